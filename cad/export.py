@@ -1,0 +1,356 @@
+"""The export step: checked part files, assembly STEP, assembly PNG and the parts list.
+
+Order of work, so that a bad design writes nothing:
+
+1. design rules on the parameters (:func:`cad.rules.check_rules`);
+2. build every part; build-volume fit of each printed part; interference check of the
+   assembly;
+3. write each file to a temporary name next to its destination and check the bytes
+   written (STL/3MF: watertight, manifold, positive volume within area x tolerance of the
+   solid's; STEP: re-imported volume);
+4. only when everything passed are the temporary files renamed into place.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import time
+from dataclasses import asdict
+from pathlib import Path
+from typing import Iterable, Literal
+
+import numpy as np
+
+from designkit._io import atomic_path
+from designkit.errors import BadInputError, DesignRuleError
+
+from . import meshcheck
+from .assembly import PART_INFO, build_parts, part_names, placements, quantities
+from .params import CadParams
+from .rules import check_rules, fit_in_build_volume
+
+Format = Literal["stl", "step", "3mf"]
+FORMATS: tuple[Format, ...] = ("stl", "step", "3mf")
+
+
+class MeshCheckError(DesignRuleError):
+    """An exported file failed its check (not watertight, wrong volume, unreadable STEP)."""
+
+
+def parse_formats(text: str | Iterable[str]) -> tuple[Format, ...]:
+    """``"stl,step"`` -> ``("stl", "step")``, checked against :data:`FORMATS`."""
+    items = text.split(",") if isinstance(text, str) else list(text)
+    out = []
+    for item in items:
+        f = item.strip().lower().lstrip(".")
+        if f not in FORMATS:
+            raise BadInputError("format", f"a comma-separated subset of {','.join(FORMATS)}", item)
+        if f not in out:
+            out.append(f)
+    if not out:
+        raise BadInputError("format", f"a comma-separated subset of {','.join(FORMATS)}", text)
+    return tuple(out)
+
+
+def _write_part(shape, path: Path, fmt: Format, p: CadParams) -> None:
+    from build123d import Mesher, export_step, export_stl
+
+    tol, ang = p.printer.tolerance_mm, p.printer.angular_tolerance_rad
+    if fmt == "stl":
+        ok = export_stl(shape, path, tolerance=tol, angular_tolerance=ang)
+    elif fmt == "3mf":
+        mesher = Mesher()
+        mesher.add_shape(shape, linear_deflection=tol, angular_deflection=ang)
+        mesher.write(path)
+        ok = True
+    else:
+        ok = export_step(shape, path)
+    if ok is False or not path.exists() or path.stat().st_size == 0:
+        raise MeshCheckError(f"build123d wrote nothing for {path.name} ({fmt})")
+
+
+def _check_file(name: str, shape, path: Path, fmt: Format, p: CadParams) -> dict:
+    """Check the written bytes; return a summary, raise MeshCheckError on a failure."""
+    volume, area = float(shape.volume), float(shape.area)
+    if fmt == "step":
+        from build123d import import_step
+
+        back = import_step(path)
+        v_back = float(back.volume)
+        if not abs(v_back - volume) <= 1e-6 * volume:
+            raise MeshCheckError(f"{name}.step re-imports with volume {v_back:.6g} mm^3, the solid "
+                                 f"has {volume:.6g} mm^3")
+        return {"step_volume_mm3": v_back}
+    verts, tris = (meshcheck.read_stl if fmt == "stl" else meshcheck.read_3mf)(path)
+    rep = meshcheck.mesh_report(verts, tris)
+    problems = meshcheck.check_mesh(rep, volume, area, p.printer.tolerance_mm)
+    if problems:
+        raise MeshCheckError(f"{name}.{fmt}: " + "; ".join(problems)
+                             + ". Try a smaller --tolerance; report the part if it persists.")
+    return {"triangles": rep.n_triangles, "watertight": rep.watertight, "manifold": rep.manifold,
+            "mesh_volume_mm3": rep.volume, "volume_bound_mm3": area * p.printer.tolerance_mm,
+            "relative_volume_error": (rep.volume - volume) / volume,
+            "_mesh": (verts, tris)}
+
+
+def _part_row(name: str, shape, qty: int, p: CadParams) -> dict:
+    info = PART_INFO[name]
+    v = float(shape.volume)
+    bb = shape.bounding_box()
+    size = tuple(round(float(s), 4) for s in bb.size)
+    row = {
+        "part": name, "description": info.description, "quantity": qty,
+        "material": info.material, "kind": info.kind,
+        "volume_mm3": v, "area_mm2": float(shape.area), "size_mm": size,
+        "mass_pla_g": v * p.printer.density_pla_g_cm3 * 1e-3,
+        "mass_steel_g": v * p.printer.density_steel_g_cm3 * 1e-3,
+    }
+    if info.kind == "printed":
+        order = fit_in_build_volume(size, p.printer.build_volume_mm)
+        row["fits_printer"] = order is not None
+        row["print_orientation"] = None if order is None else "xyz"[order[0]] + "xyz"[order[1]] + "xyz"[order[2]]
+        row["print_time_proxy_h"] = v / p.printer.flow_mm3_per_s / 3600.0
+    return row
+
+
+def export_all(p: CadParams, out_dir: str | Path, formats: Iterable[Format] = FORMATS, *,
+               picture: Literal["png", "none"] = "png",
+               oversize: Literal["error", "skip"] = "error",
+               check_interference: Literal["yes", "no"] = "yes",
+               progress: Literal["bar", "none"] = "bar") -> dict:
+    """Write every part, the assembly STEP, the assembly PNG and the parts list under out_dir.
+
+    Parameters
+    ----------
+    p : CadParams
+    out_dir : path
+        Created if missing. Files: ``<part>.<fmt>``, ``assembly.step``, ``assembly.png``,
+        ``parts.json``, ``parts.md``.
+    formats : iterable of {'stl', 'step', '3mf'}
+    oversize : {'error', 'skip'}
+        A printed part that fits the build volume in no axis-aligned orientation raises
+        (default, nothing written) or is left out of the export and listed with its size.
+
+    Returns
+    -------
+    dict
+        ``parts`` (rows of the parts list), ``files`` ({name: bytes}), ``skipped``,
+        ``seconds`` (per stage), ``out_dir``.
+    """
+    formats = parse_formats(formats)
+    if oversize not in ("error", "skip"):
+        raise BadInputError("oversize", "'error' or 'skip'", oversize)
+    out = Path(out_dir)
+    t0 = time.perf_counter()
+    seconds: dict[str, float] = {}
+    check_rules(p)
+    seconds["rules"] = time.perf_counter() - t0
+
+    t = time.perf_counter()
+    parts = build_parts(p)
+    qty = quantities(p)
+    exported = part_names(p, "exported")
+    rows = {name: _part_row(name, parts[name], qty[name], p) for name in part_names(p)}
+    seconds["build"] = time.perf_counter() - t
+    too_big = [r for r in rows.values() if r.get("fits_printer") is False]
+    if too_big and oversize == "error":
+        bv = " x ".join(f"{v:g}" for v in p.printer.build_volume_mm)
+        raise DesignRuleError("; ".join(
+            f"{r['part']} is {' x '.join(f'{s:.1f}' for s in r['size_mm'])} mm and fits the "
+            f"{bv} mm build volume in no orientation" for r in too_big)
+            + ": split the part, use a larger printer (--build-volume), or --oversize skip.")
+    skipped = [r["part"] for r in too_big]
+
+    if check_interference == "yes":
+        from .assembly import interferences
+
+        t = time.perf_counter()
+        hits = interferences(p, parts)
+        seconds["interference"] = time.perf_counter() - t
+        if hits:
+            raise DesignRuleError("parts interfere in the assembly: " + "; ".join(
+                f"{a} and {b} share {v:.3g} mm^3" for a, b, v in hits[:8])
+                + ". Check the clearances (pocket_clearance_mm, core_clearance_mm) and "
+                "sensors.offset_m.")
+
+    jobs = [(name, fmt) for name in exported if name not in skipped for fmt in formats]
+    bar = None
+    if progress == "bar":
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(jobs) + 2 + (picture == "png"), desc="designkit cad", unit="file",
+                   leave=False)
+    files: dict[str, Path] = {}
+    meshes: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    t = time.perf_counter()
+    with contextlib.ExitStack() as stack:
+        def staged(filename: str) -> Path:
+            dest = out / filename
+            tmp = stack.enter_context(atomic_path(dest))
+            files[filename] = dest
+            return tmp
+
+        for name, fmt in jobs:
+            tmp = staged(f"{name}.{fmt}")
+            _write_part(parts[name], tmp, fmt, p)
+            summary = _check_file(name, parts[name], tmp, fmt, p)
+            mesh = summary.pop("_mesh", None)
+            if mesh is not None and name not in meshes:
+                meshes[name] = mesh
+            rows[name].setdefault("checks", {})[fmt] = summary
+            if bar is not None:
+                bar.update()
+        seconds["parts"] = time.perf_counter() - t
+
+        t = time.perf_counter()
+        from build123d import export_step
+
+        from .assembly import assembly
+
+        asm = assembly(p, parts)
+        export_step(asm, staged("assembly.step"))
+        seconds["assembly_step"] = time.perf_counter() - t
+        if bar is not None:
+            bar.update()
+
+        if picture == "png":
+            t = time.perf_counter()
+            # Reference parts (winding, magnet) and parts not exported as STL are drawn from
+            # an in-memory tessellation with the same tolerance.
+            for name in part_names(p):
+                if name not in meshes:
+                    meshes[name] = _tessellate(parts[name], p)
+            render_assembly_png(p, meshes, staged("assembly.png"))
+            seconds["png"] = time.perf_counter() - t
+            if bar is not None:
+                bar.update()
+
+        seconds["total"] = time.perf_counter() - t0
+        report = {
+            "design": p.design_name, "out_dir": str(out), "formats": list(formats),
+            "mandrel": p.bobbin.mandrel, "printer": asdict(p.printer),
+            "parts": list(rows.values()), "skipped_oversize": skipped,
+            "totals": _totals(rows.values()), "seconds": seconds,
+        }
+        staged("parts.json").write_text(json.dumps(report, indent=2) + "\n")
+        staged("parts.md").write_text(parts_markdown(report))
+        if bar is not None:
+            bar.close()
+    report["files"] = {k: v.stat().st_size for k, v in sorted(files.items())}
+    return report
+
+
+def _totals(rows) -> dict:
+    printed = [r for r in rows if r["kind"] == "printed"]
+    return {
+        "pla_g": sum(r["mass_pla_g"] * r["quantity"] for r in printed),
+        "steel_g": sum(r["mass_steel_g"] * r["quantity"] for r in rows if r["material"] == "steel"),
+        "print_time_proxy_h": sum(r["print_time_proxy_h"] * r["quantity"] for r in printed),
+    }
+
+
+def parts_markdown(report: dict) -> str:
+    """The parts list as a Markdown table (mm, g, h)."""
+    lines = [f"# Parts list: {report['design']}", "",
+             f"Bobbin mandrel: `{report['mandrel']}`. Masses per piece; print time is a proxy "
+             f"(solid volume / {report['printer']['flow_mm3_per_s']:g} mm^3/s).", "",
+             "| part | qty | material | kind | volume mm^3 | mass PLA g | mass steel g | size mm "
+             "| fits printer | print time proxy h |",
+             "| --- | ---: | --- | --- | ---: | ---: | ---: | --- | --- | ---: |"]
+    for r in report["parts"]:
+        size = " x ".join(f"{s:.1f}" for s in r["size_mm"])
+        fits = {True: "yes", False: "NO"}.get(r.get("fits_printer"), "-")
+        ptime = f"{r['print_time_proxy_h']:.2f}" if "print_time_proxy_h" in r else "-"
+        lines.append(f"| {r['part']} | {r['quantity']} | {r['material']} | {r['kind']} | "
+                     f"{r['volume_mm3']:.1f} | {r['mass_pla_g']:.1f} | {r['mass_steel_g']:.1f} | "
+                     f"{size} | {fits} | {ptime} |")
+    t = report["totals"]
+    lines += ["", f"Totals: PLA {t['pla_g']:.0f} g, steel {t['steel_g']:.0f} g, print time proxy "
+              f"{t['print_time_proxy_h']:.1f} h."]
+    if report["skipped_oversize"]:
+        lines.append(f"Not exported (larger than the build volume): {', '.join(report['skipped_oversize'])}.")
+    return "\n".join(lines) + "\n"
+
+
+def _tessellate(shape, p: CadParams) -> tuple[np.ndarray, np.ndarray]:
+    verts, tris = shape.tessellate(p.printer.tolerance_mm * 5, p.printer.angular_tolerance_rad)
+    xyz = np.array([tuple(v) for v in verts], dtype=float)
+    # build123d repeats edge vertices per face; merge them so the mesh is closed for capping
+    return meshcheck._merge(xyz[np.asarray(tris, dtype=np.int64).reshape(-1)])
+
+
+def _capped_half(mesh, cut_y: float):
+    """The part of a closed mesh with y >= cut_y, closed by a cap on the cut plane."""
+    lo, hi = mesh.bounds[2], mesh.bounds[3]
+    if lo >= cut_y:
+        return mesh
+    if hi <= cut_y:
+        return mesh.extract_points([], adjacent_cells=False)  # empty
+    try:
+        return mesh.clip_closed_surface(normal=(0, 1, 0), origin=(0, cut_y, 0))
+    except Exception:  # pragma: no cover - VTK refuses non-manifold input; show it open
+        return mesh.clip(normal=(0, 1, 0), origin=(0, cut_y, 0), invert=False)
+
+
+def render_assembly_png(p: CadParams, meshes: dict[str, tuple[np.ndarray, np.ndarray]],
+                        path: str | Path, window_size: tuple[int, int] = (1600, 800)) -> Path:
+    """Off-screen picture of the assembly: isometric view and a section through a coil row.
+
+    Parameters
+    ----------
+    meshes : dict
+        ``{part name: (vertices (n, 3) mm, triangles (m, 3))}`` in each part's local frame;
+        the exported STL meshes where there are any.
+    path : path
+        PNG destination (written directly: pass a temporary path for atomicity).
+    """
+    import pyvista as pv
+
+    placed: dict[str, list] = {}
+    for pl in placements(p):
+        if pl.part not in meshes:
+            continue
+        v, t = meshes[pl.part]
+        faces = np.hstack([np.full((len(t), 1), 3), t]).ravel()
+        mesh = pv.PolyData(v.copy(), faces).transform(pl.matrix(), inplace=False)
+        placed.setdefault(pl.part, []).append(mesh)
+
+    cut_y = p.magnet_centre_mm[1]
+    with pv.vtk_verbosity("off"):  # no display here: silence VTK's X-server warning
+        plotter = pv.Plotter(off_screen=True, window_size=list(window_size), shape=(1, 2),
+                             border=False)
+    plotter.set_background("white")
+    for col, title in [(0, "assembly"),
+                       (1, f"section y = {cut_y:g} mm (through the magnet and the centre coils)")]:
+        plotter.subplot(0, col)
+        for name, group in placed.items():
+            shown = group
+            if col == 1:
+                # keep the half behind the cut, capped, so cores and pockets read as solids
+                shown = [_capped_half(m, cut_y) for m in group]
+                shown = [m for m in shown if m.n_points]
+                if not shown:
+                    continue
+            merged = pv.merge(shown) if len(shown) > 1 else shown[0]
+            plotter.add_mesh(merged, color=PART_INFO[name].color, smooth_shading=False,
+                             label=None if col else f"{name} x{len(group)}")
+        plotter.add_text(title, font_size=10, color="black", position="upper_edge")
+        if col == 0:
+            plotter.add_legend(bcolor=None, face="rectangle", size=(0.24, 0.3), loc="upper left")
+            plotter.view_isometric()
+            plotter.reset_camera()
+            plotter.camera.zoom(0.95)
+        else:
+            plotter.enable_parallel_projection()
+            plotter.view_xz()
+            plotter.camera.elevation = 8
+            plotter.reset_camera()
+            plotter.camera.zoom(1.1)
+    plotter.subplot(0, 1)
+    plotter.add_text(f"designkit cad: {p.design_name} (mm)", font_size=8, color="gray",
+                     position="lower_right")
+    with pv.vtk_verbosity("off"):
+        plotter.screenshot(str(path))
+    plotter.close()
+    return Path(path)

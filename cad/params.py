@@ -1,0 +1,346 @@
+"""Frozen parameter dataclasses of every part, and the one SI (m) -> mm conversion.
+
+:func:`from_design` is the only place where the design's metres become millimetres; every
+part function takes one of the dataclasses below and nothing else. Values the thesis does
+not give (fits, wall thicknesses, board size, finger diameter) are printing choices, stated
+in the field docs and overridable through :func:`from_design`'s keyword arguments.
+
+Frame: the design's array frame in mm, coil top faces at z = 0, z up, coil (0, 0) at the
+array centre for an odd number of rows and columns.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+from designkit.design import Design
+from designkit.errors import BadInputError
+
+MM_PER_M = 1000.0
+"""The one unit factor of cad/: millimetres per metre."""
+
+Mandrel = Literal["auto", "printed_tube", "core"]
+
+
+@dataclass(frozen=True)
+class PrinterParams:
+    """The FDM printer and the tessellation used for exported meshes."""
+
+    build_volume_mm: tuple[float, float, float] = (230.0, 190.0, 200.0)
+    """Usable build volume x, y, z, mm (Ultimaker-class default)."""
+    min_wall_mm: float = 0.8
+    """Thinnest wall the printer makes reliably (two 0.4 mm perimeters), mm."""
+    tolerance_mm: float = 0.02
+    """Linear deflection of the tessellation (max chord-to-surface distance), mm."""
+    angular_tolerance_rad: float = 0.2
+    flow_mm3_per_s: float = 4.0
+    """Print-time proxy: volumetric rate of a 0.4 mm nozzle at 0.2 mm layers and 50 mm/s,
+    mm^3/s, applied to the solid volume (100 % infill: an upper bound on time)."""
+    density_pla_g_cm3: float = 1.24
+    density_steel_g_cm3: float = 7.85
+
+
+@dataclass(frozen=True)
+class BobbinParams:
+    """Bobbin of one winding; local frame = array frame of the coil at (0, 0).
+
+    The winding occupies ``winding_inner_radius_mm <= r <= winding_outer_radius_mm`` and
+    ``-winding_length_mm <= z <= 0``; the flanges sit just outside it.
+    """
+
+    bore_radius_mm: float
+    """Radius of the hole the core slides through: core radius + clearance, mm."""
+    winding_inner_radius_mm: float
+    winding_outer_radius_mm: float
+    winding_length_mm: float
+    flange_thickness_mm: float
+    flange_radius_mm: float
+    """Winding outer radius + a lip that keeps the outer layer on the bobbin, mm."""
+    slot_width_mm: float
+    """Width of the radial wire-exit slot through each flange, mm."""
+    mandrel: Literal["printed_tube", "core"]
+    """'printed_tube': a printed tube between bore and winding carries the winding (one part
+    with both flanges). 'core': the winding is wound on the (insulated) core itself, as the
+    design's core radius = winding inner radius implies; the bobbin is then two identical
+    C-shaped end flanges (part ``bobbin_flange``) that slide onto the core."""
+
+    @property
+    def tube_wall_mm(self) -> float:
+        """Radial wall of the printed tube (negative: the core leaves no room), mm."""
+        return self.winding_inner_radius_mm - self.bore_radius_mm
+
+
+@dataclass(frozen=True)
+class CoreParams:
+    """Low-carbon steel core, a plain cylinder (machined, not printed)."""
+
+    radius_mm: float
+    length_mm: float
+    centre_z_mm: float
+    """Axial position of the core centre in the array frame, mm."""
+
+    @property
+    def top_z_mm(self) -> float:
+        return self.centre_z_mm + self.length_mm / 2
+
+    @property
+    def bottom_z_mm(self) -> float:
+        return self.centre_z_mm - self.length_mm / 2
+
+
+@dataclass(frozen=True)
+class GridParams:
+    """Where the coils are: the design's rows x columns at its pitch, and the footprint."""
+
+    rows: int
+    columns: int
+    pitch_mm: float
+    centres_xy_mm: tuple[tuple[float, float], ...]
+    """Coil axes, row-major as :meth:`Design.coil_centres_m`, mm."""
+    footprint_x_mm: float
+    footprint_y_mm: float
+    fixing_inset_mm: float
+    """Distance of the four corner fixing holes from the footprint edges, mm."""
+    fixing_hole_radius_mm: float
+    """M3 clearance hole, mm."""
+
+    @property
+    def fixing_xy_mm(self) -> tuple[tuple[float, float], ...]:
+        hx = self.footprint_x_mm / 2 - self.fixing_inset_mm
+        hy = self.footprint_y_mm / 2 - self.fixing_inset_mm
+        return ((-hx, -hy), (hx, -hy), (hx, hy), (-hx, hy))
+
+
+@dataclass(frozen=True)
+class FrameParams:
+    """Upper frame plate (the lower one is its mirror image about the array mid-plane)."""
+
+    grid: GridParams
+    thickness_mm: float
+    """Plate thickness; the plate's bottom face lies on the coil top plane z = 0, mm."""
+    pocket_radius_mm: float
+    """Flange seat from the underside: flange radius + fit clearance, mm."""
+    pocket_depth_mm: float
+    """= flange thickness, so the plate's underside rests on the winding's end plane, mm."""
+    through_radius_mm: float
+    """Hole above the pocket through which the core passes (= bobbin bore), mm."""
+    mirror_z_mm: float
+    """z of the array mid-plane about which the lower plate mirrors the upper one, mm."""
+
+
+@dataclass(frozen=True)
+class StandoffParams:
+    """Spacer tube between the two frame plates, on an M3 rod at each corner."""
+
+    outer_radius_mm: float
+    hole_radius_mm: float
+    length_mm: float
+    """= winding length: the plates rest on the winding end planes, mm."""
+
+
+@dataclass(frozen=True)
+class SensorMountParams:
+    """Board mount of the upper Hall-sensor array (the lower one mirrors it)."""
+
+    grid: GridParams
+    sensor_z_mm: float
+    """Height of the sensing plane (board mid-plane) above the coil tops, mm."""
+    board_size_mm: tuple[float, float]
+    """Sensor breakout board, x by y, mm (assumed 12 x 12: a TSOP-6 TLV493D on a small PCB)."""
+    board_thickness_mm: float
+    pocket_clearance_mm: float
+    floor_thickness_mm: float
+    channel_width_mm: float
+    """Cable channel per row, from the pockets to the +x edge, as deep as the pocket, mm."""
+    leg_outer_radius_mm: float
+    leg_bottom_z_mm: float
+    """Top face of the upper frame plate, on which the mount's legs stand, mm."""
+    mirror_z_mm: float
+
+    @property
+    def top_z_mm(self) -> float:
+        return self.sensor_z_mm + self.board_thickness_mm / 2
+
+    @property
+    def bottom_z_mm(self) -> float:
+        return self.top_z_mm - self.board_thickness_mm - self.floor_thickness_mm
+
+
+@dataclass(frozen=True)
+class MagnetHolderParams:
+    """Finger-splint magnet holder: a ring around the finger with a boss holding the magnet.
+
+    Local frame: finger (ring) axis along x through the origin; magnet axis along z,
+    pocket opening downwards (towards the coils) below the finger.
+    """
+
+    magnet_radius_mm: float
+    magnet_length_mm: float
+    press_fit_clearance_mm: float
+    """Radial pocket oversize, mm. FDM holes print ~0.1 mm undersize, so a nominal +0.05
+    gives a press fit (assumed; tune per printer)."""
+    finger_diameter_mm: float
+    """Inner diameter of the ring (assumed 18 mm: an adult index fingertip)."""
+    ring_wall_mm: float
+    ring_width_mm: float
+    boss_wall_mm: float
+    floor_thickness_mm: float
+    """Plastic between the magnet's top face and the finger, mm."""
+
+    @property
+    def pocket_radius_mm(self) -> float:
+        return self.magnet_radius_mm + self.press_fit_clearance_mm
+
+    @property
+    def pocket_depth_mm(self) -> float:
+        return self.magnet_length_mm
+
+    @property
+    def boss_radius_mm(self) -> float:
+        return self.pocket_radius_mm + self.boss_wall_mm
+
+    @property
+    def magnet_centre_z_mm(self) -> float:
+        """z of the magnet's centre in the holder's local frame, mm."""
+        return -(self.finger_diameter_mm / 2 + self.floor_thickness_mm + self.magnet_length_mm / 2)
+
+
+@dataclass(frozen=True)
+class CadParams:
+    """Everything cad/ builds, derived from one design (mm)."""
+
+    design_name: str
+    bobbin: BobbinParams
+    core: CoreParams | None
+    grid: GridParams
+    frame: FrameParams
+    standoff: StandoffParams
+    sensor_mount: SensorMountParams
+    magnet_holder: MagnetHolderParams
+    printer: PrinterParams
+    magnet_centre_mm: tuple[float, float, float]
+    """Where the assembly puts the magnet: the design point above the array centre, mm."""
+
+
+def from_design(
+    design: Design,
+    *,
+    mandrel: Mandrel = "auto",
+    printer: PrinterParams | None = None,
+    core_clearance_mm: float = 0.15,
+    air_core_tube_wall_mm: float = 1.2,
+    flange_thickness_mm: float = 2.0,
+    flange_lip_mm: float = 1.5,
+    pocket_clearance_mm: float = 0.3,
+    plate_thickness_mm: float = 6.0,
+    fixing_inset_mm: float = 6.0,
+    fixing_hole_radius_mm: float = 1.7,
+    standoff_outer_radius_mm: float = 4.0,
+    board_size_mm: tuple[float, float] = (12.0, 12.0),
+    board_thickness_mm: float = 1.6,
+    board_clearance_mm: float = 0.2,
+    mount_floor_mm: float = 2.0,
+    channel_width_mm: float = 4.0,
+    press_fit_clearance_mm: float = 0.05,
+    finger_diameter_mm: float = 18.0,
+    ring_wall_mm: float = 2.5,
+    ring_width_mm: float = 14.0,
+    boss_wall_mm: float = 1.6,
+    holder_floor_mm: float = 1.2,
+) -> CadParams:
+    """Convert a design (SI, m) into the parameters of every part (mm).
+
+    This is the only function in cad/ that reads metres. Keyword arguments are printing
+    choices in mm; they are not range-checked here beyond being finite numbers, because
+    :func:`cad.rules.check_rules` reports every violated rule with the fix.
+
+    Parameters
+    ----------
+    design : Design
+        The device; its coil, core, array, sensors, magnet and optimize.height_m are used.
+    mandrel : {'auto', 'printed_tube', 'core'}
+        What carries the winding. 'auto' prints a tube when the radial room between the
+        core (plus clearance) and the winding's inner radius is at least the printer's
+        minimum wall, else winds on the core (see :attr:`BobbinParams.mandrel`).
+
+    Returns
+    -------
+    CadParams
+    """
+    if mandrel not in ("auto", "printed_tube", "core"):
+        raise BadInputError("mandrel", "one of 'auto', 'printed_tube', 'core'", mandrel)
+    printer = printer or PrinterParams()
+    for name, value in [("core_clearance_mm", core_clearance_mm),
+                        ("press_fit_clearance_mm", press_fit_clearance_mm),
+                        ("finger_diameter_mm", finger_diameter_mm)]:
+        if not math.isfinite(float(value)):
+            raise BadInputError(name, "a finite number (mm)", value)
+    mm = MM_PER_M
+    coil, core, arr = design.coil, design.core, design.array
+    r_in, r_out, length = coil.inner_radius_m * mm, coil.outer_radius_m * mm, coil.length_m * mm
+
+    if core is None:
+        bore = r_in - air_core_tube_wall_mm
+        core_p = None
+        if mandrel == "core":
+            raise BadInputError("mandrel", "'auto' or 'printed_tube' for a design without a core",
+                                mandrel, "An air-core coil needs a printed tube to wind on.")
+        chosen = "printed_tube"
+    else:
+        bore = core.radius_m * mm + core_clearance_mm
+        core_p = CoreParams(radius_mm=core.radius_m * mm, length_mm=core.length_m * mm,
+                            centre_z_mm=-length / 2 + core.offset_m * mm)
+        if mandrel == "auto":
+            chosen = "printed_tube" if r_in - bore >= printer.min_wall_mm else "core"
+        else:
+            chosen = mandrel
+    flange_r = r_out + flange_lip_mm
+    bobbin = BobbinParams(
+        bore_radius_mm=bore, winding_inner_radius_mm=r_in, winding_outer_radius_mm=r_out,
+        winding_length_mm=length, flange_thickness_mm=flange_thickness_mm,
+        flange_radius_mm=flange_r,
+        # two wire diameters side by side (lead in and out) plus a printing allowance
+        slot_width_mm=2 * design.wire.insulated_diameter_m * mm + 0.4,
+        mandrel=chosen,
+    )
+
+    pitch = arr.pitch_m * mm
+    pocket_r = flange_r + pocket_clearance_mm
+    # The footprint is the design's (n x pitch) unless the outer pockets would break out.
+    fx = max(arr.columns * pitch, (arr.columns - 1) * pitch + 2 * (pocket_r + printer.min_wall_mm))
+    fy = max(arr.rows * pitch, (arr.rows - 1) * pitch + 2 * (pocket_r + printer.min_wall_mm))
+    centres = tuple((x * mm, y * mm) for x, y, _ in design.coil_centres_m())
+    grid = GridParams(rows=arr.rows, columns=arr.columns, pitch_mm=pitch, centres_xy_mm=centres,
+                      footprint_x_mm=fx, footprint_y_mm=fy, fixing_inset_mm=fixing_inset_mm,
+                      fixing_hole_radius_mm=fixing_hole_radius_mm)
+    mid = -length / 2
+    frame = FrameParams(grid=grid, thickness_mm=plate_thickness_mm, pocket_radius_mm=pocket_r,
+                        pocket_depth_mm=flange_thickness_mm, through_radius_mm=bore,
+                        mirror_z_mm=mid)
+    standoff = StandoffParams(outer_radius_mm=standoff_outer_radius_mm,
+                              hole_radius_mm=fixing_hole_radius_mm, length_mm=length)
+    sensors = SensorMountParams(
+        grid=grid, sensor_z_mm=design.sensors.offset_m * mm, board_size_mm=tuple(board_size_mm),
+        board_thickness_mm=board_thickness_mm, pocket_clearance_mm=board_clearance_mm,
+        floor_thickness_mm=mount_floor_mm, channel_width_mm=channel_width_mm,
+        leg_outer_radius_mm=standoff_outer_radius_mm, leg_bottom_z_mm=plate_thickness_mm,
+        mirror_z_mm=mid)
+    holder = MagnetHolderParams(
+        magnet_radius_mm=design.magnet.radius_m * mm, magnet_length_mm=design.magnet.length_m * mm,
+        press_fit_clearance_mm=press_fit_clearance_mm, finger_diameter_mm=finger_diameter_mm,
+        ring_wall_mm=ring_wall_mm, ring_width_mm=ring_width_mm, boss_wall_mm=boss_wall_mm,
+        floor_thickness_mm=holder_floor_mm)
+    # The design point sits above coil (0, 0) of the optimization; in the array that is the
+    # array centre (a coil axis for odd rows x columns).
+    magnet_centre = (0.0, 0.0, design.optimize.height_m * mm)
+    return CadParams(design_name=design.name, bobbin=bobbin, core=core_p, grid=grid, frame=frame,
+                     standoff=standoff, sensor_mount=sensors, magnet_holder=holder,
+                     printer=printer, magnet_centre_mm=magnet_centre)
+
+
+def replace(params, **changes):
+    """``dataclasses.replace`` re-exported for sweeps over part parameters."""
+    return dataclasses.replace(params, **changes)

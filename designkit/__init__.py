@@ -1,0 +1,18 @@
+"""designkit: coil-and-field design toolkit for electromagnetic mid-air haptic interfaces.
+
+SI units throughout (m, A, T, N). Light to import: heavy optional libraries (build123d, pyvista,
+gmsh, smbus2) are imported only by the modules that need them.
+"""
+
+from .coil import Coil
+from .core import Core
+from .design import MU0, Design, default_design, load_design
+from .errors import BadInputError, DesignkitError, DesignRuleError, MissingDependencyError
+from .pose import Pose
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Coil", "Core", "Design", "Pose", "default_design", "load_design", "MU0",
+    "BadInputError", "DesignkitError", "DesignRuleError", "MissingDependencyError", "__version__",
+]

@@ -1,0 +1,72 @@
+"""``designkit`` command line. Thin: parse, call the library, write, return an exit code.
+
+Each sub-command lives in its own module (``designkit/commands/<name>.py`` or ``cad/cli.py``)
+exposing ``add_arguments(parser)`` and ``run(args) -> int``; only the chosen one is imported,
+so ``designkit map`` never pays for build123d or pyvista.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from .errors import DesignkitError
+
+COMMANDS: dict[str, tuple[str, str]] = {
+    "report": ("designkit.commands.report", "main job: whole pipeline on a design -> report folder"),
+    "optimize": ("designkit.commands.optimize", "nlopt coil design (thesis eq. 2.14)"),
+    "sweep": ("designkit.commands.sweep", "evaluate a grid of coil designs (parallel)"),
+    "map": ("designkit.commands.map", "force-current map file for the controller"),
+    "cad": ("cad.cli", "printable parts (STL/STEP/3MF) and assembly"),
+    "fem": ("designkit.commands.fem", "GetDP FEM cross-check of coil + core"),
+    "viz": ("designkit.commands.viz", "off-screen pyvista figures"),
+}
+
+
+def _usage() -> str:
+    width = max(map(len, COMMANDS))
+    rows = "\n".join(f"  {name:<{width}}  {desc}" for name, (_, desc) in COMMANDS.items())
+    return (
+        "usage: designkit COMMAND [options]   (designkit COMMAND --help for its options)\n\n"
+        f"commands:\n{rows}\n"
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ("-h", "--help"):
+        print(_usage())
+        return 0 if argv else 2
+    if argv[0] == "--version":
+        from . import __version__
+
+        print(__version__)
+        return 0
+    name, rest = argv[0], argv[1:]
+    if name not in COMMANDS:
+        print(f"designkit: unknown command {name!r}\n\n{_usage()}", file=sys.stderr)
+        return 2
+    module_name, desc = COMMANDS[name]
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        if exc.name and module_name.startswith(exc.name):
+            print(f"designkit {name}: not available in this build ({exc})", file=sys.stderr)
+            return 2
+        raise
+    parser = argparse.ArgumentParser(prog=f"designkit {name}", description=desc)
+    module.add_arguments(parser)
+    try:
+        args = parser.parse_args(rest)
+    except SystemExit as exc:  # argparse exits on --help and on bad options
+        return int(exc.code or 0)
+    try:
+        return int(module.run(args) or 0)
+    except DesignkitError as exc:
+        print(f"designkit {name}: error: {exc}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

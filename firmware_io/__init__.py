@@ -1,0 +1,26 @@
+"""firmware_io: the I2C layer between a rendering runner and the EHI hardware.
+
+PCA9685 PWM boards drive nine Cytron MD10C coil drivers (PWM + DIR, sign-magnitude); two arrays
+of nine TLV493D-A1B6 Hall sensors sit behind TCA9548A muxes. Needs only numpy, plus smbus2 for a
+real bus (imported lazily). Nothing here imports designkit.
+
+Main entry points::
+
+    from firmware_io import open_bus, CoilDriver, CoilDrive, SensorArrays
+    from firmware_io.devices import PCA9685, TLV493D, TCA9548A
+    from firmware_io.sim import SimBus          # register-level simulated devices
+"""
+
+from .bus import I2CBus, open_bus
+from .coils import CoilCommandResult, CoilDriver, CoilOutput, default_coil_wiring
+from .devices import PCA9685, TCA9548A, TLV493D
+from .errors import BadInputError, CoilWriteError, FirmwareIOError, I2CError, SensorConfigError
+from .md10c import CoilDrive, DriveCommand, current_to_command
+from .sensors import ArraysReading, SensorArrays, SensorSlot, default_sensor_layout
+
+__all__ = [
+    "I2CBus", "open_bus", "CoilDriver", "CoilOutput", "CoilCommandResult", "default_coil_wiring",
+    "PCA9685", "TCA9548A", "TLV493D", "BadInputError", "CoilWriteError", "FirmwareIOError",
+    "I2CError", "SensorConfigError", "CoilDrive", "DriveCommand", "current_to_command",
+    "ArraysReading", "SensorArrays", "SensorSlot", "default_sensor_layout",
+]

@@ -1,0 +1,120 @@
+"""Cytron MD10C in sign-magnitude mode: a signed coil current request -> (PWM duty, direction).
+
+The MD10C turns its PWM input into the bridge duty and its DIR input into the polarity, so the
+coil sees an average voltage of about +-D Vs and settles at I = D Vs / R (inference,
+HARDWARE.md section 2; the coil's L/R must be long against the PWM period for the ripple
+Vs D (1 - D) / (L f) to be small). The request is clamped to the smallest of the coil's
+limit, the driver's continuous rating and what the supply can push through R.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+from .errors import BadInputError
+
+MD10C_SUPPLY_MIN_V = 5.0
+MD10C_SUPPLY_MAX_V = 30.0
+MD10C_CONTINUOUS_A = 13.0
+MD10C_PEAK_A = 30.0           # for 10 s; not used as a steady limit
+MD10C_MAX_PWM_HZ = 20e3
+
+#: PCA9685 counts per PWM period; a duty of 4096 counts is the full-ON bit.
+PWM_COUNTS = 4096
+
+
+def _finite(name: str, value: object, valid: str) -> float:
+    try:
+        v = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise BadInputError(name, valid, value) from None
+    if not math.isfinite(v):
+        raise BadInputError(name, valid, value)
+    return v
+
+
+@dataclass(frozen=True)
+class CoilDrive:
+    """Electrical data of one coil on one MD10C.
+
+    Attributes
+    ----------
+    supply_voltage_v : float
+        MD10C motor supply, V (5..30 V rating).
+    resistance_ohm : float
+        Coil resistance at operating temperature, ohm (> 0).
+    current_limit_a : float
+        Largest coil current allowed, A (> 0, at most the MD10C's 13 A continuous rating).
+    """
+
+    supply_voltage_v: float
+    resistance_ohm: float
+    current_limit_a: float
+
+    def __post_init__(self) -> None:
+        vs = _finite("supply_voltage_v", self.supply_voltage_v, "in [5, 30] V (MD10C rating)")
+        if not MD10C_SUPPLY_MIN_V <= vs <= MD10C_SUPPLY_MAX_V:
+            raise BadInputError("supply_voltage_v", "in [5, 30] V (MD10C rating)", self.supply_voltage_v)
+        r = _finite("resistance_ohm", self.resistance_ohm, "a finite number > 0 ohm")
+        if r <= 0:
+            raise BadInputError("resistance_ohm", "a finite number > 0 ohm", self.resistance_ohm)
+        lim = _finite("current_limit_a", self.current_limit_a, "in (0, 13] A (MD10C continuous rating)")
+        if not 0 < lim <= MD10C_CONTINUOUS_A:
+            raise BadInputError("current_limit_a", "in (0, 13] A (MD10C continuous rating)",
+                                self.current_limit_a)
+
+    @property
+    def max_current_a(self) -> float:
+        """Largest reachable steady current, A: min(limit, 13 A, Vs / R)."""
+        return min(self.current_limit_a, MD10C_CONTINUOUS_A, self.supply_voltage_v / self.resistance_ohm)
+
+
+@dataclass(frozen=True)
+class DriveCommand:
+    """What to put on one MD10C's inputs.
+
+    Attributes
+    ----------
+    duty_counts : int
+        PWM high time in PCA9685 counts, 0..4096 (4096 = always on).
+    direction : {'forward', 'reverse'}
+        'forward' for a current >= 0 (CytronMotorDriver PWM_DIR: DIR low), 'reverse' for < 0.
+    current_a : float
+        The current this command produces in steady state, A (signed, after clamping).
+    clamped : bool
+        True if the request exceeded :attr:`CoilDrive.max_current_a`.
+    """
+
+    duty_counts: int
+    direction: Literal["forward", "reverse"]
+    current_a: float
+    clamped: bool
+
+    @property
+    def pwm_value(self) -> int | Literal["on", "off"]:
+        """The value for :meth:`PCA9685.set_channels`: 'off', 1..4095 or 'on'."""
+        if self.duty_counts <= 0:
+            return "off"
+        if self.duty_counts >= PWM_COUNTS:
+            return "on"
+        return self.duty_counts
+
+
+def current_to_command(current_a: float, drive: CoilDrive) -> DriveCommand:
+    """Signed coil current request, A -> MD10C duty and direction.
+
+    ``duty = |I| R / Vs`` quantised to 1/4096 of the period, after clamping ``|I|`` to
+    ``drive.max_current_a``. The returned ``current_a`` is the steady current of the quantised
+    duty, with the request's sign.
+    """
+    i = _finite("current_a", current_a, "a finite number, A")
+    i_max = drive.max_current_a
+    clamped = abs(i) > i_max
+    magnitude = min(abs(i), i_max)
+    counts = int(round(magnitude * drive.resistance_ohm / drive.supply_voltage_v * PWM_COUNTS))
+    counts = min(max(counts, 0), PWM_COUNTS)
+    produced = counts / PWM_COUNTS * drive.supply_voltage_v / drive.resistance_ohm
+    direction: Literal["forward", "reverse"] = "reverse" if i < 0 and counts > 0 else "forward"
+    return DriveCommand(counts, direction, -produced if direction == "reverse" else produced, clamped)
