@@ -133,7 +133,7 @@ class CoilDriver:
             for b in self.boards:
                 b.initialize(pwm_frequency_hz)
         except OSError as exc:
-            self._fail(exc, "initialising")
+            self._fail(exc, "initialisation")
         self._dir_level = ["low"] * self.n_coils
         self._duty = [0] * self.n_coils
 
@@ -166,7 +166,8 @@ class CoilDriver:
         else:
             state = f"all {self.n_coils} coils were switched off (ALL_LED_OFF acknowledged by {boards})"
             safe = "all_off_confirmed"
-        raise CoilWriteError(exc.errno, f"Coil command failed while {doing}: {exc}; {state}.",
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        raise CoilWriteError(exc.errno, f"Coil {doing} failed: {reason}; {state}.",
                              safe_state=safe) from exc
 
     # -- the command ---------------------------------------------------------------------------
@@ -223,7 +224,7 @@ class CoilDriver:
                     if values:
                         b.set_channels(values)
         except OSError as exc:
-            self._fail(exc, "writing a coil command")
+            self._fail(exc, "command")
         for k, (cmd, w) in enumerate(zip(commands, self.wiring)):
             value = first[w.board][w.dir_channel]
             self._dir_level[k] = "high" if value == "on" else "low"

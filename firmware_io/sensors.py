@@ -85,9 +85,10 @@ class SensorArrays:
             raise BadInputError("layout", "an even, non-zero number of SensorSlot (two arrays)", n)
         seen = set()
         for s in self.layout:
-            key = (s.mux_address, s.mux_channel, s.sensor_address)
+            # sensors sharing a channel see one SDA level at reset and cannot be told apart
+            key = (s.mux_address, s.mux_channel)
             if key in seen:
-                raise BadInputError("layout", "sensors with distinct (mux, channel, address)", key)
+                raise BadInputError("layout", "one sensor per (mux, channel)", key)
             seen.add(key)
         self.bus = bus
         self.muxes = {a: TCA9548A(bus, a) for a in sorted({s.mux_address for s in self.layout})}

@@ -41,7 +41,7 @@ class MeshSpec:
 
 
 def build_mesh(spec: MeshSpec, msh_path: str | Path) -> dict:
-    """Mesh the model with gmsh and write ``msh_path`` (format 4.1, second-order geometry off).
+    """Mesh the model with gmsh and write ``msh_path`` (MSH 2.2: the format Debian's GetDP reads without linked Gmsh).
 
     Returns mesh statistics: number of nodes and triangles.
     """
@@ -74,7 +74,7 @@ def build_mesh(spec: MeshSpec, msh_path: str | Path) -> dict:
 
         def inside(tag, box):
             x0, y0, _, x1, y1, _ = gmsh.model.getBoundingBox(2, tag)
-            e = 1e-9
+            e = 1e-6  # OCC bounding boxes carry a ~1e-7 m tolerance
             return (x0 >= box[0] - e and y0 >= box[1] - e and x1 <= box[2] + e
                     and y1 <= box[3] + e)
 
@@ -97,7 +97,7 @@ def build_mesh(spec: MeshSpec, msh_path: str | Path) -> dict:
         axis, outer = [], []
         for _, c in gmsh.model.getEntities(1):
             x0, y0, _, x1, y1, _ = gmsh.model.getBoundingBox(1, c)
-            if x1 < 1e-9:
+            if x1 < 1e-6:
                 axis.append(c)
             elif abs(math.hypot(x1, max(abs(y0), abs(y1))) - rext) < 1e-6 * rext and x1 > rint:
                 outer.append(c)
@@ -154,7 +154,7 @@ def build_mesh(spec: MeshSpec, msh_path: str | Path) -> dict:
         gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
         gmsh.option.setNumber("Mesh.Algorithm", 6)
         gmsh.model.mesh.generate(2)
-        gmsh.option.setNumber("Mesh.MshFileVersion", 4.1)
+        gmsh.option.setNumber("Mesh.MshFileVersion", 2.2)
         gmsh.option.setNumber("Mesh.Binary", 0)
         gmsh.write(str(msh_path))
         node_tags, _, _ = gmsh.model.mesh.getNodes()

@@ -1,0 +1,71 @@
+"""``designkit viz KIND``: one off-screen pyvista figure of a design, written as a PNG.
+
+KIND is one of ``scene`` (coil array, magnet, workspace), ``fieldlines`` (streamlines of B),
+``slice-B`` / ``slice-F`` (|B| / |F| on a vertical and a horizontal slice), ``forcemap`` (force
+arrows at the design height) and ``isosurface`` (Fz = +/-0.8 mN). Renders without a display.
+``--vtk DIR`` also writes the figures' data for ParaView.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ..errors import BadInputError
+
+_KINDS = ("scene", "fieldlines", "slice-B", "slice-F", "forcemap", "isosurface")
+
+
+def parse_currents(text: str | None) -> list[float] | None:
+    """``"6,0,-6,..."`` -> list of floats (A); None stays None (the default currents)."""
+    if text is None:
+        return None
+    try:
+        return [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise BadInputError("--currents", "comma-separated numbers in A, one per coil",
+                            text) from None
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(x) for x in text.lower().split("x"))
+    except ValueError:
+        raise BadInputError("--size", "WIDTHxHEIGHT in pixels, e.g. 1024x768", text) from None
+    return w, h
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("kind", choices=_KINDS, help="which figure")
+    parser.add_argument("--design", type=Path, default=None,
+                        help="design TOML file (default: the embedded thesis design)")
+    parser.add_argument("--currents", default=None,
+                        help="per-coil currents in A, comma-separated, row-major "
+                             "(default: the centre coil at drive.max_current_a, others 0)")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="PNG file (default: ./designkit-viz-KIND.png)")
+    parser.add_argument("--size", default=None, help="image size WIDTHxHEIGHT in pixels")
+    parser.add_argument("--quality", choices=("quick", "full"), default="full",
+                        help="grid resolution (quick: coarse grids, a few seconds)")
+    parser.add_argument("--vtk", type=Path, default=None,
+                        help="also write the VTK files for ParaView into this folder")
+
+
+def run(args: argparse.Namespace) -> int:
+    from .. import viz
+    from ..design import load_design
+
+    design = load_design(args.design)
+    currents = viz.resolve_currents(design, parse_currents(args.currents))
+    size = None if args.size is None else parse_size(args.size)
+    out = args.out or Path(f"designkit-viz-{args.kind}.png")
+    plotter = viz.render(args.kind, design, currents, quality=args.quality, window_size=size)
+    try:
+        viz.save_png(plotter, out)
+    finally:
+        plotter.close()
+    print(f"wrote {out}")
+    if args.vtk is not None:
+        files = viz.export_vtk(design, args.vtk, currents, quality=args.quality)
+        print(f"wrote {len(files)} VTK files to {args.vtk}")
+    return 0

@@ -1,0 +1,260 @@
+"""Run one axisymmetric FEM model of a coil with GetDP and extract what designkit predicts.
+
+:func:`solve` meshes (gmsh), writes the .pro (``problem.py``), runs ``getdp`` and reads back
+B along an axis line and an off-axis line above the coil, the magnetic energy and the winding's
+flux linkage. Derivatives along the lines come from local least-squares polynomials through
+densely sampled B (the FEM's b is piecewise linear; the fit averages its inter-element jumps).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import subprocess
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..design import MU0
+from ..errors import BadInputError, MissingDependencyError
+from .mesh import MeshSpec, build_mesh, export_meshio
+from .problem import problem_text
+
+APT_HINT = "sudo apt-get install getdp"
+
+
+class GetDPNotFoundError(MissingDependencyError):
+    """The ``getdp`` program is not on PATH."""
+
+    def __init__(self, purpose: str = "designkit.fem"):
+        self.module = "getdp"
+        self.package = "getdp"
+        self.purpose = purpose
+        ImportError.__init__(
+            self, f"{purpose} needs the GetDP finite-element solver (program 'getdp' on PATH): "
+                  f"install it with `{APT_HINT}` (Debian/Ubuntu package 'getdp', version >= 3.2)")
+
+    def __reduce__(self):
+        return (type(self), (self.purpose,))
+
+
+def find_getdp() -> str:
+    """Path of the getdp executable, or raise :class:`GetDPNotFoundError`."""
+    path = shutil.which("getdp")
+    if path is None:
+        raise GetDPNotFoundError()
+    return path
+
+
+@dataclass(frozen=True)
+class LineResult:
+    """B sampled along a line r = const above the coil (local frame, winding centre at z=0)."""
+
+    r: float
+    z: np.ndarray
+    br: np.ndarray
+    bz: np.ndarray
+
+    def fit(self, z0, *, half_window: float = 4e-3, degree: int = 4):
+        """Bz, dBz/dz, Br, dBr/dz at local heights ``z0`` (m) from local polynomial fits.
+
+        Returns
+        -------
+        dict of ndarrays (T and T/m), each of the shape of ``z0``.
+        """
+        z0 = np.atleast_1d(np.asarray(z0, dtype=float))
+        out = {k: np.empty(z0.shape) for k in ("bz", "dbz_dz", "br", "dbr_dz")}
+        for i, zc in enumerate(z0):
+            lo = max(zc - half_window, self.z[0])
+            hi = min(zc + half_window, self.z[-1])
+            if hi - lo < 2 * half_window * 0.999:  # shift the window inside the sampled range
+                if lo == self.z[0]:
+                    hi = min(lo + 2 * half_window, self.z[-1])
+                else:
+                    lo = max(hi - 2 * half_window, self.z[0])
+            sel = (self.z >= lo) & (self.z <= hi)
+            t = (self.z[sel] - zc) / half_window
+            for name, y in (("bz", self.bz), ("br", self.br)):
+                c = np.polynomial.polynomial.polyfit(t, y[sel], degree)
+                out[name][i] = c[0]
+                out["d" + name + "_dz"][i] = c[1] / half_window
+        return out
+
+
+@dataclass(frozen=True)
+class FemResult:
+    """What one GetDP solve gives (local frame of the winding; SI units)."""
+
+    current: float
+    axis: LineResult
+    off_axis: LineResult
+    energy_j: float
+    flux_linkage_wb: float
+    solve_seconds: float
+    mesh_seconds: float
+    mesh_stats: dict
+    files: dict = field(default_factory=dict)
+    newton_converged: bool = True
+
+    @property
+    def inductance_energy(self) -> float:
+        """L = 2 W / I^2 (linear problems), H."""
+        return 2.0 * self.energy_j / self.current**2
+
+    @property
+    def inductance_linkage(self) -> float:
+        """L = flux linkage / I (secant inductance; valid for nonlinear cores too), H."""
+        return self.flux_linkage_wb / self.current
+
+    def to_dict(self) -> dict:
+        return {
+            "current_a": self.current,
+            "energy_j": self.energy_j,
+            "flux_linkage_wb": self.flux_linkage_wb,
+            "inductance_energy_h": self.inductance_energy,
+            "inductance_linkage_h": self.inductance_linkage,
+            "solve_seconds": self.solve_seconds,
+            "mesh_seconds": self.mesh_seconds,
+            "mesh": self.mesh_stats,
+            "newton_converged": self.newton_converged,
+            "axis": {"r_m": self.axis.r, "z_m": self.axis.z, "br_t": self.axis.br,
+                     "bz_t": self.axis.bz},
+            "off_axis": {"r_m": self.off_axis.r, "z_m": self.off_axis.z,
+                         "br_t": self.off_axis.br, "bz_t": self.off_axis.bz},
+            "files": {k: str(v) for k, v in self.files.items()},
+        }
+
+
+def _read_line(path: Path, r: float) -> LineResult:
+    data = np.loadtxt(path, ndmin=2)
+    # SimpleTable: x y z bx by bz (GetDP prints the 3 vector components after the coordinates)
+    y = data[:, 1]
+    order = np.argsort(y)
+    return LineResult(r, y[order], data[order, 3], data[order, 4])
+
+
+def _read_global(path: Path) -> float:
+    tokens = path.read_text().split()
+    return float(tokens[-1])
+
+
+def solve(coil, current: float, *, mu_r: float | None = None, bh: str | None = None,
+          level: int = 1, line_z=(0.010, 0.105), off_axis_r: float = 0.010,
+          out_dir: str | Path | None = None, export: bool = False,
+          sample_step: float = 0.25e-3, timeout_s: float = 600.0) -> FemResult:
+    """Solve the axisymmetric FEM model of ``coil`` at ``current`` with GetDP.
+
+    Parameters
+    ----------
+    coil : designkit.Coil
+        Geometry (its pose is ignored: the model is in the winding's local frame). Its core, if
+        any, is meshed; the material is ``mu_r`` (linear) or ``bh`` (B-H curve name), by
+        default the core's own ``relative_permeability``.
+    current : float, A (> 0)
+    level : int
+        Mesh refinement level (0 coarse ... 4 fine); sizes shrink by sqrt(2) per level.
+    line_z : (lo, hi), m
+        Range of the extraction lines *above the winding's top face*.
+    off_axis_r : float, m
+        Radius of the second extraction line.
+    out_dir : path or None
+        Where to keep the mesh, .pro and raw outputs; None uses a temporary folder.
+    export : bool
+        Also write .vtu and .xdmf copies of the mesh (meshio).
+
+    Returns
+    -------
+    FemResult
+    """
+    from ..core import STEEL1010_B, STEEL1010_H
+
+    exe = find_getdp()
+    current = float(current)
+    if not (math.isfinite(current) and current > 0):
+        raise BadInputError("current", "a finite number > 0 A", current)
+    if not (isinstance(level, int) and 0 <= level <= 6):
+        raise BadInputError("level", "an integer in [0, 6]", level)
+    core = coil.core
+    if bh not in (None, "steel1010"):
+        raise BadInputError("bh", "None or 'steel1010'", bh)
+    if core is not None and mu_r is None and bh is None:
+        if core.bh == "steel1010":
+            bh = "steel1010"
+        else:
+            mu_r = float(core.relative_permeability)
+    top = coil.length / 2
+    z_lo, z_hi = top + line_z[0], top + line_z[1]
+    margin = 6e-3
+    spec = MeshSpec(coil.inner_radius, coil.outer_radius, coil.length,
+                    core.radius if core else None, core.length if core else None,
+                    core.offset if core else 0.0, z_lo - margin, z_hi + margin,
+                    off_axis_r + 4e-3, level)
+    tmp_ctx = None
+    if out_dir is None:
+        tmp_ctx = tempfile.TemporaryDirectory(prefix="designkit_fem_")
+        work = Path(tmp_ctx.name)
+    else:
+        work = Path(out_dir)
+        work.mkdir(parents=True, exist_ok=True)
+    try:
+        t0 = time.perf_counter()
+        msh = work / "model.msh"
+        stats = build_mesh(spec, msh)
+        files = {"mesh": msh}
+        if export:
+            for p in export_meshio(msh, work / "model"):
+                files[p.suffix.lstrip(".")] = p
+        t_mesh = time.perf_counter() - t0
+        area = (coil.outer_radius - coil.inner_radius) * coil.length
+        jd = coil.turns * current / area
+        n = int(round((z_hi - z_lo + 2 * margin) / sample_step))
+        r_axis = 1e-7  # on r = 0 exactly VolAxiSqu divides by r; 0.1 um off is the axis value
+        lines = [(r_axis, z_lo - margin, r_axis, z_hi + margin, n, "line_axis.txt"),
+                 (off_axis_r, z_lo - margin, off_axis_r, z_hi + margin, n, "line_off.txt")]
+        bh_tab = (STEEL1010_H, STEEL1010_B) if bh == "steel1010" else None
+        pro = problem_text(current_density=jd, mu_r=mu_r, bh=bh_tab, has_core=core is not None,
+                           shell_inner=spec.shell_inner, shell_outer=spec.shell_outer,
+                           lines=lines, winding_area=area, turns=coil.turns)
+        pro_path = work / "model.pro"
+        pro_path.write_text(pro)
+        files["pro"] = pro_path
+        t1 = time.perf_counter()
+        cmd = [exe, str(pro_path), "-msh", str(msh), "-solve", "MagSta", "-pos", "Post",
+               "-v", "3"]
+        proc = subprocess.run(cmd, cwd=work, capture_output=True, text=True, timeout=timeout_s)
+        t_solve = time.perf_counter() - t1
+        (work / "getdp.log").write_text(proc.stdout + "\n" + proc.stderr)
+        files["log"] = work / "getdp.log"
+        if proc.returncode != 0 or not (work / "line_axis.txt").exists():
+            raise RuntimeError(f"getdp failed (exit {proc.returncode}); see {work / 'getdp.log'}:\n"
+                               + (proc.stderr or proc.stdout)[-2000:])
+        converged = True
+        if bh_tab is not None:
+            converged = "Non linear" not in proc.stdout or "did not converge" not in proc.stdout
+        axis = _read_line(work / "line_axis.txt", 0.0)
+        off = _read_line(work / "line_off.txt", off_axis_r)
+        # GetDP's axisymmetric Jacobians integrate per radian of azimuth: times 2 pi
+        energy = 2 * math.pi * _read_global(work / "energy.txt")
+        linkage = 2 * math.pi * _read_global(work / "linkage.txt")
+        return FemResult(current, axis, off, energy, linkage, t_solve, t_mesh, stats,
+                         files if out_dir is not None else {}, converged)
+    finally:
+        if tmp_ctx is not None:
+            tmp_ctx.cleanup()
+
+
+def write_result_json(result: FemResult, path: str | Path, extra: dict | None = None) -> Path:
+    from .._io import write_json_atomic
+
+    data = result.to_dict()
+    if extra:
+        data.update(extra)
+    return write_json_atomic(path, data)
+
+
+__all__ = ["FemResult", "LineResult", "GetDPNotFoundError", "find_getdp", "solve",
+           "write_result_json", "MU0", "json"]

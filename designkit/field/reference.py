@@ -1,0 +1,251 @@
+"""Slow, independent high-precision references for the field kernels (tests and studies only).
+
+Nothing here is used by the fast path. Every function works in mpmath at ``dps`` decimal
+digits, from formulations that share no code and no algebra with :mod:`.kernels` /
+:mod:`.winding`:
+
+* :func:`loop_biot_savart` -- the Biot-Savart phi-integral of a circular filament, in
+  Cartesian coordinates, gradient by differentiating the integrand under the integral sign
+  (mp.quad, breakpoints graded towards the nearest wire point).
+* :func:`sheet_textbook` -- the ideal finite solenoid in the textbook K, E, Pi form
+  (Callaghan & Maslen, NASA TN D-465 (1960); Derby & Olbert, Am. J. Phys. 78, 229 (2010),
+  with P1 = K - 2 (K - E)/m and P2 = (K + gamma Pi(1 - gamma^2 | m)) / (1 + gamma) written out
+  with mpmath's ellipk, ellipe, ellippi); gradient by mp.diff of that closed form.
+* :func:`winding_textbook` -- the thick winding as mp.quad over the radius of
+  :func:`sheet_textbook`, with breakpoints at a = rho and graded around it.
+* :func:`winding_loops_2d` -- the thick winding as a 2-D mp.quad over (a, z') of textbook
+  K, E loop fields (very slow; used to validate :func:`winding_textbook` itself).
+* :func:`winding_axis_bz` -- the on-axis closed form
+  Bz = (mu0 J / 2) [F(z + L/2) - F(z - L/2)],
+  F(u) = u ln((Ro + sqrt(Ro^2 + u^2)) / (Ri + sqrt(Ri^2 + u^2))), in mpmath (in float64 the
+  difference cancels far away).
+
+mu0 is 4 pi 1e-7 (designkit's constant, :data:`designkit.design.MU0`) in every function.
+Results are float64 numpy arrays; Cartesian conventions as in :mod:`designkit.field`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def _mp():
+    from ..errors import require
+
+    return require("mpmath", "mpmath", "designkit.field.reference")
+
+
+def _breaks(center, scale, lo, hi, mp):
+    """Breakpoints in [lo, hi] graded geometrically (x10) towards ``center``, down to ``scale``."""
+    pts = {lo, hi}
+    if lo < center < hi:
+        pts.add(center)
+    d = max(scale, mp.mpf(10) ** (-mp.mp.dps + 5))
+    while d < hi - lo:
+        for p in (center - d, center + d):
+            if lo < p < hi:
+                pts.add(p)
+        d *= 10
+    return sorted(pts)
+
+
+def loop_biot_savart(point, radius, current, *, dps=30):
+    """B (3,) T and G (3, 3) T/m of the loop of :func:`designkit.field.loop_field`.
+
+    B = mu0 I / (4 pi) int dl x R / |R|^3 over phi in [phi0 - pi, phi0 + pi], phi0 the azimuth
+    of the point; dG_ij = mu0 I / (4 pi) [(dl x e_j)_i / |R|^3 - 3 (dl x R)_i R_j / |R|^5].
+    """
+    mp = _mp()
+    with mp.workdps(dps):
+        x, y, z = (mp.mpf(float(c)) for c in point)
+        a = mp.mpf(float(radius))
+        phi0 = mp.atan2(y, x) if (x != 0 or y != 0) else mp.mpf(0)
+        rho = mp.sqrt(x * x + y * y)
+        dist = mp.sqrt((rho - a) ** 2 + z * z)
+        brk = _breaks(mp.mpf(0), dist / a / 10, -mp.pi, mp.pi, mp)
+
+        def parts(t):
+            ph = phi0 + t
+            c, s = mp.cos(ph), mp.sin(ph)
+            dl = (-a * s, a * c, mp.mpf(0))
+            R = (x - a * c, y - a * s, z)
+            r2 = R[0] ** 2 + R[1] ** 2 + R[2] ** 2
+            return dl, R, r2
+
+        def cross(u, w):
+            return (u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0])
+
+        def fb(i):
+            def f(t):
+                dl, R, r2 = parts(t)
+                return cross(dl, R)[i] / (r2 * mp.sqrt(r2))
+            return f
+
+        def fg(i, j):
+            e = [mp.mpf(0)] * 3
+            e[j] = mp.mpf(1)
+
+            def f(t):
+                dl, R, r2 = parts(t)
+                r3 = r2 * mp.sqrt(r2)
+                return cross(dl, e)[i] / r3 - 3 * cross(dl, R)[i] * R[j] / (r3 * r2)
+            return f
+
+        k = mp.mpf(4e-7) * mp.pi * mp.mpf(float(current)) / (4 * mp.pi)
+        b = np.array([float(k * mp.quad(fb(i), brk)) for i in range(3)])
+        g = np.array([[float(k * mp.quad(fg(i, j), brk)) for j in range(3)] for i in range(3)])
+    return b, g
+
+
+# ------------------------------------------------------------------ current sheet (textbook)
+def _sheet_rz_mp(a, h, rho, z, mp):
+    """(Br, Bz) / (mu0 K) of a current sheet, textbook K, E, Pi form, mpmath numbers."""
+    if rho == 0:
+        # on the axis: Bz = K mu0/2 [cos-difference], Br = 0
+        zp, zm = z + h, z - h
+        return mp.mpf(0), (zp / mp.sqrt(zp * zp + a * a) - zm / mp.sqrt(zm * zm + a * a)) / 2
+    gamma = (a - rho) / (a + rho)
+    br = mp.mpf(0)
+    bz = mp.mpf(0)
+    for sign, zs in ((1, z + h), (-1, z - h)):
+        den = zs * zs + (a + rho) ** 2
+        m = 4 * a * rho / den  # parameter k^2 of the end loop
+        if m == 1:  # on the rim
+            continue
+        K = mp.ellipk(m)
+        E = mp.ellipe(m)
+        alpha = a / mp.sqrt(den)
+        beta = zs / mp.sqrt(den)
+        p1 = K - 2 * (K - E) / m
+        if gamma == 0:
+            p2 = K  # rho = a: Pi term carries gamma = 0
+        else:
+            p2 = (K + gamma * mp.ellippi(1 - gamma * gamma, m)) / (1 + gamma)
+        br += sign * alpha * p1
+        bz += sign * beta * p2
+    return br / mp.pi, bz * a / ((a + rho) * mp.pi)
+
+
+def sheet_textbook(a, h, rho, z, *, gradient=False, dps=30):
+    """(Br, Bz) per mu0 K [, (dBr/drho, dBr/dz, dBz/drho, dBz/dz) per mu0 K in 1/m] of a sheet
+    of radius ``a`` over z in [-h, h], as Python floats (mp.diff for the gradient)."""
+    mp = _mp()
+    with mp.workdps(dps):
+        a_, h_, r_, z_ = (mp.mpf(float(q)) for q in (a, h, rho, z))
+        br, bz = _sheet_rz_mp(a_, h_, r_, z_, mp)
+        out = [float(br), float(bz)]
+        if gradient:
+            out += [float(d) for d in _sheet_grad_mp(a_, h_, r_, z_, mp)]
+    return tuple(out)
+
+
+def _sheet_grad_mp(a, h, rho, z, mp):
+    step = mp.mpf(10) ** (-(mp.mp.dps // 3)) * max(a, abs(rho), abs(z))
+    if rho < step:  # one-sided near the axis is not needed: the field is smooth in x there
+        rho = step
+    def f(i, rr, zz):
+        return _sheet_rz_mp(a, h, rr, zz, mp)[i]
+    dbr_dr = mp.diff(lambda t: f(0, t, z), rho, h=step)
+    dbr_dz = mp.diff(lambda t: f(0, rho, t), z, h=step)
+    dbz_dr = mp.diff(lambda t: f(1, t, z), rho, h=step)
+    dbz_dz = mp.diff(lambda t: f(1, rho, t), z, h=step)
+    return dbr_dr, dbr_dz, dbz_dr, dbz_dz
+
+
+def winding_textbook(ri, ro, length, rho, z, *, gradient=False, dps=25):
+    """Thick winding per unit mu0 J: integral over a in [ri, ro] of :func:`sheet_textbook`.
+
+    Returns (Br, Bz) in m [and (dBr/drho, dBr/dz, dBz/drho, dBz/dz, Br/rho), dimensionless].
+    ``dBz/drho`` includes the -mu0 J term inside the winding (the derivative of the sheet's
+    jump), so inside the winding the tensor is not symmetric. Br/rho is the radial derivative
+    on the axis (rho = 0).
+    """
+    mp = _mp()
+    with mp.workdps(dps):
+        ri_, ro_, h_ = mp.mpf(float(ri)), mp.mpf(float(ro)), mp.mpf(float(length)) / 2
+        r_, z_ = mp.mpf(float(rho)), mp.mpf(float(z))
+        tau = min(abs(z_ - h_), abs(z_ + h_))
+        dist = max(tau, mp.mpf(10) ** (-dps + 3) * ro_)
+        brk = _breaks(r_, dist / 4, ri_, ro_, mp) if ri_ - 10 * dist < r_ < ro_ + 10 * dist \
+            else [ri_, ro_]
+        if gradient and r_ == 0:
+            # on the axis only Bz and dBz/dz are non-zero; dBr/drho = Br/rho = -dBz/dz / 2
+            bz = mp.quad(lambda a: _sheet_rz_mp(a, h_, r_, z_, mp)[1], brk)
+            dzz = mp.quad(lambda a: mp.diff(lambda t: _sheet_rz_mp(a, h_, r_, t, mp)[1], z_), brk)
+            return (0.0, float(bz), float(-dzz / 2), 0.0, 0.0, float(dzz), float(-dzz / 2))
+        memo = {}
+
+        def grad_at(a):
+            if a not in memo:
+                memo[a] = _sheet_grad_mp(a, h_, r_, z_, mp)
+            return memo[a]
+
+        vals = []
+        for i in range(6 if gradient else 2):
+            def f(a, i=i):
+                if i < 2:
+                    return _sheet_rz_mp(a, h_, r_, z_, mp)[i]
+                return grad_at(a)[i - 2]
+            vals.append(mp.quad(f, brk))
+        if gradient:
+            if ri_ < r_ < ro_ and abs(z_) < h_:
+                vals[4] -= 1  # derivative of the sheets' jump: -mu0 J
+            vals.append(vals[0] / r_)
+        return tuple(float(q) for q in vals)
+
+
+def winding_loops_2d(ri, ro, length, rho, z, *, dps=20):
+    """(Br, Bz) per mu0 J of the thick winding as a 2-D mp.quad over (a, z') of the textbook
+    loop field Bz = [K + (a^2 - rho^2 - u^2) E / ((a - rho)^2 + u^2)] / (2 pi sqrt((a+rho)^2+u^2)),
+    Br = u / rho [-K + (a^2 + rho^2 + u^2) E / ((a - rho)^2 + u^2)] / (2 pi sqrt(...)), u = z - z'.
+    Slow (seconds per point): used to validate :func:`winding_textbook`. Requires rho > 0."""
+    mp = _mp()
+    with mp.workdps(dps):
+        ri_, ro_, h_ = mp.mpf(float(ri)), mp.mpf(float(ro)), mp.mpf(float(length)) / 2
+        r_, z_ = mp.mpf(float(rho)), mp.mpf(float(z))
+
+        def loop(a, zp, i):
+            u = z_ - zp
+            d2 = (a + r_) ** 2 + u * u
+            m = 4 * a * r_ / d2
+            K, E = mp.ellipk(m), mp.ellipe(m)
+            q = (a - r_) ** 2 + u * u
+            if i == 0:
+                return u / r_ * (-K + (a * a + r_ * r_ + u * u) * E / q) / (2 * mp.pi * mp.sqrt(d2))
+            return (K + (a * a - r_ * r_ - u * u) * E / q) / (2 * mp.pi * mp.sqrt(d2))
+
+        ab = sorted({ri_, ro_} | ({r_} if ri_ < r_ < ro_ else set()))
+        zb = sorted({-h_, h_} | ({z_} if -h_ < z_ < h_ else set()))
+        return tuple(float(mp.quad(lambda a, zp: loop(a, zp, i), ab, zb)) for i in range(2))
+
+
+def winding_axis_bz(ri, ro, length, z, *, dps=40):
+    """On-axis Bz per unit mu0 J (m) of the thick winding, closed form in mpmath."""
+    mp = _mp()
+    with mp.workdps(dps):
+        ri_, ro_, h_ = mp.mpf(float(ri)), mp.mpf(float(ro)), mp.mpf(float(length)) / 2
+        z_ = mp.mpf(float(z))
+
+        def F(u):
+            return u * mp.log((ro_ + mp.sqrt(ro_ ** 2 + u * u)) / (ri_ + mp.sqrt(ri_ ** 2 + u * u)))
+
+        return float((F(z_ + h_) - F(z_ - h_)) / 2)
+
+
+def rz_to_cartesian(point, br, bz, grad=None):
+    """Assemble Cartesian B (3,) [and G (3, 3)] at ``point`` from cylindrical components.
+
+    ``grad`` = (dBr/drho, dBr/dz, dBz/drho, dBz/dz, Br/rho)."""
+    x, y, _ = (float(q) for q in point)
+    rho = float(np.hypot(x, y))
+    c, s = (x / rho, y / rho) if rho > 0 else (1.0, 0.0)
+    b = np.array([br * c, br * s, bz])
+    if grad is None:
+        return b
+    drr, drz, dzr, dzz, brr = grad
+    g = np.array([
+        [drr * c * c + brr * s * s, (drr - brr) * c * s, drz * c],
+        [(drr - brr) * c * s, drr * s * s + brr * c * c, drz * s],
+        [dzr * c, dzr * s, dzz],
+    ])
+    return b, g
