@@ -53,16 +53,86 @@ def parse_formats(text: str | Iterable[str]) -> tuple[Format, ...]:
     return tuple(out)
 
 
-def _write_part(shape, path: Path, fmt: Format, p: CadParams) -> None:
-    from build123d import Mesher, export_step, export_stl
+def _mesh_absolute(shape, p: CadParams) -> None:
+    """Triangulate with an absolute chord tolerance (mm), replacing any earlier triangulation.
 
-    tol, ang = p.printer.tolerance_mm, p.printer.angular_tolerance_rad
+    build123d's exporters ask OCCT for a deflection relative to each edge's size, which for
+    a 24 mm core gives 0.5 mm chords; the absolute mesh is what makes the area x tolerance
+    volume bound of :mod:`cad.meshcheck` hold. export_stl keeps this finer mesh.
+    """
+    from OCP.BRepMesh import BRepMesh_IncrementalMesh
+    from OCP.BRepTools import BRepTools
+
+    BRepTools.Clean_s(shape.wrapped)
+    BRepMesh_IncrementalMesh(shape.wrapped, p.printer.tolerance_mm, False,
+                             p.printer.angular_tolerance_rad, True)
+
+
+def _triangulation(shape) -> tuple[np.ndarray, np.ndarray]:
+    """The shape's current face triangulations as one merged mesh, outward-oriented (mm)."""
+    from OCP.BRep import BRep_Tool
+    from OCP.TopAbs import TopAbs_REVERSED
+    from OCP.TopLoc import TopLoc_Location
+
+    corners = []
+    for face in shape.faces():
+        loc = TopLoc_Location()
+        tri = BRep_Tool.Triangulation_s(face.wrapped, loc)
+        if tri is None:
+            raise MeshCheckError(f"a face of {shape.label or 'a part'} has no triangulation")
+        trsf = loc.Transformation()
+        nodes = np.array([tuple(tri.Node(i).Transformed(trsf).Coord())
+                          for i in range(1, tri.NbNodes() + 1)])
+        idx = np.array([[t.Value(1), t.Value(2), t.Value(3)] for t in tri.Triangles()]) - 1
+        if face.wrapped.Orientation() == TopAbs_REVERSED:
+            idx = idx[:, ::-1]
+        corners.append(nodes[idx].reshape(-1, 3))
+    return meshcheck._merge(np.concatenate(corners))
+
+
+_3MF_TYPES = ('<?xml version="1.0" encoding="UTF-8"?>\n<Types xmlns="http://schemas.openxmlformats.org/'
+              'package/2006/content-types"><Default Extension="rels" ContentType="application/'
+              'vnd.openxmlformats-package.relationships+xml"/><Default Extension="model" '
+              'ContentType="application/vnd.ms-package.3dmanufacturing-3dmodel+xml"/></Types>\n')
+_3MF_RELS = ('<?xml version="1.0" encoding="UTF-8"?>\n<Relationships xmlns="http://schemas.'
+             'openxmlformats.org/package/2006/relationships"><Relationship Target="/3D/3dmodel.model" '
+             'Id="rel0" Type="http://schemas.microsoft.com/3dmanufacturing/2013/01/3dmodel"/>'
+             '</Relationships>\n')
+
+
+def write_3mf(vertices: np.ndarray, triangles: np.ndarray, path: str | Path, name: str) -> None:
+    """Minimal 3MF core package (one mesh object, millimetres).
+
+    Written here rather than with build123d's Mesher because Mesher re-triangulates with a
+    relative deflection; this writes exactly the checked triangulation.
+    """
+    import zipfile
+    from xml.sax.saxutils import quoteattr
+
+    vx = "".join(f'<vertex x="{x:.9g}" y="{y:.9g}" z="{z:.9g}"/>' for x, y, z in vertices)
+    tx = "".join(f'<triangle v1="{a}" v2="{b}" v3="{c}"/>' for a, b, c in triangles)
+    model = ('<?xml version="1.0" encoding="UTF-8"?>\n<model unit="millimeter" xml:lang="en-US" '
+             'xmlns="http://schemas.microsoft.com/3dmanufacturing/core/2015/02">'
+             f'<metadata name="Title">{name}</metadata><metadata name="Application">designkit cad'
+             f'</metadata><resources><object id="1" type="model" name={quoteattr(name)}><mesh>'
+             f'<vertices>{vx}</vertices><triangles>{tx}</triangles></mesh></object></resources>'
+             '<build><item objectid="1"/></build></model>\n')
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        zf.writestr("[Content_Types].xml", _3MF_TYPES)
+        zf.writestr("_rels/.rels", _3MF_RELS)
+        zf.writestr("3D/3dmodel.model", model)
+
+
+def _write_part(name: str, shape, path: Path, fmt: Format, p: CadParams) -> None:
+    from build123d import export_step, export_stl
+
     if fmt == "stl":
-        ok = export_stl(shape, path, tolerance=tol, angular_tolerance=ang)
+        _mesh_absolute(shape, p)
+        ok = export_stl(shape, path, tolerance=p.printer.tolerance_mm,
+                        angular_tolerance=p.printer.angular_tolerance_rad)
     elif fmt == "3mf":
-        mesher = Mesher()
-        mesher.add_shape(shape, linear_deflection=tol, angular_deflection=ang)
-        mesher.write(path)
+        _mesh_absolute(shape, p)
+        write_3mf(*_triangulation(shape), path, name)
         ok = True
     else:
         ok = export_step(shape, path)
@@ -193,7 +263,7 @@ def export_all(p: CadParams, out_dir: str | Path, formats: Iterable[Format] = FO
 
         for name, fmt in jobs:
             tmp = staged(f"{name}.{fmt}")
-            _write_part(parts[name], tmp, fmt, p)
+            _write_part(name, parts[name], tmp, fmt, p)
             summary = _check_file(name, parts[name], tmp, fmt, p)
             mesh = summary.pop("_mesh", None)
             if mesh is not None and name not in meshes:

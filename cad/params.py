@@ -11,7 +11,6 @@ array centre for an odd number of rows and columns.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Literal
@@ -236,7 +235,7 @@ def from_design(
     flange_lip_mm: float = 1.5,
     pocket_clearance_mm: float = 0.3,
     plate_thickness_mm: float = 6.0,
-    fixing_inset_mm: float = 6.0,
+    fixing_inset_mm: float | None = None,
     fixing_hole_radius_mm: float = 1.7,
     standoff_outer_radius_mm: float = 4.0,
     board_size_mm: tuple[float, float] = (12.0, 12.0),
@@ -309,9 +308,14 @@ def from_design(
 
     pitch = arr.pitch_m * mm
     pocket_r = flange_r + pocket_clearance_mm
-    # The footprint is the design's (n x pitch) unless the outer pockets would break out.
-    fx = max(arr.columns * pitch, (arr.columns - 1) * pitch + 2 * (pocket_r + printer.min_wall_mm))
-    fy = max(arr.rows * pitch, (arr.rows - 1) * pitch + 2 * (pocket_r + printer.min_wall_mm))
+    if fixing_inset_mm is None:
+        fixing_inset_mm = standoff_outer_radius_mm + 1.2
+    # The footprint is the design's (n x pitch) unless the outer pockets would break out or
+    # the corner standoffs would not clear the corner flanges (they sit on the diagonal).
+    corner = (pocket_r + printer.min_wall_mm + standoff_outer_radius_mm) / math.sqrt(2) + fixing_inset_mm
+    edge = max(pocket_r + printer.min_wall_mm, corner)
+    fx = max(arr.columns * pitch, (arr.columns - 1) * pitch + 2 * edge)
+    fy = max(arr.rows * pitch, (arr.rows - 1) * pitch + 2 * edge)
     centres = tuple((x * mm, y * mm) for x, y, _ in design.coil_centres_m())
     grid = GridParams(rows=arr.rows, columns=arr.columns, pitch_mm=pitch, centres_xy_mm=centres,
                       footprint_x_mm=fx, footprint_y_mm=fy, fixing_inset_mm=fixing_inset_mm,
@@ -340,7 +344,3 @@ def from_design(
                      standoff=standoff, sensor_mount=sensors, magnet_holder=holder,
                      printer=printer, magnet_centre_mm=magnet_centre)
 
-
-def replace(params, **changes):
-    """``dataclasses.replace`` re-exported for sweeps over part parameters."""
-    return dataclasses.replace(params, **changes)

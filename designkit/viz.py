@@ -6,7 +6,7 @@ Two layers, as everywhere in designkit:
   ``force_isosurface_data``) evaluate the array's field on a grid and return pyvista datasets in
   the design frame (metres, coil top faces at z = 0, z up) carrying SI arrays
   (``"B (T)"``, ``"grad B (T/m)"``, ``"F (N)"``) and, for colouring, the same magnitudes in the
-  units people read (``"|B| (mT)"``, ``"|F| (mN)"``, ``"Fz (mN)"``);
+  units people read (``"B magnitude (mT)"``, ``"F magnitude (mN)"``, ``"Fz (mN)"``);
 * ``plot_*`` functions turn them into a :class:`pyvista.Plotter` (``off_screen=True``, never
   shown) drawn in millimetres with titles and colour bars; :func:`save_png` writes it atomically
   and :func:`export_vtk` writes the datasets as ``.vtp`` / ``.vts`` files for ParaView.
@@ -57,8 +57,8 @@ _RES = {
              "iso": (37, 37, 31)},
 }
 
-B_T, B_MT = "B (T)", "|B| (mT)"
-GRAD_T_M, F_N, F_MN, FZ_MN = "grad B (T/m)", "F (N)", "|F| (mN)", "Fz (mN)"
+B_T, B_MT = "B (T)", "B magnitude (mT)"
+GRAD_T_M, F_N, F_MN, FZ_MN = "grad B (T/m)", "F (N)", "F magnitude (mN)", "Fz (mN)"
 CURRENT_A = "current (A)"
 
 _COPPER, _STEEL, _MAGNET = "#c87533", "#8c8c8c", "#b22222"
@@ -129,8 +129,9 @@ def array_field(design: "Design", points, currents: Sequence[float] | None = Non
                 gradient: bool = True):
     """Flux density (and gradient) of the design's whole coil array at points.
 
-    Sums :meth:`designkit.Coil.field` of :meth:`Coil.from_design` placed at
-    :meth:`Design.coil_centres_m`, skipping coils at 0 A.
+    Uses :class:`designkit.array.CoilArray` over the energized coils (coils at 0 A are skipped);
+    falls back to summing :meth:`designkit.Coil.field` at :meth:`Design.coil_centres_m` when
+    designkit.array is not available.
 
     Parameters
     ----------
@@ -151,6 +152,19 @@ def array_field(design: "Design", points, currents: Sequence[float] | None = Non
 
     p, _ = v.points(points)
     cur = resolve_currents(design, currents)
+    active = np.nonzero(cur)[0]
+    try:
+        from .array import CoilArray
+    except ImportError:
+        CoilArray = None
+    if CoilArray is not None and gradient and active.size:
+        full = CoilArray.from_design(design)
+        sub = CoilArray(tuple(full.coils[k] for k in active))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return sub.field(p, cur[active])
+    if CoilArray is not None and gradient:
+        return np.zeros((len(p), 3)), np.zeros((len(p), 3, 3))
     b = np.zeros((len(p), 3))
     g = np.zeros((len(p), 3, 3)) if gradient else None
     base = Coil.from_design(design)
@@ -245,7 +259,7 @@ def field_line_data(design: "Design", currents: Sequence[float] | None = None, *
     Returns
     -------
     volume : pyvista.ImageData
-        Grid around the array (coils and workspace), with ``"B (T)"`` and ``"|B| (mT)"``.
+        Grid around the array (coils and workspace), with ``"B (T)"`` and ``"B magnitude (mT)"``.
     lines : pyvista.PolyData
         Streamlines seeded on rings just above the energized coils, with the same arrays.
     """
@@ -259,11 +273,11 @@ def field_line_data(design: "Design", currents: Sequence[float] | None = None, *
     b = array_field(design, vol.points, cur, gradient=False)
     _add_field_arrays(vol, b)
     seeds = []
-    nring = 12 if quality == "full" else 8
+    nring = 16 if quality == "full" else 10
     for (x, y, _), current in zip(design.coil_centres_m(), cur):
         if current == 0.0:
             continue
-        for radius in (0.35, 0.7) if quality == "full" else (0.6,):
+        for radius in (0.3, 0.6, 0.9) if quality == "full" else (0.4, 0.8):
             r = radius * design.coil.outer_radius_m
             phi = np.linspace(0, 2 * np.pi, nring, endpoint=False)
             seeds.append(np.c_[x + r * np.cos(phi), y + r * np.sin(phi),
@@ -287,8 +301,8 @@ def slice_data(design: "Design", currents: Sequence[float] | None = None, *,
     Returns
     -------
     vertical, horizontal : pyvista.ImageData
-        Flat grids with ``"B (T)"``, ``"|B| (mT)"``, ``"grad B (T/m)"``, ``"F (N)"``,
-        ``"|F| (mN)"`` and ``"Fz (mN)"``.
+        Flat grids with ``"B (T)"``, ``"B magnitude (mT)"``, ``"grad B (T/m)"``, ``"F (N)"``,
+        ``"F magnitude (mN)"`` and ``"Fz (mN)"``.
     """
     pv = _pv()
     res = _quality(quality)
@@ -312,7 +326,7 @@ def force_map_data(design: "Design", currents: Sequence[float] | None = None, *,
     Returns
     -------
     pyvista.PolyData
-        Points (m) with ``"F (N)"``, ``"|F| (mN)"``, ``"Fz (mN)"``, ``"B (T)"``, ``"|B| (mT)"``.
+        Points (m) with ``"F (N)"``, ``"F magnitude (mN)"``, ``"Fz (mN)"``, ``"B (T)"``, ``"B magnitude (mT)"``.
     """
     pv = _pv()
     res = _quality(quality)
@@ -358,7 +372,7 @@ def force_isosurface_data(design: "Design", currents: Sequence[float] | None = N
     Returns
     -------
     volume : pyvista.ImageData
-        With ``"Fz (mN)"``, ``"F (N)"``, ``"|F| (mN)"``, ``"B (T)"``, ``"|B| (mT)"``.
+        With ``"Fz (mN)"``, ``"F (N)"``, ``"F magnitude (mN)"``, ``"B (T)"``, ``"B magnitude (mT)"``.
     surface : pyvista.PolyData
         Contours at ``Fz = +level`` and ``-level`` with point data ``"Fz (mN)"`` (the level).
     level_n : float
@@ -370,7 +384,7 @@ def force_isosurface_data(design: "Design", currents: Sequence[float] | None = N
     m = magnet_moment(design, moment)
     level = design.render.threshold_n if level_n is None else v.positive("level_n", level_n, "N")
     top = _reach_height_m(design, cur, m, level)
-    half = max(_footprint_half_m(design), 0.6 * top)
+    half = max(_footprint_half_m(design), 0.8 * top)
     vol = _image(pv, (-half, -half, design.workspace.z_min_m), (half, half, top), res["iso"])
     b, g = array_field(design, vol.points, cur, gradient=True)
     _add_field_arrays(vol, b, g, m)
@@ -387,14 +401,14 @@ def _plotter(pv, window_size, shape=(1, 1)):
 
 def _mm(mesh):
     """A copy of the mesh with its points in millimetres (data arrays untouched)."""
-    out = mesh.copy()
+    out = mesh.cast_to_structured_grid() if hasattr(mesh, "spacing") else mesh.copy()
     out.points = np.asarray(out.points) * 1e3
     return out
 
 
 def _bar(title, **extra):
-    args = dict(title=title, color="black", vertical=True, position_x=0.86, position_y=0.2,
-                width=0.06, height=0.6, title_font_size=14, label_font_size=12, fmt="%.3g",
+    args = dict(title=title, color="black", vertical=True, position_x=0.87, position_y=0.2,
+                width=0.05, height=0.6, title_font_size=14, label_font_size=12, fmt="%.3g",
                 n_labels=5)
     args.update(extra)
     return args
@@ -404,9 +418,9 @@ def _title(p, text, font_size=12):
     p.add_text(text, position="upper_left", font_size=font_size, color="black")
 
 
-def _axes(p, mesh_bounds=None, **kw):
+def _axes(p, mesh_bounds=None, location="outer", **kw):
     p.show_bounds(bounds=mesh_bounds, xtitle="x (mm)", ytitle="y (mm)", ztitle="z (mm)",
-                  color="black", font_size=10, grid=False, location="outer", ticks="outside",
+                  color="black", font_size=10, grid=False, location=location, ticks="outside",
                   minor_ticks=False, **kw)
 
 
@@ -426,8 +440,15 @@ def _currents_text(cur) -> str:
     if not nz:
         return "all coils at 0 A"
     if len(nz) <= 3:
-        return ", ".join(f"I{i + 1} = {c:+.3g} A" for i, c in nz)
+        return ", ".join(f"coil {i + 1} at {c:+.3g} A" for i, c in nz) + ", others 0 A" * (
+            len(nz) < len(cur))
     return "I = [" + ", ".join(f"{c:+.2g}" for c in cur) + "] A"
+
+
+def _log_fmt(lo: float, hi: float) -> str:
+    if lo >= 1.0:
+        return "%.0f"
+    return "%.2g" if hi < 100 else "%.3g"
 
 
 def _iso_camera(p, focus_mm, distance_mm, elevation_deg=28.0, azimuth_deg=-58.0):
@@ -435,6 +456,13 @@ def _iso_camera(p, focus_mm, distance_mm, elevation_deg=28.0, azimuth_deg=-58.0)
     d = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
     pos = np.asarray(focus_mm) + distance_mm * d
     p.camera_position = [tuple(pos), tuple(focus_mm), (0.0, 0.0, 1.0)]
+
+
+def _magnet_text(design, moment) -> str:
+    m = magnet_moment(design, moment)
+    direction = "+z" if np.allclose(m[:2], 0) and m[2] > 0 else (
+        "-z" if np.allclose(m[:2], 0) else "(" + ", ".join(f"{x:.2g}" for x in m) + ")")
+    return f"m = {np.linalg.norm(m):.3g} A m^2 along {direction}"
 
 
 # ----------------------------------------------------------------------------- figures
@@ -450,67 +478,73 @@ def plot_array_scene(design: "Design", currents: Sequence[float] | None = None, 
     imax = float(np.max(np.abs(cur))) or 1.0
     p.add_mesh(_mm(blocks["windings"]), scalars=CURRENT_A, cmap="coolwarm", clim=(-imax, imax),
                smooth_shading=True, name="windings",
-               scalar_bar_args=_bar("coil current (A)"))
+               scalar_bar_args=_bar("coil current (A)", fmt="%+.2g"))
     if "cores" in blocks.keys():
         p.add_mesh(_mm(blocks["cores"]), color=_STEEL, name="cores")
     p.add_mesh(_mm(blocks["magnet"]), color=_MAGNET, name="magnet")
     p.add_mesh(_mm(blocks["workspace"]), color="#1f4e9c", line_width=2, name="workspace")
     dp = np.asarray(design.design_point_m) * 1e3
     mdir = m / (np.linalg.norm(m) or 1.0)
-    arrow = pv.Arrow(start=dp, direction=mdir, scale=35.0, tip_length=0.3, tip_radius=0.12,
+    arrow = pv.Arrow(start=dp, direction=mdir, scale=30.0, tip_length=0.3, tip_radius=0.12,
                      shaft_radius=0.05)
     p.add_mesh(arrow, color="black", name="moment")
-    p.add_point_labels([dp + mdir * 38.0], [f"m = {np.linalg.norm(m):.3g} A m^2"],
+    p.add_point_labels([dp + mdir * 30.0 + np.array([8.0, 0.0, 0.0])], ["magnet moment m"],
                        font_size=12, text_color="black", shape=None, show_points=False,
                        always_visible=True)
     ws = design.workspace
-    p.add_point_labels([(ws.half_width_m * 1e3, -ws.half_width_m * 1e3, ws.z_max_m * 1e3)],
-                       ["workspace"], font_size=11, text_color="#1f4e9c", shape=None,
+    p.add_point_labels([(ws.half_width_m * 1e3, ws.half_width_m * 1e3, ws.z_max_m * 1e3)],
+                       ["workspace"], font_size=12, text_color="#1f4e9c", shape=None,
                        show_points=False, always_visible=True)
     c = design.coil
-    _title(p, f"{design.name}: {design.array.rows}x{design.array.columns} coils, "
-              f"Ri/Ro/L = {c.inner_radius_m * 1e3:.0f}/{c.outer_radius_m * 1e3:.0f}/"
+    _title(p, f"{design.name}: {design.array.rows} x {design.array.columns} coils, pitch "
+              f"{design.array.pitch_m * 1e3:.0f} mm; winding Ri/Ro/L = "
+              f"{c.inner_radius_m * 1e3:.0f}/{c.outer_radius_m * 1e3:.0f}/"
               f"{c.length_m * 1e3:.0f} mm, {c.turns} turns\n"
-              f"magnet at the design point z = {design.optimize.height_m * 1e3:.0f} mm; "
-              f"{_currents_text(cur)}")
+              f"magnet ({_magnet_text(design, moment)}) at the design point "
+              f"z = {design.optimize.height_m * 1e3:.0f} mm; {_currents_text(cur)}",
+           font_size=10)
     _axes(p)
     half = _footprint_half_m(design) * 1e3
-    _iso_camera(p, (0.0, 0.0, -30.0), 5.2 * half)
+    _iso_camera(p, (0.0, 0.0, 0.0), 7.4 * half, elevation_deg=22.0)
     return p
 
 
 def plot_field_lines(design: "Design", currents: Sequence[float] | None = None, *,
                      quality: Quality = "full", window_size=(1024, 768), data=None,
                      blocks=None) -> "pyvista.Plotter":
-    """Streamlines of B coloured by |B| (mT, log scale) over the coil array."""
+    """Streamlines of B coloured by the magnitude of B (mT, log scale) over the coil array."""
     pv = _pv()
     cur = resolve_currents(design, currents)
     vol, lines = field_line_data(design, cur, quality=quality) if data is None else data
     blocks = scene_meshes(design, cur) if blocks is None else blocks
     p = _plotter(pv, window_size)
-    _add_device(p, design, blocks, opacity=0.35, magnet=True, workspace=True)
+    _add_device(p, design, blocks, opacity=0.3, magnet=True, workspace=True)
     if lines.n_points:
         bmt = np.asarray(lines[B_MT])
         hi = float(np.percentile(bmt, 98))
         lo = max(hi * 1e-3, float(bmt.min()), 1e-6)
-        p.add_mesh(_mm(lines).tube(radius=0.6), scalars=B_MT, cmap="viridis", log_scale=True,
+        p.add_mesh(_mm(lines).tube(radius=0.7), scalars=B_MT, cmap="viridis", log_scale=True,
                    clim=(lo, hi), name="streamlines",
-                   scalar_bar_args=_bar("|B| (mT)", fmt="%.2g"))
+                   scalar_bar_args=_bar("B (mT)", fmt=_log_fmt(lo, hi)))
     else:
         p.add_text("no field: all coils at 0 A", position="lower_left", color="black")
-    _title(p, f"Field lines of B ({_currents_text(cur)})")
-    _axes(p, vol.bounds if False else None)
-    half = _footprint_half_m(design) * 1e3
-    _iso_camera(p, (0.0, 0.0, -35.0), 5.0 * half, elevation_deg=15.0)
+    p.add_mesh(_mm(vol.outline()), color="grey", line_width=1)
+    _title(p, f"Field lines of B, coloured by its magnitude (log scale)\n{_currents_text(cur)}; "
+              f"lines end at the edge of the computed box", font_size=11)
+    _axes(p)
+    b = np.asarray(vol.bounds) * 1e3
+    _iso_camera(p, (0.0, 0.0, (b[4] + b[5]) / 2), 2.9 * max(b[1] - b[0], b[5] - b[4]),
+                elevation_deg=12.0)
     return p
 
 
-def _section_lines(pv, design, blocks, axis: Literal["y", "z"], height_m=0.0):
+def _section_lines(pv, design, blocks, view: Literal["xz", "xy"], height_m, z_low_m):
     """Outlines of the coils in the slice views, mm."""
-    if axis == "y":
+    if view == "xz":
         cut = blocks["windings"].slice(normal="y", origin=(0, 0, 0))
         if "cores" in blocks.keys():
             cut = cut.merge(blocks["cores"].slice(normal="y", origin=(0, 0, 0)))
+        cut = cut.clip(normal=(0, 0, 1), origin=(0, 0, z_low_m), invert=False)
         return _mm(cut)
     circles = []
     for x, y, _ in design.coil_centres_m():
@@ -522,11 +556,11 @@ def _section_lines(pv, design, blocks, axis: Literal["y", "z"], height_m=0.0):
 
 def plot_slices(design: "Design", currents: Sequence[float] | None = None, *,
                 quantity: Literal["B", "F"] = "B", moment=None, height_m: float | None = None,
-                quality: Quality = "full", window_size=(1400, 620), data=None,
+                quality: Quality = "full", window_size=(1500, 640), data=None,
                 blocks=None) -> "pyvista.Plotter":
-    """|B| (mT) or |F| on the magnet (mN) on the vertical slice y = 0 (left) and on a horizontal
-    slice at the design height (right), log colour scale, with the coils' outlines and, for the
-    force, the contour of the human threshold (0.8 mN)."""
+    """Magnitude of B (mT) or of the force on the magnet (mN) on the vertical slice y = 0 (left)
+    and on a horizontal slice at the design height (right); one log colour scale shared by both,
+    the coils' outlines and, for the force, the contour of the human threshold (0.8 mN)."""
     pv = _pv()
     if quantity not in ("B", "F"):
         raise BadInputError("quantity", "'B' or 'F'", quantity)
@@ -540,53 +574,58 @@ def plot_slices(design: "Design", currents: Sequence[float] | None = None, *,
     hi = float(values.max()) if values.size else 1.0
     hi = hi if hi > 0 else 1.0
     lo = max(hi * 1e-3, float(values.min()), 1e-9)
-    label = "|B| (mT)" if quantity == "B" else "|F| on magnet (mN)"
+    label = "B (mT)" if quantity == "B" else "F (mN)"
     threshold_mn = design.render.threshold_n * 1e3
+    z_low_m = -0.25 * design.coil.length_m  # show the top quarter of the coils
+    head = ("Magnitude of B" if quantity == "B"
+            else f"Magnitude of the force on the magnet ({_magnet_text(design, moment)})")
     p = _plotter(pv, window_size, shape=(1, 2))
     for col, (mesh, view) in enumerate(((vert, "xz"), (horiz, "xy"))):
         p.subplot(0, col)
         mm = _mm(mesh)
         p.add_mesh(mm, scalars=name, cmap="inferno", log_scale=True, clim=(lo, hi),
-                   name=f"slice-{view}", scalar_bar_args=_bar(label, fmt="%.2g",
-                                                               position_x=0.84))
+                   name=f"slice-{view}", show_scalar_bar=(col == 1),
+                   scalar_bar_args=_bar(label, fmt=_log_fmt(lo, hi), position_x=0.88,
+                                        width=0.045))
+        notes = [_currents_text(cur), "cyan dot: design point"]
         if quantity == "F" and lo < threshold_mn < hi:
             iso = mm.contour([threshold_mn], scalars=name)
             if iso.n_points:
                 p.add_mesh(iso, color="cyan", line_width=3, name=f"threshold-{view}")
-        outline = _section_lines(pv, design, blocks, "y" if view == "xz" else "z",
-                                 height_m=h)
-        p.add_mesh(outline, color="black", line_width=2)
+                notes.append(f"cyan line: {threshold_mn:g} mN")
+        p.add_mesh(_section_lines(pv, design, blocks, view, h, z_low_m), color="black",
+                   line_width=2)
         dp = np.asarray(design.design_point_m) * 1e3
-        p.add_mesh(pv.PolyData(dp[None, :] + (0, -1, 0) if view == "xz" else
-                               dp[None, :] + (0, 0, 0.5)),
-                   color="cyan", point_size=12, render_points_as_spheres=True)
+        dot = dp + ((0.0, -1.0, 0.0) if view == "xz" else (0.0, 0.0, 0.5))
+        p.add_mesh(pv.PolyData(dot[None, :]), color="cyan", point_size=12,
+                   render_points_as_spheres=True)
+        bounds = list(mm.bounds)
         if view == "xz":
-            where = "vertical slice y = 0"
-            bounds = list(mm.bounds)
-            bounds[4] = -design.coil.length_m * 0.25e3  # show the top quarter of the coils
+            where = "vertical slice y = 0 (coils in outline below)"
+            bounds[4] = z_low_m * 1e3
             p.view_xz()
         else:
             where = f"horizontal slice z = {h * 1e3:.0f} mm"
-            bounds = list(mm.bounds)
             p.view_xy()
-        extra = (f"; cyan: {threshold_mn:g} mN" if quantity == "F" else "")
-        head = (f"|B| of the array" if quantity == "B"
-                else f"|F| on m = {np.linalg.norm(magnet_moment(design, moment)):.3g} A m^2 (+z)")
-        _title(p, f"{head}, {where}\n{_currents_text(cur)}; dot: design point{extra}",
-               font_size=10)
+        _title(p, f"{head}\n{where}\n" + "; ".join(notes), font_size=10)
         p.show_bounds(bounds=bounds, xtitle="x (mm)", ytitle="y (mm)", ztitle="z (mm)",
-                      color="black", font_size=9, grid=False, location="outer",
+                      color="black", font_size=9, grid=False, location="front",
                       ticks="outside", show_yaxis=(view == "xy"), show_zaxis=(view == "xz"))
         p.enable_parallel_projection()
         p.reset_camera(bounds=bounds)
-        p.camera.zoom(1.15)
+        p.camera.zoom(1.12 if view == "xz" else 1.0)
+        if view == "xy":
+            # leave room for the colour bar on the right
+            p.camera.position = tuple(np.asarray(p.camera.position) + (12.0, 0.0, 0.0))
+            p.camera.focal_point = tuple(np.asarray(p.camera.focal_point) + (12.0, 0.0, 0.0))
     return p
 
 
 def plot_force_map(design: "Design", currents: Sequence[float] | None = None, *,
                    moment=None, height_m: float | None = None, quality: Quality = "full",
                    window_size=(1024, 768), data=None, blocks=None) -> "pyvista.Plotter":
-    """Arrows of the force on the magnet over a grid at one height, coloured by |F| (mN)."""
+    """Arrows of the force on the magnet over a grid at one height, coloured by its magnitude
+    (mN, log scale); arrow length grows as the square root of the magnitude."""
     pv = _pv()
     cur = resolve_currents(design, currents)
     h = design.optimize.height_m if height_m is None else height_m
@@ -602,8 +641,8 @@ def plot_force_map(design: "Design", currents: Sequence[float] | None = None, *,
     spacing_mm = 2e3 * design.workspace.half_width_m / max(n - 1, 1)
     mm = _mm(cloud)
     if fmax > 0:
-        # Arrow length proportional to sqrt(|F|): the force near a core is orders of magnitude
-        # above that at the workspace's edge; a linear scale would show only one arrow.
+        # Length ~ sqrt(|F|): the force over a core is orders of magnitude above that at the
+        # workspace's edge; a linear scale would show one arrow and dots.
         unit = f / np.where(fmag > 0, fmag, 1.0)[:, None]
         mm["arrow"] = unit * np.sqrt(fmag / fmax)[:, None]
         glyphs = mm.glyph(orient="arrow", scale="arrow", factor=0.95 * spacing_mm,
@@ -611,16 +650,16 @@ def plot_force_map(design: "Design", currents: Sequence[float] | None = None, *,
         lo = max(fmax * 1e-3, float(fmag.min()) * 1e3, 1e-9)
         p.add_mesh(glyphs, scalars=F_MN, cmap="plasma", log_scale=True,
                    clim=(lo, fmax * 1e3), name="force-arrows",
-                   scalar_bar_args=_bar("|F| (mN)", fmt="%.2g"))
+                   scalar_bar_args=_bar("F (mN)", fmt=_log_fmt(lo, fmax * 1e3)))
     plane = pv.Plane(center=(0, 0, h * 1e3), i_size=2e3 * design.workspace.half_width_m,
                      j_size=2e3 * design.workspace.half_width_m)
     p.add_mesh(plane, color="#dddddd", opacity=0.25)
-    _title(p, f"Force on the magnet (m = {np.linalg.norm(magnet_moment(design, moment)):.3g} "
-              f"A m^2, +z) at z = {h * 1e3:.0f} mm; max |F| = {fmax * 1e3:.3g} mN\n"
-              f"{_currents_text(cur)}; arrow length ~ sqrt(|F|)")
+    _title(p, f"Force on the magnet ({_magnet_text(design, moment)}) at z = {h * 1e3:.0f} mm\n"
+              f"largest: {fmax * 1e3:.4g} mN; {_currents_text(cur)}\n"
+              f"arrow length ~ square root of the force", font_size=11)
     _axes(p)
     half = _footprint_half_m(design) * 1e3
-    _iso_camera(p, (0.0, 0.0, h * 1e3 - 25.0), 4.6 * half, elevation_deg=40.0)
+    _iso_camera(p, (0.0, 0.0, h * 1e3 - 5.0), 7.2 * half, elevation_deg=38.0)
     return p
 
 
@@ -639,18 +678,20 @@ def plot_force_isosurface(design: "Design", currents: Sequence[float] | None = N
     lmn = level * 1e3
     if surface.n_points:
         p.add_mesh(_mm(surface), scalars=FZ_MN, cmap=["#2166ac", "#b2182b"], clim=(-lmn, lmn),
-                   opacity=0.55, smooth_shading=True, name="isosurface",
+                   opacity=0.5, smooth_shading=True, name="isosurface",
                    scalar_bar_args=_bar("Fz (mN)", n_labels=2, fmt="%+.2g"))
     else:
-        p.add_text(f"|Fz| < {lmn:g} mN everywhere in the box", position="lower_left",
-                   color="black", font_size=11)
+        p.add_text(f"the vertical force stays below {lmn:g} mN everywhere in the box",
+                   position="lower_left", color="black", font_size=11)
     p.add_mesh(_mm(vol.outline()), color="grey", line_width=1)
-    _title(p, f"Where the magnet (+z) feels Fz = +{lmn:g} mN (red, push) and -{lmn:g} mN "
-              f"(blue, pull)\n{_currents_text(cur)}; inside the surfaces |Fz| is larger")
+    _title(p, f"Where the magnet ({_magnet_text(design, moment)}) feels Fz = +{lmn:g} mN "
+              f"(red, push up) and -{lmn:g} mN (blue, pull down)\n{_currents_text(cur)}; "
+              f"the force is larger between the surfaces and the coils; grey: computed box",
+           font_size=10)
     _axes(p, np.asarray(vol.bounds) * 1e3)
     b = np.asarray(vol.bounds) * 1e3
-    _iso_camera(p, (0.0, 0.0, (b[4] + b[5]) / 2 - 40.0), 2.6 * max(b[1] - b[0], b[5] - b[4]),
-                elevation_deg=18.0)
+    _iso_camera(p, (0.0, 0.0, (b[4] + b[5]) / 2 - 30.0), 2.7 * max(b[1] - b[0], b[5] - b[4]),
+                elevation_deg=16.0)
     return p
 
 

@@ -1,20 +1,59 @@
-"""``designkit report``: the main job on a design (default: the thesis device).
+"""``designkit report``: the main job on a design (default: the embedded thesis device).
 
-Writes ``OUT/report.json`` with the default coil's field, gradient and the force and torque on
-the finger magnet at the design point, and prints a summary table.
+Runs the whole pipeline and writes a report folder ``OUT`` (default ``./designkit-report``):
+
+``report.json``
+    Version, design name/hash, the design, the single coil's field, gradient, force and torque
+    at the design point (``design_point``), the whole array's force there (``array``), the
+    optimized coil (``optimized_coil``, when :mod:`designkit.optimize` is available), the files
+    written and the steps ``skipped`` with the reason.
+``report.md``
+    The same for people: tables and the figures.
+``design.json``, ``design.md``, ``design.toml``
+    The design summary (every field, SI, with derived coil quantities) as JSON, a Markdown
+    table and the TOML that reproduces it.
+``optimized_coil.json``
+    Full optimizer result (when available).
+``figures/*.png``
+    Array scene, field lines, |B| and |F| slices, force map, Fz = +/-0.8 mN iso-surface.
+``vtk/*``
+    The figures' data for ParaView (see :func:`designkit.viz.export_vtk`).
+``map/forcemap.npz``
+    A force-current map file on a coarse grid (5 mm; 15 mm with ``--quick``) when
+    :mod:`designkit.fieldmap` is available; the controller's map comes from ``designkit map``.
+
+Every file is written atomically and re-running overwrites the same files with the same
+content (no time stamps), so the job is idempotent. ``--quick`` uses coarse grids, small images
+and fewer optimizer starts (seconds instead of about a minute); tests use it.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import math
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from .. import __version__
-from .._io import write_json_atomic
+from .._io import write_json_atomic, write_text_atomic
 from ..coil import Coil
-from ..design import load_design
+from ..design import Design, design_to_toml, load_design
+
+MAP_SPACING_M = {"quick": 0.015, "full": 0.005}
+"""Grid spacing of the report's map file, m: coarse, to keep the job short."""
+
+FIGURES = ("scene", "fieldlines", "slice-B", "slice-F", "forcemap", "isosurface")
+FIGURE_TITLES = {
+    "scene": "Coil array, magnet at the design point, workspace",
+    "fieldlines": "Field lines of B",
+    "slice-B": "Magnitude of B on a vertical and a horizontal slice",
+    "slice-F": "Force on the magnet on a vertical and a horizontal slice",
+    "forcemap": "Force vectors on the magnet at the design height",
+    "isosurface": "Where the vertical force reaches the human threshold (0.8 mN)",
+}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -23,14 +62,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=Path("designkit-report"),
                         help="output folder (default: ./designkit-report)")
     parser.add_argument("--current", type=float, default=None,
-                        help="coil current in A (default: the design's per-coil limit)")
+                        help="coil current in A for the design point (default: the design's "
+                             "per-coil limit)")
+    parser.add_argument("--currents", default=None,
+                        help="per-coil currents in A for the figures, comma-separated, "
+                             "row-major (default: the centre coil at the per-coil limit)")
+    parser.add_argument("--quick", action="store_const", const="quick", dest="quality",
+                        default="full",
+                        help="coarse grids, small images, fewer optimizer starts (seconds)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
-def design_point_summary(design, current_a: float) -> dict:
+# ----------------------------------------------------------------------------- pieces
+def design_point_summary(design: Design, current_a: float) -> dict:
     """Field, gradient, force and torque of the design's coil at its design point (SI)."""
     coil = Coil.from_design(design)
     p = np.array(design.design_point_m)
-    b, g = coil.field(p, current_a, gradient=True)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        b, g = coil.field(p, current_a, gradient=True)
     m = np.array([0.0, 0.0, design.magnet.moment_a_m2])
     force = g.T @ m  # F = grad(m . B) = G^T m
     torque = np.cross(m, b)
@@ -43,32 +93,324 @@ def design_point_summary(design, current_a: float) -> dict:
         "force_n": force.tolist(),
         "torque_n_m": torque.tolist(),
         "core_model": None if coil.core is None else coil.core.model,
+        "warnings": sorted({str(w.message) for w in caught}),
     }
 
 
+def coil_properties(design: Design) -> dict:
+    """Electrical and mechanical quantities of the design's coil (SI); {} parts if unavailable."""
+    coil = Coil.from_design(design)
+    out: dict = {"dipole_moment_per_amp_a_m2": coil.dipole_moment_per_amp}
+    try:
+        r = coil.resistance(design.wire)
+        out["resistance_ohm"] = r
+        out["current_at_supply_a"] = design.drive.supply_voltage_v / r
+    except (ImportError, AttributeError) as exc:
+        out["resistance_ohm"] = None
+        out["resistance_skipped"] = f"{type(exc).__name__}: {exc}"
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ind = coil.inductance(design.wire)
+        out["inductance_h"] = ind
+        if out.get("resistance_ohm"):
+            out["time_constant_s"] = ind / out["resistance_ohm"]
+    except (ImportError, AttributeError, NotImplementedError) as exc:
+        out["inductance_h"] = None
+        out["inductance_skipped"] = f"{type(exc).__name__}: {exc}"
+    return out
+
+
+_UNITS = [("_a_per_m", "A/m"), ("_a_m2", "A m^2"), ("_ohm_m", "ohm m"), ("_per_k", "1/K"),
+          ("_n_per_m", "N/m"), ("_ohm", "ohm"), ("_m3", "m^3"), ("_hz", "Hz"), ("_c", "degC"),
+          ("_v", "V"), ("_a", "A"), ("_t", "T"), ("_s", "s"), ("_n", "N"), ("_m", "m")]
+
+
+def _unit(name: str) -> str:
+    for suffix, unit in _UNITS:
+        if name.endswith(suffix):
+            return unit
+    return ""
+
+
+def _human(value, unit: str) -> str:
+    if isinstance(value, bool) or value is None or isinstance(value, str):
+        return str(value)
+    if unit == "m":
+        return f"{value * 1e3:.6g} mm"
+    if unit == "N":
+        return f"{value * 1e3:.6g} mN"
+    if isinstance(value, float):
+        return f"{value:.6g} {unit}".strip()
+    return f"{value} {unit}".strip()
+
+
+def design_markdown(design: Design, derived: dict) -> str:
+    """The design as a Markdown table (SI in the JSON; mm and mN here, for people)."""
+    lines = [f"# Design `{design.name}`", "", f"spec hash `{design.spec_hash()}`", "",
+             "| parameter | value | SI value |", "| --- | --- | --- |"]
+    for section, values in design.to_dict().items():
+        if section == "name":
+            continue
+        if values is None:
+            lines.append(f"| {section} | none | |")
+            continue
+        for key, value in values.items():
+            unit = _unit(key)
+            si = f"{value} {unit}".strip()
+            lines.append(f"| {section}.{key} | {_human(value, unit)} | {si} |")
+    lines += ["", "## Derived coil quantities", "", "| quantity | value |", "| --- | --- |"]
+    for key, value in derived.items():
+        lines.append(f"| {key} | {_human(value, _unit(key))} |")
+    return "\n".join(lines) + "\n"
+
+
+def _vec_mn(f) -> str:
+    return "(" + ", ".join(f"{x * 1e3:+.4g}" for x in f) + ") mN"
+
+
+def _vec_mt(b) -> str:
+    return "(" + ", ".join(f"{x * 1e3:+.4g}" for x in b) + ") mT"
+
+
+def report_markdown(report: dict) -> str:
+    dp = report["design_point"]
+    lines = [f"# designkit report: design `{report['design_name']}`", "",
+             f"designkit {report['designkit_version']}, spec hash `{report['design_hash']}`; "
+             f"the design is in [design.md](design.md) / [design.toml](design.toml).", "",
+             "## Force at the design point", "",
+             "| case | current | B | dBz/dz | F |", "| --- | --- | --- | --- | --- |",
+             f"| single coil | {dp['current_a']:g} A | {_vec_mt(dp['flux_density_t'])} | "
+             f"{dp['gradient_t_per_m'][2][2]:+.5g} T/m | {_vec_mn(dp['force_n'])} |"]
+    arr = report.get("array")
+    if arr:
+        lines.append(f"| array, figure currents | {arr['currents_text']} | "
+                     f"{_vec_mt(arr['flux_density_t'])} | {arr['dbz_dz_t_per_m']:+.5g} T/m | "
+                     f"{_vec_mn(arr['force_n'])} |")
+    lines += ["", f"Point {tuple(round(x * 1e3, 3) for x in dp['point_m'])} mm, magnet moment "
+                  f"{dp['magnet_moment_a_m2'][2]:.4g} A m^2 along +z, core model "
+                  f"`{dp['core_model']}`. F = (grad B)^T m."]
+    for w in dp.get("warnings", []):
+        lines.append(f"\n> warning: {w}")
+    opt = report.get("optimized_coil")
+    if opt:
+        lines += ["", "## Optimized coil (thesis eq. 2.14)", "",
+                  "| Ri | Ro | L | turns | R | tau | Fz at the design point | core model |",
+                  "| --- | --- | --- | --- | --- | --- | --- | --- |",
+                  f"| {opt['inner_radius_m'] * 1e3:.3f} mm | {opt['outer_radius_m'] * 1e3:.3f} mm"
+                  f" | {opt['length_m'] * 1e3:.3f} mm | {opt['turns']} | "
+                  f"{opt['resistance_ohm']:.4g} ohm | {opt['time_constant_s'] * 1e3:.4g} ms | "
+                  f"{opt['force_n'] * 1e3:.4g} mN | {opt['core_model']} |",
+                  "", "Full result: [optimized_coil.json](optimized_coil.json)."]
+    figs = report.get("figures", {})
+    if figs:
+        lines += ["", "## Figures", ""]
+        for kind, path in figs.items():
+            lines += [f"### {FIGURE_TITLES.get(kind, kind)}", "", f"![{kind}]({path})", ""]
+    vtk = report.get("vtk", {})
+    if vtk:
+        lines += ["## ParaView files", "", ", ".join(f"[{n}]({p})" for n, p in vtk.items()), ""]
+    if report.get("map"):
+        lines += ["## Force-current map", "", f"[{report['map']}]({report['map']})", ""]
+    skipped = report.get("skipped", {})
+    if skipped:
+        lines += ["## Skipped", ""] + [f"- {k}: {why}" for k, why in skipped.items()] + [""]
+    return "\n".join(lines) + "\n"
+
+
+def _optimized_coil(design: Design, quality: str) -> dict:
+    from ..optimize import CoilDesignProblem, solve
+
+    problem = CoilDesignProblem.from_design(design)
+    result = solve(problem, starts=3 if quality == "quick" else 8)
+    return result.as_dict()
+
+
+def _field_map(design: Design, out: Path, quality: str) -> Path:
+    """A coarse force-current map (the controller's map: ``designkit map``, 2 mm grid)."""
+    from .. import fieldmap
+
+    spacing = MAP_SPACING_M[quality]
+    data = fieldmap.build(design, spacing=spacing, progress=False)
+    return fieldmap.write(out / "map" / "forcemap.npz", data)
+
+
+# ----------------------------------------------------------------------------- main job
 def run(args: argparse.Namespace) -> int:
     design = load_design(args.design)
+    out = Path(args.out)
+    quality = getattr(args, "quality", "full")
     current = design.drive.max_current_a if args.current is None else float(args.current)
+    show = not getattr(args, "no_progress", False)
+    steps = ["design summary", "design point", "optimized coil", "figures", "VTK files",
+             "map file", "report"]
+    try:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(steps), desc="designkit report", unit="step", disable=not show)
+    except ImportError:  # pragma: no cover - tqdm is a dependency
+        bar = None
+
+    def step(name: str):
+        if bar is not None:
+            bar.set_postfix_str(name)
+        elif show:
+            print(f"[designkit report] {name}")
+
+    def done():
+        if bar is not None:
+            bar.update(1)
+
+    skipped: dict[str, str] = {}
+
+    # 1. design summary
+    step(steps[0])
+    derived = coil_properties(design)
+    write_json_atomic(out / "design.json", {"design_name": design.name,
+                                            "design_hash": design.spec_hash(),
+                                            "design": design.to_dict(), "coil": derived})
+    write_text_atomic(out / "design.md", design_markdown(design, derived))
+    write_text_atomic(out / "design.toml", design_to_toml(design))
+    done()
+
+    # 2. force at the design point (single coil, then the array at the figure currents)
+    step(steps[1])
     summary = design_point_summary(design, current)
-    report = {
+    report: dict = {
         "designkit_version": __version__,
         "design_name": design.name,
         "design_hash": design.spec_hash(),
         "design": design.to_dict(),
         "design_point": summary,
+        "coil": derived,
     }
-    out = Path(args.out)
+    from .viz import parse_currents
+
+    currents_arg = parse_currents(getattr(args, "currents", None))
+    viz = None
+    try:
+        from .. import viz as viz_module
+
+        viz = viz_module
+        currents = viz.resolve_currents(design, currents_arg)
+        b, g = viz.array_field(design, np.array([design.design_point_m]), currents)
+        f = viz.force_from_gradient(g, viz.magnet_moment(design))[0]
+        report["array"] = {"currents_a": currents.tolist(),
+                           "currents_text": viz._currents_text(currents),
+                           "point_m": list(design.design_point_m),
+                           "flux_density_t": b[0].tolist(), "gradient_t_per_m": g[0].tolist(),
+                           "dbz_dz_t_per_m": float(g[0, 2, 2]), "force_n": f.tolist()}
+    except ImportError as exc:
+        skipped["array"] = f"designkit.viz unavailable ({exc})"
+    done()
+
+    # 3. optimized coil
+    step(steps[2])
+    try:
+        opt = _optimized_coil(design, quality)
+        write_json_atomic(out / "optimized_coil.json", opt)
+        report["optimized_coil"] = {k: opt[k] for k in (
+            "inner_radius_m", "outer_radius_m", "length_m", "turns", "resistance_ohm",
+            "inductance_h", "time_constant_s", "current_a", "force_n", "core_model",
+            "verified_global") if k in opt}
+        report["optimized_coil"]["file"] = "optimized_coil.json"
+    except ImportError as exc:
+        skipped["optimized coil"] = f"designkit.optimize is not available ({exc})"
+    done()
+
+    # 4-5. figures and VTK files from the same datasets
+    if viz is None:
+        skipped["figures"] = skipped["VTK files"] = "designkit.viz unavailable"
+        done()
+        done()
+    else:
+        try:
+            _figures_and_vtk(viz, design, currents, quality, out, report, step, done, steps)
+        except ImportError as exc:  # pyvista missing: MissingDependencyError
+            skipped["figures"] = skipped["VTK files"] = str(exc)
+
+    # 6. map file
+    step(steps[5])
+    try:
+        report["map"] = str(_field_map(design, out, quality).relative_to(out))
+    except ImportError as exc:
+        skipped["map file"] = f"designkit.fieldmap is not available ({exc})"
+    done()
+
+    # 7. report
+    step(steps[6])
+    report["skipped"] = skipped
     write_json_atomic(out / "report.json", report)
+    write_text_atomic(out / "report.md", report_markdown(report))
+    done()
+    if bar is not None:
+        bar.close()
+    _print_summary(design, summary, current, report, out)
+    return 0
+
+
+def _figures_and_vtk(viz, design, currents, quality, out, report, step, done, steps):
+    size = (640, 480) if quality == "quick" else (1024, 768)
+    wide = (960, 420) if quality == "quick" else (1500, 640)
+    step(steps[3])
+    data = {"scene": viz.scene_meshes(design, currents)}
+    data["fieldlines"] = viz.field_line_data(design, currents, quality=quality)
+    data["slices"] = viz.slice_data(design, currents, quality=quality)
+    data["forcemap"] = viz.force_map_data(design, currents, quality=quality)
+    data["isosurface"] = viz.force_isosurface_data(design, currents, quality=quality)
+    blocks = data["scene"]
+    plots = {
+        "scene": lambda: viz.plot_array_scene(design, currents, window_size=size,
+                                              blocks=blocks),
+        "fieldlines": lambda: viz.plot_field_lines(design, currents, window_size=size,
+                                                   data=data["fieldlines"], blocks=blocks),
+        "slice-B": lambda: viz.plot_slices(design, currents, quantity="B", window_size=wide,
+                                           data=data["slices"], blocks=blocks),
+        "slice-F": lambda: viz.plot_slices(design, currents, quantity="F", window_size=wide,
+                                           data=data["slices"], blocks=blocks),
+        "forcemap": lambda: viz.plot_force_map(design, currents, window_size=size,
+                                               data=data["forcemap"], blocks=blocks),
+        "isosurface": lambda: viz.plot_force_isosurface(design, currents, window_size=size,
+                                                        data=data["isosurface"],
+                                                        blocks=blocks),
+    }
+    figures = {}
+    for kind in FIGURES:
+        plotter = plots[kind]()
+        try:
+            viz.save_png(plotter, out / "figures" / f"{kind}.png")
+        finally:
+            plotter.close()
+        figures[kind] = f"figures/{kind}.png"
+    report["figures"] = figures
+    done()
+    step(steps[4])
+    files = viz.export_vtk(design, out / "vtk", currents, quality=quality, data=data)
+    report["vtk"] = {name: f"vtk/{name}" for name in sorted(files)}
+    done()
+
+
+def _print_summary(design, summary, current, report, out) -> None:
     b = summary["flux_density_t"]
     f = summary["force_n"]
     print(f"designkit {__version__} - design '{design.name}' ({design.spec_hash()[:12]})")
-    print(f"coil: Ri/Ro/L = {design.coil.inner_radius_m * 1e3:.1f}/{design.coil.outer_radius_m * 1e3:.1f}"
-          f"/{design.coil.length_m * 1e3:.1f} mm, {design.coil.turns} turns, core: "
-          f"{summary['core_model'] or 'none'}")
-    print(f"design point: {design.optimize.height_m * 1e3:.1f} mm above the coil top, I = {current:g} A")
-    print(f"  B     = ({b[0] * 1e3:+.4f}, {b[1] * 1e3:+.4f}, {b[2] * 1e3:+.4f}) mT")
+    print(f"coil: Ri/Ro/L = {design.coil.inner_radius_m * 1e3:.1f}/"
+          f"{design.coil.outer_radius_m * 1e3:.1f}/{design.coil.length_m * 1e3:.1f} mm, "
+          f"{design.coil.turns} turns, core: {summary['core_model'] or 'none'}")
+    print(f"design point: {design.optimize.height_m * 1e3:.1f} mm above the coil top, "
+          f"I = {current:g} A")
+    print(f"  B      = ({b[0] * 1e3:+.4f}, {b[1] * 1e3:+.4f}, {b[2] * 1e3:+.4f}) mT")
     print(f"  dBz/dz = {summary['gradient_t_per_m'][2][2]:+.5f} T/m")
-    print(f"  F     = ({f[0] * 1e3:+.3f}, {f[1] * 1e3:+.3f}, {f[2] * 1e3:+.3f}) mN on m = "
+    print(f"  F      = ({f[0] * 1e3:+.3f}, {f[1] * 1e3:+.3f}, {f[2] * 1e3:+.3f}) mN on m = "
           f"{design.magnet.moment_a_m2:.4f} A m^2")
-    print(f"wrote {out / 'report.json'}")
-    return 0
+    for w in summary.get("warnings", []):
+        print(f"  warning: {w}")
+    opt = report.get("optimized_coil")
+    if opt:
+        print(f"optimized coil ({opt['core_model']}): Ri/Ro/L = {opt['inner_radius_m'] * 1e3:.2f}/"
+              f"{opt['outer_radius_m'] * 1e3:.2f}/{opt['length_m'] * 1e3:.2f} mm, "
+              f"{opt['turns']} turns, Fz = {opt['force_n'] * 1e3:.1f} mN")
+    for what, why in report.get("skipped", {}).items():
+        print(f"skipped {what}: {why}")
+    print(f"wrote {out / 'report.json'}, {out / 'report.md'}, "
+          f"{len(report.get('figures', {}))} figures, {len(report.get('vtk', {}))} VTK files")

@@ -1,0 +1,371 @@
+"""A coil array: coils in poses, the 8 x n actuation matrix, force and torque on a dipole.
+
+Thesis chapter 2 (eqs. 2.5-2.13): with the currents I (n_coils,),
+
+    [B; G5] = A(p) I,    G5 = (dBx/dx, dBx/dy, dBx/dz, dBy/dy, dBy/dz),
+    F = F(m) G5 (eq. 2.5),    tau = Sk(m) B (eq. 2.9).
+
+Five numbers describe grad B because, outside every source, grad B is symmetric (curl B = 0) and
+traceless (div B = 0); :func:`gradient_from_g5` rebuilds the full tensor from them.
+
+Superposition assumes linear cores. With ``Core(bh='steel1010')`` the per-ampere columns are the
+secant values at 1 A, and the magnetization of a core by its *neighbours'* fields is neglected
+(as in the thesis); both are stated limits of this model, not of the code paths.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from . import _validate as v
+from .coil import Coil
+from .errors import BadInputError, DesignRuleError
+from .pose import Pose
+
+ROWS = ("Bx", "By", "Bz", "dBx/dx", "dBx/dy", "dBx/dz", "dBy/dy", "dBy/dz")
+"""Row order of the actuation matrix (thesis eq. 2.13). Units: T/A for rows 0-2, T/(m A) 3-7."""
+
+
+# ---------------------------------------------------------------------------- small matrices
+def force_matrix(moment) -> np.ndarray:
+    """F(m) of thesis eq. 2.5: F = F(m) G5, shape (3, 5), A m^2.
+
+    Uses dBy/dx = dBx/dy, dBz/dx = dBx/dz, dBz/dy = dBy/dz and dBz/dz = -dBx/dx - dBy/dy.
+    """
+    mx, my, mz = v.vector3("moment", moment, "A m^2")
+    return np.array([[mx, my, mz, 0.0, 0.0],
+                     [0.0, mx, 0.0, my, mz],
+                     [-mz, 0.0, mx, -mz, my]])
+
+
+def skew_matrix(moment) -> np.ndarray:
+    """Sk(m) of thesis eq. 2.8: m x B = Sk(m) B, shape (3, 3), A m^2."""
+    mx, my, mz = v.vector3("moment", moment, "A m^2")
+    return np.array([[0.0, -mz, my], [mz, 0.0, -mx], [-my, mx, 0.0]])
+
+
+def g5_from_gradient(g: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) gradient ``G[i, j] = dB_i/dx_j`` -> (..., 5) the rows 3-7 of A."""
+    return np.stack([g[..., 0, 0], g[..., 0, 1], g[..., 0, 2], g[..., 1, 1], g[..., 1, 2]], -1)
+
+
+def gradient_from_g5(g5: np.ndarray) -> np.ndarray:
+    """(..., 5) -> (..., 3, 3), symmetric and traceless by construction."""
+    gxx, gxy, gxz, gyy, gyz = np.moveaxis(np.asarray(g5), -1, 0)
+    return np.stack([np.stack([gxx, gxy, gxz], -1), np.stack([gxy, gyy, gyz], -1),
+                     np.stack([gxz, gyz, -gxx - gyy], -1)], -2)
+
+
+# ---------------------------------------------------------------------------- geometry
+def _cylinders(coil: Coil):
+    """Solid cylinders (radius, z_lo, z_hi) a coil occupies in its local frame, with names."""
+    out = [("winding", coil.outer_radius, -coil.length / 2, coil.length / 2)]
+    if coil.core is not None:
+        c = coil.core
+        out.append(("core", c.radius, c.offset - c.length / 2, c.offset + c.length / 2))
+    return out
+
+
+def _cyl_overlap(pa: Pose, a, pb: Pose, b) -> bool:
+    """Do two solid cylinders (in poses) share interior points?
+
+    Exact for parallel (or anti-parallel) axes; otherwise surface points of each (0.5 mm
+    spacing or finer) are tested inside the other, which finds any overlap deeper than that.
+    """
+    _, ra, za0, za1 = a
+    _, rb, zb0, zb1 = b
+    ca = np.asarray(pa.position) + pa.matrix[:, 2] * 0.5 * (za0 + za1)
+    cb = np.asarray(pb.position) + pb.matrix[:, 2] * 0.5 * (zb0 + zb1)
+    rsa = np.hypot(ra, 0.5 * (za1 - za0))
+    rsb = np.hypot(rb, 0.5 * (zb1 - zb0))
+    if np.linalg.norm(ca - cb) >= rsa + rsb:
+        return False
+    ua, ub = pa.matrix[:, 2], pb.matrix[:, 2]
+    eps = 1e-12
+    if abs(abs(ua @ ub) - 1.0) < 1e-9:
+        d = cb - ca
+        axial = d @ ua
+        radial = np.linalg.norm(d - axial * ua)
+        ha, hb = 0.5 * (za1 - za0), 0.5 * (zb1 - zb0)
+        return bool(radial < ra + rb - eps and abs(axial) < ha + hb - eps)
+
+    def surface(pose, r, z0, z1):
+        step = min(5e-4, r / 8)
+        nphi = max(16, int(2 * np.pi * r / step))
+        nz = max(2, int((z1 - z0) / step) + 1)
+        nr = max(2, int(r / step) + 1)
+        phi = np.linspace(0, 2 * np.pi, nphi, endpoint=False)
+        zz = np.linspace(z0, z1, nz)
+        side = np.stack(np.meshgrid(r * np.cos(phi), zz, indexing="ij"), -1)
+        pts = [np.c_[r * np.cos(P), r * np.sin(P), Z].reshape(-1, 3)
+               for P, Z in [np.meshgrid(phi, zz, indexing="ij")]]
+        rr = np.linspace(0, r, nr)
+        R, P = np.meshgrid(rr, phi, indexing="ij")
+        for zc in (z0, z1):
+            pts.append(np.c_[(R * np.cos(P)).ravel(), (R * np.sin(P)).ravel(),
+                             np.full(R.size, zc)])
+        del side
+        loc = np.vstack(pts)
+        return loc @ pose.matrix.T + np.asarray(pose.position)
+
+    def inside(pose, r, z0, z1, pts):
+        loc = pose.to_local(pts)
+        return (np.hypot(loc[:, 0], loc[:, 1]) < r - eps) & (loc[:, 2] > z0 + eps) & (
+            loc[:, 2] < z1 - eps)
+
+    return bool(np.any(inside(pb, rb, zb0, zb1, surface(pa, ra, za0, za1)))
+                or np.any(inside(pa, ra, za0, za1, surface(pb, rb, zb0, zb1))))
+
+
+def check_overlap(coils) -> None:
+    """Raise :class:`DesignRuleError` naming the first pair of coils whose solids intersect."""
+    for (i, ci), (j, cj) in itertools.combinations(enumerate(coils), 2):
+        for a in _cylinders(ci):
+            for b in _cylinders(cj):
+                if _cyl_overlap(ci.pose, a, cj.pose, b):
+                    raise DesignRuleError(
+                        f"Coils {i} and {j} overlap: the {a[0]} of coil {i} (at "
+                        f"{np.round(np.asarray(ci.pose.position) * 1e3, 3).tolist()} mm) "
+                        f"intersects the {b[0]} of coil {j} (at "
+                        f"{np.round(np.asarray(cj.pose.position) * 1e3, 3).tolist()} mm). "
+                        "Move them apart or make them smaller.")
+
+
+# ---------------------------------------------------------------------------- the array
+@dataclass(frozen=True)
+class CoilArray:
+    """Coils in poses (each :class:`Coil` carries its pose). Immutable.
+
+    Parameters
+    ----------
+    coils : tuple of Coil
+        At least one; their solids (winding envelope, core) must not intersect.
+    """
+
+    coils: tuple[Coil, ...]
+
+    def __post_init__(self):
+        coils = tuple(self.coils)
+        if not coils:
+            raise BadInputError("coils", "a non-empty sequence of Coil", coils)
+        for k, c in enumerate(coils):
+            if not isinstance(c, Coil):
+                raise BadInputError(f"coils[{k}]", "a designkit.Coil", type(c).__name__)
+        object.__setattr__(self, "coils", coils)
+        check_overlap(coils)
+
+    @classmethod
+    def from_design(cls, design) -> "CoilArray":
+        """The design's planar array: rows x columns, pitch, top faces at z = 0, row-major."""
+        return cls(tuple(Coil.from_design(design, (x, y, None))
+                         for x, y, _ in design.coil_centres_m()))
+
+    @classmethod
+    def default(cls) -> "CoilArray":
+        """The thesis array: 9 coils, 3 x 3, 50 mm pitch (with the default core)."""
+        from .design import default_design
+
+        return cls.from_design(default_design())
+
+    @property
+    def n_coils(self) -> int:
+        return len(self.coils)
+
+    def positions(self) -> np.ndarray:
+        """Winding centres, shape (n_coils, 3), m."""
+        return np.array([c.pose.position for c in self.coils])
+
+    def coil_types(self) -> dict[Coil, list[int]]:
+        """Identical coils (all but the pose equal) -> their indices: one axisymmetric model each."""
+        out: dict[Coil, list[int]] = {}
+        for k, c in enumerate(self.coils):
+            out.setdefault(dataclasses.replace(c, pose=Pose()), []).append(k)
+        return out
+
+    # ------------------------------------------------------------------ fields
+    def actuation_matrix(self, points, *, rtol: float = 1e-10) -> np.ndarray:
+        """A(p) of thesis eq. 2.13 by direct evaluation of every coil.
+
+        Parameters
+        ----------
+        points : array-like, shape (3,) or (n, 3), m
+        rtol : float
+            Relative accuracy of the winding quadrature.
+
+        Returns
+        -------
+        A : ndarray, shape (n, 8, n_coils) (or (8, n_coils) for one point); rows :data:`ROWS`,
+            T/A and T/(m A).
+        """
+        p, single = v.points(points)
+        a = np.empty((len(p), 8, self.n_coils))
+        for k, coil in enumerate(self.coils):
+            b, g = coil.field(p, 1.0, gradient=True, rtol=rtol)
+            a[:, :3, k] = b
+            a[:, 3:, k] = g5_from_gradient(g)
+        return a[0] if single else a
+
+    def _currents(self, currents) -> np.ndarray:
+        i = np.asarray(currents, dtype=float)
+        if i.shape != (self.n_coils,) or not np.all(np.isfinite(i)):
+            raise BadInputError("currents", f"{self.n_coils} finite values, A",
+                                f"shape {i.shape}")
+        return i
+
+    def field(self, points, currents) -> tuple[np.ndarray, np.ndarray]:
+        """Total B (n, 3), T, and grad B (n, 3, 3), T/m, for the currents (n_coils,), A."""
+        i = self._currents(currents)
+        a = self.actuation_matrix(np.atleast_2d(np.asarray(points, dtype=float)))
+        y = a @ i
+        return y[:, :3], gradient_from_g5(y[:, 3:])
+
+    def force(self, points, moment, currents) -> np.ndarray:
+        """Force on a point dipole, F = F(m) G5, shape (n, 3), N."""
+        fm = force_matrix(moment)
+        a = self.actuation_matrix(np.atleast_2d(np.asarray(points, dtype=float)))
+        return (a[:, 3:, :] @ self._currents(currents)) @ fm.T
+
+    def torque(self, points, moment, currents) -> np.ndarray:
+        """Torque on a point dipole, tau = Sk(m) B, shape (n, 3), N m."""
+        sk = skew_matrix(moment)
+        a = self.actuation_matrix(np.atleast_2d(np.asarray(points, dtype=float)))
+        return (a[:, :3, :] @ self._currents(currents)) @ sk.T
+
+
+# ---------------------------------------------------------------------------- workspace metrics
+def fz_per_amp(actuation: np.ndarray, moment) -> np.ndarray:
+    """Vertical force per ampere of each coil, (n, n_coils), N/A, from A (n, 8, n_coils)."""
+    return np.einsum("k,nkc->nc", force_matrix(moment)[2], actuation[:, 3:, :])
+
+
+def max_vertical_force(fz_coeff: np.ndarray, max_current: float, total_current: float, *,
+                       lateral: Literal["free", "zero"] = "free") -> np.ndarray:
+    """Largest upward force reachable at each point under the drive limits, N.
+
+    Maximize ``Fz = a . I`` subject to ``|I_k| <= max_current`` and ``sum |I_k| <= total_current``.
+
+    ``lateral='free'``: closed form (a fractional knapsack with equal weights): give
+    ``max_current`` with sign(a_k) to the coils with the largest |a_k| until the budget is spent.
+    ``lateral='zero'``: also require Fx = Fy = 0 (a pure push); one linear program per point
+    (scipy.optimize.linprog, HiGHS) -- then ``fz_coeff`` must be (n, 3, n_coils) force per amp.
+
+    Parameters
+    ----------
+    fz_coeff : ndarray, shape (n, n_coils) N/A ('free') or (n, 3, n_coils) N/A ('zero')
+    max_current, total_current : float, A
+
+    Returns
+    -------
+    ndarray, shape (n,), N (>= 0).
+    """
+    imax = v.positive("max_current", max_current, "A")
+    itot = v.positive("total_current", total_current, "A")
+    if lateral == "free":
+        a = np.sort(np.abs(np.asarray(fz_coeff, dtype=float)), axis=1)[:, ::-1]
+        n_full = int(min(a.shape[1], itot // imax))
+        out = imax * a[:, :n_full].sum(axis=1)
+        if n_full < a.shape[1]:
+            out += (itot - n_full * imax) * a[:, n_full]
+        return out
+    if lateral != "zero":
+        raise BadInputError("lateral", "'free' or 'zero'", lateral)
+    from scipy.optimize import linprog
+
+    f = np.asarray(fz_coeff, dtype=float)
+    nc = f.shape[2]
+    # I = Ip - In with Ip, In >= 0: the L1 budget becomes linear
+    a_ub = np.ones((1, 2 * nc))
+    out = np.empty(len(f))
+    for k in range(len(f)):
+        c = -np.r_[f[k, 2], -f[k, 2]]
+        a_eq = np.c_[f[k, :2], -f[k, :2]]
+        res = linprog(c, A_ub=a_ub, b_ub=[itot], A_eq=a_eq, b_eq=[0.0, 0.0],
+                      bounds=[(0, imax)] * (2 * nc), method="highs")
+        out[k] = -res.fun if res.status == 0 else 0.0
+    return out
+
+
+def condition_number(actuation: np.ndarray, length_scale: float = 0.03) -> np.ndarray:
+    """2-norm condition number of A(p) with the gradient rows times ``length_scale`` (m).
+
+    The rows of A have different units (T/A and T/(m A)); scaling the gradient rows by a length
+    (default 30 mm, the design height) makes the singular values comparable.
+    Returns shape (n,); inf where A is rank deficient.
+    """
+    a = np.array(actuation, dtype=float, copy=True)
+    a[:, 3:, :] *= v.positive("length_scale", length_scale)
+    s = np.linalg.svd(a, compute_uv=False)
+    with np.errstate(divide="ignore"):
+        return np.where(s[:, -1] > 0, s[:, 0] / np.where(s[:, -1] > 0, s[:, -1], 1.0), np.inf)
+
+
+def workspace_metrics(design, *, spacing: float = 0.005, heights=None, out_png=None,
+                      array: CoilArray | None = None) -> dict:
+    """Largest vertical force, where it passes the human threshold, and conditioning.
+
+    Evaluated on horizontal planes (``heights``, m above the coil tops; default 10, 30, 50 mm)
+    over the workspace footprint with the design's drive limits (per coil and total) and a
+    magnet pointing up (+z, moment |m| of the design's magnet).
+
+    Returns a dict of arrays and summary numbers; writes a PNG map to ``out_png`` if given.
+    """
+    from .scene import Scene
+
+    arr = array or CoilArray.from_design(design)
+    ws = design.workspace
+    heights = (0.010, 0.030, 0.050) if heights is None else tuple(heights)
+    xs = np.arange(-ws.half_width_m, ws.half_width_m + 1e-12, spacing)
+    m = np.array([0.0, 0.0, design.magnet.moment_a_m2])
+    thr = design.render.threshold_n
+    fmax, cond = [], []
+    for h in heights:
+        X, Y = np.meshgrid(xs, xs, indexing="xy")
+        pts = np.c_[X.ravel(), Y.ravel(), np.full(X.size, h)]
+        a = Scene(arr, pts, ("B", "gradient"), tolerance=1e-6).evaluate().actuation()
+        fz = fz_per_amp(a, m)
+        fmax.append(max_vertical_force(fz, design.drive.max_current_a,
+                                       design.drive.total_current_a).reshape(X.shape))
+        cond.append(condition_number(a).reshape(X.shape))
+    fmax, cond = np.array(fmax), np.array(cond)
+    out = {"heights_m": np.array(heights), "x_m": xs, "max_fz_n": fmax, "condition": cond,
+           "fraction_above_threshold": [(f > thr).mean() for f in fmax],
+           "threshold_n": thr}
+    if out_png is not None:
+        _plot_metrics(out, out_png)
+    return out
+
+
+def _plot_metrics(res: dict, out_png) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ._io import atomic_path
+
+    hs = res["heights_m"]
+    ext = np.array([res["x_m"][0], res["x_m"][-1]] * 2) * 1e3
+    fig, axes = plt.subplots(2, len(hs), figsize=(4 * len(hs), 7), squeeze=False)
+    for k, h in enumerate(hs):
+        ax = axes[0, k]
+        im = ax.imshow(res["max_fz_n"][k] * 1e3, origin="lower", extent=ext, cmap="viridis")
+        ax.contour(res["max_fz_n"][k] * 1e3, levels=[res["threshold_n"] * 1e3], colors="w",
+                   extent=ext, origin="lower")
+        ax.set_title(f"max Fz (mN), z = {h * 1e3:.0f} mm\nwhite: {res['threshold_n'] * 1e3} mN")
+        fig.colorbar(im, ax=ax)
+        ax = axes[1, k]
+        im = ax.imshow(np.log10(res["condition"][k]), origin="lower", extent=ext, cmap="magma")
+        ax.set_title("log10 cond A (grad rows x 30 mm)")
+        fig.colorbar(im, ax=ax)
+        for a in axes[:, k]:
+            a.set_xlabel("x (mm)")
+            a.set_ylabel("y (mm)")
+    fig.tight_layout()
+    with atomic_path(out_png, suffix=".png") as tmp:
+        fig.savefig(tmp, format="png", dpi=90)
+    plt.close(fig)

@@ -1,0 +1,145 @@
+"""Set designkit's models beside a GetDP solution: tables and plots.
+
+Everything is in the winding's local frame (centre at z = 0); heights are reported above the
+winding's top face.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..design import MU0
+from .runner import FemResult
+
+
+def model_field(coil, current: float, r: float, z_local: np.ndarray, core_model: str | None):
+    """Bz, dBz/dz (T, T/m) of winding + core (``core_model``; None = winding only) on r = const."""
+    import warnings
+
+    from ..core import SaturationWarning
+    from ..field.winding import winding_rz
+
+    z_local = np.asarray(z_local, dtype=float)
+    n = len(z_local)
+    j = coil.turns * current / ((coil.outer_radius - coil.inner_radius) * coil.length)
+    w = winding_rz(coil.inner_radius, coil.outer_radius, coil.length / 2, np.full(n, r), z_local,
+                   gradient=True, rtol=1e-11)
+    bz = w[1] * MU0 * j
+    dbz = w[5] * MU0 * j
+    if core_model is not None and coil.core is not None:
+        core = dataclasses.replace(coil.core, model=core_model)
+        c2 = dataclasses.replace(coil, core=core)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", SaturationWarning)
+            b, g = core.field_local(np.column_stack([np.full(n, r), np.zeros(n), z_local]), c2,
+                                    current, gradient=True)
+        bz = bz + b[:, 2]
+        dbz = dbz + g[:, 2, 2]
+    return bz, dbz
+
+
+def air_inductance(coil, nr: int = 16, nz: int = 48) -> float:
+    """Air-core self-inductance by quadrature of the winding's own flux linkage, H.
+
+    L = (N / S)^2 int_S Phi(r, z) dS / (N J / S ...) -- written per ampere: the flux through the
+    disc of radius r at height z, averaged over the winding section, times N. Independent of
+    the FEM; agrees with it to < 1e-6 on the thesis coil.
+    """
+    from ..field.winding import winding_rz
+
+    ri, ro, length, n_turns = coil.inner_radius, coil.outer_radius, coil.length, coil.turns
+    j = n_turns / ((ro - ri) * length)
+
+    def gl(a, b, n):
+        x, w = np.polynomial.legendre.leggauss(n)
+        return 0.5 * (a + b) + 0.5 * (b - a) * x, 0.5 * (b - a) * w
+
+    rs, wr = gl(ri, ro, nr)
+    zs, wz = [], []
+    edge = min(0.05 * length, 0.005)
+    for a, b in ((-length / 2, -length / 2 + edge), (-length / 2 + edge, length / 2 - edge),
+                 (length / 2 - edge, length / 2)):
+        x, w = gl(a, b, nz // 2)
+        zs.append(x)
+        wz.append(w)
+    zs = np.concatenate(zs)
+    wz = np.concatenate(wz)
+    # flux through the disc (r, z): integrate Bz r' dr' on [0, ri] and [ri, r]
+    xg, wg = np.polynomial.legendre.leggauss(24)
+    total = 0.0
+    for r, w1 in zip(rs, wr):
+        pts_r, pts_w = [], []
+        for a, b in ((0.0, ri), (ri, r)):
+            pts_r.append(0.5 * (a + b) + 0.5 * (b - a) * xg)
+            pts_w.append(0.5 * (b - a) * wg)
+        pr = np.concatenate(pts_r)
+        pw = np.concatenate(pts_w) * 2 * math.pi * pr
+        rr = np.tile(pr, len(zs))
+        zz = np.repeat(zs, len(pr))
+        bz = winding_rz(ri, ro, length / 2, rr, zz, rtol=1e-11)[1] * MU0 * j
+        phi = (bz.reshape(len(zs), len(pr)) * pw[None, :]).sum(axis=1)
+        total += w1 * np.sum(wz * phi)
+    return float(n_turns / ((ro - ri) * length) * total)
+
+
+def comparison_table(coil, fem: FemResult, heights: np.ndarray) -> dict:
+    """Relative errors of each model vs FEM along both lines at ``heights`` above the top (m)."""
+    top = coil.length / 2
+    z = top + np.asarray(heights, dtype=float)
+    out = {"height_m": np.asarray(heights, dtype=float)}
+    models = [None] if coil.core is None else ["surface-current", "thesis-uniform"]
+    for name, line in (("axis", fem.axis), ("off_axis", fem.off_axis)):
+        fit = line.fit(z)
+        entry = {"fem_bz_t": fit["bz"], "fem_dbz_dz_t_per_m": fit["dbz_dz"]}
+        for m in models:
+            bz, dbz = model_field(coil, fem.current, line.r, z, m)
+            key = m or "winding"
+            entry[f"{key}_bz_t"] = bz
+            entry[f"{key}_dbz_dz_t_per_m"] = dbz
+            entry[f"{key}_bz_rel_err"] = bz / fit["bz"] - 1.0
+            entry[f"{key}_dbz_dz_rel_err"] = dbz / fit["dbz_dz"] - 1.0
+        out[name] = entry
+    return out
+
+
+def plot_comparison(coil, fem: FemResult, path: str | Path, title: str = "") -> Path:
+    """PNG: Bz and dBz/dz along the axis and the off-axis line, FEM vs designkit's models."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .._io import atomic_path
+
+    top = coil.length / 2
+    fig, axes = plt.subplots(2, 2, figsize=(11, 7), sharex=True)
+    models = [None] if coil.core is None else ["surface-current", "thesis-uniform"]
+    for col, line in enumerate((fem.axis, fem.off_axis)):
+        sel = (line.z > top + 0.012) & (line.z < top + 0.102)
+        zz = line.z[sel]
+        hmm = (zz - top) * 1e3
+        fit = line.fit(zz)
+        axes[0, col].plot(hmm, fit["bz"] * 1e3, "k-", lw=3, alpha=0.4, label="GetDP FEM")
+        axes[1, col].plot(hmm, fit["dbz_dz"], "k-", lw=3, alpha=0.4, label="GetDP FEM")
+        for m, style in zip(models, ("C0--", "C3:")):
+            bz, dbz = model_field(coil, fem.current, line.r, zz, m)
+            axes[0, col].plot(hmm, bz * 1e3, style, label=m or "designkit winding")
+            axes[1, col].plot(hmm, dbz, style, label=m or "designkit winding")
+        axes[0, col].set_title(f"r = {line.r * 1e3:.0f} mm")
+        axes[1, col].set_xlabel("height above the winding top, mm")
+    axes[0, 0].set_ylabel("Bz, mT")
+    axes[1, 0].set_ylabel("dBz/dz, T/m")
+    for ax in axes.ravel():
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle(title or f"FEM vs designkit at {fem.current:g} A")
+    fig.tight_layout()
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+    return path

@@ -1,0 +1,422 @@
+"""The force-current map: A(p) on a regular workspace grid -> one file -> fast interpolator.
+
+File (``.npz``, written atomically): ``A`` (nx, ny, nz, 8, n_coils) float32, rows
+:data:`designkit.array.ROWS`; ``dG`` (nx, ny, nz, 7, n_coils) float32, the 7 independent
+third derivatives of the scalar potential, T_ijk = d(dB_i/dx_j)/dx_k, in the order
+(xxx, xxy, xxz, xyy, xyz, yyy, yyz) (T is fully symmetric and traceless outside the sources);
+``meta``: a JSON string (format, version, grid, units, rows, coil poses, magnet moment, drive
+limits, the design's SHA-256, designkit version, SHA-256 of the arrays). The controller side
+reads it with numpy alone (:mod:`firmware_io.mapfile`).
+
+Interpolation (``order='quadratic'``, default): in the grid cell around p, with trilinear
+weights w_c of the 8 corners and offsets d_c = p - x_c,
+
+    f(p) = sum_c w_c [ f_c + 1/2 grad f_c . d_c ],
+
+which reproduces every quadratic exactly (error O(h^3) instead of trilinear's O(h^2)) while
+still reading only the 8 corners. grad f is known at the nodes: for the B rows it is grad B
+itself (the G rows); for the G rows it is the stored tensor T. ``order='linear'`` is plain
+trilinear (faster, ~5e-3 of the maximum at 2 mm).
+
+Physics kept by construction: only the 5 independent entries of grad B are interpolated and
+:func:`designkit.array.gradient_from_g5` rebuilds dBy/dx = dBx/dy, dBz/dx = dBx/dz,
+dBz/dy = dBy/dz and dBz/dz = -dBx/dx - dBy/dy, so every interpolated gradient is exactly
+symmetric (curl-free) and traceless (divergence-free), whatever the interpolation error.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import math
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from . import _validate as v
+from .array import ROWS, CoilArray
+from .errors import BadInputError
+
+FORMAT = "designkit-fieldmap"
+FORMAT_VERSION = 1
+UNITS = {"A_rows_0_2": "T/A", "A_rows_3_7": "T/(m A)", "dG": "T/(m^2 A)", "grid": "m",
+         "moment": "A m^2", "current": "A"}
+T_ORDER = ("xxx", "xxy", "xxz", "xyy", "xyz", "yyy", "yyz")
+
+
+# ============================================================================ grid and build
+def default_box(design) -> tuple[np.ndarray, np.ndarray]:
+    """Workspace box (lower, upper corners, m): the footprint, z_min..z_max above the tops."""
+    ws = design.workspace
+    h = ws.half_width_m
+    return np.array([-h, -h, ws.z_min_m]), np.array([h, h, ws.z_max_m])
+
+
+def grid_axes(lower, upper, spacing: float) -> list[np.ndarray]:
+    """Regular axes covering [lower, upper] exactly with spacing <= ``spacing`` (m)."""
+    out = []
+    for lo, hi in zip(lower, upper):
+        n = max(2, int(math.ceil((hi - lo) / spacing - 1e-9)) + 1)
+        out.append(np.linspace(lo, hi, n))
+    return out
+
+
+def _fd4(a: np.ndarray, h: float, axis: int) -> np.ndarray:
+    """4th-order finite-difference derivative along ``axis`` (one-sided 5-point at the ends)."""
+    a = np.moveaxis(a, axis, 0)
+    n = a.shape[0]
+    d = np.empty_like(a)
+    if n < 5:
+        d[:] = np.gradient(a, h, axis=0, edge_order=min(2, n - 1) if n > 2 else 1)
+        return np.moveaxis(d, 0, axis)
+    d[2:-2] = (a[:-4] - 8 * a[1:-3] + 8 * a[3:-1] - a[4:]) / (12 * h)
+    d[0] = (-25 * a[0] + 48 * a[1] - 36 * a[2] + 16 * a[3] - 3 * a[4]) / (12 * h)
+    d[1] = (-3 * a[0] - 10 * a[1] + 18 * a[2] - 6 * a[3] + a[4]) / (12 * h)
+    d[-1] = (25 * a[-1] - 48 * a[-2] + 36 * a[-3] - 16 * a[-4] + 3 * a[-5]) / (12 * h)
+    d[-2] = (3 * a[-1] + 10 * a[-2] - 18 * a[-3] + 6 * a[-4] - a[-5]) / (12 * h)
+    return np.moveaxis(d, 0, axis)
+
+
+def third_derivatives(a_grid: np.ndarray, spacing) -> np.ndarray:
+    """T (nx, ny, nz, 7, nc) from the gradient rows of A on the grid (4th-order differences)."""
+    g = a_grid[:, :, :, 3:, :]  # gxx, gxy, gxz, gyy, gyz
+    d = [[_fd4(g[:, :, :, q], spacing[ax], ax) for ax in range(3)] for q in range(5)]
+    gxx, gxy, gxz, gyy, gyz = range(5)
+    x, y, z = range(3)
+    t = [d[gxx][x],
+         (d[gxx][y] + d[gxy][x]) / 2,
+         (d[gxx][z] + d[gxz][x]) / 2,
+         (d[gxy][y] + d[gyy][x]) / 2,
+         (d[gxy][z] + d[gxz][y] + d[gyz][x]) / 3,
+         d[gyy][y],
+         (d[gyy][z] + d[gyz][y]) / 2]
+    return np.stack(t, axis=3)
+
+
+def compute_grid(array: CoilArray, axes, *, tolerance: float = 1e-6, progress: bool = True):
+    """A on the grid ``axes`` (3 arrays, m): shape (nx, ny, nz, 8, n_coils).
+
+    One (rho, z) table per coil type (designkit.scene) covering the whole box; direct
+    evaluation for coil types whose sources reach into the box.
+    """
+    from tqdm import tqdm
+
+    from .scene import _COMP, _rz_direct, assemble, build_table
+
+    X, Y, Z = np.meshgrid(*axes, indexing="ij")
+    pts = np.c_[X.ravel(), Y.ravel(), Z.ravel()]
+    n, nc = len(pts), array.n_coils
+    per = {"B": np.zeros((n, 3, nc)), "gradient": np.zeros((n, 5, nc))}
+    tables = {}
+    for proto, idx in array.coil_types().items():
+        locs = [array.coils[k].pose.to_local(pts) for k in idx]
+        rho = np.concatenate([np.hypot(l[:, 0], l[:, 1]) for l in locs])
+        zl = np.concatenate([l[:, 2] for l in locs])
+        tables[proto] = build_table(proto, (rho.min(), rho.max()), (zl.min(), zl.max()), _COMP,
+                                    0.25 * tolerance)
+    chunk = 20000
+    work = [(proto, k, s) for proto, idx in array.coil_types().items() for k in idx
+            for s in range(0, n, chunk)]
+    for proto, k, s0 in tqdm(work, desc="map", unit="chunk", disable=not progress,
+                             leave=False):
+        sl = slice(s0, min(n, s0 + chunk))
+        loc = array.coils[k].pose.to_local(pts[sl])
+        rho, zl = np.hypot(loc[:, 0], loc[:, 1]), loc[:, 2]
+        tb = tables[proto]
+        if tb is None:
+            part = _rz_direct(proto, rho, zl, True)
+        else:
+            part = tb(rho, zl, _COMP)
+            part["dbr_drho"] = -part["dbz_dz"] - part["br_over_rho"]
+            part["dbz_drho"] = part["dbr_dz"]
+        assemble(per, array.coils[k], k, np.arange(sl.start, sl.stop), loc, part, True, None)
+    a = np.concatenate([per["B"], per["gradient"]], axis=1)
+    return a.reshape(X.shape + (8, nc)), tables
+
+
+def build(design, *, spacing: float = 0.002, box=None, tolerance: float = 1e-6,
+          progress: bool = True, array: CoilArray | None = None) -> dict:
+    """Compute the map of ``design`` (arrays and metadata, not yet written)."""
+    from . import __version__
+
+    spacing = v.in_range("spacing", spacing, 1e-4, 0.05, "m")
+    arr = array or CoilArray.from_design(design)
+    lower, upper = default_box(design) if box is None else (np.asarray(box[0], float),
+                                                            np.asarray(box[1], float))
+    axes = grid_axes(lower, upper, spacing)
+    a, _ = compute_grid(arr, axes, tolerance=tolerance, progress=progress)
+    steps = [float(ax[1] - ax[0]) for ax in axes]
+    dg = third_derivatives(a, steps)
+    a32, dg32 = a.astype(np.float32), dg.astype(np.float32)
+    meta = {
+        "format": FORMAT, "version": FORMAT_VERSION, "designkit_version": __version__,
+        "design_name": design.name, "design_sha256": design.spec_hash(),
+        "grid": {"lower_m": [float(x) for x in lower], "upper_m": [float(x) for x in upper],
+                 "shape": [len(ax) for ax in axes], "spacing_m": steps},
+        "rows": list(ROWS), "dG_order": list(T_ORDER), "units": UNITS,
+        "n_coils": arr.n_coils,
+        "coil_positions_m": arr.positions().tolist(),
+        "coil_rotations": [list(map(list, c.pose.rotation)) for c in arr.coils],
+        "magnet_moment_a_m2": [0.0, 0.0, design.magnet.moment_a_m2],
+        "max_current_a": design.drive.max_current_a,
+        "total_current_a": design.drive.total_current_a,
+        "core_model": None if arr.coils[0].core is None else arr.coils[0].core.model,
+        "interpolation": "quadratic-exact trilinear-weighted Taylor (see designkit.fieldmap)",
+        "data_sha256": _data_hash(a32, dg32),
+    }
+    return {"A": a32, "dG": dg32, "meta": meta}
+
+
+def _data_hash(a: np.ndarray, dg: np.ndarray) -> str:
+    h = hashlib.sha256()
+    h.update(np.ascontiguousarray(a).tobytes())
+    h.update(np.ascontiguousarray(dg).tobytes())
+    return h.hexdigest()
+
+
+def write(path, data: dict) -> Path:
+    """Write the map atomically (never a half-written file at ``path``)."""
+    from ._io import atomic_path
+
+    path = Path(path)
+    with atomic_path(path, suffix=".npz") as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, A=data["A"], dG=data["dG"], meta=np.array(json.dumps(data["meta"])))
+    return path
+
+
+# ============================================================================ loading
+def _bad(path, what: str) -> BadInputError:
+    return BadInputError("map file", f"a designkit force-current map ({what})", str(path))
+
+
+def read_arrays(path) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Open and validate a map file: (A, dG, meta). Raises BadInputError naming the problem."""
+    p = Path(path)
+    if not p.is_file():
+        raise BadInputError("map file", "a path to an existing .npz map", str(p))
+    try:
+        with np.load(p, allow_pickle=False) as z:
+            keys = set(z.files)
+            if not {"A", "dG", "meta"} <= keys:
+                raise _bad(p, f"arrays A, dG, meta; found {sorted(keys)} -- a foreign file")
+            meta = json.loads(str(z["meta"]))
+            a, dg = z["A"], z["dG"]
+    except BadInputError:
+        raise
+    except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError) as exc:
+        raise _bad(p, f"readable npz; {type(exc).__name__}: {exc} -- truncated or foreign")
+    if meta.get("format") != FORMAT:
+        raise _bad(p, f"meta.format == {FORMAT!r}, got {meta.get('format')!r}")
+    if meta.get("version") != FORMAT_VERSION:
+        raise _bad(p, f"format version {FORMAT_VERSION}, got {meta.get('version')!r}")
+    if meta.get("units") != UNITS or meta.get("rows") != list(ROWS):
+        raise _bad(p, f"units {UNITS} and rows {ROWS}")
+    shape = tuple(meta["grid"]["shape"])
+    nc = int(meta["n_coils"])
+    if a.shape != shape + (8, nc) or dg.shape != shape + (7, nc):
+        raise _bad(p, f"A of shape {shape + (8, nc)} and dG of {shape + (7, nc)}; got "
+                   f"{a.shape} and {dg.shape}")
+    if min(shape) < 2:
+        raise _bad(p, f"at least 2 nodes per axis, got {shape}")
+    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(dg))):
+        raise _bad(p, "finite values only (found NaN or Inf)")
+    if _data_hash(a, dg) != meta.get("data_sha256"):
+        raise _bad(p, "data matching its recorded SHA-256 (corrupted)")
+    return a, dg, meta
+
+
+# constant map of the corrections: corr[r] = 1/2 sum_d sum_q C[r, d, q] S_d[q], q over the
+# 12 derivative-carrying quantities (gxx gxy gxz gyy gyz | T xxx xxy xxz xyy xyz yyy yyz)
+def _correction_matrix() -> np.ndarray:
+    c = np.zeros((8, 3, 12))
+    gxx, gxy, gxz, gyy, gyz = range(5)
+    txxx, txxy, txxz, txyy, txyz, tyyy, tyyz = range(5, 12)
+    grad = {  # row -> [(d, q, sign)]: d(row)/dx_d in terms of the stored quantities
+        0: [(0, gxx, 1), (1, gxy, 1), (2, gxz, 1)],
+        1: [(0, gxy, 1), (1, gyy, 1), (2, gyz, 1)],
+        2: [(0, gxz, 1), (1, gyz, 1), (2, gxx, -1), (2, gyy, -1)],
+        3: [(0, txxx, 1), (1, txxy, 1), (2, txxz, 1)],
+        4: [(0, txxy, 1), (1, txyy, 1), (2, txyz, 1)],
+        5: [(0, txxz, 1), (1, txyz, 1), (2, txxx, -1), (2, txyy, -1)],
+        6: [(0, txyy, 1), (1, tyyy, 1), (2, tyyz, 1)],
+        7: [(0, txyz, 1), (1, tyyz, 1), (2, txxy, -1), (2, tyyy, -1)],
+    }
+    for r, terms in grad.items():
+        for d, q, sgn in terms:
+            c[r, d, q] += 0.5 * sgn
+    return c.reshape(8, 36)
+
+
+CORRECTION = _correction_matrix()
+CORRECTION_T32 = np.ascontiguousarray(CORRECTION.T, dtype=np.float32)  # (36, 8)
+
+
+@dataclass(frozen=True)
+class FieldMap:
+    """A loaded map. ``bounds``: (lower, upper) corners, m; ``meta``: the file's metadata."""
+
+    data: np.ndarray  # (nx, ny, nz, n_coils * 15) float32: per coil the A rows, then T
+    meta: dict
+    bounds: tuple
+    n_coils: int
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return tuple(self.meta["grid"]["shape"])
+
+    def actuation(self, points, *, outside: Literal["error", "extrapolate"] = "error",
+                  order: Literal["quadratic", "linear"] = "quadratic") -> np.ndarray:
+        """Interpolated A, shape (n, 8, n_coils) (or (8, n_coils) for one point), float64.
+
+        Parameters
+        ----------
+        points : array-like, shape (3,) or (n, 3), m
+        outside : {'error', 'extrapolate'}
+            Points outside ``bounds``: raise BadInputError, or extrapolate from the nearest
+            cell (its polynomial, which degrades quickly away from the box).
+        order : {'quadratic', 'linear'}
+        """
+        if isinstance(points, np.ndarray) and points.shape == (3,) or (
+                isinstance(points, (tuple, list)) and len(points) == 3
+                and not isinstance(points[0], (tuple, list, np.ndarray))):
+            return self._one(points, outside, order)
+        p, single = v.points(points)
+        return interpolate(self.data, self._grid, p, self.n_coils, single, outside, order)
+
+    def _one(self, points, outside, order):
+        """The controller's per-sample call: plain floats, no array bookkeeping."""
+        try:
+            q = (float(points[0]), float(points[1]), float(points[2]))
+        except (TypeError, ValueError):
+            raise BadInputError("points", "array-like of shape (3,) or (n, 3), m", points) from None
+        lo, hi = self._box[:2]
+        for k in range(3):
+            if not math.isfinite(q[k]):
+                raise BadInputError("points", "finite (no NaN or Inf)", list(q))
+            if outside == "error" and not (lo[k] - 1e-12 <= q[k] <= hi[k] + 1e-12):
+                raise BadInputError("points", f"inside the map box {list(lo)} .. {list(hi)} m "
+                                    "(or outside='extrapolate')", list(q))
+        if outside not in ("error", "extrapolate"):
+            raise BadInputError("outside", "'error' or 'extrapolate'", outside)
+        if order not in ("quadratic", "linear"):
+            raise BadInputError("order", "'quadratic' or 'linear'", order)
+        return _one_point(self.data, lo, self._box[2], self._box[3], q, self.n_coils, order)
+
+    @functools.cached_property
+    def _box(self):
+        g = self.meta["grid"]
+        return (tuple(map(float, g["lower_m"])), tuple(map(float, g["upper_m"])),
+                tuple(map(float, g["spacing_m"])), tuple(map(int, g["shape"])))
+
+    @functools.cached_property
+    def _grid(self):
+        g = self.meta["grid"]
+        return (np.asarray(g["lower_m"]), np.asarray(g["upper_m"]), np.asarray(g["spacing_m"]),
+                np.asarray(g["shape"]))
+
+
+_CORNERS = np.array([[a, b, c] for a in (0, 1) for b in (0, 1) for c in (0, 1)], float)
+
+
+def interpolate(data, grid, p, nc, single, outside, order):
+    """The interpolation kernel (numpy only; :mod:`firmware_io.mapfile` has the same).
+
+    ``data``: (nx, ny, nz, n_coils * 15) float32, per coil the 8 rows of A then the 7 of T.
+    """
+    lower, upper, step, shape = grid
+    if outside not in ("error", "extrapolate"):
+        raise BadInputError("outside", "'error' or 'extrapolate'", outside)
+    if order not in ("quadratic", "linear"):
+        raise BadInputError("order", "'quadratic' or 'linear'", order)
+    if outside == "error":
+        tol = 1e-9 * step
+        bad = np.any((p < lower - tol) | (p > upper + tol), axis=1)
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise BadInputError("points", f"inside the map box {lower.tolist()} .. "
+                                f"{upper.tolist()} m (or outside='extrapolate')",
+                                f"{p[k].tolist()} at row {k}")
+    nx, ny, nz = (int(x) for x in shape)
+    if single:
+        return _one_point(data, tuple(lower), tuple(step), (nx, ny, nz), p[0], nc, order)
+    f = (p - lower) / step
+    i = np.clip(np.floor(f).astype(np.intp), 0, shape - 2)
+    t = f - i
+    w = (np.stack([1 - t[:, 0], t[:, 0]], 1)[:, :, None, None]
+         * np.stack([1 - t[:, 1], t[:, 1]], 1)[:, None, :, None]
+         * np.stack([1 - t[:, 2], t[:, 2]], 1)[:, None, None, :]).reshape(-1, 8)
+    base = (i[:, 0] * ny + i[:, 1]) * nz + i[:, 2]
+    offs = np.array([0, 1, nz, nz + 1, ny * nz, ny * nz + 1, ny * nz + nz, ny * nz + nz + 1])
+    flat = data.reshape(nx * ny * nz, -1)
+    n = len(p)
+    corners = np.take(flat, base[:, None] + offs, axis=0)  # (n, 8, 15 nc)
+    if order == "linear":
+        s0 = np.matmul(w[:, None, :].astype(np.float32), corners).reshape(n, nc, 15)
+        return s0[:, :, :8].transpose(0, 2, 1).astype(np.float64)
+    wd = w[:, None, :] * ((t[:, None, :] - _CORNERS[None]) * step).transpose(0, 2, 1)
+    wall = np.concatenate([w[:, None, :], wd], axis=1).astype(np.float32)  # (n, 4, 8)
+    s = np.matmul(wall, corners).reshape(n, 4, nc, 15)
+    deriv = s[:, 1:, :, 3:].transpose(0, 2, 1, 3).reshape(n, nc, 36)
+    res = s[:, 0, :, :8] + np.matmul(deriv, CORRECTION_T32)
+    return res.transpose(0, 2, 1).astype(np.float64)
+
+
+def _one_point(data, lower, step, shape, q, nc, order):
+    """One point without array bookkeeping (the controller's per-sample call)."""
+    nx, ny, nz = shape
+    fx = (q[0] - lower[0]) / step[0]
+    fy = (q[1] - lower[1]) / step[1]
+    fz = (q[2] - lower[2]) / step[2]
+    ix = min(max(int(math.floor(fx)), 0), nx - 2)
+    iy = min(max(int(math.floor(fy)), 0), ny - 2)
+    iz = min(max(int(math.floor(fz)), 0), nz - 2)
+    tx, ty, tz = fx - ix, fy - iy, fz - iz
+    block = data[ix:ix + 2, iy:iy + 2, iz:iz + 2].reshape(8, nc, 15)
+    ux, uy, uz = 1.0 - tx, 1.0 - ty, 1.0 - tz
+    w = np.array([ux * uy * uz, ux * uy * tz, ux * ty * uz, ux * ty * tz,
+                  tx * uy * uz, tx * uy * tz, tx * ty * uz, tx * ty * tz])
+    flat = block.reshape(8, nc * 15)
+    if order == "linear":
+        return (w.astype(np.float32) @ flat).reshape(nc, 15)[:, :8].T.astype(np.float64)
+    sx, sy, sz = step
+    ax, ay, az = tx * sx, ty * sy, tz * sz
+    bx, by, bz = ax - sx, ay - sy, az - sz
+    wall = np.array([w, w * (ax, ax, ax, ax, bx, bx, bx, bx), w * (ay, ay, by, by, ay, ay, by, by),
+                     w * (az, bz, az, bz, az, bz, az, bz)], dtype=np.float32)
+    s = wall @ flat  # (4, nc * 15)
+    corr = s[1:].reshape(-1) @ _big_correction(nc)  # (8 * nc,)
+    return (s[0].reshape(nc, 15)[:, :8].T + corr.reshape(8, nc)).astype(np.float64)
+
+
+@functools.lru_cache(maxsize=8)
+def _big_correction(nc: int) -> np.ndarray:
+    """CORRECTION laid out for the flat (3 x nc x 15) derivative sums -> (8 x nc) rows."""
+    c = CORRECTION.reshape(8, 3, 12)
+    big = np.zeros((3, nc, 15, 8, nc), dtype=np.float32)
+    for k in range(nc):
+        big[:, k, 3:, :, k] = c.transpose(1, 2, 0)
+    return big.reshape(3 * nc * 15, 8 * nc)
+
+
+def load(path, design=None) -> FieldMap:
+    """Load and validate a map file; with ``design``, also check it was built from it.
+
+    Raises BadInputError for a missing, truncated, foreign, corrupted or mismatched file.
+    """
+    a, dg, meta = read_arrays(path)
+    if design is not None and meta["design_sha256"] != design.spec_hash():
+        raise BadInputError("map file", f"built from design {design.name!r} (SHA-256 "
+                            f"{design.spec_hash()[:12]}...)",
+                            f"{path} (design {meta.get('design_name')!r}, SHA-256 "
+                            f"{meta['design_sha256'][:12]}...)", "Rebuild it: designkit map.")
+    nc = int(meta["n_coils"])
+    data = np.ascontiguousarray(np.concatenate([a, dg], axis=3).transpose(0, 1, 2, 4, 3)
+                                .reshape(a.shape[:3] + (15 * nc,)))
+    g = meta["grid"]
+    return FieldMap(data, meta, (np.asarray(g["lower_m"], float), np.asarray(g["upper_m"], float)),
+                    nc)

@@ -1,0 +1,773 @@
+"""nlopt coil design: thesis eq. 2.14 and beyond.
+
+Problem (thesis section 2.2): maximize the vertical force ``Fz = m_z dBz/dz`` on the finger
+magnet at the design height above the coil's top face, over the winding's inner radius Ri,
+outer radius Ro and length Lc, subject to R < Rmax, 5 L/R < T, Ro <= Rmax_outer, Lc <= Lmax,
+for a fixed wire. Turns follow from the geometry and the wire, N = (Ro - Ri) Lc / (p d_ins^2)
+(p = 1 layered, sqrt(3)/2 orthocyclic; the thesis' 1429 is exactly this for 7 x 100 mm and
+0.7 mm), treated as continuous by the optimizer and rounded *down* in the reported design (so
+R and tau stay within their limits).
+
+Model of the objective
+    The force is evaluated at the design current (``drive.max_current_a``, 6 A: the thesis'
+    "R < 6 ohm to draw ~6 A from 36 V"). On the axis the thick winding's gradient has a closed
+    form: with J = N I / ((Ro - Ri) Lc) and u the distance below the magnet,
+
+        dBz/dz = mu0 J / 2 [Phi(H + Lc) - Phi(H)],
+        Phi(u) = [ln(a + sqrt(a^2 + u^2)) - a / sqrt(a^2 + u^2)]_{a = Ri}^{Ro},
+
+    whose derivatives in (Ri, Ro, Lc) are taken by complex step (exact to rounding). A test
+    checks it against :func:`designkit.field.winding_field` to 1e-9, and the reported design is
+    re-evaluated with the field engine (:class:`designkit.Coil`).
+    With an iron core (``core_model='thesis-uniform'`` or ``'surface-current'``, core radius =
+    Ri, length = Lc + 2 x protrusion, centred) the core's field and extra inductance come from
+    :class:`designkit.Core` (its gradients by central differences; slower).
+
+Constraints (nlopt form c(x) <= 0, scaled to be O(1)): R / Rmax - 1, 5 tau / T - 1 and
+(Ri + d_ins - Ro) / d_ins (at least one layer). Inductance: exact Bessel integral of
+:mod:`designkit.electrical` with analytic gradients.
+
+Solver: nlopt LD_SLSQP from every point of a scrambled Sobol set of starts (global stage:
+multistart; the optimum counts as verified when several starts reach it and none does better),
+optionally nlopt GN_ISRES (a global evolutionary method with constraints) polished by SLSQP.
+Variables are scaled to [0, 1].
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Callable, Literal, Sequence
+
+import numpy as np
+
+from . import _validate as v
+from . import electrical as el
+from .design import MU0, Design
+from .errors import BadInputError
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .coil import Coil
+
+CoreModelName = Literal["air", "thesis-uniform", "surface-current"]
+CORE_MODEL_NAMES: tuple[str, ...] = ("air", "thesis-uniform", "surface-current")
+GlobalMethod = Literal["multistart", "isres"]
+GLOBAL_METHODS: tuple[str, ...] = ("multistart", "isres")
+
+VARIABLES = ("inner_radius_m", "outer_radius_m", "length_m")
+EXTRA_VARIABLES = ("core_protrusion_m",)
+
+# Standard wire sizes, bare copper diameter, m. AWG 14-30 (ASTM B258) and IEC 60317 metric
+# grades 0.20-1.60 mm. Insulated diameter: bare + grade-1 enamel build (assumed 4 % + 20 um).
+AWG_DIAMETERS_M = {
+    14: 1.628e-3, 15: 1.450e-3, 16: 1.291e-3, 17: 1.150e-3, 18: 1.024e-3, 19: 0.912e-3,
+    20: 0.812e-3, 21: 0.723e-3, 22: 0.644e-3, 23: 0.573e-3, 24: 0.511e-3, 25: 0.455e-3,
+    26: 0.405e-3, 27: 0.361e-3, 28: 0.321e-3, 29: 0.286e-3, 30: 0.255e-3,
+}
+METRIC_DIAMETERS_M = tuple(x * 1e-3 for x in (0.20, 0.25, 0.30, 0.35, 0.40, 0.45, 0.50, 0.56,
+                                              0.60, 0.63, 0.70, 0.71, 0.75, 0.80, 0.85, 0.90,
+                                              1.00, 1.06, 1.12, 1.18, 1.25, 1.32, 1.40, 1.50,
+                                              1.60))
+
+
+def insulated_diameter_for(bare_m: float) -> float:
+    """Grade-1 enamelled diameter (assumed: bare x 1.04 + 20 um), m."""
+    return bare_m * 1.04 + 20e-6
+
+
+# ====================================================================== on-axis kernel
+def _phi(a1, a2, u):
+    s1 = np.sqrt(a1 * a1 + u * u)
+    s2 = np.sqrt(a2 * a2 + u * u)
+    return np.log((a2 + s2) / (a1 + s1)) - a2 / s2 + a1 / s1
+
+
+def axial_gradient_per_current_density(inner_radius, outer_radius, length, height):
+    """dBz/dz on the axis at ``height`` above the top face of a thick winding, per unit J.
+
+    Parameters (arrays broadcast; complex accepted for complex-step derivatives)
+    ----------
+    inner_radius, outer_radius, length, height : m
+
+    Returns
+    -------
+    dBz/dz / J, T m / A (negative above a winding with positive J).
+    """
+    return 0.5 * MU0 * (_phi(inner_radius, outer_radius, height + length)
+                        - _phi(inner_radius, outer_radius, height))
+
+
+# ====================================================================== problem
+@dataclass(frozen=True)
+class Evaluation:
+    """Model numbers of one continuous design x = (Ri, Ro, Lc[, protrusion]) (SI)."""
+
+    x: tuple[float, ...]
+    turns: float
+    force_n: float
+    resistance_ohm: float
+    inductance_h: float
+    time_constant_s: float
+    power_w: float
+    constraints: tuple[float, ...]
+    """Scaled nlopt constraints c <= 0: resistance, settling time, wall."""
+
+    @property
+    def feasible(self) -> bool:
+        return all(c <= 1e-9 for c in self.constraints)
+
+
+@dataclass(frozen=True)
+class CoilDesignProblem:
+    """Coil design problem of thesis eq. 2.14 (all SI). Build with :meth:`from_design`."""
+
+    height_m: float
+    moment_a_m2: float
+    current_a: float
+    wire_diameter_m: float
+    insulated_diameter_m: float
+    resistivity_ohm_m: float
+    packing: str
+    max_resistance_ohm: float
+    max_settling_time_s: float
+    lower: tuple[float, ...]
+    upper: tuple[float, ...]
+    core_model: str = "air"
+    core_relative_permeability: float = 1000.0
+    core_protrusion_m: float = 0.005
+    """Core length beyond each end of the winding, m (thesis: 110 mm core, 100 mm winding)."""
+    variables: tuple[str, ...] = VARIABLES
+    inductance_t_max: float = 100.0
+
+    def __post_init__(self):
+        v.positive("height_m", self.height_m)
+        v.positive("moment_a_m2", self.moment_a_m2, "A m^2")
+        v.positive("current_a", self.current_a, "A")
+        v.positive("wire_diameter_m", self.wire_diameter_m)
+        v.positive("insulated_diameter_m", self.insulated_diameter_m)
+        if self.insulated_diameter_m < self.wire_diameter_m * (1 - 1e-12):
+            raise BadInputError("insulated_diameter_m", f">= wire_diameter_m "
+                                f"({self.wire_diameter_m} m)", self.insulated_diameter_m)
+        v.positive("resistivity_ohm_m", self.resistivity_ohm_m, "ohm m")
+        el.packing_factor(self.packing)
+        v.positive("max_resistance_ohm", self.max_resistance_ohm, "ohm")
+        v.positive("max_settling_time_s", self.max_settling_time_s, "s")
+        if self.core_model not in CORE_MODEL_NAMES:
+            raise BadInputError("core_model", f"one of {CORE_MODEL_NAMES}", self.core_model)
+        v.in_range("core_relative_permeability", self.core_relative_permeability, 1.0, 1e7)
+        v.nonnegative("core_protrusion_m", self.core_protrusion_m)
+        for name in self.variables:
+            if name not in VARIABLES + EXTRA_VARIABLES:
+                raise BadInputError("variables", f"names from {VARIABLES + EXTRA_VARIABLES}", name)
+        if tuple(self.variables[:3]) != VARIABLES:
+            raise BadInputError("variables", f"starting with {VARIABLES}", self.variables)
+        if "core_protrusion_m" in self.variables and self.core_model == "air":
+            raise BadInputError("variables", "core_protrusion_m only with a core model "
+                                "('thesis-uniform' or 'surface-current')", self.core_model)
+        if len(self.lower) != len(self.variables) or len(self.upper) != len(self.variables):
+            raise BadInputError("bounds", f"{len(self.variables)} lower and upper values",
+                                (self.lower, self.upper))
+        for name, lo, hi in zip(self.variables, self.lower, self.upper):
+            lo_ = v.nonnegative(f"lower bound of {name}", lo)
+            hi_ = v.positive(f"upper bound of {name}", hi)
+            if hi_ <= lo_:
+                raise BadInputError(f"upper bound of {name}", f"> its lower bound ({lo_} m)", hi)
+        if self.lower[0] <= 0:
+            raise BadInputError("lower bound of inner_radius_m", "> 0 m", self.lower[0])
+        # infeasible bounds: not even one layer of wire fits between the radius bounds
+        if self.lower[0] + self.insulated_diameter_m > self.upper[1]:
+            raise BadInputError(
+                "bounds", f"room for one layer: min inner radius + insulated diameter "
+                f"({self.lower[0] + self.insulated_diameter_m:.4g} m) <= max outer radius",
+                self.upper[1], "The bounds admit no winding (infeasible bounds).")
+        if self.upper[2] < self.insulated_diameter_m:
+            raise BadInputError("upper bound of length_m", f">= the insulated wire diameter "
+                                f"({self.insulated_diameter_m} m)", self.upper[2])
+
+    # ------------------------------------------------------------------ constructors
+    @classmethod
+    def from_design(cls, design: Design, *, core_model: str = "air",
+                    min_length_m: float = 0.005, variables: Sequence[str] = VARIABLES,
+                    max_core_protrusion_m: float | None = None, **changes) -> "CoilDesignProblem":
+        """The eq. 2.14 problem of ``design`` (wire, limits, drive current, magnet, height).
+
+        Bounds: Ri in [optimize.min_inner_radius_m, Rmax - d_ins], Ro in
+        [min_inner + d_ins, optimize.max_outer_radius_m], Lc in [min_length_m,
+        optimize.max_length_m]; core protrusion (if a variable) in [0, max_core_protrusion_m]
+        (default: up to 1 mm below the magnet's bottom face).
+        """
+        o, w = design.optimize, design.wire
+        v.positive("wire.diameter_m", w.diameter_m)
+        d = w.insulated_diameter_m
+        lower = [o.min_inner_radius_m, o.min_inner_radius_m + d, min_length_m]
+        upper = [max(o.max_outer_radius_m - d, o.min_inner_radius_m * (1 + 1e-9)),
+                 o.max_outer_radius_m, o.max_length_m]
+        mu_r = design.core.relative_permeability if design.core is not None else 1000.0
+        protr = 0.005
+        if design.core is not None:
+            protr = max(0.0, 0.5 * (design.core.length_m - design.coil.length_m))
+        variables = tuple(variables)
+        if "core_protrusion_m" in variables:
+            top = (o.height_m - design.magnet.length_m / 2 - 1e-3
+                   if max_core_protrusion_m is None else max_core_protrusion_m)
+            lower.append(0.0)
+            upper.append(top)
+        kw = dict(
+            height_m=o.height_m, moment_a_m2=design.magnet.moment_a_m2,
+            current_a=design.drive.max_current_a, wire_diameter_m=w.diameter_m,
+            insulated_diameter_m=d, resistivity_ohm_m=el.resistivity(w), packing=w.packing,
+            max_resistance_ohm=o.max_resistance_ohm, max_settling_time_s=o.max_settling_time_s,
+            lower=tuple(lower), upper=tuple(upper), core_model=core_model,
+            core_relative_permeability=mu_r, core_protrusion_m=protr, variables=variables)
+        kw.update(changes)
+        return cls(**kw)
+
+    def with_wire(self, bare_m: float, insulated_m: float | None = None) -> "CoilDesignProblem":
+        """Same problem with another wire (bounds that depend on d_ins are kept)."""
+        ins = insulated_diameter_for(bare_m) if insulated_m is None else insulated_m
+        return dataclasses.replace(self, wire_diameter_m=bare_m, insulated_diameter_m=ins)
+
+    # ------------------------------------------------------------------ model
+    @property
+    def packing_factor(self) -> float:
+        return el.packing_factor(self.packing)
+
+    def turns(self, x) -> float:
+        return (x[1] - x[0]) * x[2] / (self.insulated_diameter_m ** 2 * self.packing_factor)
+
+    def _protrusion(self, x) -> float:
+        return x[3] if len(self.variables) > 3 else self.core_protrusion_m
+
+    def air_force(self, x, *, turns: float | None = None):
+        """|Fz| of the air winding at the design point, N, and d|Fz|/dx (complex step)."""
+        ri, ro, ln = x[0], x[1], x[2]
+        n = self.turns(x) if turns is None else turns
+        j = n * self.current_a / ((ro - ri) * ln)
+        g = axial_gradient_per_current_density(ri, ro, ln, self.height_m)
+        f = -self.moment_a_m2 * j * g
+        if turns is not None:
+            return float(f), None
+        # J is geometry-independent for a fully packed section: differentiate g only
+        h = 1e-30
+        xs = np.array([ri, ro, ln], dtype=complex) + 1j * h * np.eye(3)
+        dg = axial_gradient_per_current_density(xs[:, 0], xs[:, 1], xs[:, 2],
+                                                self.height_m).imag / h
+        return float(f), -self.moment_a_m2 * j * dg
+
+    def resistance(self, x, turns: float | None = None) -> float:
+        n = self.turns(x) if turns is None else turns
+        return el.resistance_from_geometry(x[0], x[1], n, self.wire_diameter_m,
+                                           self.resistivity_ohm_m)
+
+    def _resistance_grad(self, x) -> np.ndarray:
+        # R = rho pi (Ro^2 - Ri^2) Lc / (p d_ins^2 A_w)
+        c = (self.resistivity_ohm_m * math.pi
+             / (self.packing_factor * self.insulated_diameter_m ** 2
+                * math.pi * self.wire_diameter_m ** 2 / 4.0))
+        return np.array([-2 * x[0] * x[2] * c, 2 * x[1] * x[2] * c,
+                         (x[1] ** 2 - x[0] ** 2) * c])
+
+    def _core_coil(self, x, turns_ref: int = 1000) -> "Coil":
+        from .coil import Coil
+        from .core import Core
+
+        core = Core(radius=x[0], length=x[2] + 2 * self._protrusion(x),
+                    relative_permeability=self.core_relative_permeability, offset=0.0,
+                    model=self.core_model)
+        return Coil(x[0], x[1], x[2], turns_ref, core)
+
+    def _core_parts(self, x, turns: float) -> tuple[float, float]:
+        """(|Fz| added by the core, N; extra inductance, H) for the continuous design."""
+        from .core import SaturationWarning
+
+        ref = 1000
+        coil = self._core_coil(x, ref)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", SaturationWarning)
+            p = np.array([[0.0, 0.0, self.height_m + x[2] / 2]])
+            _, g = coil.core.field_local(p, coil, self.current_a * turns / ref, gradient=True)
+            extra = coil.core.extra_inductance(coil) * (turns / ref) ** 2
+        return float(-self.moment_a_m2 * g[0, 2, 2]), float(extra)
+
+    def evaluate(self, x, *, turns: float | None = None, gradient: bool = False):
+        """Model numbers at x; with ``gradient`` also (d force, d constraints) w.r.t. x.
+
+        ``turns``: override the continuous turns (used for the rounded design).
+        """
+        x = tuple(float(q) for q in x)
+        if gradient and turns is not None:
+            raise BadInputError("turns", "None when gradient=True (gradients are at the "
+                                "geometry's continuous turns)", turns)
+        n = self.turns(x) if turns is None else float(turns)
+        if gradient:
+            f_air, df = self.air_force(x)
+        else:
+            f_air = self.air_force(x, turns=n)[0]
+        r = self.resistance(x, n)
+        if gradient:
+            ell, dl = el.air_inductance_from_geometry(x[0], x[1], x[2], n,
+                                                      t_max=self.inductance_t_max, gradient=True)
+        else:
+            ell = el.air_inductance_from_geometry(x[0], x[1], x[2], n,
+                                                  t_max=self.inductance_t_max)
+        f = f_air
+        if self.core_model != "air":
+            fc, lc = self._core_parts(x, n)
+            f += fc
+            ell += lc
+        tau = ell / r
+        cons = (r / self.max_resistance_ohm - 1.0,
+                5.0 * tau / self.max_settling_time_s - 1.0,
+                (x[0] + self.insulated_diameter_m - x[1]) / self.insulated_diameter_m)
+        ev = Evaluation(x, n, f, r, ell, tau, self.current_a ** 2 * r, cons)
+        if not gradient:
+            return ev
+        nv = len(x)
+        dn = np.zeros(nv)
+        pk = self.insulated_diameter_m ** 2 * self.packing_factor
+        dn[:3] = [-x[2] / pk, x[2] / pk, (x[1] - x[0]) / pk]
+        grad_f = np.zeros(nv)
+        grad_f[:3] = df
+        grad_r = np.zeros(nv)
+        grad_r[:3] = self._resistance_grad(x)
+        # the air inductance gradient is at fixed turns: add the N^2 dependence
+        grad_l = np.zeros(nv)
+        grad_l[:3] = np.array(dl) + 2.0 * (ell if self.core_model == "air" else
+                                           ell - lc) / n * dn[:3]
+        if self.core_model != "air":
+            step = 1e-6
+            for k in range(nv):
+                xp, xm = list(x), list(x)
+                xp[k] += step
+                xm[k] -= step
+                if k == 3:
+                    xm[k] = max(xm[k], 0.0)
+                fp, lp = self._core_parts(xp, self.turns(xp))
+                fm, lm = self._core_parts(xm, self.turns(xm))
+                grad_f[k] += (fp - fm) / (xp[k] - xm[k])
+                grad_l[k] += (lp - lm) / (xp[k] - xm[k])
+        grad_tau = grad_l / r - ell / r ** 2 * grad_r
+        grad_c = np.zeros((3, nv))
+        grad_c[0] = grad_r / self.max_resistance_ohm
+        grad_c[1] = 5.0 * grad_tau / self.max_settling_time_s
+        grad_c[2, 0] = 1.0 / self.insulated_diameter_m
+        grad_c[2, 1] = -1.0 / self.insulated_diameter_m
+        return ev, grad_f, grad_c
+
+
+# ====================================================================== generic nlopt driver
+@dataclass(frozen=True)
+class LocalRun:
+    """One local solve: start, end point, objective, nlopt return code, evaluations."""
+
+    start: tuple[float, ...]
+    x: tuple[float, ...]
+    value: float
+    feasible: bool
+    return_code: int
+    evaluations: int
+
+
+def maximize(objective: Callable, constraints: Callable | None, n_constraints: int,
+             lower: Sequence[float], upper: Sequence[float], start: Sequence[float], *,
+             xtol_rel: float = 1e-10, ftol_rel: float = 1e-14, max_evaluations: int = 500,
+             algorithm: str = "LD_SLSQP") -> LocalRun:
+    """Maximize ``objective(x) -> (f, grad)`` s.t. ``constraints(x) -> (c, jac)`` <= 0 with nlopt.
+
+    Variables are scaled to [0, 1] internally (bounds must be finite). ``constraints`` may be
+    None (then ``n_constraints`` must be 0). A small general driver: the textbook tests use it.
+    """
+    import nlopt
+
+    lo = np.asarray(lower, dtype=float)
+    hi = np.asarray(upper, dtype=float)
+    span = hi - lo
+    n = len(lo)
+    count = [0]
+
+    def unscale(u):
+        return lo + np.clip(u, 0.0, 1.0) * span
+
+    def f_nl(u, grad):
+        count[0] += 1
+        val, g = objective(unscale(u))
+        if grad.size:
+            grad[:] = np.asarray(g) * span
+        return float(val)
+
+    def c_nl(result, u, grad):
+        c, jac = constraints(unscale(u))
+        result[:] = c
+        if grad.size:
+            grad[:, :] = np.asarray(jac) * span[None, :]
+
+    opt = nlopt.opt(getattr(nlopt, algorithm), n)
+    opt.set_lower_bounds(np.zeros(n))
+    opt.set_upper_bounds(np.ones(n))
+    opt.set_max_objective(f_nl)
+    if n_constraints:
+        opt.add_inequality_mconstraint(c_nl, [1e-10] * n_constraints)
+    opt.set_xtol_rel(xtol_rel)
+    opt.set_ftol_rel(ftol_rel)
+    opt.set_maxeval(max_evaluations)
+    u0 = np.clip((np.asarray(start, dtype=float) - lo) / span, 0.0, 1.0)
+    try:
+        u = opt.optimize(u0)
+        code = opt.last_optimize_result()
+    except nlopt.RoundoffLimited:  # report the start; the multistart's other runs decide
+        u = u0
+        code = -4
+    x = unscale(u)
+    val = objective(x)[0]
+    feas = True
+    if n_constraints:
+        feas = bool(np.all(np.asarray(constraints(x)[0]) <= 1e-8))
+    return LocalRun(tuple(map(float, start)), tuple(map(float, x)), float(val), feas, int(code),
+                    count[0])
+
+
+# ====================================================================== result
+@dataclass(frozen=True)
+class DesignResult:
+    """The optimized coil, rounded to whole turns, evaluated with the field engine (SI)."""
+
+    inner_radius_m: float
+    outer_radius_m: float
+    length_m: float
+    turns: int
+    turns_continuous: float
+    core_protrusion_m: float | None
+    resistance_ohm: float
+    inductance_h: float
+    time_constant_s: float
+    current_a: float
+    power_w: float
+    force_n: float
+    force_continuous_n: float
+    constraints: dict
+    core_model: str
+
+
+@dataclass(frozen=True)
+class OptimizeResult:
+    best: DesignResult
+    x: tuple[float, ...]
+    evaluations: int
+    """Objective calls made by nlopt (each with its gradient), all stages."""
+    model_evaluations: int
+    """Distinct model evaluations actually computed (repeated points are cached)."""
+    seconds: float
+    runs: tuple[LocalRun, ...]
+    starts_at_best: int
+    global_method: str
+    verified_global: bool
+    thesis_point: dict = field(default_factory=dict)
+
+    def as_dict(self) -> dict:
+        b = dataclasses.asdict(self.best)
+        out = {**b, "evaluations": self.evaluations,
+               "model_evaluations": self.model_evaluations, "seconds": self.seconds,
+               "global_method": self.global_method, "local_method": "LD_SLSQP",
+               "starts": len(self.runs), "starts_at_best": self.starts_at_best,
+               "verified_global": self.verified_global,
+               "local_optima": [dataclasses.asdict(r) for r in self.runs],
+               "thesis_point": self.thesis_point}
+        return out
+
+
+def _constraint_table(problem: CoilDesignProblem, ev: Evaluation, x) -> dict:
+    """Each constraint's value, limit, margin (>= 0 when satisfied) and whether it is active
+    (margin below 1e-6 of the limit)."""
+    items = {  # name: (value, limit, +1 for an upper limit / -1 for a lower limit)
+        "resistance_ohm": (ev.resistance_ohm, problem.max_resistance_ohm, 1),
+        "settling_time_s": (5 * ev.time_constant_s, problem.max_settling_time_s, 1),
+        "outer_radius_m": (x[1], problem.upper[1], 1),
+        "length_m": (x[2], problem.upper[2], 1),
+        "inner_radius_m": (x[0], problem.lower[0], -1),
+        "winding_depth_m": (x[1] - x[0], problem.insulated_diameter_m, -1),
+    }
+    out = {}
+    for name, (val, lim, sense) in items.items():
+        margin = (lim - val) * sense
+        out[name] = {"value": float(val), "limit": float(lim),
+                     "kind": "upper" if sense > 0 else "lower", "margin": float(margin),
+                     "active": bool(margin <= 1e-6 * abs(lim))}
+    return out
+
+
+def evaluate_design(problem: CoilDesignProblem, x, turns: int | None = None,
+                    *, field_engine: bool = True) -> DesignResult:
+    """Evaluate x with whole ``turns`` (default: floor of the continuous turns).
+
+    With ``field_engine`` the force comes from :meth:`designkit.Coil.field` (winding quadrature
+    at rtol 1e-10 + the core model), not from the optimizer's closed form.
+    """
+    x = tuple(float(q) for q in x)
+    n_cont = problem.turns(x)
+    n = int(math.floor(n_cont + 1e-9)) if turns is None else int(turns)
+    n = max(n, 1)
+    ev = problem.evaluate(x, turns=n)
+    force = ev.force_n
+    if field_engine:
+        force = force_field_engine(problem, x, n)
+    ev_cont = problem.evaluate(x)
+    table = _constraint_table(problem, ev, x)
+    # activity is a property of the continuous optimum (rounding down leaves a small margin)
+    cont = _constraint_table(problem, ev_cont, x)
+    for k in table:
+        table[k]["active"] = cont[k]["active"]
+    prot = problem._protrusion(x) if problem.core_model != "air" else None
+    return DesignResult(
+        inner_radius_m=x[0], outer_radius_m=x[1], length_m=x[2], turns=n,
+        turns_continuous=n_cont, core_protrusion_m=prot, resistance_ohm=ev.resistance_ohm,
+        inductance_h=ev.inductance_h, time_constant_s=ev.time_constant_s,
+        current_a=problem.current_a, power_w=ev.power_w, force_n=force,
+        force_continuous_n=ev_cont.force_n, constraints=table,
+        core_model=problem.core_model)
+
+
+def force_field_engine(problem: CoilDesignProblem, x, turns: int) -> float:
+    """|Fz| at the design point from :class:`designkit.Coil` (field engine), N."""
+    from .coil import Coil
+    from .core import SaturationWarning
+    from .pose import Pose
+
+    core = None
+    if problem.core_model != "air":
+        core = problem._core_coil(x).core
+    coil = Coil(x[0], x[1], x[2], turns, core, Pose((0.0, 0.0, -x[2] / 2)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SaturationWarning)
+        _, g = coil.field(np.array([0.0, 0.0, problem.height_m]), problem.current_a,
+                          gradient=True, rtol=1e-10)
+    return float(-problem.moment_a_m2 * g[2, 2])
+
+
+def _starts(problem: CoilDesignProblem, n: int, seed: int) -> np.ndarray:
+    from scipy.stats import qmc
+
+    lo = np.asarray(problem.lower)
+    hi = np.asarray(problem.upper)
+    with warnings.catch_warnings():  # balance of non-power-of-2 Sobol sets is not needed here
+        warnings.simplefilter("ignore", UserWarning)
+        u = qmc.Sobol(len(lo), scramble=True, seed=seed).random(n)
+    x = lo + u * (hi - lo)
+    # start with a non-empty winding: put Ro at least one wire above Ri
+    d = problem.insulated_diameter_m
+    x[:, 1] = np.maximum(x[:, 1], np.minimum(x[:, 0] + 2 * d, hi[1]))
+    return x
+
+
+def solve(problem: CoilDesignProblem, *, starts: int = 8, global_method: str = "multistart",
+          seed: int = 0, isres_evaluations: int = 4000, progress: bool = False,
+          thesis_point: bool = True) -> OptimizeResult:
+    """Solve the coil design problem to its global optimum (see the module docs).
+
+    Parameters
+    ----------
+    problem : CoilDesignProblem
+    starts : int
+        Local SLSQP runs from scrambled Sobol points (multistart), >= 1.
+    global_method : {'multistart', 'isres'}
+        'isres': nlopt GN_ISRES over the bounds first, then SLSQP from its result and from
+        ``starts`` Sobol points.
+    seed : int
+    progress : bool
+        tqdm bar over the starts.
+
+    Returns
+    -------
+    OptimizeResult
+        ``verified_global`` is True when at least two starts reach the best objective to 1e-6
+        relative and no start found a better feasible point.
+    """
+    if global_method not in GLOBAL_METHODS:
+        raise BadInputError("global_method", f"one of {GLOBAL_METHODS}", global_method)
+    starts = v.positive_int("starts", starts)
+    t0 = time.perf_counter()
+    cache: dict = {}
+    count = [0]
+
+    def full(x):
+        key = tuple(np.round(np.asarray(x, dtype=float), 15))
+        if key not in cache:
+            count[0] += 1
+            if len(cache) > 64:
+                cache.clear()
+            cache[key] = problem.evaluate(x, gradient=True)
+        return cache[key]
+
+    def obj(x):
+        ev, gf, _ = full(x)
+        return ev.force_n, gf
+
+    def cons(x):
+        ev, _, gc = full(x)
+        return np.array(ev.constraints), gc
+
+    x0s = list(_starts(problem, starts, seed))
+    isres_calls = [0]
+    if global_method == "isres":
+        x0s.insert(0, _isres(problem, isres_evaluations, seed, isres_calls))
+        count[0] += isres_calls[0]
+    runs = []
+    it = x0s
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(x0s, desc="optimize", unit="start")
+    for x0 in it:
+        runs.append(maximize(obj, cons, 3, problem.lower, problem.upper, x0))
+    feasible = [r for r in runs if r.feasible]
+    if not feasible:
+        raise BadInputError("bounds", "a region with a design meeting R < Rmax and 5 tau < T",
+                            (problem.lower, problem.upper),
+                            "No start found a feasible design (infeasible problem).")
+    best_run = max(feasible, key=lambda r: r.value)
+    at_best = sum(1 for r in feasible if r.value >= best_run.value * (1 - 1e-6))
+    seconds = time.perf_counter() - t0
+    best = evaluate_design(problem, best_run.x)
+    tp = {}
+    if thesis_point:
+        tp = thesis_point_summary(problem)
+    calls = sum(r.evaluations for r in runs) + isres_calls[0]
+    return OptimizeResult(best=best, x=best_run.x, evaluations=calls,
+                          model_evaluations=count[0], seconds=seconds,
+                          runs=tuple(runs), starts_at_best=at_best, global_method=global_method,
+                          verified_global=at_best >= 2, thesis_point=tp)
+
+
+def _isres(problem: CoilDesignProblem, maxeval: int, seed: int, count) -> np.ndarray:
+    """nlopt GN_ISRES (global, stochastic, handles the inequality constraints) -> a start."""
+    import nlopt
+
+    lo = np.asarray(problem.lower)
+    hi = np.asarray(problem.upper)
+    n = len(lo)
+    nlopt.srand(seed)
+    cache = {}
+
+    def ev(u):
+        key = tuple(u)
+        if key not in cache:
+            count[0] += 1
+            cache.clear()
+            cache[key] = problem.evaluate(lo + u * (hi - lo))
+        return cache[key]
+
+    opt = nlopt.opt(nlopt.GN_ISRES, n)
+    opt.set_lower_bounds(np.zeros(n))
+    opt.set_upper_bounds(np.ones(n))
+    opt.set_max_objective(lambda u, g: ev(u).force_n)
+
+    def c(result, u, g):
+        result[:] = ev(u).constraints
+
+    opt.add_inequality_mconstraint(c, [1e-8] * 3)
+    opt.set_maxeval(maxeval)
+    u = opt.optimize(np.full(n, 0.5))
+    return lo + u * (hi - lo)
+
+
+THESIS_POINT = (0.012, 0.019, 0.100)
+THESIS_TURNS = 1429
+THESIS_FORCE_N = 0.780
+
+
+def thesis_point_summary(problem: CoilDesignProblem) -> dict:
+    """The thesis' design (24/38/100 mm, 1429 turns) under this problem's model (SI)."""
+    x = list(THESIS_POINT)
+    if len(problem.variables) > 3:
+        x.append(problem.core_protrusion_m)
+    ev = problem.evaluate(x, turns=THESIS_TURNS)
+    return {
+        "inner_radius_m": x[0], "outer_radius_m": x[1], "length_m": x[2],
+        "turns": THESIS_TURNS, "resistance_ohm": ev.resistance_ohm,
+        "inductance_h": ev.inductance_h, "time_constant_s": ev.time_constant_s,
+        "settling_time_s": 5 * ev.time_constant_s,
+        "force_n": force_field_engine(problem, x, THESIS_TURNS),
+        "thesis_reported_force_n": THESIS_FORCE_N, "feasible": ev.feasible,
+        "core_model": problem.core_model,
+    }
+
+
+# ====================================================================== beyond the thesis
+def optimize_wire(problem: CoilDesignProblem, diameters_m: Sequence[float] | None = None, *,
+                  starts: int = 4, progress: bool = False) -> list[tuple[float, OptimizeResult]]:
+    """Solve for each standard wire (default: the metric IEC 60317 table), best first.
+
+    Insulated diameter of each: :func:`insulated_diameter_for`. Returns (bare diameter, result)
+    sorted by force; diameters whose bounds admit no winding are skipped.
+    """
+    diameters = METRIC_DIAMETERS_M if diameters_m is None else tuple(diameters_m)
+    out = []
+    it = diameters
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(diameters, desc="wire table", unit="wire")
+    for d in it:
+        v.positive("wire diameter", d)
+        try:
+            p = problem.with_wire(d)
+            res = solve(p, starts=starts, thesis_point=False)
+        except BadInputError:
+            continue
+        out.append((d, res))
+    out.sort(key=lambda t: -t[1].best.force_n)
+    return out
+
+
+@dataclass(frozen=True)
+class ParetoPoint:
+    force_n: float
+    time_constant_s: float
+    power_w: float
+    x: tuple[float, ...]
+    turns: float
+
+
+def pareto_front(problem: CoilDesignProblem, *, tau_caps_s: Sequence[float] | None = None,
+                 power_caps_w: Sequence[float] | None = None, starts: int = 3,
+                 progress: bool = False) -> list[ParetoPoint]:
+    """Force vs time constant vs power: non-dominated designs by the epsilon-constraint method.
+
+    For each pair of caps (tau <= tau_cap, I^2 R <= P_cap) maximize the force; keep the
+    designs no other design beats in all three (max force, min tau, min power). Default caps:
+    6 values of tau up to the problem's T/5 and 6 of power up to I^2 Rmax.
+    """
+    tmax = problem.max_settling_time_s / 5
+    pmax = problem.current_a ** 2 * problem.max_resistance_ohm
+    taus = np.geomspace(tmax / 20, tmax, 6) if tau_caps_s is None else np.asarray(tau_caps_s)
+    pows = np.linspace(pmax / 6, pmax, 6) if power_caps_w is None else np.asarray(power_caps_w)
+    pts = []
+    pairs = [(t, p) for t in taus for p in pows]
+    it = pairs
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(pairs, desc="pareto", unit="solve")
+    for t, p in it:
+        sub = dataclasses.replace(problem, max_settling_time_s=5 * float(t),
+                                  max_resistance_ohm=float(p) / problem.current_a ** 2)
+        try:
+            res = solve(sub, starts=starts, thesis_point=False)
+        except BadInputError:
+            continue
+        ev = problem.evaluate(res.x)
+        pts.append(ParetoPoint(ev.force_n, ev.time_constant_s, ev.power_w, res.x, ev.turns))
+    front = []
+    for a in pts:
+        dominated = any(
+            (b.force_n >= a.force_n and b.time_constant_s <= a.time_constant_s
+             and b.power_w <= a.power_w)
+            and (b.force_n > a.force_n or b.time_constant_s < a.time_constant_s
+                 or b.power_w < a.power_w)
+            for b in pts)
+        if not dominated:
+            front.append(a)
+    front.sort(key=lambda q: q.force_n)
+    return front

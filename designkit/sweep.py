@@ -1,0 +1,319 @@
+"""Design sweeps: evaluate a grid of coils (force at the design height, R, L, tau, power,
+feasibility) on local worker processes or on a Dask distributed cluster.
+
+A sweep is the Cartesian product of parameter ranges (:func:`parse_param` reads
+``NAME=START:STOP:N``) applied to the design's coil problem
+(:class:`designkit.optimize.CoilDesignProblem`); parameters not swept keep the design's values.
+Each design is rounded to whole turns (floor of the fully packed section, as the optimizer's
+reported designs) and evaluated with the optimizer's model (closed-form on-axis force, Bessel
+inductance; ~0.5 ms per design with the air model).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from . import _validate as v
+from .design import Design
+from .errors import BadInputError
+from .optimize import CORE_MODEL_NAMES, CoilDesignProblem
+
+PARAMETERS: dict[str, str] = {
+    "inner_radius_m": "winding inner radius, m",
+    "outer_radius_m": "winding outer radius, m",
+    "length_m": "winding length, m",
+    "wire_diameter_m": "bare wire diameter, m (insulated scales with the design's ratio)",
+    "height_m": "magnet height above the coil top, m",
+    "current_a": "coil current, A",
+}
+_ALIASES = {f"coil.{k}": k for k in ("inner_radius_m", "outer_radius_m", "length_m")}
+_ALIASES.update({"wire.diameter_m": "wire_diameter_m", "optimize.height_m": "height_m"})
+MAX_DESIGNS = 5_000_000
+COLUMNS = ("inner_radius_m", "outer_radius_m", "length_m", "wire_diameter_m", "height_m",
+           "current_a", "turns", "force_n", "resistance_ohm", "inductance_h", "time_constant_s",
+           "power_w", "valid", "feasible")
+
+
+@dataclass(frozen=True)
+class ParamRange:
+    name: str
+    start: float
+    stop: float
+    count: int
+
+    @property
+    def values(self) -> np.ndarray:
+        return np.linspace(self.start, self.stop, self.count)
+
+
+def parse_param(text: str) -> ParamRange:
+    """Parse ``NAME=START:STOP:N`` (N points, both ends included; N = 1 takes START).
+
+    Raises BadInputError for an unknown NAME, a malformed range, N < 1 (empty range), or
+    values outside the parameter's domain (e.g. a negative wire diameter).
+    """
+    if "=" not in text:
+        raise BadInputError("--param", "NAME=START:STOP:N", text)
+    name, _, rng = text.partition("=")
+    name = _ALIASES.get(name.strip(), name.strip())
+    if name not in PARAMETERS:
+        raise BadInputError("--param name", f"one of {sorted(PARAMETERS)}", name)
+    parts = rng.split(":")
+    if len(parts) != 3:
+        raise BadInputError(f"--param {name}", "START:STOP:N", rng)
+    start = v.finite(f"{name} START", _num(name, parts[0]))
+    stop = v.finite(f"{name} STOP", _num(name, parts[1]))
+    try:
+        count = int(parts[2])
+    except ValueError:
+        raise BadInputError(f"{name} N", "a whole number >= 1", parts[2]) from None
+    if count < 1:
+        raise BadInputError(f"{name} N", "a whole number >= 1 (the range is empty)", count)
+    if count > 1 and start == stop:
+        raise BadInputError(f"{name} STOP", f"!= START ({start}) when N > 1", stop)
+    for val, which in ((start, "START"), (stop, "STOP")):
+        if not val > 0:
+            raise BadInputError(f"{name} {which}", f"> 0 ({PARAMETERS[name]})", val)
+    return ParamRange(name, start, stop, count)
+
+
+def _num(name, s):
+    try:
+        return float(s)
+    except ValueError:
+        raise BadInputError(name, "a number", s) from None
+
+
+def grid(ranges: Sequence[ParamRange]) -> tuple[list[str], np.ndarray]:
+    """(names, values of shape (n_designs, n_params)) of the Cartesian product."""
+    names = [r.name for r in ranges]
+    if len(set(names)) != len(names):
+        dup = next(n for n in names if names.count(n) > 1)
+        raise BadInputError("--param", "each parameter at most once", dup)
+    total = math.prod(r.count for r in ranges)
+    if total > MAX_DESIGNS:
+        raise BadInputError("grid size", f"<= {MAX_DESIGNS} designs", total)
+    if not ranges:
+        return [], np.zeros((1, 0))
+    vals = np.array(list(itertools.product(*(r.values for r in ranges))), dtype=float)
+    return names, vals
+
+
+def _base_row(design: Design) -> dict:
+    c, w = design.coil, design.wire
+    return {"inner_radius_m": c.inner_radius_m, "outer_radius_m": c.outer_radius_m,
+            "length_m": c.length_m, "wire_diameter_m": w.diameter_m,
+            "height_m": design.optimize.height_m, "current_a": design.drive.max_current_a}
+
+
+def evaluate_chunk(problem: CoilDesignProblem, base: dict, names: Sequence[str],
+                   values: np.ndarray) -> list[dict]:
+    """Evaluate designs (rows of ``values`` for ``names`` over ``base``); worker entry point.
+
+    Invalid geometry (outer radius not one insulated wire above the inner one, no whole turn):
+    ``valid = False`` and empty numbers (None). Feasible = valid and R <= Rmax and
+    5 tau <= T.
+    """
+    ratio = problem.insulated_diameter_m / problem.wire_diameter_m
+    out = []
+    for row_vals in values:
+        row = dict(base)
+        row.update(zip(names, map(float, row_vals)))
+        p = dataclasses.replace(problem, height_m=row["height_m"], current_a=row["current_a"],
+                                wire_diameter_m=row["wire_diameter_m"],
+                                insulated_diameter_m=row["wire_diameter_m"] * ratio)
+        x = (row["inner_radius_m"], row["outer_radius_m"], row["length_m"])
+        n = math.floor(p.turns(x) + 1e-9) if x[1] > x[0] else 0
+        res = dict.fromkeys(COLUMNS)
+        res.update(row)
+        if x[1] < x[0] + p.insulated_diameter_m or n < 1:
+            res.update(turns=max(n, 0), valid=False, feasible=False)
+            out.append(res)
+            continue
+        ev = p.evaluate(x, turns=n)
+        res.update(turns=n, force_n=ev.force_n, resistance_ohm=ev.resistance_ohm,
+                   inductance_h=ev.inductance_h, time_constant_s=ev.time_constant_s,
+                   power_w=ev.power_w, valid=True,
+                   feasible=bool(ev.constraints[0] <= 0 and ev.constraints[1] <= 0))
+        out.append(res)
+    return out
+
+
+@dataclass(frozen=True)
+class SweepResult:
+    names: tuple[str, ...]
+    rows: list
+    best_index: int | None
+    seconds: float
+    workers: int
+    backend: str
+
+
+def run_sweep(design: Design, ranges: Sequence[ParamRange], *, workers: int | None = None,
+              scheduler: str | None = None, core_model: str = "air", chunk_size: int = 250,
+              progress: bool = True) -> SweepResult:
+    """Evaluate the grid; local processes by default, Dask when ``scheduler`` is an address.
+
+    Parameters
+    ----------
+    design : Design
+    ranges : sequence of ParamRange
+    workers : int, optional
+        Local worker processes (default: the CPU count); 1 runs in this process.
+    scheduler : str, optional
+        Address of a dask.distributed scheduler (``tcp://host:8786``); the chunks run there.
+    core_model : {'air', 'thesis-uniform', 'surface-current'}
+    chunk_size : int
+        Designs per task.
+    """
+    import time
+
+    if core_model not in CORE_MODEL_NAMES:
+        raise BadInputError("core_model", f"one of {CORE_MODEL_NAMES}", core_model)
+    if workers is not None:
+        workers = v.positive_int("workers", workers)
+    chunk_size = v.positive_int("chunk_size", chunk_size)
+    names, vals = grid(ranges)
+    problem = CoilDesignProblem.from_design(design, core_model=core_model)
+    base = _base_row(design)
+    chunks = [vals[i:i + chunk_size] for i in range(0, len(vals), chunk_size)]
+    t0 = time.perf_counter()
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(vals), desc="sweep", unit="design")
+    results: list = [None] * len(chunks)
+    if scheduler is not None:
+        backend = f"dask:{scheduler}"
+        n_workers = _run_dask(scheduler, problem, base, names, chunks, results, bar)
+    elif (workers or os.cpu_count() or 1) == 1 or len(chunks) == 1:
+        backend, n_workers = "serial", 1
+        for i, ch in enumerate(chunks):
+            results[i] = evaluate_chunk(problem, base, names, ch)
+            if bar is not None:
+                bar.update(len(ch))
+    else:
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        n_workers = workers or os.cpu_count() or 1
+        backend = "processes"
+        with ProcessPoolExecutor(max_workers=n_workers) as ex:
+            futs = {ex.submit(evaluate_chunk, problem, base, names, ch): i
+                    for i, ch in enumerate(chunks)}
+            for fut in as_completed(futs):
+                i = futs[fut]
+                results[i] = fut.result()
+                if bar is not None:
+                    bar.update(len(chunks[i]))
+    if bar is not None:
+        bar.close()
+    rows = [r for ch in results for r in ch]
+    feas = [i for i, r in enumerate(rows) if r["feasible"]]
+    best = max(feas, key=lambda i: rows[i]["force_n"]) if feas else None
+    return SweepResult(tuple(names), rows, best, time.perf_counter() - t0, n_workers, backend)
+
+
+def _run_dask(address, problem, base, names, chunks, results, bar) -> int:
+    from .errors import require
+
+    distributed = require("dask.distributed", "dask[distributed]", "designkit sweep --scheduler")
+    try:
+        client = distributed.Client(address, timeout="10s")
+    except OSError as exc:
+        raise BadInputError("--scheduler", "the address of a running dask scheduler",
+                            address, str(exc)) from None
+    try:
+        n = max(len(client.scheduler_info().get("workers", {})), 1)
+        futs = [client.submit(evaluate_chunk, problem, base, names, ch, pure=False)
+                for ch in chunks]
+        index = {f.key: i for i, f in enumerate(futs)}
+        for fut in distributed.as_completed(futs):
+            i = index[fut.key]
+            results[i] = fut.result()
+            if bar is not None:
+                bar.update(len(chunks[i]))
+    finally:
+        client.close()
+    return n
+
+
+# ====================================================================== output
+def write_csv(result: SweepResult, path: str | Path) -> Path:
+    """Rows as CSV (SI units in the column names; empty cells for invalid geometry)."""
+    import csv
+
+    from ._io import atomic_path
+
+    with atomic_path(path) as tmp:
+        with open(tmp, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(COLUMNS)
+            for r in result.rows:
+                w.writerow(["" if r[c] is None else
+                            (int(r[c]) if isinstance(r[c], bool) else r[c]) for c in COLUMNS])
+    return Path(path)
+
+
+def plot(result: SweepResult, path: str | Path) -> Path:
+    """PNG of the force over the (first two) swept parameters: feasible designs coloured by
+    force, infeasible ones grey, the best feasible design starred."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ._io import atomic_path
+
+    names = list(result.names) or ["inner_radius_m"]
+    rows = result.rows
+    valid = [r for r in rows if r["valid"]]
+    fig, ax = plt.subplots(figsize=(6.4, 4.8), dpi=110)
+    if len(names) >= 2:
+        xn, yn = names[0], names[1]
+        inf = [r for r in valid if not r["feasible"]]
+        fe = [r for r in valid if r["feasible"]]
+        if inf:
+            ax.scatter([r[xn] * 1e3 if xn.endswith("_m") else r[xn] for r in inf],
+                       [r[yn] * 1e3 if yn.endswith("_m") else r[yn] for r in inf],
+                       c="0.8", marker="x", s=10, label="infeasible")
+        if fe:
+            sc = ax.scatter([r[xn] * 1e3 if xn.endswith("_m") else r[xn] for r in fe],
+                            [r[yn] * 1e3 if yn.endswith("_m") else r[yn] for r in fe],
+                            c=[r["force_n"] * 1e3 for r in fe], s=14, cmap="viridis",
+                            label="feasible")
+            fig.colorbar(sc, ax=ax, label="force (mN)")
+        ax.set_ylabel(_label(yn))
+    else:
+        xn = names[0]
+        xs = [r[xn] * 1e3 if xn.endswith("_m") else r[xn] for r in valid]
+        ax.plot(xs, [r["force_n"] * 1e3 for r in valid], "-", color="0.6")
+        ax.scatter([x for x, r in zip(xs, valid) if r["feasible"]],
+                   [r["force_n"] * 1e3 for r in valid if r["feasible"]], s=12, label="feasible")
+        ax.set_ylabel("force (mN)")
+    if result.best_index is not None:
+        b = rows[result.best_index]
+        bx = b[names[0]] * 1e3 if names[0].endswith("_m") else b[names[0]]
+        by = (b[names[1]] * 1e3 if names[1].endswith("_m") else b[names[1]]) \
+            if len(names) >= 2 else b["force_n"] * 1e3
+        ax.plot([bx], [by], "r*", ms=14, label=f"best {b['force_n'] * 1e3:.0f} mN")
+    ax.set_xlabel(_label(names[0]))
+    ax.set_title(f"{len(rows)} designs, feasible region (R, 5 tau limits)")
+    ax.legend(loc="best", fontsize=8)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
+    return Path(path)
+
+
+def _label(name: str) -> str:
+    return name[:-2] + " (mm)" if name.endswith("_m") else name.replace("_a", " (A)")

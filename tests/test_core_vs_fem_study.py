@@ -1,0 +1,21 @@
+"""Smoke test of studies/core_vs_fem.py (quick mode: coarse FEM, one core, 6 A)."""
+
+import shutil
+
+import pytest
+
+pytestmark = pytest.mark.skipif(shutil.which("getdp") is None,
+                                reason="GetDP not installed (apt-get install getdp)")
+
+
+def test_core_vs_fem_quick(tmp_path):
+    from studies.core_vs_fem import print_table, run
+
+    res = run(tmp_path, quick=True)
+    print_table(res)
+    assert abs(res["air"]["bz_rel"]) < 2e-4 and abs(res["air"]["l_rel"]) < 1e-4
+    e = res["linear"][1000.0]["surface-current"]
+    assert max(e["axis"] + e["off_axis"]) < 0.03
+    nl = res["nonlinear"][-1]
+    assert abs(nl["dbz_model"] / nl["dbz_fem"] - 1) < 0.10
+    assert (tmp_path / "core_vs_fem.json").exists()

@@ -1,0 +1,153 @@
+"""Force-current map: file round trip, interpolation accuracy and physics, bad files, CLI,
+the numpy-only reader in firmware_io (air coils: the core model is owned elsewhere)."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from designkit import default_design
+from designkit.array import CoilArray, gradient_from_g5
+from designkit.cli import main
+from designkit.design import design_to_toml
+from designkit.errors import BadInputError
+from designkit import fieldmap
+
+SMALL = default_design().replace(**{"core": None, "workspace.half_width_m": 0.03,
+                                     "workspace.z_min_m": 0.01, "workspace.z_max_m": 0.04})
+
+
+@pytest.fixture(scope="module")
+def mapfile(tmp_path_factory):
+    path = tmp_path_factory.mktemp("map") / "small.npz"
+    fieldmap.write(path, fieldmap.build(SMALL, spacing=0.003, progress=False))
+    return path
+
+
+@pytest.fixture(scope="module")
+def fm(mapfile):
+    return fieldmap.load(mapfile, SMALL)
+
+
+@pytest.fixture(scope="module")
+def sample(fm):
+    rng = np.random.default_rng(7)
+    lo, hi = fm.bounds
+    p = rng.uniform(lo, hi, (400, 3))
+    return p, CoilArray.from_design(SMALL).actuation_matrix(p)
+
+
+def test_bounds_and_meta(fm):
+    lo, hi = fm.bounds
+    np.testing.assert_allclose(lo, [-0.03, -0.03, 0.01])
+    np.testing.assert_allclose(hi, [0.03, 0.03, 0.04])
+    assert fm.meta["design_sha256"] == SMALL.spec_hash()
+    assert fm.meta["units"]["A_rows_0_2"] == "T/A"
+    assert len(fm.meta["coil_positions_m"]) == 9
+
+
+def test_interpolation_error_against_direct(fm, sample):
+    p, a = sample
+    scale = np.abs(a).max(axis=(0, 2))
+    quad = np.abs(fm.actuation(p) - a).max(axis=(0, 2)) / scale
+    lin = np.abs(fm.actuation(p, order="linear") - a).max(axis=(0, 2)) / scale
+    assert np.all(quad < 2e-3)
+    # the quadratic-exact correction must beat trilinear clearly (O(h^3) vs O(h^2))
+    assert np.max(quad) < 0.3 * np.max(lin)
+
+
+def test_nodes_are_reproduced_and_gradient_is_symmetric_traceless(fm):
+    g = fm.meta["grid"]
+    node = np.asarray(g["lower_m"]) + np.asarray(g["spacing_m"]) * [2, 3, 1]
+    a_direct = CoilArray.from_design(SMALL).actuation_matrix(node)
+    np.testing.assert_allclose(fm.actuation(node), a_direct, rtol=1e-5,
+                               atol=1e-6 * np.abs(a_direct).max())
+    full = gradient_from_g5(np.moveaxis(fm.actuation(node + 1e-3)[3:], 0, -1))
+    np.testing.assert_allclose(np.trace(full, axis1=-2, axis2=-1), 0, atol=1e-12)
+    np.testing.assert_allclose(full, np.swapaxes(full, -1, -2))
+
+
+def test_single_point_equals_batch(fm, sample):
+    p, _ = sample
+    one = np.array([fm.actuation(q) for q in p[:20]])
+    np.testing.assert_allclose(one, fm.actuation(p[:20]), rtol=1e-6, atol=1e-9)
+    assert fm.actuation(tuple(p[0])).shape == (8, 9)
+
+
+def test_outside_points(fm):
+    lo, hi = fm.bounds
+    out = hi + [0, 0, 0.002]
+    with pytest.raises(BadInputError, match="inside the map box"):
+        fm.actuation(out)
+    with pytest.raises(BadInputError, match="inside the map box"):
+        fm.actuation(np.array([lo, out]))
+    a = fm.actuation(out, outside="extrapolate")
+    assert np.all(np.isfinite(a))
+    with pytest.raises(BadInputError):
+        fm.actuation([np.nan, 0, 0.02])
+
+
+def test_bad_files(mapfile, tmp_path):
+    trunc = tmp_path / "trunc.npz"
+    trunc.write_bytes(mapfile.read_bytes()[: mapfile.stat().st_size // 2])
+    with pytest.raises(BadInputError, match="truncated"):
+        fieldmap.load(trunc)
+    foreign = tmp_path / "foreign.npz"
+    np.savez(foreign, x=np.zeros(3))
+    with pytest.raises(BadInputError, match="foreign"):
+        fieldmap.load(foreign)
+    text = tmp_path / "text.npz"
+    text.write_text("hello")
+    with pytest.raises(BadInputError):
+        fieldmap.load(text)
+    with pytest.raises(BadInputError, match="built from design"):
+        fieldmap.load(mapfile, default_design())
+    # corrupted values (and a NaN) are caught
+    a, dg, meta = fieldmap.read_arrays(mapfile)
+    bad = tmp_path / "nan.npz"
+    a2 = a.copy()
+    a2[0, 0, 0, 0, 0] = np.nan
+    np.savez(bad, A=a2, dG=dg, meta=np.array(json.dumps(meta)))
+    with pytest.raises(BadInputError, match="finite"):
+        fieldmap.load(bad)
+    a2[0, 0, 0, 0, 0] = 1.0
+    np.savez(bad, A=a2, dG=dg, meta=np.array(json.dumps(meta)))
+    with pytest.raises(BadInputError, match="SHA-256"):
+        fieldmap.load(bad)
+    meta2 = dict(meta, units={**meta["units"], "grid": "mm"})
+    np.savez(bad, A=a, dG=dg, meta=np.array(json.dumps(meta2)))
+    with pytest.raises(BadInputError, match="units"):
+        fieldmap.load(bad)
+
+
+def test_firmware_reader_numpy_only(mapfile, fm, sample):
+    p, _ = sample
+    code = (
+        "import sys, numpy as np\n"
+        "from firmware_io.mapfile import MapFile\n"
+        f"m = MapFile.load({str(mapfile)!r})\n"
+        f"p = np.array({p[:10].tolist()!r})\n"
+        "np.save(sys.argv[1], m.actuation(p))\n"
+        "assert not any(k.startswith(('designkit', 'scipy')) for k in sys.modules), "
+        "sorted(k for k in sys.modules if k.startswith(('designkit', 'scipy')))\n"
+    )
+    out = mapfile.parent / "fw.npy"
+    root = Path(__file__).resolve().parents[1]
+    subprocess.run([sys.executable, "-c", code, str(out)], check=True, cwd=root,
+                   env={"PYTHONPATH": str(root), "PATH": "/usr/bin:/bin"})
+    np.testing.assert_allclose(np.load(out), fm.actuation(p[:10]), rtol=1e-6, atol=1e-12)
+
+
+def test_cli_map_writes_one_file(tmp_path):
+    toml = tmp_path / "d.toml"
+    toml.write_text(design_to_toml(SMALL.replace(**{"workspace.half_width_m": 0.01,
+                                                    "workspace.z_max_m": 0.02})))
+    out = tmp_path / "m.npz"
+    assert main(["map", "--design", str(toml), "--spacing", "5", "--out", str(out),
+                 "--quiet"]) == 0
+    assert [f.name for f in tmp_path.iterdir() if f.suffix == ".npz"] == ["m.npz"]
+    assert fieldmap.load(out).meta["grid"]["shape"] == [5, 5, 3]
+    assert main(["map", "--spacing", "-1", "--out", str(out), "--quiet"]) == 1

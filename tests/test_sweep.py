@@ -1,0 +1,119 @@
+"""Sweeps and the optimize/sweep CLI, in-process; Dask on a local in-process cluster."""
+
+import csv
+import json
+import math
+import sys
+from pathlib import Path
+
+import pytest
+
+from designkit import Coil, default_design
+from designkit import electrical as el
+from designkit.cli import main
+from designkit.errors import BadInputError
+from designkit.sweep import parse_param
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_parse_param_errors_name_the_problem():
+    assert parse_param("inner_radius_m=0.005:0.01:3").values.tolist() == [0.005, 0.0075, 0.01]
+    with pytest.raises(BadInputError, match="one of"):
+        parse_param("radius=0.005:0.01:3")
+    with pytest.raises(BadInputError, match="empty"):
+        parse_param("length_m=0.01:0.1:0")
+    with pytest.raises(BadInputError, match="wire_diameter_m START"):
+        parse_param("wire_diameter_m=-0.0007:0.001:4")
+
+
+def _read(path):
+    with open(path) as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_sweep_cli_serial_writes_csv_and_png(tmp_path, capsys):
+    out = tmp_path / "sw"
+    assert main(["sweep", "--param", "inner_radius_m=0.006:0.014:3",
+                 "--param", "length_m=0.03:0.1:4", "--workers", "1", "--out", str(out),
+                 "--no-progress"]) == 0
+    rows = _read(out / "sweep.csv")
+    assert len(rows) == 12
+    assert (out / "sweep.png").stat().st_size > 1000
+    d = default_design()
+    for r in rows:
+        coil = Coil(float(r["inner_radius_m"]), float(r["outer_radius_m"]),
+                    float(r["length_m"]), int(r["turns"]))
+        # independent path: turns from the section, R from the electrical module
+        assert int(r["turns"]) == math.floor(el.turns_continuous(
+            coil.inner_radius, coil.outer_radius, coil.length, 0.7e-3) + 1e-9)
+        assert float(r["resistance_ohm"]) == pytest.approx(el.resistance(coil, d.wire), rel=1e-12)
+        feasible = (float(r["resistance_ohm"]) <= 6.0
+                    and 5 * float(r["time_constant_s"]) <= 0.1)
+        assert bool(int(r["feasible"])) == feasible
+    assert "best feasible" in capsys.readouterr().out
+
+
+def test_sweep_cli_processes_match_serial(tmp_path):
+    args = ["sweep", "--param", "outer_radius_m=0.015:0.025:6", "--param",
+            "length_m=0.02:0.1:5", "--no-progress"]
+    assert main(args + ["--workers", "1", "--out", str(tmp_path / "a")]) == 0
+    assert main(args + ["--workers", "2", "--out", str(tmp_path / "b")]) == 0
+    assert _read(tmp_path / "a" / "sweep.csv") == _read(tmp_path / "b" / "sweep.csv")
+
+
+def test_sweep_on_a_local_dask_cluster(tmp_path):
+    distributed = pytest.importorskip("dask.distributed")
+    args = ["sweep", "--param", "inner_radius_m=0.005:0.015:4", "--param",
+            "length_m=0.02:0.1:3", "--no-progress"]
+    assert main(args + ["--workers", "1", "--out", str(tmp_path / "serial")]) == 0
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster:
+        assert main(args + ["--scheduler", cluster.scheduler_address,
+                            "--out", str(tmp_path / "dask")]) == 0
+    assert _read(tmp_path / "dask" / "sweep.csv") == _read(tmp_path / "serial" / "sweep.csv")
+
+
+@pytest.mark.parametrize("bad", [
+    ["--param", "bogus_m=0.01:0.02:3"],
+    ["--param", "length_m=0.01:0.1:0"],
+    ["--param", "wire_diameter_m=-0.0007:0.001:3"],
+    ["--param", "length_m=0.01:0.1"],
+    [],
+])
+def test_sweep_bad_input_fails_cleanly(tmp_path, capsys, bad):
+    out = tmp_path / "bad"
+    assert main(["sweep", *bad, "--out", str(out), "--no-progress"]) != 0
+    assert "error" in capsys.readouterr().err
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_optimize_cli_writes_json_with_si_keys(tmp_path, capsys):
+    out = tmp_path / "opt"
+    assert main(["optimize", "--out", str(out), "--starts", "4"]) == 0
+    data = json.loads((out / "optimize.json").read_text())
+    for key in ("inner_radius_m", "outer_radius_m", "length_m", "turns", "resistance_ohm",
+                "inductance_h", "time_constant_s", "current_a", "force_n", "constraints",
+                "evaluations", "seconds"):
+        assert key in data
+    assert data["resistance_ohm"] <= 6.0 and 5 * data["time_constant_s"] <= 0.1
+    assert all(c["margin"] >= -1e-12 for c in data["constraints"].values())
+    assert "thesis 24/38/100" in capsys.readouterr().out
+
+
+def test_optimize_cli_bad_design_file(tmp_path, capsys):
+    toml = tmp_path / "d.toml"
+    toml.write_text("[optimize]\nmin_inner_radius_m = 0.0248\n")
+    out = tmp_path / "opt"
+    assert main(["optimize", "--design", str(toml), "--out", str(out)]) != 0
+    assert "outer_radius_m" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_bench_optimize_smoke(tmp_path):
+    sys.path.insert(0, str(ROOT / "studies"))
+    import bench_optimize
+
+    r = bench_optimize.run(tmp_path, quick=True)
+    assert r["air_verified_global"] and r["optimum_beats_grid"]
+    assert (tmp_path / "bench_optimize.json").exists()
