@@ -97,7 +97,7 @@ def third_derivatives(a_grid: np.ndarray, spacing) -> np.ndarray:
     return np.stack(t, axis=3)
 
 
-def compute_grid(array: CoilArray, axes, *, tolerance: float = 1e-6, progress: bool = True):
+def compute_grid(array: CoilArray, axes, *, tolerance: float = 4e-4, progress: bool = True):
     """A on the grid ``axes`` (3 arrays, m): shape (nx, ny, nz, 8, n_coils).
 
     One (rho, z) table per coil type (designkit.scene) covering the whole box; direct
@@ -119,26 +119,80 @@ def compute_grid(array: CoilArray, axes, *, tolerance: float = 1e-6, progress: b
         tables[proto] = build_table(proto, (rho.min(), rho.max()), (zl.min(), zl.max()), _COMP,
                                     0.25 * tolerance)
     chunk = 20000
+    t_all = np.zeros((n, 7, nc))
+    have_t = True
     work = [(proto, k, s) for proto, idx in array.coil_types().items() for k in idx
             for s in range(0, n, chunk)]
     for proto, k, s0 in tqdm(work, desc="map", unit="chunk", disable=not progress,
                              leave=False):
         sl = slice(s0, min(n, s0 + chunk))
-        loc = array.coils[k].pose.to_local(pts[sl])
+        coil = array.coils[k]
+        loc = coil.pose.to_local(pts[sl])
         rho, zl = np.hypot(loc[:, 0], loc[:, 1]), loc[:, 2]
         tb = tables[proto]
         if tb is None:
             part = _rz_direct(proto, rho, zl, True)
+            have_t = False
         else:
             part = tb(rho, zl, _COMP)
             part["dbr_drho"] = -part["dbz_dz"] - part["br_over_rho"]
             part["dbz_drho"] = part["dbr_dz"]
-        assemble(per, array.coils[k], k, np.arange(sl.start, sl.stop), loc, part, True, None)
+            t_all[sl, :, k] = _third_from_table(tb, loc, rho, zl, coil)
+        assemble(per, coil, k, np.arange(sl.start, sl.stop), loc, part, True, None)
     a = np.concatenate([per["B"], per["gradient"]], axis=1)
-    return a.reshape(X.shape + (8, nc)), tables
+    return a.reshape(X.shape + (8, nc)), (t_all.reshape(X.shape + (7, nc)) if have_t else None)
 
 
-def build(design, *, spacing: float = 0.002, box=None, tolerance: float = 1e-6,
+def _third_from_table(tb, loc, rho, zl, coil) -> np.ndarray:
+    """T (n, 7) in the global frame from the spline derivatives of Br/rho and dBz/dz.
+
+    With b = Br/rho, f = dBz/dz, q = dBr/drho - b = -f - 2b (traceless) and c, s = cos, sin of
+    the azimuth: Gxx = b + q c^2, Gxy = q c s, Gyy = b + q s^2; differentiating with
+    d/dx = c d/drho - (s/rho) d/dphi, d/dy = s d/drho + (c/rho) d/dphi gives the 7 entries.
+    """
+    sb, sf = tb.splines["br_over_rho"], tb.splines["dbz_dz"]
+    b_r, b_z = sb.ev(rho, zl, dx=1), sb.ev(rho, zl, dy=1)
+    f_r, f_z = sf.ev(rho, zl, dx=1), sf.ev(rho, zl, dy=1)
+    b, f = sb.ev(rho, zl), sf.ev(rho, zl)
+    q = -f - 2 * b
+    q_r, q_z = -f_r - 2 * b_r, -f_z - 2 * b_z
+    pos = rho > 1e-9
+    safe = np.where(pos, rho, 1.0)
+    c = np.where(pos, loc[:, 0] / safe, 1.0)
+    s = np.where(pos, loc[:, 1] / safe, 0.0)
+    q_over = np.where(pos, q / safe, 0.0)  # q = O(rho^2) near the axis
+    t = np.empty((len(rho), 7))
+    t[:, 0] = c * b_r + c**3 * q_r + 2 * q_over * c * s * s            # xxx
+    t[:, 1] = s * b_r + s * c * c * q_r - 2 * q_over * c * c * s       # xxy
+    t[:, 2] = b_z + q_z * c * c                                        # xxz
+    t[:, 3] = q_r * c * s * s + q_over * c * (c * c - s * s)           # xyy
+    t[:, 4] = q_z * c * s                                              # xyz
+    t[:, 5] = s * b_r + s**3 * q_r + 2 * q_over * s * c * c            # yyy
+    t[:, 6] = b_z + q_z * s * s                                        # yyz
+    if coil.pose.is_identity_rotation:
+        return t
+    full = _t_full(t)
+    r = coil.pose.matrix
+    full = np.einsum("ia,jb,kc,nabc->nijk", r, r, r, full, optimize=True)
+    return np.stack([full[:, 0, 0, 0], full[:, 0, 0, 1], full[:, 0, 0, 2], full[:, 0, 1, 1],
+                     full[:, 0, 1, 2], full[:, 1, 1, 1], full[:, 1, 1, 2]], 1)
+
+
+def _t_full(t):
+    """(n, 7) -> (n, 3, 3, 3) fully symmetric traceless tensor."""
+    xxx, xxy, xxz, xyy, xyz, yyy, yyz = t.T
+    xzz, yzz, zzz = -xxx - xyy, -xxy - yyy, -xxz - yyz
+    val = {(0, 0, 0): xxx, (0, 0, 1): xxy, (0, 0, 2): xxz, (0, 1, 1): xyy, (0, 1, 2): xyz,
+           (1, 1, 1): yyy, (1, 1, 2): yyz, (0, 2, 2): xzz, (1, 2, 2): yzz, (2, 2, 2): zzz}
+    out = np.empty((len(t), 3, 3, 3))
+    for i in range(3):
+        for j in range(3):
+            for k in range(3):
+                out[:, i, j, k] = val[tuple(sorted((i, j, k)))]
+    return out
+
+
+def build(design, *, spacing: float = 0.002, box=None, tolerance: float = 4e-4,
           progress: bool = True, array: CoilArray | None = None) -> dict:
     """Compute the map of ``design`` (arrays and metadata, not yet written)."""
     from . import __version__
@@ -148,9 +202,10 @@ def build(design, *, spacing: float = 0.002, box=None, tolerance: float = 1e-6,
     lower, upper = default_box(design) if box is None else (np.asarray(box[0], float),
                                                             np.asarray(box[1], float))
     axes = grid_axes(lower, upper, spacing)
-    a, _ = compute_grid(arr, axes, tolerance=tolerance, progress=progress)
+    a, dg = compute_grid(arr, axes, tolerance=tolerance, progress=progress)
     steps = [float(ax[1] - ax[0]) for ax in axes]
-    dg = third_derivatives(a, steps)
+    if dg is None:  # some coil evaluated directly (sources in the box): finite differences
+        dg = third_derivatives(a, steps)
     a32, dg32 = a.astype(np.float32), dg.astype(np.float32)
     meta = {
         "format": FORMAT, "version": FORMAT_VERSION, "designkit_version": __version__,

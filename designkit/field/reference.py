@@ -117,8 +117,10 @@ def _sheet_rz_mp(a, h, rho, z, mp):
         alpha = a / mp.sqrt(den)
         beta = zs / mp.sqrt(den)
         p1 = K - 2 * (K - E) / m
-        if gamma == 0:
-            p2 = K  # rho = a: Pi term carries gamma = 0
+        if gamma * gamma < mp.mpf(10) ** (-mp.mp.dps + 2):
+            # 1 - gamma^2 rounds to 1: gamma Pi(1 - gamma^2 | m) -> sign(gamma) pi / (2 sqrt(1 - m))
+            # (the sheet's jump); the neglected terms are O(gamma)
+            p2 = (K + mp.sign(gamma) * mp.pi / (2 * mp.sqrt(1 - m))) / (1 + gamma)
         else:
             p2 = (K + gamma * mp.ellippi(1 - gamma * gamma, m)) / (1 + gamma)
         br += sign * alpha * p1
@@ -152,13 +154,29 @@ def _sheet_grad_mp(a, h, rho, z, mp):
     return dbr_dr, dbr_dz, dbz_dr, dbz_dz
 
 
-def winding_textbook(ri, ro, length, rho, z, *, gradient=False, dps=25):
-    """Thick winding per unit mu0 J: integral over a in [ri, ro] of :func:`sheet_textbook`.
+def _loop_rz_mp(a, rho, u, mp):
+    """(Br, Bz) per mu0 I of a loop of radius a at axial offset u, textbook K, E form."""
+    d2 = (a + rho) ** 2 + u * u
+    q = (a - rho) ** 2 + u * u
+    if q == 0:
+        return mp.mpf(0), mp.mpf(0)
+    m = 4 * a * rho / d2
+    K, E = mp.ellipk(m), mp.ellipe(m)
+    pre = 1 / (2 * mp.pi * mp.sqrt(d2))
+    bz = pre * (K + (a * a - rho * rho - u * u) * E / q)
+    br = pre * u / rho * (-K + (a * a + rho * rho + u * u) * E / q) if rho != 0 else mp.mpf(0)
+    return br, bz
+
+
+def winding_textbook(ri, ro, length, rho, z, *, gradient=False, dps=20):
+    """Thick winding per unit mu0 J, as mp.quad over the radius a in [ri, ro].
+
+    B is the integral of :func:`sheet_textbook`; dB/dz the integral of the sheet's two end
+    loops (textbook K, E form), since d/dz of a uniform sheet is K [B_loop(z + h) - B_loop(z - h)].
+    The remaining derivatives follow from Maxwell's equations (div B = 0, curl B = mu0 J):
+    dBr/drho = -dBz/dz - Br/rho, dBz/drho = dBr/dz - [inside] (the -mu0 J term).
 
     Returns (Br, Bz) in m [and (dBr/drho, dBr/dz, dBz/drho, dBz/dz, Br/rho), dimensionless].
-    ``dBz/drho`` includes the -mu0 J term inside the winding (the derivative of the sheet's
-    jump), so inside the winding the tensor is not symmetric. Br/rho is the radial derivative
-    on the axis (rho = 0).
     """
     mp = _mp()
     with mp.workdps(dps):
@@ -166,32 +184,25 @@ def winding_textbook(ri, ro, length, rho, z, *, gradient=False, dps=25):
         r_, z_ = mp.mpf(float(rho)), mp.mpf(float(z))
         tau = min(abs(z_ - h_), abs(z_ + h_))
         dist = max(tau, mp.mpf(10) ** (-dps + 3) * ro_)
-        brk = _breaks(r_, dist / 4, ri_, ro_, mp) if ri_ - 10 * dist < r_ < ro_ + 10 * dist \
-            else [ri_, ro_]
-        if gradient and r_ == 0:
-            # on the axis only Bz and dBz/dz are non-zero; dBr/drho = Br/rho = -dBz/dz / 2
-            bz = mp.quad(lambda a: _sheet_rz_mp(a, h_, r_, z_, mp)[1], brk)
-            dzz = mp.quad(lambda a: mp.diff(lambda t: _sheet_rz_mp(a, h_, r_, t, mp)[1], z_), brk)
-            return (0.0, float(bz), float(-dzz / 2), 0.0, 0.0, float(dzz), float(-dzz / 2))
-        memo = {}
+        near = ri_ - 10 * dist < r_ < ro_ + 10 * dist
+        brk = _breaks(r_, dist / 4, ri_, ro_, mp) if near else [ri_, ro_]
+        bz = mp.quad(lambda a: _sheet_rz_mp(a, h_, r_, z_, mp)[1], brk)
+        br = mp.quad(lambda a: _sheet_rz_mp(a, h_, r_, z_, mp)[0], brk) if r_ != 0 else 0
+        if not gradient:
+            return float(br), float(bz)
 
-        def grad_at(a):
-            if a not in memo:
-                memo[a] = _sheet_grad_mp(a, h_, r_, z_, mp)
-            return memo[a]
+        def dz(a, i):
+            return _loop_rz_mp(a, r_, z_ + h_, mp)[i] - _loop_rz_mp(a, r_, z_ - h_, mp)[i]
 
-        vals = []
-        for i in range(6 if gradient else 2):
-            def f(a, i=i):
-                if i < 2:
-                    return _sheet_rz_mp(a, h_, r_, z_, mp)[i]
-                return grad_at(a)[i - 2]
-            vals.append(mp.quad(f, brk))
-        if gradient:
-            if ri_ < r_ < ro_ and abs(z_) < h_:
-                vals[4] -= 1  # derivative of the sheets' jump: -mu0 J
-            vals.append(vals[0] / r_)
-        return tuple(float(q) for q in vals)
+        dbz_dz = mp.quad(lambda a: dz(a, 1), brk)
+        if r_ == 0:
+            half = -dbz_dz / 2
+            return (0.0, float(bz), float(half), 0.0, 0.0, float(dbz_dz), float(half))
+        dbr_dz = mp.quad(lambda a: dz(a, 0), brk)
+        inside = 1 if (ri_ < r_ < ro_ and abs(z_) < h_) else 0
+        br_r = br / r_
+        return (float(br), float(bz), float(-dbz_dz - br_r), float(dbr_dz),
+                float(dbr_dz - inside), float(dbz_dz), float(br_r))
 
 
 def winding_loops_2d(ri, ro, length, rho, z, *, dps=20):
