@@ -90,6 +90,10 @@ class CoreSpec:
     protrudes 5 mm beyond each end of the 100 mm winding)."""
     saturation_t: float = 1.6
     """Flux density at the knee of the B-H curve of low-carbon steel, T (flag only)."""
+    bh: str = "linear"
+    """Core material law: 'linear' (relative_permeability; keeps fields linear in the currents,
+    which the actuation matrix and the controller assume) or 'steel1010' (nonlinear B-H curve,
+    see designkit.core)."""
 
 
 @dataclass(frozen=True)
@@ -314,7 +318,10 @@ def check_design(d: Design) -> None:
         for f in fields(obj):
             val = getattr(obj, f.name)
             name = f"{sec}.{f.name}"
-            if f.name == "packing":
+            if f.name == "bh":
+                if val not in ("linear", "steel1010"):
+                    raise BadInputError(name, "'linear' or 'steel1010'", val)
+            elif f.name == "packing":
                 if val not in ("layered", "orthocyclic"):
                     raise BadInputError(name, "'layered' or 'orthocyclic'", val)
             elif f.name in ("turns", "rows", "columns"):

@@ -98,10 +98,12 @@ def third_derivatives(a_grid: np.ndarray, spacing) -> np.ndarray:
 
 
 def compute_grid(array: CoilArray, axes, *, tolerance: float = 4e-4, progress: bool = True):
-    """A on the grid ``axes`` (3 arrays, m): shape (nx, ny, nz, 8, n_coils).
+    """A (nx, ny, nz, 8, n_coils) and T (nx, ny, nz, 7, n_coils) on the grid ``axes`` (m).
 
-    One (rho, z) table per coil type (designkit.scene) covering the whole box; direct
-    evaluation for coil types whose sources reach into the box.
+    One (rho, z) table per coil type (designkit.scene) covering the whole box, refined until its
+    error is below ``tolerance`` / 4 of each component's maximum; T comes from the splines'
+    derivatives. Coil types whose sources reach into the box are evaluated directly and T is
+    then None (the caller falls back to finite differences of the grid).
     """
     from tqdm import tqdm
 
@@ -112,7 +114,8 @@ def compute_grid(array: CoilArray, axes, *, tolerance: float = 4e-4, progress: b
     n, nc = len(pts), array.n_coils
     per = {"B": np.zeros((n, 3, nc)), "gradient": np.zeros((n, 5, nc))}
     tables = {}
-    for proto, idx in array.coil_types().items():
+    for proto, idx in tqdm(list(array.coil_types().items()), desc="map: (rho, z) tables",
+                           unit="type", disable=not progress, leave=False):
         locs = [array.coils[k].pose.to_local(pts) for k in idx]
         rho = np.concatenate([np.hypot(l[:, 0], l[:, 1]) for l in locs])
         zl = np.concatenate([l[:, 2] for l in locs])
@@ -194,7 +197,18 @@ def _t_full(t):
 
 def build(design, *, spacing: float = 0.002, box=None, tolerance: float = 4e-4,
           progress: bool = True, array: CoilArray | None = None) -> dict:
-    """Compute the map of ``design`` (arrays and metadata, not yet written)."""
+    """Compute the map of ``design`` (arrays and metadata, not yet written).
+
+    Parameters
+    ----------
+    spacing : float, m
+        Largest grid step (each axis gets the step that divides the box exactly).
+    box : (lower, upper) or None
+        Corners in m; default :func:`default_box`.
+    tolerance : float
+        Relative accuracy of the (rho, z) tables (default 4e-4: table error <~ 1e-4, below the
+        grid interpolation error at 2 mm).
+    """
     from . import __version__
 
     spacing = v.in_range("spacing", spacing, 1e-4, 0.05, "m")

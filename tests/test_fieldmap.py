@@ -63,8 +63,9 @@ def test_nodes_are_reproduced_and_gradient_is_symmetric_traceless(fm):
     g = fm.meta["grid"]
     node = np.asarray(g["lower_m"]) + np.asarray(g["spacing_m"]) * [2, 3, 1]
     a_direct = CoilArray.from_design(SMALL).actuation_matrix(node)
-    np.testing.assert_allclose(fm.actuation(node), a_direct, rtol=1e-5,
-                               atol=1e-6 * np.abs(a_direct).max())
+    # at a node only the (rho, z) table error remains (build tolerance 4e-4 -> <= 1e-4)
+    err = np.abs(fm.actuation(node) - a_direct).max(axis=1)
+    assert np.all(err <= 1e-4 * np.abs(a_direct).max(axis=1))
     full = gradient_from_g5(np.moveaxis(fm.actuation(node + 1e-3)[3:], 0, -1))
     np.testing.assert_allclose(np.trace(full, axis1=-2, axis2=-1), 0, atol=1e-12)
     np.testing.assert_allclose(full, np.swapaxes(full, -1, -2))
@@ -151,3 +152,22 @@ def test_cli_map_writes_one_file(tmp_path):
     assert [f.name for f in tmp_path.iterdir() if f.suffix == ".npz"] == ["m.npz"]
     assert fieldmap.load(out).meta["grid"]["shape"] == [5, 5, 3]
     assert main(["map", "--spacing", "-1", "--out", str(out), "--quiet"]) == 1
+
+
+def test_third_derivatives_from_tables_match_differences_of_direct_gradients():
+    # rotated and shifted coil, so the frame change of T is exercised too
+    from designkit import Coil, Pose
+    from designkit.fieldmap import _t_full, compute_grid
+
+    c = Coil.from_design(SMALL)
+    c = c.replace(pose=Pose.from_axis((0.01, -0.02, -0.06), (0.3, 0.2, 1.0)))
+    arr = CoilArray((c,))
+    axes = [np.array([0.0, 0.01]), np.array([0.0, 0.012]), np.array([0.02, 0.03])]
+    _, t = compute_grid(arr, axes, tolerance=1e-6, progress=False)
+    p = np.array([0.01, 0.0, 0.03])
+    h = 1e-5
+    fd = np.stack([(c.field(p + h * e, 1.0, gradient=True)[1]
+                    - c.field(p - h * e, 1.0, gradient=True)[1]) / (2 * h) for e in np.eye(3)],
+                  -1)  # fd[i, j, k] = d G_ij / dx_k
+    np.testing.assert_allclose(_t_full(t[1, 0, 1, :, 0][None])[0], fd, rtol=0,
+                               atol=1e-4 * np.abs(fd).max())

@@ -98,6 +98,14 @@ def loop_biot_savart(point, radius, current, *, dps=30):
 
 
 # ------------------------------------------------------------------ current sheet (textbook)
+def _ke_mp(m, kc2, mp):
+    """K(m), E(m); when m rounds to 1 (kc^2 below the working precision) the asymptotic
+    K = ln(4 / kc), E = 1 (error O(kc^2 ln kc), below the working precision)."""
+    if m >= 1:
+        return mp.log(4 / mp.sqrt(kc2)), mp.mpf(1)
+    return mp.ellipk(m), mp.ellipe(m)
+
+
 def _sheet_rz_mp(a, h, rho, z, mp):
     """(Br, Bz) / (mu0 K) of a current sheet, textbook K, E, Pi form, mpmath numbers."""
     if rho == 0:
@@ -109,18 +117,18 @@ def _sheet_rz_mp(a, h, rho, z, mp):
     bz = mp.mpf(0)
     for sign, zs in ((1, z + h), (-1, z - h)):
         den = zs * zs + (a + rho) ** 2
-        m = 4 * a * rho / den  # parameter k^2 of the end loop
-        if m == 1:  # on the rim
+        q = (a - rho) ** 2 + zs * zs
+        if q == 0:  # on the rim
             continue
-        K = mp.ellipk(m)
-        E = mp.ellipe(m)
+        m = min(4 * a * rho / den, 1 - q / den)  # parameter k^2 of the end loop, <= 1
+        K, E = _ke_mp(m, q / den, mp)
         alpha = a / mp.sqrt(den)
         beta = zs / mp.sqrt(den)
         p1 = K - 2 * (K - E) / m
         if gamma * gamma < mp.mpf(10) ** (-mp.mp.dps + 2):
             # 1 - gamma^2 rounds to 1: gamma Pi(1 - gamma^2 | m) -> sign(gamma) pi / (2 sqrt(1 - m))
             # (the sheet's jump); the neglected terms are O(gamma)
-            p2 = (K + mp.sign(gamma) * mp.pi / (2 * mp.sqrt(1 - m))) / (1 + gamma)
+            p2 = (K + mp.sign(gamma) * mp.pi / (2 * mp.sqrt(q / den))) / (1 + gamma)
         else:
             p2 = (K + gamma * mp.ellippi(1 - gamma * gamma, m)) / (1 + gamma)
         br += sign * alpha * p1
@@ -160,8 +168,8 @@ def _loop_rz_mp(a, rho, u, mp):
     q = (a - rho) ** 2 + u * u
     if q == 0:
         return mp.mpf(0), mp.mpf(0)
-    m = 4 * a * rho / d2
-    K, E = mp.ellipk(m), mp.ellipe(m)
+    m = min(4 * a * rho / d2, 1 - q / d2)  # the min keeps rounding from pushing m past 1
+    K, E = _ke_mp(m, q / d2, mp)
     pre = 1 / (2 * mp.pi * mp.sqrt(d2))
     bz = pre * (K + (a * a - rho * rho - u * u) * E / q)
     br = pre * u / rho * (-K + (a * a + rho * rho + u * u) * E / q) if rho != 0 else mp.mpf(0)
@@ -199,7 +207,9 @@ def winding_textbook(ri, ro, length, rho, z, *, gradient=False, dps=20):
             half = -dbz_dz / 2
             return (0.0, float(bz), float(half), 0.0, 0.0, float(dbz_dz), float(half))
         dbr_dz = mp.quad(lambda a: dz(a, 0), brk)
-        inside = 1 if (ri_ < r_ < ro_ and abs(z_) < h_) else 0
+        # the -mu0 J term: full inside, half on the winding's surface (designkit's convention)
+        inside = 1 if (ri_ < r_ < ro_ and abs(z_) < h_) else (
+            0.5 if (ri_ <= r_ <= ro_ and abs(z_) <= h_) else 0)
         br_r = br / r_
         return (float(br), float(bz), float(-dbz_dz - br_r), float(dbr_dz),
                 float(dbr_dz - inside), float(dbz_dz), float(br_r))
