@@ -101,7 +101,6 @@ def _cyl_overlap(pa: Pose, a, pb: Pose, b) -> bool:
         nr = max(2, int(r / step) + 1)
         phi = np.linspace(0, 2 * np.pi, nphi, endpoint=False)
         zz = np.linspace(z0, z1, nz)
-        side = np.stack(np.meshgrid(r * np.cos(phi), zz, indexing="ij"), -1)
         pts = [np.c_[r * np.cos(P), r * np.sin(P), Z].reshape(-1, 3)
                for P, Z in [np.meshgrid(phi, zz, indexing="ij")]]
         rr = np.linspace(0, r, nr)
@@ -109,7 +108,6 @@ def _cyl_overlap(pa: Pose, a, pb: Pose, b) -> bool:
         for zc in (z0, z1):
             pts.append(np.c_[(R * np.cos(P)).ravel(), (R * np.sin(P)).ravel(),
                              np.full(R.size, zc)])
-        del side
         loc = np.vstack(pts)
         return loc @ pose.matrix.T + np.asarray(pose.position)
 
@@ -326,7 +324,7 @@ def workspace_metrics(design, *, spacing: float = 0.005, heights=None, out_png=N
     for h in heights:
         X, Y = np.meshgrid(xs, xs, indexing="xy")
         pts = np.c_[X.ravel(), Y.ravel(), np.full(X.size, h)]
-        a = Scene(arr, pts, ("B", "gradient"), tolerance=1e-6).evaluate().actuation()
+        a = Scene(arr, pts, ("B", "gradient"), tolerance=1e-4).evaluate().actuation()
         fz = fz_per_amp(a, m)
         fmax.append(max_vertical_force(fz, design.drive.max_current_a,
                                        design.drive.total_current_a).reshape(X.shape))

@@ -428,30 +428,13 @@ def _currents_rz(sol: CoreSolution, rho, z, gradient):
 
 def _rz_to_xyz(p, rho, comps, gradient, scale):
     """Cylindrical components (per unit) -> Cartesian B (n,3) and G (n,3,3), times ``scale``."""
-    n = p.shape[0]
+    from .field import cylindrical_to_cartesian
+
     with np.errstate(invalid="ignore", divide="ignore"):
         cphi = np.where(rho > 0, p[:, 0] / np.where(rho > 0, rho, 1.0), 1.0)
         sphi = np.where(rho > 0, p[:, 1] / np.where(rho > 0, rho, 1.0), 0.0)
-    br, bz = comps[0] * scale, comps[1] * scale
-    b = np.empty((n, 3))
-    b[:, 0] = br * cphi
-    b[:, 1] = br * sphi
-    b[:, 2] = bz
-    if not gradient:
-        return b
-    dbr_dr, dbr_dz, dbz_dr, dbz_dz, br_r = (c * scale for c in comps[2:7])
-    g = np.empty((n, 3, 3))
-    # B_x = Br cos, B_y = Br sin; d/dx = cos d/drho - sin/rho d/dphi
-    g[:, 0, 0] = dbr_dr * cphi * cphi + br_r * sphi * sphi
-    g[:, 0, 1] = (dbr_dr - br_r) * cphi * sphi
-    g[:, 1, 0] = g[:, 0, 1]
-    g[:, 1, 1] = dbr_dr * sphi * sphi + br_r * cphi * cphi
-    g[:, 0, 2] = dbr_dz * cphi
-    g[:, 1, 2] = dbr_dz * sphi
-    g[:, 2, 0] = dbz_dr * cphi
-    g[:, 2, 1] = dbz_dr * sphi
-    g[:, 2, 2] = dbz_dz
-    return b, g
+    return cylindrical_to_cartesian(cphi, sphi, scale, comps[:7] if gradient else comps[:2],
+                                    gradient)
 
 
 # ====================================================================== solvers

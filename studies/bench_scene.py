@@ -102,4 +102,8 @@ def _print(res):
 
 
 if __name__ == "__main__":
-    _print(run(Path("studies_out/bench_scene")))
+    import tempfile
+
+    out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(tempfile.mkdtemp(prefix="bench_scene_"))
+    _print(run(out))
+    print(f"written to {out}")

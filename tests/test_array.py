@@ -136,3 +136,18 @@ def test_metrics_on_the_array(arr):
     assert np.all(pure <= free * (1 + 1e-9)) and np.all(pure > 0)
     c = condition_number(a)
     assert np.all(np.isfinite(c)) and np.all(c >= 1)
+
+
+def test_workspace_metrics_png(tmp_path, arr):
+    from designkit.array import workspace_metrics
+
+    png = tmp_path / "metrics.png"
+    res = workspace_metrics(AIR, spacing=0.025, heights=(0.03,), out_png=png, array=arr)
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # independent of the scene/table path: closed-form allocation on the direct A at (0, 0, 30 mm)
+    k = int(np.argmin(np.abs(res["x_m"])))
+    a = arr.actuation_matrix(np.array([[0.0, 0.0, 0.03]]))
+    fz = fz_per_amp(a, [0, 0, AIR.magnet.moment_a_m2])
+    want = 6.0 * np.abs(fz).sum()
+    assert res["max_fz_n"][0][k, k] == pytest.approx(want, rel=1e-3)
+    assert 0 <= res["fraction_above_threshold"][0] <= 1

@@ -93,8 +93,11 @@ def _horner(coeffs_rev: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 
 def _ke(k2: np.ndarray, kc2: np.ndarray):
-    """Complete elliptic integrals K, E of modulus k (parameter m = k^2), kc^2 given directly."""
-    return ellipkm1(kc2), ellipe(k2)
+    """Complete elliptic integrals K, E of modulus k (parameter m = k^2), kc^2 given directly.
+
+    k^2 = 4 rho / beta^2 can round to just above 1 when rho ~ a and z ~ 0 (ellipe would give
+    NaN there); E(1 - kc^2) differs from E(1) by O(kc^2 ln kc) ~ eps, so clipping is exact."""
+    return ellipkm1(kc2), ellipe(np.minimum(k2, 1.0))
 
 
 def cel(kc, p, c, s, *, tol: float = 3e-9):

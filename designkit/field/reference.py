@@ -64,13 +64,20 @@ def loop_biot_savart(point, radius, current, *, dps=30):
         dist = mp.sqrt((rho - a) ** 2 + z * z)
         brk = _breaks(mp.mpf(0), dist / a / 10, -mp.pi, mp.pi, mp)
 
+        memo = {}
+
         def parts(t):
+            # mp.quad visits the same nodes for all 12 integrands: compute geometry once
+            key = t
+            if key in memo:
+                return memo[key]
             ph = phi0 + t
             c, s = mp.cos(ph), mp.sin(ph)
             dl = (-a * s, a * c, mp.mpf(0))
             R = (x - a * c, y - a * s, z)
             r2 = R[0] ** 2 + R[1] ** 2 + R[2] ** 2
-            return dl, R, r2
+            memo[key] = (dl, R, r2)
+            return memo[key]
 
         def cross(u, w):
             return (u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0])
