@@ -135,8 +135,9 @@ class RZTable:
 
 
 def build_table(coil: Coil, rho_range, z_range, comps, tolerance: float, *,
-                max_refinements: int = 5) -> RZTable | None:
-    """Table over [rho_range] x [z_range] (local, m) or None if that box touches the sources.
+                max_refinements: int = 5, max_nodes: int | None = None) -> RZTable | None:
+    """Table over [rho_range] x [z_range] (local, m) or None if that box touches the sources
+    (or if reaching the tolerance would need more than ``max_nodes`` nodes).
 
     The grid is refined (spacing halved) until the spline's error at the cell centres, against
     direct evaluation, is <= ``tolerance`` x the component's largest |value| on the nodes.
@@ -161,6 +162,8 @@ def build_table(coil: Coil, rho_range, z_range, comps, tolerance: float, *,
     for _ in range(max_refinements + 1):
         rn = _graded(r0, r1, -1.0, rs, alpha, dmin)
         zn = _graded(z0, z1, zs_lo, zs_hi, alpha, dmin)
+        if max_nodes is not None and len(rn) * len(zn) > max_nodes:
+            return None  # direct evaluation of the scene's points is cheaper
         R, Z = np.meshgrid(rn, zn, indexing="ij")
         vals = _rz_direct(coil, R.ravel(), Z.ravel(), needs_g)
         splines = {c: RectBivariateSpline(rn, zn, vals[c].reshape(R.shape), kx=3, ky=3, s=0)
@@ -224,7 +227,8 @@ class Scene:
     tolerance : float
         Relative to the largest value of each output over the scene, in [1e-9, 0.1].
     tables : {'auto', 'always', 'never'}
-        'auto' uses a coil type's table when it serves more coil-point pairs than it costs.
+        'auto' uses a coil type's table only when it serves > 4000 coil-point pairs and needs
+        fewer than a third as many nodes as it serves pairs (else direct evaluation).
     skip : {'bound', 'never'}
     """
 
@@ -313,8 +317,10 @@ class Scene:
                 continue
             table = None
             if self.tables != "never" and (self.tables == "always" or rho.size > 4000):
+                # 'auto': give up on the table when its nodes would cost more than the pairs
                 table = build_table(proto, (rho.min(), rho.max()), (zl.min(), zl.max()),
-                                    comps, 0.25 * self.tolerance)
+                                    comps, 0.25 * self.tolerance,
+                                    max_nodes=None if self.tables == "always" else rho.size // 3)
             if table is not None:
                 vals = table(rho, zl, comps)
                 if full_g:

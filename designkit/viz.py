@@ -571,7 +571,9 @@ def plot_slices(design: "Design", currents: Sequence[float] | None = None, *,
     blocks = scene_meshes(design, cur) if blocks is None else blocks
     name = B_MT if quantity == "B" else F_MN
     values = np.r_[np.asarray(vert[name]), np.asarray(horiz[name])]
-    hi = float(values.max()) if values.size else 1.0
+    # The 99th percentile, not the maximum: right above a core's rim the field is nearly
+    # singular and a few pixels would otherwise take the whole colour range.
+    hi = float(np.percentile(values, 99)) if values.size else 1.0
     hi = hi if hi > 0 else 1.0
     lo = max(hi * 1e-3, float(values.min()), 1e-9)
     label = "B (mT)" if quantity == "B" else "F (mN)"

@@ -8,7 +8,8 @@ workspace box at 5 mm spacing), three output sets are evaluated in one run:
 * force only (3 components per ampere and coil on the thesis magnet, m = 0.909 A m^2 along z),
 * Fz only (needs only dBz/dz),
 
-each four ways: direct (Coil.field, no skipping), skipping only, tables only, tables + skipping.
+each five ways: direct (Coil.field, no skipping), skipping only, tables only (always),
+tables + skipping, and 'auto' (tables only where they pay, plus skipping).
 The reference is CoilArray.actuation_matrix (direct, rtol 1e-10), from which force and Fz
 follow by F(m) (thesis eq. 2.5). Errors are the largest |error| per output row divided by that
 row's largest |value| over the grid. Speed-ups are against the direct evaluation of the same
@@ -32,7 +33,8 @@ from designkit.array import CoilArray, force_matrix
 from designkit.scene import Scene
 
 VARIANTS = {"direct": ("never", "never"), "skip": ("never", "bound"),
-            "tables": ("always", "never"), "tables+skip": ("always", "bound")}
+            "tables": ("always", "never"), "tables+skip": ("always", "bound"),
+            "auto": ("auto", "bound")}
 SETS = {"full A": ("B", "gradient"), "force": ("force",), "Fz": ("fz",)}
 
 

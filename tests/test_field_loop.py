@@ -1,7 +1,7 @@
 """Filament loop: against mpmath Biot-Savart quadrature (B and G), magpylib Circle, closed forms.
 
-mu0: designkit uses 4 pi 1e-7; magpylib uses scipy's CODATA 2018/2022 value 1.25663706212e-6 /
-1.25663706127e-6 (relative difference ~1e-10). Comparisons with magpylib are made in H = B / mu0,
+mu0: designkit uses 4 pi 1e-7; magpylib uses scipy's CODATA 2022 value 1.25663706127e-6
+(relative difference ~1e-10). Comparisons with magpylib are made in H = B / mu0,
 each library dividing by its own mu0, so the comparison is independent of that choice.
 """
 
@@ -58,11 +58,18 @@ def test_loop_matches_magpylib_circle_in_h():
     # include points 1e-6 radii from the wire
     rho[:50] = a * (1 + rng.choice([-1, 1], 50) * 1e-6)
     z[:50] = a * rng.uniform(-1e-6, 1e-6, 50)
+    # near the wire only on the axes x, y: elsewhere the last-bit rounding of rho = hypot(x, y)
+    # alone changes H by ~eps a / d = 1e-10 (the problem's condition number, in both libraries)
+    phi[:50] = rng.integers(0, 4, 50) * (np.pi / 2)
     pts = np.stack([rho * np.cos(phi), rho * np.sin(phi), z], axis=1)
     h_dk = loop_field(pts, a, i) / MU0
-    h_mp = magpy.getH("Circle", observers=pts, diameter=2 * a, current=i)
+    h_mp = magpy.func.circle_field("H", pts, 2 * a, i)
     rel = np.linalg.norm(h_dk - h_mp, axis=1) / np.linalg.norm(h_mp, axis=1)
-    assert rel.max() <= 1e-12
+    assert rel[50:].max() <= 1e-12
+    # 1e-6 radii from the wire magpylib forms 1 - rho/a after rounding rho/a, which costs it
+    # eps * a / d ~ 1e-10; designkit forms (a - rho) / a exactly and matches mpmath to 1e-15
+    # there (test_loop_matches_mpmath_biot_savart), so only magpylib's own error is allowed
+    assert rel[:50].max() <= 50 * np.finfo(float).eps / 1e-6
     # the two mu0 really differ: B would not match to 1e-12 without the H comparison
     assert abs(mu0_codata / MU0 - 1) > 1e-11
 

