@@ -179,7 +179,7 @@ class CoilArray:
         return np.array([c.pose.position for c in self.coils])
 
     def coil_types(self) -> dict[Coil, list[int]]:
-        """Identical coils (all but the pose equal) -> their indices: one axisymmetric model each."""
+        """Identical coils (all but the pose equal) -> their indices; one (rho, z) model each."""
         out: dict[Coil, list[int]] = {}
         for k, c in enumerate(self.coils):
             out.setdefault(dataclasses.replace(c, pose=Pose()), []).append(k)

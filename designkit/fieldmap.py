@@ -97,13 +97,16 @@ def third_derivatives(a_grid: np.ndarray, spacing) -> np.ndarray:
     return np.stack(t, axis=3)
 
 
-def compute_grid(array: CoilArray, axes, *, tolerance: float = 4e-4, progress: bool = True):
+def compute_grid(array: CoilArray, axes, *, tolerance: float = 4e-4, progress: bool = True,
+                 tables: dict | None = None, cover=()):
     """A (nx, ny, nz, 8, n_coils) and T (nx, ny, nz, 7, n_coils) on the grid ``axes`` (m).
 
     One (rho, z) table per coil type (designkit.scene) covering the whole box, refined until its
     error is below ``tolerance`` / 4 of each component's maximum; T comes from the splines'
     derivatives. Coil types whose sources reach into the box are evaluated directly and T is
-    then None (the caller falls back to finite differences of the grid).
+    then None (the caller falls back to finite differences of the grid). Returns
+    ``(A, T, tables)``; pass ``tables`` back in to reuse them for another grid. ``cover``:
+    more grids (lists of 3 axes) the new tables must also cover.
     """
     from tqdm import tqdm
 
@@ -113,14 +116,24 @@ def compute_grid(array: CoilArray, axes, *, tolerance: float = 4e-4, progress: b
     pts = np.c_[X.ravel(), Y.ravel(), Z.ravel()]
     n, nc = len(pts), array.n_coils
     per = {"B": np.zeros((n, 3, nc)), "gradient": np.zeros((n, 5, nc))}
-    tables = {}
-    for proto, idx in tqdm(list(array.coil_types().items()), desc="map: (rho, z) tables",
-                           unit="type", disable=not progress, leave=False):
-        locs = [array.coils[k].pose.to_local(pts) for k in idx]
+    tables = dict(tables or {})
+    todo = []
+    every = np.vstack([pts] + [np.stack(np.meshgrid(*ax, indexing="ij"), -1).reshape(-1, 3)
+                               for ax in cover])
+    for proto, idx in array.coil_types().items():
+        locs = [array.coils[k].pose.to_local(every) for k in idx]
         rho = np.concatenate([np.hypot(l[:, 0], l[:, 1]) for l in locs])
         zl = np.concatenate([l[:, 2] for l in locs])
-        tables[proto] = build_table(proto, (rho.min(), rho.max()), (zl.min(), zl.max()), _COMP,
-                                    0.25 * tolerance)
+        old = tables.get(proto)
+        if proto in tables and (old is None or old.covers(rho, zl)):
+            continue
+        if old is not None:  # widen a table built for another grid to cover this one too
+            rho = np.r_[rho, old.rho_nodes[[0, -1]]]
+            zl = np.r_[zl, old.z_nodes[[0, -1]]]
+        todo.append((proto, (rho.min(), rho.max()), (zl.min(), zl.max())))
+    for proto, r_range, z_range in tqdm(todo, desc="map: (rho, z) tables", unit="type",
+                                        disable=not progress, leave=False):
+        tables[proto] = build_table(proto, r_range, z_range, _COMP, 0.25 * tolerance)
     chunk = 20000
     t_all = np.zeros((n, 7, nc))
     have_t = True
@@ -143,7 +156,8 @@ def compute_grid(array: CoilArray, axes, *, tolerance: float = 4e-4, progress: b
             t_all[sl, :, k] = _third_from_table(tb, loc, rho, zl, coil)
         assemble(per, coil, k, np.arange(sl.start, sl.stop), loc, part, True, None)
     a = np.concatenate([per["B"], per["gradient"]], axis=1)
-    return a.reshape(X.shape + (8, nc)), (t_all.reshape(X.shape + (7, nc)) if have_t else None)
+    return (a.reshape(X.shape + (8, nc)), (t_all.reshape(X.shape + (7, nc)) if have_t else None),
+            tables)
 
 
 def _third_from_table(tb, loc, rho, zl, coil) -> np.ndarray:
@@ -196,7 +210,8 @@ def _t_full(t):
 
 
 def build(design, *, spacing: float = 0.002, box=None, tolerance: float = 4e-4,
-          progress: bool = True, array: CoilArray | None = None) -> dict:
+          fine_slab: float = 0.004, fine_factor: int = 2, progress: bool = True,
+          array: CoilArray | None = None) -> dict:
     """Compute the map of ``design`` (arrays and metadata, not yet written).
 
     Parameters
@@ -208,24 +223,47 @@ def build(design, *, spacing: float = 0.002, box=None, tolerance: float = 4e-4,
     tolerance : float
         Relative accuracy of the (rho, z) tables (default 4e-4: table error <~ 1e-4, below the
         grid interpolation error at 2 mm).
+    fine_slab : float, m
+        Height of a second, finer grid over the bottom of the box (0: none). Just above an
+        iron core's rim the field varies on a ~5 mm scale; at 2 mm spacing the interpolation
+        error there is ~8e-3 of the maximum, at 1 mm ~9e-4. Points in the slab use it.
+    fine_factor : int
+        The slab's spacing is ``spacing / fine_factor``.
     """
     from . import __version__
 
     spacing = v.in_range("spacing", spacing, 1e-4, 0.05, "m")
+    fine_slab = v.nonnegative("fine_slab", fine_slab)
+    fine_factor = v.positive_int("fine_factor", fine_factor)
     arr = array or CoilArray.from_design(design)
     lower, upper = default_box(design) if box is None else (np.asarray(box[0], float),
                                                             np.asarray(box[1], float))
-    axes = grid_axes(lower, upper, spacing)
-    a, dg = compute_grid(arr, axes, tolerance=tolerance, progress=progress)
-    steps = [float(ax[1] - ax[0]) for ax in axes]
-    if dg is None:  # some coil evaluated directly (sources in the box): finite differences
-        dg = third_derivatives(a, steps)
-    a32, dg32 = a.astype(np.float32), dg.astype(np.float32)
+    if not np.all(upper > lower):
+        raise BadInputError("box", "lower < upper in x, y and z", (lower.tolist(), upper.tolist()))
+    levels = [(lower, upper, spacing)]
+    if fine_slab > 0:
+        top = min(upper[2], lower[2] + fine_slab)
+        levels.append((lower, np.array([upper[0], upper[1], top]), spacing / fine_factor))
+    out_arrays = {}
+    grids = []
+    tables = None
+    all_axes = [grid_axes(lo, hi, h) for lo, hi, h in levels]
+    for k, (lo, hi, h) in enumerate(levels):
+        axes = all_axes[k]
+        a, dg, tables = compute_grid(arr, axes, tolerance=tolerance, progress=progress,
+                                     tables=tables, cover=all_axes[1:] if k == 0 else ())
+        steps = [float(ax[1] - ax[0]) for ax in axes]
+        if dg is None:  # some coil evaluated directly (sources in the box): finite differences
+            dg = third_derivatives(a, steps)
+        suffix = "" if k == 0 else "_fine"
+        out_arrays["A" + suffix] = a.astype(np.float32)
+        out_arrays["dG" + suffix] = dg.astype(np.float32)
+        grids.append({"lower_m": [float(x) for x in lo], "upper_m": [float(x) for x in hi],
+                      "shape": [len(ax) for ax in axes], "spacing_m": steps})
     meta = {
         "format": FORMAT, "version": FORMAT_VERSION, "designkit_version": __version__,
         "design_name": design.name, "design_sha256": design.spec_hash(),
-        "grid": {"lower_m": [float(x) for x in lower], "upper_m": [float(x) for x in upper],
-                 "shape": [len(ax) for ax in axes], "spacing_m": steps},
+        "grid": grids[0], "fine_grid": grids[1] if len(grids) > 1 else None,
         "rows": list(ROWS), "dG_order": list(T_ORDER), "units": UNITS,
         "n_coils": arr.n_coils,
         "coil_positions_m": arr.positions().tolist(),
@@ -234,16 +272,22 @@ def build(design, *, spacing: float = 0.002, box=None, tolerance: float = 4e-4,
         "max_current_a": design.drive.max_current_a,
         "total_current_a": design.drive.total_current_a,
         "core_model": None if arr.coils[0].core is None else arr.coils[0].core.model,
-        "interpolation": "quadratic-exact trilinear-weighted Taylor (see designkit.fieldmap)",
-        "data_sha256": _data_hash(a32, dg32),
+        "interpolation": "quadratic-exact trilinear-weighted Taylor (see designkit.fieldmap); "
+                         "points inside fine_grid use it",
+        "data_sha256": _data_hash(out_arrays),
     }
-    return {"A": a32, "dG": dg32, "meta": meta}
+    return {**out_arrays, "meta": meta}
 
 
-def _data_hash(a: np.ndarray, dg: np.ndarray) -> str:
+ARRAY_NAMES = ("A", "dG", "A_fine", "dG_fine")
+
+
+def _data_hash(arrays: dict) -> str:
+    """SHA-256 over the arrays present, in the order of ARRAY_NAMES."""
     h = hashlib.sha256()
-    h.update(np.ascontiguousarray(a).tobytes())
-    h.update(np.ascontiguousarray(dg).tobytes())
+    for name in ARRAY_NAMES:
+        if name in arrays:
+            h.update(np.ascontiguousarray(arrays[name]).tobytes())
     return h.hexdigest()
 
 
@@ -254,7 +298,8 @@ def write(path, data: dict) -> Path:
     path = Path(path)
     with atomic_path(path, suffix=".npz") as tmp:
         with open(tmp, "wb") as fh:
-            np.savez(fh, A=data["A"], dG=data["dG"], meta=np.array(json.dumps(data["meta"])))
+            np.savez(fh, **{k: data[k] for k in ARRAY_NAMES if k in data},
+                     meta=np.array(json.dumps(data["meta"])))
     return path
 
 
@@ -263,8 +308,8 @@ def _bad(path, what: str) -> BadInputError:
     return BadInputError("map file", f"a designkit force-current map ({what})", str(path))
 
 
-def read_arrays(path) -> tuple[np.ndarray, np.ndarray, dict]:
-    """Open and validate a map file: (A, dG, meta). Raises BadInputError naming the problem."""
+def read_arrays(path) -> tuple[dict, dict]:
+    """Open and validate a map file: (arrays, meta). Raises BadInputError naming the problem."""
     p = Path(path)
     if not p.is_file():
         raise BadInputError("map file", "a path to an existing .npz map", str(p))
@@ -274,29 +319,37 @@ def read_arrays(path) -> tuple[np.ndarray, np.ndarray, dict]:
             if not {"A", "dG", "meta"} <= keys:
                 raise _bad(p, f"arrays A, dG, meta; found {sorted(keys)} -- a foreign file")
             meta = json.loads(str(z["meta"]))
-            a, dg = z["A"], z["dG"]
+            arrays = {k: z[k] for k in ARRAY_NAMES if k in keys}
     except BadInputError:
         raise
     except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError) as exc:
         raise _bad(p, f"readable npz; {type(exc).__name__}: {exc} -- truncated or foreign")
-    if meta.get("format") != FORMAT:
-        raise _bad(p, f"meta.format == {FORMAT!r}, got {meta.get('format')!r}")
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        raise _bad(p, f"meta.format == {FORMAT!r}")
     if meta.get("version") != FORMAT_VERSION:
         raise _bad(p, f"format version {FORMAT_VERSION}, got {meta.get('version')!r}")
     if meta.get("units") != UNITS or meta.get("rows") != list(ROWS):
         raise _bad(p, f"units {UNITS} and rows {ROWS}")
-    shape = tuple(meta["grid"]["shape"])
     nc = int(meta["n_coils"])
-    if a.shape != shape + (8, nc) or dg.shape != shape + (7, nc):
-        raise _bad(p, f"A of shape {shape + (8, nc)} and dG of {shape + (7, nc)}; got "
-                   f"{a.shape} and {dg.shape}")
-    if min(shape) < 2:
-        raise _bad(p, f"at least 2 nodes per axis, got {shape}")
-    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(dg))):
-        raise _bad(p, "finite values only (found NaN or Inf)")
-    if _data_hash(a, dg) != meta.get("data_sha256"):
+    levels = [("", meta["grid"])]
+    if meta.get("fine_grid") is not None:
+        levels.append(("_fine", meta["fine_grid"]))
+    elif "A_fine" in arrays:
+        raise _bad(p, "meta.fine_grid describing A_fine")
+    for suffix, grid in levels:
+        shape = tuple(grid["shape"])
+        a, dg = arrays.get("A" + suffix), arrays.get("dG" + suffix)
+        if a is None or dg is None or a.shape != shape + (8, nc) or dg.shape != shape + (7, nc):
+            raise _bad(p, f"A{suffix} of shape {shape + (8, nc)} and dG{suffix} of "
+                       f"{shape + (7, nc)}; got {getattr(a, 'shape', None)} and "
+                       f"{getattr(dg, 'shape', None)}")
+        if min(shape) < 2:
+            raise _bad(p, f"at least 2 nodes per axis, got {shape}")
+        if not (np.all(np.isfinite(a)) and np.all(np.isfinite(dg))):
+            raise _bad(p, "finite values only (found NaN or Inf)")
+    if _data_hash(arrays) != meta.get("data_sha256"):
         raise _bad(p, "data matching its recorded SHA-256 (corrupted)")
-    return a, dg, meta
+    return arrays, meta
 
 
 # constant map of the corrections: corr[r] = 1/2 sum_d sum_q C[r, d, q] S_d[q], q over the
@@ -327,12 +380,18 @@ CORRECTION_T32 = np.ascontiguousarray(CORRECTION.T, dtype=np.float32)  # (36, 8)
 
 @dataclass(frozen=True)
 class FieldMap:
-    """A loaded map. ``bounds``: (lower, upper) corners, m; ``meta``: the file's metadata."""
+    """A loaded map. ``bounds``: (lower, upper) corners, m; ``meta``: the file's metadata.
 
-    data: np.ndarray  # (nx, ny, nz, n_coils * 15) float32: per coil the A rows, then T
+    ``data`` (nx, ny, nz, n_coils * 15) float32 holds per node and coil the 8 rows of A then
+    the 7 entries of T; ``fine`` the same for the optional bottom slab (``meta['fine_grid']``),
+    which points inside it use.
+    """
+
+    data: np.ndarray
     meta: dict
     bounds: tuple
     n_coils: int
+    fine: np.ndarray | None = None
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -350,12 +409,37 @@ class FieldMap:
             cell (its polynomial, which degrades quickly away from the box).
         order : {'quadratic', 'linear'}
         """
+        if outside not in ("error", "extrapolate"):
+            raise BadInputError("outside", "'error' or 'extrapolate'", outside)
+        if order not in ("quadratic", "linear"):
+            raise BadInputError("order", "'quadratic' or 'linear'", order)
         if isinstance(points, np.ndarray) and points.shape == (3,) or (
                 isinstance(points, (tuple, list)) and len(points) == 3
                 and not isinstance(points[0], (tuple, list, np.ndarray))):
             return self._one(points, outside, order)
         p, single = v.points(points)
-        return interpolate(self.data, self._grid, p, self.n_coils, single, outside, order)
+        lo, hi, step, _ = self._grid
+        if outside == "error":
+            tol = 1e-9 * step
+            bad = np.any((p < lo - tol) | (p > hi + tol), axis=1)
+            if bad.any():
+                k = int(np.argmax(bad))
+                raise BadInputError("points", f"inside the map box {lo.tolist()} .. "
+                                    f"{hi.tolist()} m (or outside='extrapolate')",
+                                    f"{p[k].tolist()} at row {k}")
+        if self.fine is None:
+            res = interpolate(self.data, self._grid, p, self.n_coils, order)
+        else:
+            flo, fhi = self._fine_grid[:2]
+            infine = np.all((p >= flo) & (p <= fhi), axis=1)
+            res = np.empty((len(p), 8, self.n_coils))
+            if not infine.all():
+                res[~infine] = interpolate(self.data, self._grid, p[~infine], self.n_coils,
+                                           order)
+            if infine.any():
+                res[infine] = interpolate(self.fine, self._fine_grid, p[infine], self.n_coils,
+                                          order)
+        return res[0] if single else res
 
     def _one(self, points, outside, order):
         """The controller's per-sample call: plain floats, no array bookkeeping."""
@@ -363,56 +447,57 @@ class FieldMap:
             q = (float(points[0]), float(points[1]), float(points[2]))
         except (TypeError, ValueError):
             raise BadInputError("points", "array-like of shape (3,) or (n, 3), m", points) from None
-        lo, hi = self._box[:2]
+        lo, hi, step, shape = self._box
         for k in range(3):
             if not math.isfinite(q[k]):
                 raise BadInputError("points", "finite (no NaN or Inf)", list(q))
             if outside == "error" and not (lo[k] - 1e-12 <= q[k] <= hi[k] + 1e-12):
                 raise BadInputError("points", f"inside the map box {list(lo)} .. {list(hi)} m "
                                     "(or outside='extrapolate')", list(q))
-        if outside not in ("error", "extrapolate"):
-            raise BadInputError("outside", "'error' or 'extrapolate'", outside)
-        if order not in ("quadratic", "linear"):
-            raise BadInputError("order", "'quadratic' or 'linear'", order)
-        return _one_point(self.data, lo, self._box[2], self._box[3], q, self.n_coils, order)
+        fb = self._fine_box
+        if fb is not None and all(fb[0][k] <= q[k] <= fb[1][k] for k in range(3)):
+            return _one_point(self.fine, fb[0], fb[2], fb[3], q, self.n_coils, order)
+        return _one_point(self.data, lo, step, shape, q, self.n_coils, order)
 
-    @functools.cached_property
-    def _box(self):
-        g = self.meta["grid"]
+    @staticmethod
+    def _as_box(g):
         return (tuple(map(float, g["lower_m"])), tuple(map(float, g["upper_m"])),
                 tuple(map(float, g["spacing_m"])), tuple(map(int, g["shape"])))
 
-    @functools.cached_property
-    def _grid(self):
-        g = self.meta["grid"]
+    @staticmethod
+    def _as_grid(g):
         return (np.asarray(g["lower_m"]), np.asarray(g["upper_m"]), np.asarray(g["spacing_m"]),
                 np.asarray(g["shape"]))
+
+    @functools.cached_property
+    def _box(self):
+        return self._as_box(self.meta["grid"])
+
+    @functools.cached_property
+    def _fine_box(self):
+        g = self.meta.get("fine_grid")
+        return None if g is None or self.fine is None else self._as_box(g)
+
+    @functools.cached_property
+    def _grid(self):
+        return self._as_grid(self.meta["grid"])
+
+    @functools.cached_property
+    def _fine_grid(self):
+        return self._as_grid(self.meta["fine_grid"])
 
 
 _CORNERS = np.array([[a, b, c] for a in (0, 1) for b in (0, 1) for c in (0, 1)], float)
 
 
-def interpolate(data, grid, p, nc, single, outside, order):
-    """The interpolation kernel (numpy only; :mod:`firmware_io.mapfile` has the same).
+def interpolate(data, grid, p, nc, order):
+    """The interpolation kernel for points (n, 3) -> (n, 8, nc) (numpy only;
+    :mod:`firmware_io.mapfile` repeats it). Points outside the grid use the nearest cell.
 
     ``data``: (nx, ny, nz, n_coils * 15) float32, per coil the 8 rows of A then the 7 of T.
     """
     lower, upper, step, shape = grid
-    if outside not in ("error", "extrapolate"):
-        raise BadInputError("outside", "'error' or 'extrapolate'", outside)
-    if order not in ("quadratic", "linear"):
-        raise BadInputError("order", "'quadratic' or 'linear'", order)
-    if outside == "error":
-        tol = 1e-9 * step
-        bad = np.any((p < lower - tol) | (p > upper + tol), axis=1)
-        if bad.any():
-            k = int(np.argmax(bad))
-            raise BadInputError("points", f"inside the map box {lower.tolist()} .. "
-                                f"{upper.tolist()} m (or outside='extrapolate')",
-                                f"{p[k].tolist()} at row {k}")
     nx, ny, nz = (int(x) for x in shape)
-    if single:
-        return _one_point(data, tuple(lower), tuple(step), (nx, ny, nz), p[0], nc, order)
     f = (p - lower) / step
     i = np.clip(np.floor(f).astype(np.intp), 0, shape - 2)
     t = f - i
@@ -477,15 +562,19 @@ def load(path, design=None) -> FieldMap:
 
     Raises BadInputError for a missing, truncated, foreign, corrupted or mismatched file.
     """
-    a, dg, meta = read_arrays(path)
+    arrays, meta = read_arrays(path)
     if design is not None and meta["design_sha256"] != design.spec_hash():
         raise BadInputError("map file", f"built from design {design.name!r} (SHA-256 "
                             f"{design.spec_hash()[:12]}...)",
                             f"{path} (design {meta.get('design_name')!r}, SHA-256 "
                             f"{meta['design_sha256'][:12]}...)", "Rebuild it: designkit map.")
     nc = int(meta["n_coils"])
-    data = np.ascontiguousarray(np.concatenate([a, dg], axis=3).transpose(0, 1, 2, 4, 3)
-                                .reshape(a.shape[:3] + (15 * nc,)))
+
+    def pack(a, dg):
+        return np.ascontiguousarray(np.concatenate([a, dg], axis=3).transpose(0, 1, 2, 4, 3)
+                                    .reshape(a.shape[:3] + (15 * nc,)))
+
+    fine = pack(arrays["A_fine"], arrays["dG_fine"]) if "A_fine" in arrays else None
     g = meta["grid"]
-    return FieldMap(data, meta, (np.asarray(g["lower_m"], float), np.asarray(g["upper_m"], float)),
-                    nc)
+    return FieldMap(pack(arrays["A"], arrays["dG"]), meta,
+                    (np.asarray(g["lower_m"], float), np.asarray(g["upper_m"], float)), nc, fine)

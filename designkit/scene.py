@@ -126,7 +126,17 @@ class RZTable:
     max_rel_error: dict
     scale: dict
 
+    def covers(self, rho, z) -> bool:
+        return bool(rho.min() >= self.rho_nodes[0] and rho.max() <= self.rho_nodes[-1]
+                    and z.min() >= self.z_nodes[0] and z.max() <= self.z_nodes[-1])
+
     def __call__(self, rho, z, comps):
+        # a spline outside its nodes extrapolates without warning: refuse instead
+        if not self.covers(rho, z):
+            raise BadInputError("table points", f"rho in [{self.rho_nodes[0]}, "
+                                f"{self.rho_nodes[-1]}] m and z in [{self.z_nodes[0]}, "
+                                f"{self.z_nodes[-1]}] m",
+                                f"rho [{rho.min()}, {rho.max()}], z [{z.min()}, {z.max()}]")
         return {c: self.splines[c].ev(rho, z) for c in comps}
 
     @property

@@ -52,11 +52,44 @@ def _correction(nc: int) -> np.ndarray:
     return big.reshape(3 * nc * 15, 8 * nc)
 
 
+NAMES = ("A", "dG", "A_fine", "dG_fine")
+
+
+def _pack(a, dg, nc):
+    return np.ascontiguousarray(np.concatenate([a, dg], axis=3).transpose(0, 1, 2, 4, 3)
+                                .reshape(a.shape[:3] + (15 * nc,)))
+
+
+def _interp(data, grid, p, nc, corr):
+    """(n, 3) points -> (n, 8, nc): trilinear weights + half the gradient . offset terms."""
+    lo = np.asarray(grid["lower_m"], float)
+    step = np.asarray(grid["spacing_m"], float)
+    shape = np.asarray(grid["shape"])
+    nx, ny, nz = (int(x) for x in shape)
+    f = (p - lo) / step
+    i = np.clip(np.floor(f).astype(np.intp), 0, shape - 2)
+    t = f - i
+    n = len(p)
+    w = (np.stack([1 - t[:, 0], t[:, 0]], 1)[:, :, None, None]
+         * np.stack([1 - t[:, 1], t[:, 1]], 1)[:, None, :, None]
+         * np.stack([1 - t[:, 2], t[:, 2]], 1)[:, None, None, :]).reshape(n, 8)
+    wd = w[:, None, :] * ((t[:, None, :] - _CORNERS[None]) * step).transpose(0, 2, 1)
+    wall = np.concatenate([w[:, None, :], wd], axis=1).astype(np.float32)  # (n, 4, 8)
+    base = (i[:, 0] * ny + i[:, 1]) * nz + i[:, 2]
+    offs = np.array([0, 1, nz, nz + 1, ny * nz, ny * nz + 1, ny * nz + nz, ny * nz + nz + 1])
+    corners = np.take(data.reshape(nx * ny * nz, -1), base[:, None] + offs, axis=0)
+    s = np.matmul(wall, corners)  # (n, 4, nc * 15)
+    c = s[:, 1:, :].reshape(n, -1) @ corr  # (n, 8 * nc)
+    res = s[:, 0, :].reshape(n, nc, 15)[:, :, :8].transpose(0, 2, 1) + c.reshape(n, 8, nc)
+    return res.astype(np.float64)
+
+
 @dataclass(frozen=True)
 class MapFile:
     """A validated map: ``bounds`` (lower, upper) corners in m, ``meta`` dict, ``actuation``."""
 
     data: np.ndarray  # (nx, ny, nz, n_coils * 15) float32
+    fine: np.ndarray | None  # the same on the bottom slab (meta['fine_grid']) or None
     meta: dict
     bounds: tuple
     n_coils: int
@@ -72,34 +105,43 @@ class MapFile:
                 if not {"A", "dG", "meta"} <= set(z.files):
                     raise _bad(p, f"arrays A, dG, meta; found {sorted(z.files)}")
                 meta = json.loads(str(z["meta"]))
-                a, dg = z["A"], z["dG"]
+                arrays = {k: z[k] for k in NAMES if k in z.files}
         except BadInputError:
             raise
         except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError) as exc:
             raise _bad(p, f"readable npz; {type(exc).__name__}: {exc} -- truncated or foreign")
-        if meta.get("format") != FORMAT or meta.get("version") != FORMAT_VERSION:
+        if not isinstance(meta, dict) or meta.get("format") != FORMAT or \
+                meta.get("version") != FORMAT_VERSION:
             raise _bad(p, f"format {FORMAT!r} version {FORMAT_VERSION}")
         if meta.get("units") != UNITS or tuple(meta.get("rows", ())) != ROWS:
             raise _bad(p, f"units {UNITS}, rows {ROWS}")
-        shape = tuple(meta["grid"]["shape"])
         nc = int(meta["n_coils"])
-        if a.shape != shape + (8, nc) or dg.shape != shape + (7, nc) or min(shape) < 2:
-            raise _bad(p, f"A {shape + (8, nc)}, dG {shape + (7, nc)}; got {a.shape}, {dg.shape}")
-        if not (np.all(np.isfinite(a)) and np.all(np.isfinite(dg))):
-            raise _bad(p, "finite values only")
+        levels = [("", meta["grid"])]
+        if meta.get("fine_grid") is not None:
+            levels.append(("_fine", meta["fine_grid"]))
+        for suffix, grid in levels:
+            shape = tuple(grid["shape"])
+            a, dg = arrays.get("A" + suffix), arrays.get("dG" + suffix)
+            if a is None or dg is None or a.shape != shape + (8, nc) or \
+                    dg.shape != shape + (7, nc) or min(shape) < 2:
+                raise _bad(p, f"A{suffix} {shape + (8, nc)}, dG{suffix} {shape + (7, nc)}")
+            if not (np.all(np.isfinite(a)) and np.all(np.isfinite(dg))):
+                raise _bad(p, "finite values only")
         h = hashlib.sha256()
-        h.update(np.ascontiguousarray(a).tobytes())
-        h.update(np.ascontiguousarray(dg).tobytes())
+        for name in NAMES:
+            if name in arrays:
+                h.update(np.ascontiguousarray(arrays[name]).tobytes())
         if h.hexdigest() != meta.get("data_sha256"):
             raise _bad(p, "data matching its recorded SHA-256 (corrupted)")
         if expected_design_sha256 is not None and meta["design_sha256"] != expected_design_sha256:
             raise _bad(p, f"design SHA-256 {expected_design_sha256[:12]}..., got "
                        f"{meta['design_sha256'][:12]}...")
-        data = np.ascontiguousarray(np.concatenate([a, dg], axis=3).transpose(0, 1, 2, 4, 3)
-                                    .reshape(shape + (15 * nc,)))
+        fine = (_pack(arrays["A_fine"], arrays["dG_fine"], nc)
+                if meta.get("fine_grid") is not None else None)
         g = meta["grid"]
-        return cls(data, meta, (np.asarray(g["lower_m"], float), np.asarray(g["upper_m"], float)),
-                   nc, _correction(nc))
+        return cls(_pack(arrays["A"], arrays["dG"], nc), fine, meta,
+                   (np.asarray(g["lower_m"], float), np.asarray(g["upper_m"], float)), nc,
+                   _correction(nc))
 
     def actuation(self, points, extrapolate: bool = False) -> np.ndarray:
         """A at points (3,) -> (8, n_coils) or (n, 3) -> (n, 8, n_coils), float64.
@@ -112,32 +154,22 @@ class MapFile:
         if not np.all(np.isfinite(p)):
             raise BadInputError("points", "finite (no NaN or Inf)", points)
         lo, hi = self.bounds
-        g = self.meta["grid"]
-        step = np.asarray(g["spacing_m"], float)
-        shape = np.asarray(g["shape"])
+        step = np.asarray(self.meta["grid"]["spacing_m"], float)
         if not extrapolate:
             bad = np.any((p < lo - 1e-9 * step) | (p > hi + 1e-9 * step), axis=1)
             if bad.any():
                 raise BadInputError("points", f"inside {lo.tolist()} .. {hi.tolist()} m",
                                     p[int(np.argmax(bad))].tolist())
-        nx, ny, nz = (int(x) for x in shape)
-        nc = self.n_coils
-        f = (p - lo) / step
-        i = np.clip(np.floor(f).astype(np.intp), 0, shape - 2)
-        t = f - i
-        n = len(p)
-        w = (np.stack([1 - t[:, 0], t[:, 0]], 1)[:, :, None, None]
-             * np.stack([1 - t[:, 1], t[:, 1]], 1)[:, None, :, None]
-             * np.stack([1 - t[:, 2], t[:, 2]], 1)[:, None, None, :]).reshape(n, 8)
-        wd = w[:, None, :] * ((t[:, None, :] - _CORNERS[None]) * step).transpose(0, 2, 1)
-        wall = np.concatenate([w[:, None, :], wd], axis=1).astype(np.float32)  # (n, 4, 8)
-        base = (i[:, 0] * ny + i[:, 1]) * nz + i[:, 2]
-        offs = np.array([0, 1, nz, nz + 1, ny * nz, ny * nz + 1, ny * nz + nz, ny * nz + nz + 1])
-        corners = np.take(self.data.reshape(nx * ny * nz, -1), base[:, None] + offs, axis=0)
-        s = np.matmul(wall, corners)  # (n, 4, nc * 15)
-        corr = s[:, 1:, :].reshape(n, -1) @ self.corr  # (n, 8 * nc)
-        res = s[:, 0, :].reshape(n, nc, 15)[:, :, :8].transpose(0, 2, 1) + corr.reshape(n, 8, nc)
-        res = res.astype(np.float64)
+        res = np.empty((len(p), 8, self.n_coils))
+        infine = np.zeros(len(p), dtype=bool)
+        if self.fine is not None:
+            g = self.meta["fine_grid"]
+            infine = np.all((p >= g["lower_m"]) & (p <= g["upper_m"]), axis=1)
+            if infine.any():
+                res[infine] = _interp(self.fine, g, p[infine], self.n_coils, self.corr)
+        if not infine.all():
+            res[~infine] = _interp(self.data, self.meta["grid"], p[~infine], self.n_coils,
+                                   self.corr)
         return res[0] if single else res
 
     def currents_for(self, point, wanted: np.ndarray, rows=slice(None)) -> np.ndarray:

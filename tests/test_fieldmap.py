@@ -71,6 +71,15 @@ def test_nodes_are_reproduced_and_gradient_is_symmetric_traceless(fm):
     np.testing.assert_allclose(full, np.swapaxes(full, -1, -2))
 
 
+def test_fine_slab_is_used_and_continuous(fm):
+    g = fm.meta["fine_grid"]
+    assert g["upper_m"][2] == pytest.approx(0.014) and g["spacing_m"][0] == pytest.approx(0.0015)
+    # just below and above the slab top the two grids agree to interpolation accuracy
+    p = np.array([[0.004, -0.007, 0.014 - 1e-9], [0.004, -0.007, 0.014 + 1e-9]])
+    a = fm.actuation(p)
+    assert np.abs(a[0] - a[1]).max() < 2e-3 * np.abs(a).max()
+
+
 def test_single_point_equals_batch(fm, sample):
     p, _ = sample
     one = np.array([fm.actuation(q) for q in p[:20]])
@@ -107,20 +116,26 @@ def test_bad_files(mapfile, tmp_path):
     with pytest.raises(BadInputError, match="built from design"):
         fieldmap.load(mapfile, default_design())
     # corrupted values (and a NaN) are caught
-    a, dg, meta = fieldmap.read_arrays(mapfile)
+    arrays, meta = fieldmap.read_arrays(mapfile)
+    assert set(arrays) == {"A", "dG", "A_fine", "dG_fine"}
     bad = tmp_path / "nan.npz"
-    a2 = a.copy()
-    a2[0, 0, 0, 0, 0] = np.nan
-    np.savez(bad, A=a2, dG=dg, meta=np.array(json.dumps(meta)))
-    with pytest.raises(BadInputError, match="finite"):
-        fieldmap.load(bad)
-    a2[0, 0, 0, 0, 0] = 1.0
-    np.savez(bad, A=a2, dG=dg, meta=np.array(json.dumps(meta)))
-    with pytest.raises(BadInputError, match="SHA-256"):
-        fieldmap.load(bad)
+    for name in ("A", "dG_fine"):
+        a2 = arrays[name].copy()
+        a2[0, 0, 0, 0, 0] = np.nan
+        np.savez(bad, **{**arrays, name: a2}, meta=np.array(json.dumps(meta)))
+        with pytest.raises(BadInputError, match="finite"):
+            fieldmap.load(bad)
+        a2[0, 0, 0, 0, 0] = 1.0
+        np.savez(bad, **{**arrays, name: a2}, meta=np.array(json.dumps(meta)))
+        with pytest.raises(BadInputError, match="SHA-256"):
+            fieldmap.load(bad)
     meta2 = dict(meta, units={**meta["units"], "grid": "mm"})
-    np.savez(bad, A=a, dG=dg, meta=np.array(json.dumps(meta2)))
+    np.savez(bad, **arrays, meta=np.array(json.dumps(meta2)))
     with pytest.raises(BadInputError, match="units"):
+        fieldmap.load(bad)
+    short = {k: v for k, v in arrays.items() if k != "dG_fine"}
+    np.savez(bad, **short, meta=np.array(json.dumps(meta)))
+    with pytest.raises(BadInputError, match="dG_fine"):
         fieldmap.load(bad)
 
 
@@ -150,7 +165,9 @@ def test_cli_map_writes_one_file(tmp_path):
     assert main(["map", "--design", str(toml), "--spacing", "5", "--out", str(out),
                  "--quiet"]) == 0
     assert [f.name for f in tmp_path.iterdir() if f.suffix == ".npz"] == ["m.npz"]
-    assert fieldmap.load(out).meta["grid"]["shape"] == [5, 5, 3]
+    loaded = fieldmap.load(out)
+    assert loaded.meta["grid"]["shape"] == [5, 5, 3]
+    assert loaded.meta["fine_grid"]["shape"] == [9, 9, 3]  # 4 mm slab at 2.5 mm
     assert main(["map", "--spacing", "-1", "--out", str(out), "--quiet"]) == 1
 
 
@@ -163,7 +180,7 @@ def test_third_derivatives_from_tables_match_differences_of_direct_gradients():
     c = c.replace(pose=Pose.from_axis((0.01, -0.02, -0.06), (0.3, 0.2, 1.0)))
     arr = CoilArray((c,))
     axes = [np.array([0.0, 0.01]), np.array([0.0, 0.012]), np.array([0.02, 0.03])]
-    _, t = compute_grid(arr, axes, tolerance=1e-6, progress=False)
+    _, t, _ = compute_grid(arr, axes, tolerance=1e-6, progress=False)
     p = np.array([0.01, 0.0, 0.03])
     h = 1e-5
     fd = np.stack([(c.field(p + h * e, 1.0, gradient=True)[1]

@@ -3,8 +3,6 @@
 import importlib.util
 from pathlib import Path
 
-import pytest
-
 
 def _load():
     path = Path(__file__).resolve().parents[1] / "studies" / "bench_map.py"

@@ -15,9 +15,9 @@ def _load():
 def test_bench_scene_quick(tmp_path):
     res = _load().run(tmp_path, quick=True)
     assert (tmp_path / "bench_scene.json").is_file()
-    rows = {(r["outputs"], r["variant"]): r for r in res["rows"]}
-    assert len(rows) == 15
-    for (outs, var), r in rows.items():
-        assert r["max_rel_error"] <= (1e-12 if var in ("direct",) else res["tolerance"])
+    rows = {(r["tolerance"], r["outputs"], r["variant"]): r for r in res["rows"]}
+    assert len(rows) == 30
+    for (tol, outs, var), r in rows.items():
+        assert r["max_rel_error"] <= (1e-12 if var == "direct" else tol)
         if var.startswith("tables"):
             assert r["table_nodes"] > 0

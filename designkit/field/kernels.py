@@ -310,9 +310,65 @@ def sheet_rz(a, h, rho, z, *, gradient: bool = False):
     return br, bz, dbr_drho, dbr_dz, dbz_drho, dbz_dz, br_over_rho
 
 
-def _sheet_scaled(r, omr, zz, hh, gradient):
+_SHEET_GL = {n: np.polynomial.legendre.leggauss(n) for n in (4, 6, 8, 12, 16, 24, 32, 48, 64)}
+
+
+def _sheet_far(r, omr, zz, hh, gradient):
+    """Unit-radius sheet as a Gauss-Legendre sum of loops over z' (for far points).
+
+    The closed forms subtract the two ends' terms: at distance R that cancels and loses
+    ~eps R^3 / (a^2 L) (measured 4e-3 at R = 1e4 L for a 10 mm magnet). The loop series have no
+    cancellation; the loop field is analytic in z' except at z' = z +- i|rho - a|, so the node
+    count follows from the Bernstein ellipse through that point (target 1e-16)."""
+    n = r.shape[0]
+    x = (zz + 1j * np.maximum(np.abs(omr), 1e-300)) / hh
+    w = x + np.sqrt(x - 1.0 + 0j) * np.sqrt(x + 1.0 + 0j)
+    rb = np.abs(w)
+    rb = np.maximum(rb, 1.0 / np.maximum(rb, 1e-300))
+    rb = np.minimum(0.5 * (1.0 + rb), 30.0)
+    need = np.ceil(np.log(1e2 / 1e-16) / (2.0 * np.log(np.maximum(rb, 1.0 + 1e-12))))
+    sizes = np.array(sorted(_SHEET_GL))
+    nb = sizes[np.minimum(np.searchsorted(sizes, need), len(sizes) - 1)]
+    out = [np.zeros(n) for _ in range(5 if gradient else 2)]
+    for nn in np.unique(nb):
+        sel = np.nonzero(nb == nn)[0]
+        xk, wk = _SHEET_GL[int(nn)]
+        m = sel.size
+        zp = (hh[sel][:, None] * xk[None, :]).ravel()
+        res = _loop_scaled(np.repeat(r[sel], nn), np.repeat(zz[sel], nn) - zp, gradient,
+                           np.repeat(omr[sel], nn))
+        ww = (hh[sel][:, None] * wk[None, :]).ravel() / (4.0 * math.pi)
+        comps = (res[0], res[1], res[4], res[2], res[3]) if gradient else res
+        for q, val in enumerate(comps):
+            out[q][sel] = (val * ww).reshape(m, nn).sum(axis=1)
+    return tuple(out)
+
+
+def _sheet_scaled(r, omr, zz, hh, gradient, tol=1e-15):
     """Unit-radius sheet. Returns (br, bz) per mu0 K, or with gradient
-    (br, bz, br_over_r, dbr_dz, dbz_dz) in units of the radius."""
+    (br, bz, br_over_r, dbr_dz, dbz_dz) in units of the radius.
+
+    Points whose closed-form cancellation error (~4e-16 R^3 / (2 h), unit radius) would exceed
+    ``tol`` / 20 and that lie well outside the sheet use the loop sum of :func:`_sheet_far`."""
+    big2 = r * r + zz * zz
+    far = (big2 > 2.25 * (1.0 + hh * hh)) & (
+        4e-16 * big2 * np.sqrt(big2) / (2.0 * hh) > 0.05 * tol)
+    if np.any(far):
+        res_far = _sheet_far(r[far], omr[far], zz[far], hh[far], gradient)
+        near = ~far
+        res_near = _sheet_scaled_closed(r[near], omr[near], zz[near], hh[near], gradient)
+        out = []
+        for f_, n_ in zip(res_far, res_near):
+            o = np.empty(r.shape)
+            o[far] = f_
+            o[near] = n_
+            out.append(o)
+        return tuple(out)
+    return _sheet_scaled_closed(r, omr, zz, hh, gradient)
+
+
+def _sheet_scaled_closed(r, omr, zz, hh, gradient):
+    """Closed forms (Derby-Olbert Bz, T-integral Br, end-loop gradients) of the unit sheet."""
     opr = 1.0 + r
     br_r = np.zeros(r.shape)
     bz = np.zeros(r.shape)

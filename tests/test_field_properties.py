@@ -1,0 +1,86 @@
+"""Hypothesis property tests: linearity, rotation equivariance of Coil with a Pose,
+divergence-free, curl-free outside sources, continuity across the axis."""
+
+import numpy as np
+from hypothesis import given, settings, strategies as st
+from scipy.spatial.transform import Rotation
+
+from designkit import Coil
+from designkit.field import loop_field, magnetized_cylinder_field, winding_field
+from designkit.pose import Pose
+
+RI, RO, L, N = 0.012, 0.019, 0.100, 1429
+coord = st.floats(-0.3, 0.3, allow_nan=False)
+point = st.tuples(coord, coord, coord)
+current = st.floats(-10, 10, allow_nan=False).filter(lambda c: abs(c) > 1e-3)
+FAST = settings(max_examples=40, deadline=None)
+
+
+def _outside_winding(p):
+    rho = np.hypot(p[0], p[1])
+    return not (RI - 1e-3 <= rho <= RO + 1e-3 and abs(p[2]) <= L / 2 + 1e-3)
+
+
+@FAST
+@given(point, current, current)
+def test_superposition_linearity(p, i1, i2):
+    b1, g1 = winding_field(p, RI, RO, L, N, i1, gradient=True)
+    b2, g2 = winding_field(p, RI, RO, L, N, i2, gradient=True)
+    b, g = winding_field(p, RI, RO, L, N, i1 + i2, gradient=True)
+    assert np.linalg.norm(b - b1 - b2) <= 1e-13 * (np.linalg.norm(b1) + np.linalg.norm(b2))
+    assert np.linalg.norm(g - g1 - g2) <= 1e-13 * (np.linalg.norm(g1) + np.linalg.norm(g2))
+    # two coaxial loops: the field of the pair is the sum (shifted evaluation)
+    lb = loop_field(p, 0.01, i1) + loop_field(np.subtract(p, (0, 0, 0.02)), 0.015, i2)
+    lb2 = loop_field(p, 0.01, i1) + loop_field(np.add(p, (0, 0, -0.02)), 0.015, i2)
+    assert np.allclose(lb, lb2, rtol=1e-15, atol=0)
+
+
+@FAST
+@given(point, st.integers(0, 2**31 - 1), st.tuples(coord, coord, coord))
+def test_coil_rotation_equivariance(p_local, seed, position):
+    rot = Rotation.random(random_state=seed)
+    r = rot.as_matrix()
+    coil0 = Coil(inner_radius=RI, outer_radius=RO, length=L, turns=N)
+    coil = Coil(inner_radius=RI, outer_radius=RO, length=L, turns=N,
+                pose=Pose.from_rotation(position, rot))
+    p_global = r @ np.asarray(p_local) + np.asarray(position)
+    b0, g0 = coil0.field(p_local, 2.0, gradient=True)
+    b, g = coil.field(p_global, 2.0, gradient=True)
+    # the pose round trip moves the point by ~eps |p|: allow for that where G (or its
+    # derivative, ~|B| / RI^2) is tiny, e.g. at the centre where dBz/dz = 0
+    gscale = np.linalg.norm(g0) + np.linalg.norm(b0) / RI
+    assert np.linalg.norm(b - r @ b0) <= 1e-12 * np.linalg.norm(b0)
+    assert np.linalg.norm(g - r @ g0 @ r.T) <= 1e-12 * gscale
+
+
+@FAST
+@given(point)
+def test_divergence_free_everywhere_and_curl_free_outside(p):
+    for b, g, outside, size in [
+        (*winding_field(p, RI, RO, L, N, 1.0, gradient=True), _outside_winding(p), RI),
+        (*loop_field(p, 0.02, 1.0, gradient=True), True, 0.02),
+        (*magnetized_cylinder_field(p, 0.005, 0.01, 1e6, gradient=True), True, 0.005),
+    ]:
+        # G can vanish (centre of symmetric sources): relative to |G| + |B| / size
+        gn = np.abs(g).max() + np.abs(b).max() / size
+        assert abs(np.trace(g)) <= 1e-12 * gn
+        if outside:
+            assert np.linalg.norm(g - g.T) <= 1e-12 * gn
+
+
+@FAST
+@given(st.floats(-0.3, 0.3), st.floats(0, 2 * np.pi), st.sampled_from([1e-200, 1e-30, 1e-12]))
+def test_continuity_across_the_axis(z, phi, eps):
+    cases = [(lambda q: winding_field(q, RI, RO, L, N, 1.0, gradient=True), RI),
+             (lambda q: loop_field(q, 0.02, 1.0, gradient=True), 0.02)]
+    for field, size in cases:
+        b0, g0 = field([0.0, 0.0, z])
+        # natural scales: |B| and |B| / size (G itself vanishes at the centre)
+        sb = np.linalg.norm(b0)
+        sg = np.linalg.norm(g0) + sb / size
+        for s in (1, -1):
+            q = [s * eps * np.cos(phi), s * eps * np.sin(phi), z]
+            b, g = field(q)
+            # B and G are smooth in x, y: the change is O(eps / size)
+            assert np.linalg.norm(b - b0) <= 1e-13 * sb + 10 * eps / size * sb
+            assert np.linalg.norm(g - g0) <= 1e-12 * sg + 10 * eps / size * sg

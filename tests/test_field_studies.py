@@ -1,0 +1,23 @@
+"""Smoke tests of the field studies (quick mode): they run, write their files and the numbers
+they report satisfy the issue's targets where a quick run can show them."""
+
+from studies import bench_field, stress_field
+
+
+def test_stress_field_quick(tmp_path):
+    res = stress_field.run(tmp_path, quick=True)
+    assert res["nonfinite"] == 0
+    assert res["total_points"] > 10_000
+    far = res["regions"]["far 1..1e6 m"]["worst"]
+    assert far["winding B vs dipole, minus 10 (size/R)^2"] < 1e-13
+    assert (tmp_path / "stress_field.txt").exists()
+
+
+def test_bench_field_quick(tmp_path):
+    res = bench_field.run(tmp_path, quick=True)
+    assert (tmp_path / "bench_field.png").stat().st_size > 1000
+    rows = {(r["method"], r["rtol"]): r for r in res["rows"]}
+    # accuracy of the sweep (not timings): each rtol is met
+    for (method, rtol), r in rows.items():
+        if method.startswith("designkit B") and rtol:
+            assert r["err_b"] <= rtol and (r["err_g"] is None or r["err_g"] <= rtol)
