@@ -4,6 +4,7 @@ SI units throughout (m, A, T, N). Light to import: heavy optional libraries (bui
 gmsh, smbus2) are imported only by the modules that need them.
 """
 
+from .array import CoilArray
 from .coil import Coil
 from .core import Core
 from .design import MU0, Design, default_design, load_design
@@ -13,6 +14,6 @@ from .pose import Pose
 __version__ = "0.1.0"
 
 __all__ = [
-    "Coil", "Core", "Design", "Pose", "default_design", "load_design", "MU0",
+    "Coil", "CoilArray", "Core", "Design", "Pose", "default_design", "load_design", "MU0",
     "BadInputError", "DesignkitError", "DesignRuleError", "MissingDependencyError", "__version__",
 ]
