@@ -117,15 +117,15 @@ def test_bad_files(mapfile, tmp_path):
         fieldmap.load(mapfile, default_design())
     # corrupted values (and a NaN) are caught
     arrays, meta = fieldmap.read_arrays(mapfile)
-    assert set(arrays) == {"A", "dG", "A_fine", "dG_fine"}
+    assert set(arrays) == {"A", "dG", "A_fine", "dG_fine", "RZ0"}
     bad = tmp_path / "nan.npz"
-    for name in ("A", "dG_fine"):
+    for name in ("A", "dG_fine", "RZ0"):
         a2 = arrays[name].copy()
-        a2[0, 0, 0, 0, 0] = np.nan
+        a2.reshape(-1)[0] = np.nan
         np.savez(bad, **{**arrays, name: a2}, meta=np.array(json.dumps(meta)))
         with pytest.raises(BadInputError, match="finite"):
             fieldmap.load(bad)
-        a2[0, 0, 0, 0, 0] = 1.0
+        a2.reshape(-1)[0] = 1.0
         np.savez(bad, **{**arrays, name: a2}, meta=np.array(json.dumps(meta)))
         with pytest.raises(BadInputError, match="SHA-256"):
             fieldmap.load(bad)
@@ -137,6 +137,18 @@ def test_bad_files(mapfile, tmp_path):
     np.savez(bad, **short, meta=np.array(json.dumps(meta)))
     with pytest.raises(BadInputError, match="dG_fine"):
         fieldmap.load(bad)
+    # a table that does not match its description, or a description without its table
+    np.savez(bad, **{**arrays, "RZ0": arrays["RZ0"][:-1]}, meta=np.array(json.dumps(meta)))
+    with pytest.raises(BadInputError, match="RZ0"):
+        fieldmap.load(bad)
+    meta3 = dict(meta, rz_tables=[dict(meta["rz_tables"][0], coils=[0, 99])])
+    np.savez(bad, **arrays, meta=np.array(json.dumps(meta3)))
+    with pytest.raises(BadInputError, match="rz_tables"):
+        fieldmap.load(bad)
+    old = dict(meta, version=1)
+    np.savez(bad, **arrays, meta=np.array(json.dumps(old)))
+    with pytest.raises(BadInputError, match="version"):
+        fieldmap.load(bad)
 
 
 def test_firmware_reader_numpy_only(mapfile, fm, sample):
@@ -147,6 +159,9 @@ def test_firmware_reader_numpy_only(mapfile, fm, sample):
         f"m = MapFile.load({str(mapfile)!r})\n"
         f"p = np.array({p[:10].tolist()!r})\n"
         "np.save(sys.argv[1], m.actuation(p))\n"
+        f"q = np.array({p[:200].tolist()!r})\n"
+        "np.save(sys.argv[1][:-4] + '_batch.npy', m.actuation(q))\n"
+        "np.save(sys.argv[1][:-4] + '_one.npy', m.actuation(q[7]))\n"
         "assert not any(k.startswith(('designkit', 'scipy')) for k in sys.modules), "
         "sorted(k for k in sys.modules if k.startswith(('designkit', 'scipy')))\n"
     )
@@ -155,6 +170,12 @@ def test_firmware_reader_numpy_only(mapfile, fm, sample):
     subprocess.run([sys.executable, "-c", code, str(out)], check=True, cwd=root,
                    env={"PYTHONPATH": str(root), "PATH": "/usr/bin:/bin"})
     np.testing.assert_allclose(np.load(out), fm.actuation(p[:10]), rtol=1e-6, atol=1e-12)
+    # the batch path (rho, z tables) and the single-point path agree with designkit's
+    batch = np.load(out.with_name("fw_batch.npy"))
+    assert fm.batch_uses_tables
+    np.testing.assert_allclose(batch, fm.actuation(p[:200]), rtol=1e-6, atol=1e-12)
+    np.testing.assert_allclose(np.load(out.with_name("fw_one.npy")), fm.actuation(p[7]),
+                               rtol=1e-6, atol=1e-12)
 
 
 def test_cli_map_writes_one_file(tmp_path):
@@ -188,3 +209,81 @@ def test_third_derivatives_from_tables_match_differences_of_direct_gradients():
                   -1)  # fd[i, j, k] = d G_ij / dx_k
     np.testing.assert_allclose(_t_full(t[1, 0, 1, :, 0][None])[0], fd, rtol=0,
                                atol=1e-4 * np.abs(fd).max())
+
+
+# ---------------------------------------------------------------------------- (rho, z) batch path
+def _rz_only(array, lower, upper, **kw):
+    """The batch interpolator of ``array`` over the box, without the 3-D grid (fast)."""
+    from designkit.fieldmap import _prepare_rz, _union_spec, compute_rz_table, rz_table_spec
+
+    tables, metas = [], []
+    for proto, idx in array.coil_types().items():
+        spec = _union_spec([rz_table_spec(array.coils[k], lower, upper, 7.5e-5, 0.025, 0.05,
+                                          **kw) for k in idx])
+        tables.append(compute_rz_table(proto, spec, progress=False).astype(np.float32))
+        metas.append({"name": f"RZ{len(metas)}", "coils": idx, **spec})
+    rot = [c.pose.rotation for c in array.coils]
+    return _prepare_rz(tables, metas, array.positions(), rot)
+
+
+def _rel_err(a, ref):
+    return np.abs(a - ref).max(axis=(0, 2)) / np.abs(ref).max(axis=(0, 2))
+
+
+def test_batch_path_is_used_and_agrees_with_direct(fm, sample):
+    p, a = sample
+    assert fm.batch_uses_tables and len(p) >= fieldmap.BATCH_MIN
+    batch = fm.actuation(p)
+    assert np.all(_rel_err(batch, a) < 1e-3)
+    # the 3-D path (small batches) agrees with it to the same accuracy
+    small = np.concatenate([fm.actuation(p[k:k + 40]) for k in range(0, len(p), 40)])
+    assert np.all(_rel_err(small, a) < 2e-3)
+    # the physics the 5 rows do not impose: dBz/dz = -dBx/dx - dBy/dy matches direct Gzz
+    c = CoilArray.from_design(SMALL)
+    _, g = c.coils[4].field(p, 1.0, gradient=True)
+    gzz = -batch[:, 3, 4] - batch[:, 6, 4]
+    assert np.abs(gzz - g[:, 2, 2]).max() < 1e-3 * np.abs(g[:, 2, 2]).max()
+    full = gradient_from_g5(np.moveaxis(batch[:, 3:], 1, -1))
+    np.testing.assert_allclose(np.trace(full, axis1=-2, axis2=-1), 0, atol=1e-15)
+    np.testing.assert_array_equal(full, np.swapaxes(full, -1, -2))
+
+
+def test_batch_path_with_core_near_the_rim():
+    # thesis coil with its iron core: the bottom of the workspace is 5 mm above the core's rim
+    from designkit.fieldmap import interpolate_rz
+
+    d = default_design()
+    arr = CoilArray.from_design(d).coils[4:5]  # the centre coil (keeps the test fast)
+    arr = CoilArray(arr)
+    lo, hi = np.array([-0.03, -0.03, 0.01]), np.array([0.03, 0.03, 0.03])
+    prep = _rz_only(arr, lo, hi)
+    rng = np.random.default_rng(3)
+    p = rng.uniform(lo, hi, (600, 3))
+    p[:300, 2] = rng.uniform(0.01, 0.012, 300)  # just above the rim
+    ref = arr.actuation_matrix(p)
+    assert np.all(_rel_err(interpolate_rz(prep, p, 1), ref) < 1e-3)
+
+
+def test_batch_path_tilted_and_shifted_coils():
+    from designkit import Coil, Pose
+    from designkit.fieldmap import interpolate_rz
+
+    c = Coil.from_design(SMALL)
+    coils = (c.replace(pose=Pose.from_axis((0.06, 0.0, -0.07), (-0.3, -0.1, 1.0))),
+             c.replace(pose=Pose((-0.05, 0.0, -0.07))),
+             c.replace(pose=Pose.from_axis((0.0, 0.09, -0.08), (0.0, -0.3, 1.0))))
+    arr = CoilArray(coils)
+    lo, hi = np.array([-0.02, -0.02, 0.02]), np.array([0.02, 0.02, 0.04])
+    prep = _rz_only(arr, lo, hi)
+    assert len(prep) == 1 and prep[0]["rot"] is not None and not prep[0]["shared_z"]
+    p = np.random.default_rng(5).uniform(lo, hi, (300, 3))
+    assert np.all(_rel_err(interpolate_rz(prep, p, 3), arr.actuation_matrix(p)) < 1e-3)
+
+
+def test_rz_table_refuses_points_beside_the_sources():
+    from designkit.fieldmap import rz_table_spec
+
+    c = CoilArray.from_design(SMALL).coils[0]
+    # the box reaches below the top of the winding: no table (batches use the 3-D grid)
+    assert rz_table_spec(c, np.array([-0.1, -0.1, -0.01]), np.array([0.1, 0.1, 0.05]),
+                         7.5e-5, 0.025) is None

@@ -39,6 +39,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB): grid {g['shape']} at "
           f"{[round(s * 1e3, 4) for s in g['spacing_m']]} mm"
           + (f" + bottom slab {data['meta']['fine_grid']['shape']}" if data["meta"]["fine_grid"]
-             else "") + f", {data['meta']['n_coils']} coils, "
+             else "")
+          + "".join(f" + (rho, z) table {t['shape'][:2]} for coils {t['coils']}"
+                    for t in data["meta"]["rz_tables"])
+          + f", {data['meta']['n_coils']} coils, "
           f"{time.perf_counter() - t0:.1f} s")
     return 0
