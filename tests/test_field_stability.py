@@ -81,3 +81,13 @@ def test_far_away_1e6_m_is_the_dipole():
     np.testing.assert_allclose(lb, dipole_field(p, [0, 0, np.pi * 1e-4]), rtol=1e-11,
                                atol=1e-15 * np.abs(lb).max())
     assert MU0 == 4e-7 * np.pi
+
+
+def test_subnormal_offsets_from_the_axis_keep_a_unit_direction():
+    # hypot(5e-324, 5e-324) rounds to 5e-324: x / rho and y / rho would both be 1 (found by
+    # hypothesis); G must stay traceless and equal its on-axis value
+    for p in [(5e-324, 5e-324, 0.25), (1e-310, -3e-310, 0.1)]:
+        b, g = winding_field(p, RI, RO, L, N, 1.0, gradient=True)
+        b0, g0 = winding_field((0, 0, p[2]), RI, RO, L, N, 1.0, gradient=True)
+        np.testing.assert_allclose(g, g0, rtol=1e-14, atol=1e-14 * np.abs(g0).max())
+        np.testing.assert_allclose(b, b0, rtol=1e-14, atol=1e-14 * np.abs(b0).max())

@@ -42,9 +42,14 @@ __all__ = [
 def _cyl(points):
     x, y, z = points[:, 0], points[:, 1], points[:, 2]
     rho = np.hypot(x, y)
+    # subnormal x, y: hypot rounds (e.g. hypot(5e-324, 5e-324) = 5e-324) and then c^2 + s^2 != 1;
+    # the direction is taken from the rescaled coordinates instead
+    up = np.where(rho < 1e-290, 2.0**600, 1.0)
+    xs, ys = x * up, y * up
+    rs = np.hypot(xs, ys)
     with np.errstate(invalid="ignore", divide="ignore"):
-        c = np.where(rho > 0, x / rho, 1.0)
-        s = np.where(rho > 0, y / rho, 0.0)
+        c = np.where(rs > 0, xs / rs, 1.0)
+        s = np.where(rs > 0, ys / rs, 0.0)
     return rho, z, c, s
 
 

@@ -233,14 +233,7 @@ def winding_loops_2d(ri, ro, length, rho, z, *, dps=20):
         r_, z_ = mp.mpf(float(rho)), mp.mpf(float(z))
 
         def loop(a, zp, i):
-            u = z_ - zp
-            d2 = (a + r_) ** 2 + u * u
-            m = 4 * a * r_ / d2
-            K, E = mp.ellipk(m), mp.ellipe(m)
-            q = (a - r_) ** 2 + u * u
-            if i == 0:
-                return u / r_ * (-K + (a * a + r_ * r_ + u * u) * E / q) / (2 * mp.pi * mp.sqrt(d2))
-            return (K + (a * a - r_ * r_ - u * u) * E / q) / (2 * mp.pi * mp.sqrt(d2))
+            return _loop_rz_mp(a, r_, z_ - zp, mp)[i]
 
         ab = sorted({ri_, ro_} | ({r_} if ri_ < r_ < ro_ else set()))
         zb = sorted({-h_, h_} | ({z_} if -h_ < z_ < h_ else set()))

@@ -27,6 +27,8 @@ import numpy as np
 from .kernels import _loop_scaled, _sheet_scaled
 
 MAX_LEVELS = 30
+CHUNK = 2048
+"""Points per batch (memory: worst case ~2048 x 60 pieces x 64 nodes per temporary)."""
 GRADE = 4.0
 _BUCKETS = np.array([2, 3, 4, 5, 6, 7, 8, 10, 12, 14, 16, 20, 24, 28, 32, 40, 48, 56, 64])
 _GL = {int(n): np.polynomial.legendre.leggauss(int(n)) for n in _BUCKETS}
@@ -114,6 +116,11 @@ def winding_rz(ri, ro, h, rho, z, *, gradient=False, rtol=1e-10):
     rho = np.ascontiguousarray(rho, dtype=float)
     z = np.ascontiguousarray(z, dtype=float)
     n = rho.shape[0]
+    if n > CHUNK:
+        # points at edges need up to ~60 graded pieces x 64 nodes each: bound the memory
+        parts = [winding_rz(ri, ro, h, rho[k:k + CHUNK], z[k:k + CHUNK], gradient=gradient,
+                            rtol=rtol) for k in range(0, n, CHUNK)]
+        return tuple(np.concatenate(q) for q in zip(*parts))
     # The sheet form subtracts the two end terms: far away that loses eps * R^3 / (ri^2 L).
     # There, a 2-D Gauss-Legendre sum of loops (cancellation-free series) is used instead.
     r3 = (rho * rho + z * z) ** 1.5
