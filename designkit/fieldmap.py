@@ -54,7 +54,6 @@ import functools
 import hashlib
 import json
 import math
-import threading
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -66,10 +65,18 @@ from . import _validate as v
 from .array import ROWS, CoilArray
 from .errors import BadInputError
 
-FORMAT = "designkit-fieldmap"
-FORMAT_VERSION = 2  # 2: (rho, z) tables RZ0, RZ1, ... for the batch path
-UNITS = {"A_rows_0_2": "T/A", "A_rows_3_7": "T/(m A)", "dG": "T/(m^2 A)", "grid": "m",
-         "moment": "A m^2", "current": "A"}
+# The file format constants and the batch (rho, z) kernel have one definition, in the
+# numpy-only reader the hardware runner uses; designkit imports them from there.
+from firmware_io.mapfile import (  # noqa: E402
+    _CORNERS,
+    BATCH_MIN,
+    FORMAT,
+    FORMAT_VERSION,
+    UNITS,
+    _prepare_rz,
+    interpolate_rz,
+)
+
 T_ORDER = ("xxx", "xxy", "xxz", "xyy", "xyz", "yyy", "yyz")
 
 
@@ -237,7 +244,6 @@ def _t_full(t):
 # ============================================================================ (rho, z) tables
 RZ_QUANTITIES = ("Br/rho", "Bz", "(dBr/dz)/rho", "(dBr/drho - Br/rho)/rho^2")
 """Per-ampere quantities of a (rho, z) table, units T/(m A), T/A, T/(m^2 A), T/(m^3 A)."""
-BATCH_MIN = 64
 """Batches of at least this many points (all inside the box) use the (rho, z) tables."""
 
 
@@ -307,171 +313,6 @@ def compute_rz_table(coil, spec: dict, *, progress: bool = True, chunk: int = 81
     r1, r2 = rho[1] ** 2, rho[2] ** 2
     out[0, :, 2:] = (r2 * out[1, :, 2:] - r1 * out[2, :, 2:]) / (r2 - r1)
     return out
-
-
-def _prepare_rz(tables: list, metas: list, positions, rotations) -> list:
-    """Per coil type, what :func:`interpolate_rz` needs (numpy only)."""
-    prepared = []
-    for tab, m in zip(tables, metas):
-        idx = np.asarray(m["coils"], dtype=np.intp)
-        rot = np.asarray(rotations, float)[idx]
-        pos = np.asarray(positions, float)[idx]
-        identity = bool(np.all(rot == np.eye(3)))
-        shared_z = identity and bool(np.all(pos[:, 2] == pos[0, 2]))
-        n_rho, n_u, _ = tab.shape
-        nodes = np.ascontiguousarray(tab, dtype=np.float32).reshape(-1).view(np.complex128)
-        prepared.append({
-            "idx": idx,
-            "all": bool(len(idx) == len(positions) and np.all(idx == np.arange(len(idx)))),
-            "pos32": pos.astype(np.float32), "pos": pos, "rot": None if identity else rot,
-            "shared_z": shared_z, "nodes": nodes, "n_rho": n_rho, "n_u": n_u,
-            "inv_h": 1.0 / m["rho_step_m"], "inv_scale": 1.0 / m["rho_scale_m"],
-            "z_ref": m["z_ref_m"], "u0": m["u0"],
-            "inv_du": 1.0 / m["u_step"]})
-    return prepared
-
-
-_WORK = threading.local()
-RZ_CHUNK = 4096
-"""Points per block of :func:`interpolate_rz` (bounds its scratch memory, keeps it in cache)."""
-
-
-def _scratch(name: str, size: int, dtype) -> np.ndarray:
-    """A reusable per-thread 1-D buffer of at least ``size`` elements (first ``size`` returned).
-
-    Fresh large temporaries cost more than the arithmetic here: each new array above glibc's
-    mmap threshold is page-faulted in again on every call (~3x the kernel's time).
-    """
-    bufs = _WORK.__dict__.setdefault("bufs", {})
-    b = bufs.get(name)
-    if b is None or b.size < size or b.dtype != dtype:
-        b = bufs[name] = np.empty(size, dtype=dtype)
-    return b[:size]
-
-
-def interpolate_rz(prepared: list, p: np.ndarray, nc: int) -> np.ndarray:
-    """The batch kernel: points (n, 3) inside the box -> A (n, 8, nc) float64 (a strided view:
-    rows outermost in memory).
-
-    numpy only (:mod:`firmware_io.mapfile` repeats it). Per (point, coil) pair everything is
-    flat and contiguous -- numpy is fast on long inner loops and slow on short ones -- and
-    written into reused scratch buffers; a node's 4 float32 quantities are gathered as one
-    16-byte element (viewed as complex128).
-    """
-    n = len(p)
-    out = np.empty((8, n, nc))
-    for s in range(0, n, RZ_CHUNK):
-        e = min(n, s + RZ_CHUNK)
-        for t in prepared:
-            _rz_block(t, p[s:e], out[:, s:e])
-    return out.transpose(1, 0, 2)
-
-
-def _rz_block(t: dict, p: np.ndarray, out: np.ndarray) -> None:
-    """One coil type, one block of points: rows into ``out`` (8, n, nc)[..., t['idx']]."""
-    f32 = np.float32
-    n, k = len(p), len(t["idx"])
-    m = n * k
-    x = _scratch("x", m, f32)
-    y = _scratch("y", m, f32)
-    if t["rot"] is None:
-        pf = p.astype(f32)
-        np.subtract(pf[:, 0:1], t["pos32"][:, 0], out=x.reshape(n, k))
-        np.subtract(pf[:, 1:2], t["pos32"][:, 1], out=y.reshape(n, k))
-        if t["shared_z"]:
-            z = p[:, 2] - (t["pos"][0, 2] + t["z_ref"])
-        else:
-            z = (p[:, 2:3] - (t["pos"][:, 2] + t["z_ref"])).reshape(m)
-    else:
-        loc = np.einsum("nki,kij->nkj", p[:, None, :] - t["pos"], t["rot"])
-        x[:] = loc[:, :, 0].reshape(m)
-        y[:] = loc[:, :, 1].reshape(m)
-        z = loc[:, :, 2].reshape(m) - t["z_ref"]
-    # u = log(z - z_ref): per point when all coils of the type share a height
-    u = np.log(np.maximum(z, 1e-12))
-    u -= t["u0"]
-    u *= t["inv_du"]
-    np.clip(u, 0.0, t["n_u"] - 1.000001, out=u)
-    j = u.astype(np.intp)
-    tz = (u - j).astype(f32)
-    # v = rho / (1 + rho / rho_scale) in steps
-    rho = _scratch("rho", m, f32)
-    tr = _scratch("tr", m, f32)
-    np.multiply(x, x, out=rho)
-    np.multiply(y, y, out=tr)
-    rho += tr
-    np.sqrt(rho, out=rho)
-    np.multiply(rho, f32(t["inv_scale"]), out=tr)
-    tr += f32(1.0)
-    np.divide(rho, tr, out=tr)
-    tr *= f32(t["inv_h"])
-    np.minimum(tr, f32(t["n_rho"] - 1.0001), out=tr)
-    i = _scratch("i", m, np.intp)
-    np.copyto(i, tr, casting="unsafe")  # truncation = floor (tr >= 0)
-    np.subtract(tr, i, out=tr, casting="unsafe")
-    i *= t["n_u"]
-    if t["shared_z"]:
-        i.reshape(n, k)[:] += j[:, None]
-    else:
-        i += j
-    nodes, n_u = t["nodes"], t["n_u"]
-    c = _scratch("c", 4 * m, np.complex128).reshape(4, m)
-    # mode='clip' (indices are in range): with the default 'raise', out= costs a copy
-    np.take(nodes, i, out=c[0], mode="clip")
-    i += 1
-    np.take(nodes, i, out=c[1], mode="clip")
-    i += n_u
-    np.take(nodes, i, out=c[3], mode="clip")
-    i -= 1
-    np.take(nodes, i, out=c[2], mode="clip")
-    cf = c.view(f32)  # (4, 4 m): per pair the 4 quantities of a corner
-    # along u on both rho rows, then along rho with the 4 quantities transposed to rows
-    tzb = tz[:, None] if t["shared_z"] else np.repeat(tz, 4).reshape(m, 4)
-    for lo, hi in ((0, 1), (2, 3)):
-        a, b = cf[lo].reshape(n, -1), cf[hi].reshape(n, -1)
-        if not t["shared_z"]:
-            a, b = a.reshape(m, 4), b.reshape(m, 4)
-        b -= a
-        b *= tzb
-        b += a
-    q = _scratch("q", 4 * m, f32).reshape(4, m)
-    lo_t = cf[1].reshape(m, 4).T
-    np.subtract(cf[3].reshape(m, 4).T, lo_t, out=q)
-    q *= tr
-    q += lo_t
-    bb, bz, e, w = q
-    # Bx = b x, By = b y, Bz, Gxx = b + w x^2, Gxy = w x y, Gxz = e x, Gyy = b + w y^2, Gyz = e y
-    rows = _scratch("rows", 8 * m, f32).reshape(8, m)
-    np.multiply(bb, x, out=rows[0])
-    np.multiply(bb, y, out=rows[1])
-    rows[2] = bz
-    np.multiply(w, x, out=rows[4])  # w x, reused
-    np.multiply(rows[4], x, out=rows[3])
-    rows[3] += bb
-    rows[4] *= y
-    np.multiply(e, x, out=rows[5])
-    np.multiply(w, y, out=rows[6])
-    rows[6] *= y
-    rows[6] += bb
-    np.multiply(e, y, out=rows[7])
-    rows = rows.reshape(8, n, k)
-    if t["rot"] is not None:
-        rows = _rotate_rows(rows, t["rot"])
-    if t["all"]:
-        out[...] = rows
-    else:
-        out[:, :, t["idx"]] = rows
-
-
-def _rotate_rows(rows: np.ndarray, rot: np.ndarray) -> np.ndarray:
-    """Local rows (8, n, k) of coils with rotations (k, 3, 3) -> global rows (8, n, k)."""
-    b = rows[:3].astype(np.float64)
-    gxx, gxy, gxz, gyy, gyz = rows[3:].astype(np.float64)
-    g = np.stack([np.stack([gxx, gxy, gxz]), np.stack([gxy, gyy, gyz]),
-                  np.stack([gxz, gyz, -gxx - gyy])])  # (3, 3, n, k)
-    bg = np.einsum("kia,ank->ink", rot, b)
-    gg = np.einsum("kia,abnk,kjb->ijnk", rot, g, rot)
-    return np.stack([bg[0], bg[1], bg[2], gg[0, 0], gg[0, 1], gg[0, 2], gg[1, 1], gg[1, 2]])
 
 
 def build(design, *, spacing: float = 0.002, box=None, tolerance: float = 4e-4,
@@ -854,7 +695,6 @@ class FieldMap:
         return self._as_grid(self.meta["fine_grid"])
 
 
-_CORNERS = np.array([[a, b, c] for a in (0, 1) for b in (0, 1) for c in (0, 1)], float)
 
 
 def interpolate(data, grid, p, nc, order):

@@ -110,7 +110,7 @@ def interpolate_rz(prepared: list, p: np.ndarray, nc: int) -> np.ndarray:
     """The batch kernel: points (n, 3) inside the box -> A (n, 8, nc) float64 (a strided view:
     rows outermost in memory).
 
-    numpy only (a copy of designkit.fieldmap.interpolate_rz). Per (point, coil) pair everything is
+    numpy only (designkit.fieldmap imports this one definition). Per (point, coil) pair everything is
     flat and contiguous -- numpy is fast on long inner loops and slow on short ones -- and
     written into reused scratch buffers; a node's 4 float32 quantities are gathered as one
     16-byte element (viewed as complex128).

@@ -5,7 +5,6 @@ mu0: designkit uses 4 pi 1e-7; magpylib uses scipy's CODATA 2022 value 1.2566370
 each library dividing by its own mu0, so the comparison is independent of that choice.
 """
 
-import math
 
 import numpy as np
 import pytest

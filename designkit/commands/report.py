@@ -30,8 +30,6 @@ and fewer optimizer starts (seconds instead of about a minute); tests use it.
 from __future__ import annotations
 
 import argparse
-import dataclasses
-import math
 import warnings
 from pathlib import Path
 
