@@ -235,8 +235,9 @@ class CoreSolution:
         if self.linear_model and self.peak_b > KNEE_T:
             warnings.warn(
                 f"core flux density {self.peak_b:.2f} T exceeds the {KNEE_T} T knee of "
-                "low-carbon steel: the linear core model overestimates the field; use "
-                "Core(bh='steel1010')", SaturationWarning, stacklevel=4)
+                "low-carbon steel: the linear core model overestimates the field; for the "
+                "saturating B-H curve use Core(bh='steel1010') or, in a design file, "
+                "[core] bh = \"steel1010\"", SaturationWarning, stacklevel=4)
 
     def field(self, points_local: np.ndarray, *, gradient: bool = False,
               rule: Literal["auto", "panels"] = "auto"):
