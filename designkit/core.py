@@ -31,7 +31,7 @@ Models (``Core.model``):
     the core centre and ``N`` is the *magnetometric* demagnetizing factor of the cylinder for
     chi -> 0 (volume average of the demagnetizing field of a uniformly magnetized cylinder,
     Chen, Brug & Goldfarb, IEEE Trans. Magn. 27, 3601 (1991)); designkit computes it by
-    Gauss-Legendre quadrature of the exact cylinder field (:func:`demagnetizing_factor`). The
+    Nagaoka's exact closed form (:func:`demagnetizing_factor`). The
     field outside the core equals a current sheet K = M on its side
     (:func:`designkit.field.magnetized_cylinder_field`). FIELD_MATH.md explains why this model is
     only a first estimate. It ignores ``bh`` (linear), and warns when its M passes the knee.
@@ -641,41 +641,35 @@ def _solve_nonlinear(radius, length, offset, bh, key, current, n_slices=N_SLICES
                         float(np.max(b)) / current, False)
 
 
-@functools.lru_cache(maxsize=256)
-def demagnetizing_factor(aspect_ratio: float, nodes: int = 96) -> float:
+def demagnetizing_factor(aspect_ratio: float) -> float:
     """Magnetometric (volume-averaged) axial demagnetizing factor of a cylinder, chi -> 0.
+
+    Exact closed form: the field energy of a uniformly magnetized cylinder is
+    (mu0/2) M^2 V (1 - N_m), and it equals that of its equivalent current sheet (K = M), whose
+    inductance is Nagaoka's k_N mu0 pi R^2 / L; hence N_m = 1 - k_N with
+    k_N = 4 / (3 pi k') [k'^2 (K - E) / k^2 + E - k], k = D / sqrt(D^2 + L^2), k' = L / sqrt(D^2 + L^2).
+    (K - E) / k^2 is Bulirsch's cel(k', 1, 0, 1), free of cancellation for long rods.
+    Chen, Brug & Goldfarb, IEEE Trans. Magn. 27, 3601 (1991) tabulate the same values.
 
     Parameters
     ----------
     aspect_ratio : float
-        Length / diameter.
+        Length / diameter (> 0).
 
     Returns
     -------
     float
-        N_m in (0, 1): the volume average of -H_demag,z / M for uniform axial M.
-        Accuracy ~1e-6 (Gauss-Legendre, the rim log-singularities limit it).
+        N_m in (0, 1).
     """
-    from .field.kernels import sheet_rz
+    from scipy.special import ellipe
 
-    a = 1.0
-    half = aspect_ratio  # half-length in units of the radius (L / 2 = aspect * 2a / 2)
-    x, w = np.polynomial.legendre.leggauss(nodes)
-    # graded split of r and z to resolve the rim: [0, 0.9, 1] and [0, 0.9 h, h]
-    r_nodes, r_w, z_nodes, z_w = [], [], [], []
-    for lo, hi in ((0.0, 0.9), (0.9, 1.0)):
-        r_nodes.append((hi - lo) / 2 * x + (hi + lo) / 2)
-        r_w.append((hi - lo) / 2 * w)
-    for lo, hi in ((0.0, 0.9 * half), (0.9 * half, half)):
-        z_nodes.append((hi - lo) / 2 * x + (hi + lo) / 2)
-        z_w.append((hi - lo) / 2 * w)
-    rr = np.concatenate(r_nodes)
-    wr = np.concatenate(r_w)
-    zz = np.concatenate(z_nodes)
-    wz = np.concatenate(z_w)
-    R, Z = np.meshgrid(rr, zz, indexing="ij")
-    _, bz = sheet_rz(a, half, R.ravel(), Z.ravel())  # field per unit mu0*K, K = M
-    # inside the material B = mu0 (H + M), the sheet gives B/(mu0 M); H/M = B/(mu0 M) - 1
-    hz = bz.reshape(R.shape) - 1.0
-    avg = np.sum(hz * (wr * rr)[:, None] * wz[None, :]) / (0.5 * half)
-    return float(-avg)
+    from .field.kernels import cel
+
+    aspect = float(aspect_ratio)
+    d2 = 1.0 / (1.0 + aspect * aspect)  # k^2 with D = 1, L = aspect
+    k = math.sqrt(d2)
+    kp = aspect * k
+    k_minus_e_over_k2 = float(cel(kp, 1.0, 0.0, 1.0))
+    e = float(ellipe(d2))
+    k_n = 4.0 / (3.0 * math.pi * kp) * (kp * kp * k_minus_e_over_k2 + e - k)
+    return 1.0 - k_n

@@ -75,6 +75,29 @@ def test_saturation_warning_for_linear_core_at_6A():
         core.field_local(np.array([[0, 0, 0.08]]), coil, 6.0)
 
 
+@pytest.mark.parametrize("aspect", [0.1, 0.5, 1.0, 110 / 24, 20.0])
+def test_demagnetizing_factor_equals_volume_average_of_the_demag_field(aspect):
+    """Independent check of the closed form: average -H_z/M over the volume by Gauss-Legendre
+    quadrature of the exact cylinder field (graded towards the rims)."""
+    from designkit.field.kernels import sheet_rz
+
+    x, w = np.polynomial.legendre.leggauss(96)
+
+    def rule(edges):
+        pts = [(hi - lo) / 2 * x + (hi + lo) / 2 for lo, hi in zip(edges[:-1], edges[1:])]
+        wts = [(hi - lo) / 2 * w for lo, hi in zip(edges[:-1], edges[1:])]
+        return np.concatenate(pts), np.concatenate(wts)
+
+    half = aspect  # radius 1, half-length = aspect
+    rr, wr = rule([0.0, 0.9, 0.99, 1.0])
+    zz, wz = rule([0.0, 0.9 * half, half - 0.01, half])
+    r, z = np.meshgrid(rr, zz, indexing="ij")
+    _, bz = sheet_rz(1.0, half, r.ravel(), z.ravel())
+    hz = bz.reshape(r.shape) - 1.0  # H/M = B/(mu0 M) - 1 inside the material
+    average = np.sum(hz * (wr * rr)[:, None] * wz[None, :]) / (0.5 * half)
+    assert demagnetizing_factor(aspect) == pytest.approx(-average, rel=1e-6)
+
+
 def test_demagnetizing_factor_limits():
     # long rod -> 0, thin disc -> 1, monotone in between
     n = [demagnetizing_factor(g) for g in (0.1, 1.0, 4.58, 20.0)]
