@@ -391,9 +391,12 @@ def maximize(objective: Callable, constraints: Callable | None, n_constraints: i
     def unscale(u):
         return lo + np.clip(u, 0.0, 1.0) * span
 
+    history: list[tuple[float, np.ndarray]] = []
+
     def f_nl(u, grad):
         count[0] += 1
         val, g = objective(unscale(u))
+        history.append((float(val), np.array(u, dtype=float)))
         if grad.size:
             grad[:] = np.asarray(g) * span
         return float(val)
@@ -404,27 +407,41 @@ def maximize(objective: Callable, constraints: Callable | None, n_constraints: i
         if grad.size:
             grad[:, :] = np.asarray(jac) * span[None, :]
 
-    opt = nlopt.opt(getattr(nlopt, algorithm), n)
-    opt.set_lower_bounds(np.zeros(n))
-    opt.set_upper_bounds(np.ones(n))
-    opt.set_max_objective(f_nl)
-    if n_constraints:
-        opt.add_inequality_mconstraint(c_nl, [1e-10] * n_constraints)
-    opt.set_xtol_rel(xtol_rel)
-    opt.set_ftol_rel(ftol_rel)
-    opt.set_maxeval(max_evaluations)
+    def feasible(u) -> bool:
+        return not n_constraints or bool(np.all(np.asarray(constraints(unscale(u))[0]) <= 1e-8))
+
+    def best_seen(fallback):
+        """SLSQP can stop on round-off after real progress: keep the best feasible iterate."""
+        for val, u in sorted(history, key=lambda item: -item[0])[:20]:
+            if feasible(u):
+                return u
+        return fallback
+
+    def run_once(u_start):
+        opt = nlopt.opt(getattr(nlopt, algorithm), n)
+        opt.set_lower_bounds(np.zeros(n))
+        opt.set_upper_bounds(np.ones(n))
+        opt.set_max_objective(f_nl)
+        if n_constraints:
+            opt.add_inequality_mconstraint(c_nl, [1e-10] * n_constraints)
+        opt.set_xtol_rel(xtol_rel)
+        opt.set_ftol_rel(ftol_rel)
+        opt.set_maxeval(max(max_evaluations - count[0], 1))
+        try:
+            return opt.optimize(u_start), opt.last_optimize_result()
+        except nlopt.RoundoffLimited:
+            return best_seen(u_start), -4
+
     u0 = np.clip((np.asarray(start, dtype=float) - lo) / span, 0.0, 1.0)
-    try:
-        u = opt.optimize(u0)
-        code = opt.last_optimize_result()
-    except nlopt.RoundoffLimited:  # report the start; the multistart's other runs decide
-        u = u0
-        code = -4
+    u, code = run_once(u0)
+    if code == -4 and count[0] < max_evaluations and not np.array_equal(u, u0):
+        # one restart from the best iterate: a fresh quasi-Newton model usually finishes
+        u2, code2 = run_once(u)
+        if objective(unscale(u2))[0] >= objective(unscale(u))[0] and feasible(u2):
+            u, code = u2, code2
     x = unscale(u)
     val = objective(x)[0]
-    feas = True
-    if n_constraints:
-        feas = bool(np.all(np.asarray(constraints(x)[0]) <= 1e-8))
+    feas = feasible(u)
     return LocalRun(tuple(map(float, start)), tuple(map(float, x)), float(val), feas, int(code),
                     count[0])
 

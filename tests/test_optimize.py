@@ -139,3 +139,24 @@ def test_core_protrusion_variable_needs_a_core():
     with pytest.raises(BadInputError, match="core_protrusion_m"):
         opt.CoilDesignProblem.from_design(default_design(),
                                           variables=opt.VARIABLES + ("core_protrusion_m",))
+
+
+def test_freeing_the_core_protrusion_cannot_lower_the_optimum():
+    """A relaxation: the 3-variable optimum (protrusion fixed at 5 mm) is a feasible point of
+    the 4-variable problem, so its optimum must be at least as large (and its constraints hold).
+    Also guards the driver against returning the start point when SLSQP stops on round-off."""
+    import warnings
+
+    from designkit.core import SaturationWarning
+
+    design = default_design()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SaturationWarning)
+        fixed = opt.CoilDesignProblem.from_design(design, core_model="thesis-uniform")
+        free = opt.CoilDesignProblem.from_design(
+            design, core_model="thesis-uniform",
+            variables=opt.VARIABLES + ("core_protrusion_m",), max_core_protrusion_m=0.02)
+        r_fixed = opt.solve(fixed, starts=2)
+        r_free = opt.solve(free, starts=2)
+    assert r_free.best.force_n >= r_fixed.best.force_n * (1 - 1e-6)
+    assert all(c["margin"] >= -1e-6 for c in r_free.best.constraints.values())
