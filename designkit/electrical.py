@@ -316,11 +316,7 @@ def inductance(coil: "Coil", wire: WireSpec | None = None) -> float:
         _check_wire(wire)
     ell = air_inductance(coil)
     if coil.core is not None:
-        extra = getattr(coil.core, "extra_inductance", None)
-        if extra is None:  # pragma: no cover - only while designkit.core lacks the method
-            raise NotImplementedError("designkit.core.Core.extra_inductance is missing: the "
-                                      "inductance of a coil with a core cannot be computed")
-        ell += float(extra(coil))
+        ell += float(coil.core.extra_inductance(coil))
     return ell
 
 

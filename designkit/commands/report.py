@@ -96,27 +96,20 @@ def design_point_summary(design: Design, current_a: float) -> dict:
 
 
 def coil_properties(design: Design) -> dict:
-    """Electrical and mechanical quantities of the design's coil (SI); {} parts if unavailable."""
+    """Electrical quantities of the design's coil (SI): R, current at the supply, L (with the
+    core, small-signal) and L/R."""
     coil = Coil.from_design(design)
-    out: dict = {"dipole_moment_per_amp_a_m2": coil.dipole_moment_per_amp}
-    try:
-        r = coil.resistance(design.wire)
-        out["resistance_ohm"] = r
-        out["current_at_supply_a"] = design.drive.supply_voltage_v / r
-    except (ImportError, AttributeError) as exc:
-        out["resistance_ohm"] = None
-        out["resistance_skipped"] = f"{type(exc).__name__}: {exc}"
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            ind = coil.inductance(design.wire)
-        out["inductance_h"] = ind
-        if out.get("resistance_ohm"):
-            out["time_constant_s"] = ind / out["resistance_ohm"]
-    except (ImportError, AttributeError, NotImplementedError) as exc:
-        out["inductance_h"] = None
-        out["inductance_skipped"] = f"{type(exc).__name__}: {exc}"
-    return out
+    r = coil.resistance(design.wire)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the saturation warning is reported once, elsewhere
+        ind = coil.inductance(design.wire)
+    return {
+        "dipole_moment_per_amp_a_m2": coil.dipole_moment_per_amp,
+        "resistance_ohm": r,
+        "current_at_supply_a": design.drive.supply_voltage_v / r,
+        "inductance_h": ind,
+        "time_constant_s": ind / r,
+    }
 
 
 _UNITS = [("_a_per_m", "A/m"), ("_a_m2", "A m^2"), ("_ohm_m", "ohm m"), ("_per_k", "1/K"),
