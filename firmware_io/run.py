@@ -1,0 +1,167 @@
+"""Hardware entry point on the controller: ``python -m firmware_io.run --bus 1 --map F --scene F``.
+
+Thin: parse, load the map and the scene (refusing a pair from different designs), open the bus
+(or two: ``--sensor-bus``), build the drivers with the default wiring (HARDWARE.md), put every
+coil in the safe state and run :class:`firmware_io.runner.Runner` until Ctrl-C or ``--duration``.
+Sensors are read in a background thread at the rate the bus allows; the control loop predicts
+between frames. Everything a user can get wrong is checked before any coil is energized.
+Needs numpy and smbus2 only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+import time
+
+import numpy as np
+
+from .errors import FirmwareIOError
+
+EXIT_BAD_INPUT = 2
+
+
+class ThreadedSensorSource:
+    """Read the sensor arrays continuously in a thread; hand the newest frame to the loop once."""
+
+    def __init__(self, arrays, clock=time.monotonic):
+        self.arrays, self.clock = arrays, clock
+        self._lock = threading.Lock()
+        self._frame = None
+        self._stop = threading.Event()
+        self.error: BaseException | None = None
+        self.thread = threading.Thread(target=self._loop, name="sensors", daemon=True)
+
+    def start(self) -> None:
+        self.thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self.thread.join(timeout=1.0)
+
+    def _loop(self) -> None:
+        from .runner import SensorFrame
+
+        while not self._stop.is_set():
+            t0 = self.clock()
+            try:
+                r = self.arrays.read()
+            except Exception as exc:  # noqa: BLE001 - the loop must see it, not the thread die
+                self.error = exc
+                status = ("failed",) * len(self.arrays.sensors)
+                n = len(status) // 2
+                frame = SensorFrame(np.full((n, 3), np.nan), np.full((n, 3), np.nan), status, t0)
+            else:
+                frame = SensorFrame(r.top_t, r.bottom_t, r.status, t0)
+            with self._lock:
+                self._frame = frame
+
+    def __call__(self, t_s: float):
+        with self._lock:
+            frame, self._frame = self._frame, None
+        return frame
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m firmware_io.run",
+                                description="Run the haptic rendering loop on the device.")
+    p.add_argument("--bus", required=True, help="I2C bus number (/dev/i2c-N) of the PWM boards "
+                   "(and of the sensors unless --sensor-bus is given)")
+    p.add_argument("--sensor-bus", default=None, help="a second I2C bus for the sensor arrays")
+    p.add_argument("--map", required=True, help="force-current map file (designkit map)")
+    p.add_argument("--scene", required=True, help="compiled scene file (designkit scene compile)")
+    p.add_argument("--method", default="model", help="localization method (default: model)")
+    p.add_argument("--period-ms", type=float, default=1.0, help="control period, ms (default 1)")
+    p.add_argument("--duration", type=float, default=None, help="stop after this many s")
+    p.add_argument("--unipolar", action="store_true", help="drive 0 <= I (the thesis' drive)")
+    return p
+
+
+def _bus_number(text: str, what: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise FirmwareIOError(f"{what} must be an I2C bus number (N of /dev/i2c-N); instead "
+                              f"received {text!r}") from None
+    if n < 0:
+        raise FirmwareIOError(f"{what} must be >= 0; instead received {n}")
+    return n
+
+
+def load_inputs(map_path: str, scene_path: str, method: str):
+    """Map, scene and localizer, checked against each other (no device is touched)."""
+    from .localization import Localizer
+    from .mapfile import MapFile
+    from .runner import check_same_design
+    from .scene import load_scene
+
+    fmap = MapFile.load(map_path)
+    scene = load_scene(scene_path)
+    check_same_design(fmap.design_sha256, scene.design_sha256)
+    localizer = Localizer.from_map(map_path, method=method)
+    return fmap, scene, localizer
+
+
+def open_device(bus_number: int, sensor_bus_number: int | None, drive_args: dict):
+    """Open the bus(es) and build the PWM boards and sensor arrays (default wiring)."""
+    from .bus import open_bus
+    from .coils import CoilDriver
+    from .devices import PCA9685
+    from .md10c import CoilDrive
+    from .sensors import SensorArrays
+
+    bus = open_bus(bus_number)
+    sbus = bus if sensor_bus_number is None else open_bus(sensor_bus_number)
+    n = drive_args["n_coils"]
+    boards = [PCA9685(bus, 0x40 + b) for b in range((n + 7) // 8)]
+    drives = [CoilDrive(drive_args["supply_voltage_v"], r,
+                        min(drive_args["supply_voltage_v"] / r, 13.0))
+              for r in drive_args["resistance_ohm"]]
+    return CoilDriver(boards, drives), SensorArrays(sbus)
+
+
+def main(argv: list[str] | None = None) -> int:
+    from .allocation import allocate
+    from .runner import Runner, config_from_map
+
+    args = build_parser().parse_args(argv)
+    try:
+        bus_n = _bus_number(args.bus, "--bus")
+        sbus_n = None if args.sensor_bus is None else _bus_number(args.sensor_bus, "--sensor-bus")
+        fmap, scene, localizer = load_inputs(args.map, args.scene, args.method)
+        cfg = config_from_map(fmap, control_period_s=args.period_ms * 1e-3,
+                              unipolar=args.unipolar)
+        coils, arrays = open_device(bus_n, sbus_n, {
+            "n_coils": cfg.n_coils, "supply_voltage_v": cfg.supply_voltage_v,
+            "resistance_ohm": cfg.resistance_ohm})
+        arrays.configure()
+    except (FirmwareIOError, OSError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    source = ThreadedSensorSource(arrays)
+    runner = Runner(fmap, scene, localizer, localizer, allocate, coils, source, cfg)
+    runner.start()
+    source.start()
+    t0 = time.monotonic()
+    period = cfg.control_period_s
+    try:
+        next_t = t0
+        while args.duration is None or time.monotonic() - t0 < args.duration:
+            runner.step(time.monotonic())
+            next_t += period
+            delay = next_t - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            else:
+                next_t = time.monotonic()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        runner.stop()
+        source.stop()
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

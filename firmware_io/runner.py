@@ -1,0 +1,553 @@
+"""The rendering runner: sensors -> position -> object force -> currents -> PWM, fail-safe.
+
+One control step (period ``T``, default 1 ms)::
+
+    newest sensor frame (two (9, 3) arrays, per-sensor status)      [SensorSource]
+      -> localize on a new frame, constant-velocity prediction to now [localizer, tracker]
+      -> object force f at the predicted position                   [scene]
+      -> currents: min ||F(p) I - (f - F0(p))|| within the bounds    [allocation]
+      -> coil dynamics: voltage feed-forward so that the current reaches the command at the
+         end of the period (within the supply), I^2 t thermal guard  [CoilDynamics, ThermalGuard]
+      -> MD10C duty/direction, one block write per PCA9685           [CoilDriver]
+
+Only the rows of A(p) the force needs are evaluated (Fz alone for a z-dipole when the scene asks
+for the vertical force only) and coils whose force per ampere at p is below ``skip_fraction``
+of the largest are left out of the allocation (their current is 0): the force they could add is
+bounded by ``skip_fraction * max_k |F_k| * I_limit`` per coil (stated in the summary).
+
+Faults and the safe state. Every fault switches every coil off in the same step (one ALL_LED_OFF
+write per board: :meth:`CoilDriver.all_off`), writes one log line and records the state name.
+
+================  =========================================  ===================================
+state             cause                                      resume policy
+================  =========================================  ===================================
+pwm_nack          a PCA9685 write was not acknowledged        boards re-initialised after
+                                                             ``resume_after_s``; latched after
+                                                             ``max_pwm_retries`` failures
+sensor_stuck      a sensor's frame counter stopped            after ``resume_after_s``, with that
+sensor_dead       a sensor NACKs / failed to configure        sensor excluded (NaN) for as long as
+sensor_saturated  a sensor reads at the end of its range      it is unhealthy, if the estimate is ok
+lost              the localizer flags its estimate (ok=False) when an estimate is ok again
+out_of_box        the estimate left the map's box             when it is back inside the box
+overrun           a step's compute time exceeded the period   after ``resume_after_s``
+thermal           a coil's I^2 t exceeded its budget          when it fell below ``thermal_resume``
+                                                             of the budget (cooled)
+over_limit        a command above the per-coil limit or the   after ``resume_after_s``
+                  total budget reached the output stage
+================  =========================================  ===================================
+
+Imports numpy only (plus the firmware_io drivers); the hardware entry point is
+``python -m firmware_io.run``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import BadInputError, CoilWriteError, FirmwareIOError
+
+SENSOR_FAULTS = {"stale": "sensor_stuck", "recovered": "sensor_stuck",
+                 "saturated": "sensor_saturated", "nack": "sensor_dead", "failed": "sensor_dead",
+                 "unconfigured": "sensor_dead", "not_ready": "sensor_dead",
+                 "test_mode": "sensor_dead"}
+"""Per-sensor status (firmware_io.sensors / devices.TLV493D) -> the runner's fault name; any status
+but 'ok' excludes the sensor from localization."""
+
+FAULTS = ("pwm_nack", "sensor_stuck", "sensor_dead", "sensor_saturated", "lost", "out_of_box",
+          "overrun", "thermal", "over_limit")
+
+
+# ---------------------------------------------------------------------------------------------
+# coil dynamics and thermal guard (pure numpy)
+
+
+def feedforward_voltage(target_a, current_a, resistance_ohm, inductance_h, period_s,
+                        supply_v):
+    """Voltage that takes an R-L coil from ``current_a`` to ``target_a`` in one period.
+
+    With a constant voltage V over the period T the current of an R-L coil is
+    ``I(T) = V/R + (I0 - V/R) exp(-T R / L)`` exactly, so
+    ``V = R (I* - I0 e) / (1 - e)`` with ``e = exp(-T R / L)``. The result is clipped to
+    ``[-supply_v, supply_v]`` (the MD10C's sign-magnitude output); then the target is reached
+    later, never overshot, because I(t) is monotone under a constant V.
+
+    Parameters
+    ----------
+    target_a, current_a : ndarray, shape (n,), A
+    resistance_ohm, inductance_h : ndarray, shape (n,), ohm and H (> 0)
+    period_s, supply_v : float, s and V
+
+    Returns
+    -------
+    ndarray, shape (n,), V
+    """
+    e = np.exp(-period_s * resistance_ohm / inductance_h)
+    v = resistance_ohm * (target_a - current_a * e) / (1.0 - e)
+    return np.clip(v, -supply_v, supply_v)
+
+
+def rl_step(current_a, voltage_v, resistance_ohm, inductance_h, period_s):
+    """Exact R-L response to a constant voltage over one period: I(T), A, shape (n,)."""
+    e = np.exp(-period_s * resistance_ohm / inductance_h)
+    i_inf = voltage_v / resistance_ohm
+    return i_inf + (current_a - i_inf) * e
+
+
+@dataclass
+class ThermalGuard:
+    """I^2 t budget per coil with first-order cooling.
+
+    ``E_k <- E_k exp(-T / tau) + I_k^2 T``; a coil carrying ``continuous_current_a`` forever
+    settles at ``E = I_c^2 tau (1 - ...)`` -> the budget is ``I_c^2 * tau``. A fault when any
+    ``E_k`` exceeds the budget; cleared when every ``E_k`` is below ``resume_fraction`` of it.
+
+    Attributes
+    ----------
+    continuous_current_a : float, A
+        Current the coil can carry indefinitely without reaching its temperature limit.
+    time_constant_s : float, s
+        Thermal time constant of the winding.
+    """
+
+    n_coils: int
+    continuous_current_a: float
+    time_constant_s: float
+    resume_fraction: float = 0.8
+    energy_a2s: np.ndarray = field(default=None)  # type: ignore[assignment]
+
+    def __post_init__(self):
+        if not (self.continuous_current_a > 0 and math.isfinite(self.continuous_current_a)):
+            raise BadInputError("continuous_current_a", "a finite current > 0 A",
+                                self.continuous_current_a)
+        if not (self.time_constant_s > 0 and math.isfinite(self.time_constant_s)):
+            raise BadInputError("time_constant_s", "a finite time > 0 s", self.time_constant_s)
+        if self.energy_a2s is None:
+            self.energy_a2s = np.zeros(self.n_coils)
+
+    @property
+    def budget_a2s(self) -> float:
+        return self.continuous_current_a ** 2 * self.time_constant_s
+
+    def update(self, current_a: np.ndarray, period_s: float) -> None:
+        self.energy_a2s *= math.exp(-period_s / self.time_constant_s)
+        self.energy_a2s += np.square(current_a) * period_s
+
+    def exceeded(self) -> bool:
+        return bool(np.any(self.energy_a2s > self.budget_a2s))
+
+    def cooled(self) -> bool:
+        return bool(np.all(self.energy_a2s < self.resume_fraction * self.budget_a2s))
+
+
+# ---------------------------------------------------------------------------------------------
+# configuration and records
+
+
+@dataclass(frozen=True)
+class RunnerConfig:
+    """Everything the loop needs besides its devices, SI units.
+
+    Attributes
+    ----------
+    resistance_ohm, inductance_h : tuple of float, one per coil
+        Coil resistance at the operating temperature and inductance (secant, at the operating
+        current) -> the L/R lag the feed-forward compensates.
+    supply_voltage_v : float
+        MD10C motor supply, V (<= 30 V).
+    current_limit_a, total_current_a : float
+        Per-coil bound |I_k| <= u and the budget sum |I_k| <= I_t, A.
+    unipolar : bool
+        0 <= I_k (the thesis' drive) instead of the MD10C's bipolar drive.
+    control_period_s : float
+        Step period T, s (default 1 ms).
+    force_axes : {'z', 'xyz'}
+        Force components to render: 'z' evaluates only the two rows of A(p) that Fz of a
+        z-dipole needs.
+    skip_fraction : float
+        Coils whose |force per ampere| at p is below this fraction of the largest are not
+        driven (0: never skip).
+    feedforward : bool
+        Voltage feed-forward through the L/R model (off: the duty is the steady-state one).
+    thermal_continuous_current_a, thermal_time_constant_s : float
+        :class:`ThermalGuard` parameters.
+    resume_after_s : float
+        Fault-free time before a transient fault is cleared, s.
+    max_pwm_retries : int
+        PCA9685 re-initialisations before a ``pwm_nack`` is latched.
+    overrun_factor : float
+        A step is an overrun when its compute time exceeds ``overrun_factor * control_period_s``.
+    """
+
+    resistance_ohm: tuple
+    inductance_h: tuple
+    supply_voltage_v: float
+    current_limit_a: float
+    total_current_a: float
+    unipolar: bool = False
+    control_period_s: float = 1e-3
+    force_axes: str = "z"
+    skip_fraction: float = 0.0
+    feedforward: bool = True
+    thermal_continuous_current_a: float = 3.0
+    thermal_time_constant_s: float = 300.0
+    resume_after_s: float = 0.25
+    max_pwm_retries: int = 3
+    overrun_factor: float = 1.0
+
+    def __post_init__(self):
+        n = len(self.resistance_ohm)
+        r = np.asarray(self.resistance_ohm, float)
+        ind = np.asarray(self.inductance_h, float)
+        if n == 0 or not np.all(np.isfinite(r)) or np.any(r <= 0):
+            raise BadInputError("resistance_ohm", "one finite value > 0 ohm per coil",
+                                self.resistance_ohm)
+        if ind.shape != (n,) or not np.all(np.isfinite(ind)) or np.any(ind <= 0):
+            raise BadInputError("inductance_h", f"{n} finite values > 0 H", self.inductance_h)
+        if not 5.0 <= self.supply_voltage_v <= 30.0:
+            raise BadInputError("supply_voltage_v", "in [5, 30] V (MD10C rating)",
+                                self.supply_voltage_v)
+        if not (0 < self.current_limit_a <= 13.0):
+            raise BadInputError("current_limit_a", "in (0, 13] A", self.current_limit_a)
+        if not (self.total_current_a >= 0 and math.isfinite(self.total_current_a)):
+            raise BadInputError("total_current_a", "a finite value >= 0 A", self.total_current_a)
+        if not (0 < self.control_period_s <= 0.1):
+            raise BadInputError("control_period_s", "in (0, 0.1] s", self.control_period_s)
+        if self.force_axes not in ("z", "xyz"):
+            raise BadInputError("force_axes", "'z' or 'xyz'", self.force_axes)
+        if not 0 <= self.skip_fraction < 1:
+            raise BadInputError("skip_fraction", "in [0, 1)", self.skip_fraction)
+
+    @property
+    def n_coils(self) -> int:
+        return len(self.resistance_ohm)
+
+
+@dataclass
+class StepRecord:
+    """What one control step did (SI). ``state`` is 'running', 'safe' or a fault name."""
+
+    t_s: float
+    position_m: np.ndarray
+    force_ref_n: np.ndarray
+    command_a: np.ndarray
+    voltage_v: np.ndarray
+    predicted_current_a: np.ndarray
+    loop_s: float
+    state: str
+    new_frame: bool
+
+
+@dataclass
+class SensorFrame:
+    """Two arrays of readings (T, NaN where unusable), their status and the time of the frame."""
+
+    top_t: np.ndarray
+    bottom_t: np.ndarray
+    status: tuple
+    t_s: float
+
+
+# ---------------------------------------------------------------------------------------------
+# the runner
+
+
+class Runner:
+    """Compose map, scene, localizer, allocator and drivers into the fail-safe control loop.
+
+    Parameters
+    ----------
+    fieldmap : object
+        ``actuation(point) -> (8, n)`` (rows Bx, By, Bz, dBx/dx, dBx/dy, dBx/dz, dBy/dy,
+        dBy/dz, per ampere), ``bounds`` (lower (3,), upper (3,)) m, ``moment_a_m2`` (3,), and
+        optionally ``bias_force(point) -> (3,)`` N and ``actuation_rows(point, rows)``.
+    scene : object
+        ``force(position_m, velocity_m_s) -> (3,)`` N, the object's force on the finger.
+    localizer : object
+        ``locate(top, bottom, currents=None)`` -> an estimate with ``position_m`` and ``ok``.
+    tracker : object
+        ``update(t_s, position_m)``, ``predict(t_s) -> (position_m, velocity_m_s)``,
+        ``reset()``.
+    allocate : callable
+        ``allocate(force_matrix, target, current_limit, total_limit, unipolar=...)``
+        -> (currents, residual) (firmware_io.allocation).
+    coils : CoilDriver
+    sensors : callable
+        ``sensors(t_s) -> SensorFrame | None``: the newest frame not yet handed out, or None.
+    config : RunnerConfig
+    log : callable
+        ``log(line)`` for one line per fault/resume.
+    clock : callable
+        ``clock() -> s`` for the compute time of a step (default ``time.perf_counter``).
+    """
+
+    def __init__(self, fieldmap, scene, localizer, tracker, allocate: Callable, coils,
+                 sensors: Callable, config: RunnerConfig, *, log: Callable[[str], None] = print,
+                 clock: Callable[[], float] = time.perf_counter):
+        if coils.n_coils != config.n_coils:
+            raise BadInputError("config.resistance_ohm", f"{coils.n_coils} coils (the driver's)",
+                                config.n_coils)
+        self.map, self.scene, self.localizer, self.tracker = fieldmap, scene, localizer, tracker
+        self.allocate, self.coils, self.sensors, self.cfg = allocate, coils, sensors, config
+        self.log, self.clock = log, clock
+        n = config.n_coils
+        self.r = np.asarray(config.resistance_ohm, float)
+        self.ind = np.asarray(config.inductance_h, float)
+        self.limit = np.full(n, config.current_limit_a)
+        self.thermal = ThermalGuard(n, config.thermal_continuous_current_a,
+                                    config.thermal_time_constant_s)
+        m = np.asarray(fieldmap.moment_a_m2, float)
+        self.moment = m
+        # F = F(m) G5 (thesis eq. 2.5), the one numpy definition on the controller side
+        mx, my, mz = m
+        self.force_rows = np.array([[mx, my, mz, 0.0, 0.0],
+                                    [0.0, mx, 0.0, my, mz],
+                                    [-mz, 0.0, mx, -mz, my]])
+        self.z_only = config.force_axes == "z" and abs(mx) + abs(my) <= 1e-12 * abs(mz)
+        self.lo, self.hi = (np.asarray(b, float) for b in fieldmap.bounds)
+        self.current_a = np.zeros(n)   # model of the coil currents (feed-forward state)
+        self.command_a = np.zeros(n)
+        self.state = "safe"
+        self.fault: str | None = None
+        self.fault_since_s = -math.inf
+        self.clear_since_s: float | None = None
+        self.latched = False
+        self.pwm_failures = 0
+        self.pwm_reinit_needed = False
+        self.excluded = np.zeros(2 * n, dtype=bool)
+        self.last_estimate_ok = False
+        self.have_fix = False
+        self.position_m = np.full(3, np.nan)
+        self.fault_log: list[tuple[float, str, str]] = []
+        self.last_frame: SensorFrame | None = None
+
+    # -- life cycle ----------------------------------------------------------------------------
+    def start(self, pwm_frequency_hz: float = 1526.0) -> None:
+        """Initialise every PWM board into the safe state (all coils off)."""
+        self.coils.initialize(pwm_frequency_hz)
+        self.coils.all_off()
+        self.current_a[:] = 0.0
+        self.state = "safe"
+
+    def stop(self) -> None:
+        self.coils.all_off()
+        self.state = "safe"
+
+    # -- faults --------------------------------------------------------------------------------
+    def _enter_fault(self, t_s: float, name: str, detail: str) -> None:
+        if self.fault != name:
+            self.log(f"[{t_s:9.4f} s] FAULT {name}: {detail}; all coils off")
+            self.fault_log.append((t_s, name, detail))
+        self.fault = name
+        self.fault_since_s = t_s
+        self.clear_since_s = None
+        unconfirmed = self.coils.all_off()
+        if unconfirmed:
+            self.latched = True
+            self.log(f"[{t_s:9.4f} s] all-off NOT confirmed on {unconfirmed}: latched")
+        self.command_a[:] = 0.0
+        self.state = name
+
+    def _may_resume(self, t_s: float, clear: bool) -> bool:
+        """True once the fault condition has been clear for ``resume_after_s``."""
+        if self.latched:
+            return False
+        if not clear:
+            self.clear_since_s = None
+            return False
+        if self.clear_since_s is None:
+            self.clear_since_s = t_s
+        if t_s - self.clear_since_s + 1e-12 >= self.cfg.resume_after_s:
+            if self.pwm_reinit_needed and not self._reinit_pwm(t_s):
+                return False
+            self.log(f"[{t_s:9.4f} s] resume after {self.fault}")
+            self.fault = None
+            self.clear_since_s = None
+            return True
+        return False
+
+    # -- the step ------------------------------------------------------------------------------
+    def step(self, t_s: float) -> StepRecord:
+        """One control step at time ``t_s`` (s). Never raises for a device fault."""
+        t0 = self.clock()
+        cfg = self.cfg
+        frame = self.sensors(t_s)
+        new_frame = frame is not None
+        problems: list[tuple[str, str]] = []
+        if new_frame:
+            self.last_frame = frame
+            healthy = np.array([s == "ok" for s in frame.status])
+            newly = [(i, s) for i, s in enumerate(frame.status)
+                     if not healthy[i] and not self.excluded[i]]
+            self.excluded = ~healthy
+            if newly:
+                i, s = newly[0]
+                problems.append((SENSOR_FAULTS.get(s, "sensor_dead"), f"sensor {i} ({'top' if i < cfg.n_coils else 'bottom'}"
+                                 f" {i % cfg.n_coils}) reports {s!r}; excluded"))
+            top = np.where(self.excluded[:cfg.n_coils, None], np.nan, frame.top_t)
+            bottom = np.where(self.excluded[cfg.n_coils:, None], np.nan, frame.bottom_t)
+            est = self.localizer.locate(top, bottom, currents=self.current_a.copy())
+            self.last_estimate_ok = bool(est.ok)
+            if est.ok:
+                self.tracker.update(frame.t_s, np.asarray(est.position_m, float))
+                self.have_fix = True
+            else:
+                problems.append(("lost", "the localizer flagged its estimate (residual test)"))
+        if not self.have_fix:
+            return self._record(t_s, t0, np.full(3, np.nan), np.zeros(3), new_frame,
+                                off=True)
+        p, vel = self.tracker.predict(t_s)
+        p = np.asarray(p, float)
+        self.position_m = p
+        inside = bool(np.all(p >= self.lo) and np.all(p <= self.hi))
+        if not inside:
+            problems.append(("out_of_box", f"estimate {np.round(p * 1e3, 1).tolist()} mm outside "
+                             f"the map box"))
+        if self.thermal.exceeded():
+            problems.append(("thermal", f"I^2 t {self.thermal.energy_a2s.max():.0f} A^2 s above "
+                             f"the budget {self.thermal.budget_a2s:.0f} A^2 s"))
+
+        # fault handling: enter, or stay until the resume condition holds
+        if problems and (self.fault is None or problems[0][0] != self.fault):
+            name, detail = problems[0]
+            self._enter_fault(t_s, name, detail)
+        elif self.fault is not None:
+            if self.fault == "thermal":
+                ok_now = self.thermal.cooled()
+            else:
+                ok_now = not problems
+            if not self._may_resume(t_s, ok_now):
+                return self._record(t_s, t0, p, np.zeros(3), new_frame, off=True)
+        if self.fault is not None:
+            return self._record(t_s, t0, p, np.zeros(3), new_frame, off=True)
+
+        f_ref = np.asarray(self.scene.force(p, vel), float)
+        command = self._allocate(p, f_ref)
+        total = float(np.sum(np.abs(command)))
+        if np.any(np.abs(command) > self.limit + 1e-9) or total > cfg.total_current_a + 1e-9 \
+                or (cfg.unipolar and np.any(command < -1e-9)):
+            self._enter_fault(t_s, "over_limit",
+                              f"command max |I| {np.abs(command).max():.3f} A, sum {total:.3f} A "
+                              f"(limits {cfg.current_limit_a} A, {cfg.total_current_a} A)")
+            return self._record(t_s, t0, p, f_ref, new_frame, off=True)
+        return self._drive(t_s, t0, p, f_ref, command, new_frame)
+
+    def _reinit_pwm(self, t_s: float) -> bool:
+        """Re-initialise the PWM boards after a NACK; latch after ``max_pwm_retries`` failures."""
+        try:
+            self.coils.initialize()
+        except CoilWriteError:
+            self.pwm_failures += 1
+            self.clear_since_s = None
+            if self.pwm_failures >= self.cfg.max_pwm_retries:
+                self.latched = True
+                self.log(f"[{t_s:9.4f} s] PWM boards failed {self.pwm_failures} "
+                         "re-initialisations: latched off")
+            return False
+        self.pwm_failures = 0
+        self.pwm_reinit_needed = False
+        return True
+
+    def force_matrix(self, p: np.ndarray) -> np.ndarray:
+        """Force per ampere at p: (1, n) N/A (Fz of a z-dipole) or (3, n)."""
+        if self.z_only:
+            rows = getattr(self.map, "actuation_rows", None)
+            if rows is not None:
+                a = rows(p, (3, 6))                       # dBx/dx, dBy/dy
+                return -self.moment[2] * (a[0] + a[1])[None, :]
+            a = self.map.actuation(p)
+            return -self.moment[2] * (a[3] + a[6])[None, :]
+        return self.force_rows @ self.map.actuation(p)[3:]
+
+    def _allocate(self, p: np.ndarray, f_ref: np.ndarray) -> np.ndarray:
+        cfg = self.cfg
+        fm = self.force_matrix(p)
+        target = f_ref[2:3] if self.z_only else f_ref
+        bias = getattr(self.map, "bias_force", None)
+        if bias is not None:
+            b = np.asarray(bias(p), float)
+            target = target - (b[2:3] if self.z_only else b)
+        keep = np.ones(cfg.n_coils, dtype=bool)
+        if cfg.skip_fraction > 0:
+            norms = np.abs(fm).max(axis=0)
+            keep = norms >= cfg.skip_fraction * norms.max()
+        command = np.zeros(cfg.n_coils)
+        i, _ = self.allocate(fm[:, keep], target, self.limit[keep], cfg.total_current_a,
+                             unipolar=cfg.unipolar)
+        command[keep] = i
+        return command
+
+    def _drive(self, t_s, t0, p, f_ref, command, new_frame) -> StepRecord:
+        cfg = self.cfg
+        if cfg.feedforward:
+            v = feedforward_voltage(command, self.current_a, self.r, self.ind,
+                                    cfg.control_period_s, cfg.supply_voltage_v)
+        else:
+            v = np.clip(command * self.r, -cfg.supply_voltage_v, cfg.supply_voltage_v)
+        try:
+            result = self.coils.command(v / self.r)
+        except CoilWriteError as exc:
+            self.pwm_reinit_needed = True
+            self._enter_fault(t_s, "pwm_nack", str(exc))
+            return self._record(t_s, t0, p, f_ref, new_frame, off=True)
+        elapsed = self.clock() - t0
+        if elapsed > cfg.overrun_factor * cfg.control_period_s:
+            # too late to trust this command: switch off within this step, nothing stays on
+            self._enter_fault(t_s, "overrun", f"step took {elapsed * 1e3:.2f} ms > "
+                              f"{cfg.overrun_factor * cfg.control_period_s * 1e3:.2f} ms")
+            return self._record(t_s, t0, p, f_ref, new_frame, off=True)
+        v_out = np.asarray(result.current_a, float) * self.r     # what the duty really applies
+        self.command_a = command
+        self.current_a = rl_step(self.current_a, v_out, self.r, self.ind, cfg.control_period_s)
+        self.thermal.update(self.current_a, cfg.control_period_s)
+        self.state = "running"
+        return StepRecord(t_s, p, f_ref, command.copy(), v_out, self.current_a.copy(),
+                          self.clock() - t0, self.state, new_frame)
+
+    def _record(self, t_s, t0, p, f_ref, new_frame, *, off: bool) -> StepRecord:
+        cfg = self.cfg
+        if off:
+            if self.fault is None:
+                self.state = "safe"
+                if np.any(self.command_a != 0) or np.any(np.abs(self.current_a) > 0):
+                    self.coils.all_off()
+            self.command_a = np.zeros(cfg.n_coils)
+            self.current_a = rl_step(self.current_a, np.zeros(cfg.n_coils), self.r, self.ind,
+                                     cfg.control_period_s)
+            self.thermal.update(self.current_a, cfg.control_period_s)
+        return StepRecord(t_s, np.asarray(p, float).copy(), np.asarray(f_ref, float),
+                          self.command_a.copy(), np.zeros(cfg.n_coils), self.current_a.copy(),
+                          self.clock() - t0, self.state, new_frame)
+
+
+def config_from_map(fieldmap, **overrides) -> RunnerConfig:
+    """RunnerConfig from the drive data a map file carries (``meta['drive']``, SI keys)."""
+    d = dict(fieldmap.meta.get("drive") or {})
+    need = ("resistance_ohm", "inductance_h", "supply_voltage_v", "current_limit_a",
+            "total_current_a")
+    missing = [k for k in need if k not in d]
+    if missing:
+        raise FirmwareIOError(f"the map file carries no drive data {missing}: rebuild it with "
+                              "`designkit map` (map format v2)")
+    n = fieldmap.n_coils
+    kw = {k: d[k] for k in need}
+    for k in ("resistance_ohm", "inductance_h"):
+        v = kw[k]
+        kw[k] = tuple(float(x) for x in (v if isinstance(v, (list, tuple)) else [v] * n))
+    for k in ("thermal_continuous_current_a", "thermal_time_constant_s"):
+        if k in d:
+            kw[k] = float(d[k])
+    kw.update(overrides)
+    return RunnerConfig(**kw)
+
+
+def check_same_design(map_sha256: str, scene_sha256: str) -> None:
+    """Refuse a scene compiled for another map (before any coil is energized)."""
+    if map_sha256 != scene_sha256:
+        raise FirmwareIOError(f"scene file was compiled for design {scene_sha256[:12]}..., but the "
+                              f"map file is for design {map_sha256[:12]}...: recompile the scene "
+                              "with `designkit scene compile OBJECT --map MAPFILE`")

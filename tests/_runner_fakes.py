@@ -1,0 +1,79 @@
+"""Small stand-ins for the runner's collaborators, so its loop and fault logic are tested alone."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class Estimate:
+    position_m: np.ndarray
+    residual: float
+    ok: bool
+
+
+class TruthLocalizer:
+    """Returns the true position (read from a callable) unless every sensor is NaN."""
+
+    def __init__(self, truth):
+        self.truth = truth
+
+    def locate(self, top, bottom, currents=None):
+        ok = bool(np.isfinite(top).any() or np.isfinite(bottom).any())
+        return Estimate(np.asarray(self.truth(), float), 0.0, ok)
+
+
+class HoldTracker:
+    def __init__(self):
+        self.p = None
+
+    def reset(self):
+        self.p = None
+
+    def update(self, t_s, position_m):
+        self.p = np.asarray(position_m, float)
+
+    def predict(self, t_s):
+        return self.p, np.zeros(3)
+
+
+class ConstantMap:
+    """A(p) fixed at one point's value (fault-logic tests do not need the field's shape)."""
+
+    def __init__(self, a, bounds, moment, bias=None):
+        self.a = np.asarray(a, float)
+        self.bounds = bounds
+        self.moment_a_m2 = np.asarray(moment, float)
+        self._bias = bias
+
+    def actuation(self, p):
+        p = np.asarray(p, float)
+        return self.a if p.ndim == 1 else np.broadcast_to(self.a, (len(p),) + self.a.shape)
+
+    def bias_force(self, p):
+        b = np.zeros(3) if self._bias is None else np.asarray(self._bias, float)
+        p = np.asarray(p, float)
+        return b if p.ndim == 1 else np.broadcast_to(b, (len(p), 3))
+
+
+class PlaneScene:
+    """Flat surface at ``height_m``: f = (0, 0, stiffness * max(0, height - z))."""
+
+    def __init__(self, height_m=0.05, stiffness_n_per_m=6.0):
+        self.h, self.k = height_m, stiffness_n_per_m
+
+    def force(self, p, v):
+        return np.array([0.0, 0.0, self.k * max(0.0, self.h - float(p[2]))])
+
+
+def clipped_lstsq(fm, target, limit, total, unipolar=False):
+    """Least-norm solution clipped into the bounds (a stand-in, not the exact allocator)."""
+    i = np.linalg.lstsq(fm, target, rcond=None)[0]
+    lo = 0.0 if unipolar else -np.asarray(limit)
+    i = np.clip(i, lo, limit)
+    s = np.abs(i).sum()
+    if s > total:
+        i *= total / s
+    return i, float(np.sum((fm @ i - target) ** 2))

@@ -1,0 +1,266 @@
+"""firmware_io.runner and designkit.plant: the closed loop on the simulated device, its fault
+handling and its current dynamics, checked against independent references (an ODE solver, the
+PCA9685 register file, the bounds)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from designkit.design import default_design
+from designkit.errors import BadInputError
+from designkit.plant import (FAULT_TYPES, FaultSchedule, SimulatedDevice, Trajectory, simulate,
+                             slide_trajectory, time_to_safe)
+from firmware_io.errors import FirmwareIOError
+from firmware_io.runner import (Runner, RunnerConfig, ThermalGuard, check_same_design,
+                                feedforward_voltage, rl_step)
+
+from _runner_fakes import ConstantMap, HoldTracker, PlaneScene, TruthLocalizer, clipped_lstsq
+
+BOX = (np.array([-0.075, -0.075, 0.010]), np.array([0.075, 0.075, 0.080]))
+
+
+# ---------------------------------------------------------------------------------------------
+# current dynamics vs an ODE solver
+
+
+def _ode_current(i0, v, r, ind, period):
+    sol = solve_ivp(lambda t, i: (v - r * i) / ind, (0.0, period), [i0], rtol=1e-12, atol=1e-14,
+                    method="DOP853")
+    return sol.y[0, -1]
+
+
+def test_rl_step_matches_an_ode_solver():
+    rng = np.random.default_rng(1)
+    for _ in range(40):
+        r, ind = rng.uniform(0.5, 10), rng.uniform(1e-3, 0.5)
+        i0, v, period = rng.uniform(-6, 6), rng.uniform(-30, 30), rng.uniform(1e-4, 5e-2)
+        got = rl_step(np.array([i0]), np.array([v]), r, ind, period)[0]
+        assert got == pytest.approx(_ode_current(i0, v, r, ind, period), rel=1e-9, abs=1e-12)
+
+
+def test_feedforward_reaches_the_target_in_one_period_or_saturates_without_overshoot():
+    rng = np.random.default_rng(2)
+    reached = clipped = 0
+    for _ in range(200):
+        r, ind = rng.uniform(1, 8), rng.uniform(5e-3, 0.3)
+        period, vs = rng.choice([1e-3, 2e-3, 1e-2]), rng.uniform(5, 30)
+        i0, target = rng.uniform(-vs / r, vs / r, 2) * 0.9
+        v = feedforward_voltage(np.array([target]), np.array([i0]), r, ind, period, vs)[0]
+        end = _ode_current(i0, v, r, ind, period)
+        assert abs(v) <= vs * (1 + 1e-12)
+        if abs(v) < vs * (1 - 1e-9):
+            reached += 1
+            assert end == pytest.approx(target, abs=1e-9 * max(1.0, abs(target)))
+        else:
+            clipped += 1
+            # saturated drive: moves toward the target, never past it
+            assert (end - i0) * (target - i0) >= 0 and abs(end - i0) <= abs(target - i0) + 1e-12
+    assert reached > 20 and clipped > 20
+
+
+def test_thermal_guard_matches_the_closed_form_of_first_order_heating():
+    g = ThermalGuard(1, continuous_current_a=2.0, time_constant_s=10.0)
+    dt, i = 1e-2, 3.0
+    for _ in range(1000):                       # 10 s at 3 A
+        g.update(np.array([i]), dt)
+    # E(t) = I^2 tau (1 - exp(-t/tau)) for the exact discrete sum with E += I^2 dt after decay
+    n = 1000
+    q = np.exp(-dt / 10.0)
+    exact = i * i * dt * (1 - q ** n) / (1 - q)
+    assert g.energy_a2s[0] == pytest.approx(exact, rel=1e-12)
+    assert g.exceeded() == (exact > 4.0 * 10.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# the loop on the simulated device
+
+
+@pytest.fixture(scope="module")
+def device_and_a():
+    design = default_design()
+    dev = SimulatedDevice(design, seed=3)
+    a = dev.array.actuation_matrix(np.array([0.0, 0.0, 0.04]))
+    return design, a
+
+
+def _run(device_and_a, faults: str, duration_s: float, *, limit=4.8, total=20.0,
+         resume_after_s=0.1):
+    design, a = device_and_a
+    dev = SimulatedDevice(design, seed=4)
+    traj = slide_trajectory(lambda x, y: np.full_like(x, 0.05), duration_s=duration_s,
+                            samples=401)
+    moment = dev.moment
+    fmap = ConstantMap(a, BOX, moment)
+    holder = {}
+
+    def factory(source, clock, hook):
+        cfg = RunnerConfig(resistance_ohm=(dev.resistance_ohm,) * 9,
+                           inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
+                           current_limit_a=limit, total_current_a=total,
+                           resume_after_s=resume_after_s, thermal_time_constant_s=300.0)
+        r = Runner(fmap, PlaneScene(0.05, 6.0), TruthLocalizer(lambda: source.frame_truth_m),
+                   HoldTracker(), hook(clipped_lstsq), dev.coils, source, cfg, clock=clock,
+                   log=lambda line: None)
+        r.start()
+        holder["runner"] = r
+        return r
+
+    res = simulate(dev, factory, traj, duration_s=duration_s, period_s=1e-3,
+                   faults=FaultSchedule.parse(faults, duration_s), progress=False)
+    return dev, holder["runner"], res
+
+
+@pytest.mark.parametrize("fault", FAULT_TYPES)
+def test_each_fault_ends_in_the_safe_state(device_and_a, fault):
+    dev, runner, res = _run(device_and_a, f"{fault}@0.3", 0.5)
+    c = res.columns
+    st = c["state"]
+    assert (st == "running").sum() > 100, "the loop never ran"
+    [entry] = time_to_safe(c, res.faults, 1e-3)
+    assert entry["state"] == fault
+    # from the step that can see the fault (a sensor fault needs the frame that shows it)
+    detected = [t for t, name, _ in res.fault_log if name == fault]
+    assert detected, f"{fault} was never detected"
+    k = int(np.argmin(np.abs(c["t_s"] - detected[0])))
+    assert st[k] == fault
+    # coils off from that step: every command zero while in the fault
+    assert np.all(np.stack([c[f"cmd{j + 1}_a"] for j in range(9)], 1)[st == fault] == 0)
+    # sensors see the frame within a few passes of the bus; nothing else may wait
+    latency = entry["time_to_safe_s"]
+    bound = 0.03 if fault.startswith("sensor") or fault == "out_of_box" else 1e-3
+    assert latency <= bound + 1e-12
+
+
+def test_safe_state_is_one_all_off_write_per_board(device_and_a):
+    design, a = device_and_a
+    dev = SimulatedDevice(design)
+    cfg = RunnerConfig(resistance_ohm=(dev.resistance_ohm,) * 9,
+                       inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
+                       current_limit_a=4.8, total_current_a=20.0)
+    truth = {"p": np.array([0.0, 0.0, 0.03])}
+    frames = iter([None])
+
+    class Source:
+        def __call__(self, t):
+            from firmware_io.runner import SensorFrame
+            return SensorFrame(np.zeros((9, 3)), np.zeros((9, 3)), ("ok",) * 18, t)
+
+    r = Runner(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0),
+               TruthLocalizer(lambda: truth["p"]), HoldTracker(), clipped_lstsq, dev.coils,
+               Source(), cfg, log=lambda line: None)
+    del frames
+    r.start()
+    rec = r.step(0.0)
+    assert rec.state == "running" and np.any(rec.command_a != 0)
+    assert any(b.duty(ch) > 0 for b in dev.sim_boards for ch in range(16))
+    dev.coil_bus.clear_log()
+    truth["p"] = np.array([0.0, 0.0, 0.2])          # leaves the box
+    rec = r.step(1e-3)
+    assert rec.state == "out_of_box"
+    writes = [(tr.messages[0].addr, bytes(tr.messages[0].data)) for tr in dev.coil_bus.log]
+    # ALL_LED_OFF_H (0xFD) with the full-off bit, once per board, nothing else
+    assert sorted(writes) == [(0x40, bytes([0xFD, 0x10])), (0x41, bytes([0xFD, 0x10]))]
+    assert all(b.duty(ch) == 0 for b in dev.sim_boards for ch in range(16))
+
+
+def test_commands_never_exceed_the_limits_even_when_a_defect_asks_for_more(device_and_a):
+    dev, runner, res = _run(device_and_a, "over_limit@0.2,over_limit@0.35", 0.5, limit=2.0,
+                            total=6.0)
+    c = res.columns
+    cmd = np.stack([c[f"cmd{j + 1}_a"] for j in range(9)], 1)
+    assert np.abs(cmd).max() <= 2.0 + 1e-9
+    assert np.abs(cmd).sum(axis=1).max() <= 6.0 + 1e-9
+    assert (c["state"] == "over_limit").sum() > 0
+
+
+def test_thermal_fault_stays_off_until_cooled(device_and_a):
+    dev, runner, res = _run(device_and_a, "thermal@0.2", 0.5)
+    st = res.columns["state"]
+    t = res.columns["t_s"]
+    assert np.all(st[t >= 0.2] == "thermal")          # 300 s thermal time constant: no resume
+    runner.thermal.energy_a2s[:] = 0.5 * runner.thermal.budget_a2s
+    assert runner.thermal.cooled()
+
+
+def test_pwm_nack_is_latched_after_repeated_failures(device_and_a):
+    design, a = device_and_a
+    dev = SimulatedDevice(design)
+    cfg = RunnerConfig(resistance_ohm=(dev.resistance_ohm,) * 9,
+                       inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
+                       current_limit_a=4.8, total_current_a=20.0, resume_after_s=0.01,
+                       max_pwm_retries=2)
+
+    class Source:
+        def __call__(self, t):
+            from firmware_io.runner import SensorFrame
+            return SensorFrame(np.zeros((9, 3)), np.zeros((9, 3)), ("ok",) * 18, t)
+
+    r = Runner(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0),
+               TruthLocalizer(lambda: np.array([0.0, 0.0, 0.03])), HoldTracker(), clipped_lstsq,
+               dev.coils, Source(), cfg, log=lambda line: None)
+    r.start()
+    assert r.step(0.0).state == "running"
+    dev.sim_boards[0].nack_always = True
+    assert r.step(1e-3).state == "pwm_nack"
+    states = [r.step(k * 1e-3).state for k in range(2, 80)]
+    assert r.latched and states[-1] == "pwm_nack"
+    dev.sim_boards[0].nack_always = False           # latched: a good bus does not bring it back
+    assert r.step(0.1).state == "pwm_nack"
+
+
+# ---------------------------------------------------------------------------------------------
+# bad input, before anything is energized
+
+
+def test_scene_for_another_design_is_refused():
+    with pytest.raises(FirmwareIOError, match="recompile the scene"):
+        check_same_design("a" * 64, "b" * 64)
+
+
+def test_trajectory_file_with_wrong_columns(tmp_path):
+    p = tmp_path / "t.csv"
+    p.write_text("time,x,y,z\n0,0,0,0.03\n1,0,0,0.04\n")
+    with pytest.raises(BadInputError, match="t_s, x_m, y_m, z_m"):
+        Trajectory.from_csv(p)
+    p.write_text("t_s,x_m,y_m,z_m\n0,0,0,0.03\n0,0,0,0.04\n")
+    with pytest.raises(BadInputError, match="strictly increasing"):
+        Trajectory.from_csv(p)
+
+
+@pytest.mark.parametrize("text", ["melt@1", "pwm_nack@x", "pwm_nack@99"])
+def test_fault_schedule_errors(text):
+    with pytest.raises(BadInputError):
+        FaultSchedule.parse(text, 5.0)
+
+
+def test_default_schedule_has_every_fault_once_inside_the_run():
+    s = FaultSchedule.parse("default", 10.0)
+    assert sorted(name for _, name in s.events) == sorted(FAULT_TYPES)
+    assert all(0.1 * 10 < t < 0.9 * 10 for t, _ in s.events)
+
+
+@pytest.mark.parametrize("kw, name", [
+    ({"supply_voltage_v": 36.0}, "supply_voltage_v"),
+    ({"current_limit_a": -1.0}, "current_limit_a"),
+    ({"resistance_ohm": (0.0,) * 9}, "resistance_ohm"),
+    ({"force_axes": "q"}, "force_axes"),
+])
+def test_runner_config_errors_name_the_value(kw, name):
+    base = dict(resistance_ohm=(6.0,) * 9, inductance_h=(0.18,) * 9, supply_voltage_v=30.0,
+                current_limit_a=4.8, total_current_a=20.0)
+    base.update(kw)
+    with pytest.raises(ValueError, match=name):
+        RunnerConfig(**base)
+
+
+def test_runner_imports_numpy_only():
+    code = ("import sys, firmware_io.runner, firmware_io.run; "
+            "bad = [m for m in sys.modules if m.split('.')[0] in "
+            "('designkit', 'scipy', 'matplotlib', 'pyvista')]; print(bad)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
