@@ -275,15 +275,17 @@ class SensorSimulator:
         'default' draws :meth:`SensorErrors.random` with the module's stated defaults.
     noise_t : float, T rms per axis (default 0.1 mT, datasheet)
     moment_direction : (3,), the magnet's axis (default +z, as the design's map stores it)
-    induced : {'model', 'off'}
-        Include the cores' field induced by the magnet.
+    induced : {'coupled', 'rod', 'off'}
+        The cores' field induced by the magnet: 'coupled' = ``CoilArray.magnet_core_field``
+        (all cores solved together, the magnet as a point dipole; ~50 ms per position), 'rod' =
+        :class:`InducedCoreModel` (each core alone, ~3 ms per position), 'off' = none.
     seed : int
     """
 
     def __init__(self, design: Design | None = None, *, array=None,
                  errors: SensorErrors | Literal["ideal", "default"] = "default",
                  noise_t: float = TLV_NOISE_T, moment_direction=(0.0, 0.0, 1.0),
-                 induced: Literal["model", "off"] = "model", seed: int = 0):
+                 induced: Literal["coupled", "rod", "off"] = "coupled", seed: int = 0):
         from .array import CoilArray
 
         self.design = design or default_design()
@@ -308,12 +310,11 @@ class SensorSimulator:
         pts = self.true_m.reshape(-1, 3)
         self.coil_field_t_per_a = self.array.actuation_matrix(pts)[:, :3, :].reshape(
             2, n, 3, self.array.n_coils)
-        if induced not in ("model", "off"):
-            raise BadInputError("induced", "'model' or 'off'", induced)
+        if induced not in ("coupled", "rod", "off"):
+            raise BadInputError("induced", "'coupled', 'rod' or 'off'", induced)
         self.induced_mode = induced
         self._induced = None
-        if induced == "model" and self.design.core is not None and \
-                not hasattr(self.array, "magnet_core_field"):
+        if induced == "rod" and self.design.core is not None:
             self._induced = InducedCoreModel(self.design, pts)
 
     # -- field parts -------------------------------------------------------------------
@@ -364,18 +365,25 @@ class SensorSimulator:
 
     def readout(self, field_t: np.ndarray, *, rng=None) -> Readings:
         """Sensor chain applied to the true field (k, 2, n, 3) T in the array frame."""
-        rng = rng or self.rng
-        e = self.errors
-        local = np.einsum("asji,kasj->kasi", e.rotations, field_t)  # R^T B
-        s = e.gains * local + e.offsets_t + rng.normal(scale=self.noise_t, size=local.shape)
-        codes = np.clip(np.rint(s / TLV_LSB_T), TLV_CODE_MIN, TLV_CODE_MAX).astype(np.int16)
-        meas = codes * TLV_LSB_T
-        sat = np.any(np.abs(meas) > TLV_LINEAR_RANGE_T, axis=-1)
-        # the reader knows only the nominal orientation: it reports the sensor axes as array axes
-        out = meas.astype(float)
-        out[sat] = np.nan
-        out[:, e.dead] = np.nan
-        return Readings(out[:, 0], out[:, 1], codes, sat, field_t)
+        return tlv_readout(field_t, self.errors, self.noise_t, rng or self.rng)
+
+
+def tlv_readout(field_t: np.ndarray, errors: SensorErrors, noise_t: float,
+                rng: np.random.Generator) -> Readings:
+    """The TLV493D chain: gain * R^T B + offset + noise -> 12-bit codes (clipped at -2048 /
+    +2047) -> tesla; a sensor with any axis beyond +-130 mT (outside the linear range) or dead
+    reads NaN. ``field_t`` (k, 2, n, 3) T in the array frame."""
+    e = errors
+    local = np.einsum("asji,kasj->kasi", e.rotations, field_t)  # R^T B
+    s = e.gains * local + e.offsets_t + rng.normal(scale=noise_t, size=local.shape)
+    codes = np.clip(np.rint(s / TLV_LSB_T), TLV_CODE_MIN, TLV_CODE_MAX).astype(np.int16)
+    meas = codes * TLV_LSB_T
+    sat = np.any(np.abs(meas) > TLV_LINEAR_RANGE_T, axis=-1)
+    # the reader knows only the nominal orientation: it reports the sensor axes as array axes
+    out = meas.astype(float)
+    out[sat] = np.nan
+    out[:, e.dead] = np.nan
+    return Readings(out[:, 0], out[:, 1], codes, sat, field_t)
 
 
 # ---------------------------------------------------------------------------- field cases

@@ -339,6 +339,7 @@ class Localizer:
     relative_error : float, relative model error of a sensor's reading (gain, mounting)
     residual_limit : float, largest normalized rms residual for ok
     cores : bool or None, model the magnet-induced core field ('dipole'; default: if known)
+    mount_position_m : float, m -- sensor position uncertainty, weighs near-field sensors
     calibration : (gain_inverse (2, n, 3, 3), offsets_t (2, n, 3)) or None: corrected reading
         = gain_inverse @ (reading - offset), see :func:`calibrate`.
     """
@@ -347,7 +348,8 @@ class Localizer:
                  learned: LearnedInverse | None = None, noise_t: float = DEFAULT_NOISE_T,
                  relative_error: float = 0.02, residual_limit: float = 5.0,
                  cores: bool | None = None, max_iterations: int = 30, calibration=None,
-                 kalman: ConstantVelocityKalman | None = None, frame_period_s: float = 0.01):
+                 kalman: ConstantVelocityKalman | None = None, frame_period_s: float = 0.01,
+                 mount_position_m: float = 0.0):
         if method not in METHODS:
             raise BadInputError("method", f"one of {METHODS}", method)
         if method == "learned":
@@ -366,6 +368,10 @@ class Localizer:
         self.learned = learned
         self.noise_t = float(noise_t)
         self.rel = float(relative_error)
+        if not (math.isfinite(mount_position_m) and mount_position_m >= 0):
+            raise BadInputError("mount_position_m", "a finite number >= 0, m", mount_position_m)
+        self.mount_position_m = float(mount_position_m)
+        self._moment = float(np.linalg.norm(model.moment_a_m2))
         self.residual_limit = float(residual_limit)
         self.cores = (model.induced is not None) if cores is None else bool(cores)
         if self.cores and model.induced is None:
@@ -415,7 +421,9 @@ class Localizer:
         lo, hi = m.bounds
         model = SensorModel(sp, np.asarray(scf, float), np.asarray(mom, float), str(sha),
                             float(m.meta.get("magnet_octupole_m2", 0.0)),
-                            lambda p: np.asarray(m.sensor_induced_field(p), float),
+                            # the induced term is a small correction: outside the map's box the
+                            # nearest box point is safer than extrapolating its polynomials
+                            lambda p: m.sensor_induced_field(np.clip(p, lo, hi)),
                             np.asarray(lo, float), np.asarray(hi, float))
         learned = LearnedInverse.load(weights) if weights is not None else None
         return cls(model, method, learned=learned, **kw)
@@ -480,18 +488,25 @@ class Localizer:
         return est
 
     # subtraction: d = top - P bottom; model-based: both arrays minus the coils' field
+    def _mount_var(self, d):
+        """Variance from the sensors' position uncertainty: |dB| ~ 3 |B| dr / r for the magnet's
+        field, with r from |B| (on-axis dipole: |B| = mu0 |m| / (2 pi r^3))."""
+        b = np.linalg.norm(np.nan_to_num(d), axis=-1)
+        r = np.cbrt(MU0 * self._moment / (2 * math.pi * np.maximum(b, 1e-9)))
+        return (3 * self.mount_position_m * b / r) ** 2
+
     def _data(self, meas, currents):
         sig2n = self.noise_t**2
         mag = np.linalg.norm(meas, axis=-1)
         if currents is None:
             d = meas[0] - np.einsum("sij,sj->si", self._mirror, meas[1])
             use = np.all(np.isfinite(d), axis=1)
-            s2 = 2 * sig2n + self.rel**2 * (mag[0] ** 2 + mag[1] ** 2)
+            s2 = 2 * sig2n + self.rel**2 * (mag[0] ** 2 + mag[1] ** 2) + self._mount_var(d)
             return d, use, np.sqrt(s2)
         pred = np.einsum("asdc,c->asd", self.model.coil_field_t_per_a, currents)
         d = (meas - pred).reshape(-1, 3)
         use = np.all(np.isfinite(d), axis=1)
-        s2 = (sig2n + self.rel**2 * mag**2).reshape(-1)
+        s2 = (sig2n + self.rel**2 * mag**2).reshape(-1) + self._mount_var(d)
         return d, use, np.sqrt(s2)
 
     def _forward(self, p, subtract: bool, jac: bool):
@@ -594,7 +609,8 @@ class Localizer:
             cn = float(rn @ rn)
             if np.isfinite(cn) and cn <= cost:
                 p, r, j = pn, rn, jn
-                small = float(np.linalg.norm(step)) < 1e-8 or cost - cn <= 1e-10 * cost
+                # 1 um or a negligible cost decrease: far below what the noise allows
+                small = float(np.linalg.norm(step)) < 1e-6 or cost - cn <= 1e-6 * cost
                 cost = cn
                 lam = max(lam * 0.2, 1e-9)
                 if small:
@@ -603,7 +619,7 @@ class Localizer:
             else:
                 lam *= 10.0
                 if lam > 1e8:
-                    converged = float(np.linalg.norm(step)) < 1e-7
+                    converged = float(np.linalg.norm(step)) < 1e-6
                     break
         return p, cost, it, converged
 
