@@ -55,6 +55,7 @@ import numpy as np
 from .errors import BadInputError
 
 MU0 = 4e-7 * math.pi
+_EYE = np.eye(3)
 METHODS = ("learned", "dipole", "model", "kalman")
 DEFAULT_NOISE_T = 0.1e-3
 """TLV493D noise per axis, T rms (datasheet)."""
@@ -98,16 +99,17 @@ def multipole_field(points_m: np.ndarray, position_m: np.ndarray, moment_a_m2: n
         return b
     fsr = -1.5 * c * rm52
     frr = 3.75 * c * s * rm52 * ir
-    fss = np.zeros_like(s)
     if octupole_m2:
         rm112 = rm92 * ir
         fss = k * 30 * s * rm72
         fsr = fsr + k * (-52.5 * s2 * rm92 + 7.5 * rm72)
         frr = frr + k * (78.75 * s2 * s * rm112 - 26.25 * s * rm92)
     ur = u[None, :, None] * r[:, None, :]
-    d = (fss[:, None, None] * np.outer(u, u)[None] + 2 * fsr[:, None, None] * (ur + np.swapaxes(ur, 1, 2))
-         + 4 * frr[:, None, None] * r[:, :, None] * r[:, None, :]
-         + 2 * fr[:, None, None] * np.eye(3)[None])
+    d = 2 * fsr[:, None, None] * (ur + ur.transpose(0, 2, 1))
+    d += 4 * frr[:, None, None] * r[:, :, None] * r[:, None, :]
+    d += 2 * fr[:, None, None] * _EYE
+    if octupole_m2:
+        d += fss[:, None, None] * (u[:, None] * u[None, :])
     return b, MU0 * d  # d/d(position) = -d/dr
 
 
@@ -321,7 +323,7 @@ def _check_frame(name: str, a, n: int) -> np.ndarray:
     if np.any(np.isinf(arr)):
         raise BadInputError(name, "finite values or NaN (missing/saturated), T",
                             f"Inf at {np.argwhere(np.isinf(arr))[0].tolist()}")
-    if np.any(np.abs(np.nan_to_num(arr)) > 1.0):
+    if np.any(np.abs(arr) > 1.0):  # NaN compares False
         raise BadInputError(name, "fields in tesla (|B| <= 1 T; a TLV493D reads <= 0.2 T)",
                             f"{np.nanmax(np.abs(arr))!r} -- millitesla passed as tesla?")
     return arr
@@ -491,6 +493,8 @@ class Localizer:
     def _mount_var(self, d):
         """Variance from the sensors' position uncertainty: |dB| ~ 3 |B| dr / r for the magnet's
         field, with r from |B| (on-axis dipole: |B| = mu0 |m| / (2 pi r^3))."""
+        if self.mount_position_m == 0.0:
+            return 0.0
         b = np.linalg.norm(np.nan_to_num(d), axis=-1)
         r = np.cbrt(MU0 * self._moment / (2 * math.pi * np.maximum(b, 1e-9)))
         return (3 * self.mount_position_m * b / r) ** 2
@@ -592,7 +596,7 @@ class Localizer:
         p = np.array(p0, dtype=float)
         r, j = resid(p, True)
         cost = float(r @ r)
-        lam = 1e-3
+        lam = 1e-6
         converged = False
         it = 0
         for it in range(1, self.max_iterations + 1):
@@ -603,6 +607,11 @@ class Localizer:
             except np.linalg.LinAlgError:
                 break
             if not np.all(np.isfinite(step)):
+                break
+            if lam < 1e-4 and float(step @ step) < 1e-12:
+                # a Gauss-Newton step below 1 um: converged (taking it changes nothing)
+                p = p + step
+                converged = True
                 break
             pn = p + step
             rn, jn = resid(pn, True)

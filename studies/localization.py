@@ -79,7 +79,7 @@ def _noise_limited(sim, readings, k, p_true, currents, ind_true, ind_jac):
 
 
 def run(out_dir="out/localization", n: int = 1000, seed: int = 0, *, map_path=None,
-        quick: bool = False) -> dict:
+        quick: bool = False, n_workspace: int | None = None) -> dict:
     """Run the study; returns a dict of numbers (also written as JSON)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -119,9 +119,11 @@ def run(out_dir="out/localization", n: int = 1000, seed: int = 0, *, map_path=No
                                    relative_error=0.005)}
     regions = {"cube": dict(z_range_m=(0.020, 0.070), half_width_m=0.025),
                "workspace": dict(z_range_m=(0.020, 0.080), half_width_m=0.075)}
-    results: dict = {"n": n, "model_source": source, "train_s": t_train, "rows": []}
+    counts = {"cube": n, "workspace": n if n_workspace is None else n_workspace}
+    results: dict = {"n": counts, "model_source": source, "train_s": t_train, "rows": []}
     errors_store = {}
     for region, box in regions.items():
+        n = counts[region]
         pos = random_positions(n, rng, **box)
         mag = sim.magnet_part(pos)
         ind = np.empty_like(mag)
@@ -241,7 +243,7 @@ def _benchmark(sim, model, locs, rng, quick):
 
 
 def _write(out: Path, res: dict, store: dict) -> None:
-    lines = [f"localization study: n = {res['n']} positions per region, model: {res['model_source']}",
+    lines = [f"localization study: positions per region {res['n']}, model: {res['model_source']}",
              f"{'region':10s} {'case':13s} " + " ".join(f"{m:>13s}" for m in METHODS)
              + "   thesis   (MAE mm / p95 mm; lower half MAE)"]
     rows = res["rows"]
@@ -290,7 +292,7 @@ def _plots(out: Path, res: dict, store: dict) -> None:
         ax.set_xticks(x, CASES)
         ax.set_yscale("log")
         ax.set_ylabel("mean absolute error (mm)")
-        ax.set_title(f"{region}: {res['n']} random positions per case")
+        ax.set_title(f"{region}: {res['n'][region]} random positions per case")
         ax.grid(axis="y", alpha=0.3, which="both")
     axes[0].legend(fontsize=8, loc="upper left")
     fig.tight_layout()
@@ -317,8 +319,10 @@ if __name__ == "__main__":
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out_dir", nargs="?", default="out/localization")
-    ap.add_argument("--n", type=int, default=1000)
+    ap.add_argument("--n", type=int, default=1000, help="positions in the 50 mm cube")
+    ap.add_argument("--n-workspace", type=int, default=None,
+                    help="positions in the rendering workspace (default: --n)")
     ap.add_argument("--map", default=None, help="v2 map file for the estimators")
     ap.add_argument("--quick", action="store_true")
     a = ap.parse_args()
-    run(a.out_dir, a.n, map_path=a.map, quick=a.quick)
+    run(a.out_dir, a.n, map_path=a.map, quick=a.quick, n_workspace=a.n_workspace)
