@@ -181,7 +181,8 @@ class SensorModel:
 
 @dataclass(frozen=True)
 class Estimate:
-    """position_m (3,) m; residual: normalized rms fit residual (1 ~ noise level); ok; n_used
+    """position_m (3,) m; residual: normalized rms fit residual (1 ~ noise level; 0.0 when no
+    fit was possible, then ok is False and ``reason`` says why); ok; n_used
     sensors (pairs for subtraction); iterations; method; velocity_m_s (3,) (Kalman only);
     reason: why ok is False ('' when ok)."""
 
@@ -404,8 +405,14 @@ class Localizer:
     # -- construction from files -----------------------------------------------------------
     @classmethod
     def from_map(cls, path, method: str = "model", *, weights=None,
-                 expected_design_sha256: str | None = None, **kw) -> "Localizer":
-        """From a v2 map file (its sensor section) and, for 'learned', a weights file."""
+                 expected_design_sha256: str | None = None, octupole_m2: float | None = None,
+                 **kw) -> "Localizer":
+        """From a v2 map file (its sensor section) and, for 'learned', a weights file.
+
+        ``octupole_m2``: the magnet's l = 3 coefficient ratio h^2 - 3 a^2 / 4 (m^2); default the
+        map's ``meta['magnet_octupole_m2']`` if it has one, else 0 (pure dipole). Other keywords
+        go to :class:`Localizer`.
+        """
         from .mapfile import MapFile
 
         m = MapFile.load(path, expected_design_sha256=expected_design_sha256)
@@ -420,13 +427,17 @@ class Localizer:
         scf = m.sensor_coil_field() if callable(m.sensor_coil_field) else m.sensor_coil_field
         mom = m.moment_a_m2() if callable(m.moment_a_m2) else m.moment_a_m2
         sha = m.design_sha256() if callable(m.design_sha256) else m.design_sha256
-        lo, hi = m.bounds
+        lo, hi = (np.asarray(b, float) for b in m.bounds)
+        # the magnet cannot be below the upper sensor board
+        box_lo = lo.copy()
+        box_lo[2] = max(lo[2], float(sp[0, :, 2].max()) + 0.002)
         model = SensorModel(sp, np.asarray(scf, float), np.asarray(mom, float), str(sha),
-                            float(m.meta.get("magnet_octupole_m2", 0.0)),
+                            float(m.meta.get("magnet_octupole_m2", 0.0) if octupole_m2 is None
+                                  else octupole_m2),
                             # the induced term is a small correction: outside the map's box the
                             # nearest box point is safer than extrapolating its polynomials
                             lambda p: m.sensor_induced_field(np.clip(p, lo, hi)),
-                            np.asarray(lo, float), np.asarray(hi, float))
+                            box_lo, hi)
         learned = LearnedInverse.load(weights) if weights is not None else None
         return cls(model, method, learned=learned, **kw)
 
@@ -533,7 +544,7 @@ class Localizer:
         if n_used < 3:
             p = self._last if self._last is not None else 0.5 * (self.model.box_lower_m
                                                                  + self.model.box_upper_m)
-            return Estimate(p.copy(), float("inf"), False, n_used, 0, method,
+            return Estimate(p.copy(), 0.0, False, n_used, 0, method,
                             reason=f"only {n_used} usable sensors (need 3)")
         dw = (d[use] / sig[use, None]).reshape(-1)
         w = 1.0 / sig[use]
@@ -590,6 +601,7 @@ class Localizer:
             b = b[:, :n] - np.einsum("sij,csj->csi", self._mirror, b[:, n:])
         res = (d[None, use] - b[:, use]) / sig[None, use, None]
         costs = np.einsum("cij,cij->c", res, res)
+        costs[~np.isfinite(costs)] = np.inf
         return [c[k] for k in np.argsort(costs)[:keep]]
 
     def _lm(self, resid, p0):
@@ -636,7 +648,7 @@ class Localizer:
         n = self.model.n_sensors
         d, use, sig = self._data(meas, None)
         if not use.any():
-            return Estimate(np.zeros(3), float("inf"), False, 0, 0, "learned",
+            return Estimate(np.zeros(3), 0.0, False, 0, 0, "learned",
                             reason="no usable sensor pair")
         mag = np.where(use, np.linalg.norm(np.nan_to_num(d), axis=1), -1.0)
         k = int(np.argmax(mag))
