@@ -61,6 +61,9 @@ M_MAX = 2
 """Highest azimuthal mode kept (m >= 3 measured below 1e-4 of the coupling effect; studies)."""
 N1_SIDE = 24
 N1_CAP = 8
+FAR_RHO = 2.6
+"""Bernstein-ellipse parameter a point needs w.r.t. every interval of the compressed rules
+(error ~ FAR_RHO^-12 ~ 1e-5 with 6 nodes)."""
 N_PHI_RING = 12
 """Azimuthal samples per collocation ring when projecting another core's / a winding's field."""
 N_PHI_MAGNET = 32
@@ -178,6 +181,28 @@ class CoreModel:
     far1_r: np.ndarray = None  # compressed rings of the m >= 1 charges (far points)
     far1_z: np.ndarray = None
     far1_w: np.ndarray = None  # (n_rings, n1): ring line density = far1_w @ sigma
+    far_segments: np.ndarray = None  # (n_int, 2, 2): (rho, z) ends of the product-rule intervals
+
+    def far_mask(self, rho: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """Points where the compressed ring rules are accurate (bool (n,)).
+
+        The product rule interpolates the kernel by a degree FAR_NODES - 1 polynomial on each
+        interval; its error is ~ r^(-2 FAR_NODES), r the Bernstein-ellipse parameter of the
+        point (in the meridian plane) with respect to the interval. Far: r >= FAR_RHO on every
+        interval and at least FAR_DISTANCE (8 mm) from the core.
+        """
+        from .core import FAR_DISTANCE
+
+        dist = np.maximum.reduce([self.z_lo - z, z - self.z_hi, rho - self.radius])
+        ok = dist >= FAR_DISTANCE
+        for (r0, z0), (r1, z1) in self.far_segments:
+            c = complex(0.5 * (r0 + r1), 0.5 * (z0 + z1))
+            half = complex(0.5 * (r1 - r0), 0.5 * (z1 - z0))
+            w = (rho + 1j * z - c) / half
+            sq = np.sqrt(w * w - 1.0)
+            r = np.maximum(np.abs(w + sq), np.abs(w - sq))
+            ok &= r >= FAR_RHO
+        return ok
 
     @property
     def n0(self) -> int:
@@ -261,11 +286,7 @@ class CoreModel:
         if n == 0:
             return (h, g) if gradient else h
         rho = np.hypot(pts[:, 0], pts[:, 1])
-        dist = np.maximum.reduce([self.z_lo - pts[:, 2], pts[:, 2] - self.z_hi,
-                                  rho - self.radius])
-        from .core import FAR_DISTANCE
-
-        far = dist >= FAR_DISTANCE
+        far = self.far_mask(rho, pts[:, 2])
         for sel, fn in ((far, self._m0_far), (~far, self._m0_near)):
             if np.any(sel):
                 res = fn(pts[sel], rho[sel], gradient)
@@ -281,15 +302,18 @@ class CoreModel:
                 else:
                     h[:, :, self.n0:] = res
             else:
-                # compressed rings: ring density = far1_w @ sigma, one unit per (mode, panel)
-                nb = 2 * self.m_max * self.n1
-                eye = np.eye(nb)
-                src, q = self._charges(eye, "far")  # q (nc, nb)
-                res = self._charge_kernel(pts, src, gradient, q, False)
-                if gradient:
-                    h[:, :, self.n0:], g[:, :, :, self.n0:] = res
-                else:
-                    h[:, :, self.n0:] = res
+                # compressed rings where accurate (ring density = far1_w @ sigma, one unit per
+                # (mode, panel)), panel charges elsewhere
+                eye = np.eye(2 * self.m_max * self.n1)
+                for sel, rule in ((far, "far"), (~far, (3, 32))):
+                    if not np.any(sel):
+                        continue
+                    src, q = self._charges(eye, rule)
+                    res = self._charge_kernel(pts[sel], src, gradient, q, False)
+                    if gradient:
+                        h[sel, :, self.n0:], g[sel, :, :, self.n0:] = res
+                    else:
+                        h[sel, :, self.n0:] = res
         return (h, g) if gradient else h
 
     def field(self, pts: np.ndarray, xs: np.ndarray, gradient: bool = False,
@@ -311,9 +335,7 @@ class CoreModel:
         if n == 0:
             return (h, g) if gradient else h
         rho = np.hypot(pts[:, 0], pts[:, 1])
-        dist = np.maximum.reduce([self.z_lo - pts[:, 2], pts[:, 2] - self.z_hi,
-                                  rho - self.radius])
-        far = dist >= FAR_DISTANCE
+        far = self.far_mask(rho, pts[:, 2])
         x0 = xs[:self.n0]
         # m = 0: cylindrical components per column, then Cartesian
         sel_list = ((far, True), (~far, False))
@@ -622,11 +644,15 @@ def _self_charge_matrices(radius, z_lo, z_hi, kind, lo, hi, rho_c, z_c, m_max):
 
 @functools.lru_cache(maxsize=32)
 def core_model(radius: float, length: float, offset: float, mu_r: float, key: tuple,
-               m_max: int = M_MAX) -> CoreModel:
-    """Discretization and self blocks of a linear core (cached per core type)."""
-    from .core import FAR_NODES, _geometry, _interface_factor, _system
+               m_max: int = M_MAX, refine: int = 1) -> CoreModel:
+    """Discretization and self blocks of a linear core (cached per core type).
 
-    side, side_slice, discs = _geometry(radius, length, offset)
+    ``refine`` multiplies every panel count (convergence studies, wide cores).
+    """
+    from .core import FAR_NODES, N_CAP, N_SIDE, _geometry, _interface_factor, _system
+
+    side, side_slice, discs = _geometry(radius, length, offset, n_side=N_SIDE * refine,
+                                        n_cap=N_CAP * refine)
     a, _, rho0, z0 = _system(radius, side, discs, key)
     f_side = _interface_factor(np.full(len(side), mu_r), 1.0)
     below = discs[:, 3].astype(int)
@@ -654,9 +680,10 @@ def core_model(radius: float, length: float, offset: float, mu_r: float, key: tu
         zz.append(np.full_like(nodes, zp))
         ww.append(full)
     # m >= 1 panels
-    e_side = _graded_both(lo, hi, N1_SIDE)
-    e_cap = _graded_sin(0.0, radius, N1_CAP)
-    kind = np.r_[np.zeros(N1_SIDE, int), np.ones(N1_CAP, int), np.full(N1_CAP, 2)]
+    n1s, n1c = N1_SIDE * refine, N1_CAP * refine
+    e_side = _graded_both(lo, hi, n1s)
+    e_cap = _graded_sin(0.0, radius, n1c)
+    kind = np.r_[np.zeros(n1s, int), np.ones(n1c, int), np.full(n1c, 2)]
     lo1 = np.r_[e_side[:-1], e_cap[:-1], e_cap[:-1]]
     hi1 = np.r_[e_side[1:], e_cap[1:], e_cap[1:]]
     mid = 0.5 * (lo1 + hi1)
@@ -670,11 +697,11 @@ def core_model(radius: float, length: float, offset: float, mu_r: float, key: tu
     # compressed far rule of the m >= 1 charges (same product rule as m = 0)
     r1, z1f, w1 = [], [], []
     n1 = len(kind)
-    nodes, w = _product_matrix(lo1[:N1_SIDE], hi1[:N1_SIDE],
+    nodes, w = _product_matrix(lo1[:n1s], hi1[:n1s],
                                [(lo, lo + end), (lo + end, hi - end), (hi - end, hi)], FAR_NODES)
     r1.append(np.full_like(nodes, radius))
     z1f.append(nodes)
-    w1.append(np.hstack([w, np.zeros((len(nodes), n1 - N1_SIDE))]))
+    w1.append(np.hstack([w, np.zeros((len(nodes), n1 - n1s))]))
     for kk, zp in ((1, hi), (2, lo)):
         sel = np.flatnonzero(kind == kk)
         nodes, w = _product_matrix(lo1[sel], hi1[sel], [(0.0, radius)], FAR_NODES)
@@ -683,18 +710,23 @@ def core_model(radius: float, length: float, offset: float, mu_r: float, key: tu
         r1.append(nodes)
         z1f.append(np.full_like(nodes, zp))
         w1.append(full)
+    segs = np.array([[[radius, a], [radius, b]] for a, b in
+                     [(lo, lo + end), (lo + end, hi - end), (hi - end, hi)]]
+                    + [[[0.0, zp], [radius, zp]] for zp in (lo, hi)])
     return CoreModel(radius, lo, hi, mu_r, m_max, side, discs, f0, self0, rho0, z0,
                      np.concatenate(rr), np.concatenate(zz), np.vstack(ww), kind, lo1, hi1,
-                     rho1, z1, self1, np.concatenate(r1), np.concatenate(z1f), np.vstack(w1))
+                     rho1, z1, self1, np.concatenate(r1), np.concatenate(z1f), np.vstack(w1),
+                     segs)
 
 
 # ============================================================================ the array system
-def _core_model_of(coil, m_max):
+def _core_model_of(coil, m_max, refine=1):
     from .core import _winding_key
 
     c = coil.core
     return core_model(float(c.radius), float(c.length), float(c.offset),
-                      float(c.relative_permeability), _winding_key(coil), int(m_max))
+                      float(c.relative_permeability), _winding_key(coil), int(m_max),
+                      int(refine))
 
 
 def _rel_key(pa, pb):
@@ -712,17 +744,17 @@ class ArraySystem:
     cores' fields are evaluated from the solved unknowns.
     """
 
-    def __init__(self, array, m_max: int = M_MAX):
+    def __init__(self, array, m_max: int = M_MAX, refine: int = 1):
         from scipy.linalg import lu_factor
 
         self.array = array
         self.m_max = int(m_max)
-        self.core_index = [k for k, c in enumerate(array.coils) if c.core is not None]
-        for k in self.core_index:
-            if array.coils[k].core.bh != "linear" or array.coils[k].core.model != \
-                    "surface-current":
-                pass  # the linear model at relative_permeability; saturation: saturation_table
-        self.models = [_core_model_of(array.coils[k], self.m_max) for k in self.core_index]
+        # linear at relative_permeability (a 1010-steel core too: its saturation is the
+        # separate correction, saturation_table); 'thesis-uniform' cores stay uncoupled
+        self.core_index = [k for k, c in enumerate(array.coils)
+                           if c.core is not None and c.core.model == "surface-current"]
+        self.models = [_core_model_of(array.coils[k], self.m_max, refine)
+                       for k in self.core_index]
         self.poses = [array.coils[k].pose for k in self.core_index]
         sizes = [m.n_unknowns for m in self.models]
         self.offsets = np.r_[0, np.cumsum(sizes)].astype(int)
