@@ -61,13 +61,32 @@ M_MAX = 2
 """Highest azimuthal mode kept (m >= 3 measured below 1e-4 of the coupling effect; studies)."""
 N1_SIDE = 24
 N1_CAP = 8
+FAR_RHO = 2.6
+"""Bernstein-ellipse parameter a point needs w.r.t. every interval of the compressed rules
+(error ~ FAR_RHO^-12 ~ 1e-5 with 6 nodes)."""
 N_PHI_RING = 12
 """Azimuthal samples per collocation ring when projecting another core's / a winding's field."""
-N_PHI_MAGNET = 48
+N_PHI_MAGNET = 32
 """... and when projecting the magnet's field (it can be ~5 mm from a core top)."""
-NEAR_DISTANCE = 0.015
-"""Observation points closer than this (m) to a core's bounding cylinder use its fine charge
-quadrature (4 Gauss nodes x 64 azimuths per panel), farther ones 2 x 16."""
+"""Observation points closer than ``designkit.core.FAR_DISTANCE`` (8 mm) to a core's bounding
+cylinder sum its panels (m = 0) and 3 Gauss nodes x 32 azimuths per charge panel (m >= 1);
+farther ones a compressed product rule (FAR_NODES rings per interval, 12 azimuths)."""
+
+
+def _blas_one_thread():
+    """Context limiting BLAS to one thread when threadpoolctl is installed (optional).
+
+    The kernels here are many small matrix products; a multithreaded BLAS on a busy machine
+    spends far more time synchronizing than computing (measured 40x slower, 2 threads on 2
+    loaded cores).
+    """
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - optional
+        import contextlib
+
+        return contextlib.nullcontext()
+    return threadpool_limits(1, user_api="blas")
 
 
 # ============================================================================ per core type
@@ -159,6 +178,31 @@ class CoreModel:
     rho1: np.ndarray
     z1: np.ndarray
     self1: tuple  # per m: (n1, n1) I - 2 lam D_m
+    far1_r: np.ndarray = None  # compressed rings of the m >= 1 charges (far points)
+    far1_z: np.ndarray = None
+    far1_w: np.ndarray = None  # (n_rings, n1): ring line density = far1_w @ sigma
+    far_segments: np.ndarray = None  # (n_int, 2, 2): (rho, z) ends of the product-rule intervals
+
+    def far_mask(self, rho: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """Points where the compressed ring rules are accurate (bool (n,)).
+
+        The product rule interpolates the kernel by a degree FAR_NODES - 1 polynomial on each
+        interval; its error is ~ r^(-2 FAR_NODES), r the Bernstein-ellipse parameter of the
+        point (in the meridian plane) with respect to the interval. Far: r >= FAR_RHO on every
+        interval and at least FAR_DISTANCE (8 mm) from the core.
+        """
+        from .core import FAR_DISTANCE
+
+        dist = np.maximum.reduce([self.z_lo - z, z - self.z_hi, rho - self.radius])
+        ok = dist >= FAR_DISTANCE
+        for (r0, z0), (r1, z1) in self.far_segments:
+            c = complex(0.5 * (r0 + r1), 0.5 * (z0 + z1))
+            half = complex(0.5 * (r1 - r0), 0.5 * (z1 - z0))
+            w = (rho + 1j * z - c) / half
+            sq = np.sqrt(w * w - 1.0)
+            r = np.maximum(np.abs(w + sq), np.abs(w - sq))
+            ok &= r >= FAR_RHO
+        return ok
 
     @property
     def n0(self) -> int:
@@ -228,7 +272,7 @@ class CoreModel:
         return np.concatenate(rows, axis=0)
 
     # ------------------------------------------------------------------ basis fields
-    def basis_field(self, pts: np.ndarray, gradient: bool = False, fine: bool | None = None):
+    def basis_field(self, pts: np.ndarray, gradient: bool = False, fine: bool = False):
         """H of every unit unknown at local points (outside the core).
 
         Returns H (n, 3, n_unknowns) A/m per unit [, G (n, 3, 3, n_unknowns) A/m^2].
@@ -242,11 +286,7 @@ class CoreModel:
         if n == 0:
             return (h, g) if gradient else h
         rho = np.hypot(pts[:, 0], pts[:, 1])
-        dist = np.maximum.reduce([self.z_lo - pts[:, 2], pts[:, 2] - self.z_hi,
-                                  rho - self.radius])
-        from .core import FAR_DISTANCE
-
-        far = dist >= FAR_DISTANCE
+        far = self.far_mask(rho, pts[:, 2])
         for sel, fn in ((far, self._m0_far), (~far, self._m0_near)):
             if np.any(sel):
                 res = fn(pts[sel], rho[sel], gradient)
@@ -255,14 +295,176 @@ class CoreModel:
                 else:
                     h[sel, :, :self.n0] = res
         if self.m_max:
-            near = dist < NEAR_DISTANCE if fine is None else np.full(n, bool(fine))
-            for sel, (ng, nphi) in ((near, (4, 64)), (~near, (2, 16))):
-                if np.any(sel):
-                    res = self._m1_field(pts[sel], ng, nphi, gradient)
+            if fine:
+                res = self._m1_field(pts, 4, 64, gradient)
+                if gradient:
+                    h[:, :, self.n0:], g[:, :, :, self.n0:] = res
+                else:
+                    h[:, :, self.n0:] = res
+            else:
+                # compressed rings where accurate (ring density = far1_w @ sigma, one unit per
+                # (mode, panel)), panel charges elsewhere
+                eye = np.eye(2 * self.m_max * self.n1)
+                for sel, rule in ((far, "far"), (~far, (3, 32))):
+                    if not np.any(sel):
+                        continue
+                    src, q = self._charges(eye, rule)
+                    res = self._charge_kernel(pts[sel], src, gradient, q, False)
                     if gradient:
                         h[sel, :, self.n0:], g[sel, :, :, self.n0:] = res
                     else:
                         h[sel, :, self.n0:] = res
+        return (h, g) if gradient else h
+
+    def field(self, pts: np.ndarray, xs: np.ndarray, gradient: bool = False,
+              pointwise: bool = False):
+        """H of the core for unknown columns ``xs`` (n_unknowns, k) at local points.
+
+        Contracts the unknowns before the kernels (far rings for m = 0, charges for m >= 1).
+        Returns H (n, 3, k) A/m [, G (n, 3, 3, k) A/m^2]; with ``pointwise`` point i uses
+        column i (k = n) and the shapes are (n, 3) [, (n, 3, 3)].
+        """
+        from .core import FAR_DISTANCE
+
+        pts = np.asarray(pts, dtype=float)
+        n = len(pts)
+        k = xs.shape[1]
+        shp = (n,) if pointwise else (n, k)
+        h = np.zeros((n, 3) + shp[1:])
+        g = np.zeros((n, 3, 3) + shp[1:]) if gradient else None
+        if n == 0:
+            return (h, g) if gradient else h
+        rho = np.hypot(pts[:, 0], pts[:, 1])
+        far = self.far_mask(rho, pts[:, 2])
+        x0 = xs[:self.n0]
+        # m = 0: cylindrical components per column, then Cartesian
+        sel_list = ((far, True), (~far, False))
+        for sel, is_far in sel_list:
+            if not np.any(sel):
+                continue
+            idx = np.flatnonzero(sel)
+            comps = self._m0_rz(pts[idx], rho[idx], gradient, is_far)  # list (m, nb)
+            xcol = x0[:, idx] if pointwise else x0
+            if pointwise:
+                cz = [np.einsum("nb,bn->n", q, xcol) for q in comps]
+                res = self._rz_basis_to_xyz(pts[idx], rho[idx], [c[:, None] for c in cz],
+                                            gradient)
+                res = (res[0][..., 0], res[1][..., 0]) if gradient else res[..., 0]
+            else:
+                cz = [q @ xcol for q in comps]
+                res = self._rz_basis_to_xyz(pts[idx], rho[idx], cz, gradient)
+            if gradient:
+                h[idx] += res[0]
+                g[idx] += res[1]
+            else:
+                h[idx] += res
+        if self.m_max:
+            for sel, rule in ((~far, (3, 32)), (far, "far")):
+                if not np.any(sel):
+                    continue
+                idx = np.flatnonzero(sel)
+                src, q = self._charges(xs[self.n0:], rule)  # (nc, 3), (nc, k)
+                res = self._charge_kernel(pts[idx], src, gradient,
+                                          q[:, idx] if pointwise else q, pointwise)
+                if gradient:
+                    h[idx] += res[0]
+                    g[idx] += res[1]
+                else:
+                    h[idx] += res
+        return (h, g) if gradient else h
+
+    def _m0_rz(self, pts, rho, gradient, far):
+        """Cylindrical components per m = 0 unknown: list of (n, n0) arrays."""
+        from .core import _disc_nodes
+        from .field.kernels import loop_rz, sheet_rz
+
+        n = len(rho)
+        z = pts[:, 2]
+        if far:
+            nq = len(self.far_r)
+            res = loop_rz(np.tile(self.far_r, n), np.repeat(rho, nq),
+                          np.repeat(z, nq) - np.tile(self.far_z, n), gradient=gradient)
+            return [q.reshape(n, nq) @ self.far_w for q in res]
+        side, discs = self.side, self.discs
+        hh = 0.5 * (side[:, 1] - side[:, 0])
+        cc = 0.5 * (side[:, 1] + side[:, 0])
+        ns = len(hh)
+        rs = sheet_rz(self.radius, np.tile(hh, n), np.repeat(rho, ns),
+                      np.repeat(z, ns) - np.tile(cc, n), gradient=gradient)
+        nq = 4
+        rq, wq = _disc_nodes(discs[:, 1], discs[:, 2], nq)
+        nd = len(discs)
+        m = nd * nq
+        rl = loop_rz(np.tile(rq.ravel(), n), np.repeat(rho, m),
+                     np.repeat(z, m) - np.tile(np.repeat(discs[:, 0], nq), n), gradient=gradient)
+        ww = wq.ravel()
+        return [np.hstack([a.reshape(n, ns), (b.reshape(n, m) * ww).reshape(n, nd, nq)
+                           .sum(axis=2)]) for a, b in zip(rs, rl)]
+
+    def _charges(self, x1: np.ndarray, rule):
+        """Point charges of the m >= 1 unknowns x1 (2 m_max n1, k): positions (nc, 3), m, and
+        charges (nc, k), A m. ``rule``: (Gauss nodes per panel, azimuths) or 'far' (the
+        compressed product rule, ``FAR_NODES`` rings per interval, 12 azimuths)."""
+        k = x1.shape[1]
+        if rule == "far":
+            nphi = 12
+            phi = 2.0 * math.pi * (np.arange(nphi) + 0.5) / nphi
+            r, z = self.far1_r, self.far1_z
+            pos = np.stack([r[:, None] * np.cos(phi), r[:, None] * np.sin(phi),
+                            np.repeat(z[:, None], nphi, axis=1)], axis=-1)
+            dens = np.zeros((len(r), nphi, k))
+            for m in range(1, self.m_max + 1):
+                a = (2 * (m - 1)) * self.n1
+                wc = self.far1_w @ x1[a:a + self.n1]
+                ws = self.far1_w @ x1[a + self.n1:a + 2 * self.n1]
+                dens += wc[:, None, :] * np.cos(m * phi)[None, :, None]
+                dens += ws[:, None, :] * np.sin(m * phi)[None, :, None]
+            q = dens * (r * 2.0 * math.pi / nphi)[:, None, None]
+            return pos.reshape(-1, 3), q.reshape(-1, k)
+        ng, nphi = rule
+        pos, wt, phi = self._charge_nodes(ng, nphi)
+        dens = np.zeros((self.n1, nphi, k))
+        for m in range(1, self.m_max + 1):
+            a = (2 * (m - 1)) * self.n1
+            dens += x1[a:a + self.n1, None, :] * np.cos(m * phi)[None, :, None]
+            dens += x1[a + self.n1:a + 2 * self.n1, None, :] * np.sin(m * phi)[None, :, None]
+        q = wt[:, :, None, None] * dens[:, None, :, :]  # (n1, ng, nphi, k)
+        return pos.reshape(-1, 3), q.reshape(-1, k)
+
+    @staticmethod
+    def _charge_kernel(pts, src, gradient, q, pointwise, chunk=128):
+        """Field of point charges q (nc, k) at src (nc, 3): (n, 3, k) [, (n, 3, 3, k)]."""
+        n = len(pts)
+        k = q.shape[1]
+        shp = (n,) if pointwise else (n, k)
+        h = np.empty((n, 3) + shp[1:])
+        g = np.empty((n, 3, 3) + shp[1:]) if gradient else None
+        c4 = 1.0 / (4.0 * math.pi)
+        for a in range(0, n, chunk):
+            p = pts[a:a + chunk]
+            d = p[:, None, :] - src[None]
+            r2 = np.einsum("cij,cij->ci", d, d)
+            inv3 = c4 / (r2 * np.sqrt(r2))
+            comps = [d[..., i] * inv3 for i in range(3)]
+            if gradient:
+                inv5 = 3.0 * inv3 / r2
+                for i in range(3):
+                    for kk in range(i, 3):
+                        t = -d[..., i] * d[..., kk] * inv5
+                        if i == kk:
+                            t = t + inv3
+                        comps.append(t)
+            if pointwise:
+                qq = q[:, a:a + chunk].T  # (c, nc)
+                red = np.stack([np.einsum("cs,cs->c", t, qq) for t in comps], axis=1)
+            else:
+                red = np.stack([t @ q for t in comps], axis=1)  # (c, ncomp, k)
+            h[a:a + chunk] = red[:, :3]
+            if gradient:
+                for (i, kk), j in {(0, 0): 3, (0, 1): 4, (0, 2): 5, (1, 1): 6, (1, 2): 7,
+                                   (2, 2): 8}.items():
+                    g[a:a + chunk, i, kk] = red[:, j]
+                    g[a:a + chunk, kk, i] = red[:, j]
         return (h, g) if gradient else h
 
     def _rz_basis_to_xyz(self, pts, rho, comps, gradient):
@@ -442,11 +644,15 @@ def _self_charge_matrices(radius, z_lo, z_hi, kind, lo, hi, rho_c, z_c, m_max):
 
 @functools.lru_cache(maxsize=32)
 def core_model(radius: float, length: float, offset: float, mu_r: float, key: tuple,
-               m_max: int = M_MAX) -> CoreModel:
-    """Discretization and self blocks of a linear core (cached per core type)."""
-    from .core import FAR_NODES, _geometry, _interface_factor, _system
+               m_max: int = M_MAX, refine: int = 1) -> CoreModel:
+    """Discretization and self blocks of a linear core (cached per core type).
 
-    side, side_slice, discs = _geometry(radius, length, offset)
+    ``refine`` multiplies every panel count (convergence studies, wide cores).
+    """
+    from .core import FAR_NODES, N_CAP, N_SIDE, _geometry, _interface_factor, _system
+
+    side, side_slice, discs = _geometry(radius, length, offset, n_side=N_SIDE * refine,
+                                        n_cap=N_CAP * refine)
     a, _, rho0, z0 = _system(radius, side, discs, key)
     f_side = _interface_factor(np.full(len(side), mu_r), 1.0)
     below = discs[:, 3].astype(int)
@@ -474,9 +680,10 @@ def core_model(radius: float, length: float, offset: float, mu_r: float, key: tu
         zz.append(np.full_like(nodes, zp))
         ww.append(full)
     # m >= 1 panels
-    e_side = _graded_both(lo, hi, N1_SIDE)
-    e_cap = _graded_sin(0.0, radius, N1_CAP)
-    kind = np.r_[np.zeros(N1_SIDE, int), np.ones(N1_CAP, int), np.full(N1_CAP, 2)]
+    n1s, n1c = N1_SIDE * refine, N1_CAP * refine
+    e_side = _graded_both(lo, hi, n1s)
+    e_cap = _graded_sin(0.0, radius, n1c)
+    kind = np.r_[np.zeros(n1s, int), np.ones(n1c, int), np.full(n1c, 2)]
     lo1 = np.r_[e_side[:-1], e_cap[:-1], e_cap[:-1]]
     hi1 = np.r_[e_side[1:], e_cap[1:], e_cap[1:]]
     mid = 0.5 * (lo1 + hi1)
@@ -487,18 +694,39 @@ def core_model(radius: float, length: float, offset: float, mu_r: float, key: tu
         d = _self_charge_matrices(radius, lo, hi, kind, lo1, hi1, rho1, z1, m_max)
         lam2 = 2.0 * (mu_r - 1.0) / (mu_r + 1.0)
         self1 = tuple(np.eye(len(kind)) - lam2 * d[m] for m in range(m_max))
+    # compressed far rule of the m >= 1 charges (same product rule as m = 0)
+    r1, z1f, w1 = [], [], []
+    n1 = len(kind)
+    nodes, w = _product_matrix(lo1[:n1s], hi1[:n1s],
+                               [(lo, lo + end), (lo + end, hi - end), (hi - end, hi)], FAR_NODES)
+    r1.append(np.full_like(nodes, radius))
+    z1f.append(nodes)
+    w1.append(np.hstack([w, np.zeros((len(nodes), n1 - n1s))]))
+    for kk, zp in ((1, hi), (2, lo)):
+        sel = np.flatnonzero(kind == kk)
+        nodes, w = _product_matrix(lo1[sel], hi1[sel], [(0.0, radius)], FAR_NODES)
+        full = np.zeros((len(nodes), n1))
+        full[:, sel] = w
+        r1.append(nodes)
+        z1f.append(np.full_like(nodes, zp))
+        w1.append(full)
+    segs = np.array([[[radius, a], [radius, b]] for a, b in
+                     [(lo, lo + end), (lo + end, hi - end), (hi - end, hi)]]
+                    + [[[0.0, zp], [radius, zp]] for zp in (lo, hi)])
     return CoreModel(radius, lo, hi, mu_r, m_max, side, discs, f0, self0, rho0, z0,
                      np.concatenate(rr), np.concatenate(zz), np.vstack(ww), kind, lo1, hi1,
-                     rho1, z1, self1)
+                     rho1, z1, self1, np.concatenate(r1), np.concatenate(z1f), np.vstack(w1),
+                     segs)
 
 
 # ============================================================================ the array system
-def _core_model_of(coil, m_max):
+def _core_model_of(coil, m_max, refine=1):
     from .core import _winding_key
 
     c = coil.core
     return core_model(float(c.radius), float(c.length), float(c.offset),
-                      float(c.relative_permeability), _winding_key(coil), int(m_max))
+                      float(c.relative_permeability), _winding_key(coil), int(m_max),
+                      int(refine))
 
 
 def _rel_key(pa, pb):
@@ -516,17 +744,17 @@ class ArraySystem:
     cores' fields are evaluated from the solved unknowns.
     """
 
-    def __init__(self, array, m_max: int = M_MAX):
+    def __init__(self, array, m_max: int = M_MAX, refine: int = 1):
         from scipy.linalg import lu_factor
 
         self.array = array
         self.m_max = int(m_max)
-        self.core_index = [k for k, c in enumerate(array.coils) if c.core is not None]
-        for k in self.core_index:
-            if array.coils[k].core.bh != "linear" or array.coils[k].core.model != \
-                    "surface-current":
-                pass  # the linear model at relative_permeability; saturation: saturation_table
-        self.models = [_core_model_of(array.coils[k], self.m_max) for k in self.core_index]
+        # linear at relative_permeability (a 1010-steel core too: its saturation is the
+        # separate correction, saturation_table); 'thesis-uniform' cores stay uncoupled
+        self.core_index = [k for k, c in enumerate(array.coils)
+                           if c.core is not None and c.core.model == "surface-current"]
+        self.models = [_core_model_of(array.coils[k], self.m_max, refine)
+                       for k in self.core_index]
         self.poses = [array.coils[k].pose for k in self.core_index]
         sizes = [m.n_unknowns for m in self.models]
         self.offsets = np.r_[0, np.cumsum(sizes)].astype(int)
@@ -534,6 +762,14 @@ class ArraySystem:
         self.factors = np.concatenate([m.factors() for m in self.models]) if n else np.zeros(0)
         mat = np.zeros((n, n))
         cache = {}
+        with _blas_one_thread():
+            self._assemble(mat, cache)
+        self.n_blocks = len(cache)
+        self.n_unknowns = n
+        self._lu = lu_factor(mat) if n else None
+        self._coil_solution = None
+
+    def _assemble(self, mat, cache):
         for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
             sj = slice(self.offsets[jj], self.offsets[jj + 1])
             mat[sj, sj] = mj.self_block()
@@ -545,10 +781,6 @@ class ArraySystem:
                     cache[key] = self._cross_block(mi, pi, mj, pj)
                 si = slice(self.offsets[ii], self.offsets[ii + 1])
                 mat[sj, si] = -mj.factors()[:, None] * cache[key]
-        self.n_blocks = len(cache)
-        self.n_unknowns = n
-        self._lu = lu_factor(mat) if n else None
-        self._coil_solution = None
 
     # ------------------------------------------------------------------ assembly
     @staticmethod
@@ -563,18 +795,43 @@ class ArraySystem:
         h = np.einsum("ab,nbu->nau", rot, h)
         return mj.project(h.reshape(shape + (3, -1)))
 
-    def _project_global_field(self, field_fn, n_phi) -> np.ndarray:
-        """RHS: F * projection of a source's H (callable on global points -> (n, 3[, k])).
+    def _project_global_field(self, field_fn, n_phi, near_points=None) -> np.ndarray:
+        """RHS: F * projection of a source's H (callable on global points -> (n, 3, k)).
 
-        Returns (n_unknowns, k).
+        Without ``near_points``: ``n_phi`` azimuths per ring on every core. With
+        ``near_points`` (k, 3) global m, one source per column (column q sits at
+        near_points[q], and ``field_fn(points, cols)`` evaluates only columns ``cols``): a
+        core uses ``n_phi`` azimuths for the sources closer than 30 mm to it and
+        ``N_PHI_RING`` for the others (a source that far has no significant azimuthal
+        content beyond the kept modes on the core's rings). Returns (n_unknowns, k).
         """
         rows = []
         for mj, pj in zip(self.models, self.poses):
-            ring = mj.ring_points(n_phi)
-            glob = ring.reshape(-1, 3) @ pj.matrix.T + np.asarray(pj.position)
-            h = field_fn(glob)  # (n, 3, k)
-            h = np.einsum("ba,nbk->nak", pj.matrix, h)  # to local j
-            rows.append(mj.project(h.reshape(ring.shape[:2] + h.shape[1:])))
+            if near_points is None:
+                groups = [(n_phi, None)]
+            else:
+                loc = pj.to_local(near_points)
+                rho = np.hypot(loc[:, 0], loc[:, 1])
+                dist = np.maximum.reduce([mj.z_lo - loc[:, 2], loc[:, 2] - mj.z_hi,
+                                          rho - mj.radius])
+                close = dist < 0.03
+                groups = [(n_phi, np.flatnonzero(close)), (N_PHI_RING, np.flatnonzero(~close))]
+            out = None
+            for nphi, cols in groups:
+                if cols is not None and len(cols) == 0:
+                    continue
+                ring = mj.ring_points(nphi)
+                glob = ring.reshape(-1, 3) @ pj.matrix.T + np.asarray(pj.position)
+                h = field_fn(glob) if cols is None else field_fn(glob, cols)  # (n, 3, k)
+                h = np.einsum("ba,nbk->nak", pj.matrix, h)  # to local j
+                proj = mj.project(h.reshape(ring.shape[:2] + h.shape[1:]))
+                if cols is None:
+                    out = proj
+                else:
+                    if out is None:
+                        out = np.zeros((mj.n_unknowns, len(near_points)))
+                    out[:, cols] = proj
+            rows.append(out)
         return self.factors[:, None] * np.concatenate(rows, axis=0)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
@@ -611,56 +868,55 @@ class ArraySystem:
 
         Returns B (n, 3, k) T [, G (n, 3, 3, k) T/m].
         """
-        pts = np.asarray(points, dtype=float)
-        k = x.shape[1]
-        b = np.zeros((len(pts), 3, k))
-        g = np.zeros((len(pts), 3, 3, k)) if gradient else None
-        for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
-            xs = x[self.offsets[jj]:self.offsets[jj + 1]]
-            loc = pj.to_local(pts)
-            res = mj.basis_field(loc, gradient)
-            rot = pj.matrix
-            if gradient:
-                h, gg = res
-                g += MU0 * np.einsum("ab,cd,nbdu,uk->nack", rot, rot, gg, xs)
-            else:
-                h = res
-            b += MU0 * np.einsum("ab,nbu,uk->nak", rot, h, xs)
-        return (b, g) if gradient else b
+        return self._field(points, x, gradient, False)
 
     def core_field_pointwise(self, points: np.ndarray, x: np.ndarray, gradient: bool = False):
         """Like :meth:`core_field` but point i uses its own column x[:, i]: B (n, 3) [, G]."""
+        return self._field(points, x, gradient, True)
+
+    def _field(self, points, x, gradient, pointwise):
+        with _blas_one_thread():
+            return self._field_impl(points, x, gradient, pointwise)
+
+    def _field_impl(self, points, x, gradient, pointwise):
         pts = np.asarray(points, dtype=float)
-        b = np.zeros((len(pts), 3))
-        g = np.zeros((len(pts), 3, 3)) if gradient else None
+        tail = () if pointwise else (x.shape[1],)
+        b = np.zeros((len(pts), 3) + tail)
+        g = np.zeros((len(pts), 3, 3) + tail) if gradient else None
         for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
             xs = x[self.offsets[jj]:self.offsets[jj + 1]]
-            loc = pj.to_local(pts)
-            res = mj.basis_field(loc, gradient)
+            res = mj.field(pj.to_local(pts), xs, gradient, pointwise)
             rot = pj.matrix
+            h = res[0] if gradient else res
+            if pj.is_identity_rotation:
+                b += MU0 * h
+                if gradient:
+                    g += MU0 * res[1]
+                continue
+            b += MU0 * np.einsum("ab,nb...->na...", rot, h)
             if gradient:
-                h, gg = res
-                g += MU0 * np.einsum("ab,cd,nbdu,un->nac", rot, rot, gg, xs)
-            else:
-                h = res
-            b += MU0 * np.einsum("ab,nbu,un->na", rot, h, xs)
+                gl = np.einsum("ab,nbc...->nac...", rot, res[1])
+                g += MU0 * np.einsum("nac...,dc->nad...", gl, rot)
         return (b, g) if gradient else b
 
     # ------------------------------------------------------------------ magnet source
     def magnet_solution(self, positions: np.ndarray, moment: np.ndarray) -> np.ndarray:
         """Unknowns of all cores magnetized by a point dipole at each position, (nu, n)."""
-        from .field import dipole_field
-
         pos = np.atleast_2d(np.asarray(positions, dtype=float))
         m = np.asarray(moment, dtype=float)
 
-        def dip(glob):
-            out = np.empty((len(glob), 3, len(pos)))
-            for q, p in enumerate(pos):
-                out[:, :, q] = dipole_field(glob - p, m) / MU0
-            return out
+        def dip(glob, cols):
+            # H of the point dipole (magnet outside every core: r > 0 at all ring points)
+            d = glob[:, None, :] - pos[None, cols, :]  # (n, k, 3)
+            r2 = np.einsum("nki,nki->nk", d, d)
+            inv_r = 1.0 / np.sqrt(r2)
+            mr = d @ m
+            h = (3.0 * d * (mr * inv_r ** 5)[..., None] - m * (inv_r ** 3)[..., None])
+            return np.swapaxes(h, 1, 2) / (4.0 * math.pi)
 
-        return self.solve(self._project_global_field(dip, N_PHI_MAGNET))
+        with _blas_one_thread():
+            rhs = self._project_global_field(dip, N_PHI_MAGNET, pos)
+        return self.solve(rhs)
 
 
 # ============================================================================ saturation
