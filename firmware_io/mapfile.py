@@ -128,11 +128,12 @@ def data_hash(arrays: dict) -> str:
 
 
 def write(path, arrays: dict, meta: dict) -> Path:
-    """Write ``arrays`` and ``meta`` (``data_sha256`` filled in) to ``path`` as .npz.
+    """Validate, then write ``arrays`` and ``meta`` (``data_sha256`` filled in) to ``path``.
 
     Not atomic by itself: designkit.fieldmap.write wraps it in an atomic rename.
     """
     meta = dict(meta, data_sha256=data_hash(arrays))
+    validate(arrays, meta, path)
     with open(path, "wb") as fh:
         np.savez_compressed(fh, **{k: arrays[k] for k in array_names(arrays)},
                             meta=np.array(json.dumps(meta)))
@@ -165,6 +166,12 @@ def read(path) -> tuple[dict, dict]:
         raise
     except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError) as exc:
         raise _bad(p, f"readable npz; {type(exc).__name__}: {exc} -- truncated or foreign")
+    validate(arrays, meta, p)
+    return arrays, meta
+
+
+def validate(arrays: dict, meta: dict, p="<map data>") -> None:
+    """Check everything :func:`read` checks on arrays and meta in memory (BadInputError)."""
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise _bad(p, f"meta.format == {FORMAT!r} -- a foreign file")
     if meta.get("version") != FORMAT_VERSION:
@@ -219,7 +226,6 @@ def read(path) -> tuple[dict, dict]:
             raise _bad(p, f"{name} strictly increasing with at least 2 nodes")
     if data_hash(arrays) != meta.get("data_sha256"):
         raise _bad(p, "data matching its recorded SHA-256 (corrupted)")
-    return arrays, meta
 
 
 # ============================================================================ (rho, z) tables
