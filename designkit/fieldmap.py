@@ -385,7 +385,7 @@ def build(design, *, spacing: float = 0.015, coupling_log_step: float = 0.35,
     rotations = [list(map(list, c.pose.rotation)) for c in arr.coils]
     # the tables' part as the reader computes it (so the fits absorb the table error at nodes)
     prep = mf.prepare_rz([arrays[t["name"]] for t in rz_meta], rz_meta, positions, rotations)
-    whole, core = (np.ascontiguousarray(x.transpose(1, 0, 2), dtype=np.float64)
+    whole, core = (np.ascontiguousarray(x.transpose(2, 1, 0), dtype=np.float64)
                    for x in mf.interpolate_rz(prep, c_nodes, nc))
     scale = np.maximum(np.abs(a_c).max(axis=(0, 2)), 1e-300)  # (8,) per-row max
     mix = _fit_mix(whole, core, a_c, scale)
