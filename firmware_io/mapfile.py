@@ -413,20 +413,21 @@ def _rotate_rows(rows: np.ndarray, rot: np.ndarray) -> np.ndarray:
     return np.stack([bg[0], bg[1], bg[2], gg[0, 0], gg[0, 1], gg[0, 2], gg[1, 1], gg[1, 2]])
 
 
-# rows = sum over (quantity q, monomial f) of q * f * _POLY[q, f]: monomials (1, x, y, x^2, xy, y^2)
-_POLY = np.zeros((4, 6, 8))
-_POLY[0, 1, 0] = _POLY[0, 2, 1] = _POLY[0, 0, 3] = _POLY[0, 0, 6] = 1.0  # b: Bx, By, Gxx, Gyy
-_POLY[1, 0, 2] = 1.0                                                       # Bz
-_POLY[2, 1, 5] = _POLY[2, 2, 7] = 1.0                                      # e: Gxz, Gyz
-_POLY[3, 3, 3] = _POLY[3, 4, 4] = _POLY[3, 5, 6] = 1.0                     # w: Gxx, Gxy, Gyy
-_POLY = _POLY.reshape(24, 8)
+# one point: rows (8,) of a part = (b, Bz, e, w) @ M, M (4, 8) = mono @ _POLY with the monomials
+# mono = (1, x, y, x x, x y, y x, y y) of the coil-local horizontal offsets
+_POLY = np.zeros((7, 4, 8))
+_POLY[1, 0, 0] = _POLY[2, 0, 1] = _POLY[0, 0, 3] = _POLY[0, 0, 6] = 1.0  # b: Bx, By, Gxx, Gyy
+_POLY[0, 1, 2] = 1.0                                                       # Bz
+_POLY[1, 2, 5] = _POLY[2, 2, 7] = 1.0                                      # e: Gxz, Gyz
+_POLY[3, 3, 3] = _POLY[4, 3, 4] = _POLY[6, 3, 6] = 1.0                     # w: Gxx, Gxy, Gyy
+_POLY = _POLY.reshape(7, 32)
 
 
-def _rz_one(t: dict, q, whole: np.ndarray, core: np.ndarray) -> None:
-    """One point (3 floats), one coil type: rows into ``whole``, ``core`` (8, nc)[:, idx]."""
+def _rz_one(t: dict, q) -> np.ndarray:
+    """One point (3 floats), one coil type: rows (k, 2, 8) float64 of its k coils, for the
+    whole coil [:, 0] and its core alone [:, 1], in the global frame."""
     if t["rot"] is None:
         d = np.subtract(q, t["pos"])
-        x, y = d[:, 0], d[:, 1]
         if t["shared_z"]:
             zz = q[2] - t["zr"][0]
             u = (math.log(zz if zz > 1e-12 else 1e-12) - t["u0"]) * t["inv_du"]
@@ -437,44 +438,31 @@ def _rz_one(t: dict, q, whole: np.ndarray, core: np.ndarray) -> None:
             u = (np.log(np.maximum(q[2] - t["zr"], 1e-12)) - t["u0"]) * t["inv_du"]
             u = np.clip(u, 0.0, t["n_u"] - 1.000001)
             j = u.astype(np.intp)
-            tz = u - j
+            tz = u[:, None]
     else:
-        loc = np.einsum("ki,kij->kj", np.subtract(q, t["pos"]), t["rot"])
-        x, y = loc[:, 0], loc[:, 1]
-        u = (np.log(np.maximum(loc[:, 2] - t["z_ref"], 1e-12)) - t["u0"]) * t["inv_du"]
+        d = np.einsum("ki,kij->kj", np.subtract(q, t["pos"]), t["rot"])
+        u = (np.log(np.maximum(d[:, 2] - t["z_ref"], 1e-12)) - t["u0"]) * t["inv_du"]
         u = np.clip(u, 0.0, t["n_u"] - 1.000001)
         j = u.astype(np.intp)
-        tz = u - j
-    rho = np.sqrt(x * x + y * y)
+        tz = (u - j)[:, None]
+    xy = d[:, :2]
+    k = len(xy)
+    outer = (xy[:, :, None] * xy[:, None, :]).reshape(k, 4)
+    rho = np.sqrt(outer[:, 0] + outer[:, 3])
     vv = np.minimum(rho * t["inv_h"] / (1.0 + rho * t["inv_scale"]), t["n_rho"] - 1.0001)
     i = vv.astype(np.intp)
-    tr = vv - i
+    tr = (vv - i)[:, None]
     cells = t["cells"][i * (t["n_u"] - 1) + j]  # (k, corner, quantity)
     # bilinear weights of the corners (rho_i, u_j), (rho_i, u_j+1), (rho_i+1, u_j), (.., ..)
-    w = np.empty((len(x), 1, 4))
-    a = 1.0 - tr
-    w[:, 0, 0] = a * (1.0 - tz)
-    w[:, 0, 1] = a * tz
-    w[:, 0, 2] = tr * (1.0 - tz)
-    w[:, 0, 3] = tr * tz
-    val = np.matmul(w, cells).reshape(-1, 2, 4)  # (k, whole/core, b Bz e w)
-    mono = np.empty((len(x), 1, 1, 6))
-    mono[..., 0] = 1.0
-    mono[..., 1] = x[:, None, None]
-    mono[..., 2] = y[:, None, None]
-    mono[..., 3] = (x * x)[:, None, None]
-    mono[..., 4] = (x * y)[:, None, None]
-    mono[..., 5] = (y * y)[:, None, None]
-    rows = (val[..., None] * mono).reshape(-1, 24) @ _POLY  # (2 k, 8)
-    rows = rows.reshape(-1, 2, 8)
-    for part, out in ((0, whole), (1, core)):
-        r = rows[:, part].T  # (8, k)
-        if t["rot"] is not None:
-            r = _rotate_rows(r[:, None, :], t["rot"])[:, 0, :]
-        if t["all"]:
-            out[...] = r
-        else:
-            out[:, t["idx"]] = r
+    wz = np.concatenate([1.0 - tz, tz], axis=-1) if np.ndim(tz) else np.array([1.0 - tz, tz])
+    w = (np.concatenate([1.0 - tr, tr], axis=1)[:, :, None] * wz[..., None, :]).reshape(k, 1, 4)
+    val = np.matmul(w, cells).reshape(k, 2, 4)  # (k, whole/core, b Bz e w)
+    mono = np.concatenate([np.ones((k, 1)), xy, outer], axis=1)  # (k, 7)
+    rows = np.matmul(val, (mono @ _POLY).reshape(k, 4, 8))  # (k, 2, 8) local frame
+    if t["rot"] is not None:
+        rows = np.stack([_rotate_rows(rows[:, p].T[:, None, :], t["rot"])[:, 0, :].T
+                         for p in range(2)], axis=1)
+    return rows
 
 
 def prepare_magnet(tables: list, metas: list, positions, rotations) -> list:
@@ -603,6 +591,8 @@ class MapFile:
     magnet_f0: tuple = field(repr=False)
     magnet_sind: tuple = field(repr=False)
     sind_mix: np.ndarray = field(repr=False)
+    mix_t: np.ndarray = field(repr=False)
+    modes_t: np.ndarray = field(repr=False)
 
     @classmethod
     def load(cls, path, expected_design_sha256: str | None = None) -> "MapFile":
@@ -640,7 +630,11 @@ class MapFile:
                    (maxes, np.ascontiguousarray(f0.reshape(-1, 3)), f0.shape[:3]),
                    (maxes, np.ascontiguousarray(sind.reshape(-1, 6 * nc), dtype=np.float32),
                     sind.shape[:3]),
-                   np.asarray(arrays["SIND_MIX"], float).reshape(nc, 6 * nc))
+                   np.asarray(arrays["SIND_MIX"], float).reshape(nc, 6 * nc),
+                   np.ascontiguousarray(np.asarray(arrays["MIX"], float).T),
+                   # residual modes laid out (r, nc * 8) for the one-point (nc, 8) sum
+                   np.ascontiguousarray(arrays["MODES"].astype(np.float64).transpose(0, 2, 1)
+                                        .reshape(len(arrays["MODES"]), -1)))
 
     # ------------------------------------------------------------------ plain attributes
     @property
@@ -717,12 +711,15 @@ class MapFile:
         nc = self.n_coils
         q = self._one_point(points, extrapolate)
         if q is not None:
-            whole, core = np.empty((8, nc)), np.empty((8, nc))
-            for t in self.rz:
-                _rz_one(t, q, whole, core)
-            whole += core @ self.mix
-            whole += (_trilinear_one(self.coupling, q) @ self.modes).reshape(8, nc)
-            return whole if np.ndim(points) == 1 else whole[None]
+            if len(self.rz) == 1 and self.rz[0]["all"]:
+                rows = _rz_one(self.rz[0], q)  # (nc, 2, 8)
+            else:
+                rows = np.empty((nc, 2, 8))
+                for t in self.rz:
+                    rows[t["idx"]] = _rz_one(t, q)
+            a = rows[:, 0] + self.mix_t @ rows[:, 1]  # (nc, 8)
+            a += (_trilinear_one(self.coupling, q) @ self.modes_t).reshape(nc, 8)
+            return a.T if np.ndim(points) == 1 else a.T[None]
         p, single = self._points(points, extrapolate)
         n = len(p)
         out = np.empty((n, 8, nc))
