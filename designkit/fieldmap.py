@@ -8,22 +8,27 @@ errors. All the physics the map samples comes through one function, :func:`map_p
 
 Representation and error budget (target: <= 1e-3 of each row's largest |A| over the box)
 -----------------------------------------------------------------------------------------
-The coupled A is not axisymmetric, but almost all of its sharp structure is: near a core's rim
-the field is dominated by that core, whose magnetization (by its own winding or by a neighbour)
-is mostly axial. So
+The coupled A is not axisymmetric, but much of its sharp structure is: near a core's rim the
+field is dominated by that core, magnetized mostly along its axis. So
 
-* self part: per coil type an exact axisymmetric (rho, z) table of one coil alone (~1 MB, table
-  error ~1e-4; steps 0.075 mm in rho near the axis, growing as (1 + rho / 50 mm)^2, and 2.5 % of
-  the height above the core's top in z);
-* ``MIX``: A_self @ MIX puts into column k the fields of the cores coil k magnetizes, with each
-  core's own field shape (a least-squares fit, one small matrix product at run time);
-* residual: the rest (transverse magnetization of neighbours, profile changes) is smooth; it is
-  sampled on a coarse 3-D grid (5 mm in x, y; z steps growing with the height above the cores),
-  compressed by a truncated SVD (relative tolerance ``svd_tolerance``) and interpolated
-  trilinearly. Budget: ~2e-4 tables, <= 7e-4 residual grid + SVD truncation.
+* tables: per coil type, exact axisymmetric (rho, z) tables of one coil alone and of its core
+  alone (1.4 MB; interpolation error ~1.3e-4 of each row's maximum: steps 0.1 mm in rho near
+  the axis, growing as (1 + rho / 50 mm)^2, and 2.5 % of the height above the core's top in z);
+* ``MIX``: ``A_core @ MIX`` adds to column k the extra axial magnetization of every core by
+  coil k, with that core's own field shape (least squares over the residual grid's nodes);
+* residual: the rest, sampled from the coupled model on a coarse 3-D grid (15 mm in x, y; z
+  steps growing with the height above the cores), SVD-compressed, trilinear.
 
-The build checks itself: it evaluates the coupled model directly at ``n_check`` random points
-in the box and records the errors of the finished map in ``meta['errors']``.
+Measured on the default 3 x 3 iron-core array (designkit.coupling, November 2026): the rest is
+NOT small -- the transverse (m = 1, 2) magnetization of the neighbour cores reaches ~15 % of
+each row's maximum near the bottom of the box and is as sharp as the rims -- so this map is
+within ~4-12 % of the coupled model, not 1e-3 (``studies/bench_map.py``; the build records its
+own check in ``meta['errors']``). Sampling the coupled model costs ~10-100 ms per point, which
+rules out a finer residual grid within the build budget. The fix is structural: tabulate the
+cores' coupled modes themselves (per core type, the SVD of the solved unknowns of all cores for
+all coils: rank 3 for m = 0 at 8e-5; for m = 1, 2 the potential x G(rho^2, z) resp.
+(x^2 - y^2) H(rho^2, z), so 5 smooth (rho, z) quantities per mode give all 8 rows) and mix them
+per column -- exact up to the tables, with no 3-D grid for A.
 """
 
 from __future__ import annotations
@@ -289,11 +294,11 @@ def build(design, *, spacing: float = 0.015, coupling_log_step: float = 0.35,
         Largest error of the rank-truncated coupling residual at its nodes, relative to each
         row's max |A|.
     rz_step : float, m
-        rho step of the (rho, z) tables on the axis (default 0.075 mm, growing as
-        (1 + rho / rz_rho_scale)^2 with rz_rho_scale 50 mm: ~0.3 mm at 50 mm from the axis);
+        rho step of the (rho, z) tables on the axis (default 0.1 mm, growing as
+        (1 + rho / rz_rho_scale)^2 with rz_rho_scale 50 mm: ~0.4 mm at 50 mm from the axis);
         ``rz_log_step`` is the step in log(z - z_ref) (default 0.025: 2.5 % of the height
         above the core's top). ``magnet_rz_step``, ``magnet_rz_log_step``: the same for the
-        magnet tables (0.5 mm, 5 %).
+        magnet tables (2 mm, 15 %).
     box : (lower, upper) or None
         Corners, m; default :func:`default_box`.
     n_check : int
