@@ -8,22 +8,27 @@ errors. All the physics the map samples comes through one function, :func:`map_p
 
 Representation and error budget (target: <= 1e-3 of each row's largest |A| over the box)
 -----------------------------------------------------------------------------------------
-The coupled A is not axisymmetric, but almost all of its sharp structure is: near a core's rim
-the field is dominated by that core, whose magnetization (by its own winding or by a neighbour)
-is mostly axial. So
+The coupled A is not axisymmetric, but much of its sharp structure is: near a core's rim the
+field is dominated by that core, magnetized mostly along its axis. So
 
-* self part: per coil type an exact axisymmetric (rho, z) table of one coil alone (~1 MB, table
-  error ~1e-4; steps 0.075 mm in rho near the axis, growing as (1 + rho / 50 mm)^2, and 2.5 % of
-  the height above the core's top in z);
-* ``MIX``: A_self @ MIX puts into column k the fields of the cores coil k magnetizes, with each
-  core's own field shape (a least-squares fit, one small matrix product at run time);
-* residual: the rest (transverse magnetization of neighbours, profile changes) is smooth; it is
-  sampled on a coarse 3-D grid (5 mm in x, y; z steps growing with the height above the cores),
-  compressed by a truncated SVD (relative tolerance ``svd_tolerance``) and interpolated
-  trilinearly. Budget: ~2e-4 tables, <= 7e-4 residual grid + SVD truncation.
+* tables: per coil type, exact axisymmetric (rho, z) tables of one coil alone and of its core
+  alone (1.4 MB; interpolation error ~1.3e-4 of each row's maximum: steps 0.1 mm in rho near
+  the axis, growing as (1 + rho / 50 mm)^2, and 2.5 % of the height above the core's top in z);
+* ``MIX``: ``A_core @ MIX`` adds to column k the extra axial magnetization of every core by
+  coil k, with that core's own field shape (least squares over the residual grid's nodes);
+* residual: the rest, sampled from the coupled model on a coarse 3-D grid (15 mm in x, y; z
+  steps growing with the height above the cores), SVD-compressed, trilinear.
 
-The build checks itself: it evaluates the coupled model directly at ``n_check`` random points
-in the box and records the errors of the finished map in ``meta['errors']``.
+Measured on the default 3 x 3 iron-core array (designkit.coupling, November 2026): the rest is
+NOT small -- the transverse (m = 1, 2) magnetization of the neighbour cores reaches ~15 % of
+each row's maximum near the bottom of the box and is as sharp as the rims -- so this map is
+within ~4-12 % of the coupled model, not 1e-3 (``studies/bench_map.py``; the build records its
+own check in ``meta['errors']``). Sampling the coupled model costs ~10-100 ms per point, which
+rules out a finer residual grid within the build budget. The fix is structural: tabulate the
+cores' coupled modes themselves (per core type, the SVD of the solved unknowns of all cores for
+all coils: rank 3 for m = 0 at 8e-5; for m = 1, 2 the potential x G(rho^2, z) resp.
+(x^2 - y^2) H(rho^2, z), so 5 smooth (rho, z) quantities per mode give all 8 rows) and mix them
+per column -- exact up to the tables, with no 3-D grid for A.
 """
 
 from __future__ import annotations
@@ -207,45 +212,44 @@ def _union_spec(specs: list) -> dict:
 @dataclass(frozen=True)
 class MapPhysics:
     """What the map samples, for one design (all SI); every method takes the CoilArray it is
-    about (the design's array, or one coil alone for the per-type tables).
-
-    ``source`` says which model produced the numbers (it is recorded in the file).
+    about (the design's array, or one coil alone for the per-type tables). All of it comes from
+    the coupled array model (:mod:`designkit.coupling` through :class:`CoilArray`).
     """
 
     moment_a_m2: np.ndarray
-    sensor_offset_m: float
-    saturation_currents_a: np.ndarray
-    source: str
+    max_current_a: float
+    source: str = "designkit.coupling (all cores solved together, linear cores)"
 
     def sensor_positions(self, array: CoilArray) -> np.ndarray:
-        """(2, n_coils, 3) m: one sensor on each coil's axis, ``sensor_offset_m`` above its
-        top face (upper array) and below its bottom face (lower array)."""
-        def on_axis(c, z):
-            return np.asarray(c.pose.position) + c.pose.matrix[:, 2] * z
-
-        d = self.sensor_offset_m
-        return np.array([[on_axis(c, c.length / 2 + d) for c in array.coils],
-                         [on_axis(c, -c.length / 2 - d) for c in array.coils]])
+        """(2, n_coils, 3) m: upper array then lower array, one sensor per coil axis."""
+        return array.sensor_positions_m()
 
     def actuation(self, array: CoilArray, points) -> np.ndarray:
         """Coupled A (n, 8, n_coils), T/A and T/(m A)."""
-        return _standin_actuation(array, np.asarray(points, float))
+        return array.actuation_matrix(np.asarray(points, float))
 
     def bias_force(self, array: CoilArray, points) -> np.ndarray:
         """F0 (n, 3) N on the magnet at ``points`` at zero current."""
-        return _standin_bias(array, np.asarray(points, float), self.moment_a_m2)[0]
+        return array.bias_force(np.asarray(points, float), self.moment_a_m2)
 
-    def sensor_induced(self, array: CoilArray, magnet_positions) -> np.ndarray:
+    def sensor_induced(self, array: CoilArray, magnet_positions, chunk: int = 64) -> np.ndarray:
         """(n, 2, n_coils, 3) T: the field of the magnet-magnetized cores at the sensors."""
-        return _standin_bias(array, np.asarray(magnet_positions, float), self.moment_a_m2,
-                             self.sensor_positions(array))[1]
+        p = np.asarray(magnet_positions, float)
+        sens = array.sensor_positions_m()
+        system = array.coupled()
+        out = np.zeros((len(p),) + sens.shape)
+        if system is None:
+            return out
+        for a in range(0, len(p), chunk):  # one back-substitution per magnet position
+            x = system.magnet_solution(p[a:a + chunk], self.moment_a_m2)
+            b = system.core_field(sens.reshape(-1, 3), x)  # (n_sensors, 3, k)
+            out[a:a + chunk] = np.moveaxis(b, -1, 0).reshape((-1,) + sens.shape)
+        return out
 
     def magnet_alone(self, alone: CoilArray, points):
         """One coil alone: F0 (n, 3) N and the z field (n,) T of its magnetized core at its
         upper sensor, for the magnet at ``points``."""
-        f = self.bias_force(alone, points)
-        b = self.sensor_induced(alone, points)[:, 0, 0, 2]
-        return f, b
+        return self.bias_force(alone, points), self.sensor_induced(alone, points)[:, 0, 0, 2]
 
     def sensor_coil_field(self, array: CoilArray) -> np.ndarray:
         """(2, n_coils, 3, n_coils) T/A: the coupled field of each coil at the sensors."""
@@ -253,84 +257,29 @@ class MapPhysics:
         nc = array.n_coils
         return self.actuation(array, s)[:, :3, :].reshape(2, nc, 3, nc)
 
-    def saturation(self, array: CoilArray) -> np.ndarray:
-        """Factors (n_s, n_coils) on the columns of A at the currents
-        ``saturation_currents_a`` (1 for linear cores)."""
-        return np.ones((len(self.saturation_currents_a), array.n_coils))
+    def saturation(self, array: CoilArray) -> tuple[np.ndarray, np.ndarray]:
+        """Currents (n_s,) A and per-coil factors (n_s, n_coils) on the columns of A
+        (:meth:`CoilArray.saturation_correction`; 1 for air coils)."""
+        if array.coupled() is None:  # no iron: nothing saturates (and no solve to pay for)
+            cur = np.array([0.0, 1.0])
+            return cur, np.ones((2, array.n_coils))
+        # 7 currents: linear interpolation between them is within 0.3 % of the 13-point
+        # curve (the factor bends only above ~4 A), for half the nonlinear solves
+        s = array.saturation_correction(currents_a=np.linspace(0.0, self.max_current_a, 7))
+        return s["saturation_current_a"], s["saturation_factor"]
 
 
 def map_physics(design) -> MapPhysics:
     """The one place the map's physics comes from (see :class:`MapPhysics`)."""
-    return MapPhysics(np.array([0.0, 0.0, design.magnet.moment_a_m2]), design.sensors.offset_m,
-                      np.linspace(0.0, design.drive.max_current_a, 7),
-                      "STAND-IN coupling (uncoupled model + synthetic neighbour-core fields)")
-
-
-# ---- stand-in for the coupled model (until CoilArray carries it): the uncoupled A plus, for each
-# coil k, the field of every other core j magnetized against it (the field of core j alone, i.e.
-# coil j's field minus its winding's, scaled by -0.15 (pitch / d_kj)^3) and a smooth transverse
-# part (a dipole along x at the core's top, 1 % of the axial one); and a magnet that magnetizes
-# every core in proportion to its field at the core's top face.
-def _cores(array):
-    out = []
-    for c in array.coils:
-        if c.core is None:
-            continue
-        centre = np.asarray(c.pose.position) + c.pose.matrix[:, 2] * c.core.offset
-        out.append((centre, c.core.radius, c.core.length))
-    return out
-
-
-def _standin_actuation(array, p):
-    from .field import dipole_field
-
-    a = array.actuation_matrix(p)
-    if any(c.core is None for c in array.coils) or array.n_coils < 2:
-        return a
-    air = CoilArray(tuple(c.replace(core=None) for c in array.coils)).actuation_matrix(p)
-    core_only = a - air
-    pos = array.positions()
-    d = np.linalg.norm(pos[:, None] - pos[None], axis=2)
-    pitch = d[d > 0].min()
-    c = np.where(d > 0, -0.15 * (pitch / np.where(d > 0, d, 1.0)) ** 3, 0.0)  # c[j, k]
-    out = a + core_only @ c
-    m_per_amp = array.coils[0].core.magnetization(array.coils[0], 1.0)
-    for j, (centre, r, length) in enumerate(_cores(array)):
-        top = centre + np.array([0.0, 0.0, length / 2 - r])
-        mom = 0.01 * m_per_amp * math.pi * r * r * length * np.array([1.0, 0.0, 0.0])
-        b, g = dipole_field(p - top, mom, gradient=True)
-        rows = np.concatenate([b, g[:, [0, 0, 0, 1, 1], [0, 1, 2, 1, 2]]], axis=1)
-        out += rows[:, :, None] * c[j][None, None, :]
-    return out
-
-
-def _standin_bias(array, p, moment, sensors=None):
-    from .field import dipole_field, magnetized_cylinder_field
-
-    n = len(p)
-    f = np.zeros((n, 3))
-    b_s = None if sensors is None else np.zeros((n,) + sensors.shape)
-    for centre, r, length in _cores(array):
-        top = centre + np.array([0.0, 0.0, length / 2])
-        bm = dipole_field(top - p, moment)  # the magnet's field at the core's top face
-        m_core = 3.0 * bm[:, 2] / (4e-7 * math.pi)  # A/m
-        _, g = magnetized_cylinder_field(p - centre, r, length, 1.0, gradient=True)
-        f += m_core[:, None] * np.einsum("nij,i->nj", g, moment)
-        if sensors is not None:
-            bu = magnetized_cylinder_field(sensors.reshape(-1, 3) - centre, r, length, 1.0)
-            b_s += m_core[:, None, None, None] * bu.reshape(sensors.shape)[None]
-    if len(_cores(array)) > 1:  # the cores' interaction: a smooth 5 % extra pull
-        centre = array.positions().mean(axis=0)
-        f += 0.05 * f.mean(axis=0) * np.exp(-np.sum((p - centre) ** 2, axis=1) / 0.05 ** 2)[:, None]
-    return f, b_s
+    return MapPhysics(np.array([0.0, 0.0, design.magnet.moment_a_m2]), design.drive.max_current_a)
 
 
 # ============================================================================ build
-def build(design, *, spacing: float = 0.005, coupling_log_step: float = 0.15,
-          magnet_spacing: float = 0.01, magnet_log_step: float = 0.2,
-          svd_tolerance: float = 1e-4, rz_step: float = 7.5e-5, rz_log_step: float = 0.025,
-          rz_rho_scale: float = 0.05, magnet_rz_step: float = 5e-4,
-          magnet_rz_log_step: float = 0.05, box=None, n_check: int = 2000,
+def build(design, *, spacing: float = 0.015, coupling_log_step: float = 0.35,
+          magnet_spacing: float = 0.025, magnet_log_step: float = 0.5,
+          svd_tolerance: float = 1e-4, rz_step: float = 1e-4, rz_log_step: float = 0.025,
+          rz_rho_scale: float = 0.05, magnet_rz_step: float = 2e-3,
+          magnet_rz_log_step: float = 0.15, box=None, n_check: int = 100,
           progress: bool = True, array: CoilArray | None = None) -> dict:
     """Compute the map v2 of ``design``: ``{"arrays": {...}, "meta": {...}}`` (not yet written).
 
@@ -345,11 +294,11 @@ def build(design, *, spacing: float = 0.005, coupling_log_step: float = 0.15,
         Largest error of the rank-truncated coupling residual at its nodes, relative to each
         row's max |A|.
     rz_step : float, m
-        rho step of the (rho, z) tables on the axis (default 0.075 mm, growing as
-        (1 + rho / rz_rho_scale)^2 with rz_rho_scale 50 mm: ~0.3 mm at 50 mm from the axis);
+        rho step of the (rho, z) tables on the axis (default 0.1 mm, growing as
+        (1 + rho / rz_rho_scale)^2 with rz_rho_scale 50 mm: ~0.4 mm at 50 mm from the axis);
         ``rz_log_step`` is the step in log(z - z_ref) (default 0.025: 2.5 % of the height
         above the core's top). ``magnet_rz_step``, ``magnet_rz_log_step``: the same for the
-        magnet tables (0.5 mm, 5 %).
+        magnet tables (2 mm, 15 %).
     box : (lower, upper) or None
         Corners, m; default :func:`default_box`.
     n_check : int
@@ -441,7 +390,7 @@ def build(design, *, spacing: float = 0.005, coupling_log_step: float = 0.15,
     rotations = [list(map(list, c.pose.rotation)) for c in arr.coils]
     # the tables' part as the reader computes it (so the fits absorb the table error at nodes)
     prep = mf.prepare_rz([arrays[t["name"]] for t in rz_meta], rz_meta, positions, rotations)
-    whole, core = (np.ascontiguousarray(x.transpose(1, 0, 2), dtype=np.float64)
+    whole, core = (np.ascontiguousarray(x.transpose(2, 1, 0), dtype=np.float64)
                    for x in mf.interpolate_rz(prep, c_nodes, nc))
     scale = np.maximum(np.abs(a_c).max(axis=(0, 2)), 1e-300)  # (8,) per-row max
     mix = _fit_mix(whole, core, a_c, scale)
@@ -454,6 +403,7 @@ def build(design, *, spacing: float = 0.005, coupling_log_step: float = 0.15,
     sind_mix = np.linalg.lstsq(amp, sind_flat, rcond=None)[0] if np.abs(amp).max() > 0 else \
         np.zeros((nc, 6 * nc))
     m_shape = tuple(len(a) for a in m_axes)
+    sat_i, sat_f = phys.saturation(arr)
     arrays.update({
         "MIX": mix, "PHI": phi.reshape(tuple(len(a) for a in c_axes) + (rank,)).astype(np.float16),
         "MODES": modes.astype(np.float32),
@@ -465,8 +415,7 @@ def build(design, *, spacing: float = 0.005, coupling_log_step: float = 0.15,
         "SENSOR_POS": phys.sensor_positions(arr).astype(np.float64),
         "SENSOR_COIL": phys.sensor_coil_field(arr).astype(np.float64),
         "MOMENT": phys.moment_a_m2.astype(np.float64),
-        "SAT_I": phys.saturation_currents_a.astype(np.float64),
-        "SAT_FACTOR": phys.saturation(arr).astype(np.float64),
+        "SAT_I": sat_i.astype(np.float64), "SAT_FACTOR": sat_f.astype(np.float64),
     })
     meta = {
         "format": FORMAT, "version": FORMAT_VERSION, "designkit_version": __version__,
@@ -562,8 +511,11 @@ def write(path, data: dict) -> Path:
     from ._io import atomic_path
 
     path = check_output(path)
-    with atomic_path(path, suffix=".npz") as tmp:
-        mf.write(tmp, data["arrays"], data["meta"])
+    try:
+        with atomic_path(path, suffix=".npz") as tmp:
+            mf.write(tmp, data["arrays"], data["meta"])
+    except _FirmwareBadInput as exc:
+        raise _translate(exc) from None
     return path
 
 

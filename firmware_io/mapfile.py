@@ -128,11 +128,12 @@ def data_hash(arrays: dict) -> str:
 
 
 def write(path, arrays: dict, meta: dict) -> Path:
-    """Write ``arrays`` and ``meta`` (``data_sha256`` filled in) to ``path`` as .npz.
+    """Validate, then write ``arrays`` and ``meta`` (``data_sha256`` filled in) to ``path``.
 
     Not atomic by itself: designkit.fieldmap.write wraps it in an atomic rename.
     """
     meta = dict(meta, data_sha256=data_hash(arrays))
+    validate(arrays, meta, path)
     with open(path, "wb") as fh:
         np.savez_compressed(fh, **{k: arrays[k] for k in array_names(arrays)},
                             meta=np.array(json.dumps(meta)))
@@ -165,6 +166,12 @@ def read(path) -> tuple[dict, dict]:
         raise
     except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError) as exc:
         raise _bad(p, f"readable npz; {type(exc).__name__}: {exc} -- truncated or foreign")
+    validate(arrays, meta, p)
+    return arrays, meta
+
+
+def validate(arrays: dict, meta: dict, p="<map data>") -> None:
+    """Check everything :func:`read` checks on arrays and meta in memory (BadInputError)."""
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise _bad(p, f"meta.format == {FORMAT!r} -- a foreign file")
     if meta.get("version") != FORMAT_VERSION:
@@ -219,7 +226,6 @@ def read(path) -> tuple[dict, dict]:
             raise _bad(p, f"{name} strictly increasing with at least 2 nodes")
     if data_hash(arrays) != meta.get("data_sha256"):
         raise _bad(p, "data matching its recorded SHA-256 (corrupted)")
-    return arrays, meta
 
 
 # ============================================================================ (rho, z) tables
@@ -277,24 +283,25 @@ def _scratch(name: str, size: int, dtype) -> np.ndarray:
 
 def interpolate_rz(prepared: list, p: np.ndarray, nc: int) -> tuple:
     """The batch kernel of the tables: points (n, 3) -> (whole coils, cores alone), each
-    (8, n, nc) float32, rows :data:`ROWS` outermost.
+    (nc, 8, n) float32 (coil-major: the mixing over coils then runs on long contiguous rows),
+    rows :data:`ROWS`.
 
     Per (point, coil) pair everything is flat and contiguous -- numpy is fast on long inner
     loops and slow on short ones -- and written into reused scratch buffers; a node's 8 float32
     quantities are gathered as one 32-byte element.
     """
     n = len(p)
-    whole = np.empty((8, n, nc), np.float32)
-    core = np.empty((8, n, nc), np.float32)
+    whole = np.empty((nc, 8, n), np.float32)
+    core = np.empty((nc, 8, n), np.float32)
     for s in range(0, n, RZ_CHUNK):
         e = min(n, s + RZ_CHUNK)
         for t in prepared:
-            _rz_block(t, p[s:e], whole[:, s:e], core[:, s:e])
+            _rz_block(t, p[s:e], whole[:, :, s:e], core[:, :, s:e])
     return whole, core
 
 
 def _rz_block(t: dict, p: np.ndarray, whole: np.ndarray, core: np.ndarray) -> None:
-    """One coil type, one block of points: rows into ``whole``, ``core`` (8, n, nc)[..., idx]."""
+    """One coil type, one block of points: rows into ``whole``, ``core`` (nc, 8, n)[idx]."""
     f32 = np.float32
     n, k = len(p), len(t["idx"])
     m = n * k
@@ -388,10 +395,11 @@ def _rz_block(t: dict, p: np.ndarray, whole: np.ndarray, core: np.ndarray) -> No
         r = rows[part].reshape(8, n, k)
         if t["rot"] is not None:
             r = _rotate_rows(r, t["rot"])
+        r = r.transpose(2, 0, 1)
         if t["all"]:
             out[...] = r
         else:
-            out[:, :, t["idx"]] = r
+            out[t["idx"]] = r
 
 
 def _rotate_rows(rows: np.ndarray, rot: np.ndarray) -> np.ndarray:
@@ -405,20 +413,21 @@ def _rotate_rows(rows: np.ndarray, rot: np.ndarray) -> np.ndarray:
     return np.stack([bg[0], bg[1], bg[2], gg[0, 0], gg[0, 1], gg[0, 2], gg[1, 1], gg[1, 2]])
 
 
-# rows = sum over (quantity q, monomial f) of q * f * _POLY[q, f]: monomials (1, x, y, x^2, xy, y^2)
-_POLY = np.zeros((4, 6, 8))
-_POLY[0, 1, 0] = _POLY[0, 2, 1] = _POLY[0, 0, 3] = _POLY[0, 0, 6] = 1.0  # b: Bx, By, Gxx, Gyy
-_POLY[1, 0, 2] = 1.0                                                       # Bz
-_POLY[2, 1, 5] = _POLY[2, 2, 7] = 1.0                                      # e: Gxz, Gyz
-_POLY[3, 3, 3] = _POLY[3, 4, 4] = _POLY[3, 5, 6] = 1.0                     # w: Gxx, Gxy, Gyy
-_POLY = _POLY.reshape(24, 8)
+# one point: rows (8,) of a part = (b, Bz, e, w) @ M, M (4, 8) = mono @ _POLY with the monomials
+# mono = (1, x, y, x x, x y, y x, y y) of the coil-local horizontal offsets
+_POLY = np.zeros((7, 4, 8))
+_POLY[1, 0, 0] = _POLY[2, 0, 1] = _POLY[0, 0, 3] = _POLY[0, 0, 6] = 1.0  # b: Bx, By, Gxx, Gyy
+_POLY[0, 1, 2] = 1.0                                                       # Bz
+_POLY[1, 2, 5] = _POLY[2, 2, 7] = 1.0                                      # e: Gxz, Gyz
+_POLY[3, 3, 3] = _POLY[4, 3, 4] = _POLY[6, 3, 6] = 1.0                     # w: Gxx, Gxy, Gyy
+_POLY = _POLY.reshape(7, 32)
 
 
-def _rz_one(t: dict, q, whole: np.ndarray, core: np.ndarray) -> None:
-    """One point (3 floats), one coil type: rows into ``whole``, ``core`` (8, nc)[:, idx]."""
+def _rz_one(t: dict, q) -> np.ndarray:
+    """One point (3 floats), one coil type: rows (k, 2, 8) float64 of its k coils, for the
+    whole coil [:, 0] and its core alone [:, 1], in the global frame."""
     if t["rot"] is None:
         d = np.subtract(q, t["pos"])
-        x, y = d[:, 0], d[:, 1]
         if t["shared_z"]:
             zz = q[2] - t["zr"][0]
             u = (math.log(zz if zz > 1e-12 else 1e-12) - t["u0"]) * t["inv_du"]
@@ -429,44 +438,31 @@ def _rz_one(t: dict, q, whole: np.ndarray, core: np.ndarray) -> None:
             u = (np.log(np.maximum(q[2] - t["zr"], 1e-12)) - t["u0"]) * t["inv_du"]
             u = np.clip(u, 0.0, t["n_u"] - 1.000001)
             j = u.astype(np.intp)
-            tz = u - j
+            tz = u[:, None]
     else:
-        loc = np.einsum("ki,kij->kj", np.subtract(q, t["pos"]), t["rot"])
-        x, y = loc[:, 0], loc[:, 1]
-        u = (np.log(np.maximum(loc[:, 2] - t["z_ref"], 1e-12)) - t["u0"]) * t["inv_du"]
+        d = np.einsum("ki,kij->kj", np.subtract(q, t["pos"]), t["rot"])
+        u = (np.log(np.maximum(d[:, 2] - t["z_ref"], 1e-12)) - t["u0"]) * t["inv_du"]
         u = np.clip(u, 0.0, t["n_u"] - 1.000001)
         j = u.astype(np.intp)
-        tz = u - j
-    rho = np.sqrt(x * x + y * y)
+        tz = (u - j)[:, None]
+    xy = d[:, :2]
+    k = len(xy)
+    outer = (xy[:, :, None] * xy[:, None, :]).reshape(k, 4)
+    rho = np.sqrt(outer[:, 0] + outer[:, 3])
     vv = np.minimum(rho * t["inv_h"] / (1.0 + rho * t["inv_scale"]), t["n_rho"] - 1.0001)
     i = vv.astype(np.intp)
-    tr = vv - i
+    tr = (vv - i)[:, None]
     cells = t["cells"][i * (t["n_u"] - 1) + j]  # (k, corner, quantity)
     # bilinear weights of the corners (rho_i, u_j), (rho_i, u_j+1), (rho_i+1, u_j), (.., ..)
-    w = np.empty((len(x), 1, 4))
-    a = 1.0 - tr
-    w[:, 0, 0] = a * (1.0 - tz)
-    w[:, 0, 1] = a * tz
-    w[:, 0, 2] = tr * (1.0 - tz)
-    w[:, 0, 3] = tr * tz
-    val = np.matmul(w, cells).reshape(-1, 2, 4)  # (k, whole/core, b Bz e w)
-    mono = np.empty((len(x), 1, 1, 6))
-    mono[..., 0] = 1.0
-    mono[..., 1] = x[:, None, None]
-    mono[..., 2] = y[:, None, None]
-    mono[..., 3] = (x * x)[:, None, None]
-    mono[..., 4] = (x * y)[:, None, None]
-    mono[..., 5] = (y * y)[:, None, None]
-    rows = (val[..., None] * mono).reshape(-1, 24) @ _POLY  # (2 k, 8)
-    rows = rows.reshape(-1, 2, 8)
-    for part, out in ((0, whole), (1, core)):
-        r = rows[:, part].T  # (8, k)
-        if t["rot"] is not None:
-            r = _rotate_rows(r[:, None, :], t["rot"])[:, 0, :]
-        if t["all"]:
-            out[...] = r
-        else:
-            out[:, t["idx"]] = r
+    wz = np.concatenate([1.0 - tz, tz], axis=-1) if np.ndim(tz) else np.array([1.0 - tz, tz])
+    w = (np.concatenate([1.0 - tr, tr], axis=1)[:, :, None] * wz[..., None, :]).reshape(k, 1, 4)
+    val = np.matmul(w, cells).reshape(k, 2, 4)  # (k, whole/core, b Bz e w)
+    mono = np.concatenate([np.ones((k, 1)), xy, outer], axis=1)  # (k, 7)
+    rows = np.matmul(val, (mono @ _POLY).reshape(k, 4, 8))  # (k, 2, 8) local frame
+    if t["rot"] is not None:
+        rows = np.stack([_rotate_rows(rows[:, p].T[:, None, :], t["rot"])[:, 0, :].T
+                         for p in range(2)], axis=1)
+    return rows
 
 
 def prepare_magnet(tables: list, metas: list, positions, rotations) -> list:
@@ -542,19 +538,17 @@ def _trilinear(grid: tuple, p: np.ndarray) -> np.ndarray:
 def _trilinear_one(grid: tuple, q) -> np.ndarray:
     """The same for one point (3 floats) -> (q,), with Python scalars for the index work."""
     axes, values, shape = grid
-    lists = grid_lists(grid)
-    idx, ts = [], []
-    for k in range(3):
-        ax = lists[k]
-        i = min(max(bisect.bisect_right(ax, q[k]) - 1, 0), len(ax) - 2)
-        idx.append(i)
-        ts.append((q[k] - ax[i]) / (ax[i + 1] - ax[i]))
-    tx, ty, tz = ts
+    xs, ys, zs = grid_lists(grid)
+    i = min(max(bisect.bisect_right(xs, q[0]) - 1, 0), len(xs) - 2)
+    j = min(max(bisect.bisect_right(ys, q[1]) - 1, 0), len(ys) - 2)
+    k = min(max(bisect.bisect_right(zs, q[2]) - 1, 0), len(zs) - 2)
+    tx = (q[0] - xs[i]) / (xs[i + 1] - xs[i])
+    ty = (q[1] - ys[j]) / (ys[j + 1] - ys[j])
+    tz = (q[2] - zs[k]) / (zs[k + 1] - zs[k])
     ux, uy, uz = 1.0 - tx, 1.0 - ty, 1.0 - tz
     w = np.array([ux * uy * uz, ux * uy * tz, ux * ty * uz, ux * ty * tz,
-                  tx * uy * uz, tx * uy * tz, tx * ty * uz, tx * ty * tz])
-    block = values.reshape(shape + (-1,))[idx[0]:idx[0] + 2, idx[1]:idx[1] + 2,
-                                          idx[2]:idx[2] + 2].reshape(8, -1)
+                  tx * uy * uz, tx * uy * tz, tx * ty * uz, tx * ty * tz], dtype=values.dtype)
+    block = values.reshape(shape + (-1,))[i:i + 2, j:j + 2, k:k + 2].reshape(8, -1)
     return w @ block
 
 
@@ -597,6 +591,8 @@ class MapFile:
     magnet_f0: tuple = field(repr=False)
     magnet_sind: tuple = field(repr=False)
     sind_mix: np.ndarray = field(repr=False)
+    mix_t: np.ndarray = field(repr=False)
+    modes_t: np.ndarray = field(repr=False)
 
     @classmethod
     def load(cls, path, expected_design_sha256: str | None = None) -> "MapFile":
@@ -634,7 +630,11 @@ class MapFile:
                    (maxes, np.ascontiguousarray(f0.reshape(-1, 3)), f0.shape[:3]),
                    (maxes, np.ascontiguousarray(sind.reshape(-1, 6 * nc), dtype=np.float32),
                     sind.shape[:3]),
-                   np.asarray(arrays["SIND_MIX"], float).reshape(nc, 6 * nc))
+                   np.asarray(arrays["SIND_MIX"], float).reshape(nc, 6 * nc),
+                   np.ascontiguousarray(np.asarray(arrays["MIX"], float).T),
+                   # residual modes laid out (r, nc * 8) for the one-point (nc, 8) sum
+                   np.ascontiguousarray(arrays["MODES"].astype(np.float64).transpose(0, 2, 1)
+                                        .reshape(len(arrays["MODES"]), -1)))
 
     # ------------------------------------------------------------------ plain attributes
     @property
@@ -711,26 +711,34 @@ class MapFile:
         nc = self.n_coils
         q = self._one_point(points, extrapolate)
         if q is not None:
-            whole, core = np.empty((8, nc)), np.empty((8, nc))
-            for t in self.rz:
-                _rz_one(t, q, whole, core)
-            whole += core @ self.mix
-            whole += (_trilinear_one(self.coupling, q) @ self.modes).reshape(8, nc)
-            return whole if np.ndim(points) == 1 else whole[None]
+            if len(self.rz) == 1 and self.rz[0]["all"]:
+                rows = _rz_one(self.rz[0], q)  # (nc, 2, 8)
+            else:
+                rows = np.empty((nc, 2, 8))
+                for t in self.rz:
+                    rows[t["idx"]] = _rz_one(t, q)
+            a = rows[:, 0] + self.mix_t @ rows[:, 1]  # (nc, 8)
+            a += (_trilinear_one(self.coupling, q) @ self.modes_t).reshape(nc, 8)
+            return a.T if np.ndim(points) == 1 else a.T[None]
         p, single = self._points(points, extrapolate)
         n = len(p)
-        out = np.empty((8, n, nc))
-        mix32 = self.mix.astype(np.float32)
+        out = np.empty((n, 8, nc))
         modes32 = self.modes.astype(np.float32)
+        # MIX is (n_coils, n_coils): ~81 axpy's on contiguous rows beat a skinny BLAS call
+        # (which spawns threads for a few microseconds of work)
+        terms = [(j, k, np.float32(self.mix[j, k])) for j in range(nc) for k in range(nc)
+                 if self.mix[j, k] != 0.0]
         for s in range(0, n, RZ_CHUNK):
             e = min(n, s + RZ_CHUNK)
-            whole, core = interpolate_rz(self.rz, p[s:e], nc)
             m = e - s
-            whole += (core.reshape(8 * m, nc) @ mix32).reshape(8, m, nc)
+            whole, core = interpolate_rz(self.rz, p[s:e], nc)  # (nc, 8, m) each
+            tmp = _scratch("mix", 8 * m, np.float32).reshape(8, m)
+            for j, k, c in terms:
+                np.multiply(core[j], c, out=tmp)
+                whole[k] += tmp
             res = (_trilinear(self.coupling, p[s:e]) @ modes32).reshape(m, 8, nc)
-            np.add(whole, res.transpose(1, 0, 2), out=out[:, s:e])
-        res = out.transpose(1, 0, 2)
-        return res[0] if single else res
+            np.add(whole.transpose(2, 1, 0), res, out=out[s:e])
+        return out[0] if single else out
 
     def bias_force(self, points, extrapolate: bool = False) -> np.ndarray:
         """F0, the force on the magnet (moment :attr:`moment_a_m2`) at zero current, N:
