@@ -8,9 +8,15 @@ Thesis chapter 2 (eqs. 2.5-2.13): with the currents I (n_coils,),
 Five numbers describe grad B because, outside every source, grad B is symmetric (curl B = 0) and
 traceless (div B = 0); :func:`gradient_from_g5` rebuilds the full tensor from them.
 
-Superposition assumes linear cores. With ``Core(bh='steel1010')`` the per-ampere columns are the
-secant values at 1 A, and the magnetization of a core by its *neighbours'* fields is neglected
-(as in the thesis); both are stated limits of this model, not of the code paths.
+The array is one magnetic system: every core is magnetized by every winding, by the other
+cores and by the finger magnet, all solved together (:mod:`designkit.coupling`, linear cores at
+``relative_permeability``; solved once per array and cached). Column k of A is the field per
+ampere in coil k with all cores present. With linear cores the force on the magnet is
+``F(p, I) = F(m) A(p) I + F0(p)`` with the bias force F0 (:meth:`CoilArray.bias_force`) of the
+cores the magnet magnetizes. Saturation (``Core(bh='steel1010')``) is not in A: the per-coil
+correction :meth:`CoilArray.saturation_correction` scales the columns.
+Cores of the approximate ``model='thesis-uniform'`` keep the uncoupled per-coil model of the
+thesis (no neighbour coupling, no magnet pull).
 """
 
 from __future__ import annotations
@@ -146,6 +152,8 @@ class CoilArray:
     """
 
     coils: tuple[Coil, ...]
+    sensor_offset_m: float = 0.014
+    """Hall sensors: this far above each coil's top face and below its bottom face, m."""
 
     def __post_init__(self):
         coils = tuple(self.coils)
@@ -155,13 +163,18 @@ class CoilArray:
             if not isinstance(c, Coil):
                 raise BadInputError(f"coils[{k}]", "a designkit.Coil", type(c).__name__)
         object.__setattr__(self, "coils", coils)
+        v.nonnegative("sensor_offset_m", self.sensor_offset_m)
         check_overlap(coils)
+        from .coupling import check_separation
+
+        check_separation(coils)
 
     @classmethod
     def from_design(cls, design) -> "CoilArray":
         """The design's planar array: rows x columns, pitch, top faces at z = 0, row-major."""
         return cls(tuple(Coil.from_design(design, (x, y, None))
-                         for x, y, _ in design.coil_centres_m()))
+                         for x, y, _ in design.coil_centres_m()),
+                   sensor_offset_m=design.sensors.offset_m)
 
     @classmethod
     def default(cls) -> "CoilArray":
@@ -185,9 +198,28 @@ class CoilArray:
             out.setdefault(dataclasses.replace(c, pose=Pose()), []).append(k)
         return out
 
+    # ------------------------------------------------------------------ coupled cores
+    def coupled(self):
+        """The array-level core solve (:class:`designkit.coupling.ArraySystem`), built once.
+
+        None when no core takes part (air coils, or only ``model='thesis-uniform'`` cores).
+        """
+        if "_system" not in self.__dict__:
+            from .coupling import ArraySystem
+
+            idx = [k for k, c in enumerate(self.coils)
+                   if c.core is not None and c.core.model == "surface-current"]
+            # frozen dataclass: cache the derived solve on the instance
+            object.__setattr__(self, "_system", ArraySystem(self) if idx else None)
+        return self.__dict__["_system"]
+
     # ------------------------------------------------------------------ fields
     def actuation_matrix(self, points, *, rtol: float = 1e-10) -> np.ndarray:
-        """A(p) of thesis eq. 2.13 by direct evaluation of every coil.
+        """A(p) of thesis eq. 2.13 with all cores solved together (coupled).
+
+        Column k: winding k per ampere plus the field of every core magnetized by it (and by
+        each other). Cost: per point, the 9 windings plus ~9 x 300 kernel terms; the core
+        solve is built on the first call (seconds) and cached on the array.
 
         Parameters
         ----------
@@ -202,11 +234,125 @@ class CoilArray:
         """
         p, single = v.points(points)
         a = np.empty((len(p), 8, self.n_coils))
+        system = self.coupled()
+        coupled = set() if system is None else set(system.core_index)
+        for k, coil in enumerate(self.coils):
+            # cores in the coupled solve are added below, all together
+            include = "winding" if (k in coupled or coil.core is None) else "all"
+            b, g = coil.field(p, 1.0, gradient=True, rtol=rtol, include=include)
+            a[:, :3, k] = b
+            a[:, 3:, k] = g5_from_gradient(g)
+        if system is not None:
+            b, g = system.core_field(p, system.coil_solution(), gradient=True)
+            a[:, :3, :] += b
+            a[:, 3:, :] += g5_from_gradient(np.moveaxis(g, -1, 1)).transpose(0, 2, 1)
+        return a[0] if single else a
+
+    def uncoupled_actuation_matrix(self, points, *, rtol: float = 1e-10) -> np.ndarray:
+        """A(p) with each core magnetized by its own winding only (the thesis' model; for
+        comparison), same shape and units as :meth:`actuation_matrix`."""
+        p, single = v.points(points)
+        a = np.empty((len(p), 8, self.n_coils))
         for k, coil in enumerate(self.coils):
             b, g = coil.field(p, 1.0, gradient=True, rtol=rtol)
             a[:, :3, k] = b
             a[:, 3:, k] = g5_from_gradient(g)
         return a[0] if single else a
+
+    # ------------------------------------------------------------------ the magnet and the iron
+    def magnet_core_field(self, points_m, magnet_position_m, moment_a_m2, *,
+                          gradient: bool = False):
+        """Field of the cores magnetized by the finger magnet (point dipole), at points.
+
+        Parameters
+        ----------
+        points_m : array-like, shape (3,) or (n, 3), m
+        magnet_position_m : array-like, shape (3,), m
+        moment_a_m2 : array-like, shape (3,), A m^2 (take it from the design / map file)
+        gradient : bool
+
+        Returns
+        -------
+        B : ndarray (n, 3), T [, G : ndarray (n, 3, 3), T/m]; zeros without cores.
+        """
+        p, single = v.points(points_m, "points_m")
+        pos = v.vector3("magnet_position_m", magnet_position_m, "m")
+        m = v.vector3("moment_a_m2", moment_a_m2, "A m^2")
+        system = self.coupled()
+        if system is None:
+            b, g = np.zeros((len(p), 3)), np.zeros((len(p), 3, 3))
+        else:
+            x = system.magnet_solution(pos[None], m)
+            res = system.core_field(p, x, gradient=gradient)
+            b, g = (res[0][..., 0], res[1][..., 0]) if gradient else (res[..., 0], None)
+        if single:
+            b = b[0]
+            g = None if g is None else g[0]
+        return (b, g) if gradient else b
+
+    def _bias(self, magnet_positions_m, moment_a_m2):
+        p, single = v.points(magnet_positions_m, "magnet_positions_m")
+        m = v.vector3("moment_a_m2", moment_a_m2, "A m^2")
+        system = self.coupled()
+        if system is None:
+            return np.zeros((len(p), 3)), np.zeros((len(p), 3, 3)), m, single
+        b = np.empty((len(p), 3))
+        g = np.empty((len(p), 3, 3))
+        for a in range(0, len(p), 64):
+            x = system.magnet_solution(p[a:a + 64], m)
+            b[a:a + 64], g[a:a + 64] = system.core_field_pointwise(p[a:a + 64], x, True)
+        return b, g, m, single
+
+    def bias_force(self, magnet_positions_m, moment_a_m2) -> np.ndarray:
+        """Force on the magnet from the cores it magnetizes, at zero current, (n, 3) N.
+
+        F0(p) = (m . grad) B_ind(p): the gradient at the magnet of the cores' field induced by
+        the magnet itself (point dipole ``moment_a_m2`` at each of ``magnet_positions_m``
+        (n, 3) m). Zero without cores.
+        """
+        _, g, m, single = self._bias(magnet_positions_m, moment_a_m2)
+        f = np.einsum("nji,j->ni", g, m)
+        return f[0] if single else f
+
+    def bias_torque(self, magnet_positions_m, moment_a_m2) -> np.ndarray:
+        """Torque on the magnet from the cores it magnetizes, m x B_ind(p), (n, 3) N m."""
+        b, _, m, single = self._bias(magnet_positions_m, moment_a_m2)
+        t = np.cross(m[None], b)
+        return t[0] if single else t
+
+    def sensor_positions_m(self) -> np.ndarray:
+        """Hall sensor positions, (2, n_coils, 3) m: [0] upper array (``sensor_offset_m`` above
+        each coil's top face, on its axis), [1] lower array (as far below its bottom face)."""
+        out = np.empty((2, self.n_coils, 3))
+        for k, c in enumerate(self.coils):
+            axis = c.pose.matrix[:, 2]
+            pos = np.asarray(c.pose.position, dtype=float)
+            d = c.length / 2 + self.sensor_offset_m
+            out[0, k] = pos + d * axis
+            out[1, k] = pos - d * axis
+        return out
+
+    def saturation_correction(self, height_m: float = 0.03, currents_a=None) -> dict:
+        """Per-coil saturation factor of the 1010-steel cores vs |I| (see
+        :func:`designkit.coupling.saturation_table`): ``{'saturation_current_a': (k,) A,
+        'saturation_factor': (k, n_coils)}``; factor 1 for air coils."""
+        from .coupling import saturation_table
+
+        out = None
+        tables = {}
+        for k, c in enumerate(self.coils):
+            if c.core is None:
+                continue
+            key = dataclasses.replace(c, pose=Pose())
+            if key not in tables:
+                tables[key] = saturation_table(c, height_m, currents_a)
+        cur = (next(iter(tables.values()))["current_a"] if tables else
+               (np.linspace(0.0, 6.0, 13) if currents_a is None else np.asarray(currents_a)))
+        out = np.ones((len(cur), self.n_coils))
+        for k, c in enumerate(self.coils):
+            if c.core is not None:
+                out[:, k] = tables[dataclasses.replace(c, pose=Pose())]["factor"]
+        return {"saturation_current_a": np.asarray(cur, dtype=float), "saturation_factor": out}
 
     def _currents(self, currents) -> np.ndarray:
         i = np.asarray(currents, dtype=float)

@@ -1,26 +1,75 @@
-"""Read the force-current map written by ``designkit map`` -- numpy and the standard library only.
+"""The map file the controller runs on (format v2): the one definition, numpy and the stdlib only.
 
-The file (``.npz``): ``A`` (nx, ny, nz, 8, n_coils) float32 with rows Bx, By, Bz, dBx/dx,
-dBx/dy, dBx/dz, dBy/dy, dBy/dz (T/A and T/(m A)); ``dG`` (nx, ny, nz, 7, n_coils) float32, the
-third derivatives T_xxx, T_xxy, T_xxz, T_xyy, T_xyz, T_yyy, T_yyz (T/(m^2 A)); ``meta``, a JSON
-string (grid, units, coil poses, magnet moment, limits, hashes); ``RZ0``, ``RZ1``, ... (meta
-``rz_tables``): per identical coil type, a (n_rho, n_u, 4) float32 table of Br/rho, Bz,
-(dBr/dz)/rho, (dBr/drho - Br/rho)/rho^2 per ampere in the coil's local (rho, z) frame.
-designkit.fieldmap documents the format and both interpolators; this module repeats them so the
-runner never imports designkit: one point or small batches use the 3-D grid, batches of
->= BATCH_MIN points inside the box the (rho, z) tables.
+``designkit map`` writes it (:mod:`designkit.fieldmap` computes the arrays and wraps
+:class:`MapFile`); the runner reads it with this module alone. Everything about the format --
+array names, shapes, validation, interpolation -- is defined here and nowhere else.
+
+What the file carries (``.npz``; every array hashed into ``meta.data_sha256``)
+------------------------------------------------------------------------------
+The coupled actuation matrix A(p), (8, n_coils) per point, rows :data:`ROWS` (T/A, T/(m A)),
+as three parts whose sum is A::
+
+    A(p) = A_whole(p) + A_core(p) @ MIX + PHI(p) @ MODES
+
+* ``RZ0``, ``RZ1``, ...: per identical coil type (meta ``rz_tables``), exact axisymmetric
+  fields per ampere of one coil alone, (n_rho, n_u, 8) float32: for the whole coil (winding +
+  its own core) and for its core alone, the smooth, even-in-rho quantities b = Br/rho, Bz,
+  e = (dBr/dz)/rho, w = (dBr/drho - Br/rho)/rho^2 on a grid uniform in
+  v = rho / (1 + rho / rho_scale) and u = log(z - z_ref) (z_ref: top of the coil's sources), so
+  the steps grow with the distance from the core's rim. Bilinear in (v, u), then Bx = b x,
+  By = b y, Bz, dBx/dx = b + w x^2, dBx/dy = w x y, dBx/dz = e x, dBy/dy = b + w y^2,
+  dBy/dz = e y in the coil's frame (no division, no special case on the axis). These hold the
+  sharp near field of every core rim.
+* ``MIX`` (n_coils, n_coils) float64: coil k magnetizes every core j (its own included) a little
+  more or less than it would alone, mostly along the core's axis, and the field of that extra
+  magnetization has (nearly) the shape of core j's own field: ``A_core @ MIX`` carries most of
+  the core-to-core coupling, near field included, for one small matrix product. Fitted by least
+  squares when the map is built.
+* ``PHI`` (nx, ny, nz, r) float16 (the residual is ~1 % of A: float16's 5e-4 relative
+  rounding is ~5e-6 of A) on the grid ``C_X``, ``C_Y``, ``C_Z`` (m, strictly increasing,
+  z graded towards the bottom) and ``MODES`` (r, 8, n_coils) float32: what is left (the transverse
+  magnetization of the neighbour cores, profile changes), smooth, compressed by a truncated SVD
+  (rank r chosen from the tolerance); trilinear in PHI (which commutes with the projection).
+
+The magnet's interaction with the cores, as functions of the magnet's position p (same box), on
+the grid ``M_X``, ``M_Y``, ``M_Z`` (trilinear):
+
+* the bias force F0(p), N, on the magnet (moment ``MOMENT``) at zero current (the pull of the
+  cores it magnetizes): the sum over the cores of the pull of each core alone, axisymmetric about
+  it (``MRZ0``, ... per coil type, meta ``magnet_tables``, (n_rho, n_u, 3) float32: F_rho/rho,
+  F_z and a, same (v, u) grids) plus ``F0_RES`` (mx, my, mz, 3) float32, what the cores'
+  interaction adds (trilinear). With linear cores the total force is
+  ``F = force_matrix(m) @ (A(p) @ I)[3:] + F0(p)``.
+* the field, T, of the cores magnetized by the magnet, at the Hall sensors (upper array then
+  lower), as a function of the magnet's position: ``a(p) @ SIND_MIX + SIND_RES(p)``, a (n_coils,)
+  the per-core amplitudes of the magnet tables (the z field one core alone would make at its own
+  upper sensor), ``SIND_MIX`` (n_coils, 2, n_coils, 3) float64 fitted, ``SIND_RES``
+  (mx, my, mz, 2, n_coils, 3) float16 the rest (trilinear).
+
+Constants: ``SENSOR_POS`` (2, n_coils, 3) m; ``SENSOR_COIL`` (2, n_coils, 3, n_coils) T/A, the
+coils' (coupled) field at the sensors per ampere; ``MOMENT`` (3,) A m^2; saturation ``SAT_I``
+(n_s,) A and ``SAT_FACTOR`` (n_s, n_coils): column k of A is multiplied by the factor at |I_k|
+(linear interpolation; 1 for linear cores). ``meta``: a JSON string (format, version, units,
+rows, coil poses, design name and SHA-256, current limit and total budget, build settings and the
+interpolation errors measured when the map was built).
+
+Usage::
 
     m = MapFile.load("fieldmap.npz")
-    a = m.actuation((0.0, 0.0, 0.03))        # (8, n_coils)
+    a = m.actuation((0.0, 0.0, 0.03))            # (8, n_coils)
+    f0 = m.bias_force((0.0, 0.0, 0.03))          # (3,) N
+    b = m.sensor_induced_field((0.0, 0.0, 0.03))  # (2, n_coils, 3) T
 """
 
 from __future__ import annotations
 
+import bisect
 import hashlib
 import json
+import math
 import threading
 import zipfile
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -28,46 +77,167 @@ import numpy as np
 from .errors import BadInputError
 
 FORMAT = "designkit-fieldmap"
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
+"""Format version of map v2 (coupled A, bias force, sensor fields); 1 and 2 were grid-only maps."""
 BATCH_MIN = 64
 ROWS = ("Bx", "By", "Bz", "dBx/dx", "dBx/dy", "dBx/dz", "dBy/dy", "dBy/dz")
-UNITS = {"A_rows_0_2": "T/A", "A_rows_3_7": "T/(m A)", "dG": "T/(m^2 A)", "grid": "m",
-         "moment": "A m^2", "current": "A"}
-_CORNERS = np.array([[a, b, c] for a in (0, 1) for b in (0, 1) for c in (0, 1)], float)
+UNITS = {"A_rows_0_2": "T/A", "A_rows_3_7": "T/(m A)", "grid": "m", "moment": "A m^2",
+         "current": "A", "force": "N", "field": "T", "sensor_coil_field": "T/A"}
+REBUILD = ("Rebuild it for this version: designkit map --design <design.toml> "
+           "--out <file.npz>")
+
+# name -> (dtype, shape as a function of the sizes); the single list of arrays in a map file
+_FIXED = ("MIX", "PHI", "MODES", "C_X", "C_Y", "C_Z", "F0_RES", "SIND_MIX", "SIND_RES",
+          "M_X", "M_Y", "M_Z", "SENSOR_POS", "SENSOR_COIL", "MOMENT", "SAT_I", "SAT_FACTOR")
 
 
-def _bad(path, what):
-    return BadInputError("map file", f"a designkit force-current map ({what})", str(path))
+def _shapes(meta: dict, arrays: dict) -> dict:
+    nc = int(meta["n_coils"])
+    cx, cy, cz = (len(arrays[k]) for k in ("C_X", "C_Y", "C_Z"))
+    mx, my, mz = (len(arrays[k]) for k in ("M_X", "M_Y", "M_Z"))
+    r = int(meta["coupling_rank"])
+    ns = len(arrays["SAT_I"])
+    f32, f64 = np.float32, np.float64
+    f16 = np.float16
+    return {"MIX": (f64, (nc, nc)), "PHI": (f16, (cx, cy, cz, r)), "MODES": (f32, (r, 8, nc)),
+            "C_X": (f64, (cx,)), "C_Y": (f64, (cy,)), "C_Z": (f64, (cz,)),
+            "F0_RES": (f32, (mx, my, mz, 3)), "SIND_MIX": (f64, (nc, 2, nc, 3)),
+            "SIND_RES": (f16, (mx, my, mz, 2, nc, 3)),
+            "M_X": (f64, (mx,)), "M_Y": (f64, (my,)), "M_Z": (f64, (mz,)),
+            "SENSOR_POS": (f64, (2, nc, 3)), "SENSOR_COIL": (f64, (2, nc, 3, nc)),
+            "MOMENT": (f64, (3,)), "SAT_I": (f64, (ns,)), "SAT_FACTOR": (f64, (ns, nc))}
 
 
-def _correction(nc: int) -> np.ndarray:
-    """(3 * nc * 15, 8 * nc): half the gradient . offset terms, see designkit.fieldmap."""
-    # d(row)/dx_d as (d, q, sign); q: 0-4 = gxx gxy gxz gyy gyz, 5-11 = T xxx..yyz
-    grad = {0: [(0, 0, 1), (1, 1, 1), (2, 2, 1)], 1: [(0, 1, 1), (1, 3, 1), (2, 4, 1)],
-            2: [(0, 2, 1), (1, 4, 1), (2, 0, -1), (2, 3, -1)],
-            3: [(0, 5, 1), (1, 6, 1), (2, 7, 1)], 4: [(0, 6, 1), (1, 8, 1), (2, 9, 1)],
-            5: [(0, 7, 1), (1, 9, 1), (2, 5, -1), (2, 8, -1)],
-            6: [(0, 8, 1), (1, 10, 1), (2, 11, 1)],
-            7: [(0, 9, 1), (1, 11, 1), (2, 6, -1), (2, 10, -1)]}
-    big = np.zeros((3, nc, 15, 8, nc), dtype=np.float32)
-    for r, terms in grad.items():
-        for d, q, sgn in terms:
-            for k in range(nc):
-                big[d, k, 3 + q, r, k] += 0.5 * sgn
-    return big.reshape(3 * nc * 15, 8 * nc)
+def array_names(keys) -> list:
+    """The arrays of a map in hashing order: the fixed ones present, then RZ0, RZ1, ...,
+    then MRZ0, MRZ1, ..."""
+    def tables(prefix):
+        n = len(prefix)
+        return sorted((k for k in keys if k.startswith(prefix) and k[n:].isdigit()),
+                      key=lambda k: int(k[n:]))
+
+    return [k for k in _FIXED if k in keys] + tables("RZ") + tables("MRZ")
 
 
-NAMES = ("A", "dG", "A_fine", "dG_fine")
+def data_hash(arrays: dict) -> str:
+    """SHA-256 over the arrays of :func:`array_names`, in that order."""
+    h = hashlib.sha256()
+    for name in array_names(arrays):
+        h.update(np.ascontiguousarray(arrays[name]).tobytes())
+    return h.hexdigest()
 
 
-def _all_names(keys) -> list:
-    rz = sorted((k for k in keys if k.startswith("RZ") and k[2:].isdigit()),
-                key=lambda k: int(k[2:]))
-    return [k for k in NAMES if k in keys] + rz
+def write(path, arrays: dict, meta: dict) -> Path:
+    """Validate, then write ``arrays`` and ``meta`` (``data_sha256`` filled in) to ``path``.
+
+    Not atomic by itself: designkit.fieldmap.write wraps it in an atomic rename.
+    """
+    meta = dict(meta, data_sha256=data_hash(arrays))
+    validate(arrays, meta, path)
+    with open(path, "wb") as fh:
+        np.savez_compressed(fh, **{k: arrays[k] for k in array_names(arrays)},
+                            meta=np.array(json.dumps(meta)))
+    return Path(path)
 
 
-def _prepare_rz(tables: list, metas: list, positions, rotations) -> list:
-    """Per coil type, what :func:`interpolate_rz` needs (numpy only)."""
+def _bad(path, what: str, hint: str = "") -> BadInputError:
+    return BadInputError("map file", f"a designkit map file ({what})", str(path), hint)
+
+
+def read(path) -> tuple[dict, dict]:
+    """Open and validate a map file: ``(arrays, meta)``; BadInputError naming the problem."""
+    p = Path(path)
+    if not p.is_file():
+        raise BadInputError("map file", "a path to an existing .npz map file", str(p))
+    with open(p, "rb") as fh:
+        magic = fh.read(4)
+    if magic != b"PK\x03\x04":  # every .npz is a zip archive; anything else is not a map
+        raise _bad(p, "a .npz archive; this file is not one, so it is not a map file",
+                   "Make one with: designkit map --design <design.toml> --out <file.npz>")
+    try:
+        with np.load(p, allow_pickle=False) as z:
+            keys = set(z.files)
+            if "meta" not in keys:
+                raise _bad(p, f"an array 'meta'; found {sorted(keys)} -- a foreign .npz, "
+                           "not a map file")
+            meta = json.loads(str(z["meta"]))
+            arrays = {k: z[k] for k in array_names(keys)}
+    except BadInputError:
+        raise
+    except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError) as exc:
+        raise _bad(p, f"readable npz; {type(exc).__name__}: {exc} -- truncated or foreign")
+    validate(arrays, meta, p)
+    return arrays, meta
+
+
+def validate(arrays: dict, meta: dict, p="<map data>") -> None:
+    """Check everything :func:`read` checks on arrays and meta in memory (BadInputError)."""
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        raise _bad(p, f"meta.format == {FORMAT!r} -- a foreign file")
+    if meta.get("version") != FORMAT_VERSION:
+        raise _bad(p, f"format version {FORMAT_VERSION} (map v2: coupled array, bias force, "
+                   f"sensor fields); this file is version {meta.get('version')!r}, written "
+                   "before v2", REBUILD)
+    if meta.get("units") != UNITS or meta.get("rows") != list(ROWS):
+        raise _bad(p, f"units {UNITS} and rows {ROWS}")
+    try:
+        nc = int(meta["n_coils"])
+        missing = [k for k in _FIXED if k not in arrays]
+        if missing:
+            raise _bad(p, f"arrays {list(_FIXED)}; missing {missing}")
+        shapes = _shapes(meta, arrays)
+    except (KeyError, TypeError, ValueError) as exc:
+        if isinstance(exc, BadInputError):
+            raise
+        raise _bad(p, f"complete metadata; {type(exc).__name__}: {exc}")
+    for name, (dtype, shape) in shapes.items():
+        a = arrays[name]
+        if a.shape != shape or a.dtype != dtype:
+            raise _bad(p, f"{name} of shape {shape} {np.dtype(dtype).name}; got {a.shape} "
+                       f"{a.dtype}")
+    for key, prefix, nq in (("rz_tables", "RZ", NQ), ("magnet_tables", "MRZ", NQ_MAGNET)):
+        tabs = meta.get(key)
+        if not isinstance(tabs, list) or not tabs:
+            raise _bad(p, f"meta.{key} (a non-empty list)")
+        covered = []
+        for k, t in enumerate(tabs):
+            try:
+                shape = tuple(t["shape"])
+                tab = arrays.get(t["name"])
+                ok = (t["name"] == f"{prefix}{k}" and tab is not None and tab.shape == shape
+                      and tab.dtype == np.float32 and len(shape) == 3 and shape[2] == nq
+                      and min(shape) >= 2 and t["rho_step_m"] > 0 and t["u_step"] > 0
+                      and t["rho_scale_m"] > (shape[0] - 1) * t["rho_step_m"]
+                      and len(t["coils"]) > 0 and all(0 <= c < nc for c in t["coils"]))
+            except (KeyError, TypeError):
+                ok = False
+            if not ok:
+                raise _bad(p, f"{key}[{k}] describing a float32 array {prefix}{k} (n_rho, n_u, "
+                           f"{nq}) for coil indices < {nc}")
+            covered += list(t["coils"])
+        if sorted(covered) != list(range(nc)):
+            raise _bad(p, f"{key}: one table for every coil 0..{nc - 1}; got coils "
+                       f"{sorted(covered)}")
+    for name in array_names(arrays):
+        if not np.all(np.isfinite(arrays[name])):
+            raise _bad(p, f"finite values only (found NaN or Inf in {name})")
+    for name in ("C_X", "C_Y", "C_Z", "M_X", "M_Y", "M_Z", "SAT_I"):
+        if len(arrays[name]) < 2 or not np.all(np.diff(arrays[name]) > 0):
+            raise _bad(p, f"{name} strictly increasing with at least 2 nodes")
+    if data_hash(arrays) != meta.get("data_sha256"):
+        raise _bad(p, "data matching its recorded SHA-256 (corrupted)")
+
+
+# ============================================================================ (rho, z) tables
+NQ = 8
+"""Quantities per node of a (rho, z) table: b, Bz, e, w of the whole coil, then of its core alone."""
+NQ_MAGNET = 3
+"""Quantities per node of a magnet table: F_rho/rho, F_z (N/m, N) of the magnet's pull on one
+core alone, and a (T) the z field of that core, magnetized by the magnet, at its upper sensor."""
+
+
+def prepare_rz(tables: list, metas: list, positions, rotations) -> list:
+    """Per coil type, what :func:`interpolate_rz` and the one-point kernel need."""
     prepared = []
     for tab, m in zip(tables, metas):
         idx = np.asarray(m["coils"], dtype=np.intp)
@@ -76,21 +246,26 @@ def _prepare_rz(tables: list, metas: list, positions, rotations) -> list:
         identity = bool(np.all(rot == np.eye(3)))
         shared_z = identity and bool(np.all(pos[:, 2] == pos[0, 2]))
         n_rho, n_u, _ = tab.shape
-        nodes = np.ascontiguousarray(tab, dtype=np.float32).reshape(-1).view(np.complex128)
+        tab32 = np.ascontiguousarray(tab, dtype=np.float32)
+        # the one-point kernel reads a cell's 4 corners x 8 quantities as one row of 32
+        t64 = tab32.astype(np.float64)
+        cells = np.ascontiguousarray(np.stack([t64[:-1, :-1], t64[:-1, 1:], t64[1:, :-1],
+                                               t64[1:, 1:]], axis=2).reshape(-1, 4, NQ))
         prepared.append({
             "idx": idx,
             "all": bool(len(idx) == len(positions) and np.all(idx == np.arange(len(idx)))),
             "pos32": pos.astype(np.float32), "pos": pos, "rot": None if identity else rot,
-            "shared_z": shared_z, "nodes": nodes, "n_rho": n_rho, "n_u": n_u,
+            "shared_z": shared_z, "nodes": tab32.reshape(-1).view("V32"),
+            "cells": cells, "n_rho": n_rho, "n_u": n_u,
             "inv_h": 1.0 / m["rho_step_m"], "inv_scale": 1.0 / m["rho_scale_m"],
-            "z_ref": m["z_ref_m"], "u0": m["u0"],
+            "z_ref": m["z_ref_m"], "zr": pos[:, 2] + m["z_ref_m"], "u0": m["u0"],
             "inv_du": 1.0 / m["u_step"]})
     return prepared
 
 
 _WORK = threading.local()
-RZ_CHUNK = 4096
-"""Points per block of :func:`interpolate_rz` (bounds its scratch memory, keeps it in cache)."""
+RZ_CHUNK = 2048
+"""Points per block of the batch kernels (bounds their scratch memory, keeps it in cache)."""
 
 
 def _scratch(name: str, size: int, dtype) -> np.ndarray:
@@ -106,26 +281,27 @@ def _scratch(name: str, size: int, dtype) -> np.ndarray:
     return b[:size]
 
 
-def interpolate_rz(prepared: list, p: np.ndarray, nc: int) -> np.ndarray:
-    """The batch kernel: points (n, 3) inside the box -> A (n, 8, nc) float64 (a strided view:
-    rows outermost in memory).
+def interpolate_rz(prepared: list, p: np.ndarray, nc: int) -> tuple:
+    """The batch kernel of the tables: points (n, 3) -> (whole coils, cores alone), each
+    (nc, 8, n) float32 (coil-major: the mixing over coils then runs on long contiguous rows),
+    rows :data:`ROWS`.
 
-    numpy only (designkit.fieldmap imports this one definition). Per (point, coil) pair everything is
-    flat and contiguous -- numpy is fast on long inner loops and slow on short ones -- and
-    written into reused scratch buffers; a node's 4 float32 quantities are gathered as one
-    16-byte element (viewed as complex128).
+    Per (point, coil) pair everything is flat and contiguous -- numpy is fast on long inner
+    loops and slow on short ones -- and written into reused scratch buffers; a node's 8 float32
+    quantities are gathered as one 32-byte element.
     """
     n = len(p)
-    out = np.empty((8, n, nc))
+    whole = np.empty((nc, 8, n), np.float32)
+    core = np.empty((nc, 8, n), np.float32)
     for s in range(0, n, RZ_CHUNK):
         e = min(n, s + RZ_CHUNK)
         for t in prepared:
-            _rz_block(t, p[s:e], out[:, s:e])
-    return out.transpose(1, 0, 2)
+            _rz_block(t, p[s:e], whole[:, :, s:e], core[:, :, s:e])
+    return whole, core
 
 
-def _rz_block(t: dict, p: np.ndarray, out: np.ndarray) -> None:
-    """One coil type, one block of points: rows into ``out`` (8, n, nc)[..., t['idx']]."""
+def _rz_block(t: dict, p: np.ndarray, whole: np.ndarray, core: np.ndarray) -> None:
+    """One coil type, one block of points: rows into ``whole``, ``core`` (nc, 8, n)[idx]."""
     f32 = np.float32
     n, k = len(p), len(t["idx"])
     m = n * k
@@ -136,9 +312,9 @@ def _rz_block(t: dict, p: np.ndarray, out: np.ndarray) -> None:
         np.subtract(pf[:, 0:1], t["pos32"][:, 0], out=x.reshape(n, k))
         np.subtract(pf[:, 1:2], t["pos32"][:, 1], out=y.reshape(n, k))
         if t["shared_z"]:
-            z = p[:, 2] - (t["pos"][0, 2] + t["z_ref"])
+            z = p[:, 2] - t["zr"][0]
         else:
-            z = (p[:, 2:3] - (t["pos"][:, 2] + t["z_ref"])).reshape(m)
+            z = (p[:, 2:3] - t["zr"]).reshape(m)
     else:
         loc = np.einsum("nki,kij->nkj", p[:, None, :] - t["pos"], t["rot"])
         x[:] = loc[:, :, 0].reshape(m)
@@ -172,7 +348,7 @@ def _rz_block(t: dict, p: np.ndarray, out: np.ndarray) -> None:
     else:
         i += j
     nodes, n_u = t["nodes"], t["n_u"]
-    c = _scratch("c", 4 * m, np.complex128).reshape(4, m)
+    c = _scratch("c", 4 * m, np.dtype("V32")).reshape(4, m)
     # mode='clip' (indices are in range): with the default 'raise', out= costs a copy
     np.take(nodes, i, out=c[0], mode="clip")
     i += 1
@@ -181,43 +357,49 @@ def _rz_block(t: dict, p: np.ndarray, out: np.ndarray) -> None:
     np.take(nodes, i, out=c[3], mode="clip")
     i -= 1
     np.take(nodes, i, out=c[2], mode="clip")
-    cf = c.view(f32)  # (4, 4 m): per pair the 4 quantities of a corner
-    # along u on both rho rows, then along rho with the 4 quantities transposed to rows
-    tzb = tz[:, None] if t["shared_z"] else np.repeat(tz, 4).reshape(m, 4)
+    cf = c.view(f32)  # (4, 8 m): per pair the 8 quantities of a corner
+    # along u on both rho rows, then along rho with the 8 quantities transposed to rows
+    tzb = tz[:, None] if t["shared_z"] else np.repeat(tz, NQ).reshape(m, NQ)
     for lo, hi in ((0, 1), (2, 3)):
         a, b = cf[lo].reshape(n, -1), cf[hi].reshape(n, -1)
         if not t["shared_z"]:
-            a, b = a.reshape(m, 4), b.reshape(m, 4)
+            a, b = a.reshape(m, NQ), b.reshape(m, NQ)
         b -= a
         b *= tzb
         b += a
-    q = _scratch("q", 4 * m, f32).reshape(4, m)
-    lo_t = cf[1].reshape(m, 4).T
-    np.subtract(cf[3].reshape(m, 4).T, lo_t, out=q)
+    q = _scratch("q", NQ * m, f32).reshape(NQ, m)
+    lo_t = cf[1].reshape(m, NQ).T
+    np.subtract(cf[3].reshape(m, NQ).T, lo_t, out=q)
     q *= tr
     q += lo_t
-    bb, bz, e, w = q
-    # Bx = b x, By = b y, Bz, Gxx = b + w x^2, Gxy = w x y, Gxz = e x, Gyy = b + w y^2, Gyz = e y
-    rows = _scratch("rows", 8 * m, f32).reshape(8, m)
-    np.multiply(bb, x, out=rows[0])
-    np.multiply(bb, y, out=rows[1])
-    rows[2] = bz
-    np.multiply(w, x, out=rows[4])  # w x, reused
-    np.multiply(rows[4], x, out=rows[3])
-    rows[3] += bb
-    rows[4] *= y
-    np.multiply(e, x, out=rows[5])
-    np.multiply(w, y, out=rows[6])
-    rows[6] *= y
-    rows[6] += bb
-    np.multiply(e, y, out=rows[7])
-    rows = rows.reshape(8, n, k)
-    if t["rot"] is not None:
-        rows = _rotate_rows(rows, t["rot"])
-    if t["all"]:
-        out[...] = rows
-    else:
-        out[:, :, t["idx"]] = rows
+    rows = _scratch("rows", 16 * m, f32).reshape(2, 8, m)
+    wx = _scratch("wx", m, f32)
+    for part in range(2):
+        bb, bz, e, w = q[4 * part:4 * part + 4]
+        r = rows[part]
+        # Bx = b x, By = b y, Bz, Gxx = b + w x^2, Gxy = w x y, Gxz = e x, Gyy = b + w y^2,
+        # Gyz = e y
+        np.multiply(bb, x, out=r[0])
+        np.multiply(bb, y, out=r[1])
+        r[2] = bz
+        np.multiply(w, x, out=wx)
+        np.multiply(wx, x, out=r[3])
+        r[3] += bb
+        np.multiply(wx, y, out=r[4])
+        np.multiply(e, x, out=r[5])
+        np.multiply(w, y, out=r[6])
+        r[6] *= y
+        r[6] += bb
+        np.multiply(e, y, out=r[7])
+    for part, out in ((0, whole), (1, core)):
+        r = rows[part].reshape(8, n, k)
+        if t["rot"] is not None:
+            r = _rotate_rows(r, t["rot"])
+        r = r.transpose(2, 0, 1)
+        if t["all"]:
+            out[...] = r
+        else:
+            out[t["idx"]] = r
 
 
 def _rotate_rows(rows: np.ndarray, rot: np.ndarray) -> np.ndarray:
@@ -231,149 +413,379 @@ def _rotate_rows(rows: np.ndarray, rot: np.ndarray) -> np.ndarray:
     return np.stack([bg[0], bg[1], bg[2], gg[0, 0], gg[0, 1], gg[0, 2], gg[1, 1], gg[1, 2]])
 
 
-def _pack(a, dg, nc):
-    return np.ascontiguousarray(np.concatenate([a, dg], axis=3).transpose(0, 1, 2, 4, 3)
-                                .reshape(a.shape[:3] + (15 * nc,)))
+# one point: rows (8,) of a part = (b, Bz, e, w) @ M, M (4, 8) = mono @ _POLY with the monomials
+# mono = (1, x, y, x x, x y, y x, y y) of the coil-local horizontal offsets
+_POLY = np.zeros((7, 4, 8))
+_POLY[1, 0, 0] = _POLY[2, 0, 1] = _POLY[0, 0, 3] = _POLY[0, 0, 6] = 1.0  # b: Bx, By, Gxx, Gyy
+_POLY[0, 1, 2] = 1.0                                                       # Bz
+_POLY[1, 2, 5] = _POLY[2, 2, 7] = 1.0                                      # e: Gxz, Gyz
+_POLY[3, 3, 3] = _POLY[4, 3, 4] = _POLY[6, 3, 6] = 1.0                     # w: Gxx, Gxy, Gyy
+_POLY = _POLY.reshape(7, 32)
 
 
-def _interp(data, grid, p, nc, corr):
-    """(n, 3) points -> (n, 8, nc): trilinear weights + half the gradient . offset terms."""
-    lo = np.asarray(grid["lower_m"], float)
-    step = np.asarray(grid["spacing_m"], float)
-    shape = np.asarray(grid["shape"])
-    nx, ny, nz = (int(x) for x in shape)
-    f = (p - lo) / step
-    i = np.clip(np.floor(f).astype(np.intp), 0, shape - 2)
-    t = f - i
+def _rz_one(t: dict, q) -> np.ndarray:
+    """One point (3 floats), one coil type: rows (k, 2, 8) float64 of its k coils, for the
+    whole coil [:, 0] and its core alone [:, 1], in the global frame."""
+    if t["rot"] is None:
+        d = np.subtract(q, t["pos"])
+        if t["shared_z"]:
+            zz = q[2] - t["zr"][0]
+            u = (math.log(zz if zz > 1e-12 else 1e-12) - t["u0"]) * t["inv_du"]
+            u = min(max(u, 0.0), t["n_u"] - 1.000001)
+            j = int(u)
+            tz = u - j
+        else:
+            u = (np.log(np.maximum(q[2] - t["zr"], 1e-12)) - t["u0"]) * t["inv_du"]
+            u = np.clip(u, 0.0, t["n_u"] - 1.000001)
+            j = u.astype(np.intp)
+            tz = u[:, None]
+    else:
+        d = np.einsum("ki,kij->kj", np.subtract(q, t["pos"]), t["rot"])
+        u = (np.log(np.maximum(d[:, 2] - t["z_ref"], 1e-12)) - t["u0"]) * t["inv_du"]
+        u = np.clip(u, 0.0, t["n_u"] - 1.000001)
+        j = u.astype(np.intp)
+        tz = (u - j)[:, None]
+    xy = d[:, :2]
+    k = len(xy)
+    outer = (xy[:, :, None] * xy[:, None, :]).reshape(k, 4)
+    rho = np.sqrt(outer[:, 0] + outer[:, 3])
+    vv = np.minimum(rho * t["inv_h"] / (1.0 + rho * t["inv_scale"]), t["n_rho"] - 1.0001)
+    i = vv.astype(np.intp)
+    tr = (vv - i)[:, None]
+    cells = t["cells"][i * (t["n_u"] - 1) + j]  # (k, corner, quantity)
+    # bilinear weights of the corners (rho_i, u_j), (rho_i, u_j+1), (rho_i+1, u_j), (.., ..)
+    wz = np.concatenate([1.0 - tz, tz], axis=-1) if np.ndim(tz) else np.array([1.0 - tz, tz])
+    w = (np.concatenate([1.0 - tr, tr], axis=1)[:, :, None] * wz[..., None, :]).reshape(k, 1, 4)
+    val = np.matmul(w, cells).reshape(k, 2, 4)  # (k, whole/core, b Bz e w)
+    mono = np.concatenate([np.ones((k, 1)), xy, outer], axis=1)  # (k, 7)
+    rows = np.matmul(val, (mono @ _POLY).reshape(k, 4, 8))  # (k, 2, 8) local frame
+    if t["rot"] is not None:
+        rows = np.stack([_rotate_rows(rows[:, p].T[:, None, :], t["rot"])[:, 0, :].T
+                         for p in range(2)], axis=1)
+    return rows
+
+
+def prepare_magnet(tables: list, metas: list, positions, rotations) -> list:
+    """Per coil type, what :func:`magnet_terms` needs."""
+    out = []
+    for tab, m in zip(tables, metas):
+        idx = np.asarray(m["coils"], dtype=np.intp)
+        rot = np.asarray(rotations, float)[idx]
+        out.append({"idx": idx, "pos": np.asarray(positions, float)[idx],
+                    "rot": None if np.all(rot == np.eye(3)) else rot,
+                    "flat": np.ascontiguousarray(tab, dtype=np.float64).reshape(-1, NQ_MAGNET),
+                    "n_rho": tab.shape[0], "n_u": tab.shape[1], "inv_h": 1.0 / m["rho_step_m"],
+                    "inv_scale": 1.0 / m["rho_scale_m"], "z_ref": m["z_ref_m"], "u0": m["u0"],
+                    "inv_du": 1.0 / m["u_step"]})
+    return out
+
+
+def magnet_terms(prepared: list, p: np.ndarray, nc: int):
+    """The pair terms of the magnet at points (n, 3): force (n, 3) N summed over the cores (each
+    core alone), and the amplitudes a (n, nc) T of every core's induced field."""
     n = len(p)
-    w = (np.stack([1 - t[:, 0], t[:, 0]], 1)[:, :, None, None]
-         * np.stack([1 - t[:, 1], t[:, 1]], 1)[:, None, :, None]
-         * np.stack([1 - t[:, 2], t[:, 2]], 1)[:, None, None, :]).reshape(n, 8)
-    wd = w[:, None, :] * ((t[:, None, :] - _CORNERS[None]) * step).transpose(0, 2, 1)
-    wall = np.concatenate([w[:, None, :], wd], axis=1).astype(np.float32)  # (n, 4, 8)
-    base = (i[:, 0] * ny + i[:, 1]) * nz + i[:, 2]
-    offs = np.array([0, 1, nz, nz + 1, ny * nz, ny * nz + 1, ny * nz + nz, ny * nz + nz + 1])
-    corners = np.take(data.reshape(nx * ny * nz, -1), base[:, None] + offs, axis=0)
-    s = np.matmul(wall, corners)  # (n, 4, nc * 15)
-    c = s[:, 1:, :].reshape(n, -1) @ corr  # (n, 8 * nc)
-    res = s[:, 0, :].reshape(n, nc, 15)[:, :, :8].transpose(0, 2, 1) + c.reshape(n, 8, nc)
-    return res.astype(np.float64)
+    force = np.zeros((n, 3))
+    amp = np.empty((n, nc))
+    for t in prepared:
+        d = p[:, None, :] - t["pos"][None]  # (n, k, 3)
+        loc = d if t["rot"] is None else np.einsum("nki,kij->nkj", d, t["rot"])
+        x, y = loc[..., 0], loc[..., 1]
+        rho = np.sqrt(x * x + y * y)
+        vv = np.minimum(rho * t["inv_h"] / (1.0 + rho * t["inv_scale"]), t["n_rho"] - 1.0001)
+        u = (np.log(np.maximum(loc[..., 2] - t["z_ref"], 1e-12)) - t["u0"]) * t["inv_du"]
+        u = np.clip(u, 0.0, t["n_u"] - 1.000001)
+        i, j = vv.astype(np.intp), u.astype(np.intp)
+        tr, tz = (vv - i)[..., None], (u - j)[..., None]
+        base = i * t["n_u"] + j
+        f = t["flat"]
+        val = ((1 - tr) * ((1 - tz) * f[base] + tz * f[base + 1])
+               + tr * ((1 - tz) * f[base + t["n_u"]] + tz * f[base + t["n_u"] + 1]))
+        fl = np.stack([val[..., 0] * x, val[..., 0] * y, val[..., 1]], axis=-1)  # local frame
+        if t["rot"] is not None:
+            fl = np.einsum("kij,nkj->nki", t["rot"], fl)
+        force += fl.sum(axis=1)
+        amp[:, t["idx"]] = val[..., 2]
+    return force, amp
 
 
-@dataclass(frozen=True)
+# ============================================================================ 3-D grids
+def _cells(axis: np.ndarray, x: np.ndarray):
+    """Cell index (n,) and local coordinate t (n,) of ``x`` on a strictly increasing axis;
+    outside, the end cell with t < 0 or > 1 (linear extrapolation)."""
+    i = np.clip(np.searchsorted(axis, x, side="right") - 1, 0, len(axis) - 2)
+    return i, (x - axis[i]) / (axis[i + 1] - axis[i])
+
+
+def _trilinear(grid: tuple, p: np.ndarray) -> np.ndarray:
+    """Trilinear interpolation of ``values`` (nx * ny * nz, q) at points (n, 3) -> (n, q)."""
+    axes, values, shape = grid
+    ny, nz = shape[1], shape[2]
+    ix, tx = _cells(axes[0], p[:, 0])
+    iy, ty = _cells(axes[1], p[:, 1])
+    iz, tz = _cells(axes[2], p[:, 2])
+    base = (ix * ny + iy) * nz + iz
+    ux, uy, uz = 1.0 - tx, 1.0 - ty, 1.0 - tz
+    out = np.zeros((len(p), values.shape[1]), values.dtype)
+    for off, w in ((0, ux * uy * uz), (1, ux * uy * tz), (nz, ux * ty * uz),
+                   (nz + 1, ux * ty * tz), (ny * nz, tx * uy * uz), (ny * nz + 1, tx * uy * tz),
+                   (ny * nz + nz, tx * ty * uz), (ny * nz + nz + 1, tx * ty * tz)):
+        corner = np.take(values, base + off, axis=0)
+        corner *= w.astype(values.dtype)[:, None]
+        out += corner
+    return out
+
+
+def _trilinear_one(grid: tuple, q) -> np.ndarray:
+    """The same for one point (3 floats) -> (q,), with Python scalars for the index work."""
+    axes, values, shape = grid
+    xs, ys, zs = grid_lists(grid)
+    i = min(max(bisect.bisect_right(xs, q[0]) - 1, 0), len(xs) - 2)
+    j = min(max(bisect.bisect_right(ys, q[1]) - 1, 0), len(ys) - 2)
+    k = min(max(bisect.bisect_right(zs, q[2]) - 1, 0), len(zs) - 2)
+    tx = (q[0] - xs[i]) / (xs[i + 1] - xs[i])
+    ty = (q[1] - ys[j]) / (ys[j + 1] - ys[j])
+    tz = (q[2] - zs[k]) / (zs[k + 1] - zs[k])
+    ux, uy, uz = 1.0 - tx, 1.0 - ty, 1.0 - tz
+    w = np.array([ux * uy * uz, ux * uy * tz, ux * ty * uz, ux * ty * tz,
+                  tx * uy * uz, tx * uy * tz, tx * ty * uz, tx * ty * tz], dtype=values.dtype)
+    block = values.reshape(shape + (-1,))[i:i + 2, j:j + 2, k:k + 2].reshape(8, -1)
+    return w @ block
+
+
+_LISTS: dict = {}
+
+
+def grid_lists(grid: tuple) -> tuple:
+    key = id(grid[0])
+    got = _LISTS.get(key)
+    if got is None or got[0] is not grid[0]:
+        got = _LISTS[key] = (grid[0], tuple(ax.tolist() for ax in grid[0]))
+    return got[1]
+
+
+# ============================================================================ the reader
+def _interp_factor(currents, sat_i, sat_f) -> np.ndarray:
+    """Saturation factors (n_coils,) at the magnitudes of ``currents`` (clamped to the table)."""
+    a = np.abs(np.asarray(currents, float))
+    return np.array([np.interp(a[k], sat_i, sat_f[:, k]) for k in range(sat_f.shape[1])])
+
+
+@dataclass(frozen=True, eq=False)
 class MapFile:
-    """A validated map: ``bounds`` (lower, upper) corners in m, ``meta`` dict, ``actuation``."""
+    """A validated map file (see the module docstring for what each part means).
 
-    data: np.ndarray  # (nx, ny, nz, n_coils * 15) float32
-    fine: np.ndarray | None  # the same on the bottom slab (meta['fine_grid']) or None
+    Attributes: ``meta`` (dict), ``bounds`` ((lower, upper) corners of the box, m), ``n_coils``,
+    ``sensor_positions_m`` (2, n_coils, 3), ``moment_a_m2`` (3,), ``design_sha256``,
+    ``max_current_a`` (per coil), ``total_current_a`` (sum of |I|), ``arrays`` (the raw arrays).
+    """
+
+    arrays: dict
     meta: dict
     bounds: tuple
     n_coils: int
-    corr: np.ndarray
-    rz: tuple = ()  # prepared (rho, z) tables of the batch path
+    rz: tuple = field(repr=False)
+    mix: np.ndarray = field(repr=False)
+    coupling: tuple = field(repr=False)
+    modes: np.ndarray = field(repr=False)
+    magnet: tuple = field(repr=False)
+    magnet_f0: tuple = field(repr=False)
+    magnet_sind: tuple = field(repr=False)
+    sind_mix: np.ndarray = field(repr=False)
+    mix_t: np.ndarray = field(repr=False)
+    modes_t: np.ndarray = field(repr=False)
 
     @classmethod
     def load(cls, path, expected_design_sha256: str | None = None) -> "MapFile":
-        p = Path(path)
-        if not p.is_file():
-            raise BadInputError("map file", "a path to an existing .npz map", str(p))
-        try:
-            with np.load(p, allow_pickle=False) as z:
-                if not {"A", "dG", "meta"} <= set(z.files):
-                    raise _bad(p, f"arrays A, dG, meta; found {sorted(z.files)}")
-                meta = json.loads(str(z["meta"]))
-                arrays = {k: z[k] for k in _all_names(z.files)}
-        except BadInputError:
-            raise
-        except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError) as exc:
-            raise _bad(p, f"readable npz; {type(exc).__name__}: {exc} -- truncated or foreign")
-        if not isinstance(meta, dict) or meta.get("format") != FORMAT or \
-                meta.get("version") != FORMAT_VERSION:
-            raise _bad(p, f"format {FORMAT!r} version {FORMAT_VERSION}")
-        if meta.get("units") != UNITS or tuple(meta.get("rows", ())) != ROWS:
-            raise _bad(p, f"units {UNITS}, rows {ROWS}")
-        nc = int(meta["n_coils"])
-        levels = [("", meta["grid"])]
-        if meta.get("fine_grid") is not None:
-            levels.append(("_fine", meta["fine_grid"]))
-        for suffix, grid in levels:
-            shape = tuple(grid["shape"])
-            a, dg = arrays.get("A" + suffix), arrays.get("dG" + suffix)
-            if a is None or dg is None or a.shape != shape + (8, nc) or \
-                    dg.shape != shape + (7, nc) or min(shape) < 2:
-                raise _bad(p, f"A{suffix} {shape + (8, nc)}, dG{suffix} {shape + (7, nc)}")
-            if not (np.all(np.isfinite(a)) and np.all(np.isfinite(dg))):
-                raise _bad(p, "finite values only")
-        tabs = meta.get("rz_tables")
-        if not isinstance(tabs, list):
-            raise _bad(p, "meta.rz_tables (a list)")
-        for k, t in enumerate(tabs):
-            try:
-                shape = tuple(t["shape"])
-                tab = arrays.get(t["name"])
-                ok = (t["name"] == f"RZ{k}" and tab is not None and tab.shape == shape
-                      and tab.dtype == np.float32 and len(shape) == 3 and shape[2] == 4
-                      and min(shape) >= 2 and t["rho_step_m"] > 0 and t["u_step"] > 0
-                      and t["rho_scale_m"] > (shape[0] - 1) * t["rho_step_m"]
-                      and len(t["coils"]) > 0 and all(0 <= c < nc for c in t["coils"]))
-            except (KeyError, TypeError):
-                ok = False
-            if not ok:
-                raise _bad(p, f"rz_tables[{k}] describing a float32 array RZ{k} (n_rho, n_u, 4)")
-            if not np.all(np.isfinite(tab)):
-                raise _bad(p, "finite values only")
-        h = hashlib.sha256()
-        for name in _all_names(arrays):
-            h.update(np.ascontiguousarray(arrays[name]).tobytes())
-        if h.hexdigest() != meta.get("data_sha256"):
-            raise _bad(p, "data matching its recorded SHA-256 (corrupted)")
+        """Read and validate ``path``; with ``expected_design_sha256``, refuse another design's map."""
+        arrays, meta = read(path)
         if expected_design_sha256 is not None and meta["design_sha256"] != expected_design_sha256:
-            raise _bad(p, f"design SHA-256 {expected_design_sha256[:12]}..., got "
-                       f"{meta['design_sha256'][:12]}...")
-        fine = (_pack(arrays["A_fine"], arrays["dG_fine"], nc)
-                if meta.get("fine_grid") is not None else None)
-        g = meta["grid"]
-        rz = _prepare_rz([arrays[t["name"]] for t in tabs], tabs, meta["coil_positions_m"],
+            raise _bad(path, f"built from the design with SHA-256 {expected_design_sha256[:12]}"
+                       f"...; this one is from design {meta.get('design_name')!r} "
+                       f"({meta['design_sha256'][:12]}...)", REBUILD)
+        return cls.from_arrays(arrays, meta)
+
+    @classmethod
+    def from_arrays(cls, arrays: dict, meta: dict) -> "MapFile":
+        """A MapFile from already validated arrays (what :func:`read` returns)."""
+        nc = int(meta["n_coils"])
+        tabs = meta["rz_tables"]
+        rz = prepare_rz([arrays[t["name"]] for t in tabs], tabs, meta["coil_positions_m"],
                          meta["coil_rotations"])
-        return cls(_pack(arrays["A"], arrays["dG"], nc), fine, meta,
-                   (np.asarray(g["lower_m"], float), np.asarray(g["upper_m"], float)), nc,
-                   _correction(nc), tuple(rz))
+        caxes = tuple(np.asarray(arrays[k], float) for k in ("C_X", "C_Y", "C_Z"))
+        phi = arrays["PHI"]
+        coupling = (caxes, np.ascontiguousarray(phi.reshape(-1, phi.shape[3]), dtype=np.float32),
+                    phi.shape[:3])
+        maxes = tuple(np.asarray(arrays[k], float) for k in ("M_X", "M_Y", "M_Z"))
+        f0 = arrays["F0_RES"]
+        sind = arrays["SIND_RES"]
+        mt = meta["magnet_tables"]
+        magnet = prepare_magnet([arrays[t["name"]] for t in mt], mt, meta["coil_positions_m"],
+                                meta["coil_rotations"])
+        g = meta["box_m"]
+        return cls(arrays, meta, (np.asarray(g[0], float), np.asarray(g[1], float)), nc,
+                   tuple(rz), np.asarray(arrays["MIX"], float), coupling,
+                   np.ascontiguousarray(arrays["MODES"].reshape(len(arrays["MODES"]), -1),
+                                        dtype=np.float64),
+                   tuple(magnet),
+                   (maxes, np.ascontiguousarray(f0.reshape(-1, 3)), f0.shape[:3]),
+                   (maxes, np.ascontiguousarray(sind.reshape(-1, 6 * nc), dtype=np.float32),
+                    sind.shape[:3]),
+                   np.asarray(arrays["SIND_MIX"], float).reshape(nc, 6 * nc),
+                   np.ascontiguousarray(np.asarray(arrays["MIX"], float).T),
+                   # residual modes laid out (r, nc * 8) for the one-point (nc, 8) sum
+                   np.ascontiguousarray(arrays["MODES"].astype(np.float64).transpose(0, 2, 1)
+                                        .reshape(len(arrays["MODES"]), -1)))
 
-    def actuation(self, points, extrapolate: bool = False) -> np.ndarray:
-        """A at points (3,) -> (8, n_coils) or (n, 3) -> (n, 8, n_coils), float64.
+    # ------------------------------------------------------------------ plain attributes
+    @property
+    def sensor_positions_m(self) -> np.ndarray:
+        """(2, n_coils, 3) m: upper array then lower array, one sensor per coil centre."""
+        return self.arrays["SENSOR_POS"].copy()
 
-        Outside the box: BadInputError unless ``extrapolate`` (nearest cell's polynomial).
-        Batches of >= BATCH_MIN points inside the box use the (rho, z) tables (result: a
-        strided view), the rest the 3-D grid.
-        """
+    @property
+    def moment_a_m2(self) -> np.ndarray:
+        """The finger magnet's moment (3,) A m^2 the map's bias force was computed for."""
+        return self.arrays["MOMENT"].copy()
+
+    @property
+    def design_sha256(self) -> str:
+        return self.meta["design_sha256"]
+
+    @property
+    def max_current_a(self) -> float:
+        """Per-coil current limit, A."""
+        return float(self.meta["max_current_a"])
+
+    @property
+    def total_current_a(self) -> float:
+        """Budget on the sum of |I_k| over the coils, A."""
+        return float(self.meta["total_current_a"])
+
+    # ------------------------------------------------------------------ point checks
+    def _points(self, points, extrapolate: bool, name: str = "points"):
+        """(p (n, 3) float64, single) after the shape, finiteness and box checks."""
         p = np.asarray(points, dtype=float)
         single = p.ndim == 1
+        if p.shape[-1:] != (3,) or p.ndim > 2:
+            raise BadInputError(name, "array-like of shape (3,) or (n, 3), m",
+                                f"shape {p.shape}")
         p = p.reshape(-1, 3)
         if not np.all(np.isfinite(p)):
-            raise BadInputError("points", "finite (no NaN or Inf)", points)
-        lo, hi = self.bounds
-        step = np.asarray(self.meta["grid"]["spacing_m"], float)
+            raise BadInputError(name, "finite (no NaN or Inf)", p.tolist()[:3])
         if not extrapolate:
-            bad = np.any((p < lo - 1e-9 * step) | (p > hi + 1e-9 * step), axis=1)
+            lo, hi = self.bounds
+            tol = 1e-9
+            bad = np.any((p < lo - tol) | (p > hi + tol), axis=1)
             if bad.any():
-                raise BadInputError("points", f"inside {lo.tolist()} .. {hi.tolist()} m",
-                                    p[int(np.argmax(bad))].tolist())
-        if (len(p) >= BATCH_MIN and self.rz
-                and sum(len(t["idx"]) for t in self.rz) == self.n_coils
-                and (not extrapolate or np.all((p >= lo) & (p <= hi)))):
-            res = interpolate_rz(self.rz, p, self.n_coils)
-            return res[0] if single else res
-        res = np.empty((len(p), 8, self.n_coils))
-        infine = np.zeros(len(p), dtype=bool)
-        if self.fine is not None:
-            g = self.meta["fine_grid"]
-            infine = np.all((p >= g["lower_m"]) & (p <= g["upper_m"]), axis=1)
-            if infine.any():
-                res[infine] = _interp(self.fine, g, p[infine], self.n_coils, self.corr)
-        if not infine.all():
-            res[~infine] = _interp(self.data, self.meta["grid"], p[~infine], self.n_coils,
-                                   self.corr)
-        return res[0] if single else res
+                k = int(np.argmax(bad))
+                raise BadInputError(name, f"inside the map box {lo.tolist()} .. {hi.tolist()} m"
+                                    " (or extrapolate=True)", f"{p[k].tolist()} at row {k}")
+        return p, single
+
+    def _one_point(self, points, extrapolate: bool):
+        """Three Python floats, or None when ``points`` is not one point."""
+        shape = np.shape(points)
+        if shape not in ((3,), (1, 3)):
+            return None
+        try:
+            q = tuple(float(c) for c in np.asarray(points, dtype=float).reshape(3))
+        except (TypeError, ValueError):
+            raise BadInputError("points", "array-like of shape (3,) or (n, 3), m",
+                                points) from None
+        lo, hi = self.bounds
+        for k in range(3):
+            if not math.isfinite(q[k]):
+                raise BadInputError("points", "finite (no NaN or Inf)", list(q))
+            if not extrapolate and not (lo[k] - 1e-9 <= q[k] <= hi[k] + 1e-9):
+                raise BadInputError("points", f"inside the map box {lo.tolist()} .. "
+                                    f"{hi.tolist()} m (or extrapolate=True)", list(q))
+        return q
+
+    # ------------------------------------------------------------------ the interpolators
+    def actuation(self, points, extrapolate: bool = False) -> np.ndarray:
+        """The coupled A at points (3,) -> (8, n_coils) or (n, 3) -> (n, 8, n_coils), float64.
+
+        Rows :data:`ROWS`, T/A and T/(m A). Outside the box: BadInputError unless
+        ``extrapolate`` (the end cells' polynomials, which degrade quickly away from the box).
+        """
+        nc = self.n_coils
+        q = self._one_point(points, extrapolate)
+        if q is not None:
+            if len(self.rz) == 1 and self.rz[0]["all"]:
+                rows = _rz_one(self.rz[0], q)  # (nc, 2, 8)
+            else:
+                rows = np.empty((nc, 2, 8))
+                for t in self.rz:
+                    rows[t["idx"]] = _rz_one(t, q)
+            a = rows[:, 0] + self.mix_t @ rows[:, 1]  # (nc, 8)
+            a += (_trilinear_one(self.coupling, q) @ self.modes_t).reshape(nc, 8)
+            return a.T if np.ndim(points) == 1 else a.T[None]
+        p, single = self._points(points, extrapolate)
+        n = len(p)
+        out = np.empty((n, 8, nc))
+        modes32 = self.modes.astype(np.float32)
+        # MIX is (n_coils, n_coils): ~81 axpy's on contiguous rows beat a skinny BLAS call
+        # (which spawns threads for a few microseconds of work)
+        terms = [(j, k, np.float32(self.mix[j, k])) for j in range(nc) for k in range(nc)
+                 if self.mix[j, k] != 0.0]
+        for s in range(0, n, RZ_CHUNK):
+            e = min(n, s + RZ_CHUNK)
+            m = e - s
+            whole, core = interpolate_rz(self.rz, p[s:e], nc)  # (nc, 8, m) each
+            tmp = _scratch("mix", 8 * m, np.float32).reshape(8, m)
+            for j, k, c in terms:
+                np.multiply(core[j], c, out=tmp)
+                whole[k] += tmp
+            res = (_trilinear(self.coupling, p[s:e]) @ modes32).reshape(m, 8, nc)
+            np.add(whole.transpose(2, 1, 0), res, out=out[s:e])
+        return out[0] if single else out
+
+    def bias_force(self, points, extrapolate: bool = False) -> np.ndarray:
+        """F0, the force on the magnet (moment :attr:`moment_a_m2`) at zero current, N:
+        (3,) -> (3,), (n, 3) -> (n, 3)."""
+        q = self._one_point(points, extrapolate)
+        if q is not None:
+            f = magnet_terms(self.magnet, np.array([q]), self.n_coils)[0][0]
+            f += _trilinear_one(self.magnet_f0, q)
+            return f if np.ndim(points) == 1 else f[None]
+        p, single = self._points(points, extrapolate)
+        f = magnet_terms(self.magnet, p, self.n_coils)[0] + _trilinear(self.magnet_f0, p)
+        return f[0] if single else f
+
+    def sensor_induced_field(self, magnet_position_m, extrapolate: bool = False) -> np.ndarray:
+        """Field of the cores magnetized by the magnet at the Hall sensors, T:
+        (3,) -> (2, n_coils, 3) (upper array then lower), (n, 3) -> (n, 2, n_coils, 3)."""
+        nc = self.n_coils
+        q = self._one_point(magnet_position_m, extrapolate)
+        if q is not None:
+            amp = magnet_terms(self.magnet, np.array([q]), nc)[1][0]
+            b = (amp @ self.sind_mix + _trilinear_one(self.magnet_sind, q)).reshape(2, nc, 3)
+            return b if np.ndim(magnet_position_m) == 1 else b[None]
+        p, single = self._points(magnet_position_m, extrapolate, "magnet_position_m")
+        amp = magnet_terms(self.magnet, p, nc)[1]
+        b = (amp @ self.sind_mix + _trilinear(self.magnet_sind, p)).reshape(-1, 2, nc, 3)
+        return b[0] if single else b
+
+    def sensor_coil_field(self, currents=None) -> np.ndarray:
+        """The coils' field at the sensors: per ampere (2, n_coils, 3, n_coils) T/A, or with
+        ``currents`` (n_coils,) A the field (2, n_coils, 3) T (saturation not applied)."""
+        g = self.arrays["SENSOR_COIL"]
+        if currents is None:
+            return g.copy()
+        return g @ self._currents(currents)
+
+    def saturation_factor(self, currents) -> np.ndarray:
+        """Per-coil factors (n_coils,) on the columns of A at these currents (A): the
+        saturation correction (1 for linear cores)."""
+        return _interp_factor(self._currents(currents), self.arrays["SAT_I"],
+                              self.arrays["SAT_FACTOR"])
+
+    def _currents(self, currents) -> np.ndarray:
+        i = np.asarray(currents, dtype=float)
+        if i.shape != (self.n_coils,) or not np.all(np.isfinite(i)):
+            raise BadInputError("currents", f"{self.n_coils} finite values, A",
+                                f"shape {i.shape}")
+        return i
 
     def currents_for(self, point, wanted: np.ndarray, rows=slice(None)) -> np.ndarray:
         """Least-norm currents (A) with A[rows] I = wanted at ``point`` (pseudo-inverse)."""
@@ -386,7 +798,7 @@ def _self_check():  # pragma: no cover - manual use on the target host
 
     m = MapFile.load(sys.argv[1])
     lo, hi = m.bounds
-    print(m.meta["grid"], m.actuation((lo + hi) / 2).shape)
+    print(m.meta["design_name"], m.actuation((lo + hi) / 2).shape, m.bias_force((lo + hi) / 2))
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -360,6 +360,9 @@ class SimTLV493D(SimDevice):
                  power_up_address: int = 0x5E, factory_bytes: Sequence[int] = (0x8D, 0x85, 0x3A)):
         super().__init__()
         self.field_t = tuple(float(v) for v in field_t)
+        self.field_source: Callable[[], Sequence[float]] | None = None
+        """Optional callable returning the field (3,) T at each conversion (e.g. a
+        designkit.localize simulator); overrides ``field_t``."""
         self.temperature_raw = int(temperature_raw)
         self.factory_bytes = bytes(factory_bytes)
         self.stuck_frame = False
@@ -457,7 +460,8 @@ class SimTLV493D(SimDevice):
 
     def _convert(self) -> None:
         self.conversions += 1
-        self.raw = [int(min(max(round(b / TLV_LSB_T), -2048), 2047)) for b in self.field_t]
+        b_t = self.field_t if self.field_source is None else tuple(self.field_source())
+        self.raw = [int(min(max(round(b / TLV_LSB_T), -2048), 2047)) for b in b_t]
         if not self.mod2 & 0x80:  # T=0: temperature measured too
             self.temp_raw_latched = self.temperature_raw
         self.frm = (self.frm + 1) & 0x3

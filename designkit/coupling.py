@@ -1,0 +1,988 @@
+"""The array as one magnetic system: all cores magnetized together, by every source at hand.
+
+Every linear, homogeneous core is a body of revolution about its own axis, so its response to
+any applied field splits into azimuthal Fourier modes ``m`` that do not mix (about *its* axis).
+The array-level solve keeps, per core:
+
+``m = 0``
+    The axisymmetric part, with exactly the unknowns and the integral equation of the single-core
+    model (:mod:`designkit.core`, bound azimuthal surface current ``K`` on the meridian panels):
+    ``K = f (H0_t + PV[H_K]_t)``. A single core driven by its own winding therefore gives
+    *exactly* the single-core solution.
+``m = 1 .. m_max`` (cos and sin)
+    The non-axisymmetric part as bound surface *charge* ``sigma = M . n`` (a scalar; the
+    magnetization of a linear core is curl- and divergence-free inside): the second-kind
+    equation ``sigma = 2 (mu_r - 1) / (mu_r + 1) (H0_n + PV[H_sigma]_n)``, collocated on
+    panels graded towards the rims. Its ill-conditioned mode (the net charge, ``m = 0``) is
+    exactly the one these modes never contain.
+
+The applied field of a core (``H0``) is the sources' field plus the field of every *other*
+core; it is sampled on the core's collocation rings (``N_PHI_RING`` azimuths) and projected onto
+the modes. The self blocks are mode-diagonal; the cross blocks (core i's unknowns -> core j's
+projected field) are built once per design. Solving the block system for a source gives all
+cores' magnetization at once (a dense LU, factorized once per design and reused for every
+source: each coil's winding per ampere, the finger magnet at each position).
+
+Costs (n_c cores, n_u = n0 + 2 m_max n1 unknowns per core, default 80 + 2*2*40 = 240):
+per design, the cross blocks (one per distinct relative placement of two cores: 24 in a 3 x 3
+grid) and one LU of size n_c n_u (2160); per source, one RHS sample of the source's field at
+n_c (n0 + n1) N_PHI_RING points and an LU back-substitution; per observation point, n_c times
+(~30 compressed rings for m = 0 and 40 x 16 panel charges for m >= 1, 4 x 64 near a core).
+
+Magnet-core interaction (linear cores): the magnet (point dipole ``m`` at ``p``) magnetizes
+the cores; the field of these cores at any point is :meth:`ArraySystem.magnet_core_field`; the
+force on the magnet is ``F0 = (m . grad) B_ind(p)`` and the torque ``m x B_ind(p)``. With
+linear cores everything superposes: ``F(p, I) = F(m) A(p) I + F0(p)`` exactly for a rigid point
+dipole; what remains is the core saturation (the coils' and the magnet's fields add in the
+iron), the magnet's finite size, and the magnet's own permeability (mu_r ~ 1.05 for NdFeB).
+
+Saturation correction (stored by the map, applied by the runner): see :func:`saturation_table`.
+Per coil k and current magnitude |I| on the grid ``saturation_current_a`` (k,), the factor
+``saturation_factor[:, k]`` (k, n_coils) multiplies column k of the linear A(p):
+``A_sat(p, I)[:, :, k] = A(p)[:, :, k] * s_k(|I_k|)`` (linear interpolation in |I_k|, s = 1 at 0).
+It is the single-core nonlinear (1010 steel) force at the design point divided by the linear
+one, from designkit's nonlinear axisymmetric solve.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .design import MU0
+from .errors import BadInputError, DesignRuleError
+from .pose import Pose
+
+M_MAX = 2
+"""Highest azimuthal mode kept (m >= 3 measured below 1e-4 of the coupling effect; studies)."""
+N1_SIDE = 24
+N1_CAP = 8
+FAR_RHO = 2.6
+"""Bernstein-ellipse parameter a point needs w.r.t. every interval of the compressed rules
+(error ~ FAR_RHO^-12 ~ 1e-5 with 6 nodes)."""
+N_PHI_RING = 12
+"""Azimuthal samples per collocation ring when projecting another core's / a winding's field."""
+N_PHI_MAGNET = 32
+"""... and when projecting the magnet's field (it can be ~5 mm from a core top)."""
+"""Observation points closer than ``designkit.core.FAR_DISTANCE`` (8 mm) to a core's bounding
+cylinder sum its panels (m = 0) and 3 Gauss nodes x 32 azimuths per charge panel (m >= 1);
+farther ones a compressed product rule (FAR_NODES rings per interval, 12 azimuths)."""
+
+
+def _blas_one_thread():
+    """Context limiting BLAS to one thread when threadpoolctl is installed (optional).
+
+    The kernels here are many small matrix products; a multithreaded BLAS on a busy machine
+    spends far more time synchronizing than computing (measured 40x slower, 2 threads on 2
+    loaded cores).
+    """
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - optional
+        import contextlib
+
+        return contextlib.nullcontext()
+    return threadpool_limits(1, user_api="blas")
+
+
+# ============================================================================ per core type
+def _gauss(n):
+    return np.polynomial.legendre.leggauss(n)
+
+
+def _product_matrix(lo_e, hi_e, intervals, n):
+    """Ring nodes and the matrix W (n_nodes, n_panels): currents of the compressed far rule.
+
+    Same product rule as :meth:`designkit.core.CoreSolution.far_rings`, linear in the panel
+    values: ring weight = W @ k.
+    """
+    x, _ = _gauss(n)
+    xf, wf = _gauss(n + 2)
+    nodes_all, rows = [], []
+    for a, b in intervals:
+        nodes = 0.5 * (a + b) + 0.5 * (b - a) * x
+        w = np.zeros((n, len(lo_e)))
+        for j in range(len(lo_e)):
+            p0, p1 = max(lo_e[j], a), min(hi_e[j], b)
+            if p1 <= p0:
+                continue
+            s = 0.5 * (p0 + p1) + 0.5 * (p1 - p0) * xf
+            ws = 0.5 * (p1 - p0) * wf
+            for q in range(n):
+                others = np.delete(nodes, q)
+                lag = np.prod((s[:, None] - others[None, :]) / (nodes[q] - others[None, :]),
+                              axis=1)
+                w[q, j] = np.sum(ws * lag)
+        nodes_all.append(nodes)
+        rows.append(w)
+    return np.concatenate(nodes_all), np.vstack(rows)
+
+
+def _phi_nodes_graded(levels=22, n=8):
+    """Gauss nodes on (0, pi] graded geometrically towards 0 (weakly singular at phi' = 0)."""
+    x, w = _gauss(n)
+    edges = np.r_[0.0, math.pi * 2.0 ** -np.arange(levels, -1, -1.0)]
+    ph, wt = [], []
+    for a, b in zip(edges[:-1], edges[1:]):
+        ph.append(0.5 * (a + b) + 0.5 * (b - a) * x)
+        wt.append(0.5 * (b - a) * w)
+    return np.concatenate(ph), np.concatenate(wt)
+
+
+def _graded_sin(lo, hi, n):
+    """Edges on [lo, hi] clustered towards hi (the rim) like core._graded(..., 'hi')."""
+    u = np.linspace(0.0, 1.0, n + 1)
+    e = lo + (hi - lo) * np.sin(0.5 * np.pi * u)
+    e[0], e[-1] = lo, hi
+    return e
+
+
+def _graded_both(lo, hi, n):
+    u = np.linspace(0.0, 1.0, n + 1)
+    e = lo + (hi - lo) * 0.5 * (1.0 - np.cos(np.pi * u))
+    e[0], e[-1] = lo, hi
+    return e
+
+
+@dataclass(frozen=True, eq=False)
+class CoreModel:
+    """Discretization and self blocks of one core type (local frame of its coil).
+
+    m = 0: panels of :func:`designkit.core._geometry` (n0 = 80). m >= 1: ``N1_SIDE`` side panels
+    and ``N1_CAP`` per end face (n1 = 40), charge density constant per panel.
+    """
+
+    radius: float
+    z_lo: float
+    z_hi: float
+    mu_r: float
+    m_max: int
+    # m = 0
+    side: np.ndarray
+    discs: np.ndarray
+    f0: np.ndarray
+    self0: np.ndarray
+    rho0: np.ndarray
+    z0: np.ndarray
+    far_r: np.ndarray
+    far_z: np.ndarray
+    far_w: np.ndarray
+    # m >= 1 panels: kind 0 side (param z), 1 top cap, 2 bottom cap (param r)
+    kind1: np.ndarray
+    lo1: np.ndarray
+    hi1: np.ndarray
+    rho1: np.ndarray
+    z1: np.ndarray
+    self1: tuple  # per m: (n1, n1) I - 2 lam D_m
+    far1_r: np.ndarray = None  # compressed rings of the m >= 1 charges (far points)
+    far1_z: np.ndarray = None
+    far1_w: np.ndarray = None  # (n_rings, n1): ring line density = far1_w @ sigma
+    far_segments: np.ndarray = None  # (n_int, 2, 2): (rho, z) ends of the product-rule intervals
+
+    def far_mask(self, rho: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """Points where the compressed ring rules are accurate (bool (n,)).
+
+        The product rule interpolates the kernel by a degree FAR_NODES - 1 polynomial on each
+        interval; its error is ~ r^(-2 FAR_NODES), r the Bernstein-ellipse parameter of the
+        point (in the meridian plane) with respect to the interval. Far: r >= FAR_RHO on every
+        interval and at least FAR_DISTANCE (8 mm) from the core.
+        """
+        from .core import FAR_DISTANCE
+
+        dist = np.maximum.reduce([self.z_lo - z, z - self.z_hi, rho - self.radius])
+        ok = dist >= FAR_DISTANCE
+        for (r0, z0), (r1, z1) in self.far_segments:
+            c = complex(0.5 * (r0 + r1), 0.5 * (z0 + z1))
+            half = complex(0.5 * (r1 - r0), 0.5 * (z1 - z0))
+            w = (rho + 1j * z - c) / half
+            sq = np.sqrt(w * w - 1.0)
+            r = np.maximum(np.abs(w + sq), np.abs(w - sq))
+            ok &= r >= FAR_RHO
+        return ok
+
+    @property
+    def n0(self) -> int:
+        return len(self.rho0)
+
+    @property
+    def n1(self) -> int:
+        return len(self.rho1)
+
+    @property
+    def n_unknowns(self) -> int:
+        return self.n0 + 2 * self.m_max * self.n1
+
+    @property
+    def lam2(self) -> float:
+        return 2.0 * (self.mu_r - 1.0) / (self.mu_r + 1.0)
+
+    def factors(self) -> np.ndarray:
+        """Row factors F of the interface equations, (n_unknowns,)."""
+        return np.r_[self.f0, np.full(2 * self.m_max * self.n1, self.lam2)]
+
+    def self_block(self) -> np.ndarray:
+        n = self.n_unknowns
+        out = np.zeros((n, n))
+        out[:self.n0, :self.n0] = self.self0
+        for m in range(1, self.m_max + 1):
+            for c in range(2):
+                s = self.n0 + (2 * (m - 1) + c) * self.n1
+                out[s:s + self.n1, s:s + self.n1] = self.self1[m - 1]
+        return out
+
+    # ------------------------------------------------------------------ sampling rings
+    def ring_points(self, n_phi: int) -> np.ndarray:
+        """Local points of the m = 0 then m >= 1 collocation rings, (n0 + n1, n_phi, 3), m."""
+        phi = 2.0 * math.pi * np.arange(n_phi) / n_phi
+        rho = np.r_[self.rho0, self.rho1]
+        z = np.r_[self.z0, self.z1]
+        return np.stack([rho[:, None] * np.cos(phi)[None], rho[:, None] * np.sin(phi)[None],
+                         np.repeat(z[:, None], n_phi, axis=1)], axis=-1)
+
+    def project(self, h_local: np.ndarray) -> np.ndarray:
+        """Mode projection of H (local frame) sampled on :meth:`ring_points`.
+
+        h_local : (n0 + n1, n_phi, 3, ...) A/m (trailing axes are kept).
+        Returns (n_unknowns, ...): m = 0 rows the azimuthal mean of the meridian tangential H
+        (side +z, end faces -r), m >= 1 rows the cos / sin coefficients of the normal H.
+        """
+        n_phi = h_local.shape[1]
+        phi = 2.0 * math.pi * np.arange(n_phi) / n_phi
+        extra = (None,) * (h_local.ndim - 3)
+        c = np.cos(phi)[(slice(None),) + extra]
+        s = np.sin(phi)[(slice(None),) + extra]
+        h0 = h_local[:self.n0]
+        ns = len(self.side)
+        t0 = np.concatenate([h0[:ns, :, 2], -(h0[ns:, :, 0] * c + h0[ns:, :, 1] * s)])
+        rows = [t0.mean(axis=1)]
+        h1 = h_local[self.n0:]
+        side = self.kind1 == 0
+        hn = np.where(side[(slice(None), None) + extra], h1[:, :, 0] * c + h1[:, :, 1] * s,
+                      np.where((self.kind1 == 1)[(slice(None), None) + extra], h1[:, :, 2],
+                               -h1[:, :, 2]))
+        for m in range(1, self.m_max + 1):
+            cm = np.cos(m * phi)[(None, slice(None)) + extra]
+            sm = np.sin(m * phi)[(None, slice(None)) + extra]
+            rows.append(2.0 / n_phi * (hn * cm).sum(axis=1))
+            rows.append(2.0 / n_phi * (hn * sm).sum(axis=1))
+        return np.concatenate(rows, axis=0)
+
+    # ------------------------------------------------------------------ basis fields
+    def basis_field(self, pts: np.ndarray, gradient: bool = False, fine: bool = False):
+        """H of every unit unknown at local points (outside the core).
+
+        Returns H (n, 3, n_unknowns) A/m per unit [, G (n, 3, 3, n_unknowns) A/m^2].
+        m = 0 unknowns are surface currents K (A/m), m >= 1 charge densities (A/m).
+        """
+        pts = np.asarray(pts, dtype=float)
+        n = len(pts)
+        nu = self.n_unknowns
+        h = np.zeros((n, 3, nu))
+        g = np.zeros((n, 3, 3, nu)) if gradient else None
+        if n == 0:
+            return (h, g) if gradient else h
+        rho = np.hypot(pts[:, 0], pts[:, 1])
+        far = self.far_mask(rho, pts[:, 2])
+        for sel, fn in ((far, self._m0_far), (~far, self._m0_near)):
+            if np.any(sel):
+                res = fn(pts[sel], rho[sel], gradient)
+                if gradient:
+                    h[sel, :, :self.n0], g[sel, :, :, :self.n0] = res
+                else:
+                    h[sel, :, :self.n0] = res
+        if self.m_max:
+            if fine:
+                res = self._m1_field(pts, 4, 64, gradient)
+                if gradient:
+                    h[:, :, self.n0:], g[:, :, :, self.n0:] = res
+                else:
+                    h[:, :, self.n0:] = res
+            else:
+                # compressed rings where accurate (ring density = far1_w @ sigma, one unit per
+                # (mode, panel)), panel charges elsewhere
+                eye = np.eye(2 * self.m_max * self.n1)
+                for sel, rule in ((far, "far"), (~far, (3, 32))):
+                    if not np.any(sel):
+                        continue
+                    src, q = self._charges(eye, rule)
+                    res = self._charge_kernel(pts[sel], src, gradient, q, False)
+                    if gradient:
+                        h[sel, :, self.n0:], g[sel, :, :, self.n0:] = res
+                    else:
+                        h[sel, :, self.n0:] = res
+        return (h, g) if gradient else h
+
+    def field(self, pts: np.ndarray, xs: np.ndarray, gradient: bool = False,
+              pointwise: bool = False):
+        """H of the core for unknown columns ``xs`` (n_unknowns, k) at local points.
+
+        Contracts the unknowns before the kernels (far rings for m = 0, charges for m >= 1).
+        Returns H (n, 3, k) A/m [, G (n, 3, 3, k) A/m^2]; with ``pointwise`` point i uses
+        column i (k = n) and the shapes are (n, 3) [, (n, 3, 3)].
+        """
+        from .core import FAR_DISTANCE
+
+        pts = np.asarray(pts, dtype=float)
+        n = len(pts)
+        k = xs.shape[1]
+        shp = (n,) if pointwise else (n, k)
+        h = np.zeros((n, 3) + shp[1:])
+        g = np.zeros((n, 3, 3) + shp[1:]) if gradient else None
+        if n == 0:
+            return (h, g) if gradient else h
+        rho = np.hypot(pts[:, 0], pts[:, 1])
+        far = self.far_mask(rho, pts[:, 2])
+        x0 = xs[:self.n0]
+        # m = 0: cylindrical components per column, then Cartesian
+        sel_list = ((far, True), (~far, False))
+        for sel, is_far in sel_list:
+            if not np.any(sel):
+                continue
+            idx = np.flatnonzero(sel)
+            comps = self._m0_rz(pts[idx], rho[idx], gradient, is_far)  # list (m, nb)
+            xcol = x0[:, idx] if pointwise else x0
+            if pointwise:
+                cz = [np.einsum("nb,bn->n", q, xcol) for q in comps]
+                res = self._rz_basis_to_xyz(pts[idx], rho[idx], [c[:, None] for c in cz],
+                                            gradient)
+                res = (res[0][..., 0], res[1][..., 0]) if gradient else res[..., 0]
+            else:
+                cz = [q @ xcol for q in comps]
+                res = self._rz_basis_to_xyz(pts[idx], rho[idx], cz, gradient)
+            if gradient:
+                h[idx] += res[0]
+                g[idx] += res[1]
+            else:
+                h[idx] += res
+        if self.m_max:
+            for sel, rule in ((~far, (3, 32)), (far, "far")):
+                if not np.any(sel):
+                    continue
+                idx = np.flatnonzero(sel)
+                src, q = self._charges(xs[self.n0:], rule)  # (nc, 3), (nc, k)
+                res = self._charge_kernel(pts[idx], src, gradient,
+                                          q[:, idx] if pointwise else q, pointwise)
+                if gradient:
+                    h[idx] += res[0]
+                    g[idx] += res[1]
+                else:
+                    h[idx] += res
+        return (h, g) if gradient else h
+
+    def _m0_rz(self, pts, rho, gradient, far):
+        """Cylindrical components per m = 0 unknown: list of (n, n0) arrays."""
+        from .core import _disc_nodes
+        from .field.kernels import loop_rz, sheet_rz
+
+        n = len(rho)
+        z = pts[:, 2]
+        if far:
+            nq = len(self.far_r)
+            res = loop_rz(np.tile(self.far_r, n), np.repeat(rho, nq),
+                          np.repeat(z, nq) - np.tile(self.far_z, n), gradient=gradient)
+            return [q.reshape(n, nq) @ self.far_w for q in res]
+        side, discs = self.side, self.discs
+        hh = 0.5 * (side[:, 1] - side[:, 0])
+        cc = 0.5 * (side[:, 1] + side[:, 0])
+        ns = len(hh)
+        rs = sheet_rz(self.radius, np.tile(hh, n), np.repeat(rho, ns),
+                      np.repeat(z, ns) - np.tile(cc, n), gradient=gradient)
+        nq = 4
+        rq, wq = _disc_nodes(discs[:, 1], discs[:, 2], nq)
+        nd = len(discs)
+        m = nd * nq
+        rl = loop_rz(np.tile(rq.ravel(), n), np.repeat(rho, m),
+                     np.repeat(z, m) - np.tile(np.repeat(discs[:, 0], nq), n), gradient=gradient)
+        ww = wq.ravel()
+        return [np.hstack([a.reshape(n, ns), (b.reshape(n, m) * ww).reshape(n, nd, nq)
+                           .sum(axis=2)]) for a, b in zip(rs, rl)]
+
+    def _charges(self, x1: np.ndarray, rule):
+        """Point charges of the m >= 1 unknowns x1 (2 m_max n1, k): positions (nc, 3), m, and
+        charges (nc, k), A m. ``rule``: (Gauss nodes per panel, azimuths) or 'far' (the
+        compressed product rule, ``FAR_NODES`` rings per interval, 12 azimuths)."""
+        k = x1.shape[1]
+        if rule == "far":
+            nphi = 12
+            phi = 2.0 * math.pi * (np.arange(nphi) + 0.5) / nphi
+            r, z = self.far1_r, self.far1_z
+            pos = np.stack([r[:, None] * np.cos(phi), r[:, None] * np.sin(phi),
+                            np.repeat(z[:, None], nphi, axis=1)], axis=-1)
+            dens = np.zeros((len(r), nphi, k))
+            for m in range(1, self.m_max + 1):
+                a = (2 * (m - 1)) * self.n1
+                wc = self.far1_w @ x1[a:a + self.n1]
+                ws = self.far1_w @ x1[a + self.n1:a + 2 * self.n1]
+                dens += wc[:, None, :] * np.cos(m * phi)[None, :, None]
+                dens += ws[:, None, :] * np.sin(m * phi)[None, :, None]
+            q = dens * (r * 2.0 * math.pi / nphi)[:, None, None]
+            return pos.reshape(-1, 3), q.reshape(-1, k)
+        ng, nphi = rule
+        pos, wt, phi = self._charge_nodes(ng, nphi)
+        dens = np.zeros((self.n1, nphi, k))
+        for m in range(1, self.m_max + 1):
+            a = (2 * (m - 1)) * self.n1
+            dens += x1[a:a + self.n1, None, :] * np.cos(m * phi)[None, :, None]
+            dens += x1[a + self.n1:a + 2 * self.n1, None, :] * np.sin(m * phi)[None, :, None]
+        q = wt[:, :, None, None] * dens[:, None, :, :]  # (n1, ng, nphi, k)
+        return pos.reshape(-1, 3), q.reshape(-1, k)
+
+    @staticmethod
+    def _charge_kernel(pts, src, gradient, q, pointwise, chunk=128):
+        """Field of point charges q (nc, k) at src (nc, 3): (n, 3, k) [, (n, 3, 3, k)]."""
+        n = len(pts)
+        k = q.shape[1]
+        shp = (n,) if pointwise else (n, k)
+        h = np.empty((n, 3) + shp[1:])
+        g = np.empty((n, 3, 3) + shp[1:]) if gradient else None
+        c4 = 1.0 / (4.0 * math.pi)
+        for a in range(0, n, chunk):
+            p = pts[a:a + chunk]
+            d = p[:, None, :] - src[None]
+            r2 = np.einsum("cij,cij->ci", d, d)
+            inv3 = c4 / (r2 * np.sqrt(r2))
+            comps = [d[..., i] * inv3 for i in range(3)]
+            if gradient:
+                inv5 = 3.0 * inv3 / r2
+                for i in range(3):
+                    for kk in range(i, 3):
+                        t = -d[..., i] * d[..., kk] * inv5
+                        if i == kk:
+                            t = t + inv3
+                        comps.append(t)
+            if pointwise:
+                qq = q[:, a:a + chunk].T  # (c, nc)
+                red = np.stack([np.einsum("cs,cs->c", t, qq) for t in comps], axis=1)
+            else:
+                red = np.stack([t @ q for t in comps], axis=1)  # (c, ncomp, k)
+            h[a:a + chunk] = red[:, :3]
+            if gradient:
+                for (i, kk), j in {(0, 0): 3, (0, 1): 4, (0, 2): 5, (1, 1): 6, (1, 2): 7,
+                                   (2, 2): 8}.items():
+                    g[a:a + chunk, i, kk] = red[:, j]
+                    g[a:a + chunk, kk, i] = red[:, j]
+        return (h, g) if gradient else h
+
+    def _rz_basis_to_xyz(self, pts, rho, comps, gradient):
+        """(n, nb) cylindrical component arrays -> Cartesian (n, 3, nb) [, (n, 3, 3, nb)]."""
+        from .field import cylindrical_to_cartesian
+
+        with np.errstate(invalid="ignore", divide="ignore"):
+            c = np.where(rho > 0, pts[:, 0] / np.where(rho > 0, rho, 1.0), 1.0)
+            s = np.where(rho > 0, pts[:, 1] / np.where(rho > 0, rho, 1.0), 0.0)
+        nb = comps[0].shape[1]
+        flat = [q.T.ravel() for q in comps]  # basis-major
+        res = cylindrical_to_cartesian(np.tile(c, nb), np.tile(s, nb), 1.0, flat, gradient)
+        n = len(rho)
+        if gradient:
+            b, gg = res
+            return (np.moveaxis(b.reshape(nb, n, 3), 0, -1),
+                    np.moveaxis(gg.reshape(nb, n, 3, 3), 0, -1))
+        return np.moveaxis(res.reshape(nb, n, 3), 0, -1)
+
+    def _m0_far(self, pts, rho, gradient):
+        from .field.kernels import loop_rz
+
+        nq = len(self.far_r)
+        n = len(rho)
+        res = loop_rz(np.tile(self.far_r, n), np.repeat(rho, nq),
+                      np.repeat(pts[:, 2], nq) - np.tile(self.far_z, n), gradient=gradient)
+        comps = [(q.reshape(n, nq) @ self.far_w) for q in res]
+        return self._rz_basis_to_xyz(pts, rho, comps, gradient)
+
+    def _m0_near(self, pts, rho, gradient):
+        from .core import _disc_nodes
+        from .field.kernels import loop_rz, sheet_rz
+
+        n = len(rho)
+        z = pts[:, 2]
+        side, discs = self.side, self.discs
+        hh = 0.5 * (side[:, 1] - side[:, 0])
+        cc = 0.5 * (side[:, 1] + side[:, 0])
+        ns = len(hh)
+        rs = sheet_rz(self.radius, np.tile(hh, n), np.repeat(rho, ns),
+                      np.repeat(z, ns) - np.tile(cc, n), gradient=gradient)
+        nq = 4
+        rq, wq = _disc_nodes(discs[:, 1], discs[:, 2], nq)
+        nd = len(discs)
+        m = nd * nq
+        rl = loop_rz(np.tile(rq.ravel(), n), np.repeat(rho, m),
+                     np.repeat(z, m) - np.tile(np.repeat(discs[:, 0], nq), n), gradient=gradient)
+        ww = wq.ravel()
+        comps = [np.hstack([a.reshape(n, ns), (b.reshape(n, m) * ww).reshape(n, nd, nq)
+                            .sum(axis=2)]) for a, b in zip(rs, rl)]
+        return self._rz_basis_to_xyz(pts, rho, comps, gradient)
+
+    @functools.cached_property
+    def _charge_nodes_cache(self):
+        return {}
+
+    def _charge_nodes(self, ng, nphi):
+        """Charge quadrature: positions (n1, ng, nphi, 3), weights (n1, ng) (area / dphi)."""
+        key = (ng, nphi)
+        cache = self._charge_nodes_cache
+        if key not in cache:
+            x, w = _gauss(ng)
+            mid = 0.5 * (self.lo1 + self.hi1)
+            half = 0.5 * (self.hi1 - self.lo1)
+            s = mid[:, None] + half[:, None] * x[None]
+            ws = half[:, None] * w[None]
+            phi = 2.0 * math.pi * (np.arange(nphi) + 0.5) / nphi
+            side = (self.kind1 == 0)[:, None]
+            r = np.where(side, self.radius, s)
+            zz = np.where(side, s, np.where((self.kind1 == 1)[:, None], self.z_hi, self.z_lo))
+            wt = ws * r * (2.0 * math.pi / nphi)  # dA = r ds dphi
+            pos = np.stack([r[:, :, None] * np.cos(phi), r[:, :, None] * np.sin(phi),
+                            np.repeat(zz[:, :, None], nphi, axis=2)], axis=-1)
+            cache[key] = (pos, wt, phi)
+        return cache[key]
+
+    def _m1_field(self, pts, ng, nphi, gradient, chunk=128):
+        pos, wt, phi = self._charge_nodes(ng, nphi)
+        n1 = self.n1
+        modes = []
+        for m in range(1, self.m_max + 1):
+            modes += [np.cos(m * phi), np.sin(m * phi)]
+        modes_t = np.array(modes).T.copy()  # (nphi, 2M)
+        nm = modes_t.shape[1]
+        src = pos.reshape(-1, 3)  # (n1*ng*nphi, 3), phi fastest
+        wflat = wt.reshape(-1)  # (n1*ng,)
+        n = len(pts)
+        nb = nm * n1
+        h = np.empty((n, 3, nb))
+        g = np.empty((n, 3, 3, nb)) if gradient else None
+        c4 = 1.0 / (4.0 * math.pi)
+        for a in range(0, n, chunk):
+            p = pts[a:a + chunk]
+            c = len(p)
+            d = p[:, None, :] - src[None]  # (c, ns, 3)
+            r2 = np.einsum("cij,cij->ci", d, d)
+            inv3 = c4 / (r2 * np.sqrt(r2))
+            comps = [d[..., i] * inv3 for i in range(3)]
+            if gradient:
+                inv5 = 3.0 * inv3 / r2
+                for i in range(3):
+                    for k in range(i, 3):
+                        t = -d[..., i] * d[..., k] * inv5
+                        if i == k:
+                            t = t + inv3
+                        comps.append(t)
+            stack = np.stack(comps, axis=1).reshape(c, len(comps), n1 * ng, nphi)
+            red = stack @ modes_t  # (c, ncomp, n1*ng, 2M)
+            red = (red * wflat[None, None, :, None]).reshape(c, len(comps), n1, ng, nm).sum(3)
+            red = np.swapaxes(red, 2, 3).reshape(c, len(comps), nb)  # mode-major
+            h[a:a + chunk] = red[:, :3]
+            if gradient:
+                idx = {(0, 0): 3, (0, 1): 4, (0, 2): 5, (1, 1): 6, (1, 2): 7, (2, 2): 8}
+                for (i, k), q in idx.items():
+                    g[a:a + chunk, i, k] = red[:, q]
+                    g[a:a + chunk, k, i] = red[:, q]
+        return (h, g) if gradient else h
+
+
+def _self_charge_matrices(radius, z_lo, z_hi, kind, lo, hi, rho_c, z_c, m_max):
+    """D_m (n1, n1): normal H at the collocation points (phi = 0) per unit cos(m phi') density.
+
+    Side panels: the z' integral is done in closed form (a uniform line charge), end-face
+    panels by composite Gauss in r'; phi' by Gauss on intervals graded geometrically towards
+    phi' = 0 (the integrand is weakly singular there on the panel itself). Integrands are even
+    in phi' for the cos modes, so [0, pi] is doubled. The principal value on a panel's own
+    surface is what the on-surface integral gives (the +-sigma/2 jump is added by the equation).
+    """
+    n1 = len(kind)
+    ph, wph = _phi_nodes_graded()
+    cph, sph = np.cos(ph), np.sin(ph)
+    nrm = np.where(kind[:, None] == 0, [[1.0, 0.0, 0.0]], np.where(kind[:, None] == 1,
+                                                                   [[0, 0, 1.0]], [[0, 0, -1.0]]))
+    out = np.zeros((m_max, n1, n1))
+    mw = np.array([np.cos(m * ph) for m in range(1, m_max + 1)]) * wph[None] * 2.0
+    xg, wg = _gauss(8)
+    for j in range(n1):
+        if kind[j] == 0:
+            # line charges at (R cos phi', R sin phi') from z = lo to hi, unit density per area:
+            # lambda = R dphi'
+            dx = rho_c[:, None] - radius * cph[None]  # (n1, nph)
+            dy = -radius * sph[None] * np.ones((n1, 1))
+            b2 = dx * dx + dy * dy
+            ua = (z_c - lo[j])[:, None]
+            ub = (z_c - hi[j])[:, None]
+            sa, sb = np.sqrt(b2 + ua * ua), np.sqrt(b2 + ub * ub)
+            # (1/b^2) [u/sqrt(b^2+u^2)] written without 0/0: u / (b^2 sqrt(b^2+u^2)) ... use
+            # the identity ua/sa - ub/sb = (ua sb - ub sa) / (sa sb)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                brk = (ua / sa - ub / sb) / b2
+            brk = np.where(b2 > 0, brk, 0.0)
+            hp = radius / (4 * math.pi) * brk  # per unit dphi'
+            hx, hy = hp * dx, hp * dy
+            hz = radius / (4 * math.pi) * (1.0 / sb - 1.0 / sa)
+        else:
+            zc = z_hi if kind[j] == 1 else z_lo
+            pieces = np.linspace(lo[j], hi[j], 5)
+            rr = np.concatenate([0.5 * (a + b) + 0.5 * (b - a) * xg for a, b in
+                                 zip(pieces[:-1], pieces[1:])])
+            wr = np.concatenate([0.5 * (b - a) * wg for a, b in zip(pieces[:-1], pieces[1:])])
+            # (n1, nr, nph)
+            dx = rho_c[:, None, None] - rr[None, :, None] * cph[None, None]
+            dy = -rr[None, :, None] * sph[None, None] * np.ones((n1, 1, 1))
+            dz = (z_c - zc)[:, None, None] * np.ones((1, len(rr), 1))
+            r3 = (dx * dx + dy * dy + dz * dz) ** -1.5 / (4 * math.pi)
+            ww = (wr * rr)[None, :, None]
+            hx = (dx * r3 * ww).sum(axis=1)
+            hy = (dy * r3 * ww).sum(axis=1)
+            hz = (dz * r3 * ww).sum(axis=1)
+        hn = hx * nrm[:, 0:1] + hy * nrm[:, 1:2] + hz * nrm[:, 2:3]  # (n1, nph)
+        if kind[j] != 0:
+            same = kind == kind[j]
+            hn[same] = 0.0  # a flat face's charges have no normal field in its own plane
+        out[:, :, j] = (hn @ mw.T).T
+    return out
+
+
+@functools.lru_cache(maxsize=32)
+def core_model(radius: float, length: float, offset: float, mu_r: float, key: tuple,
+               m_max: int = M_MAX, refine: int = 1) -> CoreModel:
+    """Discretization and self blocks of a linear core (cached per core type).
+
+    ``refine`` multiplies every panel count (convergence studies, wide cores).
+    """
+    from .core import FAR_NODES, N_CAP, N_SIDE, _geometry, _interface_factor, _system
+
+    side, side_slice, discs = _geometry(radius, length, offset, n_side=N_SIDE * refine,
+                                        n_cap=N_CAP * refine)
+    a, _, rho0, z0 = _system(radius, side, discs, key)
+    f_side = _interface_factor(np.full(len(side), mu_r), 1.0)
+    below = discs[:, 3].astype(int)
+    above = discs[:, 4].astype(int)
+    f_disc = _interface_factor(np.where(below < 0, 1.0, mu_r), np.where(above < 0, 1.0, mu_r))
+    f0 = np.concatenate([f_side, f_disc])
+    self0 = np.eye(len(f0)) - f0[:, None] * a
+    lo, hi = offset - length / 2, offset + length / 2
+    # far rule (compressed rings), as CoreSolution.far_rings
+    L = hi - lo
+    end = min(0.15 * L, 2 * radius)
+    rr, zz, ww = [], [], []
+    nodes, w = _product_matrix(side[:, 0], side[:, 1],
+                               [(lo, lo + end), (lo + end, hi - end), (hi - end, hi)], FAR_NODES)
+    ns = len(side)
+    rr.append(np.full_like(nodes, radius))
+    zz.append(nodes)
+    ww.append(np.hstack([w, np.zeros((len(nodes), len(discs)))]))
+    for zp in np.unique(discs[:, 0]):
+        sel = np.flatnonzero(discs[:, 0] == zp)
+        nodes, w = _product_matrix(discs[sel, 1], discs[sel, 2], [(0.0, radius)], FAR_NODES)
+        full = np.zeros((len(nodes), len(f0)))
+        full[:, ns + sel] = w
+        rr.append(nodes)
+        zz.append(np.full_like(nodes, zp))
+        ww.append(full)
+    # m >= 1 panels
+    n1s, n1c = N1_SIDE * refine, N1_CAP * refine
+    e_side = _graded_both(lo, hi, n1s)
+    e_cap = _graded_sin(0.0, radius, n1c)
+    kind = np.r_[np.zeros(n1s, int), np.ones(n1c, int), np.full(n1c, 2)]
+    lo1 = np.r_[e_side[:-1], e_cap[:-1], e_cap[:-1]]
+    hi1 = np.r_[e_side[1:], e_cap[1:], e_cap[1:]]
+    mid = 0.5 * (lo1 + hi1)
+    rho1 = np.where(kind == 0, radius, mid)
+    z1 = np.where(kind == 0, mid, np.where(kind == 1, hi, lo))
+    self1 = ()
+    if m_max:
+        d = _self_charge_matrices(radius, lo, hi, kind, lo1, hi1, rho1, z1, m_max)
+        lam2 = 2.0 * (mu_r - 1.0) / (mu_r + 1.0)
+        self1 = tuple(np.eye(len(kind)) - lam2 * d[m] for m in range(m_max))
+    # compressed far rule of the m >= 1 charges (same product rule as m = 0)
+    r1, z1f, w1 = [], [], []
+    n1 = len(kind)
+    nodes, w = _product_matrix(lo1[:n1s], hi1[:n1s],
+                               [(lo, lo + end), (lo + end, hi - end), (hi - end, hi)], FAR_NODES)
+    r1.append(np.full_like(nodes, radius))
+    z1f.append(nodes)
+    w1.append(np.hstack([w, np.zeros((len(nodes), n1 - n1s))]))
+    for kk, zp in ((1, hi), (2, lo)):
+        sel = np.flatnonzero(kind == kk)
+        nodes, w = _product_matrix(lo1[sel], hi1[sel], [(0.0, radius)], FAR_NODES)
+        full = np.zeros((len(nodes), n1))
+        full[:, sel] = w
+        r1.append(nodes)
+        z1f.append(np.full_like(nodes, zp))
+        w1.append(full)
+    segs = np.array([[[radius, a], [radius, b]] for a, b in
+                     [(lo, lo + end), (lo + end, hi - end), (hi - end, hi)]]
+                    + [[[0.0, zp], [radius, zp]] for zp in (lo, hi)])
+    return CoreModel(radius, lo, hi, mu_r, m_max, side, discs, f0, self0, rho0, z0,
+                     np.concatenate(rr), np.concatenate(zz), np.vstack(ww), kind, lo1, hi1,
+                     rho1, z1, self1, np.concatenate(r1), np.concatenate(z1f), np.vstack(w1),
+                     segs)
+
+
+# ============================================================================ the array system
+def _core_model_of(coil, m_max, refine=1):
+    from .core import _winding_key
+
+    c = coil.core
+    return core_model(float(c.radius), float(c.length), float(c.offset),
+                      float(c.relative_permeability), _winding_key(coil), int(m_max),
+                      int(refine))
+
+
+def _rel_key(pa, pb):
+    """Hashable relative placement of pose b seen from pose a (rounded to 1e-9 m / 1e-12)."""
+    rel_pos = pa.to_local(np.asarray(pb.position, dtype=float)[None])[0]
+    rel_rot = pa.matrix.T @ pb.matrix
+    return tuple(np.round(rel_pos, 9)) + tuple(np.round(rel_rot.ravel(), 12))
+
+
+class ArraySystem:
+    """All cores of a :class:`~designkit.array.CoilArray` solved together (linear cores).
+
+    Built once per array (:meth:`designkit.array.CoilArray.coupled`). Sources are projected
+    onto the cores' modes, the block system is solved by a stored LU factorization, and the
+    cores' fields are evaluated from the solved unknowns.
+    """
+
+    def __init__(self, array, m_max: int = M_MAX, refine: int = 1):
+        from scipy.linalg import lu_factor
+
+        self.array = array
+        self.m_max = int(m_max)
+        # linear at relative_permeability (a 1010-steel core too: its saturation is the
+        # separate correction, saturation_table); 'thesis-uniform' cores stay uncoupled
+        self.core_index = [k for k, c in enumerate(array.coils)
+                           if c.core is not None and c.core.model == "surface-current"]
+        self.models = [_core_model_of(array.coils[k], self.m_max, refine)
+                       for k in self.core_index]
+        self.poses = [array.coils[k].pose for k in self.core_index]
+        sizes = [m.n_unknowns for m in self.models]
+        self.offsets = np.r_[0, np.cumsum(sizes)].astype(int)
+        n = int(self.offsets[-1])
+        self.factors = np.concatenate([m.factors() for m in self.models]) if n else np.zeros(0)
+        mat = np.zeros((n, n))
+        cache = {}
+        with _blas_one_thread():
+            self._assemble(mat, cache)
+        self.n_blocks = len(cache)
+        self.n_unknowns = n
+        self._lu = lu_factor(mat) if n else None
+        self._coil_solution = None
+
+    def _assemble(self, mat, cache):
+        for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
+            sj = slice(self.offsets[jj], self.offsets[jj + 1])
+            mat[sj, sj] = mj.self_block()
+            for ii, (mi, pi) in enumerate(zip(self.models, self.poses)):
+                if ii == jj:
+                    continue
+                key = (id(mi), id(mj), _rel_key(pi, pj))
+                if key not in cache:
+                    cache[key] = self._cross_block(mi, pi, mj, pj)
+                si = slice(self.offsets[ii], self.offsets[ii + 1])
+                mat[sj, si] = -mj.factors()[:, None] * cache[key]
+
+    # ------------------------------------------------------------------ assembly
+    @staticmethod
+    def _cross_block(mi, pi, mj, pj):
+        """Projected field at core j's rings per unit unknown of core i, (nu_j, nu_i)."""
+        ring = mj.ring_points(N_PHI_RING)  # local j
+        shape = ring.shape[:2]
+        glob = ring.reshape(-1, 3) @ pj.matrix.T + np.asarray(pj.position)
+        loc_i = pi.to_local(glob)
+        h = mi.basis_field(loc_i, fine=False)  # (n, 3, nu_i) in frame i
+        rot = pj.matrix.T @ pi.matrix  # frame i -> frame j
+        h = np.einsum("ab,nbu->nau", rot, h)
+        return mj.project(h.reshape(shape + (3, -1)))
+
+    def _project_global_field(self, field_fn, n_phi, near_points=None) -> np.ndarray:
+        """RHS: F * projection of a source's H (callable on global points -> (n, 3, k)).
+
+        Without ``near_points``: ``n_phi`` azimuths per ring on every core. With
+        ``near_points`` (k, 3) global m, one source per column (column q sits at
+        near_points[q], and ``field_fn(points, cols)`` evaluates only columns ``cols``): a
+        core uses ``n_phi`` azimuths for the sources closer than 30 mm to it and
+        ``N_PHI_RING`` for the others (a source that far has no significant azimuthal
+        content beyond the kept modes on the core's rings). Returns (n_unknowns, k).
+        """
+        rows = []
+        for mj, pj in zip(self.models, self.poses):
+            if near_points is None:
+                groups = [(n_phi, None)]
+            else:
+                loc = pj.to_local(near_points)
+                rho = np.hypot(loc[:, 0], loc[:, 1])
+                dist = np.maximum.reduce([mj.z_lo - loc[:, 2], loc[:, 2] - mj.z_hi,
+                                          rho - mj.radius])
+                close = dist < 0.03
+                groups = [(n_phi, np.flatnonzero(close)), (N_PHI_RING, np.flatnonzero(~close))]
+            out = None
+            for nphi, cols in groups:
+                if cols is not None and len(cols) == 0:
+                    continue
+                ring = mj.ring_points(nphi)
+                glob = ring.reshape(-1, 3) @ pj.matrix.T + np.asarray(pj.position)
+                h = field_fn(glob) if cols is None else field_fn(glob, cols)  # (n, 3, k)
+                h = np.einsum("ba,nbk->nak", pj.matrix, h)  # to local j
+                proj = mj.project(h.reshape(ring.shape[:2] + h.shape[1:]))
+                if cols is None:
+                    out = proj
+                else:
+                    if out is None:
+                        out = np.zeros((mj.n_unknowns, len(near_points)))
+                    out[:, cols] = proj
+            rows.append(out)
+        return self.factors[:, None] * np.concatenate(rows, axis=0)
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        from scipy.linalg import lu_solve
+
+        return lu_solve(self._lu, rhs)
+
+    # ------------------------------------------------------------------ coil sources
+    def coil_solution(self) -> np.ndarray:
+        """Unknowns of all cores per ampere in each coil, (n_unknowns, n_coils) (cached)."""
+        if self._coil_solution is None:
+            coils = self.array.coils
+
+            rhs = np.zeros((self.n_unknowns, len(coils)))
+            cache = {}
+            for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
+                ring = mj.ring_points(N_PHI_RING)
+                glob = ring.reshape(-1, 3) @ pj.matrix.T + np.asarray(pj.position)
+                for k, c in enumerate(coils):
+                    # identical windings at the same relative placement: one evaluation
+                    key = (dataclasses.replace(c, core=None, pose=Pose()), id(mj),
+                           _rel_key(c.pose, pj))
+                    if key not in cache:
+                        h = c.field(glob, 1.0, include="winding", rtol=1e-9) / MU0
+                        h = h @ pj.matrix  # to local j
+                        cache[key] = mj.project(h.reshape(ring.shape[:2] + (3,)))
+                    rhs[self.offsets[jj]:self.offsets[jj + 1], k] = cache[key]
+            self._coil_solution = self.solve(self.factors[:, None] * rhs)
+        return self._coil_solution
+
+    # ------------------------------------------------------------------ evaluation
+    def core_field(self, points: np.ndarray, x: np.ndarray, gradient: bool = False):
+        """B of all cores for the unknown columns x (n_unknowns, k) at global points.
+
+        Returns B (n, 3, k) T [, G (n, 3, 3, k) T/m].
+        """
+        return self._field(points, x, gradient, False)
+
+    def core_field_pointwise(self, points: np.ndarray, x: np.ndarray, gradient: bool = False):
+        """Like :meth:`core_field` but point i uses its own column x[:, i]: B (n, 3) [, G]."""
+        return self._field(points, x, gradient, True)
+
+    def _field(self, points, x, gradient, pointwise):
+        with _blas_one_thread():
+            return self._field_impl(points, x, gradient, pointwise)
+
+    def _field_impl(self, points, x, gradient, pointwise):
+        pts = np.asarray(points, dtype=float)
+        tail = () if pointwise else (x.shape[1],)
+        b = np.zeros((len(pts), 3) + tail)
+        g = np.zeros((len(pts), 3, 3) + tail) if gradient else None
+        for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
+            xs = x[self.offsets[jj]:self.offsets[jj + 1]]
+            res = mj.field(pj.to_local(pts), xs, gradient, pointwise)
+            rot = pj.matrix
+            h = res[0] if gradient else res
+            if pj.is_identity_rotation:
+                b += MU0 * h
+                if gradient:
+                    g += MU0 * res[1]
+                continue
+            b += MU0 * np.einsum("ab,nb...->na...", rot, h)
+            if gradient:
+                gl = np.einsum("ab,nbc...->nac...", rot, res[1])
+                g += MU0 * np.einsum("nac...,dc->nad...", gl, rot)
+        return (b, g) if gradient else b
+
+    # ------------------------------------------------------------------ magnet source
+    def magnet_solution(self, positions: np.ndarray, moment: np.ndarray) -> np.ndarray:
+        """Unknowns of all cores magnetized by a point dipole at each position, (nu, n)."""
+        pos = np.atleast_2d(np.asarray(positions, dtype=float))
+        m = np.asarray(moment, dtype=float)
+
+        def dip(glob, cols):
+            # H of the point dipole (magnet outside every core: r > 0 at all ring points)
+            d = glob[:, None, :] - pos[None, cols, :]  # (n, k, 3)
+            r2 = np.einsum("nki,nki->nk", d, d)
+            inv_r = 1.0 / np.sqrt(r2)
+            mr = d @ m
+            h = (3.0 * d * (mr * inv_r ** 5)[..., None] - m * (inv_r ** 3)[..., None])
+            return np.swapaxes(h, 1, 2) / (4.0 * math.pi)
+
+        with _blas_one_thread():
+            rhs = self._project_global_field(dip, N_PHI_MAGNET, pos)
+        return self.solve(rhs)
+
+
+# ============================================================================ saturation
+def saturation_table(coil, height_m: float = 0.03, currents_a=None) -> dict:
+    """Per-coil force factor of the nonlinear 1010-steel core vs |I|, at the design point.
+
+    ``s(|I|) = Fz_nonlinear(I) / (I * Fz_linear(1 A))``, single core (designkit's nonlinear
+    axisymmetric solve, :class:`designkit.core.Core` with ``bh='steel1010'``) at the point
+    ``height_m`` above the coil top on its axis, magnet moment along +z. The runner applies
+    ``A[:, :, k] *= s(|I_k|)`` (interpolated linearly in |I_k| on ``current_a``).
+
+    Returns dict with ``current_a`` (k,) A and ``factor`` (k,).
+    """
+    import dataclasses
+
+    currents = np.linspace(0.0, 6.0, 13) if currents_a is None else np.asarray(currents_a, float)
+    c = coil.core
+    lin = dataclasses.replace(coil, core=dataclasses.replace(c, bh="linear"))
+    nl = dataclasses.replace(coil, core=dataclasses.replace(c, bh="steel1010"))
+    pt = np.array([[0.0, 0.0, coil.length / 2 + height_m]])
+    _, g_lin = lin.field(pt, 1.0, gradient=True)
+    out = []
+    for i in currents:
+        if i <= 0:
+            out.append(1.0)
+            continue
+        _, g = nl.field(pt, float(i), gradient=True)
+        out.append(float(g[0, 2, 2] / (i * g_lin[0, 2, 2])))
+    return {"current_a": currents, "factor": np.array(out)}
+
+
+def check_separation(coils) -> None:
+    """Raise :class:`DesignRuleError` naming any core that overlaps or touches another coil's
+    core or winding (the coupled solve needs every core surrounded by air).
+
+    coils : sequence of :class:`designkit.Coil` in their poses.
+    """
+    from .array import _cyl_overlap
+    for i, ci in enumerate(coils):
+        if ci.core is None:
+            continue
+        c = ci.core
+        core_cyl = ("core", c.radius, c.offset - c.length / 2, c.offset + c.length / 2)
+        for j, cj in enumerate(coils):
+            if j == i:
+                continue
+            others = [("winding", cj.outer_radius, -cj.length / 2, cj.length / 2)]
+            if cj.core is not None and j > i:
+                d = cj.core
+                others.append(("core", d.radius, d.offset - d.length / 2, d.offset + d.length / 2))
+            for o in others:
+                if _cyl_overlap(ci.pose, _grow(core_cyl), cj.pose, _grow(o)):
+                    raise DesignRuleError(
+                        f"The core of coil {i} (at "
+                        f"{np.round(np.asarray(ci.pose.position) * 1e3, 3).tolist()} mm) "
+                        f"{'overlaps or touches'} the {o[0]} of coil {j} (at "
+                        f"{np.round(np.asarray(cj.pose.position) * 1e3, 3).tolist()} mm); "
+                        "cores must be separated from every other coil by air. Move the coils "
+                        "apart or make them smaller.")
+
+
+def _grow(cyl, eps=1e-9):
+    """Grow a cylinder by eps so that touching counts as overlapping."""
+    name, r, z0, z1 = cyl
+    return (name, r + eps, z0 - eps, z1 + eps)
+
+
+__all__ = ["ArraySystem", "CoreModel", "core_model", "saturation_table", "check_separation",
+           "M_MAX", "BadInputError"]

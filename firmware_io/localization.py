@@ -1,0 +1,688 @@
+"""Where is the finger magnet? Estimators over the two Hall arrays -- numpy only (runs on the
+controller).
+
+    loc = Localizer.from_map("fieldmap.npz", method="model")
+    est = loc.locate(top_t, bottom_t, currents_a)     # (9, 3) T each; NaN = missing/saturated
+    est.position_m, est.residual, est.ok
+
+Methods (``method=``):
+
+``'learned'``
+    The thesis' algorithm (section 3.2.2): subtract the lower array from the upper one, take the
+    sensor with the largest remainder and map its 3-vector to the magnet's position relative to
+    that sensor with a learned inverse. Here a small MLP (4 inputs: field direction and
+    log10 |B|; two tanh layers; 3 outputs), trained offline with scipy L-BFGS on the dipole's
+    field (designkit.localize.train_learned_inverse) and stored in a weights file; inference is
+    numpy. An output outside the training box is clipped to it and flagged (ok = False).
+``'dipole'``
+    Subtraction + least-squares fit of the magnet's field over every usable sensor pair
+    (Levenberg-Marquardt on the position, analytic Jacobian of the dipole(+octupole) field;
+    warm start from the last good estimate, a coarse global search when lost). With
+    ``cores=True`` (default when the map carries it) the model includes the subtracted field of
+    the cores magnetized by the magnet; ``cores=False`` is the naive fit.
+``'model'``
+    Model-based cancellation: subtract the coils' field predicted from the commanded currents
+    (the map's per-ampere field at the sensors) from both arrays and fit magnet + magnet-induced
+    core field to all usable sensors (no subtraction, so no doubled noise, and the lower array's
+    weak magnet signal is used too). Needs ``currents``.
+``'kalman'``
+    ``'model'`` (``'dipole'`` when no currents are given) followed by a constant-velocity Kalman
+    filter (:class:`ConstantVelocityKalman`); :meth:`Localizer.predict` extrapolates between
+    sensor frames for the control loop.
+
+Magnet model: an axisymmetric multipole with the moment from the map: dipole plus the l = 3 term
+(coefficient ratio ``octupole_m2`` = h^2 - 3 a^2 / 4 for a cylinder of radius a, half-length h:
+1.6 % of the dipole field at 20 mm for the 10 x 10 mm magnet, more than the sensor noise near
+the magnet). Sensor weights: sigma^2 = noise^2 + (relative_error |B_sensor|)^2, so a sensor
+dominated by a large coil field (where gain and mounting errors matter) counts less.
+
+Robustness: a sensor with any NaN component is excluded (for subtraction, the pair); the fit
+needs >= 3 usable sensors. ``ok`` is False when the fit did not converge, the normalized rms
+residual exceeds ``residual_limit``, too few sensors remain, or the position leaves the
+plausible box -- the runner then fails safe.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .errors import BadInputError
+
+MU0 = 4e-7 * math.pi
+_EYE = np.eye(3)
+METHODS = ("learned", "dipole", "model", "kalman")
+DEFAULT_NOISE_T = 0.1e-3
+"""TLV493D noise per axis, T rms (datasheet)."""
+
+
+# ---------------------------------------------------------------------------- magnet model
+def multipole_field(points_m: np.ndarray, position_m: np.ndarray, moment_a_m2: np.ndarray,
+                    octupole_m2: float = 0.0, *, jacobian: bool = False):
+    """Field of an axisymmetric magnet (dipole + l = 3 term) at points, (n, 3) T.
+
+    Potential phi = C1 cos(t) / r^2 + C1 q P3(cos t) / r^4 with C1 = |m| / (4 pi), q =
+    ``octupole_m2``; B = -mu0 grad phi. Written as phi = f(s, rho), s = u.r, rho = r.r, so that
+    B = -mu0 (f_s u + 2 f_rho r) and dB/dr = -mu0 (f_ss u u^T + 2 f_srho (u r^T + r u^T)
+    + 4 f_rhorho r r^T + 2 f_rho I).
+
+    Parameters
+    ----------
+    points_m : (n, 3) m; position_m : (3,) m; moment_a_m2 : (3,) A m^2; octupole_m2 : float, m^2
+    jacobian : also return dB/d(position_m), (n, 3, 3) T/m (= -dB/dr).
+    """
+    mag = math.sqrt(float(moment_a_m2 @ moment_a_m2))
+    u = moment_a_m2 / mag
+    r = points_m - position_m
+    rho = np.einsum("ij,ij->i", r, r)
+    s = r @ u
+    c = mag / (4 * math.pi)
+    ir = 1.0 / rho
+    rm32 = ir * np.sqrt(ir)          # rho^-3/2
+    rm52 = rm32 * ir
+    fs = c * rm32
+    fr = -1.5 * c * s * rm52
+    if octupole_m2:
+        k = 0.5 * c * octupole_m2
+        rm72 = rm52 * ir
+        rm92 = rm72 * ir
+        s2 = s * s
+        fs = fs + k * (15 * s2 * rm72 - 3 * rm52)
+        fr = fr + k * (-17.5 * s2 * s * rm92 + 7.5 * s * rm72)
+    b = -MU0 * (fs[:, None] * u[None] + 2 * fr[:, None] * r)
+    if not jacobian:
+        return b
+    fsr = -1.5 * c * rm52
+    frr = 3.75 * c * s * rm52 * ir
+    if octupole_m2:
+        rm112 = rm92 * ir
+        fss = k * 30 * s * rm72
+        fsr = fsr + k * (-52.5 * s2 * rm92 + 7.5 * rm72)
+        frr = frr + k * (78.75 * s2 * s * rm112 - 26.25 * s * rm92)
+    ur = u[None, :, None] * r[:, None, :]
+    d = 2 * fsr[:, None, None] * (ur + ur.transpose(0, 2, 1))
+    d += 4 * frr[:, None, None] * r[:, :, None] * r[:, None, :]
+    d += 2 * fr[:, None, None] * _EYE
+    if octupole_m2:
+        d += fss[:, None, None] * (u[:, None] * u[None, :])
+    return b, MU0 * d  # d/d(position) = -d/dr
+
+
+# ---------------------------------------------------------------------------- the sensor model
+@dataclass
+class SensorModel:
+    """What the estimators know (the v2 map's sensor section).
+
+    sensor_positions_m : (2, n, 3) m, upper array then lower array
+    coil_field_t_per_a : (2, n, 3, n_coils) T/A, the coils' field at the sensors per ampere
+    moment_a_m2 : (3,) A m^2
+    design_sha256 : str
+    octupole_m2 : float, m^2 (0 = pure dipole)
+    induced : callable (3,) m -> (2, n, 3) T, or None: field of the magnet-magnetized cores
+    box_lower_m, box_upper_m : (3,) plausible magnet positions (outside: ok = False)
+    """
+
+    sensor_positions_m: np.ndarray
+    coil_field_t_per_a: np.ndarray
+    moment_a_m2: np.ndarray
+    design_sha256: str
+    octupole_m2: float = 0.0
+    induced: Callable[[np.ndarray], np.ndarray] | None = None
+    box_lower_m: np.ndarray | None = None
+    box_upper_m: np.ndarray | None = None
+
+    def __post_init__(self):
+        sp = np.asarray(self.sensor_positions_m, dtype=float)
+        if sp.ndim != 3 or sp.shape[0] != 2 or sp.shape[2] != 3 or not np.all(np.isfinite(sp)):
+            raise BadInputError("sensor_positions_m", "finite, shape (2, n, 3), m", f"shape {sp.shape}")
+        n = sp.shape[1]
+        cf = np.asarray(self.coil_field_t_per_a, dtype=float)
+        if cf.ndim != 4 or cf.shape[:3] != (2, n, 3) or not np.all(np.isfinite(cf)):
+            raise BadInputError("coil_field_t_per_a", f"finite, shape (2, {n}, 3, n_coils), T/A",
+                                f"shape {cf.shape}")
+        m = np.asarray(self.moment_a_m2, dtype=float)
+        if m.shape != (3,) or not np.all(np.isfinite(m)) or not np.linalg.norm(m) > 0:
+            raise BadInputError("moment_a_m2", "a finite non-zero 3-vector, A m^2", m.tolist())
+        self.sensor_positions_m, self.coil_field_t_per_a, self.moment_a_m2 = sp, cf, m
+        if self.box_lower_m is None:
+            xy = np.abs(sp[..., :2]).max()
+            self.box_lower_m = np.array([-xy - 0.05, -xy - 0.05, sp[0, :, 2].max() + 0.002])
+            self.box_upper_m = np.array([xy + 0.05, xy + 0.05, sp[0, :, 2].max() + 0.15])
+
+    @classmethod
+    def from_operator(cls, *, induced_samples_m, induced_operator, **kw) -> "SensorModel":
+        """Induced field as a linear operator on the magnet's applied H_z at sample points
+        (designkit.localize.InducedCoreModel), evaluated with the multipole magnet model."""
+        samples = np.asarray(induced_samples_m, float)
+        op = np.asarray(induced_operator, float)
+        model = cls(**kw)
+        shape = model.sensor_positions_m.shape
+
+        def induced(p):
+            h = multipole_field(samples, p, model.moment_a_m2, model.octupole_m2)[:, 2] / MU0
+            return (op @ h).reshape(shape)
+
+        model.induced = induced
+        return model
+
+    @property
+    def n_sensors(self) -> int:
+        return self.sensor_positions_m.shape[1]
+
+    @property
+    def n_coils(self) -> int:
+        return self.coil_field_t_per_a.shape[3]
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """position_m (3,) m; residual: normalized rms fit residual (1 ~ noise level; 0.0 when no
+    fit was possible, then ok is False and ``reason`` says why); ok; n_used
+    sensors (pairs for subtraction); iterations; method; velocity_m_s (3,) (Kalman only);
+    reason: why ok is False ('' when ok)."""
+
+    position_m: np.ndarray
+    residual: float
+    ok: bool
+    n_used: int
+    iterations: int
+    method: str
+    velocity_m_s: np.ndarray | None = None
+    reason: str = ""
+
+
+# ---------------------------------------------------------------------------- Kalman
+class ConstantVelocityKalman:
+    """Constant-velocity Kalman filter on the position estimates (per axis, shared dt).
+
+    Process: white acceleration of ``accel_rms_m_s2`` (a finger's ~2 m/s^2); measurement noise
+    ``meas_rms_m`` per axis. Estimates with ok = False are skipped (prediction only).
+    """
+
+    def __init__(self, accel_rms_m_s2: float = 2.0, meas_rms_m: float = 0.5e-3):
+        for name, val in (("accel_rms_m_s2", accel_rms_m_s2), ("meas_rms_m", meas_rms_m)):
+            if not (isinstance(val, (int, float)) and math.isfinite(val) and val > 0):
+                raise BadInputError(name, "a finite number > 0", val)
+        self.q = float(accel_rms_m_s2) ** 2
+        self.r = float(meas_rms_m) ** 2
+        self.reset()
+
+    def reset(self) -> None:
+        self.x = None  # (2, 3): position, velocity
+        self.p = None  # (2, 2) covariance, same for each axis
+        self.t = None
+
+    def _predict(self, t: float):
+        dt = max(t - self.t, 0.0)
+        f = np.array([[1.0, dt], [0.0, 1.0]])
+        q = self.q * np.array([[dt**4 / 4, dt**3 / 2], [dt**3 / 2, dt**2]])
+        return f @ self.x, f @ self.p @ f.T + q
+
+    def update(self, position_m, time_s: float, ok: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Fold in one estimate; returns (position (3,), velocity (3,))."""
+        z = np.asarray(position_m, dtype=float)
+        if self.x is None:
+            if not ok:
+                return z.copy(), np.zeros(3)
+            self.x = np.stack([z, np.zeros(3)])
+            self.p = np.diag([self.r, 1.0])
+            self.t = float(time_s)
+            return z.copy(), np.zeros(3)
+        x, p = self._predict(float(time_s))
+        self.t = float(time_s)
+        if ok:
+            s = p[0, 0] + self.r
+            k = p[:, 0] / s
+            x = x + k[:, None] * (z - x[0])[None]
+            p = p - np.outer(k, p[0])
+        self.x, self.p = x, p
+        return x[0].copy(), x[1].copy()
+
+    def predict(self, time_s: float) -> np.ndarray:
+        """Extrapolated position (3,) at ``time_s`` (between frames); NaN-free: raises if empty."""
+        if self.x is None:
+            raise BadInputError("filter state", "at least one ok estimate before predict", None)
+        return self._predict(float(time_s))[0][0].copy()
+
+
+# ---------------------------------------------------------------------------- learned inverse
+@dataclass(frozen=True)
+class LearnedInverse:
+    """MLP: features (u_B (3), log10 |B|) -> magnet position relative to the sensor, m."""
+
+    weights: tuple
+    feature_mean: np.ndarray
+    feature_std: np.ndarray
+    box_lower_m: np.ndarray
+    box_upper_m: np.ndarray
+    log_b_range: tuple
+    design_sha256: str
+
+    @classmethod
+    def load(cls, path) -> "LearnedInverse":
+        p = Path(path)
+        if not p.is_file():
+            raise BadInputError("weights", "a path to an existing learned-inverse .npz", str(p))
+        try:
+            with np.load(p, allow_pickle=False) as z:
+                meta = json.loads(str(z["meta"]))
+                nl = int(meta["layers"])
+                w = tuple((z[f"W{k}"].astype(float), z[f"b{k}"].astype(float)) for k in range(nl))
+                out = cls(w, z["feature_mean"].astype(float), z["feature_std"].astype(float),
+                          z["box_lower_m"].astype(float), z["box_upper_m"].astype(float),
+                          tuple(meta["log_b_range"]), meta["design_sha256"])
+        except (KeyError, ValueError, OSError, EOFError) as exc:
+            raise BadInputError("weights", "a learned-inverse file written by designkit.localize"
+                                f" ({type(exc).__name__}: {exc})", str(p)) from None
+        return out
+
+    def save(self, path) -> None:
+        arrays = {f"W{k}": w for k, (w, _) in enumerate(self.weights)}
+        arrays.update({f"b{k}": b for k, (_, b) in enumerate(self.weights)})
+        meta = {"layers": len(self.weights), "log_b_range": list(self.log_b_range),
+                "design_sha256": self.design_sha256, "format": "designkit-learned-inverse"}
+        np.savez(path, feature_mean=self.feature_mean, feature_std=self.feature_std,
+                 box_lower_m=self.box_lower_m, box_upper_m=self.box_upper_m,
+                 meta=json.dumps(meta), **arrays)
+
+    @staticmethod
+    def features(b: np.ndarray) -> np.ndarray:
+        """(k, 3) T -> (k, 4)."""
+        n = np.linalg.norm(b, axis=-1)
+        return np.c_[b / n[:, None], np.log10(n)]
+
+    def raw(self, b: np.ndarray) -> np.ndarray:
+        """Unclipped network output (k, 3) m for fields (k, 3) T."""
+        h = (self.features(b) - self.feature_mean) / self.feature_std
+        for k, (w, bias) in enumerate(self.weights):
+            h = h @ w + bias
+            if k < len(self.weights) - 1:
+                h = np.tanh(h)
+        c = 0.5 * (self.box_lower_m + self.box_upper_m)
+        return c + h * 0.5 * (self.box_upper_m - self.box_lower_m)
+
+    def __call__(self, b: np.ndarray) -> tuple[np.ndarray, bool]:
+        """(3,) T -> (relative position (3,) m inside the training box, inside flag)."""
+        b = np.asarray(b, float).reshape(1, 3)
+        lb = math.log10(float(np.linalg.norm(b)) or 1e-30)
+        rel = self.raw(b)[0]
+        inside = bool(np.all(rel >= self.box_lower_m) and np.all(rel <= self.box_upper_m)
+                      and self.log_b_range[0] <= lb <= self.log_b_range[1])
+        return np.clip(rel, self.box_lower_m, self.box_upper_m), inside
+
+
+# ---------------------------------------------------------------------------- the localizer
+def _check_frame(name: str, a, n: int) -> np.ndarray:
+    arr = np.asarray(a, dtype=float)
+    if arr.shape != (n, 3):
+        raise BadInputError(name, f"an array of shape ({n}, 3), T", f"shape {arr.shape}")
+    if np.any(np.isinf(arr)):
+        raise BadInputError(name, "finite values or NaN (missing/saturated), T",
+                            f"Inf at {np.argwhere(np.isinf(arr))[0].tolist()}")
+    if np.any(np.abs(arr) > 1.0):  # NaN compares False
+        raise BadInputError(name, "fields in tesla (|B| <= 1 T; a TLV493D reads <= 0.2 T)",
+                            f"{np.nanmax(np.abs(arr))!r} -- millitesla passed as tesla?")
+    return arr
+
+
+class Localizer:
+    """Magnet position from the two arrays' readings (see the module docstring).
+
+    Parameters
+    ----------
+    model : SensorModel
+    method : {'learned', 'dipole', 'model', 'kalman'}
+    learned : LearnedInverse, needed for 'learned'
+    noise_t : float, T rms per axis
+    relative_error : float, relative model error of a sensor's reading (gain, mounting)
+    residual_limit : float, largest normalized rms residual for ok
+    cores : bool or None, model the magnet-induced core field ('dipole'; default: if known)
+    mount_position_m : float, m -- sensor position uncertainty, weighs near-field sensors
+    calibration : (gain_inverse (2, n, 3, 3), offsets_t (2, n, 3)) or None: corrected reading
+        = gain_inverse @ (reading - offset), see :func:`calibrate`.
+    """
+
+    def __init__(self, model: SensorModel, method: str = "model", *,
+                 learned: LearnedInverse | None = None, noise_t: float = DEFAULT_NOISE_T,
+                 relative_error: float = 0.02, residual_limit: float = 5.0,
+                 cores: bool | None = None, max_iterations: int = 30, calibration=None,
+                 kalman: ConstantVelocityKalman | None = None, frame_period_s: float = 0.01,
+                 mount_position_m: float = 0.0):
+        if method not in METHODS:
+            raise BadInputError("method", f"one of {METHODS}", method)
+        if method == "learned":
+            if learned is None:
+                raise BadInputError("weights", "a learned-inverse file for method 'learned'", None)
+            if learned.design_sha256 != model.design_sha256:
+                raise BadInputError("weights", f"trained for design {model.design_sha256[:12]}...",
+                                    f"design {learned.design_sha256[:12]}...",
+                                    "Retrain: designkit.localize.train_learned_inverse.")
+        for name, val in (("noise_t", noise_t), ("relative_error", relative_error + 1e-300),
+                          ("residual_limit", residual_limit), ("frame_period_s", frame_period_s)):
+            if not (math.isfinite(val) and val > 0):
+                raise BadInputError(name, "a finite number > 0", val)
+        self.model = model
+        self.method = method
+        self.learned = learned
+        self.noise_t = float(noise_t)
+        self.rel = float(relative_error)
+        if not (math.isfinite(mount_position_m) and mount_position_m >= 0):
+            raise BadInputError("mount_position_m", "a finite number >= 0, m", mount_position_m)
+        self.mount_position_m = float(mount_position_m)
+        self._moment = float(np.linalg.norm(model.moment_a_m2))
+        self.residual_limit = float(residual_limit)
+        self.cores = (model.induced is not None) if cores is None else bool(cores)
+        if self.cores and model.induced is None:
+            raise BadInputError("cores", "False (the model carries no induced core field)", cores)
+        self.max_iterations = int(max_iterations)
+        self.frame_period_s = float(frame_period_s)
+        self.kalman = kalman or (ConstantVelocityKalman() if method == "kalman" else None)
+        n = model.n_sensors
+        self._pts = model.sensor_positions_m.reshape(-1, 3)
+        # subtraction: the lower sensor's coil field mapped onto the upper one's (for the
+        # symmetric array diag(-1, -1, 1): Br is odd about the coil's mid-plane)
+        cf = model.coil_field_t_per_a
+        self._mirror = np.stack([cf[0, i] @ np.linalg.pinv(cf[1, i]) for i in range(n)])
+        self.calibration = None
+        if calibration is not None:
+            gi, off = (np.asarray(c, float) for c in calibration)
+            if gi.shape != (2, n, 3, 3) or off.shape != (2, n, 3):
+                raise BadInputError("calibration", f"(gain_inverse (2, {n}, 3, 3), offsets (2, {n}, 3))",
+                                    f"shapes {gi.shape}, {off.shape}")
+            self.calibration = (gi, off)
+        lo, hi = model.box_lower_m, model.box_upper_m
+        g = np.stack(np.meshgrid(np.linspace(lo[0] + 0.02, hi[0] - 0.02, 7),
+                                 np.linspace(lo[1] + 0.02, hi[1] - 0.02, 7),
+                                 np.linspace(lo[2] + 0.006, lo[2] + 0.08, 5), indexing="ij"), -1)
+        self._candidates = g.reshape(-1, 3)
+        self._last: np.ndarray | None = None
+
+    # -- construction from files -----------------------------------------------------------
+    @classmethod
+    def from_map(cls, path, method: str = "model", *, weights=None,
+                 expected_design_sha256: str | None = None, octupole_m2: float | None = None,
+                 **kw) -> "Localizer":
+        """From a v2 map file (its sensor section) and, for 'learned', a weights file.
+
+        ``octupole_m2``: the magnet's l = 3 coefficient ratio h^2 - 3 a^2 / 4 (m^2); default the
+        map's ``meta['magnet_octupole_m2']`` if it has one, else 0 (pure dipole). Other keywords
+        go to :class:`Localizer`.
+        """
+        from .mapfile import MapFile
+
+        m = MapFile.load(path, expected_design_sha256=expected_design_sha256)
+        need = ("sensor_positions_m", "sensor_coil_field", "sensor_induced_field", "moment_a_m2",
+                "design_sha256")
+        missing = [a for a in need if not hasattr(m, a)]
+        if missing:
+            raise BadInputError("map file", "a v2 map with the sensor section (missing "
+                                f"{', '.join(missing)})", str(path))
+        sp = np.asarray(m.sensor_positions_m() if callable(m.sensor_positions_m)
+                        else m.sensor_positions_m, float)
+        scf = m.sensor_coil_field() if callable(m.sensor_coil_field) else m.sensor_coil_field
+        mom = m.moment_a_m2() if callable(m.moment_a_m2) else m.moment_a_m2
+        sha = m.design_sha256() if callable(m.design_sha256) else m.design_sha256
+        lo, hi = (np.asarray(b, float) for b in m.bounds)
+        # the magnet cannot be below the upper sensor board
+        box_lo = lo.copy()
+        box_lo[2] = max(lo[2], float(sp[0, :, 2].max()) + 0.002)
+        model = SensorModel(sp, np.asarray(scf, float), np.asarray(mom, float), str(sha),
+                            float(m.meta.get("magnet_octupole_m2", 0.0) if octupole_m2 is None
+                                  else octupole_m2),
+                            # the induced term is a small correction: outside the map's box the
+                            # nearest box point is safer than extrapolating its polynomials
+                            lambda p: m.sensor_induced_field(np.clip(p, lo, hi)),
+                            box_lo, hi)
+        learned = LearnedInverse.load(weights) if weights is not None else None
+        return cls(model, method, learned=learned, **kw)
+
+    @property
+    def sensor_positions_m(self) -> np.ndarray:
+        """(2, n, 3) m: upper array, lower array, in the order :meth:`locate` expects."""
+        return self.model.sensor_positions_m.copy()
+
+    def reset(self) -> None:
+        """Forget the warm start and the filter state."""
+        self._last = None
+        if self.kalman is not None:
+            self.kalman.reset()
+
+    def predict(self, time_s: float) -> np.ndarray:
+        """Kalman-extrapolated position (3,) m at ``time_s`` (method 'kalman')."""
+        if self.kalman is None:
+            raise BadInputError("method", "'kalman' for predict()", self.method)
+        return self.kalman.predict(time_s)
+
+    # -- the estimate ------------------------------------------------------------------------
+    def locate(self, top, bottom, currents=None, *, time_s: float | None = None) -> Estimate:
+        """Estimate the magnet's position from one frame.
+
+        Parameters
+        ----------
+        top, bottom : array-like, shape (n, 3), T; NaN marks a missing or saturated sensor
+        currents : array-like, shape (n_coils,), A -- commanded currents ('model'; optional else)
+        time_s : float, frame time for 'kalman' (default: one ``frame_period_s`` per call)
+        """
+        n = self.model.n_sensors
+        top = _check_frame("top", top, n)
+        bottom = _check_frame("bottom", bottom, n)
+        i = None
+        if currents is not None:
+            i = np.asarray(currents, dtype=float)
+            if i.shape != (self.model.n_coils,) or not np.all(np.isfinite(i)):
+                raise BadInputError("currents", f"{self.model.n_coils} finite values, A",
+                                    f"shape {i.shape}" if i.shape != (self.model.n_coils,)
+                                    else i.tolist())
+        meas = np.stack([top, bottom])
+        if self.calibration is not None:
+            gi, off = self.calibration
+            meas = np.einsum("asij,asj->asi", gi, meas - off)
+        method = self.method
+        if method == "model" and i is None:
+            raise BadInputError("currents", f"{self.model.n_coils} commanded currents, A, for "
+                                "method 'model'", None)
+        if method == "kalman":
+            method = "model" if i is not None else "dipole"
+        if method == "learned":
+            est = self._learned(meas)
+        else:
+            est = self._fit(meas, i if method == "model" else None, method)
+        if self.kalman is not None:
+            t = time_s if time_s is not None else (
+                (self.kalman.t + self.frame_period_s) if self.kalman.t is not None else 0.0)
+            pos, vel = self.kalman.update(est.position_m, t, est.ok)
+            est = Estimate(pos, est.residual, est.ok, est.n_used, est.iterations, "kalman",
+                           vel, est.reason)
+        return est
+
+    # subtraction: d = top - P bottom; model-based: both arrays minus the coils' field
+    def _mount_var(self, d):
+        """Variance from the sensors' position uncertainty: |dB| ~ 3 |B| dr / r for the magnet's
+        field, with r from |B| (on-axis dipole: |B| = mu0 |m| / (2 pi r^3))."""
+        if self.mount_position_m == 0.0:
+            return 0.0
+        b = np.linalg.norm(np.nan_to_num(d), axis=-1)
+        r = np.cbrt(MU0 * self._moment / (2 * math.pi * np.maximum(b, 1e-9)))
+        return (3 * self.mount_position_m * b / r) ** 2
+
+    def _data(self, meas, currents):
+        sig2n = self.noise_t**2
+        mag = np.linalg.norm(meas, axis=-1)
+        if currents is None:
+            d = meas[0] - np.einsum("sij,sj->si", self._mirror, meas[1])
+            use = np.all(np.isfinite(d), axis=1)
+            s2 = 2 * sig2n + self.rel**2 * (mag[0] ** 2 + mag[1] ** 2) + self._mount_var(d)
+            return d, use, np.sqrt(s2)
+        pred = np.einsum("asdc,c->asd", self.model.coil_field_t_per_a, currents)
+        d = (meas - pred).reshape(-1, 3)
+        use = np.all(np.isfinite(d), axis=1)
+        s2 = (sig2n + self.rel**2 * mag**2).reshape(-1) + self._mount_var(d)
+        return d, use, np.sqrt(s2)
+
+    def _forward(self, p, subtract: bool, jac: bool):
+        m = self.model
+        res = multipole_field(self._pts, p, m.moment_a_m2, m.octupole_m2, jacobian=jac)
+        b, j = (res if jac else (res, None))
+        if self.cores:
+            b = b + m.induced(p).reshape(-1, 3)
+        n = m.n_sensors
+        if subtract:
+            b = b[:n] - np.einsum("sij,sj->si", self._mirror, b[n:])
+            if jac:
+                j = j[:n] - np.einsum("sij,sjk->sik", self._mirror, j[n:])
+        return b, j
+
+    def _fit(self, meas, currents, method) -> Estimate:
+        subtract = currents is None
+        d, use, sig = self._data(meas, np.asarray(currents) if currents is not None else None)
+        n_used = int(use.sum())
+        if n_used < 3:
+            p = self._last if self._last is not None else 0.5 * (self.model.box_lower_m
+                                                                 + self.model.box_upper_m)
+            return Estimate(p.copy(), 0.0, False, n_used, 0, method,
+                            reason=f"only {n_used} usable sensors (need 3)")
+        dw = (d[use] / sig[use, None]).reshape(-1)
+        w = 1.0 / sig[use]
+
+        def resid(p, jac):
+            b, j = self._forward(p, subtract, jac)
+            r = dw - (b[use] * w[:, None]).reshape(-1)
+            return (r, (j[use] * w[:, None, None]).reshape(-1, 3)) if jac else r
+
+        starts = ([self._last] if self._last is not None
+                  else self._global_starts(d, use, sig, subtract))
+        best = None
+        for p0 in starts:
+            out = self._lm(resid, p0)
+            if best is None or out[1] < best[1]:
+                best = out
+            if self._last is not None and not self._ok(out, n_used)[0]:
+                # lost from the warm start: try the global search once
+                for q0 in self._global_starts(d, use, sig, subtract):
+                    o2 = self._lm(resid, q0)
+                    if o2[1] < best[1]:
+                        best = o2
+        p, cost, iters, converged = best
+        dof = max(dw.size - 3, 1)
+        rms = math.sqrt(cost / dof)
+        ok, reason = self._ok(best, n_used)
+        self._last = p.copy() if ok else None
+        return Estimate(p, rms, ok, n_used, iters, method, reason=reason)
+
+    def _ok(self, out, n_used):
+        p, cost, _, converged = out
+        dof = max(3 * n_used - 3, 1)
+        rms = math.sqrt(cost / dof)
+        if not converged:
+            return False, "fit did not converge"
+        if not (np.all(p >= self.model.box_lower_m) and np.all(p <= self.model.box_upper_m)):
+            return False, "position outside the plausible box"
+        if rms > self.residual_limit:
+            return False, f"residual {rms:.3g} > {self.residual_limit:g} (lost or implausible)"
+        return True, ""
+
+    def _global_starts(self, d, use, sig, subtract, keep: int = 2):
+        """The best ``keep`` points of a coarse grid over the plausible box (dipole term only,
+        all candidates in one vectorized pass)."""
+        m = self.model
+        c = self._candidates
+        r = self._pts[None] - c[:, None]                          # (C, 2n, 3)
+        rho = np.einsum("cij,cij->ci", r, r)
+        u = m.moment_a_m2
+        b = MU0 / (4 * math.pi) * (3 * r * (r @ u)[..., None] / rho[..., None] ** 2.5
+                                   - u / rho[..., None] ** 1.5)
+        n = m.n_sensors
+        if subtract:
+            b = b[:, :n] - np.einsum("sij,csj->csi", self._mirror, b[:, n:])
+        res = (d[None, use] - b[:, use]) / sig[None, use, None]
+        costs = np.einsum("cij,cij->c", res, res)
+        costs[~np.isfinite(costs)] = np.inf
+        return [c[k] for k in np.argsort(costs)[:keep]]
+
+    def _lm(self, resid, p0):
+        p = np.array(p0, dtype=float)
+        r, j = resid(p, True)
+        cost = float(r @ r)
+        lam = 1e-6
+        converged = False
+        it = 0
+        for it in range(1, self.max_iterations + 1):
+            a = j.T @ j
+            g = j.T @ r
+            try:
+                step = np.linalg.solve(a + lam * np.diag(np.diag(a) + 1e-30), g)
+            except np.linalg.LinAlgError:
+                break
+            if not np.all(np.isfinite(step)):
+                break
+            if lam < 1e-4 and float(step @ step) < 1e-12:
+                # a Gauss-Newton step below 1 um: converged (taking it changes nothing)
+                p = p + step
+                converged = True
+                break
+            pn = p + step
+            rn, jn = resid(pn, True)
+            cn = float(rn @ rn)
+            if np.isfinite(cn) and cn <= cost:
+                p, r, j = pn, rn, jn
+                # 1 um or a negligible cost decrease: far below what the noise allows
+                small = float(np.linalg.norm(step)) < 1e-6 or cost - cn <= 1e-6 * cost
+                cost = cn
+                lam = max(lam * 0.2, 1e-9)
+                if small:
+                    converged = True
+                    break
+            else:
+                lam *= 10.0
+                if lam > 1e8:
+                    converged = float(np.linalg.norm(step)) < 1e-6
+                    break
+        return p, cost, it, converged
+
+    def _learned(self, meas) -> Estimate:
+        n = self.model.n_sensors
+        d, use, sig = self._data(meas, None)
+        if not use.any():
+            return Estimate(np.zeros(3), 0.0, False, 0, 0, "learned",
+                            reason="no usable sensor pair")
+        mag = np.where(use, np.linalg.norm(np.nan_to_num(d), axis=1), -1.0)
+        k = int(np.argmax(mag))
+        rel, inside = self.learned(d[k])
+        p = self.model.sensor_positions_m[0, k] + rel
+        b, _ = self._forward(p, True, False)
+        r = ((d[use] - b[use]) / sig[use, None]).reshape(-1)
+        rms = math.sqrt(float(r @ r) / max(r.size - 3, 1))
+        ok, reason = inside, "" if inside else "outside the learned inverse's training box"
+        if ok and rms > self.residual_limit:
+            ok, reason = False, f"residual {rms:.3g} > {self.residual_limit:g}"
+        return Estimate(p, rms, ok, int(use.sum()), 0, "learned", reason=reason)
+
+
+def calibrate(frames_top, frames_bottom, currents, model: SensorModel):
+    """Per-sensor affine calibration from frames with the coils driven and no magnet.
+
+    Fits reading = G B_model + o per sensor by least squares over the frames (k, n, 3) T taken
+    at currents (k, n_coils) A; returns (G^-1 (2, n, 3, 3), o (2, n, 3)) for
+    :class:`Localizer` ``calibration``. Absorbs gain, mounting rotation and (to first order)
+    mounting shift. Needs frames that span all three field directions at every sensor.
+    """
+    meas = np.stack([np.asarray(frames_top, float), np.asarray(frames_bottom, float)], 1)
+    i = np.asarray(currents, float)
+    pred = np.einsum("asdc,kc->kasd", model.coil_field_t_per_a, i)
+    k, _, n, _ = meas.shape
+    gi = np.empty((2, n, 3, 3))
+    off = np.empty((2, n, 3))
+    for a in range(2):
+        for s in range(n):
+            ok = np.all(np.isfinite(meas[:, a, s]), axis=1)
+            x = np.c_[pred[ok, a, s], np.ones(ok.sum())]
+            coef, *_ = np.linalg.lstsq(x, meas[ok, a, s], rcond=None)
+            g = coef[:3].T
+            off[a, s] = coef[3]
+            gi[a, s] = np.linalg.inv(g)
+    return gi, off
