@@ -36,7 +36,7 @@ def wrench_matrices():
     h = ws.half_width_m
     pts = rng.uniform([-h, -h, ws.z_min_m], [h, h, ws.z_max_m], (24, 3))
     a = CoilArray.from_design(d).actuation_matrix(pts, rtol=1e-8)
-    m = np.array([0.0, 0.0, d.magnet.moment_a_m2])
+    m = np.asarray(d.magnet.moment_vector_a_m2)
     return np.concatenate([force_matrix(m) @ a[:, 3:, :], skew_matrix(m) @ a[:, :3, :]], axis=1)
 
 
