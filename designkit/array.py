@@ -454,7 +454,7 @@ def workspace_metrics(design, *, spacing: float = 0.005, heights=None, out_png=N
 
     Evaluated on horizontal planes (``heights``, m above the coil tops; default 10, 30, 50 mm)
     over the workspace footprint with the design's drive limits (per coil and total) and a
-    magnet pointing up (+z, moment |m| of the design's magnet).
+    magnet of the design (its moment vector, MagnetSpec.direction).
 
     Returns a dict of arrays and summary numbers; writes a PNG map to ``out_png`` if given.
     """
@@ -464,7 +464,7 @@ def workspace_metrics(design, *, spacing: float = 0.005, heights=None, out_png=N
     ws = design.workspace
     heights = (0.010, 0.030, 0.050) if heights is None else tuple(heights)
     xs = np.arange(-ws.half_width_m, ws.half_width_m + 1e-12, spacing)
-    m = np.array([0.0, 0.0, design.magnet.moment_a_m2])
+    m = np.array(design.magnet.moment_vector_a_m2)
     thr = design.render.threshold_n
     fmax, cond = [], []
     for h in heights:

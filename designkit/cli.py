@@ -21,6 +21,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "cad": ("cad.cli", "printable parts (STL/STEP/3MF) and assembly"),
     "fem": ("designkit.commands.fem", "GetDP FEM cross-check of coil + core"),
     "viz": ("designkit.commands.viz", "off-screen pyvista figures"),
+    "scene": ("designkit.commands.scene", "compile a virtual object for the runner (ch. 4)"),
     "run": ("designkit.commands.run", "the rendering runner on the simulated device"),
 }
 

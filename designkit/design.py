@@ -7,6 +7,8 @@ thesis' device (shared/seed/ehi_thesis.txt, sections 2.2-3.2). Values the thesis
 are marked ``assumed`` in the field docs below.
 
 Frame: the coil top faces lie in the plane z = 0 and z points up, towards the user's hand.
+Polarity (see :class:`MagnetSpec`): positive current = counter-clockwise seen from above = coil
+field up; the magnet's moment points down by default, so positive current repels it.
 """
 
 from __future__ import annotations
@@ -30,12 +32,36 @@ MU0 = 4e-7 * math.pi
 
 @dataclass(frozen=True)
 class MagnetSpec:
-    """The fingertip permanent magnet (thesis: N52 cylinder, 10 mm x 10 mm, axial M)."""
+    """The fingertip permanent magnet (thesis: N52 cylinder, 10 mm x 10 mm, axial M).
+
+    Polarity, defined here once for all of designkit and the map file: a positive coil current
+    circulates counter-clockwise about +z seen from above (:meth:`designkit.Coil.field`), so
+    the coil's field above its top face points up (+z, its north pole up). The magnet's moment
+    points along ``direction``, by default -z (its north pole faces the coils): like poles face
+    each other, and positive current repels the magnet, i.e. pushes the finger up, as the
+    thesis' unipolar drive does (F_z = m . dB/dz = -|m| dBz/dz > 0 above a coil).
+    """
 
     radius_m: float = 0.005
     length_m: float = 0.010
     magnetization_a_per_m: float = 1.1579e6
     """Axial magnetization M, A/m (thesis section 2.2)."""
+    direction: tuple[float, float, float] = (0.0, 0.0, -1.0)
+    """Direction of the magnetic moment (south -> north) in the array frame, normalized on use.
+    Default (0, 0, -1): north pole down, so positive coil current means repulsion."""
+
+    def __post_init__(self):
+        d = tuple(float(c) for c in self.direction) if isinstance(
+            self.direction, (list, tuple)) else self.direction
+        object.__setattr__(self, "direction", d)
+
+    @property
+    def moment_vector_a_m2(self) -> tuple[float, float, float]:
+        """The moment m = M V * direction / |direction|, A m^2, shape (3,). Use this, never a
+        hard-coded (0, 0, |m|)."""
+        d = self.direction
+        n = math.sqrt(sum(c * c for c in d))
+        return tuple(self.moment_a_m2 * c / n for c in d)
 
     @property
     def volume_m3(self) -> float:
@@ -318,7 +344,13 @@ def check_design(d: Design) -> None:
         for f in fields(obj):
             val = getattr(obj, f.name)
             name = f"{sec}.{f.name}"
-            if f.name == "bh":
+            if f.name == "direction":
+                if not (isinstance(val, tuple) and len(val) == 3
+                        and all(isinstance(c, float) and math.isfinite(c) for c in val)
+                        and any(c != 0.0 for c in val)):
+                    raise BadInputError(name, "3 finite numbers, not all 0 (the moment's "
+                                        "direction; default [0, 0, -1])", val)
+            elif f.name == "bh":
                 if val not in ("linear", "steel1010"):
                     raise BadInputError(name, "'linear' or 'steel1010'", val)
             elif f.name == "packing":

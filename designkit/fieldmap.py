@@ -271,7 +271,7 @@ class MapPhysics:
 
 def map_physics(design) -> MapPhysics:
     """The one place the map's physics comes from (see :class:`MapPhysics`)."""
-    return MapPhysics(np.array([0.0, 0.0, design.magnet.moment_a_m2]), design.drive.max_current_a)
+    return MapPhysics(np.asarray(design.magnet.moment_vector_a_m2, float), design.drive.max_current_a)
 
 
 # ============================================================================ build

@@ -12,7 +12,7 @@ Two layers, as everywhere in designkit:
   and :func:`export_vtk` writes the datasets as ``.vtp`` / ``.vts`` files for ParaView.
 
 The force on the finger magnet is ``F = (grad B)^T m`` (ARCHITECTURE.md) with ``m`` the design's
-magnet moment along +z unless another moment is given.
+magnet moment of the design (MagnetSpec.direction, default -z) unless another is given.
 
 pyvista is imported only here, lazily: without it the functions raise
 :class:`designkit.errors.MissingDependencyError` ("designkit.viz needs pyvista: pip install
@@ -119,9 +119,9 @@ def resolve_currents(design: "Design", currents: Sequence[float] | None = None) 
 
 
 def magnet_moment(design: "Design", moment=None) -> np.ndarray:
-    """The finger magnet's dipole moment, A m^2, shape (3,): the design's |m| along +z by default."""
+    """The finger magnet's dipole moment, A m^2, shape (3,): the design's (MagnetSpec.direction)."""
     if moment is None:
-        return np.array([0.0, 0.0, design.magnet.moment_a_m2])
+        return np.array(design.magnet.moment_vector_a_m2)
     return np.asarray(v.vector3("moment", moment, "A m^2"), dtype=float)
 
 

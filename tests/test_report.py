@@ -44,7 +44,7 @@ def test_report_force_matches_the_field_engine(quick_report):
     dp = rep["design_point"]
     b, g = Coil.from_design(d).field(np.array(d.design_point_m), d.drive.max_current_a,
                                      gradient=True)
-    m = np.array([0.0, 0.0, d.magnet.moment_a_m2])
+    m = np.array(d.magnet.moment_vector_a_m2)
     np.testing.assert_allclose(dp["flux_density_t"], b, rtol=1e-9, atol=1e-15)
     np.testing.assert_allclose(dp["force_n"], g.T @ m, rtol=1e-9, atol=1e-12)
     # with the default figure currents (centre coil only) the array equals the single coil

@@ -79,7 +79,7 @@ def design_point_summary(design: Design, current_a: float) -> dict:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         b, g = coil.field(p, current_a, gradient=True)
-    m = np.array([0.0, 0.0, design.magnet.moment_a_m2])
+    m = np.array(design.magnet.moment_vector_a_m2)
     force = g.T @ m  # F = grad(m . B) = G^T m
     torque = np.cross(m, b)
     return {
@@ -179,7 +179,7 @@ def report_markdown(report: dict) -> str:
                      f"{_vec_mt(arr['flux_density_t'])} | {arr['dbz_dz_t_per_m']:+.5g} T/m | "
                      f"{_vec_mn(arr['force_n'])} |")
     lines += ["", f"Point {tuple(round(x * 1e3, 3) for x in dp['point_m'])} mm, magnet moment "
-                  f"{dp['magnet_moment_a_m2'][2]:.4g} A m^2 along +z, core model "
+                  f"{dp['magnet_moment_a_m2']} A m^2 (design.magnet.direction), core model "
                   f"`{dp['core_model']}`. F = (grad B)^T m."]
     for w in dp.get("warnings", []):
         lines.append(f"\n> warning: {w}")

@@ -1,0 +1,167 @@
+"""Question: is firmware_io.allocation.allocate exact and fast enough for the control loop?
+
+Random 9-coil problems on the default design: random magnet positions in the workspace with the
+real A(p) (designkit.CoilArray, default core), rows Fz / force / force+torque, targets from 2 %
+to 5x the reachable scale (inside and outside the reachable set), random per-coil limits
+(0..6 A, or 6 A) and budgets (0.5..60 A or none), unipolar and bipolar.
+
+* Exactness (``n_verify`` problems): KKT certificate (studies/alloc_reference.py, 1e-9
+  relative), bound violations (> 1e-9 A), objective against scipy SLSQP on the split problem
+  (1e-6 relative, floor 1e-12 ||f||^2; "ours lower" means the reference stopped early -- ours
+  carries a KKT certificate).
+* Speed (``n_time`` problems, one solve each, perf_counter): median and p99 per solve, on the
+  random mix and on the design's own limits (6 A per coil, 54 A budget: never binding), against
+  scipy.optimize.lsq_linear on the box-only version of the same problems, same process.
+
+    python studies/bench_allocation.py [OUT_DIR] [--n-time N] [--n-verify N] [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+if __package__ in (None, ""):
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import numpy as np
+
+from alloc_reference import kkt_violation, slsqp_reference
+from designkit import default_design
+from designkit._io import write_json_atomic
+from designkit.array import CoilArray, force_matrix, skew_matrix
+from firmware_io.allocation import allocate
+
+ROWS = {1: [2], 3: [0, 1, 2], 6: [0, 1, 2, 3, 4, 5]}
+
+
+def wrenches(n_pos: int, seed: int = 0, design=None) -> np.ndarray:
+    """(n_pos, 6, n_coils) force and torque per ampere at random workspace points."""
+    d = design or default_design()
+    rng = np.random.default_rng(seed)
+    ws = d.workspace
+    h = ws.half_width_m
+    pts = rng.uniform([-h, -h, ws.z_min_m], [h, h, ws.z_max_m], (n_pos, 3))
+    a = CoilArray.from_design(d).actuation_matrix(pts, rtol=1e-7)
+    m = np.asarray(d.magnet.moment_vector_a_m2)
+    return np.concatenate([force_matrix(m) @ a[:, 3:, :], skew_matrix(m) @ a[:, :3, :]], axis=1)
+
+
+def problems(w: np.ndarray, n: int, seed: int, design_limits: bool = False):
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(n):
+        k = int(rng.choice([1, 3, 6]))
+        fm = w[rng.integers(len(w))][ROWS[k]]
+        uni = bool(rng.integers(2))
+        if design_limits:
+            u, tl = 6.0, 54.0
+        else:
+            u = rng.uniform(0.0, 6.0, fm.shape[1]) if rng.random() < 0.5 else 6.0
+            tl = float(rng.choice([rng.uniform(0.5, 20.0), rng.uniform(20, 60), np.inf]))
+        reach = np.abs(fm).sum(axis=1) * 6.0
+        f = rng.normal(size=k) * reach * rng.choice([0.02, 0.2, 1.0, 5.0])
+        out.append((fm, f, u, tl, uni))
+    return out
+
+
+def _times(probs):
+    t = np.empty(len(probs))
+    for i, (fm, f, u, tl, uni) in enumerate(probs):
+        t0 = time.perf_counter()
+        allocate(fm, f, u, tl, unipolar=uni)
+        t[i] = time.perf_counter() - t0
+    return t
+
+
+def _times_lsq(probs):
+    from scipy.optimize import lsq_linear
+
+    t = np.empty(len(probs))
+    for i, (fm, f, u, tl, uni) in enumerate(probs):
+        ub = np.broadcast_to(np.asarray(u, float), (fm.shape[1],)) + 1e-12
+        lb = np.zeros_like(ub) if uni else -ub
+        t0 = time.perf_counter()
+        lsq_linear(fm, f, bounds=(lb, ub))
+        t[i] = time.perf_counter() - t0
+    return t
+
+
+def verify(probs, progress: bool = True) -> dict:
+    from tqdm import tqdm
+
+    worst_kkt, worst_viol, n_mis, n_lower, worst_rel = 0.0, 0.0, 0, 0, 0.0
+    for fm, f, u, tl, uni in tqdm(probs, desc="verify", disable=not progress, mininterval=5):
+        x, res = allocate(fm, f, u, tl, unipolar=uni)
+        kv, infeas = kkt_violation(fm, f, u, tl, x, uni)
+        worst_kkt, worst_viol = max(worst_kkt, kv), max(worst_viol, infeas)
+        ref = slsqp_reference(fm, f, u, tl, uni)
+        floor = 1e-12 * float(f @ f)
+        rel = (res - ref) / max(ref, floor, 1e-300)
+        if abs(res - ref) > 1e-6 * ref + floor:
+            n_mis += 1
+            n_lower += res < ref
+        if res >= ref:
+            worst_rel = max(worst_rel, rel)
+    return {"n": len(probs), "max_kkt_rel": worst_kkt, "max_bound_violation_a": worst_viol,
+            "n_objective_mismatch": n_mis, "n_mismatch_ours_lower": n_lower,
+            "n_mismatch_ours_higher": n_mis - n_lower, "max_rel_excess_over_ref": worst_rel}
+
+
+def run(out_dir="out/bench_allocation", *, n_time: int = 20000, n_verify: int = 2000,
+        n_pos: int = 400, quick: bool = False, progress: bool = True) -> dict:
+    out_dir = Path(out_dir)
+    if quick:
+        n_time, n_verify, n_pos = 300, 30, 12
+    w = wrenches(n_pos)
+    mix = problems(w, n_time, seed=1)
+    design = problems(w, n_time, seed=2, design_limits=True)
+    for p in mix[:200]:  # warm-up (imports, caches)
+        allocate(p[0], p[1], p[2], p[3], unipolar=p[4])
+    t_mix, t_des = _times(mix), _times(design)
+    n_lsq = min(len(mix), 3000)
+    t_lsq = _times_lsq(mix[:n_lsq])
+    res = {
+        "n_time": n_time, "n_positions": n_pos,
+        "mix_median_us": float(np.median(t_mix) * 1e6),
+        "mix_p99_us": float(np.percentile(t_mix, 99) * 1e6),
+        "design_limits_median_us": float(np.median(t_des) * 1e6),
+        "design_limits_p99_us": float(np.percentile(t_des, 99) * 1e6),
+        "lsq_linear_box_only_median_us": float(np.median(t_lsq) * 1e6),
+        "lsq_linear_box_only_p99_us": float(np.percentile(t_lsq, 99) * 1e6),
+    }
+    res["speedup_vs_lsq_linear_median"] = (res["lsq_linear_box_only_median_us"]
+                                           / res["mix_median_us"])
+    res["verify"] = verify(problems(w, n_verify, seed=3), progress=progress)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(out_dir / "bench_allocation.json", res)
+    print(f"{'per solve (us)':<34}{'median':>10}{'p99':>10}")
+    for name, key in (("allocate, random mix", "mix"),
+                      ("allocate, design limits 6 A/54 A", "design_limits"),
+                      ("lsq_linear, box only (mix)", "lsq_linear_box_only")):
+        print(f"{name:<34}{res[key + '_median_us']:>10.1f}{res[key + '_p99_us']:>10.1f}")
+    print(f"speed-up vs lsq_linear (median): {res['speedup_vs_lsq_linear_median']:.1f}x")
+    v = res["verify"]
+    print(f"verified {v['n']} problems: max KKT {v['max_kkt_rel']:.2e} (rel), max bound "
+          f"violation {v['max_bound_violation_a']:.1e} A, objective mismatches > 1e-6: "
+          f"{v['n_objective_mismatch']} (ours higher {v['n_mismatch_ours_higher']}, "
+          f"ours lower {v['n_mismatch_ours_lower']})")
+    return res
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("out_dir", nargs="?", default="out/bench_allocation")
+    ap.add_argument("--n-time", type=int, default=20000)
+    ap.add_argument("--n-verify", type=int, default=2000)
+    ap.add_argument("--n-positions", type=int, default=400)
+    ap.add_argument("--quick", action="store_true")
+    a = ap.parse_args(argv)
+    run(a.out_dir, n_time=a.n_time, n_verify=a.n_verify, n_pos=a.n_positions, quick=a.quick)
+
+
+if __name__ == "__main__":
+    main()

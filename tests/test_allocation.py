@@ -1,0 +1,174 @@
+"""firmware_io.allocation: exact bounded allocation (thesis eq. 4.9).
+
+References (independent of the solver): a KKT certificate (studies/alloc_reference.py), scipy SLSQP
+on the split formulation, the pseudo-inverse (least-energy exact fit) and the closed-form
+fractional knapsack for the largest reachable Fz.
+"""
+
+from __future__ import annotations
+
+import ast
+import pathlib
+import sys
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(pathlib.Path(__file__).parents[1] / "studies"))
+from alloc_reference import kkt_violation, slsqp_reference  # noqa: E402
+
+from firmware_io.allocation import allocate  # noqa: E402
+from firmware_io.errors import BadInputError  # noqa: E402
+
+ROWS = {1: [2], 3: [0, 1, 2], 6: [0, 1, 2, 3, 4, 5]}
+
+
+@pytest.fixture(scope="module")
+def wrench_matrices():
+    """(m, 6, 9) force+torque per ampere of the default design at random workspace points."""
+    from designkit import CoilArray
+    from designkit.array import force_matrix, skew_matrix
+    from designkit.design import default_design
+
+    d = default_design()
+    rng = np.random.default_rng(13)
+    ws = d.workspace
+    h = ws.half_width_m
+    pts = rng.uniform([-h, -h, ws.z_min_m], [h, h, ws.z_max_m], (24, 3))
+    a = CoilArray.from_design(d).actuation_matrix(pts, rtol=1e-8)
+    m = np.asarray(d.magnet.moment_vector_a_m2)
+    return np.concatenate([force_matrix(m) @ a[:, 3:, :], skew_matrix(m) @ a[:, :3, :]], axis=1)
+
+
+def random_problem(rng, w):
+    """Random rows, drive mode, per-coil limits, budget and a target inside or outside reach."""
+    k = int(rng.choice([1, 3, 6]))
+    fm = w[rng.integers(len(w))][ROWS[k]]
+    uni = bool(rng.integers(2))
+    u = rng.uniform(0.0, 6.0, fm.shape[1]) if rng.random() < 0.5 else 6.0
+    tl = float(rng.choice([rng.uniform(0.5, 20.0), rng.uniform(20, 60), np.inf]))
+    reach = np.abs(fm).sum(axis=1) * 6.0
+    f = rng.normal(size=k) * reach * rng.choice([0.02, 0.2, 1.0, 5.0])
+    return fm, f, u, tl, uni
+
+
+def test_kkt_and_slsqp_reference_random(wrench_matrices):
+    rng = np.random.default_rng(4)
+    worst_kkt = 0.0
+    for _ in range(60):
+        fm, f, u, tl, uni = random_problem(rng, wrench_matrices)
+        x, res = allocate(fm, f, u, tl, unipolar=uni)
+        kv, infeas = kkt_violation(fm, f, u, tl, x, uni)
+        assert infeas <= 1e-9, (infeas, x)
+        worst_kkt = max(worst_kkt, kv)
+        ref = slsqp_reference(fm, f, u, tl, uni)
+        # never worse than the reference beyond 1e-6 relative (floor: 1e-12 of ||f||^2)
+        assert res <= ref + 1e-6 * ref + 1e-12 * (f @ f), (res, ref)
+        r = fm @ x - f
+        assert res == pytest.approx(r @ r, rel=1e-12, abs=1e-300)
+    assert worst_kkt <= 1e-9
+
+
+def test_least_energy_exact_fit_equals_pseudoinverse(wrench_matrices):
+    """Reachable target whose minimum-norm fit is inside the bounds: I = pinv(F) f."""
+    rng = np.random.default_rng(5)
+    for _ in range(100):
+        k = int(rng.choice([1, 3, 6]))
+        fm = wrench_matrices[rng.integers(len(wrench_matrices))][ROWS[k]]
+        ref = np.linalg.pinv(fm) @ (fm @ rng.uniform(-1, 1, 9))
+        uni = bool(np.all(ref >= 0))
+        x, res = allocate(fm, fm @ ref, 6.0, 54.0, unipolar=uni)
+        scale = np.abs(ref).max()
+        if scale > 6.0 or np.abs(ref).sum() > 54.0:
+            continue
+        np.testing.assert_allclose(x, ref, rtol=0, atol=1e-8 * scale)
+
+
+def test_fz_only_matches_fractional_knapsack(wrench_matrices):
+    """k = 1, target far beyond reach: Fz = the knapsack optimum (sorted |a| x u till I_t)."""
+    rng = np.random.default_rng(6)
+    for _ in range(50):
+        a = wrench_matrices[rng.integers(len(wrench_matrices))][2]
+        u, tl = 6.0, float(rng.uniform(1, 60))
+        srt = np.sort(np.abs(a))[::-1]
+        full = int(min(9, tl // u))
+        best = u * srt[:full].sum() + (tl - full * u) * (srt[full] if full < 9 else 0.0)
+        x, res = allocate(a, [10 * np.abs(a).sum() * u], u, tl)
+        assert a @ x == pytest.approx(best, rel=1e-12)
+        assert np.abs(x).sum() <= tl * (1 + 1e-12)
+
+
+def test_unipolar_cannot_pull():
+    """A coil that only pulls (negative column) stays at 0 A unipolar; bipolar reverses it."""
+    a = np.array([[-1.0, 0.5]])
+    x, res = allocate(a, [2.0], 6.0, 54.0, unipolar=True)
+    np.testing.assert_allclose(x, [0.0, 4.0], atol=1e-12)
+    x, res = allocate(a, [2.0], 6.0, 54.0)
+    # least energy exact fit: x = a^T (a a^T)^-1 f
+    np.testing.assert_allclose(x, [-1.6, 0.8], atol=1e-12)
+    assert res == pytest.approx(0.0, abs=1e-24)
+
+
+def test_bounds_never_violated_extreme_scales():
+    rng = np.random.default_rng(7)
+    for _ in range(300):
+        k, n = int(rng.integers(1, 7)), int(rng.integers(1, 12))
+        fm = rng.normal(size=(k, n)) * 10.0 ** rng.uniform(-8, 4, size=(1, n))
+        f = rng.normal(size=k) * 10.0 ** rng.uniform(-6, 6)
+        u = rng.uniform(0, 10, n) * (rng.random(n) > 0.1)
+        tl = float(rng.uniform(0, 30))
+        uni = bool(rng.integers(2))
+        x, res = allocate(fm, f, u, tl, unipolar=uni)
+        assert np.all(np.isfinite(x)) and np.isfinite(res)
+        lo = 0.0 if uni else -1.0
+        assert np.all(x <= u + 1e-12 * u.max()) and np.all(x >= lo * u - 1e-12 * u.max())
+        assert np.abs(x).sum() <= tl * (1 + 1e-12) + 1e-300
+        kv, _ = kkt_violation(fm, f, u, tl, x, uni)
+        assert kv <= 1e-7  # columns spanning 12 decades: rounding in g itself
+
+
+def test_bias_is_subtracted():
+    a = np.array([[1.0, 2.0, -1.0]])
+    x1, r1 = allocate(a, [1.0], 6.0, 54.0, bias=[0.25])
+    x2, r2 = allocate(a, [0.75], 6.0, 54.0)
+    np.testing.assert_array_equal(x1, x2)
+
+
+@pytest.mark.parametrize("args, name", [
+    ((np.array([[1.0, np.nan]]), [1.0], 1.0, 2.0), "force_matrix"),
+    ((np.array([[1.0, np.inf]]), [1.0], 1.0, 2.0), "force_matrix"),
+    ((np.ones((1, 2)), [np.nan], 1.0, 2.0), "target"),
+    ((np.ones((1, 2)), [1.0, 2.0], 1.0, 2.0), "target"),
+    ((np.ones((1, 2)), [1.0], -1.0, 2.0), "current_limit"),
+    ((np.ones((1, 2)), [1.0], [1.0, np.nan], 2.0), "current_limit"),
+    ((np.ones((1, 2)), [1.0], 1.0, -0.5), "total_limit"),
+    ((np.ones((1, 2)), [1.0], 1.0, np.nan), "total_limit"),
+    ((np.ones((2, 3, 1)), [1.0], 1.0, 1.0), "force_matrix"),
+])
+def test_bad_input(args, name):
+    with pytest.raises(BadInputError, match=name) as exc:
+        allocate(*args)
+    assert isinstance(exc.value, ValueError)
+
+
+def test_numpy_only():
+    src = pathlib.Path(__file__).parents[1] / "firmware_io" / "allocation.py"
+    mods = set()
+    for node in ast.walk(ast.parse(src.read_text())):
+        if isinstance(node, ast.Import):
+            mods |= {a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.level == 0:
+            mods.add(node.module.split(".")[0])
+    assert mods <= {"numpy", "math", "__future__"}, mods
+
+
+@pytest.mark.slow
+def test_reference_1e4_problems(wrench_matrices):
+    rng = np.random.default_rng(8)
+    for _ in range(10_000):
+        fm, f, u, tl, uni = random_problem(rng, wrench_matrices)
+        x, res = allocate(fm, f, u, tl, unipolar=uni)
+        kv, infeas = kkt_violation(fm, f, u, tl, x, uni)
+        assert kv <= 1e-9 and infeas <= 1e-9
+        ref = slsqp_reference(fm, f, u, tl, uni)
+        assert res <= ref + 1e-6 * ref + 1e-12 * (f @ f)

@@ -1,0 +1,72 @@
+"""force_constant (thesis eq. 4.3) against independent references: the closed-form fractional
+knapsack (Fz only) and a scipy linprog ray-shooting LP (3-D force)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from designkit.design import default_design
+from designkit.errors import BadInputError
+from designkit.render import ArrayActuation, Hemisphere, Plane, Wedge, force_constant
+from designkit.render.constant import force_matrices
+
+
+@pytest.fixture(scope="module")
+def source():
+    return ArrayActuation.from_design(default_design())
+
+
+def _knapsack(c, u, tl):
+    c = np.sort(c)[::-1]
+    best, left = 0.0, tl
+    for ci in c:
+        take = min(u, left)
+        best += take * max(ci, 0.0)
+        left -= take
+    return best
+
+
+@pytest.mark.parametrize("unipolar", [True, False])
+def test_fz_rows_equal_knapsack(source, unipolar):
+    res = force_constant(Hemisphere(), source, current_limit_a=6.0, total_current_a=20.0,
+                         unipolar=unipolar, rows="fz", n_side=5, progress=False)
+    fm = force_matrices(source, res.points_m, "fz")[:, 0, :]
+    for j in range(len(res.points_m)):
+        c = fm[j] if unipolar else np.abs(fm[j])
+        want = _knapsack(c, 6.0, 20.0) / res.heights_m[j]
+        assert res.lam_per_point[j] == pytest.approx(want, rel=2e-6)
+    assert res.lam_n_per_m == res.lam_per_point.min()
+    np.testing.assert_array_equal(res.limiting_point_m, res.points_m[res.limiting_index])
+
+
+@pytest.mark.parametrize("unipolar", [True, False])
+def test_force_rows_equal_linprog(source, unipolar):
+    from scipy.optimize import linprog
+
+    res = force_constant(Wedge(), source, current_limit_a=6.0, total_current_a=54.0,
+                         unipolar=unipolar, rows="force", n_side=4, progress=False)
+    fm = force_matrices(source, res.points_m, "force")
+    n = fm.shape[2]
+    for j in range(len(res.points_m)):
+        d = res.heights_m[j] * res.normals[j]
+        # variables: I+ (n), I- (n), lambda; max lambda s.t. F (I+ - I-) = lambda d
+        a_eq = np.c_[fm[j], -fm[j], -d[:, None]]
+        nvar = 2 * n + 1
+        bounds = [(0, 6.0)] * n + [(0, 0.0 if unipolar else 6.0)] * n + [(0, None)]
+        a_ub = np.r_[np.ones(2 * n), 0.0][None, :]
+        lp = linprog(-np.eye(nvar)[-1], A_ub=a_ub, b_ub=[54.0], A_eq=a_eq, b_eq=np.zeros(3),
+                     bounds=bounds, method="highs")
+        assert lp.status == 0
+        assert res.lam_per_point[j] == pytest.approx(lp.x[-1], rel=1e-5)
+
+
+def test_plane_bounds_and_bad_input(source):
+    with pytest.raises(BadInputError, match="rows"):
+        force_constant(Plane(), source, current_limit_a=6.0, total_current_a=54.0, rows="x")
+    with pytest.raises(BadInputError, match="current_limit_a"):
+        force_constant(Plane(), source, current_limit_a=-1.0, total_current_a=54.0)
+    with pytest.raises(BadInputError, match="fieldmap"):
+        force_constant(Plane(), object(), current_limit_a=6.0, total_current_a=54.0)
+    with pytest.raises(BadInputError, match="object"):
+        force_constant(Plane(height_m=0.2), source, current_limit_a=6.0, total_current_a=54.0)
