@@ -270,8 +270,9 @@ class Runner:
     localizer : object
         ``locate(top, bottom, currents=None)`` -> an estimate with ``position_m`` and ``ok``.
     tracker : object
-        ``update(t_s, position_m)``, ``predict(t_s) -> (position_m, velocity_m_s)``,
-        ``reset()``.
+        A constant-velocity filter over the estimates between frames
+        (:class:`firmware_io.localization.ConstantVelocityKalman`): ``update(position_m, time_s,
+        ok)``, ``predict(time_s) -> position_m`` and its state ``x`` ((2, 3): position, velocity).
     allocate : callable
         ``allocate(force_matrix, target, current_limit, total_limit, unipolar=...)``
         -> (currents, residual) (firmware_io.allocation).
@@ -390,18 +391,19 @@ class Runner:
                                  f" {i % cfg.n_coils}) reports {s!r}; excluded"))
             top = np.where(self.excluded[:cfg.n_coils, None], np.nan, frame.top_t)
             bottom = np.where(self.excluded[cfg.n_coils:, None], np.nan, frame.bottom_t)
+            # the currents the coils really carry (the R-L model), not the command they lag
             est = self.localizer.locate(top, bottom, currents=self.current_a.copy())
             self.last_estimate_ok = bool(est.ok)
             if est.ok:
-                self.tracker.update(frame.t_s, np.asarray(est.position_m, float))
+                self.tracker.update(np.asarray(est.position_m, float), frame.t_s, True)
                 self.have_fix = True
             else:
                 problems.append(("lost", "the localizer flagged its estimate (residual test)"))
         if not self.have_fix:
             return self._record(t_s, t0, np.full(3, np.nan), np.zeros(3), new_frame,
                                 off=True)
-        p, vel = self.tracker.predict(t_s)
-        p = np.asarray(p, float)
+        p = np.asarray(self.tracker.predict(t_s), float)
+        vel = np.asarray(self.tracker.x[1], float)
         self.position_m = p
         inside = bool(np.all(p >= self.lo) and np.all(p <= self.hi))
         if not inside:

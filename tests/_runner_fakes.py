@@ -26,17 +26,16 @@ class TruthLocalizer:
 
 
 class HoldTracker:
+    """Holds the last estimate (zero velocity)."""
+
     def __init__(self):
-        self.p = None
+        self.x = None
 
-    def reset(self):
-        self.p = None
+    def update(self, position_m, time_s, ok=True):
+        self.x = np.stack([np.asarray(position_m, float), np.zeros(3)])
 
-    def update(self, t_s, position_m):
-        self.p = np.asarray(position_m, float)
-
-    def predict(self, t_s):
-        return self.p, np.zeros(3)
+    def predict(self, time_s):
+        return self.x[0]
 
 
 class ConstantMap:
