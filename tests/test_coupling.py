@@ -1,0 +1,326 @@
+"""The array as one magnetic system (designkit.coupling): independent references.
+
+References: the image method (dipole above a wide high-mu slab, closed form), the first-order
+(Born) volume integral of M = chi H0 for mu_r -> 1, reciprocity and energy conservation
+(properties the collocation solve does not build in), the 3 x 3 array's mirror symmetry, and a
+brute-force 3-D surface-charge boundary-element solve without azimuthal modes (slow).
+"""
+
+import numpy as np
+import pytest
+
+from designkit import Coil, Pose, default_design
+from designkit.array import CoilArray, g5_from_gradient
+from designkit.core import Core
+from designkit.coupling import ArraySystem
+from designkit.design import MU0, ArraySpec
+from designkit.errors import DesignRuleError
+from designkit.field import dipole_field
+
+D = default_design()
+M_DESIGN = np.array([0.0, 0.0, D.magnet.moment_a_m2])
+
+
+@pytest.fixture(scope="module")
+def arr():
+    return CoilArray.from_design(D)
+
+
+def _two(pitch=0.05, mu_r=1000.0):
+    d = D.replace(array=ArraySpec(rows=1, columns=2, pitch_m=pitch),
+                  core=D.core.__class__(relative_permeability=mu_r))
+    return CoilArray.from_design(d)
+
+
+# ---------------------------------------------------------------------------- image method
+def test_image_method_wide_slab():
+    # a point dipole 10 mm above the centre of a wide (R = L = 60 mm) mu_r 1000 cylinder sees
+    # (to the slab's finite size) the image dipole kappa (-mx, -my, mz) at the mirror point
+    R, L, h, mu = 0.06, 0.06, 0.01, 1000.0
+    coil = Coil(R, R + 0.002, L, 10, Core(R, L, relative_permeability=mu), Pose((0, 0, -L / 2)))
+    s = ArraySystem(CoilArray((coil,)), m_max=1, refine=4)
+    rng = np.random.default_rng(5)
+    for _ in range(2):
+        m = rng.normal(size=3)
+        p = np.array([0.0, 0.0, h])
+        x = s.magnet_solution(p[None], m)
+        b, g = s.core_field_pointwise(p[None], x, gradient=True)
+        kap = (mu - 1) / (mu + 1)
+        bi, gi = dipole_field(p - [0, 0, -h], kap * np.array([-m[0], -m[1], m[2]]),
+                              gradient=True)
+        np.testing.assert_allclose(g[0].T @ m, gi.T @ m, atol=0.015 * np.abs(gi.T @ m).max())
+        np.testing.assert_allclose(np.cross(m, b[0]), np.cross(m, bi),
+                                   atol=0.015 * np.abs(np.cross(m, bi)).max())
+
+
+# ---------------------------------------------------------------------------- mu_r -> 1
+def _born_core_field(array, k, pts, chi, nr=10, nphi=24, nz=60):
+    """First order in chi: B of M = chi H_winding_k over every core volume (dipole sum)."""
+    xr, wr = np.polynomial.legendre.leggauss(nr)
+    xz, wz = np.polynomial.legendre.leggauss(nz)
+    total = np.zeros((len(pts), 3))
+    src = array.coils[k]
+    for c in array.coils:
+        core = c.core
+        s = 0.5 * (xr + 1)
+        r = core.radius * np.sqrt(s)  # area coordinate
+        wra = 0.5 * wr * np.pi * core.radius ** 2 / nphi  # r dr dphi = R^2/2 ds dphi
+        z = core.offset + 0.5 * core.length * xz
+        wzz = 0.5 * core.length * wz
+        ph = 2 * np.pi * np.arange(nphi) / nphi
+        Rr, Pp, Zz = np.meshgrid(r, ph, z, indexing="ij")
+        W = (wra[:, None, None] * np.ones(nphi)[None, :, None] * wzz[None, None, :]).ravel()
+        loc = np.c_[(Rr * np.cos(Pp)).ravel(), (Rr * np.sin(Pp)).ravel(), Zz.ravel()]
+        glob = c.pose.position + loc
+        h0 = src.field(glob, 1.0, include="winding") / MU0
+        mvol = chi * h0 * W[:, None]  # dipole moments of the cells, A m^2
+        for i in range(0, len(pts)):
+            d = pts[i] - glob
+            r2 = np.einsum("ij,ij->i", d, d)
+            inv = 1 / np.sqrt(r2)
+            mr = np.einsum("ij,ij->i", mvol, d)
+            total[i] += 1e-7 * np.sum(3 * d * (mr * inv ** 5)[:, None]
+                                      - mvol * (inv ** 3)[:, None], axis=0)
+    return total
+
+
+def test_weak_cores_match_first_order_volume_integral():
+    chi = 1e-3
+    a2 = _two(mu_r=1.0 + chi)
+    air = CoilArray(tuple(c.replace(core=None) for c in a2.coils))
+    rng = np.random.default_rng(2)
+    pts = np.c_[rng.uniform(-0.06, 0.06, 6), rng.uniform(-0.03, 0.03, 6),
+                rng.uniform(0.015, 0.06, 6)]
+    a = a2.actuation_matrix(pts)
+    a_air = air.actuation_matrix(pts)
+    for k in range(2):
+        born = _born_core_field(a2, k, pts, chi)
+        core_part = a[:, :3, k] - a_air[:, :3, k]
+        # O(chi^2) (demagnetization ~ N chi) and quadrature: 1 % of the largest value
+        np.testing.assert_allclose(core_part, born, atol=0.01 * np.abs(born).max())
+    # mu_r = 1 exactly: the air answer
+    a1 = _two(mu_r=1.0).actuation_matrix(pts)
+    np.testing.assert_allclose(a1, a_air, rtol=1e-12, atol=1e-18)
+
+
+# ---------------------------------------------------------------------------- reciprocity
+def test_reciprocity_between_two_magnets(arr):
+    # m2 . B_ind(p2; m1 at p1) = m1 . B_ind(p1; m2 at p2) (symmetric Green's function of the
+    # linear iron; the collocation solve is not symmetric by construction)
+    s = arr.coupled()
+    rng = np.random.default_rng(11)
+    for _ in range(4):
+        p1, p2 = (np.r_[rng.uniform(-0.07, 0.07, 2), rng.uniform(0.012, 0.07)] for _ in range(2))
+        m1, m2 = rng.normal(size=3), rng.normal(size=3)
+        b12 = arr.magnet_core_field(p2, p1, m1)
+        b21 = arr.magnet_core_field(p1, p2, m2)
+        lhs, rhs = m2 @ b12, m1 @ b21
+        scale = np.linalg.norm(m1) * np.linalg.norm(m2) * max(np.abs(b12).max() /
+                                                                np.linalg.norm(m1), 1e-12)
+        assert abs(lhs - rhs) <= 5e-3 * max(abs(lhs), abs(rhs)) + 1e-4 * scale
+    assert s is arr.coupled()  # built once, cached on the array
+
+
+def test_bias_force_is_the_energy_gradient(arr):
+    # U(p) = -1/2 m . B_ind(p; p) for a rigid dipole in linear iron; F0 = -grad U. The 1/2 and
+    # the identity F0 = (m . grad) B_ind hold only if the solve is reciprocal.
+    rng = np.random.default_rng(4)
+    for _ in range(3):
+        p = np.r_[rng.uniform(-0.06, 0.06, 2), rng.uniform(0.015, 0.06)]
+        m = rng.normal(size=3) * 0.5
+        f = arr.bias_force(p, m)
+        h = 2e-4
+
+        def w(q):
+            return 0.5 * m @ arr.magnet_core_field(q, q, m)
+
+        fd = np.array([(w(p + h * e) - w(p - h * e)) / (2 * h) for e in np.eye(3)])
+        np.testing.assert_allclose(f, fd, atol=3e-3 * np.abs(f).max())
+
+
+# ---------------------------------------------------------------------------- symmetry
+def test_mirror_symmetry_of_the_3x3_array(arr):
+    # mirror x -> -x maps coil (row, col) to (row, 2 - col); B -> (-Bx, By, Bz) for the
+    # mirrored point (B is a pseudovector, coils' currents reverse sense: B' = -(P B) with
+    # P = diag(-1, 1, 1)... checked against the air array, which is exact)
+    rng = np.random.default_rng(7)
+    pts = np.c_[rng.uniform(-0.07, 0.07, (5, 2)), rng.uniform(0.01, 0.08, 5)]
+    mir = pts * [-1, 1, 1]
+    a = arr.actuation_matrix(pts)
+    am = arr.actuation_matrix(mir)
+    perm = [3 * (k // 3) + 2 - k % 3 for k in range(9)]
+    # same sign pattern as the (exact) air array
+    air = CoilArray(tuple(c.replace(core=None) for c in arr.coils))
+    sa = np.sign(np.round(air.actuation_matrix(pts)[:, :, :] /
+                          np.where(air.actuation_matrix(mir)[:, :, perm] == 0, 1,
+                                   air.actuation_matrix(mir)[:, :, perm]), 6))
+    sgn = np.array([-1, 1, 1, 1, -1, -1, 1, 1])  # Bx,By,Bz,dBx/dx,dBx/dy,dBx/dz,dBy/dy,dBy/dz
+    assert np.all((sa == 0) | (sa == sgn[None, :, None]))
+    np.testing.assert_allclose(a, sgn[None, :, None] * am[:, :, perm],
+                               atol=1e-9 * np.abs(a).max())
+
+
+def test_coupling_effects_have_the_known_size(arr):
+    # sanity against an independent 3-D volume-integral solve quoted in issue 12 (linear
+    # mu_r 1000): +12 % dBz/dz at the design point; Bz changes sign above a neighbour
+    p = np.array([[0.0, 0.0, 0.03], [0.05, 0.0, 0.03]])
+    a = arr.actuation_matrix(p)
+    au = arr.uncoupled_actuation_matrix(p)
+    gzz = -(a[0, 3, 4] + a[0, 6, 4])
+    gzz_u = -(au[0, 3, 4] + au[0, 6, 4])
+    assert 1.09 < gzz / gzz_u < 1.15
+    assert au[1, 2, 4] > 0 > a[1, 2, 4]
+
+
+def test_magnet_pull_and_sensor_field(arr):
+    # independent 3-D solve (issue 12): ~ -62 mN at 30 mm, 4.0 mT / 0.74 mT at the sensors
+    f0 = arr.bias_force([0.0, 0.0, 0.03], M_DESIGN)
+    assert abs(f0[0]) < 1e-9 and abs(f0[1]) < 1e-9
+    assert -0.066 < f0[2] < -0.058
+    s = arr.sensor_positions_m()
+    assert s.shape == (2, 9, 3)
+    np.testing.assert_allclose(s[0, 4], [0, 0, 0.014])
+    np.testing.assert_allclose(s[1, 4], [0, 0, -0.114])
+    b = arr.magnet_core_field(s.reshape(-1, 3), [0.0, 0.0, 0.03], M_DESIGN).reshape(2, 9, 3)
+    assert 3.8e-3 < b[0, 4, 2] < 4.2e-3
+    assert 0.68e-3 < b[1, 4, 2] < 0.80e-3
+    # torque: zero for an upright magnet on the axis; m x B for a tilted one
+    t = arr.bias_torque([[0.0, 0.0, 0.03]], M_DESIGN)
+    assert np.abs(t).max() < 1e-12
+    mt = np.array([0.3, 0.0, 0.85])
+    bi = arr.magnet_core_field([0.01, 0.0, 0.03], [0.01, 0.0, 0.03], mt)
+    np.testing.assert_allclose(arr.bias_torque([0.01, 0.0, 0.03], mt), np.cross(mt, bi),
+                               rtol=1e-10, atol=1e-15)
+
+
+def test_no_cores_no_coupling():
+    air = CoilArray.from_design(D.replace(core=None))
+    assert air.coupled() is None
+    np.testing.assert_array_equal(air.bias_force([[0, 0, 0.03]], M_DESIGN), np.zeros((1, 3)))
+    b, g = air.magnet_core_field([[0, 0, 0.01]], [0, 0, 0.03], M_DESIGN, gradient=True)
+    assert b.shape == (1, 3) and g.shape == (1, 3, 3) and not b.any()
+
+
+@pytest.mark.slow
+def test_higher_modes_converge(arr):
+    # m = 3 changes the cores' field by < 5e-4 of its largest value (measured 2e-4)
+    pts = np.array([[0.0, 0.0, 0.03], [0.05, 0.0, 0.03], [0.025, 0.025, 0.02]])
+    s2 = arr.coupled()
+    s3 = ArraySystem(arr, m_max=3)
+    b2 = s2.core_field(pts, s2.coil_solution())
+    b3 = s3.core_field(pts, s3.coil_solution())
+    assert np.abs(b3 - b2).max() < 5e-4 * np.abs(b2).max()
+
+
+# ---------------------------------------------------------------------------- bad input
+def test_cores_touching_a_neighbour_are_named():
+    c = Coil.from_design(D)
+    # cores longer than the winding, neighbour's winding touching the protruding core
+    core = Core(0.012, 0.11)
+    a = Coil(0.012, 0.019, 0.1, 100, core, Pose((0, 0, -0.05)))
+    b = Coil(0.012, 0.019, 0.1, 100, None, Pose((0.031, 0, -0.05 - 0.1 - 0.005)))
+    with pytest.raises(DesignRuleError, match=r"core of coil 0.*winding of coil 1"):
+        CoilArray((a, b))
+    # a winding resting on the protruding core's top face: error too
+    lid = Coil(0.02, 0.03, 0.01, 100, None, Pose((0.0, 0.0, 0.010)))
+    with pytest.raises(DesignRuleError, match=r"core of coil 0.*winding of coil 1"):
+        CoilArray((a, lid))
+    CoilArray((a, lid.moved((0.0, 0.0, 0.0101))))  # 0.1 mm of air: fine
+    CoilArray((c, c.moved((0.05, 0, -0.05))))  # the default pitch: fine
+
+
+# ---------------------------------------------------------------------------- brute-force 3-D
+def _bem_3d(array, k, obs, nphi=32, ns=40, nr=10):
+    """Brute-force 3-D surface-charge BEM of all cores (flat-panel collocation, no modes).
+
+    sigma_i - 2 lam sum_j K_ij sigma_j = 2 lam H0_n(x_i); near pairs by 4 x 4 Gauss points;
+    the net charge of each core (zero exactly) is deflated with a rank-one term.
+    Returns B (n_obs, 3) T of winding k plus every core, per ampere.
+    """
+    xg, wg = np.polynomial.legendre.leggauss(4)
+    cen, nrm, area, subp, subw, owner = [], [], [], [], [], []
+    for ci, c in enumerate(array.coils):
+        core = c.core
+        R, lo, hi = core.radius, core.offset - core.length / 2, core.offset + core.length / 2
+        u = np.linspace(0, 1, ns + 1)
+        ze = lo + (hi - lo) * 0.5 * (1 - np.cos(np.pi * u))
+        re = R * np.sin(0.5 * np.pi * np.linspace(0, 1, nr + 1))
+        pe = 2 * np.pi * np.arange(nphi + 1) / nphi
+        for face in ("side", "top", "bottom"):
+            a_e = ze if face == "side" else re
+            for i in range(len(a_e) - 1):
+                for j in range(nphi):
+                    s0, s1, p0, p1 = a_e[i], a_e[i + 1], pe[j], pe[j + 1]
+                    ss = 0.5 * (s0 + s1) + 0.5 * (s1 - s0) * xg
+                    pp = 0.5 * (p0 + p1) + 0.5 * (p1 - p0) * xg
+                    S, P = np.meshgrid(ss, pp, indexing="ij")
+                    W = np.outer(0.5 * (s1 - s0) * wg, 0.5 * (p1 - p0) * wg)
+                    sm, pm = 0.5 * (s0 + s1), 0.5 * (p0 + p1)
+                    if face == "side":
+                        pts = np.c_[R * np.cos(P.ravel()), R * np.sin(P.ravel()), S.ravel()]
+                        W = W * R
+                        cc = [R * np.cos(pm), R * np.sin(pm), sm]
+                        nn = [np.cos(pm), np.sin(pm), 0.0]
+                    else:
+                        zf = hi if face == "top" else lo
+                        pts = np.c_[S.ravel() * np.cos(P.ravel()), S.ravel() * np.sin(P.ravel()),
+                                    np.full(S.size, zf)]
+                        W = W * S
+                        cc = [sm * np.cos(pm), sm * np.sin(pm), zf]
+                        nn = [0.0, 0.0, 1.0 if face == "top" else -1.0]
+                    off = np.asarray(c.pose.position)
+                    cen.append(np.add(cc, off))
+                    nrm.append(nn)
+                    area.append(W.sum())
+                    subp.append(pts + off)
+                    subw.append(W.ravel())
+                    owner.append(ci)
+    cen, nrm, area = np.array(cen), np.array(nrm), np.array(area)
+    subp, subw, owner = np.array(subp), np.array(subw), np.array(owner)
+    n = len(cen)
+    size = np.sqrt(area)
+    mat = np.empty((n, n))
+    for a0 in range(0, n, 256):
+        sl = slice(a0, a0 + 256)
+        d = cen[sl, None, :] - cen[None, :, :]
+        r2 = np.einsum("ijk,ijk->ij", d, d)
+        np.fill_diagonal(r2[:, a0:a0 + 256], 1.0)
+        kk = np.einsum("ijk,ik->ij", d, nrm[sl]) / (4 * np.pi * r2 ** 1.5) * area[None]
+        near = np.sqrt(r2) < 3 * np.maximum(size[sl, None], size[None])
+        near[np.arange(len(kk)), np.arange(a0, a0 + len(kk))] = True
+        for i, j in zip(*np.nonzero(near)):
+            dd = cen[a0 + i] - subp[j]
+            rr = np.einsum("ij,ij->i", dd, dd)
+            kk[i, j] = np.sum(subw[j] * (dd @ nrm[a0 + i]) / (4 * np.pi * rr ** 1.5))
+        mat[sl] = kk
+    mu = array.coils[0].core.relative_permeability
+    lam2 = 2 * (mu - 1) / (mu + 1)
+    sysm = np.eye(n) - lam2 * mat
+    for ci in range(array.n_coils):
+        sel = owner == ci
+        sysm[np.ix_(sel, sel)] += np.outer(np.ones(sel.sum()), area[sel]) / area[sel].sum()
+    h0 = array.coils[k].field(cen, 1.0, include="winding") / MU0
+    sig = np.linalg.solve(sysm, lam2 * np.einsum("ij,ij->i", h0, nrm))
+    q = (subw * sig[:, None]).ravel()
+    src = subp.reshape(-1, 3)
+    b = array.coils[k].field(obs, 1.0, include="winding")
+    for i, p in enumerate(obs):
+        d = p - src
+        r2 = np.einsum("ij,ij->i", d, d)
+        b[i] += MU0 * np.sum(d * (q / (4 * np.pi * r2 ** 1.5))[:, None], axis=0)
+    return b
+
+
+@pytest.mark.slow
+def test_two_cores_against_bruteforce_3d_bem():
+    a2 = _two()
+    obs = np.array([[0.0, 0.0, 0.03], [0.05, 0.0, 0.03], [0.025, 0.01, 0.02], [0.05, 0.0, 0.015],
+                    [-0.02, 0.015, 0.04]])
+    ref = _bem_3d(a2, 0, obs)
+    got = a2.actuation_matrix(obs)[:, :3, 0]
+    unc = a2.uncoupled_actuation_matrix(obs)[:, :3, 0]
+    scale = np.abs(ref).max(axis=1, keepdims=True)
+    err = np.abs(got - ref) / scale
+    assert err.max() < 0.02, err
+    # and the test can tell coupled from uncoupled at the neighbour
+    assert (np.abs(unc - ref) / scale).max() > 5 * err.max()
