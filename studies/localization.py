@@ -90,7 +90,9 @@ def run(out_dir="out/localization", n: int = 1000, seed: int = 0, *, map_path=No
                           induced="rod" if quick else "coupled")
     # the estimators' knowledge: the v2 map if given, else the same numbers from designkit
     if map_path is not None and Path(map_path).is_file():
-        base = Localizer.from_map(map_path, "dipole")
+        mg = design.magnet
+        base = Localizer.from_map(map_path, "dipole",
+                                  octupole_m2=(mg.length_m / 2) ** 2 - 0.75 * mg.radius_m**2)
         model = base.model
         source = f"map {map_path}"
     else:

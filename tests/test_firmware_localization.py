@@ -260,3 +260,14 @@ def test_calibration_recovers_gain_rotation_offset():
     gi, off = calibrate(meas[:, 0], meas[:, 1], i, model)
     assert np.allclose(gi, np.linalg.inv(g_true), atol=1e-9)
     assert np.allclose(off, o_true, atol=1e-12)
+
+
+def test_localization_imports_numpy_only():
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = ("import sys, firmware_io.localization; "
+            "bad = [m for m in sys.modules if m.split('.')[0] in ('designkit', 'smbus2', 'scipy')]; "
+            "assert not bad, bad")
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=str(Path(__file__).parents[1]))
