@@ -331,21 +331,39 @@ class SimulatedDevice:
         return self.current_a
 
     # -- physics ---------------------------------------------------------------------------------
-    def prepare(self, positions_m) -> None:
-        """Evaluate the array model once, in one batch, at every step's true position.
+    def prepare(self, positions_m, *, sample_step_m: float = 2.5e-4, max_stride: int = 10) -> None:
+        """Evaluate the array model once, in one batch, along every step's true position.
 
-        The finger's path is scripted, so the model never has to be called inside the loop:
-        per step only (3, n) @ (n,) products remain. Sets the per-step force matrices (k, 3, n)
-        N/A, bias forces (k, 3) N, and the coils' field at the sensors per ampere.
+        The finger's path is scripted, so the model is never called inside the loop: it is
+        evaluated where the path has moved ``sample_step_m`` since the last sample (at least every
+        ``max_stride`` steps, and on both sides of a jump) and interpolated linearly in between;
+        per step only (3, n) @ (n,) products remain. For a path that moves 0.25 mm between samples
+        the interpolation error of A is ~(0.25 mm / 30 mm)^2 ~ 1e-4 relative at the design point
+        (the field varies on the coil-size scale). Sets the per-step force matrices (k, 3, n) N/A,
+        bias forces (k, 3) N, and the coils' field at the sensors per ampere.
         """
         from .array import force_matrix
 
         p = np.asarray(positions_m, float).reshape(-1, 3)
-        a = self.array.actuation_matrix(p)
-        self.force_per_amp = np.einsum("ij,kjl->kil", force_matrix(self.moment), a[:, 3:, :])
+        idx = [0]
+        for k in range(1, len(p)):
+            jump = np.linalg.norm(p[k] - p[k - 1]) > 1e-3
+            if jump and idx[-1] != k - 1:
+                idx.append(k - 1)
+            if (jump or k - idx[-1] >= max_stride
+                    or np.linalg.norm(p[k] - p[idx[-1]]) >= sample_step_m):
+                idx.append(k)
+        if idx[-1] != len(p) - 1:
+            idx.append(len(p) - 1)
+        idx = np.asarray(idx)
+        a = self.array.actuation_matrix(p[idx])
+        f_s = np.einsum("ij,kjl->kil", force_matrix(self.moment), a[:, 3:, :])
         bias = getattr(self.array, "bias_force", None)
-        self.bias_n = (np.asarray(bias(p, self.moment), float).reshape(-1, 3) if bias is not None
-                       else np.zeros((len(p), 3)))
+        b_s = (np.asarray(bias(p[idx], self.moment), float).reshape(-1, 3) if bias is not None
+               else np.zeros((len(idx), 3)))
+        steps = np.arange(len(p))
+        self.force_per_amp = _interp_rows(steps, idx, f_s)
+        self.bias_n = _interp_rows(steps, idx, b_s)
         self.sensor_per_amp = self.array.actuation_matrix(
             self.sensor_positions_m.reshape(-1, 3))[:, :3, :]
 
@@ -363,6 +381,15 @@ class SimulatedDevice:
     def sensor_source(self, position_at) -> "SimSensorSource":
         """The runner's sensor source on this device; ``position_at(t_s)`` is the true position."""
         return SimSensorSource(self, position_at)
+
+
+def _interp_rows(steps, idx, values):
+    """Linear interpolation of ``values`` (len(idx), ...) sampled at ``idx`` onto ``steps``."""
+    flat = values.reshape(len(idx), -1)
+    out = np.empty((len(steps), flat.shape[1]))
+    for j in range(flat.shape[1]):
+        out[:, j] = np.interp(steps, idx, flat[:, j])
+    return out.reshape((len(steps),) + values.shape[1:])
 
 
 class SimSensorSource:

@@ -49,7 +49,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .devices import TLV493D_LINEAR_RANGE_T
 from .errors import BadInputError, CoilWriteError, FirmwareIOError
+from .localization import multipole_field
 
 SENSOR_FAULTS = {"stale": "sensor_stuck", "recovered": "sensor_stuck",
                  "saturated": "sensor_saturated", "nack": "sensor_dead", "failed": "sensor_dead",
@@ -57,6 +59,12 @@ SENSOR_FAULTS = {"stale": "sensor_stuck", "recovered": "sensor_stuck",
                  "test_mode": "sensor_dead"}
 """Per-sensor status (firmware_io.sensors / devices.TLV493D) -> the runner's fault name; any status
 but 'ok' excludes the sensor from localization."""
+
+EXPECTED_SATURATION = 0.8
+"""A sensor whose predicted field (coils at the modelled currents + the magnet's dipole at the
+predicted position) exceeds this fraction of the TLV493D's +-130 mT linear range on some axis is
+expected to saturate: it is excluded without a fault (full rendering currents saturate the sensor
+above an energized iron-core coil). Any other reading beyond the linear range is a fault."""
 
 FAULTS = ("pwm_nack", "sensor_stuck", "sensor_dead", "sensor_saturated", "lost", "out_of_box",
           "overrun", "thermal", "over_limit")
@@ -381,16 +389,28 @@ class Runner:
         problems: list[tuple[str, str]] = []
         if new_frame:
             self.last_frame = frame
-            healthy = np.array([s == "ok" for s in frame.status])
-            newly = [(i, s) for i, s in enumerate(frame.status)
+            status = list(frame.status)
+            n = cfg.n_coils
+            values = np.concatenate([frame.top_t, frame.bottom_t])
+            beyond = np.any(np.abs(values) > TLV493D_LINEAR_RANGE_T, axis=1)
+            for i in np.flatnonzero(beyond):
+                if status[i] == "ok":
+                    status[i] = "saturated"
+            expected = self._expected_saturation()
+            healthy = np.array([s == "ok" for s in status])
+            # an expected saturation: excluded, not a fault
+            quiet = expected & ~healthy & np.array([s == "saturated" for s in status])
+            self.excluded |= quiet
+            newly = [(i, s) for i, s in enumerate(status)
                      if not healthy[i] and not self.excluded[i]]
             self.excluded = ~healthy
             if newly:
                 i, s = newly[0]
-                problems.append((SENSOR_FAULTS.get(s, "sensor_dead"), f"sensor {i} ({'top' if i < cfg.n_coils else 'bottom'}"
-                                 f" {i % cfg.n_coils}) reports {s!r}; excluded"))
-            top = np.where(self.excluded[:cfg.n_coils, None], np.nan, frame.top_t)
-            bottom = np.where(self.excluded[cfg.n_coils:, None], np.nan, frame.bottom_t)
+                problems.append((SENSOR_FAULTS.get(s, "sensor_dead"),
+                                 f"sensor {i} ({'top' if i < n else 'bottom'} {i % n}) reports "
+                                 f"{s!r}; excluded"))
+            top = np.where(self.excluded[:n, None], np.nan, frame.top_t)
+            bottom = np.where(self.excluded[n:, None], np.nan, frame.bottom_t)
             # the currents the coils really carry (the R-L model), not the command they lag
             est = self.localizer.locate(top, bottom, currents=self.current_a.copy())
             self.last_estimate_ok = bool(est.ok)
@@ -437,6 +457,19 @@ class Runner:
                               f"(limits {cfg.current_limit_a} A, {cfg.total_current_a} A)")
             return self._record(t_s, t0, p, f_ref, new_frame, off=True)
         return self._drive(t_s, t0, p, f_ref, command, new_frame)
+
+    def _expected_saturation(self) -> np.ndarray:
+        """(2 n,) bool: sensors the model expects beyond :data:`EXPECTED_SATURATION` of the
+        linear range (coils at the modelled currents, plus the magnet's dipole field)."""
+        n = self.cfg.n_coils
+        coil_field = getattr(self.map, "sensor_coil_field", None)
+        if coil_field is None:
+            return np.zeros(2 * n, dtype=bool)
+        b = np.asarray(coil_field(self.current_a), float).reshape(2 * n, 3)
+        if self.have_fix and np.all(np.isfinite(self.position_m)):
+            pts = np.asarray(self.map.sensor_positions_m, float).reshape(-1, 3)
+            b = b + multipole_field(pts, self.position_m, self.moment)
+        return np.any(np.abs(b) > EXPECTED_SATURATION * TLV493D_LINEAR_RANGE_T, axis=1)
 
     def _reinit_pwm(self, t_s: float) -> bool:
         """Re-initialise the PWM boards after a NACK; latch after ``max_pwm_retries`` failures."""

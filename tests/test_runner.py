@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from designkit.array import CoilArray
 from designkit.design import default_design
 from designkit.errors import BadInputError
 from designkit.plant import (FAULT_TYPES, FaultSchedule, SimulatedDevice, Trajectory, simulate,
@@ -83,15 +84,15 @@ def test_thermal_guard_matches_the_closed_form_of_first_order_heating():
 @pytest.fixture(scope="module")
 def device_and_a():
     design = default_design()
-    dev = SimulatedDevice(design, seed=3)
-    a = dev.array.actuation_matrix(np.array([0.0, 0.0, 0.04]))
-    return design, a
+    array = CoilArray.from_design(design)      # one coupled solve for the module
+    a = array.actuation_matrix(np.array([0.0, 0.0, 0.04]))
+    return design, array, a
 
 
 def _run(device_and_a, faults: str, duration_s: float, *, limit=4.8, total=20.0,
          resume_after_s=0.1):
-    design, a = device_and_a
-    dev = SimulatedDevice(design, seed=4)
+    design, array, a = device_and_a
+    dev = SimulatedDevice(design, array, seed=4)
     traj = slide_trajectory(lambda x, y: np.full_like(x, 0.05), duration_s=duration_s,
                             samples=401)
     moment = dev.moment
@@ -115,13 +116,9 @@ def _run(device_and_a, faults: str, duration_s: float, *, limit=4.8, total=20.0,
     return dev, holder["runner"], res
 
 
-@pytest.mark.parametrize("fault", FAULT_TYPES)
-def test_each_fault_ends_in_the_safe_state(device_and_a, fault):
-    dev, runner, res = _run(device_and_a, f"{fault}@0.3", 0.5)
+def _check_fault(res, fault, entry):
     c = res.columns
     st = c["state"]
-    assert (st == "running").sum() > 100, "the loop never ran"
-    [entry] = time_to_safe(c, res.faults, 1e-3)
     assert entry["state"] == fault
     # from the step that can see the fault (a sensor fault needs the frame that shows it)
     detected = [t for t, name, _ in res.fault_log if name == fault]
@@ -136,14 +133,32 @@ def test_each_fault_ends_in_the_safe_state(device_and_a, fault):
     assert latency <= bound + 1e-12
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("fault", FAULT_TYPES)
+def test_each_fault_ends_in_the_safe_state(device_and_a, fault):
+    dev, runner, res = _run(device_and_a, f"{fault}@0.3", 0.5)
+    assert (res.columns["state"] == "running").sum() > 100, "the loop never ran"
+    [entry] = time_to_safe(res.columns, res.faults, 1e-3)
+    _check_fault(res, fault, entry)
+
+
+def test_three_faults_in_one_short_run_each_end_in_the_safe_state(device_and_a):
+    faults = ("pwm_nack", "sensor_stuck", "over_limit")
+    dev, runner, res = _run(device_and_a, "pwm_nack@0.15,sensor_stuck@0.45,over_limit@0.75",
+                            0.9)
+    entries = time_to_safe(res.columns, res.faults, 1e-3)
+    assert [e["fault"] for e in entries] == list(faults)
+    for fault, entry in zip(faults, entries):
+        _check_fault(res, fault, entry)
+
+
 def test_safe_state_is_one_all_off_write_per_board(device_and_a):
-    design, a = device_and_a
-    dev = SimulatedDevice(design)
+    design, array, a = device_and_a
+    dev = SimulatedDevice(design, array)
     cfg = RunnerConfig(resistance_ohm=(dev.resistance_ohm,) * 9,
                        inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
                        current_limit_a=4.8, total_current_a=20.0)
     truth = {"p": np.array([0.0, 0.0, 0.03])}
-    frames = iter([None])
 
     class Source:
         def __call__(self, t):
@@ -152,8 +167,7 @@ def test_safe_state_is_one_all_off_write_per_board(device_and_a):
 
     r = Runner(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0),
                TruthLocalizer(lambda: truth["p"]), HoldTracker(), clipped_lstsq, dev.coils,
-               Source(), cfg, log=lambda line: None)
-    del frames
+               Source(), cfg, log=lambda line: None, clock=lambda: 0.0)
     r.start()
     rec = r.step(0.0)
     assert rec.state == "running" and np.any(rec.command_a != 0)
@@ -188,8 +202,8 @@ def test_thermal_fault_stays_off_until_cooled(device_and_a):
 
 
 def test_pwm_nack_is_latched_after_repeated_failures(device_and_a):
-    design, a = device_and_a
-    dev = SimulatedDevice(design)
+    design, array, a = device_and_a
+    dev = SimulatedDevice(design, array)
     cfg = RunnerConfig(resistance_ohm=(dev.resistance_ohm,) * 9,
                        inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
                        current_limit_a=4.8, total_current_a=20.0, resume_after_s=0.01,
@@ -202,7 +216,7 @@ def test_pwm_nack_is_latched_after_repeated_failures(device_and_a):
 
     r = Runner(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0),
                TruthLocalizer(lambda: np.array([0.0, 0.0, 0.03])), HoldTracker(), clipped_lstsq,
-               dev.coils, Source(), cfg, log=lambda line: None)
+               dev.coils, Source(), cfg, log=lambda line: None, clock=lambda: 0.0)
     r.start()
     assert r.step(0.0).state == "running"
     dev.sim_boards[0].nack_always = True
