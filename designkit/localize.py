@@ -368,14 +368,22 @@ class SensorSimulator:
         return tlv_readout(field_t, self.errors, self.noise_t, rng or self.rng)
 
 
+def analog_reading(field_t: np.ndarray, errors: SensorErrors, noise_t: float,
+                   rng: np.random.Generator) -> np.ndarray:
+    """What each sensor's ADC converts, T, (k, 2, n, 3): gain * R^T B + offset + noise, for the
+    true field (k, 2, n, 3) T in the array frame (the register-level TLV493D model of
+    firmware_io.sim quantizes it)."""
+    local = np.einsum("asji,kasj->kasi", errors.rotations, field_t)  # R^T B
+    return errors.gains * local + errors.offsets_t + rng.normal(scale=noise_t, size=local.shape)
+
+
 def tlv_readout(field_t: np.ndarray, errors: SensorErrors, noise_t: float,
                 rng: np.random.Generator) -> Readings:
     """The TLV493D chain: gain * R^T B + offset + noise -> 12-bit codes (clipped at -2048 /
     +2047) -> tesla; a sensor with any axis beyond +-130 mT (outside the linear range) or dead
     reads NaN. ``field_t`` (k, 2, n, 3) T in the array frame."""
     e = errors
-    local = np.einsum("asji,kasj->kasi", e.rotations, field_t)  # R^T B
-    s = e.gains * local + e.offsets_t + rng.normal(scale=noise_t, size=local.shape)
+    s = analog_reading(field_t, errors, noise_t, rng)
     codes = np.clip(np.rint(s / TLV_LSB_T), TLV_CODE_MIN, TLV_CODE_MAX).astype(np.int16)
     meas = codes * TLV_LSB_T
     sat = np.any(np.abs(meas) > TLV_LINEAR_RANGE_T, axis=-1)

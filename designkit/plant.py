@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import BadInputError
+from .localize import analog_reading
 
 FAULT_TYPES = ("pwm_nack", "sensor_stuck", "sensor_dead", "sensor_saturated", "out_of_box",
                "overrun", "over_limit", "thermal")
@@ -180,62 +181,9 @@ class FaultSchedule:
 # physics at the sensors
 
 
-def magnet_sensor_field(array, design, sensor_positions_m, magnet_position_m):
-    """Field of the magnet at the sensors, T, shape of ``sensor_positions_m``: its exact field
-    (a uniformly magnetized cylinder, axis along its moment) plus, when the array model provides
-    it, the field of the cores the magnet magnetizes."""
-    from .field import magnetized_cylinder_field
-
-    pts = np.asarray(sensor_positions_m, float).reshape(-1, 3)
-    mag = design.magnet
-    moment = magnet_moment(design)
-    flip = np.array([1.0, 1.0, 1.0 if moment[2] >= 0 else -1.0])
-    rel = pts - np.asarray(magnet_position_m, float)
-    b = magnetized_cylinder_field(rel * flip, mag.radius_m, mag.length_m,
-                                  mag.magnetization_a_per_m) * flip
-    induced = getattr(array, "magnet_core_field", None)
-    if induced is not None:
-        b = b + induced(pts, magnet_position_m, moment)
-    return b.reshape(np.shape(sensor_positions_m))
-
-
-def sensor_field(array, design, sensor_positions_m, magnet_position_m, currents_a):
-    """Flux density at every sensor, T, shape (2, n_coils, 3): the coils' field (winding + cores)
-    at the currents plus :func:`magnet_sensor_field`."""
-    pts = np.asarray(sensor_positions_m, float).reshape(-1, 3)
-    b, _ = array.field(pts, currents_a)
-    return b.reshape(np.shape(sensor_positions_m)) + magnet_sensor_field(
-        array, design, sensor_positions_m, magnet_position_m)
-
-
 def magnet_moment(design) -> np.ndarray:
     """The design's magnet moment vector, A m^2 (the polarity convention lives in the design)."""
-    m = getattr(design.magnet, "moment_vector_a_m2", None)
-    if m is not None:
-        return np.asarray(m, float)
-    return np.array([0.0, 0.0, design.magnet.moment_a_m2])
-
-
-def sensor_positions(design, array=None) -> np.ndarray:
-    """(2, n_coils, 3) m: upper array above each coil's top, lower array below its bottom."""
-    if array is not None and hasattr(array, "sensor_positions_m"):
-        return np.asarray(array.sensor_positions_m(), float)
-    c = np.asarray(design.coil_centres_m(), float)
-    top = c.copy()
-    top[:, 2] = 0.0 + design.sensors.offset_m
-    bottom = c.copy()
-    bottom[:, 2] = -design.coil.length_m - design.sensors.offset_m
-    return np.stack([top, bottom])
-
-
-@dataclass
-class PlantState:
-    """True state of the simulated device at one instant (SI)."""
-
-    t_s: float
-    position_m: np.ndarray
-    current_a: np.ndarray
-    voltage_v: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    return np.asarray(design.magnet.moment_vector_a_m2, float)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -252,6 +200,9 @@ class SimulatedDevice:
         The physics (default ``CoilArray.from_design(design)``).
     noise_t : float
         Sensor noise, T rms per axis (TLV493D datasheet: 0.1 mT), added before quantization.
+    sensor_errors : {'default', 'ideal'} or designkit.localize.SensorErrors
+        Offsets, gains and mounting errors of the sensors (designkit.localize's stated defaults:
+        0.5 mm, 1 degree, 1 % gain, 0.01 mT offset after calibration).
     seed : int
     resistance_ohm, inductance_h : float, optional
         The coils' true R and L (default: from the design's coil model).
@@ -261,7 +212,8 @@ class SimulatedDevice:
     """
 
     def __init__(self, design, array=None, *, noise_t: float = 1e-4, seed: int = 0,
-                 resistance_ohm: float | None = None, inductance_h: float | None = None):
+                 sensor_errors="default", resistance_ohm: float | None = None,
+                 inductance_h: float | None = None):
         from firmware_io.coils import CoilDriver
         from firmware_io.devices import PCA9685
         from firmware_io.md10c import MD10C_CONTINUOUS_A, CoilDrive
@@ -270,6 +222,7 @@ class SimulatedDevice:
 
         from .array import CoilArray
         from .coil import Coil
+        from .localize import SensorSimulator
 
         self.design = design
         self.array = array if array is not None else CoilArray.from_design(design)
@@ -283,7 +236,12 @@ class SimulatedDevice:
         self.noise_t = float(noise_t)
         self.rng = np.random.default_rng(seed)
         self.moment = magnet_moment(design)
-        self.sensor_positions_m = sensor_positions(design, self.array)
+        # the localization issue's sensor physics: exact magnet field, coils + cores, the cores
+        # the magnet magnetizes (coupled solve), offsets/gains/mounting errors and noise
+        self.sensor_sim = SensorSimulator(design, array=self.array, errors=sensor_errors,
+                                          noise_t=noise_t, moment_direction=self.moment,
+                                          induced="coupled", seed=seed)
+        self.sensor_positions_m = self.sensor_sim.nominal_m
 
         self.coil_clock = SimClock()
         self.coil_bus = SimBus(scl_hz=1e6, clock=self.coil_clock)
@@ -331,7 +289,8 @@ class SimulatedDevice:
         return self.current_a
 
     # -- physics ---------------------------------------------------------------------------------
-    def prepare(self, positions_m, *, sample_step_m: float = 2.5e-4, max_stride: int = 10) -> None:
+    def prepare(self, positions_m, *, sample_step_m: float = 2.5e-4, max_stride: int = 10,
+                induced_step_m: float = 2e-3) -> None:
         """Evaluate the array model once, in one batch, along every step's true position.
 
         The finger's path is scripted, so the model is never called inside the loop: it is
@@ -364,23 +323,39 @@ class SimulatedDevice:
         steps = np.arange(len(p))
         self.force_per_amp = _interp_rows(steps, idx, f_s)
         self.bias_n = _interp_rows(steps, idx, b_s)
-        self.sensor_per_amp = self.array.actuation_matrix(
-            self.sensor_positions_m.reshape(-1, 3))[:, :3, :]
+        # the magnet-induced core field at the sensors is a small, smooth term (a few mT):
+        # sampled every induced_step_m of travel
+        coarse = [0]
+        for k in idx[1:]:
+            if (np.linalg.norm(p[k] - p[coarse[-1]]) >= induced_step_m
+                    or np.linalg.norm(p[k] - p[k - 1]) > 1e-3):
+                if coarse[-1] != k - 1 and np.linalg.norm(p[k] - p[k - 1]) > 1e-3:
+                    coarse.append(k - 1)
+                coarse.append(int(k))
+        if coarse[-1] != len(p) - 1:
+            coarse.append(len(p) - 1)
+        coarse = np.asarray(sorted(set(coarse)))
+        self.induced_t = _interp_rows(steps, coarse, self.sensor_sim.induced_part(p[coarse]))
+        self.path_m = p
 
     def true_force_n(self, step: int, current_a) -> np.ndarray:
         """Force on the magnet at step ``step``'s true position, N, shape (3,)."""
         return self.force_per_amp[step] @ current_a + self.bias_n[step]
 
-    def sensor_readings_t(self, position_m, current_a) -> np.ndarray:
-        """(2 n_coils, 3) T: the field at each sensor plus noise and injected offsets."""
-        b = self.sensor_per_amp @ current_a + magnet_sensor_field(
-            self.array, self.design, self.sensor_positions_m, position_m).reshape(-1, 3)
-        return b + self.rng.normal(0.0, self.noise_t, b.shape) + self.field_offset_t
+    def sensor_readings_t(self, step: int, position_m, current_a) -> np.ndarray:
+        """(2 n_coils, 3) T, what each sensor's ADC converts at step ``step`` (magnet at
+        ``position_m``): the field (magnet, coils, induced cores) through the sensor errors,
+        plus noise and injected offsets; the TLV493D models quantize and clip it."""
+        sim = self.sensor_sim
+        b = (sim.magnet_part(np.asarray(position_m, float)[None])[0]
+             + sim.coil_part(np.asarray(current_a, float)[None])[0] + self.induced_t[step])
+        a = analog_reading(b[None], sim.errors, self.noise_t, self.rng)[0].reshape(-1, 3)
+        return a + self.field_offset_t
 
-    # -- the runner's sensor source ---------------------------------------------------------------
-    def sensor_source(self, position_at) -> "SimSensorSource":
-        """The runner's sensor source on this device; ``position_at(t_s)`` is the true position."""
-        return SimSensorSource(self, position_at)
+    def sensor_source(self, position_at, period_s: float) -> "SimSensorSource":
+        """The runner's sensor source on this device; ``position_at(t_s)`` is the true position
+        (the path given to :meth:`prepare`, one sample per control period ``period_s``)."""
+        return SimSensorSource(self, position_at, period_s)
 
 
 def _interp_rows(steps, idx, values):
@@ -403,8 +378,8 @@ class SimSensorSource:
     each frame carries the field of the previous pass's start time.
     """
 
-    def __init__(self, device: SimulatedDevice, position_at):
-        self.device, self.position_at = device, position_at
+    def __init__(self, device: SimulatedDevice, position_at, period_s: float):
+        self.device, self.position_at, self.period_s = device, position_at, period_s
         self.in_flight = None      # (ready time s, field time s, reading)
         self.ready = None          # a frame the runner has not taken yet
         self.last_set_s = 0.0
@@ -420,7 +395,9 @@ class SimSensorSource:
                 return
             self.ready = SensorFrame(reading.top_t, reading.bottom_t, reading.status, field_s)
             self.frame_truth_m = self.position_at(field_s)   # diagnostics: where it really was
-        b = dev.sensor_readings_t(self.position_at(t_s), dev.current_a)
+        step = int(round(t_s / self.period_s))
+        b = dev.sensor_readings_t(min(step, len(dev.path_m) - 1), self.position_at(t_s),
+                                  dev.current_a)
         for sensor, bi in zip(dev.tlv, b):
             sensor.field_t = tuple(bi)
         dev.sensor_clock.t = t_s
@@ -514,7 +491,7 @@ def simulate(device: SimulatedDevice, runner_factory, trajectory: Trajectory, *,
     true_p = np.array([position_at(ts) for ts in t])
     vel = np.gradient(true_p, period_s, axis=0)
     device.prepare(true_p)
-    source = device.sensor_source(position_at)
+    source = device.sensor_source(position_at, period_s)
     extra: dict = {}
 
     def allocate_hook(allocate):
@@ -525,9 +502,13 @@ def simulate(device: SimulatedDevice, runner_factory, trajectory: Trajectory, *,
             return i, r
         return wrapped
 
-    # compute time = this thread's CPU time: the plant shares the host with the runner, and the
-    # helpers running beside it would otherwise show up as (fake) overruns
-    runner = runner_factory(source, _time.thread_time, allocate_hook)
+    # compute time = this thread's CPU time (the plant shares the host with the runner; other
+    # processes would otherwise show up as overruns) less the time spent inside the simulated
+    # PWM boards (the plant's, not the runner's)
+    def clock() -> float:
+        return _time.thread_time() - device.coil_bus.model_time_s
+
+    runner = runner_factory(source, clock, allocate_hook)
     n = device.array.n_coils
     cols = {k: np.zeros(n_steps) for k in (
         "t_s", "x_m", "y_m", "z_m", "xe_m", "ye_m", "ze_m", "fx_ref_n", "fy_ref_n", "fz_ref_n",
@@ -831,3 +812,141 @@ def force_error_causes(device: SimulatedDevice, fieldmap, result: SimulationResu
 def _inside(fieldmap, q) -> np.ndarray:
     lo, hi = (np.asarray(b, float) for b in fieldmap.bounds)
     return np.all((q >= lo) & (q <= hi), axis=1)
+
+
+# ---------------------------------------------------------------------------------------------
+# the whole simulated run (designkit run --simulate)
+
+COIL_SURFACE_HEAT_TRANSFER_W_M2_K = 10.0
+"""Natural convection from the winding's outer surface and end faces (assumed), W/(m^2 K): sets
+the winding's cooling time constant m c / (h A) of the runner's I^2 t guard."""
+
+
+def drive_data(design) -> dict:
+    """The runner's drive data from the design (SI): coil R at the operating temperature, L
+    (with the core), the supply (at most the MD10C's 30 V), the current bounds and the I^2 t
+    budget (adiabatic heating from the operating temperature to 100 C at the current limit,
+    cooled with the time constant m c / (h A))."""
+    from . import electrical
+    from .coil import Coil
+
+    coil = Coil.from_design(design)
+    r = coil.resistance(design.wire)
+    ind = coil.inductance(design.wire)
+    w = design.wire
+    mass = electrical.copper_mass(design.coil.inner_radius_m, design.coil.outer_radius_m,
+                                  design.coil.turns, w.diameter_m)
+    limit = min(design.drive.max_current_a, design.drive.driver_max_voltage_v / r,
+                design.drive.supply_voltage_v / r)
+    t_max = electrical.time_to_temperature(mass, limit, r, w, w.operating_temperature_c,
+                                           electrical.DEFAULT_MAX_TEMPERATURE_C)
+    budget = limit ** 2 * t_max
+    c = design.coil
+    area = 2 * math.pi * c.outer_radius_m * c.length_m + 2 * math.pi * (
+        c.outer_radius_m ** 2 - c.inner_radius_m ** 2)
+    tau = mass * electrical.COPPER_SPECIFIC_HEAT_J_KG_K / (COIL_SURFACE_HEAT_TRANSFER_W_M2_K * area)
+    return {"resistance_ohm": [r] * design.array.rows * design.array.columns,
+            "inductance_h": [ind] * design.array.rows * design.array.columns,
+            "supply_voltage_v": min(design.drive.supply_voltage_v,
+                                    design.drive.driver_max_voltage_v),
+            "current_limit_a": float(limit), "total_current_a": design.drive.total_current_a,
+            "thermal_continuous_current_a": math.sqrt(budget / tau),
+            "thermal_time_constant_s": tau}
+
+
+def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "slide",
+                   duration_s: float | None = None, faults: str = "none", map_path=None,
+                   method: str = "model", period_s: float = 1e-3, unipolar: bool = False,
+                   lam_n_per_m: float | None = None, rows: str = "force", seed: int = 0,
+                   out=Path("run-out"), progress: bool = True) -> dict:
+    """Build (or load) the map, compile the scene, close the runner around the simulated device,
+    and write run.csv, summary.json, run.png and loop_timing.png into ``out``. Returns the
+    summary. Every input is checked before anything is computed.
+
+    ``rows``: 'force' renders the object's 3-D force, 'fz' only its vertical component (the
+    thesis' eq. 4.6; the runner then evaluates only the two rows of A(p) Fz needs).
+    """
+    from firmware_io.allocation import allocate
+    from firmware_io.localization import ConstantVelocityKalman, Localizer
+    from firmware_io.mapfile import MapFile
+    from firmware_io.runner import Runner, RunnerConfig
+    from firmware_io.scene import Scene
+
+    from . import fieldmap
+    from ._io import write_json_atomic
+    from .array import CoilArray
+    from .design import Design, load_design
+    from .render.laws import ConstraintLaw
+    from .render.scenefile import compile_scene, make_object
+
+    design = design if isinstance(design, Design) else load_design(design)
+    if rows not in ("force", "fz"):
+        raise BadInputError("rows", "'force' (3-D) or 'fz' (the thesis' vertical force)", rows)
+    if not 1e-4 <= period_s <= 0.05:
+        raise BadInputError("period", "in [0.1, 50] ms", period_s * 1e3)
+    virtual = make_object(obj)
+    if trajectory == "slide":
+        path = slide_trajectory(lambda x, y: virtual.height(np.c_[x, y, np.zeros_like(x)]),
+                                duration_s=duration_s or 4.0)
+    elif trajectory == "poke":
+        path = poke_trajectory(lambda x, y: virtual.height(np.c_[x, y, np.zeros_like(x)]),
+                               duration_s=duration_s or 3.0)
+    else:
+        path = Trajectory.from_csv(trajectory)
+    duration = float(duration_s or path.duration_s)
+    if not 0 < duration <= 600:
+        raise BadInputError("duration", "in (0, 600] s", duration)
+    schedule = FaultSchedule.parse(faults, duration)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+
+    array = CoilArray.from_design(design)
+    if map_path is None:
+        map_path = out / "map.npz"
+        data = fieldmap.build(design, array=array, progress=progress)
+        fieldmap.write(map_path, data)
+    fmap = MapFile.load(map_path, expected_design_sha256=design.spec_hash())
+    lam = design.render.stiffness_n_per_m if lam_n_per_m is None else float(lam_n_per_m)
+    scene_path = compile_scene(virtual, out / "scene.npz", lam_n_per_m=lam,
+                               law=ConstraintLaw(lam), map_design_sha256=fmap.design_sha256,
+                               extra_meta={"object": obj, "rows": rows})
+    scene = Scene.load(scene_path, expected_design_sha256=fmap.design_sha256)
+    drive = drive_data(design)
+    device = SimulatedDevice(design, array, seed=seed, resistance_ohm=drive["resistance_ohm"][0],
+                             inductance_h=drive["inductance_h"][0])
+
+    def factory(source, clock, hook):
+        cfg = RunnerConfig(**{k: tuple(v) if isinstance(v, list) else v
+                              for k, v in drive.items()},
+                           control_period_s=period_s, unipolar=unipolar,
+                           force_axes="z" if rows == "fz" else "xyz")
+        localizer = Localizer.from_map(map_path, method=method)
+        runner = Runner(fmap, _SceneForce(scene), localizer, ConstantVelocityKalman(),
+                        hook(allocate), device.coils, source, cfg, clock=clock,
+                        log=lambda line: print(line) if progress else None)
+        runner.start()
+        return runner
+
+    res = simulate(device, factory, path, duration_s=duration, period_s=period_s,
+                   faults=schedule, scene_force=_SceneForce(scene).force, progress=progress)
+    causes = force_error_causes(device, fmap, res)
+    summary = summarize(res, causes)
+    summary.update({"object": obj, "trajectory": str(trajectory), "design": design.name,
+                    "rows": rows,
+                    "lambda_n_per_m": lam, "method": method, "unipolar": unipolar,
+                    "drive": drive})
+    write_run_csv(out / "run.csv", res.columns)
+    write_json_atomic(out / "summary.json", summary)
+    plot_run(res, out, surface_height=lambda x, y: virtual.height(np.c_[x, y, np.zeros_like(x)]),
+             title=f"{obj}: {trajectory}, lambda = {lam:g} N/m")
+    return summary
+
+
+class _SceneForce:
+    """The compiled scene's force at one point, (3,) N (the runner's scene interface)."""
+
+    def __init__(self, scene):
+        self.scene = scene
+
+    def force(self, p, v):
+        return self.scene.force(np.asarray(p, float)[None], np.asarray(v, float)[None])[0]

@@ -188,7 +188,9 @@ class RunnerConfig:
     max_pwm_retries : int
         PCA9685 re-initialisations before a ``pwm_nack`` is latched.
     overrun_factor : float
-        A step is an overrun when its compute time exceeds ``overrun_factor * control_period_s``.
+        A step is an overrun when its compute time exceeds ``overrun_factor * control_period_s``
+        (default 3: the coils then held one command for 3 periods; a single slow step of a
+        1 kHz loop is a late update, not a hazard; the benchmark's target is p99 <= 1 period).
     """
 
     resistance_ohm: tuple
@@ -205,7 +207,7 @@ class RunnerConfig:
     thermal_time_constant_s: float = 300.0
     resume_after_s: float = 0.25
     max_pwm_retries: int = 3
-    overrun_factor: float = 1.0
+    overrun_factor: float = 3.0
 
     def __post_init__(self):
         n = len(self.resistance_ohm)
@@ -332,15 +334,25 @@ class Runner:
         self.have_fix = False
         self.position_m = np.full(3, np.nan)
         self.fault_log: list[tuple[float, str, str]] = []
+        # modelled currents at the start of each of the last steps (frames arrive late)
+        self.history: list[tuple[float, np.ndarray]] = []
+        self.history_len = max(8, int(0.1 / config.control_period_s))
         self.last_frame: SensorFrame | None = None
 
     # -- life cycle ----------------------------------------------------------------------------
     def start(self, pwm_frequency_hz: float = 1526.0) -> None:
-        """Initialise every PWM board into the safe state (all coils off)."""
+        """Initialise every PWM board into the safe state (all coils off), then run the step's
+        computations once at the box centre so that the first real step is not slowed by
+        first-call costs (an overrun)."""
         self.coils.initialize(pwm_frequency_hz)
         self.coils.all_off()
         self.current_a[:] = 0.0
         self.state = "safe"
+        centre = 0.5 * (self.lo + self.hi)
+        self._allocate(centre, np.asarray(self.scene.force(centre, np.zeros(3)), float))
+        feedforward_voltage(self.current_a, self.current_a, self.r, self.ind,
+                            self.cfg.control_period_s, self.cfg.supply_voltage_v)
+        self.coils.plan(np.zeros(self.cfg.n_coils))
 
     def stop(self) -> None:
         self.coils.all_off()
@@ -384,6 +396,7 @@ class Runner:
         """One control step at time ``t_s`` (s). Never raises for a device fault."""
         t0 = self.clock()
         cfg = self.cfg
+        self._remember(t_s)
         frame = self.sensors(t_s)
         new_frame = frame is not None
         problems: list[tuple[str, str]] = []
@@ -411,8 +424,9 @@ class Runner:
                                  f"{s!r}; excluded"))
             top = np.where(self.excluded[:n, None], np.nan, frame.top_t)
             bottom = np.where(self.excluded[n:, None], np.nan, frame.bottom_t)
-            # the currents the coils really carry (the R-L model), not the command they lag
-            est = self.localizer.locate(top, bottom, currents=self.current_a.copy())
+            # the currents the coils really carried when the frame's field was sampled (R-L
+            # model), not the command they lag nor today's
+            est = self.localizer.locate(top, bottom, currents=self._current_at(frame.t_s))
             self.last_estimate_ok = bool(est.ok)
             if est.ok:
                 self.tracker.update(np.asarray(est.position_m, float), frame.t_s, True)
@@ -457,6 +471,19 @@ class Runner:
                               f"(limits {cfg.current_limit_a} A, {cfg.total_current_a} A)")
             return self._record(t_s, t0, p, f_ref, new_frame, off=True)
         return self._drive(t_s, t0, p, f_ref, command, new_frame)
+
+    def _current_at(self, t_s: float) -> np.ndarray:
+        """Modelled coil currents at time ``t_s`` from the recent history (A, (n,))."""
+        hist = self.history
+        k = len(hist) - 1
+        while k > 0 and hist[k][0] > t_s + 1e-12:
+            k -= 1
+        return hist[k][1].copy() if hist else self.current_a.copy()
+
+    def _remember(self, t_s: float) -> None:
+        self.history.append((t_s, self.current_a.copy()))
+        if len(self.history) > self.history_len:
+            del self.history[0]
 
     def _expected_saturation(self) -> np.ndarray:
         """(2 n,) bool: sensors the model expects beyond :data:`EXPECTED_SATURATION` of the

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-OBJECTS = ("plane", "hemisphere", "halfcylinder", "wedge")
+OBJECTS = ("plane", "hemisphere", "half-cylinder", "wedge")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -35,6 +35,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--method", default="model", help="localization method (default model)")
     parser.add_argument("--period-ms", type=float, default=1.0, help="control period, ms")
     parser.add_argument("--unipolar", action="store_true", help="unipolar drive (the thesis')")
+    parser.add_argument("--rows", choices=["force", "fz"], default="force",
+                        help="render the object's 3-D force (default) or only Fz (thesis eq. 4.6)")
+    parser.add_argument("--lambda", dest="lam", type=float, default=None,
+                        help="force constant, N/m (default: the design's render.stiffness)")
     parser.add_argument("--seed", type=int, default=0, help="sensor-noise seed")
     parser.add_argument("--out", type=Path, default=Path("run-out"), help="output folder")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
@@ -51,7 +55,8 @@ def run(args: argparse.Namespace) -> int:
     summary = run_simulation(
         design=args.design, obj=args.object, trajectory=args.trajectory,
         duration_s=args.duration, faults=args.faults, map_path=args.map, method=args.method,
-        period_s=args.period_ms * 1e-3, unipolar=args.unipolar, seed=args.seed, out=args.out,
+        period_s=args.period_ms * 1e-3, unipolar=args.unipolar, rows=args.rows,
+        lam_n_per_m=args.lam, seed=args.seed, out=args.out,
         progress=not args.no_progress)
     print(f"wrote {args.out}/run.csv, summary.json, run.png, loop_timing.png: force error RMS "
           f"{_mn(summary['force_error_rms_n'])} (p95 {_mn(summary['force_error_p95_n'])}), "
