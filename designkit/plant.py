@@ -869,7 +869,7 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
     from firmware_io.allocation import allocate
     from firmware_io.localization import ConstantVelocityKalman, Localizer
     from firmware_io.mapfile import MapFile
-    from firmware_io.runner import Runner, RunnerConfig
+    from firmware_io.runner import Runner, RunnerConfig, SceneForce
     from firmware_io.scene import Scene
 
     from . import fieldmap
@@ -921,14 +921,14 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
                            control_period_s=period_s, unipolar=unipolar,
                            force_axes="z" if rows == "fz" else "xyz")
         localizer = Localizer.from_map(map_path, method=method)
-        runner = Runner(fmap, _SceneForce(scene), localizer, ConstantVelocityKalman(),
+        runner = Runner(fmap, SceneForce(scene), localizer, ConstantVelocityKalman(),
                         hook(allocate), device.coils, source, cfg, clock=clock,
                         log=lambda line: print(line) if progress else None)
         runner.start()
         return runner
 
     res = simulate(device, factory, path, duration_s=duration, period_s=period_s,
-                   faults=schedule, scene_force=_SceneForce(scene).force, progress=progress)
+                   faults=schedule, scene_force=SceneForce(scene).force, progress=progress)
     causes = force_error_causes(device, fmap, res)
     summary = summarize(res, causes)
     summary.update({"object": obj, "trajectory": str(trajectory), "design": design.name,
@@ -942,11 +942,3 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
     return summary
 
 
-class _SceneForce:
-    """The compiled scene's force at one point, (3,) N (the runner's scene interface)."""
-
-    def __init__(self, scene):
-        self.scene = scene
-
-    def force(self, p, v):
-        return self.scene.force(np.asarray(p, float)[None], np.asarray(v, float)[None])[0]

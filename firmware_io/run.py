@@ -78,7 +78,10 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _bus_number(text: str, what: str) -> int:
+def _bus_number(text: str, what: str, dev_dir: str = "/dev") -> int:
+    """The adapter number, checked to exist (``/dev/i2c-N``) before anything else is done."""
+    import os
+
     try:
         n = int(text)
     except ValueError:
@@ -86,19 +89,34 @@ def _bus_number(text: str, what: str) -> int:
                               f"received {text!r}") from None
     if n < 0:
         raise FirmwareIOError(f"{what} must be >= 0; instead received {n}")
+    node = os.path.join(dev_dir, f"i2c-{n}")
+    if not os.path.exists(node):
+        have = sorted(f for f in os.listdir(dev_dir) if f.startswith("i2c-")) \
+            if os.path.isdir(dev_dir) else []
+        raise FirmwareIOError(f"{what} {n}: {node} does not exist (adapters here: "
+                              f"{', '.join(have) or 'none'}; enable I2C, e.g. raspi-config)")
     return n
+
+
+def check_sensor_arrays(status, n_per_array: int, min_per_array: int = 4) -> None:
+    """Refuse to start when an array is missing: fewer than ``min_per_array`` sensors of the upper
+    or the lower array configured (the localization needs both)."""
+    for name, part in (("upper", status[:n_per_array]), ("lower", status[n_per_array:])):
+        ok = sum(s == "ok" for s in part)
+        if ok < min_per_array:
+            raise FirmwareIOError(f"the {name} sensor array answers with {ok} of {n_per_array} "
+                                  f"sensors (need >= {min_per_array}); statuses {list(part)}: "
+                                  "check its cable, the TCA9548A addresses and power")
 
 
 def load_inputs(map_path: str, scene_path: str, method: str):
     """Map, scene and localizer, checked against each other (no device is touched)."""
     from .localization import Localizer
     from .mapfile import MapFile
-    from .runner import check_same_design
-    from .scene import load_scene
+    from .scene import Scene
 
     fmap = MapFile.load(map_path)
-    scene = load_scene(scene_path)
-    check_same_design(fmap.design_sha256, scene.design_sha256)
+    scene = Scene.load(scene_path, expected_design_sha256=fmap.design_sha256)
     localizer = Localizer.from_map(map_path, method=method)
     return fmap, scene, localizer
 
@@ -123,24 +141,27 @@ def open_device(bus_number: int, sensor_bus_number: int | None, drive_args: dict
 
 def main(argv: list[str] | None = None) -> int:
     from .allocation import allocate
-    from .runner import Runner, config_from_map
+    from .localization import ConstantVelocityKalman
+    from .runner import Runner, SceneForce, config_from_map
 
     args = build_parser().parse_args(argv)
     try:
         bus_n = _bus_number(args.bus, "--bus")
         sbus_n = None if args.sensor_bus is None else _bus_number(args.sensor_bus, "--sensor-bus")
         fmap, scene, localizer = load_inputs(args.map, args.scene, args.method)
+        rows = scene.meta.get("rows", "force")
         cfg = config_from_map(fmap, control_period_s=args.period_ms * 1e-3,
-                              unipolar=args.unipolar)
+                              unipolar=args.unipolar, force_axes="z" if rows == "fz" else "xyz")
         coils, arrays = open_device(bus_n, sbus_n, {
             "n_coils": cfg.n_coils, "supply_voltage_v": cfg.supply_voltage_v,
             "resistance_ohm": cfg.resistance_ohm})
-        arrays.configure()
+        check_sensor_arrays(arrays.configure(), cfg.n_coils)
     except (FirmwareIOError, OSError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     source = ThreadedSensorSource(arrays)
-    runner = Runner(fmap, scene, localizer, localizer, allocate, coils, source, cfg)
+    runner = Runner(fmap, SceneForce(scene), localizer, ConstantVelocityKalman(), allocate,
+                    coils, source, cfg)
     runner.start()
     source.start()
     t0 = time.monotonic()

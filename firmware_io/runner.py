@@ -607,9 +607,12 @@ def config_from_map(fieldmap, **overrides) -> RunnerConfig:
     return RunnerConfig(**kw)
 
 
-def check_same_design(map_sha256: str, scene_sha256: str) -> None:
-    """Refuse a scene compiled for another map (before any coil is energized)."""
-    if map_sha256 != scene_sha256:
-        raise FirmwareIOError(f"scene file was compiled for design {scene_sha256[:12]}..., but the "
-                              f"map file is for design {map_sha256[:12]}...: recompile the scene "
-                              "with `designkit scene compile OBJECT --map MAPFILE`")
+class SceneForce:
+    """A compiled scene (:class:`firmware_io.scene.Scene`) as the runner's one-point interface:
+    ``force(position_m (3,), velocity_m_s (3,)) -> (3,)`` N."""
+
+    def __init__(self, scene):
+        self.scene = scene
+
+    def force(self, p, v):
+        return self.scene.force(np.asarray(p, float)[None], np.asarray(v, float)[None])[0]

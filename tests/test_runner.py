@@ -17,8 +17,8 @@ from designkit.errors import BadInputError
 from designkit.plant import (FAULT_TYPES, FaultSchedule, SimulatedDevice, Trajectory, simulate,
                              slide_trajectory, time_to_safe)
 from firmware_io.errors import FirmwareIOError
-from firmware_io.runner import (Runner, RunnerConfig, ThermalGuard, check_same_design,
-                                feedforward_voltage, rl_step)
+from firmware_io.runner import (Runner, RunnerConfig, ThermalGuard, feedforward_voltage,
+                                rl_step)
 
 from _runner_fakes import ConstantMap, HoldTracker, PlaneScene, TruthLocalizer, clipped_lstsq
 
@@ -231,9 +231,41 @@ def test_pwm_nack_is_latched_after_repeated_failures(device_and_a):
 # bad input, before anything is energized
 
 
-def test_scene_for_another_design_is_refused():
-    with pytest.raises(FirmwareIOError, match="recompile the scene"):
-        check_same_design("a" * 64, "b" * 64)
+def test_scene_for_another_design_is_refused(tmp_path):
+    from designkit.render.laws import ConstraintLaw
+    from designkit.render.scenefile import compile_scene, make_object
+    from firmware_io.scene import Scene
+
+    path = compile_scene(make_object("plane"), tmp_path / "s.npz", lam_n_per_m=6.0,
+                         law=ConstraintLaw(6.0), map_design_sha256="a" * 64)
+    with pytest.raises(ValueError, match="Recompile"):
+        Scene.load(path, expected_design_sha256="b" * 64)
+
+
+def test_hardware_entry_refuses_a_bus_that_does_not_exist(tmp_path, capsys):
+    from firmware_io import run
+
+    rc = run.main(["--bus", "97", "--map", str(tmp_path / "m.npz"),
+                   "--scene", str(tmp_path / "s.npz")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "i2c-97" in err and "does not exist" in err
+    assert "Traceback" not in err
+
+
+def test_hardware_entry_refuses_a_missing_sensor_array():
+    from firmware_io.errors import FirmwareIOError
+    from firmware_io.run import check_sensor_arrays
+    from firmware_io.sensors import SensorArrays
+    from firmware_io.sim import SimBus, SimClock, SimTCA9548A, SimTLV493D
+
+    clock = SimClock()
+    bus = SimBus(clock=clock)
+    muxes = [bus.attach(SimTCA9548A(0x71 + k)) for k in range(3)]
+    for i in range(9):                       # the upper array only: the lower cable is off
+        muxes[i // 8].attach(i % 8, SimTLV493D())
+    status = SensorArrays(bus, sleep=clock.sleep).configure()
+    with pytest.raises(FirmwareIOError, match="lower sensor array answers with 0 of 9"):
+        check_sensor_arrays(status, 9)
 
 
 def test_trajectory_file_with_wrong_columns(tmp_path):
