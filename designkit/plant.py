@@ -858,13 +858,14 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
                    duration_s: float | None = None, faults: str = "none", map_path=None,
                    method: str = "model", period_s: float = 1e-3, unipolar: bool = False,
                    lam_n_per_m: float | None = None, rows: str = "force", seed: int = 0,
-                   out=Path("run-out"), progress: bool = True) -> dict:
+                   out=Path("run-out"), progress: bool = True, array=None) -> dict:
     """Build (or load) the map, compile the scene, close the runner around the simulated device,
     and write run.csv, summary.json, run.png and loop_timing.png into ``out``. Returns the
     summary. Every input is checked before anything is computed.
 
     ``rows``: 'force' renders the object's 3-D force, 'fz' only its vertical component (the
-    thesis' eq. 4.6; the runner then evaluates only the two rows of A(p) Fz needs).
+    thesis' eq. 4.6; the runner then evaluates only the two rows of A(p) Fz needs). ``array``:
+    the design's CoilArray when the caller has one (its coupled solve is reused).
     """
     from firmware_io.allocation import allocate
     from firmware_io.localization import ConstantVelocityKalman, Localizer
@@ -900,7 +901,7 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
 
-    array = CoilArray.from_design(design)
+    array = array if array is not None else CoilArray.from_design(design)
     if map_path is None:
         map_path = out / "map.npz"
         data = fieldmap.build(design, array=array, progress=progress)

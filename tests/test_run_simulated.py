@@ -71,3 +71,9 @@ def test_bench_runner_smoke(map_file, tmp_path):
               "pca9685_bytes"):
         assert res[k]["median_us"] > 0
     assert res["step_with_frame"]["median_us"] > res["step_without_frame"]["median_us"]
+
+
+def test_render_runner_study_smoke(map_file, tmp_path):
+    res = load_study("render_runner").run(tmp_path / "r", map_path=map_file, quick=True)
+    [(key, v)] = res.items()
+    assert key == "plane/force" and v["localization_mae_m"] < 3e-3
