@@ -15,6 +15,7 @@ import dataclasses
 import hashlib
 import json
 import math
+import numbers
 import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -253,7 +254,7 @@ def design_from_dict(data: Mapping[str, Any], *, source: str = "design") -> Desi
     kwargs: dict[str, Any] = {}
     for key, value in data.items():
         if key == "name":
-            kwargs["name"] = str(value)
+            kwargs["name"] = value  # type-checked in check_design: 5 is not silently "5"
         elif key in _SECTIONS:
             if key == "core" and (value is False or value == {} and False):
                 kwargs["core"] = None
@@ -309,8 +310,24 @@ def design_to_toml(design: Design) -> str:
     return "\n".join(lines)
 
 
+def _check_type(name: str, value: Any, default: Any) -> None:
+    """The value has the type of the field's default: a string where text is expected, a whole
+    number for counts, a number (not text, not true/false) for quantities."""
+    if isinstance(default, str):
+        if not isinstance(value, str):
+            raise BadInputError(name, "a string (in TOML: quoted)", value)
+    elif isinstance(default, int):
+        if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+            raise BadInputError(name, "a whole number", value)
+    elif isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise BadInputError(name, "a number (in TOML: unquoted)", value)
+
+
 def check_design(d: Design) -> None:
-    """Range checks of every field; raises BadInputError naming the dotted parameter."""
+    """Type and range checks of every field; raises BadInputError naming the dotted parameter."""
+    _check_type("name", d.name, "")
+    if not d.name.strip():
+        raise BadInputError("name", "a non-empty string", d.name)
     for sec in _SECTIONS:
         obj = getattr(d, sec)
         if obj is None:
@@ -318,6 +335,7 @@ def check_design(d: Design) -> None:
         for f in fields(obj):
             val = getattr(obj, f.name)
             name = f"{sec}.{f.name}"
+            _check_type(name, val, f.default)
             if f.name == "bh":
                 if val not in ("linear", "steel1010"):
                     raise BadInputError(name, "'linear' or 'steel1010'", val)

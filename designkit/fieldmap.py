@@ -140,7 +140,7 @@ def compute_grid(array: CoilArray, axes, *, tolerance: float = 4e-4, progress: b
     ``(A, T, tables)``; pass ``tables`` back in to reuse them for another grid. ``cover``:
     more grids (lists of 3 axes) the new tables must also cover.
     """
-    from tqdm import tqdm
+    from ._progress import tqdm
 
     from .scene import _COMP, _rz_direct, assemble, build_table
 
@@ -285,7 +285,7 @@ def compute_rz_table(coil, spec: dict, *, progress: bool = True, chunk: int = 81
     """The table (n_rho, n_u, 4) float64 of ``spec`` by direct evaluation (Coil.field, rtol
     1e-10) on the nodes; e and w on the axis by Richardson extrapolation (both are even in rho).
     """
-    from tqdm import tqdm
+    from ._progress import tqdm
 
     from .scene import _rz_direct
 

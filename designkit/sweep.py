@@ -188,7 +188,7 @@ def run_sweep(design: Design, ranges: Sequence[ParamRange], *, workers: int | No
     t0 = time.perf_counter()
     bar = None
     if progress:
-        from tqdm import tqdm
+        from ._progress import tqdm
 
         bar = tqdm(total=len(vals), desc="sweep", unit="design")
     results: list = [None] * len(chunks)

@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 from ..design import load_design
+from ._common import add_progress_argument, show_progress
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -24,7 +25,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="height in mm of a grid at half the spacing over the bottom of the "
                              "box, where an iron core's rim makes the field vary fastest "
                              "(default 4; 0: none)")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_progress_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -33,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
     design = load_design(args.design)
     t0 = time.perf_counter()
     data = fieldmap.build(design, spacing=args.spacing * 1e-3, fine_slab=args.fine_slab * 1e-3,
-                          progress=not args.quiet)
+                          progress=show_progress(args))
     path = fieldmap.write(args.out, data)
     g = data["meta"]["grid"]
     print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB): grid {g['shape']} at "

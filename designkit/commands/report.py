@@ -39,6 +39,8 @@ from .. import __version__
 from .._io import write_json_atomic, write_text_atomic
 from ..coil import Coil
 from ..design import Design, design_to_toml, load_design
+from ._common import (add_currents_arguments, add_progress_argument, check_current_limit,
+                      check_output, parse_currents, show_progress, staged_folder)
 
 MAP_SPACING_M = {"quick": 0.015, "full": 0.005}
 """Grid spacing of the report's map file, m: coarse, to keep the job short."""
@@ -62,13 +64,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--current", type=float, default=None,
                         help="coil current in A for the design point (default: the design's "
                              "per-coil limit)")
-    parser.add_argument("--currents", default=None,
-                        help="per-coil currents in A for the figures, comma-separated, "
-                             "row-major (default: the centre coil at the per-coil limit)")
+    add_currents_arguments(parser, "per-coil currents in A for the figures, comma-separated, "
+                                   "row-major (default: the centre coil at the per-coil limit)")
     parser.add_argument("--quick", action="store_const", const="quick", dest="quality",
                         default="full",
                         help="coarse grids, small images, fewer optimizer starts (seconds)")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_progress_argument(parser)
 
 
 # ----------------------------------------------------------------------------- pieces
@@ -228,15 +229,31 @@ def _field_map(design: Design, out: Path, quality: str) -> Path:
 
 # ----------------------------------------------------------------------------- main job
 def run(args: argparse.Namespace) -> int:
+    # every input is checked before the first file is written, and the files are written into
+    # a staging folder moved into place at the end: a failing run leaves nothing behind
+    out = check_output(args.out, folder=True)
     design = load_design(args.design)
-    out = Path(args.out)
-    quality = getattr(args, "quality", "full")
     current = design.drive.max_current_a if args.current is None else float(args.current)
-    show = not getattr(args, "no_progress", False)
+    allow = getattr(args, "allow_over_limit", False)
+    check_current_limit(design, [current], allow=allow, param="--current")
+    from ..viz import resolve_currents
+
+    currents_arg = parse_currents(getattr(args, "currents", None))
+    if currents_arg is not None:
+        check_current_limit(design, resolve_currents(design, currents_arg), allow=allow)
+    with staged_folder(out) as stage:
+        summary, report = _run(args, design, current, currents_arg, stage)
+    _print_summary(design, summary, current, report, out)
+    return 0
+
+
+def _run(args, design, current, currents_arg, out):
+    quality = getattr(args, "quality", "full")
+    show = show_progress(args)
     steps = ["design summary", "design point", "optimized coil", "figures", "VTK files",
              "map file", "report"]
     try:
-        from tqdm import tqdm
+        from .._progress import tqdm
 
         bar = tqdm(total=len(steps), desc="designkit report", unit="step", disable=not show)
     except ImportError:  # pragma: no cover - tqdm is a dependency
@@ -275,9 +292,6 @@ def run(args: argparse.Namespace) -> int:
         "design_point": summary,
         "coil": derived,
     }
-    from .viz import parse_currents
-
-    currents_arg = parse_currents(getattr(args, "currents", None))
     viz = None
     try:
         from .. import viz as viz_module
@@ -336,8 +350,7 @@ def run(args: argparse.Namespace) -> int:
     done()
     if bar is not None:
         bar.close()
-    _print_summary(design, summary, current, report, out)
-    return 0
+    return summary, report
 
 
 def _figures_and_vtk(viz, design, currents, quality, out, report, step, done, steps):
