@@ -14,7 +14,7 @@ from pathlib import Path
 from ..design import load_design
 from ..errors import BadInputError
 from ..optimize import CORE_MODEL_NAMES
-from ..sweep import PARAMETERS, grid, parse_param, plot, run_sweep, write_csv
+from ..sweep import PARAMETERS, grid, parse_param, plot, reason_summary, run_sweep, write_csv
 from ._common import add_progress_argument, check_output, show_progress
 
 
@@ -56,5 +56,8 @@ def run(args: argparse.Namespace) -> int:
               f"{b['outer_radius_m'] * 1e3:.2f} mm, L {b['length_m'] * 1e3:.2f} mm, "
               f"{b['turns']} turns, R {b['resistance_ohm']:.3f} ohm, 5 tau "
               f"{5e3 * b['time_constant_s']:.2f} ms, force {b['force_n'] * 1e3:.1f} mN")
+    if feas == 0:
+        print(f"no feasible design; why (column 'reason' of {csv_path.name}):\n"
+              + reason_summary(result))
     print(f"wrote {csv_path} and {png_path}")
     return 0
