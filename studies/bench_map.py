@@ -119,9 +119,9 @@ def _print(res):
 
 
 if __name__ == "__main__":
-    import tempfile
-
-    out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(tempfile.mkdtemp(prefix="bench_map_"))
+    
+    out = (Path(sys.argv[1]) if len(sys.argv) > 1
+           else Path(__file__).resolve().parents[1] / "out" / "bench_map")
     _print(run(out))
     print("targets: build <= 30 s, 1 point <= 20 us (default: 3-D grid 'quadratic'), 1e4 points "
           "<= 5 ms (default: 'tables'), error <= 1e-3")
