@@ -57,7 +57,7 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 
 from . import _validate as v
-from .design import MU0
+from .constants import MU0
 from .errors import BadInputError
 
 if TYPE_CHECKING:  # pragma: no cover

@@ -22,11 +22,9 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from . import _validate as v
+from .constants import MU0  # noqa: F401  (re-exported: designkit.design.MU0 is public)
 from .errors import BadInputError, DesignRuleError
 
-MU0 = 4e-7 * math.pi
-"""Vacuum permeability used throughout designkit, T m / A. The classical exact value
-4 pi 1e-7; it differs from CODATA 2022 (1.25663706127e-6) by 1.3e-10 relative."""
 
 
 @dataclass(frozen=True)

@@ -47,7 +47,8 @@ import numpy as np
 from scipy.special import itj0y0, j0, j1
 
 from . import _validate as v
-from .design import MU0, DriveSpec, OptimizeSpec, WireSpec
+from .constants import MU0
+from .design import DriveSpec, OptimizeSpec, WireSpec
 from .errors import BadInputError
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -415,17 +416,14 @@ def design_rule_violations(*, resistance_ohm: float, settling_time_s: float, tur
     return out
 
 
-def electrical_report(design: "Design", coil: "Coil | None" = None, *,
+def electrical_report(design: "Design", coil: "Coil", *,
                       max_temperature_c: float = DEFAULT_MAX_TEMPERATURE_C) -> ElectricalReport:
-    """Everything electrical and thermal about ``coil`` (default: the design's coil).
+    """Everything electrical and thermal about ``coil`` (``Coil.from_design(design)`` for the
+    design's own: this module sits below designkit.coil and does not build coils).
 
     Resistance at the wire's operating temperature; current = V/R capped by the driver's
     continuous rating; thermal estimate at that current from the operating temperature.
     """
-    from .coil import Coil
-
-    if coil is None:
-        coil = Coil.from_design(design)
     wire = _check_wire(design.wire)
     r = resistance(coil, wire)
     l_air = air_inductance(coil)

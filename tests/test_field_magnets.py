@@ -33,7 +33,8 @@ def _points(radius, length, n=3000, seed=11):
                                                MagnetSpec().magnetization_a_per_m),
                                               (0.012, 0.110, -3.3e5)])
 def test_cylinder_matches_magpylib(radius, length, m):
-    magpy = pytest.importorskip("magpylib")
+    import magpylib as magpy
+
     p = _points(radius, length)
     # B / mu0 = H + M: independent of the mu0 each library uses
     b_mp = magpy.func.cylinder_field("B", p, (2 * radius, length), (0, 0, magpy.mu_0 * m))
@@ -49,7 +50,8 @@ def test_n52_magnet_axis_closed_form_and_far_field():
     b = magnetized_cylinder_field(np.stack([0 * z, 0 * z, z], 1), a, ln, m)
     # axis: Bz = mu0 M / 2 [(z + h)/sqrt((z+h)^2 + a^2) - (z - h)/sqrt((z-h)^2 + a^2)]
     # (in mpmath: in float64 the difference cancels far away)
-    mp = pytest.importorskip("mpmath")
+    import mpmath as mp
+
     mp.mp.dps = 30
     h = mp.mpf(ln) / 2
     bz = [float(MU0 * m / 2 * ((zz + h) / mp.sqrt((zz + h) ** 2 + a**2)

@@ -26,7 +26,6 @@ def test_report_folder_is_complete(quick_report):
     rep = json.loads((out / "report.json").read_text())
     for key in ("designkit_version", "design_name", "design_hash", "design", "design_point"):
         assert key in rep
-    pytest.importorskip("pyvista")
     assert set(rep["figures"]) == {"scene", "fieldlines", "slice-B", "slice-F", "forcemap",
                                    "isosurface"}
     for rel in list(rep["figures"].values()) + list(rep["vtk"].values()):

@@ -7,7 +7,7 @@ summed by superposition; the force is F_j = sum_i m_i dB_i/dx_j.
 import numpy as np
 import pytest
 
-pv = pytest.importorskip("pyvista")
+import pyvista as pv  # a required dependency: no skip
 
 from designkit import Coil, default_design  # noqa: E402
 from designkit import viz  # noqa: E402
