@@ -129,9 +129,8 @@ def array_field(design: "Design", points, currents: Sequence[float] | None = Non
                 gradient: bool = True):
     """Flux density (and gradient) of the design's whole coil array at points.
 
-    Uses :class:`designkit.array.CoilArray` over the energized coils (coils at 0 A are skipped);
-    falls back to summing :meth:`designkit.Coil.field` at :meth:`Design.coil_centres_m` when
-    designkit.array is not available.
+    :class:`designkit.array.CoilArray` over the energized coils (coils at 0 A are skipped): the
+    one place where the coils' fields are summed.
 
     Parameters
     ----------
@@ -148,46 +147,30 @@ def array_field(design: "Design", points, currents: Sequence[float] | None = Non
     """
     import warnings
 
-    from .coil import Coil
+    from .array import CoilArray
 
     p, _ = v.points(points)
     cur = resolve_currents(design, currents)
     active = np.nonzero(cur)[0]
-    try:
-        from .array import CoilArray
-    except ImportError:
-        CoilArray = None
-    if CoilArray is not None and gradient and active.size:
+    if not active.size:
+        b, g = np.zeros((len(p), 3)), np.zeros((len(p), 3, 3))
+    else:
         full = CoilArray.from_design(design)
         sub = CoilArray(tuple(full.coils[k] for k in active))
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            return sub.field(p, cur[active])
-    if CoilArray is not None and gradient:
-        return np.zeros((len(p), 3)), np.zeros((len(p), 3, 3))
-    b = np.zeros((len(p), 3))
-    g = np.zeros((len(p), 3, 3)) if gradient else None
-    base = Coil.from_design(design)
-    for centre, current in zip(design.coil_centres_m(), cur):
-        if current == 0.0:
-            continue
-        coil = base.moved(centre)
         with warnings.catch_warnings():
             # A figure is not the place to repeat the linear-core saturation warning for every
             # grid; `designkit report` states it once in its summary.
             warnings.simplefilter("ignore")
-            res = coil.field(p, float(current), gradient=gradient)
-        if gradient:
-            b += res[0]
-            g += res[1]
-        else:
-            b += res
+            b, g = sub.field(p, cur[active])
     return (b, g) if gradient else b
 
 
 def force_from_gradient(gradient_t_per_m: np.ndarray, moment_a_m2: np.ndarray) -> np.ndarray:
-    """Force on a point dipole, ``F_j = sum_i m_i dB_i/dx_j``, N, shape (n, 3)."""
-    return np.einsum("nij,i->nj", np.asarray(gradient_t_per_m), np.asarray(moment_a_m2))
+    """Force on a point dipole in air, ``F = F(m) G5`` (:func:`designkit.array.force_matrix`),
+    N, shape (n, 3), from the gradient (n, 3, 3), T/m."""
+    from .array import force_matrix, g5_from_gradient
+
+    return g5_from_gradient(np.asarray(gradient_t_per_m)) @ force_matrix(moment_a_m2).T
 
 
 def _add_field_arrays(mesh, b, g=None, moment=None):

@@ -37,6 +37,7 @@ import numpy as np
 
 from .. import __version__
 from .._io import write_json_atomic, write_text_atomic
+from ..array import force_matrix, g5_from_gradient
 from ..coil import Coil
 from ..design import Design, design_to_toml, load_design
 from ._common import (add_currents_arguments, add_progress_argument, check_current_limit,
@@ -81,7 +82,7 @@ def design_point_summary(design: Design, current_a: float) -> dict:
         warnings.simplefilter("always")
         b, g = coil.field(p, current_a, gradient=True)
     m = np.array([0.0, 0.0, design.magnet.moment_a_m2])
-    force = g.T @ m  # F = grad(m . B) = G^T m
+    force = force_matrix(m) @ g5_from_gradient(g)  # thesis eq. 2.5, F = G^T m in air
     torque = np.cross(m, b)
     return {
         "current_a": current_a,
