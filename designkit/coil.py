@@ -77,7 +77,8 @@ class Coil:
         if design.core is not None:
             core = Core(radius=design.core.radius_m, length=design.core.length_m,
                         relative_permeability=design.core.relative_permeability,
-                        offset=design.core.offset_m, bh=design.core.bh)
+                        offset=design.core.offset_m, bh=design.core.bh,
+                        knee_t=design.core.saturation_t)
         return cls(c.inner_radius_m, c.outer_radius_m, c.length_m, c.turns, core,
                    Pose((float(x), float(y), float(z))))
 

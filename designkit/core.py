@@ -76,7 +76,8 @@ STEEL1010_B = np.array([0.0, 0.2003, 0.3204, 0.40045, 0.50055, 0.5606, 0.7908, 0
                         1.2016, 1.302, 1.4028, 1.524, 1.626, 1.698, 1.73, 1.87, 2.04, 2.07, 2.095,
                         2.2, 2.4, 4.4])
 KNEE_T = 1.5
-"""Flux density above which low-carbon steel is past the knee of its B-H curve, T."""
+"""Flux density above which low-carbon steel is past the knee of its B-H curve, T (default of
+:attr:`Core.knee_t`; a design file sets it as ``[core] saturation_t``)."""
 
 
 class SaturationWarning(UserWarning):
@@ -114,6 +115,8 @@ class Core:
         Magnetization model (module docs). Default: the FEM-validated surface-current model.
     bh : {'linear', 'steel1010'}
         Material law: linear ``relative_permeability`` or the 1010 steel B-H curve (saturation).
+    knee_t : float, T
+        A linear model warns (:class:`SaturationWarning`) when the core's flux density passes it.
     """
 
     radius: float
@@ -122,12 +125,14 @@ class Core:
     offset: float = 0.0
     model: CoreModel = "surface-current"
     bh: BHCurveName = "linear"
+    knee_t: float = KNEE_T
 
     def __post_init__(self):
         v.positive("core.radius", self.radius)
         v.positive("core.length", self.length)
         v.in_range("core.relative_permeability", self.relative_permeability, 1.0, 1e7)
         v.finite("core.offset", self.offset, "m")
+        v.positive("core.knee_t", self.knee_t, "T")
         if self.model not in CORE_MODELS:
             raise BadInputError("core.model", f"one of {CORE_MODELS}", self.model)
         if self.bh not in BH_CURVES:
@@ -180,10 +185,10 @@ class Core:
         -------
         B : ndarray (n, 3), T, and G : ndarray (n, 3, 3), T/m when gradient=True.
         Warns :class:`SaturationWarning` when a linear model's core flux density exceeds
-        :data:`KNEE_T`.
+        :attr:`knee_t`.
         """
         sol = self.solution(coil, current)
-        sol.warn_if_saturated()
+        sol.warn_if_saturated(self.knee_t)
         return sol.field(points_local, gradient=gradient)
 
     def extra_inductance(self, coil: "Coil", current: float | None = None) -> float:
@@ -231,10 +236,10 @@ class CoreSolution:
                             abs(self.peak_b * factor), core.bh == "linear" or
                             core.model == "thesis-uniform", core.model)
 
-    def warn_if_saturated(self) -> None:
-        if self.linear_model and self.peak_b > KNEE_T:
+    def warn_if_saturated(self, knee_t: float = KNEE_T) -> None:
+        if self.linear_model and self.peak_b > knee_t:
             warnings.warn(
-                f"core flux density {self.peak_b:.2f} T exceeds the {KNEE_T} T knee of "
+                f"core flux density {self.peak_b:.2f} T exceeds the {knee_t:g} T knee of "
                 "low-carbon steel: the linear core model overestimates the field; for the "
                 "saturating B-H curve use Core(bh='steel1010') or, in a design file, "
                 "[core] bh = \"steel1010\"", SaturationWarning, stacklevel=4)

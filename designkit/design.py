@@ -87,8 +87,9 @@ class CoreSpec:
     offset_m: float = 0.0
     """Axial offset of the core centre from the winding centre, m (assumed 0: the core
     protrudes 5 mm beyond each end of the 100 mm winding)."""
-    saturation_t: float = 1.6
-    """Flux density at the knee of the B-H curve of low-carbon steel, T (flag only)."""
+    saturation_t: float = 1.5
+    """Flux density at the knee of the B-H curve of low-carbon steel, T: a linear core model
+    warns above it (``Core.knee_t``)."""
     bh: str = "linear"
     """Core material law: 'linear' (relative_permeability; keeps fields linear in the currents,
     which the actuation matrix and the controller assume) or 'steel1010' (nonlinear B-H curve,
@@ -116,6 +117,8 @@ class DriveSpec:
     """Cytron MD10C motor supply rating, V (the thesis' 36 V exceeds it)."""
     driver_continuous_current_a: float = 13.0
     pwm_frequency_hz: float = 1526.0
+    """PWM frequency of the drivers, Hz (PCA9685 maximum); sets the current ripple
+    (``electrical.pwm_ripple``)."""
 
 
 @dataclass(frozen=True)

@@ -383,6 +383,9 @@ class ElectricalReport:
     time_to_max_temperature_s: float
     max_temperature_c: float
     violations: tuple[str, ...]
+    pwm_frequency_hz: float = 0.0
+    pwm_ripple_a: float = 0.0
+    """Worst-case (50 % duty) peak-to-peak current ripple of the PWM drive, A."""
 
     def as_dict(self) -> dict:
         import dataclasses
@@ -390,6 +393,13 @@ class ElectricalReport:
         d = dataclasses.asdict(self)
         d["violations"] = list(self.violations)
         return d
+
+
+def pwm_ripple(voltage_v: float, resistance_ohm: float, time_constant_s: float,
+               frequency_hz: float) -> float:
+    """Peak-to-peak current ripple of an RL load on a PWM bridge at 50 % duty (the worst duty),
+    A: (V/R) tanh(1 / (4 f tau)), the periodic steady state of the two exponential halves."""
+    return voltage_v / resistance_ohm * math.tanh(1.0 / (4.0 * frequency_hz * time_constant_s))
 
 
 def design_rule_violations(*, resistance_ohm: float, settling_time_s: float, turns: int,
@@ -446,4 +456,7 @@ def electrical_report(design: "Design", coil: "Coil", *,
         inductance_h=l_total, time_constant_s=tau, settling_time_s=5 * tau, current_a=i,
         current_capped=capped, voltage_v=design.drive.supply_voltage_v, power_w=i * i * r,
         copper_mass_kg=mass, fill_factor=fill, time_to_max_temperature_s=t_hot,
-        max_temperature_c=max_temperature_c, violations=tuple(violations))
+        max_temperature_c=max_temperature_c, violations=tuple(violations),
+        pwm_frequency_hz=design.drive.pwm_frequency_hz,
+        pwm_ripple_a=pwm_ripple(design.drive.supply_voltage_v, r, tau,
+                                design.drive.pwm_frequency_hz))
