@@ -132,14 +132,15 @@ def _central_differences(pts, h=1e-6):
     return fd
 
 
-def test_gradient_symmetric_traceless_and_equal_to_finite_differences_outside():
+def test_gradient_equals_finite_differences_and_b_is_div_and_curl_free_outside():
     pts = _outside_points()
     b, g = winding_field(pts, RI, RO, L, N, I, gradient=True)
     gn = np.linalg.norm(g, axis=(1, 2))
-    assert np.all(np.abs(np.trace(g, axis1=1, axis2=2)) <= 1e-12 * gn)
-    assert np.all(np.linalg.norm(g - g.transpose(0, 2, 1), axis=(1, 2)) <= 1e-12 * gn)
     fd = _central_differences(pts)
     assert np.all(np.linalg.norm(fd - g, axis=1) <= 1e-7 * gn[:, None])
+    # the kernels build G traceless and symmetric; the differences of B test B itself
+    assert np.all(np.abs(np.trace(fd, axis1=1, axis2=2)) <= 1e-6 * gn)
+    assert np.all(np.linalg.norm(fd - fd.transpose(0, 2, 1), axis=(1, 2)) <= 1e-6 * gn)
 
 
 def test_inside_curl_is_mu0_j_and_finite_differences_include_it():
@@ -149,13 +150,15 @@ def test_inside_curl_is_mu0_j_and_finite_differences_include_it():
     phi = rng.uniform(0, 2 * np.pi, 30)
     pts = np.stack([rho * np.cos(phi), rho * np.sin(phi), z], axis=1)
     b, g = winding_field(pts, RI, RO, L, N, I, gradient=True)
-    curl = np.stack([g[:, 2, 1] - g[:, 1, 2], g[:, 0, 2] - g[:, 2, 0], g[:, 1, 0] - g[:, 0, 1]], 1)
-    j_vec = MU0 * J * np.stack([-np.sin(phi), np.cos(phi), 0 * phi], 1)
     gn = np.linalg.norm(g, axis=(1, 2))
-    assert np.all(np.linalg.norm(curl - j_vec, axis=1) <= 1e-10 * gn)
-    assert np.all(np.abs(np.trace(g, axis1=1, axis2=2)) <= 1e-12 * gn)
     fd = _central_differences(pts)
     assert np.all(np.linalg.norm(fd - g, axis=1) <= 1e-6 * gn[:, None])
+    # Ampere and Gauss on the field values (through the differences), not on G's construction
+    curl = np.stack([fd[:, 2, 1] - fd[:, 1, 2], fd[:, 0, 2] - fd[:, 2, 0],
+                     fd[:, 1, 0] - fd[:, 0, 1]], 1)
+    j_vec = MU0 * J * np.stack([-np.sin(phi), np.cos(phi), 0 * phi], 1)
+    assert np.all(np.linalg.norm(curl - j_vec, axis=1) <= 1e-5 * gn)
+    assert np.all(np.abs(np.trace(fd, axis1=1, axis2=2)) <= 1e-5 * gn)
 
 
 def _loop_sum(pts, n):
