@@ -408,7 +408,14 @@ def _bar(title, **extra):
 
 
 def _title(p, text, font_size=12):
-    p.add_text(text, position="upper_left", font_size=font_size, color="black")
+    """Title at the upper left, each line wrapped to the width of its (sub)plot."""
+    import textwrap
+
+    width = p.window_size[0] / p.shape[1]
+    # VTK's default font: a character is about 0.6 font sizes wide, in pixels
+    chars = max(20, int(0.92 * width / (0.6 * font_size)))
+    lines = [w for line in text.split("\n") for w in (textwrap.wrap(line, chars) or [""])]
+    p.add_text("\n".join(lines), position="upper_left", font_size=font_size, color="black")
 
 
 def nice_ticks(lo: float, hi: float, target: int = 5) -> tuple[float, float, float]:
@@ -569,7 +576,7 @@ def plot_field_lines(design: "Design", currents: Sequence[float] | None = None, 
     p.add_mesh(_mm(vol.outline()), color="grey", line_width=1)
     _title(p, f"Field lines of B, coloured by its magnitude (log scale)\n{_currents_text(cur)}; "
               f"lines end at the edge of the computed box", font_size=11)
-    _fit_camera(p, _axes(p), elevation_deg=12.0, margin=1.1)
+    _fit_camera(p, _axes(p), elevation_deg=12.0)
     return p
 
 
