@@ -33,8 +33,9 @@ Models (``Core.model``):
     Chen, Brug & Goldfarb, IEEE Trans. Magn. 27, 3601 (1991)); designkit computes it by
     Nagaoka's exact closed form (:func:`demagnetizing_factor`). The
     field outside the core equals a current sheet K = M on its side
-    (:func:`designkit.field.magnetized_cylinder_field`). FIELD_MATH.md explains why this model is
-    only a first estimate. It ignores ``bh`` (linear), and warns when its M passes the knee.
+    (:func:`designkit.field.magnetized_cylinder_field`). It is only a first estimate: real
+    magnetization is far from uniform in a finite core (44-48 % off in Bz against GetDP FEM,
+    ``studies/core_vs_fem.py``). It ignores ``bh`` (linear), and warns when its M passes the knee.
 
 Inductance: the extra flux linkage of the winding due to the core, per unit current, is
 ``sum over the core's current rings of K ds * Phi_w(r, z) / I^2`` (reciprocity: the mutual
@@ -478,12 +479,9 @@ def _geometry(radius, length, offset, slice_edges=None, n_side=N_SIDE, n_cap=N_C
     side_slice = []
     per = max(4, int(round(n_side / nsl))) if nsl > 1 else n_side
     for k in range(nsl):
-        if nsl == 1:
-            e = _graded(slice_edges[k], slice_edges[k + 1], per, "both")
-        else:
-            # slices: grade only at the core's ends, uniform-ish elsewhere
-            e = _graded(slice_edges[k], slice_edges[k + 1], per, "both" if k in (0, nsl - 1)
-                        else "both")
+        # every slice is graded towards both of its ends, not only the core's: each interface
+        # between slices carries disc currents too, and the side current varies fastest there
+        e = _graded(slice_edges[k], slice_edges[k + 1], per, "both")
         side_edges.append(np.column_stack([e[:-1], e[1:]]))
         side_slice.append(np.full(len(e) - 1, k))
     side = np.concatenate(side_edges)
@@ -559,8 +557,9 @@ def _solve_with_mu(radius, side, side_slice, discs, mus, a, h_t):
 def _slice_probe(radius, side, discs, slice_edges, key, nr=4, nz=3):
     """Quadrature points of every slice and the linear maps from panel currents to B there.
 
-    Returns (pr, pz, weights, slice_index, Pr, Pz, hr, hz): B/mu0 at the points is
-    ``P @ k + h * current`` (h the applied field per ampere).
+    Returns (weights, slice_index, Pr, Pz, hr, hz), one row per quadrature point: B/mu0
+    there is ``P @ k + h * current`` (h the applied field per ampere); the weights sum to 1
+    over each slice.
     """
     from .field.kernels import loop_rz, sheet_rz
 

@@ -3,7 +3,7 @@
 Every product (field, force, optimized coil, printed parts, FEM mesh, force-current map,
 plots, currents on the wire) is derived from one :class:`Design`, so they can never disagree.
 A design is loaded from TOML (:func:`load_design`) or taken from :func:`default_design`, the
-thesis' device (shared/seed/ehi_thesis.txt, sections 2.2-3.2). Values the thesis does not give
+thesis' device (the EHI thesis this toolkit reproduces, sections 2.2-3.2). Values the thesis does not give
 are marked ``assumed`` in the field docs below.
 
 Frame: the coil top faces lie in the plane z = 0 and z points up, towards the user's hand.

@@ -11,7 +11,8 @@ Two layers, as everywhere in designkit:
   shown) drawn in millimetres with titles and colour bars; :func:`save_png` writes it atomically
   and :func:`export_vtk` writes the datasets as ``.vtp`` / ``.vts`` files for ParaView.
 
-The force on the finger magnet is ``F = (grad B)^T m`` (ARCHITECTURE.md) with ``m`` the design's
+The force on the finger magnet is ``F = (grad B)^T m`` (:func:`designkit.array.force_matrix`,
+thesis eq. 2.5) with ``m`` the design's
 magnet moment along +z unless another moment is given.
 
 pyvista is imported only here, lazily: without it the functions raise

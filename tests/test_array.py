@@ -31,7 +31,7 @@ def test_default_layout():
 
 
 def test_force_matrix_equals_grad_m_dot_b():
-    # independent source: the closed-form dipole field and its gradient (FIELD_MATH), and a
+    # independent source: the closed-form dipole field and its gradient, and a
     # central difference of the energy m.B
     rng = np.random.default_rng(3)
     src = np.array([0.3, -0.2, 1.1])

@@ -96,7 +96,7 @@ def test_wheeler_within_its_accuracy_for_the_thesis_coil():
     got = el.air_inductance_from_geometry(0.012, 0.019, 0.1, 1429)
     wheeler = el.wheeler_inductance(0.012, 0.019, 0.1, 1429)
     assert abs(got / wheeler - 1) < 0.01
-    # the long-solenoid formula at the mean radius is far off (FIELD_MATH: 18-30 %)
+    # the long-solenoid formula at the mean radius is far off (18-30 % for this coil)
     naive = MU0 * 1429 ** 2 * math.pi * 0.0155 ** 2 / 0.1
     assert abs(got / naive - 1) > 0.15
 

@@ -2,7 +2,7 @@
 
 One loop = 18 sensor reads of 6 bytes, 18 mux selects + 3 mux disables (1 byte), one PCA9685
 write of 64 channel bytes (coils 0-7) and one of 8 (coil 8), each with its register byte.
-Bits per transaction = 9 (bytes + address byte) + 2 (HARDWARE.md section 6).
+Bits per transaction = 9 (bytes + address byte) + 2 (START and STOP; NXP UM10204, 3.1).
 """
 
 import json

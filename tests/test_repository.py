@@ -167,3 +167,20 @@ def test_imports_point_one_way():
 def test_field_kernels_do_not_import_the_design_spec():
     for path in (ROOT / "designkit" / "field").glob("*.py"):
         assert "design import" not in path.read_text(), path.name
+
+
+def test_no_reference_to_notes_outside_the_repository():
+    """Docstrings and comments cite only files that ship with the repository (or public
+    datasheets by name): a reader of a clone cannot open a design note that is not there."""
+    import re
+
+    missing = []
+    paths = [p for d in ("designkit", "cad", "firmware_io", "studies", "tests")
+             for p in (ROOT / d).rglob("*.py")]
+    for path in paths:
+        for name in set(re.findall(r"\b([A-Z][A-Z_]+\.md)\b", path.read_text())):
+            if not list(ROOT.glob(f"**/{name}")):
+                missing.append(f"{path.relative_to(ROOT)}: {name}")
+        if "shared/seed" in path.read_text() and path.name != "test_repository.py":
+            missing.append(f"{path.relative_to(ROOT)}: shared/seed")
+    assert not missing, "\n".join(missing)
