@@ -185,6 +185,15 @@ def report_markdown(report: dict) -> str:
                   f"`{dp['core_model']}`. F = (grad B)^T m."]
     for w in dp.get("warnings", []):
         lines.append(f"\n> warning: {w}")
+    sen = report.get("sensors")
+    if sen:
+        lines += ["", f"Upper sensor {sen['sensor_point_m'][2] * 1e3:.0f} mm above its coil: the "
+                      f"coil at {sen['coil_current_a']:g} A gives "
+                      f"{sen['coil_field_fraction_of_range'] * 100:.0f} % of the "
+                      f"{sen['range_t'] * 1e3:g} mT range"
+                      + (" (the reading clips)" if sen["clips"] else "")
+                      + f"; the magnet at the design point gives "
+                      f"{sen['magnet_field_counts']:.0f} counts of {sen['lsb_t'] * 1e3:g} mT."]
     opt = report.get("optimized_coil")
     if opt:
         lines += ["", "## Optimized coil (thesis eq. 2.14)", "",
@@ -346,6 +355,9 @@ def _run(args, design, current, currents_arg, out):
     # 7. report
     step(steps[6])
     report["skipped"] = skipped
+    from ..sensing import sensor_headroom
+
+    report["sensors"] = sensor_headroom(design)
     write_json_atomic(out / "report.json", report)
     write_text_atomic(out / "report.md", report_markdown(report))
     done()
