@@ -108,9 +108,10 @@ def test_report_failing_late_leaves_nothing(tmp_path, monkeypatch, capsys):
         ImportError("skip the optimizer in this test")))
     monkeypatch.setattr(report, "_figures_and_vtk", lambda *a, **k: (_ for _ in ()).throw(
         ImportError("skip the figures in this test")))
-    assert main(["report", "--quick", "--no-progress", "--out", str(tmp_path / "rep")]) == 1
+    assert main(["report", "--quick", "--no-progress", "--out",
+                 str(tmp_path / "new" / "deeper" / "rep")]) == 1
     assert "a late failure" in capsys.readouterr().err
-    assert list(tmp_path.iterdir()) == []  # neither rep/ nor a staging folder
+    assert list(tmp_path.iterdir()) == []  # neither rep/, its new parents nor a staging folder
 
 
 def test_report_failing_keeps_a_previous_report_untouched(tmp_path, monkeypatch, capsys):
@@ -214,3 +215,22 @@ def test_design_file_type_errors(tmp_path, text, param):
     res = designkit("optimize", "--design", "d.toml", "--out", "o", cwd=tmp_path)
     _one_clear_line(res, param)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["d.toml"]
+
+
+def test_staged_folder_moves_everything_into_place(tmp_path, monkeypatch):
+    from designkit.commands._common import staged_folder
+
+    with staged_folder(tmp_path / "a" / "out") as stage:
+        (stage / "sub").mkdir()
+        (stage / "sub" / "x.txt").write_text("x")
+        assert not (tmp_path / "a" / "out").exists()  # nothing visible before success
+    assert (tmp_path / "a" / "out" / "sub" / "x.txt").read_text() == "x"
+    # into an existing folder: new files replace, others stay; also with --out .
+    monkeypatch.chdir(tmp_path / "a" / "out")
+    (tmp_path / "a" / "out" / "keep.txt").write_text("k")
+    with staged_folder(".") as stage:
+        (stage / "sub").mkdir()
+        (stage / "sub" / "x.txt").write_text("y")
+    out = tmp_path / "a" / "out"
+    assert (out / "sub" / "x.txt").read_text() == "y" and (out / "keep.txt").read_text() == "k"
+    assert sorted(p.name for p in out.iterdir()) == ["keep.txt", "sub"]

@@ -75,23 +75,30 @@ def check_output(path: str | Path, *, folder: bool, param: str = "--out") -> Pat
 def staged_folder(out: str | Path, param: str = "--out") -> Iterator[Path]:
     """Yield an empty staging folder next to ``out``; on success move everything written there
     into ``out`` (files already in ``out`` and not rewritten stay), on failure delete it."""
-    out = check_output(out, folder=True, param=param)
+    out = check_output(out, folder=True, param=param).absolute()
+    created = [p for p in reversed(out.parents) if not p.exists()]  # outermost first
     out.parent.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.staging.", dir=out.parent))
+    ok = False
     try:
         yield stage
         if not out.exists():
             os.replace(stage, out)
-            return
-        for src in sorted(stage.rglob("*")):
-            dst = out / src.relative_to(stage)
-            if src.is_dir():
-                dst.mkdir(exist_ok=True)
-            else:
-                dst.parent.mkdir(parents=True, exist_ok=True)
-                os.replace(src, dst)
+        else:
+            for src in sorted(stage.rglob("*")):
+                dst = out / src.relative_to(stage)
+                if src.is_dir():
+                    dst.mkdir(exist_ok=True)
+                else:
+                    dst.parent.mkdir(parents=True, exist_ok=True)
+                    os.replace(src, dst)
+        ok = True
     finally:
         shutil.rmtree(stage, ignore_errors=True)
+        if not ok:  # the parent folders this run made go too
+            for folder in reversed(created):
+                with contextlib.suppress(OSError):
+                    folder.rmdir()
 
 
 # ----------------------------------------------------------------------------- progress
