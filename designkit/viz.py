@@ -565,10 +565,15 @@ def plot_field_lines(design: "Design", currents: Sequence[float] | None = None, 
     blocks = scene_meshes(design, cur) if blocks is None else blocks
     p = _plotter(pv, window_size)
     _add_device(p, design, blocks, opacity=0.3, magnet=True, workspace=True)
+    clip_note = ""
     if lines.n_points:
         bmt = np.asarray(lines[B_MT])
-        hi = float(np.percentile(bmt, 98))
-        lo = max(hi * 1e-3, float(bmt.min()), 1e-6)
+        # the data range, as in the slices; a floor 4 decades down is the only clip, stated
+        hi = max(float(bmt.max()), 1e-6)
+        lo = max(float(bmt.min()), 1e-6)
+        if lo < hi * 1e-4:
+            lo = hi * 1e-4
+            clip_note = f"; colours below {lo:.2g} mT clipped"
         p.add_mesh(_mm(lines).tube(radius=0.7), scalars=B_MT, cmap="viridis", log_scale=True,
                    clim=(lo, hi), name="streamlines",
                    scalar_bar_args=_bar("B (mT)", fmt=_log_fmt(lo, hi)))
@@ -576,7 +581,7 @@ def plot_field_lines(design: "Design", currents: Sequence[float] | None = None, 
         p.add_text("no field: all coils at 0 A", position="lower_left", color="black")
     p.add_mesh(_mm(vol.outline()), color="grey", line_width=1)
     _title(p, f"Field lines of B, coloured by its magnitude (log scale)\n{_currents_text(cur)}; "
-              f"lines end at the edge of the computed box", font_size=11)
+              f"lines end at the edge of the computed box{clip_note}", font_size=11)
     _fit_camera(p, _axes(p), elevation_deg=12.0)
     return p
 

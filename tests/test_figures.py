@@ -157,3 +157,16 @@ def test_isosurface_box_is_sized_to_the_array_and_the_cut_is_stated(rendered):
     text = _texts(p)
     assert f"z = {DESIGN.workspace.z_min_m * 1e3:.0f} mm (bottom of the workspace)" in text
     assert "cut flat" in text and "up to z =" in text
+
+
+def test_field_line_colours_span_the_data(rendered):
+    p, _ = rendered["fieldlines"]
+    actor = next(a for r in p.renderers for k, a in r.actors.items() if k == "streamlines")
+    _, lines = viz.field_line_data(DESIGN, quality="quick")
+    values = np.asarray(lines[viz.B_MT])
+    lo, hi = actor.mapper.scalar_range
+    assert hi == pytest.approx(values.max(), rel=1e-12)
+    if "clipped" in _texts(p):
+        assert lo == pytest.approx(hi * 1e-4, rel=1e-12)
+    else:
+        assert lo == pytest.approx(values.min(), rel=1e-12)
