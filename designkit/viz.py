@@ -419,24 +419,43 @@ def _title(p, text, font_size=12):
     p.add_text("\n".join(lines), position="upper_left", font_size=font_size, color="black")
 
 
+def _vtk_tick_spacing(span: float) -> float:
+    """The major tick spacing ``vtkCubeAxesActor`` picks for an axis of this span (it labels
+    ``vmin + k * spacing`` whatever label count it is asked for, once that count reaches its
+    own; pyvista's ``_axis_label_values`` mirrors the same rule)."""
+    power = math.log10(span)
+    if power != 0.0:
+        power = math.copysign(abs(power) + 10.0e-10, power)
+    if power < 0.0:
+        power -= 1.0
+    decade = 10.0 ** float(int(power))
+    ticks = int(span / decade) + 1
+    return decade / (5.0 if ticks <= 2 else 2.0 if ticks < 5 else 1.0)
+
+
 def nice_ticks(lo: float, hi: float, target: int = 5) -> tuple[float, float, float]:
-    """``(lo', hi', step)``: the range widened to multiples of a 1, 2, 2.5 or 5 x 10^k step with
-    3 to 10 intervals, so that every tick value is round; of those steps, the one that widens
-    the range least (then the one nearest ``target`` intervals)."""
+    """``(lo', hi', step)``: the range widened so that the axis VTK draws over it is labelled
+    on round values: ``lo'`` a multiple of ``step``, ``step`` VTK's own tick spacing for the
+    widened span (a 1, 2 or 5 x 10^k), 3 to 11 labels; of those, the least widening (then the
+    label count nearest ``target`` + 1)."""
     span = hi - lo
-    if not span > 0:
+    if not (span > 0 and math.isfinite(span)):
         return lo - 1.0, hi + 1.0, 1.0
     k = 10.0 ** math.floor(math.log10(span))
     best = None
-    for base in (0.1, 0.2, 0.25, 0.5, 1.0, 2.0, 2.5, 5.0):
+    for base in (0.05, 0.1, 0.2, 0.25, 0.5, 1.0, 2.0, 2.5, 5.0):
         step = base * k
         a = math.floor(lo / step + 1e-9) * step
         b = math.ceil(hi / step - 1e-9) * step
-        n = round((b - a) / step)
-        if 3 <= n <= 10:
+        major = _vtk_tick_spacing(b - a)
+        if abs(a / major - round(a / major)) > 1e-9:
+            continue  # VTK would label a + j * major: not round
+        a, b = round(a / major) * major, b  # exact multiples, no 1e-17 residues in the labels
+        n = math.floor((b - a) / major + 1e-9)
+        if 2 <= n <= 10:
             key = ((b - a) / span, abs(n - target))
             if best is None or key < best[0]:
-                best = (key, (a, b, step))
+                best = (key, (a, b, major))
     return best[1] if best else (lo, hi, span / target)
 
 
@@ -446,7 +465,8 @@ def _nice_bounds(bounds) -> tuple[list[float], dict]:
     for i, axis in enumerate("xyz"):
         lo, hi, step = nice_ticks(b[2 * i], b[2 * i + 1])
         b[2 * i], b[2 * i + 1] = lo, hi
-        counts[f"n_{axis}labels"] = int(round((hi - lo) / step)) + 1
+        # at least VTK's own count: it then labels lo + k * step (see _vtk_tick_spacing)
+        counts[f"n_{axis}labels"] = int(math.floor((hi - lo) / step + 1e-9)) + 1
     return b, counts
 
 
