@@ -47,11 +47,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from designkit import _validate as v
+    from designkit.commands._common import check_output
     from designkit.design import load_design
 
     from .export import export_all, parse_formats
     from .params import PrinterParams, from_design
 
+    check_output(args.out, folder=True)
     formats = parse_formats(args.format)
     printer = dataclasses.replace(
         PrinterParams(), build_volume_mm=tuple(args.build_volume),

@@ -10,35 +10,30 @@ import numpy as np
 from .errors import BadInputError
 
 
-def positive(name: str, value: Any, unit: str = "m") -> float:
-    """Return ``value`` as float, or raise if it is not a finite number > 0."""
+def _number(name: str, value: Any, unit: str, what: str, ok) -> float:
+    """``value`` as a finite float for which ``ok(v)`` holds, else BadInputError naming
+    ``what`` ("a finite number > 0", ...) and the unit."""
+    valid = f"{what} {unit}".rstrip()
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise BadInputError(name, f"a finite number > 0 {unit}".rstrip(), value) from None
-    if not (math.isfinite(v) and v > 0.0):
-        raise BadInputError(name, f"a finite number > 0 {unit}".rstrip(), value)
+        raise BadInputError(name, valid, value) from None
+    if not (math.isfinite(v) and ok(v)):
+        raise BadInputError(name, valid, value)
     return v
+
+
+def positive(name: str, value: Any, unit: str = "m") -> float:
+    """Return ``value`` as float, or raise if it is not a finite number > 0."""
+    return _number(name, value, unit, "a finite number > 0", lambda v: v > 0.0)
 
 
 def nonnegative(name: str, value: Any, unit: str = "m") -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise BadInputError(name, f"a finite number >= 0 {unit}".rstrip(), value) from None
-    if not (math.isfinite(v) and v >= 0.0):
-        raise BadInputError(name, f"a finite number >= 0 {unit}".rstrip(), value)
-    return v
+    return _number(name, value, unit, "a finite number >= 0", lambda v: v >= 0.0)
 
 
 def finite(name: str, value: Any, unit: str = "") -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise BadInputError(name, f"a finite number {unit}".rstrip(), value) from None
-    if not math.isfinite(v):
-        raise BadInputError(name, f"a finite number {unit}".rstrip(), value)
-    return v
+    return _number(name, value, unit, "a finite number", lambda v: True)
 
 
 def in_range(name: str, value: Any, low: float, high: float, unit: str = "",

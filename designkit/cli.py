@@ -11,6 +11,7 @@ import argparse
 import importlib
 import sys
 
+from .commands._common import join_negative_values
 from .errors import DesignkitError
 
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -60,12 +61,15 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog=f"designkit {name}", description=desc)
     module.add_arguments(parser)
     try:
-        args = parser.parse_args(rest)
+        args = parser.parse_args(join_negative_values(rest))
     except SystemExit as exc:  # argparse exits on --help and on bad options
         return int(exc.code or 0)
     try:
         return int(module.run(args) or 0)
     except DesignkitError as exc:
+        print(f"designkit {name}: error: {exc}", file=sys.stderr)
+        return 1
+    except OSError as exc:  # a disk or permission problem is a message, not a traceback
         print(f"designkit {name}: error: {exc}", file=sys.stderr)
         return 1
 

@@ -14,11 +14,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from . import _validate as v
+from . import electrical
+from .core import Core
 from .errors import BadInputError
+from .field import winding_field
 from .pose import Pose
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .core import Core
     from .design import Design, WireSpec
 
 
@@ -57,8 +59,6 @@ class Coil:
         if not isinstance(self.pose, Pose):
             raise BadInputError("pose", "a designkit.Pose", type(self.pose).__name__)
         if self.core is not None:
-            from .core import Core
-
             if not isinstance(self.core, Core):
                 raise BadInputError("core", "a designkit.Core or None", type(self.core).__name__)
             if self.core.radius > ri * (1 + 1e-12):
@@ -69,8 +69,6 @@ class Coil:
     @classmethod
     def from_design(cls, design: "Design", position=(0.0, 0.0, None)) -> "Coil":
         """The design's coil; by default its top face at z = 0 (centre at -length/2)."""
-        from .core import Core
-
         c = design.coil
         x, y, z = position
         if z is None:
@@ -79,7 +77,8 @@ class Coil:
         if design.core is not None:
             core = Core(radius=design.core.radius_m, length=design.core.length_m,
                         relative_permeability=design.core.relative_permeability,
-                        offset=design.core.offset_m, bh=design.core.bh)
+                        offset=design.core.offset_m, bh=design.core.bh,
+                        knee_t=design.core.saturation_t)
         return cls(c.inner_radius_m, c.outer_radius_m, c.length_m, c.turns, core,
                    Pose((float(x), float(y), float(z))))
 
@@ -128,8 +127,6 @@ class Coil:
         B : ndarray, shape (n, 3) or (3,), T
         G : ndarray, shape (n, 3, 3) or (3, 3), T/m (only when gradient=True)
         """
-        from .field import winding_field
-
         p, single = v.points(points)
         current = v.finite("current", current, "A")
         if include not in ("all", "winding", "core"):
@@ -162,12 +159,8 @@ class Coil:
     # ------------------------------------------------------------------ electrical
     def resistance(self, wire: "WireSpec | None" = None) -> float:
         """DC resistance of the winding, ohm (see :mod:`designkit.electrical`)."""
-        from . import electrical
-
         return electrical.resistance(self, wire)
 
     def inductance(self, wire: "WireSpec | None" = None) -> float:
         """Self-inductance including the core, H (see :mod:`designkit.electrical`)."""
-        from . import electrical
-
         return electrical.inductance(self, wire)

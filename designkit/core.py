@@ -33,8 +33,9 @@ Models (``Core.model``):
     Chen, Brug & Goldfarb, IEEE Trans. Magn. 27, 3601 (1991)); designkit computes it by
     Nagaoka's exact closed form (:func:`demagnetizing_factor`). The
     field outside the core equals a current sheet K = M on its side
-    (:func:`designkit.field.magnetized_cylinder_field`). FIELD_MATH.md explains why this model is
-    only a first estimate. It ignores ``bh`` (linear), and warns when its M passes the knee.
+    (:func:`designkit.field.magnetized_cylinder_field`). It is only a first estimate: real
+    magnetization is far from uniform in a finite core (44-48 % off in Bz against GetDP FEM,
+    ``studies/core_vs_fem.py``). It ignores ``bh`` (linear), and warns when its M passes the knee.
 
 Inductance: the extra flux linkage of the winding due to the core, per unit current, is
 ``sum over the core's current rings of K ds * Phi_w(r, z) / I^2`` (reciprocity: the mutual
@@ -57,7 +58,7 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 
 from . import _validate as v
-from .design import MU0
+from .constants import MU0
 from .errors import BadInputError
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -76,7 +77,8 @@ STEEL1010_B = np.array([0.0, 0.2003, 0.3204, 0.40045, 0.50055, 0.5606, 0.7908, 0
                         1.2016, 1.302, 1.4028, 1.524, 1.626, 1.698, 1.73, 1.87, 2.04, 2.07, 2.095,
                         2.2, 2.4, 4.4])
 KNEE_T = 1.5
-"""Flux density above which low-carbon steel is past the knee of its B-H curve, T."""
+"""Flux density above which low-carbon steel is past the knee of its B-H curve, T (default of
+:attr:`Core.knee_t`; a design file sets it as ``[core] saturation_t``)."""
 
 
 class SaturationWarning(UserWarning):
@@ -114,6 +116,8 @@ class Core:
         Magnetization model (module docs). Default: the FEM-validated surface-current model.
     bh : {'linear', 'steel1010'}
         Material law: linear ``relative_permeability`` or the 1010 steel B-H curve (saturation).
+    knee_t : float, T
+        A linear model warns (:class:`SaturationWarning`) when the core's flux density passes it.
     """
 
     radius: float
@@ -122,12 +126,14 @@ class Core:
     offset: float = 0.0
     model: CoreModel = "surface-current"
     bh: BHCurveName = "linear"
+    knee_t: float = KNEE_T
 
     def __post_init__(self):
         v.positive("core.radius", self.radius)
         v.positive("core.length", self.length)
         v.in_range("core.relative_permeability", self.relative_permeability, 1.0, 1e7)
         v.finite("core.offset", self.offset, "m")
+        v.positive("core.knee_t", self.knee_t, "T")
         if self.model not in CORE_MODELS:
             raise BadInputError("core.model", f"one of {CORE_MODELS}", self.model)
         if self.bh not in BH_CURVES:
@@ -180,10 +186,10 @@ class Core:
         -------
         B : ndarray (n, 3), T, and G : ndarray (n, 3, 3), T/m when gradient=True.
         Warns :class:`SaturationWarning` when a linear model's core flux density exceeds
-        :data:`KNEE_T`.
+        :attr:`knee_t`.
         """
         sol = self.solution(coil, current)
-        sol.warn_if_saturated()
+        sol.warn_if_saturated(self.knee_t)
         return sol.field(points_local, gradient=gradient)
 
     def extra_inductance(self, coil: "Coil", current: float | None = None) -> float:
@@ -231,10 +237,10 @@ class CoreSolution:
                             abs(self.peak_b * factor), core.bh == "linear" or
                             core.model == "thesis-uniform", core.model)
 
-    def warn_if_saturated(self) -> None:
-        if self.linear_model and self.peak_b > KNEE_T:
+    def warn_if_saturated(self, knee_t: float = KNEE_T) -> None:
+        if self.linear_model and self.peak_b > knee_t:
             warnings.warn(
-                f"core flux density {self.peak_b:.2f} T exceeds the {KNEE_T} T knee of "
+                f"core flux density {self.peak_b:.2f} T exceeds the {knee_t:g} T knee of "
                 "low-carbon steel: the linear core model overestimates the field; for the "
                 "saturating B-H curve use Core(bh='steel1010') or, in a design file, "
                 "[core] bh = \"steel1010\"", SaturationWarning, stacklevel=4)
@@ -473,12 +479,9 @@ def _geometry(radius, length, offset, slice_edges=None, n_side=N_SIDE, n_cap=N_C
     side_slice = []
     per = max(4, int(round(n_side / nsl))) if nsl > 1 else n_side
     for k in range(nsl):
-        if nsl == 1:
-            e = _graded(slice_edges[k], slice_edges[k + 1], per, "both")
-        else:
-            # slices: grade only at the core's ends, uniform-ish elsewhere
-            e = _graded(slice_edges[k], slice_edges[k + 1], per, "both" if k in (0, nsl - 1)
-                        else "both")
+        # every slice is graded towards both of its ends, not only the core's: each interface
+        # between slices carries disc currents too, and the side current varies fastest there
+        e = _graded(slice_edges[k], slice_edges[k + 1], per, "both")
         side_edges.append(np.column_stack([e[:-1], e[1:]]))
         side_slice.append(np.full(len(e) - 1, k))
     side = np.concatenate(side_edges)
@@ -554,8 +557,9 @@ def _solve_with_mu(radius, side, side_slice, discs, mus, a, h_t):
 def _slice_probe(radius, side, discs, slice_edges, key, nr=4, nz=3):
     """Quadrature points of every slice and the linear maps from panel currents to B there.
 
-    Returns (pr, pz, weights, slice_index, Pr, Pz, hr, hz): B/mu0 at the points is
-    ``P @ k + h * current`` (h the applied field per ampere).
+    Returns (weights, slice_index, Pr, Pz, hr, hz), one row per quadrature point: B/mu0
+    there is ``P @ k + h * current`` (h the applied field per ampere); the weights sum to 1
+    over each slice.
     """
     from .field.kernels import loop_rz, sheet_rz
 

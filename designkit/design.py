@@ -3,7 +3,7 @@
 Every product (field, force, optimized coil, printed parts, FEM mesh, force-current map,
 plots, currents on the wire) is derived from one :class:`Design`, so they can never disagree.
 A design is loaded from TOML (:func:`load_design`) or taken from :func:`default_design`, the
-thesis' device (shared/seed/ehi_thesis.txt, sections 2.2-3.2). Values the thesis does not give
+thesis' device (the EHI thesis this toolkit reproduces, sections 2.2-3.2). Values the thesis does not give
 are marked ``assumed`` in the field docs below.
 
 Frame: the coil top faces lie in the plane z = 0 and z points up, towards the user's hand.
@@ -17,17 +17,16 @@ import dataclasses
 import hashlib
 import json
 import math
+import numbers
 import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, Mapping
 
 from . import _validate as v
+from .constants import MU0  # noqa: F401  (re-exported: designkit.design.MU0 is public)
 from .errors import BadInputError, DesignRuleError
 
-MU0 = 4e-7 * math.pi
-"""Vacuum permeability used throughout designkit, T m / A. The classical exact value
-4 pi 1e-7; it differs from CODATA 2022 (1.25663706127e-6) by 1.3e-10 relative."""
 
 
 @dataclass(frozen=True)
@@ -114,8 +113,9 @@ class CoreSpec:
     offset_m: float = 0.0
     """Axial offset of the core centre from the winding centre, m (assumed 0: the core
     protrudes 5 mm beyond each end of the 100 mm winding)."""
-    saturation_t: float = 1.6
-    """Flux density at the knee of the B-H curve of low-carbon steel, T (flag only)."""
+    saturation_t: float = 1.5
+    """Flux density at the knee of the B-H curve of low-carbon steel, T: a linear core model
+    warns above it (``Core.knee_t``)."""
     bh: str = "linear"
     """Core material law: 'linear' (relative_permeability; keeps fields linear in the currents,
     which the actuation matrix and the controller assume) or 'steel1010' (nonlinear B-H curve,
@@ -143,6 +143,8 @@ class DriveSpec:
     """Cytron MD10C motor supply rating, V (the thesis' 36 V exceeds it)."""
     driver_continuous_current_a: float = 13.0
     pwm_frequency_hz: float = 1526.0
+    """PWM frequency of the drivers, Hz (PCA9685 maximum); sets the current ripple
+    (``electrical.pwm_ripple``)."""
 
 
 @dataclass(frozen=True)
@@ -279,7 +281,7 @@ def design_from_dict(data: Mapping[str, Any], *, source: str = "design") -> Desi
     kwargs: dict[str, Any] = {}
     for key, value in data.items():
         if key == "name":
-            kwargs["name"] = str(value)
+            kwargs["name"] = value  # type-checked in check_design: 5 is not silently "5"
         elif key in _SECTIONS:
             if key == "core" and (value is False or value == {} and False):
                 kwargs["core"] = None
@@ -335,8 +337,24 @@ def design_to_toml(design: Design) -> str:
     return "\n".join(lines)
 
 
+def _check_type(name: str, value: Any, default: Any) -> None:
+    """The value has the type of the field's default: a string where text is expected, a whole
+    number for counts, a number (not text, not true/false) for quantities."""
+    if isinstance(default, str):
+        if not isinstance(value, str):
+            raise BadInputError(name, "a string (in TOML: quoted)", value)
+    elif isinstance(default, int):
+        if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+            raise BadInputError(name, "a whole number", value)
+    elif isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise BadInputError(name, "a number (in TOML: unquoted)", value)
+
+
 def check_design(d: Design) -> None:
-    """Range checks of every field; raises BadInputError naming the dotted parameter."""
+    """Type and range checks of every field; raises BadInputError naming the dotted parameter."""
+    _check_type("name", d.name, "")
+    if not d.name.strip():
+        raise BadInputError("name", "a non-empty string", d.name)
     for sec in _SECTIONS:
         obj = getattr(d, sec)
         if obj is None:
@@ -350,7 +368,9 @@ def check_design(d: Design) -> None:
                         and any(c != 0.0 for c in val)):
                     raise BadInputError(name, "3 finite numbers, not all 0 (the moment's "
                                         "direction; default [0, 0, -1])", val)
-            elif f.name == "bh":
+                continue
+            _check_type(name, val, f.default)
+            if f.name == "bh":
                 if val not in ("linear", "steel1010"):
                     raise BadInputError(name, "'linear' or 'steel1010'", val)
             elif f.name == "packing":

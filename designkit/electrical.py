@@ -47,7 +47,8 @@ import numpy as np
 from scipy.special import itj0y0, j0, j1
 
 from . import _validate as v
-from .design import MU0, DriveSpec, OptimizeSpec, WireSpec
+from .constants import MU0
+from .design import DriveSpec, OptimizeSpec, WireSpec
 from .errors import BadInputError
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -382,6 +383,9 @@ class ElectricalReport:
     time_to_max_temperature_s: float
     max_temperature_c: float
     violations: tuple[str, ...]
+    pwm_frequency_hz: float = 0.0
+    pwm_ripple_a: float = 0.0
+    """Worst-case (50 % duty) peak-to-peak current ripple of the PWM drive, A."""
 
     def as_dict(self) -> dict:
         import dataclasses
@@ -389,6 +393,13 @@ class ElectricalReport:
         d = dataclasses.asdict(self)
         d["violations"] = list(self.violations)
         return d
+
+
+def pwm_ripple(voltage_v: float, resistance_ohm: float, time_constant_s: float,
+               frequency_hz: float) -> float:
+    """Peak-to-peak current ripple of an RL load on a PWM bridge at 50 % duty (the worst duty),
+    A: (V/R) tanh(1 / (4 f tau)), the periodic steady state of the two exponential halves."""
+    return voltage_v / resistance_ohm * math.tanh(1.0 / (4.0 * frequency_hz * time_constant_s))
 
 
 def design_rule_violations(*, resistance_ohm: float, settling_time_s: float, turns: int,
@@ -415,17 +426,14 @@ def design_rule_violations(*, resistance_ohm: float, settling_time_s: float, tur
     return out
 
 
-def electrical_report(design: "Design", coil: "Coil | None" = None, *,
+def electrical_report(design: "Design", coil: "Coil", *,
                       max_temperature_c: float = DEFAULT_MAX_TEMPERATURE_C) -> ElectricalReport:
-    """Everything electrical and thermal about ``coil`` (default: the design's coil).
+    """Everything electrical and thermal about ``coil`` (``Coil.from_design(design)`` for the
+    design's own: this module sits below designkit.coil and does not build coils).
 
     Resistance at the wire's operating temperature; current = V/R capped by the driver's
     continuous rating; thermal estimate at that current from the operating temperature.
     """
-    from .coil import Coil
-
-    if coil is None:
-        coil = Coil.from_design(design)
     wire = _check_wire(design.wire)
     r = resistance(coil, wire)
     l_air = air_inductance(coil)
@@ -448,4 +456,7 @@ def electrical_report(design: "Design", coil: "Coil | None" = None, *,
         inductance_h=l_total, time_constant_s=tau, settling_time_s=5 * tau, current_a=i,
         current_capped=capped, voltage_v=design.drive.supply_voltage_v, power_w=i * i * r,
         copper_mass_kg=mass, fill_factor=fill, time_to_max_temperature_s=t_hot,
-        max_temperature_c=max_temperature_c, violations=tuple(violations))
+        max_temperature_c=max_temperature_c, violations=tuple(violations),
+        pwm_frequency_hz=design.drive.pwm_frequency_hz,
+        pwm_ripple_a=pwm_ripple(design.drive.supply_voltage_v, r, tau,
+                                design.drive.pwm_frequency_hz))

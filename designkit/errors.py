@@ -7,30 +7,20 @@ They keep their fields and pickle, because sweeps run in worker processes.
 
 from __future__ import annotations
 
+from firmware_io.errors import InputRangeError
+
 
 class DesignkitError(Exception):
     """Base class of every error designkit raises on purpose."""
 
 
-class BadInputError(ValueError, DesignkitError):
+class BadInputError(InputRangeError, DesignkitError):
     """An input is outside its valid range.
 
     The message always names the parameter, the valid range and the value received:
-    ``Input inner_radius must be > 0 m; instead received -0.012.``
+    ``Input inner_radius must be > 0 m; instead received -0.012.`` (the pattern is
+    :class:`firmware_io.errors.InputRangeError`'s, shared so both packages say it alike).
     """
-
-    def __init__(self, name: str, valid: str, received: object, hint: str = ""):
-        self.name = name
-        self.valid = valid
-        self.received = received
-        self.hint = hint
-        message = f"Input {name} must be {valid}; instead received {received!r}."
-        if hint:
-            message += f" {hint}"
-        super().__init__(message)
-
-    def __reduce__(self):
-        return (type(self), (self.name, self.valid, self.received, self.hint))
 
 
 class DesignRuleError(ValueError, DesignkitError):

@@ -304,7 +304,7 @@ def build(design, *, spacing: float = 0.015, coupling_log_step: float = 0.35,
     n_check : int
         Random points where the finished map is compared with direct evaluation (meta 'errors').
     """
-    from tqdm import tqdm
+    from ._progress import tqdm
 
     from . import __version__
 

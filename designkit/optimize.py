@@ -633,7 +633,7 @@ def solve(problem: CoilDesignProblem, *, starts: int = 8, global_method: str = "
     runs = []
     it = x0s
     if progress:
-        from tqdm import tqdm
+        from ._progress import tqdm
 
         it = tqdm(x0s, desc="optimize", unit="start")
     for x0 in it:
@@ -723,7 +723,7 @@ def optimize_wire(problem: CoilDesignProblem, diameters_m: Sequence[float] | Non
     out = []
     it = diameters
     if progress:
-        from tqdm import tqdm
+        from ._progress import tqdm
 
         it = tqdm(diameters, desc="wire table", unit="wire")
     for d in it:
@@ -764,7 +764,7 @@ def pareto_front(problem: CoilDesignProblem, *, tau_caps_s: Sequence[float] | No
     pairs = [(t, p) for t in taus for p in pows]
     it = pairs
     if progress:
-        from tqdm import tqdm
+        from ._progress import tqdm
 
         it = tqdm(pairs, desc="pareto", unit="solve")
     for t, p in it:

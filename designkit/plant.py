@@ -471,7 +471,7 @@ def simulate(device: SimulatedDevice, runner_factory, trajectory: Trajectory, *,
     """
     import time as _time
 
-    from tqdm import tqdm
+    from ._progress import tqdm
 
     n_steps = int(round(duration_s / period_s))
     t = np.arange(n_steps) * period_s

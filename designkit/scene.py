@@ -33,9 +33,10 @@ from typing import Literal
 import numpy as np
 
 from . import _validate as v
-from .array import CoilArray, g5_from_gradient
+from .array import CoilArray, force_matrix, g5_from_gradient
 from .coil import Coil
 from .errors import BadInputError
+from .field import cylindrical_to_cartesian
 from .pose import Pose
 
 Output = Literal["B", "gradient", "force", "fz", "torque"]
@@ -400,29 +401,25 @@ def assemble(per: dict, coil: Coil, k: int, s, loc, part: dict, full_g: bool, m)
     c = np.where(pos, loc[:, 0] / np.where(pos, rho, 1.0), 1.0)
     sn = np.where(pos, loc[:, 1] / np.where(pos, rho, 1.0), 0.0)
     outs = set(per)
+    if "br" in part or full_g:
+        zero = np.zeros(len(s))
+        comps = ("br", "bz") + (("dbr_drho", "dbr_dz", "dbz_drho", "dbz_dz", "br_over_rho")
+                                if full_g else ())
+        res = cylindrical_to_cartesian(c, sn, 1.0, [part.get(q, zero) for q in comps], full_g)
+        b, g = res if full_g else (res, None)
     if "br" in part:
-        b = np.c_[part["br"] * c, part["br"] * sn, part["bz"]]
         b = coil.pose.vectors_to_global(b)
         if "B" in outs:
             per["B"][s, :, k] = b
         if "torque" in outs:
             per["torque"][s, :, k] = np.cross(m, b)
     if full_g:
-        g = np.empty((len(s), 3, 3))
-        cc, ss, cs = c * c, sn * sn, c * sn
-        g[:, 0, 0] = part["dbr_drho"] * cc + part["br_over_rho"] * ss
-        g[:, 1, 1] = part["dbr_drho"] * ss + part["br_over_rho"] * cc
-        g[:, 0, 1] = g[:, 1, 0] = (part["dbr_drho"] - part["br_over_rho"]) * cs
-        g[:, 0, 2] = part["dbr_dz"] * c
-        g[:, 1, 2] = part["dbr_dz"] * sn
-        g[:, 2, 0] = part["dbz_drho"] * c
-        g[:, 2, 1] = part["dbz_drho"] * sn
-        g[:, 2, 2] = part["dbz_dz"]
         g = coil.pose.tensors_to_global(g)
+        g5 = g5_from_gradient(g)
         if "gradient" in outs:
-            per["gradient"][s, :, k] = g5_from_gradient(g)
+            per["gradient"][s, :, k] = g5
         if "force" in outs:
-            per["force"][s, :, k] = np.einsum("nji,j->ni", g, m)
+            per["force"][s, :, k] = g5 @ force_matrix(m).T
         if "fz" in outs:
             per["fz"][s, k] = m[2] * g[:, 2, 2]
     elif "fz" in outs:

@@ -15,6 +15,7 @@ import dataclasses
 import itertools
 import math
 import os
+import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -39,7 +40,7 @@ _ALIASES.update({"wire.diameter_m": "wire_diameter_m", "optimize.height_m": "hei
 MAX_DESIGNS = 5_000_000
 COLUMNS = ("inner_radius_m", "outer_radius_m", "length_m", "wire_diameter_m", "height_m",
            "current_a", "turns", "force_n", "resistance_ohm", "inductance_h", "time_constant_s",
-           "power_w", "valid", "feasible")
+           "power_w", "valid", "feasible", "reason")
 
 
 @dataclass(frozen=True)
@@ -135,7 +136,8 @@ def evaluate_chunk(problem: CoilDesignProblem, base: dict, names: Sequence[str],
         res = dict.fromkeys(COLUMNS)
         res.update(row)
         if x[1] < x[0] + p.insulated_diameter_m or n < 1:
-            res.update(turns=max(n, 0), valid=False, feasible=False)
+            res.update(turns=max(n, 0), valid=False, feasible=False,
+                       reason=infeasible_reason(p, res))
             out.append(res)
             continue
         ev = p.evaluate(x, turns=n)
@@ -143,8 +145,47 @@ def evaluate_chunk(problem: CoilDesignProblem, base: dict, names: Sequence[str],
                    inductance_h=ev.inductance_h, time_constant_s=ev.time_constant_s,
                    power_w=ev.power_w, valid=True,
                    feasible=bool(ev.constraints[0] <= 0 and ev.constraints[1] <= 0))
+        res["reason"] = "" if res["feasible"] else infeasible_reason(p, res)
         out.append(res)
     return out
+
+
+def infeasible_reason(problem: CoilDesignProblem, row: dict) -> str:
+    """Why a design row is not feasible, in words (empty for a feasible one).
+
+    Geometry first (outer radius not one insulated wire above the inner one: no whole turn),
+    then the limits of thesis eq. 2.14 (R <= Rmax, 5 L/R <= T). A length above 1 m is named as
+    probably millimetres, the usual slip with ``--param inner_radius_m=6:10:3``.
+    """
+    reasons = []
+    # no per-row numbers here (the row has them): equal reasons group in reason_summary
+    if row.get("resistance_ohm") is None:
+        if row["outer_radius_m"] < row["inner_radius_m"] + problem.insulated_diameter_m:
+            reasons.append(f"outer radius < inner radius + one wire "
+                           f"({problem.insulated_diameter_m * 1e3:.3g} mm)")
+        else:
+            reasons.append("no whole turn fits the winding section")
+    else:
+        if row["resistance_ohm"] > problem.max_resistance_ohm:
+            reasons.append(f"R > {problem.max_resistance_ohm:g} ohm")
+        if 5 * row["time_constant_s"] > problem.max_settling_time_s:
+            reasons.append(f"5 L/R > {problem.max_settling_time_s * 1e3:g} ms")
+    big = [k for k in ("inner_radius_m", "outer_radius_m", "length_m", "wire_diameter_m",
+                       "height_m") if row[k] > 1.0]
+    if big:
+        reasons.append(f"{', '.join(big)} > 1 m: millimetres given where metres are expected?")
+    return "; ".join(reasons)
+
+
+def reason_summary(result: "SweepResult", most: int = 3) -> str:
+    """The commonest reasons designs were infeasible, with counts, one per line."""
+    import collections
+
+    counts = collections.Counter(r["reason"] for r in result.rows if not r["feasible"])
+    lines = [f"  {n} x {why}" for why, n in counts.most_common(most)]
+    if len(counts) > most:
+        lines.append(f"  ... and {len(counts) - most} other reasons (column 'reason' of the CSV)")
+    return "\n".join(lines)
 
 
 @dataclass(frozen=True)
@@ -188,7 +229,7 @@ def run_sweep(design: Design, ranges: Sequence[ParamRange], *, workers: int | No
     t0 = time.perf_counter()
     bar = None
     if progress:
-        from tqdm import tqdm
+        from ._progress import tqdm
 
         bar = tqdm(total=len(vals), desc="sweep", unit="design")
     results: list = [None] * len(chunks)
@@ -265,54 +306,93 @@ def write_csv(result: SweepResult, path: str | Path) -> Path:
 
 def plot(result: SweepResult, path: str | Path) -> Path:
     """PNG of the force over the (first two) swept parameters: feasible designs coloured by
-    force, infeasible ones grey, the best feasible design starred."""
+    force, infeasible ones grey, the best feasible design starred (see :func:`sweep_figure`)."""
+    import matplotlib.pyplot as plt
+
+    from ._io import atomic_path
+
+    fig = sweep_figure(result)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
+    return Path(path)
+
+
+def _shown(name: str, value: float) -> float:
+    return value * 1e3 if name.endswith("_m") else value
+
+
+def sweep_figure(result: SweepResult):
+    """The matplotlib figure of :func:`plot`.
+
+    With more than two swept parameters the plot is the slice through the best feasible design
+    (the first grid values when none is feasible), and the title says so. The legend sits above
+    the axes, where it cannot hide points; a sweep with no feasible design says why in the
+    axes instead of showing an empty plot.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ._io import atomic_path
-
     names = list(result.names) or ["inner_radius_m"]
     rows = result.rows
-    valid = [r for r in rows if r["valid"]]
+    anchor = rows[result.best_index] if result.best_index is not None else rows[0]
+    fixed = names[2:]
+    shown = [r for r in rows if all(r[k] == anchor[k] for k in fixed)]
+    valid = [r for r in shown if r["valid"]]
     fig, ax = plt.subplots(figsize=(6.4, 4.8), dpi=110)
+    xn = names[0]
     if len(names) >= 2:
-        xn, yn = names[0], names[1]
+        yn = names[1]
         inf = [r for r in valid if not r["feasible"]]
         fe = [r for r in valid if r["feasible"]]
         if inf:
-            ax.scatter([r[xn] * 1e3 if xn.endswith("_m") else r[xn] for r in inf],
-                       [r[yn] * 1e3 if yn.endswith("_m") else r[yn] for r in inf],
-                       c="0.8", marker="x", s=10, label="infeasible")
+            ax.scatter([_shown(xn, r[xn]) for r in inf], [_shown(yn, r[yn]) for r in inf],
+                       c="0.7", marker="x", s=10, label="infeasible")
         if fe:
-            sc = ax.scatter([r[xn] * 1e3 if xn.endswith("_m") else r[xn] for r in fe],
-                            [r[yn] * 1e3 if yn.endswith("_m") else r[yn] for r in fe],
+            sc = ax.scatter([_shown(xn, r[xn]) for r in fe], [_shown(yn, r[yn]) for r in fe],
                             c=[r["force_n"] * 1e3 for r in fe], s=14, cmap="viridis",
                             label="feasible")
             fig.colorbar(sc, ax=ax, label="force (mN)")
         ax.set_ylabel(_label(yn))
+        by = _shown(yn, anchor[yn])
     else:
-        xn = names[0]
-        xs = [r[xn] * 1e3 if xn.endswith("_m") else r[xn] for r in valid]
+        xs = [_shown(xn, r[xn]) for r in valid]
         ax.plot(xs, [r["force_n"] * 1e3 for r in valid], "-", color="0.6")
         ax.scatter([x for x, r in zip(xs, valid) if r["feasible"]],
                    [r["force_n"] * 1e3 for r in valid if r["feasible"]], s=12, label="feasible")
         ax.set_ylabel("force (mN)")
+        by = anchor["force_n"] * 1e3 if anchor["force_n"] is not None else None
     if result.best_index is not None:
-        b = rows[result.best_index]
-        bx = b[names[0]] * 1e3 if names[0].endswith("_m") else b[names[0]]
-        by = (b[names[1]] * 1e3 if names[1].endswith("_m") else b[names[1]]) \
-            if len(names) >= 2 else b["force_n"] * 1e3
-        ax.plot([bx], [by], "r*", ms=14, label=f"best {b['force_n'] * 1e3:.0f} mN")
-    ax.set_xlabel(_label(names[0]))
-    ax.set_title(f"{len(rows)} designs, feasible region (R, 5 tau limits)")
-    ax.legend(loc="best", fontsize=8)
+        ax.plot([_shown(xn, anchor[xn])], [by], "r*", ms=14,
+                label=f"best {anchor['force_n'] * 1e3:.0f} mN")
+    ax.set_xlabel(_label(xn))
+    feasible = sum(1 for r in rows if r["feasible"])
+    title = f"{len(rows)} designs, {feasible} feasible (R and 5 L/R limits)"
+    if fixed:
+        where = ", ".join(f"{_label(k).split(' (')[0]} = {_shown(k, anchor[k]):.4g}"
+                          f"{' mm' if k.endswith('_m') else (' A' if k.endswith('_a') else '')}"
+                          for k in fixed)
+        title += (f"\nslice at {where} ({len(shown)} of {len(rows)} designs; "
+                  f"{'best design' if result.best_index is not None else 'first grid value'})")
+    ax.set_title(title, fontsize=9, pad=22 if len(fixed) == 0 else 24)
+    if feasible == 0:
+        why = [r["reason"] for r in rows if r.get("reason")]
+        common = max(set(why), key=why.count) if why else "unknown"
+        ax.text(0.5, 0.5, "no feasible design\n" + textwrap.fill(f"most common reason: {common}",
+                                                                  48),
+                transform=ax.transAxes, ha="center", va="center", fontsize=10,
+                bbox=dict(boxstyle="round", facecolor="white", edgecolor="0.5"))
+        if not valid:
+            ax.set_xticks([])
+            ax.set_yticks([])
+    if ax.get_legend_handles_labels()[0]:
+        # above the axes: a legend inside would sit on the points it names
+        ax.legend(loc="lower left", bbox_to_anchor=(0.0, 1.0), ncol=3, fontsize=8,
+                  frameon=False, borderaxespad=0.1)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png")
-    plt.close(fig)
-    return Path(path)
+    return fig
 
 
 def _label(name: str) -> str:

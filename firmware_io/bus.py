@@ -129,7 +129,7 @@ def transaction_bits(message_lengths: Sequence[int]) -> int:
     """SCL clock periods of one STOP-terminated transaction.
 
     Every byte (the address byte included) takes 9 clocks (8 data + ACK); START and STOP take
-    about one each, and each repeated START about one more (HARDWARE.md section 6).
+    about one each, and each repeated START about one more (NXP UM10204, I2C-bus spec, 3.1).
 
     Parameters
     ----------

@@ -2,7 +2,8 @@
 
 Every driver takes a ``bus`` with :class:`smbus2.SMBus`'s methods (see :mod:`firmware_io.bus`)
 and does one thing per call with as few transactions as the chip allows. Register facts, byte
-layouts and sequences are those of HARDWARE.md; the pure helpers (:func:`pca9685_prescale`,
+layouts and sequences are those of the chips' datasheets (NXP PCA9685, NXP PCA9548A /
+TI TCA9548A, Infineon TLV493D-A1B6 user manual); the pure helpers (:func:`pca9685_prescale`,
 :func:`pca9685_channel_bytes`, :func:`tlv493d_write_frame`, :func:`tlv493d_decode`) carry them
 so they can be checked on their own.
 """

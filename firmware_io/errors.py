@@ -17,8 +17,9 @@ class FirmwareIOError(Exception):
     """Base class of every error firmware_io raises on purpose."""
 
 
-class BadInputError(ValueError, FirmwareIOError):
-    """An input is outside its valid range.
+class InputRangeError(ValueError):
+    """An input is outside its valid range: the one message pattern of firmware_io and designkit
+    (``designkit.errors.BadInputError`` derives from it too).
 
     ``Input hz must be in [23.8, 1526] Hz; instead received 5000.``
     """
@@ -35,6 +36,10 @@ class BadInputError(ValueError, FirmwareIOError):
 
     def __reduce__(self):
         return (type(self), (self.name, self.valid, self.received, self.hint))
+
+
+class BadInputError(InputRangeError, FirmwareIOError):
+    """An input of firmware_io is outside its valid range (see :class:`InputRangeError`)."""
 
 
 class I2CError(OSError, FirmwareIOError):

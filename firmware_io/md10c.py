@@ -1,8 +1,8 @@
 """Cytron MD10C in sign-magnitude mode: a signed coil current request -> (PWM duty, direction).
 
 The MD10C turns its PWM input into the bridge duty and its DIR input into the polarity, so the
-coil sees an average voltage of about +-D Vs and settles at I = D Vs / R (inference,
-HARDWARE.md section 2; the coil's L/R must be long against the PWM period for the ripple
+coil sees an average voltage of about +-D Vs and settles at I = D Vs / R (inference from
+the Cytron MD10C manual's sign-magnitude mode; the coil's L/R must be long against the PWM period for the ripple
 Vs D (1 - D) / (L f) to be small). The request is clamped to the smallest of the coil's
 limit, the driver's continuous rating and what the supply can push through R.
 """

@@ -1,6 +1,6 @@
 """SensorArrays: the 18 TLV493D sensors -> two (9, 3) field arrays in tesla with per-sensor health.
 
-Default topology (HARDWARE.md section 4): one sensor per mux channel, so sensors that share an
+Default topology: one sensor per mux channel, so sensors that share an
 address never see each other and each reset reaches one sensor only: 18 sensors on three
 TCA9548A at 0x71, 0x72, 0x73 (0x70 is left to the PCA9685 All-Call), sensor i on mux
 0x71 + i // 8, channel i % 8. Sensors 0-8 form the top array, 9-17 the bottom array, each in

@@ -1,7 +1,7 @@
 """Simulated I2C bus with register-level models of the PCA9685, TLV493D-A1B6 and TCA9548A.
 
 There is no hardware here, so firmware_io is built against these models. They follow the chips at
-the level the drivers see (HARDWARE.md sections 1, 3, 4, 5):
+the level the drivers see (their datasheets, as in :mod:`firmware_io.devices`):
 
 * :class:`SimPCA9685` -- register file with auto-increment (0x45 wraps to 0x00), PRE_SCALE
   writable only while SLEEP=1 (minimum 3), All-Call at 0x70 while MODE1.ALLCALL=1, ALL_LED
@@ -75,7 +75,7 @@ class Transaction:
     start_s: float | None = None  # SimClock time at START (None without a SimClock)
 
     def wire_time_s(self, scl_hz: float) -> float:
-        """Wire time of this transaction at ``scl_hz``, s (HARDWARE.md section 6 formula)."""
+        """Wire time of this transaction at ``scl_hz``, s (:func:`firmware_io.bus.transaction_wire_time_s`)."""
         return transaction_wire_time_s([len(m.data) for m in self.messages], scl_hz)
 
 

@@ -100,9 +100,9 @@ def _table(r: dict) -> str:
 
 
 if __name__ == "__main__":
-    import tempfile
-
-    target = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(tempfile.mkdtemp(prefix="bench_cad_"))
+    
+    target = (Path(sys.argv[1]) if len(sys.argv) > 1
+           else Path(__file__).resolve().parents[1] / "out" / "bench_cad")
     res = run(target, quick=False)
     print(_table(res))
     print(f"\nfiles under {target}")

@@ -260,5 +260,6 @@ def run(out_dir, quick=False):
 
 
 if __name__ == "__main__":
-    res = run(Path(__file__).resolve().parent / "out" / "bench_field")
+    res = run((Path(sys.argv[1]) if len(sys.argv) > 1
+           else Path(__file__).resolve().parents[1] / "out" / "bench_field"))
     print(res["table"])

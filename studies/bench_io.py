@@ -4,13 +4,13 @@ One loop of the rendering runner reads all 18 TLV493D sensors (with the TCA9548A
 need) and writes one coil command to the two PCA9685 boards. This study
 
 1. records that loop's transactions on the register-level simulated bus (firmware_io.sim) and
-   turns them into wire time at 100 kHz, 400 kHz and 1 MHz with the HARDWARE.md section 6 formula
+   turns them into wire time at 100 kHz, 400 kHz and 1 MHz with the formula of firmware_io.bus
    (9 clocks per byte including the address byte, + START/STOP, + 1 per repeated START);
 2. measures the Python cost per loop of the firmware_io drivers on this host, subtracting the
    time spent inside the simulated device models (reference run in the same process);
 3. adds a per-ioctl kernel overhead, which cannot be measured without hardware: 0.05 ms
    (optimistic) and 0.3 ms (pessimistic) per transaction, bracketing the ~0.15 ms inferred from
-   Raspberry Pi measurements in HARDWARE.md section 6;
+   published Raspberry Pi I2C measurements (not repeatable here);
 
 and reports the achievable loop rate = 1 / (wire + ioctls x overhead + Python). The TCA9548A is
 specified up to 400 kHz only, so the 1 MHz row is out of spec for the sensor segment; the 'split'
@@ -153,9 +153,9 @@ def run(out_dir, quick: bool = False) -> dict:
 
 
 if __name__ == "__main__":
-    import tempfile
-
-    out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(tempfile.mkdtemp(prefix="bench_io_"))
+    
+    out = (Path(sys.argv[1]) if len(sys.argv) > 1
+           else Path(__file__).resolve().parents[1] / "out" / "bench_io")
     res = run(out)
     print(res["table"])
     print(f"written to {out}")

@@ -132,7 +132,8 @@ def _print(res):
 
 
 if __name__ == "__main__":
-    out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path("out/bench_map")
+    out = (Path(sys.argv[1]) if len(sys.argv) > 1
+           else Path(__file__).resolve().parents[1] / "out" / "bench_map")
     n = int(sys.argv[2]) if len(sys.argv) > 2 else 10000
     _print(run(out, n_points=n))
     print(f"written to {out}")

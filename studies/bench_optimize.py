@@ -97,7 +97,8 @@ def run(out_dir, quick: bool = False) -> dict:
 
 
 if __name__ == "__main__":
-    r = run(Path("bench-optimize-out"))
+    r = run((Path(sys.argv[1]) if len(sys.argv) > 1
+           else Path(__file__).resolve().parents[1] / "out" / "bench_optimize"))
     cols = ["case", "inner_diameter_mm", "outer_diameter_mm", "length_mm", "turns",
             "resistance_ohm", "inductance_mh", "settling_ms", "force_mn", "evaluations",
             "seconds", "starts_at_best", "thesis_point_force_mn", "thesis_point_settling_ms"]

@@ -106,8 +106,8 @@ def _print(res):
 
 
 if __name__ == "__main__":
-    import tempfile
-
-    out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(tempfile.mkdtemp(prefix="bench_scene_"))
+    
+    out = (Path(sys.argv[1]) if len(sys.argv) > 1
+           else Path(__file__).resolve().parents[1] / "out" / "bench_scene")
     _print(run(out))
     print(f"written to {out}")

@@ -255,5 +255,6 @@ def print_table(res: dict) -> None:
 if __name__ == "__main__":  # pragma: no cover
     import sys
 
-    res = run(sys.argv[1] if len(sys.argv) > 1 else "study_out/core_vs_fem")
+    res = run((Path(sys.argv[1]) if len(sys.argv) > 1
+           else Path(__file__).resolve().parents[1] / "out" / "core_vs_fem"))
     print_table(res)

@@ -181,5 +181,6 @@ def run(out_dir, quick=False):
 
 
 if __name__ == "__main__":
-    res = run(Path(__file__).resolve().parent / "out" / "stress_field")
+    res = run((Path(sys.argv[1]) if len(sys.argv) > 1
+           else Path(__file__).resolve().parents[1] / "out" / "stress_field"))
     print(res["table"])

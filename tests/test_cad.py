@@ -18,7 +18,7 @@ from cad import meshcheck
 from cad.params import from_design
 from cad.rules import check_rules, fit_in_build_volume, violations
 
-build123d = pytest.importorskip("build123d")
+import build123d  # noqa: E402,F401  (a required dependency: no skip)
 from cad import parts as P  # noqa: E402  (needs build123d)
 from cad.assembly import build_part, interferences, part_names, quantities  # noqa: E402
 

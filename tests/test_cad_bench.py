@@ -1,20 +1,14 @@
 """Smoke test of studies/bench_cad.py (timings are reported by the study, never asserted)."""
 
-import importlib.util
 import json
-from pathlib import Path
 
-import pytest
+import build123d  # noqa: F401  (a required dependency: no skip)
 
-pytest.importorskip("build123d")
-
-STUDY = Path(__file__).resolve().parents[1] / "studies" / "bench_cad.py"
+from conftest import load_study
 
 
 def test_bench_cad_quick(tmp_path):
-    spec = importlib.util.spec_from_file_location("bench_cad", STUDY)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = load_study("bench_cad")
     res = mod.run(tmp_path, quick=True)
     assert res["formats"] == ["stl"]
     assert res["files"]["core.stl"] == (tmp_path / "full" / "core.stl").stat().st_size

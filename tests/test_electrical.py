@@ -73,7 +73,8 @@ def test_air_inductance_matches_maxwell_filament_sum():
 
 
 def test_thin_winding_tends_to_lorenz_current_sheet():
-    mpmath = pytest.importorskip("mpmath")
+    import mpmath
+
     a, length, n = 0.02, 0.05, 100
     k2 = 4 * a * a / (4 * a * a + length * length)
     mpmath.mp.dps = 30
@@ -95,7 +96,7 @@ def test_wheeler_within_its_accuracy_for_the_thesis_coil():
     got = el.air_inductance_from_geometry(0.012, 0.019, 0.1, 1429)
     wheeler = el.wheeler_inductance(0.012, 0.019, 0.1, 1429)
     assert abs(got / wheeler - 1) < 0.01
-    # the long-solenoid formula at the mean radius is far off (FIELD_MATH: 18-30 %)
+    # the long-solenoid formula at the mean radius is far off (18-30 % for this coil)
     naive = MU0 * 1429 ** 2 * math.pi * 0.0155 ** 2 / 0.1
     assert abs(got / naive - 1) > 0.15
 
@@ -129,7 +130,8 @@ def test_adiabatic_heating_matches_ode():
 
 def test_design_rules_are_reported_in_words_for_the_thesis_device():
     design = default_design()
-    rep = el.electrical_report(design.replace(core=None))
+    air = design.replace(core=None)
+    rep = el.electrical_report(air, Coil.from_design(air))
     text = " ".join(rep.violations)
     assert "36 V exceeds the driver's rating of 30 V" in text
     assert "6.235 ohm exceeds" in text
@@ -145,7 +147,7 @@ def test_design_rules_are_reported_in_words_for_the_thesis_device():
 
 def test_core_adds_inductance_and_breaks_the_tau_rule():
     design = default_design()  # mu_r 1000 core (designkit.core's model)
-    rep = el.electrical_report(design)
+    rep = el.electrical_report(design, Coil.from_design(design))
     assert rep.inductance_core_h > 3 * rep.inductance_air_h
     assert any("5 L/R" in s for s in rep.violations)
 

@@ -26,51 +26,23 @@ def _check(exc, name, value):
     assert pickle.loads(pickle.dumps(exc.value)).name == exc.value.name
 
 
-def test_negative_inner_radius():
+@pytest.mark.parametrize("call,name,value,extra", [
+    (lambda: _winding(inner_radius=-0.012), "inner_radius", -0.012, "> 0"),
+    (lambda: _winding(outer_radius=0.0), "outer_radius", 0.0, ""),
+    (lambda: _winding(outer_radius=0.012), "outer_radius", 0.012, "inner_radius"),
+    (lambda: loop_field([0, 0, 1.0], 0.0, 1.0), "radius", 0.0, ""),
+    (lambda: magnetized_cylinder_field([0, 0, 1.0], -1.0, 0.01, 1e6), "radius", -1.0, ""),
+    (lambda: _winding(length=0), "length", 0, ""),
+    (lambda: _winding(turns=0), "turns", 0, ""),
+    (lambda: Coil(inner_radius=0.012, outer_radius=0.019, length=0.1, turns=0), "turns", 0, ""),
+], ids=["negative inner radius", "zero outer radius", "outer not above inner",
+        "zero loop radius", "negative cylinder radius", "zero length", "zero turns",
+        "coil with zero turns"])
+def test_bad_geometry_names_the_parameter(call, name, value, extra):
     with pytest.raises(BadInputError) as e:
-        _winding(inner_radius=-0.012)
-    _check(e, "inner_radius", -0.012)
-    assert "> 0" in str(e.value)
-
-
-def test_zero_outer_radius():
-    with pytest.raises(BadInputError) as e:
-        _winding(outer_radius=0.0)
-    _check(e, "outer_radius", 0.0)
-
-
-def test_outer_not_greater_than_inner():
-    with pytest.raises(BadInputError) as e:
-        _winding(outer_radius=0.012)
-    _check(e, "outer_radius", 0.012)
-    assert "inner_radius" in str(e.value)
-
-
-def test_zero_loop_radius():
-    with pytest.raises(BadInputError) as e:
-        loop_field([0, 0, 1.0], 0.0, 1.0)
-    _check(e, "radius", 0.0)
-
-
-def test_negative_cylinder_radius():
-    with pytest.raises(BadInputError) as e:
-        magnetized_cylinder_field([0, 0, 1.0], -1.0, 0.01, 1e6)
-    _check(e, "radius", -1.0)
-
-
-def test_zero_length():
-    with pytest.raises(BadInputError) as e:
-        _winding(length=0)
-    _check(e, "length", 0)
-
-
-def test_zero_turns():
-    with pytest.raises(BadInputError) as e:
-        _winding(turns=0)
-    _check(e, "turns", 0)
-    with pytest.raises(BadInputError) as e:
-        Coil(inner_radius=0.012, outer_radius=0.019, length=0.1, turns=0)
-    _check(e, "turns", 0)
+        call()
+    _check(e, name, value)
+    assert extra in str(e.value)
 
 
 def test_nonfinite_point():

@@ -44,7 +44,7 @@ def test_loop_matches_mpmath_biot_savart(point, why):
 
 
 def test_loop_matches_magpylib_circle_in_h():
-    magpy = pytest.importorskip("magpylib")
+    import magpylib as magpy
     from scipy.constants import mu_0 as mu0_codata
 
     rng = np.random.default_rng(7)

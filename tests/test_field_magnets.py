@@ -33,7 +33,8 @@ def _points(radius, length, n=3000, seed=11):
                                                MagnetSpec().magnetization_a_per_m),
                                               (0.012, 0.110, -3.3e5)])
 def test_cylinder_matches_magpylib(radius, length, m):
-    magpy = pytest.importorskip("magpylib")
+    import magpylib as magpy
+
     p = _points(radius, length)
     # B / mu0 = H + M: independent of the mu0 each library uses
     b_mp = magpy.func.cylinder_field("B", p, (2 * radius, length), (0, 0, magpy.mu_0 * m))
@@ -49,7 +50,8 @@ def test_n52_magnet_axis_closed_form_and_far_field():
     b = magnetized_cylinder_field(np.stack([0 * z, 0 * z, z], 1), a, ln, m)
     # axis: Bz = mu0 M / 2 [(z + h)/sqrt((z+h)^2 + a^2) - (z - h)/sqrt((z-h)^2 + a^2)]
     # (in mpmath: in float64 the difference cancels far away)
-    mp = pytest.importorskip("mpmath")
+    import mpmath as mp
+
     mp.mp.dps = 30
     h = mp.mpf(ln) / 2
     bz = [float(MU0 * m / 2 * ((zz + h) / mp.sqrt((zz + h) ** 2 + a**2)
@@ -76,8 +78,9 @@ def test_dipole_closed_form_and_gradient():
         fd = np.stack([(dipole_field(pi + h * e, mvec) - dipole_field(pi - h * e, mvec)) / (2 * h)
                        for e in np.eye(3)], 1)
         np.testing.assert_allclose(gi, fd, rtol=0, atol=1e-8 * np.abs(gi).max())
-        assert abs(np.trace(gi)) <= 1e-14 * np.abs(gi).max()
-        np.testing.assert_allclose(gi, gi.T, rtol=0, atol=1e-14 * np.abs(gi).max())
+        # div B = 0 and curl B = 0 of the field values themselves (through the differences)
+        assert abs(np.trace(fd)) <= 1e-8 * np.abs(gi).max()
+        np.testing.assert_allclose(fd, fd.T, rtol=0, atol=1e-8 * np.abs(gi).max())
 
 
 def test_cylinder_far_away_matches_mpmath_without_cancellation():

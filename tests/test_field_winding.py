@@ -50,22 +50,24 @@ INSIDE = [
 ]
 
 
-@pytest.mark.parametrize("point,why", OUTSIDE)
-def test_winding_outside_matches_mpmath_to_1e_10(point, why):
+def _matches_mpmath(point, why, tol):
     b_ref, g_ref = _ref_cart(point)
     b, g = winding_field(point, RI, RO, L, N, I, gradient=True, rtol=1e-10)
-    assert _rel(b, b_ref) <= 1e-10, why
-    assert _rel(g, g_ref) <= 1e-10, why
+    assert _rel(b, b_ref) <= tol, why
+    assert _rel(g, g_ref) <= tol, why
+    return b_ref
+
+
+@pytest.mark.parametrize("point,why", OUTSIDE)
+def test_winding_outside_matches_mpmath_to_1e_10(point, why):
+    b_ref = _matches_mpmath(point, why, 1e-10)
     b_only = winding_field(point, RI, RO, L, N, I, rtol=1e-10)
     assert _rel(b_only, b_ref) <= 1e-10, why
 
 
 @pytest.mark.parametrize("point,why", INSIDE)
 def test_winding_inside_matches_mpmath_to_1e_8(point, why):
-    b_ref, g_ref = _ref_cart(point)
-    b, g = winding_field(point, RI, RO, L, N, I, gradient=True, rtol=1e-10)
-    assert _rel(b, b_ref) <= 1e-8, why
-    assert _rel(g, g_ref) <= 1e-8, why
+    _matches_mpmath(point, why, 1e-8)
 
 
 @pytest.mark.slow
@@ -88,7 +90,8 @@ def test_on_axis_closed_form_including_far_away():
 def test_far_field_converges_to_dipole_without_cancellation():
     # m = N I <pi a^2> over a uniform radial distribution: (pi/(Ro-Ri)) int a^2 da
     m = N * I * np.pi * (RI**2 + RI * RO + RO**2) / 3
-    mp = pytest.importorskip("mpmath")
+    import mpmath as mp
+
     m_quad = N * I * float(mp.pi * mp.quad(lambda a: a * a, [RI, RO]) / (RO - RI))
     assert abs(m / m_quad - 1) < 1e-15
     d = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
@@ -131,14 +134,15 @@ def _central_differences(pts, h=1e-6):
     return fd
 
 
-def test_gradient_symmetric_traceless_and_equal_to_finite_differences_outside():
+def test_gradient_equals_finite_differences_and_b_is_div_and_curl_free_outside():
     pts = _outside_points()
     b, g = winding_field(pts, RI, RO, L, N, I, gradient=True)
     gn = np.linalg.norm(g, axis=(1, 2))
-    assert np.all(np.abs(np.trace(g, axis1=1, axis2=2)) <= 1e-12 * gn)
-    assert np.all(np.linalg.norm(g - g.transpose(0, 2, 1), axis=(1, 2)) <= 1e-12 * gn)
     fd = _central_differences(pts)
     assert np.all(np.linalg.norm(fd - g, axis=1) <= 1e-7 * gn[:, None])
+    # the kernels build G traceless and symmetric; the differences of B test B itself
+    assert np.all(np.abs(np.trace(fd, axis1=1, axis2=2)) <= 1e-6 * gn)
+    assert np.all(np.linalg.norm(fd - fd.transpose(0, 2, 1), axis=(1, 2)) <= 1e-6 * gn)
 
 
 def test_inside_curl_is_mu0_j_and_finite_differences_include_it():
@@ -148,13 +152,15 @@ def test_inside_curl_is_mu0_j_and_finite_differences_include_it():
     phi = rng.uniform(0, 2 * np.pi, 30)
     pts = np.stack([rho * np.cos(phi), rho * np.sin(phi), z], axis=1)
     b, g = winding_field(pts, RI, RO, L, N, I, gradient=True)
-    curl = np.stack([g[:, 2, 1] - g[:, 1, 2], g[:, 0, 2] - g[:, 2, 0], g[:, 1, 0] - g[:, 0, 1]], 1)
-    j_vec = MU0 * J * np.stack([-np.sin(phi), np.cos(phi), 0 * phi], 1)
     gn = np.linalg.norm(g, axis=(1, 2))
-    assert np.all(np.linalg.norm(curl - j_vec, axis=1) <= 1e-10 * gn)
-    assert np.all(np.abs(np.trace(g, axis1=1, axis2=2)) <= 1e-12 * gn)
     fd = _central_differences(pts)
     assert np.all(np.linalg.norm(fd - g, axis=1) <= 1e-6 * gn[:, None])
+    # Ampere and Gauss on the field values (through the differences), not on G's construction
+    curl = np.stack([fd[:, 2, 1] - fd[:, 1, 2], fd[:, 0, 2] - fd[:, 2, 0],
+                     fd[:, 1, 0] - fd[:, 0, 1]], 1)
+    j_vec = MU0 * J * np.stack([-np.sin(phi), np.cos(phi), 0 * phi], 1)
+    assert np.all(np.linalg.norm(curl - j_vec, axis=1) <= 1e-5 * gn)
+    assert np.all(np.abs(np.trace(fd, axis1=1, axis2=2)) <= 1e-5 * gn)
 
 
 def _loop_sum(pts, n):
@@ -182,7 +188,8 @@ def _magpylib_shells(pts, k):
     """Nested-shell construction in magpylib: M_z(r) = J (Ro - r) in the winding, J (Ro - Ri)
     in the bore (curl M = J phi), made piecewise constant on k CylinderSegment shells plus a
     Cylinder for the bore. Returns B / mu0_magpylib = H + M (independent of mu0)."""
-    magpy = pytest.importorskip("magpylib")
+    import magpylib as magpy
+
     edges = np.linspace(RI, RO, k + 1)
     mid = 0.5 * (edges[1:] + edges[:-1])
     m_shell = J * (RO - mid)

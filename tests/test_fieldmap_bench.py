@@ -1,19 +1,10 @@
 """Smoke test of studies/bench_map.py (quick mode: air coils, small box)."""
 
-import importlib.util
-from pathlib import Path
-
-
-def _load():
-    path = Path(__file__).resolve().parents[1] / "studies" / "bench_map.py"
-    spec = importlib.util.spec_from_file_location("bench_map", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+from conftest import load_study
 
 
 def test_bench_map_quick(tmp_path):
-    res = _load().run(tmp_path, quick=True)["air_quick"]
+    res = load_study("bench_map").run(tmp_path, quick=True)["air_quick"]
     assert (tmp_path / "bench_map.json").is_file()
     assert not list(tmp_path.glob("*.npz"))  # the study cleans up its map
     # air coils: the tables carry everything; within the 1e-3 target

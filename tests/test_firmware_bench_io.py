@@ -2,27 +2,18 @@
 
 One loop = 18 sensor reads of 6 bytes, 18 mux selects + 3 mux disables (1 byte), one PCA9685
 write of 64 channel bytes (coils 0-7) and one of 8 (coil 8), each with its register byte.
-Bits per transaction = 9 (bytes + address byte) + 2 (HARDWARE.md section 6).
+Bits per transaction = 9 (bytes + address byte) + 2 (START and STOP; NXP UM10204, 3.1).
 """
 
-import importlib.util
 import json
-from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def load_study():
-    spec = importlib.util.spec_from_file_location("bench_io", ROOT / "studies" / "bench_io.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+from conftest import load_study
 
 
 def test_bench_io_quick(tmp_path):
-    result = load_study().run(tmp_path, quick=True)
+    result = load_study("bench_io").run(tmp_path, quick=True)
     bits = 18 * (9 * 7 + 2) + 21 * (9 * 2 + 2) + (9 * 66 + 2) + (9 * 10 + 2)
     assert bits == 2278
     for f in (100e3, 400e3, 1e6):

@@ -1,7 +1,7 @@
 """MD10C current commands and the CoilDriver on two simulated PCA9685 boards.
 
-Expected duties by hand from I = D Vs / R (sign-magnitude MD10C, HARDWARE.md section 2) with
-D = counts / 4096, and the PCA9685 byte rules of section 1. Default wiring: coil k < 8 on board
+Expected duties by hand from I = D Vs / R (sign-magnitude MD10C, Cytron MD10C user manual) with
+D = counts / 4096, and the PCA9685 byte rules of its datasheet. Default wiring: coil k < 8 on board
 0x40, PWM channel 2k, DIR channel 2k+1; coil 8 on board 0x41, channels 0 and 1. Positive current
 -> DIR low (full-OFF bytes 00 00 00 10), negative -> DIR high (full-ON bytes 00 10 00 00).
 """

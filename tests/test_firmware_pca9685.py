@@ -1,6 +1,6 @@
 """PCA9685 driver against the register-level simulated chip.
 
-Expected bytes come from the NXP datasheet rules quoted in HARDWARE.md section 1, written out by
+Expected bytes come from the NXP PCA9685 datasheet (rev. 4, sections 7.3-7.3.5), written out by
 hand here: PRE_SCALE = round(25 MHz / (4096 f)) - 1, channel bytes [ON_L, ON_H, OFF_L, OFF_H],
 full ON = ON_H bit 4, full OFF = OFF_H bit 4, LED0_ON_L = 0x06, ALL_LED_OFF_H = 0xFD.
 """

@@ -8,7 +8,7 @@ simulated chips, so the bytes are checked where the kernel would put them on the
 
 import pytest
 
-smbus2 = pytest.importorskip("smbus2")
+import smbus2  # noqa: E402  (a required dependency: no skip)
 import smbus2.smbus2 as smbus2_impl  # noqa: E402
 
 from firmware_io import open_bus  # noqa: E402

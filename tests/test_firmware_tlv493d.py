@@ -1,6 +1,6 @@
 """TLV493D-A1B6 decode, parity, configuration and hang recovery.
 
-Frames are built by hand from the register map in HARDWARE.md section 4 [UM]: Bx = b0<<4 | b4>>4,
+Frames are built by hand from the register map of the Infineon TLV493D-A1B6 user manual: Bx = b0<<4 | b4>>4,
 By = b1<<4 | b4&15, Bz = b2<<4 | b5&15, T = (b3&0xF0)<<4 | b6, 12-bit two's complement,
 0.098 mT/LSB, FRM = b3 bits 3:2, CH = b3 bits 1:0, PD = b5 bit 4; T degC = (raw - 340) * 1.1 + 25.
 Writes are [0x00, MOD1, byte8, MOD2] with an odd number of ones over the 32 bits.

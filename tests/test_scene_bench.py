@@ -1,19 +1,10 @@
 """Smoke test of studies/bench_scene.py (quick mode: air coils, 20 mm grid)."""
 
-import importlib.util
-from pathlib import Path
-
-
-def _load():
-    path = Path(__file__).resolve().parents[1] / "studies" / "bench_scene.py"
-    spec = importlib.util.spec_from_file_location("bench_scene", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+from conftest import load_study
 
 
 def test_bench_scene_quick(tmp_path):
-    res = _load().run(tmp_path, quick=True)
+    res = load_study("bench_scene").run(tmp_path, quick=True)
     assert (tmp_path / "bench_scene.json").is_file()
     rows = {(r["tolerance"], r["outputs"], r["variant"]): r for r in res["rows"]}
     assert len(rows) == 30

@@ -63,7 +63,8 @@ def test_sweep_cli_processes_match_serial(tmp_path):
 
 
 def test_sweep_on_a_local_dask_cluster(tmp_path):
-    distributed = pytest.importorskip("dask.distributed")
+    import dask.distributed as distributed
+
     args = ["sweep", "--param", "inner_radius_m=0.005:0.015:4", "--param",
             "length_m=0.02:0.1:3", "--no-progress"]
     assert main(args + ["--workers", "1", "--out", str(tmp_path / "serial")]) == 0

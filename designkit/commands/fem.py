@@ -8,7 +8,6 @@ fem_vs_designkit.png.
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 
 def add_arguments(parser) -> None:
@@ -34,6 +33,9 @@ def run(args) -> int:
     from ..fem.compare import air_inductance, comparison_table, plot_comparison
     from ..fem.runner import solve
 
+    from ._common import check_output
+
+    out = check_output(args.out, folder=True)
     design = load_design(args.design)
     coil = Coil.from_design(design)
     if coil.core is not None:
@@ -45,7 +47,6 @@ def run(args) -> int:
     current = design.drive.max_current_a if args.current is None else args.current
     if not current > 0:
         raise BadInputError("--current", "> 0 A", current)
-    out = Path(args.out)
     res = solve(coil, current, level=args.level, out_dir=out, export=True)
     heights = np.array([0.014, 0.02, 0.03, 0.04, 0.06, 0.08, 0.10])
     table = comparison_table(coil, res, heights)

@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 from ..design import load_design
+from ._common import add_progress_argument, show_progress
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -23,8 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "the sharp near field is in the (rho, z) tables)")
     parser.add_argument("--out", type=Path, default=Path("fieldmap.npz"),
                         help="output file, .npz (default ./fieldmap.npz)")
-    parser.add_argument("--quiet", "--no-progress", dest="quiet", action="store_true",
-                        help="no progress bar")
+    add_progress_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -36,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
     spacing = in_range("--spacing", args.spacing, 0.5, 50.0, "mm")
     design = load_design(args.design)
     t0 = time.perf_counter()
-    data = fieldmap.build(design, spacing=spacing * 1e-3, progress=not args.quiet)
+    data = fieldmap.build(design, spacing=spacing * 1e-3, progress=show_progress(args))
     path = fieldmap.write(out, data)
     meta = data["meta"]
     err = meta["errors"]

@@ -14,6 +14,7 @@ from .._io import write_json_atomic
 from ..design import load_design
 from ..errors import BadInputError
 from ..optimize import CORE_MODEL_NAMES, GLOBAL_METHODS, CoilDesignProblem, solve
+from ._common import add_progress_argument, check_output, show_progress
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -29,15 +30,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--global", dest="global_method", choices=GLOBAL_METHODS,
                         default="multistart", help="global stage (default multistart)")
     parser.add_argument("--seed", type=int, default=0)
+    add_progress_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
+    check_output(args.out, folder=True)
     design = load_design(args.design)
     if args.starts < 1:
         raise BadInputError("--starts", "a whole number >= 1", args.starts)
     problem = CoilDesignProblem.from_design(design, core_model=args.core_model)
     result = solve(problem, starts=args.starts, global_method=args.global_method,
-                   seed=args.seed, progress=True)
+                   seed=args.seed, progress=show_progress(args))
     data = {"design_name": design.name, "design_hash": design.spec_hash(),
             "core_model": args.core_model, **result.as_dict()}
     out = Path(args.out) / "optimize.json"

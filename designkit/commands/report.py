@@ -37,8 +37,11 @@ import numpy as np
 
 from .. import __version__
 from .._io import write_json_atomic, write_text_atomic
+from ..array import force_matrix, g5_from_gradient
 from ..coil import Coil
 from ..design import Design, design_to_toml, load_design
+from ._common import (add_currents_arguments, add_progress_argument, check_current_limit,
+                      check_output, parse_currents, show_progress, staged_folder)
 
 MAP_SPACING_M = {"quick": 0.015, "full": 0.005}
 """Grid spacing of the report's map file, m: coarse, to keep the job short."""
@@ -62,13 +65,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--current", type=float, default=None,
                         help="coil current in A for the design point (default: the design's "
                              "per-coil limit)")
-    parser.add_argument("--currents", default=None,
-                        help="per-coil currents in A for the figures, comma-separated, "
-                             "row-major (default: the centre coil at the per-coil limit)")
+    add_currents_arguments(parser, "per-coil currents in A for the figures, comma-separated, "
+                                   "row-major (default: the centre coil at the per-coil limit)")
     parser.add_argument("--quick", action="store_const", const="quick", dest="quality",
                         default="full",
                         help="coarse grids, small images, fewer optimizer starts (seconds)")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_progress_argument(parser)
 
 
 # ----------------------------------------------------------------------------- pieces
@@ -80,7 +82,7 @@ def design_point_summary(design: Design, current_a: float) -> dict:
         warnings.simplefilter("always")
         b, g = coil.field(p, current_a, gradient=True)
     m = np.array(design.magnet.moment_vector_a_m2)
-    force = g.T @ m  # F = grad(m . B) = G^T m
+    force = force_matrix(m) @ g5_from_gradient(g)  # thesis eq. 2.5, F = G^T m in air
     torque = np.cross(m, b)
     return {
         "current_a": current_a,
@@ -183,6 +185,15 @@ def report_markdown(report: dict) -> str:
                   f"`{dp['core_model']}`. F = (grad B)^T m."]
     for w in dp.get("warnings", []):
         lines.append(f"\n> warning: {w}")
+    sen = report.get("sensors")
+    if sen:
+        lines += ["", f"Upper sensor {sen['sensor_point_m'][2] * 1e3:.0f} mm above its coil: the "
+                      f"coil at {sen['coil_current_a']:g} A gives "
+                      f"{sen['coil_field_fraction_of_range'] * 100:.0f} % of the "
+                      f"{sen['range_t'] * 1e3:g} mT range"
+                      + (" (the reading clips)" if sen["clips"] else "")
+                      + f"; the magnet at the design point gives "
+                      f"{sen['magnet_field_counts']:.0f} counts of {sen['lsb_t'] * 1e3:g} mT."]
     opt = report.get("optimized_coil")
     if opt:
         lines += ["", "## Optimized coil (thesis eq. 2.14)", "",
@@ -228,15 +239,31 @@ def _field_map(design: Design, out: Path, quality: str) -> Path:
 
 # ----------------------------------------------------------------------------- main job
 def run(args: argparse.Namespace) -> int:
+    # every input is checked before the first file is written, and the files are written into
+    # a staging folder moved into place at the end: a failing run leaves nothing behind
+    out = check_output(args.out, folder=True)
     design = load_design(args.design)
-    out = Path(args.out)
-    quality = getattr(args, "quality", "full")
     current = design.drive.max_current_a if args.current is None else float(args.current)
-    show = not getattr(args, "no_progress", False)
+    allow = getattr(args, "allow_over_limit", False)
+    check_current_limit(design, [current], allow=allow, param="--current")
+    from ..viz import resolve_currents
+
+    currents_arg = parse_currents(getattr(args, "currents", None))
+    if currents_arg is not None:
+        check_current_limit(design, resolve_currents(design, currents_arg), allow=allow)
+    with staged_folder(out) as stage:
+        summary, report = _run(args, design, current, currents_arg, stage)
+    _print_summary(design, summary, current, report, out)
+    return 0
+
+
+def _run(args, design, current, currents_arg, out):
+    quality = getattr(args, "quality", "full")
+    show = show_progress(args)
     steps = ["design summary", "design point", "optimized coil", "figures", "VTK files",
              "map file", "report"]
     try:
-        from tqdm import tqdm
+        from .._progress import tqdm
 
         bar = tqdm(total=len(steps), desc="designkit report", unit="step", disable=not show)
     except ImportError:  # pragma: no cover - tqdm is a dependency
@@ -275,9 +302,6 @@ def run(args: argparse.Namespace) -> int:
         "design_point": summary,
         "coil": derived,
     }
-    from .viz import parse_currents
-
-    currents_arg = parse_currents(getattr(args, "currents", None))
     viz = None
     try:
         from .. import viz as viz_module
@@ -331,13 +355,15 @@ def run(args: argparse.Namespace) -> int:
     # 7. report
     step(steps[6])
     report["skipped"] = skipped
+    from ..sensing import sensor_headroom
+
+    report["sensors"] = sensor_headroom(design)
     write_json_atomic(out / "report.json", report)
     write_text_atomic(out / "report.md", report_markdown(report))
     done()
     if bar is not None:
         bar.close()
-    _print_summary(design, summary, current, report, out)
-    return 0
+    return summary, report
 
 
 def _figures_and_vtk(viz, design, currents, quality, out, report, step, done, steps):

@@ -14,7 +14,8 @@ from pathlib import Path
 from ..design import load_design
 from ..errors import BadInputError
 from ..optimize import CORE_MODEL_NAMES
-from ..sweep import PARAMETERS, grid, parse_param, plot, run_sweep, write_csv
+from ..sweep import PARAMETERS, grid, parse_param, plot, reason_summary, run_sweep, write_csv
+from ._common import add_progress_argument, check_output, show_progress
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -27,10 +28,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
                         help="dask.distributed scheduler address: run the sweep there")
     parser.add_argument("--core-model", choices=CORE_MODEL_NAMES, default="air")
-    parser.add_argument("--no-progress", action="store_true")
+    add_progress_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
+    check_output(args.out, folder=True)
     if not args.param:
         raise BadInputError("--param", "at least one NAME=START:STOP:N", "nothing")
     ranges = [parse_param(p) for p in args.param]
@@ -39,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
         raise BadInputError("--workers", "a whole number >= 1", args.workers)
     design = load_design(args.design)
     result = run_sweep(design, ranges, workers=args.workers, scheduler=args.scheduler,
-                       core_model=args.core_model, progress=not args.no_progress)
+                       core_model=args.core_model, progress=show_progress(args))
     out = Path(args.out)
     # the CSV and the PNG are written only after every design is evaluated (atomic renames)
     csv_path = write_csv(result, out / "sweep.csv")
@@ -54,5 +56,8 @@ def run(args: argparse.Namespace) -> int:
               f"{b['outer_radius_m'] * 1e3:.2f} mm, L {b['length_m'] * 1e3:.2f} mm, "
               f"{b['turns']} turns, R {b['resistance_ohm']:.3f} ohm, 5 tau "
               f"{5e3 * b['time_constant_s']:.2f} ms, force {b['force_n'] * 1e3:.1f} mN")
+    if feas == 0:
+        print(f"no feasible design; why (column 'reason' of {csv_path.name}):\n"
+              + reason_summary(result))
     print(f"wrote {csv_path} and {png_path}")
     return 0

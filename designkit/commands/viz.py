@@ -12,19 +12,10 @@ import argparse
 from pathlib import Path
 
 from ..errors import BadInputError
+from ._common import (add_currents_arguments, check_current_limit, check_output,
+                      parse_currents)
 
 _KINDS = ("scene", "fieldlines", "slice-B", "slice-F", "forcemap", "isosurface")
-
-
-def parse_currents(text: str | None) -> list[float] | None:
-    """``"6,0,-6,..."`` -> list of floats (A); None stays None (the default currents)."""
-    if text is None:
-        return None
-    try:
-        return [float(x) for x in text.split(",") if x.strip()]
-    except ValueError:
-        raise BadInputError("--currents", "comma-separated numbers in A, one per coil",
-                            text) from None
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -39,9 +30,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("kind", choices=_KINDS, help="which figure")
     parser.add_argument("--design", type=Path, default=None,
                         help="design TOML file (default: the embedded thesis design)")
-    parser.add_argument("--currents", default=None,
-                        help="per-coil currents in A, comma-separated, row-major "
-                             "(default: the centre coil at drive.max_current_a, others 0)")
+    add_currents_arguments(parser, "per-coil currents in A, comma-separated, row-major "
+                                   "(default: the centre coil at drive.max_current_a, others 0)")
     parser.add_argument("--out", type=Path, default=None,
                         help="PNG file (default: ./designkit-viz-KIND.png)")
     parser.add_argument("--size", default=None, help="image size WIDTHxHEIGHT in pixels")
@@ -55,10 +45,15 @@ def run(args: argparse.Namespace) -> int:
     from .. import viz
     from ..design import load_design
 
+    out = check_output(args.out or Path(f"designkit-viz-{args.kind}.png"), folder=False)
+    if out.suffix.lower() != ".png":
+        raise BadInputError("--out", "a file name ending in .png", str(out))
+    if args.vtk is not None:
+        check_output(args.vtk, folder=True, param="--vtk")
     design = load_design(args.design)
     currents = viz.resolve_currents(design, parse_currents(args.currents))
+    check_current_limit(design, currents, allow=args.allow_over_limit)
     size = None if args.size is None else parse_size(args.size)
-    out = args.out or Path(f"designkit-viz-{args.kind}.png")
     plotter = viz.render(args.kind, design, currents, quality=args.quality, window_size=size)
     try:
         viz.save_png(plotter, out)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..design import MU0
+from ..constants import MU0
 from .runner import FemResult
 
 

@@ -40,6 +40,24 @@ class MeshSpec:
         return 2.0 ** (-self.level / 2.0)
 
 
+def _size_near(f, what: str, tags, size_min: float, size_max: float, dist_min: float,
+               dist_max: float, sampling: int | None = None) -> int:
+    """gmsh Distance + Threshold fields: element size ``size_min`` within ``dist_min`` of the
+    curves or points ``tags`` (``what`` = "CurvesList" / "PointsList"), growing to ``size_max``
+    at ``dist_max``, m. Returns the Threshold field's tag."""
+    dist = f.add("Distance")
+    f.setNumbers(dist, what, tags)
+    if sampling is not None:
+        f.setNumber(dist, "Sampling", sampling)
+    thr = f.add("Threshold")
+    f.setNumber(thr, "InField", dist)
+    f.setNumber(thr, "SizeMin", size_min)
+    f.setNumber(thr, "SizeMax", size_max)
+    f.setNumber(thr, "DistMin", dist_min)
+    f.setNumber(thr, "DistMax", dist_max)
+    return thr
+
+
 def build_mesh(spec: MeshSpec, msh_path: str | Path) -> dict:
     """Mesh the model with gmsh and write ``msh_path`` (MSH 2.2: the format Debian's GetDP reads without linked Gmsh).
 
@@ -122,28 +140,13 @@ def build_mesh(spec: MeshSpec, msh_path: str | Path) -> dict:
         for tag in groups[CORE] + groups[WINDING]:
             obj_curves += [abs(c[1]) for c in gmsh.model.getBoundary([(2, tag)], oriented=False)]
         obj_curves = [c for c in set(obj_curves) if c not in axis]
-        dist = f.add("Distance")
-        f.setNumbers(dist, "CurvesList", obj_curves)
-        f.setNumber(dist, "Sampling", 200)
-        thr = f.add("Threshold")
-        f.setNumber(thr, "InField", dist)
-        f.setNumber(thr, "SizeMin", h_obj)
-        f.setNumber(thr, "SizeMax", h_far)
-        f.setNumber(thr, "DistMin", 2e-3)
-        f.setNumber(thr, "DistMax", 0.08)
+        thr = _size_near(f, "CurvesList", obj_curves, h_obj, h_far, 2e-3, 0.08, sampling=200)
         corner_pts = []
         for tag in groups[CORE] + groups[WINDING]:
             for d, p in gmsh.model.getBoundary([(2, tag)], recursive=True):
                 if d == 0:
                     corner_pts.append(p)
-        distp = f.add("Distance")
-        f.setNumbers(distp, "PointsList", sorted(set(corner_pts)))
-        thrp = f.add("Threshold")
-        f.setNumber(thrp, "InField", distp)
-        f.setNumber(thrp, "SizeMin", h_corner)
-        f.setNumber(thrp, "SizeMax", h_far)
-        f.setNumber(thrp, "DistMin", 0.3e-3)
-        f.setNumber(thrp, "DistMax", 0.01)
+        thrp = _size_near(f, "PointsList", sorted(set(corner_pts)), h_corner, h_far, 0.3e-3, 0.01)
         shell_size = f.add("MathEval")
         f.setString(shell_size, "F", f"{max(h_far, 0.02 * s)}")
         fmin = f.add("Min")

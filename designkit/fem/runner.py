@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..design import MU0
+from ..constants import MU0
 from ..errors import BadInputError, MissingDependencyError
 from .mesh import MeshSpec, build_mesh, export_meshio
 from .problem import problem_text

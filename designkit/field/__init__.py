@@ -24,7 +24,7 @@ import math
 import numpy as np
 
 from .. import _validate as v
-from ..design import MU0
+from ..constants import MU0
 from ..errors import BadInputError
 from .kernels import loop_rz, sheet_rz
 from .winding import winding_rz

@@ -17,8 +17,8 @@ With ``gradient=True`` each returns the 7-tuple
 ``(br, bz, dbr_drho, dbr_dz, dbz_drho, dbz_dz, br_over_rho)`` (derivatives carry one more 1/m),
 ``br_over_rho`` being Br / rho evaluated without 0/0 on the axis.
 
-Formulation (see FIELD_MATH.md and the module docs of designkit.field)
----------------------------------------------------------------------
+Formulation (see also the module docs of designkit.field)
+---------------------------------------------------------
 In units of the loop radius, with beta^2 = (1 + rho)^2 + z^2, k^2 = 4 rho / beta^2 and
 kc^2 = ((1 - rho)^2 + z^2) / beta^2 (both formed directly, never as 1 - other), the loop
 integrals are sums of

@@ -12,7 +12,7 @@ promises for the requested ``rtol``; far points need 2-4 nodes in all.
 The integration variable is the offset delta = a - rho, so kernels receive 1 - rho/a =
 delta / a exactly, which keeps points within 1e-15 of the sheet exact.
 
-Gradients need no further integrals (FIELD_MATH.md):
+Gradients need no further integrals:
 * d/dz of each sheet is K times the difference of its two end loops;
 * dBz/drho = dBr/dz - mu0 J_phi (the J term only inside the winding);
 * dBr/drho = -dBz/dz - Br/rho (divergence-free), Br/rho taken from the sheet's own Br/rho.

@@ -183,7 +183,7 @@ def force_constant(obj, fieldmap, *, current_limit_a: float, total_current_a: fl
     The magnet's pull on the cores at zero current, F0, is included when the source provides
     ``bias_force`` (map v2); then lambda d - F0 must be renderable.
     """
-    from tqdm import tqdm
+    from .._progress import tqdm
 
     if rows not in ("force", "fz"):
         raise BadInputError("rows", "'force' or 'fz'", rows)

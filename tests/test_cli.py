@@ -1,0 +1,236 @@
+"""The ``designkit`` command as a user meets it: run as a separate process in a temporary
+folder, bad input gives one clear line and a non-zero exit, never a traceback, and a failing
+run leaves nothing behind."""
+
+from __future__ import annotations
+
+import importlib
+import io
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from designkit._progress import LineWriter, tqdm
+from designkit.cli import main
+from designkit.commands._common import join_negative_values
+from designkit.errors import BadInputError
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def designkit(*args: str, cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess:
+    """Run the installed console script when it belongs to this checkout, else the module."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT), PYVISTA_OFF_SCREEN="true", MPLBACKEND="Agg")
+    exe = shutil.which("designkit")
+    cmd = [exe] if exe and Path(exe).parent == Path(sys.executable).parent else \
+        [sys.executable, "-m", "designkit.cli"]
+    return subprocess.run(cmd + list(args), cwd=cwd, env=env, capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def _one_clear_line(res, *words):
+    assert res.returncode != 0
+    assert "Traceback" not in res.stderr
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, res.stderr
+    for w in words:
+        assert w in lines[0], lines[0]
+    return lines[0]
+
+
+# ----------------------------------------------------------------------------- --out checks
+OUT_FOLDER_COMMANDS = {
+    "report": ["report", "--quick"],
+    "optimize": ["optimize"],
+    "sweep": ["sweep", "--param", "inner_radius_m=0.006:0.01:3"],
+    "cad": ["cad"],
+    "fem": ["fem"],
+}
+
+
+@pytest.mark.parametrize("command", sorted(OUT_FOLDER_COMMANDS))
+def test_out_naming_an_existing_file_is_one_line(tmp_path, command):
+    (tmp_path / "taken").write_text("precious")
+    res = designkit(*OUT_FOLDER_COMMANDS[command], "--out", "taken", cwd=tmp_path)
+    _one_clear_line(res, "--out", "existing file", "taken")
+    assert (tmp_path / "taken").read_text() == "precious"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["taken"]
+
+
+def test_viz_out_naming_an_existing_folder_is_one_line(tmp_path):
+    (tmp_path / "fig.png").mkdir()
+    res = designkit("viz", "scene", "--out", "fig.png", cwd=tmp_path)
+    _one_clear_line(res, "--out", "existing folder")
+
+
+def test_out_under_a_file_is_one_line(tmp_path):
+    (tmp_path / "f").write_text("")
+    res = designkit("optimize", "--out", "f/sub", cwd=tmp_path)
+    _one_clear_line(res, "--out", "is a file")
+
+
+def _must_not_run(*a, **k):
+    raise AssertionError("the computation ran before --out was checked")
+
+
+@pytest.mark.parametrize("command,target", [
+    ("optimize", "designkit.commands.optimize.solve"),
+    ("sweep", "designkit.commands.sweep.run_sweep"),
+    ("report", "designkit.commands.report._run"),
+])
+def test_out_is_checked_before_computing(tmp_path, monkeypatch, capsys, command, target):
+    mod, _, name = target.rpartition(".")
+    monkeypatch.setattr(importlib.import_module(mod), name, _must_not_run)
+    (tmp_path / "taken").write_text("")
+    assert main([*OUT_FOLDER_COMMANDS[command], "--out", str(tmp_path / "taken")]) == 1
+    assert "existing file" in capsys.readouterr().err
+
+
+# ----------------------------------------------------------------------------- report: nothing half written
+def test_report_with_wrong_currents_leaves_nothing(tmp_path):
+    res = designkit("report", "--quick", "--currents", "6,0", "--out", "rep", cwd=tmp_path)
+    _one_clear_line(res, "currents", "9 numbers")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_report_failing_late_leaves_nothing(tmp_path, monkeypatch, capsys):
+    import designkit.commands.report as report
+
+    def fail(*a, **k):
+        raise BadInputError("map", "something", "a late failure")
+
+    monkeypatch.setattr(report, "_field_map", fail)
+    monkeypatch.setattr(report, "_optimized_coil", lambda d, q: (_ for _ in ()).throw(
+        ImportError("skip the optimizer in this test")))
+    monkeypatch.setattr(report, "_figures_and_vtk", lambda *a, **k: (_ for _ in ()).throw(
+        ImportError("skip the figures in this test")))
+    assert main(["report", "--quick", "--no-progress", "--out",
+                 str(tmp_path / "new" / "deeper" / "rep")]) == 1
+    assert "a late failure" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []  # neither rep/, its new parents nor a staging folder
+
+
+def test_report_failing_keeps_a_previous_report_untouched(tmp_path, monkeypatch, capsys):
+    import designkit.commands.report as report
+
+    old = tmp_path / "rep"
+    old.mkdir()
+    (old / "design.json").write_text("old")
+    monkeypatch.setattr(report, "_field_map", lambda *a: (_ for _ in ()).throw(
+        BadInputError("map", "x", "late")))
+    monkeypatch.setattr(report, "_optimized_coil", lambda d, q: (_ for _ in ()).throw(
+        ImportError("skip")))
+    monkeypatch.setattr(report, "_figures_and_vtk", lambda *a, **k: (_ for _ in ()).throw(
+        ImportError("skip")))
+    assert main(["report", "--quick", "--no-progress", "--out", str(old)]) == 1
+    assert [p.name for p in old.iterdir()] == ["design.json"]
+    assert (old / "design.json").read_text() == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rep"]
+
+
+# ----------------------------------------------------------------------------- currents
+def test_join_negative_values():
+    assert join_negative_values(["--currents", "-6,0", "--x", "-1"]) == ["--currents=-6,0",
+                                                                        "--x", "-1"]
+    assert join_negative_values(["--current", "-.5"]) == ["--current=-.5"]
+    assert join_negative_values(["--currents", "--out"]) == ["--currents", "--out"]
+
+
+def test_negative_currents_are_accepted(tmp_path):
+    res = designkit("viz", "scene", "--currents", "-6,0,0,0,6,0,0,0,-3", "--size", "320x240",
+                    "--out", "s.png", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert (tmp_path / "s.png").stat().st_size > 1000
+
+
+@pytest.mark.parametrize("args", [
+    ["viz", "scene", "--currents", "60,0,0,0,0,0,0,0,0"],
+    ["report", "--quick", "--currents", "0,0,0,0,-6.5,0,0,0,0"],
+    ["report", "--quick", "--current", "60"],
+])
+def test_currents_over_the_limit_are_an_error(tmp_path, args):
+    res = designkit(*args, "--out", "o.png" if args[0] == "viz" else "rep", cwd=tmp_path)
+    line = _one_clear_line(res, "6 A per coil", "--allow-over-limit")
+    assert "drive.max_current_a" in line
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_total_current_budget(tmp_path):
+    toml = tmp_path / "d.toml"
+    toml.write_text("[drive]\ntotal_current_a = 10.0\n")
+    res = designkit("viz", "scene", "--design", str(toml), "--currents", "6,6,0,0,0,0,0,0,0",
+                    "--out", "o.png", cwd=tmp_path)
+    _one_clear_line(res, "10 A", "drive.total_current_a")
+
+
+def test_over_limit_allowed_explicitly(tmp_path):
+    res = designkit("viz", "scene", "--currents", "60,0,0,0,0,0,0,0,0", "--allow-over-limit",
+                    "--size", "320x240", "--out", "o.png", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert (tmp_path / "o.png").is_file()
+
+
+# ----------------------------------------------------------------------------- progress
+@pytest.mark.parametrize("command", ["report", "optimize", "sweep", "map"])
+def test_one_progress_flag_everywhere(command, capsys):
+    assert main([command, "--help"]) == 0
+    text = capsys.readouterr().out
+    assert "--no-progress" in text and "--quiet" in text
+
+
+def test_progress_is_line_wise_without_a_terminal():
+    sink = io.StringIO()
+    for _ in tqdm(range(50), file=sink, desc="job", mininterval=0, miniters=1):
+        pass
+    text = sink.getvalue()
+    assert "\r" not in text
+    lines = text.splitlines()
+    assert len(lines) >= 2 and all(ln.startswith("job") for ln in lines)
+    assert "50/50" in lines[-1]
+    assert isinstance(LineWriter(sink).encoding, str)
+
+
+def test_sweep_progress_in_a_pipe_has_no_carriage_returns(tmp_path):
+    res = designkit("sweep", "--param", "inner_radius_m=0.006:0.01:5", "--workers", "1",
+                    "--out", "sw", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert "\r" not in res.stderr and "sweep" in res.stderr
+
+
+# ----------------------------------------------------------------------------- design files
+@pytest.mark.parametrize("text,param", [
+    ("name = 5\n", "name"),
+    ('[coil]\nturns = "1429"\n', "coil.turns"),
+    ('[coil]\ninner_radius_m = "0.012"\n', "coil.inner_radius_m"),
+    ("[core]\nbh = 1\n", "core.bh"),
+    ("[coil]\nturns = 14.5\n", "coil.turns"),
+    ("[drive]\nmax_current_a = true\n", "drive.max_current_a"),
+])
+def test_design_file_type_errors(tmp_path, text, param):
+    (tmp_path / "d.toml").write_text(text)
+    res = designkit("optimize", "--design", "d.toml", "--out", "o", cwd=tmp_path)
+    _one_clear_line(res, param)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d.toml"]
+
+
+def test_staged_folder_moves_everything_into_place(tmp_path, monkeypatch):
+    from designkit.commands._common import staged_folder
+
+    with staged_folder(tmp_path / "a" / "out") as stage:
+        (stage / "sub").mkdir()
+        (stage / "sub" / "x.txt").write_text("x")
+        assert not (tmp_path / "a" / "out").exists()  # nothing visible before success
+    assert (tmp_path / "a" / "out" / "sub" / "x.txt").read_text() == "x"
+    # into an existing folder: new files replace, others stay; also with --out .
+    monkeypatch.chdir(tmp_path / "a" / "out")
+    (tmp_path / "a" / "out" / "keep.txt").write_text("k")
+    with staged_folder(".") as stage:
+        (stage / "sub").mkdir()
+        (stage / "sub" / "x.txt").write_text("y")
+    out = tmp_path / "a" / "out"
+    assert (out / "sub" / "x.txt").read_text() == "y" and (out / "keep.txt").read_text() == "k"
+    assert sorted(p.name for p in out.iterdir()) == ["keep.txt", "sub"]

@@ -1,0 +1,180 @@
+"""Regression tests of what was fixed in the figures: nothing cut at the canvas edges, round
+tick values, colour-bar titles clear of the ticks, slice colours over the data range with
+solids left out, visible force arrows, an isosurface box sized to the array with its cuts
+stated."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import pyvista as pv  # noqa: F401  (a required dependency)
+from matplotlib.image import imread
+
+from designkit import default_design, viz
+
+DESIGN = default_design()
+SIZE = {"slice-B": (960, 420), "slice-F": (960, 420)}
+
+
+def _texts(plotter) -> str:
+    out = []
+    for renderer in plotter.renderers:
+        for actor in renderer.actors.values():
+            if hasattr(actor, "GetText"):
+                for i in range(8):
+                    try:
+                        out.append(actor.GetText(i) or "")
+                    except TypeError:
+                        out.append(actor.GetText() or "")
+                        break
+            elif hasattr(actor, "GetInput") and isinstance(actor.GetInput(), str):
+                out.append(actor.GetInput())
+    return "\n".join(out)
+
+
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory):
+    out = tmp_path_factory.mktemp("figures")
+    figs = {}
+    for kind in viz.KINDS:
+        p = viz.render(kind, DESIGN, quality="quick", window_size=SIZE.get(kind, (640, 480)))
+        path = viz.save_png(p, out / f"{kind}.png")
+        figs[kind] = (p, imread(path))
+    yield figs
+    for p, _ in figs.values():
+        p.close()
+
+
+@pytest.mark.parametrize("kind", viz.KINDS)
+def test_nothing_is_cut_at_the_canvas_edges(rendered, kind):
+    _, img = rendered[kind]
+    rgb = img[..., :3]
+    h, w = rgb.shape[:2]
+    frame = np.ones((h, w), dtype=bool)
+    frame[2:-2, 2:-2] = False
+    if kind.startswith("slice"):  # the separator line between the two panels
+        frame[:, w // 2 - 3:w // 2 + 3] = False
+    # the background is white: any dark pixel on the outer frame is a label or a mesh cut off
+    assert rgb[frame].min() > 0.9, f"{kind}: drawing reaches the edge of the image"
+
+
+def _round_step(step: float) -> bool:
+    mant = step / 10 ** math.floor(math.log10(step))
+    return min(abs(mant - m) for m in (1, 2, 2.5, 5, 10)) < 1e-6
+
+
+@pytest.mark.parametrize("lo,hi", [(-75, 75), (-105, 80), (10, 490), (0.002, 0.0731),
+                                   (-3e-4, 7e-4), (33.7, 385.2)])
+def test_nice_ticks_are_round_and_cover_the_range(lo, hi):
+    a, b, step = viz.nice_ticks(lo, hi)
+    assert a <= lo and b >= hi and _round_step(step)
+    n = math.floor((b - a) / step + 1e-9)
+    assert 2 <= n <= 10
+    for t in a + step * np.arange(n + 1):
+        assert abs(t / step - round(t / step)) < 1e-6  # every tick is a multiple of the step
+
+
+def test_random_ranges_get_round_ticks():
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        lo = rng.normal() * 10 ** rng.uniform(-3, 3)
+        hi = lo + 10 ** rng.uniform(-3, 3)
+        a, b, step = viz.nice_ticks(lo, hi)
+        assert a <= lo and b >= hi and (b - a) <= 5 * (hi - lo)
+        assert abs(a / step - round(a / step)) < 1e-6
+
+
+@pytest.mark.parametrize("kind", ["scene", "fieldlines", "forcemap", "isosurface", "slice-B"])
+def test_axis_labels_are_round_values(rendered, kind):
+    """The labels VTK actually draws (it overrides the requested count with its own ticks)."""
+    p, _ = rendered[kind]
+    for renderer in p.renderers:
+        cube = renderer.cube_axes_actor
+        if cube is None:
+            continue
+        for i in range(3):
+            labels = cube.GetAxisLabels(i)
+            vals = [labels.GetValue(j) for j in range(labels.GetNumberOfValues())]
+            vals = [float(v) for v in vals if v.strip()]
+            if len(vals) < 2:
+                continue
+            step = vals[1] - vals[0]
+            assert _round_step(abs(step)), (kind, i, vals)
+            assert np.allclose(np.diff(vals), step), (kind, i, vals)
+            assert all(abs(v / step - round(v / step)) < 1e-6 for v in vals), (kind, i, vals)
+
+
+@pytest.mark.parametrize("kind", viz.KINDS)
+def test_colour_bar_titles_are_lifted_clear_of_the_top_tick(rendered, kind):
+    p, _ = rendered[kind]
+    for bar in p.scalar_bars.values():
+        assert bar.GetVerticalTitleSeparation() >= bar.GetLabelTextProperty().GetFontSize()
+
+
+@pytest.mark.parametrize("quantity", ["B", "F"])
+def test_slice_colours_span_the_data_and_leave_out_solids(quantity):
+    vert, horiz = viz.slice_data(DESIGN, quality="quick")
+    inside = viz.inside_solids(DESIGN, vert.points)
+    # the protruding core (5 mm above the winding) reaches into the vertical slice
+    assert inside.any() and np.all(np.asarray(vert[viz.IN_SOLID], bool) == inside)
+    p = viz.plot_slices(DESIGN, quantity=quantity, data=(vert, horiz), window_size=(640, 300))
+    try:
+        name = viz.B_MT if quantity == "B" else viz.F_MN
+        air = np.r_[np.asarray(vert[name])[~inside], np.asarray(horiz[name])]
+        text = _texts(p)
+        for view in ("xz", "xy"):
+            actor = next(a for r in p.renderers for k, a in r.actors.items()
+                         if k == f"slice-{view}")
+            shown = actor.mapper.dataset
+            # no point inside a core or a winding is drawn as field in air
+            assert not viz.inside_solids(DESIGN, np.asarray(shown.points) * 1e-3).any()
+            lo, hi = actor.mapper.scalar_range
+            assert hi == pytest.approx(air.max(), rel=1e-12)
+            if "clipped" in text:
+                assert lo == pytest.approx(hi * 1e-4, rel=1e-12)
+            else:
+                assert lo == pytest.approx(air.min(), rel=1e-12)
+    finally:
+        p.close()
+
+
+def test_force_arrows_are_not_hidden(rendered):
+    p, _ = rendered["forcemap"]
+    actors = {k: a for r in p.renderers for k, a in r.actors.items()}
+    assert actors["windings"].prop.opacity < 0.5
+    arrows = actors["force-arrows"].mapper.dataset
+    cloud = viz.force_map_data(DESIGN, quality="quick")
+    n = int(round(math.sqrt(cloud.n_points)))
+    spacing_mm = 2e3 * DESIGN.workspace.half_width_m / (n - 1)
+    # every glyph is at least MIN_ARROW of the longest: split the glyphs by their source point
+    per = arrows.n_points // cloud.n_points
+    pts = np.asarray(arrows.points).reshape(cloud.n_points, per, 3)
+    lengths = np.linalg.norm(np.ptp(pts, axis=1), axis=1)  # bounding-box diagonal >= length
+    assert lengths.min() >= 0.9 * viz.MIN_ARROW * 0.95 * spacing_mm
+
+
+def test_isosurface_box_is_sized_to_the_array_and_the_cut_is_stated(rendered):
+    p, _ = rendered["isosurface"]
+    vol, _, _ = viz.force_isosurface_data(DESIGN, quality="quick")
+    b = np.asarray(vol.bounds)
+    foot = max(DESIGN.workspace.half_width_m,
+               DESIGN.array.pitch_m + DESIGN.coil.outer_radius_m)
+    assert b[1] <= 2 * foot * (1 + 1e-9) and b[5] <= max(4 * foot, DESIGN.workspace.z_max_m) + 1e-9
+    text = _texts(p)
+    assert f"z = {DESIGN.workspace.z_min_m * 1e3:.0f} mm (bottom of the workspace)" in text
+    assert "cut flat" in text and "up to z =" in text
+
+
+def test_field_line_colours_span_the_data(rendered):
+    p, _ = rendered["fieldlines"]
+    actor = next(a for r in p.renderers for k, a in r.actors.items() if k == "streamlines")
+    _, lines = viz.field_line_data(DESIGN, quality="quick")
+    values = np.asarray(lines[viz.B_MT])
+    lo, hi = actor.mapper.scalar_range
+    assert hi == pytest.approx(values.max(), rel=1e-12)
+    if "clipped" in _texts(p):
+        assert lo == pytest.approx(hi * 1e-4, rel=1e-12)
+    else:
+        assert lo == pytest.approx(values.min(), rel=1e-12)

@@ -1,0 +1,47 @@
+"""sensors.range_t and sensors.lsb_t are read: the coil field at a sensor against the range,
+the magnet's field in counts; checked against closed forms."""
+
+import math
+
+import numpy as np
+import pytest
+
+from designkit import default_design
+from designkit.constants import MU0
+from designkit.sensing import sensor_headroom
+
+
+def _thick_solenoid_axis_bz(ri, ro, length, turns, current, z):
+    """Closed form on the axis of a uniform thick winding, z from its centre, T."""
+    j = turns * current / (length * (ro - ri))
+
+    def f(u):
+        return u * math.log((ro + math.hypot(ro, u)) / (ri + math.hypot(ri, u)))
+
+    return MU0 * j / 2 * (f(z + length / 2) - f(z - length / 2))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_air_coil_field_and_magnet_counts_match_closed_forms(seed):
+    rng = np.random.default_rng(seed)
+    d = default_design().replace(core=None, **{
+        "sensors.offset_m": rng.uniform(0.005, 0.02), "drive.max_current_a": rng.uniform(1, 6),
+        "optimize.height_m": rng.uniform(0.03, 0.06)})
+    res = sensor_headroom(d)
+    c, s = d.coil, d.sensors
+    bz = _thick_solenoid_axis_bz(c.inner_radius_m, c.outer_radius_m, c.length_m, c.turns,
+                                 d.drive.max_current_a, c.length_m / 2 + s.offset_m)
+    assert res["coil_field_t"][2] == pytest.approx(bz, rel=1e-9)
+    assert res["coil_field_fraction_of_range"] == pytest.approx(abs(bz) / s.range_t, rel=1e-9)
+    dist = d.optimize.height_m - s.offset_m
+    b_mag = MU0 * d.magnet.moment_a_m2 / (2 * math.pi * dist**3)  # on the dipole's axis
+    assert res["magnet_field_t"][2] == pytest.approx(b_mag, rel=1e-12)
+    assert res["magnet_field_counts"] == pytest.approx(b_mag / s.lsb_t, rel=1e-12)
+
+
+def test_clipping_follows_the_sensor_range():
+    d = default_design()
+    res = sensor_headroom(d)
+    b = abs(res["coil_field_t"][2])
+    assert sensor_headroom(d.replace(**{"sensors.range_t": 0.9 * b}))["clips"]
+    assert not sensor_headroom(d.replace(**{"sensors.range_t": 1.1 * b}))["clips"]

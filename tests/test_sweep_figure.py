@@ -1,0 +1,111 @@
+"""sweep.csv says why a design is infeasible; sweep.png says which slice it shows, keeps its
+legend off the points and its labels on the canvas, and explains an all-infeasible sweep."""
+
+from __future__ import annotations
+
+import csv
+import math
+
+import numpy as np
+import pytest
+
+from designkit import Coil, default_design
+from designkit import electrical as el
+from designkit.sweep import parse_param, run_sweep, sweep_figure
+
+from test_cli import designkit
+
+
+def _extent_inside_canvas(fig):
+    """Everything drawn (tick labels, axis labels, titles, colour bar) lies on the canvas."""
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    canvas = fig.bbox
+    for ax in fig.axes:
+        bb = ax.get_tightbbox(renderer)
+        assert bb.x0 >= canvas.x0 - 0.5 and bb.x1 <= canvas.x1 + 0.5, ax
+        assert bb.y0 >= canvas.y0 - 0.5 and bb.y1 <= canvas.y1 + 0.5, ax
+
+
+def test_mm_by_mistake_says_why(tmp_path):
+    res = designkit("sweep", "--param", "inner_radius_m=6:10:3", "--workers", "1",
+                    "--no-progress", "--out", "sw", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert "0 feasible" in res.stdout and "no feasible design" in res.stdout
+    assert "millimetres" in res.stdout
+    with open(tmp_path / "sw" / "sweep.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 3
+    assert all("outer radius < inner radius" in r["reason"] for r in rows)
+
+
+def test_reason_matches_independent_limits():
+    d = default_design()
+    rng = np.random.default_rng(17)
+    result = run_sweep(d, [parse_param("inner_radius_m=0.005:0.02:7"),
+                           parse_param("length_m=0.02:0.1:6")], workers=1, progress=False)
+    seen = set()
+    for r in result.rows:
+        if not r["valid"]:
+            assert r["reason"].startswith("outer radius < inner radius")
+            continue
+        coil = Coil(r["inner_radius_m"], r["outer_radius_m"], r["length_m"], r["turns"])
+        res_ohm = el.resistance(coil, d.wire)
+        over_r = res_ohm > d.optimize.max_resistance_ohm
+        over_t = 5 * r["time_constant_s"] > d.optimize.max_settling_time_s
+        assert ("R > 6 ohm" in r["reason"]) == over_r
+        assert ("5 L/R > 100 ms" in r["reason"]) == over_t
+        assert (r["reason"] == "") == r["feasible"]
+        seen.add((over_r, over_t))
+    assert len(seen) >= 2  # the grid crosses a limit
+    del rng
+
+
+def _fig_all_infeasible():
+    d = default_design()
+    result = run_sweep(d, [parse_param("inner_radius_m=6:10:3"),
+                           parse_param("length_m=0.03:0.1:3")], workers=1, progress=False)
+    return result, sweep_figure(result)
+
+
+def test_all_infeasible_plot_says_so_instead_of_empty_axes():
+    result, fig = _fig_all_infeasible()
+    texts = [t.get_text() for t in fig.axes[0].texts]
+    assert any("no feasible design" in t and "millimetres" in t for t in texts)
+    _extent_inside_canvas(fig)
+
+
+def test_three_parameter_sweep_names_its_slice_and_legend_is_off_the_points():
+    d = default_design()
+    result = run_sweep(d, [parse_param("inner_radius_m=0.006:0.014:5"),
+                           parse_param("length_m=0.03:0.1:6"),
+                           parse_param("outer_radius_m=0.015:0.025:3")], workers=1,
+                       progress=False)
+    fig = sweep_figure(result)
+    ax = fig.axes[0]
+    best = result.rows[result.best_index]
+    title = ax.get_title()
+    assert "slice at outer_radius = " in title
+    assert f"{best['outer_radius_m'] * 1e3:.4g} mm" in title
+    n_slice = sum(1 for r in result.rows if r["outer_radius_m"] == best["outer_radius_m"])
+    assert f"{n_slice} of {len(result.rows)} designs" in title
+    # every plotted point belongs to the slice: 5 x 6 points
+    n_points = sum(len(c.get_offsets()) for c in ax.collections)
+    assert n_points == n_slice == 30
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    legend = ax.get_legend().get_window_extent(renderer)
+    axes_box = ax.get_window_extent(renderer)
+    assert legend.y0 >= axes_box.y1 - 1.0  # above the axes, not over the points
+    _extent_inside_canvas(fig)
+    assert math.isfinite(best["force_n"])
+
+
+@pytest.mark.parametrize("n", [1, 2])
+def test_one_and_two_parameter_figures_have_no_slice_note(n):
+    d = default_design()
+    params = [parse_param("inner_radius_m=0.006:0.014:4"), parse_param("length_m=0.03:0.1:3")]
+    result = run_sweep(d, params[:n], workers=1, progress=False)
+    fig = sweep_figure(result)
+    assert "slice" not in fig.axes[0].get_title()
+    _extent_inside_canvas(fig)
