@@ -61,16 +61,21 @@ M_MAX = 2
 """Highest azimuthal mode kept (m >= 3 measured below 1e-4 of the coupling effect; studies)."""
 N1_SIDE = 24
 N1_CAP = 8
+FAR_DISTANCE = 8e-3
+"""Points nearer than this (m) to a core's bounding cylinder always sum its panels."""
+FAR_NODES = 6
+"""Gauss nodes per interval of the compressed ring rules (the product rule of
+designkit.core's far field, here linear in the panel values)."""
 FAR_RHO = 2.6
 """Bernstein-ellipse parameter a point needs w.r.t. every interval of the compressed rules
 (error ~ FAR_RHO^-12 ~ 1e-5 with 6 nodes)."""
 N_PHI_RING = 12
 """Azimuthal samples per collocation ring when projecting another core's / a winding's field."""
 N_PHI_MAGNET = 32
-"""... and when projecting the magnet's field (it can be ~5 mm from a core top)."""
-"""Observation points closer than ``designkit.core.FAR_DISTANCE`` (8 mm) to a core's bounding
-cylinder sum its panels (m = 0) and 3 Gauss nodes x 32 azimuths per charge panel (m >= 1);
-farther ones a compressed product rule (FAR_NODES rings per interval, 12 azimuths)."""
+"""... and when projecting the magnet's field (it can be ~5 mm from a core top).
+Observation points where :meth:`CoreModel.far_mask` fails sum a core's panels (m = 0) and
+3 Gauss nodes x 32 azimuths per charge panel (m >= 1); the others use compressed product
+rules (FAR_NODES rings per interval, 12 azimuths)."""
 
 
 def _blas_one_thread():
@@ -191,8 +196,6 @@ class CoreModel:
         point (in the meridian plane) with respect to the interval. Far: r >= FAR_RHO on every
         interval and at least FAR_DISTANCE (8 mm) from the core.
         """
-        from .core import FAR_DISTANCE
-
         dist = np.maximum.reduce([self.z_lo - z, z - self.z_hi, rho - self.radius])
         ok = dist >= FAR_DISTANCE
         for (r0, z0), (r1, z1) in self.far_segments:
@@ -324,8 +327,6 @@ class CoreModel:
         Returns H (n, 3, k) A/m [, G (n, 3, 3, k) A/m^2]; with ``pointwise`` point i uses
         column i (k = n) and the shapes are (n, 3) [, (n, 3, 3)].
         """
-        from .core import FAR_DISTANCE
-
         pts = np.asarray(pts, dtype=float)
         n = len(pts)
         k = xs.shape[1]
@@ -649,7 +650,7 @@ def core_model(radius: float, length: float, offset: float, mu_r: float, key: tu
 
     ``refine`` multiplies every panel count (convergence studies, wide cores).
     """
-    from .core import FAR_NODES, N_CAP, N_SIDE, _geometry, _interface_factor, _system
+    from .core import N_CAP, N_SIDE, _geometry, _interface_factor, _system
 
     side, side_slice, discs = _geometry(radius, length, offset, n_side=N_SIDE * refine,
                                         n_cap=N_CAP * refine)
