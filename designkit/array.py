@@ -333,26 +333,41 @@ class CoilArray:
         return out
 
     def saturation_correction(self, height_m: float = 0.03, currents_a=None) -> dict:
-        """Per-coil saturation factor of the 1010-steel cores vs |I| (see
-        :func:`designkit.coupling.saturation_table`): ``{'saturation_current_a': (k,) A,
-        'saturation_factor': (k, n_coils)}``; factor 1 for air coils."""
+        """Saturation correction of the 1010-steel cores (form: :func:`designkit.coupling.
+        saturation_table`).
+
+        Returns dict: ``saturation_current_a`` (k,) A; ``saturation_factor`` (k, n_coils)
+        (1 for air coils); ``core_flux_t_per_a`` (n_coils, n_coils) T/A, the coupled linear
+        axial flux density at core k's mid-plane per ampere in coil j (zero rows for air
+        coils), for the per-state use.
+        """
         from .coupling import saturation_table
 
-        out = None
         tables = {}
-        for k, c in enumerate(self.coils):
-            if c.core is None:
-                continue
-            key = dataclasses.replace(c, pose=Pose())
-            if key not in tables:
-                tables[key] = saturation_table(c, height_m, currents_a)
-        cur = (next(iter(tables.values()))["current_a"] if tables else
-               (np.linspace(0.0, 6.0, 13) if currents_a is None else np.asarray(currents_a)))
-        out = np.ones((len(cur), self.n_coils))
+        for c in self.coils:
+            if c.core is not None:
+                key = dataclasses.replace(c, pose=Pose())
+                if key not in tables:
+                    tables[key] = saturation_table(c, height_m, currents_a)
+        cur = (np.arange(0.0, 6.01, 1.0) if currents_a is None
+               else np.asarray(currents_a, dtype=float))
+        fac = np.ones((len(cur), self.n_coils))
         for k, c in enumerate(self.coils):
             if c.core is not None:
-                out[:, k] = tables[dataclasses.replace(c, pose=Pose())]["factor"]
-        return {"saturation_current_a": np.asarray(cur, dtype=float), "saturation_factor": out}
+                fac[:, k] = tables[dataclasses.replace(c, pose=Pose())]["factor"]
+        cmat = np.zeros((self.n_coils, self.n_coils))
+        system = self.coupled()
+        if system is not None:
+            idx = system.core_index
+            mid = np.array([np.asarray(self.coils[k].pose.position) + self.coils[k].pose.matrix
+                            @ [0.0, 0.0, self.coils[k].core.offset] for k in idx])
+            axes = np.array([self.coils[k].pose.matrix[:, 2] for k in idx])
+            b = system.core_field(mid, system.coil_solution())  # (n, 3, n_coils)
+            for j, cj in enumerate(self.coils):
+                b[:, :, j] += cj.field(mid, 1.0, include="winding")
+            cmat[idx] = np.einsum("na,nac->nc", axes, b)
+        return {"saturation_current_a": cur, "saturation_factor": fac,
+                "core_flux_t_per_a": cmat}
 
     def _currents(self, currents) -> np.ndarray:
         i = np.asarray(currents, dtype=float)

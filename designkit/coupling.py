@@ -36,12 +36,15 @@ linear cores everything superposes: ``F(p, I) = F(m) A(p) I + F0(p)`` exactly fo
 dipole; what remains is the core saturation (the coils' and the magnet's fields add in the
 iron), the magnet's finite size, and the magnet's own permeability (mu_r ~ 1.05 for NdFeB).
 
-Saturation correction (stored by the map, applied by the runner): see :func:`saturation_table`.
-Per coil k and current magnitude |I| on the grid ``saturation_current_a`` (k,), the factor
-``saturation_factor[:, k]`` (k, n_coils) multiplies column k of the linear A(p):
-``A_sat(p, I)[:, :, k] = A(p)[:, :, k] * s_k(|I_k|)`` (linear interpolation in |I_k|, s = 1 at 0).
-It is the single-core nonlinear (1010 steel) force at the design point divided by the linear
-one, from designkit's nonlinear axisymmetric solve.
+Saturation correction (stored by the map, applied by the runner): see :func:`saturation_table`
+and :meth:`designkit.array.CoilArray.saturation_correction`, which returns
+``saturation_current_a`` (k,) A, ``saturation_factor`` (k, n_coils) and ``core_flux_t_per_a``
+(n_coils, n_coils) T/A. Column k of the linear A(p) is scaled,
+``A_sat(p, I)[:, :, k] = A(p)[:, :, k] * s_k``, with ``s_k = interp(|I_k|, saturation_current_a,
+saturation_factor[:, k])`` (one coil on), or per state with |I_k| replaced by the equivalent own
+current ``|sum_j C[k, j] I_j| / C[k, k]`` (C = core_flux_t_per_a). s is the single-core
+nonlinear (1010 steel) force at the design point over the linear one (designkit's nonlinear
+axisymmetric solve); against the nonlinear axisymmetric GetDP FEM see studies/array_coupling.py.
 """
 
 from __future__ import annotations
@@ -921,22 +924,11 @@ class ArraySystem:
 
 
 # ============================================================================ saturation
-def saturation_table(coil, height_m: float = 0.03, currents_a=None) -> dict:
-    """Per-coil force factor of the nonlinear 1010-steel core vs |I|, at the design point.
-
-    ``s(|I|) = Fz_nonlinear(I) / (I * Fz_linear(1 A))``, single core (designkit's nonlinear
-    axisymmetric solve, :class:`designkit.core.Core` with ``bh='steel1010'``) at the point
-    ``height_m`` above the coil top on its axis, magnet moment along +z. The runner applies
-    ``A[:, :, k] *= s(|I_k|)`` (interpolated linearly in |I_k| on ``current_a``).
-
-    Returns dict with ``current_a`` (k,) A and ``factor`` (k,).
-    """
-    import dataclasses
-
-    currents = np.linspace(0.0, 6.0, 13) if currents_a is None else np.asarray(currents_a, float)
+@functools.lru_cache(maxsize=8)
+def _saturation_cached(coil, height_m, currents):
     c = coil.core
-    lin = dataclasses.replace(coil, core=dataclasses.replace(c, bh="linear"))
-    nl = dataclasses.replace(coil, core=dataclasses.replace(c, bh="steel1010"))
+    lin = dataclasses.replace(coil, pose=Pose(), core=dataclasses.replace(c, bh="linear"))
+    nl = dataclasses.replace(coil, pose=Pose(), core=dataclasses.replace(c, bh="steel1010"))
     pt = np.array([[0.0, 0.0, coil.length / 2 + height_m]])
     _, g_lin = lin.field(pt, 1.0, gradient=True)
     out = []
@@ -946,7 +938,41 @@ def saturation_table(coil, height_m: float = 0.03, currents_a=None) -> dict:
             continue
         _, g = nl.field(pt, float(i), gradient=True)
         out.append(float(g[0, 2, 2] / (i * g_lin[0, 2, 2])))
-    return {"current_a": currents, "factor": np.array(out)}
+    return np.array(out)
+
+
+def saturation_table(coil, height_m: float = 0.03, currents_a=None) -> dict:
+    """Per-coil force factor of the nonlinear 1010-steel core vs |I|, at the design point.
+
+    ``s(|I|) = dBz/dz_nonlinear(I) / (I * dBz/dz_linear(1 A))`` of the single coil (its
+    nonlinear axisymmetric solve, :class:`designkit.core.Core` with ``bh='steel1010'``, against
+    the linear core at ``relative_permeability``), on the axis ``height_m`` above the coil's top
+    (the design point; the vertical force on an upright magnet there scales the same way).
+
+    How the runner applies it (the map file stores these arrays):
+
+    * per coil, from its own current: ``A[:, :, k] *= s(|I_k|)`` with ``s`` interpolated
+      linearly in |I_k| on ``current_a`` (s = 1 at 0 A). Exact for one energized coil
+      (to the nonlinear solve's accuracy, see studies/array_coupling.py);
+    * per state, when neighbours are energized too: the other coils change core k's flux
+      (a side neighbour at 6 A changes the mid-plane flux density of the centre core by
+      ~ -14 % of the centre coil's own 6 A value, linear model). Index the same table by the
+      *equivalent own current* ``I_eq,k = |sum_j C[k, j] I_j| / C[k, k]`` with C the coupled
+      linear mid-plane axial flux density per ampere
+      (:meth:`designkit.array.CoilArray.saturation_correction` ``core_flux_t_per_a``):
+      ``s_k = interp(I_eq,k, current_a, factor)`` (beyond the table: its last value).
+      This assumes the core's saturation follows its mid-plane flux; it is not checked
+      against a coupled nonlinear solve (none exists here).
+
+    Returns
+    -------
+    dict with ``current_a`` (k,) A and ``factor`` (k,).
+    """
+    currents = np.arange(0.0, 6.01, 1.0) if currents_a is None else np.asarray(currents_a,
+                                                                               float)
+    key = dataclasses.replace(coil, pose=Pose())
+    factor = _saturation_cached(key, float(height_m), tuple(float(i) for i in currents))
+    return {"current_a": currents, "factor": factor}
 
 
 def check_separation(coils) -> None:
