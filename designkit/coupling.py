@@ -904,23 +904,92 @@ class ArraySystem:
         return (b, g) if gradient else b
 
     # ------------------------------------------------------------------ magnet source
-    def magnet_solution(self, positions: np.ndarray, moment: np.ndarray) -> np.ndarray:
-        """Unknowns of all cores magnetized by a point dipole at each position, (nu, n)."""
+    def magnet_solution(self, positions: np.ndarray, moment: np.ndarray,
+                        magnet_size_m=None) -> np.ndarray:
+        """Unknowns of all cores magnetized by the magnet at each position, (nu, n).
+
+        ``magnet_size_m``: None for a point dipole ``moment``; (radius, length) m for the
+        uniformly magnetized cylinder (axis along ``moment``, M = |m| / volume; its exact
+        field, :func:`designkit.field.magnetized_cylinder_field`).
+        """
         pos = np.atleast_2d(np.asarray(positions, dtype=float))
         m = np.asarray(moment, dtype=float)
+        if magnet_size_m is None:
+            def src(glob, cols):
+                # H of the point dipole (magnet outside every core: r > 0 at ring points)
+                d = glob[:, None, :] - pos[None, cols, :]  # (n, k, 3)
+                r2 = np.einsum("nki,nki->nk", d, d)
+                inv_r = 1.0 / np.sqrt(r2)
+                mr = d @ m
+                h = (3.0 * d * (mr * inv_r ** 5)[..., None] - m * (inv_r ** 3)[..., None])
+                return np.swapaxes(h, 1, 2) / (4.0 * math.pi)
+        else:
+            from .field.kernels import sheet_rz
 
-        def dip(glob, cols):
-            # H of the point dipole (magnet outside every core: r > 0 at all ring points)
-            d = glob[:, None, :] - pos[None, cols, :]  # (n, k, 3)
-            r2 = np.einsum("nki,nki->nk", d, d)
-            inv_r = 1.0 / np.sqrt(r2)
-            mr = d @ m
-            h = (3.0 * d * (mr * inv_r ** 5)[..., None] - m * (inv_r ** 3)[..., None])
-            return np.swapaxes(h, 1, 2) / (4.0 * math.pi)
+            a, length = (float(v) for v in magnet_size_m)
+            mm = float(np.linalg.norm(m))
+            u = m / mm if mm > 0 else np.array([0.0, 0.0, 1.0])
+            mag = mm / (math.pi * a * a * length)
+
+            def src(glob, cols):
+                d = glob[:, None, :] - pos[None, cols, :]  # (n, k, 3)
+                zl = d @ u
+                rv = d - zl[..., None] * u
+                rho = np.sqrt(np.einsum("nki,nki->nk", rv, rv))
+                br, bz = sheet_rz(a, 0.5 * length, rho.ravel(), zl.ravel())
+                br, bz = br.reshape(rho.shape), bz.reshape(rho.shape)
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    er = np.where(rho[..., None] > 0, rv / np.where(rho > 0, rho, 1.0)[..., None],
+                                  0.0)
+                h = mag * (br[..., None] * er + bz[..., None] * u)
+                return np.swapaxes(h, 1, 2)
 
         with _blas_one_thread():
-            rhs = self._project_global_field(dip, N_PHI_MAGNET, pos)
+            rhs = self._project_global_field(src, N_PHI_MAGNET, pos)
         return self.solve(rhs)
+
+    def magnet_load(self, positions: np.ndarray, moment: np.ndarray, magnet_size_m=None,
+                    n_r: int = 4, n_phi: int = 8):
+        """Force (n, 3) N and torque (n, 3) N m on the magnet from the cores it magnetizes.
+
+        Point dipole (``magnet_size_m`` None): F = (m . grad) B_ind(p), tau = m x B_ind(p).
+        Cylinder (radius, length): its uniform axial M as face charges +-M on the end faces,
+        F = M [int_top B_ind dA - int_bot B_ind dA], tau = M [int_top (r - p) x B_ind dA -
+        int_bot ...] (exact for a uniformly magnetized body in a curl-free field; Gauss rule
+        of n_r x n_phi points per face).
+        """
+        pos = np.atleast_2d(np.asarray(positions, dtype=float))
+        m = np.asarray(moment, dtype=float)
+        x = self.magnet_solution(pos, m, magnet_size_m)
+        if magnet_size_m is None:
+            b, g = self.core_field_pointwise(pos, x, gradient=True)
+            return np.einsum("nji,j->ni", g, m), np.cross(m[None], b)
+        a, length = (float(v) for v in magnet_size_m)
+        mm = float(np.linalg.norm(m))
+        u = m / mm if mm > 0 else np.array([0.0, 0.0, 1.0])
+        mag = mm / (math.pi * a * a * length)
+        e1 = np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0])
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(u, e1)
+        xr, wr = _gauss(n_r)
+        s = 0.5 * (xr + 1.0)
+        r = a * np.sqrt(s)
+        ph = 2.0 * math.pi * np.arange(n_phi) / n_phi
+        R, P = np.meshgrid(r, ph, indexing="ij")
+        w = np.repeat(0.5 * wr * math.pi * a * a / n_phi, n_phi)  # area weights
+        disc = (R.ravel()[:, None] * (np.cos(P.ravel())[:, None] * e1
+                                      + np.sin(P.ravel())[:, None] * e2))
+        nq = len(w)
+        force = np.zeros((len(pos), 3))
+        torque = np.zeros((len(pos), 3))
+        for sign in (1.0, -1.0):
+            rel = disc + sign * 0.5 * length * u  # (nq, 3) about the centre
+            pts = (pos[:, None, :] + rel[None]).reshape(-1, 3)
+            bq = self.core_field_pointwise(pts, np.repeat(x, nq, axis=1))
+            bq = bq.reshape(len(pos), nq, 3)
+            force += sign * mag * np.einsum("q,nqi->ni", w, bq)
+            torque += sign * mag * np.einsum("q,nqi->ni", w, np.cross(rel[None], bq))
+        return force, torque
 
 
 # ============================================================================ saturation
