@@ -144,34 +144,29 @@ def _even_on_axis(out: np.ndarray, rho: np.ndarray, cols) -> None:
 
 
 def compute_rz_table(coil, spec: dict, *, chunk: int = 8192) -> np.ndarray:
-    """The table (n_rho, n_u, 8) float64 of ``spec``: b, Bz, e, w (see
-    :data:`RZ_QUANTITIES`) of the whole coil, then of its core alone (whole minus the winding),
-    by direct evaluation (Coil.field, rtol 1e-10) on the nodes; e and w on the axis by
-    Richardson extrapolation (both are even in rho)."""
+    """The table (n_rho, n_u, 4) float64 of ``spec``: b, Bz, e, w (see :data:`RZ_QUANTITIES`)
+    of the coil alone (winding + its own core), by direct evaluation (Coil.field, rtol 1e-10) on
+    the nodes; e and w on the axis by Richardson extrapolation (both are even in rho)."""
     from .scene import _rz_direct
 
     rho, z = _spec_nodes(spec)
     n_rho, n_u = len(rho), len(z)
     R, Z = np.meshgrid(rho[1:], z, indexing="ij")
     r, zz = R.ravel(), Z.ravel()
-    out = np.zeros((n_rho, n_u, 8))
-    flat = out[1:].reshape(-1, 8)
-    parts = [coil] + ([coil.replace(core=None)] if coil.core is not None else [])
-    for part, c in enumerate(parts):
-        for s in range(0, len(r), chunk):
-            sl = slice(s, s + chunk)
-            d = _rz_direct(c, r[sl], zz[sl], True)
-            b = d["br_over_rho"]
-            flat[sl, 4 * part + 0] = b
-            flat[sl, 4 * part + 1] = d["bz"]
-            flat[sl, 4 * part + 2] = d["dbr_dz"] / r[sl]
-            flat[sl, 4 * part + 3] = (d["dbr_drho"] - b) / r[sl] ** 2
-        d0 = _rz_direct(c, np.zeros(n_u), z, True)
-        out[0, :, 4 * part] = d0["br_over_rho"]
-        out[0, :, 4 * part + 1] = d0["bz"]
-        _even_on_axis(out, rho, [4 * part + 2, 4 * part + 3])
-    if len(parts) == 2:  # core alone = whole - winding alone
-        out[..., 4:] = out[..., :4] - out[..., 4:]
+    out = np.zeros((n_rho, n_u, 4))
+    flat = out[1:].reshape(-1, 4)
+    for s in range(0, len(r), chunk):
+        sl = slice(s, s + chunk)
+        d = _rz_direct(coil, r[sl], zz[sl], True)
+        b = d["br_over_rho"]
+        flat[sl, 0] = b
+        flat[sl, 1] = d["bz"]
+        flat[sl, 2] = d["dbr_dz"] / r[sl]
+        flat[sl, 3] = (d["dbr_drho"] - b) / r[sl] ** 2
+    d0 = _rz_direct(coil, np.zeros(n_u), z, True)
+    out[0, :, 0] = d0["br_over_rho"]
+    out[0, :, 1] = d0["bz"]
+    _even_on_axis(out, rho, [2, 3])
     return out
 
 
@@ -274,48 +269,177 @@ def map_physics(design) -> MapPhysics:
     return MapPhysics(np.array([0.0, 0.0, design.magnet.moment_a_m2]), design.drive.max_current_a)
 
 
+# ============================================================================ coupled core modes
+N_MODE_Q = {0: 4, 1: 5, 2: 5}
+"""Table quantities per core mode: m = 0 (b, Bz, e, w as the coil tables), m = 1, 2 (the
+potential x G resp. (x^2 - y^2) H with G(rho^2, z): a, a1, a2, az, a1z = -mu0 (G, G', G'', G_z,
+G'_z), ' = d/d(rho^2))."""
+
+
+def coupled_modes(arr: CoilArray, tolerance: float = 1e-4) -> dict | None:
+    """The cores' coupling as a few modes per core type (None without coupled cores).
+
+    The coupled solve gives every core's unknowns X_j (m = 0 surface currents, m = 1, 2 cos and
+    sin charges; :mod:`designkit.coupling`) per ampere in each coil. Column k of A is the
+    uncoupled coil k (the tables RZ) plus the fields of dX_j = X_j - (X_self if j == k): the
+    extra magnetization of every core. Per core type and mode order m, the SVD of all dX blocks
+    gives the shapes U_m (kept while the singular values are above ``tolerance`` x the
+    largest of the m = 0 block); the coefficients C[j, b, k] = U_m^T dX_j[:, k].
+
+    Returns {"types": [{"model", "coils", "U": {m: (n_m, R_m)}, "basis": [(m, r, c)]}],
+    "coef": (n_coils, n_basis_max, n_coils)}; basis entries (m, r, c): mode order, shape index,
+    c = 0 cos / 1 sin (m = 0: c = 0).
+    """
+    from .pose import Pose
+
+    system = arr.coupled()
+    if system is None:
+        return None
+    x = system.coil_solution()  # (n_unknowns, nc)
+    nc = arr.n_coils
+    blocks = {}
+    for jj, k in enumerate(system.core_index):
+        model = system.models[jj]
+        blocks.setdefault(id(model), (model, []))[1].append((jj, k))
+    types = []
+    for model, members in blocks.values():
+        proto = arr.coils[members[0][1]].replace(pose=Pose())
+        alone = CoilArray((proto,)).coupled()
+        x_self = alone.coil_solution()[:, 0]
+        n0, n1, m_max = model.n0, model.n1, model.m_max
+        dx = {}
+        for jj, k in members:
+            d = x[system.offsets[jj]:system.offsets[jj + 1]].copy()
+            d[:, k] -= x_self
+            dx[k] = d
+        parts = {0: [(slice(0, n0), 0)]}
+        for m in range(1, m_max + 1):
+            parts[m] = [(slice(n0 + (2 * (m - 1) + c) * n1, n0 + (2 * (m - 1) + c + 1) * n1), c)
+                        for c in range(2)]
+        stacked = {m: np.concatenate([dx[k][sl] for k in dx for sl, _ in parts[m]], axis=1)
+                   for m in parts}
+        # the m = 0 currents and m >= 1 charges have different units per unit field: compare
+        # each block with the largest singular value of its own order, the tolerance being
+        # relative to the coupling of that order
+        U = {}
+        for m, mat in stacked.items():
+            u, sv, _ = np.linalg.svd(mat, full_matrices=False)
+            if sv[0] == 0:
+                continue
+            r = max(1, int(np.sum(sv > tolerance * sv[0])))
+            U[m] = u[:, :r]
+        basis = [(m, r, c) for m in sorted(U) for r in range(U[m].shape[1])
+                 for c in ((0,) if m == 0 else (0, 1))]
+        types.append({"model": model, "coils": [k for _, k in members], "U": U,
+                      "basis": basis, "parts": parts, "dx": dx})
+    nb = max(len(t["basis"]) for t in types)
+    coef = np.zeros((nc, nb, nc))
+    for t in types:
+        for k, d in t["dx"].items():
+            for b, (m, r, c) in enumerate(t["basis"]):
+                sl = [s for s, cc in t["parts"][m] if cc == c][0]
+                coef[k, b] = t["U"][m][:, r] @ d[sl]
+    return {"types": types, "coef": coef}
+
+
+def compute_mode_table(t: dict, spec: dict) -> np.ndarray:
+    """The mode table (n_rho, n_u, Q) float64 of one core type: for each basis shape, the
+    quantities of :data:`N_MODE_Q` from the core model's basis fields at (rho, 0, z), local."""
+    from .design import MU0
+
+    model = t["model"]
+    rho, z = _spec_nodes(spec)
+    R, Z = np.meshgrid(rho, z, indexing="ij")
+    pts = np.c_[R.ravel(), np.zeros(R.size), Z.ravel()]
+    n0, n1 = model.n0, model.n1
+    shapes = [(m, r) for m in sorted(t["U"]) for r in range(t["U"][m].shape[1])]
+    q_tot = sum(N_MODE_Q[m] for m, _ in shapes)
+    out = np.zeros((R.size, q_tot))
+    chunk = 256
+    for s in range(0, len(pts), chunk):
+        p = pts[s:s + chunk]
+        h, g = model.basis_field(p, gradient=True)  # (n, 3, nu), (n, 3, 3, nu) A/m per unit
+        r_ = p[:, 0]
+        col = 0
+        for m, r in shapes:
+            u = t["U"][m][:, r]
+            if m == 0:
+                b = MU0 * h[:, :, :n0] @ u
+                gg = MU0 * g[:, :, :, :n0] @ u
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    bb = gg[:, 1, 1]  # Br/rho = dBy/dy on the x axis
+                    out[s:s + chunk, col:col + 4] = np.c_[
+                        bb, b[:, 2], gg[:, 0, 2] / r_, (gg[:, 0, 0] - bb) / r_ ** 2]
+            else:
+                cs = [slice(n0 + (2 * (m - 1) + c) * n1, n0 + (2 * (m - 1) + c + 1) * n1)
+                      for c in range(2)]
+                bc, gc = MU0 * h[:, :, cs[0]] @ u, MU0 * g[:, :, :, cs[0]] @ u
+                bs, gs = MU0 * h[:, :, cs[1]] @ u, MU0 * g[:, :, :, cs[1]] @ u
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    if m == 1:  # cos: x G, sin: y G (formulas in firmware_io.mapfile)
+                        a = bs[:, 1]
+                        az = gs[:, 1, 2]
+                        a1 = gc[:, 1, 1] / (2 * r_)
+                        a2 = (gc[:, 0, 0] - 6 * r_ * a1) / (4 * r_ ** 3)
+                        a1z = (gc[:, 0, 2] - az) / (2 * r_ ** 2)
+                    else:  # cos: (x^2 - y^2) H, sin: 2 x y H
+                        a = bs[:, 1] / (2 * r_)
+                        az = gs[:, 1, 2] / (2 * r_)
+                        a1 = (gc[:, 1, 1] + 2 * a) / (2 * r_ ** 2)
+                        a2 = (gc[:, 0, 0] - 2 * a - 10 * r_ ** 2 * a1) / (4 * r_ ** 4)
+                        a1z = (gc[:, 0, 2] - 2 * r_ * az) / (2 * r_ ** 3)
+                out[s:s + chunk, col:col + 5] = np.c_[a, a1, a2, az, a1z]
+            col += N_MODE_Q[m]
+    out = out.reshape(len(rho), len(z), q_tot)
+    # rho = 0: every quantity is even in rho -> Richardson from the next two nodes
+    r1, r2 = rho[1] ** 2, rho[2] ** 2
+    out[0] = (r2 * out[1] - r1 * out[2]) / (r2 - r1)
+    return out
+
+
 # ============================================================================ build
-def build(design, *, spacing: float = 0.015, coupling_log_step: float = 0.35,
-          magnet_spacing: float = 0.025, magnet_log_step: float = 0.5,
-          svd_tolerance: float = 1e-4, rz_step: float = 1e-4, rz_log_step: float = 0.025,
-          rz_rho_scale: float = 0.05, magnet_rz_step: float = 2e-3,
+def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
+          mode_tolerance: float = 1e-4, rz_step: float = 1e-4, rz_log_step: float = 0.025,
+          rz_rho_scale: float = 0.05, mode_rz_step: float = 2.5e-4,
+          mode_rz_log_step: float = 0.04, magnet_rz_step: float = 2e-3,
           magnet_rz_log_step: float = 0.15, box=None, n_check: int = 100,
           progress: bool = True, array: CoilArray | None = None) -> dict:
     """Compute the map v2 of ``design``: ``{"arrays": {...}, "meta": {...}}`` (not yet written).
 
     Parameters
     ----------
-    spacing : float, m
-        x, y step of the coupling residual grid (its z steps grow from ``coupling_log_step``
-        x the height above the cores' tops, never above ``spacing``).
-    magnet_spacing, magnet_log_step : float
-        The same for the residual grids over magnet positions (bias force, sensor fields).
-    svd_tolerance : float
-        Largest error of the rank-truncated coupling residual at its nodes, relative to each
-        row's max |A|.
+    spacing, log_step : float
+        x, y step (m) of the grids over magnet positions that carry what the per-core magnet
+        tables miss (bias force, sensor fields); their z steps grow from ``log_step`` x the
+        height above the cores' tops, never above ``spacing``.
+    mode_tolerance : float
+        Coupled core modes are kept while their singular value is above this fraction of the
+        largest of their order (m = 0, 1, 2).
     rz_step : float, m
-        rho step of the (rho, z) tables on the axis (default 0.1 mm, growing as
+        rho step of the coil tables on the axis (default 0.1 mm, growing as
         (1 + rho / rz_rho_scale)^2 with rz_rho_scale 50 mm: ~0.4 mm at 50 mm from the axis);
         ``rz_log_step`` is the step in log(z - z_ref) (default 0.025: 2.5 % of the height
-        above the core's top). ``magnet_rz_step``, ``magnet_rz_log_step``: the same for the
-        magnet tables (2 mm, 15 %).
+        above the core's top). ``mode_rz_step``, ``mode_rz_log_step``: the same for the mode
+        tables (0.25 mm, 4 %: they carry the coupling, ~15 % of A); ``magnet_rz_step``,
+        ``magnet_rz_log_step`` for the magnet tables (2 mm, 15 %).
     box : (lower, upper) or None
         Corners, m; default :func:`default_box`.
     n_check : int
-        Random points where the finished map is compared with direct evaluation (meta 'errors').
+        Random points where the finished map is compared with direct evaluation of the coupled
+        model (meta 'errors'; each costs a full coupled evaluation).
     """
     from tqdm import tqdm
 
     from . import __version__
 
-    spacing = v.in_range("spacing", spacing, 5e-4, 0.05, "m")
-    magnet_spacing = v.in_range("magnet_spacing", magnet_spacing, 5e-4, 0.05, "m")
-    coupling_log_step = v.in_range("coupling_log_step", coupling_log_step, 1e-3, 1.0)
-    magnet_log_step = v.in_range("magnet_log_step", magnet_log_step, 1e-3, 1.0)
-    svd_tolerance = v.in_range("svd_tolerance", svd_tolerance, 1e-7, 1e-2)
+    spacing = v.in_range("spacing", spacing, 5e-4, 0.1, "m")
+    log_step = v.in_range("log_step", log_step, 1e-3, 2.0)
+    mode_tolerance = v.in_range("mode_tolerance", mode_tolerance, 1e-8, 1e-1)
     rz_step = v.in_range("rz_step", rz_step, 1e-5, 0.01, "m")
     rz_log_step = v.in_range("rz_log_step", rz_log_step, 1e-3, 0.5)
     rz_rho_scale = v.in_range("rz_rho_scale", rz_rho_scale, 1e-3, 10.0, "m")
+    mode_rz_step = v.in_range("mode_rz_step", mode_rz_step, 1e-5, 0.01, "m")
+    mode_rz_log_step = v.in_range("mode_rz_log_step", mode_rz_log_step, 1e-3, 0.5)
     magnet_rz_step = v.in_range("magnet_rz_step", magnet_rz_step, 1e-5, 0.01, "m")
     magnet_rz_log_step = v.in_range("magnet_rz_log_step", magnet_rz_log_step, 1e-3, 0.5)
     n_check = v.positive_int("n_check", n_check)
@@ -329,10 +453,10 @@ def build(design, *, spacing: float = 0.015, coupling_log_step: float = 0.35,
     nc = arr.n_coils
     types = list(arr.coil_types().items())
 
-    def specs(step, log_step, n_q):
+    def specs(idx_lists, step, log_step_, n_q):
         out = []
-        for _, idx in types:
-            s = [rz_table_spec(arr.coils[k], lower, upper, step, log_step, rz_rho_scale, n_q)
+        for idx in idx_lists:
+            s = [rz_table_spec(arr.coils[k], lower, upper, step, log_step_, rz_rho_scale, n_q)
                  for k in idx]
             if any(x is None for x in s):
                 raise BadInputError("box", "above every coil's winding and core (the map's "
@@ -341,61 +465,66 @@ def build(design, *, spacing: float = 0.015, coupling_log_step: float = 0.35,
             out.append(_union_spec(s))
         return out
 
-    a_specs = specs(rz_step, rz_log_step, 8)
-    m_specs = specs(magnet_rz_step, magnet_rz_log_step, 3)
+    a_specs = specs([idx for _, idx in types], rz_step, rz_log_step, 4)
+    m_specs = specs([idx for _, idx in types], magnet_rz_step, magnet_rz_log_step, 3)
     z_ref = max(arr.coils[k].pose.position[2] + s["z_ref_m"] for (_, idx), s in zip(types, a_specs)
                 for k in idx)
-    c_axes = box_axes(lower, upper, spacing, z_ref, coupling_log_step)
-    m_axes = box_axes(lower, upper, magnet_spacing, z_ref, magnet_log_step)
-    c_nodes, m_nodes = _nodes(c_axes), _nodes(m_axes)
+    m_axes = box_axes(lower, upper, spacing, z_ref, log_step)
+    m_nodes = _nodes(m_axes)
     rng = np.random.default_rng(20261123)
     check = rng.uniform(lower, upper, (n_check, 3))
-    n_mcheck = min(n_check, 500)
-    chunk = 512
-    work = ([("tables", k) for k in range(len(types))]
-            + [("coupled A", s) for s in range(0, len(c_nodes), chunk)]
+    n_mcheck = min(n_check, 50)
+    chunk = 64
+    work = ([("coupled solve", 0)] + [("coil tables", k) for k in range(len(types))]
+            + [("mode tables", 0)]
             + [("magnet", s) for s in range(0, len(m_nodes), chunk)]
-            + [("check", s) for s in range(0, n_check, chunk)] + [("magnet check", 0)])
+            + [("check", s) for s in range(0, n_check, chunk)] + [("magnet check", 0),
+                                                                  ("saturation", 0)])
     arrays: dict = {}
-    rz_meta, mrz_meta = [], []
-    a_c = np.empty((len(c_nodes), 8, nc))
+    rz_meta, mrz_meta, cm_meta = [], [], []
     f0 = np.empty((len(m_nodes), 3))
     sind = np.empty((len(m_nodes), 2, nc, 3))
     a_check = np.empty((n_check, 8, nc))
     seconds: dict = {}
+    modes = None
     bar = tqdm(work, desc="map", unit="step", disable=not progress, leave=False)
     for kind, s in bar:
         bar.set_postfix_str(kind, refresh=False)
         t0 = time.perf_counter()
-        if kind == "tables":
+        if kind == "coupled solve":
+            modes = coupled_modes(arr, mode_tolerance)
+        elif kind == "coil tables":
             proto, idx = types[s]
             arrays[f"RZ{s}"] = compute_rz_table(proto, a_specs[s]).astype(np.float32)
             rz_meta.append({"name": f"RZ{s}", "coils": [int(k) for k in idx], **a_specs[s]})
             arrays[f"MRZ{s}"] = compute_magnet_table(phys, proto, m_specs[s]).astype(np.float32)
             mrz_meta.append({"name": f"MRZ{s}", "coils": [int(k) for k in idx], **m_specs[s]})
-        elif kind == "coupled A":
-            a_c[s:s + chunk] = phys.actuation(arr, c_nodes[s:s + chunk])
+        elif kind == "mode tables":
+            for k, t in enumerate(modes["types"] if modes else []):
+                spec = specs([t["coils"]], mode_rz_step, mode_rz_log_step, 1)[0]
+                tab = compute_mode_table(t, spec)
+                shapes = [[m, r] for m in sorted(t["U"]) for r in range(t["U"][m].shape[1])]
+                cols = np.cumsum([0] + [N_MODE_Q[m] for m, _ in shapes])[:-1].tolist()
+                spec["shape"] = list(tab.shape)
+                arrays[f"CM{k}"] = tab.astype(np.float32)
+                cm_meta.append({"name": f"CM{k}", "coils": [int(c) for c in t["coils"]], **spec,
+                                "shapes": shapes, "columns": [int(c) for c in cols],
+                                "basis": [list(b) for b in t["basis"]]})
         elif kind == "magnet":
             f0[s:s + chunk] = phys.bias_force(arr, m_nodes[s:s + chunk])
             sind[s:s + chunk] = phys.sensor_induced(arr, m_nodes[s:s + chunk])
         elif kind == "check":
             a_check[s:s + chunk] = phys.actuation(arr, check[s:s + chunk])
-        else:
+        elif kind == "magnet check":
             f0_check = phys.bias_force(arr, check[:n_mcheck])
             sind_check = phys.sensor_induced(arr, check[:n_mcheck])
+        else:
+            sat_i, sat_f = phys.saturation(arr)
         seconds[kind] = seconds.get(kind, 0.0) + time.perf_counter() - t0
     bar.close()
     t0 = time.perf_counter()
     positions = arr.positions()
     rotations = [list(map(list, c.pose.rotation)) for c in arr.coils]
-    # the tables' part as the reader computes it (so the fits absorb the table error at nodes)
-    prep = mf.prepare_rz([arrays[t["name"]] for t in rz_meta], rz_meta, positions, rotations)
-    whole, core = (np.ascontiguousarray(x.transpose(2, 1, 0), dtype=np.float64)
-                   for x in mf.interpolate_rz(prep, c_nodes, nc))
-    scale = np.maximum(np.abs(a_c).max(axis=(0, 2)), 1e-300)  # (8,) per-row max
-    mix = _fit_mix(whole, core, a_c, scale)
-    resid = a_c - whole - np.einsum("nrj,jk->nrk", core, mix)
-    phi, modes, rank = _compress(resid, scale, svd_tolerance)
     mprep = mf.prepare_magnet([arrays[t["name"]] for t in mrz_meta], mrz_meta, positions,
                               rotations)
     f_pair, amp = mf.magnet_terms(mprep, m_nodes, nc)
@@ -403,11 +532,9 @@ def build(design, *, spacing: float = 0.015, coupling_log_step: float = 0.35,
     sind_mix = np.linalg.lstsq(amp, sind_flat, rcond=None)[0] if np.abs(amp).max() > 0 else \
         np.zeros((nc, 6 * nc))
     m_shape = tuple(len(a) for a in m_axes)
-    sat_i, sat_f = phys.saturation(arr)
+    coef = modes["coef"] if modes else np.zeros((nc, 0, nc))
     arrays.update({
-        "MIX": mix, "PHI": phi.reshape(tuple(len(a) for a in c_axes) + (rank,)).astype(np.float16),
-        "MODES": modes.astype(np.float32),
-        "C_X": c_axes[0], "C_Y": c_axes[1], "C_Z": c_axes[2],
+        "COEF": coef,
         "F0_RES": (f0 - f_pair).reshape(m_shape + (3,)).astype(np.float32),
         "SIND_MIX": sind_mix.reshape(nc, 2, nc, 3),
         "SIND_RES": (sind_flat - amp @ sind_mix).reshape(m_shape + (2, nc, 3)).astype(np.float16),
@@ -420,22 +547,23 @@ def build(design, *, spacing: float = 0.015, coupling_log_step: float = 0.35,
     meta = {
         "format": FORMAT, "version": FORMAT_VERSION, "designkit_version": __version__,
         "design_name": design.name, "design_sha256": design.spec_hash(),
-        "rows": list(ROWS), "units": UNITS, "n_coils": nc, "coupling_rank": rank,
+        "rows": list(ROWS), "units": UNITS, "n_coils": nc, "n_basis": int(coef.shape[1]),
         "box_m": [lower.tolist(), upper.tolist()],
         "rz_tables": rz_meta, "rz_quantities": list(RZ_QUANTITIES),
-        "magnet_tables": mrz_meta,
+        "mode_tables": cm_meta, "magnet_tables": mrz_meta,
         "coil_positions_m": positions.tolist(), "coil_rotations": rotations,
         "max_current_a": design.drive.max_current_a,
         "total_current_a": design.drive.total_current_a,
         "physics": phys.source,
-        "settings": {"spacing_m": spacing, "coupling_log_step": coupling_log_step,
-                     "magnet_spacing_m": magnet_spacing, "magnet_log_step": magnet_log_step,
-                     "svd_tolerance": svd_tolerance, "rz_step_m": rz_step,
+        "settings": {"spacing_m": spacing, "log_step": log_step,
+                     "mode_tolerance": mode_tolerance, "rz_step_m": rz_step,
                      "rz_log_step": rz_log_step, "rz_rho_scale_m": rz_rho_scale,
+                     "mode_rz_step_m": mode_rz_step, "mode_rz_log_step": mode_rz_log_step,
                      "magnet_rz_step_m": magnet_rz_step,
                      "magnet_rz_log_step": magnet_rz_log_step},
     }
     reader = mf.MapFile.from_arrays(arrays, meta)
+    scale = np.maximum(np.abs(a_check).max(axis=(0, 2)), 1e-300)
     err = np.abs(reader.actuation(check) - a_check) / scale[None, :, None]
 
     def rel(got, ref):
@@ -452,41 +580,6 @@ def build(design, *, spacing: float = 0.015, coupling_log_step: float = 0.35,
     seconds["fits and check"] = time.perf_counter() - t0
     meta["build_seconds"] = seconds
     return {"arrays": arrays, "meta": meta}
-
-
-def _fit_mix(whole: np.ndarray, core: np.ndarray, a_c: np.ndarray, scale: np.ndarray):
-    """MIX (nc, nc) minimizing |(whole + core @ MIX - A) / scale| over the nodes."""
-    n, _, nc = core.shape
-    s = (core / scale[None, :, None]).reshape(n * 8, nc)
-    c = ((a_c - whole) / scale[None, :, None]).reshape(n * 8, nc)
-    if not np.any(s):
-        return np.zeros((nc, nc))  # no cores: nothing to mix
-    return np.linalg.lstsq(s, c, rcond=None)[0]
-
-
-def _compress(resid: np.ndarray, scale: np.ndarray, tolerance: float):
-    """Truncated SVD of the residual (n, 8, nc): PHI (n, r), MODES (r, 8, nc), r.
-
-    r is the smallest rank whose largest error at the nodes, relative to each row's ``scale``,
-    is at most ``tolerance`` (at least 1, so the arrays are never empty).
-    """
-    n, _, nc = resid.shape
-    x = (resid / scale[None, :, None]).reshape(n, 8 * nc)
-    u, sv, vt = np.linalg.svd(x, full_matrices=False)
-
-    def err(r):
-        return np.abs(x - (u[:, :r] * sv[:r]) @ vt[:r]).max()
-
-    lo, hi = 1, len(sv)  # err(hi) ~ 0: bisect on the smallest r with err(r) <= tolerance
-    if err(lo) <= tolerance:
-        hi = lo
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        lo, hi = (lo, mid) if err(mid) <= tolerance else (mid, hi)
-    rank = hi
-    phi = u[:, :rank] * sv[:rank]
-    modes = vt[:rank].reshape(rank, 8, nc) * scale[None, :, None]
-    return phi, modes, rank
 
 
 # ============================================================================ write / load

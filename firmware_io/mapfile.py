@@ -87,20 +87,17 @@ REBUILD = ("Rebuild it for this version: designkit map --design <design.toml> "
            "--out <file.npz>")
 
 # name -> (dtype, shape as a function of the sizes); the single list of arrays in a map file
-_FIXED = ("MIX", "PHI", "MODES", "C_X", "C_Y", "C_Z", "F0_RES", "SIND_MIX", "SIND_RES",
-          "M_X", "M_Y", "M_Z", "SENSOR_POS", "SENSOR_COIL", "MOMENT", "SAT_I", "SAT_FACTOR")
+_FIXED = ("COEF", "F0_RES", "SIND_MIX", "SIND_RES", "M_X", "M_Y", "M_Z", "SENSOR_POS",
+          "SENSOR_COIL", "MOMENT", "SAT_I", "SAT_FACTOR")
 
 
 def _shapes(meta: dict, arrays: dict) -> dict:
     nc = int(meta["n_coils"])
-    cx, cy, cz = (len(arrays[k]) for k in ("C_X", "C_Y", "C_Z"))
     mx, my, mz = (len(arrays[k]) for k in ("M_X", "M_Y", "M_Z"))
-    r = int(meta["coupling_rank"])
+    nb = int(meta["n_basis"])
     ns = len(arrays["SAT_I"])
-    f32, f64 = np.float32, np.float64
-    f16 = np.float16
-    return {"MIX": (f64, (nc, nc)), "PHI": (f16, (cx, cy, cz, r)), "MODES": (f32, (r, 8, nc)),
-            "C_X": (f64, (cx,)), "C_Y": (f64, (cy,)), "C_Z": (f64, (cz,)),
+    f16, f32, f64 = np.float16, np.float32, np.float64
+    return {"COEF": (f64, (nc, nb, nc)),
             "F0_RES": (f32, (mx, my, mz, 3)), "SIND_MIX": (f64, (nc, 2, nc, 3)),
             "SIND_RES": (f16, (mx, my, mz, 2, nc, 3)),
             "M_X": (f64, (mx,)), "M_Y": (f64, (my,)), "M_Z": (f64, (mz,)),
@@ -110,13 +107,13 @@ def _shapes(meta: dict, arrays: dict) -> dict:
 
 def array_names(keys) -> list:
     """The arrays of a map in hashing order: the fixed ones present, then RZ0, RZ1, ...,
-    then MRZ0, MRZ1, ..."""
+    MRZ0, ..., CM0, ..."""
     def tables(prefix):
         n = len(prefix)
         return sorted((k for k in keys if k.startswith(prefix) and k[n:].isdigit()),
                       key=lambda k: int(k[n:]))
 
-    return [k for k in _FIXED if k in keys] + tables("RZ") + tables("MRZ")
+    return [k for k in _FIXED if k in keys] + tables("RZ") + tables("MRZ") + tables("CM")
 
 
 def data_hash(arrays: dict) -> str:
@@ -195,17 +192,27 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
         if a.shape != shape or a.dtype != dtype:
             raise _bad(p, f"{name} of shape {shape} {np.dtype(dtype).name}; got {a.shape} "
                        f"{a.dtype}")
-    for key, prefix, nq in (("rz_tables", "RZ", NQ), ("magnet_tables", "MRZ", NQ_MAGNET)):
+    for key, prefix, nq in (("rz_tables", "RZ", NQ), ("magnet_tables", "MRZ", NQ_MAGNET),
+                            ("mode_tables", "CM", None)):
         tabs = meta.get(key)
-        if not isinstance(tabs, list) or not tabs:
-            raise _bad(p, f"meta.{key} (a non-empty list)")
+        if not isinstance(tabs, list) or (not tabs and key != "mode_tables"):
+            raise _bad(p, f"meta.{key} (a list, non-empty but for mode_tables)")
         covered = []
         for k, t in enumerate(tabs):
             try:
                 shape = tuple(t["shape"])
                 tab = arrays.get(t["name"])
+                if nq is None:  # a mode table: its columns follow from its shapes
+                    want = sum(N_MODE_Q[m] for m, _ in t["shapes"])
+                    ok_modes = (want == shape[2] and len(t["columns"]) == len(t["shapes"])
+                                and len(t["basis"]) <= int(meta["n_basis"])
+                                and all(list(b[:2]) in [list(x) for x in t["shapes"]]
+                                        and b[2] in (0, 1) for b in t["basis"]))
+                else:
+                    want, ok_modes = nq, True
                 ok = (t["name"] == f"{prefix}{k}" and tab is not None and tab.shape == shape
-                      and tab.dtype == np.float32 and len(shape) == 3 and shape[2] == nq
+                      and ok_modes
+                      and tab.dtype == np.float32 and len(shape) == 3 and shape[2] == want
                       and min(shape) >= 2 and t["rho_step_m"] > 0 and t["u_step"] > 0
                       and t["rho_scale_m"] > (shape[0] - 1) * t["rho_step_m"]
                       and len(t["coils"]) > 0 and all(0 <= c < nc for c in t["coils"]))
@@ -215,13 +222,13 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
                 raise _bad(p, f"{key}[{k}] describing a float32 array {prefix}{k} (n_rho, n_u, "
                            f"{nq}) for coil indices < {nc}")
             covered += list(t["coils"])
-        if sorted(covered) != list(range(nc)):
+        if key != "mode_tables" and sorted(covered) != list(range(nc)):
             raise _bad(p, f"{key}: one table for every coil 0..{nc - 1}; got coils "
                        f"{sorted(covered)}")
     for name in array_names(arrays):
         if not np.all(np.isfinite(arrays[name])):
             raise _bad(p, f"finite values only (found NaN or Inf in {name})")
-    for name in ("C_X", "C_Y", "C_Z", "M_X", "M_Y", "M_Z", "SAT_I"):
+    for name in ("M_X", "M_Y", "M_Z", "SAT_I"):
         if len(arrays[name]) < 2 or not np.all(np.diff(arrays[name]) > 0):
             raise _bad(p, f"{name} strictly increasing with at least 2 nodes")
     if data_hash(arrays) != meta.get("data_sha256"):
@@ -229,8 +236,12 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
 
 
 # ============================================================================ (rho, z) tables
-NQ = 8
-"""Quantities per node of a (rho, z) table: b, Bz, e, w of the whole coil, then of its core alone."""
+NQ = 4
+"""Quantities per node of a (rho, z) coil table: b, Bz, e, w of the coil alone (winding + its
+own core magnetized by it alone), per ampere."""
+N_MODE_Q = {0: 4, 1: 5, 2: 5}
+"""Quantities per node and shape of a mode table: m = 0 (b, Bz, e, w), m = 1, 2 (a, a1, a2, az,
+a1z, see :func:`mode_rows`)."""
 NQ_MAGNET = 3
 """Quantities per node of a magnet table: F_rho/rho, F_z (N/m, N) of the magnet's pull on one
 core alone, and a (T) the z field of that core, magnetized by the magnet, at its upper sensor."""
@@ -247,7 +258,7 @@ def prepare_rz(tables: list, metas: list, positions, rotations) -> list:
         shared_z = identity and bool(np.all(pos[:, 2] == pos[0, 2]))
         n_rho, n_u, _ = tab.shape
         tab32 = np.ascontiguousarray(tab, dtype=np.float32)
-        # the one-point kernel reads a cell's 4 corners x 8 quantities as one row of 32
+        # the one-point kernel reads a cell's 4 corners x NQ quantities as one row
         t64 = tab32.astype(np.float64)
         cells = np.ascontiguousarray(np.stack([t64[:-1, :-1], t64[:-1, 1:], t64[1:, :-1],
                                                t64[1:, 1:]], axis=2).reshape(-1, 4, NQ))
@@ -255,7 +266,7 @@ def prepare_rz(tables: list, metas: list, positions, rotations) -> list:
             "idx": idx,
             "all": bool(len(idx) == len(positions) and np.all(idx == np.arange(len(idx)))),
             "pos32": pos.astype(np.float32), "pos": pos, "rot": None if identity else rot,
-            "shared_z": shared_z, "nodes": tab32.reshape(-1).view("V32"),
+            "shared_z": shared_z, "nodes": tab32.reshape(-1).view(f"V{4 * NQ}"),
             "cells": cells, "n_rho": n_rho, "n_u": n_u,
             "inv_h": 1.0 / m["rho_step_m"], "inv_scale": 1.0 / m["rho_scale_m"],
             "z_ref": m["z_ref_m"], "zr": pos[:, 2] + m["z_ref_m"], "u0": m["u0"],
@@ -281,27 +292,25 @@ def _scratch(name: str, size: int, dtype) -> np.ndarray:
     return b[:size]
 
 
-def interpolate_rz(prepared: list, p: np.ndarray, nc: int) -> tuple:
-    """The batch kernel of the tables: points (n, 3) -> (whole coils, cores alone), each
-    (nc, 8, n) float32 (coil-major: the mixing over coils then runs on long contiguous rows),
-    rows :data:`ROWS`.
+def interpolate_rz(prepared: list, p: np.ndarray, nc: int) -> np.ndarray:
+    """The batch kernel of the coil tables: points (n, 3) -> rows (nc, 8, n) float32
+    (coil-major), rows :data:`ROWS`, of every coil alone.
 
     Per (point, coil) pair everything is flat and contiguous -- numpy is fast on long inner
     loops and slow on short ones -- and written into reused scratch buffers; a node's 8 float32
-    quantities are gathered as one 32-byte element.
+    quantities are gathered as one 16-byte element.
     """
     n = len(p)
     whole = np.empty((nc, 8, n), np.float32)
-    core = np.empty((nc, 8, n), np.float32)
     for s in range(0, n, RZ_CHUNK):
         e = min(n, s + RZ_CHUNK)
         for t in prepared:
-            _rz_block(t, p[s:e], whole[:, :, s:e], core[:, :, s:e])
-    return whole, core
+            _rz_block(t, p[s:e], whole[:, :, s:e])
+    return whole
 
 
-def _rz_block(t: dict, p: np.ndarray, whole: np.ndarray, core: np.ndarray) -> None:
-    """One coil type, one block of points: rows into ``whole``, ``core`` (nc, 8, n)[idx]."""
+def _rz_block(t: dict, p: np.ndarray, whole: np.ndarray) -> None:
+    """One coil type, one block of points: rows into ``whole`` (nc, 8, n)[idx]."""
     f32 = np.float32
     n, k = len(p), len(t["idx"])
     m = n * k
@@ -348,7 +357,7 @@ def _rz_block(t: dict, p: np.ndarray, whole: np.ndarray, core: np.ndarray) -> No
     else:
         i += j
     nodes, n_u = t["nodes"], t["n_u"]
-    c = _scratch("c", 4 * m, np.dtype("V32")).reshape(4, m)
+    c = _scratch("c", 4 * m, np.dtype(f"V{4 * NQ}")).reshape(4, m)
     # mode='clip' (indices are in range): with the default 'raise', out= costs a copy
     np.take(nodes, i, out=c[0], mode="clip")
     i += 1
@@ -372,9 +381,9 @@ def _rz_block(t: dict, p: np.ndarray, whole: np.ndarray, core: np.ndarray) -> No
     np.subtract(cf[3].reshape(m, NQ).T, lo_t, out=q)
     q *= tr
     q += lo_t
-    rows = _scratch("rows", 16 * m, f32).reshape(2, 8, m)
+    rows = _scratch("rows", 8 * m, f32).reshape(1, 8, m)
     wx = _scratch("wx", m, f32)
-    for part in range(2):
+    for part in range(1):
         bb, bz, e, w = q[4 * part:4 * part + 4]
         r = rows[part]
         # Bx = b x, By = b y, Bz, Gxx = b + w x^2, Gxy = w x y, Gxz = e x, Gyy = b + w y^2,
@@ -391,7 +400,7 @@ def _rz_block(t: dict, p: np.ndarray, whole: np.ndarray, core: np.ndarray) -> No
         r[6] *= y
         r[6] += bb
         np.multiply(e, y, out=r[7])
-    for part, out in ((0, whole), (1, core)):
+    for part, out in ((0, whole),):
         r = rows[part].reshape(8, n, k)
         if t["rot"] is not None:
             r = _rotate_rows(r, t["rot"])
@@ -424,8 +433,8 @@ _POLY = _POLY.reshape(7, 32)
 
 
 def _rz_one(t: dict, q) -> np.ndarray:
-    """One point (3 floats), one coil type: rows (k, 2, 8) float64 of its k coils, for the
-    whole coil [:, 0] and its core alone [:, 1], in the global frame."""
+    """One point (3 floats), one coil type: rows (k, 8) float64 of its k coils alone, global
+    frame."""
     if t["rot"] is None:
         d = np.subtract(q, t["pos"])
         if t["shared_z"]:
@@ -456,12 +465,11 @@ def _rz_one(t: dict, q) -> np.ndarray:
     # bilinear weights of the corners (rho_i, u_j), (rho_i, u_j+1), (rho_i+1, u_j), (.., ..)
     wz = np.concatenate([1.0 - tz, tz], axis=-1) if np.ndim(tz) else np.array([1.0 - tz, tz])
     w = (np.concatenate([1.0 - tr, tr], axis=1)[:, :, None] * wz[..., None, :]).reshape(k, 1, 4)
-    val = np.matmul(w, cells).reshape(k, 2, 4)  # (k, whole/core, b Bz e w)
+    val = np.matmul(w, cells)  # (k, 1, 4): b Bz e w
     mono = np.concatenate([np.ones((k, 1)), xy, outer], axis=1)  # (k, 7)
-    rows = np.matmul(val, (mono @ _POLY).reshape(k, 4, 8))  # (k, 2, 8) local frame
+    rows = np.matmul(val, (mono @ _POLY).reshape(k, 4, 8))[:, 0]  # (k, 8) local frame
     if t["rot"] is not None:
-        rows = np.stack([_rotate_rows(rows[:, p].T[:, None, :], t["rot"])[:, 0, :].T
-                         for p in range(2)], axis=1)
+        rows = _rotate_rows(rows.T[:, None, :], t["rot"])[:, 0, :].T
     return rows
 
 
@@ -506,6 +514,87 @@ def magnet_terms(prepared: list, p: np.ndarray, nc: int):
         force += fl.sum(axis=1)
         amp[:, t["idx"]] = val[..., 2]
     return force, amp
+
+
+# ============================================================================ coupled core modes
+def prepare_modes(tables: list, metas: list, positions, rotations) -> list:
+    """Per core type, what :func:`mode_rows` needs."""
+    out = []
+    for tab, m in zip(tables, metas):
+        idx = np.asarray(m["coils"], dtype=np.intp)
+        rot = np.asarray(rotations, float)[idx]
+        out.append({"idx": idx, "pos": np.asarray(positions, float)[idx],
+                    "rot": None if np.all(rot == np.eye(3)) else rot,
+                    "flat": np.ascontiguousarray(tab, dtype=np.float64).reshape(-1, tab.shape[2]),
+                    "n_rho": tab.shape[0], "n_u": tab.shape[1], "inv_h": 1.0 / m["rho_step_m"],
+                    "inv_scale": 1.0 / m["rho_scale_m"], "z_ref": m["z_ref_m"], "u0": m["u0"],
+                    "inv_du": 1.0 / m["u_step"],
+                    "basis": [tuple(b) for b in m["basis"]],
+                    "col": {tuple(s): c for s, c in zip(m["shapes"], m["columns"])}})
+    return out
+
+
+def _bilinear(t: dict, p: np.ndarray):
+    """Local x, y (n, k) and the table quantities (n, k, Q) of a type's k coils at (n, 3)."""
+    d = p[:, None, :] - t["pos"][None]
+    loc = d if t["rot"] is None else np.einsum("nki,kij->nkj", d, t["rot"])
+    x, y = loc[..., 0], loc[..., 1]
+    rho = np.sqrt(x * x + y * y)
+    vv = np.minimum(rho * t["inv_h"] / (1.0 + rho * t["inv_scale"]), t["n_rho"] - 1.0001)
+    u = (np.log(np.maximum(loc[..., 2] - t["z_ref"], 1e-12)) - t["u0"]) * t["inv_du"]
+    u = np.clip(u, 0.0, t["n_u"] - 1.000001)
+    i, j = vv.astype(np.intp), u.astype(np.intp)
+    tr, tz = (vv - i)[..., None], (u - j)[..., None]
+    base = i * t["n_u"] + j
+    f, nu = t["flat"], t["n_u"]
+    val = ((1 - tr) * ((1 - tz) * f[base] + tz * f[base + 1])
+           + tr * ((1 - tz) * f[base + nu] + tz * f[base + nu + 1]))
+    return x, y, val
+
+
+def mode_rows(t: dict, p: np.ndarray) -> np.ndarray:
+    """Rows (8, n, k, n_basis) of every basis shape of the type's k cores at points (n, 3),
+    global frame. m = 0: the axisymmetric form of the coil tables; m = 1 cos / sin: the field
+    of the potential x G / y G; m = 2 cos / sin: (x^2 - y^2) H / 2 x y H (G, H functions of
+    rho^2 and z; the table holds a, a1, a2, az, a1z = -mu0 (G, G', G'', G_z, G'_z))."""
+    x, y, val = _bilinear(t, p)
+    n, k = x.shape
+    rows = np.empty((8, n, k, len(t["basis"])))
+    xx, xy, yy = x * x, x * y, y * y
+    for b, (m, r, c) in enumerate(t["basis"]):
+        q = t["col"][(m, r)]
+        if m == 0:
+            bb, bz, e, w = (val[..., q + i] for i in range(4))
+            rows[:, :, :, b] = (bb * x, bb * y, bz, bb + w * xx, w * xy, e * x, bb + w * yy,
+                                e * y)
+            continue
+        a, a1, a2, az, a1z = (val[..., q + i] for i in range(5))
+        if m == 1 and c == 0:
+            rows[:, :, :, b] = (a + 2 * xx * a1, 2 * xy * a1, x * az, 6 * x * a1 + 4 * x * xx * a2,
+                                2 * y * a1 + 4 * xx * y * a2, az + 2 * xx * a1z,
+                                2 * x * a1 + 4 * x * yy * a2, 2 * xy * a1z)
+        elif m == 1:
+            rows[:, :, :, b] = (2 * xy * a1, a + 2 * yy * a1, y * az,
+                                2 * y * a1 + 4 * xx * y * a2, 2 * x * a1 + 4 * x * yy * a2,
+                                2 * xy * a1z, 6 * y * a1 + 4 * y * yy * a2, az + 2 * yy * a1z)
+        elif c == 0:
+            pp = xx - yy
+            rows[:, :, :, b] = (2 * x * a + 2 * x * pp * a1, -2 * y * a + 2 * y * pp * a1,
+                                pp * az, 2 * a + (8 * xx + 2 * pp) * a1 + 4 * xx * pp * a2,
+                                4 * xy * pp * a2, 2 * x * az + 2 * x * pp * a1z,
+                                -2 * a + (2 * pp - 8 * yy) * a1 + 4 * yy * pp * a2,
+                                -2 * y * az + 2 * y * pp * a1z)
+        else:
+            qq = 2 * xy
+            rows[:, :, :, b] = (2 * y * a + 2 * x * qq * a1, 2 * x * a + 2 * y * qq * a1,
+                                qq * az, 12 * xy * a1 + 4 * xx * qq * a2,
+                                2 * a + 4 * (xx + yy) * a1 + 4 * xy * qq * a2,
+                                2 * y * az + 2 * x * qq * a1z, 12 * xy * a1 + 4 * yy * qq * a2,
+                                2 * x * az + 2 * y * qq * a1z)
+    if t["rot"] is not None:
+        flat = rows.transpose(0, 1, 3, 2).reshape(8, -1, k)
+        rows = _rotate_rows(flat, t["rot"]).reshape(8, n, -1, k).transpose(0, 1, 3, 2)
+    return rows
 
 
 # ============================================================================ 3-D grids
@@ -584,15 +673,12 @@ class MapFile:
     bounds: tuple
     n_coils: int
     rz: tuple = field(repr=False)
-    mix: np.ndarray = field(repr=False)
-    coupling: tuple = field(repr=False)
-    modes: np.ndarray = field(repr=False)
+    modes: tuple = field(repr=False)
+    coef: tuple = field(repr=False)
     magnet: tuple = field(repr=False)
     magnet_f0: tuple = field(repr=False)
     magnet_sind: tuple = field(repr=False)
     sind_mix: np.ndarray = field(repr=False)
-    mix_t: np.ndarray = field(repr=False)
-    modes_t: np.ndarray = field(repr=False)
 
     @classmethod
     def load(cls, path, expected_design_sha256: str | None = None) -> "MapFile":
@@ -611,10 +697,13 @@ class MapFile:
         tabs = meta["rz_tables"]
         rz = prepare_rz([arrays[t["name"]] for t in tabs], tabs, meta["coil_positions_m"],
                          meta["coil_rotations"])
-        caxes = tuple(np.asarray(arrays[k], float) for k in ("C_X", "C_Y", "C_Z"))
-        phi = arrays["PHI"]
-        coupling = (caxes, np.ascontiguousarray(phi.reshape(-1, phi.shape[3]), dtype=np.float32),
-                    phi.shape[:3])
+        mtabs = meta["mode_tables"]
+        modes = prepare_modes([arrays[t["name"]] for t in mtabs], mtabs,
+                              meta["coil_positions_m"], meta["coil_rotations"])
+        coef = arrays["COEF"]
+        # per type: COEF rows of its cores and its basis, laid out (k * n_basis, nc)
+        coefs = tuple(np.ascontiguousarray(coef[t["idx"], :len(t["basis"])].reshape(-1, nc))
+                      for t in modes)
         maxes = tuple(np.asarray(arrays[k], float) for k in ("M_X", "M_Y", "M_Z"))
         f0 = arrays["F0_RES"]
         sind = arrays["SIND_RES"]
@@ -623,18 +712,11 @@ class MapFile:
                                 meta["coil_rotations"])
         g = meta["box_m"]
         return cls(arrays, meta, (np.asarray(g[0], float), np.asarray(g[1], float)), nc,
-                   tuple(rz), np.asarray(arrays["MIX"], float), coupling,
-                   np.ascontiguousarray(arrays["MODES"].reshape(len(arrays["MODES"]), -1),
-                                        dtype=np.float64),
-                   tuple(magnet),
+                   tuple(rz), tuple(modes), coefs, tuple(magnet),
                    (maxes, np.ascontiguousarray(f0.reshape(-1, 3)), f0.shape[:3]),
                    (maxes, np.ascontiguousarray(sind.reshape(-1, 6 * nc), dtype=np.float32),
                     sind.shape[:3]),
-                   np.asarray(arrays["SIND_MIX"], float).reshape(nc, 6 * nc),
-                   np.ascontiguousarray(np.asarray(arrays["MIX"], float).T),
-                   # residual modes laid out (r, nc * 8) for the one-point (nc, 8) sum
-                   np.ascontiguousarray(arrays["MODES"].astype(np.float64).transpose(0, 2, 1)
-                                        .reshape(len(arrays["MODES"]), -1)))
+                   np.asarray(arrays["SIND_MIX"], float).reshape(nc, 6 * nc))
 
     # ------------------------------------------------------------------ plain attributes
     @property
@@ -712,32 +794,26 @@ class MapFile:
         q = self._one_point(points, extrapolate)
         if q is not None:
             if len(self.rz) == 1 and self.rz[0]["all"]:
-                rows = _rz_one(self.rz[0], q)  # (nc, 2, 8)
+                a = _rz_one(self.rz[0], q).T  # (8, nc)
             else:
-                rows = np.empty((nc, 2, 8))
+                a = np.empty((8, nc))
                 for t in self.rz:
-                    rows[t["idx"]] = _rz_one(t, q)
-            a = rows[:, 0] + self.mix_t @ rows[:, 1]  # (nc, 8)
-            a += (_trilinear_one(self.coupling, q) @ self.modes_t).reshape(nc, 8)
-            return a.T if np.ndim(points) == 1 else a.T[None]
+                    a[:, t["idx"]] = _rz_one(t, q).T
+            pq = np.array([q])
+            for t, c in zip(self.modes, self.coef):
+                a += mode_rows(t, pq).reshape(8, -1) @ c
+            return a if np.ndim(points) == 1 else a[None]
         p, single = self._points(points, extrapolate)
         n = len(p)
         out = np.empty((n, 8, nc))
-        modes32 = self.modes.astype(np.float32)
-        # MIX is (n_coils, n_coils): ~81 axpy's on contiguous rows beat a skinny BLAS call
-        # (which spawns threads for a few microseconds of work)
-        terms = [(j, k, np.float32(self.mix[j, k])) for j in range(nc) for k in range(nc)
-                 if self.mix[j, k] != 0.0]
         for s in range(0, n, RZ_CHUNK):
             e = min(n, s + RZ_CHUNK)
             m = e - s
-            whole, core = interpolate_rz(self.rz, p[s:e], nc)  # (nc, 8, m) each
-            tmp = _scratch("mix", 8 * m, np.float32).reshape(8, m)
-            for j, k, c in terms:
-                np.multiply(core[j], c, out=tmp)
-                whole[k] += tmp
-            res = (_trilinear(self.coupling, p[s:e]) @ modes32).reshape(m, 8, nc)
-            np.add(whole.transpose(2, 1, 0), res, out=out[s:e])
+            a = interpolate_rz(self.rz, p[s:e], nc).transpose(2, 1, 0).astype(np.float64)
+            for t, c in zip(self.modes, self.coef):
+                a += (mode_rows(t, p[s:e]).reshape(8 * m, -1) @ c).reshape(8, m, nc) \
+                    .transpose(1, 0, 2)
+            out[s:e] = a
         return out[0] if single else out
 
     def bias_force(self, points, extrapolate: bool = False) -> np.ndarray:

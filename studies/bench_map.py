@@ -72,7 +72,7 @@ def _case(design, out_dir: Path, name: str, n_points: int, n_magnet: int, **buil
     out = {
         "build_s": t_build, "build_stage_s": data["meta"]["build_seconds"], "load_s": t_load,
         "file_mb": path.stat().st_size / 1e6, "n_points": n_points,
-        "coupling_rank": data["meta"]["coupling_rank"],
+        "n_basis": data["meta"]["n_basis"],
         "arrays_mb": {k: round(v.nbytes / 1e6, 3) for k, v in data["arrays"].items()
                       if v.nbytes > 1e4},
         "direct_per_point_ms": t_direct / n_points * 1e3,
@@ -112,7 +112,7 @@ def _print(res):
     for name, r in res.items():
         print(f"== {name}: file {r['file_mb']:.2f} MB (target 5), build {r['build_s']:.1f} s "
               f"(target 30; stages {', '.join(f'{k} {v:.1f}' for k, v in r['build_stage_s'].items())}),"
-              f" load {r['load_s']:.2f} s, coupling rank {r['coupling_rank']}")
+              f" load {r['load_s']:.2f} s, core modes {r['n_basis']}")
         print(f"   arrays MB: {r['arrays_mb']}")
         print(f"   one point (3,) {r['t_1_us_shape3'][0]:.1f} us, (1, 3) {r['t_1_us_shape13'][0]:.1f} us"
               f" (target 20; min of runs, medians {r['t_1_us_shape3'][1]:.1f}, "

@@ -26,7 +26,7 @@ SMALL = default_design().replace(**{"core": None, "workspace.half_width_m": 0.03
 @pytest.fixture(scope="module")
 def mapfile(tmp_path_factory):
     path = tmp_path_factory.mktemp("map") / "small.npz"
-    fieldmap.write(path, fieldmap.build(SMALL, spacing=0.01, n_check=20, progress=False))
+    fieldmap.write(path, fieldmap.build(SMALL, n_check=20, progress=False))
     return path
 
 
@@ -150,7 +150,7 @@ def test_bad_files(mapfile, tmp_path):
         fieldmap.load(tmp_path / "missing.npz")
     arrays, meta = read(mapfile)
     bad = tmp_path / "bad.npz"
-    for name in ("PHI", "RZ0", "F0_RES", "SENSOR_COIL"):
+    for name in ("RZ0", "MRZ0", "F0_RES", "SENSOR_COIL"):
         a2 = arrays[name].copy()
         a2.reshape(-1)[0] = np.nan
         _resave(bad, {**arrays, name: a2}, meta)
@@ -160,8 +160,8 @@ def test_bad_files(mapfile, tmp_path):
         _resave(bad, {**arrays, name: a2}, meta)
         with pytest.raises(BadInputError, match="SHA-256"):
             fieldmap.load(bad)
-    _resave(bad, {k: v for k, v in arrays.items() if k != "MIX"}, meta)
-    with pytest.raises(BadInputError, match="MIX"):
+    _resave(bad, {k: v for k, v in arrays.items() if k != "COEF"}, meta)
+    with pytest.raises(BadInputError, match="COEF"):
         fieldmap.load(bad)
     _resave(bad, {**arrays, "RZ0": arrays["RZ0"][:-1]}, meta)
     with pytest.raises(BadInputError, match="RZ0"):
@@ -233,11 +233,11 @@ def test_cli_map_writes_one_file(tmp_path):
     toml.write_text(design_to_toml(SMALL.replace(**{"workspace.half_width_m": 0.01,
                                                     "workspace.z_max_m": 0.02})))
     out = tmp_path / "m.npz"
-    assert main(["map", "--design", str(toml), "--spacing", "5", "--out", str(out),
+    assert main(["map", "--design", str(toml), "--spacing", "10", "--out", str(out),
                  "--quiet"]) == 0
     assert sorted(f.name for f in tmp_path.iterdir()) == ["d.toml", "m.npz"]
     loaded = fieldmap.load(out)
-    assert loaded.meta["settings"]["spacing_m"] == pytest.approx(0.005)
+    assert loaded.meta["settings"]["spacing_m"] == pytest.approx(0.01)
     assert main(["map", "--spacing", "-1", "--out", str(out), "--quiet"]) == 1
 
 
