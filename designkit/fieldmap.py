@@ -171,21 +171,19 @@ def compute_rz_table(coil, spec: dict, *, chunk: int = 8192) -> np.ndarray:
 
 
 def compute_magnet_table(phys: "MapPhysics", coil, spec: dict) -> np.ndarray:
-    """The magnet table (n_rho, n_u, 3) float64 of one coil alone at the origin: F_rho/rho and
-    F_z of the magnet's pull on its core (N/m, N) and a, the z field of the core magnetized by
-    the magnet at the coil's upper sensor (T), for the magnet at (rho, 0, z)."""
+    """The magnet table (n_rho, n_u, 2) float64 of one coil alone at the origin: F_rho/rho and
+    F_z of the magnet's pull on its core (N/m, N) for the magnet at (rho, 0, z)."""
     from .pose import Pose
 
     alone = CoilArray((coil.replace(pose=Pose()),))
     rho, z = _spec_nodes(spec)
     R, Z = np.meshgrid(rho, z, indexing="ij")
     pts = np.c_[R.ravel(), np.zeros(R.size), Z.ravel()]
-    f, amp = phys.magnet_alone(alone, pts)
-    out = np.empty((len(rho), len(z), 3))
+    f = phys.bias_force(alone, pts)
+    out = np.empty((len(rho), len(z), 2))
     with np.errstate(divide="ignore", invalid="ignore"):
         out[..., 0] = (f[:, 0] / pts[:, 0]).reshape(R.shape)
     out[..., 1] = f[:, 2].reshape(R.shape)
-    out[..., 2] = amp.reshape(R.shape)
     _even_on_axis(out, rho, [0])
     return out
 
@@ -241,11 +239,6 @@ class MapPhysics:
             out[a:a + chunk] = np.moveaxis(b, -1, 0).reshape((-1,) + sens.shape)
         return out
 
-    def magnet_alone(self, alone: CoilArray, points):
-        """One coil alone: F0 (n, 3) N and the z field (n,) T of its magnetized core at its
-        upper sensor, for the magnet at ``points``."""
-        return self.bias_force(alone, points), self.sensor_induced(alone, points)[:, 0, 0, 2]
-
     def sensor_coil_field(self, array: CoilArray) -> np.ndarray:
         """(2, n_coils, 3, n_coils) T/A: the coupled field of each coil at the sensors."""
         s = self.sensor_positions(array).reshape(-1, 3)
@@ -286,9 +279,12 @@ def coupled_modes(arr: CoilArray, tolerance: float = 1e-4) -> dict | None:
     gives the shapes U_m (kept while the singular values are above ``tolerance`` x the
     largest of the m = 0 block); the coefficients C[j, b, k] = U_m^T dX_j[:, k].
 
-    Returns {"types": [{"model", "coils", "U": {m: (n_m, R_m)}, "basis": [(m, r, c)]}],
-    "coef": (n_coils, n_basis_max, n_coils)}; basis entries (m, r, c): mode order, shape index,
-    c = 0 cos / 1 sin (m = 0: c = 0).
+    Returns {"types": [{"model", "coils", "sets": [A, sensors], each {"U": {m: (n_m, R_m)},
+    "basis": [(m, r, c)]}}],
+    "coef": (n_coils, n_basis_max, n_coils), "sensor_coef": (n_coils, n_basis_max, 2, n_coils,
+    3)}; basis entries (m, r, c): mode order, shape index, c = 0 cos / 1 sin (m = 0: c = 0).
+    ``sensor_coef[..., s, c]``: the coefficients of the cores magnetized by a unit dipole
+    (1 A m^2) along axis c at sensor s (reciprocity, see the code).
     """
     from .pose import Pose
 
@@ -297,6 +293,14 @@ def coupled_modes(arr: CoilArray, tolerance: float = 1e-4) -> dict | None:
         return None
     x = system.coil_solution()  # (n_unknowns, nc)
     nc = arr.n_coils
+    # reciprocity (linear cores): the field at sensor s along e_c of the cores magnetized by the
+    # magnet m at p is m . B(p) of the cores magnetized by a unit dipole e_c at s. Those are
+    # fixed sources: 3 x 2 x nc more columns, so the sensors' field is a mode sum too.
+    sens = arr.sensor_positions_m().reshape(-1, 3)
+    xs = np.stack([system.magnet_solution(sens, e) for e in np.eye(3)], axis=-1)  # (nu, ns, 3)
+    xs = xs.reshape(len(xs), -1)  # columns (sensor, component)
+    n_src = nc + xs.shape[1]
+    x = np.concatenate([x, xs], axis=1)
     blocks = {}
     for jj, k in enumerate(system.core_index):
         model = system.models[jj]
@@ -316,42 +320,60 @@ def coupled_modes(arr: CoilArray, tolerance: float = 1e-4) -> dict | None:
         for m in range(1, m_max + 1):
             parts[m] = [(slice(n0 + (2 * (m - 1) + c) * n1, n0 + (2 * (m - 1) + c + 1) * n1), c)
                         for c in range(2)]
-        stacked = {m: np.concatenate([dx[k][sl] for k in dx for sl, _ in parts[m]], axis=1)
-                   for m in parts}
-        # the m = 0 currents and m >= 1 charges have different units per unit field: compare
-        # each block with the largest singular value of its own order, the tolerance being
-        # relative to the coupling of that order
-        U = {}
-        for m, mat in stacked.items():
-            u, sv, _ = np.linalg.svd(mat, full_matrices=False)
-            if sv[0] == 0:
-                continue
-            r = max(1, int(np.sum(sv > tolerance * sv[0])))
-            U[m] = u[:, :r]
-        basis = [(m, r, c) for m in sorted(U) for r in range(U[m].shape[1])
-                 for c in ((0,) if m == 0 else (0, 1))]
-        types.append({"model": model, "coils": [k for _, k in members], "U": U,
-                      "basis": basis, "parts": parts, "dx": dx})
-    nb = max(len(t["basis"]) for t in types)
-    coef = np.zeros((nc, nb, nc))
-    for t in types:
-        for k, d in t["dx"].items():
-            for b, (m, r, c) in enumerate(t["basis"]):
-                sl = [s for s, cc in t["parts"][m] if cc == c][0]
-                coef[k, b] = t["U"][m][:, r] @ d[sl]
-    return {"types": types, "coef": coef}
+        def shapes_of(cols):
+            """Per mode order: the SVD shapes of these source columns (None: no coupling)."""
+            out = {}
+            for m in parts:
+                mat = np.concatenate([dx[k][sl][:, cols] for k in dx for sl, _ in parts[m]],
+                                     axis=1)
+                u, sv, _ = np.linalg.svd(mat, full_matrices=False)
+                if sv[0] > 0:
+                    out[m] = u[:, :max(1, int(np.sum(sv > tolerance * sv[0])))]
+            return out
+
+        # A and the sensors get their own shapes: the sensor dipoles sit ~9 mm from a core's
+        # end and need many more, which A should not pay for at every lookup
+        sets = []
+        for cols in (slice(0, nc), slice(nc, n_src)):
+            U = shapes_of(cols)
+            basis = [(m, r, c) for m in sorted(U) for r in range(U[m].shape[1])
+                     for c in ((0,) if m == 0 else (0, 1))]
+            sets.append({"U": U, "basis": basis})
+        types.append({"model": model, "coils": [k for _, k in members], "sets": sets,
+                      "parts": parts, "dx": dx})
+    coefs = []
+    for which, cols in ((0, slice(0, nc)), (1, slice(nc, n_src))):
+        nb = max(len(t["sets"][which]["basis"]) for t in types)
+        coef = np.zeros((nc, nb, cols.stop - cols.start))
+        for t in types:
+            st = t["sets"][which]
+            for k, d in t["dx"].items():
+                for b, (m, r, c) in enumerate(st["basis"]):
+                    sl = [s for s, cc in t["parts"][m] if cc == c][0]
+                    coef[k, b] = st["U"][m][:, r] @ d[sl][:, cols]
+        coefs.append(coef)
+    return {"types": types, "coef": coefs[0],
+            "sensor_coef": coefs[1].reshape(nc, coefs[1].shape[1], 2, nc, 3)}
 
 
-def compute_mode_table(t: dict, spec: dict) -> np.ndarray:
-    """The mode table (n_rho, n_u, Q) float64 of one core type: for each basis shape, the
-    quantities of :data:`N_MODE_Q` from the core model's basis fields at (rho, 0, z), local."""
+def compute_mode_tables(t: dict, spec: dict) -> list:
+    """The mode tables (n_rho, n_u, Q) float64 of one core type, one per shape set of ``t``
+    (A, sensors): for each shape, the quantities of :data:`N_MODE_Q` from the core model's
+    basis fields at (rho, 0, z), local frame (one evaluation of the basis for all sets)."""
     from .design import MU0
 
     model = t["model"]
+    t_sets = t["sets"]
     rho, z = _spec_nodes(spec)
     R, Z = np.meshgrid(rho, z, indexing="ij")
     pts = np.c_[R.ravel(), np.zeros(R.size), Z.ravel()]
     n0, n1 = model.n0, model.n1
+    # all shapes of all sets side by side; split at the end
+    U = {}
+    for st in t["sets"]:
+        for m, u in st["U"].items():
+            U[m] = u if m not in U else np.concatenate([U[m], u], axis=1)
+    t = {"U": U}
     shapes = [(m, r) for m in sorted(t["U"]) for r in range(t["U"][m].shape[1])]
     q_tot = sum(N_MODE_Q[m] for m, _ in shapes)
     out = np.zeros((R.size, q_tot))
@@ -394,7 +416,22 @@ def compute_mode_table(t: dict, spec: dict) -> np.ndarray:
     # rho = 0: every quantity is even in rho -> Richardson from the next two nodes
     r1, r2 = rho[1] ** 2, rho[2] ** 2
     out[0] = (r2 * out[1] - r1 * out[2]) / (r2 - r1)
-    return out
+    # split per set, in each set's own shape order (m ascending, r ascending)
+    col = {}
+    c0 = 0
+    for m, r in shapes:
+        col[(m, r)] = c0
+        c0 += N_MODE_Q[m]
+    tables, offset = [], {m: 0 for m in U}
+    for st in t_sets:
+        cols = []
+        for m in sorted(st["U"]):
+            for r in range(st["U"][m].shape[1]):
+                c = col[(m, offset[m] + r)]
+                cols.extend(range(c, c + N_MODE_Q[m]))
+            offset[m] += st["U"][m].shape[1]
+        tables.append(out[..., cols])
+    return tables
 
 
 # ============================================================================ build
@@ -466,7 +503,7 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
         return out
 
     a_specs = specs([idx for _, idx in types], rz_step, rz_log_step, 4)
-    m_specs = specs([idx for _, idx in types], magnet_rz_step, magnet_rz_log_step, 3)
+    m_specs = specs([idx for _, idx in types], magnet_rz_step, magnet_rz_log_step, 2)
     z_ref = max(arr.coils[k].pose.position[2] + s["z_ref_m"] for (_, idx), s in zip(types, a_specs)
                 for k in idx)
     m_axes = box_axes(lower, upper, spacing, z_ref, log_step)
@@ -481,9 +518,8 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
             + [("check", s) for s in range(0, n_check, chunk)] + [("magnet check", 0),
                                                                   ("saturation", 0)])
     arrays: dict = {}
-    rz_meta, mrz_meta, cm_meta = [], [], []
+    rz_meta, mrz_meta, cm_meta, sm_meta = [], [], [], []
     f0 = np.empty((len(m_nodes), 3))
-    sind = np.empty((len(m_nodes), 2, nc, 3))
     a_check = np.empty((n_check, 8, nc))
     seconds: dict = {}
     modes = None
@@ -502,17 +538,18 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
         elif kind == "mode tables":
             for k, t in enumerate(modes["types"] if modes else []):
                 spec = specs([t["coils"]], mode_rz_step, mode_rz_log_step, 1)[0]
-                tab = compute_mode_table(t, spec)
-                shapes = [[m, r] for m in sorted(t["U"]) for r in range(t["U"][m].shape[1])]
-                cols = np.cumsum([0] + [N_MODE_Q[m] for m, _ in shapes])[:-1].tolist()
-                spec["shape"] = list(tab.shape)
-                arrays[f"CM{k}"] = tab.astype(np.float32)
-                cm_meta.append({"name": f"CM{k}", "coils": [int(c) for c in t["coils"]], **spec,
-                                "shapes": shapes, "columns": [int(c) for c in cols],
-                                "basis": [list(b) for b in t["basis"]]})
+                for st, tab, prefix, metas in zip(t["sets"], compute_mode_tables(t, spec),
+                                                  ("CM", "SM"), (cm_meta, sm_meta)):
+                    shapes = [[m, r] for m in sorted(st["U"])
+                              for r in range(st["U"][m].shape[1])]
+                    cols = np.cumsum([0] + [N_MODE_Q[m] for m, _ in shapes])[:-1].tolist()
+                    arrays[f"{prefix}{k}"] = tab.astype(np.float32)
+                    metas.append({"name": f"{prefix}{k}", "coils": [int(c) for c in t["coils"]],
+                                  **spec, "shape": list(tab.shape), "shapes": shapes,
+                                  "columns": [int(c) for c in cols],
+                                  "basis": [list(b) for b in st["basis"]]})
         elif kind == "magnet":
             f0[s:s + chunk] = phys.bias_force(arr, m_nodes[s:s + chunk])
-            sind[s:s + chunk] = phys.sensor_induced(arr, m_nodes[s:s + chunk])
         elif kind == "check":
             a_check[s:s + chunk] = phys.actuation(arr, check[s:s + chunk])
         elif kind == "magnet check":
@@ -527,17 +564,13 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
     rotations = [list(map(list, c.pose.rotation)) for c in arr.coils]
     mprep = mf.prepare_magnet([arrays[t["name"]] for t in mrz_meta], mrz_meta, positions,
                               rotations)
-    f_pair, amp = mf.magnet_terms(mprep, m_nodes, nc)
-    sind_flat = sind.reshape(len(m_nodes), -1)
-    sind_mix = np.linalg.lstsq(amp, sind_flat, rcond=None)[0] if np.abs(amp).max() > 0 else \
-        np.zeros((nc, 6 * nc))
+    f_pair = mf.magnet_terms(mprep, m_nodes)
     m_shape = tuple(len(a) for a in m_axes)
     coef = modes["coef"] if modes else np.zeros((nc, 0, nc))
     arrays.update({
         "COEF": coef,
+        "SCOEF": modes["sensor_coef"] if modes else np.zeros((nc, 0, 2, nc, 3)),
         "F0_RES": (f0 - f_pair).reshape(m_shape + (3,)).astype(np.float32),
-        "SIND_MIX": sind_mix.reshape(nc, 2, nc, 3),
-        "SIND_RES": (sind_flat - amp @ sind_mix).reshape(m_shape + (2, nc, 3)).astype(np.float16),
         "M_X": m_axes[0], "M_Y": m_axes[1], "M_Z": m_axes[2],
         "SENSOR_POS": phys.sensor_positions(arr).astype(np.float64),
         "SENSOR_COIL": phys.sensor_coil_field(arr).astype(np.float64),
@@ -548,9 +581,10 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
         "format": FORMAT, "version": FORMAT_VERSION, "designkit_version": __version__,
         "design_name": design.name, "design_sha256": design.spec_hash(),
         "rows": list(ROWS), "units": UNITS, "n_coils": nc, "n_basis": int(coef.shape[1]),
+        "n_sensor_basis": int(arrays["SCOEF"].shape[1]),
         "box_m": [lower.tolist(), upper.tolist()],
         "rz_tables": rz_meta, "rz_quantities": list(RZ_QUANTITIES),
-        "mode_tables": cm_meta, "magnet_tables": mrz_meta,
+        "mode_tables": cm_meta, "sensor_mode_tables": sm_meta, "magnet_tables": mrz_meta,
         "coil_positions_m": positions.tolist(), "coil_rotations": rotations,
         "max_current_a": design.drive.max_current_a,
         "total_current_a": design.drive.total_current_a,

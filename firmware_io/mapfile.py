@@ -41,10 +41,9 @@ the grid ``M_X``, ``M_Y``, ``M_Z`` (trilinear):
   interaction adds (trilinear). With linear cores the total force is
   ``F = force_matrix(m) @ (A(p) @ I)[3:] + F0(p)``.
 * the field, T, of the cores magnetized by the magnet, at the Hall sensors (upper array then
-  lower), as a function of the magnet's position: ``a(p) @ SIND_MIX + SIND_RES(p)``, a (n_coils,)
-  the per-core amplitudes of the magnet tables (the z field one core alone would make at its own
-  upper sensor), ``SIND_MIX`` (n_coils, 2, n_coils, 3) float64 fitted, ``SIND_RES``
-  (mx, my, mz, 2, n_coils, 3) float16 the rest (trilinear).
+  lower), as a function of the magnet's position p: by reciprocity (linear cores) component c
+  at sensor s is m . B(p) of the cores magnetized by a unit dipole along c at s, a sum of the
+  same core modes as A with the coefficients ``SCOEF`` (n_coils, n_basis, 2, n_coils, 3).
 
 Constants: ``SENSOR_POS`` (2, n_coils, 3) m; ``SENSOR_COIL`` (2, n_coils, 3, n_coils) T/A, the
 coils' (coupled) field at the sensors per ampere; ``MOMENT`` (3,) A m^2; saturation ``SAT_I``
@@ -87,8 +86,8 @@ REBUILD = ("Rebuild it for this version: designkit map --design <design.toml> "
            "--out <file.npz>")
 
 # name -> (dtype, shape as a function of the sizes); the single list of arrays in a map file
-_FIXED = ("COEF", "F0_RES", "SIND_MIX", "SIND_RES", "M_X", "M_Y", "M_Z", "SENSOR_POS",
-          "SENSOR_COIL", "MOMENT", "SAT_I", "SAT_FACTOR")
+_FIXED = ("COEF", "SCOEF", "F0_RES", "M_X", "M_Y", "M_Z", "SENSOR_POS", "SENSOR_COIL",
+          "MOMENT", "SAT_I", "SAT_FACTOR")
 
 
 def _shapes(meta: dict, arrays: dict) -> dict:
@@ -96,10 +95,10 @@ def _shapes(meta: dict, arrays: dict) -> dict:
     mx, my, mz = (len(arrays[k]) for k in ("M_X", "M_Y", "M_Z"))
     nb = int(meta["n_basis"])
     ns = len(arrays["SAT_I"])
-    f16, f32, f64 = np.float16, np.float32, np.float64
-    return {"COEF": (f64, (nc, nb, nc)),
-            "F0_RES": (f32, (mx, my, mz, 3)), "SIND_MIX": (f64, (nc, 2, nc, 3)),
-            "SIND_RES": (f16, (mx, my, mz, 2, nc, 3)),
+    f32, f64 = np.float32, np.float64
+    nbs = int(meta["n_sensor_basis"])
+    return {"COEF": (f64, (nc, nb, nc)), "SCOEF": (f64, (nc, nbs, 2, nc, 3)),
+            "F0_RES": (f32, (mx, my, mz, 3)),
             "M_X": (f64, (mx,)), "M_Y": (f64, (my,)), "M_Z": (f64, (mz,)),
             "SENSOR_POS": (f64, (2, nc, 3)), "SENSOR_COIL": (f64, (2, nc, 3, nc)),
             "MOMENT": (f64, (3,)), "SAT_I": (f64, (ns,)), "SAT_FACTOR": (f64, (ns, nc))}
@@ -113,7 +112,8 @@ def array_names(keys) -> list:
         return sorted((k for k in keys if k.startswith(prefix) and k[n:].isdigit()),
                       key=lambda k: int(k[n:]))
 
-    return [k for k in _FIXED if k in keys] + tables("RZ") + tables("MRZ") + tables("CM")
+    return ([k for k in _FIXED if k in keys] + tables("RZ") + tables("MRZ") + tables("CM")
+            + tables("SM"))
 
 
 def data_hash(arrays: dict) -> str:
@@ -193,10 +193,11 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
             raise _bad(p, f"{name} of shape {shape} {np.dtype(dtype).name}; got {a.shape} "
                        f"{a.dtype}")
     for key, prefix, nq in (("rz_tables", "RZ", NQ), ("magnet_tables", "MRZ", NQ_MAGNET),
-                            ("mode_tables", "CM", None)):
+                            ("mode_tables", "CM", None), ("sensor_mode_tables", "SM", None)):
         tabs = meta.get(key)
-        if not isinstance(tabs, list) or (not tabs and key != "mode_tables"):
-            raise _bad(p, f"meta.{key} (a list, non-empty but for mode_tables)")
+        n_basis = int(meta["n_basis" if prefix == "CM" else "n_sensor_basis"])
+        if not isinstance(tabs, list) or (not tabs and nq is not None):
+            raise _bad(p, f"meta.{key} (a list, non-empty for coil and magnet tables)")
         covered = []
         for k, t in enumerate(tabs):
             try:
@@ -205,7 +206,7 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
                 if nq is None:  # a mode table: its columns follow from its shapes
                     want = sum(N_MODE_Q[m] for m, _ in t["shapes"])
                     ok_modes = (want == shape[2] and len(t["columns"]) == len(t["shapes"])
-                                and len(t["basis"]) <= int(meta["n_basis"])
+                                and len(t["basis"]) <= n_basis
                                 and all(list(b[:2]) in [list(x) for x in t["shapes"]]
                                         and b[2] in (0, 1) for b in t["basis"]))
                 else:
@@ -222,7 +223,7 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
                 raise _bad(p, f"{key}[{k}] describing a float32 array {prefix}{k} (n_rho, n_u, "
                            f"{nq}) for coil indices < {nc}")
             covered += list(t["coils"])
-        if key != "mode_tables" and sorted(covered) != list(range(nc)):
+        if nq is not None and sorted(covered) != list(range(nc)):
             raise _bad(p, f"{key}: one table for every coil 0..{nc - 1}; got coils "
                        f"{sorted(covered)}")
     for name in array_names(arrays):
@@ -242,9 +243,9 @@ own core magnetized by it alone), per ampere."""
 N_MODE_Q = {0: 4, 1: 5, 2: 5}
 """Quantities per node and shape of a mode table: m = 0 (b, Bz, e, w), m = 1, 2 (a, a1, a2, az,
 a1z, see :func:`mode_rows`)."""
-NQ_MAGNET = 3
+NQ_MAGNET = 2
 """Quantities per node of a magnet table: F_rho/rho, F_z (N/m, N) of the magnet's pull on one
-core alone, and a (T) the z field of that core, magnetized by the magnet, at its upper sensor."""
+core alone."""
 
 
 def prepare_rz(tables: list, metas: list, positions, rotations) -> list:
@@ -488,12 +489,10 @@ def prepare_magnet(tables: list, metas: list, positions, rotations) -> list:
     return out
 
 
-def magnet_terms(prepared: list, p: np.ndarray, nc: int):
-    """The pair terms of the magnet at points (n, 3): force (n, 3) N summed over the cores (each
-    core alone), and the amplitudes a (n, nc) T of every core's induced field."""
+def magnet_terms(prepared: list, p: np.ndarray) -> np.ndarray:
+    """The magnet's pull at points (n, 3) summed over the cores, each core alone: (n, 3) N."""
     n = len(p)
     force = np.zeros((n, 3))
-    amp = np.empty((n, nc))
     for t in prepared:
         d = p[:, None, :] - t["pos"][None]  # (n, k, 3)
         loc = d if t["rot"] is None else np.einsum("nki,kij->nkj", d, t["rot"])
@@ -512,8 +511,7 @@ def magnet_terms(prepared: list, p: np.ndarray, nc: int):
         if t["rot"] is not None:
             fl = np.einsum("kij,nkj->nki", t["rot"], fl)
         force += fl.sum(axis=1)
-        amp[:, t["idx"]] = val[..., 2]
-    return force, amp
+    return force
 
 
 # ============================================================================ coupled core modes
@@ -675,10 +673,9 @@ class MapFile:
     rz: tuple = field(repr=False)
     modes: tuple = field(repr=False)
     coef: tuple = field(repr=False)
+    scoef: tuple = field(repr=False)
     magnet: tuple = field(repr=False)
     magnet_f0: tuple = field(repr=False)
-    magnet_sind: tuple = field(repr=False)
-    sind_mix: np.ndarray = field(repr=False)
 
     @classmethod
     def load(cls, path, expected_design_sha256: str | None = None) -> "MapFile":
@@ -704,19 +701,21 @@ class MapFile:
         # per type: COEF rows of its cores and its basis, laid out (k * n_basis, nc)
         coefs = tuple(np.ascontiguousarray(coef[t["idx"], :len(t["basis"])].reshape(-1, nc))
                       for t in modes)
+        stabs = meta["sensor_mode_tables"]
+        smodes = prepare_modes([arrays[t["name"]] for t in stabs], stabs,
+                               meta["coil_positions_m"], meta["coil_rotations"])
+        sc = arrays["SCOEF"]
+        scoefs = tuple((t, np.ascontiguousarray(sc[t["idx"], :len(t["basis"])]
+                                                .reshape(-1, 6 * nc))) for t in smodes)
         maxes = tuple(np.asarray(arrays[k], float) for k in ("M_X", "M_Y", "M_Z"))
         f0 = arrays["F0_RES"]
-        sind = arrays["SIND_RES"]
         mt = meta["magnet_tables"]
         magnet = prepare_magnet([arrays[t["name"]] for t in mt], mt, meta["coil_positions_m"],
                                 meta["coil_rotations"])
         g = meta["box_m"]
         return cls(arrays, meta, (np.asarray(g[0], float), np.asarray(g[1], float)), nc,
-                   tuple(rz), tuple(modes), coefs, tuple(magnet),
-                   (maxes, np.ascontiguousarray(f0.reshape(-1, 3)), f0.shape[:3]),
-                   (maxes, np.ascontiguousarray(sind.reshape(-1, 6 * nc), dtype=np.float32),
-                    sind.shape[:3]),
-                   np.asarray(arrays["SIND_MIX"], float).reshape(nc, 6 * nc))
+                   tuple(rz), tuple(modes), coefs, scoefs, tuple(magnet),
+                   (maxes, np.ascontiguousarray(f0.reshape(-1, 3)), f0.shape[:3]))
 
     # ------------------------------------------------------------------ plain attributes
     @property
@@ -821,26 +820,29 @@ class MapFile:
         (3,) -> (3,), (n, 3) -> (n, 3)."""
         q = self._one_point(points, extrapolate)
         if q is not None:
-            f = magnet_terms(self.magnet, np.array([q]), self.n_coils)[0][0]
+            f = magnet_terms(self.magnet, np.array([q]))[0]
             f += _trilinear_one(self.magnet_f0, q)
             return f if np.ndim(points) == 1 else f[None]
         p, single = self._points(points, extrapolate)
-        f = magnet_terms(self.magnet, p, self.n_coils)[0] + _trilinear(self.magnet_f0, p)
+        f = magnet_terms(self.magnet, p) + _trilinear(self.magnet_f0, p)
         return f[0] if single else f
 
     def sensor_induced_field(self, magnet_position_m, extrapolate: bool = False) -> np.ndarray:
         """Field of the cores magnetized by the magnet at the Hall sensors, T:
-        (3,) -> (2, n_coils, 3) (upper array then lower), (n, 3) -> (n, 2, n_coils, 3)."""
+        (3,) -> (2, n_coils, 3) (upper array then lower), (n, 3) -> (n, 2, n_coils, 3).
+
+        By reciprocity (linear cores): component c at sensor s is m . B(p) of the cores
+        magnetized by a unit dipole along c at s -- a mode sum like A (``SCOEF``)."""
         nc = self.n_coils
-        q = self._one_point(magnet_position_m, extrapolate)
-        if q is not None:
-            amp = magnet_terms(self.magnet, np.array([q]), nc)[1][0]
-            b = (amp @ self.sind_mix + _trilinear_one(self.magnet_sind, q)).reshape(2, nc, 3)
-            return b if np.ndim(magnet_position_m) == 1 else b[None]
+        one = self._one_point(magnet_position_m, extrapolate) is not None
         p, single = self._points(magnet_position_m, extrapolate, "magnet_position_m")
-        amp = magnet_terms(self.magnet, p, nc)[1]
-        b = (amp @ self.sind_mix + _trilinear(self.magnet_sind, p)).reshape(-1, 2, nc, 3)
-        return b[0] if single else b
+        m = self.arrays["MOMENT"]
+        out = np.zeros((len(p), 6 * nc))
+        for t, c in self.scoef:
+            rows = mode_rows(t, p)[:3]  # (3, n, k, nb): B per unit coefficient
+            out += np.tensordot(m, rows, axes=(0, 0)).reshape(len(p), -1) @ c
+        b = out.reshape(-1, 2, nc, 3)
+        return b[0] if (single or (one and np.ndim(magnet_position_m) == 1)) else b
 
     def sensor_coil_field(self, currents=None) -> np.ndarray:
         """The coils' field at the sensors: per ampere (2, n_coils, 3, n_coils) T/A, or with
