@@ -529,6 +529,15 @@ def prepare_modes(tables: list, metas: list, positions, rotations) -> list:
                     "inv_du": 1.0 / m["u_step"],
                     "basis": [tuple(b) for b in m["basis"]],
                     "col": {tuple(s): c for s, c in zip(m["shapes"], m["columns"])}})
+        t = out[-1]
+        groups, order = [], []
+        for key in sorted({(b[0], b[2]) for b in t["basis"]}):
+            members = [i for i, b in enumerate(t["basis"]) if (b[0], b[2]) == key]
+            cols = np.array([[t["col"][(t["basis"][i][0], t["basis"][i][1])] + q
+                              for q in range(N_MODE_Q[key[0]])] for i in members], np.intp)
+            groups.append((key, cols))
+            order += members
+        t["groups"], t["order"] = groups, np.array(order, np.intp)
     return out
 
 
@@ -545,53 +554,81 @@ def _bilinear(t: dict, p: np.ndarray):
     tr, tz = (vv - i)[..., None], (u - j)[..., None]
     base = i * t["n_u"] + j
     f, nu = t["flat"], t["n_u"]
-    val = ((1 - tr) * ((1 - tz) * f[base] + tz * f[base + 1])
-           + tr * ((1 - tz) * f[base + nu] + tz * f[base + nu + 1]))
-    return x, y, val
+    lo = f[base]
+    lo += tz * (f[base + 1] - lo)
+    hi = f[base + nu]
+    hi += tz * (f[base + nu + 1] - hi)
+    lo += tr * (hi - lo)
+    return x, y, lo
+
+
+def _poly(x: np.ndarray, y: np.ndarray, m: int, c: int) -> np.ndarray:
+    """(n, k, Q_m, 8): row r of a basis field = sum over its quantities q of val[q] * P[q, r].
+
+    m = 0: (b, Bz, e, w) -> Bx = b x, By = b y, Bz, Gxx = b + w x^2, Gxy = w x y, Gxz = e x,
+    Gyy = b + w y^2, Gyz = e y. m = 1, 2: B = -grad of the potential x G, y G (m = 1 cos, sin)
+    or (x^2 - y^2) H, 2 x y H (m = 2), G, H functions of (rho^2, z); the quantities are
+    (a, a1, a2, az, a1z) = -mu0 (G, G', G'', G_z, G'_z), ' = d/d(rho^2).
+    """
+    xx, xy, yy = x * x, x * y, y * y
+    P = np.zeros(x.shape + (N_MODE_Q[m], 8))
+    if m == 0:
+        P[..., 0, 0], P[..., 0, 1], P[..., 0, 3], P[..., 0, 6] = x, y, 1.0, 1.0
+        P[..., 1, 2] = 1.0
+        P[..., 2, 5], P[..., 2, 7] = x, y
+        P[..., 3, 3], P[..., 3, 4], P[..., 3, 6] = xx, xy, yy
+    elif m == 1 and c == 0:
+        P[..., 0, 0] = 1.0
+        P[..., 1, 0], P[..., 1, 1], P[..., 1, 3], P[..., 1, 4], P[..., 1, 6] = (
+            2 * xx, 2 * xy, 6 * x, 2 * y, 2 * x)
+        P[..., 2, 3], P[..., 2, 4], P[..., 2, 6] = 4 * x * xx, 4 * xx * y, 4 * x * yy
+        P[..., 3, 2], P[..., 3, 5] = x, 1.0
+        P[..., 4, 5], P[..., 4, 7] = 2 * xx, 2 * xy
+    elif m == 1:
+        P[..., 0, 1] = 1.0
+        P[..., 1, 0], P[..., 1, 1], P[..., 1, 3], P[..., 1, 4], P[..., 1, 6] = (
+            2 * xy, 2 * yy, 2 * y, 2 * x, 6 * y)
+        P[..., 2, 3], P[..., 2, 4], P[..., 2, 6] = 4 * xx * y, 4 * x * yy, 4 * y * yy
+        P[..., 3, 2], P[..., 3, 7] = y, 1.0
+        P[..., 4, 5], P[..., 4, 7] = 2 * xy, 2 * yy
+    elif c == 0:
+        pp = xx - yy
+        P[..., 0, 0], P[..., 0, 1], P[..., 0, 3], P[..., 0, 6] = 2 * x, -2 * y, 2.0, -2.0
+        P[..., 1, 0], P[..., 1, 1], P[..., 1, 3], P[..., 1, 6] = (
+            2 * x * pp, 2 * y * pp, 8 * xx + 2 * pp, 2 * pp - 8 * yy)
+        P[..., 2, 3], P[..., 2, 4], P[..., 2, 6] = 4 * xx * pp, 4 * xy * pp, 4 * yy * pp
+        P[..., 3, 2], P[..., 3, 5], P[..., 3, 7] = pp, 2 * x, -2 * y
+        P[..., 4, 5], P[..., 4, 7] = 2 * x * pp, 2 * y * pp
+    else:
+        qq = 2 * xy
+        P[..., 0, 0], P[..., 0, 1], P[..., 0, 4] = 2 * y, 2 * x, 2.0
+        P[..., 1, 0], P[..., 1, 1], P[..., 1, 3], P[..., 1, 4], P[..., 1, 6] = (
+            2 * x * qq, 2 * y * qq, 12 * xy, 4 * (xx + yy), 12 * xy)
+        P[..., 2, 3], P[..., 2, 4], P[..., 2, 6] = 4 * xx * qq, 4 * xy * qq, 4 * yy * qq
+        P[..., 3, 2], P[..., 3, 5], P[..., 3, 7] = qq, 2 * y, 2 * x
+        P[..., 4, 5], P[..., 4, 7] = 2 * x * qq, 2 * y * qq
+    return P
 
 
 def mode_rows(t: dict, p: np.ndarray) -> np.ndarray:
-    """Rows (8, n, k, n_basis) of every basis shape of the type's k cores at points (n, 3),
-    global frame. m = 0: the axisymmetric form of the coil tables; m = 1 cos / sin: the field
-    of the potential x G / y G; m = 2 cos / sin: (x^2 - y^2) H / 2 x y H (G, H functions of
-    rho^2 and z; the table holds a, a1, a2, az, a1z = -mu0 (G, G', G'', G_z, G'_z))."""
+    """Rows (n, k, n_basis, 8) of every basis field of the type's k cores at points (n, 3),
+    global frame, basis in the order of ``t['order']`` (grouped by mode order and cos / sin;
+    :func:`prepare_modes` permutes the coefficients to match)."""
     x, y, val = _bilinear(t, p)
     n, k = x.shape
-    rows = np.empty((8, n, k, len(t["basis"])))
-    xx, xy, yy = x * x, x * y, y * y
-    for b, (m, r, c) in enumerate(t["basis"]):
-        q = t["col"][(m, r)]
-        if m == 0:
-            bb, bz, e, w = (val[..., q + i] for i in range(4))
-            rows[:, :, :, b] = (bb * x, bb * y, bz, bb + w * xx, w * xy, e * x, bb + w * yy,
-                                e * y)
-            continue
-        a, a1, a2, az, a1z = (val[..., q + i] for i in range(5))
-        if m == 1 and c == 0:
-            rows[:, :, :, b] = (a + 2 * xx * a1, 2 * xy * a1, x * az, 6 * x * a1 + 4 * x * xx * a2,
-                                2 * y * a1 + 4 * xx * y * a2, az + 2 * xx * a1z,
-                                2 * x * a1 + 4 * x * yy * a2, 2 * xy * a1z)
-        elif m == 1:
-            rows[:, :, :, b] = (2 * xy * a1, a + 2 * yy * a1, y * az,
-                                2 * y * a1 + 4 * xx * y * a2, 2 * x * a1 + 4 * x * yy * a2,
-                                2 * xy * a1z, 6 * y * a1 + 4 * y * yy * a2, az + 2 * yy * a1z)
-        elif c == 0:
-            pp = xx - yy
-            rows[:, :, :, b] = (2 * x * a + 2 * x * pp * a1, -2 * y * a + 2 * y * pp * a1,
-                                pp * az, 2 * a + (8 * xx + 2 * pp) * a1 + 4 * xx * pp * a2,
-                                4 * xy * pp * a2, 2 * x * az + 2 * x * pp * a1z,
-                                -2 * a + (2 * pp - 8 * yy) * a1 + 4 * yy * pp * a2,
-                                -2 * y * az + 2 * y * pp * a1z)
-        else:
-            qq = 2 * xy
-            rows[:, :, :, b] = (2 * y * a + 2 * x * qq * a1, 2 * x * a + 2 * y * qq * a1,
-                                qq * az, 12 * xy * a1 + 4 * xx * qq * a2,
-                                2 * a + 4 * (xx + yy) * a1 + 4 * xy * qq * a2,
-                                2 * y * az + 2 * x * qq * a1z, 12 * xy * a1 + 4 * yy * qq * a2,
-                                2 * x * az + 2 * y * qq * a1z)
+    parts = []
+    for (m, c), cols in t["groups"]:
+        v = val[..., cols]  # (n, k, nb_g, Q_m)
+        pm = _poly(x, y, m, c)[:, :, None]  # (n, k, 1, Q_m, 8)
+        # a sum over the 4-5 quantities: numpy's batched matmul is slow on tiny matrices
+        acc = v[..., 0, None] * pm[..., 0, :]
+        for q in range(1, v.shape[-1]):
+            acc += v[..., q, None] * pm[..., q, :]
+        parts.append(acc)  # (n, k, nb_g, 8)
+    rows = parts[0] if len(parts) == 1 else np.concatenate(parts, axis=2)
     if t["rot"] is not None:
-        flat = rows.transpose(0, 1, 3, 2).reshape(8, -1, k)
-        rows = _rotate_rows(flat, t["rot"]).reshape(8, n, -1, k).transpose(0, 1, 3, 2)
+        flat = rows.transpose(3, 0, 2, 1).reshape(8, -1, k)
+        rows = _rotate_rows(flat, t["rot"]).reshape(8, n, -1, k).transpose(1, 3, 2, 0)
     return rows
 
 
@@ -699,13 +736,13 @@ class MapFile:
                               meta["coil_positions_m"], meta["coil_rotations"])
         coef = arrays["COEF"]
         # per type: COEF rows of its cores and its basis, laid out (k * n_basis, nc)
-        coefs = tuple(np.ascontiguousarray(coef[t["idx"], :len(t["basis"])].reshape(-1, nc))
+        coefs = tuple(np.ascontiguousarray(coef[t["idx"]][:, t["order"]].reshape(-1, nc))
                       for t in modes)
         stabs = meta["sensor_mode_tables"]
         smodes = prepare_modes([arrays[t["name"]] for t in stabs], stabs,
                                meta["coil_positions_m"], meta["coil_rotations"])
         sc = arrays["SCOEF"]
-        scoefs = tuple((t, np.ascontiguousarray(sc[t["idx"], :len(t["basis"])]
+        scoefs = tuple((t, np.ascontiguousarray(sc[t["idx"]][:, t["order"]]
                                                 .reshape(-1, 6 * nc))) for t in smodes)
         maxes = tuple(np.asarray(arrays[k], float) for k in ("M_X", "M_Y", "M_Z"))
         f0 = arrays["F0_RES"]
@@ -800,7 +837,7 @@ class MapFile:
                     a[:, t["idx"]] = _rz_one(t, q).T
             pq = np.array([q])
             for t, c in zip(self.modes, self.coef):
-                a += mode_rows(t, pq).reshape(8, -1) @ c
+                a += mode_rows(t, pq).reshape(-1, 8).T @ c
             return a if np.ndim(points) == 1 else a[None]
         p, single = self._points(points, extrapolate)
         n = len(p)
@@ -810,8 +847,9 @@ class MapFile:
             m = e - s
             a = interpolate_rz(self.rz, p[s:e], nc).transpose(2, 1, 0).astype(np.float64)
             for t, c in zip(self.modes, self.coef):
-                a += (mode_rows(t, p[s:e]).reshape(8 * m, -1) @ c).reshape(8, m, nc) \
-                    .transpose(1, 0, 2)
+                rows = mode_rows(t, p[s:e])  # (m, k, nb, 8)
+                a += (rows.reshape(m, -1, 8).transpose(0, 2, 1).reshape(8 * m, -1) @ c
+                      ).reshape(m, 8, nc)
             out[s:e] = a
         return out[0] if single else out
 
@@ -839,8 +877,8 @@ class MapFile:
         m = self.arrays["MOMENT"]
         out = np.zeros((len(p), 6 * nc))
         for t, c in self.scoef:
-            rows = mode_rows(t, p)[:3]  # (3, n, k, nb): B per unit coefficient
-            out += np.tensordot(m, rows, axes=(0, 0)).reshape(len(p), -1) @ c
+            rows = mode_rows(t, p)[..., :3]  # (n, k, nb, 3): B per unit coefficient
+            out += (rows @ m).reshape(len(p), -1) @ c
         b = out.reshape(-1, 2, nc, 3)
         return b[0] if (single or (one and np.ndim(magnet_position_m) == 1)) else b
 
