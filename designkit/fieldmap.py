@@ -8,27 +8,27 @@ errors. All the physics the map samples comes through one function, :func:`map_p
 
 Representation and error budget (target: <= 1e-3 of each row's largest |A| over the box)
 -----------------------------------------------------------------------------------------
-The coupled A is not axisymmetric, but much of its sharp structure is: near a core's rim the
-field is dominated by that core, magnetized mostly along its axis. So
+The coupled A is not axisymmetric, but every core is a body of revolution whose response splits
+into azimuthal orders m (:mod:`designkit.coupling`). So nothing of A is sampled on a 3-D grid:
 
-* tables: per coil type, exact axisymmetric (rho, z) tables of one coil alone and of its core
-  alone (1.4 MB; interpolation error ~1.3e-4 of each row's maximum: steps 0.1 mm in rho near
-  the axis, growing as (1 + rho / 50 mm)^2, and 2.5 % of the height above the core's top in z);
-* ``MIX``: ``A_core @ MIX`` adds to column k the extra axial magnetization of every core by
-  coil k, with that core's own field shape (least squares over the residual grid's nodes);
-* residual: the rest, sampled from the coupled model on a coarse 3-D grid (15 mm in x, y; z
-  steps growing with the height above the cores), SVD-compressed, trilinear.
+* coil tables: per coil type, the exact axisymmetric field of one coil alone (0.7 MB; ~1.3e-4
+  of each row's maximum: steps 0.1 mm in rho near the axis, growing as (1 + rho / 50 mm)^2, and
+  2.5 % of the height above the core's top in z);
+* coupling: the extra magnetization of every core by every coil, from the coupled solve itself,
+  compressed per core type and order m by an SVD (``mode_tolerance``: m = 0 needs 2-3 shapes at
+  1e-4, m = 1, 2 about 2 each) and tabulated as fields of those shapes (:func:`mode_rows`
+  in firmware_io.mapfile); 0.25 mm / 4 % steps: the coupling is ~15 % of A, so their
+  interpolation error counts ~0.15 x.
+* SVD truncation and m >= 3 (below 1e-4 of the coupling, designkit.coupling) are the rest.
 
-Measured on the default 3 x 3 iron-core array (designkit.coupling, November 2026): the rest is
-NOT small -- the transverse (m = 1, 2) magnetization of the neighbour cores reaches ~15 % of
-each row's maximum near the bottom of the box and is as sharp as the rims -- so this map is
-within ~4-12 % of the coupled model, not 1e-3 (``studies/bench_map.py``; the build records its
-own check in ``meta['errors']``). Sampling the coupled model costs ~10-100 ms per point, which
-rules out a finer residual grid within the build budget. The fix is structural: tabulate the
-cores' coupled modes themselves (per core type, the SVD of the solved unknowns of all cores for
-all coils: rank 3 for m = 0 at 8e-5; for m = 1, 2 the potential x G(rho^2, z) resp.
-(x^2 - y^2) H(rho^2, z), so 5 smooth (rho, z) quantities per mode give all 8 rows) and mix them
-per column -- exact up to the tables, with no 3-D grid for A.
+Measured (2-core array, 30 random points; studies/bench_map.py for the default array): A within
+2e-4 of each row's maximum. The sensor-induced field uses the same modes by reciprocity (~2-3 %
+of its maximum: the unit dipoles at the sensors, ~9 mm from a core's end, need many shapes and
+the discrete solve is reciprocal only to its discretization); the bias force is the weakest part
+(~8 %: per-core pull tables plus a coarse grid of the cores' interaction) -- see the report.
+
+The build checks itself: it evaluates the coupled model directly at ``n_check`` random points
+in the box and records the errors of the finished map in ``meta['errors']``.
 """
 
 from __future__ import annotations

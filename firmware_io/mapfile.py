@@ -6,51 +6,47 @@ array names, shapes, validation, interpolation -- is defined here and nowhere el
 
 What the file carries (``.npz``; every array hashed into ``meta.data_sha256``)
 ------------------------------------------------------------------------------
-The coupled actuation matrix A(p), (8, n_coils) per point, rows :data:`ROWS` (T/A, T/(m A)),
-as three parts whose sum is A::
+The coupled actuation matrix A(p), (8, n_coils) per point, rows :data:`ROWS` (T/A, T/(m A)):
+column k is coil k alone plus the extra magnetization coil k gives every core (the coupling),
+written in the cores' own modes::
 
-    A(p) = A_whole(p) + A_core(p) @ MIX + PHI(p) @ MODES
+    A(p)[:, k] = A_alone_k(p) + sum over cores j and basis fields b of  F_jb(p) COEF[j, b, k]
 
-* ``RZ0``, ``RZ1``, ...: per identical coil type (meta ``rz_tables``), exact axisymmetric
-  fields per ampere of one coil alone, (n_rho, n_u, 8) float32: for the whole coil (winding +
-  its own core) and for its core alone, the smooth, even-in-rho quantities b = Br/rho, Bz,
+* ``RZ0``, ``RZ1``, ...: per identical coil type (meta ``rz_tables``), the exact axisymmetric
+  field per ampere of one coil alone (winding + its own core magnetized by it alone),
+  (n_rho, n_u, 4) float32: the smooth, even-in-rho quantities b = Br/rho, Bz,
   e = (dBr/dz)/rho, w = (dBr/drho - Br/rho)/rho^2 on a grid uniform in
   v = rho / (1 + rho / rho_scale) and u = log(z - z_ref) (z_ref: top of the coil's sources), so
   the steps grow with the distance from the core's rim. Bilinear in (v, u), then Bx = b x,
   By = b y, Bz, dBx/dx = b + w x^2, dBx/dy = w x y, dBx/dz = e x, dBy/dy = b + w y^2,
-  dBy/dz = e y in the coil's frame (no division, no special case on the axis). These hold the
-  sharp near field of every core rim.
-* ``MIX`` (n_coils, n_coils) float64: coil k magnetizes every core j (its own included) a little
-  more or less than it would alone, mostly along the core's axis, and the field of that extra
-  magnetization has (nearly) the shape of core j's own field: ``A_core @ MIX`` carries most of
-  the core-to-core coupling, near field included, for one small matrix product. Fitted by least
-  squares when the map is built.
-* ``PHI`` (nx, ny, nz, r) float16 (the residual is ~1 % of A: float16's 5e-4 relative
-  rounding is ~5e-6 of A) on the grid ``C_X``, ``C_Y``, ``C_Z`` (m, strictly increasing,
-  z graded towards the bottom) and ``MODES`` (r, 8, n_coils) float32: what is left (the transverse
-  magnetization of the neighbour cores, profile changes), smooth, compressed by a truncated SVD
-  (rank r chosen from the tolerance); trilinear in PHI (which commutes with the projection).
+  dBy/dz = e y in the coil's frame (no division, no special case on the axis).
+* ``CM0``, ... (meta ``mode_tables``): per core type, the fields F_b of a few magnetization
+  shapes of the core (the SVD of every core's extra magnetization in the coupled solve, per
+  azimuthal order m = 0, 1, 2; cos and sin for m >= 1) on the same kind of (v, u) grid: m = 0
+  as the coil tables, m = 1, 2 as the potentials x G, y G resp. (x^2 - y^2) H, 2 x y H with
+  G, H smooth in (rho^2, z): 5 quantities (a, a1, a2, az, a1z) = -mu0 (G, G', G'', G_z, G'_z)
+  give all 8 rows (:func:`mode_rows`). ``COEF`` (n_coils, n_basis, n_coils) float64.
 
-The magnet's interaction with the cores, as functions of the magnet's position p (same box), on
-the grid ``M_X``, ``M_Y``, ``M_Z`` (trilinear):
+The magnet's interaction with the cores, as functions of the magnet's position p:
 
 * the bias force F0(p), N, on the magnet (moment ``MOMENT``) at zero current (the pull of the
-  cores it magnetizes): the sum over the cores of the pull of each core alone, axisymmetric about
-  it (``MRZ0``, ... per coil type, meta ``magnet_tables``, (n_rho, n_u, 3) float32: F_rho/rho,
-  F_z and a, same (v, u) grids) plus ``F0_RES`` (mx, my, mz, 3) float32, what the cores'
-  interaction adds (trilinear). With linear cores the total force is
-  ``F = force_matrix(m) @ (A(p) @ I)[3:] + F0(p)``.
+  cores it magnetizes): the sum over the cores of the pull of each core alone, axisymmetric
+  about it (``MRZ0``, ... per coil type, meta ``magnet_tables``, (n_rho, n_u, 2) float32:
+  F_rho/rho, F_z) plus ``F0_RES`` (mx, my, mz, 3) float32 on the grid ``M_X``, ``M_Y``,
+  ``M_Z`` (m, z graded towards the cores), what the cores' interaction adds (trilinear). With
+  linear cores the total force is ``F = force_matrix(m) @ (A(p) @ I)[3:] + F0(p)``.
 * the field, T, of the cores magnetized by the magnet, at the Hall sensors (upper array then
   lower), as a function of the magnet's position p: by reciprocity (linear cores) component c
   at sensor s is m . B(p) of the cores magnetized by a unit dipole along c at s, a sum of the
-  same core modes as A with the coefficients ``SCOEF`` (n_coils, n_basis, 2, n_coils, 3).
+  cores' modes (``SM0``, ... meta ``sensor_mode_tables``, their own SVD shapes) with the
+  coefficients ``SCOEF`` (n_coils, n_sensor_basis, 2, n_coils, 3).
 
 Constants: ``SENSOR_POS`` (2, n_coils, 3) m; ``SENSOR_COIL`` (2, n_coils, 3, n_coils) T/A, the
 coils' (coupled) field at the sensors per ampere; ``MOMENT`` (3,) A m^2; saturation ``SAT_I``
 (n_s,) A and ``SAT_FACTOR`` (n_s, n_coils): column k of A is multiplied by the factor at |I_k|
-(linear interpolation; 1 for linear cores). ``meta``: a JSON string (format, version, units,
+(linear interpolation; 1 for air coils). ``meta``: a JSON string (format, version, units,
 rows, coil poses, design name and SHA-256, current limit and total budget, build settings and the
-interpolation errors measured when the map was built).
+errors measured when the map was built).
 
 Usage::
 

@@ -261,7 +261,7 @@ TWO = default_design().replace(**{"array.rows": 1, "array.columns": 2,
 @pytest.fixture(scope="module")
 def coupled(tmp_path_factory):
     path = tmp_path_factory.mktemp("map") / "two.npz"
-    data = fieldmap.build(TWO, spacing=0.01, n_check=10, progress=False)
+    data = fieldmap.build(TWO, n_check=10, progress=False)
     fieldmap.write(path, data)
     return fieldmap.load(path, TWO), CoilArray.from_design(TWO)
 
@@ -274,19 +274,20 @@ def test_coupled_map_against_direct_coupled_model(coupled):
     p = rng.uniform(lo, hi, (300, 3))
     a = arr.actuation_matrix(p)
     err = np.abs(fm.actuation(p) - a).max(axis=(0, 2)) / np.abs(a).max(axis=(0, 2))
-    # measured 2026-11: what the default settings reach on the coupled model (see the
-    # report; the 1e-3 target needs mode tables of the coupled solution, not yet built)
-    assert np.all(err < 0.05), err
+    assert np.all(err < 1e-3), err  # the target (measured ~2e-4)
     m = fm.moment_a_m2
     f = arr.bias_force(p[:20], m)
-    assert np.abs(fm.bias_force(p[:20]) - f).max() < 0.1 * np.abs(f).max()
+    # the bias force is the coarse part (per-core tables + a 25 mm grid): measured ~8 %
+    assert np.abs(fm.bias_force(p[:20]) - f).max() < 0.15 * np.abs(f).max()
     s = fm.sensor_positions_m
     np.testing.assert_allclose(s, arr.sensor_positions_m())
     direct = arr.actuation_matrix(s.reshape(-1, 3))[:, :3, :].reshape(2, 2, 3, 2)
     np.testing.assert_allclose(fm.sensor_coil_field(), direct, rtol=1e-12)
-    q = p[0]
-    b = arr.magnet_core_field(s.reshape(-1, 3), q, m).reshape(2, 2, 3)
-    assert np.abs(fm.sensor_induced_field(q) - b).max() < 0.6 * np.abs(b).max()
+    b = np.array([arr.magnet_core_field(s.reshape(-1, 3), q, m).reshape(2, 2, 3)
+                  for q in p[:10]])
+    # reciprocity through the modes: measured ~2-3 % of the largest induced field
+    assert np.abs(fm.sensor_induced_field(p[:10]) - b).max() < 0.05 * np.abs(b).max()
+    np.testing.assert_allclose(fm.sensor_induced_field(p[3]), fm.sensor_induced_field(p[:10])[3])
     sat = arr.saturation_correction(currents_a=np.linspace(0, 6, 7))
     np.testing.assert_allclose(fm.saturation_factor([6.0, -3.0]),
                                [sat["saturation_factor"][-1, 0], sat["saturation_factor"][3, 1]])
