@@ -712,7 +712,8 @@ class MapFile:
 
     @classmethod
     def load(cls, path, expected_design_sha256: str | None = None) -> "MapFile":
-        """Read and validate ``path``; with ``expected_design_sha256``, refuse another design's map."""
+        """Read and validate ``path``; with ``expected_design_sha256``, refuse another
+        design's map."""
         arrays, meta = read(path)
         if expected_design_sha256 is not None and meta["design_sha256"] != expected_design_sha256:
             raise _bad(path, f"built from the design with SHA-256 {expected_design_sha256[:12]}"

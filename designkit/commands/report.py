@@ -41,7 +41,7 @@ from ..coil import Coil
 from ..design import Design, design_to_toml, load_design
 
 MAP_SPACING_M = {"quick": 0.025, "full": 0.015}
-"""Step of the report map's grid of magnet positions (bias force), m: coarse, to keep the job short."""
+"""Step of the report map's grid of magnet positions (bias force), m: coarse, quick."""
 
 FIGURES = ("scene", "fieldlines", "slice-B", "slice-F", "forcemap", "isosurface")
 FIGURE_TITLES = {
