@@ -116,7 +116,8 @@ def _print(res):
               f"{r['n_basis']}")
         print(f"   arrays MB: {r['arrays_mb']}")
         print(f"   one point (3,) {r['t_1_us_shape3'][0]:.1f} us, (1, 3) "
-              f"{r['t_1_us_shape13'][0]:.1f} us (target 20; min of runs, medians {r['t_1_us_shape3'][1]:.1f}, "
+              f"{r['t_1_us_shape13'][0]:.1f} us (target 20; min of runs, medians "
+              f"{r['t_1_us_shape3'][1]:.1f}, "
               f"{r['t_1_us_shape13'][1]:.1f}); bias {r['t_bias_1_us'][0]:.1f} us, sensors "
               f"{r['t_sensor_1_us'][0]:.1f} us")
         print(f"   1e4 points {r['t_1e4_ms'][0]:.2f} ms (target 5; median {r['t_1e4_ms'][1]:.2f})"
