@@ -269,7 +269,8 @@ potential x G resp. (x^2 - y^2) H with G(rho^2, z): a, a1, a2, az, a1z = -mu0 (G
 G'_z), ' = d/d(rho^2))."""
 
 
-def coupled_modes(arr: CoilArray, tolerance: float = 1e-4) -> dict | None:
+def coupled_modes(arr: CoilArray, tolerance: float = 1e-4,
+                  sensor_tolerance: float = 1e-3) -> dict | None:
     """The cores' coupling as a few modes per core type (None without coupled cores).
 
     The coupled solve gives every core's unknowns X_j (m = 0 surface currents, m = 1, 2 cos and
@@ -320,7 +321,7 @@ def coupled_modes(arr: CoilArray, tolerance: float = 1e-4) -> dict | None:
         for m in range(1, m_max + 1):
             parts[m] = [(slice(n0 + (2 * (m - 1) + c) * n1, n0 + (2 * (m - 1) + c + 1) * n1), c)
                         for c in range(2)]
-        def shapes_of(cols):
+        def shapes_of(cols, tol):
             """Per mode order: the SVD shapes of these source columns (None: no coupling)."""
             out = {}
             for m in parts:
@@ -328,14 +329,14 @@ def coupled_modes(arr: CoilArray, tolerance: float = 1e-4) -> dict | None:
                                      axis=1)
                 u, sv, _ = np.linalg.svd(mat, full_matrices=False)
                 if sv[0] > 0:
-                    out[m] = u[:, :max(1, int(np.sum(sv > tolerance * sv[0])))]
+                    out[m] = u[:, :max(1, int(np.sum(sv > tol * sv[0])))]
             return out
 
         # A and the sensors get their own shapes: the sensor dipoles sit ~9 mm from a core's
         # end and need many more, which A should not pay for at every lookup
         sets = []
-        for cols in (slice(0, nc), slice(nc, n_src)):
-            U = shapes_of(cols)
+        for cols, tol in ((slice(0, nc), tolerance), (slice(nc, n_src), sensor_tolerance)):
+            U = shapes_of(cols, tol)
             basis = [(m, r, c) for m in sorted(U) for r in range(U[m].shape[1])
                      for c in ((0,) if m == 0 else (0, 1))]
             sets.append({"U": U, "basis": basis})
@@ -436,7 +437,7 @@ def compute_mode_tables(t: dict, spec: dict) -> list:
 
 # ============================================================================ build
 def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
-          mode_tolerance: float = 1e-4, rz_step: float = 1e-4, rz_log_step: float = 0.025,
+          mode_tolerance: float = 1e-4, sensor_mode_tolerance: float = 1e-3, rz_step: float = 1e-4, rz_log_step: float = 0.025,
           rz_rho_scale: float = 0.05, mode_rz_step: float = 2.5e-4,
           mode_rz_log_step: float = 0.04, magnet_rz_step: float = 2e-3,
           magnet_rz_log_step: float = 0.15, box=None, n_check: int = 100,
@@ -449,9 +450,11 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
         x, y step (m) of the grids over magnet positions that carry what the per-core magnet
         tables miss (bias force, sensor fields); their z steps grow from ``log_step`` x the
         height above the cores' tops, never above ``spacing``.
-    mode_tolerance : float
+    mode_tolerance, sensor_mode_tolerance : float
         Coupled core modes are kept while their singular value is above this fraction of the
-        largest of their order (m = 0, 1, 2).
+        largest of their order (m = 0, 1, 2); for A, resp. for the sensor-induced field (whose
+        unit dipoles ~9 mm from a core's end need many more shapes; 1e-3 keeps the file small
+        for an error of ~2 % of the field, itself a few mT).
     rz_step : float, m
         rho step of the coil tables on the axis (default 0.1 mm, growing as
         (1 + rho / rz_rho_scale)^2 with rz_rho_scale 50 mm: ~0.4 mm at 50 mm from the axis);
@@ -472,6 +475,8 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
     spacing = v.in_range("spacing", spacing, 5e-4, 0.1, "m")
     log_step = v.in_range("log_step", log_step, 1e-3, 2.0)
     mode_tolerance = v.in_range("mode_tolerance", mode_tolerance, 1e-8, 1e-1)
+    sensor_mode_tolerance = v.in_range("sensor_mode_tolerance", sensor_mode_tolerance, 1e-8,
+                                       1e-1)
     rz_step = v.in_range("rz_step", rz_step, 1e-5, 0.01, "m")
     rz_log_step = v.in_range("rz_log_step", rz_log_step, 1e-3, 0.5)
     rz_rho_scale = v.in_range("rz_rho_scale", rz_rho_scale, 1e-3, 10.0, "m")
@@ -528,7 +533,7 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
         bar.set_postfix_str(kind, refresh=False)
         t0 = time.perf_counter()
         if kind == "coupled solve":
-            modes = coupled_modes(arr, mode_tolerance)
+            modes = coupled_modes(arr, mode_tolerance, sensor_mode_tolerance)
         elif kind == "coil tables":
             proto, idx = types[s]
             arrays[f"RZ{s}"] = compute_rz_table(proto, a_specs[s]).astype(np.float32)
@@ -543,9 +548,13 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
                     shapes = [[m, r] for m in sorted(st["U"])
                               for r in range(st["U"][m].shape[1])]
                     cols = np.cumsum([0] + [N_MODE_Q[m] for m, _ in shapes])[:-1].tolist()
-                    arrays[f"{prefix}{k}"] = tab.astype(np.float32)
+                    # float16 per column scaled to its largest |value|: these tables carry the
+                    # coupling (~15 % of A), so 5e-4 rounding is ~1e-4 of A; halves the file
+                    col_scale = np.maximum(np.abs(tab).max(axis=(0, 1)), 1e-300)
+                    arrays[f"{prefix}{k}"] = (tab / col_scale).astype(np.float16)
                     metas.append({"name": f"{prefix}{k}", "coils": [int(c) for c in t["coils"]],
                                   **spec, "shape": list(tab.shape), "shapes": shapes,
+                                  "column_scale": col_scale.tolist(),
                                   "columns": [int(c) for c in cols],
                                   "basis": [list(b) for b in st["basis"]]})
         elif kind == "magnet":
@@ -590,7 +599,8 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
         "total_current_a": design.drive.total_current_a,
         "physics": phys.source,
         "settings": {"spacing_m": spacing, "log_step": log_step,
-                     "mode_tolerance": mode_tolerance, "rz_step_m": rz_step,
+                     "mode_tolerance": mode_tolerance,
+                     "sensor_mode_tolerance": sensor_mode_tolerance, "rz_step_m": rz_step,
                      "rz_log_step": rz_log_step, "rz_rho_scale_m": rz_rho_scale,
                      "mode_rz_step_m": mode_rz_step, "mode_rz_log_step": mode_rz_log_step,
                      "magnet_rz_step_m": magnet_rz_step,

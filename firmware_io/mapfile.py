@@ -25,7 +25,8 @@ written in the cores' own modes::
   azimuthal order m = 0, 1, 2; cos and sin for m >= 1) on the same kind of (v, u) grid: m = 0
   as the coil tables, m = 1, 2 as the potentials x G, y G resp. (x^2 - y^2) H, 2 x y H with
   G, H smooth in (rho^2, z): 5 quantities (a, a1, a2, az, a1z) = -mu0 (G, G', G'', G_z, G'_z)
-  give all 8 rows (:func:`mode_rows`). ``COEF`` (n_coils, n_basis, n_coils) float64.
+  give all 8 rows (:func:`mode_rows`); float16, each column divided by its largest |value|
+  (meta ``column_scale``). ``COEF`` (n_coils, n_basis, n_coils) float64.
 
 The magnet's interaction with the cores, as functions of the magnet's position p:
 
@@ -202,6 +203,8 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
                 if nq is None:  # a mode table: its columns follow from its shapes
                     want = sum(N_MODE_Q[m] for m, _ in t["shapes"])
                     ok_modes = (want == shape[2] and len(t["columns"]) == len(t["shapes"])
+                                and len(t["column_scale"]) == want
+                                and all(math.isfinite(c) and c > 0 for c in t["column_scale"])
                                 and len(t["basis"]) <= n_basis
                                 and all(list(b[:2]) in [list(x) for x in t["shapes"]]
                                         and b[2] in (0, 1) for b in t["basis"]))
@@ -209,7 +212,8 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
                     want, ok_modes = nq, True
                 ok = (t["name"] == f"{prefix}{k}" and tab is not None and tab.shape == shape
                       and ok_modes
-                      and tab.dtype == np.float32 and len(shape) == 3 and shape[2] == want
+                      and tab.dtype == (np.float32 if nq else np.float16) and len(shape) == 3
+                      and shape[2] == want
                       and min(shape) >= 2 and t["rho_step_m"] > 0 and t["u_step"] > 0
                       and t["rho_scale_m"] > (shape[0] - 1) * t["rho_step_m"]
                       and len(t["coils"]) > 0 and all(0 <= c < nc for c in t["coils"]))
@@ -519,7 +523,8 @@ def prepare_modes(tables: list, metas: list, positions, rotations) -> list:
         rot = np.asarray(rotations, float)[idx]
         out.append({"idx": idx, "pos": np.asarray(positions, float)[idx],
                     "rot": None if np.all(rot == np.eye(3)) else rot,
-                    "flat": np.ascontiguousarray(tab, dtype=np.float64).reshape(-1, tab.shape[2]),
+                    "flat": (tab.reshape(-1, tab.shape[2]).astype(np.float64)
+                             * np.asarray(m["column_scale"], float)),
                     "n_rho": tab.shape[0], "n_u": tab.shape[1], "inv_h": 1.0 / m["rho_step_m"],
                     "inv_scale": 1.0 / m["rho_scale_m"], "z_ref": m["z_ref_m"], "u0": m["u0"],
                     "inv_du": 1.0 / m["u_step"],

@@ -337,8 +337,11 @@ def test_mode_rows_reproduce_harmonic_fields():
          7.5 * Z * s2 ** -3.5]
     h = [s2 ** -2.5, -2.5 * s2 ** -3.5, 8.75 * s2 ** -4.5, -5 * Z * s2 ** -3.5,
          17.5 * Z * s2 ** -4.5]
-    tab = np.stack([-q for q in g] + [-q for q in h], -1).astype(np.float32)
+    tab = np.stack([-q for q in g] + [-q for q in h], -1)
+    scale = np.abs(tab).max(axis=(0, 1))
+    tab = (tab / scale).astype(np.float16)  # as stored in a map file
     meta = {**spec, "coils": [0], "shape": list(tab.shape), "shapes": [[1, 0], [2, 0]],
+            "column_scale": scale.tolist(),
             "columns": [0, 5], "basis": [[1, 0, 0], [1, 0, 1], [2, 0, 0], [2, 0, 1]]}
     t = prepare_modes([tab], [meta], [[0.0, 0.0, 0.0]], [np.eye(3).tolist()])[0]
     rng = np.random.default_rng(3)
@@ -352,5 +355,5 @@ def test_mode_rows_reproduce_harmonic_fields():
         bb, gg = _closed_form((m, c), p, d)
         want = np.concatenate([bb, gg[:, 0, :], gg[:, 1, 1:]], axis=1)
         scale = np.abs(want).max()
-        np.testing.assert_allclose(rows[:, b_idx], want, rtol=0, atol=2e-5 * scale,
+        np.testing.assert_allclose(rows[:, b_idx], want, rtol=0, atol=3e-3 * scale,
                                    err_msg=f"mode {m}, {'sin' if c else 'cos'}")
