@@ -155,7 +155,7 @@ def allocate(force_matrix, target, current_limit, total_limit, *, unipolar: bool
 def _solve(fm, f, u, tl, unipolar, max_iter):
     k, n = fm.shape
     umax = float(u.max())
-    tl_eff = min(tl, float(u.sum()))
+    tl_eff = min(tl, float(_add(u)))
     if umax == 0.0 or tl_eff == 0.0:
         return np.zeros(n)
     # scale currents by u_max and forces by the largest achievable column force
@@ -165,9 +165,15 @@ def _solve(fm, f, u, tl, unipolar, max_iter):
         return np.zeros(n)
     fs = fm * (umax / fscale)
     ft = f / fscale
+    rows = _or(fs != 0.0, axis=1)
+    if not _and(rows):  # an all-zero row (e.g. torque about m) adds a constant residual only
+        if not _or(rows):
+            return np.zeros(n)
+        fs, ft = fs[rows], ft[rows]
+        k = fs.shape[0]
     us = u / umax
     ts = tl_eff / umax
-    budget_possible = ts < us.sum() * (1 - 1e-15)
+    budget_possible = ts < _add(us) * (1 - 1e-15)
     c2 = float((fs * fs).sum(axis=0).max())
     eps = EPS_REL * max(c2, 1e-300)
     h = fs.T @ fs
@@ -183,37 +189,43 @@ def _solve(fm, f, u, tl, unipolar, max_iter):
     ab = np.abs(x)
     sg = np.where(x >= 0, 1.0, -1.0)
     free = (ab > 0.0) & (ab < us)
-    bud = bool(budget_possible and ab.sum() >= ts * (1 - 1e-12))
-    if bud and not free.any():
+    bud = bool(budget_possible and _add(ab) >= ts * (1 - 1e-12))
+    if bud and not _or(free):
         bud = False
     fixed_val = np.where(free, 0.0, x)
 
     state = _active_set(fs, ft, h, q, us, ts, eps, tol, unipolar, budget_possible, k, n,
                         max_iter, x, free, sg, fixed_val, bud)
-    # ---- continuation: the same face search with eps 1e4 x smaller, warm started, takes the
-    # Tikhonov bias down by 1e4 (usually 1 face); the tie-break was settled by the first pass
-    state = _active_set(fs, ft, h, q, us, ts, eps * 1e-4, tol, unipolar, budget_possible, k, n,
-                        max_iter, *state)
-    x, free, sg, fixed_val, bud = state
     # ---- polish: the eps -> 0 limit on the final face (the lexicographic answer: least residual,
-    # then least energy) removes the Tikhonov bias when it stays on the face
-    if free.any():
-        xp = _face_minimizer(fs, ft, h, q, 0.0, free, sg, fixed_val, bud, ts, k)
-        j = free
-        a = sg[j] * xp[j]
-        slack = 1e-12 * float(us.max())
-        if np.all(a >= -slack) and np.all(a <= us[j] + slack):
-            xp[j] = sg[j] * np.clip(a, 0.0, us[j])
-            rp, rx = fs @ xp - ft, fs @ x - ft
-            if rp @ rp <= rx @ rx:
-                x = xp
+    # then least energy) removes the Tikhonov bias when it stays on the face; if it leaves the
+    # face, a continuation pass with eps 1e4 x smaller (warm started, usually 1 face) first
+    x, ok = _polish(fs, ft, h, q, us, ts, k, *state)
+    if not ok:
+        state = _active_set(fs, ft, h, q, us, ts, eps * 1e-4, tol, unipolar, budget_possible,
+                            k, n, max_iter, *state)
+        x, _ = _polish(fs, ft, h, q, us, ts, k, *state)
     # ---- guarantee: never outside the bounds, whatever round-off did
-    x = np.clip(x, lo * us, us)
-    tot = float(np.abs(x).sum())
+    x = _clip(x, lo * us, us)
+    tot = float(_add(np.abs(x)))
     if tot > ts:
         x *= ts / tot
     return x * umax
 
+
+
+def _polish(fs, ft, h, q, us, ts, k, x, free, sg, fixed_val, bud):
+    """(x, accepted): the eps = 0 face minimizer if it stays on the face and is no worse."""
+    if not _or(free):
+        return x, True
+    xp = _face_minimizer(fs, ft, h, q, 0.0, free, sg, fixed_val, bud, ts, k)
+    a = sg[free] * xp[free]
+    slack = 1e-12 * float(us.max())
+    if _and(a >= -slack) and _and(a <= us[free] + slack):
+        xp[free] = sg[free] * _clip(a, 0.0, us[free])
+        rp, rx = fs @ xp - ft, fs @ x - ft
+        if rp @ rp <= rx @ rx:
+            return xp, True
+    return x, False
 
 
 def _active_set(fs, ft, h, q, us, ts, eps, tol, unipolar, budget_possible, k, n, max_iter,
@@ -231,21 +243,21 @@ def _active_set(fs, ft, h, q, us, ts, eps, tol, unipolar, budget_possible, k, n,
                 ax = sg[j] * x[j]
                 alpha, block, kind = 1.0, -1, 0
                 neg = sp < 0
-                if neg.any():
+                if _or(neg):
                     a = ax[neg] / -sp[neg]
                     m = int(np.argmin(a))
                     if a[m] < alpha:
                         alpha, block, kind = float(a[m]), int(j[neg][m]), 0
                 pos = sp > 0
-                if pos.any():
+                if _or(pos):
                     a = (us[j[pos]] - ax[pos]) / sp[pos]
                     m = int(np.argmin(a))
                     if a[m] < alpha:
                         alpha, block, kind = float(a[m]), int(j[pos][m]), 1
                 if budget_possible and not bud:
-                    rate = float(sp.sum())
+                    rate = float(_add(sp))
                     if rate > 0:
-                        a = (ts - float(np.abs(x).sum())) / rate
+                        a = (ts - float(_add(np.abs(x)))) / rate
                         if a < alpha:
                             alpha, block, kind = max(a, 0.0), -1, 2
                 if alpha < 1.0:
@@ -260,8 +272,8 @@ def _active_set(fs, ft, h, q, us, ts, eps, tol, unipolar, budget_possible, k, n,
                         free = (ab > 0.0) & (ab < us)
                         sg = np.where(x >= 0, 1.0, -1.0)
                         fixed_val = np.where(free, 0.0, x)
-                        bud = bool(budget_possible and ab.sum() >= ts * (1 - 1e-12)
-                                   and free.any())
+                        bud = bool(budget_possible and _add(ab) >= ts * (1 - 1e-12)
+                                   and _or(free))
                         continue
                     x = xb
                     if kind == 2:
@@ -272,8 +284,8 @@ def _active_set(fs, ft, h, q, us, ts, eps, tol, unipolar, budget_possible, k, n,
                         x[block] = fixed_val[block]
                     # keep free coordinates on their side and inside the box under round-off
                     jj = idx[free]
-                    x[jj] = sg[jj] * np.clip(sg[jj] * x[jj], 0.0, us[jj])
-                    if bud and not free.any():
+                    x[jj] = sg[jj] * _clip(sg[jj] * x[jj], 0.0, us[jj])
+                    if bud and not _or(free):
                         bud = False  # implied by the bounds: a redundant working constraint
                     continue
             x = xh
@@ -326,27 +338,37 @@ def _face_minimizer(fs, ft, h, q, eps, free, sg, fixed_val, bud, ts, k):
             top = fj @ gmat
             top[:, :k] += eps * np.eye(k)
             mat = np.concatenate([top, (s @ gmat)[None, :]], axis=0)
-            c = ts - float(np.abs(fixed_val).sum())
-            w = _lsolve(mat, np.append(r, c))
+            c = ts - float(_add(np.abs(fixed_val)))
+            w = _lsolve(mat, np.append(r, c), eps > 0)
             x[j] = gmat @ w
         else:
-            y = _lsolve(fj @ fj.T + eps * np.eye(k), r)
+            y = _lsolve(fj @ fj.T + eps * np.eye(k), r, eps > 0)
             x[j] = fj.T @ y
         return x
     hj = h[np.ix_(j, j)] + eps * np.eye(nf)
     b = fj.T @ r
     if bud:
-        c = ts - float(np.abs(fixed_val).sum())
+        c = ts - float(_add(np.abs(fixed_val)))
         mat = np.empty((nf + 1, nf + 1))
         mat[:nf, :nf] = hj
         mat[:nf, nf] = s
         mat[nf, :nf] = s
         mat[nf, nf] = 0.0
-        sol = _lsolve(mat, np.append(b, c))
+        sol = _lsolve(mat, np.append(b, c), eps > 0)
         x[j] = sol[:nf]
     else:
-        x[j] = _lsolve(hj, b)
+        x[j] = _lsolve(hj, b, eps > 0)
     return x
+
+
+_add = np.add.reduce
+_and = np.logical_and.reduce
+_or = np.logical_or.reduce
+
+
+def _clip(a, lo, hi):
+    """np.clip without its Python wrapper (this module's inner loops are call-bound)."""
+    return np.minimum(np.maximum(a, lo), hi)
 
 
 def _phi(fs, ft, eps, x):
@@ -354,21 +376,26 @@ def _phi(fs, ft, eps, x):
     return float(r @ r + eps * (x @ x))
 
 
-try:  # the gufunc behind np.linalg.solve without its ~5 us Python wrapper (tiny systems)
+try:  # the gufunc behind np.linalg.solve without its Python wrapper and errstate (tiny systems)
     from numpy.linalg import _umath_linalg as _ul
 
-    def _raw_solve(mat, rhs):
-        with np.errstate(invalid="raise", divide="raise", over="ignore"):
-            return _ul.solve1(mat, rhs, signature="dd->d")
+    def _fast_solve(mat, rhs):
+        return _ul.solve1(mat, rhs, signature="dd->d")
 except (ImportError, AttributeError):  # pragma: no cover - other numpy layouts
-    _raw_solve = np.linalg.solve
+    _fast_solve = np.linalg.solve
 
 
-def _lsolve(mat, rhs):
-    """Solve, falling back to least squares on an exactly singular (degenerate) face."""
+def _lsolve(mat, rhs, regularized=True):
+    """Solve; ``regularized`` systems (eps > 0) are never singular, so they skip the
+    floating-point guards; others fall back to least squares on an exactly singular face."""
+    if regularized:
+        out = _fast_solve(mat, rhs)
+        if _and(np.isfinite(out)):
+            return out
     try:
-        out = _raw_solve(mat, rhs)
-        if np.all(np.isfinite(out)):
+        with np.errstate(invalid="raise", divide="raise", over="ignore"):
+            out = _fast_solve(mat, rhs)
+        if _and(np.isfinite(out)):
             return out
     except (np.linalg.LinAlgError, FloatingPointError):
         pass
@@ -378,19 +405,19 @@ def _lsolve(mat, rhs):
 def _project(v, us, ts, unipolar):
     """Euclidean projection of v onto {lo <= x <= u, sum |x| <= ts}; also the threshold tau."""
     a = v if unipolar else np.abs(v)
-    c = np.clip(a, 0.0, us)
-    if c.sum() <= ts:
+    c = _clip(a, 0.0, us)
+    if _add(c) <= ts:
         tau = 0.0
     else:
         # sum clip(a - tau, 0, u) is piecewise linear and decreasing in tau: bracket, interpolate
         bp = np.concatenate([a - us, a])
         bp = np.unique(bp[bp > 0.0])
-        sums = np.clip(a[None, :] - bp[:, None], 0.0, us).sum(axis=1)
+        sums = _clip(a[None, :] - bp[:, None], 0.0, us).sum(axis=1)
         i = int(np.searchsorted(-sums, -ts))  # first breakpoint with sum <= ts
         t_hi, s_hi = bp[i], sums[i]
-        t_lo, s_lo = (bp[i - 1], sums[i - 1]) if i > 0 else (0.0, c.sum())
+        t_lo, s_lo = (bp[i - 1], sums[i - 1]) if i > 0 else (0.0, _add(c))
         tau = t_lo + (s_lo - ts) * (t_hi - t_lo) / max(s_lo - s_hi, 1e-300)
-        c = np.clip(a - tau, 0.0, us)
+        c = _clip(a - tau, 0.0, us)
     return (c if unipolar else np.copysign(c, v)), tau
 
 
@@ -401,7 +428,10 @@ def _dual_guess(fs, ft, us, ts, eps, unipolar, steps=6):
     k = fs.shape[0]
     eye = eps * np.eye(k)
     y = _lsolve(fs @ fs.T + eye, ft)
-    x, tau = _project(fs.T @ y, us, ts, unipolar)
+    v = fs.T @ y
+    x, tau = _project(v, us, ts, unipolar)
+    if tau == 0.0 and np.array_equal(x, v):
+        return x  # the unconstrained minimizer is feasible
     seen = None
     for _ in range(steps):
         ax = np.abs(x)
@@ -412,9 +442,9 @@ def _dual_guess(fs, ft, us, ts, eps, unipolar, steps=6):
         seen = key
         ff = fs[:, fr]
         jac = ff @ ff.T + eye
-        if tau > 0.0 and fr.any():
+        if tau > 0.0 and _or(fr):
             w = ff @ np.sign(x[fr])
-            jac -= np.outer(w, w) / fr.sum()
+            jac -= np.outer(w, w) / _add(fr)
         y = y - _lsolve(jac, fs @ x + eps * y - ft)
         x, tau = _project(fs.T @ y, us, ts, unipolar)
     return x

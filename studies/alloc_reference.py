@@ -56,7 +56,7 @@ def kkt_violation(fm, f, u, tl, x, unipolar=False, *, zero_tol=None):
     return best / scale, infeas
 
 
-def slsqp_reference(fm, f, u, tl, unipolar=False):
+def slsqp_reference(fm, f, u, tl, unipolar=False, *, starts=2):
     """min ||F x - f||^2 with SLSQP on the split x = P - N (scaled to O(1)); the objective."""
     from scipy.optimize import minimize
 
@@ -85,7 +85,7 @@ def slsqp_reference(fm, f, u, tl, unipolar=False):
     cons = [{"type": "ineq", "fun": lambda z: ts - z.sum(),
              "jac": lambda z: -np.ones_like(z)}]
     best = None
-    for z0 in (np.zeros(d.shape[1]), np.clip(np.linalg.lstsq(d, b, rcond=None)[0], 0, None)):
+    for z0 in (np.zeros(d.shape[1]), np.clip(np.linalg.lstsq(d, b, rcond=None)[0], 0, None))[:starts]:
         z0 = np.minimum(z0, np.concatenate([us] * (1 if unipolar else 2)))
         if z0.sum() > ts:
             z0 *= ts / z0.sum()
@@ -100,3 +100,4 @@ def slsqp_reference(fm, f, u, tl, unipolar=False):
             best = val
     del hess, lin
     return best * fs * fs
+

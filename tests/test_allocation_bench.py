@@ -1,4 +1,4 @@
-"""Smoke test of studies/bench_allocation.py (quick mode: 12 positions, 300 timed problems)."""
+"""Smoke test of studies/bench_allocation.py (quick: 12 positions, 300 timed/certified problems)."""
 
 import importlib.util
 import sys
@@ -16,4 +16,6 @@ def test_bench_allocation_quick(tmp_path):
     v = res["verify"]
     assert v["n"] == 30 and v["max_kkt_rel"] <= 1e-9 and v["max_bound_violation_a"] <= 1e-9
     assert v["n_mismatch_ours_higher"] == 0
+    c = res["certify"]
+    assert c["n"] == 300 and c["max_kkt_rel"] <= 1e-9 and c["max_bound_violation_a"] <= 1e-9
     assert res["mix_median_us"] > 0 and res["speedup_vs_lsq_linear_median"] > 0

@@ -70,3 +70,26 @@ def test_plane_bounds_and_bad_input(source):
         force_constant(Plane(), object(), current_limit_a=6.0, total_current_a=54.0)
     with pytest.raises(BadInputError, match="object"):
         force_constant(Plane(height_m=0.2), source, current_limit_a=6.0, total_current_a=54.0)
+
+
+def test_map_source_matches_array_and_cli_records_its_hash(tmp_path):
+    """force_constant through a map file (interpolated A) agrees with the array directly, and
+    `scene compile --map` records the map's design hash (air coils, small box: fast)."""
+    from designkit import fieldmap
+    from designkit.cli import main
+    from firmware_io.scene import Scene
+
+    small = default_design().replace(**{"core": None, "workspace.half_width_m": 0.03,
+                                        "workspace.z_min_m": 0.01, "workspace.z_max_m": 0.04})
+    path = tmp_path / "map.npz"
+    fieldmap.write(path, fieldmap.build(small, spacing=0.003, progress=False))
+    fm = fieldmap.load(path, small)
+    plane = Plane(size_m=0.05, height_m=0.03)
+    kw = dict(current_limit_a=6.0, total_current_a=54.0, n_side=5, progress=False)
+    via_map = force_constant(plane, fm, **kw)
+    direct = force_constant(plane, ArrayActuation.from_design(small), **kw)
+    assert via_map.lam_n_per_m == pytest.approx(direct.lam_n_per_m, rel=5e-3)
+    out = tmp_path / "s.npz"
+    assert main(["scene", "compile", "plane", "--map", str(path), "--lambda", "1",
+                 "--out", str(out)]) == 0
+    assert Scene.load(out, expected_design_sha256=small.spec_hash()).lam_n_per_m == 1.0
