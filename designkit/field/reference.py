@@ -420,3 +420,108 @@ def _loop_rz_mp_safe(a, rho, u, mp):
     with mp.extradps(extra):
         br, bz = _loop_rz_mp(a, rho, u, mp)
     return +br, +bz
+
+
+# ------------------------------------------------------------------ randomized test cases
+REGIONS = ("axis", "bore", "body", "face", "corner", "ulp", "near", "far")
+
+
+def sample_cases(seed, n_geometries, regions=REGIONS, per_region=1):
+    """Seeded random thick windings and observer points in every region (tests and studies).
+
+    Geometry: Ro = 1 cm x 10^U(-1, 1), Ri / Ro and L / Ro log-uniform in [1e-4, 0.99] and
+    [1e-3, 1e3], except the first four, the corners of that domain. Regions ("size" = the section's diagonal hypot(Ro - Ri, L)):
+
+    * axis: rho = 0, z uniform in +-(h + 2 Ro);
+    * bore: rho in (0, Ri), |z| < h;  body: Ri < rho < Ro, |z| < h;
+    * face: 1e-9..1e-2 x size (log-uniform) inside or outside one of the four faces, away
+      from its ends; corner: the same distance from one of the four corners, any direction;
+    * ulp: 1..4 ulps from a face or a corner (either side);
+    * near: 1e-2..1 x size outside the section; far: 2..1e4 x hypot(Ro, h) from the centre.
+
+    Face, corner and ulp points lie in the plane y = 0 (rho exact); the others have a random
+    azimuth. Returns a list of dicts (ri, ro, length, region, point (3,), corner_distance, size).
+    """
+    rng = np.random.default_rng(seed)
+    out = []
+    # the first four geometries are the domain's corners (Ri/Ro, L/Ro) = (1e-4 | 0.99, 1e-3 | 1e3)
+    extremes = [(1e-4, 1e-3), (1e-4, 1e3), (0.99, 1e-3), (0.99, 1e3)]
+    for g in range(n_geometries):
+        ro = 0.01 * 10 ** rng.uniform(-1, 1)
+        ri = ro * 10 ** rng.uniform(-4, np.log10(0.99))
+        length = ro * 10 ** rng.uniform(-3, 3)
+        if g < len(extremes):
+            ri, length = ro * extremes[g][0], ro * extremes[g][1]
+        h = length / 2
+        size = float(np.hypot(ro - ri, length))
+        corners = [(ri, h), (ri, -h), (ro, h), (ro, -h)]
+        for region in regions:
+            for _k in range(per_region):
+                phi = rng.uniform(0, 2 * np.pi)
+                if region == "axis":
+                    rho, z = 0.0, rng.uniform(-1, 1) * (h + 2 * ro)
+                elif region == "bore":
+                    rho, z = ri * rng.uniform(0, 1), h * rng.uniform(-1, 1)
+                elif region == "body":
+                    rho, z = rng.uniform(ri, ro), h * rng.uniform(-1, 1)
+                elif region == "face":
+                    phi = 0.0
+                    d = size * 10 ** rng.uniform(-9, -2) * rng.choice([-1, 1])
+                    f = rng.integers(4)
+                    t = rng.uniform(0.1, 0.9)
+                    if f < 2:  # side faces r = ri, ro
+                        rho, z = (ri, ro)[f] + d, h * (2 * t - 1)
+                    else:      # end faces z = +-h
+                        rho, z = ri + t * (ro - ri), (h if f == 2 else -h) + d
+                elif region == "corner":
+                    phi = 0.0
+                    d = size * 10 ** rng.uniform(-9, -2)
+                    ang = rng.uniform(0, 2 * np.pi)
+                    cr, cz = corners[rng.integers(4)]
+                    rho, z = abs(cr + d * np.cos(ang)), cz + d * np.sin(ang)
+                elif region == "ulp":
+                    phi = 0.0
+                    k = float(rng.choice([1, 2, 4])) * rng.choice([-1, 1]) * 2.0 ** -52
+                    cr, cz = corners[rng.integers(4)]
+                    kind = rng.integers(3)
+                    if kind == 0:    # end face
+                        rho, z = ri + rng.uniform(0.1, 0.9) * (ro - ri), cz * (1 + k)
+                    elif kind == 1:  # side face
+                        rho, z = cr * (1 + k), h * rng.uniform(-0.9, 0.9)
+                    else:            # corner
+                        rho, z = cr * (1 + k), cz * (1 - k)
+                elif region == "near":
+                    d = size * 10 ** rng.uniform(-2, 0)
+                    ang = rng.uniform(0, 2 * np.pi)
+                    cr, cz = corners[rng.integers(4)]
+                    # outward from a corner, or beside / above a face
+                    side = rng.integers(3)
+                    if side == 0:
+                        rho = abs(cr + d * abs(np.cos(ang)) * np.sign(cr - 0.5 * (ri + ro)))
+                        z = cz + d * abs(np.sin(ang)) * np.sign(cz)
+                    elif side == 1:
+                        rho, z = ro + d, h * rng.uniform(-1, 1)
+                    else:
+                        rho, z = rng.uniform(0, ro), np.sign(cz) * (h + d)
+                else:  # far
+                    R = float(np.hypot(ro, h)) * 10 ** rng.uniform(np.log10(2), 4)
+                    u = rng.normal(size=3)
+                    u /= np.linalg.norm(u)
+                    rho, z = float(np.hypot(u[0], u[1])) * R, u[2] * R
+                point = np.array([rho * np.cos(phi), rho * np.sin(phi), z])
+                if phi == 0.0:
+                    point[1] = 0.0
+                rr = float(np.hypot(point[0], point[1]))
+                cd = min(float(np.hypot(rr - cr, point[2] - cz)) for cr, cz in corners)
+                out.append(dict(ri=float(ri), ro=float(ro), length=float(length),
+                                region=region, point=point, corner_distance=cd, size=size))
+    return out
+
+
+def case_reference(case, dps=30):
+    """(B (3,), G (3, 3)) per unit mu0 J (m, dimensionless) of a :func:`sample_cases` case, from
+    :func:`winding_charge` at ``dps`` digits."""
+    p = case["point"]
+    rho = float(np.hypot(p[0], p[1]))
+    r = winding_charge(case["ri"], case["ro"], case["length"], rho, p[2], gradient=True, dps=dps)
+    return rz_to_cartesian(p, r[0], r[1], r[2:])

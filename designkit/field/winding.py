@@ -139,11 +139,13 @@ def _pieces(ri, ro, h, rho, z, rtol, safety):
     singularity is closer than 4^-FULL_LEVELS of the interval, or on it)."""
     n = rho.shape[0]
     anchor, d_lo, d_hi, c, tau, dist, width = _geometry(ri, ro, h, rho, z)
+    # innermost piece half-width w_L in (dist / 2, 2 dist]: its Bernstein ellipse still
+    # reaches rtol = 1e-12 with <= 64 nodes (bisection below is the safety net)
     with np.errstate(divide="ignore"):
-        full = np.ceil(np.log(width / dist) / math.log(GRADE))
+        full = np.floor(np.log(width / dist / 2.0) / math.log(GRADE)) + 1
     full = np.where(dist > 0, full, np.inf)
     trunc = full > FULL_LEVELS
-    levels = np.where(trunc, MAX_LEVELS, np.maximum(full, 0)).astype(int)
+    levels = np.where(trunc, MAX_LEVELS, np.where(dist < width / 2.0, full, 0)).astype(int)
     m = int(levels.max(initial=0))
     cols = [d_lo, d_hi, np.where((c > d_lo) & (c < d_hi), c, np.nan)]
     for k in range(1, m + 1):
