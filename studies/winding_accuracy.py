@@ -159,16 +159,17 @@ def load_or_compute_issue(out_dir, processes=2, progress=True):
 def run(out_dir, quick=False, seed=TABLE_SEED, n_geometries=None, processes=2):
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    if n_geometries is None:
-        n_geometries = 1 if quick else 40
-    regions = ("axis", "bore", "body", "near", "far") if quick else ref.REGIONS
-    if quick:  # smoke: the cheap regions of one geometry, no cache
-        cases = [c for c in ref.sample_cases(seed, n_geometries) if c["region"] in regions]
-        refs = compute_refs(cases, processes=1, progress=False)
+    if quick:  # smoke: the committed table of the default tests (no mpmath)
+        data = Path(__file__).resolve().parents[1] / "tests" / "data"
+        seed, n_geometries = TABLE_SEED, TABLE_GEOMETRIES
+        cases, refs = load_or_compute(data, seed, n_geometries, processes)
+        ic, ir = load_or_compute_issue(data, processes)
     else:
+        if n_geometries is None:
+            n_geometries = 40
         cases, refs = load_or_compute(out_dir, seed, n_geometries, processes)
         ic, ir = load_or_compute_issue(out_dir, processes)
-        cases, refs = cases + ic, refs + ir
+    cases, refs = cases + ic, refs + ir
     table, worst = ratio_table(cases, refs)
     lines = [f"{len(cases)} points, {n_geometries} random geometries (seed {seed}); "
              "largest achieved / requested error (B; G beyond 1e-6 size from corners)",

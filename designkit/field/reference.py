@@ -357,6 +357,12 @@ def winding_charge(ri, ro, length, rho, z, *, gradient=False, dps=30):
     R = max(abs(float(rho)), abs(float(z)), 1e-300)
     size = min(float(length), float(ro))
     extra = int(max(0.0, np.log10(R / size))) + 2
+    # within d of a face plane the near-singular integrands need ~log10(size / d) more digits
+    # to keep mp.quad's nodes and error estimates meaningful (found at 1e-18 of the size)
+    d = min(abs(float(z) - length / 2), abs(float(z) + length / 2), abs(float(rho) - ri),
+            abs(float(rho) - ro))
+    if d > 0:
+        extra += int(min(30.0, max(0.0, np.log10(float(ro) / d) - 8)))
     with mp.workdps(dps + extra):
         ri_, ro_, h_ = mp.mpf(float(ri)), mp.mpf(float(ro)), mp.mpf(float(length)) / 2
         r_, z_ = mp.mpf(float(rho)), mp.mpf(float(z))

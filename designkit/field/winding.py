@@ -14,11 +14,16 @@ plane), and their mirror a = -rho +- i tau. The interval is cut at the real poin
 ``dist`` (mirrored Gauss-Legendre pieces make the odd, principal-value part of the end-loop
 integrands cancel). Each piece gets the fewest Gauss-Legendre nodes whose Bernstein-ellipse
 bound reaches ``rtol`` (ellipse half-way to the nearest singularity, SAFETY for the integrand's
-growth there); a piece that would need more than 64 nodes is bisected until none does -- there
-is no silent node cap. Points closer to a surface than 4^-60 of the interval (ulp-near or on
-it) are graded down to 4^-30 of it; the innermost piece then sees the nascent-delta part of the
-end-loop integrand as its principal value, and the one-sided limit is added in closed form
-(dBr/dz jumps by mu0 J across an end face; inside it is PV + mu0 J / 2, outside PV - mu0 J / 2).
+growth there near the singularity, times the a^2 growth of the far field over the ellipse:
+:func:`_growth`); a piece that would need more than 64 nodes is bisected until none does -- there
+is no silent node cap. The grading stops at L = ceil(log4(1e3 A / rtol)) levels, A =
+max(1, (Ro - Ri) / L) (the innermost piece then holds < rtol / 1e3 of the result: deeper
+grading buys nothing for B); for the
+gradient it goes on down to the singularity's distance unless that is below 4^-30 of the
+innermost piece, which then sees the nascent-delta part of the end-loop integrand as its
+principal value, and the one-sided limit is added in closed form (dBr/dz jumps by mu0 J across
+an end face; inside it is PV + mu0 J / 2, outside PV - mu0 J / 2). Such innermost pieces get a
+fixed 8-node rule.
 
 Far formulation (points outside the section only): a tensor Gauss-Legendre sum over (a, z') of
 filament loops, whose series have no cancellation far away. The loop field is analytic in a
@@ -46,7 +51,8 @@ Singular points. B is continuous and bounded everywhere. G is bounded except at 
 corners of the section, where it grows like (mu0 J / 2 pi) ln(size / d) at distance d (the 2-D
 field of a quarter plane of current). Exactly at a corner (and closer than ~1e-18 of the
 section) the value returned is finite: the radius integral with the grading stopped at
-4^-30 of its width, i.e. G at d ~ 1e-18 of the size (|G| ~ mu0 J x 7, not a limit).
+4^-30 of its width (MAX_LEVELS, whatever rtol), i.e. G at d ~ 1e-18..1e-20 of the size
+(|G| ~ 10 mu0 J for the thesis coil: a finite placeholder, not a limit).
 Conditioning near a corner: G changes by ~ mu0 J eps |p| / d when the point moves by one ulp,
 so near a corner the relative accuracy of G is limited to ~eps (size / d) / ln(size / d) by the
 point's own rounding (e.g. ~1e-10 at d = 1e-6 of the size, 1e-7 at 1e-9), whatever rtol says.
@@ -73,8 +79,7 @@ ASPECT_RANGE = (1e-3, 1e3)
 
 MAX_NODES = 64
 MAX_LEVELS = 30
-"""Grading depth for points on (or closer than 4^-60 of the interval to) a surface."""
-FULL_LEVELS = 60
+"""Grading depth exactly at a corner with gradient=True (defines the corner value of G)."""
 CHUNK = 1024
 """Points per batch (memory: worst case ~1024 x 120 pieces x 64 nodes per temporary)."""
 GRADE = 4.0
@@ -106,6 +111,14 @@ def _bernstein_rho(lo, hi, s):
     return np.minimum(0.5 * (1.0 + r), RHO_CAP)
 
 
+def _growth(mid, half, rb):
+    """Growth of the integrand (~ a^2: a loop's or sheet's far field is its moment pi a^2 I
+    over R^3) on the Bernstein ellipse rb of the radius interval mid +- half, relative to its
+    size on the interval. Multiplies the Gauss-Legendre error bound."""
+    amax = np.abs(mid) + half * 0.5 * (rb + 1.0 / rb)
+    return (amax / np.maximum(np.abs(mid), half)) ** 2
+
+
 def _need(rb, rtol, safety):
     with np.errstate(divide="ignore", over="ignore"):
         return np.ceil(np.log(safety / rtol) / (2.0 * np.log(np.maximum(rb, 1.0 + 1e-15))))
@@ -131,12 +144,21 @@ def _geometry(ri, ro, h, rho, z):
     return anchor, d_lo, d_hi, c, tau, dist, width
 
 
-def _pieces(ri, ro, h, rho, z, rtol, safety):
+def _trunc_levels(rtol, ri, ro, h):
+    """Grading depth below which the innermost piece's share of the integral (<= 4^-L of the
+    interval times a log) is under rtol / 1e3 of the result: deeper grading buys nothing for B.
+    The integrand (a sheet's field, O(1) near its rim) exceeds the result (~ L / (Ro - Ri) of
+    it for a flat winding) by up to (Ro - Ri) / L."""
+    amp = max(1.0, (ro - ri) / (2.0 * h))
+    return int(math.ceil(math.log(1e3 * amp / rtol) / math.log(GRADE)))
+
+
+def _pieces(ri, ro, h, rho, z, rtol, safety, gradient):
     """Graded pieces for every point.
 
     Returns (point index, lo, hi, nodes) per piece (in coordinates a - anchor), the per-point
     anchor and the per-point flag ``trunc`` (grading stopped at MAX_LEVELS although the
-    singularity is closer than 4^-FULL_LEVELS of the interval, or on it)."""
+    singularity is closer than the depth resolves, or on it)."""
     n = rho.shape[0]
     anchor, d_lo, d_hi, c, tau, dist, width = _geometry(ri, ro, h, rho, z)
     # innermost piece half-width w_L in (dist / 2, 2 dist]: its Bernstein ellipse still
@@ -144,8 +166,19 @@ def _pieces(ri, ro, h, rho, z, rtol, safety):
     with np.errstate(divide="ignore"):
         full = np.floor(np.log(width / dist / 2.0) / math.log(GRADE)) + 1
     full = np.where(dist > 0, full, np.inf)
-    trunc = full > FULL_LEVELS
-    levels = np.where(trunc, MAX_LEVELS, np.where(dist < width / 2.0, full, 0)).astype(int)
+    lt = _trunc_levels(rtol, ri, ro, h)
+    if gradient:
+        # G must resolve the end loops' nascent delta (width ~ dist) unless dist is below
+        # 4^-30 of the innermost piece, where its principal value plus the closed-form jump is
+        # exact; exactly at a corner the depth is fixed (MAX_LEVELS) so that the documented
+        # corner value does not depend on rtol
+        trunc = full > lt + 30
+        corner = (dist == 0) & ((c == d_lo) | (c == d_hi)) & (np.abs(z) == h)
+        cut = np.where(corner, MAX_LEVELS, lt)
+    else:
+        trunc = full > lt
+        cut = lt
+    levels = np.where(trunc, cut, np.where(dist < width / 2.0, full, 0)).astype(int)
     m = int(levels.max(initial=0))
     cols = [d_lo, d_hi, np.where((c > d_lo) & (c < d_hi), c, np.nan)]
     for k in range(1, m + 1):
@@ -171,7 +204,7 @@ def _pieces(ri, ro, h, rho, z, rtol, safety):
         # beside the winding, tau = 0) and the mirror a = -rho + i tau
         rb = np.minimum(_bernstein_rho(lo, hi, (rhop - ancp) + 1j * taup),
                         _bernstein_rho(lo, hi, (-rhop - ancp) + 1j * taup))
-        need = _need(rb, rtol, safety)
+        need = _need(rb, rtol, safety * _growth(ancp + 0.5 * (lo + hi), 0.5 * (hi - lo), rb))
         need = np.where(central, _CENTRAL_NODES, need)
         split = need > MAX_NODES
         if not np.any(split):
@@ -190,11 +223,44 @@ def _pieces(ri, ro, h, rho, z, rtol, safety):
     return pidx, lo, hi, nodes, anchor, trunc
 
 
-def _near(ri, ro, h, rho, z, gradient, rtol):
-    """Radius quadrature of sheets. Returns (values, magnitudes, cost) per point."""
+def _sheet_loops(a, pr, pz, h, gradient, nzs):
+    """Sheets of radius a (one per entry) as Gauss-Legendre sums of nzs[i] loops over z'.
+
+    Same units as the sheet terms of :func:`_near`; returns (values, magnitudes) lists."""
+    m = a.size
+    nout = 5 if gradient else 2
+    vals = [np.zeros(m) for _ in range(nout)]
+    mags = [np.zeros(m) for _ in range(nout)]
+    for nn in np.unique(nzs):
+        sel = np.nonzero(nzs == nn)[0]
+        x, w = _GL[int(nn)]
+        k = sel.size
+        A = np.repeat(a[sel], nn)
+        R = np.repeat(pr[sel], nn)
+        U = np.repeat(pz[sel], nn) - np.tile(h * x, k)
+        res = _loop_scaled(R / A, U / A, gradient, (A - R) / A)
+        f = np.tile(h * w, k) / (4.0 * math.pi * A)
+        terms = [res[0] * f, res[1] * f]
+        if gradient:
+            terms += [res[4] * f / A, res[2] * f / A, res[3] * f / A]
+        for q, t in enumerate(terms):
+            t = t.reshape(k, nn)
+            vals[q][sel] = t.sum(axis=1)
+            mags[q][sel] = np.abs(t).sum(axis=1)
+    return vals, mags
+
+
+def _near(ri, ro, h, rho, z, gradient, rtol, zsum=False):
+    """Radius quadrature of sheets. Returns (values, magnitudes, cost) per point.
+
+    ``zsum``: sheets farther from the point than their own height (Bernstein ellipse of the
+    z'-interval through z +- i |a - rho| needing <= 32 nodes) are summed as loops over z'
+    instead of the closed form, whose two end terms cancel like (distance / L) -- the
+    formulation for flat windings (L << Ro - Ri), where the closed forms lose ~(Ro - Ri) / L
+    ulps."""
     n = rho.shape[0]
     safety = SAFETY_G if gradient else SAFETY_B
-    pidx, lo, hi, nb, anchor, trunc = _pieces(ri, ro, h, rho, z, rtol, safety)
+    pidx, lo, hi, nb, anchor, trunc = _pieces(ri, ro, h, rho, z, rtol, safety, gradient)
     nout = 5 if gradient else 2
     acc = np.zeros((nout, n))
     mag = np.zeros((nout, n))
@@ -220,6 +286,18 @@ def _near(ri, ro, h, rho, z, gradient, rtol):
         if gradient:
             vals += [res[2] / a, res[3] / a, res[4] / a]
             mags += [res[7] / a, res[8] / a, res[9] / a]
+        if zsum:
+            rb = _bernstein_rho(-hz, hz, pz + 1j * np.abs(delta))
+            nz = _need(rb, rtol, safety)
+            lp = nz <= 32
+            if np.any(lp):
+                lv, lm = _sheet_loops(a[lp], pr[lp], pz[lp], hz, gradient,
+                                      _bucket(nz[lp]))
+                for q in range(nout):
+                    vals[q] = vals[q].copy()
+                    mags[q] = mags[q].copy()
+                    vals[q][lp] = lv[q]
+                    mags[q][lp] = lm[q]
         for q in range(nout):
             s = (vals[q] * ww).reshape(-1, nn).sum(axis=1)
             acc[q] += np.bincount(pidx[sel], weights=s, minlength=n)
@@ -241,7 +319,8 @@ def _far_nodes(ri, ro, h, rho, z, rtol, safety):
     outside = (dz > 0) | (dr > 0)
     rb_a = np.minimum(_bernstein_rho(ri, ro, rho + 1j * dz), _bernstein_rho(ri, ro, -rho + 1j * dz))
     rb_z = _bernstein_rho(-h, h, z + 1j * dr)
-    na = np.where(outside, _need(rb_a, rtol, safety), np.inf)
+    na = np.where(outside, _need(rb_a, rtol, safety * _growth(0.5 * (ri + ro), 0.5 * (ro - ri),
+                                                               rb_a)), np.inf)
     nz = np.where(outside, _need(rb_z, rtol, safety), np.inf)
     ok = (na <= MAX_NODES) & (nz <= MAX_NODES)
     na = np.where(ok, _bucket(np.where(ok, na, 2)), 0)
@@ -284,6 +363,12 @@ def _far(ri, ro, h, rho, z, gradient, na, nz):
             out[q][sel] = t.sum(axis=1)
             mag[q][sel] = np.abs(t).sum(axis=1)
     return out, mag
+
+
+def _round_bound(acc, mag):
+    """Relative rounding bound of B (for choosing between formulations)."""
+    return np.hypot(mag[0], mag[1]) * ROUND_ULPS * EPS / np.maximum(np.hypot(acc[0], acc[1]),
+                                                                    1e-300)
 
 
 def _round_ok(acc, mag, gradient, rtol):
@@ -349,6 +434,17 @@ def winding_rz(ri, ro, h, rho, z, *, gradient=False, rtol=1e-10):
     if rest.size:
         v_n, m_n, cost = _near(ri, ro, h, rho[rest], z[rest], gradient, rtol)
         ok_n = _round_ok(v_n, m_n, gradient, rtol)
+        redo = ~ok_n & ~far_ok[rest]
+        if np.any(redo):
+            # the sheets' end terms cancel (flat winding) and the far sums are not allowed:
+            # sum the distant sheets as loops over z' (no cancellation)
+            k = rest[redo]
+            v_z, m_z, _ = _near(ri, ro, h, rho[k], z[k], gradient, rtol, zsum=True)
+            ok_z = _round_ok(v_z, m_z, gradient, rtol)
+            better = ok_z | (_round_bound(v_z, m_z) < _round_bound(v_n[:, redo], m_n[:, redo]))
+            idx = np.nonzero(redo)[0][better]
+            v_n[:, idx] = v_z[:, better]
+            ok_n[idx] = ok_z[better]
         # far sums where the sheets cancel too much, or where they are cheaper
         alt = far_ok[rest] & ~use_far[rest] & (~ok_n | (na[rest] * nz[rest] < cost))
         keep = ~alt
