@@ -80,8 +80,8 @@ ASPECT_RANGE = (1e-3, 1e3)
 MAX_NODES = 64
 MAX_LEVELS = 30
 """Grading depth exactly at a corner with gradient=True (defines the corner value of G)."""
-CHUNK = 1024
-"""Points per batch (memory: worst case ~1024 x 120 pieces x 64 nodes per temporary)."""
+CHUNK = 2048
+"""Points per batch (memory: edge points need ~60 pieces x ~24 nodes per temporary)."""
 GRADE = 4.0
 _BUCKETS = np.array([2, 3, 4, 5, 6, 7, 8, 10, 12, 14, 16, 20, 24, 28, 32, 40, 48, 56, 64])
 _GL = {int(n): np.polynomial.legendre.leggauss(int(n)) for n in _BUCKETS}
