@@ -139,8 +139,8 @@ def test_value_exactly_at_a_corner_is_finite_and_as_documented():
 
 @pytest.mark.slow
 def test_fresh_random_geometries_live_mpmath():
-    # ~40 live references (~2 min on 2 cores): new geometries every seed bump
-    cases = ref.sample_cases(2026, 5)
+    # 24 live references (3 random windings x 8 regions; ~2 min on 2 idle cores)
+    cases = ref.sample_cases(2026, 3, extremes=False)
     refs = wa.compute_refs(cases, processes=2, progress=False)
     table, worst = wa.ratio_table(cases, refs)
     for region, row in table.items():

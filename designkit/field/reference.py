@@ -432,11 +432,11 @@ def _loop_rz_mp_safe(a, rho, u, mp):
 REGIONS = ("axis", "bore", "body", "face", "corner", "ulp", "near", "far")
 
 
-def sample_cases(seed, n_geometries, regions=REGIONS, per_region=1):
+def sample_cases(seed, n_geometries, regions=REGIONS, per_region=1, extremes=True):
     """Seeded random thick windings and observer points in every region (tests and studies).
 
     Geometry: Ro = 1 cm x 10^U(-1, 1), Ri / Ro and L / Ro log-uniform in [1e-4, 0.99] and
-    [1e-3, 1e3], except the first four, the corners of that domain. Regions ("size" = the section's diagonal hypot(Ro - Ri, L)):
+    [1e-3, 1e3], except the first four (if ``extremes``), the corners of that domain. Regions ("size" = the section's diagonal hypot(Ro - Ri, L)):
 
     * axis: rho = 0, z uniform in +-(h + 2 Ro);
     * bore: rho in (0, Ri), |z| < h;  body: Ri < rho < Ro, |z| < h;
@@ -451,13 +451,14 @@ def sample_cases(seed, n_geometries, regions=REGIONS, per_region=1):
     rng = np.random.default_rng(seed)
     out = []
     # the first four geometries are the domain's corners (Ri/Ro, L/Ro) = (1e-4 | 0.99, 1e-3 | 1e3)
-    extremes = [(1e-4, 1e-3), (1e-4, 1e3), (0.99, 1e-3), (0.99, 1e3)]
+    use_extremes = extremes
+    corners_rl = [(1e-4, 1e-3), (1e-4, 1e3), (0.99, 1e-3), (0.99, 1e3)]
     for g in range(n_geometries):
         ro = 0.01 * 10 ** rng.uniform(-1, 1)
         ri = ro * 10 ** rng.uniform(-4, np.log10(0.99))
         length = ro * 10 ** rng.uniform(-3, 3)
-        if g < len(extremes):
-            ri, length = ro * extremes[g][0], ro * extremes[g][1]
+        if use_extremes and g < len(corners_rl):
+            ri, length = ro * corners_rl[g][0], ro * corners_rl[g][1]
         h = length / 2
         size = float(np.hypot(ro - ri, length))
         corners = [(ri, h), (ri, -h), (ro, h), (ro, -h)]
