@@ -18,7 +18,15 @@ Methods timed in the same process:
 
 Targets (issue 2): at equal error 1e-6 designkit B + G >= 30x faster per point than magpylib's
 cheapest construction that reaches 1e-6 (B only); designkit B + G at rtol = 1e-10 faster than
-magpylib's 16-shell B only; gradient cost <= 3x B alone.
+magpylib's 16-shell B only; gradient cost <= 3x B alone. Issue 11: these ratios still hold
+(earlier run: 5660x vs 512 shells at 1e-6 with B+G rtol 1e-5, 169x vs 16 shells at 1e-10,
+gradient <= 1.82x B).
+
+Second part (issue 11): randomized windings (Ri/Ro 1e-4..0.99, L/Ro 1e-3..1e3, the domain's
+corners included) and points in every region (axis, bore, body, faces, corners, ulp-near,
+near, far): designkit B+G run time per point and achieved error (vs 30-digit mpmath, the table
+of tests/data/winding_refs.json) per region and rtol, magpylib's nested shells (B only) on the
+same points side by side, and the slowest regions named.
 """
 
 from __future__ import annotations
@@ -95,27 +103,129 @@ def magpylib_circles(pts):
     return b.reshape(N, len(pts), 3).sum(axis=0) * (MU0 / magpy.mu_0)
 
 
-def magpylib_shells(pts, k):
+def magpylib_shells(pts, k, ri=RI, ro=RO, length=L, j=J):
     """B (designkit's mu0) of the nested-shell construction with k shells."""
     import magpylib as magpy
 
-    edges = np.linspace(RI, RO, k + 1)
+    edges = np.linspace(ri, ro, k + 1)
     mid = 0.5 * (edges[1:] + edges[:-1])
-    dims = np.stack([edges[:-1], edges[1:], np.full(k, L), np.zeros(k), np.full(k, 360.0)], 1)
+    dims = np.stack([edges[:-1], edges[1:], np.full(k, length), np.zeros(k),
+                     np.full(k, 360.0)], 1)
     pol = np.zeros((k, 3))
-    pol[:, 2] = magpy.mu_0 * J * (RO - mid)
+    pol[:, 2] = magpy.mu_0 * j * (ro - mid)
     obs = np.repeat(pts[None], k, axis=0).reshape(-1, 3)
     b = magpy.func.cylinder_segment_field("B", obs, np.repeat(dims, len(pts), axis=0),
                                           np.repeat(pol, len(pts), axis=0))
     b = b.reshape(k, len(pts), 3).sum(axis=0)
-    b += magpy.func.cylinder_field("B", pts, (2 * RI, L), (0, 0, magpy.mu_0 * J * (RO - RI)))
+    b += magpy.func.cylinder_field("B", pts, (2 * ri, length), (0, 0, magpy.mu_0 * j * (ro - ri)))
     return b * (MU0 / magpy.mu_0)  # B / mu0 = H + M is independent of mu0
+
+
+def _kernel_reference(pts):
+    """B, G of the raw kernel at rtol = 1e-13 (below the public 1e-12 floor: a reference for
+    the thesis workspace only, checked against mpmath on a few points in the full run)."""
+    from designkit.field import cylindrical_to_cartesian
+    from designkit.field.winding import winding_rz
+
+    rho = np.hypot(pts[:, 0], pts[:, 1])
+    c = np.where(rho > 0, pts[:, 0] / np.where(rho > 0, rho, 1), 1.0)
+    s = np.where(rho > 0, pts[:, 1] / np.where(rho > 0, rho, 1), 0.0)
+    res = winding_rz(RI, RO, L / 2, rho, pts[:, 2], gradient=True, rtol=1e-13)
+    return cylindrical_to_cartesian(c, s, MU0 * J, res, True)
 
 
 def axis_closed_form(z):
     def F(u):
         return u * np.log((RO + np.hypot(RO, u)) / (RI + np.hypot(RI, u)))
     return MU0 * J / 2 * (F(z + L / 2) - F(z - L / 2))
+
+
+REGION_RTOLS = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)
+
+
+def random_geometries(quick=False, have_magpylib=True):
+    """Run time per point and achieved error over randomized windings, per point region.
+
+    Errors: the 30-digit mpmath table tests/data/winding_refs.json (12 windings incl. the
+    domain's corners x 8 regions, studies/winding_accuracy.py) plus the issue-11 cases. Time:
+    other windings from the same sampler with ``per`` points per (winding, region), one call
+    each (so per-call overhead is amortized). magpylib: nested CylinderSegment shells (B only)
+    on the same points."""
+    import time as _t
+
+    from designkit.field import reference as ref
+    from studies import winding_accuracy as wa
+
+    data = Path(__file__).resolve().parents[1] / "tests" / "data"
+    cases, refs = wa.load_or_compute(data, wa.TABLE_SEED, wa.TABLE_GEOMETRIES)
+    per = 20 if quick else 200
+    timing = ref.sample_cases(7, 4 if quick else 12, per_region=per)
+    groups = {}
+    for c in timing:
+        groups.setdefault((c["region"], c["ri"], c["ro"], c["length"]), []).append(c["point"])
+    out = {}
+    for rtol in REGION_RTOLS:
+        for (region, ri, ro, length), pts in groups.items():
+            pts = np.array(pts)
+            t = _t.perf_counter()
+            winding_field(pts, ri, ro, length, 1.0, 1.0, gradient=True, rtol=rtol)
+            dt = _t.perf_counter() - t
+            o = out.setdefault((region, rtol), dict(time=0.0, n=0, err_b=0.0, err_g=0.0))
+            o["time"] += dt
+            o["n"] += len(pts)
+        for case, (b_ref, g_ref) in zip(cases, refs):
+            eb, eg = wa.errors(case, b_ref, g_ref, rtol)
+            if case["corner_distance"] <= wa.CORNER_EXCLUSION * case["size"]:
+                eg = 0.0
+            o = out[(case["region"], rtol)]
+            o["err_b"] = max(o["err_b"], eb)
+            o["err_g"] = max(o["err_g"], eg)
+    shells = {}
+    if have_magpylib:
+        for k in ((16, 64) if quick else (16, 64, 256)):
+            for region in ref.REGIONS:
+                tot, n, err = 0.0, 0, 0.0
+                for (reg, ri, ro, length), pts in groups.items():
+                    if reg != region:
+                        continue
+                    pts = np.array(pts)
+                    t = _t.perf_counter()
+                    magpylib_shells(pts, k, ri, ro, length, 1.0 / ((ro - ri) * length))
+                    tot += _t.perf_counter() - t
+                    n += len(pts)
+                for case, (b_ref, _g) in zip(cases, refs):
+                    if case["region"] != region:
+                        continue
+                    j = 1.0 / ((case["ro"] - case["ri"]) * case["length"])
+                    b = magpylib_shells(case["point"][None], k, case["ri"], case["ro"],
+                                        case["length"], j)[0]
+                    err = max(err, float(np.linalg.norm(b - MU0 * j * b_ref)
+                                         / np.linalg.norm(MU0 * j * b_ref)))
+                shells[(region, k)] = dict(us_per_point=1e6 * tot / n, err_b=err)
+    lines = ["Random windings (Ri/Ro 1e-4..0.99, L/Ro 1e-3..1e3): designkit B+G us/point "
+             "[max err B / max err G vs mpmath]",
+             f"{'region':8s} " + " ".join(f"{'rtol ' + format(r, '.0e'):>26s}"
+                                          for r in REGION_RTOLS)]
+    for region in ref.REGIONS:
+        lines.append(f"{region:8s} " + " ".join(
+            f"{1e6 * out[(region, r)]['time'] / out[(region, r)]['n']:8.1f} "
+            f"[{out[(region, r)]['err_b']:7.1e}/{out[(region, r)]['err_g']:7.1e}]"
+            for r in REGION_RTOLS))
+    if shells:
+        ks = sorted({k for _, k in shells})
+        lines += ["", "magpylib nested shells (B only) us/point [max err B], same regions",
+                  f"{'region':8s} " + " ".join(f"{str(k) + ' shells':>20s}" for k in ks)]
+        for region in ref.REGIONS:
+            lines.append(f"{region:8s} " + " ".join(
+                f"{shells[(region, k)]['us_per_point']:8.1f} [{shells[(region, k)]['err_b']:7.1e}]"
+                for k in ks))
+    slow = sorted(ref.REGIONS, key=lambda r: -out[(r, 1e-10)]["time"] / out[(r, 1e-10)]["n"])
+    lines += ["", "slowest regions at rtol 1e-10 (B+G): " + ", ".join(
+        f"{r} {1e6 * out[(r, 1e-10)]['time'] / out[(r, 1e-10)]['n']:.0f} us" for r in slow[:3])]
+    rows = [dict(region=r, rtol=t, us_per_point=1e6 * v["time"] / v["n"], err_b=v["err_b"],
+                 err_g=v["err_g"]) for (r, t), v in out.items()]
+    mrows = [dict(region=r, shells=k, **v) for (r, k), v in shells.items()]
+    return rows, mrows, lines
 
 
 def run(out_dir, quick=False):
@@ -129,7 +239,7 @@ def run(out_dir, quick=False):
 
     pts = workspace_points(n_dk)
     pts_mp = pts[:n_mp]
-    b_ref, g_ref = winding_field(pts, RI, RO, L, N, I, gradient=True, rtol=1e-13)
+    b_ref, g_ref = _kernel_reference(pts)
     rows = []
 
     def add(method, rtol, t, npts, err_b, err_g=None):
@@ -160,7 +270,7 @@ def run(out_dir, quick=False):
     add("designkit 1429 loops (discrete)", None, t, n_mp, _err(b, b_ref[:n_mp]))
     z_ax = np.linspace(L / 2 + 0.003, L / 2 + 0.08, n_dk)
     t, bz = _time(lambda: axis_closed_form(z_ax), repeat)
-    bz_dk = winding_field(np.stack([0 * z_ax, 0 * z_ax, z_ax], 1), RI, RO, L, N, I, rtol=1e-13)
+    bz_dk = _kernel_reference(np.stack([0 * z_ax, 0 * z_ax, z_ax], 1))[0]
     add("axis closed form (float64, on-axis points)", None, t, n_dk,
         float(np.max(np.abs(bz / bz_dk[:, 2] - 1))))
 
@@ -219,6 +329,8 @@ def run(out_dir, quick=False):
         lines.append(f"{k}: {val:.3g}" if isinstance(val, float) else f"{k}: {val}")
     if ref_check is not None:
         lines.append(f"reference (rtol=1e-13) vs mpmath on 4 points: {ref_check:.2e}")
+    rand_rows, mag_rows, rand_lines = random_geometries(quick, have_magpylib)
+    lines += ["", *rand_lines]
     table = "\n".join(lines)
     write_text_atomic(out_dir / "bench_field.txt", table + "\n")
 
@@ -254,7 +366,7 @@ def run(out_dir, quick=False):
     plt.close(fig)
     tmp.replace(png)
     result = dict(rows=rows, ratios=ratios, reference_vs_mpmath=ref_check, table=table,
-                  png=str(png))
+                  png=str(png), random_rows=rand_rows, random_magpylib_rows=mag_rows)
     write_json_atomic(out_dir / "bench_field.json", {k: v for k, v in result.items()})
     return result
 

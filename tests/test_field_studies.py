@@ -1,7 +1,7 @@
 """Smoke tests of the field studies (quick mode): they run, write their files and the numbers
 they report satisfy the issue's targets where a quick run can show them."""
 
-from studies import bench_field, stress_field
+from studies import bench_field, stress_field, winding_accuracy
 
 
 def test_stress_field_quick(tmp_path):
@@ -21,3 +21,15 @@ def test_bench_field_quick(tmp_path):
     for (method, rtol), r in rows.items():
         if method.startswith("designkit B") and rtol:
             assert r["err_b"] <= rtol and (r["err_g"] is None or r["err_g"] <= rtol)
+    # random windings: each region and rtol meets the target against the mpmath table
+    for r in res["random_rows"]:
+        assert r["err_b"] <= r["rtol"] and r["err_g"] <= 10 * r["rtol"], r
+    assert {r["region"] for r in res["random_rows"]} >= {"axis", "corner", "ulp", "far"}
+    assert res["random_magpylib_rows"] and all(r["us_per_point"] > 0
+                                               for r in res["random_magpylib_rows"])
+
+
+def test_winding_accuracy_quick(tmp_path):
+    res = winding_accuracy.run(tmp_path, quick=True)
+    assert res["max_b_ratio"] <= 1.0 and res["max_g_ratio"] <= 10.0
+    assert (tmp_path / "winding_accuracy.txt").exists()

@@ -313,7 +313,7 @@ def sheet_rz(a, h, rho, z, *, gradient: bool = False):
 _SHEET_GL = {n: np.polynomial.legendre.leggauss(n) for n in (4, 6, 8, 12, 16, 24, 32, 48, 64)}
 
 
-def _sheet_far(r, omr, zz, hh, gradient):
+def _sheet_far(r, omr, zz, hh, gradient, mag=False):
     """Unit-radius sheet as a Gauss-Legendre sum of loops over z' (for far points).
 
     The closed forms subtract the two ends' terms: at distance R that cancels and loses
@@ -329,7 +329,8 @@ def _sheet_far(r, omr, zz, hh, gradient):
     need = np.ceil(np.log(1e2 / 1e-16) / (2.0 * np.log(np.maximum(rb, 1.0 + 1e-12))))
     sizes = np.array(sorted(_SHEET_GL))
     nb = sizes[np.minimum(np.searchsorted(sizes, need), len(sizes) - 1)]
-    out = [np.zeros(n) for _ in range(5 if gradient else 2)]
+    nc = 5 if gradient else 2
+    out = [np.zeros(n) for _ in range(2 * nc if mag else nc)]
     for nn in np.unique(nb):
         sel = np.nonzero(nb == nn)[0]
         xk, wk = _SHEET_GL[int(nn)]
@@ -341,22 +342,32 @@ def _sheet_far(r, omr, zz, hh, gradient):
         comps = (res[0], res[1], res[4], res[2], res[3]) if gradient else res
         for q, val in enumerate(comps):
             out[q][sel] = (val * ww).reshape(m, nn).sum(axis=1)
+            if mag:
+                out[nc + q][sel] = np.abs(val * ww).reshape(m, nn).sum(axis=1)
     return tuple(out)
 
 
-def _sheet_scaled(r, omr, zz, hh, gradient, tol=1e-15):
+def _sheet_scaled(r, omr, zz, hh, gradient, tol=1e-15, mag=False, ends=None):
     """Unit-radius sheet. Returns (br, bz) per mu0 K, or with gradient
     (br, bz, br_over_r, dbr_dz, dbz_dz) in units of the radius.
 
     Points whose closed-form cancellation error (~4e-16 R^3 / (2 h), unit radius) would exceed
-    ``tol`` / 20 and that lie well outside the sheet use the loop sum of :func:`_sheet_far`."""
+    ``tol`` / 20 and that lie well outside the sheet use the loop sum of :func:`_sheet_far`.
+
+    With ``mag=True`` the tuple is followed by the same number of magnitudes: the sums of the
+    absolute values of the terms each output is formed from (the two end terms of the closed
+    forms, the loop terms of the far sum). Rounding error <= ~eps x magnitude: callers use it
+    to bound the cancellation a posteriori. ``ends`` = ((z + h) / a, (z - h) / a) may be passed
+    when the caller can form them without the rounding of z / a +- h / a (points within an ulp
+    of an end plane)."""
     big2 = r * r + zz * zz
     far = (big2 > 2.25 * (1.0 + hh * hh)) & (
         4e-16 * big2 * np.sqrt(big2) / (2.0 * hh) > 0.05 * tol)
     if np.any(far):
-        res_far = _sheet_far(r[far], omr[far], zz[far], hh[far], gradient)
+        res_far = _sheet_far(r[far], omr[far], zz[far], hh[far], gradient, mag)
         near = ~far
-        res_near = _sheet_scaled_closed(r[near], omr[near], zz[near], hh[near], gradient)
+        res_near = _sheet_scaled_closed(r[near], omr[near], zz[near], hh[near], gradient, mag,
+                                        None if ends is None else (ends[0][near], ends[1][near]))
         out = []
         for f_, n_ in zip(res_far, res_near):
             o = np.empty(r.shape)
@@ -364,10 +375,10 @@ def _sheet_scaled(r, omr, zz, hh, gradient, tol=1e-15):
             o[near] = n_
             out.append(o)
         return tuple(out)
-    return _sheet_scaled_closed(r, omr, zz, hh, gradient)
+    return _sheet_scaled_closed(r, omr, zz, hh, gradient, mag, ends)
 
 
-def _sheet_scaled_closed(r, omr, zz, hh, gradient):
+def _sheet_scaled_closed(r, omr, zz, hh, gradient, mag=False, ends_in=None):
     """Closed forms (Derby-Olbert Bz, T-integral Br, end-loop gradients) of the unit sheet."""
     opr = 1.0 + r
     br_r = np.zeros(r.shape)
@@ -378,7 +389,11 @@ def _sheet_scaled_closed(r, omr, zz, hh, gradient):
     s_cel = np.where(flat, 1.0, gamma)
     omr2 = omr * omr
     ends = []
-    for sign, ze in ((+1.0, zz + hh), (-1.0, zz - hh)):
+    m_bz = np.zeros(r.shape)
+    m_brr = np.zeros(r.shape)
+    if ends_in is None:
+        ends_in = (zz + hh, zz - hh)
+    for sign, ze in ((+1.0, ends_in[0]), (-1.0, ends_in[1])):
         # sign=+1: the end at z = -h (seen at z + h) enters with +, the end at +h with -
         ze2 = ze * ze
         beta2 = opr * opr + ze2
@@ -389,16 +404,28 @@ def _sheet_scaled_closed(r, omr, zz, hh, gradient):
         safe_kc2 = np.where(on, 1.0, kc2)
         t = _t_integral(k2, safe_kc2)
         c_ = cel(np.sqrt(safe_kc2), p, 1.0, s_cel)
-        bz += sign * np.where(on, 0.0, ze * c_ / (beta * opr))
-        br_r -= sign * np.where(on, 0.0, t / (beta2 * beta))
+        tz = np.where(on, 0.0, ze * c_ / (beta * opr))
+        tr = np.where(on, 0.0, t / (beta2 * beta))
+        bz += sign * tz
+        br_r -= sign * tr
+        if mag:
+            m_bz += np.abs(tz)
+            m_brr += np.abs(tr)
         ends.append(ze)
     bz *= 1.0 / math.pi
     br_r *= 4.0 / math.pi
     br = br_r * r
+    if mag:
+        m_bz *= 1.0 / math.pi
+        m_brr *= 4.0 / math.pi
     if not gradient:
-        return br, bz
+        return (br, bz, m_brr * r, m_bz) if mag else (br, bz)
     # d/dz of a sheet = K [B_loop(z + h) - B_loop(z - h)] (difference of its end loops)
     lp = _loop_scaled(r, ends[0], False, omr)
     lm = _loop_scaled(r, ends[1], False, omr)
     inv4pi = 1.0 / (4.0 * math.pi)
-    return br, bz, br_r, (lp[0] - lm[0]) * inv4pi, (lp[1] - lm[1]) * inv4pi
+    out = (br, bz, br_r, (lp[0] - lm[0]) * inv4pi, (lp[1] - lm[1]) * inv4pi)
+    if mag:
+        out += (m_brr * r, m_bz, m_brr, (np.abs(lp[0]) + np.abs(lm[0])) * inv4pi,
+                (np.abs(lp[1]) + np.abs(lm[1])) * inv4pi)
+    return out

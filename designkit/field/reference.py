@@ -270,3 +270,265 @@ def rz_to_cartesian(point, br, bz, grad=None):
         [dzr * c, dzr * s, dzz],
     ])
     return b, g
+
+
+# ------------------------------------------------------------------ thick winding, charge picture
+def _ring_charge_mp(b, rho, u, mp):
+    """(H_rho, H_z) at (rho, u) of a ring of radius b carrying unit surface-charge density over
+    a unit radial width (total magnetic charge 2 pi b), textbook K, E form:
+    H_z = b u E / (pi Q sqrt(D)), H_rho = b [K - (b^2 - rho^2 + u^2) E / Q] / (2 pi rho sqrt(D)),
+    D = (b + rho)^2 + u^2, Q = (b - rho)^2 + u^2, m = 4 b rho / D. Near the axis K - ... cancels
+    like 1 - O(m): the working precision is raised by log10(1/m) digits there."""
+    D = (b + rho) ** 2 + u * u
+    Q = (b - rho) ** 2 + u * u
+    if Q == 0:
+        return mp.mpf(0), mp.mpf(0)
+    if rho == 0:
+        return mp.mpf(0), b * u * mp.pi / 2 / (mp.pi * Q * mp.sqrt(D))
+    m = 4 * b * rho / D
+    extra = int(max(0, -mp.log10(m))) + 5 if m < 1e-3 else 0
+    with mp.extradps(extra):
+        D = (b + rho) ** 2 + u * u
+        Q = (b - rho) ** 2 + u * u
+        m = min(4 * b * rho / D, 1 - Q / D)
+        K, E = _ke_mp(m, Q / D, mp)
+        sd = mp.sqrt(D)
+        hz = b * u * E / (mp.pi * Q * sd)
+        hr = b * (K - (b * b - rho * rho + u * u) * E / Q) / (2 * mp.pi * rho * sd)
+    return +hr, +hz
+
+
+def _graded_breaks(center, scale, lo, hi, mp, ratio=4):
+    """Breakpoints in [lo, hi]: lo, hi, ``center`` (if inside) and center +- scale * ratio^k."""
+    pts = {lo, hi}
+    if lo < center < hi:
+        pts.add(center)
+    d = max(scale, (hi - lo) * mp.mpf(10) ** (-mp.mp.dps))
+    while d < hi - lo:
+        for p in (center - d, center + d):
+            if lo < p < hi:
+                pts.add(p)
+        d *= ratio
+    return sorted(pts)
+
+
+def _quad_pv(f, lo, hi, c, scale, mp, kinks=()):
+    """int_lo^hi f over breakpoints graded towards c (scale: the distance of f's nearest
+    complex singularity from c) and at ``kinks``. If scale == 0 and lo < c < hi, f may have a
+    1/(x - c) pole: the principal value, by folding x = c +- t over the symmetric part."""
+    def q(a, b, center, sc):
+        brk = set(_graded_breaks(center, sc, a, b, mp)) | {k for k in kinks if a < k < b}
+        return mp.quad(f, sorted(brk))
+
+    if scale == 0 and lo < c < hi:
+        d = min(c - lo, hi - c)
+        tb = set(_graded_breaks(mp.mpf(0), d * mp.mpf(10) ** (-mp.mp.dps // 2), mp.mpf(0), d, mp))
+        tb |= {abs(k - c) for k in kinks if 0 < abs(k - c) < d}
+        total = mp.quad(lambda t: f(c + t) + f(c - t), sorted(tb))
+        if c - d > lo:
+            total += q(lo, c - d, c - d, (c - d - lo) * mp.mpf(10) ** (-mp.mp.dps // 2))
+        if c + d < hi:
+            total += q(c + d, hi, c + d, (hi - c - d) * mp.mpf(10) ** (-mp.mp.dps // 2))
+        return total
+    return q(lo, hi, c, scale / 2)
+
+
+def winding_charge(ri, ro, length, rho, z, *, gradient=False, dps=30):
+    """Thick winding per unit mu0 J, from its equivalent magnetization (an independent picture).
+
+    A uniform azimuthal current density J over ri < r < ro, |z| < h is the curl of the axial
+    magnetization M_z(r) = J (ro - max(r, ri)) for r < ro, |z| < h (0 elsewhere). M has no volume
+    charge (it does not depend on z); its surface charge sigma = +-M_z(r) sits on the two end
+    disks z = +-h, r < ro. So B = mu0 (H + M) with H the field of two charged disks: a 1-D
+    mp.quad over the ring radius b in [0, ro] of textbook ring-of-charge fields (K, E only),
+    with breakpoints at b = ri and graded towards b = rho by the distance to each end plane (a
+    principal value by folding when the point lies on an end plane).
+
+    The gradient's d/dz column is mu0 J int_ri^ro [B_loop(a, z + h) - B_loop(a, z - h)] da
+    (textbook K, E loops); the rest follows from div B = 0 and curl B = mu0 J.
+
+    Returns (Br, Bz) in m [and (dBr/drho, dBr/dz, dBz/drho, dBz/dz, Br/rho), dimensionless],
+    with the designkit conventions on the winding's surface (half the -J term, mean of the
+    two sides) and B, G in units of mu0 J. ``rho``, ``z`` are exact (converted from the given
+    floats without rounding).
+    """
+    mp = _mp()
+    # far points: the two disks' fields cancel like (size / R): keep dps digits after it
+    R = max(abs(float(rho)), abs(float(z)), 1e-300)
+    size = min(float(length), float(ro))
+    extra = int(max(0.0, np.log10(R / size))) + 2
+    # within d of a face plane the near-singular integrands need ~log10(size / d) more digits
+    # to keep mp.quad's nodes and error estimates meaningful (found at 1e-18 of the size)
+    d = min(abs(float(z) - length / 2), abs(float(z) + length / 2), abs(float(rho) - ri),
+            abs(float(rho) - ro))
+    if d > 0:
+        extra += int(min(30.0, max(0.0, np.log10(float(ro) / d) - 8)))
+    with mp.workdps(dps + extra):
+        ri_, ro_, h_ = mp.mpf(float(ri)), mp.mpf(float(ro)), mp.mpf(float(length)) / 2
+        r_, z_ = mp.mpf(float(rho)), mp.mpf(float(z))
+
+        def sigma(b):
+            return ro_ - (b if b > ri_ else ri_)
+
+        hr = mp.mpf(0)
+        hz = mp.mpf(0)
+        for s, u in ((1, z_ - h_), (-1, z_ + h_)):
+            memo = {}
+
+            def f(b, i):
+                if b not in memo:
+                    memo[b] = _ring_charge_mp(b, r_, u, mp)
+                return s * sigma(b) * memo[b][i]
+
+            # sigma has a kink at ri (a breakpoint)
+            if r_ != 0:
+                hr += _quad_pv(lambda b: f(b, 0), mp.mpf(0), ro_, r_, abs(u), mp, (ri_,))
+            # H_z of a disk on its own plane is 0 off the ring (principal value)
+            if u != 0:
+                hz += _quad_pv(lambda b: f(b, 1), mp.mpf(0), ro_, r_, abs(u), mp, (ri_,))
+        az = abs(z_)
+        if r_ <= ro_ and az <= h_:
+            m_here = sigma(r_) * (mp.mpf(1) / 2 if az == h_ else 1)
+        else:
+            m_here = 0
+        br, bz = hr, hz + m_here
+        if not gradient:
+            return float(br), float(bz)
+
+        def loop_end(a, u, i):
+            return _loop_rz_mp_safe(a, r_, u, mp)[i]
+
+        def dz_int(i):
+            total = mp.mpf(0)
+            for sgn, u in ((1, z_ + h_), (-1, z_ - h_)):
+                total += sgn * _quad_pv(lambda a: loop_end(a, u, i), ri_, ro_, r_, abs(u), mp)
+            return total
+
+        dbz_dz = dz_int(1)
+        if r_ == 0:
+            half = -dbz_dz / 2
+            return (0.0, float(bz), float(half), 0.0, 0.0, float(dbz_dz), float(half))
+        dbr_dz = dz_int(0)
+        inside = 1 if (ri_ < r_ < ro_ and az < h_) else (
+            mp.mpf(1) / 2 if (ri_ <= r_ <= ro_ and az <= h_) else 0)
+        br_r = br / r_
+        return (float(br), float(bz), float(-dbz_dz - br_r), float(dbr_dz),
+                float(dbr_dz - inside), float(dbz_dz), float(br_r))
+
+
+def _loop_rz_mp_safe(a, rho, u, mp):
+    """:func:`_loop_rz_mp` with the working precision raised near the axis, where its Br
+    bracket -K + (...) E / q cancels like O(m)."""
+    if rho == 0:
+        return _loop_rz_mp(a, rho, u, mp)
+    m = 4 * a * rho / ((a + rho) ** 2 + u * u)
+    extra = int(max(0, -mp.log10(m))) + 5 if m < 1e-3 else 0
+    with mp.extradps(extra):
+        br, bz = _loop_rz_mp(a, rho, u, mp)
+    return +br, +bz
+
+
+# ------------------------------------------------------------------ randomized test cases
+REGIONS = ("axis", "bore", "body", "face", "corner", "ulp", "near", "far")
+
+
+def sample_cases(seed, n_geometries, regions=REGIONS, per_region=1, extremes=True):
+    """Seeded random thick windings and observer points in every region (tests and studies).
+
+    Geometry: Ro = 1 cm x 10^U(-1, 1), Ri / Ro and L / Ro log-uniform in [1e-4, 0.99] and
+    [1e-3, 1e3], except the first four (if ``extremes``), the corners of that domain. Regions ("size" = the section's diagonal hypot(Ro - Ri, L)):
+
+    * axis: rho = 0, z uniform in +-(h + 2 Ro);
+    * bore: rho in (0, Ri), |z| < h;  body: Ri < rho < Ro, |z| < h;
+    * face: 1e-9..1e-2 x size (log-uniform) inside or outside one of the four faces, away
+      from its ends; corner: the same distance from one of the four corners, any direction;
+    * ulp: 1..4 ulps from a face or a corner (either side);
+    * near: 1e-2..1 x size outside the section; far: 2..1e4 x hypot(Ro, h) from the centre.
+
+    Face, corner and ulp points lie in the plane y = 0 (rho exact); the others have a random
+    azimuth. Returns a list of dicts (ri, ro, length, region, point (3,), corner_distance, size).
+    """
+    rng = np.random.default_rng(seed)
+    out = []
+    # the first four geometries are the domain's corners (Ri/Ro, L/Ro) = (1e-4 | 0.99, 1e-3 | 1e3)
+    use_extremes = extremes
+    corners_rl = [(1e-4, 1e-3), (1e-4, 1e3), (0.99, 1e-3), (0.99, 1e3)]
+    for g in range(n_geometries):
+        ro = 0.01 * 10 ** rng.uniform(-1, 1)
+        ri = ro * 10 ** rng.uniform(-4, np.log10(0.99))
+        length = ro * 10 ** rng.uniform(-3, 3)
+        if use_extremes and g < len(corners_rl):
+            ri, length = ro * corners_rl[g][0], ro * corners_rl[g][1]
+        h = length / 2
+        size = float(np.hypot(ro - ri, length))
+        corners = [(ri, h), (ri, -h), (ro, h), (ro, -h)]
+        for region in regions:
+            for _k in range(per_region):
+                phi = rng.uniform(0, 2 * np.pi)
+                if region == "axis":
+                    rho, z = 0.0, rng.uniform(-1, 1) * (h + 2 * ro)
+                elif region == "bore":
+                    rho, z = ri * rng.uniform(0, 1), h * rng.uniform(-1, 1)
+                elif region == "body":
+                    rho, z = rng.uniform(ri, ro), h * rng.uniform(-1, 1)
+                elif region == "face":
+                    phi = 0.0
+                    d = size * 10 ** rng.uniform(-9, -2) * rng.choice([-1, 1])
+                    f = rng.integers(4)
+                    t = rng.uniform(0.1, 0.9)
+                    if f < 2:  # side faces r = ri, ro
+                        rho, z = (ri, ro)[f] + d, h * (2 * t - 1)
+                    else:      # end faces z = +-h
+                        rho, z = ri + t * (ro - ri), (h if f == 2 else -h) + d
+                elif region == "corner":
+                    phi = 0.0
+                    d = size * 10 ** rng.uniform(-9, -2)
+                    ang = rng.uniform(0, 2 * np.pi)
+                    cr, cz = corners[rng.integers(4)]
+                    rho, z = abs(cr + d * np.cos(ang)), cz + d * np.sin(ang)
+                elif region == "ulp":
+                    phi = 0.0
+                    k = float(rng.choice([1, 2, 4])) * rng.choice([-1, 1]) * 2.0 ** -52
+                    cr, cz = corners[rng.integers(4)]
+                    kind = rng.integers(3)
+                    if kind == 0:    # end face
+                        rho, z = ri + rng.uniform(0.1, 0.9) * (ro - ri), cz * (1 + k)
+                    elif kind == 1:  # side face
+                        rho, z = cr * (1 + k), h * rng.uniform(-0.9, 0.9)
+                    else:            # corner
+                        rho, z = cr * (1 + k), cz * (1 - k)
+                elif region == "near":
+                    d = size * 10 ** rng.uniform(-2, 0)
+                    ang = rng.uniform(0, 2 * np.pi)
+                    cr, cz = corners[rng.integers(4)]
+                    # outward from a corner, or beside / above a face
+                    side = rng.integers(3)
+                    if side == 0:
+                        rho = abs(cr + d * abs(np.cos(ang)) * np.sign(cr - 0.5 * (ri + ro)))
+                        z = cz + d * abs(np.sin(ang)) * np.sign(cz)
+                    elif side == 1:
+                        rho, z = ro + d, h * rng.uniform(-1, 1)
+                    else:
+                        rho, z = rng.uniform(0, ro), np.sign(cz) * (h + d)
+                else:  # far
+                    R = float(np.hypot(ro, h)) * 10 ** rng.uniform(np.log10(2), 4)
+                    u = rng.normal(size=3)
+                    u /= np.linalg.norm(u)
+                    rho, z = float(np.hypot(u[0], u[1])) * R, u[2] * R
+                point = np.array([rho * np.cos(phi), rho * np.sin(phi), z])
+                if phi == 0.0:
+                    point[1] = 0.0
+                rr = float(np.hypot(point[0], point[1]))
+                cd = min(float(np.hypot(rr - cr, point[2] - cz)) for cr, cz in corners)
+                out.append(dict(ri=float(ri), ro=float(ro), length=float(length),
+                                region=region, point=point, corner_distance=cd, size=size))
+    return out
+
+
+def case_reference(case, dps=30):
+    """(B (3,), G (3, 3)) per unit mu0 J (m, dimensionless) of a :func:`sample_cases` case, from
+    :func:`winding_charge` at ``dps`` digits."""
+    p = case["point"]
+    rho = float(np.hypot(p[0], p[1]))
+    r = winding_charge(case["ri"], case["ro"], case["length"], rho, p[2], gradient=True, dps=dps)
+    return rz_to_cartesian(p, r[0], r[1], r[2:])
