@@ -29,6 +29,12 @@ come from least-squares quartic fits along three short lines (x, y, z) through e
 :func:`solve` itself on the analytic magnet-alone / air-winding fields in tests
 (``tests/test_fem3d.py``).
 
+Accuracy (single thesis coil with its mu_r 1000 core, quarter model, against the axisymmetric
+surface-current model, which agrees with the axisymmetric GetDP to < 0.5 % in B and dBz/dz;
+7 points 15-60 mm above, beside and between):
+level -2 (~6k tetrahedra) B 0.9 %, |grad B| 30 %; level -1 (~16k) B 0.5 %, |grad B| 2.6 %;
+level 0 (~42k) B 0.28 %, |grad B| 1.0 % (relative to |B| and ||grad B||_F at each point).
+
 Force on the magnet from the iron: F = integral over the magnet of (M . grad) B_ind dV with
 B_ind = B(with cores) - B(cores replaced by air), both on the same mesh (so the magnet's own
 discretized field cancels); for an axial, uniform M this is
