@@ -301,12 +301,13 @@ class CoreSolution:
             # the ellipse exceeds that on [0, R] by up to the Chebyshev growth ((rho+1/rho)/2)^2
             growth = (0.5 * (bound_rho + 1.0 / bound_rho)) ** 2 if grp["kind"] == "disc" else 1.0
             todo = np.ones(len(z), dtype=bool)
-            for nodes, (rq, zq, wq) in grp["rules"].items():
+            for nodes in FAR_NODES:
                 sel = todo & (_interp_bound(bound_rho, nodes) * grp["cancel"] * growth
                               <= EVAL_RTOL)
                 if not np.any(sel):
                     continue
                 todo &= ~sel
+                rq, zq, wq = self._rule(grp, nodes)
                 idx = np.flatnonzero(sel)
                 ring_pt.append(np.repeat(idx, len(rq)))
                 ring_r.append(np.tile(rq, len(idx)))
@@ -326,14 +327,30 @@ class CoreSolution:
                 comps[q] += np.bincount(pt, weights=res[q] * ww, minlength=len(z))
         return _rz_to_xyz(p, rho, comps, gradient, MU0)
 
+    def _rule(self, grp: dict, nodes: int):
+        """The group's product rule with ``nodes`` rings (built on first use, cached)."""
+        rule = grp["rules"].get(nodes)
+        if rule is None:
+            if grp["kind"] == "side":
+                i = grp["side"]
+                rule = _product_rule(self.side_z_lo[i], self.side_z_hi[i], self.k_side[i],
+                                     grp["lo"], grp["hi"], nodes, "side", self.radius)
+            else:
+                i = grp["disc"]
+                rule = _product_rule(self.disc_r_lo[i], self.disc_r_hi[i], self.k_disc[i],
+                                     grp["lo"], grp["hi"], nodes, "disc", grp["fixed"])
+            grp["rules"][nodes] = rule
+        return rule
+
     def groups(self) -> list[dict]:
         """Source groups of the compressed rule (cached on the instance).
 
         Each: ``kind`` ('side' or 'disc'), source-coordinate interval ``lo``, ``hi`` (z for the
         side, r for a face), ``fixed`` (the face's z), the panel indices ``side`` / ``disc`` it
-        covers, and ``rules``: {nodes: (r, z, current per ring)} product rules (the loop field
-        interpolated at Gauss nodes, the piecewise-constant K with its rim singularity
-        integrated exactly in the weights).
+        covers, ``cancel`` (:func:`_cancellation`) and ``rules``: {nodes: (r, z, current per
+        ring)} product rules filled on first use by :meth:`_rule` (the loop field interpolated
+        at Gauss nodes, the piecewise-constant K with its rim singularity integrated exactly in
+        the weights).
         """
         cached = self.__dict__.get("_groups")
         if cached is not None:
@@ -357,9 +374,7 @@ class CoreSolution:
                         "disc": np.zeros(0, dtype=int),
                         "cancel": _cancellation(self.k_side[sel], self.side_z_hi[sel]
                                                 - self.side_z_lo[sel]),
-                        "rules": {n: _product_rule(self.side_z_lo[sel], self.side_z_hi[sel],
-                                                   self.k_side[sel], a, b, n, "side",
-                                                   self.radius) for n in FAR_NODES}})
+                        "rules": {}})
         for zp in np.unique(self.disc_z):
             sel = np.flatnonzero(self.disc_z == zp)
             r_lo = float(self.disc_r_lo[sel].min())
@@ -371,9 +386,7 @@ class CoreSolution:
                         "cancel": max(_cancellation(self.k_disc[sel], mom),
                                       _cancellation(self.k_disc[sel], self.disc_r_hi[sel]
                                                     - self.disc_r_lo[sel])),
-                        "rules": {n: _product_rule(self.disc_r_lo[sel], self.disc_r_hi[sel],
-                                                   self.k_disc[sel], r_lo, r_hi, n, "disc",
-                                                   float(zp)) for n in FAR_NODES}})
+                        "rules": {}})
         object.__setattr__(self, "_groups", out)  # frozen dataclass: cache the derived rules
         return out
 

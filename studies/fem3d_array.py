@@ -66,8 +66,10 @@ def run(out_dir="out/fem3d_array", quick: bool = False, level: int | None = None
                      for z in (0.012, 0.03, 0.06)])
     arrays: dict = {}
     summary: dict = {"levels": list(levels), "seconds": {}}
-    steps = [("single", l) for l in levels] + [("block", l) for l in levels] + \
-        [("pull", l) for l in levels] + [("two", lv), ("centre", lv)] + \
+    # the reference cases first, the accuracy checks and the coarser levels after: every step
+    # rewrites the result files, so an interrupted run keeps what it finished
+    steps = [("two", lv), ("centre", lv), ("pull", lv)] + [("single", l) for l in levels] + \
+        [("block", l) for l in levels[:1]] + [("pull", l) for l in levels[:-1]] + \
         ([] if quick else [("corner", lv - 1)])
     for name, l in tqdm(steps, desc="3-D GetDP cases", mininterval=2):
         t0 = time.perf_counter()
@@ -113,8 +115,8 @@ def run(out_dir="out/fem3d_array", quick: bool = False, level: int | None = None
                 "tets": res.mesh_stats["tetrahedra"]}
             arrays[f"{name}_points"], arrays[f"{name}_b"], arrays[f"{name}_g"] = ws, b, g
         summary["seconds"][f"{name}_L{l}"] = time.perf_counter() - t0
-    np.savez(out / "fem3d_array.npz", **arrays)
-    write_json_atomic(out / "fem3d_array.json", summary)
+        np.savez(out / "fem3d_array.npz", **arrays)
+        write_json_atomic(out / "fem3d_array.json", summary)
     return summary
 
 

@@ -48,6 +48,7 @@ def test_single_core_3d_matches_axisymmetric_model_coarse():
     assert np.all(np.sign(b[:, 0]) == np.sign(bm[:, 0]))
 
 
+@pytest.mark.slow
 def test_image_method_force_of_magnet_above_block():
     """F = int (M . grad) B_ind over the magnet, B_ind = B - B(block as air) on one mesh,
     against the image method (mu_r 1000, 10 mm gap) within 5 % on a coarse mesh."""
