@@ -1453,3 +1453,99 @@ def evaluate_device(design: Design, problem: DeviceProblem | None = None) -> dic
                 "violated": sorted(n for n, t in table.items() if not t["met"]),
                 "feasible": all(t["met"] for t in table.values())})
     return out
+
+
+def verify_device(problem: DeviceProblem, result: DeviceResult, *, starts: int = 4,
+                  isres_evaluations: int = 3000, grid_levels: int = 4, seed: int = 0,
+                  progress: bool = False) -> dict:
+    """Global checks of a device optimum on the corrected fast model, wire fixed to the chosen
+    standard size (6 continuous variables).
+
+    1. multistart: ``starts`` SLSQP runs from shifted-Halton points;
+    2. global: nlopt GN_ISRES (stochastic, constrained) for ``isres_evaluations``, polished
+       by SLSQP;
+    3. a coarse grid of ``grid_levels`` values per variable (levels^6 designs, bounds
+       included).
+    ``agree`` when every feasible multistart optimum and the polished ISRES optimum reach the
+    best value to 1e-3 relative and no feasible grid point beats it. Returns numbers (SI),
+    evaluations and seconds of each stage.
+    """
+    import nlopt
+
+    prob = dataclasses.replace(problem, corrections=result.corrections)
+    wire = result.wire_diameter_m
+    model = _FastModel(prob, {6: wire})
+    lo, hi = model.lo, model.hi
+    out: dict = {"wire_diameter_m": wire, "corrections": list(result.corrections)}
+    # reference: the corrected local optimum from the result's continuous design
+    t0 = time.perf_counter()
+    ref = _local(model, [DeviceProblem.search(result.x_continuous)[k] for k in model.free])
+    best = ref.value
+    # 1. multistart
+    t1 = time.perf_counter()
+    c0 = model.calls
+    ys = lo + _halton(starts, len(lo), seed + 17) * (hi - lo)
+    ys[:, 1] = np.maximum(ys[:, 1], np.minimum(ys[:, 0] + 2e-3, hi[1]))
+    runs = [_local(model, y0) for y0 in ys]
+    feas = [r.value for r in runs if r.feasible]
+    out["multistart"] = {"starts": starts, "feasible": len(feas),
+                         "values_n": [float(v_) for v_ in feas],
+                         "best_n": float(max(feas)) if feas else None,
+                         "evaluations": model.calls - c0,
+                         "seconds": time.perf_counter() - t1}
+    # 2. ISRES
+    t2 = time.perf_counter()
+    c0 = model.calls
+    nlopt.srand(seed)
+    n = len(lo)
+    opt = nlopt.opt(nlopt.GN_ISRES, n)
+    opt.set_lower_bounds(np.zeros(n))
+    opt.set_upper_bounds(np.ones(n))
+    opt.set_max_objective(lambda u, g: float(model.values(lo + u * (hi - lo))[0]))
+
+    def cfun(res, u, g):
+        res[:] = model.values(lo + u * (hi - lo))[1:]
+
+    opt.add_inequality_mconstraint(cfun, [1e-8] * len(DEVICE_CONSTRAINTS))
+    opt.set_maxeval(int(isres_evaluations))
+    u = opt.optimize(np.full(n, 0.5))
+    raw = model.values(lo + u * (hi - lo))
+    pol = _local(model, lo + u * (hi - lo))
+    out["isres"] = {"evaluations_requested": int(isres_evaluations),
+                    "raw_value_n": float(raw[0]), "raw_feasible": bool(np.all(raw[1:] <= 1e-8)),
+                    "polished_value_n": float(pol.value), "polished_feasible": pol.feasible,
+                    "evaluations": model.calls - c0, "seconds": time.perf_counter() - t2}
+    # 3. grid
+    t3 = time.perf_counter()
+    c0 = model.calls
+    axes = [np.linspace(a_, b_, grid_levels) for a_, b_ in zip(lo, hi)]
+    grid_best, grid_x, n_feas = -np.inf, None, 0
+    import itertools
+
+    pts = list(itertools.product(*axes))
+    it = pts
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(pts, desc="grid", unit="design")
+    for y in it:
+        val = model.values(np.array(y))
+        if np.all(val[1:] <= 1e-8):
+            n_feas += 1
+            if val[0] > grid_best:
+                grid_best, grid_x = float(val[0]), y
+    out["grid"] = {"levels": grid_levels, "designs": len(pts), "feasible": n_feas,
+                   "best_n": grid_best if n_feas else None,
+                   "best_x": None if grid_x is None else
+                   dict(zip(DEVICE_VARIABLES, model.full_x(grid_x))),
+                   "evaluations": model.calls - c0, "seconds": time.perf_counter() - t3}
+    best = max([best] + feas + ([pol.value] if pol.feasible else []))
+    tol = 1e-3
+    ms_ok = bool(feas) and all(abs(v_ - best) <= tol * best for v_ in feas)
+    is_ok = pol.feasible and abs(pol.value - best) <= tol * best
+    grid_ok = (not n_feas) or grid_best <= best * (1 + 1e-9)
+    out.update({"reference_local_n": float(ref.value), "best_n": float(best),
+                "multistart_agree": ms_ok, "isres_agree": bool(is_ok), "grid_not_better": grid_ok,
+                "agree": bool(ms_ok and is_ok and grid_ok),
+                "evaluations": model.calls, "seconds": time.perf_counter() - t0})
+    return out
