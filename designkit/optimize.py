@@ -1029,10 +1029,18 @@ class DeviceProblem:
         out = {}
         for name, (val, lim, sense, note) in items.items():
             margin = (lim - val) * sense
-            out[name] = {"value": float(val), "limit": float(lim),
+            out[name] = {"value": float(val), "limit": float(lim), "unit": _unit_of(name),
                          "kind": "upper" if sense > 0 else "lower", "margin": float(margin),
                          "met": bool(margin >= -1e-9 * max(abs(lim), 1e-12)), "note": note}
         return out
+
+
+def _unit_of(name: str) -> str:
+    """Unit of a constraint from its key's suffix (value, limit and margin share it)."""
+    for suffix, unit in (("_ohm", "ohm"), ("_v", "V"), ("_s", "s"), ("_m", "m")):
+        if name.endswith(suffix):
+            return unit
+    return "turns" if name == "turns" else ""
 
 
 def _panel_core(ri, ro, ln, n, a, lc, offset, current, z_mag):
@@ -1427,7 +1435,15 @@ def device_design(base: Design, result: DeviceResult, problem: DeviceProblem, *,
         "core.offset_m": DeviceProblem.core_offset(result.x), "core.bh": "steel1010",
         "drive.supply_voltage_v": problem.supply_voltage_v,
         "drive.max_current_a": problem.current_a,
+        # the workspace starts where the magnet can be: above the upper sensor board
+        "workspace.z_min_m": max(base.workspace.z_min_m, reachable_height_m(base)),
     })
+
+
+def reachable_height_m(design: Design) -> float:
+    """Lowest magnet-centre height above the coil tops: the upper sensor board's top
+    (sensors.offset_m + :data:`BOARD_THICKNESS_M`) plus the magnet's half length, m."""
+    return design.sensors.offset_m + BOARD_THICKNESS_M + design.magnet.length_m / 2
 
 
 def device_problem_for(design: Design, **kw) -> DeviceProblem:
@@ -1462,9 +1478,15 @@ def evaluate_device(design: Design, problem: DeviceProblem | None = None) -> dic
     # the design's own supply is a constraint too (the thesis' 36 V > the MD10C's 30 V)
     table["design_supply_voltage_v"] = {
         "value": float(design.drive.supply_voltage_v), "limit": p.supply_voltage_v,
-        "kind": "upper", "margin": p.supply_voltage_v - design.drive.supply_voltage_v,
+        "unit": "V", "kind": "upper", "margin": p.supply_voltage_v - design.drive.supply_voltage_v,
         "met": design.drive.supply_voltage_v <= p.supply_voltage_v,
         "note": "the design's supply vs the MD10C rating"}
+    reach = reachable_height_m(design)
+    table["workspace_z_min_m"] = {
+        "value": float(design.workspace.z_min_m), "limit": reach, "unit": "m", "kind": "lower",
+        "margin": float(design.workspace.z_min_m - reach),
+        "met": bool(design.workspace.z_min_m >= reach - 1e-12),
+        "note": "workspace starts where the magnet fits above the upper sensor board"}
     out = {k2: v2 for k2, v2 in ev.items() if k2 != "g"}
     out.update({"name": design.name, "turns": int(c.turns), "turns_that_fit": fit,
                 "inner_radius_m": c.inner_radius_m, "outer_radius_m": c.outer_radius_m,
@@ -1583,3 +1605,98 @@ def _verify_device(problem: DeviceProblem, result: DeviceResult, *, starts: int 
                 "agree": bool(ms_ok and is_ok and grid_ok),
                 "evaluations": model.calls, "seconds": time.perf_counter() - t0})
     return out
+
+
+# ====================================================================== rendering objective
+def workspace_region(design: Design, *, half_width_m: float | None = None,
+                     heights_m: Sequence[float] | None = None, n_xy: int = 3) -> np.ndarray:
+    """Points of the rendering region, (n, 3) m: an n_xy x n_xy grid over +/- half_width_m
+    (default: one pitch, the inner array) at ``heights_m`` (default: the lowest height the
+    magnet reaches above the upper sensor board -- board top + magnet half length, at least
+    workspace.z_min_m -- and the design height)."""
+    hw = design.array.pitch_m if half_width_m is None else float(half_width_m)
+    if heights_m is None:
+        reach = reachable_height_m(design)
+        heights_m = (max(design.workspace.z_min_m, reach), design.optimize.height_m)
+    xs = np.linspace(-hw, hw, n_xy)
+    X, Y, Z = np.meshgrid(xs, xs, np.asarray(heights_m, dtype=float), indexing="ij")
+    return np.c_[X.ravel(), Y.ravel(), Z.ravel()]
+
+
+def array_force_per_amp(coil_x: Sequence[float], turns: float, current_a: float,
+                        centres_xy_m: np.ndarray, points_m: np.ndarray, moment_a_m2: float, *,
+                        core_force_ratio: float = 1.0, n_slices: int = 12) -> np.ndarray:
+    """Force per ampere on a z-axis dipole of |m| = moment_a_m2 from each coil, (n, 3, n_coils).
+
+    Each coil: its winding (exact kernel) plus its 1010-steel core magnetized as the fast slice
+    model gives at ``current_a`` (secant: field per ampere = field at current_a / current_a),
+    times ``core_force_ratio`` (e.g. the panel/fast ratio at the design point). Coils do not
+    couple (each core sees only its own winding). Physical x as :data:`DEVICE_VARIABLES`.
+    """
+    from .core_fast import solve_rod
+    from .field import cylindrical_to_cartesian
+    from .field.kernels import sheet_rz
+    from .field.winding import winding_rz
+
+    ri, ro, ln, a, lc, prot, _ = [float(q) for q in coil_x]
+    off = ln / 2 + prot - lc / 2
+    sol = solve_rod(ri, ro, ln, turns, min(a, ri), lc, off, current_a, n_slices=n_slices,
+                    quadrature="bessel")
+    pts = np.asarray(points_m, dtype=float)
+    cen = np.asarray(centres_xy_m, dtype=float)
+    nc, npt = len(cen), len(pts)
+    rel = np.repeat(pts[None, :, :], nc, axis=0).reshape(-1, 3)
+    rel[:, 0] -= np.repeat(cen[:, 0], npt)
+    rel[:, 1] -= np.repeat(cen[:, 1], npt)
+    rel[:, 2] += ln / 2  # winding centre at z = -ln/2 (top faces at z = 0)
+    rho = np.hypot(rel[:, 0], rel[:, 1])
+    z = rel[:, 2]
+    j = turns / ((ro - ri) * ln)
+    wres = winding_rz(ri, ro, ln / 2, rho, z, gradient=True, rtol=1e-8)
+    comps = [np.asarray(q) * j for q in wres]
+    e = sol.edges_m
+    for k in range(len(e) - 1):
+        zc, hk = 0.5 * (e[k] + e[k + 1]), 0.5 * (e[k + 1] - e[k])
+        sres = sheet_rz(sol.radius_m, hk, rho, z - zc, gradient=True)
+        kk = sol.m_a_per_m[k] / current_a * core_force_ratio
+        comps = [c + np.asarray(q) * kk for c, q in zip(comps, sres)]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cphi = np.where(rho > 0, rel[:, 0] / np.where(rho > 0, rho, 1.0), 1.0)
+        sphi = np.where(rho > 0, rel[:, 1] / np.where(rho > 0, rho, 1.0), 0.0)
+    _, g = cylindrical_to_cartesian(cphi, sphi, MU0, comps, True)
+    f = moment_a_m2 * g[:, 2, :]  # F_j = m dBz/dx_j for m along z (curl B = 0 outside)
+    return f.reshape(nc, npt, 3).transpose(1, 2, 0)
+
+
+def rendering_force(design: Design, *, coil_x: Sequence[float] | None = None,
+                    turns: float | None = None, points_m: np.ndarray | None = None,
+                    core_force_ratio: float = 1.0) -> dict:
+    """The rendering objective: the smallest upward force the array can render over the
+    workspace region with the bounded allocation (|I_k| <= drive.max_current_a,
+    sum |I_k| <= drive.total_current_a, Fx = Fy = 0: one LP per point,
+    :func:`designkit.array.max_vertical_force` with ``lateral='zero'``).
+
+    The bipolar drive makes the result independent of the magnet's polarity (I -> -I).
+    Default coil: the design's own. Returns min_upward_force_n, per-point forces (N) and the
+    points (m).
+    """
+    from .array import max_vertical_force
+
+    if coil_x is None:
+        c, k = design.coil, design.core
+        if k is None:
+            raise BadInputError("design.core", "a core (rendering uses the core model)", None)
+        prot = k.offset_m + k.length_m / 2 - c.length_m / 2
+        coil_x = [c.inner_radius_m, c.outer_radius_m, c.length_m, k.radius_m, k.length_m,
+                  prot, design.wire.diameter_m]
+        turns = c.turns
+    pts = workspace_region(design) if points_m is None else np.asarray(points_m, dtype=float)
+    cen = np.array([[x, y] for x, y, _ in design.coil_centres_m()])
+    f = array_force_per_amp(coil_x, turns, design.drive.max_current_a, cen, pts,
+                            design.magnet.moment_a_m2, core_force_ratio=core_force_ratio)
+    fz = max_vertical_force(f, design.drive.max_current_a, design.drive.total_current_a,
+                            lateral="zero")
+    return {"min_upward_force_n": float(fz.min()), "upward_force_n": fz.tolist(),
+            "points_m": pts.tolist(), "core_force_ratio": core_force_ratio,
+            "allocation": "LP per point: |I_k| <= max_current_a, sum |I_k| <= total_current_a, "
+                          "Fx = Fy = 0"}
