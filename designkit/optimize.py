@@ -31,6 +31,32 @@ Solver: nlopt LD_SLSQP from every point of a scrambled Sobol set of starts (glob
 multistart; the optimum counts as verified when several starts reach it and none does better),
 optionally nlopt GN_ISRES (a global evolutionary method with constraints) polished by SLSQP.
 Variables are scaled to [0, 1].
+
+The real device (issue 16)
+--------------------------
+Device problem (issue 16): winding, wire and 1010-steel core optimized together.
+
+Models: the winding's on-axis gradient in closed form (:func:`axial_gradient_per_current_density`),
+the exact Bessel air inductance, and the saturating core by the fast slice model of
+:mod:`designkit.core_fast` *corrected* by the surface-current panel model of
+:mod:`designkit.core` (``bh='steel1010'``): the core's force and flux linkage in the fast model
+are multiplied by the ratios panel / fast measured at the current optimum, the problem is
+re-solved from there, and this repeats until the ratios settle (space mapping, zeroth order).
+At the reported optimum the corrected model equals the panel model (to the loop tolerance), so
+every reported number and margin is the panel model's; the fast model only steers the search.
+
+Search variables (:data:`SEARCH_VARIABLES`): inner/outer radius and length of the winding,
+core fill (core radius / inner radius), core depth fraction (core length / (winding length +
+protrusion)), core protrusion above the winding top, bare wire diameter (continuous, then the
+two neighbouring sizes of the IEC 60317 table are solved and the better kept). Constraints
+(:data:`DEVICE_CONSTRAINTS`, each with its margin in the output): R at the hot limit (100 C)
+< 6 ohm, I R(100 C) <= the MD10C's 30 V at the operating current (6 A), 5 L_secant(6 A) /
+R(20 C) < 100 ms, adiabatic time from 20 to 100 C at the rendering duty (0.5, assumed) >= 60 s,
+a winding at least one wire deep; bounds: outer diameter + 1 mm <= pitch (no overlap), core
+top 1 mm below the upper sensor board, whole layers of the insulated wire (rounded down at the
+end). Gradients: forward differences of the fast model (smooth by construction: fixed
+quadrature rules, Newton to 1e-12 T). Global check: :func:`verify_device`. Infeasible bounds:
+:func:`_diagnose_infeasible` names each constraint that cannot be met and by how much.
 """
 
 from __future__ import annotations
@@ -793,17 +819,7 @@ def pareto_front(problem: CoilDesignProblem, *, tau_caps_s: Sequence[float] | No
 
 
 # ====================================================================== the real device
-"""Device problem (issue 16): winding, wire and 1010-steel core optimized together.
-
-Models: the winding's on-axis gradient in closed form (:func:`axial_gradient_per_current_density`),
-the exact Bessel air inductance, and the saturating core by the fast slice model of
-:mod:`designkit.core_fast` *corrected* by the surface-current panel model of
-:mod:`designkit.core` (``bh='steel1010'``): the core's force and flux linkage in the fast model
-are multiplied by the ratios panel / fast measured at the current optimum, the problem is
-re-solved from there, and this repeats until the ratios settle (space mapping, zeroth order).
-At the reported optimum the corrected model equals the panel model (to the loop tolerance), so
-every reported number and margin is the panel model's; the fast model only steers the search.
-"""
+# (module docs: "The real device")
 
 DEVICE_VARIABLES = ("inner_radius_m", "outer_radius_m", "length_m", "core_radius_m",
                     "core_length_m", "core_protrusion_m", "wire_diameter_m")
