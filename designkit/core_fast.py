@@ -64,7 +64,8 @@ N_SLICES = 24
 
 @functools.lru_cache(maxsize=1)
 def _h_of_b():
-    return PchipInterpolator(STEEL1010_B, STEEL1010_H, extrapolate=True)
+    f = PchipInterpolator(STEEL1010_B, STEEL1010_H, extrapolate=True)
+    return f, f.derivative()
 
 
 def steel1010_h_smooth(b_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -74,10 +75,10 @@ def steel1010_h_smooth(b_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """
     b = np.asarray(b_t, dtype=float)
     ab = np.abs(b)
-    f = _h_of_b()
+    f, df = _h_of_b()
     top = STEEL1010_B[-1]
     h = np.where(ab <= top, f(np.minimum(ab, top)), STEEL1010_H[-1] + (ab - top) / MU0)
-    dh = np.where(ab <= top, f.derivative()(np.minimum(ab, top)), 1.0 / MU0)
+    dh = np.where(ab <= top, df(np.minimum(ab, top)), 1.0 / MU0)
     return np.sign(b) * h, dh
 
 
@@ -195,8 +196,17 @@ def _q_exp(k, ell):
     return 2.0 * (u + np.expm1(-u)) / (k * k)
 
 
+@functools.lru_cache(maxsize=8)
+def _outer_nodes(t_max: float, nodes: int):
+    """Fixed t = k ro nodes, weights, S(t) and J-free parts that do not depend on the geometry."""
+    from .electrical import _int_xj1, _panels
+
+    t, wt = _panels(float(t_max), nodes)
+    return t, wt, _int_xj1(t)
+
+
 def bessel_slice_flux(inner_radius_m, outer_radius_m, length_m, turns, radius_m, edges_m, *,
-                      t_max: float = 400.0, nodes: int = 6) -> np.ndarray:
+                      t_max: float = 200.0, nodes: int = 6) -> np.ndarray:
     """Same G_k as :func:`applied_slice_flux` by the Fourier-Bessel mutual-inductance integral.
 
     G_k = mu0 pi a n_w int_0^inf J1(k a) [S(k ro) - S(k ri)] / k^2 E_k(k) dk, with
@@ -208,14 +218,14 @@ def bessel_slice_flux(inner_radius_m, outer_radius_m, length_m, turns, radius_m,
     """
     from scipy.special import j1
 
-    from .electrical import _int_xj1, _panels
+    from .electrical import _int_xj1
 
     ro, ri = float(outer_radius_m), float(inner_radius_m)
     a = float(radius_m)
-    t, wt = _panels(float(t_max), nodes)
+    t, wt, s_outer = _outer_nodes(float(t_max), int(nodes))
     k = t / ro
     wk = wt / ro
-    rad = (_int_xj1(t) - _int_xj1(k * ri)) / (k * k)
+    rad = (s_outer - _int_xj1(k * ri)) / (k * k)
     w1, w2 = -length_m / 2, length_m / 2
     p1 = np.asarray(edges_m[:-1], dtype=float)[:, None]
     p2 = np.asarray(edges_m[1:], dtype=float)[:, None]

@@ -1131,7 +1131,8 @@ class _FastModel:
         return base, jac
 
 
-def _local(model: _FastModel, y0, max_evaluations: int = 80) -> LocalRun:
+def _local(model: _FastModel, y0, max_evaluations: int = 80, *, xtol_rel: float = 1e-5,
+           ftol_rel: float = 1e-9) -> LocalRun:
     nc = len(DEVICE_CONSTRAINTS)
 
     def obj(y):
@@ -1142,8 +1143,8 @@ def _local(model: _FastModel, y0, max_evaluations: int = 80) -> LocalRun:
         val, jac = model.with_gradient(y)
         return val[1:], jac[1:]
 
-    return maximize(obj, cons, nc, model.lo, model.hi, y0, xtol_rel=1e-5, ftol_rel=1e-9,
-                    max_evaluations=max_evaluations)
+    return maximize(obj, cons, nc, model.lo, model.hi, y0, xtol_rel=xtol_rel,
+                    ftol_rel=ftol_rel, max_evaluations=max_evaluations)
 
 
 def _halton(n: int, dim: int, seed: int) -> np.ndarray:
@@ -1356,7 +1357,8 @@ def _solve_device(problem: DeviceProblem, *, starts: int = 4, seed: int = 0,
 
         bar = tqdm(total=starts + 2, desc="optimize", unit="stage")
     for y0 in it:
-        runs.append(_local(model, y0))
+        # coarse tolerances: the starts only have to find the basin; the wire stage polishes
+        runs.append(_local(model, y0, xtol_rel=1e-3, ftol_rel=1e-6))
         if bar is not None:
             bar.update(1)
     fast_calls = model.calls
