@@ -1718,3 +1718,32 @@ def rendering_force(design: Design, *, coil_x: Sequence[float] | None = None,
             "points_m": pts.tolist(), "core_force_ratio": core_force_ratio,
             "allocation": "LP per point: |I_k| <= max_current_a, sum |I_k| <= total_current_a, "
                           "Fx = Fy = 0"}
+
+
+def getdp_check(design: Design, reported: dict, *, level: int = 1,
+                out_dir: str | None = None) -> dict:
+    """Check a device's force and inductance against GetDP (axisymmetric, nonlinear 1010 steel).
+
+    ``reported``: numbers of :meth:`DeviceProblem.evaluate` / :func:`evaluate_device` (force_n =
+    upward force at the design point, inductance_h = secant at the drive current). The FEM's
+    dBz/dz on the axis at the design height (local polynomial fit of the sampled line) gives
+    the force |m| |dBz/dz|; its flux linkage / current the secant inductance.
+    Returns both, the relative errors and ``within_3_percent``.
+    """
+    from .coil import Coil
+    from .fem.runner import solve as fem_solve
+
+    coil = Coil.from_design(design)
+    fem = fem_solve(coil, design.drive.max_current_a, level=level, out_dir=out_dir)
+    z = design.optimize.height_m + design.coil.length_m / 2
+    g = float(fem.axis.fit(np.array([z]))["dbz_dz"][0])
+    f_fem = design.magnet.moment_a_m2 * abs(g)
+    l_fem = float(fem.inductance_linkage)
+    ef = reported["force_n"] / f_fem - 1.0
+    el_ = reported["inductance_h"] / l_fem - 1.0
+    return {"force_fem_n": f_fem, "force_n": reported["force_n"], "force_rel_err": ef,
+            "inductance_fem_h": l_fem, "inductance_h": reported["inductance_h"],
+            "inductance_rel_err": el_, "mesh_level": level,
+            "fem_nodes": fem.mesh_stats.get("nodes"), "fem_seconds": fem.solve_seconds,
+            "fem_converged": bool(fem.newton_converged),
+            "within_3_percent": bool(abs(ef) <= 0.03 and abs(el_) <= 0.03)}

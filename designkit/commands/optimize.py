@@ -31,6 +31,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "constraint; coil: the thesis' eq. 2.14 winding-only problem")
     parser.add_argument("--verify", action="store_true",
                         help="device: also run the global checks (multistart, ISRES, grid)")
+    parser.add_argument("--fem", action="store_true",
+                        help="device: check the optimum's force and inductance against GetDP "
+                             "(nonlinear 1010 steel; ~1 min)")
     parser.add_argument("--core-model", choices=CORE_MODEL_NAMES, default="air",
                         help="coil problem only: force/inductance model (default air)")
     parser.add_argument("--starts", type=int, default=None,
@@ -63,6 +66,10 @@ def _run_device(args, design, starts: int) -> int:
     data["optimized_design_hash"] = optimum.spec_hash()
     if args.verify:
         data["verification"] = verify_device(problem, result, seed=args.seed, progress=True)
+    if getattr(args, "fem", False):
+        from ..optimize import getdp_check
+
+        data["getdp_check"] = getdp_check(optimum, data)
     if design.core is not None:
         data["base_design"] = evaluate_device(design, problem)
     data["total_seconds"] = time.perf_counter() - t0
@@ -122,6 +129,13 @@ def device_summary(data: dict) -> str:
             f"{ver['grid']['designs']} designs best "
             f"{(ver['grid']['best_n'] or 0) * 1e3:.1f} mN not better={ver['grid_not_better']}; "
             f"{ver['evaluations']} evaluations, {ver['seconds']:.1f} s)")
+    fem = data.get("getdp_check")
+    if fem:
+        lines.append(f"GetDP check (level {fem['mesh_level']}, {fem['fem_nodes']} nodes): force "
+                     f"{fem['force_fem_n'] * 1e3:.1f} mN ({fem['force_rel_err'] * 100:+.2f} %), "
+                     f"inductance {fem['inductance_fem_h'] * 1e3:.3f} mH "
+                     f"({fem['inductance_rel_err'] * 100:+.2f} %); within 3 %: "
+                     f"{fem['within_3_percent']}")
     base = data.get("base_design")
     if base:
         bad = ", ".join(base["violated"]) or "none"
