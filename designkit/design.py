@@ -304,16 +304,42 @@ def design_from_dict(data: Mapping[str, Any], *, source: str = "design") -> Desi
     return Design(**kwargs)
 
 
-def load_design(path: str | Path | None) -> Design:
-    """Load a TOML design file; ``None`` gives :func:`default_design`.
+NAMED_DESIGNS: dict[str, str | None] = {"thesis": None, "thesis-default": None,
+                                          "optimized": "optimized.toml"}
+"""Designs loadable by name (``--design optimized``): None = the embedded thesis default;
+otherwise a TOML file shipped in ``designkit/data`` (``optimized``: the device of
+``designkit optimize`` meeting every constraint, see designkit.optimize)."""
 
-    Missing tables and keys take the default design's values.
+
+def named_design(name: str) -> Design:
+    """A shipped design by name (:data:`NAMED_DESIGNS`)."""
+    if name not in NAMED_DESIGNS:
+        raise BadInputError("design", f"a TOML path or one of the names {sorted(NAMED_DESIGNS)}",
+                            name)
+    fname = NAMED_DESIGNS[name]
+    if fname is None:
+        return default_design()
+    from importlib import resources
+
+    text = resources.files("designkit").joinpath("data", fname).read_text()
+    return design_from_dict(tomllib.loads(text), source=f"designkit/data/{fname}")
+
+
+def load_design(path: str | Path | None) -> Design:
+    """Load a TOML design file, or a shipped design by name; ``None`` gives
+    :func:`default_design`.
+
+    Names (:data:`NAMED_DESIGNS`) are used only when no file of that name exists. Missing
+    tables and keys take the default design's values.
     """
     if path is None:
         return default_design()
     p = Path(path)
+    if not p.is_file() and str(path) in NAMED_DESIGNS:
+        return named_design(str(path))
     if not p.is_file():
-        raise BadInputError("design", "a path to an existing TOML file", str(p))
+        raise BadInputError("design", "a path to an existing TOML file or one of the names "
+                            f"{sorted(NAMED_DESIGNS)}", str(p))
     try:
         data = tomllib.loads(p.read_text())
     except tomllib.TOMLDecodeError as exc:

@@ -31,6 +31,32 @@ Solver: nlopt LD_SLSQP from every point of a scrambled Sobol set of starts (glob
 multistart; the optimum counts as verified when several starts reach it and none does better),
 optionally nlopt GN_ISRES (a global evolutionary method with constraints) polished by SLSQP.
 Variables are scaled to [0, 1].
+
+The real device (issue 16)
+--------------------------
+Device problem (issue 16): winding, wire and 1010-steel core optimized together.
+
+Models: the winding's on-axis gradient in closed form (:func:`axial_gradient_per_current_density`),
+the exact Bessel air inductance, and the saturating core by the fast slice model of
+:mod:`designkit.core_fast` *corrected* by the surface-current panel model of
+:mod:`designkit.core` (``bh='steel1010'``): the core's force and flux linkage in the fast model
+are multiplied by the ratios panel / fast measured at the current optimum, the problem is
+re-solved from there, and this repeats until the ratios settle (space mapping, zeroth order).
+At the reported optimum the corrected model equals the panel model (to the loop tolerance), so
+every reported number and margin is the panel model's; the fast model only steers the search.
+
+Search variables (:data:`SEARCH_VARIABLES`): inner/outer radius and length of the winding,
+core fill (core radius / inner radius), core depth fraction (core length / (winding length +
+protrusion)), core protrusion above the winding top, bare wire diameter (continuous, then the
+two neighbouring sizes of the IEC 60317 table are solved and the better kept). Constraints
+(:data:`DEVICE_CONSTRAINTS`, each with its margin in the output): R at the hot limit (100 C)
+< 6 ohm, I R(100 C) <= the MD10C's 30 V at the operating current (6 A), 5 L_secant(6 A) /
+R(20 C) < 100 ms, adiabatic time from 20 to 100 C at the rendering duty (0.5, assumed) >= 60 s,
+a winding at least one wire deep; bounds: outer diameter + 1 mm <= pitch (no overlap), core
+top 1 mm below the upper sensor board, whole layers of the insulated wire (rounded down at the
+end). Gradients: forward differences of the fast model (smooth by construction: fixed
+quadrature rules, Newton to 1e-12 T). Global check: :func:`verify_device`. Infeasible bounds:
+:func:`_diagnose_infeasible` names each constraint that cannot be met and by how much.
 """
 
 from __future__ import annotations
@@ -480,7 +506,9 @@ class OptimizeResult:
     runs: tuple[LocalRun, ...]
     starts_at_best: int
     global_method: str
-    verified_global: bool
+    starts_agree: bool
+    """At least two starts reach the best objective to 1e-6 and none does better (a multistart
+    agreement only; the device problem's :func:`verify_device` is the global check)."""
     thesis_point: dict = field(default_factory=dict)
 
     def as_dict(self) -> dict:
@@ -489,7 +517,7 @@ class OptimizeResult:
                "model_evaluations": self.model_evaluations, "seconds": self.seconds,
                "global_method": self.global_method, "local_method": "LD_SLSQP",
                "starts": len(self.runs), "starts_at_best": self.starts_at_best,
-               "verified_global": self.verified_global,
+               "starts_agree": self.starts_agree,
                "local_optima": [dataclasses.asdict(r) for r in self.runs],
                "thesis_point": self.thesis_point}
         return out
@@ -598,7 +626,7 @@ def solve(problem: CoilDesignProblem, *, starts: int = 8, global_method: str = "
     Returns
     -------
     OptimizeResult
-        ``verified_global`` is True when at least two starts reach the best objective to 1e-6
+        ``starts_agree`` is True when at least two starts reach the best objective to 1e-6
         relative and no start found a better feasible point.
     """
     if global_method not in GLOBAL_METHODS:
@@ -654,7 +682,7 @@ def solve(problem: CoilDesignProblem, *, starts: int = 8, global_method: str = "
     return OptimizeResult(best=best, x=best_run.x, evaluations=calls,
                           model_evaluations=count[0], seconds=seconds,
                           runs=tuple(runs), starts_at_best=at_best, global_method=global_method,
-                          verified_global=at_best >= 2, thesis_point=tp)
+                          starts_agree=at_best >= 2, thesis_point=tp)
 
 
 def _isres(problem: CoilDesignProblem, maxeval: int, seed: int, count) -> np.ndarray:
@@ -788,3 +816,934 @@ def pareto_front(problem: CoilDesignProblem, *, tau_caps_s: Sequence[float] | No
             front.append(a)
     front.sort(key=lambda q: q.force_n)
     return front
+
+
+# ====================================================================== the real device
+# (module docs: "The real device")
+
+DEVICE_VARIABLES = ("inner_radius_m", "outer_radius_m", "length_m", "core_radius_m",
+                    "core_length_m", "core_protrusion_m", "wire_diameter_m")
+DEVICE_CONSTRAINTS = ("resistance_ohm", "supply_voltage_v", "settling_time_s",
+                      "time_to_max_temperature_s", "winding_depth_m")
+SEARCH_VARIABLES = ("inner_radius_m", "outer_radius_m", "length_m", "core_fill",
+                    "core_depth_fraction", "core_protrusion_m", "wire_diameter_m")
+"""What the optimizer moves: core radius = core_fill x inner radius (the bore bounds it) and
+core length = core_depth_fraction x (winding length + protrusion) (the core's bottom never
+below the winding's), so those two limits are bounds, not constraints."""
+BOARD_THICKNESS_M = 0.8e-3
+"""Upper sensor board above ``sensors.offset_m`` (assumed; gives the ~14.8 mm board top)."""
+
+
+@dataclass(frozen=True)
+class DeviceProblem:
+    """The real device's coil problem (SI). Build with :meth:`from_design`.
+
+    Stated operating conditions
+    ---------------------------
+    hot_temperature_c : winding temperature of the resistance and supply constraints (the
+        thermal limit: the coil must still take ``current_a`` from ``supply_voltage_v`` when hot).
+    cold_temperature_c : temperature of the settling-time constraint (cold copper has the
+        lowest R, so the longest L/R).
+    Inductance: *secant* L(I) = L_air + lambda_core(I) / I at the operating current (the
+    incremental value is reported too).
+    """
+
+    height_m: float
+    moment_a_m2: float
+    current_a: float
+    supply_voltage_v: float
+    max_resistance_ohm: float
+    max_settling_time_s: float
+    resistivity_ref_ohm_m: float
+    temperature_coefficient_per_k: float
+    reference_temperature_c: float
+    hot_temperature_c: float
+    cold_temperature_c: float
+    packing: str
+    insulation_ratio: float
+    """Insulated / bare diameter of the wire family (grade-1 enamel, ~1.04-1.1)."""
+    render_duty: float
+    min_time_to_hot_s: float
+    magnet_bottom_clearance_m: float
+    """Design height - magnet half length - upper-board top (>= 0 for the magnet to reach)."""
+    lower: tuple[float, ...]
+    upper: tuple[float, ...]
+    pitch_m: float
+    board_top_m: float
+    wire_table_m: tuple[float, ...] = METRIC_DIAMETERS_M
+    corrections: tuple[float, float] = (1.0, 1.0)
+    """(force, linkage) ratios panel / fast applied to the core's share."""
+    n_slices: int = 12
+
+    @classmethod
+    def from_design(cls, design: Design, *, hot_temperature_c: float = 100.0,
+                    render_duty: float = 0.5, min_time_to_hot_s: float = 60.0,
+                    coil_clearance_m: float = 1e-3, board_clearance_m: float = 1e-3,
+                    **changes) -> "DeviceProblem":
+        """The device problem of ``design``: its magnet, height, drive, sensors and pitch.
+
+        Supply: the driver's rating (``drive.driver_max_voltage_v``, MD10C 30 V). Bounds:
+        inner radius [optimize.min_inner_radius_m, pitch/2]; outer radius up to
+        (pitch - coil_clearance_m)/2 (no overlap at the pitch); winding length
+        [10 mm, optimize.max_length_m]; core radius [2 mm, pitch/2]; core length [10 mm,
+        optimize.max_length_m + protrusion]; protrusion above the winding [0, the upper sensor
+        board's underside - board_clearance_m]; bare wire [0.2, 1.6] mm.
+        """
+        o, w = design.optimize, design.wire
+        pitch = design.array.pitch_m if design.array.rows * design.array.columns > 1 else 1.0
+        board_bottom = design.sensors.offset_m
+        board_top = design.sensors.offset_m + BOARD_THICKNESS_M
+        max_prot = max(board_bottom - board_clearance_m, 1e-4)
+        r_out = min(0.5 * (pitch - coil_clearance_m), o.max_outer_radius_m)
+        lower = (o.min_inner_radius_m, o.min_inner_radius_m + 0.2e-3, 0.010, 0.25, 0.1, 0.0,
+                 0.20e-3)
+        upper = (r_out - 0.3e-3, r_out, o.max_length_m, 1.0, 1.0, max_prot, 1.60e-3)
+        kw = dict(
+            height_m=o.height_m, moment_a_m2=design.magnet.moment_a_m2,
+            current_a=design.drive.max_current_a,
+            supply_voltage_v=design.drive.driver_max_voltage_v,
+            max_resistance_ohm=o.max_resistance_ohm, max_settling_time_s=o.max_settling_time_s,
+            resistivity_ref_ohm_m=w.resistivity_ohm_m,
+            temperature_coefficient_per_k=w.temperature_coefficient_per_k,
+            reference_temperature_c=w.reference_temperature_c,
+            hot_temperature_c=hot_temperature_c,
+            cold_temperature_c=w.reference_temperature_c, packing=w.packing,
+            insulation_ratio=1.04 + 20e-6 / 0.7e-3, render_duty=render_duty,
+            min_time_to_hot_s=min_time_to_hot_s,
+            magnet_bottom_clearance_m=o.height_m - design.magnet.length_m / 2 - board_top,
+            lower=lower, upper=upper, pitch_m=pitch, board_top_m=board_top)
+        kw.update(changes)
+        return cls(**kw)
+
+    def __post_init__(self):
+        v.positive("height_m", self.height_m)
+        v.positive("current_a", self.current_a, "A")
+        v.positive("supply_voltage_v", self.supply_voltage_v, "V")
+        v.in_range("render_duty", self.render_duty, 1e-3, 1.0)
+        if len(self.lower) != 7 or len(self.upper) != 7:
+            raise BadInputError("bounds", f"7 values for {SEARCH_VARIABLES}",
+                                (self.lower, self.upper))
+        for name, lo, hi in zip(SEARCH_VARIABLES, self.lower, self.upper):
+            if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo < hi):
+                raise BadInputError(f"bounds of {name}", "0 <= lower < upper (finite, m)",
+                                    (lo, hi))
+
+    # ------------------------------------------------------------------ model pieces
+    @staticmethod
+    def physical(y) -> list[float]:
+        """Search variables (:data:`SEARCH_VARIABLES`) -> physical (:data:`DEVICE_VARIABLES`)."""
+        ri, ro, ln, fill, depth, prot, d = [float(q) for q in y]
+        return [ri, ro, ln, fill * ri, depth * (ln + prot), prot, d]
+
+    @staticmethod
+    def search(x) -> list[float]:
+        """Physical -> search variables (inverse of :meth:`physical`)."""
+        ri, ro, ln, a, lc, prot, d = [float(q) for q in x]
+        return [ri, ro, ln, a / ri, lc / (ln + prot), prot, d]
+
+    def resistivity(self, temperature_c: float) -> float:
+        return self.resistivity_ref_ohm_m * (1.0 + self.temperature_coefficient_per_k
+                                             * (temperature_c - self.reference_temperature_c))
+
+    def insulated(self, bare_m: float) -> float:
+        return bare_m * self.insulation_ratio
+
+    def turns(self, x) -> float:
+        return el.turns_continuous(x[0], x[1], x[2], self.insulated(x[6]), self.packing)
+
+    @staticmethod
+    def core_offset(x) -> float:
+        """Core centre relative to the winding centre, m (core top = winding top + protrusion)."""
+        return x[2] / 2 + x[5] - x[4] / 2
+
+    def evaluate(self, x, *, turns: float | None = None, model: str = "fast") -> dict:
+        """All model numbers at x (SI). ``model``: 'fast' (corrected slice model) or 'panel'.
+
+        Returns a dict with force_n (upward force the coil renders at the design point with
+        |I| = current_a, >= 0), winding/core shares of dBz/dz, R (hot, cold), L (secant,
+        incremental), tau, supply voltage needed, thermal time, peak core B and the scaled
+        constraints ``g`` (<= 0 feasible), in :data:`DEVICE_CONSTRAINTS` order.
+        """
+        from .core_fast import solve_rod
+
+        x = [float(q) for q in x]
+        ri, ro, ln, a, lc, prot, d = x
+        n = self.turns(x) if turns is None else float(turns)
+        i = self.current_a
+        z_mag = ln / 2 + self.height_m  # magnet centre in the winding frame
+        j = n * i / ((ro - ri) * ln)
+        g_w = float(j * axial_gradient_per_current_density(ri, ro, ln, self.height_m))
+        a_eff = min(a, ri)
+        if model == "fast":
+            sol = solve_rod(ri, ro, ln, n, a_eff, lc, self.core_offset(x), i,
+                            n_slices=self.n_slices, quadrature="bessel")
+            g_c = float(sol.axis_field(z_mag)[1]) * self.corrections[0]
+            lam = sol.linkage_wb * self.corrections[1]
+            l_inc_core = sol.dlinkage_di_wb_per_a * self.corrections[1]
+            peak = sol.peak_b_t
+        elif model == "panel":
+            g_c, lam, peak = _panel_core(ri, ro, ln, n, a_eff, lc, self.core_offset(x), i, z_mag)
+            l_inc_core = float("nan")
+        else:
+            raise BadInputError("model", "'fast' or 'panel'", model)
+        l_air = el.air_inductance_from_geometry(ri, ro, ln, n, t_max=60.0)
+        l_sec = l_air + lam / i
+        wire_len = el.wire_length_from_geometry(ri, ro, n)
+        area = math.pi * d * d / 4
+        r_hot = self.resistivity(self.hot_temperature_c) * wire_len / area
+        r_cold = self.resistivity(self.cold_temperature_c) * wire_len / area
+        tau = l_sec / r_cold
+        volt = i * r_hot
+        mass = el.COPPER_DENSITY_KG_M3 * wire_len * area
+        # adiabatic heating at the rendering duty: mean power duty x I^2 R(T), from cold
+        alpha = self.temperature_coefficient_per_k
+        a_c = alpha / (1 + alpha * (self.cold_temperature_c - self.reference_temperature_c))
+        p0 = self.render_duty * i * i * r_cold
+        t_hot = (mass * el.COPPER_SPECIFIC_HEAT_J_KG_K
+                 * math.log1p(a_c * (self.hot_temperature_c - self.cold_temperature_c))
+                 / (p0 * a_c))
+        d_ins = self.insulated(d)
+        g = (r_hot / self.max_resistance_ohm - 1.0,
+             volt / self.supply_voltage_v - 1.0,
+             5.0 * tau / self.max_settling_time_s - 1.0,
+             1.0 - t_hot / self.min_time_to_hot_s,
+             (ri + d_ins - ro) / 1e-3)
+        return {"turns": n, "force_n": float(self.moment_a_m2 * abs(g_w + g_c)),
+                "dbz_dz_winding_t_per_m": g_w, "dbz_dz_core_t_per_m": g_c,
+                "resistance_ohm": r_hot, "resistance_cold_ohm": r_cold,
+                "inductance_h": l_sec, "inductance_air_h": l_air,
+                "inductance_incremental_h": l_air + l_inc_core,
+                "time_constant_s": tau, "settling_time_s": 5 * tau, "voltage_needed_v": volt,
+                "time_to_max_temperature_s": t_hot, "copper_mass_kg": mass,
+                "peak_core_flux_density_t": peak, "g": g}
+
+    def constraint_table(self, x, ev: dict, turns_fit: int | None = None) -> dict:
+        """Each constraint: value, limit, kind, margin (>= 0 when met; in the value's unit)."""
+        ri, ro, ln, a, lc, prot, d = [float(q) for q in x]
+        items = {
+            "resistance_ohm": (ev["resistance_ohm"], self.max_resistance_ohm, 1,
+                               f"R at {self.hot_temperature_c:g} C"),
+            "supply_voltage_v": (ev["voltage_needed_v"], self.supply_voltage_v, 1,
+                                 f"I R at {self.hot_temperature_c:g} C vs the MD10C rating"),
+            "settling_time_s": (ev["settling_time_s"], self.max_settling_time_s, 1,
+                                f"5 L_secant({self.current_a:g} A) / R({self.cold_temperature_c:g} C)"),
+            "time_to_max_temperature_s": (ev["time_to_max_temperature_s"],
+                                          self.min_time_to_hot_s, -1,
+                                          f"adiabatic, {self.render_duty:g} duty at "
+                                          f"{self.current_a:g} A, {self.cold_temperature_c:g} "
+                                          f"-> {self.hot_temperature_c:g} C"),
+            "core_radius_m": (a, ri, 1, "core fits the bore"),
+            "outer_diameter_m": (2 * ro, self.pitch_m, 1, "coils do not overlap at the pitch"),
+            "core_protrusion_m": (prot, self.upper[5], 1,
+                                  "core top below the upper sensor board"),
+            "magnet_bottom_m": (self.magnet_bottom_clearance_m + self.board_top_m,
+                                self.board_top_m, -1,
+                                "magnet bottom at the design height above the board top"),
+        }
+        if turns_fit is not None:
+            items["turns"] = (ev["turns"], turns_fit, 1, f"{self.packing} packing")
+        out = {}
+        for name, (val, lim, sense, note) in items.items():
+            margin = (lim - val) * sense
+            out[name] = {"value": float(val), "limit": float(lim), "unit": _unit_of(name),
+                         "kind": "upper" if sense > 0 else "lower", "margin": float(margin),
+                         "met": bool(margin >= -1e-9 * max(abs(lim), 1e-12)), "note": note}
+        return out
+
+
+def _unit_of(name: str) -> str:
+    """Unit of a constraint from its key's suffix (value, limit and margin share it)."""
+    for suffix, unit in (("_ohm", "ohm"), ("_v", "V"), ("_s", "s"), ("_m", "m")):
+        if name.endswith(suffix):
+            return unit
+    return "turns" if name == "turns" else ""
+
+
+def _panel_core(ri, ro, ln, n, a, lc, offset, current, z_mag):
+    """Core share of dBz/dz at the magnet (T/m), flux linkage (Wb), peak B (T): panel model."""
+    from .coil import Coil
+    from .core import Core
+
+    ref = 1000
+    core = Core(radius=a, length=lc, offset=offset, bh="steel1010")
+    coil = Coil(ri, ro, ln, ref, core)
+    i_ref = current * n / ref
+    sol = core.solution(coil, i_ref)
+    _, g = sol.field(np.array([[0.0, 0.0, z_mag]]), gradient=True)
+    lam = sol.flux_linkage(coil) * (n / ref)
+    return float(g[0, 2, 2]), float(lam), float(sol.peak_b)
+
+
+class _FastModel:
+    """Cached fast evaluations and forward-difference gradients in scaled variables."""
+
+    def __init__(self, problem: DeviceProblem, fixed: dict[int, float] | None = None):
+        self.p = problem
+        self.fixed = dict(fixed or {})
+        self.free = [k for k in range(7) if k not in self.fixed]
+        self.lo = np.array([problem.lower[k] for k in self.free])
+        self.hi = np.array([problem.upper[k] for k in self.free])
+        self.cache: dict = {}
+        self.calls = 0
+
+    def full_y(self, y) -> list[float]:
+        x = [0.0] * 7
+        for k, val in self.fixed.items():
+            x[k] = val
+        for k, val in zip(self.free, y):
+            x[k] = float(val)
+        return x
+
+    def full_x(self, y) -> list[float]:
+        """Physical design of the free search variables y."""
+        return DeviceProblem.physical(self.full_y(y))
+
+    def values(self, y) -> np.ndarray:
+        """[force_n, g_0, ..., g_6] at the free variables y (SI)."""
+        key = tuple(np.round(np.asarray(y, dtype=float), 14))
+        hit = self.cache.get(key)
+        if hit is None:
+            self.calls += 1
+            x = self.full_x(y)
+            if x[1] <= x[0] * (1 + 1e-9):  # empty winding: no force, depth constraint violated
+                hit = np.array([0.0, 0, 0, 0, 0, (x[0] + self.p.insulated(x[6]) - x[1]) / 1e-3])
+            else:
+                ev = self.p.evaluate(x)
+                hit = np.array([ev["force_n"], *ev["g"]], dtype=float)
+            if len(self.cache) > 4096:
+                self.cache.clear()
+            self.cache[key] = hit
+        return hit
+
+    def with_gradient(self, y):
+        y = np.asarray(y, dtype=float)
+        base = self.values(y)
+        jac = np.zeros((len(base), len(y)))
+        span = self.hi - self.lo
+        for k in range(len(y)):
+            h = 1e-6 * span[k]
+            yp = y.copy()
+            # step inwards at the upper bound so the model is never evaluated outside
+            if yp[k] + h > self.hi[k]:
+                h = -h
+            yp[k] += h
+            jac[:, k] = (self.values(yp) - base) / h
+        return base, jac
+
+
+def _local(model: _FastModel, y0, max_evaluations: int = 80, *, xtol_rel: float = 1e-5,
+           ftol_rel: float = 1e-9) -> LocalRun:
+    nc = len(DEVICE_CONSTRAINTS)
+
+    def obj(y):
+        val, jac = model.with_gradient(y)
+        return val[0], jac[0]
+
+    def cons(y):
+        val, jac = model.with_gradient(y)
+        return val[1:], jac[1:]
+
+    return maximize(obj, cons, nc, model.lo, model.hi, y0, xtol_rel=xtol_rel,
+                    ftol_rel=ftol_rel, max_evaluations=max_evaluations)
+
+
+def _halton(n: int, dim: int, seed: int) -> np.ndarray:
+    """Randomly shifted Halton points in [0, 1)^dim (scipy.stats' import alone costs ~1 s)."""
+    primes = (2, 3, 5, 7, 11, 13, 17, 19, 23, 29)[:dim]
+    out = np.empty((n, dim))
+    for j, b in enumerate(primes):
+        for i in range(n):
+            f, r, k = 1.0, 0.0, i + 1
+            while k:
+                f /= b
+                r += f * (k % b)
+                k //= b
+            out[i, j] = r
+    shift = np.random.default_rng(seed).random(dim)
+    return (out + shift) % 1.0
+
+
+def _sobol(lo, hi, n, seed):
+    u = _halton(n, len(lo), seed)
+    return np.asarray(lo) + u * (np.asarray(hi) - np.asarray(lo))
+
+
+def _device_starts(problem: DeviceProblem, n: int, seed: int) -> np.ndarray:
+    """Sobol starts made geometrically sensible (core in the bore, Ro above Ri)."""
+    x = _sobol(problem.lower, problem.upper, n, seed)
+    x[:, 1] = np.maximum(x[:, 1], np.minimum(x[:, 0] + 2e-3, problem.upper[1]))
+    return x
+
+
+def round_design(problem: DeviceProblem, x) -> tuple[list[float], int]:
+    """Whole turns: the section shrunk to whole layers x whole turns per layer (layered) or
+    the floor of the continuous turns (orthocyclic), core trimmed to stay inside. (x, turns)."""
+    x = [float(q) for q in x]
+    d = problem.insulated(x[6])
+    if problem.packing == "layered":
+        layers = max(1, int(math.floor((x[1] - x[0]) / d + 1e-9)))
+        per = max(1, int(math.floor(x[2] / d + 1e-9)))
+        x[1] = x[0] + layers * d
+        x[2] = per * d
+        n = layers * per
+    else:
+        n = el.turns_from_geometry(x[0], x[1], x[2], d, problem.packing)
+    x[4] = min(x[4], x[2] + x[5])
+    return x, int(n)
+
+
+@dataclass(frozen=True)
+class DeviceResult:
+    """The optimized device (SI) and how it was found."""
+
+    x_continuous: tuple[float, ...]
+    x: tuple[float, ...]
+    """Rounded design: whole layers and turns per layer."""
+    turns: int
+    wire_diameter_m: float
+    insulated_diameter_m: float
+    evaluation: dict
+    """Panel-model numbers of the rounded design (:meth:`DeviceProblem.evaluate`)."""
+    constraints: dict
+    corrections: tuple[float, float]
+    correction_history: tuple
+    starts: tuple[LocalRun, ...]
+    fast_evaluations: int
+    panel_evaluations: int
+    seconds: float
+    core_model: str = "steel1010 (fast slice model corrected by the surface-current panel model)"
+
+    @property
+    def feasible(self) -> bool:
+        return all(c["met"] for c in self.constraints.values())
+
+    def as_dict(self, problem: DeviceProblem) -> dict:
+        ev = self.evaluation
+        ri, ro, ln, a, lc, prot, d = self.x
+        out = {
+            "inner_radius_m": ri, "outer_radius_m": ro, "length_m": ln, "turns": self.turns,
+            "wire_diameter_m": d, "insulated_wire_diameter_m": self.insulated_diameter_m,
+            "core_radius_m": a, "core_length_m": lc, "core_protrusion_m": prot,
+            "core_offset_m": DeviceProblem.core_offset(self.x),
+            "resistance_ohm": ev["resistance_ohm"],
+            "resistance_cold_ohm": ev["resistance_cold_ohm"],
+            "inductance_h": ev["inductance_h"], "inductance_kind": "secant at current_a",
+            "inductance_air_h": ev["inductance_air_h"],
+            "time_constant_s": ev["time_constant_s"], "settling_time_s": ev["settling_time_s"],
+            "supply_voltage_v": problem.supply_voltage_v, "current_a": problem.current_a,
+            "voltage_needed_v": ev["voltage_needed_v"],
+            "force_n": ev["force_n"],
+            "force_definition": "largest upward Fz (z up, on the magnet) the coil renders at "
+                                "the design point with |I| <= current_a (bipolar drive)",
+            "dbz_dz_t_per_m": ev["dbz_dz_winding_t_per_m"] + ev["dbz_dz_core_t_per_m"],
+            "design_height_m": problem.height_m,
+            "peak_core_flux_density_t": ev["peak_core_flux_density_t"],
+            "time_to_max_temperature_s": ev["time_to_max_temperature_s"],
+            "copper_mass_kg": ev["copper_mass_kg"],
+            "core_model": self.core_model, "temperature_c": problem.hot_temperature_c,
+            "cold_temperature_c": problem.cold_temperature_c,
+            "render_duty": problem.render_duty, "packing": problem.packing,
+            "seconds": self.seconds, "fast_evaluations": self.fast_evaluations,
+            "panel_evaluations": self.panel_evaluations,
+            "corrections": {"force": self.corrections[0], "linkage": self.corrections[1]},
+            "correction_history": [list(map(float, c)) for c in self.correction_history],
+            "continuous_optimum": dict(zip(DEVICE_VARIABLES, map(float, self.x_continuous))),
+            "search_variables": list(SEARCH_VARIABLES),
+            "starts": len(self.starts),
+            "local_optima": [dataclasses.asdict(r) for r in self.starts],
+            "constraints": self.constraints,
+            "margins": {k: c["margin"] for k, c in self.constraints.items()},
+            "feasible": self.feasible,
+        }
+        return out
+
+
+def _diagnose_infeasible(problem: DeviceProblem) -> BadInputError:
+    """Which constraint makes the bounds infeasible, and by how much (fast model)."""
+    import nlopt
+
+    model = _FastModel(problem)
+    names = DEVICE_CONSTRAINTS
+    worst = []
+    y0 = _device_starts(problem, 1, 1)[0]
+    n_var = len(y0)
+    for i, name in enumerate(names):
+        def f(u, grad, i=i):
+            y = model.lo + u * (model.hi - model.lo)
+            val, jac = model.with_gradient(y)
+            if grad.size:
+                grad[:] = jac[1 + i] * (model.hi - model.lo)
+            return float(val[1 + i])
+        opt = nlopt.opt(nlopt.LD_SLSQP, n_var)
+        opt.set_lower_bounds(np.zeros(n_var))
+        opt.set_upper_bounds(np.ones(n_var))
+        opt.set_min_objective(f)
+        opt.set_maxeval(200)
+        opt.set_xtol_rel(1e-6)
+        u0 = (y0 - model.lo) / (model.hi - model.lo)
+        try:
+            u = opt.optimize(u0)
+        except nlopt.RoundoffLimited:
+            u = u0
+        best = f(u, np.zeros(0))
+        if best > 1e-6:
+            worst.append((best, name))
+    scale = {"resistance_ohm": (problem.max_resistance_ohm, "ohm"),
+             "supply_voltage_v": (problem.supply_voltage_v, "V"),
+             "settling_time_s": (problem.max_settling_time_s, "s"),
+             "time_to_max_temperature_s": (problem.min_time_to_hot_s, "s"),
+             "winding_depth_m": (1e-3, "m")}
+    if problem.magnet_bottom_clearance_m < 0:
+        worst.append((-problem.magnet_bottom_clearance_m, "magnet_bottom_m"))
+        scale["magnet_bottom_m"] = (1.0, "m")
+    if worst:
+        worst.sort(reverse=True)
+        parts = []
+        for g, name in worst:
+            lim, unit = scale[name]
+            parts.append(f"{name}: misses its limit by at least {g * lim:.4g} {unit} "
+                         f"({g * 100:.3g} % of the limit) at the best point within the bounds")
+        return BadInputError("bounds", "bounds that admit a design meeting every constraint",
+                             (problem.lower, problem.upper),
+                             "Infeasible: " + "; ".join(parts) + ".")
+    return BadInputError("bounds", "bounds that admit a design meeting every constraint",
+                         (problem.lower, problem.upper),
+                         "Each constraint can be met alone but no start met all together "
+                         "(they conflict inside these bounds).")
+
+
+def _one_blas_thread():
+    """Context: BLAS on one thread. The panel model's 280 x 280 solves ran 30x slower with
+    OpenBLAS threads fighting over a loaded 2-core machine (measured 0.16 s vs 5 ms each)."""
+    import contextlib
+
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - optional: only a speed-up
+        return contextlib.nullcontext()
+    return threadpool_limits(limits=1, user_api="blas")
+
+
+def solve_device(problem: DeviceProblem, *, starts: int = 4, seed: int = 0,
+                 max_corrections: int = 4, correction_tol: float = 2e-2,
+                 progress: bool = False) -> DeviceResult:
+    """Optimize the device (see :func:`_solve_device`), BLAS on one thread."""
+    with _one_blas_thread():
+        return _solve_device(problem, starts=starts, seed=seed,
+                             max_corrections=max_corrections, correction_tol=correction_tol,
+                             progress=progress)
+
+
+def _solve_device(problem: DeviceProblem, *, starts: int = 4, seed: int = 0,
+                  max_corrections: int = 4, correction_tol: float = 2e-2,
+                  progress: bool = False) -> DeviceResult:
+    """Optimize the device (module notes above): fast multistart -> standard wire ->
+    corrected re-solves until the panel model agrees -> whole turns, evaluated by the panel
+    model.
+
+    Raises BadInputError naming the constraint (and by how much) when the bounds are
+    infeasible.
+    """
+    starts = v.positive_int("starts", starts)
+    t0 = time.perf_counter()
+    if problem.magnet_bottom_clearance_m < 0:
+        raise _diagnose_infeasible(problem)
+    model = _FastModel(problem)
+    runs = []
+    it = list(_device_starts(problem, starts, seed))
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=starts + 2, desc="optimize", unit="stage")
+    for y0 in it:
+        # coarse tolerances: the starts only have to find the basin; the wire stage polishes
+        runs.append(_local(model, y0, xtol_rel=1e-3, ftol_rel=1e-6))
+        if bar is not None:
+            bar.update(1)
+    fast_calls = model.calls
+    feas = [r for r in runs if r.feasible]
+    if not feas:
+        if bar is not None:
+            bar.close()
+        raise _diagnose_infeasible(problem)
+    best = max(feas, key=lambda r: r.value)
+    # standard wire: the two table sizes around the continuous optimum
+    d_cont = best.x[6]
+    table = sorted(problem.wire_table_m)
+    below = [d for d in table if d <= d_cont]
+    above = [d for d in table if d > d_cont]
+    cands = ([below[-1]] if below else []) + ([above[0]] if above else [])
+    prob = problem
+    wire_runs = []
+    for d in cands:
+        m = _FastModel(prob, {6: d})
+        r = _local(m, [best.x[k] for k in m.free])
+        fast_calls += m.calls
+        if r.feasible:
+            wire_runs.append((r.value, d, m.full_y(r.x)))
+    if not wire_runs:
+        if bar is not None:
+            bar.close()
+        raise BadInputError("wire_table_m", "a standard wire near the continuous optimum "
+                            f"({d_cont * 1e3:.3f} mm) that admits a feasible design",
+                            [round(c * 1e3, 3) for c in cands])
+    _, wire, y = max(wire_runs)
+    phys = DeviceProblem.physical
+    if bar is not None:
+        bar.update(1)
+    # correction loop: panel model at the current design, re-solve the corrected fast model
+    history = []
+    panel_calls = 0
+    corr = (1.0, 1.0)
+    x_round, n = round_design(prob, phys(y))
+    ev_panel = None
+    for _ in range(max_corrections):
+        x_round, n = round_design(prob, phys(y))
+        ev_panel = prob.evaluate(x_round, turns=n, model="panel")
+        panel_calls += 1
+        ev_fast = dataclasses.replace(prob, corrections=(1.0, 1.0)).evaluate(x_round, turns=n)
+        new = (ev_panel["dbz_dz_core_t_per_m"] / ev_fast["dbz_dz_core_t_per_m"],
+               (ev_panel["inductance_h"] - ev_panel["inductance_air_h"])
+               / max(ev_fast["inductance_h"] - ev_fast["inductance_air_h"], 1e-30))
+        history.append(new)
+        converged = max(abs(new[0] / corr[0] - 1), abs(new[1] / corr[1] - 1)) < correction_tol
+        corr = new
+        prob = dataclasses.replace(prob, corrections=corr)
+        feasible_now = all(gv <= 1e-9 for gv in ev_panel["g"])
+        if converged and feasible_now:
+            break
+        m = _FastModel(prob, {6: wire})
+        r = _local(m, [y[k] for k in m.free])
+        fast_calls += m.calls
+        if not r.feasible:
+            break
+        y = m.full_y(r.x)
+    if bar is not None:
+        bar.update(1)
+        bar.close()
+    # the reported design: rounded, panel-model numbers (the last loop pass evaluated it
+    # unless the loop re-solved after it)
+    x = phys(y)
+    xr, n = round_design(prob, x)
+    if list(xr) != list(x_round):
+        ev_panel = prob.evaluate(xr, turns=n, model="panel")
+        panel_calls += 1
+    fit = el.turns_from_geometry(xr[0], xr[1], xr[2], prob.insulated(wire), prob.packing)
+    table_c = prob.constraint_table(xr, ev_panel, fit)
+    return DeviceResult(tuple(map(float, x)), tuple(map(float, xr)), n, wire,
+                        prob.insulated(wire), ev_panel, table_c, corr, tuple(history),
+                        tuple(runs), fast_calls, panel_calls, time.perf_counter() - t0)
+
+
+def device_design(base: Design, result: DeviceResult, problem: DeviceProblem, *,
+                  name: str = "optimized") -> Design:
+    """The optimum as a complete :class:`Design` (everything not optimized from ``base``).
+
+    Coil, wire (bare and insulated diameter), core (radius, length, offset, 1010 steel B-H) and
+    drive (supply = the driver's rating, current = the operating current) come from the result.
+    """
+    ri, ro, ln, a, lc, prot, d = result.x
+    return base.replace(**{
+        "name": name,
+        "coil.inner_radius_m": ri, "coil.outer_radius_m": ro, "coil.length_m": ln,
+        "coil.turns": int(result.turns),
+        "wire.diameter_m": d, "wire.insulated_diameter_m": result.insulated_diameter_m,
+        "core.radius_m": a, "core.length_m": lc,
+        "core.offset_m": DeviceProblem.core_offset(result.x), "core.bh": "steel1010",
+        "drive.supply_voltage_v": problem.supply_voltage_v,
+        "drive.max_current_a": problem.current_a,
+        # the workspace starts where the magnet can be: above the upper sensor board
+        "workspace.z_min_m": max(base.workspace.z_min_m, reachable_height_m(base)),
+    })
+
+
+def reachable_height_m(design: Design) -> float:
+    """Lowest magnet-centre height above the coil tops: the upper sensor board's top
+    (sensors.offset_m + :data:`BOARD_THICKNESS_M`) plus the magnet's half length, m."""
+    return design.sensors.offset_m + BOARD_THICKNESS_M + design.magnet.length_m / 2
+
+
+def device_problem_for(design: Design, **kw) -> DeviceProblem:
+    """:meth:`DeviceProblem.from_design` with the base design's wire insulation ratio kept
+    when it is a real enamel build (> 1), else the grade-1 ratio."""
+    ratio = design.wire.insulated_diameter_m / design.wire.diameter_m
+    if ratio > 1.0 + 1e-9:
+        kw.setdefault("insulation_ratio", ratio)
+    return DeviceProblem.from_design(design, **kw)
+
+
+def evaluate_device(design: Design, problem: DeviceProblem | None = None) -> dict:
+    """A design's coil and core under the device problem's panel model and constraints (SI).
+
+    Used for the side-by-side report: the thesis device with every constraint it misses, the
+    optimized device with its margins. Needs a core (``design.core``).
+    """
+    if design.core is None:
+        raise BadInputError("design.core", "a core (the device problem has an iron core)", None)
+    p = problem if problem is not None else device_problem_for(design)
+    c, k, w = design.coil, design.core, design.wire
+    top = c.length_m / 2
+    prot = k.offset_m + k.length_m / 2 - top
+    x = [c.inner_radius_m, c.outer_radius_m, c.length_m, k.radius_m, k.length_m,
+         max(prot, 0.0), w.diameter_m]
+    p = dataclasses.replace(p, insulation_ratio=w.insulated_diameter_m / w.diameter_m)
+    with _one_blas_thread():
+        ev = p.evaluate(x, turns=c.turns, model="panel")
+    fit = el.turns_from_geometry(c.inner_radius_m, c.outer_radius_m, c.length_m,
+                                 w.insulated_diameter_m, w.packing)
+    table = p.constraint_table(x, ev, fit)
+    # the design's own supply is a constraint too (the thesis' 36 V > the MD10C's 30 V)
+    table["design_supply_voltage_v"] = {
+        "value": float(design.drive.supply_voltage_v), "limit": p.supply_voltage_v,
+        "unit": "V", "kind": "upper", "margin": p.supply_voltage_v - design.drive.supply_voltage_v,
+        "met": design.drive.supply_voltage_v <= p.supply_voltage_v,
+        "note": "the design's supply vs the MD10C rating"}
+    reach = reachable_height_m(design)
+    table["workspace_z_min_m"] = {
+        "value": float(design.workspace.z_min_m), "limit": reach, "unit": "m", "kind": "lower",
+        "margin": float(design.workspace.z_min_m - reach),
+        "met": bool(design.workspace.z_min_m >= reach - 1e-12),
+        "note": "workspace starts where the magnet fits above the upper sensor board"}
+    out = {k2: v2 for k2, v2 in ev.items() if k2 != "g"}
+    out.update({"name": design.name, "turns": int(c.turns), "turns_that_fit": fit,
+                "inner_radius_m": c.inner_radius_m, "outer_radius_m": c.outer_radius_m,
+                "length_m": c.length_m, "wire_diameter_m": w.diameter_m,
+                "core_radius_m": k.radius_m, "core_length_m": k.length_m,
+                "core_protrusion_m": prot, "current_a": p.current_a,
+                "temperature_c": p.hot_temperature_c,
+                "core_model": "steel1010 surface-current panel model",
+                "constraints": table,
+                "violated": sorted(n for n, t in table.items() if not t["met"]),
+                "feasible": all(t["met"] for t in table.values())})
+    return out
+
+
+def verify_device(problem: DeviceProblem, result: DeviceResult, *, starts: int = 4,
+                  isres_evaluations: int = 3000, grid_levels: int = 4, seed: int = 0,
+                  progress: bool = False) -> dict:
+    """Global checks of a device optimum (see :func:`_verify_device`), BLAS on one thread."""
+    with _one_blas_thread():
+        return _verify_device(problem, result, starts=starts,
+                              isres_evaluations=isres_evaluations, grid_levels=grid_levels,
+                              seed=seed, progress=progress)
+
+
+def _verify_device(problem: DeviceProblem, result: DeviceResult, *, starts: int = 4,
+                   isres_evaluations: int = 3000, grid_levels: int = 4, seed: int = 0,
+                   progress: bool = False) -> dict:
+    """Global checks of a device optimum on the corrected fast model, wire fixed to the chosen
+    standard size (6 continuous variables).
+
+    1. multistart: ``starts`` SLSQP runs from shifted-Halton points;
+    2. global: nlopt GN_ISRES (stochastic, constrained) for ``isres_evaluations``, polished
+       by SLSQP;
+    3. a coarse grid of ``grid_levels`` values per variable (levels^6 designs, bounds
+       included).
+    ``agree`` when every feasible multistart optimum and the polished ISRES optimum reach the
+    best value to 1e-3 relative and no feasible grid point beats it. Returns numbers (SI),
+    evaluations and seconds of each stage.
+    """
+    import nlopt
+
+    prob = dataclasses.replace(problem, corrections=result.corrections)
+    wire = result.wire_diameter_m
+    model = _FastModel(prob, {6: wire})
+    lo, hi = model.lo, model.hi
+    out: dict = {"wire_diameter_m": wire, "corrections": list(result.corrections)}
+    # reference: the corrected local optimum from the result's continuous design
+    t0 = time.perf_counter()
+    ref = _local(model, [DeviceProblem.search(result.x_continuous)[k] for k in model.free])
+    best = ref.value
+    # 1. multistart
+    t1 = time.perf_counter()
+    c0 = model.calls
+    ys = lo + _halton(starts, len(lo), seed + 17) * (hi - lo)
+    ys[:, 1] = np.maximum(ys[:, 1], np.minimum(ys[:, 0] + 2e-3, hi[1]))
+    runs = [_local(model, y0) for y0 in ys]
+    feas = [r.value for r in runs if r.feasible]
+    out["multistart"] = {"starts": starts, "feasible": len(feas),
+                         "values_n": [float(v_) for v_ in feas],
+                         "best_n": float(max(feas)) if feas else None,
+                         "evaluations": model.calls - c0,
+                         "seconds": time.perf_counter() - t1}
+    # 2. ISRES
+    t2 = time.perf_counter()
+    c0 = model.calls
+    nlopt.srand(seed)
+    n = len(lo)
+    opt = nlopt.opt(nlopt.GN_ISRES, n)
+    opt.set_lower_bounds(np.zeros(n))
+    opt.set_upper_bounds(np.ones(n))
+    opt.set_max_objective(lambda u, g: float(model.values(lo + u * (hi - lo))[0]))
+
+    def cfun(res, u, g):
+        res[:] = model.values(lo + u * (hi - lo))[1:]
+
+    opt.add_inequality_mconstraint(cfun, [1e-8] * len(DEVICE_CONSTRAINTS))
+    opt.set_maxeval(int(isres_evaluations))
+    u = opt.optimize(np.full(n, 0.5))
+    raw = model.values(lo + u * (hi - lo))
+    pol = _local(model, lo + u * (hi - lo))
+    out["isres"] = {"evaluations_requested": int(isres_evaluations),
+                    "raw_value_n": float(raw[0]), "raw_feasible": bool(np.all(raw[1:] <= 1e-8)),
+                    "polished_value_n": float(pol.value), "polished_feasible": pol.feasible,
+                    "evaluations": model.calls - c0, "seconds": time.perf_counter() - t2}
+    # 3. grid
+    t3 = time.perf_counter()
+    c0 = model.calls
+    axes = [np.linspace(a_, b_, grid_levels) for a_, b_ in zip(lo, hi)]
+    grid_best, grid_x, n_feas = -np.inf, None, 0
+    import itertools
+
+    pts = list(itertools.product(*axes))
+    it = pts
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(pts, desc="grid", unit="design")
+    for y in it:
+        val = model.values(np.array(y))
+        if np.all(val[1:] <= 1e-8):
+            n_feas += 1
+            if val[0] > grid_best:
+                grid_best, grid_x = float(val[0]), y
+    out["grid"] = {"levels": grid_levels, "designs": len(pts), "feasible": n_feas,
+                   "best_n": grid_best if n_feas else None,
+                   "best_x": None if grid_x is None else
+                   dict(zip(DEVICE_VARIABLES, model.full_x(grid_x))),
+                   "evaluations": model.calls - c0, "seconds": time.perf_counter() - t3}
+    best = max([best] + feas + ([pol.value] if pol.feasible else []))
+    tol = 1e-3
+    ms_ok = bool(feas) and all(abs(v_ - best) <= tol * best for v_ in feas)
+    is_ok = pol.feasible and abs(pol.value - best) <= tol * best
+    grid_ok = (not n_feas) or grid_best <= best * (1 + 1e-9)
+    out.update({"reference_local_n": float(ref.value), "best_n": float(best),
+                "multistart_agree": ms_ok, "isres_agree": bool(is_ok), "grid_not_better": grid_ok,
+                "agree": bool(ms_ok and is_ok and grid_ok),
+                "evaluations": model.calls, "seconds": time.perf_counter() - t0})
+    return out
+
+
+# ====================================================================== rendering objective
+def workspace_region(design: Design, *, half_width_m: float | None = None,
+                     heights_m: Sequence[float] | None = None, n_xy: int = 3) -> np.ndarray:
+    """Points of the rendering region, (n, 3) m: an n_xy x n_xy grid over +/- half_width_m
+    (default: one pitch, the inner array) at ``heights_m`` (default: the lowest height the
+    magnet reaches above the upper sensor board -- board top + magnet half length, at least
+    workspace.z_min_m -- and the design height)."""
+    hw = design.array.pitch_m if half_width_m is None else float(half_width_m)
+    if heights_m is None:
+        reach = reachable_height_m(design)
+        heights_m = (max(design.workspace.z_min_m, reach), design.optimize.height_m)
+    xs = np.linspace(-hw, hw, n_xy)
+    X, Y, Z = np.meshgrid(xs, xs, np.asarray(heights_m, dtype=float), indexing="ij")
+    return np.c_[X.ravel(), Y.ravel(), Z.ravel()]
+
+
+def array_force_per_amp(coil_x: Sequence[float], turns: float, current_a: float,
+                        centres_xy_m: np.ndarray, points_m: np.ndarray, moment_a_m2: float, *,
+                        core_force_ratio: float = 1.0, n_slices: int = 12) -> np.ndarray:
+    """Force per ampere on a z-axis dipole of |m| = moment_a_m2 from each coil, (n, 3, n_coils).
+
+    Each coil: its winding (exact kernel) plus its 1010-steel core magnetized as the fast slice
+    model gives at ``current_a`` (secant: field per ampere = field at current_a / current_a),
+    times ``core_force_ratio`` (e.g. the panel/fast ratio at the design point). Coils do not
+    couple (each core sees only its own winding). Physical x as :data:`DEVICE_VARIABLES`.
+    """
+    from .core_fast import solve_rod
+    from .field import cylindrical_to_cartesian
+    from .field.kernels import sheet_rz
+    from .field.winding import winding_rz
+
+    ri, ro, ln, a, lc, prot, _ = [float(q) for q in coil_x]
+    off = ln / 2 + prot - lc / 2
+    sol = solve_rod(ri, ro, ln, turns, min(a, ri), lc, off, current_a, n_slices=n_slices,
+                    quadrature="bessel")
+    pts = np.asarray(points_m, dtype=float)
+    cen = np.asarray(centres_xy_m, dtype=float)
+    nc, npt = len(cen), len(pts)
+    rel = np.repeat(pts[None, :, :], nc, axis=0).reshape(-1, 3)
+    rel[:, 0] -= np.repeat(cen[:, 0], npt)
+    rel[:, 1] -= np.repeat(cen[:, 1], npt)
+    rel[:, 2] += ln / 2  # winding centre at z = -ln/2 (top faces at z = 0)
+    rho = np.hypot(rel[:, 0], rel[:, 1])
+    z = rel[:, 2]
+    j = turns / ((ro - ri) * ln)
+    wres = winding_rz(ri, ro, ln / 2, rho, z, gradient=True, rtol=1e-8)
+    comps = [np.asarray(q) * j for q in wres]
+    e = sol.edges_m
+    for k in range(len(e) - 1):
+        zc, hk = 0.5 * (e[k] + e[k + 1]), 0.5 * (e[k + 1] - e[k])
+        sres = sheet_rz(sol.radius_m, hk, rho, z - zc, gradient=True)
+        kk = sol.m_a_per_m[k] / current_a * core_force_ratio
+        comps = [c + np.asarray(q) * kk for c, q in zip(comps, sres)]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cphi = np.where(rho > 0, rel[:, 0] / np.where(rho > 0, rho, 1.0), 1.0)
+        sphi = np.where(rho > 0, rel[:, 1] / np.where(rho > 0, rho, 1.0), 0.0)
+    _, g = cylindrical_to_cartesian(cphi, sphi, MU0, comps, True)
+    f = moment_a_m2 * g[:, 2, :]  # F_j = m dBz/dx_j for m along z (curl B = 0 outside)
+    return f.reshape(nc, npt, 3).transpose(1, 2, 0)
+
+
+def rendering_force(design: Design, *, coil_x: Sequence[float] | None = None,
+                    turns: float | None = None, points_m: np.ndarray | None = None,
+                    core_force_ratio: float = 1.0) -> dict:
+    """The rendering objective: the smallest upward force the array can render over the
+    workspace region with the bounded allocation (|I_k| <= drive.max_current_a,
+    sum |I_k| <= drive.total_current_a, Fx = Fy = 0: one LP per point,
+    :func:`designkit.array.max_vertical_force` with ``lateral='zero'``).
+
+    The bipolar drive makes the result independent of the magnet's polarity (I -> -I).
+    Default coil: the design's own. Returns min_upward_force_n, per-point forces (N) and the
+    points (m).
+    """
+    from .array import max_vertical_force
+
+    if coil_x is None:
+        c, k = design.coil, design.core
+        if k is None:
+            raise BadInputError("design.core", "a core (rendering uses the core model)", None)
+        prot = k.offset_m + k.length_m / 2 - c.length_m / 2
+        coil_x = [c.inner_radius_m, c.outer_radius_m, c.length_m, k.radius_m, k.length_m,
+                  prot, design.wire.diameter_m]
+        turns = c.turns
+    pts = workspace_region(design) if points_m is None else np.asarray(points_m, dtype=float)
+    cen = np.array([[x, y] for x, y, _ in design.coil_centres_m()])
+    f = array_force_per_amp(coil_x, turns, design.drive.max_current_a, cen, pts,
+                            design.magnet.moment_a_m2, core_force_ratio=core_force_ratio)
+    fz = max_vertical_force(f, design.drive.max_current_a, design.drive.total_current_a,
+                            lateral="zero")
+    return {"min_upward_force_n": float(fz.min()), "upward_force_n": fz.tolist(),
+            "points_m": pts.tolist(), "core_force_ratio": core_force_ratio,
+            "allocation": "LP per point: |I_k| <= max_current_a, sum |I_k| <= total_current_a, "
+                          "Fx = Fy = 0"}
+
+
+def getdp_check(design: Design, reported: dict, *, level: int = 1,
+                out_dir: str | None = None) -> dict:
+    """Check a device's force and inductance against GetDP (axisymmetric, nonlinear 1010 steel).
+
+    ``reported``: numbers of :meth:`DeviceProblem.evaluate` / :func:`evaluate_device` (force_n =
+    upward force at the design point, inductance_h = secant at the drive current). The FEM's
+    dBz/dz on the axis at the design height (local polynomial fit of the sampled line) gives
+    the force |m| |dBz/dz|; its flux linkage / current the secant inductance.
+    Returns both, the relative errors and ``within_3_percent``.
+    """
+    from .coil import Coil
+    from .fem.runner import solve as fem_solve
+
+    coil = Coil.from_design(design)
+    fem = fem_solve(coil, design.drive.max_current_a, level=level, out_dir=out_dir)
+    z = design.optimize.height_m + design.coil.length_m / 2
+    g = float(fem.axis.fit(np.array([z]))["dbz_dz"][0])
+    f_fem = design.magnet.moment_a_m2 * abs(g)
+    l_fem = float(fem.inductance_linkage)
+    ef = reported["force_n"] / f_fem - 1.0
+    el_ = reported["inductance_h"] / l_fem - 1.0
+    return {"force_fem_n": f_fem, "force_n": reported["force_n"], "force_rel_err": ef,
+            "inductance_fem_h": l_fem, "inductance_h": reported["inductance_h"],
+            "inductance_rel_err": el_, "mesh_level": level,
+            "fem_nodes": fem.mesh_stats.get("nodes"), "fem_seconds": fem.solve_seconds,
+            "fem_converged": bool(fem.newton_converged),
+            "within_3_percent": bool(abs(ef) <= 0.03 and abs(el_) <= 0.03)}

@@ -55,7 +55,25 @@ class ParamRange:
         return np.linspace(self.start, self.stop, self.count)
 
 
-def parse_param(text: str) -> ParamRange:
+ARRAY_PARAMETERS: dict[str, str] = {
+    "pitch_m": "array pitch (centre to centre), m",
+    "core_length_m": "core length, m",
+    "core_protrusion_m": "core top above the winding's top face, m",
+    "inner_radius_m": "winding inner radius (= core radius), m",
+    "outer_radius_m": "winding outer radius, m",
+    "length_m": "winding length, m",
+    "wire_diameter_m": "bare wire diameter, m (insulated scales with the design's ratio)",
+}
+"""Parameters of ``designkit sweep --array`` (whole arrays, rendering objective)."""
+ARRAY_COLUMNS = ("pitch_m", "inner_radius_m", "outer_radius_m", "length_m", "wire_diameter_m",
+                 "core_radius_m", "core_length_m", "core_protrusion_m", "turns", "force_n",
+                 "force_design_point_n", "resistance_ohm", "settling_time_s",
+                 "voltage_needed_v", "time_to_max_temperature_s", "valid", "feasible")
+"""``force_n`` of an array row is the rendering objective: the smallest upward force over the
+workspace region (:func:`designkit.optimize.rendering_force`)."""
+
+
+def parse_param(text: str, parameters: dict[str, str] | None = None) -> ParamRange:
     """Parse ``NAME=START:STOP:N`` (N points, both ends included; N = 1 takes START).
 
     Raises BadInputError for an unknown NAME, a malformed range, N < 1 (empty range), or
@@ -64,9 +82,10 @@ def parse_param(text: str) -> ParamRange:
     if "=" not in text:
         raise BadInputError("--param", "NAME=START:STOP:N", text)
     name, _, rng = text.partition("=")
+    params = PARAMETERS if parameters is None else parameters
     name = _ALIASES.get(name.strip(), name.strip())
-    if name not in PARAMETERS:
-        raise BadInputError("--param name", f"one of {sorted(PARAMETERS)}", name)
+    if name not in params:
+        raise BadInputError("--param name", f"one of {sorted(params)}", name)
     parts = rng.split(":")
     if len(parts) != 3:
         raise BadInputError(f"--param {name}", "START:STOP:N", rng)
@@ -82,7 +101,7 @@ def parse_param(text: str) -> ParamRange:
         raise BadInputError(f"{name} STOP", f"!= START ({start}) when N > 1", stop)
     for val, which in ((start, "START"), (stop, "STOP")):
         if not val > 0:
-            raise BadInputError(f"{name} {which}", f"> 0 ({PARAMETERS[name]})", val)
+            raise BadInputError(f"{name} {which}", f"> 0 ({params[name]})", val)
     return ParamRange(name, start, stop, count)
 
 
@@ -263,6 +282,148 @@ def run_sweep(design: Design, ranges: Sequence[ParamRange], *, workers: int | No
     return SweepResult(tuple(names), rows, best, time.perf_counter() - t0, n_workers, backend)
 
 
+def evaluate_array_chunk(design: Design, names: Sequence[str], values: np.ndarray) -> list[dict]:
+    """Evaluate whole arrays (rows of ``values`` for ``names`` over ``design``); worker entry.
+
+    Each row: the design's array with the swept pitch, winding, wire and 1010-steel core (core
+    radius = inner radius, core top ``core_protrusion_m`` above the winding top), whole turns
+    from the layered window, the device constraints of
+    :class:`designkit.optimize.DeviceProblem` (fast slice core model) and the rendering
+    objective (smallest upward force over the workspace region, LP per point). Invalid rows
+    (overlapping coils, no whole turn, core longer than winding + protrusion): valid = False.
+    """
+    from . import electrical as el
+    from .errors import DesignkitError
+    from .optimize import device_problem_for, rendering_force
+
+    c = design.coil
+    k = design.core
+    ratio = design.wire.insulated_diameter_m / design.wire.diameter_m
+    base = {"pitch_m": design.array.pitch_m, "inner_radius_m": c.inner_radius_m,
+            "outer_radius_m": c.outer_radius_m, "length_m": c.length_m,
+            "wire_diameter_m": design.wire.diameter_m,
+            "core_length_m": k.length_m if k is not None else c.length_m,
+            "core_protrusion_m": (k.offset_m + k.length_m / 2 - c.length_m / 2)
+            if k is not None else 0.0}
+    out = []
+    for row_vals in values:
+        row = dict(base)
+        row.update(zip(names, map(float, row_vals)))
+        res = dict.fromkeys(ARRAY_COLUMNS)
+        res.update({q: row[q] for q in base})
+        res["core_radius_m"] = row["inner_radius_m"]
+        d_ins = row["wire_diameter_m"] * ratio
+        ri, ro, ln = row["inner_radius_m"], row["outer_radius_m"], row["length_m"]
+        prot, lc = row["core_protrusion_m"], row["core_length_m"]
+        n = 0
+        if ro > ri:
+            n = el.turns_from_geometry(ri, ro, ln, d_ins, design.wire.packing)
+        try:
+            if n < 1 or lc > ln + prot + 1e-12 or prot < 0:
+                raise BadInputError("row", "a whole turn and a core inside winding + protrusion",
+                                    row)
+            d2 = design.replace(**{
+                "array.pitch_m": row["pitch_m"], "coil.inner_radius_m": ri,
+                "coil.outer_radius_m": ro, "coil.length_m": ln, "coil.turns": n,
+                "wire.diameter_m": row["wire_diameter_m"], "wire.insulated_diameter_m": d_ins,
+                "core.radius_m": ri, "core.length_m": lc,
+                "core.offset_m": ln / 2 + prot - lc / 2, "core.bh": "steel1010"})
+        except (DesignkitError, ValueError):
+            res.update(turns=n, valid=False, feasible=False)
+            out.append(res)
+            continue
+        p = device_problem_for(d2)
+        x = [ri, ro, ln, ri, lc, prot, row["wire_diameter_m"]]
+        ev = p.evaluate(x, turns=n)
+        rend = rendering_force(d2, coil_x=x, turns=n)
+        res.update(turns=n, force_n=rend["min_upward_force_n"],
+                   force_design_point_n=ev["force_n"], resistance_ohm=ev["resistance_ohm"],
+                   settling_time_s=ev["settling_time_s"],
+                   voltage_needed_v=ev["voltage_needed_v"],
+                   time_to_max_temperature_s=ev["time_to_max_temperature_s"], valid=True,
+                   feasible=bool(max(ev["g"]) <= 0 and prot <= p.upper[5]))
+        out.append(res)
+    return out
+
+
+def run_array_sweep(design: Design, ranges: Sequence[ParamRange], *, workers: int | None = None,
+                    scheduler: str | None = None, chunk_size: int = 2,
+                    progress: bool = True) -> SweepResult:
+    """Sweep whole arrays with the rendering objective (:func:`evaluate_array_chunk`);
+    local processes by default, a dask.distributed cluster with ``scheduler``. The best row is
+    the feasible one with the largest rendering objective."""
+    import time
+
+    if design.core is None:
+        raise BadInputError("design.core", "a core (the array sweep models 1010-steel cores)",
+                            None)
+    if workers is not None:
+        workers = v.positive_int("workers", workers)
+    chunk_size = v.positive_int("chunk_size", chunk_size)
+    names, vals = grid(ranges)
+    chunks = [vals[i:i + chunk_size] for i in range(0, len(vals), chunk_size)]
+    t0 = time.perf_counter()
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(vals), desc="array sweep", unit="design")
+    results: list = [None] * len(chunks)
+    if scheduler is not None:
+        backend = f"dask:{scheduler}"
+        n_workers = _run_dask_fn(scheduler, evaluate_array_chunk, (design, names), chunks,
+                                 results, bar)
+    elif (workers or os.cpu_count() or 1) == 1 or len(chunks) == 1:
+        backend, n_workers = "serial", 1
+        for i, ch in enumerate(chunks):
+            results[i] = evaluate_array_chunk(design, names, ch)
+            if bar is not None:
+                bar.update(len(ch))
+    else:
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        n_workers = workers or os.cpu_count() or 1
+        backend = "processes"
+        with ProcessPoolExecutor(max_workers=n_workers) as ex:
+            futs = {ex.submit(evaluate_array_chunk, design, names, ch): i
+                    for i, ch in enumerate(chunks)}
+            for fut in as_completed(futs):
+                i = futs[fut]
+                results[i] = fut.result()
+                if bar is not None:
+                    bar.update(len(chunks[i]))
+    if bar is not None:
+        bar.close()
+    rows = [r for ch in results for r in ch]
+    feas = [i for i, r in enumerate(rows) if r["feasible"]]
+    best = max(feas, key=lambda i: rows[i]["force_n"]) if feas else None
+    return SweepResult(tuple(names), rows, best, time.perf_counter() - t0, n_workers, backend)
+
+
+def _run_dask_fn(address, fn, head: tuple, chunks, results, bar) -> int:
+    """Submit ``fn(*head, chunk)`` per chunk to a dask scheduler; fill ``results`` in order."""
+    from .errors import require
+
+    distributed = require("dask.distributed", "dask[distributed]", "designkit sweep --scheduler")
+    try:
+        client = distributed.Client(address, timeout="10s")
+    except OSError as exc:
+        raise BadInputError("--scheduler", "the address of a running dask scheduler",
+                            address, str(exc)) from None
+    try:
+        n = max(len(client.scheduler_info().get("workers", {})), 1)
+        futs = [client.submit(fn, *head, ch, pure=False) for ch in chunks]
+        index = {f.key: i for i, f in enumerate(futs)}
+        for fut in distributed.as_completed(futs):
+            i = index[fut.key]
+            results[i] = fut.result()
+            if bar is not None:
+                bar.update(len(chunks[i]))
+    finally:
+        client.close()
+    return n
+
+
 def _run_dask(address, problem, base, names, chunks, results, bar) -> int:
     from .errors import require
 
@@ -288,7 +449,8 @@ def _run_dask(address, problem, base, names, chunks, results, bar) -> int:
 
 
 # ====================================================================== output
-def write_csv(result: SweepResult, path: str | Path) -> Path:
+def write_csv(result: SweepResult, path: str | Path,
+              columns: Sequence[str] = COLUMNS) -> Path:
     """Rows as CSV (SI units in the column names; empty cells for invalid geometry)."""
     import csv
 
@@ -297,21 +459,23 @@ def write_csv(result: SweepResult, path: str | Path) -> Path:
     with atomic_path(path) as tmp:
         with open(tmp, "w", newline="") as fh:
             w = csv.writer(fh)
-            w.writerow(COLUMNS)
+            w.writerow(columns)
             for r in result.rows:
                 w.writerow(["" if r[c] is None else
-                            (int(r[c]) if isinstance(r[c], bool) else r[c]) for c in COLUMNS])
+                            (int(r[c]) if isinstance(r[c], bool) else r[c]) for c in columns])
     return Path(path)
 
 
-def plot(result: SweepResult, path: str | Path) -> Path:
+def plot(result: SweepResult, path: str | Path, *,
+         objective: str = "force at the design point",
+         limits: str = "R, 5 tau limits") -> Path:
     """PNG of the force over the (first two) swept parameters: feasible designs coloured by
     force, infeasible ones grey, the best feasible design starred (see :func:`sweep_figure`)."""
     import matplotlib.pyplot as plt
 
     from ._io import atomic_path
 
-    fig = sweep_figure(result)
+    fig = sweep_figure(result, objective=objective, limits=limits)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png")
     plt.close(fig)
@@ -322,7 +486,28 @@ def _shown(name: str, value: float) -> float:
     return value * 1e3 if name.endswith("_m") else value
 
 
-def sweep_figure(result: SweepResult):
+def plot(result: SweepResult, path: str | Path, *,
+         objective: str = "force at the design point",
+         limits: str = "R, 5 tau limits") -> Path:
+    """PNG of the force over the (first two) swept parameters: feasible designs coloured by
+    force, infeasible ones grey, the best feasible design starred (see :func:`sweep_figure`)."""
+    import matplotlib.pyplot as plt
+
+    from ._io import atomic_path
+
+    fig = sweep_figure(result, objective=objective, limits=limits)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
+    return Path(path)
+
+
+def _shown(name: str, value: float) -> float:
+    return value * 1e3 if name.endswith("_m") else value
+
+
+def sweep_figure(result: SweepResult, *, objective: str = "force at the design point",
+                 limits: str = "R and 5 L/R limits"):
     """The matplotlib figure of :func:`plot`.
 
     With more than two swept parameters the plot is the slice through the best feasible design

@@ -78,7 +78,7 @@ def test_thesis_problem_optimum_is_feasible_global_and_beats_the_thesis_design()
     p = opt.CoilDesignProblem.from_design(design)
     res = opt.solve(p, starts=6)
     b = res.best
-    assert res.verified_global and res.starts_at_best >= 2
+    assert res.starts_agree and res.starts_at_best >= 2
     # independent re-check of the returned design with the Coil object and electrical module
     coil = Coil(b.inner_radius_m, b.outer_radius_m, b.length_m, b.turns,
                 pose=Pose((0, 0, -b.length_m / 2)))
@@ -160,3 +160,207 @@ def test_freeing_the_core_protrusion_cannot_lower_the_optimum():
         r_free = opt.solve(free, starts=2)
     assert r_free.best.force_n >= r_fixed.best.force_n * (1 - 1e-6)
     assert all(c["margin"] >= -1e-6 for c in r_free.best.constraints.values())
+
+
+# ====================================================================== the real device
+from designkit import core_fast  # noqa: E402
+from designkit.design import MU0, load_design  # noqa: E402
+
+
+def _loop_mutual_mp(a, b, z):
+    """Maxwell's mutual inductance of coaxial loops (mpmath, independent of designkit)."""
+    import mpmath as mp
+
+    a, b, z = mp.mpf(a), mp.mpf(b), mp.mpf(z)
+    k2 = 4 * a * b / ((a + b) ** 2 + z * z)
+    if k2 >= 1:  # z below the working precision: the integrable log singularity itself
+        return mp.mpf(0)
+    k = mp.sqrt(k2)
+    return MU0 * mp.sqrt(a * b) * ((2 / k - k) * mp.ellipk(k2) - 2 / k * mp.ellipe(k2))
+
+
+def test_nagaoka_sheet_integral_matches_a_double_integral_of_loop_mutuals():
+    """Q(l) = int_0^l int_0^l M_loop(a, a, x - y) = 2 int_0^l (l - t) M(t) dt (mpmath)."""
+    import mpmath as mp
+
+    rng = np.random.default_rng(3)
+    a = 0.009
+    for ell in a * np.exp(rng.uniform(np.log(0.05), np.log(20), 5)):
+        pts = sorted({0.0, 1e-3 * ell, 0.1 * ell, float(ell)})
+        with mp.workdps(30):
+            # log singularity at t = 0 (integrable); the rule may touch the end point
+            ref = 2 * mp.quad(lambda t: (ell - t) * _loop_mutual_mp(a, a, t) if t > 0 else 0,
+                              pts)
+        assert core_fast.nagaoka_self(np.array([ell]), a)[0] == pytest.approx(float(ref),
+                                                                              rel=1e-7)
+
+
+def test_slice_flux_fourier_bessel_matches_the_winding_field_quadrature():
+    """Two independent routes to int_slice B_z dV: Fourier-Bessel mutual inductance vs the
+    winding field kernel (:func:`designkit.field.winding.winding_rz`) by Gauss quadrature."""
+    rng = np.random.default_rng(11)
+    for _ in range(5):
+        ri = rng.uniform(0.005, 0.015)
+        ro = ri + rng.uniform(0.002, 0.012)
+        ln = rng.uniform(0.02, 0.1)
+        a = ri * rng.uniform(0.4, 1.0)
+        lc = rng.uniform(0.02, 0.12)
+        off = rng.uniform(-0.01, 0.01)
+        edges = core_fast.slice_edges(lc, off, 8)
+        g_q = core_fast.applied_slice_flux(ri, ro, ln, 500, a, edges, nr=6, nz=6)
+        g_b = core_fast.bessel_slice_flux(ri, ro, ln, 500, a, edges)
+        np.testing.assert_allclose(g_b, g_q, rtol=2e-3)
+
+
+def test_toeplitz_slice_coupling_equals_the_interval_formula():
+    a, lc, n = 0.008, 0.07, 10
+    s = core_fast.solve_rod(0.009, 0.02, 0.06, 800, a, lc, 0.0, 1.0, n_slices=n,
+                            relative_permeability=500.0)
+    e = core_fast.slice_edges(lc, 0.0, n)
+    iv = np.column_stack([e[:-1], e[1:]])
+    c = core_fast.interval_mutual(iv, iv, a)
+    vol = np.pi * a * a * np.diff(e)
+    t = c / (MU0 * vol[:, None])
+    # the solved B satisfies (I - T + T / mu_r) B = B0 with the interval formula's T
+    np.testing.assert_allclose((np.eye(n) - t + t / 500.0) @ s.b_t, s.b0_t, rtol=1e-9)
+
+
+def test_fast_rod_saturates_and_its_incremental_inductance_is_the_derivative():
+    geo = (0.009, 0.024, 0.063, 1173, 0.009, 0.07, 0.009)
+    lo = core_fast.solve_rod(*geo, 0.5, quadrature="bessel")
+    hi = core_fast.solve_rod(*geo, 6.0, quadrature="bessel")
+    # saturation: past the 1.5 T knee the incremental inductance drops below the secant one
+    assert hi.peak_b_t > 1.5 > lo.peak_b_t
+    assert hi.incremental_extra_inductance_h < 0.95 * hi.secant_extra_inductance_h
+    assert lo.incremental_extra_inductance_h >= 0.99 * lo.secant_extra_inductance_h
+    # incremental = d linkage / dI (central difference of independent solves)
+    h = 1e-3
+    p = core_fast.solve_rod(*geo, 6.0 + h, quadrature="bessel").linkage_wb
+    m = core_fast.solve_rod(*geo, 6.0 - h, quadrature="bessel").linkage_wb
+    assert hi.incremental_extra_inductance_h == pytest.approx((p - m) / (2 * h), rel=1e-5)
+
+
+def test_device_constraints_match_the_electrical_module_on_the_thesis_coil():
+    """R, supply, 5 tau and heating of the device problem vs designkit.electrical (separate
+    code): the thesis coil at 100 C and 20 C."""
+    import dataclasses
+
+    d = default_design()
+    p = opt.device_problem_for(d)
+    x = [0.012, 0.019, 0.1, 0.012, 0.11, 0.005, 0.7e-3]
+    ev = p.evaluate(x, turns=1429)
+    coil = Coil(0.012, 0.019, 0.1, 1429)
+    hot = dataclasses.replace(d.wire, operating_temperature_c=100.0)
+    assert ev["resistance_ohm"] == pytest.approx(el.resistance(coil, hot), rel=1e-12)
+    assert ev["resistance_cold_ohm"] == pytest.approx(el.resistance(coil, d.wire), rel=1e-12)
+    assert ev["inductance_air_h"] == pytest.approx(el.air_inductance(coil), rel=1e-5)
+    mass = el.copper_mass(0.012, 0.019, 1429, 0.7e-3)
+    t_ref = el.time_to_temperature(mass, 6.0 * math.sqrt(0.5), ev["resistance_cold_ohm"],
+                                   d.wire, 20.0, 100.0)
+    assert ev["time_to_max_temperature_s"] == pytest.approx(t_ref, rel=1e-12)
+    assert ev["voltage_needed_v"] == pytest.approx(6.0 * ev["resistance_ohm"], rel=1e-12)
+
+
+def test_device_evaluation_flags_every_violation_of_the_thesis_device():
+    rep = opt.evaluate_device(default_design())
+    # the issue's list: R, 5 tau (core counted), 36 V > 30 V, 1429 turns do not fit
+    for name in ("resistance_ohm", "settling_time_s", "design_supply_voltage_v", "turns",
+                 "supply_voltage_v"):
+        assert name in rep["violated"], name
+    assert not rep["feasible"]
+    assert rep["constraints"]["turns"]["limit"] == el.turns_from_geometry(
+        0.012, 0.019, 0.1, 0.7e-3)
+
+
+def test_shipped_optimized_design_meets_every_constraint_under_the_panel_model():
+    d = load_design("optimized")
+    assert d.name == "optimized" and d.core.bh == "steel1010"
+    rep = opt.evaluate_device(d)
+    assert rep["feasible"], rep["violated"]
+    # the thesis device's force at the design point is beaten
+    assert rep["force_n"] > opt.evaluate_device(default_design())["force_n"]
+    # turns are whole layers x whole turns per layer of the insulated wire
+    assert d.coil.turns == el.turns_from_geometry(d.coil.inner_radius_m, d.coil.outer_radius_m,
+                                                  d.coil.length_m, d.wire.insulated_diameter_m)
+
+
+def test_named_designs_and_bad_names():
+    assert load_design("thesis") == default_design()
+    with pytest.raises(BadInputError, match="optimized"):
+        load_design("no-such-design")
+
+
+def test_device_optimum_beats_a_dense_two_variable_grid():
+    """Brute force: with the other variables at the optimum, no point of a 20 x 20 grid over
+    (inner radius, winding length) of the same corrected model is feasible and better, and the
+    grid's best comes within its resolution of the optimum."""
+    d = default_design()
+    p = opt.device_problem_for(d)
+    res = opt.solve_device(p, starts=2)
+    import dataclasses
+
+    pc = dataclasses.replace(p, corrections=res.corrections)
+    y = opt.DeviceProblem.search(res.x_continuous)
+    m = opt._FastModel(pc, {6: res.wire_diameter_m})
+    ref = opt._local(m, [y[k] for k in m.free]).value
+    best = 0.0
+    for ri in np.linspace(p.lower[0], 0.015, 20):
+        for ln in np.linspace(p.lower[2], p.upper[2], 20):
+            yy = list(y)
+            yy[0], yy[2] = ri, ln
+            ev = pc.evaluate(opt.DeviceProblem.physical(yy))
+            if max(ev["g"]) <= 0:
+                best = max(best, ev["force_n"])
+                assert ev["force_n"] <= ref * (1 + 1e-9)
+    assert best >= 0.97 * ref
+
+
+def test_infeasible_device_bounds_name_the_constraint_and_the_amount():
+    # magnet centre 15 mm up: its bottom (10 mm) is 4.8 mm below the board top (14.8 mm)
+    d = default_design().replace(**{"optimize.height_m": 0.015})
+    with pytest.raises(BadInputError, match=r"magnet_bottom_m: misses its limit by at least "
+                                            r"0\.0048 m"):
+        opt.solve_device(opt.device_problem_for(d))
+    # an impossible heating requirement: no winding in the bounds lasts 1e6 s
+    p = opt.device_problem_for(default_design(), min_time_to_hot_s=1e6)
+    with pytest.raises(BadInputError, match="time_to_max_temperature_s: misses its limit"):
+        opt.solve_device(p, starts=1)
+
+
+@pytest.mark.slow
+def test_fast_core_model_tracks_the_panel_model_on_random_designs():
+    """The corrected search relies on panel / fast ratios that vary slowly: measure them on
+    random designs (independent model: designkit.core surface-current, steel1010)."""
+    rng = np.random.default_rng(5)
+    p = opt.device_problem_for(default_design())
+    rf, rl = [], []
+    for _ in range(4):
+        ri = rng.uniform(0.006, 0.014)
+        x = [ri, ri + rng.uniform(0.005, 0.012), rng.uniform(0.04, 0.1), ri,
+             rng.uniform(0.05, 0.1), rng.uniform(0, 0.013), 0.8e-3]
+        x[4] = min(x[4], x[2] + x[5])
+        f = p.evaluate(x)
+        q = p.evaluate(x, model="panel")
+        rf.append(q["dbz_dz_core_t_per_m"] / f["dbz_dz_core_t_per_m"])
+        rl.append((q["inductance_h"] - q["inductance_air_h"])
+                  / (f["inductance_h"] - f["inductance_air_h"]))
+    assert 0.8 < min(rf) and max(rf) < 1.1
+    assert 1.0 < min(rl) and max(rl) < 1.3
+
+
+@pytest.mark.slow
+def test_optimized_design_agrees_with_getdp_within_3_percent():
+    """GetDP (axisymmetric, nonlinear 1010 steel) at the shipped optimum: force (dBz/dz on the
+    axis at the design point) and secant inductance within 3 % of the reported numbers."""
+    from designkit.fem.runner import find_getdp
+
+    try:
+        find_getdp()
+    except Exception:
+        pytest.skip("GetDP not installed")
+    d = load_design("optimized")
+    rep = opt.evaluate_device(d)
+    chk = opt.getdp_check(d, rep)
+    assert chk["fem_converged"]
+    assert abs(chk["force_rel_err"]) < 0.03 and abs(chk["inductance_rel_err"]) < 0.03
+    assert chk["within_3_percent"]

@@ -5,15 +5,17 @@ Runs the whole pipeline and writes a report folder ``OUT`` (default ``./designki
 ``report.json``
     Version, design name/hash, the design, the single coil's field, gradient, force and torque
     at the design point (``design_point``), the whole array's force there (``array``), the
-    optimized coil (``optimized_coil``, when :mod:`designkit.optimize` is available), the files
-    written and the steps ``skipped`` with the reason.
+    design side by side with the shipped optimized device (``designs``: every device
+    constraint with its margin, violations flagged, the upward force at the design point and
+    the smallest upward force the array renders over the workspace region), the files
+    written, the steps ``skipped`` with the reason, and ``quick`` (true for a --quick run).
 ``report.md``
     The same for people: tables and the figures.
 ``design.json``, ``design.md``, ``design.toml``
     The design summary (every field, SI, with derived coil quantities) as JSON, a Markdown
     table and the TOML that reproduces it.
-``optimized_coil.json``
-    Full optimizer result (when available).
+``designs.json``
+    The side-by-side evaluation in full (constraint tables, rendering points).
 ``figures/*.png``
     Array scene, field lines, |B| and |F| slices, force map, Fz = +/-0.8 mN iso-surface.
 ``vtk/*``
@@ -166,9 +168,71 @@ def _vec_mt(b) -> str:
     return "(" + ", ".join(f"{x * 1e3:+.4g}" for x in b) + ") mT"
 
 
+_ROWS = [
+    ("winding inner / outer radius", lambda e: f"{e['inner_radius_m'] * 1e3:.2f} / "
+                                               f"{e['outer_radius_m'] * 1e3:.2f} mm"),
+    ("winding length", lambda e: f"{e['length_m'] * 1e3:.2f} mm"),
+    ("turns (fit the window)", lambda e: f"{e['turns']} ({e['turns_that_fit']})"),
+    ("wire (bare)", lambda e: f"{e['wire_diameter_m'] * 1e3:.3f} mm"),
+    ("core radius / length / protrusion", lambda e: f"{e['core_radius_m'] * 1e3:.2f} / "
+                                                    f"{e['core_length_m'] * 1e3:.2f} / "
+                                                    f"{e['core_protrusion_m'] * 1e3:.2f} mm"),
+    ("R (hot)", lambda e: f"{e['resistance_ohm']:.4g} ohm at {e['temperature_c']:g} C"),
+    ("L secant at the current", lambda e: f"{e['inductance_h'] * 1e3:.4g} mH at "
+                                          f"{e['current_a']:g} A"),
+    ("5 L/R (cold)", lambda e: f"{e['settling_time_s'] * 1e3:.4g} ms"),
+    ("peak core B", lambda e: f"{e['peak_core_flux_density_t']:.3g} T"),
+    ("upward Fz at the design point", lambda e: f"{e['upward_force_design_point_n'] * 1e3:.1f} "
+                                                f"mN at {e['design_height_m'] * 1e3:g} mm"),
+    ("smallest upward Fz over the workspace region",
+     lambda e: f"{e['min_upward_force_workspace_n'] * 1e3:.1f} mN"),
+]
+
+
+def designs_markdown(designs: dict) -> list[str]:
+    """Side-by-side tables: quantities, then every constraint with its margin (flagged)."""
+    ents = [designs[k] for k in ("design", "optimized") if "skipped" not in designs.get(k, {})]
+    if not ents:
+        return []
+    head = " | ".join(f"`{e['name']}`" for e in ents)
+    lines = ["", "## Design vs the optimized device", "",
+             "Saturating 1010-steel core (surface-current panel model, checked against GetDP); "
+             "R at the hot limit, 5 L/R with cold copper, supply = the MD10C's 30 V. "
+             "Workspace region: the inner array footprint at the lowest reachable height and "
+             "the design height; allocation |I| <= per-coil limit, sum |I| <= budget, "
+             "Fx = Fy = 0 (LP per point).", "",
+             f"| quantity | {head} |", "| --- |" + " --- |" * len(ents)]
+    for label, fmt in _ROWS:
+        lines.append(f"| {label} | " + " | ".join(fmt(e) for e in ents) + " |")
+    lines += ["", "### Constraints (margin >= 0 is met)", "",
+              f"| constraint | {head} |", "| --- |" + " --- |" * len(ents)]
+    names = list(dict.fromkeys(n for e in ents for n in e["constraints"]))
+    for n in names:
+        cells = []
+        for e in ents:
+            c = e["constraints"].get(n)
+            if c is None:
+                cells.append("")
+                continue
+            flag = "ok" if c["met"] else "**VIOLATED**"
+            cells.append(f"{c['value']:.4g} vs {c['kind']} limit {c['limit']:.4g} {c['unit']}"
+                         f", margin {c['margin']:+.3g}: {flag}")
+        note = ents[-1]["constraints"].get(n, ents[0]["constraints"].get(n, {})).get("note", "")
+        lines.append(f"| {n} ({note}) | " + " | ".join(cells) + " |")
+    for e in ents:
+        bad = ", ".join(e["violated"]) or "none"
+        lines.append(f"\n`{e['name']}` violates: {bad}.")
+    lines += ["", "Full numbers: [designs.json](designs.json)."]
+    return lines
+
+
 def report_markdown(report: dict) -> str:
     dp = report["design_point"]
-    lines = [f"# designkit report: design `{report['design_name']}`", "",
+    lines = [f"# designkit report: design `{report['design_name']}`", ""]
+    if report.get("quick"):
+        lines += ["> QUICK RUN (--quick): coarse grids and small images; numbers of the design "
+                  "comparison are not affected.", ""]
+    lines += [
              f"designkit {report['designkit_version']}, spec hash `{report['design_hash']}`; "
              f"the design is in [design.md](design.md) / [design.toml](design.toml).", "",
              "## Force at the design point", "",
@@ -182,7 +246,8 @@ def report_markdown(report: dict) -> str:
                      f"{_vec_mn(arr['force_n'])} |")
     lines += ["", f"Point {tuple(round(x * 1e3, 3) for x in dp['point_m'])} mm, magnet moment "
                   f"{dp['magnet_moment_a_m2']} A m^2 (design.magnet.direction), core model "
-                  f"`{dp['core_model']}`. F = (grad B)^T m."]
+                  f"`{dp['core_model']}`. F = (grad B)^T m. Sign convention everywhere: z up "
+                  "(away from the coil tops); Fz > 0 pushes the magnet away from the coils."]
     for w in dp.get("warnings", []):
         lines.append(f"\n> warning: {w}")
     sen = report.get("sensors")
@@ -194,16 +259,9 @@ def report_markdown(report: dict) -> str:
                       + (" (the reading clips)" if sen["clips"] else "")
                       + f"; the magnet at the design point gives "
                       f"{sen['magnet_field_counts']:.0f} counts of {sen['lsb_t'] * 1e3:g} mT."]
-    opt = report.get("optimized_coil")
-    if opt:
-        lines += ["", "## Optimized coil (thesis eq. 2.14)", "",
-                  "| Ri | Ro | L | turns | R | tau | Fz at the design point | core model |",
-                  "| --- | --- | --- | --- | --- | --- | --- | --- |",
-                  f"| {opt['inner_radius_m'] * 1e3:.3f} mm | {opt['outer_radius_m'] * 1e3:.3f} mm"
-                  f" | {opt['length_m'] * 1e3:.3f} mm | {opt['turns']} | "
-                  f"{opt['resistance_ohm']:.4g} ohm | {opt['time_constant_s'] * 1e3:.4g} ms | "
-                  f"{opt['force_n'] * 1e3:.4g} mN | {opt['core_model']} |",
-                  "", "Full result: [optimized_coil.json](optimized_coil.json)."]
+    designs = report.get("designs")
+    if designs:
+        lines += designs_markdown(designs)
     figs = report.get("figures", {})
     if figs:
         lines += ["", "## Figures", ""]
@@ -220,12 +278,41 @@ def report_markdown(report: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _optimized_coil(design: Design, quality: str) -> dict:
-    from ..optimize import CoilDesignProblem, solve
+def designs_side_by_side(design: Design) -> dict:
+    """The report's design next to the shipped optimized device (or the thesis device next to
+    it when the report is of the optimized one), under the device problem's constraints.
 
-    problem = CoilDesignProblem.from_design(design)
-    result = solve(problem, starts=3 if quality == "quick" else 8)
-    return result.as_dict()
+    Each entry: the saturating panel model's numbers and constraint table
+    (:func:`designkit.optimize.evaluate_device`), ``violated`` (names), the upward force at the
+    design point and ``min_upward_force_workspace_n`` (:func:`designkit.optimize.rendering_force`,
+    the fast core model scaled by the panel/fast core-force ratio at the design point).
+    Fz sign convention: z up (away from the coils); ``*_upward_*`` forces are Fz >= 0 rendered
+    with the current's sign chosen (bipolar drive).
+    """
+    from ..design import default_design, named_design
+    from ..optimize import device_problem_for, evaluate_device, rendering_force
+
+    optimized = named_design("optimized")
+    left = default_design() if design.name == optimized.name else design
+    out = {}
+    for role, d in (("design", left), ("optimized", optimized)):
+        if d.core is None:
+            out[role] = {"name": d.name, "skipped": "no core: the device problem has one"}
+            continue
+        problem = device_problem_for(d)
+        ev = evaluate_device(d, problem)
+        fast = problem.evaluate([ev["inner_radius_m"], ev["outer_radius_m"], ev["length_m"],
+                                 ev["core_radius_m"], ev["core_length_m"],
+                                 max(ev["core_protrusion_m"], 0.0), ev["wire_diameter_m"]],
+                                turns=ev["turns"])
+        ratio = ev["dbz_dz_core_t_per_m"] / fast["dbz_dz_core_t_per_m"]
+        rend = rendering_force(d, core_force_ratio=ratio)
+        ev["upward_force_design_point_n"] = ev.pop("force_n")
+        ev["design_height_m"] = d.optimize.height_m
+        ev["min_upward_force_workspace_n"] = rend["min_upward_force_n"]
+        ev["rendering"] = rend
+        out[role] = ev
+    return out
 
 
 def _field_map(design: Design, out: Path, quality: str) -> Path:
@@ -244,23 +331,9 @@ def run(args: argparse.Namespace) -> int:
     out = check_output(args.out, folder=True)
     design = load_design(args.design)
     current = design.drive.max_current_a if args.current is None else float(args.current)
-    allow = getattr(args, "allow_over_limit", False)
-    check_current_limit(design, [current], allow=allow, param="--current")
-    from ..viz import resolve_currents
-
-    currents_arg = parse_currents(getattr(args, "currents", None))
-    if currents_arg is not None:
-        check_current_limit(design, resolve_currents(design, currents_arg), allow=allow)
-    with staged_folder(out) as stage:
-        summary, report = _run(args, design, current, currents_arg, stage)
-    _print_summary(design, summary, current, report, out)
-    return 0
-
-
-def _run(args, design, current, currents_arg, out):
     quality = getattr(args, "quality", "full")
     show = show_progress(args)
-    steps = ["design summary", "design point", "optimized coil", "figures", "VTK files",
+    steps = ["design summary", "design point", "design vs optimized", "figures", "VTK files",
              "map file", "report"]
     try:
         from .._progress import tqdm
@@ -295,6 +368,7 @@ def _run(args, design, current, currents_arg, out):
     step(steps[1])
     summary = design_point_summary(design, current)
     report: dict = {
+        "quick": quality == "quick",
         "designkit_version": __version__,
         "design_name": design.name,
         "design_hash": design.spec_hash(),
@@ -319,18 +393,15 @@ def _run(args, design, current, currents_arg, out):
         skipped["array"] = f"designkit.viz unavailable ({exc})"
     done()
 
-    # 3. optimized coil
+    # 3. the design next to the shipped optimized device
     step(steps[2])
     try:
-        opt = _optimized_coil(design, quality)
-        write_json_atomic(out / "optimized_coil.json", opt)
-        report["optimized_coil"] = {k: opt[k] for k in (
-            "inner_radius_m", "outer_radius_m", "length_m", "turns", "resistance_ohm",
-            "inductance_h", "time_constant_s", "current_a", "force_n", "core_model",
-            "verified_global") if k in opt}
-        report["optimized_coil"]["file"] = "optimized_coil.json"
+        designs = designs_side_by_side(design)
+        write_json_atomic(out / "designs.json", designs)
+        report["designs"] = {k: {q: val for q, val in e.items() if q != "rendering"}
+                             for k, e in designs.items()}
     except ImportError as exc:
-        skipped["optimized coil"] = f"designkit.optimize is not available ({exc})"
+        skipped["design vs optimized"] = f"designkit.optimize is not available ({exc})"
     done()
 
     # 4-5. figures and VTK files from the same datasets
@@ -422,11 +493,15 @@ def _print_summary(design, summary, current, report, out) -> None:
           f"{design.magnet.moment_a_m2:.4f} A m^2")
     for w in summary.get("warnings", []):
         print(f"  warning: {w}")
-    opt = report.get("optimized_coil")
-    if opt:
-        print(f"optimized coil ({opt['core_model']}): Ri/Ro/L = {opt['inner_radius_m'] * 1e3:.2f}/"
-              f"{opt['outer_radius_m'] * 1e3:.2f}/{opt['length_m'] * 1e3:.2f} mm, "
-              f"{opt['turns']} turns, Fz = {opt['force_n'] * 1e3:.1f} mN")
+    for role, e in report.get("designs", {}).items():
+        if "skipped" in e:
+            continue
+        bad = ", ".join(e["violated"]) or "none"
+        print(f"{role} '{e['name']}': upward Fz {e['upward_force_design_point_n'] * 1e3:.1f} mN "
+              f"at the design point, >= {e['min_upward_force_workspace_n'] * 1e3:.1f} mN over "
+              f"the workspace region; violates: {bad}")
+    if report.get("quick"):
+        print("QUICK RUN (--quick): coarse grids and small images")
     for what, why in report.get("skipped", {}).items():
         print(f"skipped {what}: {why}")
     print(f"wrote {out / 'report.json'}, {out / 'report.md'}, "
