@@ -331,6 +331,20 @@ def run(args: argparse.Namespace) -> int:
     out = check_output(args.out, folder=True)
     design = load_design(args.design)
     current = design.drive.max_current_a if args.current is None else float(args.current)
+    allow = getattr(args, "allow_over_limit", False)
+    check_current_limit(design, [current], allow=allow, param="--current")
+    from ..viz import resolve_currents
+
+    currents_arg = parse_currents(getattr(args, "currents", None))
+    if currents_arg is not None:
+        check_current_limit(design, resolve_currents(design, currents_arg), allow=allow)
+    with staged_folder(out) as stage:
+        summary, report = _run(args, design, current, currents_arg, stage)
+    _print_summary(design, summary, current, report, out)
+    return 0
+
+
+def _run(args, design, current, currents_arg, out):
     quality = getattr(args, "quality", "full")
     show = show_progress(args)
     steps = ["design summary", "design point", "design vs optimized", "figures", "VTK files",
