@@ -54,7 +54,7 @@ from scipy.interpolate import PchipInterpolator
 from scipy.special import ellipe
 
 from .core import STEEL1010_B, STEEL1010_H
-from .design import MU0
+from .constants import MU0
 from .errors import BadInputError
 from .field.kernels import cel
 

@@ -56,7 +56,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .design import MU0
+from .constants import MU0
 from .errors import BadInputError, DesignRuleError
 from .pose import Pose
 

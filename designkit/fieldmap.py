@@ -361,7 +361,7 @@ def compute_mode_tables(t: dict, spec: dict) -> list:
     """The mode tables (n_rho, n_u, Q) float64 of one core type, one per shape set of ``t``
     (A, sensors): for each shape, the quantities of :data:`N_MODE_Q` from the core model's
     basis fields at (rho, 0, z), local frame (one evaluation of the basis for all sets)."""
-    from .design import MU0
+    from .constants import MU0
 
     model = t["model"]
     t_sets = t["sets"]

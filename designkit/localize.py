@@ -38,7 +38,8 @@ from typing import Literal, Sequence
 import numpy as np
 
 from . import _validate as v
-from .design import MU0, Design, default_design
+from .constants import MU0
+from .design import Design, default_design
 from .errors import BadInputError
 
 TLV_LSB_T = 0.098e-3

@@ -72,7 +72,8 @@ import numpy as np
 
 from . import _validate as v
 from . import electrical as el
-from .design import MU0, Design
+from .constants import MU0
+from .design import Design
 from .errors import BadInputError
 
 if TYPE_CHECKING:  # pragma: no cover

@@ -14,7 +14,7 @@ import warnings
 import numpy as np
 
 from .coil import Coil
-from .constants import MU0
+from .field import dipole_field
 
 
 def sensor_headroom(design, current_a: float | None = None) -> dict:
@@ -41,11 +41,9 @@ def sensor_headroom(design, current_a: float | None = None) -> dict:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the saturation warning is the report's, once
         b_coil = Coil.from_design(design).field(point, current)
-    r = np.asarray(design.design_point_m) - point
-    m = np.array([0.0, 0.0, design.magnet.moment_a_m2])
-    d = np.linalg.norm(r)
-    # point dipole at the design point, seen from the sensor (r points sensor -> magnet)
-    b_mag = MU0 / (4 * np.pi) * (3 * r * (m @ r) / d**5 - m / d**3)
+    # the magnet as a point dipole at the design point
+    b_mag = dipole_field(point - np.asarray(design.design_point_m),
+                         design.magnet.moment_vector_a_m2)
     frac = float(np.abs(b_coil).max() / s.range_t)
     return {"sensor_point_m": point.tolist(), "coil_current_a": current,
             "coil_field_t": b_coil.tolist(), "range_t": s.range_t, "lsb_t": s.lsb_t,

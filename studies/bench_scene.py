@@ -61,7 +61,7 @@ def run(out_dir, quick: bool = False, tolerances=(1e-3, 1e-4), spacing: float = 
         spacing = 0.02
     arr = CoilArray.from_design(design)
     pts = workspace_grid(design, spacing)
-    m = (0.0, 0.0, design.magnet.moment_a_m2)
+    m = design.magnet.moment_vector_a_m2
     t0 = time.perf_counter()
     a_ref = arr.actuation_matrix(pts)
     t_ref = time.perf_counter() - t0

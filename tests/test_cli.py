@@ -104,7 +104,7 @@ def test_report_failing_late_leaves_nothing(tmp_path, monkeypatch, capsys):
         raise BadInputError("map", "something", "a late failure")
 
     monkeypatch.setattr(report, "_field_map", fail)
-    monkeypatch.setattr(report, "_optimized_coil", lambda d, q: (_ for _ in ()).throw(
+    monkeypatch.setattr(report, "designs_side_by_side", lambda d: (_ for _ in ()).throw(
         ImportError("skip the optimizer in this test")))
     monkeypatch.setattr(report, "_figures_and_vtk", lambda *a, **k: (_ for _ in ()).throw(
         ImportError("skip the figures in this test")))
@@ -122,7 +122,7 @@ def test_report_failing_keeps_a_previous_report_untouched(tmp_path, monkeypatch,
     (old / "design.json").write_text("old")
     monkeypatch.setattr(report, "_field_map", lambda *a: (_ for _ in ()).throw(
         BadInputError("map", "x", "late")))
-    monkeypatch.setattr(report, "_optimized_coil", lambda d, q: (_ for _ in ()).throw(
+    monkeypatch.setattr(report, "designs_side_by_side", lambda d: (_ for _ in ()).throw(
         ImportError("skip")))
     monkeypatch.setattr(report, "_figures_and_vtk", lambda *a, **k: (_ for _ in ()).throw(
         ImportError("skip")))

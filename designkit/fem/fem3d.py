@@ -55,7 +55,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..design import MU0
+from ..constants import MU0
 from ..errors import BadInputError, require
 from .runner import find_getdp
 
