@@ -16,7 +16,7 @@ from .errors import DesignkitError
 
 COMMANDS: dict[str, tuple[str, str]] = {
     "report": ("designkit.commands.report", "main job: whole pipeline on a design -> report folder"),
-    "optimize": ("designkit.commands.optimize", "nlopt coil design (thesis eq. 2.14)"),
+    "optimize": ("designkit.commands.optimize", "the real device: coil, wire, saturating core"),
     "sweep": ("designkit.commands.sweep", "evaluate a grid of coil designs (parallel)"),
     "map": ("designkit.commands.map", "force-current map file for the controller"),
     "cad": ("cad.cli", "printable parts (STL/STEP/3MF) and assembly"),
