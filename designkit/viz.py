@@ -813,11 +813,43 @@ def save_png(plotter: "pyvista.Plotter", path: str | Path) -> Path:
     return path
 
 
+def bar_label_values(lo: float, hi: float, log: bool) -> list[float]:
+    """Round label values for a colour bar over [lo, hi]: 1, 2, 5 x 10^k on a log bar (fewer
+    per decade when the range spans many), the ticks of :func:`nice_ticks` inside the range on
+    a linear one."""
+    if not (hi > lo):
+        return [lo]
+    if log and lo > 0:
+        for mants in ((1, 2, 5), (1, 3), (1,)):
+            vals = [m * 10.0 ** e for e in range(math.floor(math.log10(lo)),
+                                                math.ceil(math.log10(hi)) + 1) for m in mants]
+            vals = [x for x in vals if lo * (1 - 1e-9) <= x <= hi * (1 + 1e-9)]  # lo > 0 here
+            if len(vals) <= 7:
+                break
+        return vals if len(vals) >= 2 else [lo, hi]
+    a, b, step = nice_ticks(lo, hi)
+    vals = [a + k * step for k in range(int(round((b - a) / step)) + 1)]
+    return [x for x in vals if lo - 1e-9 * step <= x <= hi + 1e-9 * step]
+
+
 def _clear_bar_titles(plotter) -> None:
-    """Lift each colour bar's title above its top tick label (VTK draws them overlapping)."""
+    """Colour bars on round label values (:func:`bar_label_values`), their title lifted above
+    the top label (VTK draws them overlapping)."""
+    from vtkmodules.vtkCommonCore import vtkDoubleArray
+
     for bar in plotter.scalar_bars.values():
         size = bar.GetLabelTextProperty().GetFontSize()
         bar.SetVerticalTitleSeparation(max(int(size), 12))
+        lut = bar.GetLookupTable()
+        if lut is None or bar.GetNumberOfLabels() <= 2:
+            continue  # two labels are the range's ends, e.g. -0.8 / +0.8 mN: round already
+        lo, hi = lut.GetRange()
+        labels = vtkDoubleArray()
+        for x in bar_label_values(lo, hi, bool(lut.GetScale())):
+            labels.InsertNextValue(x)
+        bar.SetUseCustomLabels(True)
+        bar.SetCustomLabels(labels)
+        bar.SetLabelFormat("%g")
 
 
 def render(kind: Kind, design: "Design", currents: Sequence[float] | None = None, *,

@@ -113,6 +113,25 @@ def test_colour_bar_titles_are_lifted_clear_of_the_top_tick(rendered, kind):
         assert bar.GetVerticalTitleSeparation() >= bar.GetLabelTextProperty().GetFontSize()
 
 
+@pytest.mark.parametrize("kind", viz.KINDS)
+def test_colour_bar_labels_are_round_values_inside_the_range(rendered, kind):
+    p, _ = rendered[kind]
+    for bar in p.scalar_bars.values():
+        lo, hi = bar.GetLookupTable().GetRange()
+        if bar.GetNumberOfLabels() <= 2:
+            continue
+        assert bar.GetUseCustomLabels()
+        labels = bar.GetCustomLabels()
+        vals = [labels.GetValue(i) for i in range(labels.GetNumberOfValues())]
+        assert 2 <= len(vals) <= 7
+        for x in vals:
+            tol = 1e-9 * (hi - lo)
+            assert lo - tol <= x <= hi + tol
+            if x != 0:
+                mant = abs(x) / 10 ** math.floor(math.log10(abs(x)))
+                assert min(abs(mant - m) for m in (1, 2, 3, 4, 5, 6, 8, 10)) < 1e-6, vals
+
+
 @pytest.mark.parametrize("quantity", ["B", "F"])
 def test_slice_colours_span_the_data_and_leave_out_solids(quantity):
     vert, horiz = viz.slice_data(DESIGN, quality="quick")
