@@ -156,6 +156,25 @@ def figure(name, obj, pts, nrm, stats_u, stats_b, lam, out_png, source):
     plt.close(fig)
 
 
+def figures_only(out_dir="out/render_thesis", *, n_side: int = 31) -> None:
+    """Redraw the per-object figures (no lambda searches)."""
+    out_dir = Path(out_dir)
+    source = ArrayActuation.from_design(default_design())
+    mesh = MeshSurface.from_file(blob_stl(out_dir / "blob.stl"), spacing_m=0.002)
+    lo, hi = source.bounds
+    for name, obj in {"flat surface": Plane(), "hemisphere": Hemisphere(),
+                      "half-cylinder": HalfCylinder(), "wedge": Wedge(),
+                      "mesh (blob)": mesh}.items():
+        pts, nrm = obj.surface_points(n_side)
+        keep = np.all((pts >= lo) & (pts <= hi), axis=1)
+        pts, nrm = pts[keep], nrm[keep]
+        fms = force_matrices(source, pts, "force")
+        su = render_stats(obj, source, 18.0, True, pts, nrm, fms)
+        sb = render_stats(obj, source, 18.0, False, pts, nrm, fms)
+        slug = name.split()[0].replace("-", "_")
+        figure(name, obj, pts, nrm, su, sb, 18.0, out_dir / f"render_{slug}.png", source)
+
+
 def run(out_dir="out/render_thesis", *, n_side: int = 31, quick: bool = False,
         progress: bool = True) -> dict:
     out_dir = Path(out_dir)
@@ -236,7 +255,8 @@ def table(res) -> str:
     for r in res["objects"]:
         lu, lb = r["lambda_unipolar_n_per_m"], r["lambda_bipolar_n_per_m"]
         lines.append(f"| {r['object']} | {r['n_points']} | {lu:.3g} | {lb:.3g} | "
-                     f"{lb / lu:.2f} | {r['met5_unipolar_at_6'] * 100:.0f} % / "
+                     f"{(f'{lb / lu:.2f}' if lu > 0 else 'inf')} | "
+                     f"{r['met5_unipolar_at_6'] * 100:.0f} % / "
                      f"{r['met5_bipolar_at_6'] * 100:.0f} % | "
                      f"{r['met5_unipolar_at_18'] * 100:.0f} % / "
                      f"{r['met5_bipolar_at_18'] * 100:.0f} % | "
@@ -297,8 +317,21 @@ def main(argv=None):
     ap.add_argument("out_dir", nargs="?", default="out/render_thesis")
     ap.add_argument("--n-side", type=int, default=31)
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--figures-only", action="store_true", help="redraw the object figures")
+    ap.add_argument("--from-json", action="store_true",
+                    help="rewrite the table and the lambda figure from render_thesis.json")
     a = ap.parse_args(argv)
-    run(a.out_dir, n_side=a.n_side, quick=a.quick)
+    if a.from_json:
+        import json
+
+        res = json.loads((Path(a.out_dir) / "render_thesis.json").read_text())
+        write_text_atomic(Path(a.out_dir) / "render_thesis.md", table(res))
+        _lambda_figure(res, Path(a.out_dir) / "render_lambda.png")
+        print(table(res))
+    elif a.figures_only:
+        figures_only(a.out_dir, n_side=a.n_side)
+    else:
+        run(a.out_dir, n_side=a.n_side, quick=a.quick)
 
 
 if __name__ == "__main__":
