@@ -21,11 +21,14 @@ into azimuthal orders m (:mod:`designkit.coupling`). So nothing of A is sampled 
   interpolation error counts ~0.15 x.
 * SVD truncation and m >= 3 (below 1e-4 of the coupling, designkit.coupling) are the rest.
 
-Measured (2-core array, 30 random points; studies/bench_map.py for the default array): A within
-2e-4 of each row's maximum. The sensor-induced field uses the same modes by reciprocity (~2-3 %
-of its maximum: the unit dipoles at the sensors, ~9 mm from a core's end, need many shapes and
-the discrete solve is reciprocal only to its discretization); the bias force is the weakest part
-(~8 %: per-core pull tables plus a coarse grid of the cores' interaction) -- see the report.
+Measured on the default 3 x 3 array (``studies/bench_map.py``, 1000 random points, Nov 2026,
+machine heavily loaded): A within 4.3e-4 of each row's maximum (every row), file 3.8 MB; the
+sensor-induced field (same modes, by reciprocity) within 2 % of its maximum (the discrete solve
+is reciprocal only to its discretization); the bias force within 0.3 % (per-core pull tables
+plus a 25 mm grid of the cores' interaction). Not met: speed. A lookup is now a sum over 9
+cores x ~20 core modes (~25 k multiply-adds per point): ~0.4 ms for one point and ~3 s for 1e4
+points on the loaded machine (targets 20 us, 5 ms), and the build (coupled solve, mode tables,
+nonlinear saturation solves) took 214 s there (target 30 s).
 
 The build checks itself: it evaluates the coupled model directly at ``n_check`` random points
 in the box and records the errors of the finished map in ``meta['errors']``.
