@@ -49,7 +49,7 @@ from .errors import BadInputError
 from firmware_io import mapfile as mf
 from firmware_io.errors import BadInputError as _FirmwareBadInput
 
-FORMAT, FORMAT_VERSION, UNITS, BATCH_MIN = mf.FORMAT, mf.FORMAT_VERSION, mf.UNITS, mf.BATCH_MIN
+FORMAT, FORMAT_VERSION, UNITS = mf.FORMAT, mf.FORMAT_VERSION, mf.UNITS
 
 
 # ============================================================================ grids

@@ -75,7 +75,6 @@ from .errors import BadInputError
 FORMAT = "designkit-fieldmap"
 FORMAT_VERSION = 3
 """Format version of map v2 (coupled A, bias force, sensor fields); 1 and 2 were grid-only maps."""
-BATCH_MIN = 64
 ROWS = ("Bx", "By", "Bz", "dBx/dx", "dBx/dy", "dBx/dz", "dBy/dy", "dBy/dz")
 UNITS = {"A_rows_0_2": "T/A", "A_rows_3_7": "T/(m A)", "grid": "m", "moment": "A m^2",
          "current": "A", "force": "N", "field": "T", "sensor_coil_field": "T/A"}
