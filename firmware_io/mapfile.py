@@ -610,16 +610,43 @@ def _poly(x: np.ndarray, y: np.ndarray, m: int, c: int) -> np.ndarray:
     return P
 
 
+def _monomials(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """(..., 15): 1, x, y, x^2, x y, y^2, x^3, x^2 y, x y^2, y^3, x^4, x^3 y, x^2 y^2, x y^3, y^4."""
+    xx, yy = x * x, y * y
+    return np.stack([np.ones_like(x), x, y, xx, x * y, yy, xx * x, xx * y, x * yy, yy * y,
+                     xx * xx, xx * x * y, xx * yy, x * yy * y, yy * yy], axis=-1)
+
+
+def _poly_tensors() -> dict:
+    """_poly as constant tensors on the monomials: P = monomials @ T[(m, c)] (15, Q_m * 8).
+
+    _poly is a polynomial of degree <= 4 in (x, y), so evaluating it at 40 random points and
+    solving for the 15 monomial coefficients is exact up to rounding (checked)."""
+    rng = np.random.default_rng(0)
+    x, y = rng.uniform(-1, 1, (2, 40))
+    mono = _monomials(x, y)
+    out = {}
+    for key in ((0, 0), (1, 0), (1, 1), (2, 0), (2, 1)):
+        p = _poly(x, y, *key).reshape(40, -1)
+        t = np.linalg.lstsq(mono, p, rcond=None)[0]
+        t[np.abs(t) < 1e-9] = 0.0
+        t = np.round(t)  # the coefficients are small integers
+        assert np.allclose(mono @ t, p, atol=1e-12)
+        out[key] = t
+    return out
+
+
 def mode_rows(t: dict, p: np.ndarray) -> np.ndarray:
     """Rows (n, k, n_basis, 8) of every basis field of the type's k cores at points (n, 3),
     global frame, basis in the order of ``t['order']`` (grouped by mode order and cos / sin;
     :func:`prepare_modes` permutes the coefficients to match)."""
     x, y, val = _bilinear(t, p)
     n, k = x.shape
+    mono = _monomials(x, y).reshape(n * k, 15)
     parts = []
     for (m, c), cols in t["groups"]:
         v = val[..., cols]  # (n, k, nb_g, Q_m)
-        pm = _poly(x, y, m, c)[:, :, None]  # (n, k, 1, Q_m, 8)
+        pm = (mono @ _POLY_T[(m, c)]).reshape(n, k, 1, N_MODE_Q[m], 8)  # one GEMM
         # a sum over the 4-5 quantities: numpy's batched matmul is slow on tiny matrices
         acc = v[..., 0, None] * pm[..., 0, :]
         for q in range(1, v.shape[-1]):
@@ -630,6 +657,9 @@ def mode_rows(t: dict, p: np.ndarray) -> np.ndarray:
         flat = rows.transpose(3, 0, 2, 1).reshape(8, -1, k)
         rows = _rotate_rows(flat, t["rot"]).reshape(8, n, -1, k).transpose(1, 3, 2, 0)
     return rows
+
+
+_POLY_T = _poly_tensors()
 
 
 # ============================================================================ 3-D grids
