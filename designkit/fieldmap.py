@@ -440,7 +440,8 @@ def compute_mode_tables(t: dict, spec: dict) -> list:
 
 # ============================================================================ build
 def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
-          mode_tolerance: float = 1e-4, sensor_mode_tolerance: float = 1e-3, rz_step: float = 1e-4, rz_log_step: float = 0.025,
+          mode_tolerance: float = 1e-4, sensor_mode_tolerance: float = 1e-3,
+          rz_step: float = 1e-4, rz_log_step: float = 0.025,
           rz_rho_scale: float = 0.05, mode_rz_step: float = 2.5e-4,
           mode_rz_log_step: float = 0.04, magnet_rz_step: float = 2e-3,
           magnet_rz_log_step: float = 0.15, box=None, n_check: int = 100,

@@ -611,7 +611,8 @@ def _poly(x: np.ndarray, y: np.ndarray, m: int, c: int) -> np.ndarray:
 
 
 def _monomials(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """(..., 15): 1, x, y, x^2, x y, y^2, x^3, x^2 y, x y^2, y^3, x^4, x^3 y, x^2 y^2, x y^3, y^4."""
+    """(..., 15): 1, x, y, x^2, x y, y^2, x^3, x^2 y, x y^2, y^3, x^4, x^3 y, x^2 y^2,
+    x y^3, y^4."""
     xx, yy = x * x, y * y
     return np.stack([np.ones_like(x), x, y, xx, x * y, yy, xx * x, xx * y, x * yy, yy * y,
                      xx * xx, xx * x * y, xx * yy, x * yy * y, yy * yy], axis=-1)
