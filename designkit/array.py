@@ -198,6 +198,16 @@ class CoilArray:
             out.setdefault(dataclasses.replace(c, pose=Pose()), []).append(k)
         return out
 
+    def __getstate__(self):
+        # the cached coupled solve (tens of MB) is rebuilt on demand, not pickled to workers
+        state = dict(self.__dict__)
+        state.pop("_system", None)
+        return state
+
+    def __setstate__(self, state):
+        for key, value in state.items():
+            object.__setattr__(self, key, value)
+
     # ------------------------------------------------------------------ coupled cores
     def coupled(self):
         """The array-level core solve (:class:`designkit.coupling.ArraySystem`), built once.
