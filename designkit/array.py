@@ -253,7 +253,8 @@ class CoilArray:
             a[:, :3, k] = b
             a[:, 3:, k] = g5_from_gradient(g)
         if system is not None:
-            b, g = system.core_field(p, system.coil_solution(), gradient=True)
+            b, g = system.core_field(p, system.coil_solution(), gradient=True,
+                                     coil_columns=True)
             a[:, :3, :] += b
             a[:, 3:, :] += g5_from_gradient(np.moveaxis(g, -1, 1)).transpose(0, 2, 1)
         return a[0] if single else a

@@ -350,7 +350,7 @@ class CoreModel:
         return (h, g) if gradient else h
 
     def field(self, pts: np.ndarray, xs: np.ndarray, gradient: bool = False,
-              pointwise: bool = False):
+              pointwise: bool = False, own_col: int | None = None):
         """H of the core for unknown columns ``xs`` (n_unknowns, k) at local points.
 
         Contracts the unknowns before the kernels (far rings for m = 0, charges for m >= 1).
@@ -368,9 +368,26 @@ class CoreModel:
         rho = np.hypot(pts[:, 0], pts[:, 1])
         far = self.far_mask(rho, pts[:, 2])
         x0 = xs[:self.n0]
+        if own_col is not None and not pointwise:
+            # the column of the core's own winding (by far its largest): m = 0 through
+            # designkit.core's field rules, so one coil alone is exactly the single-core model;
+            # the small remainder of the other columns by the compressed rules below
+            from .core import CoreSolution
+
+            ns = len(self.side)
+            sol = CoreSolution(self.radius, self.side[:, 0], self.side[:, 1], x0[:ns, own_col],
+                               self.discs[:, 0], self.discs[:, 1], self.discs[:, 2],
+                               x0[ns:, own_col], 0.0)
+            res = sol.field(pts, gradient=gradient)
+            if gradient:
+                h[..., own_col] += res[0] / MU0
+                g[..., own_col] += res[1] / MU0
+            else:
+                h[..., own_col] += res / MU0
+            x0 = x0.copy()
+            x0[:, own_col] = 0.0
         # m = 0: cylindrical components per column, then Cartesian
-        sel_list = ((far, True), (~far, False))
-        for sel, is_far in sel_list:
+        for sel, is_far in ((far, True), (~far, False)):
             if not np.any(sel):
                 continue
             idx = np.flatnonzero(sel)
@@ -894,29 +911,33 @@ class ArraySystem:
         return self._coil_solution
 
     # ------------------------------------------------------------------ evaluation
-    def core_field(self, points: np.ndarray, x: np.ndarray, gradient: bool = False):
+    def core_field(self, points: np.ndarray, x: np.ndarray, gradient: bool = False, *,
+                   coil_columns: bool = False):
         """B of all cores for the unknown columns x (n_unknowns, k) at global points.
 
-        Returns B (n, 3, k) T [, G (n, 3, 3, k) T/m].
+        ``coil_columns``: x is :meth:`coil_solution` (column k = coil k), and each core's own
+        column is evaluated by designkit.core's rules. Returns B (n, 3, k) T [, G (n, 3, 3, k)
+        T/m].
         """
-        return self._field(points, x, gradient, False)
+        return self._field(points, x, gradient, False, coil_columns)
 
     def core_field_pointwise(self, points: np.ndarray, x: np.ndarray, gradient: bool = False):
         """Like :meth:`core_field` but point i uses its own column x[:, i]: B (n, 3) [, G]."""
         return self._field(points, x, gradient, True)
 
-    def _field(self, points, x, gradient, pointwise):
+    def _field(self, points, x, gradient, pointwise, coil_columns=False):
         with _blas_one_thread():
-            return self._field_impl(points, x, gradient, pointwise)
+            return self._field_impl(points, x, gradient, pointwise, coil_columns)
 
-    def _field_impl(self, points, x, gradient, pointwise):
+    def _field_impl(self, points, x, gradient, pointwise, coil_columns=False):
         pts = np.asarray(points, dtype=float)
         tail = () if pointwise else (x.shape[1],)
         b = np.zeros((len(pts), 3) + tail)
         g = np.zeros((len(pts), 3, 3) + tail) if gradient else None
         for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
             xs = x[self.offsets[jj]:self.offsets[jj + 1]]
-            res = mj.field(pj.to_local(pts), xs, gradient, pointwise)
+            res = mj.field(pj.to_local(pts), xs, gradient, pointwise,
+                           self.core_index[jj] if coil_columns else None)
             rot = pj.matrix
             h = res[0] if gradient else res
             if pj.is_identity_rotation:
