@@ -23,25 +23,55 @@ projected field) are built once per design. Solving the block system for a sourc
 cores' magnetization at once (a dense LU, factorized once per design and reused for every
 source: each coil's winding per ampere, the finger magnet at each position).
 
-Costs (n_c cores, n_u = n0 + 2 m_max n1 unknowns per core, default 80 + 2*2*40 = 240):
-per design, the cross blocks (one per distinct relative placement of two cores: 24 in a 3 x 3
-grid) and one LU of size n_c n_u (2160); per source, one RHS sample of the source's field at
-n_c (n0 + n1) N_PHI_RING points and an LU back-substitution; per observation point, n_c times
-(~30 compressed rings for m = 0 and 40 x 16 panel charges for m >= 1, 4 x 64 near a core).
+Costs (n_c cores, n_u = n0 + 2 m_max n1 unknowns per core; default 80 + 2*2*40 = 240, 2160
+for the 3 x 3 array):
 
-Magnet-core interaction (linear cores): the magnet (point dipole ``m`` at ``p``) magnetizes
-the cores; the field of these cores at any point is :meth:`ArraySystem.magnet_core_field`; the
-force on the magnet is ``F0 = (m . grad) B_ind(p)`` and the torque ``m x B_ind(p)``. With
-linear cores everything superposes: ``F(p, I) = F(m) A(p) I + F0(p)`` exactly for a rigid point
-dipole; what remains is the core saturation (the coils' and the magnet's fields add in the
-iron), the magnet's finite size, and the magnet's own permeability (mu_r ~ 1.05 for NdFeB).
+* per design (once, cached on the :class:`~designkit.array.CoilArray`): the self blocks of each
+  core type (m = 0: core.py's influence matrix; m >= 1: n1^2 graded quadratures), one cross
+  block per distinct relative placement of two cores (24 in a 3 x 3 grid; each = the basis
+  fields of one core at (n0 + n1) x N_PHI_RING points of the other), one dense LU of
+  n_c n_u (2160^2), and the coil columns (each winding sampled on every core's rings, one per
+  distinct relative placement, then an LU back-substitution). Measured 4-7 s + 0.6 s for the
+  default array on a loaded 2-core machine (single-threaded BLAS);
+* per point of A: the n_c windings (as uncoupled) plus, per core, ~30 compressed m = 0 rings and
+  ~360 compressed m >= 1 charges (far points) or 176 panel kernels and 3840 panel charges
+  (points the Bernstein-ellipse test puts near): ~0.8 ms coupled vs ~0.4 ms uncoupled per point
+  with gradient, 9 columns (loaded machine);
+* per magnet position (F0, torque, induced field): the magnet's field sampled on every core's
+  rings (N_PHI_MAGNET azimuths on cores within 30 mm, N_PHI_RING on the others), one
+  back-substitution, one evaluation: ~5 ms per position (dipole), ~4x that for the finite
+  cylinder (face quadrature).
 
-Saturation correction (stored by the map, applied by the runner): see :func:`saturation_table`.
-Per coil k and current magnitude |I| on the grid ``saturation_current_a`` (k,), the factor
-``saturation_factor[:, k]`` (k, n_coils) multiplies column k of the linear A(p):
-``A_sat(p, I)[:, :, k] = A(p)[:, :, k] * s_k(|I_k|)`` (linear interpolation in |I_k|, s = 1 at 0).
-It is the single-core nonlinear (1010 steel) force at the design point divided by the linear
-one, from designkit's nonlinear axisymmetric solve.
+Accuracy (measured, tests/test_coupling.py, studies/array_coupling.py): m_max 2 -> 3 changes
+the cores' field by < 2e-4 of its maximum; refine 1 -> 2 (twice the panels) changes dBz/dz at the
+design point by ~1e-4; the solve is reciprocal to ~0.2 %; two cores vs the 3-D GetDP FEM
+(designkit.fem.fem3d) within the FEM's coarse-mesh error (~2-4 % in B).
+
+Magnet-core interaction (linear cores): the magnet magnetizes the cores
+(:meth:`ArraySystem.magnet_solution`); the field of these cores anywhere is
+``CoilArray.magnet_core_field``; the force and torque on the magnet are
+:meth:`ArraySystem.magnet_load`: for a point dipole ``F0 = (m . grad) B_ind(p)``,
+``tau = m x B_ind(p)``; for the real 10 x 10 mm N52 cylinder (``magnet_size_m``) its exact
+field is the source and the force is that of its face charges (exact for uniform M). The
+dipole is the default (the map and the controller carry only m); it underestimates the pull by
+0.2 % at 80 mm, 0.7 % at 50 mm, 1.9 % at 30 mm, 4 % at 12-20 mm, and the sensor-induced field by
+~1 %. With linear cores everything superposes: ``F(p, I) = F(m) A(p) I + F0(p)`` exactly for a
+rigid point dipole. What remains: (1) saturation couples currents and magnet (their fields add
+in the iron: at 12 mm the magnet adds ~0.12 T, 5 mm below the centre core's top, to the ~0.8 T
+of its coil at 6 A; at 30 mm 0.015 T), not in a per-coil factor; (2) the magnet's finite size,
+i.e. A(p) at the centre vs averaged over the magnet (the dipole-vs-cylinder numbers above);
+(3) the magnet's own permeability (mu_r ~ 1.05 for NdFeB: the coils' field changes its
+moment by ~chi H / M ~ 3e-4 at 10 mT).
+
+Saturation correction (stored by the map, applied by the runner): see :func:`saturation_table`
+and :meth:`designkit.array.CoilArray.saturation_correction`, which returns
+``saturation_current_a`` (k,) A, ``saturation_factor`` (k, n_coils) and ``core_flux_t_per_a``
+(n_coils, n_coils) T/A. Column k of the linear A(p) is scaled,
+``A_sat(p, I)[:, :, k] = A(p)[:, :, k] * s_k``, with ``s_k = interp(|I_k|, saturation_current_a,
+saturation_factor[:, k])`` (one coil on), or per state with |I_k| replaced by the equivalent own
+current ``|sum_j C[k, j] I_j| / C[k, k]`` (C = core_flux_t_per_a). s is the single-core
+nonlinear (1010 steel) force at the design point over the linear one (designkit's nonlinear
+axisymmetric solve); against the nonlinear axisymmetric GetDP FEM see studies/array_coupling.py.
 """
 
 from __future__ import annotations
@@ -61,13 +91,37 @@ M_MAX = 2
 """Highest azimuthal mode kept (m >= 3 measured below 1e-4 of the coupling effect; studies)."""
 N1_SIDE = 24
 N1_CAP = 8
+FAR_DISTANCE = 8e-3
+"""Points nearer than this (m) to a core's bounding cylinder always sum its panels."""
+FAR_NODES = 6
+"""Gauss nodes per interval of the compressed ring rules (the product rule of
+designkit.core's far field, here linear in the panel values)."""
+FAR_RHO = 2.6
+"""Bernstein-ellipse parameter a point needs w.r.t. every interval of the compressed rules
+(error ~ FAR_RHO^-12 ~ 1e-5 with 6 nodes)."""
 N_PHI_RING = 12
 """Azimuthal samples per collocation ring when projecting another core's / a winding's field."""
-N_PHI_MAGNET = 48
-"""... and when projecting the magnet's field (it can be ~5 mm from a core top)."""
-NEAR_DISTANCE = 0.015
-"""Observation points closer than this (m) to a core's bounding cylinder use its fine charge
-quadrature (4 Gauss nodes x 64 azimuths per panel), farther ones 2 x 16."""
+N_PHI_MAGNET = 32
+"""... and when projecting the magnet's field (it can be ~5 mm from a core top).
+Observation points where :meth:`CoreModel.far_mask` fails sum a core's panels (m = 0) and
+3 Gauss nodes x 32 azimuths per charge panel (m >= 1); the others use compressed product
+rules (FAR_NODES rings per interval, 12 azimuths)."""
+
+
+def _blas_one_thread():
+    """Context limiting BLAS to one thread when threadpoolctl is installed (optional).
+
+    The kernels here are many small matrix products; a multithreaded BLAS on a busy machine
+    spends far more time synchronizing than computing (measured 40x slower, 2 threads on 2
+    loaded cores).
+    """
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - optional
+        import contextlib
+
+        return contextlib.nullcontext()
+    return threadpool_limits(1, user_api="blas")
 
 
 # ============================================================================ per core type
@@ -159,6 +213,29 @@ class CoreModel:
     rho1: np.ndarray
     z1: np.ndarray
     self1: tuple  # per m: (n1, n1) I - 2 lam D_m
+    far1_r: np.ndarray = None  # compressed rings of the m >= 1 charges (far points)
+    far1_z: np.ndarray = None
+    far1_w: np.ndarray = None  # (n_rings, n1): ring line density = far1_w @ sigma
+    far_segments: np.ndarray = None  # (n_int, 2, 2): (rho, z) ends of the product-rule intervals
+
+    def far_mask(self, rho: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """Points where the compressed ring rules are accurate (bool (n,)).
+
+        The product rule interpolates the kernel by a degree FAR_NODES - 1 polynomial on each
+        interval; its error is ~ r^(-2 FAR_NODES), r the Bernstein-ellipse parameter of the
+        point (in the meridian plane) with respect to the interval. Far: r >= FAR_RHO on every
+        interval and at least FAR_DISTANCE (8 mm) from the core.
+        """
+        dist = np.maximum.reduce([self.z_lo - z, z - self.z_hi, rho - self.radius])
+        ok = dist >= FAR_DISTANCE
+        for (r0, z0), (r1, z1) in self.far_segments:
+            c = complex(0.5 * (r0 + r1), 0.5 * (z0 + z1))
+            half = complex(0.5 * (r1 - r0), 0.5 * (z1 - z0))
+            w = (rho + 1j * z - c) / half
+            sq = np.sqrt(w * w - 1.0)
+            r = np.maximum(np.abs(w + sq), np.abs(w - sq))
+            ok &= r >= FAR_RHO
+        return ok
 
     @property
     def n0(self) -> int:
@@ -228,7 +305,7 @@ class CoreModel:
         return np.concatenate(rows, axis=0)
 
     # ------------------------------------------------------------------ basis fields
-    def basis_field(self, pts: np.ndarray, gradient: bool = False, fine: bool | None = None):
+    def basis_field(self, pts: np.ndarray, gradient: bool = False, fine: bool = False):
         """H of every unit unknown at local points (outside the core).
 
         Returns H (n, 3, n_unknowns) A/m per unit [, G (n, 3, 3, n_unknowns) A/m^2].
@@ -242,11 +319,7 @@ class CoreModel:
         if n == 0:
             return (h, g) if gradient else h
         rho = np.hypot(pts[:, 0], pts[:, 1])
-        dist = np.maximum.reduce([self.z_lo - pts[:, 2], pts[:, 2] - self.z_hi,
-                                  rho - self.radius])
-        from .core import FAR_DISTANCE
-
-        far = dist >= FAR_DISTANCE
+        far = self.far_mask(rho, pts[:, 2])
         for sel, fn in ((far, self._m0_far), (~far, self._m0_near)):
             if np.any(sel):
                 res = fn(pts[sel], rho[sel], gradient)
@@ -255,14 +328,191 @@ class CoreModel:
                 else:
                     h[sel, :, :self.n0] = res
         if self.m_max:
-            near = dist < NEAR_DISTANCE if fine is None else np.full(n, bool(fine))
-            for sel, (ng, nphi) in ((near, (4, 64)), (~near, (2, 16))):
-                if np.any(sel):
-                    res = self._m1_field(pts[sel], ng, nphi, gradient)
+            if fine:
+                res = self._m1_field(pts, 4, 64, gradient)
+                if gradient:
+                    h[:, :, self.n0:], g[:, :, :, self.n0:] = res
+                else:
+                    h[:, :, self.n0:] = res
+            else:
+                # compressed rings where accurate (ring density = far1_w @ sigma, one unit per
+                # (mode, panel)), panel charges elsewhere
+                eye = np.eye(2 * self.m_max * self.n1)
+                for sel, rule in ((far, "far"), (~far, (3, 32))):
+                    if not np.any(sel):
+                        continue
+                    src, q = self._charges(eye, rule)
+                    res = self._charge_kernel(pts[sel], src, gradient, q, False)
                     if gradient:
                         h[sel, :, self.n0:], g[sel, :, :, self.n0:] = res
                     else:
                         h[sel, :, self.n0:] = res
+        return (h, g) if gradient else h
+
+    def field(self, pts: np.ndarray, xs: np.ndarray, gradient: bool = False,
+              pointwise: bool = False, own_col: int | None = None):
+        """H of the core for unknown columns ``xs`` (n_unknowns, k) at local points.
+
+        Contracts the unknowns before the kernels (far rings for m = 0, charges for m >= 1).
+        Returns H (n, 3, k) A/m [, G (n, 3, 3, k) A/m^2]; with ``pointwise`` point i uses
+        column i (k = n) and the shapes are (n, 3) [, (n, 3, 3)].
+        """
+        pts = np.asarray(pts, dtype=float)
+        n = len(pts)
+        k = xs.shape[1]
+        shp = (n,) if pointwise else (n, k)
+        h = np.zeros((n, 3) + shp[1:])
+        g = np.zeros((n, 3, 3) + shp[1:]) if gradient else None
+        if n == 0:
+            return (h, g) if gradient else h
+        rho = np.hypot(pts[:, 0], pts[:, 1])
+        far = self.far_mask(rho, pts[:, 2])
+        x0 = xs[:self.n0]
+        if own_col is not None and not pointwise:
+            # the column of the core's own winding (by far its largest): m = 0 through
+            # designkit.core's field rules, so one coil alone is exactly the single-core model;
+            # the small remainder of the other columns by the compressed rules below
+            from .core import CoreSolution
+
+            ns = len(self.side)
+            sol = CoreSolution(self.radius, self.side[:, 0], self.side[:, 1], x0[:ns, own_col],
+                               self.discs[:, 0], self.discs[:, 1], self.discs[:, 2],
+                               x0[ns:, own_col], 0.0)
+            res = sol.field(pts, gradient=gradient)
+            if gradient:
+                h[..., own_col] += res[0] / MU0
+                g[..., own_col] += res[1] / MU0
+            else:
+                h[..., own_col] += res / MU0
+            x0 = x0.copy()
+            x0[:, own_col] = 0.0
+        # m = 0: cylindrical components per column, then Cartesian
+        for sel, is_far in ((far, True), (~far, False)):
+            if not np.any(sel):
+                continue
+            idx = np.flatnonzero(sel)
+            comps = self._m0_rz(pts[idx], rho[idx], gradient, is_far)  # list (m, nb)
+            xcol = x0[:, idx] if pointwise else x0
+            if pointwise:
+                cz = [np.einsum("nb,bn->n", q, xcol) for q in comps]
+                res = self._rz_basis_to_xyz(pts[idx], rho[idx], [c[:, None] for c in cz],
+                                            gradient)
+                res = (res[0][..., 0], res[1][..., 0]) if gradient else res[..., 0]
+            else:
+                cz = [q @ xcol for q in comps]
+                res = self._rz_basis_to_xyz(pts[idx], rho[idx], cz, gradient)
+            if gradient:
+                h[idx] += res[0]
+                g[idx] += res[1]
+            else:
+                h[idx] += res
+        if self.m_max:
+            for sel, rule in ((~far, (3, 32)), (far, "far")):
+                if not np.any(sel):
+                    continue
+                idx = np.flatnonzero(sel)
+                src, q = self._charges(xs[self.n0:], rule)  # (nc, 3), (nc, k)
+                res = self._charge_kernel(pts[idx], src, gradient,
+                                          q[:, idx] if pointwise else q, pointwise)
+                if gradient:
+                    h[idx] += res[0]
+                    g[idx] += res[1]
+                else:
+                    h[idx] += res
+        return (h, g) if gradient else h
+
+    def _m0_rz(self, pts, rho, gradient, far):
+        """Cylindrical components per m = 0 unknown: list of (n, n0) arrays."""
+        from .core import _disc_nodes
+        from .field.kernels import loop_rz, sheet_rz
+
+        n = len(rho)
+        z = pts[:, 2]
+        if far:
+            nq = len(self.far_r)
+            res = loop_rz(np.tile(self.far_r, n), np.repeat(rho, nq),
+                          np.repeat(z, nq) - np.tile(self.far_z, n), gradient=gradient)
+            return [q.reshape(n, nq) @ self.far_w for q in res]
+        side, discs = self.side, self.discs
+        hh = 0.5 * (side[:, 1] - side[:, 0])
+        cc = 0.5 * (side[:, 1] + side[:, 0])
+        ns = len(hh)
+        rs = sheet_rz(self.radius, np.tile(hh, n), np.repeat(rho, ns),
+                      np.repeat(z, ns) - np.tile(cc, n), gradient=gradient)
+        nq = 4
+        rq, wq = _disc_nodes(discs[:, 1], discs[:, 2], nq)
+        nd = len(discs)
+        m = nd * nq
+        rl = loop_rz(np.tile(rq.ravel(), n), np.repeat(rho, m),
+                     np.repeat(z, m) - np.tile(np.repeat(discs[:, 0], nq), n), gradient=gradient)
+        ww = wq.ravel()
+        return [np.hstack([a.reshape(n, ns), (b.reshape(n, m) * ww).reshape(n, nd, nq)
+                           .sum(axis=2)]) for a, b in zip(rs, rl)]
+
+    def _charges(self, x1: np.ndarray, rule):
+        """Point charges of the m >= 1 unknowns x1 (2 m_max n1, k): positions (nc, 3), m, and
+        charges (nc, k), A m. ``rule``: (Gauss nodes per panel, azimuths) or 'far' (the
+        compressed product rule, ``FAR_NODES`` rings per interval, 12 azimuths)."""
+        k = x1.shape[1]
+        if rule == "far":
+            nphi = 12
+            phi = 2.0 * math.pi * (np.arange(nphi) + 0.5) / nphi
+            r, z = self.far1_r, self.far1_z
+            pos = np.stack([r[:, None] * np.cos(phi), r[:, None] * np.sin(phi),
+                            np.repeat(z[:, None], nphi, axis=1)], axis=-1)
+            dens = np.zeros((len(r), nphi, k))
+            for m in range(1, self.m_max + 1):
+                a = (2 * (m - 1)) * self.n1
+                wc = self.far1_w @ x1[a:a + self.n1]
+                ws = self.far1_w @ x1[a + self.n1:a + 2 * self.n1]
+                dens += wc[:, None, :] * np.cos(m * phi)[None, :, None]
+                dens += ws[:, None, :] * np.sin(m * phi)[None, :, None]
+            q = dens * (r * 2.0 * math.pi / nphi)[:, None, None]
+            return pos.reshape(-1, 3), q.reshape(-1, k)
+        ng, nphi = rule
+        pos, wt, phi = self._charge_nodes(ng, nphi)
+        dens = np.zeros((self.n1, nphi, k))
+        for m in range(1, self.m_max + 1):
+            a = (2 * (m - 1)) * self.n1
+            dens += x1[a:a + self.n1, None, :] * np.cos(m * phi)[None, :, None]
+            dens += x1[a + self.n1:a + 2 * self.n1, None, :] * np.sin(m * phi)[None, :, None]
+        q = wt[:, :, None, None] * dens[:, None, :, :]  # (n1, ng, nphi, k)
+        return pos.reshape(-1, 3), q.reshape(-1, k)
+
+    @staticmethod
+    def _charge_kernel(pts, src, gradient, q, pointwise, chunk=128):
+        """Field of point charges q (nc, k) at src (nc, 3): (n, 3, k) [, (n, 3, 3, k)]."""
+        n = len(pts)
+        k = q.shape[1]
+        shp = (n,) if pointwise else (n, k)
+        h = np.empty((n, 3) + shp[1:])
+        g = np.empty((n, 3, 3) + shp[1:]) if gradient else None
+        c4 = 1.0 / (4.0 * math.pi)
+        for a in range(0, n, chunk):
+            p = pts[a:a + chunk]
+            d = p[:, None, :] - src[None]
+            r2 = np.einsum("cij,cij->ci", d, d)
+            inv3 = c4 / (r2 * np.sqrt(r2))
+            comps = [d[..., i] * inv3 for i in range(3)]
+            if gradient:
+                inv5 = 3.0 * inv3 / r2
+                for i in range(3):
+                    for kk in range(i, 3):
+                        t = -d[..., i] * d[..., kk] * inv5
+                        if i == kk:
+                            t = t + inv3
+                        comps.append(t)
+            if pointwise:
+                qq = q[:, a:a + chunk].T  # (c, nc)
+                red = np.stack([np.einsum("cs,cs->c", t, qq) for t in comps], axis=1)
+            else:
+                red = np.stack([t @ q for t in comps], axis=1)  # (c, ncomp, k)
+            h[a:a + chunk] = red[:, :3]
+            if gradient:
+                for (i, kk), j in {(0, 0): 3, (0, 1): 4, (0, 2): 5, (1, 1): 6, (1, 2): 7,
+                                   (2, 2): 8}.items():
+                    g[a:a + chunk, i, kk] = red[:, j]
+                    g[a:a + chunk, kk, i] = red[:, j]
         return (h, g) if gradient else h
 
     def _rz_basis_to_xyz(self, pts, rho, comps, gradient):
@@ -442,11 +692,15 @@ def _self_charge_matrices(radius, z_lo, z_hi, kind, lo, hi, rho_c, z_c, m_max):
 
 @functools.lru_cache(maxsize=32)
 def core_model(radius: float, length: float, offset: float, mu_r: float, key: tuple,
-               m_max: int = M_MAX) -> CoreModel:
-    """Discretization and self blocks of a linear core (cached per core type)."""
-    from .core import FAR_NODES, _geometry, _interface_factor, _system
+               m_max: int = M_MAX, refine: int = 1) -> CoreModel:
+    """Discretization and self blocks of a linear core (cached per core type).
 
-    side, side_slice, discs = _geometry(radius, length, offset)
+    ``refine`` multiplies every panel count (convergence studies, wide cores).
+    """
+    from .core import N_CAP, N_SIDE, _geometry, _interface_factor, _system
+
+    side, side_slice, discs = _geometry(radius, length, offset, n_side=N_SIDE * refine,
+                                        n_cap=N_CAP * refine)
     a, _, rho0, z0 = _system(radius, side, discs, key)
     f_side = _interface_factor(np.full(len(side), mu_r), 1.0)
     below = discs[:, 3].astype(int)
@@ -474,9 +728,10 @@ def core_model(radius: float, length: float, offset: float, mu_r: float, key: tu
         zz.append(np.full_like(nodes, zp))
         ww.append(full)
     # m >= 1 panels
-    e_side = _graded_both(lo, hi, N1_SIDE)
-    e_cap = _graded_sin(0.0, radius, N1_CAP)
-    kind = np.r_[np.zeros(N1_SIDE, int), np.ones(N1_CAP, int), np.full(N1_CAP, 2)]
+    n1s, n1c = N1_SIDE * refine, N1_CAP * refine
+    e_side = _graded_both(lo, hi, n1s)
+    e_cap = _graded_sin(0.0, radius, n1c)
+    kind = np.r_[np.zeros(n1s, int), np.ones(n1c, int), np.full(n1c, 2)]
     lo1 = np.r_[e_side[:-1], e_cap[:-1], e_cap[:-1]]
     hi1 = np.r_[e_side[1:], e_cap[1:], e_cap[1:]]
     mid = 0.5 * (lo1 + hi1)
@@ -487,18 +742,39 @@ def core_model(radius: float, length: float, offset: float, mu_r: float, key: tu
         d = _self_charge_matrices(radius, lo, hi, kind, lo1, hi1, rho1, z1, m_max)
         lam2 = 2.0 * (mu_r - 1.0) / (mu_r + 1.0)
         self1 = tuple(np.eye(len(kind)) - lam2 * d[m] for m in range(m_max))
+    # compressed far rule of the m >= 1 charges (same product rule as m = 0)
+    r1, z1f, w1 = [], [], []
+    n1 = len(kind)
+    nodes, w = _product_matrix(lo1[:n1s], hi1[:n1s],
+                               [(lo, lo + end), (lo + end, hi - end), (hi - end, hi)], FAR_NODES)
+    r1.append(np.full_like(nodes, radius))
+    z1f.append(nodes)
+    w1.append(np.hstack([w, np.zeros((len(nodes), n1 - n1s))]))
+    for kk, zp in ((1, hi), (2, lo)):
+        sel = np.flatnonzero(kind == kk)
+        nodes, w = _product_matrix(lo1[sel], hi1[sel], [(0.0, radius)], FAR_NODES)
+        full = np.zeros((len(nodes), n1))
+        full[:, sel] = w
+        r1.append(nodes)
+        z1f.append(np.full_like(nodes, zp))
+        w1.append(full)
+    segs = np.array([[[radius, a], [radius, b]] for a, b in
+                     [(lo, lo + end), (lo + end, hi - end), (hi - end, hi)]]
+                    + [[[0.0, zp], [radius, zp]] for zp in (lo, hi)])
     return CoreModel(radius, lo, hi, mu_r, m_max, side, discs, f0, self0, rho0, z0,
                      np.concatenate(rr), np.concatenate(zz), np.vstack(ww), kind, lo1, hi1,
-                     rho1, z1, self1)
+                     rho1, z1, self1, np.concatenate(r1), np.concatenate(z1f), np.vstack(w1),
+                     segs)
 
 
 # ============================================================================ the array system
-def _core_model_of(coil, m_max):
+def _core_model_of(coil, m_max, refine=1):
     from .core import _winding_key
 
     c = coil.core
     return core_model(float(c.radius), float(c.length), float(c.offset),
-                      float(c.relative_permeability), _winding_key(coil), int(m_max))
+                      float(c.relative_permeability), _winding_key(coil), int(m_max),
+                      int(refine))
 
 
 def _rel_key(pa, pb):
@@ -516,17 +792,17 @@ class ArraySystem:
     cores' fields are evaluated from the solved unknowns.
     """
 
-    def __init__(self, array, m_max: int = M_MAX):
+    def __init__(self, array, m_max: int = M_MAX, refine: int = 1):
         from scipy.linalg import lu_factor
 
         self.array = array
         self.m_max = int(m_max)
-        self.core_index = [k for k, c in enumerate(array.coils) if c.core is not None]
-        for k in self.core_index:
-            if array.coils[k].core.bh != "linear" or array.coils[k].core.model != \
-                    "surface-current":
-                pass  # the linear model at relative_permeability; saturation: saturation_table
-        self.models = [_core_model_of(array.coils[k], self.m_max) for k in self.core_index]
+        # linear at relative_permeability (a 1010-steel core too: its saturation is the
+        # separate correction, saturation_table); 'thesis-uniform' cores stay uncoupled
+        self.core_index = [k for k, c in enumerate(array.coils)
+                           if c.core is not None and c.core.model == "surface-current"]
+        self.models = [_core_model_of(array.coils[k], self.m_max, refine)
+                       for k in self.core_index]
         self.poses = [array.coils[k].pose for k in self.core_index]
         sizes = [m.n_unknowns for m in self.models]
         self.offsets = np.r_[0, np.cumsum(sizes)].astype(int)
@@ -534,6 +810,14 @@ class ArraySystem:
         self.factors = np.concatenate([m.factors() for m in self.models]) if n else np.zeros(0)
         mat = np.zeros((n, n))
         cache = {}
+        with _blas_one_thread():
+            self._assemble(mat, cache)
+        self.n_blocks = len(cache)
+        self.n_unknowns = n
+        self._lu = lu_factor(mat) if n else None
+        self._coil_solution = None
+
+    def _assemble(self, mat, cache):
         for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
             sj = slice(self.offsets[jj], self.offsets[jj + 1])
             mat[sj, sj] = mj.self_block()
@@ -545,10 +829,6 @@ class ArraySystem:
                     cache[key] = self._cross_block(mi, pi, mj, pj)
                 si = slice(self.offsets[ii], self.offsets[ii + 1])
                 mat[sj, si] = -mj.factors()[:, None] * cache[key]
-        self.n_blocks = len(cache)
-        self.n_unknowns = n
-        self._lu = lu_factor(mat) if n else None
-        self._coil_solution = None
 
     # ------------------------------------------------------------------ assembly
     @staticmethod
@@ -563,18 +843,43 @@ class ArraySystem:
         h = np.einsum("ab,nbu->nau", rot, h)
         return mj.project(h.reshape(shape + (3, -1)))
 
-    def _project_global_field(self, field_fn, n_phi) -> np.ndarray:
-        """RHS: F * projection of a source's H (callable on global points -> (n, 3[, k])).
+    def _project_global_field(self, field_fn, n_phi, near_points=None) -> np.ndarray:
+        """RHS: F * projection of a source's H (callable on global points -> (n, 3, k)).
 
-        Returns (n_unknowns, k).
+        Without ``near_points``: ``n_phi`` azimuths per ring on every core. With
+        ``near_points`` (k, 3) global m, one source per column (column q sits at
+        near_points[q], and ``field_fn(points, cols)`` evaluates only columns ``cols``): a
+        core uses ``n_phi`` azimuths for the sources closer than 30 mm to it and
+        ``N_PHI_RING`` for the others (a source that far has no significant azimuthal
+        content beyond the kept modes on the core's rings). Returns (n_unknowns, k).
         """
         rows = []
         for mj, pj in zip(self.models, self.poses):
-            ring = mj.ring_points(n_phi)
-            glob = ring.reshape(-1, 3) @ pj.matrix.T + np.asarray(pj.position)
-            h = field_fn(glob)  # (n, 3, k)
-            h = np.einsum("ba,nbk->nak", pj.matrix, h)  # to local j
-            rows.append(mj.project(h.reshape(ring.shape[:2] + h.shape[1:])))
+            if near_points is None:
+                groups = [(n_phi, None)]
+            else:
+                loc = pj.to_local(near_points)
+                rho = np.hypot(loc[:, 0], loc[:, 1])
+                dist = np.maximum.reduce([mj.z_lo - loc[:, 2], loc[:, 2] - mj.z_hi,
+                                          rho - mj.radius])
+                close = dist < 0.03
+                groups = [(n_phi, np.flatnonzero(close)), (N_PHI_RING, np.flatnonzero(~close))]
+            out = None
+            for nphi, cols in groups:
+                if cols is not None and len(cols) == 0:
+                    continue
+                ring = mj.ring_points(nphi)
+                glob = ring.reshape(-1, 3) @ pj.matrix.T + np.asarray(pj.position)
+                h = field_fn(glob) if cols is None else field_fn(glob, cols)  # (n, 3, k)
+                h = np.einsum("ba,nbk->nak", pj.matrix, h)  # to local j
+                proj = mj.project(h.reshape(ring.shape[:2] + h.shape[1:]))
+                if cols is None:
+                    out = proj
+                else:
+                    if out is None:
+                        out = np.zeros((mj.n_unknowns, len(near_points)))
+                    out[:, cols] = proj
+            rows.append(out)
         return self.factors[:, None] * np.concatenate(rows, axis=0)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
@@ -606,80 +911,141 @@ class ArraySystem:
         return self._coil_solution
 
     # ------------------------------------------------------------------ evaluation
-    def core_field(self, points: np.ndarray, x: np.ndarray, gradient: bool = False):
+    def core_field(self, points: np.ndarray, x: np.ndarray, gradient: bool = False, *,
+                   coil_columns: bool = False):
         """B of all cores for the unknown columns x (n_unknowns, k) at global points.
 
-        Returns B (n, 3, k) T [, G (n, 3, 3, k) T/m].
+        ``coil_columns``: x is :meth:`coil_solution` (column k = coil k), and each core's own
+        column is evaluated by designkit.core's rules. Returns B (n, 3, k) T [, G (n, 3, 3, k)
+        T/m].
         """
-        pts = np.asarray(points, dtype=float)
-        k = x.shape[1]
-        b = np.zeros((len(pts), 3, k))
-        g = np.zeros((len(pts), 3, 3, k)) if gradient else None
-        for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
-            xs = x[self.offsets[jj]:self.offsets[jj + 1]]
-            loc = pj.to_local(pts)
-            res = mj.basis_field(loc, gradient)
-            rot = pj.matrix
-            if gradient:
-                h, gg = res
-                g += MU0 * np.einsum("ab,cd,nbdu,uk->nack", rot, rot, gg, xs)
-            else:
-                h = res
-            b += MU0 * np.einsum("ab,nbu,uk->nak", rot, h, xs)
-        return (b, g) if gradient else b
+        return self._field(points, x, gradient, False, coil_columns)
 
     def core_field_pointwise(self, points: np.ndarray, x: np.ndarray, gradient: bool = False):
         """Like :meth:`core_field` but point i uses its own column x[:, i]: B (n, 3) [, G]."""
+        return self._field(points, x, gradient, True)
+
+    def _field(self, points, x, gradient, pointwise, coil_columns=False):
+        with _blas_one_thread():
+            return self._field_impl(points, x, gradient, pointwise, coil_columns)
+
+    def _field_impl(self, points, x, gradient, pointwise, coil_columns=False):
         pts = np.asarray(points, dtype=float)
-        b = np.zeros((len(pts), 3))
-        g = np.zeros((len(pts), 3, 3)) if gradient else None
+        tail = () if pointwise else (x.shape[1],)
+        b = np.zeros((len(pts), 3) + tail)
+        g = np.zeros((len(pts), 3, 3) + tail) if gradient else None
         for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
             xs = x[self.offsets[jj]:self.offsets[jj + 1]]
-            loc = pj.to_local(pts)
-            res = mj.basis_field(loc, gradient)
+            res = mj.field(pj.to_local(pts), xs, gradient, pointwise,
+                           self.core_index[jj] if coil_columns else None)
             rot = pj.matrix
+            h = res[0] if gradient else res
+            if pj.is_identity_rotation:
+                b += MU0 * h
+                if gradient:
+                    g += MU0 * res[1]
+                continue
+            b += MU0 * np.einsum("ab,nb...->na...", rot, h)
             if gradient:
-                h, gg = res
-                g += MU0 * np.einsum("ab,cd,nbdu,un->nac", rot, rot, gg, xs)
-            else:
-                h = res
-            b += MU0 * np.einsum("ab,nbu,un->na", rot, h, xs)
+                gl = np.einsum("ab,nbc...->nac...", rot, res[1])
+                g += MU0 * np.einsum("nac...,dc->nad...", gl, rot)
         return (b, g) if gradient else b
 
     # ------------------------------------------------------------------ magnet source
-    def magnet_solution(self, positions: np.ndarray, moment: np.ndarray) -> np.ndarray:
-        """Unknowns of all cores magnetized by a point dipole at each position, (nu, n)."""
-        from .field import dipole_field
+    def magnet_solution(self, positions: np.ndarray, moment: np.ndarray,
+                        magnet_size_m=None) -> np.ndarray:
+        """Unknowns of all cores magnetized by the magnet at each position, (nu, n).
 
+        ``magnet_size_m``: None for a point dipole ``moment``; (radius, length) m for the
+        uniformly magnetized cylinder (axis along ``moment``, M = |m| / volume; its exact
+        field, :func:`designkit.field.magnetized_cylinder_field`).
+        """
         pos = np.atleast_2d(np.asarray(positions, dtype=float))
         m = np.asarray(moment, dtype=float)
+        if magnet_size_m is None:
+            def src(glob, cols):
+                # H of the point dipole (magnet outside every core: r > 0 at ring points)
+                d = glob[:, None, :] - pos[None, cols, :]  # (n, k, 3)
+                r2 = np.einsum("nki,nki->nk", d, d)
+                inv_r = 1.0 / np.sqrt(r2)
+                mr = d @ m
+                h = (3.0 * d * (mr * inv_r ** 5)[..., None] - m * (inv_r ** 3)[..., None])
+                return np.swapaxes(h, 1, 2) / (4.0 * math.pi)
+        else:
+            from .field.kernels import sheet_rz
 
-        def dip(glob):
-            out = np.empty((len(glob), 3, len(pos)))
-            for q, p in enumerate(pos):
-                out[:, :, q] = dipole_field(glob - p, m) / MU0
-            return out
+            a, length = (float(v) for v in magnet_size_m)
+            mm = float(np.linalg.norm(m))
+            u = m / mm if mm > 0 else np.array([0.0, 0.0, 1.0])
+            mag = mm / (math.pi * a * a * length)
 
-        return self.solve(self._project_global_field(dip, N_PHI_MAGNET))
+            def src(glob, cols):
+                d = glob[:, None, :] - pos[None, cols, :]  # (n, k, 3)
+                zl = d @ u
+                rv = d - zl[..., None] * u
+                rho = np.sqrt(np.einsum("nki,nki->nk", rv, rv))
+                br, bz = sheet_rz(a, 0.5 * length, rho.ravel(), zl.ravel())
+                br, bz = br.reshape(rho.shape), bz.reshape(rho.shape)
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    er = np.where(rho[..., None] > 0, rv / np.where(rho > 0, rho, 1.0)[..., None],
+                                  0.0)
+                h = mag * (br[..., None] * er + bz[..., None] * u)
+                return np.swapaxes(h, 1, 2)
+
+        with _blas_one_thread():
+            rhs = self._project_global_field(src, N_PHI_MAGNET, pos)
+        return self.solve(rhs)
+
+    def magnet_load(self, positions: np.ndarray, moment: np.ndarray, magnet_size_m=None,
+                    n_r: int = 4, n_phi: int = 8):
+        """Force (n, 3) N and torque (n, 3) N m on the magnet from the cores it magnetizes.
+
+        Point dipole (``magnet_size_m`` None): F = (m . grad) B_ind(p), tau = m x B_ind(p).
+        Cylinder (radius, length): its uniform axial M as face charges +-M on the end faces,
+        F = M [int_top B_ind dA - int_bot B_ind dA], tau = M [int_top (r - p) x B_ind dA -
+        int_bot ...] (exact for a uniformly magnetized body in a curl-free field; Gauss rule
+        of n_r x n_phi points per face).
+        """
+        pos = np.atleast_2d(np.asarray(positions, dtype=float))
+        m = np.asarray(moment, dtype=float)
+        x = self.magnet_solution(pos, m, magnet_size_m)
+        if magnet_size_m is None:
+            b, g = self.core_field_pointwise(pos, x, gradient=True)
+            return np.einsum("nji,j->ni", g, m), np.cross(m[None], b)
+        a, length = (float(v) for v in magnet_size_m)
+        mm = float(np.linalg.norm(m))
+        u = m / mm if mm > 0 else np.array([0.0, 0.0, 1.0])
+        mag = mm / (math.pi * a * a * length)
+        e1 = np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0])
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(u, e1)
+        xr, wr = _gauss(n_r)
+        s = 0.5 * (xr + 1.0)
+        r = a * np.sqrt(s)
+        ph = 2.0 * math.pi * np.arange(n_phi) / n_phi
+        R, P = np.meshgrid(r, ph, indexing="ij")
+        w = np.repeat(0.5 * wr * math.pi * a * a / n_phi, n_phi)  # area weights
+        disc = (R.ravel()[:, None] * (np.cos(P.ravel())[:, None] * e1
+                                      + np.sin(P.ravel())[:, None] * e2))
+        nq = len(w)
+        force = np.zeros((len(pos), 3))
+        torque = np.zeros((len(pos), 3))
+        for sign in (1.0, -1.0):
+            rel = disc + sign * 0.5 * length * u  # (nq, 3) about the centre
+            pts = (pos[:, None, :] + rel[None]).reshape(-1, 3)
+            bq = self.core_field_pointwise(pts, np.repeat(x, nq, axis=1))
+            bq = bq.reshape(len(pos), nq, 3)
+            force += sign * mag * np.einsum("q,nqi->ni", w, bq)
+            torque += sign * mag * np.einsum("q,nqi->ni", w, np.cross(rel[None], bq))
+        return force, torque
 
 
 # ============================================================================ saturation
-def saturation_table(coil, height_m: float = 0.03, currents_a=None) -> dict:
-    """Per-coil force factor of the nonlinear 1010-steel core vs |I|, at the design point.
-
-    ``s(|I|) = Fz_nonlinear(I) / (I * Fz_linear(1 A))``, single core (designkit's nonlinear
-    axisymmetric solve, :class:`designkit.core.Core` with ``bh='steel1010'``) at the point
-    ``height_m`` above the coil top on its axis, magnet moment along +z. The runner applies
-    ``A[:, :, k] *= s(|I_k|)`` (interpolated linearly in |I_k| on ``current_a``).
-
-    Returns dict with ``current_a`` (k,) A and ``factor`` (k,).
-    """
-    import dataclasses
-
-    currents = np.linspace(0.0, 6.0, 13) if currents_a is None else np.asarray(currents_a, float)
+@functools.lru_cache(maxsize=8)
+def _saturation_cached(coil, height_m, currents):
     c = coil.core
-    lin = dataclasses.replace(coil, core=dataclasses.replace(c, bh="linear"))
-    nl = dataclasses.replace(coil, core=dataclasses.replace(c, bh="steel1010"))
+    lin = dataclasses.replace(coil, pose=Pose(), core=dataclasses.replace(c, bh="linear"))
+    nl = dataclasses.replace(coil, pose=Pose(), core=dataclasses.replace(c, bh="steel1010"))
     pt = np.array([[0.0, 0.0, coil.length / 2 + height_m]])
     _, g_lin = lin.field(pt, 1.0, gradient=True)
     out = []
@@ -689,7 +1055,41 @@ def saturation_table(coil, height_m: float = 0.03, currents_a=None) -> dict:
             continue
         _, g = nl.field(pt, float(i), gradient=True)
         out.append(float(g[0, 2, 2] / (i * g_lin[0, 2, 2])))
-    return {"current_a": currents, "factor": np.array(out)}
+    return np.array(out)
+
+
+def saturation_table(coil, height_m: float = 0.03, currents_a=None) -> dict:
+    """Per-coil force factor of the nonlinear 1010-steel core vs |I|, at the design point.
+
+    ``s(|I|) = dBz/dz_nonlinear(I) / (I * dBz/dz_linear(1 A))`` of the single coil (its
+    nonlinear axisymmetric solve, :class:`designkit.core.Core` with ``bh='steel1010'``, against
+    the linear core at ``relative_permeability``), on the axis ``height_m`` above the coil's top
+    (the design point; the vertical force on an upright magnet there scales the same way).
+
+    How the runner applies it (the map file stores these arrays):
+
+    * per coil, from its own current: ``A[:, :, k] *= s(|I_k|)`` with ``s`` interpolated
+      linearly in |I_k| on ``current_a`` (s = 1 at 0 A). Exact for one energized coil
+      (to the nonlinear solve's accuracy, see studies/array_coupling.py);
+    * per state, when neighbours are energized too: the other coils change core k's flux
+      (a side neighbour at 6 A changes the mid-plane flux density of the centre core by
+      ~ -14 % of the centre coil's own 6 A value, linear model). Index the same table by the
+      *equivalent own current* ``I_eq,k = |sum_j C[k, j] I_j| / C[k, k]`` with C the coupled
+      linear mid-plane axial flux density per ampere
+      (:meth:`designkit.array.CoilArray.saturation_correction` ``core_flux_t_per_a``):
+      ``s_k = interp(I_eq,k, current_a, factor)`` (beyond the table: its last value).
+      This assumes the core's saturation follows its mid-plane flux; it is not checked
+      against a coupled nonlinear solve (none exists here).
+
+    Returns
+    -------
+    dict with ``current_a`` (k,) A and ``factor`` (k,).
+    """
+    currents = np.arange(0.0, 6.01, 1.0) if currents_a is None else np.asarray(currents_a,
+                                                                               float)
+    key = dataclasses.replace(coil, pose=Pose())
+    factor = _saturation_cached(key, float(height_m), tuple(float(i) for i in currents))
+    return {"current_a": currents, "factor": factor}
 
 
 def check_separation(coils) -> None:
