@@ -25,8 +25,8 @@ written in the cores' own modes::
   azimuthal order m = 0, 1, 2; cos and sin for m >= 1) on the same kind of (v, u) grid: m = 0
   as the coil tables, m = 1, 2 as the potentials x G, y G resp. (x^2 - y^2) H, 2 x y H with
   G, H smooth in (rho^2, z): 5 quantities (a, a1, a2, az, a1z) = -mu0 (G, G', G'', G_z, G'_z)
-  give all 8 rows (:func:`mode_rows`); float16, each column divided by its largest |value|
-  (meta ``column_scale``). ``COEF`` (n_coils, n_basis, n_coils) float64.
+  give all 8 rows (:func:`mode_rows`); float32 (float16 for the sensor field's), each column
+  divided by its largest |value| (meta ``column_scale``). ``COEF`` (n_coils, n_basis, n_coils) float64.
 
 The magnet's interaction with the cores, as functions of the magnet's position p:
 
@@ -211,7 +211,8 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
                     want, ok_modes = nq, True
                 ok = (t["name"] == f"{prefix}{k}" and tab is not None and tab.shape == shape
                       and ok_modes
-                      and tab.dtype == (np.float32 if nq else np.float16) and len(shape) == 3
+                      and (tab.dtype == np.float32 or (nq is None and tab.dtype == np.float16))
+                      and len(shape) == 3
                       and shape[2] == want
                       and min(shape) >= 2 and t["rho_step_m"] > 0 and t["u_step"] > 0
                       and t["rho_scale_m"] > (shape[0] - 1) * t["rho_step_m"]
