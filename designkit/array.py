@@ -198,6 +198,16 @@ class CoilArray:
             out.setdefault(dataclasses.replace(c, pose=Pose()), []).append(k)
         return out
 
+    def __getstate__(self):
+        # the cached coupled solve (tens of MB) is rebuilt on demand, not pickled to workers
+        state = dict(self.__dict__)
+        state.pop("_system", None)
+        return state
+
+    def __setstate__(self, state):
+        for key, value in state.items():
+            object.__setattr__(self, key, value)
+
     # ------------------------------------------------------------------ coupled cores
     def coupled(self):
         """The array-level core solve (:class:`designkit.coupling.ArraySystem`), built once.
@@ -243,7 +253,8 @@ class CoilArray:
             a[:, :3, k] = b
             a[:, 3:, k] = g5_from_gradient(g)
         if system is not None:
-            b, g = system.core_field(p, system.coil_solution(), gradient=True)
+            b, g = system.core_field(p, system.coil_solution(), gradient=True,
+                                     coil_columns=True)
             a[:, :3, :] += b
             a[:, 3:, :] += g5_from_gradient(np.moveaxis(g, -1, 1)).transpose(0, 2, 1)
         return a[0] if single else a

@@ -23,18 +23,45 @@ projected field) are built once per design. Solving the block system for a sourc
 cores' magnetization at once (a dense LU, factorized once per design and reused for every
 source: each coil's winding per ampere, the finger magnet at each position).
 
-Costs (n_c cores, n_u = n0 + 2 m_max n1 unknowns per core, default 80 + 2*2*40 = 240):
-per design, the cross blocks (one per distinct relative placement of two cores: 24 in a 3 x 3
-grid) and one LU of size n_c n_u (2160); per source, one RHS sample of the source's field at
-n_c (n0 + n1) N_PHI_RING points and an LU back-substitution; per observation point, n_c times
-(~30 compressed rings for m = 0 and 40 x 16 panel charges for m >= 1, 4 x 64 near a core).
+Costs (n_c cores, n_u = n0 + 2 m_max n1 unknowns per core; default 80 + 2*2*40 = 240, 2160
+for the 3 x 3 array):
 
-Magnet-core interaction (linear cores): the magnet (point dipole ``m`` at ``p``) magnetizes
-the cores; the field of these cores at any point is :meth:`ArraySystem.magnet_core_field`; the
-force on the magnet is ``F0 = (m . grad) B_ind(p)`` and the torque ``m x B_ind(p)``. With
-linear cores everything superposes: ``F(p, I) = F(m) A(p) I + F0(p)`` exactly for a rigid point
-dipole; what remains is the core saturation (the coils' and the magnet's fields add in the
-iron), the magnet's finite size, and the magnet's own permeability (mu_r ~ 1.05 for NdFeB).
+* per design (once, cached on the :class:`~designkit.array.CoilArray`): the self blocks of each
+  core type (m = 0: core.py's influence matrix; m >= 1: n1^2 graded quadratures), one cross
+  block per distinct relative placement of two cores (24 in a 3 x 3 grid; each = the basis
+  fields of one core at (n0 + n1) x N_PHI_RING points of the other), one dense LU of
+  n_c n_u (2160^2), and the coil columns (each winding sampled on every core's rings, one per
+  distinct relative placement, then an LU back-substitution). Measured 4-7 s + 0.6 s for the
+  default array on a loaded 2-core machine (single-threaded BLAS);
+* per point of A: the n_c windings (as uncoupled) plus, per core, ~30 compressed m = 0 rings and
+  ~360 compressed m >= 1 charges (far points) or 176 panel kernels and 3840 panel charges
+  (points the Bernstein-ellipse test puts near): ~0.8 ms coupled vs ~0.4 ms uncoupled per point
+  with gradient, 9 columns (loaded machine);
+* per magnet position (F0, torque, induced field): the magnet's field sampled on every core's
+  rings (N_PHI_MAGNET azimuths on cores within 30 mm, N_PHI_RING on the others), one
+  back-substitution, one evaluation: ~5 ms per position (dipole), ~4x that for the finite
+  cylinder (face quadrature).
+
+Accuracy (measured, tests/test_coupling.py, studies/array_coupling.py): m_max 2 -> 3 changes
+the cores' field by < 2e-4 of its maximum; refine 1 -> 2 (twice the panels) changes dBz/dz at the
+design point by ~1e-4; the solve is reciprocal to ~0.2 %; two cores vs the 3-D GetDP FEM
+(designkit.fem.fem3d) within the FEM's coarse-mesh error (~2-4 % in B).
+
+Magnet-core interaction (linear cores): the magnet magnetizes the cores
+(:meth:`ArraySystem.magnet_solution`); the field of these cores anywhere is
+``CoilArray.magnet_core_field``; the force and torque on the magnet are
+:meth:`ArraySystem.magnet_load`: for a point dipole ``F0 = (m . grad) B_ind(p)``,
+``tau = m x B_ind(p)``; for the real 10 x 10 mm N52 cylinder (``magnet_size_m``) its exact
+field is the source and the force is that of its face charges (exact for uniform M). The
+dipole is the default (the map and the controller carry only m); it underestimates the pull by
+0.2 % at 80 mm, 0.7 % at 50 mm, 1.9 % at 30 mm, 4 % at 12-20 mm, and the sensor-induced field by
+~1 %. With linear cores everything superposes: ``F(p, I) = F(m) A(p) I + F0(p)`` exactly for a
+rigid point dipole. What remains: (1) saturation couples currents and magnet (their fields add
+in the iron: at 12 mm the magnet adds ~0.12 T, 5 mm below the centre core's top, to the ~0.8 T
+of its coil at 6 A; at 30 mm 0.015 T), not in a per-coil factor; (2) the magnet's finite size,
+i.e. A(p) at the centre vs averaged over the magnet (the dipole-vs-cylinder numbers above);
+(3) the magnet's own permeability (mu_r ~ 1.05 for NdFeB: the coils' field changes its
+moment by ~chi H / M ~ 3e-4 at 10 mT).
 
 Saturation correction (stored by the map, applied by the runner): see :func:`saturation_table`
 and :meth:`designkit.array.CoilArray.saturation_correction`, which returns
@@ -323,7 +350,7 @@ class CoreModel:
         return (h, g) if gradient else h
 
     def field(self, pts: np.ndarray, xs: np.ndarray, gradient: bool = False,
-              pointwise: bool = False):
+              pointwise: bool = False, own_col: int | None = None):
         """H of the core for unknown columns ``xs`` (n_unknowns, k) at local points.
 
         Contracts the unknowns before the kernels (far rings for m = 0, charges for m >= 1).
@@ -341,9 +368,26 @@ class CoreModel:
         rho = np.hypot(pts[:, 0], pts[:, 1])
         far = self.far_mask(rho, pts[:, 2])
         x0 = xs[:self.n0]
+        if own_col is not None and not pointwise:
+            # the column of the core's own winding (by far its largest): m = 0 through
+            # designkit.core's field rules, so one coil alone is exactly the single-core model;
+            # the small remainder of the other columns by the compressed rules below
+            from .core import CoreSolution
+
+            ns = len(self.side)
+            sol = CoreSolution(self.radius, self.side[:, 0], self.side[:, 1], x0[:ns, own_col],
+                               self.discs[:, 0], self.discs[:, 1], self.discs[:, 2],
+                               x0[ns:, own_col], 0.0)
+            res = sol.field(pts, gradient=gradient)
+            if gradient:
+                h[..., own_col] += res[0] / MU0
+                g[..., own_col] += res[1] / MU0
+            else:
+                h[..., own_col] += res / MU0
+            x0 = x0.copy()
+            x0[:, own_col] = 0.0
         # m = 0: cylindrical components per column, then Cartesian
-        sel_list = ((far, True), (~far, False))
-        for sel, is_far in sel_list:
+        for sel, is_far in ((far, True), (~far, False)):
             if not np.any(sel):
                 continue
             idx = np.flatnonzero(sel)
@@ -867,29 +911,33 @@ class ArraySystem:
         return self._coil_solution
 
     # ------------------------------------------------------------------ evaluation
-    def core_field(self, points: np.ndarray, x: np.ndarray, gradient: bool = False):
+    def core_field(self, points: np.ndarray, x: np.ndarray, gradient: bool = False, *,
+                   coil_columns: bool = False):
         """B of all cores for the unknown columns x (n_unknowns, k) at global points.
 
-        Returns B (n, 3, k) T [, G (n, 3, 3, k) T/m].
+        ``coil_columns``: x is :meth:`coil_solution` (column k = coil k), and each core's own
+        column is evaluated by designkit.core's rules. Returns B (n, 3, k) T [, G (n, 3, 3, k)
+        T/m].
         """
-        return self._field(points, x, gradient, False)
+        return self._field(points, x, gradient, False, coil_columns)
 
     def core_field_pointwise(self, points: np.ndarray, x: np.ndarray, gradient: bool = False):
         """Like :meth:`core_field` but point i uses its own column x[:, i]: B (n, 3) [, G]."""
         return self._field(points, x, gradient, True)
 
-    def _field(self, points, x, gradient, pointwise):
+    def _field(self, points, x, gradient, pointwise, coil_columns=False):
         with _blas_one_thread():
-            return self._field_impl(points, x, gradient, pointwise)
+            return self._field_impl(points, x, gradient, pointwise, coil_columns)
 
-    def _field_impl(self, points, x, gradient, pointwise):
+    def _field_impl(self, points, x, gradient, pointwise, coil_columns=False):
         pts = np.asarray(points, dtype=float)
         tail = () if pointwise else (x.shape[1],)
         b = np.zeros((len(pts), 3) + tail)
         g = np.zeros((len(pts), 3, 3) + tail) if gradient else None
         for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
             xs = x[self.offsets[jj]:self.offsets[jj + 1]]
-            res = mj.field(pj.to_local(pts), xs, gradient, pointwise)
+            res = mj.field(pj.to_local(pts), xs, gradient, pointwise,
+                           self.core_index[jj] if coil_columns else None)
             rot = pj.matrix
             h = res[0] if gradient else res
             if pj.is_identity_rotation:

@@ -21,11 +21,18 @@ into azimuthal orders m (:mod:`designkit.coupling`). So nothing of A is sampled 
   interpolation error counts ~0.15 x.
 * SVD truncation and m >= 3 (below 1e-4 of the coupling, designkit.coupling) are the rest.
 
-Measured (2-core array, 30 random points; studies/bench_map.py for the default array): A within
-2e-4 of each row's maximum. The sensor-induced field uses the same modes by reciprocity (~2-3 %
-of its maximum: the unit dipoles at the sensors, ~9 mm from a core's end, need many shapes and
-the discrete solve is reciprocal only to its discretization); the bias force is the weakest part
-(~8 %: per-core pull tables plus a coarse grid of the cores' interaction) -- see the report.
+Measured on the default 3 x 3 array (``studies/bench_map.py``, Nov 2026, machine heavily
+loaded): file 3.75 MB; A within 4.3e-4 of each row's maximum at 1000 random points against the
+coupled model as first merged, 1.27e-3 (dBx/dx; other rows <= 7.1e-4) at 300 points after
+designkit.coupling's update that evaluates each core's own column by designkit.core's (sharper)
+rules -- the decomposition itself is exact to 1.3e-5 and neither finer tables nor float32 nor
+more modes changed the 2-core error, which sits at the core rims: to be resolved with the
+coupling's quadrature rules. The sensor-induced field (same modes, by reciprocity) within 2 % of
+its maximum; the bias force within 0.3 % (per-core pull tables plus a 25 mm grid of the cores'
+interaction). Not met: speed -- a lookup sums 9 cores x ~20 core modes (~25 k multiply-adds per
+point): ~160 us for one point, (3,) or (1, 3) alike, and ~1.5 s for 1e4 points on the loaded
+machine (targets 20 us, 5 ms); the build (mode tables, nonlinear saturation solves) took 163 s
+there (target 30 s).
 
 The build checks itself: it evaluates the coupled model directly at ``n_check`` random points
 in the box and records the errors of the finished map in ``meta['errors']``.
@@ -46,7 +53,7 @@ from .errors import BadInputError
 from firmware_io import mapfile as mf
 from firmware_io.errors import BadInputError as _FirmwareBadInput
 
-FORMAT, FORMAT_VERSION, UNITS, BATCH_MIN = mf.FORMAT, mf.FORMAT_VERSION, mf.UNITS, mf.BATCH_MIN
+FORMAT, FORMAT_VERSION, UNITS = mf.FORMAT, mf.FORMAT_VERSION, mf.UNITS
 
 
 # ============================================================================ grids
@@ -381,7 +388,14 @@ def compute_mode_tables(t: dict, spec: dict) -> list:
     chunk = 256
     for s in range(0, len(pts), chunk):
         p = pts[s:s + chunk]
-        h, g = model.basis_field(p, gradient=True)  # (n, 3, nu), (n, 3, 3, nu) A/m per unit
+        # the fine charge quadrature where the compressed rules are not accurate (near the
+        # core), as the coupled model's own field evaluation does
+        near = ~model.far_mask(np.hypot(p[:, 0], p[:, 1]), p[:, 2])
+        h = np.zeros((len(p), 3, model.n_unknowns))
+        g = np.zeros((len(p), 3, 3, model.n_unknowns))
+        for sel, fine in ((near, True), (~near, False)):
+            if np.any(sel):
+                h[sel], g[sel] = model.basis_field(p[sel], gradient=True, fine=fine)
         r_ = p[:, 0]
         col = 0
         for m, r in shapes:
@@ -437,9 +451,11 @@ def compute_mode_tables(t: dict, spec: dict) -> list:
 
 # ============================================================================ build
 def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
-          mode_tolerance: float = 1e-4, sensor_mode_tolerance: float = 1e-3, rz_step: float = 1e-4, rz_log_step: float = 0.025,
+          mode_tolerance: float = 1e-4, sensor_mode_tolerance: float = 1e-3,
+          rz_step: float = 1e-4, rz_log_step: float = 0.025,
           rz_rho_scale: float = 0.05, mode_rz_step: float = 2.5e-4,
-          mode_rz_log_step: float = 0.04, magnet_rz_step: float = 2e-3,
+          mode_rz_log_step: float = 0.04, sensor_mode_rz_step: float = 2.5e-4,
+          sensor_mode_rz_log_step: float = 0.04, magnet_rz_step: float = 2e-3,
           magnet_rz_log_step: float = 0.15, box=None, n_check: int = 100,
           progress: bool = True, array: CoilArray | None = None) -> dict:
     """Compute the map v2 of ``design``: ``{"arrays": {...}, "meta": {...}}`` (not yet written).
@@ -460,7 +476,9 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
         (1 + rho / rz_rho_scale)^2 with rz_rho_scale 50 mm: ~0.4 mm at 50 mm from the axis);
         ``rz_log_step`` is the step in log(z - z_ref) (default 0.025: 2.5 % of the height
         above the core's top). ``mode_rz_step``, ``mode_rz_log_step``: the same for the mode
-        tables (0.25 mm, 4 %: they carry the coupling, ~15 % of A); ``magnet_rz_step``,
+        tables of A (0.25 mm, 4 %: they carry the coupling, ~15-25 % of A);
+        ``sensor_mode_rz_step``, ``sensor_mode_rz_log_step`` for those of the sensor field
+        (0.25 mm, 4 %); ``magnet_rz_step``,
         ``magnet_rz_log_step`` for the magnet tables (2 mm, 15 %).
     box : (lower, upper) or None
         Corners, m; default :func:`default_box`.
@@ -482,6 +500,9 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
     rz_rho_scale = v.in_range("rz_rho_scale", rz_rho_scale, 1e-3, 10.0, "m")
     mode_rz_step = v.in_range("mode_rz_step", mode_rz_step, 1e-5, 0.01, "m")
     mode_rz_log_step = v.in_range("mode_rz_log_step", mode_rz_log_step, 1e-3, 0.5)
+    sensor_mode_rz_step = v.in_range("sensor_mode_rz_step", sensor_mode_rz_step, 1e-5, 0.01, "m")
+    sensor_mode_rz_log_step = v.in_range("sensor_mode_rz_log_step", sensor_mode_rz_log_step,
+                                         1e-3, 0.5)
     magnet_rz_step = v.in_range("magnet_rz_step", magnet_rz_step, 1e-5, 0.01, "m")
     magnet_rz_log_step = v.in_range("magnet_rz_log_step", magnet_rz_log_step, 1e-3, 0.5)
     n_check = v.positive_int("n_check", n_check)
@@ -542,14 +563,18 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
             mrz_meta.append({"name": f"MRZ{s}", "coils": [int(k) for k in idx], **m_specs[s]})
         elif kind == "mode tables":
             for k, t in enumerate(modes["types"] if modes else []):
-                spec = specs([t["coils"]], mode_rz_step, mode_rz_log_step, 1)[0]
-                for st, tab, prefix, metas in zip(t["sets"], compute_mode_tables(t, spec),
-                                                  ("CM", "SM"), (cm_meta, sm_meta)):
+                for which, prefix, metas, step, lstep in (
+                        (0, "CM", cm_meta, mode_rz_step, mode_rz_log_step),
+                        (1, "SM", sm_meta, sensor_mode_rz_step, sensor_mode_rz_log_step)):
+                    st = t["sets"][which]
+                    spec = specs([t["coils"]], step, lstep, 1)[0]
+                    tab = compute_mode_tables({**t, "sets": [st]}, spec)[0]
                     shapes = [[m, r] for m in sorted(st["U"])
                               for r in range(st["U"][m].shape[1])]
                     cols = np.cumsum([0] + [N_MODE_Q[m] for m, _ in shapes])[:-1].tolist()
-                    # float16 per column scaled to its largest |value|: these tables carry the
-                    # coupling (~15 % of A), so 5e-4 rounding is ~1e-4 of A; halves the file
+                    # float16, each column scaled to its largest |value|: these tables carry
+                    # the coupling (~15-25 % of A); measured: float32 changes the 2-core error
+                    # by < 1 %, and float16 halves the file
                     col_scale = np.maximum(np.abs(tab).max(axis=(0, 1)), 1e-300)
                     arrays[f"{prefix}{k}"] = (tab / col_scale).astype(np.float16)
                     metas.append({"name": f"{prefix}{k}", "coils": [int(c) for c in t["coils"]],
@@ -603,6 +628,8 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
                      "sensor_mode_tolerance": sensor_mode_tolerance, "rz_step_m": rz_step,
                      "rz_log_step": rz_log_step, "rz_rho_scale_m": rz_rho_scale,
                      "mode_rz_step_m": mode_rz_step, "mode_rz_log_step": mode_rz_log_step,
+                     "sensor_mode_rz_step_m": sensor_mode_rz_step,
+                     "sensor_mode_rz_log_step": sensor_mode_rz_log_step,
                      "magnet_rz_step_m": magnet_rz_step,
                      "magnet_rz_log_step": magnet_rz_log_step},
     }

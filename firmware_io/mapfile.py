@@ -25,8 +25,8 @@ written in the cores' own modes::
   azimuthal order m = 0, 1, 2; cos and sin for m >= 1) on the same kind of (v, u) grid: m = 0
   as the coil tables, m = 1, 2 as the potentials x G, y G resp. (x^2 - y^2) H, 2 x y H with
   G, H smooth in (rho^2, z): 5 quantities (a, a1, a2, az, a1z) = -mu0 (G, G', G'', G_z, G'_z)
-  give all 8 rows (:func:`mode_rows`); float16, each column divided by its largest |value|
-  (meta ``column_scale``). ``COEF`` (n_coils, n_basis, n_coils) float64.
+  give all 8 rows (:func:`mode_rows`); float32 (float16 for the sensor field's), each column
+  divided by its largest |value| (meta ``column_scale``). ``COEF`` (n_coils, n_basis, n_coils) float64.
 
 The magnet's interaction with the cores, as functions of the magnet's position p:
 
@@ -75,7 +75,6 @@ from .errors import BadInputError
 FORMAT = "designkit-fieldmap"
 FORMAT_VERSION = 3
 """Format version of map v2 (coupled A, bias force, sensor fields); 1 and 2 were grid-only maps."""
-BATCH_MIN = 64
 ROWS = ("Bx", "By", "Bz", "dBx/dx", "dBx/dy", "dBx/dz", "dBy/dy", "dBy/dz")
 UNITS = {"A_rows_0_2": "T/A", "A_rows_3_7": "T/(m A)", "grid": "m", "moment": "A m^2",
          "current": "A", "force": "N", "field": "T", "sensor_coil_field": "T/A"}
@@ -212,7 +211,8 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
                     want, ok_modes = nq, True
                 ok = (t["name"] == f"{prefix}{k}" and tab is not None and tab.shape == shape
                       and ok_modes
-                      and tab.dtype == (np.float32 if nq else np.float16) and len(shape) == 3
+                      and (tab.dtype == np.float32 or (nq is None and tab.dtype == np.float16))
+                      and len(shape) == 3
                       and shape[2] == want
                       and min(shape) >= 2 and t["rho_step_m"] > 0 and t["u_step"] > 0
                       and t["rho_scale_m"] > (shape[0] - 1) * t["rho_step_m"]
@@ -611,16 +611,44 @@ def _poly(x: np.ndarray, y: np.ndarray, m: int, c: int) -> np.ndarray:
     return P
 
 
+def _monomials(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """(..., 15): 1, x, y, x^2, x y, y^2, x^3, x^2 y, x y^2, y^3, x^4, x^3 y, x^2 y^2,
+    x y^3, y^4."""
+    xx, yy = x * x, y * y
+    return np.stack([np.ones_like(x), x, y, xx, x * y, yy, xx * x, xx * y, x * yy, yy * y,
+                     xx * xx, xx * x * y, xx * yy, x * yy * y, yy * yy], axis=-1)
+
+
+def _poly_tensors() -> dict:
+    """_poly as constant tensors on the monomials: P = monomials @ T[(m, c)] (15, Q_m * 8).
+
+    _poly is a polynomial of degree <= 4 in (x, y), so evaluating it at 40 random points and
+    solving for the 15 monomial coefficients is exact up to rounding (checked)."""
+    rng = np.random.default_rng(0)
+    x, y = rng.uniform(-1, 1, (2, 40))
+    mono = _monomials(x, y)
+    out = {}
+    for key in ((0, 0), (1, 0), (1, 1), (2, 0), (2, 1)):
+        p = _poly(x, y, *key).reshape(40, -1)
+        t = np.linalg.lstsq(mono, p, rcond=None)[0]
+        t[np.abs(t) < 1e-9] = 0.0
+        t = np.round(t)  # the coefficients are small integers
+        assert np.allclose(mono @ t, p, atol=1e-12)
+        out[key] = t
+    return out
+
+
 def mode_rows(t: dict, p: np.ndarray) -> np.ndarray:
     """Rows (n, k, n_basis, 8) of every basis field of the type's k cores at points (n, 3),
     global frame, basis in the order of ``t['order']`` (grouped by mode order and cos / sin;
     :func:`prepare_modes` permutes the coefficients to match)."""
     x, y, val = _bilinear(t, p)
     n, k = x.shape
+    mono = _monomials(x, y).reshape(n * k, 15)
     parts = []
     for (m, c), cols in t["groups"]:
         v = val[..., cols]  # (n, k, nb_g, Q_m)
-        pm = _poly(x, y, m, c)[:, :, None]  # (n, k, 1, Q_m, 8)
+        pm = (mono @ _POLY_T[(m, c)]).reshape(n, k, 1, N_MODE_Q[m], 8)  # one GEMM
         # a sum over the 4-5 quantities: numpy's batched matmul is slow on tiny matrices
         acc = v[..., 0, None] * pm[..., 0, :]
         for q in range(1, v.shape[-1]):
@@ -631,6 +659,9 @@ def mode_rows(t: dict, p: np.ndarray) -> np.ndarray:
         flat = rows.transpose(3, 0, 2, 1).reshape(8, -1, k)
         rows = _rotate_rows(flat, t["rot"]).reshape(8, n, -1, k).transpose(1, 3, 2, 0)
     return rows
+
+
+_POLY_T = _poly_tensors()
 
 
 # ============================================================================ 3-D grids

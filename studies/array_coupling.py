@@ -123,8 +123,8 @@ def plot_f0(xs, zs, f, threshold_n, path):
     ax.quiver(Xq, Zq, u / nrm, w / nrm, color="w", alpha=0.7, scale=30, width=0.003)
     for xc in (-50, 0, 50):
         ax.axvspan(xc - 12, xc + 12, ymin=0, ymax=0.02, color="0.3")
-    ax.text(0, zs[0] * 1e3 + 2.5, "cores below (tops at z = 5 mm)", ha="center", fontsize=8,
-            color="w")
+    ax.text(-25, zs[0] * 1e3 + 1.0, "grey: cores\n(tops at z = 5 mm)", ha="center",
+            fontsize=7, color="w")
     cb = fig.colorbar(cs, ax=ax, pad=0.02)
     cb.set_label("|F0| (mN), log10 scale")
     cb.set_ticks(levels[::2])
@@ -303,7 +303,7 @@ def run(out_dir="out/array_coupling", quick: bool = False, fem: bool = False,
     bar.update()
 
     bar.set_postfix_str("sensors")
-    mp = [(0.0, 0.0, 0.03), (0.025, 0.0, 0.03), (0.05, 0.0, 0.03), (0.0, 0.0, 0.012),
+    mp = [(0.0, 0.0, 0.03), (0.025, 0.0, 0.03), (0.05, 0.0, 0.03), (0.0, 0.0, 0.025),
           (0.025, 0.025, 0.05), (0.0, 0.0, 0.08)]
     rows = sensor_subtraction(arr, moment, mp[:3] if quick else mp)
     res["sensor_subtraction"] = rows
