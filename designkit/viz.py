@@ -134,8 +134,8 @@ def array_field(design: "Design", points, currents: Sequence[float] | None = Non
                 gradient: bool = True):
     """Flux density (and gradient) of the design's whole coil array at points.
 
-    :class:`designkit.array.CoilArray` over the energized coils (coils at 0 A are skipped): the
-    one place where the coils' fields are summed.
+    :class:`designkit.array.CoilArray` of the whole array (its cores solved together, so the
+    unpowered coils' cores count too): the one place where the coils' fields are summed.
 
     Parameters
     ----------
@@ -152,22 +152,32 @@ def array_field(design: "Design", points, currents: Sequence[float] | None = Non
     """
     import warnings
 
-    from .array import CoilArray
-
     p, _ = v.points(points)
     cur = resolve_currents(design, currents)
-    active = np.nonzero(cur)[0]
-    if not active.size:
+    if not np.any(cur):
         b, g = np.zeros((len(p), 3)), np.zeros((len(p), 3, 3))
     else:
-        full = CoilArray.from_design(design)
-        sub = CoilArray(tuple(full.coils[k] for k in active))
+        # the whole array, unpowered coils included: their cores are magnetized by the others
         with warnings.catch_warnings():
             # A figure is not the place to repeat the linear-core saturation warning for every
             # grid; `designkit report` states it once in its summary.
             warnings.simplefilter("ignore")
-            b, g = sub.field(p, cur[active])
+            b, g = _array(design).field(p, cur)
     return (b, g) if gradient else b
+
+
+def _array(design):
+    """The design's CoilArray, built (and its coupled core solve done) once per design."""
+    from .array import CoilArray
+
+    key = design.spec_hash()
+    if _ARRAYS.get("key") != key:
+        _ARRAYS.clear()
+        _ARRAYS.update(key=key, array=CoilArray.from_design(design))
+    return _ARRAYS["array"]
+
+
+_ARRAYS: dict = {}
 
 
 def force_from_gradient(gradient_t_per_m: np.ndarray, moment_a_m2: np.ndarray) -> np.ndarray:
