@@ -143,7 +143,7 @@ def axis_closed_form(z):
 REGION_RTOLS = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)
 
 
-def random_geometries(quick=False, have_magpylib=True):
+def random_geometries(quick=False, have_magpylib=True, magpylib_random=False):
     """Run time per point and achieved error over randomized windings, per point region.
 
     Errors: the 30-digit mpmath table tests/data/winding_refs.json (12 windings incl. the
@@ -158,7 +158,7 @@ def random_geometries(quick=False, have_magpylib=True):
 
     data = Path(__file__).resolve().parents[1] / "tests" / "data"
     cases, refs = wa.load_or_compute(data, wa.TABLE_SEED, wa.TABLE_GEOMETRIES)
-    per = 20 if quick else 200
+    per = 10 if quick else 100
     timing = ref.sample_cases(7, 4 if quick else 12, per_region=per)
     groups = {}
     for c in timing:
@@ -181,26 +181,34 @@ def random_geometries(quick=False, have_magpylib=True):
             o["err_b"] = max(o["err_b"], eb)
             o["err_g"] = max(o["err_g"], eg)
     shells = {}
-    if have_magpylib:
-        for k in ((16, 64) if quick else (16, 64, 256)):
+    # opt-in: magpylib 5.x's CylinderSegment (its cel iteration) did not return, within
+    # minutes, for some points of the extreme windings (found with this bench); the thesis
+    # section above keeps magpylib side by side in every run
+    if have_magpylib and magpylib_random:
+        # magpylib's CylinderSegment costs ~1 ms per shell and point on surfaces: time it on
+        # 10 points per (winding, region)
+        for k in ((16,) if quick else (16, 64)):
             for region in ref.REGIONS:
                 tot, n, err = 0.0, 0, 0.0
                 for (reg, ri, ro, length), pts in groups.items():
                     if reg != region:
                         continue
-                    pts = np.array(pts)
+                    pts = np.array(pts)[:10]
                     t = _t.perf_counter()
-                    magpylib_shells(pts, k, ri, ro, length, 1.0 / ((ro - ri) * length))
+                    with np.errstate(all="ignore"):
+                        magpylib_shells(pts, k, ri, ro, length, 1.0 / ((ro - ri) * length))
                     tot += _t.perf_counter() - t
                     n += len(pts)
                 for case, (b_ref, _g) in zip(cases, refs):
                     if case["region"] != region:
                         continue
                     j = 1.0 / ((case["ro"] - case["ri"]) * case["length"])
-                    b = magpylib_shells(case["point"][None], k, case["ri"], case["ro"],
-                                        case["length"], j)[0]
-                    err = max(err, float(np.linalg.norm(b - MU0 * j * b_ref)
-                                         / np.linalg.norm(MU0 * j * b_ref)))
+                    with np.errstate(all="ignore"):
+                        b = magpylib_shells(case["point"][None], k, case["ri"], case["ro"],
+                                            case["length"], j)[0]
+                    e = float(np.linalg.norm(b - MU0 * j * b_ref) / np.linalg.norm(MU0 * j * b_ref))
+                    # NaN: magpylib fails on some surface points
+                    err = max(err, e) if np.isfinite(e) else np.inf
                 shells[(region, k)] = dict(us_per_point=1e6 * tot / n, err_b=err)
     lines = ["Random windings (Ri/Ro 1e-4..0.99, L/Ro 1e-3..1e3): designkit B+G us/point "
              "[max err B / max err G vs mpmath]",
@@ -213,7 +221,8 @@ def random_geometries(quick=False, have_magpylib=True):
             for r in REGION_RTOLS))
     if shells:
         ks = sorted({k for _, k in shells})
-        lines += ["", "magpylib nested shells (B only) us/point [max err B], same regions",
+        lines += ["", "magpylib nested shells (B only) us/point [max err B; inf: NaN returned], "
+                  "same regions",
                   f"{'region':8s} " + " ".join(f"{str(k) + ' shells':>20s}" for k in ks)]
         for region in ref.REGIONS:
             lines.append(f"{region:8s} " + " ".join(

@@ -25,8 +25,6 @@ def test_bench_field_quick(tmp_path):
     for r in res["random_rows"]:
         assert r["err_b"] <= r["rtol"] and r["err_g"] <= 10 * r["rtol"], r
     assert {r["region"] for r in res["random_rows"]} >= {"axis", "corner", "ulp", "far"}
-    assert res["random_magpylib_rows"] and all(r["us_per_point"] > 0
-                                               for r in res["random_magpylib_rows"])
 
 
 def test_winding_accuracy_quick(tmp_path):
