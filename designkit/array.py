@@ -22,6 +22,7 @@ thesis (no neighbour coupling, no magnet pull).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 from dataclasses import dataclass
 from typing import Literal
@@ -423,6 +424,12 @@ class CoilArray:
         sk = skew_matrix(moment)
         a = self.actuation_matrix(np.atleast_2d(np.asarray(points, dtype=float)))
         return (a[:, :3, :] @ self._currents(currents)) @ sk.T
+
+
+@functools.lru_cache(maxsize=8)
+def array_for_design(design) -> CoilArray:
+    """``CoilArray.from_design(design)``, cached per design so its coupled solve is reused."""
+    return CoilArray.from_design(design)
 
 
 # ---------------------------------------------------------------------------- workspace metrics
