@@ -22,6 +22,7 @@ thesis (no neighbour coupling, no magnet pull).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 from dataclasses import dataclass
 from typing import Literal
@@ -198,6 +199,16 @@ class CoilArray:
             out.setdefault(dataclasses.replace(c, pose=Pose()), []).append(k)
         return out
 
+    def __getstate__(self):
+        # the cached coupled solve (tens of MB) is rebuilt on demand, not pickled to workers
+        state = dict(self.__dict__)
+        state.pop("_system", None)
+        return state
+
+    def __setstate__(self, state):
+        for key, value in state.items():
+            object.__setattr__(self, key, value)
+
     # ------------------------------------------------------------------ coupled cores
     def coupled(self):
         """The array-level core solve (:class:`designkit.coupling.ArraySystem`), built once.
@@ -243,7 +254,8 @@ class CoilArray:
             a[:, :3, k] = b
             a[:, 3:, k] = g5_from_gradient(g)
         if system is not None:
-            b, g = system.core_field(p, system.coil_solution(), gradient=True)
+            b, g = system.core_field(p, system.coil_solution(), gradient=True,
+                                     coil_columns=True)
             a[:, :3, :] += b
             a[:, 3:, :] += g5_from_gradient(np.moveaxis(g, -1, 1)).transpose(0, 2, 1)
         return a[0] if single else a
@@ -261,8 +273,8 @@ class CoilArray:
 
     # ------------------------------------------------------------------ the magnet and the iron
     def magnet_core_field(self, points_m, magnet_position_m, moment_a_m2, *,
-                          gradient: bool = False):
-        """Field of the cores magnetized by the finger magnet (point dipole), at points.
+                          gradient: bool = False, magnet_size_m=None):
+        """Field of the cores magnetized by the finger magnet, at points.
 
         Parameters
         ----------
@@ -270,6 +282,9 @@ class CoilArray:
         magnet_position_m : array-like, shape (3,), m
         moment_a_m2 : array-like, shape (3,), A m^2 (take it from the design / map file)
         gradient : bool
+        magnet_size_m : None or (radius, length), m
+            None: the magnet is a point dipole. (radius, length): a uniformly magnetized
+            cylinder along the moment, its exact field magnetizes the cores.
 
         Returns
         -------
@@ -278,11 +293,12 @@ class CoilArray:
         p, single = v.points(points_m, "points_m")
         pos = v.vector3("magnet_position_m", magnet_position_m, "m")
         m = v.vector3("moment_a_m2", moment_a_m2, "A m^2")
+        size = self._magnet_size(magnet_size_m)
         system = self.coupled()
         if system is None:
             b, g = np.zeros((len(p), 3)), np.zeros((len(p), 3, 3))
         else:
-            x = system.magnet_solution(pos[None], m)
+            x = system.magnet_solution(pos[None], m, size)
             res = system.core_field(p, x, gradient=gradient)
             b, g = (res[0][..., 0], res[1][..., 0]) if gradient else (res[..., 0], None)
         if single:
@@ -290,34 +306,48 @@ class CoilArray:
             g = None if g is None else g[0]
         return (b, g) if gradient else b
 
-    def _bias(self, magnet_positions_m, moment_a_m2):
+    @staticmethod
+    def _magnet_size(magnet_size_m):
+        if magnet_size_m is None:
+            return None
+        try:
+            r, length = (float(q) for q in magnet_size_m)
+        except (TypeError, ValueError):
+            raise BadInputError("magnet_size_m", "None or (radius, length) in m",
+                                magnet_size_m) from None
+        v.positive("magnet_size_m[0] (radius)", r)
+        v.positive("magnet_size_m[1] (length)", length)
+        return (r, length)
+
+    def _bias(self, magnet_positions_m, moment_a_m2, magnet_size_m):
         p, single = v.points(magnet_positions_m, "magnet_positions_m")
         m = v.vector3("moment_a_m2", moment_a_m2, "A m^2")
+        size = self._magnet_size(magnet_size_m)
         system = self.coupled()
         if system is None:
-            return np.zeros((len(p), 3)), np.zeros((len(p), 3, 3)), m, single
-        b = np.empty((len(p), 3))
-        g = np.empty((len(p), 3, 3))
-        for a in range(0, len(p), 64):
-            x = system.magnet_solution(p[a:a + 64], m)
-            b[a:a + 64], g[a:a + 64] = system.core_field_pointwise(p[a:a + 64], x, True)
-        return b, g, m, single
+            return np.zeros((len(p), 3)), np.zeros((len(p), 3)), single
+        f = np.empty((len(p), 3))
+        t = np.empty((len(p), 3))
+        step = 64 if size is None else 16
+        for a in range(0, len(p), step):
+            f[a:a + step], t[a:a + step] = system.magnet_load(p[a:a + step], m, size)
+        return f, t, single
 
-    def bias_force(self, magnet_positions_m, moment_a_m2) -> np.ndarray:
+    def bias_force(self, magnet_positions_m, moment_a_m2, *, magnet_size_m=None) -> np.ndarray:
         """Force on the magnet from the cores it magnetizes, at zero current, (n, 3) N.
 
-        F0(p) = (m . grad) B_ind(p): the gradient at the magnet of the cores' field induced by
-        the magnet itself (point dipole ``moment_a_m2`` at each of ``magnet_positions_m``
-        (n, 3) m). Zero without cores.
+        Point dipole (default): F0(p) = (m . grad) B_ind(p), B_ind the cores' field induced by
+        the magnet itself (moment ``moment_a_m2`` at each of ``magnet_positions_m`` (n, 3) m).
+        ``magnet_size_m=(radius, length)``: the finite cylinder (exact source field, face-charge
+        force). Zero without cores.
         """
-        _, g, m, single = self._bias(magnet_positions_m, moment_a_m2)
-        f = np.einsum("nji,j->ni", g, m)
+        f, _, single = self._bias(magnet_positions_m, moment_a_m2, magnet_size_m)
         return f[0] if single else f
 
-    def bias_torque(self, magnet_positions_m, moment_a_m2) -> np.ndarray:
-        """Torque on the magnet from the cores it magnetizes, m x B_ind(p), (n, 3) N m."""
-        b, _, m, single = self._bias(magnet_positions_m, moment_a_m2)
-        t = np.cross(m[None], b)
+    def bias_torque(self, magnet_positions_m, moment_a_m2, *, magnet_size_m=None) -> np.ndarray:
+        """Torque on the magnet from the cores it magnetizes (about its centre), (n, 3) N m;
+        point dipole: m x B_ind(p). ``magnet_size_m`` as in :meth:`bias_force`."""
+        _, t, single = self._bias(magnet_positions_m, moment_a_m2, magnet_size_m)
         return t[0] if single else t
 
     def sensor_positions_m(self) -> np.ndarray:
@@ -333,26 +363,41 @@ class CoilArray:
         return out
 
     def saturation_correction(self, height_m: float = 0.03, currents_a=None) -> dict:
-        """Per-coil saturation factor of the 1010-steel cores vs |I| (see
-        :func:`designkit.coupling.saturation_table`): ``{'saturation_current_a': (k,) A,
-        'saturation_factor': (k, n_coils)}``; factor 1 for air coils."""
+        """Saturation correction of the 1010-steel cores (form: :func:`designkit.coupling.
+        saturation_table`).
+
+        Returns dict: ``saturation_current_a`` (k,) A; ``saturation_factor`` (k, n_coils)
+        (1 for air coils); ``core_flux_t_per_a`` (n_coils, n_coils) T/A, the coupled linear
+        axial flux density at core k's mid-plane per ampere in coil j (zero rows for air
+        coils), for the per-state use.
+        """
         from .coupling import saturation_table
 
-        out = None
         tables = {}
-        for k, c in enumerate(self.coils):
-            if c.core is None:
-                continue
-            key = dataclasses.replace(c, pose=Pose())
-            if key not in tables:
-                tables[key] = saturation_table(c, height_m, currents_a)
-        cur = (next(iter(tables.values()))["current_a"] if tables else
-               (np.linspace(0.0, 6.0, 13) if currents_a is None else np.asarray(currents_a)))
-        out = np.ones((len(cur), self.n_coils))
+        for c in self.coils:
+            if c.core is not None:
+                key = dataclasses.replace(c, pose=Pose())
+                if key not in tables:
+                    tables[key] = saturation_table(c, height_m, currents_a)
+        cur = (np.arange(0.0, 6.01, 1.0) if currents_a is None
+               else np.asarray(currents_a, dtype=float))
+        fac = np.ones((len(cur), self.n_coils))
         for k, c in enumerate(self.coils):
             if c.core is not None:
-                out[:, k] = tables[dataclasses.replace(c, pose=Pose())]["factor"]
-        return {"saturation_current_a": np.asarray(cur, dtype=float), "saturation_factor": out}
+                fac[:, k] = tables[dataclasses.replace(c, pose=Pose())]["factor"]
+        cmat = np.zeros((self.n_coils, self.n_coils))
+        system = self.coupled()
+        if system is not None:
+            idx = system.core_index
+            mid = np.array([np.asarray(self.coils[k].pose.position) + self.coils[k].pose.matrix
+                            @ [0.0, 0.0, self.coils[k].core.offset] for k in idx])
+            axes = np.array([self.coils[k].pose.matrix[:, 2] for k in idx])
+            b = system.core_field(mid, system.coil_solution())  # (n, 3, n_coils)
+            for j, cj in enumerate(self.coils):
+                b[:, :, j] += cj.field(mid, 1.0, include="winding")
+            cmat[idx] = np.einsum("na,nac->nc", axes, b)
+        return {"saturation_current_a": cur, "saturation_factor": fac,
+                "core_flux_t_per_a": cmat}
 
     def _currents(self, currents) -> np.ndarray:
         i = np.asarray(currents, dtype=float)
@@ -379,6 +424,12 @@ class CoilArray:
         sk = skew_matrix(moment)
         a = self.actuation_matrix(np.atleast_2d(np.asarray(points, dtype=float)))
         return (a[:, :3, :] @ self._currents(currents)) @ sk.T
+
+
+@functools.lru_cache(maxsize=8)
+def array_for_design(design) -> CoilArray:
+    """``CoilArray.from_design(design)``, cached per design so its coupled solve is reused."""
+    return CoilArray.from_design(design)
 
 
 # ---------------------------------------------------------------------------- workspace metrics

@@ -36,6 +36,24 @@ Models (``Core.model``):
     (:func:`designkit.field.magnetized_cylinder_field`). FIELD_MATH.md explains why this model is
     only a first estimate. It ignores ``bh`` (linear), and warns when its M passes the knee.
 
+Field evaluation (:meth:`CoreSolution.field`): the solved currents are grouped (the side in
+stretches no longer than four core radii plus the two end stretches; each end face or slice
+interface). For a point and a group, the kernel (loop field as a function of the source
+coordinate s along the group) is analytic except where the source ring would pass through the
+point: s* = z +- i |R - rho| for the side, r* = rho +- i |z - z_face| for a face. The Bernstein
+ellipse of the group's interval through s* (parameter rho_s; the bounds use the half-way ellipse
+rho = (1 + rho_s) / 2) bounds the error of n-node interpolation by 4 rho^-n / (rho - 1) and of
+n-node Gauss quadrature by 64/15 rho^-2n / (rho^2 - 1), relative to the group's contribution
+(Trefethen, ATAP ch. 8, 19). Per point and group the cheapest of: a compressed product rule of
+4-24 rings (interpolation bound <= :data:`EVAL_RTOL`), else the group's panels: side panels are
+closed-form current sheets (exact everywhere), face panels 4-node Gauss rules where their
+quadrature bound holds, else a Gauss rule graded geometrically towards the point's projection
+(pieces delta, 2 delta, 4 delta, ... with delta the distance to the panel: every piece then sees
+the singularity through an ellipse rho_s >= 3.7, 10 nodes each). All distances are in units of
+the group's or panel's own size, so the choice holds for any geometry and any point (inside the
+core, on its faces: finite principal values). Validated against GetDP all around the coil
+(``studies/core_vs_fem.py``, :func:`designkit.fem.compare.probe_set`).
+
 Inductance: the extra flux linkage of the winding due to the core, per unit current, is
 ``sum over the core's current rings of K ds * Phi_w(r, z) / I^2`` (reciprocity: the mutual
 inductance of a ring and the winding is the winding's flux through the ring per ampere),
@@ -243,62 +261,114 @@ class CoreSolution:
               rule: Literal["auto", "panels"] = "auto"):
         """B (n, 3) T [, G (n, 3, 3) T/m] of the bound currents at local Cartesian points.
 
-        ``rule='auto'``: points farther than :data:`FAR_DISTANCE` from the core use the
-        compressed ring rule (:meth:`far_rings`, ~20 loops per point); nearer points sum the
-        panels exactly. ``'panels'`` always sums the panels.
+        ``rule='auto'``: for every point and every *source group* (three stretches of the side,
+        each end face or slice interface) the cheapest quadrature whose error bound holds at
+        that point is used (module section "Field evaluation"): a compressed product rule of
+        6, 10 or 16 rings per group when the point is far from the group *in units of the
+        group's own length*, else the group's exact panels (side: closed-form current sheets;
+        faces: Gauss rules of loops, refined geometrically towards the point's projection when
+        the point is near the panel). ``'panels'`` always sums the panels (with the same near
+        refinement): the reference for the compressed rules.
         """
         p = np.asarray(points_local, dtype=float)
         rho = np.hypot(p[:, 0], p[:, 1])
         z = p[:, 2]
+        nout = 7 if gradient else 2
+        if rule not in ("auto", "panels"):
+            raise BadInputError("rule", "'auto' or 'panels'", rule)
         if rule == "panels" or len(self.k_disc) == 0:
             comps = _currents_rz(self, rho, z, gradient)
             return _rz_to_xyz(p, rho, comps, gradient, MU0)
-        lo, hi = float(self.side_z_lo.min()), float(self.side_z_hi.max())
-        far = (z - hi >= FAR_DISTANCE) | (lo - z >= FAR_DISTANCE) | (rho - self.radius
-                                                                      >= FAR_DISTANCE)
-        nout = 7 if gradient else 2
-        comps = [np.zeros(len(z)) for _ in range(nout)]
-        if np.any(~far):
-            near = _currents_rz(self, rho[~far], z[~far], gradient)
-            for q in range(nout):
-                comps[q][~far] = near[q]
-        if np.any(far):
-            from .field.kernels import loop_rz
+        from .field.kernels import loop_rz
 
-            rq, zq, wq = self.far_rings()
-            nf = int(far.sum())
-            m = len(rq)
-            res = loop_rz(np.tile(rq, nf), np.repeat(rho[far], m),
-                          np.repeat(z[far], m) - np.tile(zq, nf), gradient=gradient)
-            ww = np.tile(wq, nf)
+        comps = [np.zeros(len(z)) for _ in range(nout)]
+        ring_pt, ring_r, ring_z, ring_w = [], [], [], []
+        for grp in self.groups():
+            # singularity of the kernel as a function of the source coordinate: where the
+            # source ring would pass through the point (complex for points off the contour)
+            if grp["kind"] == "side":
+                s = z + 1j * np.abs(self.radius - rho)
+            else:
+                s = rho + 1j * np.abs(z - grp["fixed"])
+            bound_rho = _usable_rho(grp["lo"], grp["hi"], s)
+            # a face's kernel grows like r'^2 (its dipole moment) off the interval: its size on
+            # the ellipse exceeds that on [0, R] by up to the Chebyshev growth ((rho+1/rho)/2)^2
+            growth = (0.5 * (bound_rho + 1.0 / bound_rho)) ** 2 if grp["kind"] == "disc" else 1.0
+            todo = np.ones(len(z), dtype=bool)
+            for nodes, (rq, zq, wq) in grp["rules"].items():
+                sel = todo & (_interp_bound(bound_rho, nodes) * grp["cancel"] * growth
+                              <= EVAL_RTOL)
+                if not np.any(sel):
+                    continue
+                todo &= ~sel
+                idx = np.flatnonzero(sel)
+                ring_pt.append(np.repeat(idx, len(rq)))
+                ring_r.append(np.tile(rq, len(idx)))
+                ring_z.append(np.tile(zq, len(idx)))
+                ring_w.append(np.tile(wq, len(idx)))
+            if np.any(todo):
+                idx = np.flatnonzero(todo)
+                near = _panels_rz(self, grp["side"], grp["disc"], rho[idx], z[idx], gradient)
+                for q in range(nout):
+                    comps[q][idx] += near[q]
+        if ring_pt:
+            pt = np.concatenate(ring_pt)
+            ww = np.concatenate(ring_w)
+            res = loop_rz(np.concatenate(ring_r), rho[pt], z[pt] - np.concatenate(ring_z),
+                          gradient=gradient)
             for q in range(nout):
-                comps[q][far] = (res[q] * ww).reshape(nf, m).sum(axis=1)
+                comps[q] += np.bincount(pt, weights=res[q] * ww, minlength=len(z))
         return _rz_to_xyz(p, rho, comps, gradient, MU0)
 
-    def far_rings(self):
-        """Compressed ring rule for far points: (r, z, current per ring) arrays, SI.
+    def groups(self) -> list[dict]:
+        """Source groups of the compressed rule (cached on the instance).
 
-        Product integration: on a few intervals per face the loop field is interpolated at
-        Gauss points, the piecewise-constant K (with its rim singularity) goes into the weights
-        exactly. Cached on the instance.
+        Each: ``kind`` ('side' or 'disc'), source-coordinate interval ``lo``, ``hi`` (z for the
+        side, r for a face), ``fixed`` (the face's z), the panel indices ``side`` / ``disc`` it
+        covers, and ``rules``: {nodes: (r, z, current per ring)} product rules (the loop field
+        interpolated at Gauss nodes, the piecewise-constant K with its rim singularity
+        integrated exactly in the weights).
         """
-        cached = self.__dict__.get("_far")
+        cached = self.__dict__.get("_groups")
         if cached is not None:
             return cached
         lo, hi = float(self.side_z_lo.min()), float(self.side_z_hi.max())
         length = hi - lo
         end = min(0.15 * length, 2 * self.radius)
-        rings_r, rings_z, rings_w = [], [], []
-        side_iv = [(lo, lo + end), (lo + end, hi - end), (hi - end, hi)]
-        _product_rule(self.side_z_lo, self.side_z_hi, self.k_side, side_iv, FAR_NODES,
-                      lambda s: (np.full_like(s, self.radius), s), rings_r, rings_z, rings_w)
+        # group edges on panel edges, so a group that falls back to panels owns whole panels
+        edges = np.unique(np.concatenate([self.side_z_lo, self.side_z_hi]))
+        # middle stretch cut into pieces <= 4 radii: a group's length sets how far away a
+        # point must be for its compressed rule, so shorter groups serve nearer points
+        n_mid = max(1, int(math.ceil((length - 2 * end) / (4 * self.radius))))
+        want = np.concatenate([[lo], lo + end + (length - 2 * end) * np.arange(n_mid + 1)
+                               / n_mid, [hi]])
+        cut = sorted(set(float(edges[np.argmin(np.abs(edges - c))]) for c in want))
+        out = []
+        mid = 0.5 * (self.side_z_lo + self.side_z_hi)
+        for a, b in zip(cut[:-1], cut[1:]):
+            sel = np.flatnonzero((mid > a) & (mid < b))
+            out.append({"kind": "side", "lo": a, "hi": b, "fixed": self.radius, "side": sel,
+                        "disc": np.zeros(0, dtype=int),
+                        "cancel": _cancellation(self.k_side[sel], self.side_z_hi[sel]
+                                                - self.side_z_lo[sel]),
+                        "rules": {n: _product_rule(self.side_z_lo[sel], self.side_z_hi[sel],
+                                                   self.k_side[sel], a, b, n, "side",
+                                                   self.radius) for n in FAR_NODES}})
         for zp in np.unique(self.disc_z):
-            sel = self.disc_z == zp
-            _product_rule(self.disc_r_lo[sel], self.disc_r_hi[sel], self.k_disc[sel],
-                          [(0.0, self.radius)], FAR_NODES,
-                          lambda s, zp=zp: (s, np.full_like(s, zp)), rings_r, rings_z, rings_w)
-        out = (np.concatenate(rings_r), np.concatenate(rings_z), np.concatenate(rings_w))
-        object.__setattr__(self, "_far", out)  # frozen dataclass: cache the derived rule
+            sel = np.flatnonzero(self.disc_z == zp)
+            r_lo = float(self.disc_r_lo[sel].min())
+            r_hi = float(self.disc_r_hi[sel].max())
+            # a face's far field is that of its dipole moment: weights ~ r^2 dr
+            mom = (self.disc_r_hi[sel] ** 3 - self.disc_r_lo[sel] ** 3) / 3.0
+            out.append({"kind": "disc", "lo": r_lo, "hi": r_hi, "fixed": float(zp),
+                        "side": np.zeros(0, dtype=int), "disc": sel,
+                        "cancel": max(_cancellation(self.k_disc[sel], mom),
+                                      _cancellation(self.k_disc[sel], self.disc_r_hi[sel]
+                                                    - self.disc_r_lo[sel])),
+                        "rules": {n: _product_rule(self.disc_r_lo[sel], self.disc_r_hi[sel],
+                                                   self.k_disc[sel], r_lo, r_hi, n, "disc",
+                                                   float(zp)) for n in FAR_NODES}})
+        object.__setattr__(self, "_groups", out)  # frozen dataclass: cache the derived rules
         return out
 
     def flux_linkage(self, coil: "Coil") -> float:
@@ -324,33 +394,159 @@ class CoreSolution:
         return total
 
 
-FAR_DISTANCE = 8e-3
-"""Points at least this far (m) outside the core's bounding cylinder use the compressed rule."""
-FAR_NODES = 6
+EVAL_RTOL = 1e-5
+"""Quadrature error bound of the field evaluation, relative to the size of each source group's
+contribution (module section "Field evaluation"); far below the model's discretization error."""
+FAR_NODES = (4, 6, 8, 12, 16, 24)
+"""Ring counts of the compressed product rules, tried in this order."""
+PANEL_NODES = 4
+"""Gauss nodes per end-face panel when the point is far from the panel (else refined)."""
+NEAR_NODES = 10
+"""Gauss nodes per piece of the geometric near-point refinement of a face panel."""
+RHO_CAP = 1e3
 
 
-def _product_rule(lo_e, hi_e, k, intervals, n, place, out_r, out_z, out_w):
-    """Gauss-node rings whose weights integrate piecewise-constant K times the interpolant."""
+def _usable_rho(lo, hi, s):
+    """Usable Bernstein-ellipse parameter of [lo, hi] for the kernel singularity ``s`` (complex).
+
+    rho_s is the ellipse (foci lo, hi) through s; the bounds use the ellipse half-way in,
+    rho = (1 + rho_s) / 2, on which the kernel stays within a small factor of its size on the
+    interval (Trefethen, Approximation Theory and Approximation Practice, ch. 8 and 19)."""
+    x = (2.0 * np.asarray(s) - lo - hi) / (hi - lo)
+    w = x + np.sqrt(x - 1.0 + 0j) * np.sqrt(x + 1.0 + 0j)
+    r = np.abs(w)
+    r = np.maximum(r, 1.0 / np.maximum(r, 1e-300))
+    return np.minimum(0.5 * (1.0 + r), RHO_CAP)
+
+
+def _cancellation(k, w, cap=1e4):
+    """sum |k| w / |sum k w| (>= 1, capped): the interpolation error scales with the integral of
+    |K| while the group's contribution may be the much smaller integral of K (currents of both
+    signs), so the bound is multiplied by this factor."""
+    total = abs(float(np.sum(k * w)))
+    mag = float(np.sum(np.abs(k) * w))
+    return min(mag / total, cap) if total > 0 else cap
+
+
+def _interp_bound(rho, n):
+    """Relative error bound of n-point Gauss-node interpolation: 4 rho^-n / (rho - 1)."""
+    with np.errstate(divide="ignore", over="ignore"):
+        return 4.0 * rho ** (-float(n)) / np.maximum(rho - 1.0, 1e-300)
+
+
+def _quad_bound(rho, n):
+    """Relative error bound of n-point Gauss-Legendre quadrature: 64/15 rho^-2n / (rho^2 - 1)."""
+    with np.errstate(divide="ignore", over="ignore"):
+        return 64.0 / 15.0 * rho ** (-2.0 * n) / np.maximum(rho * rho - 1.0, 1e-300)
+
+
+def _product_rule(lo_e, hi_e, k, a, b, n, kind, fixed):
+    """n rings at the Gauss nodes of [a, b] whose weights integrate the piecewise-constant K
+    (panels [lo_e, hi_e]) times the Lagrange interpolant of the loop field exactly.
+
+    Returns (r, z, current per ring) arrays, m and A."""
+    x, _ = np.polynomial.legendre.leggauss(n)
+    xf, wf = np.polynomial.legendre.leggauss(n + 2)  # exact for K * (degree n-1) per panel
+    nodes = 0.5 * (a + b) + 0.5 * (b - a) * x
+    p0 = np.maximum(lo_e, a)
+    p1 = np.minimum(hi_e, b)
+    keep = p1 > p0
+    p0, p1, kk = p0[keep], p1[keep], k[keep]
+    s = (0.5 * (p0 + p1)[:, None] + 0.5 * (p1 - p0)[:, None] * xf[None, :]).ravel()
+    ws = ((0.5 * (p1 - p0) * kk)[:, None] * wf[None, :]).ravel()
+    # Lagrange basis at s, scaled to [-1, 1] for conditioning
+    t = (2.0 * s - a - b) / (b - a)
+    lag = np.ones((len(s), n))
+    for q in range(n):
+        for j in range(n):
+            if j != q:
+                lag[:, q] *= (t - x[j]) / (x[q] - x[j])
+    weights = ws @ lag
+    if kind == "side":
+        return np.full(n, fixed), nodes, weights
+    return nodes, np.full(n, fixed), weights
+
+
+def _near_rule(lo, hi, s_re, delta, n=NEAR_NODES):
+    """Gauss rule on [lo, hi] graded geometrically towards x0 = clip(s_re): pieces of length
+    delta, 2 delta, 4 delta, ... on each side, so every piece sees the singularity (at distance
+    >= delta from x0) through an ellipse of parameter >= 3.7 (module docs). Returns (x, w)."""
     x, w = np.polynomial.legendre.leggauss(n)
-    xf, wf = np.polynomial.legendre.leggauss(n + 2)
-    for a, b in intervals:
-        nodes = 0.5 * (a + b) + 0.5 * (b - a) * x
-        weights = np.zeros(n)
-        for j in range(len(k)):
-            p0, p1 = max(lo_e[j], a), min(hi_e[j], b)
-            if p1 <= p0:
-                continue
-            s = 0.5 * (p0 + p1) + 0.5 * (p1 - p0) * xf
-            ws = 0.5 * (p1 - p0) * wf
-            for q in range(n):
-                others = np.delete(nodes, q)
-                lag = np.prod((s[:, None] - others[None, :]) / (nodes[q] - others[None, :]),
-                              axis=1)
-                weights[q] += k[j] * np.sum(ws * lag)
-        r, z = place(nodes)
-        out_r.append(r)
-        out_z.append(z)
-        out_w.append(weights)
+    x0 = min(max(s_re, lo), hi)
+    edges = [x0]
+    step = delta
+    while edges[-1] < hi:
+        edges.append(min(edges[-1] + step, hi))
+        step *= 2.0
+    left = [x0]
+    step = delta
+    while left[-1] > lo:
+        left.append(max(left[-1] - step, lo))
+        step *= 2.0
+    e = np.array(left[::-1] + edges[1:])
+    e = e[np.concatenate([[True], np.diff(e) > 0])]
+    a, b = e[:-1], e[1:]
+    xs = (0.5 * (a + b)[:, None] + 0.5 * (b - a)[:, None] * x[None, :]).ravel()
+    ws = (0.5 * (b - a)[:, None] * w[None, :]).ravel()
+    return xs, ws
+
+
+def _panels_rz(sol, side_idx, disc_idx, rho, z, gradient):
+    """Exact panel sum of the given side and face panels per mu0 at (rho, z).
+
+    Side panels: closed-form current sheets. Face panels: PANEL_NODES-point Gauss rules of
+    loops where their quadrature bound holds, else the geometric near rule."""
+    from .field.kernels import loop_rz, sheet_rz
+
+    n = rho.shape[0]
+    nout = 7 if gradient else 2
+    acc = [np.zeros(n) for _ in range(nout)]
+    if n == 0:
+        return acc
+    if len(side_idx):
+        lo, hi, k = sol.side_z_lo[side_idx], sol.side_z_hi[side_idx], sol.k_side[side_idx]
+        h = 0.5 * (hi - lo)
+        c = 0.5 * (hi + lo)
+        ns = len(h)
+        res = sheet_rz(sol.radius, np.tile(h, n), np.repeat(rho, ns),
+                       np.repeat(z, ns) - np.tile(c, n), gradient=gradient)
+        kk = np.tile(k, n)
+        for q in range(nout):
+            acc[q] += (res[q] * kk).reshape(n, ns).sum(axis=1)
+    if len(disc_idx):
+        r_lo, r_hi = sol.disc_r_lo[disc_idx], sol.disc_r_hi[disc_idx]
+        zp, kd = sol.disc_z[disc_idx], sol.k_disc[disc_idx]
+        nd = len(disc_idx)
+        dz = np.abs(z[:, None] - zp[None, :])
+        rho_b = _usable_rho(r_lo[None, :], r_hi[None, :], rho[:, None] + 1j * dz)
+        ok = _quad_bound(rho_b, PANEL_NODES) <= EVAL_RTOL
+        nq = PANEL_NODES
+        rq, wq = _disc_nodes(r_lo, r_hi, nq)
+        wk = (wq * kd[:, None])  # (nd, nq)
+        m = nd * nq
+        res = loop_rz(np.tile(rq.ravel(), n), np.repeat(rho, m),
+                      np.repeat(z, m) - np.tile(np.repeat(zp, nq), n), gradient=gradient)
+        ww = (ok[:, :, None] * wk[None, :, :]).ravel()
+        for q in range(nout):
+            acc[q] += (res[q] * ww).reshape(n, m).sum(axis=1)
+        bad_i, bad_j = np.nonzero(~ok)
+        if len(bad_i):
+            xs, ws, pt, zs = [], [], [], []
+            for i, j in zip(bad_i, bad_j):
+                span = r_hi[j] - r_lo[j]
+                gap = max(r_lo[j] - rho[i], rho[i] - r_hi[j], 0.0)
+                # floor: a point on the face itself gets the principal value (finite)
+                delta = max(dz[i, j], gap, 1e-9 * span)
+                x, w = _near_rule(r_lo[j], r_hi[j], rho[i], delta)
+                xs.append(x)
+                ws.append(w * kd[j])
+                pt.append(np.full(len(x), i))
+                zs.append(np.full(len(x), zp[j]))
+            xs, ws, pt, zsrc = (np.concatenate(a) for a in (xs, ws, pt, zs))
+            res = loop_rz(xs, rho[pt], z[pt] - zsrc, gradient=gradient)
+            for q in range(nout):
+                acc[q] += np.bincount(pt, weights=res[q] * ws, minlength=n)
+    return acc
 
 
 # ====================================================================== winding (applied) field
@@ -397,34 +593,9 @@ def _disc_nodes(r_lo, r_hi, n):
 
 
 def _currents_rz(sol: CoreSolution, rho, z, gradient):
-    """Sum of the panels' fields per mu0 at (rho, z): list of the 2 or 7 rz components."""
-    from .field.kernels import loop_rz, sheet_rz
-
-    n = rho.shape[0]
-    nout = 7 if gradient else 2
-    acc = [np.zeros(n) for _ in range(nout)]
-    if len(sol.k_side):
-        h = 0.5 * (sol.side_z_hi - sol.side_z_lo)
-        c = 0.5 * (sol.side_z_hi + sol.side_z_lo)
-        ns = len(h)
-        res = sheet_rz(sol.radius, np.tile(h, n), np.repeat(rho, ns),
-                       np.repeat(z, ns) - np.tile(c, n), gradient=gradient)
-        kk = np.tile(sol.k_side, n)
-        for q in range(nout):
-            acc[q] += (res[q] * kk).reshape(n, ns).sum(axis=1)
-    if len(sol.k_disc):
-        nq = 4
-        rq, wq = _disc_nodes(sol.disc_r_lo, sol.disc_r_hi, nq)
-        wk = (wq * sol.k_disc[:, None]).ravel()
-        zq = np.repeat(sol.disc_z, nq)
-        rq = rq.ravel()
-        m = len(rq)
-        res = loop_rz(np.tile(rq, n), np.repeat(rho, m), np.repeat(z, m) - np.tile(zq, n),
-                      gradient=gradient)
-        ww = np.tile(wk, n)
-        for q in range(nout):
-            acc[q] += (res[q] * ww).reshape(n, m).sum(axis=1)
-    return acc
+    """Sum of all panels' fields per mu0 at (rho, z): list of the 2 or 7 rz components."""
+    return _panels_rz(sol, np.arange(len(sol.k_side)), np.arange(len(sol.k_disc)), rho, z,
+                      gradient)
 
 
 def _rz_to_xyz(p, rho, comps, gradient, scale):

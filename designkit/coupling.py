@@ -23,25 +23,55 @@ projected field) are built once per design. Solving the block system for a sourc
 cores' magnetization at once (a dense LU, factorized once per design and reused for every
 source: each coil's winding per ampere, the finger magnet at each position).
 
-Costs (n_c cores, n_u = n0 + 2 m_max n1 unknowns per core, default 80 + 2*2*40 = 240):
-per design, the cross blocks (one per distinct relative placement of two cores: 24 in a 3 x 3
-grid) and one LU of size n_c n_u (2160); per source, one RHS sample of the source's field at
-n_c (n0 + n1) N_PHI_RING points and an LU back-substitution; per observation point, n_c times
-(~30 compressed rings for m = 0 and 40 x 16 panel charges for m >= 1, 4 x 64 near a core).
+Costs (n_c cores, n_u = n0 + 2 m_max n1 unknowns per core; default 80 + 2*2*40 = 240, 2160
+for the 3 x 3 array):
 
-Magnet-core interaction (linear cores): the magnet (point dipole ``m`` at ``p``) magnetizes
-the cores; the field of these cores at any point is :meth:`ArraySystem.magnet_core_field`; the
-force on the magnet is ``F0 = (m . grad) B_ind(p)`` and the torque ``m x B_ind(p)``. With
-linear cores everything superposes: ``F(p, I) = F(m) A(p) I + F0(p)`` exactly for a rigid point
-dipole; what remains is the core saturation (the coils' and the magnet's fields add in the
-iron), the magnet's finite size, and the magnet's own permeability (mu_r ~ 1.05 for NdFeB).
+* per design (once, cached on the :class:`~designkit.array.CoilArray`): the self blocks of each
+  core type (m = 0: core.py's influence matrix; m >= 1: n1^2 graded quadratures), one cross
+  block per distinct relative placement of two cores (24 in a 3 x 3 grid; each = the basis
+  fields of one core at (n0 + n1) x N_PHI_RING points of the other), one dense LU of
+  n_c n_u (2160^2), and the coil columns (each winding sampled on every core's rings, one per
+  distinct relative placement, then an LU back-substitution). Measured 4-7 s + 0.6 s for the
+  default array on a loaded 2-core machine (single-threaded BLAS);
+* per point of A: the n_c windings (as uncoupled) plus, per core, ~30 compressed m = 0 rings and
+  ~360 compressed m >= 1 charges (far points) or 176 panel kernels and 3840 panel charges
+  (points the Bernstein-ellipse test puts near): ~0.8 ms coupled vs ~0.4 ms uncoupled per point
+  with gradient, 9 columns (loaded machine);
+* per magnet position (F0, torque, induced field): the magnet's field sampled on every core's
+  rings (N_PHI_MAGNET azimuths on cores within 30 mm, N_PHI_RING on the others), one
+  back-substitution, one evaluation: ~5 ms per position (dipole), ~4x that for the finite
+  cylinder (face quadrature).
 
-Saturation correction (stored by the map, applied by the runner): see :func:`saturation_table`.
-Per coil k and current magnitude |I| on the grid ``saturation_current_a`` (k,), the factor
-``saturation_factor[:, k]`` (k, n_coils) multiplies column k of the linear A(p):
-``A_sat(p, I)[:, :, k] = A(p)[:, :, k] * s_k(|I_k|)`` (linear interpolation in |I_k|, s = 1 at 0).
-It is the single-core nonlinear (1010 steel) force at the design point divided by the linear
-one, from designkit's nonlinear axisymmetric solve.
+Accuracy (measured, tests/test_coupling.py, studies/array_coupling.py): m_max 2 -> 3 changes
+the cores' field by < 2e-4 of its maximum; refine 1 -> 2 (twice the panels) changes dBz/dz at the
+design point by ~1e-4; the solve is reciprocal to ~0.2 %; two cores vs the 3-D GetDP FEM
+(designkit.fem.fem3d) within the FEM's coarse-mesh error (~2-4 % in B).
+
+Magnet-core interaction (linear cores): the magnet magnetizes the cores
+(:meth:`ArraySystem.magnet_solution`); the field of these cores anywhere is
+``CoilArray.magnet_core_field``; the force and torque on the magnet are
+:meth:`ArraySystem.magnet_load`: for a point dipole ``F0 = (m . grad) B_ind(p)``,
+``tau = m x B_ind(p)``; for the real 10 x 10 mm N52 cylinder (``magnet_size_m``) its exact
+field is the source and the force is that of its face charges (exact for uniform M). The
+dipole is the default (the map and the controller carry only m); it underestimates the pull by
+0.2 % at 80 mm, 0.7 % at 50 mm, 1.9 % at 30 mm, 4 % at 12-20 mm, and the sensor-induced field by
+~1 %. With linear cores everything superposes: ``F(p, I) = F(m) A(p) I + F0(p)`` exactly for a
+rigid point dipole. What remains: (1) saturation couples currents and magnet (their fields add
+in the iron: at 12 mm the magnet adds ~0.12 T, 5 mm below the centre core's top, to the ~0.8 T
+of its coil at 6 A; at 30 mm 0.015 T), not in a per-coil factor; (2) the magnet's finite size,
+i.e. A(p) at the centre vs averaged over the magnet (the dipole-vs-cylinder numbers above);
+(3) the magnet's own permeability (mu_r ~ 1.05 for NdFeB: the coils' field changes its
+moment by ~chi H / M ~ 3e-4 at 10 mT).
+
+Saturation correction (stored by the map, applied by the runner): see :func:`saturation_table`
+and :meth:`designkit.array.CoilArray.saturation_correction`, which returns
+``saturation_current_a`` (k,) A, ``saturation_factor`` (k, n_coils) and ``core_flux_t_per_a``
+(n_coils, n_coils) T/A. Column k of the linear A(p) is scaled,
+``A_sat(p, I)[:, :, k] = A(p)[:, :, k] * s_k``, with ``s_k = interp(|I_k|, saturation_current_a,
+saturation_factor[:, k])`` (one coil on), or per state with |I_k| replaced by the equivalent own
+current ``|sum_j C[k, j] I_j| / C[k, k]`` (C = core_flux_t_per_a). s is the single-core
+nonlinear (1010 steel) force at the design point over the linear one (designkit's nonlinear
+axisymmetric solve); against the nonlinear axisymmetric GetDP FEM see studies/array_coupling.py.
 """
 
 from __future__ import annotations
@@ -61,16 +91,21 @@ M_MAX = 2
 """Highest azimuthal mode kept (m >= 3 measured below 1e-4 of the coupling effect; studies)."""
 N1_SIDE = 24
 N1_CAP = 8
+FAR_DISTANCE = 8e-3
+"""Points nearer than this (m) to a core's bounding cylinder always sum its panels."""
+FAR_NODES = 6
+"""Gauss nodes per interval of the compressed ring rules (the product rule of
+designkit.core's far field, here linear in the panel values)."""
 FAR_RHO = 2.6
 """Bernstein-ellipse parameter a point needs w.r.t. every interval of the compressed rules
 (error ~ FAR_RHO^-12 ~ 1e-5 with 6 nodes)."""
 N_PHI_RING = 12
 """Azimuthal samples per collocation ring when projecting another core's / a winding's field."""
 N_PHI_MAGNET = 32
-"""... and when projecting the magnet's field (it can be ~5 mm from a core top)."""
-"""Observation points closer than ``designkit.core.FAR_DISTANCE`` (8 mm) to a core's bounding
-cylinder sum its panels (m = 0) and 3 Gauss nodes x 32 azimuths per charge panel (m >= 1);
-farther ones a compressed product rule (FAR_NODES rings per interval, 12 azimuths)."""
+"""... and when projecting the magnet's field (it can be ~5 mm from a core top).
+Observation points where :meth:`CoreModel.far_mask` fails sum a core's panels (m = 0) and
+3 Gauss nodes x 32 azimuths per charge panel (m >= 1); the others use compressed product
+rules (FAR_NODES rings per interval, 12 azimuths)."""
 
 
 def _blas_one_thread():
@@ -191,8 +226,6 @@ class CoreModel:
         point (in the meridian plane) with respect to the interval. Far: r >= FAR_RHO on every
         interval and at least FAR_DISTANCE (8 mm) from the core.
         """
-        from .core import FAR_DISTANCE
-
         dist = np.maximum.reduce([self.z_lo - z, z - self.z_hi, rho - self.radius])
         ok = dist >= FAR_DISTANCE
         for (r0, z0), (r1, z1) in self.far_segments:
@@ -317,15 +350,13 @@ class CoreModel:
         return (h, g) if gradient else h
 
     def field(self, pts: np.ndarray, xs: np.ndarray, gradient: bool = False,
-              pointwise: bool = False):
+              pointwise: bool = False, own_col: int | None = None):
         """H of the core for unknown columns ``xs`` (n_unknowns, k) at local points.
 
         Contracts the unknowns before the kernels (far rings for m = 0, charges for m >= 1).
         Returns H (n, 3, k) A/m [, G (n, 3, 3, k) A/m^2]; with ``pointwise`` point i uses
         column i (k = n) and the shapes are (n, 3) [, (n, 3, 3)].
         """
-        from .core import FAR_DISTANCE
-
         pts = np.asarray(pts, dtype=float)
         n = len(pts)
         k = xs.shape[1]
@@ -337,9 +368,26 @@ class CoreModel:
         rho = np.hypot(pts[:, 0], pts[:, 1])
         far = self.far_mask(rho, pts[:, 2])
         x0 = xs[:self.n0]
+        if own_col is not None and not pointwise:
+            # the column of the core's own winding (by far its largest): m = 0 through
+            # designkit.core's field rules, so one coil alone is exactly the single-core model;
+            # the small remainder of the other columns by the compressed rules below
+            from .core import CoreSolution
+
+            ns = len(self.side)
+            sol = CoreSolution(self.radius, self.side[:, 0], self.side[:, 1], x0[:ns, own_col],
+                               self.discs[:, 0], self.discs[:, 1], self.discs[:, 2],
+                               x0[ns:, own_col], 0.0)
+            res = sol.field(pts, gradient=gradient)
+            if gradient:
+                h[..., own_col] += res[0] / MU0
+                g[..., own_col] += res[1] / MU0
+            else:
+                h[..., own_col] += res / MU0
+            x0 = x0.copy()
+            x0[:, own_col] = 0.0
         # m = 0: cylindrical components per column, then Cartesian
-        sel_list = ((far, True), (~far, False))
-        for sel, is_far in sel_list:
+        for sel, is_far in ((far, True), (~far, False)):
             if not np.any(sel):
                 continue
             idx = np.flatnonzero(sel)
@@ -649,7 +697,7 @@ def core_model(radius: float, length: float, offset: float, mu_r: float, key: tu
 
     ``refine`` multiplies every panel count (convergence studies, wide cores).
     """
-    from .core import FAR_NODES, N_CAP, N_SIDE, _geometry, _interface_factor, _system
+    from .core import N_CAP, N_SIDE, _geometry, _interface_factor, _system
 
     side, side_slice, discs = _geometry(radius, length, offset, n_side=N_SIDE * refine,
                                         n_cap=N_CAP * refine)
@@ -863,29 +911,33 @@ class ArraySystem:
         return self._coil_solution
 
     # ------------------------------------------------------------------ evaluation
-    def core_field(self, points: np.ndarray, x: np.ndarray, gradient: bool = False):
+    def core_field(self, points: np.ndarray, x: np.ndarray, gradient: bool = False, *,
+                   coil_columns: bool = False):
         """B of all cores for the unknown columns x (n_unknowns, k) at global points.
 
-        Returns B (n, 3, k) T [, G (n, 3, 3, k) T/m].
+        ``coil_columns``: x is :meth:`coil_solution` (column k = coil k), and each core's own
+        column is evaluated by designkit.core's rules. Returns B (n, 3, k) T [, G (n, 3, 3, k)
+        T/m].
         """
-        return self._field(points, x, gradient, False)
+        return self._field(points, x, gradient, False, coil_columns)
 
     def core_field_pointwise(self, points: np.ndarray, x: np.ndarray, gradient: bool = False):
         """Like :meth:`core_field` but point i uses its own column x[:, i]: B (n, 3) [, G]."""
         return self._field(points, x, gradient, True)
 
-    def _field(self, points, x, gradient, pointwise):
+    def _field(self, points, x, gradient, pointwise, coil_columns=False):
         with _blas_one_thread():
-            return self._field_impl(points, x, gradient, pointwise)
+            return self._field_impl(points, x, gradient, pointwise, coil_columns)
 
-    def _field_impl(self, points, x, gradient, pointwise):
+    def _field_impl(self, points, x, gradient, pointwise, coil_columns=False):
         pts = np.asarray(points, dtype=float)
         tail = () if pointwise else (x.shape[1],)
         b = np.zeros((len(pts), 3) + tail)
         g = np.zeros((len(pts), 3, 3) + tail) if gradient else None
         for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
             xs = x[self.offsets[jj]:self.offsets[jj + 1]]
-            res = mj.field(pj.to_local(pts), xs, gradient, pointwise)
+            res = mj.field(pj.to_local(pts), xs, gradient, pointwise,
+                           self.core_index[jj] if coil_columns else None)
             rot = pj.matrix
             h = res[0] if gradient else res
             if pj.is_identity_rotation:
@@ -900,42 +952,100 @@ class ArraySystem:
         return (b, g) if gradient else b
 
     # ------------------------------------------------------------------ magnet source
-    def magnet_solution(self, positions: np.ndarray, moment: np.ndarray) -> np.ndarray:
-        """Unknowns of all cores magnetized by a point dipole at each position, (nu, n)."""
+    def magnet_solution(self, positions: np.ndarray, moment: np.ndarray,
+                        magnet_size_m=None) -> np.ndarray:
+        """Unknowns of all cores magnetized by the magnet at each position, (nu, n).
+
+        ``magnet_size_m``: None for a point dipole ``moment``; (radius, length) m for the
+        uniformly magnetized cylinder (axis along ``moment``, M = |m| / volume; its exact
+        field, :func:`designkit.field.magnetized_cylinder_field`).
+        """
         pos = np.atleast_2d(np.asarray(positions, dtype=float))
         m = np.asarray(moment, dtype=float)
+        if magnet_size_m is None:
+            def src(glob, cols):
+                # H of the point dipole (magnet outside every core: r > 0 at ring points)
+                d = glob[:, None, :] - pos[None, cols, :]  # (n, k, 3)
+                r2 = np.einsum("nki,nki->nk", d, d)
+                inv_r = 1.0 / np.sqrt(r2)
+                mr = d @ m
+                h = (3.0 * d * (mr * inv_r ** 5)[..., None] - m * (inv_r ** 3)[..., None])
+                return np.swapaxes(h, 1, 2) / (4.0 * math.pi)
+        else:
+            from .field.kernels import sheet_rz
 
-        def dip(glob, cols):
-            # H of the point dipole (magnet outside every core: r > 0 at all ring points)
-            d = glob[:, None, :] - pos[None, cols, :]  # (n, k, 3)
-            r2 = np.einsum("nki,nki->nk", d, d)
-            inv_r = 1.0 / np.sqrt(r2)
-            mr = d @ m
-            h = (3.0 * d * (mr * inv_r ** 5)[..., None] - m * (inv_r ** 3)[..., None])
-            return np.swapaxes(h, 1, 2) / (4.0 * math.pi)
+            a, length = (float(v) for v in magnet_size_m)
+            mm = float(np.linalg.norm(m))
+            u = m / mm if mm > 0 else np.array([0.0, 0.0, 1.0])
+            mag = mm / (math.pi * a * a * length)
+
+            def src(glob, cols):
+                d = glob[:, None, :] - pos[None, cols, :]  # (n, k, 3)
+                zl = d @ u
+                rv = d - zl[..., None] * u
+                rho = np.sqrt(np.einsum("nki,nki->nk", rv, rv))
+                br, bz = sheet_rz(a, 0.5 * length, rho.ravel(), zl.ravel())
+                br, bz = br.reshape(rho.shape), bz.reshape(rho.shape)
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    er = np.where(rho[..., None] > 0, rv / np.where(rho > 0, rho, 1.0)[..., None],
+                                  0.0)
+                h = mag * (br[..., None] * er + bz[..., None] * u)
+                return np.swapaxes(h, 1, 2)
 
         with _blas_one_thread():
-            rhs = self._project_global_field(dip, N_PHI_MAGNET, pos)
+            rhs = self._project_global_field(src, N_PHI_MAGNET, pos)
         return self.solve(rhs)
+
+    def magnet_load(self, positions: np.ndarray, moment: np.ndarray, magnet_size_m=None,
+                    n_r: int = 4, n_phi: int = 8):
+        """Force (n, 3) N and torque (n, 3) N m on the magnet from the cores it magnetizes.
+
+        Point dipole (``magnet_size_m`` None): F = (m . grad) B_ind(p), tau = m x B_ind(p).
+        Cylinder (radius, length): its uniform axial M as face charges +-M on the end faces,
+        F = M [int_top B_ind dA - int_bot B_ind dA], tau = M [int_top (r - p) x B_ind dA -
+        int_bot ...] (exact for a uniformly magnetized body in a curl-free field; Gauss rule
+        of n_r x n_phi points per face).
+        """
+        pos = np.atleast_2d(np.asarray(positions, dtype=float))
+        m = np.asarray(moment, dtype=float)
+        x = self.magnet_solution(pos, m, magnet_size_m)
+        if magnet_size_m is None:
+            b, g = self.core_field_pointwise(pos, x, gradient=True)
+            return np.einsum("nji,j->ni", g, m), np.cross(m[None], b)
+        a, length = (float(v) for v in magnet_size_m)
+        mm = float(np.linalg.norm(m))
+        u = m / mm if mm > 0 else np.array([0.0, 0.0, 1.0])
+        mag = mm / (math.pi * a * a * length)
+        e1 = np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0])
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(u, e1)
+        xr, wr = _gauss(n_r)
+        s = 0.5 * (xr + 1.0)
+        r = a * np.sqrt(s)
+        ph = 2.0 * math.pi * np.arange(n_phi) / n_phi
+        R, P = np.meshgrid(r, ph, indexing="ij")
+        w = np.repeat(0.5 * wr * math.pi * a * a / n_phi, n_phi)  # area weights
+        disc = (R.ravel()[:, None] * (np.cos(P.ravel())[:, None] * e1
+                                      + np.sin(P.ravel())[:, None] * e2))
+        nq = len(w)
+        force = np.zeros((len(pos), 3))
+        torque = np.zeros((len(pos), 3))
+        for sign in (1.0, -1.0):
+            rel = disc + sign * 0.5 * length * u  # (nq, 3) about the centre
+            pts = (pos[:, None, :] + rel[None]).reshape(-1, 3)
+            bq = self.core_field_pointwise(pts, np.repeat(x, nq, axis=1))
+            bq = bq.reshape(len(pos), nq, 3)
+            force += sign * mag * np.einsum("q,nqi->ni", w, bq)
+            torque += sign * mag * np.einsum("q,nqi->ni", w, np.cross(rel[None], bq))
+        return force, torque
 
 
 # ============================================================================ saturation
-def saturation_table(coil, height_m: float = 0.03, currents_a=None) -> dict:
-    """Per-coil force factor of the nonlinear 1010-steel core vs |I|, at the design point.
-
-    ``s(|I|) = Fz_nonlinear(I) / (I * Fz_linear(1 A))``, single core (designkit's nonlinear
-    axisymmetric solve, :class:`designkit.core.Core` with ``bh='steel1010'``) at the point
-    ``height_m`` above the coil top on its axis, magnet moment along +z. The runner applies
-    ``A[:, :, k] *= s(|I_k|)`` (interpolated linearly in |I_k| on ``current_a``).
-
-    Returns dict with ``current_a`` (k,) A and ``factor`` (k,).
-    """
-    import dataclasses
-
-    currents = np.linspace(0.0, 6.0, 13) if currents_a is None else np.asarray(currents_a, float)
+@functools.lru_cache(maxsize=8)
+def _saturation_cached(coil, height_m, currents):
     c = coil.core
-    lin = dataclasses.replace(coil, core=dataclasses.replace(c, bh="linear"))
-    nl = dataclasses.replace(coil, core=dataclasses.replace(c, bh="steel1010"))
+    lin = dataclasses.replace(coil, pose=Pose(), core=dataclasses.replace(c, bh="linear"))
+    nl = dataclasses.replace(coil, pose=Pose(), core=dataclasses.replace(c, bh="steel1010"))
     pt = np.array([[0.0, 0.0, coil.length / 2 + height_m]])
     _, g_lin = lin.field(pt, 1.0, gradient=True)
     out = []
@@ -945,7 +1055,41 @@ def saturation_table(coil, height_m: float = 0.03, currents_a=None) -> dict:
             continue
         _, g = nl.field(pt, float(i), gradient=True)
         out.append(float(g[0, 2, 2] / (i * g_lin[0, 2, 2])))
-    return {"current_a": currents, "factor": np.array(out)}
+    return np.array(out)
+
+
+def saturation_table(coil, height_m: float = 0.03, currents_a=None) -> dict:
+    """Per-coil force factor of the nonlinear 1010-steel core vs |I|, at the design point.
+
+    ``s(|I|) = dBz/dz_nonlinear(I) / (I * dBz/dz_linear(1 A))`` of the single coil (its
+    nonlinear axisymmetric solve, :class:`designkit.core.Core` with ``bh='steel1010'``, against
+    the linear core at ``relative_permeability``), on the axis ``height_m`` above the coil's top
+    (the design point; the vertical force on an upright magnet there scales the same way).
+
+    How the runner applies it (the map file stores these arrays):
+
+    * per coil, from its own current: ``A[:, :, k] *= s(|I_k|)`` with ``s`` interpolated
+      linearly in |I_k| on ``current_a`` (s = 1 at 0 A). Exact for one energized coil
+      (to the nonlinear solve's accuracy, see studies/array_coupling.py);
+    * per state, when neighbours are energized too: the other coils change core k's flux
+      (a side neighbour at 6 A changes the mid-plane flux density of the centre core by
+      ~ -14 % of the centre coil's own 6 A value, linear model). Index the same table by the
+      *equivalent own current* ``I_eq,k = |sum_j C[k, j] I_j| / C[k, k]`` with C the coupled
+      linear mid-plane axial flux density per ampere
+      (:meth:`designkit.array.CoilArray.saturation_correction` ``core_flux_t_per_a``):
+      ``s_k = interp(I_eq,k, current_a, factor)`` (beyond the table: its last value).
+      This assumes the core's saturation follows its mid-plane flux; it is not checked
+      against a coupled nonlinear solve (none exists here).
+
+    Returns
+    -------
+    dict with ``current_a`` (k,) A and ``factor`` (k,).
+    """
+    currents = np.arange(0.0, 6.01, 1.0) if currents_a is None else np.asarray(currents_a,
+                                                                               float)
+    key = dataclasses.replace(coil, pose=Pose())
+    factor = _saturation_cached(key, float(height_m), tuple(float(i) for i in currents))
+    return {"current_a": currents, "factor": factor}
 
 
 def check_separation(coils) -> None:

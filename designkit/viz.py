@@ -157,12 +157,14 @@ def array_field(design: "Design", points, currents: Sequence[float] | None = Non
         from .array import CoilArray
     except ImportError:
         CoilArray = None
-    if CoilArray is not None and gradient and active.size:
-        full = CoilArray.from_design(design)
-        sub = CoilArray(tuple(full.coils[k] for k in active))
+    if CoilArray is not None and active.size:
+        # every core is iron whether its coil is powered or not: the whole coupled array
+        from .array import array_for_design
+
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            return sub.field(p, cur[active])
+            res = array_for_design(design).field(p, cur)
+        return res if gradient else res[0]
     if CoilArray is not None and gradient:
         return np.zeros((len(p), 3)), np.zeros((len(p), 3, 3))
     b = np.zeros((len(p), 3))

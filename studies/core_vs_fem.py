@@ -10,7 +10,9 @@ models cost?
 Table sections: air core (FEM vs quadrature); mesh refinement (the FEM digits are converged);
 linear cores mu_r 200/1000/5000 at 6 A (max error on the axis 14-100 mm above the winding and on
 r = 10 mm); nonlinear core 1-6 A at the design point; inductance, tau and 5 tau < 100 ms;
-force at 6 A vs the thesis' 780 mN; costs.
+force at 6 A vs the thesis' 780 mN; all around the coil (above, below, beside, in the bore
+beyond the core's ends, at the neighbours' positions) for three core geometries and mu_r
+200/1000/5000/1010 steel, with the FEM's mesh convergence at those points; costs.
 """
 
 from __future__ import annotations
@@ -89,6 +91,68 @@ def _timings(repeats: int = 20) -> dict:
     return {"core_solve_ms": solve_ms, "core_solve_plus_inductance_ms": induct_ms,
             "core_field_1000pts_ms": 1e3 * t_core, "winding_field_1000pts_ms": 1e3 * t_wind,
             "core_over_winding": t_core / t_wind}
+
+
+CORE_GEOMETRIES = {
+    "thesis 24x110": dict(radius=0.012, length=0.110),
+    "short-thin 16x70": dict(radius=0.008, length=0.070),
+    "offset 20x90 +15": dict(radius=0.010, length=0.090, offset=0.015),
+}
+MATERIALS = (200.0, 1000.0, 5000.0, "steel1010")
+CLASSES = ("above", "below", "beside", "bore", "between")
+
+
+def _around_one(geometry, material, level):
+    from designkit.core import Core
+    from designkit.fem import solve
+    from designkit.fem.compare import probe_errors, probe_set
+
+    kw = CORE_GEOMETRIES[geometry]
+    core = Core(**kw, bh="steel1010") if material == "steel1010" else \
+        Core(**kw, relative_permeability=float(material))
+    coil = _coil(core)
+    pts, labels = probe_set(coil)
+    res = solve(coil, 6.0, level=level, probes=pts)
+    e = probe_errors(coil, res)
+    labels = np.array(labels)
+    row = {"getdp_s": res.solve_seconds, "n_points": len(labels)}
+    for c in CLASSES:
+        sel = labels == c
+        if sel.any():
+            row[c] = (float(e["b_err"][sel].max()), float(e["dbz_err"][sel].max()))
+    row["worst_b"] = float(e["b_err"].max())
+    row["worst_dbz"] = float(e["dbz_err"].max())
+    return row, e, labels
+
+
+def _around(level, quick):
+    from tqdm import tqdm
+
+    cases = [(g, m) for g in CORE_GEOMETRIES for m in MATERIALS]
+    if quick:
+        cases = [("thesis 24x110", 1000.0), ("short-thin 16x70", 1000.0)]
+    out = {}
+    for g, m in tqdm(cases, desc="core vs FEM all around", mininterval=2):
+        out[f"{g} | {m}"] = _around_one(g, m, level)[0]
+    return out
+
+
+def _around_convergence():
+    """FEM mesh convergence at the probes: thesis core, mu_r 1000, levels 0..2."""
+    vals = {}
+    for lv in (0, 1, 2):
+        _, e, _ = _around_one("thesis 24x110", 1000.0, lv)
+        vals[lv] = e
+    ref = vals[2]["fem"]
+    conv = {}
+    for lv in (0, 1):
+        f = vals[lv]["fem"]
+        db = np.hypot(f["br"] - ref["br"], f["bz"] - ref["bz"]) / np.hypot(ref["br"], ref["bz"])
+        dg = np.abs(f["dbz_dz"] - ref["dbz_dz"]) / np.maximum(np.abs(ref["dbz_dz"]),
+                                                              0.5 * vals[2]["g_norm_fem"])
+        conv[lv] = (float(db.max()), float(dg.max()))
+    conv["model_vs_level2"] = (float(vals[2]["b_err"].max()), float(vals[2]["dbz_err"].max()))
+    return conv
 
 
 def run(out_dir, quick: bool = False) -> dict:
@@ -190,6 +254,10 @@ def run(out_dir, quick: bool = False) -> dict:
         "fz_core_steel1010_model_n": float(m_z * nl[-1]["dbz_model"]),
         "fz_core_steel1010_fem_n": float(m_z * nl[-1]["dbz_fem"]),
         "thesis_n": THESIS_FORCE_N}
+    # ---- all around the coil: 3 core geometries x 4 materials (issue 11)
+    results["around"] = _around(level, quick)
+    if not quick:
+        results["around_convergence"] = _around_convergence()
     results["cost"] = _timings(5 if quick else 20)
     results["cost"]["getdp_coarse_s"] = r_air.solve_seconds if level == 0 else refine[0]["getdp_s"]
     from designkit._io import write_json_atomic
@@ -243,6 +311,21 @@ def print_table(res: dict) -> None:
           f" {1e3 * abs(f['fz_core_linear1000_n']):.0f} mN; 1010 steel model"
           f" {1e3 * abs(f['fz_core_steel1010_model_n']):.0f} mN, FEM"
           f" {1e3 * abs(f['fz_core_steel1010_fem_n']):.0f} mN; thesis {1e3 * f['thesis_n']:.0f} mN")
+    print("== all around the coil, 6 A: max error per point class, B | dBz/dz (%)")
+    print("   B: |dB|/|B| (vector); dBz/dz: |d dBz/dz| / max(|dBz/dz|, ||grad B||_F / 2) (FEM)")
+    print("   core / material                " + "".join(f"{c:>15s}" for c in CLASSES)
+          + "   GetDP s")
+    for key, row in res["around"].items():
+        cells = "".join(f"{100 * row[c][0]:6.2f} |{100 * row[c][1]:5.2f} " if c in row
+                        else f"{'-':>15s}" for c in CLASSES)
+        print(f"   {key:31s}{cells}  {row['getdp_s']:6.1f}")
+    if "around_convergence" in res:
+        cv = res["around_convergence"]
+        print("   FEM mesh convergence (thesis core, mu_r 1000) vs level 2, max over the probes:"
+              f" level 0 B {100 * cv[0][0]:.2f} % dBz/dz {100 * cv[0][1]:.2f} %;"
+              f" level 1 B {100 * cv[1][0]:.2f} % dBz/dz {100 * cv[1][1]:.2f} %;"
+              f" model vs level 2: B {100 * cv['model_vs_level2'][0]:.2f} %,"
+              f" dBz/dz {100 * cv['model_vs_level2'][1]:.2f} %")
     c = res["cost"]
     print(f"== cost: core solve {c['core_solve_ms']:.1f} ms/design (limit 50),"
           f" + inductance {c['core_solve_plus_inductance_ms']:.1f} ms;"
@@ -255,5 +338,5 @@ def print_table(res: dict) -> None:
 if __name__ == "__main__":  # pragma: no cover
     import sys
 
-    res = run(sys.argv[1] if len(sys.argv) > 1 else "study_out/core_vs_fem")
+    res = run(sys.argv[1] if len(sys.argv) > 1 else "out/core_vs_fem")
     print_table(res)

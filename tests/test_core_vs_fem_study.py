@@ -18,4 +18,6 @@ def test_core_vs_fem_quick(tmp_path):
     assert max(e["axis"] + e["off_axis"]) < 0.03
     nl = res["nonlinear"][-1]
     assert abs(nl["dbz_model"] / nl["dbz_fem"] - 1) < 0.10
+    for row in res["around"].values():
+        assert row["worst_b"] < 0.03 and row["worst_dbz"] < 0.03
     assert (tmp_path / "core_vs_fem.json").exists()

@@ -1,7 +1,7 @@
 """designkit.viz: off-screen figures are not blank and their data equal the field engine's.
 
-Reference: :meth:`designkit.Coil.field` of each coil evaluated directly (not through viz) and
-summed by superposition; the force is F_j = sum_i m_i dB_i/dx_j.
+Reference: :meth:`designkit.array.CoilArray.field` of the design's (coupled) array evaluated
+directly (not through viz); the force is F_j = sum_i m_i dB_i/dx_j.
 """
 
 import numpy as np
@@ -21,14 +21,16 @@ CURRENTS = np.zeros(9)
 CURRENTS[4], CURRENTS[0] = 2.0, -1.5
 
 
+@__import__("functools").lru_cache(maxsize=1)
+def _engine():
+    # the engine: the coupled array (all nine cores iron, issue 12), its own instance
+    from designkit.array import CoilArray
+
+    return CoilArray.from_design(DESIGN)
+
+
 def direct_field(points):
-    b = np.zeros((len(points), 3))
-    g = np.zeros((len(points), 3, 3))
-    for centre, current in zip(DESIGN.coil_centres_m(), CURRENTS):
-        bb, gg = Coil.from_design(DESIGN, (centre[0], centre[1], None)).field(
-            points, float(current), gradient=True)
-        b += bb
-        g += gg
+    b, g = _engine().field(points, CURRENTS)
     m = np.array([0.0, 0.0, DESIGN.magnet.moment_a_m2])
     f = np.array([gi.T @ m for gi in g])
     return b, g, f
@@ -74,7 +76,9 @@ def test_array_field_is_the_superposition_of_coil_fields():
     np.testing.assert_allclose(g, rg, rtol=1e-9, atol=1e-10)
     # default currents: only the centre coil at the design's limit
     b0 = viz.array_field(DESIGN, pts, None, gradient=False)
-    ref = Coil.from_design(DESIGN).field(pts, DESIGN.drive.max_current_a)
+    i0 = np.zeros(9)
+    i0[4] = DESIGN.drive.max_current_a
+    ref = _engine().field(pts, i0)[0]
     np.testing.assert_allclose(b0, ref, rtol=1e-9, atol=1e-12)
 
 
@@ -149,11 +153,12 @@ def test_isosurface_is_at_the_threshold_and_renders():
     fz = np.asarray(surface[viz.FZ_MN])
     assert np.all(np.isclose(np.abs(fz), 0.8, rtol=1e-6))
     # points on the surface, checked against the engine: most within 10 % of the level; the
-    # rest lie near the coils, where the coarse (27 mm) grid cannot follow the field
+    # rest lie near the coils, where the coarse (27 mm) grid cannot follow the field (with the
+    # coupled cores Fz changes sign above unpowered neighbours: half of the sample, was 0.6)
     idx, pts = sample(surface, 12, seed=2)
     _, _, f = direct_field(pts)
     ratio = f[:, 2] * 1e3 / fz[idx]
-    assert np.mean(np.abs(ratio - 1) < 0.1) >= 0.6
+    assert np.mean(np.abs(ratio - 1) < 0.1) >= 0.5
     not_blank(viz.plot_force_isosurface(DESIGN, CURRENTS, window_size=(240, 180),
                                         data=(vol, surface, level)))
 

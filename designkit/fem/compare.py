@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..design import MU0
+from ..errors import BadInputError
 from .runner import FemResult
 
 
@@ -143,3 +144,117 @@ def plot_comparison(coil, fem: FemResult, path: str | Path, title: str = "") -> 
         fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
     return path
+
+
+def model_rz(coil, current: float, r: np.ndarray, z_local: np.ndarray, *,
+             core_model: str | None = "surface-current", rule: str = "auto") -> dict:
+    """Winding + core field of designkit at local (r, z) points: dict of arrays br, bz (T),
+    dbr_dz, dbz_dz, dbr_dr, br_over_r (T/m); ``core_model`` None = winding only."""
+    import warnings
+
+    from ..core import SaturationWarning
+    from ..field.winding import winding_rz
+
+    r = np.asarray(r, dtype=float)
+    z = np.asarray(z_local, dtype=float)
+    j = coil.turns * current / ((coil.outer_radius - coil.inner_radius) * coil.length)
+    w = winding_rz(coil.inner_radius, coil.outer_radius, coil.length / 2, r, z,
+                   gradient=True, rtol=1e-11)
+    # winding_rz gradient tuple: br, bz, dbr_drho, dbr_dz, dbz_drho, dbz_dz, br_over_rho
+    out = {"br": w[0] * MU0 * j, "bz": w[1] * MU0 * j, "dbr_dr": w[2] * MU0 * j,
+           "dbr_dz": w[3] * MU0 * j, "dbz_dz": w[5] * MU0 * j, "br_over_r": w[6] * MU0 * j}
+    if core_model is not None and coil.core is not None:
+        core = dataclasses.replace(coil.core, model=core_model)
+        c2 = dataclasses.replace(coil, core=core)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", SaturationWarning)
+            sol = core.solution(c2, current)
+        pts = np.column_stack([r, np.zeros_like(r), z])
+        b, g = sol.field(pts, gradient=True, rule=rule)
+        # on the y = 0 half-plane x = r: x is the radial, z the axial direction
+        out["br"] = out["br"] + b[:, 0]
+        out["bz"] = out["bz"] + b[:, 2]
+        out["dbr_dr"] = out["dbr_dr"] + g[:, 0, 0]
+        out["dbr_dz"] = out["dbr_dz"] + g[:, 0, 2]
+        out["dbz_dz"] = out["dbz_dz"] + g[:, 2, 2]
+        out["br_over_r"] = out["br_over_r"] + g[:, 1, 1]
+    return out
+
+
+def probe_errors(coil, fem: FemResult, *, core_model: str | None = "surface-current",
+                 rule: str = "auto") -> dict:
+    """designkit vs GetDP at the probe points of ``fem`` (``solve(probes=...)``).
+
+    Error measures (dimensionless), chosen so that sign changes of a component do not blow up:
+
+    * ``b_err``: |B_model - B_fem| / |B_fem| (vector, r and z components);
+    * ``dbz_err``: |dBz/dz_model - dBz/dz_fem| / max(|dBz/dz_fem|, ||G_fem||_F / 2), with
+      ||G||_F the Frobenius norm of the FEM's gradient tensor at the point (from dBr/dz = dBz/dr,
+      dBz/dz, Br/r and dBr/dr = -dBz/dz - Br/r): the plain relative error wherever dBz/dz is
+      at least half the gradient's size, a local scale where dBz/dz passes through zero.
+    * ``dbz_rel``: the plain relative error (for the table).
+    """
+    pr = fem.probes
+    if pr is None:
+        raise BadInputError("fem.probes", "a FemResult solved with probes=...", None)
+    m = model_rz(coil, fem.current, pr["r"], pr["z"], core_model=core_model, rule=rule)
+    b_fem = np.hypot(pr["br"], pr["bz"])
+    b_err = np.hypot(m["br"] - pr["br"], m["bz"] - pr["bz"]) / b_fem
+    with np.errstate(divide="ignore", invalid="ignore"):
+        br_over_r = np.where(pr["r"] > 1e-6, pr["br"] / np.maximum(pr["r"], 1e-30),
+                             -0.5 * pr["dbz_dz"])
+    dbr_dr = -pr["dbz_dz"] - br_over_r
+    g_norm = np.sqrt(pr["dbz_dz"] ** 2 + 2 * pr["dbr_dz"] ** 2 + br_over_r ** 2 + dbr_dr ** 2)
+    scale = np.maximum(np.abs(pr["dbz_dz"]), 0.5 * g_norm)
+    dbz_err = np.abs(m["dbz_dz"] - pr["dbz_dz"]) / scale
+    return {"r": pr["r"], "z": pr["z"], "model": m, "fem": pr, "b_err": b_err,
+            "dbz_err": dbz_err, "dbz_rel": m["dbz_dz"] / pr["dbz_dz"] - 1.0,
+            "g_norm_fem": g_norm}
+
+
+PITCH_M = 0.05
+"""Array pitch of the thesis layout, m: 'between' probes sit at neighbours' positions."""
+
+
+def probe_set(coil, pitch: float = PITCH_M) -> tuple[np.ndarray, list[str]]:
+    """Probe points all around ``coil`` (local frame, m) and their class labels.
+
+    Classes: ``above`` / ``below`` the coil and core, ``beside`` the winding (level with it,
+    including the three points of issue 11), ``bore`` (inside the bore beyond the core's ends
+    or between a thin core and the winding, when there is room), ``between`` (half-way to and
+    at the neighbours' axes at ``pitch``, side and diagonal). Every vertical probe segment
+    (+-2.5 mm) lies in air.
+
+    Returns
+    -------
+    points : ndarray (n, 2), (r, z) m
+    labels : list of str (n)
+    """
+    ri, ro, hl = coil.inner_radius, coil.outer_radius, coil.length / 2
+    core = coil.core
+    ct = core.offset + core.length / 2 if core else -np.inf
+    cb = core.offset - core.length / 2 if core else np.inf
+    mt, mb = max(hl, ct), min(-hl, cb)
+    pts: list[tuple[float, float, str]] = []
+    for sgn, m0, lab in ((1.0, mt, "above"), (-1.0, mb, "below")):
+        for r, dz in ((0.0, 0.008), (0.0, 0.030), (0.6 * ro, 0.005), (ro, 0.004),
+                      (ro, 0.020), (1.5 * ro, 0.010)):
+            pts.append((r, m0 + sgn * dz, lab))
+    for r, z in ((0.020, -0.006), (0.025, 0.020), (0.030, 0.0), (ro + 0.002, 0.8 * hl),
+                 (ro + 0.002, -0.7 * hl), (ro + 0.006, 0.3 * hl)):
+        pts.append((r, z, "beside"))
+    if core is not None:
+        if ct < hl - 0.008:
+            pts.append((0.0, ct + 0.004, "bore"))
+            pts.append((0.5 * ri, 0.5 * (ct + hl), "bore"))
+        if cb > -hl + 0.008:
+            pts.append((0.0, cb - 0.004, "bore"))
+            pts.append((0.5 * ri, 0.5 * (cb - hl), "bore"))
+        if ri - core.radius >= 0.003:
+            pts.append((0.5 * (ri + core.radius), core.offset, "bore"))
+    for r, z in ((0.5 * pitch, 0.0), (0.5 * pitch, mt + 0.010), (pitch, 0.0),
+                 (pitch, hl + 0.020), (pitch, -hl - 0.010), (math.sqrt(2) * pitch, 0.030),
+                 (math.sqrt(0.5) * pitch, -0.030)):
+        pts.append((r, z, "between"))
+    arr = np.array([(r, z) for r, z, _ in pts])
+    return arr, [lab for _, _, lab in pts]

@@ -34,6 +34,8 @@ class MeshSpec:
     level: int = 1
     shell_inner: float = 0.25
     shell_outer: float = 0.30
+    probe_box: tuple[float, float, float] | None = None
+    """(r_max, z_lo, z_hi), m: region meshed at the probe size (points all around the coil)."""
 
     @property
     def scale(self) -> float:
@@ -144,10 +146,21 @@ def build_mesh(spec: MeshSpec, msh_path: str | Path) -> dict:
         f.setNumber(thrp, "SizeMax", h_far)
         f.setNumber(thrp, "DistMin", 0.3e-3)
         f.setNumber(thrp, "DistMax", 0.01)
+        fields = [box, thr, thrp]
+        if spec.probe_box is not None:
+            pbox = f.add("Box")
+            f.setNumber(pbox, "VIn", 1.0e-3 * s)
+            f.setNumber(pbox, "VOut", h_far)
+            f.setNumber(pbox, "XMin", 0.0)
+            f.setNumber(pbox, "XMax", spec.probe_box[0])
+            f.setNumber(pbox, "YMin", spec.probe_box[1])
+            f.setNumber(pbox, "YMax", spec.probe_box[2])
+            f.setNumber(pbox, "Thickness", 0.02)
+            fields.append(pbox)
         shell_size = f.add("MathEval")
         f.setString(shell_size, "F", f"{max(h_far, 0.02 * s)}")
         fmin = f.add("Min")
-        f.setNumbers(fmin, "FieldsList", [box, thr, thrp])
+        f.setNumbers(fmin, "FieldsList", fields)
         f.setAsBackgroundMesh(fmin)
         gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
         gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)

@@ -99,6 +99,8 @@ class FemResult:
     mesh_stats: dict
     files: dict = field(default_factory=dict)
     newton_converged: bool = True
+    probes: dict | None = None
+    """With ``solve(probes=...)``: arrays r, z (local, m), br, bz (T), dbr_dz, dbz_dz (T/m)."""
 
     @property
     def inductance_energy(self) -> float:
@@ -145,7 +147,8 @@ def _read_global(path: Path) -> float:
 def solve(coil, current: float, *, mu_r: float | None = None, bh: str | None = None,
           level: int = 1, line_z=(0.010, 0.105), off_axis_r: float = 0.010,
           out_dir: str | Path | None = None, export: bool = False,
-          sample_step: float = 0.25e-3, timeout_s: float = 600.0) -> FemResult:
+          sample_step: float = 0.25e-3, timeout_s: float = 600.0,
+          probes=None, probe_half_window: float = 2.5e-3) -> FemResult:
     """Solve the axisymmetric FEM model of ``coil`` at ``current`` with GetDP.
 
     Parameters
@@ -165,6 +168,13 @@ def solve(coil, current: float, *, mu_r: float | None = None, bh: str | None = N
         Where to keep the mesh, .pro and raw outputs; None uses a temporary folder.
     export : bool
         Also write .vtu and .xdmf copies of the mesh (meshio).
+
+    probes : array (n, 2) or None
+        (r, z) points in the winding's local frame (m) anywhere around the coil, in air and at
+        least ``probe_half_window`` from any material boundary: B there and dB/dz from a
+        degree-4 least-squares polynomial through B sampled on the vertical segment
+        z +- probe_half_window (the FEM's b is piecewise polynomial; the fit averages its
+        inter-element jumps). The region holding them is meshed at 1 mm x 2^(-level/2).
 
     Returns
     -------
@@ -189,10 +199,20 @@ def solve(coil, current: float, *, mu_r: float | None = None, bh: str | None = N
     top = coil.length / 2
     z_lo, z_hi = top + line_z[0], top + line_z[1]
     margin = 6e-3
+    pbox = None
+    if probes is not None:
+        probes = np.atleast_2d(np.asarray(probes, dtype=float))
+        if probes.ndim != 2 or probes.shape[1] != 2 or not np.all(np.isfinite(probes)) \
+                or np.any(probes[:, 0] < 0) or np.any(np.hypot(*probes.T) > 0.2):
+            raise BadInputError("probes", "finite (r >= 0, z) pairs within 0.2 m of the coil",
+                                probes.shape)
+        pw = probe_half_window
+        pbox = (float(probes[:, 0].max()) + 5e-3, float(probes[:, 1].min()) - pw - 5e-3,
+                float(probes[:, 1].max()) + pw + 5e-3)
     spec = MeshSpec(coil.inner_radius, coil.outer_radius, coil.length,
                     core.radius if core else None, core.length if core else None,
                     core.offset if core else 0.0, z_lo - margin, z_hi + margin,
-                    off_axis_r + 4e-3, level)
+                    off_axis_r + 4e-3, level, probe_box=pbox)
     tmp_ctx = None
     if out_dir is None:
         tmp_ctx = tempfile.TemporaryDirectory(prefix="designkit_fem_")
@@ -215,6 +235,12 @@ def solve(coil, current: float, *, mu_r: float | None = None, bh: str | None = N
         r_axis = 1e-7  # on r = 0 exactly VolAxiSqu divides by r; 0.1 um off is the axis value
         lines = [(r_axis, z_lo - margin, r_axis, z_hi + margin, n, "line_axis.txt"),
                  (off_axis_r, z_lo - margin, off_axis_r, z_hi + margin, n, "line_off.txt")]
+        if probes is not None:
+            npw = max(16, int(round(2 * probe_half_window / (0.1e-3))))
+            for i, (pr, pz) in enumerate(probes):
+                rr, pz = max(float(pr), 1e-7), float(pz)
+                lines.append((rr, pz - probe_half_window, rr, pz + probe_half_window, npw,
+                              f"probe_{i}.txt"))
         bh_tab = (STEEL1010_H, STEEL1010_B) if bh == "steel1010" else None
         pro = problem_text(current_density=jd, mu_r=mu_r, bh=bh_tab, has_core=core is not None,
                            shell_inner=spec.shell_inner, shell_outer=spec.shell_outer,
@@ -237,11 +263,20 @@ def solve(coil, current: float, *, mu_r: float | None = None, bh: str | None = N
             converged = "Non linear" not in proc.stdout or "did not converge" not in proc.stdout
         axis = _read_line(work / "line_axis.txt", 0.0)
         off = _read_line(work / "line_off.txt", off_axis_r)
+        probe_out = None
+        if probes is not None:
+            cols = {k: np.empty(len(probes)) for k in ("br", "bz", "dbr_dz", "dbz_dz")}
+            for i, (pr, pz) in enumerate(probes):
+                fit = _read_line(work / f"probe_{i}.txt", pr).fit(
+                    np.array([pz]), half_window=probe_half_window)
+                for k in cols:
+                    cols[k][i] = fit[k][0]
+            probe_out = {"r": probes[:, 0].copy(), "z": probes[:, 1].copy(), **cols}
         # GetDP's axisymmetric Jacobians integrate per radian of azimuth: times 2 pi
         energy = 2 * math.pi * _read_global(work / "energy.txt")
         linkage = 2 * math.pi * _read_global(work / "linkage.txt")
         return FemResult(current, axis, off, energy, linkage, t_solve, t_mesh, stats,
-                         files if out_dir is not None else {}, converged)
+                         files if out_dir is not None else {}, converged, probe_out)
     finally:
         if tmp_ctx is not None:
             tmp_ctx.cleanup()

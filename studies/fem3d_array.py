@@ -1,0 +1,160 @@
+"""3-D GetDP reference for the coupled array (issue 12): how close is the 3-D FEM to known
+answers, and what does it say about coupled cores and the magnet's pull on the iron?
+
+Question: with the 3-D GetDP model of designkit.fem.fem3d (vector potential, Whitney +
+second-order face functions, tree gauge, shell to infinity, symmetry where it exists), how
+accurate are B and grad B (single coil with its core vs the axisymmetric model, which agrees
+with the axisymmetric GetDP to ~1 %), and the magnet force (vs the image method), at two
+mesh levels; and what are the reference values for (1) two cores at the 50 mm pitch with one
+coil energized, (2) the 3x3 array with the centre (and, unless quick, the corner) coil
+energized, (3) the magnet's pull on one core at 20, 30, 50 mm (magnet centre above the winding
+top)? The uncoupled single-coil model is set beside (1) and (2) to show the coupling effect.
+
+Writes ``fem3d_array.npz`` (every case's points, B, G, forces) and ``fem3d_array.json``
+(summary) under the output folder (default out/fem3d_array/); returns the summary dict.
+Usage: ``PYTHONPATH=$PWD python studies/fem3d_array.py [out_dir] [--quick] [--level N]``.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def _rel(a, b, axis):
+    return np.linalg.norm(a - b, axis=axis) / np.linalg.norm(b, axis=axis)
+
+
+def _uncoupled(points, centre_xy=(0.0, 0.0)):
+    """designkit's single-coil model (winding + its own core, mu_r 1000, 1 A) at array-frame
+    points for a coil centred at ``centre_xy``: the uncoupled reference."""
+    from designkit.coil import Coil
+    from designkit.core import Core
+    from designkit.fem import fem3d
+    from designkit.field import winding_field
+
+    geo = fem3d.thesis_geometry()
+    coil = Coil(geo["ri"], geo["ro"], geo["length"], geo["turns"],
+                Core(geo["core_radius"], geo["core_length"], 1000.0))
+    loc = points - np.array([centre_xy[0], centre_xy[1], -geo["length"] / 2])
+    bw, gw = winding_field(loc, geo["ri"], geo["ro"], geo["length"], geo["turns"], 1.0,
+                           gradient=True)
+    bc, gc = coil.core.field_local(loc, coil, 1.0, gradient=True)
+    return bw + bc, gw + gc
+
+
+def run(out_dir="out/fem3d_array", quick: bool = False, level: int | None = None) -> dict:
+    from tqdm import tqdm
+
+    from designkit._io import write_json_atomic
+    from designkit.fem import fem3d
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    lv = (-2 if quick else -1) if level is None else level
+    levels = (lv,) if quick else (lv - 1, lv)
+    geo = fem3d.thesis_geometry()
+    pitch = geo["pitch"]
+    heights = (0.012, 0.030, 0.050, 0.080)
+    ws = fem3d.workspace_points(n_side=3 if quick else 4, heights=heights)
+    rng = np.random.default_rng(11)
+    check = np.column_stack([rng.uniform(-0.06, 0.06, 8), rng.uniform(-0.06, 0.06, 8),
+                             rng.uniform(0.012, 0.08, 8)])
+    pair = np.array([[x, y, z] for x in (0.0, 0.025, pitch) for y in (0.0, 0.02)
+                     for z in (0.012, 0.03, 0.06)])
+    arrays: dict = {}
+    summary: dict = {"levels": list(levels), "seconds": {}}
+    steps = [("single", l) for l in levels] + [("block", l) for l in levels] + \
+        [("pull", l) for l in levels] + [("two", lv), ("centre", lv)] + \
+        ([] if quick else [("corner", lv - 1)])
+    for name, l in tqdm(steps, desc="3-D GetDP cases", mininterval=2):
+        t0 = time.perf_counter()
+        if name == "single":
+            b, g, res = fem3d.single_core_case(check, level=l)
+            bm, gm = _uncoupled(check)
+            summary[f"single_L{l}"] = {
+                "b_err_max": float(_rel(b, bm, 1).max()),
+                "g_err_max": float(_rel(g, gm, (1, 2)).max()),
+                "dbz_err_max": float(np.max(np.abs(g[:, 2, 2] - gm[:, 2, 2])
+                                            / np.linalg.norm(gm, axis=(1, 2)))),
+                "tets": res.mesh_stats["tetrahedra"]}
+            arrays[f"single_L{l}_points"], arrays[f"single_L{l}_b"] = check, b
+            arrays[f"single_L{l}_g"] = g
+        elif name == "block":
+            r = fem3d.magnet_block_force(level=l)
+            summary[f"block_L{l}"] = {"fem_fz_n": r["fem_fz_n"], "image_fz_n": r["image_fz_n"],
+                                      "rel": r["fem_fz_n"] / r["image_fz_n"] - 1,
+                                      "tets": r["mesh"]["tetrahedra"]}
+        elif name == "pull":
+            h, fz = fem3d.magnet_pull_case(level=l)
+            summary[f"pull_L{l}"] = {"heights_m": h.tolist(), "fz_n": fz.tolist()}
+            arrays[f"pull_L{l}_heights"], arrays[f"pull_L{l}_fz"] = h, fz
+        elif name == "two":
+            b, g, res = fem3d.two_cores_case(pair, level=l)
+            bm, gm = _uncoupled(pair)
+            summary["two_cores"] = {
+                "coupling_b_max": float(_rel(b, bm, 1).max()),
+                "coupling_dbz_at_design_point": float(g[1, 2, 2] / gm[1, 2, 2] - 1),
+                "tets": res.mesh_stats["tetrahedra"]}
+            arrays["two_points"], arrays["two_b"], arrays["two_g"] = pair, b, g
+        elif name in ("centre", "corner"):
+            b, g, res = fem3d.array_case(ws, energized=name, level=l)
+            c = (0.0, 0.0) if name == "centre" else (-pitch, pitch)
+            bm, gm = _uncoupled(ws, c)
+            i0 = int(np.argmin(np.linalg.norm(ws - np.array([c[0], c[1], 0.03]), axis=1)))
+            summary[f"array_{name}"] = {
+                "coupling_b_max": float(_rel(b, bm, 1).max()),
+                "coupling_b_median": float(np.median(_rel(b, bm, 1))),
+                "dbz_vs_uncoupled_nearest_design_point":
+                    float(g[i0, 2, 2] / gm[i0, 2, 2] - 1),
+                "design_point_m": ws[i0].tolist(), "level": l,
+                "tets": res.mesh_stats["tetrahedra"]}
+            arrays[f"{name}_points"], arrays[f"{name}_b"], arrays[f"{name}_g"] = ws, b, g
+        summary["seconds"][f"{name}_L{l}"] = time.perf_counter() - t0
+    np.savez(out / "fem3d_array.npz", **arrays)
+    write_json_atomic(out / "fem3d_array.json", summary)
+    return summary
+
+
+def print_table(s: dict) -> None:
+    print("== 3-D GetDP reference (machine shared: times are wall-clock under load)")
+    for key in sorted(k for k in s if k.startswith("single_")):
+        e = s[key]
+        print(f"   single coil+core vs axisymmetric model, {key[7:]} ({e['tets']} tets):"
+              f" max |dB|/|B| {100 * e['b_err_max']:.2f} %, max |dG|/|G| "
+              f"{100 * e['g_err_max']:.1f} %, max |d dBz/dz|/|G| {100 * e['dbz_err_max']:.1f} %")
+    for key in sorted(k for k in s if k.startswith("block_")):
+        e = s[key]
+        print(f"   magnet 10 mm above a mu_r 1000 block, {key[6:]}: FEM {1e3 * e['fem_fz_n']:.1f} mN"
+              f" vs image {1e3 * e['image_fz_n']:.1f} mN ({100 * e['rel']:+.2f} %)")
+    for key in sorted(k for k in s if k.startswith("pull_")):
+        e = s[key]
+        cells = ", ".join(f"{1e3 * h:.0f} mm: {1e3 * f:.1f} mN" for h, f in
+                          zip(e["heights_m"], e["fz_n"]))
+        print(f"   magnet pull on one core (no current), {key[5:]}: {cells}")
+    if "two_cores" in s:
+        e = s["two_cores"]
+        print(f"   two cores, coil 0 at 1 A: |B| differs from the uncoupled model by up to"
+              f" {100 * e['coupling_b_max']:.1f} %; dBz/dz 30 mm above coil 0"
+              f" {100 * e['coupling_dbz_at_design_point']:+.1f} %")
+    for name in ("centre", "corner"):
+        if f"array_{name}" in s:
+            e = s[f"array_{name}"]
+            print(f"   3x3 array, {name} coil at 1 A (L{e['level']}, {e['tets']} tets): |B| vs"
+                  f" uncoupled up to {100 * e['coupling_b_max']:.1f} % (median"
+                  f" {100 * e['coupling_b_median']:.1f} %); dBz/dz at {e['design_point_m']}"
+                  f" {100 * e['dbz_vs_uncoupled_nearest_design_point']:+.1f} %")
+    print("   seconds: " + ", ".join(f"{k} {v:.0f}" for k, v in s["seconds"].items()))
+
+
+if __name__ == "__main__":  # pragma: no cover
+    import argparse
+
+    ap = argparse.ArgumentParser()
+    ap.add_argument("out_dir", nargs="?", default="out/fem3d_array")
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--level", type=int, default=None)
+    a = ap.parse_args()
+    print_table(run(a.out_dir, quick=a.quick, level=a.level))
