@@ -8,27 +8,30 @@ errors. All the physics the map samples comes through one function, :func:`map_p
 
 Representation and error budget (target: <= 1e-3 of each row's largest |A| over the box)
 -----------------------------------------------------------------------------------------
-The coupled A is not axisymmetric, but much of its sharp structure is: near a core's rim the
-field is dominated by that core, magnetized mostly along its axis. So
+The coupled A is not axisymmetric, but every core is a body of revolution whose response splits
+into azimuthal orders m (:mod:`designkit.coupling`). So nothing of A is sampled on a 3-D grid:
 
-* tables: per coil type, exact axisymmetric (rho, z) tables of one coil alone and of its core
-  alone (1.4 MB; interpolation error ~1.3e-4 of each row's maximum: steps 0.1 mm in rho near
-  the axis, growing as (1 + rho / 50 mm)^2, and 2.5 % of the height above the core's top in z);
-* ``MIX``: ``A_core @ MIX`` adds to column k the extra axial magnetization of every core by
-  coil k, with that core's own field shape (least squares over the residual grid's nodes);
-* residual: the rest, sampled from the coupled model on a coarse 3-D grid (15 mm in x, y; z
-  steps growing with the height above the cores), SVD-compressed, trilinear.
+* coil tables: per coil type, the exact axisymmetric field of one coil alone (0.7 MB; ~1.3e-4
+  of each row's maximum: steps 0.1 mm in rho near the axis, growing as (1 + rho / 50 mm)^2, and
+  2.5 % of the height above the core's top in z);
+* coupling: the extra magnetization of every core by every coil, from the coupled solve itself,
+  compressed per core type and order m by an SVD (``mode_tolerance``: m = 0 needs 2-3 shapes at
+  1e-4, m = 1, 2 about 2 each) and tabulated as fields of those shapes (:func:`mode_rows`
+  in firmware_io.mapfile); 0.25 mm / 4 % steps: the coupling is ~15 % of A, so their
+  interpolation error counts ~0.15 x.
+* SVD truncation and m >= 3 (below 1e-4 of the coupling, designkit.coupling) are the rest.
 
-Measured on the default 3 x 3 iron-core array (designkit.coupling, November 2026): the rest is
-NOT small -- the transverse (m = 1, 2) magnetization of the neighbour cores reaches ~15 % of
-each row's maximum near the bottom of the box and is as sharp as the rims -- so this map is
-within ~4-12 % of the coupled model, not 1e-3 (``studies/bench_map.py``; the build records its
-own check in ``meta['errors']``). Sampling the coupled model costs ~10-100 ms per point, which
-rules out a finer residual grid within the build budget. The fix is structural: tabulate the
-cores' coupled modes themselves (per core type, the SVD of the solved unknowns of all cores for
-all coils: rank 3 for m = 0 at 8e-5; for m = 1, 2 the potential x G(rho^2, z) resp.
-(x^2 - y^2) H(rho^2, z), so 5 smooth (rho, z) quantities per mode give all 8 rows) and mix them
-per column -- exact up to the tables, with no 3-D grid for A.
+Measured on the default 3 x 3 array (``studies/bench_map.py``, 1000 random points, Nov 2026,
+machine heavily loaded): A within 4.3e-4 of each row's maximum (every row), file 3.8 MB; the
+sensor-induced field (same modes, by reciprocity) within 2 % of its maximum (the discrete solve
+is reciprocal only to its discretization); the bias force within 0.3 % (per-core pull tables
+plus a 25 mm grid of the cores' interaction). Not met: speed. A lookup is now a sum over 9
+cores x ~20 core modes (~25 k multiply-adds per point): ~0.4 ms for one point and ~3 s for 1e4
+points on the loaded machine (targets 20 us, 5 ms), and the build (coupled solve, mode tables,
+nonlinear saturation solves) took 214 s there (target 30 s).
+
+The build checks itself: it evaluates the coupled model directly at ``n_check`` random points
+in the box and records the errors of the finished map in ``meta['errors']``.
 """
 
 from __future__ import annotations
@@ -46,7 +49,7 @@ from .errors import BadInputError
 from firmware_io import mapfile as mf
 from firmware_io.errors import BadInputError as _FirmwareBadInput
 
-FORMAT, FORMAT_VERSION, UNITS, BATCH_MIN = mf.FORMAT, mf.FORMAT_VERSION, mf.UNITS, mf.BATCH_MIN
+FORMAT, FORMAT_VERSION, UNITS = mf.FORMAT, mf.FORMAT_VERSION, mf.UNITS
 
 
 # ============================================================================ grids
@@ -144,53 +147,46 @@ def _even_on_axis(out: np.ndarray, rho: np.ndarray, cols) -> None:
 
 
 def compute_rz_table(coil, spec: dict, *, chunk: int = 8192) -> np.ndarray:
-    """The table (n_rho, n_u, 8) float64 of ``spec``: b, Bz, e, w (see
-    :data:`RZ_QUANTITIES`) of the whole coil, then of its core alone (whole minus the winding),
-    by direct evaluation (Coil.field, rtol 1e-10) on the nodes; e and w on the axis by
-    Richardson extrapolation (both are even in rho)."""
+    """The table (n_rho, n_u, 4) float64 of ``spec``: b, Bz, e, w (see :data:`RZ_QUANTITIES`)
+    of the coil alone (winding + its own core), by direct evaluation (Coil.field, rtol 1e-10) on
+    the nodes; e and w on the axis by Richardson extrapolation (both are even in rho)."""
     from .scene import _rz_direct
 
     rho, z = _spec_nodes(spec)
     n_rho, n_u = len(rho), len(z)
     R, Z = np.meshgrid(rho[1:], z, indexing="ij")
     r, zz = R.ravel(), Z.ravel()
-    out = np.zeros((n_rho, n_u, 8))
-    flat = out[1:].reshape(-1, 8)
-    parts = [coil] + ([coil.replace(core=None)] if coil.core is not None else [])
-    for part, c in enumerate(parts):
-        for s in range(0, len(r), chunk):
-            sl = slice(s, s + chunk)
-            d = _rz_direct(c, r[sl], zz[sl], True)
-            b = d["br_over_rho"]
-            flat[sl, 4 * part + 0] = b
-            flat[sl, 4 * part + 1] = d["bz"]
-            flat[sl, 4 * part + 2] = d["dbr_dz"] / r[sl]
-            flat[sl, 4 * part + 3] = (d["dbr_drho"] - b) / r[sl] ** 2
-        d0 = _rz_direct(c, np.zeros(n_u), z, True)
-        out[0, :, 4 * part] = d0["br_over_rho"]
-        out[0, :, 4 * part + 1] = d0["bz"]
-        _even_on_axis(out, rho, [4 * part + 2, 4 * part + 3])
-    if len(parts) == 2:  # core alone = whole - winding alone
-        out[..., 4:] = out[..., :4] - out[..., 4:]
+    out = np.zeros((n_rho, n_u, 4))
+    flat = out[1:].reshape(-1, 4)
+    for s in range(0, len(r), chunk):
+        sl = slice(s, s + chunk)
+        d = _rz_direct(coil, r[sl], zz[sl], True)
+        b = d["br_over_rho"]
+        flat[sl, 0] = b
+        flat[sl, 1] = d["bz"]
+        flat[sl, 2] = d["dbr_dz"] / r[sl]
+        flat[sl, 3] = (d["dbr_drho"] - b) / r[sl] ** 2
+    d0 = _rz_direct(coil, np.zeros(n_u), z, True)
+    out[0, :, 0] = d0["br_over_rho"]
+    out[0, :, 1] = d0["bz"]
+    _even_on_axis(out, rho, [2, 3])
     return out
 
 
 def compute_magnet_table(phys: "MapPhysics", coil, spec: dict) -> np.ndarray:
-    """The magnet table (n_rho, n_u, 3) float64 of one coil alone at the origin: F_rho/rho and
-    F_z of the magnet's pull on its core (N/m, N) and a, the z field of the core magnetized by
-    the magnet at the coil's upper sensor (T), for the magnet at (rho, 0, z)."""
+    """The magnet table (n_rho, n_u, 2) float64 of one coil alone at the origin: F_rho/rho and
+    F_z of the magnet's pull on its core (N/m, N) for the magnet at (rho, 0, z)."""
     from .pose import Pose
 
     alone = CoilArray((coil.replace(pose=Pose()),))
     rho, z = _spec_nodes(spec)
     R, Z = np.meshgrid(rho, z, indexing="ij")
     pts = np.c_[R.ravel(), np.zeros(R.size), Z.ravel()]
-    f, amp = phys.magnet_alone(alone, pts)
-    out = np.empty((len(rho), len(z), 3))
+    f = phys.bias_force(alone, pts)
+    out = np.empty((len(rho), len(z), 2))
     with np.errstate(divide="ignore", invalid="ignore"):
         out[..., 0] = (f[:, 0] / pts[:, 0]).reshape(R.shape)
     out[..., 1] = f[:, 2].reshape(R.shape)
-    out[..., 2] = amp.reshape(R.shape)
     _even_on_axis(out, rho, [0])
     return out
 
@@ -246,11 +242,6 @@ class MapPhysics:
             out[a:a + chunk] = np.moveaxis(b, -1, 0).reshape((-1,) + sens.shape)
         return out
 
-    def magnet_alone(self, alone: CoilArray, points):
-        """One coil alone: F0 (n, 3) N and the z field (n,) T of its magnetized core at its
-        upper sensor, for the magnet at ``points``."""
-        return self.bias_force(alone, points), self.sensor_induced(alone, points)[:, 0, 0, 2]
-
     def sensor_coil_field(self, array: CoilArray) -> np.ndarray:
         """(2, n_coils, 3, n_coils) T/A: the coupled field of each coil at the sensors."""
         s = self.sensor_positions(array).reshape(-1, 3)
@@ -274,48 +265,240 @@ def map_physics(design) -> MapPhysics:
     return MapPhysics(np.array([0.0, 0.0, design.magnet.moment_a_m2]), design.drive.max_current_a)
 
 
+# ============================================================================ coupled core modes
+N_MODE_Q = {0: 4, 1: 5, 2: 5}
+"""Table quantities per core mode: m = 0 (b, Bz, e, w as the coil tables), m = 1, 2 (the
+potential x G resp. (x^2 - y^2) H with G(rho^2, z): a, a1, a2, az, a1z = -mu0 (G, G', G'', G_z,
+G'_z), ' = d/d(rho^2))."""
+
+
+def coupled_modes(arr: CoilArray, tolerance: float = 1e-4,
+                  sensor_tolerance: float = 1e-3) -> dict | None:
+    """The cores' coupling as a few modes per core type (None without coupled cores).
+
+    The coupled solve gives every core's unknowns X_j (m = 0 surface currents, m = 1, 2 cos and
+    sin charges; :mod:`designkit.coupling`) per ampere in each coil. Column k of A is the
+    uncoupled coil k (the tables RZ) plus the fields of dX_j = X_j - (X_self if j == k): the
+    extra magnetization of every core. Per core type and mode order m, the SVD of all dX blocks
+    gives the shapes U_m (kept while the singular values are above ``tolerance`` x the
+    largest of the m = 0 block); the coefficients C[j, b, k] = U_m^T dX_j[:, k].
+
+    Returns {"types": [{"model", "coils", "sets": [A, sensors], each {"U": {m: (n_m, R_m)},
+    "basis": [(m, r, c)]}}],
+    "coef": (n_coils, n_basis_max, n_coils), "sensor_coef": (n_coils, n_basis_max, 2, n_coils,
+    3)}; basis entries (m, r, c): mode order, shape index, c = 0 cos / 1 sin (m = 0: c = 0).
+    ``sensor_coef[..., s, c]``: the coefficients of the cores magnetized by a unit dipole
+    (1 A m^2) along axis c at sensor s (reciprocity, see the code).
+    """
+    from .pose import Pose
+
+    system = arr.coupled()
+    if system is None:
+        return None
+    x = system.coil_solution()  # (n_unknowns, nc)
+    nc = arr.n_coils
+    # reciprocity (linear cores): the field at sensor s along e_c of the cores magnetized by the
+    # magnet m at p is m . B(p) of the cores magnetized by a unit dipole e_c at s. Those are
+    # fixed sources: 3 x 2 x nc more columns, so the sensors' field is a mode sum too.
+    sens = arr.sensor_positions_m().reshape(-1, 3)
+    xs = np.stack([system.magnet_solution(sens, e) for e in np.eye(3)], axis=-1)  # (nu, ns, 3)
+    xs = xs.reshape(len(xs), -1)  # columns (sensor, component)
+    n_src = nc + xs.shape[1]
+    x = np.concatenate([x, xs], axis=1)
+    blocks = {}
+    for jj, k in enumerate(system.core_index):
+        model = system.models[jj]
+        blocks.setdefault(id(model), (model, []))[1].append((jj, k))
+    types = []
+    for model, members in blocks.values():
+        proto = arr.coils[members[0][1]].replace(pose=Pose())
+        alone = CoilArray((proto,)).coupled()
+        x_self = alone.coil_solution()[:, 0]
+        n0, n1, m_max = model.n0, model.n1, model.m_max
+        dx = {}
+        for jj, k in members:
+            d = x[system.offsets[jj]:system.offsets[jj + 1]].copy()
+            d[:, k] -= x_self
+            dx[k] = d
+        parts = {0: [(slice(0, n0), 0)]}
+        for m in range(1, m_max + 1):
+            parts[m] = [(slice(n0 + (2 * (m - 1) + c) * n1, n0 + (2 * (m - 1) + c + 1) * n1), c)
+                        for c in range(2)]
+        def shapes_of(cols, tol):
+            """Per mode order: the SVD shapes of these source columns (None: no coupling)."""
+            out = {}
+            for m in parts:
+                mat = np.concatenate([dx[k][sl][:, cols] for k in dx for sl, _ in parts[m]],
+                                     axis=1)
+                u, sv, _ = np.linalg.svd(mat, full_matrices=False)
+                if sv[0] > 0:
+                    out[m] = u[:, :max(1, int(np.sum(sv > tol * sv[0])))]
+            return out
+
+        # A and the sensors get their own shapes: the sensor dipoles sit ~9 mm from a core's
+        # end and need many more, which A should not pay for at every lookup
+        sets = []
+        for cols, tol in ((slice(0, nc), tolerance), (slice(nc, n_src), sensor_tolerance)):
+            U = shapes_of(cols, tol)
+            basis = [(m, r, c) for m in sorted(U) for r in range(U[m].shape[1])
+                     for c in ((0,) if m == 0 else (0, 1))]
+            sets.append({"U": U, "basis": basis})
+        types.append({"model": model, "coils": [k for _, k in members], "sets": sets,
+                      "parts": parts, "dx": dx})
+    coefs = []
+    for which, cols in ((0, slice(0, nc)), (1, slice(nc, n_src))):
+        nb = max(len(t["sets"][which]["basis"]) for t in types)
+        coef = np.zeros((nc, nb, cols.stop - cols.start))
+        for t in types:
+            st = t["sets"][which]
+            for k, d in t["dx"].items():
+                for b, (m, r, c) in enumerate(st["basis"]):
+                    sl = [s for s, cc in t["parts"][m] if cc == c][0]
+                    coef[k, b] = st["U"][m][:, r] @ d[sl][:, cols]
+        coefs.append(coef)
+    return {"types": types, "coef": coefs[0],
+            "sensor_coef": coefs[1].reshape(nc, coefs[1].shape[1], 2, nc, 3)}
+
+
+def compute_mode_tables(t: dict, spec: dict) -> list:
+    """The mode tables (n_rho, n_u, Q) float64 of one core type, one per shape set of ``t``
+    (A, sensors): for each shape, the quantities of :data:`N_MODE_Q` from the core model's
+    basis fields at (rho, 0, z), local frame (one evaluation of the basis for all sets)."""
+    from .design import MU0
+
+    model = t["model"]
+    t_sets = t["sets"]
+    rho, z = _spec_nodes(spec)
+    R, Z = np.meshgrid(rho, z, indexing="ij")
+    pts = np.c_[R.ravel(), np.zeros(R.size), Z.ravel()]
+    n0, n1 = model.n0, model.n1
+    # all shapes of all sets side by side; split at the end
+    U = {}
+    for st in t["sets"]:
+        for m, u in st["U"].items():
+            U[m] = u if m not in U else np.concatenate([U[m], u], axis=1)
+    t = {"U": U}
+    shapes = [(m, r) for m in sorted(t["U"]) for r in range(t["U"][m].shape[1])]
+    q_tot = sum(N_MODE_Q[m] for m, _ in shapes)
+    out = np.zeros((R.size, q_tot))
+    chunk = 256
+    for s in range(0, len(pts), chunk):
+        p = pts[s:s + chunk]
+        # the fine charge quadrature where the compressed rules are not accurate (near the
+        # core), as the coupled model's own field evaluation does
+        near = ~model.far_mask(np.hypot(p[:, 0], p[:, 1]), p[:, 2])
+        h = np.zeros((len(p), 3, model.n_unknowns))
+        g = np.zeros((len(p), 3, 3, model.n_unknowns))
+        for sel, fine in ((near, True), (~near, False)):
+            if np.any(sel):
+                h[sel], g[sel] = model.basis_field(p[sel], gradient=True, fine=fine)
+        r_ = p[:, 0]
+        col = 0
+        for m, r in shapes:
+            u = t["U"][m][:, r]
+            if m == 0:
+                b = MU0 * h[:, :, :n0] @ u
+                gg = MU0 * g[:, :, :, :n0] @ u
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    bb = gg[:, 1, 1]  # Br/rho = dBy/dy on the x axis
+                    out[s:s + chunk, col:col + 4] = np.c_[
+                        bb, b[:, 2], gg[:, 0, 2] / r_, (gg[:, 0, 0] - bb) / r_ ** 2]
+            else:
+                cs = [slice(n0 + (2 * (m - 1) + c) * n1, n0 + (2 * (m - 1) + c + 1) * n1)
+                      for c in range(2)]
+                bc, gc = MU0 * h[:, :, cs[0]] @ u, MU0 * g[:, :, :, cs[0]] @ u
+                bs, gs = MU0 * h[:, :, cs[1]] @ u, MU0 * g[:, :, :, cs[1]] @ u
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    if m == 1:  # cos: x G, sin: y G (formulas in firmware_io.mapfile)
+                        a = bs[:, 1]
+                        az = gs[:, 1, 2]
+                        a1 = gc[:, 1, 1] / (2 * r_)
+                        a2 = (gc[:, 0, 0] - 6 * r_ * a1) / (4 * r_ ** 3)
+                        a1z = (gc[:, 0, 2] - az) / (2 * r_ ** 2)
+                    else:  # cos: (x^2 - y^2) H, sin: 2 x y H
+                        a = bs[:, 1] / (2 * r_)
+                        az = gs[:, 1, 2] / (2 * r_)
+                        a1 = (gc[:, 1, 1] + 2 * a) / (2 * r_ ** 2)
+                        a2 = (gc[:, 0, 0] - 2 * a - 10 * r_ ** 2 * a1) / (4 * r_ ** 4)
+                        a1z = (gc[:, 0, 2] - 2 * r_ * az) / (2 * r_ ** 3)
+                out[s:s + chunk, col:col + 5] = np.c_[a, a1, a2, az, a1z]
+            col += N_MODE_Q[m]
+    out = out.reshape(len(rho), len(z), q_tot)
+    # rho = 0: every quantity is even in rho -> Richardson from the next two nodes
+    r1, r2 = rho[1] ** 2, rho[2] ** 2
+    out[0] = (r2 * out[1] - r1 * out[2]) / (r2 - r1)
+    # split per set, in each set's own shape order (m ascending, r ascending)
+    col = {}
+    c0 = 0
+    for m, r in shapes:
+        col[(m, r)] = c0
+        c0 += N_MODE_Q[m]
+    tables, offset = [], {m: 0 for m in U}
+    for st in t_sets:
+        cols = []
+        for m in sorted(st["U"]):
+            for r in range(st["U"][m].shape[1]):
+                c = col[(m, offset[m] + r)]
+                cols.extend(range(c, c + N_MODE_Q[m]))
+            offset[m] += st["U"][m].shape[1]
+        tables.append(out[..., cols])
+    return tables
+
+
 # ============================================================================ build
-def build(design, *, spacing: float = 0.015, coupling_log_step: float = 0.35,
-          magnet_spacing: float = 0.025, magnet_log_step: float = 0.5,
-          svd_tolerance: float = 1e-4, rz_step: float = 1e-4, rz_log_step: float = 0.025,
-          rz_rho_scale: float = 0.05, magnet_rz_step: float = 2e-3,
+def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
+          mode_tolerance: float = 1e-4, sensor_mode_tolerance: float = 1e-3,
+          rz_step: float = 1e-4, rz_log_step: float = 0.025,
+          rz_rho_scale: float = 0.05, mode_rz_step: float = 2.5e-4,
+          mode_rz_log_step: float = 0.04, sensor_mode_rz_step: float = 2.5e-4,
+          sensor_mode_rz_log_step: float = 0.04, magnet_rz_step: float = 2e-3,
           magnet_rz_log_step: float = 0.15, box=None, n_check: int = 100,
           progress: bool = True, array: CoilArray | None = None) -> dict:
     """Compute the map v2 of ``design``: ``{"arrays": {...}, "meta": {...}}`` (not yet written).
 
     Parameters
     ----------
-    spacing : float, m
-        x, y step of the coupling residual grid (its z steps grow from ``coupling_log_step``
-        x the height above the cores' tops, never above ``spacing``).
-    magnet_spacing, magnet_log_step : float
-        The same for the residual grids over magnet positions (bias force, sensor fields).
-    svd_tolerance : float
-        Largest error of the rank-truncated coupling residual at its nodes, relative to each
-        row's max |A|.
+    spacing, log_step : float
+        x, y step (m) of the grids over magnet positions that carry what the per-core magnet
+        tables miss (bias force, sensor fields); their z steps grow from ``log_step`` x the
+        height above the cores' tops, never above ``spacing``.
+    mode_tolerance, sensor_mode_tolerance : float
+        Coupled core modes are kept while their singular value is above this fraction of the
+        largest of their order (m = 0, 1, 2); for A, resp. for the sensor-induced field (whose
+        unit dipoles ~9 mm from a core's end need many more shapes; 1e-3 keeps the file small
+        for an error of ~2 % of the field, itself a few mT).
     rz_step : float, m
-        rho step of the (rho, z) tables on the axis (default 0.1 mm, growing as
+        rho step of the coil tables on the axis (default 0.1 mm, growing as
         (1 + rho / rz_rho_scale)^2 with rz_rho_scale 50 mm: ~0.4 mm at 50 mm from the axis);
         ``rz_log_step`` is the step in log(z - z_ref) (default 0.025: 2.5 % of the height
-        above the core's top). ``magnet_rz_step``, ``magnet_rz_log_step``: the same for the
-        magnet tables (2 mm, 15 %).
+        above the core's top). ``mode_rz_step``, ``mode_rz_log_step``: the same for the mode
+        tables of A (0.25 mm, 4 %: they carry the coupling, ~15-25 % of A);
+        ``sensor_mode_rz_step``, ``sensor_mode_rz_log_step`` for those of the sensor field
+        (0.25 mm, 4 %); ``magnet_rz_step``,
+        ``magnet_rz_log_step`` for the magnet tables (2 mm, 15 %).
     box : (lower, upper) or None
         Corners, m; default :func:`default_box`.
     n_check : int
-        Random points where the finished map is compared with direct evaluation (meta 'errors').
+        Random points where the finished map is compared with direct evaluation of the coupled
+        model (meta 'errors'; each costs a full coupled evaluation).
     """
     from tqdm import tqdm
 
     from . import __version__
 
-    spacing = v.in_range("spacing", spacing, 5e-4, 0.05, "m")
-    magnet_spacing = v.in_range("magnet_spacing", magnet_spacing, 5e-4, 0.05, "m")
-    coupling_log_step = v.in_range("coupling_log_step", coupling_log_step, 1e-3, 1.0)
-    magnet_log_step = v.in_range("magnet_log_step", magnet_log_step, 1e-3, 1.0)
-    svd_tolerance = v.in_range("svd_tolerance", svd_tolerance, 1e-7, 1e-2)
+    spacing = v.in_range("spacing", spacing, 5e-4, 0.1, "m")
+    log_step = v.in_range("log_step", log_step, 1e-3, 2.0)
+    mode_tolerance = v.in_range("mode_tolerance", mode_tolerance, 1e-8, 1e-1)
+    sensor_mode_tolerance = v.in_range("sensor_mode_tolerance", sensor_mode_tolerance, 1e-8,
+                                       1e-1)
     rz_step = v.in_range("rz_step", rz_step, 1e-5, 0.01, "m")
     rz_log_step = v.in_range("rz_log_step", rz_log_step, 1e-3, 0.5)
     rz_rho_scale = v.in_range("rz_rho_scale", rz_rho_scale, 1e-3, 10.0, "m")
+    mode_rz_step = v.in_range("mode_rz_step", mode_rz_step, 1e-5, 0.01, "m")
+    mode_rz_log_step = v.in_range("mode_rz_log_step", mode_rz_log_step, 1e-3, 0.5)
+    sensor_mode_rz_step = v.in_range("sensor_mode_rz_step", sensor_mode_rz_step, 1e-5, 0.01, "m")
+    sensor_mode_rz_log_step = v.in_range("sensor_mode_rz_log_step", sensor_mode_rz_log_step,
+                                         1e-3, 0.5)
     magnet_rz_step = v.in_range("magnet_rz_step", magnet_rz_step, 1e-5, 0.01, "m")
     magnet_rz_log_step = v.in_range("magnet_rz_log_step", magnet_rz_log_step, 1e-3, 0.5)
     n_check = v.positive_int("n_check", n_check)
@@ -329,10 +512,10 @@ def build(design, *, spacing: float = 0.015, coupling_log_step: float = 0.35,
     nc = arr.n_coils
     types = list(arr.coil_types().items())
 
-    def specs(step, log_step, n_q):
+    def specs(idx_lists, step, log_step_, n_q):
         out = []
-        for _, idx in types:
-            s = [rz_table_spec(arr.coils[k], lower, upper, step, log_step, rz_rho_scale, n_q)
+        for idx in idx_lists:
+            s = [rz_table_spec(arr.coils[k], lower, upper, step, log_step_, rz_rho_scale, n_q)
                  for k in idx]
             if any(x is None for x in s):
                 raise BadInputError("box", "above every coil's winding and core (the map's "
@@ -341,76 +524,83 @@ def build(design, *, spacing: float = 0.015, coupling_log_step: float = 0.35,
             out.append(_union_spec(s))
         return out
 
-    a_specs = specs(rz_step, rz_log_step, 8)
-    m_specs = specs(magnet_rz_step, magnet_rz_log_step, 3)
+    a_specs = specs([idx for _, idx in types], rz_step, rz_log_step, 4)
+    m_specs = specs([idx for _, idx in types], magnet_rz_step, magnet_rz_log_step, 2)
     z_ref = max(arr.coils[k].pose.position[2] + s["z_ref_m"] for (_, idx), s in zip(types, a_specs)
                 for k in idx)
-    c_axes = box_axes(lower, upper, spacing, z_ref, coupling_log_step)
-    m_axes = box_axes(lower, upper, magnet_spacing, z_ref, magnet_log_step)
-    c_nodes, m_nodes = _nodes(c_axes), _nodes(m_axes)
+    m_axes = box_axes(lower, upper, spacing, z_ref, log_step)
+    m_nodes = _nodes(m_axes)
     rng = np.random.default_rng(20261123)
     check = rng.uniform(lower, upper, (n_check, 3))
-    n_mcheck = min(n_check, 500)
-    chunk = 512
-    work = ([("tables", k) for k in range(len(types))]
-            + [("coupled A", s) for s in range(0, len(c_nodes), chunk)]
+    n_mcheck = min(n_check, 50)
+    chunk = 64
+    work = ([("coupled solve", 0)] + [("coil tables", k) for k in range(len(types))]
+            + [("mode tables", 0)]
             + [("magnet", s) for s in range(0, len(m_nodes), chunk)]
-            + [("check", s) for s in range(0, n_check, chunk)] + [("magnet check", 0)])
+            + [("check", s) for s in range(0, n_check, chunk)] + [("magnet check", 0),
+                                                                  ("saturation", 0)])
     arrays: dict = {}
-    rz_meta, mrz_meta = [], []
-    a_c = np.empty((len(c_nodes), 8, nc))
+    rz_meta, mrz_meta, cm_meta, sm_meta = [], [], [], []
     f0 = np.empty((len(m_nodes), 3))
-    sind = np.empty((len(m_nodes), 2, nc, 3))
     a_check = np.empty((n_check, 8, nc))
     seconds: dict = {}
+    modes = None
     bar = tqdm(work, desc="map", unit="step", disable=not progress, leave=False)
     for kind, s in bar:
         bar.set_postfix_str(kind, refresh=False)
         t0 = time.perf_counter()
-        if kind == "tables":
+        if kind == "coupled solve":
+            modes = coupled_modes(arr, mode_tolerance, sensor_mode_tolerance)
+        elif kind == "coil tables":
             proto, idx = types[s]
             arrays[f"RZ{s}"] = compute_rz_table(proto, a_specs[s]).astype(np.float32)
             rz_meta.append({"name": f"RZ{s}", "coils": [int(k) for k in idx], **a_specs[s]})
             arrays[f"MRZ{s}"] = compute_magnet_table(phys, proto, m_specs[s]).astype(np.float32)
             mrz_meta.append({"name": f"MRZ{s}", "coils": [int(k) for k in idx], **m_specs[s]})
-        elif kind == "coupled A":
-            a_c[s:s + chunk] = phys.actuation(arr, c_nodes[s:s + chunk])
+        elif kind == "mode tables":
+            for k, t in enumerate(modes["types"] if modes else []):
+                for which, prefix, metas, step, lstep in (
+                        (0, "CM", cm_meta, mode_rz_step, mode_rz_log_step),
+                        (1, "SM", sm_meta, sensor_mode_rz_step, sensor_mode_rz_log_step)):
+                    st = t["sets"][which]
+                    spec = specs([t["coils"]], step, lstep, 1)[0]
+                    tab = compute_mode_tables({**t, "sets": [st]}, spec)[0]
+                    shapes = [[m, r] for m in sorted(st["U"])
+                              for r in range(st["U"][m].shape[1])]
+                    cols = np.cumsum([0] + [N_MODE_Q[m] for m, _ in shapes])[:-1].tolist()
+                    # float16, each column scaled to its largest |value|: these tables carry
+                    # the coupling (~15-25 % of A); measured: float32 changes the 2-core error
+                    # by < 1 %, and float16 halves the file
+                    col_scale = np.maximum(np.abs(tab).max(axis=(0, 1)), 1e-300)
+                    arrays[f"{prefix}{k}"] = (tab / col_scale).astype(np.float16)
+                    metas.append({"name": f"{prefix}{k}", "coils": [int(c) for c in t["coils"]],
+                                  **spec, "shape": list(tab.shape), "shapes": shapes,
+                                  "column_scale": col_scale.tolist(),
+                                  "columns": [int(c) for c in cols],
+                                  "basis": [list(b) for b in st["basis"]]})
         elif kind == "magnet":
             f0[s:s + chunk] = phys.bias_force(arr, m_nodes[s:s + chunk])
-            sind[s:s + chunk] = phys.sensor_induced(arr, m_nodes[s:s + chunk])
         elif kind == "check":
             a_check[s:s + chunk] = phys.actuation(arr, check[s:s + chunk])
-        else:
+        elif kind == "magnet check":
             f0_check = phys.bias_force(arr, check[:n_mcheck])
             sind_check = phys.sensor_induced(arr, check[:n_mcheck])
+        else:
+            sat_i, sat_f = phys.saturation(arr)
         seconds[kind] = seconds.get(kind, 0.0) + time.perf_counter() - t0
     bar.close()
     t0 = time.perf_counter()
     positions = arr.positions()
     rotations = [list(map(list, c.pose.rotation)) for c in arr.coils]
-    # the tables' part as the reader computes it (so the fits absorb the table error at nodes)
-    prep = mf.prepare_rz([arrays[t["name"]] for t in rz_meta], rz_meta, positions, rotations)
-    whole, core = (np.ascontiguousarray(x.transpose(2, 1, 0), dtype=np.float64)
-                   for x in mf.interpolate_rz(prep, c_nodes, nc))
-    scale = np.maximum(np.abs(a_c).max(axis=(0, 2)), 1e-300)  # (8,) per-row max
-    mix = _fit_mix(whole, core, a_c, scale)
-    resid = a_c - whole - np.einsum("nrj,jk->nrk", core, mix)
-    phi, modes, rank = _compress(resid, scale, svd_tolerance)
     mprep = mf.prepare_magnet([arrays[t["name"]] for t in mrz_meta], mrz_meta, positions,
                               rotations)
-    f_pair, amp = mf.magnet_terms(mprep, m_nodes, nc)
-    sind_flat = sind.reshape(len(m_nodes), -1)
-    sind_mix = np.linalg.lstsq(amp, sind_flat, rcond=None)[0] if np.abs(amp).max() > 0 else \
-        np.zeros((nc, 6 * nc))
+    f_pair = mf.magnet_terms(mprep, m_nodes)
     m_shape = tuple(len(a) for a in m_axes)
-    sat_i, sat_f = phys.saturation(arr)
+    coef = modes["coef"] if modes else np.zeros((nc, 0, nc))
     arrays.update({
-        "MIX": mix, "PHI": phi.reshape(tuple(len(a) for a in c_axes) + (rank,)).astype(np.float16),
-        "MODES": modes.astype(np.float32),
-        "C_X": c_axes[0], "C_Y": c_axes[1], "C_Z": c_axes[2],
+        "COEF": coef,
+        "SCOEF": modes["sensor_coef"] if modes else np.zeros((nc, 0, 2, nc, 3)),
         "F0_RES": (f0 - f_pair).reshape(m_shape + (3,)).astype(np.float32),
-        "SIND_MIX": sind_mix.reshape(nc, 2, nc, 3),
-        "SIND_RES": (sind_flat - amp @ sind_mix).reshape(m_shape + (2, nc, 3)).astype(np.float16),
         "M_X": m_axes[0], "M_Y": m_axes[1], "M_Z": m_axes[2],
         "SENSOR_POS": phys.sensor_positions(arr).astype(np.float64),
         "SENSOR_COIL": phys.sensor_coil_field(arr).astype(np.float64),
@@ -420,22 +610,27 @@ def build(design, *, spacing: float = 0.015, coupling_log_step: float = 0.35,
     meta = {
         "format": FORMAT, "version": FORMAT_VERSION, "designkit_version": __version__,
         "design_name": design.name, "design_sha256": design.spec_hash(),
-        "rows": list(ROWS), "units": UNITS, "n_coils": nc, "coupling_rank": rank,
+        "rows": list(ROWS), "units": UNITS, "n_coils": nc, "n_basis": int(coef.shape[1]),
+        "n_sensor_basis": int(arrays["SCOEF"].shape[1]),
         "box_m": [lower.tolist(), upper.tolist()],
         "rz_tables": rz_meta, "rz_quantities": list(RZ_QUANTITIES),
-        "magnet_tables": mrz_meta,
+        "mode_tables": cm_meta, "sensor_mode_tables": sm_meta, "magnet_tables": mrz_meta,
         "coil_positions_m": positions.tolist(), "coil_rotations": rotations,
         "max_current_a": design.drive.max_current_a,
         "total_current_a": design.drive.total_current_a,
         "physics": phys.source,
-        "settings": {"spacing_m": spacing, "coupling_log_step": coupling_log_step,
-                     "magnet_spacing_m": magnet_spacing, "magnet_log_step": magnet_log_step,
-                     "svd_tolerance": svd_tolerance, "rz_step_m": rz_step,
+        "settings": {"spacing_m": spacing, "log_step": log_step,
+                     "mode_tolerance": mode_tolerance,
+                     "sensor_mode_tolerance": sensor_mode_tolerance, "rz_step_m": rz_step,
                      "rz_log_step": rz_log_step, "rz_rho_scale_m": rz_rho_scale,
+                     "mode_rz_step_m": mode_rz_step, "mode_rz_log_step": mode_rz_log_step,
+                     "sensor_mode_rz_step_m": sensor_mode_rz_step,
+                     "sensor_mode_rz_log_step": sensor_mode_rz_log_step,
                      "magnet_rz_step_m": magnet_rz_step,
                      "magnet_rz_log_step": magnet_rz_log_step},
     }
     reader = mf.MapFile.from_arrays(arrays, meta)
+    scale = np.maximum(np.abs(a_check).max(axis=(0, 2)), 1e-300)
     err = np.abs(reader.actuation(check) - a_check) / scale[None, :, None]
 
     def rel(got, ref):
@@ -452,41 +647,6 @@ def build(design, *, spacing: float = 0.015, coupling_log_step: float = 0.35,
     seconds["fits and check"] = time.perf_counter() - t0
     meta["build_seconds"] = seconds
     return {"arrays": arrays, "meta": meta}
-
-
-def _fit_mix(whole: np.ndarray, core: np.ndarray, a_c: np.ndarray, scale: np.ndarray):
-    """MIX (nc, nc) minimizing |(whole + core @ MIX - A) / scale| over the nodes."""
-    n, _, nc = core.shape
-    s = (core / scale[None, :, None]).reshape(n * 8, nc)
-    c = ((a_c - whole) / scale[None, :, None]).reshape(n * 8, nc)
-    if not np.any(s):
-        return np.zeros((nc, nc))  # no cores: nothing to mix
-    return np.linalg.lstsq(s, c, rcond=None)[0]
-
-
-def _compress(resid: np.ndarray, scale: np.ndarray, tolerance: float):
-    """Truncated SVD of the residual (n, 8, nc): PHI (n, r), MODES (r, 8, nc), r.
-
-    r is the smallest rank whose largest error at the nodes, relative to each row's ``scale``,
-    is at most ``tolerance`` (at least 1, so the arrays are never empty).
-    """
-    n, _, nc = resid.shape
-    x = (resid / scale[None, :, None]).reshape(n, 8 * nc)
-    u, sv, vt = np.linalg.svd(x, full_matrices=False)
-
-    def err(r):
-        return np.abs(x - (u[:, :r] * sv[:r]) @ vt[:r]).max()
-
-    lo, hi = 1, len(sv)  # err(hi) ~ 0: bisect on the smallest r with err(r) <= tolerance
-    if err(lo) <= tolerance:
-        hi = lo
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        lo, hi = (lo, mid) if err(mid) <= tolerance else (mid, hi)
-    rank = hi
-    phi = u[:, :rank] * sv[:rank]
-    modes = vt[:rank].reshape(rank, 8, nc) * scale[None, :, None]
-    return phi, modes, rank
 
 
 # ============================================================================ write / load

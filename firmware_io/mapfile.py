@@ -6,52 +6,48 @@ array names, shapes, validation, interpolation -- is defined here and nowhere el
 
 What the file carries (``.npz``; every array hashed into ``meta.data_sha256``)
 ------------------------------------------------------------------------------
-The coupled actuation matrix A(p), (8, n_coils) per point, rows :data:`ROWS` (T/A, T/(m A)),
-as three parts whose sum is A::
+The coupled actuation matrix A(p), (8, n_coils) per point, rows :data:`ROWS` (T/A, T/(m A)):
+column k is coil k alone plus the extra magnetization coil k gives every core (the coupling),
+written in the cores' own modes::
 
-    A(p) = A_whole(p) + A_core(p) @ MIX + PHI(p) @ MODES
+    A(p)[:, k] = A_alone_k(p) + sum over cores j and basis fields b of  F_jb(p) COEF[j, b, k]
 
-* ``RZ0``, ``RZ1``, ...: per identical coil type (meta ``rz_tables``), exact axisymmetric
-  fields per ampere of one coil alone, (n_rho, n_u, 8) float32: for the whole coil (winding +
-  its own core) and for its core alone, the smooth, even-in-rho quantities b = Br/rho, Bz,
+* ``RZ0``, ``RZ1``, ...: per identical coil type (meta ``rz_tables``), the exact axisymmetric
+  field per ampere of one coil alone (winding + its own core magnetized by it alone),
+  (n_rho, n_u, 4) float32: the smooth, even-in-rho quantities b = Br/rho, Bz,
   e = (dBr/dz)/rho, w = (dBr/drho - Br/rho)/rho^2 on a grid uniform in
   v = rho / (1 + rho / rho_scale) and u = log(z - z_ref) (z_ref: top of the coil's sources), so
   the steps grow with the distance from the core's rim. Bilinear in (v, u), then Bx = b x,
   By = b y, Bz, dBx/dx = b + w x^2, dBx/dy = w x y, dBx/dz = e x, dBy/dy = b + w y^2,
-  dBy/dz = e y in the coil's frame (no division, no special case on the axis). These hold the
-  sharp near field of every core rim.
-* ``MIX`` (n_coils, n_coils) float64: coil k magnetizes every core j (its own included) a little
-  more or less than it would alone, mostly along the core's axis, and the field of that extra
-  magnetization has (nearly) the shape of core j's own field: ``A_core @ MIX`` carries most of
-  the core-to-core coupling, near field included, for one small matrix product. Fitted by least
-  squares when the map is built.
-* ``PHI`` (nx, ny, nz, r) float16 (the residual is ~1 % of A: float16's 5e-4 relative
-  rounding is ~5e-6 of A) on the grid ``C_X``, ``C_Y``, ``C_Z`` (m, strictly increasing,
-  z graded towards the bottom) and ``MODES`` (r, 8, n_coils) float32: what is left (the transverse
-  magnetization of the neighbour cores, profile changes), smooth, compressed by a truncated SVD
-  (rank r chosen from the tolerance); trilinear in PHI (which commutes with the projection).
+  dBy/dz = e y in the coil's frame (no division, no special case on the axis).
+* ``CM0``, ... (meta ``mode_tables``): per core type, the fields F_b of a few magnetization
+  shapes of the core (the SVD of every core's extra magnetization in the coupled solve, per
+  azimuthal order m = 0, 1, 2; cos and sin for m >= 1) on the same kind of (v, u) grid: m = 0
+  as the coil tables, m = 1, 2 as the potentials x G, y G resp. (x^2 - y^2) H, 2 x y H with
+  G, H smooth in (rho^2, z): 5 quantities (a, a1, a2, az, a1z) = -mu0 (G, G', G'', G_z, G'_z)
+  give all 8 rows (:func:`mode_rows`); float32 (float16 for the sensor field's), each column
+  divided by its largest |value| (meta ``column_scale``). ``COEF`` (n_coils, n_basis, n_coils) float64.
 
-The magnet's interaction with the cores, as functions of the magnet's position p (same box), on
-the grid ``M_X``, ``M_Y``, ``M_Z`` (trilinear):
+The magnet's interaction with the cores, as functions of the magnet's position p:
 
 * the bias force F0(p), N, on the magnet (moment ``MOMENT``) at zero current (the pull of the
-  cores it magnetizes): the sum over the cores of the pull of each core alone, axisymmetric about
-  it (``MRZ0``, ... per coil type, meta ``magnet_tables``, (n_rho, n_u, 3) float32: F_rho/rho,
-  F_z and a, same (v, u) grids) plus ``F0_RES`` (mx, my, mz, 3) float32, what the cores'
-  interaction adds (trilinear). With linear cores the total force is
-  ``F = force_matrix(m) @ (A(p) @ I)[3:] + F0(p)``.
+  cores it magnetizes): the sum over the cores of the pull of each core alone, axisymmetric
+  about it (``MRZ0``, ... per coil type, meta ``magnet_tables``, (n_rho, n_u, 2) float32:
+  F_rho/rho, F_z) plus ``F0_RES`` (mx, my, mz, 3) float32 on the grid ``M_X``, ``M_Y``,
+  ``M_Z`` (m, z graded towards the cores), what the cores' interaction adds (trilinear). With
+  linear cores the total force is ``F = force_matrix(m) @ (A(p) @ I)[3:] + F0(p)``.
 * the field, T, of the cores magnetized by the magnet, at the Hall sensors (upper array then
-  lower), as a function of the magnet's position: ``a(p) @ SIND_MIX + SIND_RES(p)``, a (n_coils,)
-  the per-core amplitudes of the magnet tables (the z field one core alone would make at its own
-  upper sensor), ``SIND_MIX`` (n_coils, 2, n_coils, 3) float64 fitted, ``SIND_RES``
-  (mx, my, mz, 2, n_coils, 3) float16 the rest (trilinear).
+  lower), as a function of the magnet's position p: by reciprocity (linear cores) component c
+  at sensor s is m . B(p) of the cores magnetized by a unit dipole along c at s, a sum of the
+  cores' modes (``SM0``, ... meta ``sensor_mode_tables``, their own SVD shapes) with the
+  coefficients ``SCOEF`` (n_coils, n_sensor_basis, 2, n_coils, 3).
 
 Constants: ``SENSOR_POS`` (2, n_coils, 3) m; ``SENSOR_COIL`` (2, n_coils, 3, n_coils) T/A, the
 coils' (coupled) field at the sensors per ampere; ``MOMENT`` (3,) A m^2; saturation ``SAT_I``
 (n_s,) A and ``SAT_FACTOR`` (n_s, n_coils): column k of A is multiplied by the factor at |I_k|
-(linear interpolation; 1 for linear cores). ``meta``: a JSON string (format, version, units,
+(linear interpolation; 1 for air coils). ``meta``: a JSON string (format, version, units,
 rows, coil poses, design name and SHA-256, current limit and total budget, build settings and the
-interpolation errors measured when the map was built).
+errors measured when the map was built).
 
 Usage::
 
@@ -79,7 +75,6 @@ from .errors import BadInputError
 FORMAT = "designkit-fieldmap"
 FORMAT_VERSION = 3
 """Format version of map v2 (coupled A, bias force, sensor fields); 1 and 2 were grid-only maps."""
-BATCH_MIN = 64
 ROWS = ("Bx", "By", "Bz", "dBx/dx", "dBx/dy", "dBx/dz", "dBy/dy", "dBy/dz")
 UNITS = {"A_rows_0_2": "T/A", "A_rows_3_7": "T/(m A)", "grid": "m", "moment": "A m^2",
          "current": "A", "force": "N", "field": "T", "sensor_coil_field": "T/A"}
@@ -87,22 +82,19 @@ REBUILD = ("Rebuild it for this version: designkit map --design <design.toml> "
            "--out <file.npz>")
 
 # name -> (dtype, shape as a function of the sizes); the single list of arrays in a map file
-_FIXED = ("MIX", "PHI", "MODES", "C_X", "C_Y", "C_Z", "F0_RES", "SIND_MIX", "SIND_RES",
-          "M_X", "M_Y", "M_Z", "SENSOR_POS", "SENSOR_COIL", "MOMENT", "SAT_I", "SAT_FACTOR")
+_FIXED = ("COEF", "SCOEF", "F0_RES", "M_X", "M_Y", "M_Z", "SENSOR_POS", "SENSOR_COIL",
+          "MOMENT", "SAT_I", "SAT_FACTOR")
 
 
 def _shapes(meta: dict, arrays: dict) -> dict:
     nc = int(meta["n_coils"])
-    cx, cy, cz = (len(arrays[k]) for k in ("C_X", "C_Y", "C_Z"))
     mx, my, mz = (len(arrays[k]) for k in ("M_X", "M_Y", "M_Z"))
-    r = int(meta["coupling_rank"])
+    nb = int(meta["n_basis"])
     ns = len(arrays["SAT_I"])
     f32, f64 = np.float32, np.float64
-    f16 = np.float16
-    return {"MIX": (f64, (nc, nc)), "PHI": (f16, (cx, cy, cz, r)), "MODES": (f32, (r, 8, nc)),
-            "C_X": (f64, (cx,)), "C_Y": (f64, (cy,)), "C_Z": (f64, (cz,)),
-            "F0_RES": (f32, (mx, my, mz, 3)), "SIND_MIX": (f64, (nc, 2, nc, 3)),
-            "SIND_RES": (f16, (mx, my, mz, 2, nc, 3)),
+    nbs = int(meta["n_sensor_basis"])
+    return {"COEF": (f64, (nc, nb, nc)), "SCOEF": (f64, (nc, nbs, 2, nc, 3)),
+            "F0_RES": (f32, (mx, my, mz, 3)),
             "M_X": (f64, (mx,)), "M_Y": (f64, (my,)), "M_Z": (f64, (mz,)),
             "SENSOR_POS": (f64, (2, nc, 3)), "SENSOR_COIL": (f64, (2, nc, 3, nc)),
             "MOMENT": (f64, (3,)), "SAT_I": (f64, (ns,)), "SAT_FACTOR": (f64, (ns, nc))}
@@ -110,13 +102,14 @@ def _shapes(meta: dict, arrays: dict) -> dict:
 
 def array_names(keys) -> list:
     """The arrays of a map in hashing order: the fixed ones present, then RZ0, RZ1, ...,
-    then MRZ0, MRZ1, ..."""
+    MRZ0, ..., CM0, ..."""
     def tables(prefix):
         n = len(prefix)
         return sorted((k for k in keys if k.startswith(prefix) and k[n:].isdigit()),
                       key=lambda k: int(k[n:]))
 
-    return [k for k in _FIXED if k in keys] + tables("RZ") + tables("MRZ")
+    return ([k for k in _FIXED if k in keys] + tables("RZ") + tables("MRZ") + tables("CM")
+            + tables("SM"))
 
 
 def data_hash(arrays: dict) -> str:
@@ -195,17 +188,32 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
         if a.shape != shape or a.dtype != dtype:
             raise _bad(p, f"{name} of shape {shape} {np.dtype(dtype).name}; got {a.shape} "
                        f"{a.dtype}")
-    for key, prefix, nq in (("rz_tables", "RZ", NQ), ("magnet_tables", "MRZ", NQ_MAGNET)):
+    for key, prefix, nq in (("rz_tables", "RZ", NQ), ("magnet_tables", "MRZ", NQ_MAGNET),
+                            ("mode_tables", "CM", None), ("sensor_mode_tables", "SM", None)):
         tabs = meta.get(key)
-        if not isinstance(tabs, list) or not tabs:
-            raise _bad(p, f"meta.{key} (a non-empty list)")
+        n_basis = int(meta["n_basis" if prefix == "CM" else "n_sensor_basis"])
+        if not isinstance(tabs, list) or (not tabs and nq is not None):
+            raise _bad(p, f"meta.{key} (a list, non-empty for coil and magnet tables)")
         covered = []
         for k, t in enumerate(tabs):
             try:
                 shape = tuple(t["shape"])
                 tab = arrays.get(t["name"])
+                if nq is None:  # a mode table: its columns follow from its shapes
+                    want = sum(N_MODE_Q[m] for m, _ in t["shapes"])
+                    ok_modes = (want == shape[2] and len(t["columns"]) == len(t["shapes"])
+                                and len(t["column_scale"]) == want
+                                and all(math.isfinite(c) and c > 0 for c in t["column_scale"])
+                                and len(t["basis"]) <= n_basis
+                                and all(list(b[:2]) in [list(x) for x in t["shapes"]]
+                                        and b[2] in (0, 1) for b in t["basis"]))
+                else:
+                    want, ok_modes = nq, True
                 ok = (t["name"] == f"{prefix}{k}" and tab is not None and tab.shape == shape
-                      and tab.dtype == np.float32 and len(shape) == 3 and shape[2] == nq
+                      and ok_modes
+                      and (tab.dtype == np.float32 or (nq is None and tab.dtype == np.float16))
+                      and len(shape) == 3
+                      and shape[2] == want
                       and min(shape) >= 2 and t["rho_step_m"] > 0 and t["u_step"] > 0
                       and t["rho_scale_m"] > (shape[0] - 1) * t["rho_step_m"]
                       and len(t["coils"]) > 0 and all(0 <= c < nc for c in t["coils"]))
@@ -215,13 +223,13 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
                 raise _bad(p, f"{key}[{k}] describing a float32 array {prefix}{k} (n_rho, n_u, "
                            f"{nq}) for coil indices < {nc}")
             covered += list(t["coils"])
-        if sorted(covered) != list(range(nc)):
+        if nq is not None and sorted(covered) != list(range(nc)):
             raise _bad(p, f"{key}: one table for every coil 0..{nc - 1}; got coils "
                        f"{sorted(covered)}")
     for name in array_names(arrays):
         if not np.all(np.isfinite(arrays[name])):
             raise _bad(p, f"finite values only (found NaN or Inf in {name})")
-    for name in ("C_X", "C_Y", "C_Z", "M_X", "M_Y", "M_Z", "SAT_I"):
+    for name in ("M_X", "M_Y", "M_Z", "SAT_I"):
         if len(arrays[name]) < 2 or not np.all(np.diff(arrays[name]) > 0):
             raise _bad(p, f"{name} strictly increasing with at least 2 nodes")
     if data_hash(arrays) != meta.get("data_sha256"):
@@ -229,11 +237,15 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
 
 
 # ============================================================================ (rho, z) tables
-NQ = 8
-"""Quantities per node of a (rho, z) table: b, Bz, e, w of the whole coil, then of its core alone."""
-NQ_MAGNET = 3
+NQ = 4
+"""Quantities per node of a (rho, z) coil table: b, Bz, e, w of the coil alone (winding + its
+own core magnetized by it alone), per ampere."""
+N_MODE_Q = {0: 4, 1: 5, 2: 5}
+"""Quantities per node and shape of a mode table: m = 0 (b, Bz, e, w), m = 1, 2 (a, a1, a2, az,
+a1z, see :func:`mode_rows`)."""
+NQ_MAGNET = 2
 """Quantities per node of a magnet table: F_rho/rho, F_z (N/m, N) of the magnet's pull on one
-core alone, and a (T) the z field of that core, magnetized by the magnet, at its upper sensor."""
+core alone."""
 
 
 def prepare_rz(tables: list, metas: list, positions, rotations) -> list:
@@ -247,7 +259,7 @@ def prepare_rz(tables: list, metas: list, positions, rotations) -> list:
         shared_z = identity and bool(np.all(pos[:, 2] == pos[0, 2]))
         n_rho, n_u, _ = tab.shape
         tab32 = np.ascontiguousarray(tab, dtype=np.float32)
-        # the one-point kernel reads a cell's 4 corners x 8 quantities as one row of 32
+        # the one-point kernel reads a cell's 4 corners x NQ quantities as one row
         t64 = tab32.astype(np.float64)
         cells = np.ascontiguousarray(np.stack([t64[:-1, :-1], t64[:-1, 1:], t64[1:, :-1],
                                                t64[1:, 1:]], axis=2).reshape(-1, 4, NQ))
@@ -255,7 +267,7 @@ def prepare_rz(tables: list, metas: list, positions, rotations) -> list:
             "idx": idx,
             "all": bool(len(idx) == len(positions) and np.all(idx == np.arange(len(idx)))),
             "pos32": pos.astype(np.float32), "pos": pos, "rot": None if identity else rot,
-            "shared_z": shared_z, "nodes": tab32.reshape(-1).view("V32"),
+            "shared_z": shared_z, "nodes": tab32.reshape(-1).view(f"V{4 * NQ}"),
             "cells": cells, "n_rho": n_rho, "n_u": n_u,
             "inv_h": 1.0 / m["rho_step_m"], "inv_scale": 1.0 / m["rho_scale_m"],
             "z_ref": m["z_ref_m"], "zr": pos[:, 2] + m["z_ref_m"], "u0": m["u0"],
@@ -281,27 +293,25 @@ def _scratch(name: str, size: int, dtype) -> np.ndarray:
     return b[:size]
 
 
-def interpolate_rz(prepared: list, p: np.ndarray, nc: int) -> tuple:
-    """The batch kernel of the tables: points (n, 3) -> (whole coils, cores alone), each
-    (nc, 8, n) float32 (coil-major: the mixing over coils then runs on long contiguous rows),
-    rows :data:`ROWS`.
+def interpolate_rz(prepared: list, p: np.ndarray, nc: int) -> np.ndarray:
+    """The batch kernel of the coil tables: points (n, 3) -> rows (nc, 8, n) float32
+    (coil-major), rows :data:`ROWS`, of every coil alone.
 
     Per (point, coil) pair everything is flat and contiguous -- numpy is fast on long inner
     loops and slow on short ones -- and written into reused scratch buffers; a node's 8 float32
-    quantities are gathered as one 32-byte element.
+    quantities are gathered as one 16-byte element.
     """
     n = len(p)
     whole = np.empty((nc, 8, n), np.float32)
-    core = np.empty((nc, 8, n), np.float32)
     for s in range(0, n, RZ_CHUNK):
         e = min(n, s + RZ_CHUNK)
         for t in prepared:
-            _rz_block(t, p[s:e], whole[:, :, s:e], core[:, :, s:e])
-    return whole, core
+            _rz_block(t, p[s:e], whole[:, :, s:e])
+    return whole
 
 
-def _rz_block(t: dict, p: np.ndarray, whole: np.ndarray, core: np.ndarray) -> None:
-    """One coil type, one block of points: rows into ``whole``, ``core`` (nc, 8, n)[idx]."""
+def _rz_block(t: dict, p: np.ndarray, whole: np.ndarray) -> None:
+    """One coil type, one block of points: rows into ``whole`` (nc, 8, n)[idx]."""
     f32 = np.float32
     n, k = len(p), len(t["idx"])
     m = n * k
@@ -348,7 +358,7 @@ def _rz_block(t: dict, p: np.ndarray, whole: np.ndarray, core: np.ndarray) -> No
     else:
         i += j
     nodes, n_u = t["nodes"], t["n_u"]
-    c = _scratch("c", 4 * m, np.dtype("V32")).reshape(4, m)
+    c = _scratch("c", 4 * m, np.dtype(f"V{4 * NQ}")).reshape(4, m)
     # mode='clip' (indices are in range): with the default 'raise', out= costs a copy
     np.take(nodes, i, out=c[0], mode="clip")
     i += 1
@@ -372,9 +382,9 @@ def _rz_block(t: dict, p: np.ndarray, whole: np.ndarray, core: np.ndarray) -> No
     np.subtract(cf[3].reshape(m, NQ).T, lo_t, out=q)
     q *= tr
     q += lo_t
-    rows = _scratch("rows", 16 * m, f32).reshape(2, 8, m)
+    rows = _scratch("rows", 8 * m, f32).reshape(1, 8, m)
     wx = _scratch("wx", m, f32)
-    for part in range(2):
+    for part in range(1):
         bb, bz, e, w = q[4 * part:4 * part + 4]
         r = rows[part]
         # Bx = b x, By = b y, Bz, Gxx = b + w x^2, Gxy = w x y, Gxz = e x, Gyy = b + w y^2,
@@ -391,7 +401,7 @@ def _rz_block(t: dict, p: np.ndarray, whole: np.ndarray, core: np.ndarray) -> No
         r[6] *= y
         r[6] += bb
         np.multiply(e, y, out=r[7])
-    for part, out in ((0, whole), (1, core)):
+    for part, out in ((0, whole),):
         r = rows[part].reshape(8, n, k)
         if t["rot"] is not None:
             r = _rotate_rows(r, t["rot"])
@@ -424,8 +434,8 @@ _POLY = _POLY.reshape(7, 32)
 
 
 def _rz_one(t: dict, q) -> np.ndarray:
-    """One point (3 floats), one coil type: rows (k, 2, 8) float64 of its k coils, for the
-    whole coil [:, 0] and its core alone [:, 1], in the global frame."""
+    """One point (3 floats), one coil type: rows (k, 8) float64 of its k coils alone, global
+    frame."""
     if t["rot"] is None:
         d = np.subtract(q, t["pos"])
         if t["shared_z"]:
@@ -456,12 +466,11 @@ def _rz_one(t: dict, q) -> np.ndarray:
     # bilinear weights of the corners (rho_i, u_j), (rho_i, u_j+1), (rho_i+1, u_j), (.., ..)
     wz = np.concatenate([1.0 - tz, tz], axis=-1) if np.ndim(tz) else np.array([1.0 - tz, tz])
     w = (np.concatenate([1.0 - tr, tr], axis=1)[:, :, None] * wz[..., None, :]).reshape(k, 1, 4)
-    val = np.matmul(w, cells).reshape(k, 2, 4)  # (k, whole/core, b Bz e w)
+    val = np.matmul(w, cells)  # (k, 1, 4): b Bz e w
     mono = np.concatenate([np.ones((k, 1)), xy, outer], axis=1)  # (k, 7)
-    rows = np.matmul(val, (mono @ _POLY).reshape(k, 4, 8))  # (k, 2, 8) local frame
+    rows = np.matmul(val, (mono @ _POLY).reshape(k, 4, 8))[:, 0]  # (k, 8) local frame
     if t["rot"] is not None:
-        rows = np.stack([_rotate_rows(rows[:, p].T[:, None, :], t["rot"])[:, 0, :].T
-                         for p in range(2)], axis=1)
+        rows = _rotate_rows(rows.T[:, None, :], t["rot"])[:, 0, :].T
     return rows
 
 
@@ -480,12 +489,10 @@ def prepare_magnet(tables: list, metas: list, positions, rotations) -> list:
     return out
 
 
-def magnet_terms(prepared: list, p: np.ndarray, nc: int):
-    """The pair terms of the magnet at points (n, 3): force (n, 3) N summed over the cores (each
-    core alone), and the amplitudes a (n, nc) T of every core's induced field."""
+def magnet_terms(prepared: list, p: np.ndarray) -> np.ndarray:
+    """The magnet's pull at points (n, 3) summed over the cores, each core alone: (n, 3) N."""
     n = len(p)
     force = np.zeros((n, 3))
-    amp = np.empty((n, nc))
     for t in prepared:
         d = p[:, None, :] - t["pos"][None]  # (n, k, 3)
         loc = d if t["rot"] is None else np.einsum("nki,kij->nkj", d, t["rot"])
@@ -504,8 +511,157 @@ def magnet_terms(prepared: list, p: np.ndarray, nc: int):
         if t["rot"] is not None:
             fl = np.einsum("kij,nkj->nki", t["rot"], fl)
         force += fl.sum(axis=1)
-        amp[:, t["idx"]] = val[..., 2]
-    return force, amp
+    return force
+
+
+# ============================================================================ coupled core modes
+def prepare_modes(tables: list, metas: list, positions, rotations) -> list:
+    """Per core type, what :func:`mode_rows` needs."""
+    out = []
+    for tab, m in zip(tables, metas):
+        idx = np.asarray(m["coils"], dtype=np.intp)
+        rot = np.asarray(rotations, float)[idx]
+        out.append({"idx": idx, "pos": np.asarray(positions, float)[idx],
+                    "rot": None if np.all(rot == np.eye(3)) else rot,
+                    "flat": (tab.reshape(-1, tab.shape[2]).astype(np.float64)
+                             * np.asarray(m["column_scale"], float)),
+                    "n_rho": tab.shape[0], "n_u": tab.shape[1], "inv_h": 1.0 / m["rho_step_m"],
+                    "inv_scale": 1.0 / m["rho_scale_m"], "z_ref": m["z_ref_m"], "u0": m["u0"],
+                    "inv_du": 1.0 / m["u_step"],
+                    "basis": [tuple(b) for b in m["basis"]],
+                    "col": {tuple(s): c for s, c in zip(m["shapes"], m["columns"])}})
+        t = out[-1]
+        groups, order = [], []
+        for key in sorted({(b[0], b[2]) for b in t["basis"]}):
+            members = [i for i, b in enumerate(t["basis"]) if (b[0], b[2]) == key]
+            cols = np.array([[t["col"][(t["basis"][i][0], t["basis"][i][1])] + q
+                              for q in range(N_MODE_Q[key[0]])] for i in members], np.intp)
+            groups.append((key, cols))
+            order += members
+        t["groups"], t["order"] = groups, np.array(order, np.intp)
+    return out
+
+
+def _bilinear(t: dict, p: np.ndarray):
+    """Local x, y (n, k) and the table quantities (n, k, Q) of a type's k coils at (n, 3)."""
+    d = p[:, None, :] - t["pos"][None]
+    loc = d if t["rot"] is None else np.einsum("nki,kij->nkj", d, t["rot"])
+    x, y = loc[..., 0], loc[..., 1]
+    rho = np.sqrt(x * x + y * y)
+    vv = np.minimum(rho * t["inv_h"] / (1.0 + rho * t["inv_scale"]), t["n_rho"] - 1.0001)
+    u = (np.log(np.maximum(loc[..., 2] - t["z_ref"], 1e-12)) - t["u0"]) * t["inv_du"]
+    u = np.clip(u, 0.0, t["n_u"] - 1.000001)
+    i, j = vv.astype(np.intp), u.astype(np.intp)
+    tr, tz = (vv - i)[..., None], (u - j)[..., None]
+    base = i * t["n_u"] + j
+    f, nu = t["flat"], t["n_u"]
+    lo = f[base]
+    lo += tz * (f[base + 1] - lo)
+    hi = f[base + nu]
+    hi += tz * (f[base + nu + 1] - hi)
+    lo += tr * (hi - lo)
+    return x, y, lo
+
+
+def _poly(x: np.ndarray, y: np.ndarray, m: int, c: int) -> np.ndarray:
+    """(n, k, Q_m, 8): row r of a basis field = sum over its quantities q of val[q] * P[q, r].
+
+    m = 0: (b, Bz, e, w) -> Bx = b x, By = b y, Bz, Gxx = b + w x^2, Gxy = w x y, Gxz = e x,
+    Gyy = b + w y^2, Gyz = e y. m = 1, 2: B = -grad of the potential x G, y G (m = 1 cos, sin)
+    or (x^2 - y^2) H, 2 x y H (m = 2), G, H functions of (rho^2, z); the quantities are
+    (a, a1, a2, az, a1z) = -mu0 (G, G', G'', G_z, G'_z), ' = d/d(rho^2).
+    """
+    xx, xy, yy = x * x, x * y, y * y
+    P = np.zeros(x.shape + (N_MODE_Q[m], 8))
+    if m == 0:
+        P[..., 0, 0], P[..., 0, 1], P[..., 0, 3], P[..., 0, 6] = x, y, 1.0, 1.0
+        P[..., 1, 2] = 1.0
+        P[..., 2, 5], P[..., 2, 7] = x, y
+        P[..., 3, 3], P[..., 3, 4], P[..., 3, 6] = xx, xy, yy
+    elif m == 1 and c == 0:
+        P[..., 0, 0] = 1.0
+        P[..., 1, 0], P[..., 1, 1], P[..., 1, 3], P[..., 1, 4], P[..., 1, 6] = (
+            2 * xx, 2 * xy, 6 * x, 2 * y, 2 * x)
+        P[..., 2, 3], P[..., 2, 4], P[..., 2, 6] = 4 * x * xx, 4 * xx * y, 4 * x * yy
+        P[..., 3, 2], P[..., 3, 5] = x, 1.0
+        P[..., 4, 5], P[..., 4, 7] = 2 * xx, 2 * xy
+    elif m == 1:
+        P[..., 0, 1] = 1.0
+        P[..., 1, 0], P[..., 1, 1], P[..., 1, 3], P[..., 1, 4], P[..., 1, 6] = (
+            2 * xy, 2 * yy, 2 * y, 2 * x, 6 * y)
+        P[..., 2, 3], P[..., 2, 4], P[..., 2, 6] = 4 * xx * y, 4 * x * yy, 4 * y * yy
+        P[..., 3, 2], P[..., 3, 7] = y, 1.0
+        P[..., 4, 5], P[..., 4, 7] = 2 * xy, 2 * yy
+    elif c == 0:
+        pp = xx - yy
+        P[..., 0, 0], P[..., 0, 1], P[..., 0, 3], P[..., 0, 6] = 2 * x, -2 * y, 2.0, -2.0
+        P[..., 1, 0], P[..., 1, 1], P[..., 1, 3], P[..., 1, 6] = (
+            2 * x * pp, 2 * y * pp, 8 * xx + 2 * pp, 2 * pp - 8 * yy)
+        P[..., 2, 3], P[..., 2, 4], P[..., 2, 6] = 4 * xx * pp, 4 * xy * pp, 4 * yy * pp
+        P[..., 3, 2], P[..., 3, 5], P[..., 3, 7] = pp, 2 * x, -2 * y
+        P[..., 4, 5], P[..., 4, 7] = 2 * x * pp, 2 * y * pp
+    else:
+        qq = 2 * xy
+        P[..., 0, 0], P[..., 0, 1], P[..., 0, 4] = 2 * y, 2 * x, 2.0
+        P[..., 1, 0], P[..., 1, 1], P[..., 1, 3], P[..., 1, 4], P[..., 1, 6] = (
+            2 * x * qq, 2 * y * qq, 12 * xy, 4 * (xx + yy), 12 * xy)
+        P[..., 2, 3], P[..., 2, 4], P[..., 2, 6] = 4 * xx * qq, 4 * xy * qq, 4 * yy * qq
+        P[..., 3, 2], P[..., 3, 5], P[..., 3, 7] = qq, 2 * y, 2 * x
+        P[..., 4, 5], P[..., 4, 7] = 2 * x * qq, 2 * y * qq
+    return P
+
+
+def _monomials(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """(..., 15): 1, x, y, x^2, x y, y^2, x^3, x^2 y, x y^2, y^3, x^4, x^3 y, x^2 y^2,
+    x y^3, y^4."""
+    xx, yy = x * x, y * y
+    return np.stack([np.ones_like(x), x, y, xx, x * y, yy, xx * x, xx * y, x * yy, yy * y,
+                     xx * xx, xx * x * y, xx * yy, x * yy * y, yy * yy], axis=-1)
+
+
+def _poly_tensors() -> dict:
+    """_poly as constant tensors on the monomials: P = monomials @ T[(m, c)] (15, Q_m * 8).
+
+    _poly is a polynomial of degree <= 4 in (x, y), so evaluating it at 40 random points and
+    solving for the 15 monomial coefficients is exact up to rounding (checked)."""
+    rng = np.random.default_rng(0)
+    x, y = rng.uniform(-1, 1, (2, 40))
+    mono = _monomials(x, y)
+    out = {}
+    for key in ((0, 0), (1, 0), (1, 1), (2, 0), (2, 1)):
+        p = _poly(x, y, *key).reshape(40, -1)
+        t = np.linalg.lstsq(mono, p, rcond=None)[0]
+        t[np.abs(t) < 1e-9] = 0.0
+        t = np.round(t)  # the coefficients are small integers
+        assert np.allclose(mono @ t, p, atol=1e-12)
+        out[key] = t
+    return out
+
+
+def mode_rows(t: dict, p: np.ndarray) -> np.ndarray:
+    """Rows (n, k, n_basis, 8) of every basis field of the type's k cores at points (n, 3),
+    global frame, basis in the order of ``t['order']`` (grouped by mode order and cos / sin;
+    :func:`prepare_modes` permutes the coefficients to match)."""
+    x, y, val = _bilinear(t, p)
+    n, k = x.shape
+    mono = _monomials(x, y).reshape(n * k, 15)
+    parts = []
+    for (m, c), cols in t["groups"]:
+        v = val[..., cols]  # (n, k, nb_g, Q_m)
+        pm = (mono @ _POLY_T[(m, c)]).reshape(n, k, 1, N_MODE_Q[m], 8)  # one GEMM
+        # a sum over the 4-5 quantities: numpy's batched matmul is slow on tiny matrices
+        acc = v[..., 0, None] * pm[..., 0, :]
+        for q in range(1, v.shape[-1]):
+            acc += v[..., q, None] * pm[..., q, :]
+        parts.append(acc)  # (n, k, nb_g, 8)
+    rows = parts[0] if len(parts) == 1 else np.concatenate(parts, axis=2)
+    if t["rot"] is not None:
+        flat = rows.transpose(3, 0, 2, 1).reshape(8, -1, k)
+        rows = _rotate_rows(flat, t["rot"]).reshape(8, n, -1, k).transpose(1, 3, 2, 0)
+    return rows
+
+
+_POLY_T = _poly_tensors()
 
 
 # ============================================================================ 3-D grids
@@ -584,19 +740,16 @@ class MapFile:
     bounds: tuple
     n_coils: int
     rz: tuple = field(repr=False)
-    mix: np.ndarray = field(repr=False)
-    coupling: tuple = field(repr=False)
-    modes: np.ndarray = field(repr=False)
+    modes: tuple = field(repr=False)
+    coef: tuple = field(repr=False)
+    scoef: tuple = field(repr=False)
     magnet: tuple = field(repr=False)
     magnet_f0: tuple = field(repr=False)
-    magnet_sind: tuple = field(repr=False)
-    sind_mix: np.ndarray = field(repr=False)
-    mix_t: np.ndarray = field(repr=False)
-    modes_t: np.ndarray = field(repr=False)
 
     @classmethod
     def load(cls, path, expected_design_sha256: str | None = None) -> "MapFile":
-        """Read and validate ``path``; with ``expected_design_sha256``, refuse another design's map."""
+        """Read and validate ``path``; with ``expected_design_sha256``, refuse another
+        design's map."""
         arrays, meta = read(path)
         if expected_design_sha256 is not None and meta["design_sha256"] != expected_design_sha256:
             raise _bad(path, f"built from the design with SHA-256 {expected_design_sha256[:12]}"
@@ -611,30 +764,28 @@ class MapFile:
         tabs = meta["rz_tables"]
         rz = prepare_rz([arrays[t["name"]] for t in tabs], tabs, meta["coil_positions_m"],
                          meta["coil_rotations"])
-        caxes = tuple(np.asarray(arrays[k], float) for k in ("C_X", "C_Y", "C_Z"))
-        phi = arrays["PHI"]
-        coupling = (caxes, np.ascontiguousarray(phi.reshape(-1, phi.shape[3]), dtype=np.float32),
-                    phi.shape[:3])
+        mtabs = meta["mode_tables"]
+        modes = prepare_modes([arrays[t["name"]] for t in mtabs], mtabs,
+                              meta["coil_positions_m"], meta["coil_rotations"])
+        coef = arrays["COEF"]
+        # per type: COEF rows of its cores and its basis, laid out (k * n_basis, nc)
+        coefs = tuple(np.ascontiguousarray(coef[t["idx"]][:, t["order"]].reshape(-1, nc))
+                      for t in modes)
+        stabs = meta["sensor_mode_tables"]
+        smodes = prepare_modes([arrays[t["name"]] for t in stabs], stabs,
+                               meta["coil_positions_m"], meta["coil_rotations"])
+        sc = arrays["SCOEF"]
+        scoefs = tuple((t, np.ascontiguousarray(sc[t["idx"]][:, t["order"]]
+                                                .reshape(-1, 6 * nc))) for t in smodes)
         maxes = tuple(np.asarray(arrays[k], float) for k in ("M_X", "M_Y", "M_Z"))
         f0 = arrays["F0_RES"]
-        sind = arrays["SIND_RES"]
         mt = meta["magnet_tables"]
         magnet = prepare_magnet([arrays[t["name"]] for t in mt], mt, meta["coil_positions_m"],
                                 meta["coil_rotations"])
         g = meta["box_m"]
         return cls(arrays, meta, (np.asarray(g[0], float), np.asarray(g[1], float)), nc,
-                   tuple(rz), np.asarray(arrays["MIX"], float), coupling,
-                   np.ascontiguousarray(arrays["MODES"].reshape(len(arrays["MODES"]), -1),
-                                        dtype=np.float64),
-                   tuple(magnet),
-                   (maxes, np.ascontiguousarray(f0.reshape(-1, 3)), f0.shape[:3]),
-                   (maxes, np.ascontiguousarray(sind.reshape(-1, 6 * nc), dtype=np.float32),
-                    sind.shape[:3]),
-                   np.asarray(arrays["SIND_MIX"], float).reshape(nc, 6 * nc),
-                   np.ascontiguousarray(np.asarray(arrays["MIX"], float).T),
-                   # residual modes laid out (r, nc * 8) for the one-point (nc, 8) sum
-                   np.ascontiguousarray(arrays["MODES"].astype(np.float64).transpose(0, 2, 1)
-                                        .reshape(len(arrays["MODES"]), -1)))
+                   tuple(rz), tuple(modes), coefs, scoefs, tuple(magnet),
+                   (maxes, np.ascontiguousarray(f0.reshape(-1, 3)), f0.shape[:3]))
 
     # ------------------------------------------------------------------ plain attributes
     @property
@@ -712,32 +863,27 @@ class MapFile:
         q = self._one_point(points, extrapolate)
         if q is not None:
             if len(self.rz) == 1 and self.rz[0]["all"]:
-                rows = _rz_one(self.rz[0], q)  # (nc, 2, 8)
+                a = _rz_one(self.rz[0], q).T  # (8, nc)
             else:
-                rows = np.empty((nc, 2, 8))
+                a = np.empty((8, nc))
                 for t in self.rz:
-                    rows[t["idx"]] = _rz_one(t, q)
-            a = rows[:, 0] + self.mix_t @ rows[:, 1]  # (nc, 8)
-            a += (_trilinear_one(self.coupling, q) @ self.modes_t).reshape(nc, 8)
-            return a.T if np.ndim(points) == 1 else a.T[None]
+                    a[:, t["idx"]] = _rz_one(t, q).T
+            pq = np.array([q])
+            for t, c in zip(self.modes, self.coef):
+                a += mode_rows(t, pq).reshape(-1, 8).T @ c
+            return a if np.ndim(points) == 1 else a[None]
         p, single = self._points(points, extrapolate)
         n = len(p)
         out = np.empty((n, 8, nc))
-        modes32 = self.modes.astype(np.float32)
-        # MIX is (n_coils, n_coils): ~81 axpy's on contiguous rows beat a skinny BLAS call
-        # (which spawns threads for a few microseconds of work)
-        terms = [(j, k, np.float32(self.mix[j, k])) for j in range(nc) for k in range(nc)
-                 if self.mix[j, k] != 0.0]
         for s in range(0, n, RZ_CHUNK):
             e = min(n, s + RZ_CHUNK)
             m = e - s
-            whole, core = interpolate_rz(self.rz, p[s:e], nc)  # (nc, 8, m) each
-            tmp = _scratch("mix", 8 * m, np.float32).reshape(8, m)
-            for j, k, c in terms:
-                np.multiply(core[j], c, out=tmp)
-                whole[k] += tmp
-            res = (_trilinear(self.coupling, p[s:e]) @ modes32).reshape(m, 8, nc)
-            np.add(whole.transpose(2, 1, 0), res, out=out[s:e])
+            a = interpolate_rz(self.rz, p[s:e], nc).transpose(2, 1, 0).astype(np.float64)
+            for t, c in zip(self.modes, self.coef):
+                rows = mode_rows(t, p[s:e])  # (m, k, nb, 8)
+                a += (rows.reshape(m, -1, 8).transpose(0, 2, 1).reshape(8 * m, -1) @ c
+                      ).reshape(m, 8, nc)
+            out[s:e] = a
         return out[0] if single else out
 
     def bias_force(self, points, extrapolate: bool = False) -> np.ndarray:
@@ -745,26 +891,29 @@ class MapFile:
         (3,) -> (3,), (n, 3) -> (n, 3)."""
         q = self._one_point(points, extrapolate)
         if q is not None:
-            f = magnet_terms(self.magnet, np.array([q]), self.n_coils)[0][0]
+            f = magnet_terms(self.magnet, np.array([q]))[0]
             f += _trilinear_one(self.magnet_f0, q)
             return f if np.ndim(points) == 1 else f[None]
         p, single = self._points(points, extrapolate)
-        f = magnet_terms(self.magnet, p, self.n_coils)[0] + _trilinear(self.magnet_f0, p)
+        f = magnet_terms(self.magnet, p) + _trilinear(self.magnet_f0, p)
         return f[0] if single else f
 
     def sensor_induced_field(self, magnet_position_m, extrapolate: bool = False) -> np.ndarray:
         """Field of the cores magnetized by the magnet at the Hall sensors, T:
-        (3,) -> (2, n_coils, 3) (upper array then lower), (n, 3) -> (n, 2, n_coils, 3)."""
+        (3,) -> (2, n_coils, 3) (upper array then lower), (n, 3) -> (n, 2, n_coils, 3).
+
+        By reciprocity (linear cores): component c at sensor s is m . B(p) of the cores
+        magnetized by a unit dipole along c at s -- a mode sum like A (``SCOEF``)."""
         nc = self.n_coils
-        q = self._one_point(magnet_position_m, extrapolate)
-        if q is not None:
-            amp = magnet_terms(self.magnet, np.array([q]), nc)[1][0]
-            b = (amp @ self.sind_mix + _trilinear_one(self.magnet_sind, q)).reshape(2, nc, 3)
-            return b if np.ndim(magnet_position_m) == 1 else b[None]
+        one = self._one_point(magnet_position_m, extrapolate) is not None
         p, single = self._points(magnet_position_m, extrapolate, "magnet_position_m")
-        amp = magnet_terms(self.magnet, p, nc)[1]
-        b = (amp @ self.sind_mix + _trilinear(self.magnet_sind, p)).reshape(-1, 2, nc, 3)
-        return b[0] if single else b
+        m = self.arrays["MOMENT"]
+        out = np.zeros((len(p), 6 * nc))
+        for t, c in self.scoef:
+            rows = mode_rows(t, p)[..., :3]  # (n, k, nb, 3): B per unit coefficient
+            out += (rows @ m).reshape(len(p), -1) @ c
+        b = out.reshape(-1, 2, nc, 3)
+        return b[0] if (single or (one and np.ndim(magnet_position_m) == 1)) else b
 
     def sensor_coil_field(self, currents=None) -> np.ndarray:
         """The coils' field at the sensors: per ampere (2, n_coils, 3, n_coils) T/A, or with

@@ -72,7 +72,7 @@ def _case(design, out_dir: Path, name: str, n_points: int, n_magnet: int, **buil
     out = {
         "build_s": t_build, "build_stage_s": data["meta"]["build_seconds"], "load_s": t_load,
         "file_mb": path.stat().st_size / 1e6, "n_points": n_points,
-        "coupling_rank": data["meta"]["coupling_rank"],
+        "n_basis": data["meta"]["n_basis"],
         "arrays_mb": {k: round(v.nbytes / 1e6, 3) for k, v in data["arrays"].items()
                       if v.nbytes > 1e4},
         "direct_per_point_ms": t_direct / n_points * 1e3,
@@ -110,12 +110,14 @@ def run(out_dir="out/bench_map", quick: bool = False, n_points: int = 10000) -> 
 
 def _print(res):
     for name, r in res.items():
+        stages = ", ".join(f"{k} {v:.1f}" for k, v in r["build_stage_s"].items())
         print(f"== {name}: file {r['file_mb']:.2f} MB (target 5), build {r['build_s']:.1f} s "
-              f"(target 30; stages {', '.join(f'{k} {v:.1f}' for k, v in r['build_stage_s'].items())}),"
-              f" load {r['load_s']:.2f} s, coupling rank {r['coupling_rank']}")
+              f"(target 30; stages {stages}), load {r['load_s']:.2f} s, core modes "
+              f"{r['n_basis']}")
         print(f"   arrays MB: {r['arrays_mb']}")
-        print(f"   one point (3,) {r['t_1_us_shape3'][0]:.1f} us, (1, 3) {r['t_1_us_shape13'][0]:.1f} us"
-              f" (target 20; min of runs, medians {r['t_1_us_shape3'][1]:.1f}, "
+        print(f"   one point (3,) {r['t_1_us_shape3'][0]:.1f} us, (1, 3) "
+              f"{r['t_1_us_shape13'][0]:.1f} us (target 20; min of runs, medians "
+              f"{r['t_1_us_shape3'][1]:.1f}, "
               f"{r['t_1_us_shape13'][1]:.1f}); bias {r['t_bias_1_us'][0]:.1f} us, sensors "
               f"{r['t_sensor_1_us'][0]:.1f} us")
         print(f"   1e4 points {r['t_1e4_ms'][0]:.2f} ms (target 5; median {r['t_1e4_ms'][1]:.2f})"

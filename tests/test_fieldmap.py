@@ -5,9 +5,9 @@ The fast tests use air coils (no iron: the coupled model is exact superposition 
 the coupled iron-core array is in the slow tests (its array-level solve takes seconds)."""
 
 import json
+import math
 import subprocess
 import sys
-import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +26,7 @@ SMALL = default_design().replace(**{"core": None, "workspace.half_width_m": 0.03
 @pytest.fixture(scope="module")
 def mapfile(tmp_path_factory):
     path = tmp_path_factory.mktemp("map") / "small.npz"
-    fieldmap.write(path, fieldmap.build(SMALL, spacing=0.01, n_check=20, progress=False))
+    fieldmap.write(path, fieldmap.build(SMALL, n_check=20, progress=False))
     return path
 
 
@@ -150,7 +150,7 @@ def test_bad_files(mapfile, tmp_path):
         fieldmap.load(tmp_path / "missing.npz")
     arrays, meta = read(mapfile)
     bad = tmp_path / "bad.npz"
-    for name in ("PHI", "RZ0", "F0_RES", "SENSOR_COIL"):
+    for name in ("RZ0", "MRZ0", "F0_RES", "SENSOR_COIL"):
         a2 = arrays[name].copy()
         a2.reshape(-1)[0] = np.nan
         _resave(bad, {**arrays, name: a2}, meta)
@@ -160,8 +160,8 @@ def test_bad_files(mapfile, tmp_path):
         _resave(bad, {**arrays, name: a2}, meta)
         with pytest.raises(BadInputError, match="SHA-256"):
             fieldmap.load(bad)
-    _resave(bad, {k: v for k, v in arrays.items() if k != "MIX"}, meta)
-    with pytest.raises(BadInputError, match="MIX"):
+    _resave(bad, {k: v for k, v in arrays.items() if k != "COEF"}, meta)
+    with pytest.raises(BadInputError, match="COEF"):
         fieldmap.load(bad)
     _resave(bad, {**arrays, "RZ0": arrays["RZ0"][:-1]}, meta)
     with pytest.raises(BadInputError, match="RZ0"):
@@ -233,11 +233,11 @@ def test_cli_map_writes_one_file(tmp_path):
     toml.write_text(design_to_toml(SMALL.replace(**{"workspace.half_width_m": 0.01,
                                                     "workspace.z_max_m": 0.02})))
     out = tmp_path / "m.npz"
-    assert main(["map", "--design", str(toml), "--spacing", "5", "--out", str(out),
+    assert main(["map", "--design", str(toml), "--spacing", "10", "--out", str(out),
                  "--quiet"]) == 0
     assert sorted(f.name for f in tmp_path.iterdir()) == ["d.toml", "m.npz"]
     loaded = fieldmap.load(out)
-    assert loaded.meta["settings"]["spacing_m"] == pytest.approx(0.005)
+    assert loaded.meta["settings"]["spacing_m"] == pytest.approx(0.01)
     assert main(["map", "--spacing", "-1", "--out", str(out), "--quiet"]) == 1
 
 
@@ -260,7 +260,7 @@ TWO = default_design().replace(**{"array.rows": 1, "array.columns": 2,
 @pytest.fixture(scope="module")
 def coupled(tmp_path_factory):
     path = tmp_path_factory.mktemp("map") / "two.npz"
-    data = fieldmap.build(TWO, spacing=0.01, n_check=10, progress=False)
+    data = fieldmap.build(TWO, n_check=10, progress=False)
     fieldmap.write(path, data)
     return fieldmap.load(path, TWO), CoilArray.from_design(TWO)
 
@@ -273,19 +273,89 @@ def test_coupled_map_against_direct_coupled_model(coupled):
     p = rng.uniform(lo, hi, (300, 3))
     a = arr.actuation_matrix(p)
     err = np.abs(fm.actuation(p) - a).max(axis=(0, 2)) / np.abs(a).max(axis=(0, 2))
-    # measured 2026-11: what the default settings reach on the coupled model (see the
-    # report; the 1e-3 target needs mode tables of the coupled solution, not yet built)
-    assert np.all(err < 0.05), err
+    # target 1e-3; measured 2.1e-4 before i12c's last update, 1.3e-3 (dBx/dy) after it --
+    # not the tables' resolution nor float16 (both checked); see the report
+    assert np.all(err < 2e-3), err
     m = fm.moment_a_m2
     f = arr.bias_force(p[:20], m)
-    assert np.abs(fm.bias_force(p[:20]) - f).max() < 0.1 * np.abs(f).max()
+    # the bias force is the coarse part (per-core tables + a 25 mm grid): measured ~8 %
+    assert np.abs(fm.bias_force(p[:20]) - f).max() < 0.15 * np.abs(f).max()
     s = fm.sensor_positions_m
     np.testing.assert_allclose(s, arr.sensor_positions_m())
     direct = arr.actuation_matrix(s.reshape(-1, 3))[:, :3, :].reshape(2, 2, 3, 2)
     np.testing.assert_allclose(fm.sensor_coil_field(), direct, rtol=1e-12)
-    q = p[0]
-    b = arr.magnet_core_field(s.reshape(-1, 3), q, m).reshape(2, 2, 3)
-    assert np.abs(fm.sensor_induced_field(q) - b).max() < 0.6 * np.abs(b).max()
+    b = np.array([arr.magnet_core_field(s.reshape(-1, 3), q, m).reshape(2, 2, 3)
+                  for q in p[:10]])
+    # reciprocity through the modes: measured ~2-3 % of the largest induced field
+    assert np.abs(fm.sensor_induced_field(p[:10]) - b).max() < 0.05 * np.abs(b).max()
+    np.testing.assert_allclose(fm.sensor_induced_field(p[3]), fm.sensor_induced_field(p[:10])[3])
     sat = arr.saturation_correction(currents_a=np.linspace(0, 6, 7))
     np.testing.assert_allclose(fm.saturation_factor([6.0, -3.0]),
                                [sat["saturation_factor"][-1, 0], sat["saturation_factor"][3, 1]])
+
+
+# ---------------------------------------------------------------------------- mode formulas
+def _closed_form(kind, p, d):
+    """B = -grad(phi) and its gradient (central differences of the closed-form B) for the
+    harmonic potentials phi of the mode kinds, source at (0, 0, -d)."""
+    def b(q):
+        x, y, z = q[..., 0], q[..., 1], q[..., 2] + d
+        r2 = x * x + y * y + z * z
+        if kind == (1, 0):  # phi = x r^-3 (transverse dipole)
+            g = r2 ** -1.5
+            return -np.stack([g - 3 * x * x * r2 ** -2.5, -3 * x * y * r2 ** -2.5,
+                              -3 * x * z * r2 ** -2.5], -1)
+        if kind == (1, 1):  # phi = y r^-3
+            return -np.stack([-3 * x * y * r2 ** -2.5, r2 ** -1.5 - 3 * y * y * r2 ** -2.5,
+                              -3 * y * z * r2 ** -2.5], -1)
+        h, dh = r2 ** -2.5, -5 * r2 ** -3.5  # H = r^-5, dH/dx_i = -5 x_i r^-7
+        if kind == (2, 0):  # phi = (x^2 - y^2) r^-5
+            pp = x * x - y * y
+            return -np.stack([2 * x * h + pp * dh * x, -2 * y * h + pp * dh * y, pp * dh * z], -1)
+        qq = 2 * x * y  # phi = 2 x y r^-5
+        return -np.stack([2 * y * h + qq * dh * x, 2 * x * h + qq * dh * y, qq * dh * z], -1)
+
+    e = 1e-7
+    g = np.stack([(b(p + e * u) - b(p - e * u)) / (2 * e) for u in np.eye(3)], -1)
+    return b(p), g
+
+
+def test_mode_rows_reproduce_harmonic_fields():
+    # the table quantities of x G, y G (G = r^-3) and (x^2 - y^2) H, 2 x y H (H = r^-5) as
+    # functions of (rho^2, z): (a, a1, a2, az, a1z) = -(G, G', G'', G_z, G'_z); at table nodes
+    # the kernel's rows must equal the closed-form fields at any azimuth
+    from firmware_io.mapfile import N_MODE_Q, mode_rows, prepare_modes
+
+    d = 0.02
+    spec = {"rho_step_m": 1e-3, "rho_scale_m": 0.05, "z_ref_m": 0.0, "u0": math.log(0.005),
+            "u_step": 0.1}
+    n_rho, n_u = 30, 20
+    vn = spec["rho_step_m"] * np.arange(n_rho)
+    rho = vn / (1 - vn / spec["rho_scale_m"])
+    z = np.exp(spec["u0"] + spec["u_step"] * np.arange(n_u))
+    R2, Z = np.meshgrid(rho ** 2, z + d, indexing="ij")
+    s2 = R2 + Z * Z
+    g = [s2 ** -1.5, -1.5 * s2 ** -2.5, 3.75 * s2 ** -3.5, -3 * Z * s2 ** -2.5,
+         7.5 * Z * s2 ** -3.5]
+    h = [s2 ** -2.5, -2.5 * s2 ** -3.5, 8.75 * s2 ** -4.5, -5 * Z * s2 ** -3.5,
+         17.5 * Z * s2 ** -4.5]
+    tab = np.stack([-q for q in g] + [-q for q in h], -1)
+    scale = np.abs(tab).max(axis=(0, 1))
+    tab = (tab / scale).astype(np.float16)  # as stored in a map file
+    meta = {**spec, "coils": [0], "shape": list(tab.shape), "shapes": [[1, 0], [2, 0]],
+            "column_scale": scale.tolist(),
+            "columns": [0, 5], "basis": [[1, 0, 0], [1, 0, 1], [2, 0, 0], [2, 0, 1]]}
+    t = prepare_modes([tab], [meta], [[0.0, 0.0, 0.0]], [np.eye(3).tolist()])[0]
+    rng = np.random.default_rng(3)
+    i, j = rng.integers(1, n_rho - 1, 40), rng.integers(0, n_u - 1, 40)
+    phi = rng.uniform(0, 2 * np.pi, 40)
+    p = np.c_[rho[i] * np.cos(phi), rho[i] * np.sin(phi), z[j]]
+    rows = mode_rows(t, p)[:, 0]  # (n, nb in t['order'], 8)
+    order = [tuple(meta["basis"][k]) for k in t["order"]]
+    assert N_MODE_Q[1] == N_MODE_Q[2] == 5
+    for b_idx, (m, _, c) in enumerate(order):
+        bb, gg = _closed_form((m, c), p, d)
+        want = np.concatenate([bb, gg[:, 0, :], gg[:, 1, 1:]], axis=1)
+        scale = np.abs(want).max()
+        np.testing.assert_allclose(rows[:, b_idx], want, rtol=0, atol=3e-3 * scale,
+                                   err_msg=f"mode {m}, {'sin' if c else 'cos'}")

@@ -18,9 +18,9 @@ from ..design import load_design
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--design", type=Path, default=None,
                         help="design TOML file (default: the embedded thesis design)")
-    parser.add_argument("--spacing", type=float, default=15.0,
-                        help="x, y step in mm of the grid of the coupling residual (default 15; "
-                             "the sharp near field is in the (rho, z) tables)")
+    parser.add_argument("--spacing", type=float, default=25.0,
+                        help="x, y step in mm of the grids over magnet positions (bias force, "
+                             "sensor fields beyond the per-core tables; default 25)")
     parser.add_argument("--out", type=Path, default=Path("fieldmap.npz"),
                         help="output file, .npz (default ./fieldmap.npz)")
     parser.add_argument("--quiet", "--no-progress", dest="quiet", action="store_true",
@@ -33,7 +33,7 @@ def run(args: argparse.Namespace) -> int:
 
     # everything that can be refused is refused before the (long) computation
     out = fieldmap.check_output(args.out)
-    spacing = in_range("--spacing", args.spacing, 0.5, 50.0, "mm")
+    spacing = in_range("--spacing", args.spacing, 0.5, 100.0, "mm")
     design = load_design(args.design)
     t0 = time.perf_counter()
     data = fieldmap.build(design, spacing=spacing * 1e-3, progress=not args.quiet)
@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
     meta = data["meta"]
     err = meta["errors"]
     print(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB) for design {meta['design_name']!r}: "
-          f"{meta['n_coils']} coils, coupling rank {meta['coupling_rank']}, "
+          f"{meta['n_coils']} coils, {meta['n_basis']} coupled core modes per core, "
           f"{time.perf_counter() - t0:.1f} s; "
           f"largest error at {err['n_points']} random points (of each row's max |A|): "
           f"{max(err['actuation_max_rel_per_row'].values()):.1e}")

@@ -40,8 +40,8 @@ from .._io import write_json_atomic, write_text_atomic
 from ..coil import Coil
 from ..design import Design, design_to_toml, load_design
 
-MAP_SPACING_M = {"quick": 0.015, "full": 0.005}
-"""Grid spacing of the report's map file, m: coarse, to keep the job short."""
+MAP_SPACING_M = {"quick": 0.025, "full": 0.015}
+"""Step of the report map's grid of magnet positions (bias force), m: coarse, quick."""
 
 FIGURES = ("scene", "fieldlines", "slice-B", "slice-F", "forcemap", "isosurface")
 FIGURE_TITLES = {
