@@ -21,14 +21,18 @@ into azimuthal orders m (:mod:`designkit.coupling`). So nothing of A is sampled 
   interpolation error counts ~0.15 x.
 * SVD truncation and m >= 3 (below 1e-4 of the coupling, designkit.coupling) are the rest.
 
-Measured on the default 3 x 3 array (``studies/bench_map.py``, 1000 random points, Nov 2026,
-machine heavily loaded): A within 4.3e-4 of each row's maximum (every row), file 3.8 MB; the
-sensor-induced field (same modes, by reciprocity) within 2 % of its maximum (the discrete solve
-is reciprocal only to its discretization); the bias force within 0.3 % (per-core pull tables
-plus a 25 mm grid of the cores' interaction). Not met: speed. A lookup is now a sum over 9
-cores x ~20 core modes (~25 k multiply-adds per point): ~0.4 ms for one point and ~3 s for 1e4
-points on the loaded machine (targets 20 us, 5 ms), and the build (coupled solve, mode tables,
-nonlinear saturation solves) took 214 s there (target 30 s).
+Measured on the default 3 x 3 array (``studies/bench_map.py``, Nov 2026, machine heavily
+loaded): file 3.75 MB; A within 4.3e-4 of each row's maximum at 1000 random points against the
+coupled model as first merged, 1.27e-3 (dBx/dx; other rows <= 7.1e-4) at 300 points after
+designkit.coupling's update that evaluates each core's own column by designkit.core's (sharper)
+rules -- the decomposition itself is exact to 1.3e-5 and neither finer tables nor float32 nor
+more modes changed the 2-core error, which sits at the core rims: to be resolved with the
+coupling's quadrature rules. The sensor-induced field (same modes, by reciprocity) within 2 % of
+its maximum; the bias force within 0.3 % (per-core pull tables plus a 25 mm grid of the cores'
+interaction). Not met: speed -- a lookup sums 9 cores x ~20 core modes (~25 k multiply-adds per
+point): ~160 us for one point, (3,) or (1, 3) alike, and ~1.5 s for 1e4 points on the loaded
+machine (targets 20 us, 5 ms); the build (mode tables, nonlinear saturation solves) took 163 s
+there (target 30 s).
 
 The build checks itself: it evaluates the coupled model directly at ``n_check`` random points
 in the box and records the errors of the finished map in ``meta['errors']``.
