@@ -580,8 +580,9 @@ class Localizer:
         rms = math.sqrt(cost / dof)
         if not converged:
             return False, "fit did not converge"
-        if not (np.all(p >= self.model.box_lower_m) and np.all(p <= self.model.box_upper_m)):
-            return False, "position outside the plausible box"
+        lo, hi = self.model.box_lower_m, self.model.box_upper_m
+        if not (np.all(p > lo + 1e-6) and np.all(p < hi - 1e-6)):
+            return False, "position at or outside the plausible box's edge"
         if rms > self.residual_limit:
             return False, f"residual {rms:.3g} > {self.residual_limit:g} (lost or implausible)"
         return True, ""
@@ -625,7 +626,9 @@ class Localizer:
                 p = p + step
                 converged = True
                 break
-            pn = p + step
+            # the position stays in the plausible box: far outside it the magnet's field vanishes
+            # and a step could run away on the (bounded) induced term alone
+            pn = np.minimum(np.maximum(p + step, self.model.box_lower_m), self.model.box_upper_m)
             rn, jn = resid(pn, True)
             cn = float(rn @ rn)
             if np.isfinite(cn) and cn <= cost:
