@@ -135,7 +135,8 @@ def print_table(s: dict) -> None:
               f"{100 * e['g_err_max']:.1f} %, max |d dBz/dz|/|G| {100 * e['dbz_err_max']:.1f} %")
     for key in sorted(k for k in s if k.startswith("block_")):
         e = s[key]
-        print(f"   magnet 10 mm above a mu_r 1000 block, {key[6:]}: FEM {1e3 * e['fem_fz_n']:.1f} mN"
+        print(f"   magnet 10 mm above a mu_r 1000 block, {key[6:]}: FEM"
+              f" {1e3 * e['fem_fz_n']:.1f} mN"
               f" vs image {1e3 * e['image_fz_n']:.1f} mN ({100 * e['rel']:+.2f} %)")
     for key in sorted(k for k in s if k.startswith("pull_")):
         e = s[key]
