@@ -46,7 +46,6 @@ high-mu_r block) in the tests.
 from __future__ import annotations
 
 import math
-import shutil
 import subprocess
 import tempfile
 import time
@@ -55,7 +54,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..constants import MU0
 from ..errors import BadInputError, require
 from .runner import find_getdp
 
@@ -194,9 +192,6 @@ def build_mesh(bodies, msh_path, *, symmetry="none", level=0, refine=(), r_int=0
         gmsh.model.addPhysicalGroup(2, bnd, BOUNDARY)
 
         f = gmsh.model.mesh.field
-        surf = []
-        for bi, b in enumerate(bodies):
-            pass
         body_surfs = set()
         for ents in list(body_groups.values()) + [groups[MAGNET]]:
             for t in ents:
@@ -321,7 +316,8 @@ def problem_text(bodies, stats, *, mu_scale=1.0, r_int=0.25, r_ext=0.32,
     L.append("Formulation { { Name MagSta; Type FemEquation;")
     L.append("  Quantity { { Name a; Type Local; NameOfSpace Hcurl_a; } }")
     L.append("  Equation {")
-    L.append("    Galerkin { [ nu[] * Dof{d a}, {d a} ]; In Domain; Jacobian Vol; Integration I1; }")
+    L.append("    Galerkin { [ nu[] * Dof{d a}, {d a} ]; In Domain; Jacobian Vol;"
+             " Integration I1; }")
     if winds:
         L.append("    Galerkin { [ -js[], {a} ]; In Winds; Jacobian Vol; Integration I1; }")
     if has_mag:
