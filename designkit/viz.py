@@ -11,8 +11,9 @@ Two layers, as everywhere in designkit:
   shown) drawn in millimetres with titles and colour bars; :func:`save_png` writes it atomically
   and :func:`export_vtk` writes the datasets as ``.vtp`` / ``.vts`` files for ParaView.
 
-The force on the finger magnet is ``F = (grad B)^T m`` (ARCHITECTURE.md) with ``m`` the design's
-magnet moment along +z unless another moment is given.
+The force on the finger magnet is ``F = (grad B)^T m`` (:func:`designkit.array.force_matrix`,
+thesis eq. 2.5) with ``m`` the design's magnet moment (MagnetSpec.direction, default -z) unless
+another moment is given.
 
 pyvista is imported only here, lazily: without it the functions raise
 :class:`designkit.errors.MissingDependencyError` ("designkit.viz needs pyvista: pip install
@@ -60,8 +61,12 @@ _RES = {
 B_T, B_MT = "B (T)", "B magnitude (mT)"
 GRAD_T_M, F_N, F_MN, FZ_MN = "grad B (T/m)", "F (N)", "F magnitude (mN)", "Fz (mN)"
 CURRENT_A = "current (A)"
+IN_SOLID = "inside a core or winding"
+REACH_M = "height where |Fz| on the coil axes falls below the level (m)"
 
 _COPPER, _STEEL, _MAGNET = "#c87533", "#8c8c8c", "#b22222"
+MIN_ARROW = 0.3
+"""Shortest force arrow in the force map, as a fraction of the longest."""
 
 
 # ----------------------------------------------------------------------------- pyvista
@@ -119,9 +124,9 @@ def resolve_currents(design: "Design", currents: Sequence[float] | None = None) 
 
 
 def magnet_moment(design: "Design", moment=None) -> np.ndarray:
-    """The finger magnet's dipole moment, A m^2, shape (3,): the design's |m| along +z by default."""
+    """The finger magnet's dipole moment, A m^2, shape (3,): the design's (MagnetSpec.direction)."""
     if moment is None:
-        return np.array([0.0, 0.0, design.magnet.moment_a_m2])
+        return np.array(design.magnet.moment_vector_a_m2)
     return np.asarray(v.vector3("moment", moment, "A m^2"), dtype=float)
 
 
@@ -129,9 +134,8 @@ def array_field(design: "Design", points, currents: Sequence[float] | None = Non
                 gradient: bool = True):
     """Flux density (and gradient) of the design's whole coil array at points.
 
-    Uses :class:`designkit.array.CoilArray` over the energized coils (coils at 0 A are skipped);
-    falls back to summing :meth:`designkit.Coil.field` at :meth:`Design.coil_centres_m` when
-    designkit.array is not available.
+    :class:`designkit.array.CoilArray` of the whole array (its cores solved together, so the
+    unpowered coils' cores count too): the one place where the coils' fields are summed.
 
     Parameters
     ----------
@@ -148,48 +152,28 @@ def array_field(design: "Design", points, currents: Sequence[float] | None = Non
     """
     import warnings
 
-    from .coil import Coil
+    from .array import array_for_design
 
     p, _ = v.points(points)
     cur = resolve_currents(design, currents)
-    active = np.nonzero(cur)[0]
-    try:
-        from .array import CoilArray
-    except ImportError:
-        CoilArray = None
-    if CoilArray is not None and active.size:
-        # every core is iron whether its coil is powered or not: the whole coupled array
-        from .array import array_for_design
-
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            res = array_for_design(design).field(p, cur)
-        return res if gradient else res[0]
-    if CoilArray is not None and gradient:
-        return np.zeros((len(p), 3)), np.zeros((len(p), 3, 3))
-    b = np.zeros((len(p), 3))
-    g = np.zeros((len(p), 3, 3)) if gradient else None
-    base = Coil.from_design(design)
-    for centre, current in zip(design.coil_centres_m(), cur):
-        if current == 0.0:
-            continue
-        coil = base.moved(centre)
+    if not np.any(cur):
+        b, g = np.zeros((len(p), 3)), np.zeros((len(p), 3, 3))
+    else:
+        # the whole array, unpowered coils included: their cores are magnetized by the others
         with warnings.catch_warnings():
             # A figure is not the place to repeat the linear-core saturation warning for every
             # grid; `designkit report` states it once in its summary.
             warnings.simplefilter("ignore")
-            res = coil.field(p, float(current), gradient=gradient)
-        if gradient:
-            b += res[0]
-            g += res[1]
-        else:
-            b += res
+            b, g = array_for_design(design).field(p, cur)
     return (b, g) if gradient else b
 
 
 def force_from_gradient(gradient_t_per_m: np.ndarray, moment_a_m2: np.ndarray) -> np.ndarray:
-    """Force on a point dipole, ``F_j = sum_i m_i dB_i/dx_j``, N, shape (n, 3)."""
-    return np.einsum("nij,i->nj", np.asarray(gradient_t_per_m), np.asarray(moment_a_m2))
+    """Force on a point dipole in air, ``F = F(m) G5`` (:func:`designkit.array.force_matrix`),
+    N, shape (n, 3), from the gradient (n, 3, 3), T/m."""
+    from .array import force_matrix, g5_from_gradient
+
+    return g5_from_gradient(np.asarray(gradient_t_per_m)) @ force_matrix(moment_a_m2).T
 
 
 def _add_field_arrays(mesh, b, g=None, moment=None):
@@ -318,6 +302,7 @@ def slice_data(design: "Design", currents: Sequence[float] | None = None, *,
     for mesh in (vert, horiz):
         b, g = array_field(design, mesh.points, cur, gradient=True)
         _add_field_arrays(mesh, b, g, m)
+        mesh.point_data[IN_SOLID] = inside_solids(design, mesh.points).astype(np.uint8)
     return vert, horiz
 
 
@@ -385,11 +370,16 @@ def force_isosurface_data(design: "Design", currents: Sequence[float] | None = N
     cur = resolve_currents(design, currents)
     m = magnet_moment(design, moment)
     level = design.render.threshold_n if level_n is None else v.positive("level_n", level_n, "N")
-    top = _reach_height_m(design, cur, m, level)
-    half = max(_footprint_half_m(design), 0.8 * top)
+    reach = _reach_height_m(design, cur, m, level)
+    # a box sized to the array (twice its footprint, at most 4 footprints high), not to the
+    # reach of the surfaces (up to 0.5 m): the array would be a speck; the plot states the cut
+    foot = _footprint_half_m(design)
+    half = 2.0 * foot
+    top = max(min(reach, 4.0 * foot), design.workspace.z_max_m)
     vol = _image(pv, (-half, -half, design.workspace.z_min_m), (half, half, top), res["iso"])
     b, g = array_field(design, vol.points, cur, gradient=True)
     _add_field_arrays(vol, b, g, m)
+    vol.field_data[REACH_M] = [reach / 1.25]
     surface = vol.contour([-level * 1e3, level * 1e3], scalars=FZ_MN)
     return vol, surface, level
 
@@ -417,13 +407,87 @@ def _bar(title, **extra):
 
 
 def _title(p, text, font_size=12):
-    p.add_text(text, position="upper_left", font_size=font_size, color="black")
+    """Title at the upper left, each line wrapped to the width of its (sub)plot."""
+    import textwrap
+
+    width = p.window_size[0] / p.shape[1]
+    # VTK's default font: a character is about 0.6 font sizes wide, in pixels
+    chars = max(20, int(0.92 * width / (0.6 * font_size)))
+    lines = [w for line in text.split("\n") for w in (textwrap.wrap(line, chars) or [""])]
+    p.add_text("\n".join(lines), position="upper_left", font_size=font_size, color="black")
+
+
+def _vtk_tick_spacing(span: float) -> float:
+    """The major tick spacing ``vtkCubeAxesActor`` picks for an axis of this span (it labels
+    ``vmin + k * spacing`` whatever label count it is asked for, once that count reaches its
+    own; pyvista's ``_axis_label_values`` mirrors the same rule)."""
+    power = math.log10(span)
+    if power != 0.0:
+        power = math.copysign(abs(power) + 10.0e-10, power)
+    if power < 0.0:
+        power -= 1.0
+    decade = 10.0 ** float(int(power))
+    ticks = int(span / decade) + 1
+    return decade / (5.0 if ticks <= 2 else 2.0 if ticks < 5 else 1.0)
+
+
+def nice_ticks(lo: float, hi: float, target: int = 5) -> tuple[float, float, float]:
+    """``(lo', hi', step)``: the range widened so that the axis VTK draws over it is labelled
+    on round values: ``lo'`` a multiple of ``step``, ``step`` VTK's own tick spacing for the
+    widened span (a 1, 2 or 5 x 10^k), 3 to 11 labels; of those, the least widening (then the
+    label count nearest ``target`` + 1)."""
+    span = hi - lo
+    if not (span > 0 and math.isfinite(span)):
+        return lo - 1.0, hi + 1.0, 1.0
+    k = 10.0 ** math.floor(math.log10(span))
+    best = None
+    for base in (0.05, 0.1, 0.2, 0.25, 0.5, 1.0, 2.0, 2.5, 5.0):
+        step = base * k
+        a = math.floor(lo / step + 1e-9) * step
+        b = math.ceil(hi / step - 1e-9) * step
+        major = _vtk_tick_spacing(b - a)
+        if abs(a / major - round(a / major)) > 1e-9:
+            continue  # VTK would label a + j * major: not round
+        a, b = round(a / major) * major, b  # exact multiples, no 1e-17 residues in the labels
+        n = math.floor((b - a) / major + 1e-9)
+        if 2 <= n <= 10:
+            key = ((b - a) / span, abs(n - target))
+            if best is None or key < best[0]:
+                best = (key, (a, b, major))
+    return best[1] if best else (lo, hi, span / target)
+
+
+def _nice_bounds(bounds) -> tuple[list[float], dict]:
+    b = list(map(float, bounds))
+    counts = {}
+    for i, axis in enumerate("xyz"):
+        lo, hi, step = nice_ticks(b[2 * i], b[2 * i + 1])
+        b[2 * i], b[2 * i + 1] = lo, hi
+        # at least VTK's own count: it then labels lo + k * step (see _vtk_tick_spacing)
+        counts[f"n_{axis}labels"] = int(math.floor((hi - lo) / step + 1e-9)) + 1
+    return b, counts
 
 
 def _axes(p, mesh_bounds=None, location="outer", **kw):
-    p.show_bounds(bounds=mesh_bounds, xtitle="x (mm)", ytitle="y (mm)", ztitle="z (mm)",
+    """Axes in mm on round tick values (the bounds are widened to the nearest round ticks)."""
+    b, counts = _nice_bounds(p.bounds if mesh_bounds is None else mesh_bounds)
+    p.show_bounds(bounds=b, xtitle="x (mm)", ytitle="y (mm)", ztitle="z (mm)",
                   color="black", font_size=10, grid=False, location=location, ticks="outside",
-                  minor_ticks=False, **kw)
+                  minor_ticks=False, fmt="%g", **counts, **kw)
+    return b
+
+
+def _fit_camera(p, bounds_mm, elevation_deg=25.0, azimuth_deg=-58.0, margin=1.22):
+    """Look at the box from (elevation, azimuth) from just far enough that its bounding sphere,
+    widened by ``margin`` for the axis labels, fits the view: nothing is cut at the edges."""
+    b = np.asarray(bounds_mm, dtype=float)
+    every = np.asarray(p.bounds, dtype=float)  # every actor, e.g. coils below the axes box
+    b[0::2], b[1::2] = np.minimum(b[0::2], every[0::2]), np.maximum(b[1::2], every[1::2])
+    centre = (b[0::2] + b[1::2]) / 2
+    radius = 0.5 * float(np.linalg.norm(b[1::2] - b[0::2]))
+    half_angle = math.radians(p.camera.view_angle / 2)
+    _iso_camera(p, tuple(centre), margin * radius / math.sin(half_angle), elevation_deg,
+                azimuth_deg)
 
 
 def _add_device(p, design, blocks, *, opacity=1.0, magnet=True, workspace=True):
@@ -505,9 +569,7 @@ def plot_array_scene(design: "Design", currents: Sequence[float] | None = None, 
               f"magnet ({_magnet_text(design, moment)}) at the design point "
               f"z = {design.optimize.height_m * 1e3:.0f} mm; {_currents_text(cur)}",
            font_size=10)
-    _axes(p)
-    half = _footprint_half_m(design) * 1e3
-    _iso_camera(p, (0.0, 0.0, 0.0), 7.4 * half, elevation_deg=22.0)
+    _fit_camera(p, _axes(p), elevation_deg=22.0)
     return p
 
 
@@ -521,10 +583,15 @@ def plot_field_lines(design: "Design", currents: Sequence[float] | None = None, 
     blocks = scene_meshes(design, cur) if blocks is None else blocks
     p = _plotter(pv, window_size)
     _add_device(p, design, blocks, opacity=0.3, magnet=True, workspace=True)
+    clip_note = ""
     if lines.n_points:
         bmt = np.asarray(lines[B_MT])
-        hi = float(np.percentile(bmt, 98))
-        lo = max(hi * 1e-3, float(bmt.min()), 1e-6)
+        # the data range, as in the slices; a floor 4 decades down is the only clip, stated
+        hi = max(float(bmt.max()), 1e-6)
+        lo = max(float(bmt.min()), 1e-6)
+        if lo < hi * 1e-4:
+            lo = hi * 1e-4
+            clip_note = f"; colours below {lo:.2g} mT clipped"
         p.add_mesh(_mm(lines).tube(radius=0.7), scalars=B_MT, cmap="viridis", log_scale=True,
                    clim=(lo, hi), name="streamlines",
                    scalar_bar_args=_bar("B (mT)", fmt=_log_fmt(lo, hi)))
@@ -532,11 +599,8 @@ def plot_field_lines(design: "Design", currents: Sequence[float] | None = None, 
         p.add_text("no field: all coils at 0 A", position="lower_left", color="black")
     p.add_mesh(_mm(vol.outline()), color="grey", line_width=1)
     _title(p, f"Field lines of B, coloured by its magnitude (log scale)\n{_currents_text(cur)}; "
-              f"lines end at the edge of the computed box", font_size=11)
-    _axes(p)
-    b = np.asarray(vol.bounds) * 1e3
-    _iso_camera(p, (0.0, 0.0, (b[4] + b[5]) / 2), 2.9 * max(b[1] - b[0], b[5] - b[4]),
-                elevation_deg=12.0)
+              f"lines end at the edge of the computed box{clip_note}", font_size=11)
+    _fit_camera(p, _axes(p), elevation_deg=12.0)
     return p
 
 
@@ -556,6 +620,31 @@ def _section_lines(pv, design, blocks, view: Literal["xz", "xy"], height_m, z_lo
     return _mm(pv.merge(circles))
 
 
+def inside_solids(design: "Design", points) -> np.ndarray:
+    """Boolean mask (n,): the points (m) that lie inside a core or a winding of the array."""
+    p, _ = v.points(points)
+    c = design.coil
+    inside = np.zeros(len(p), dtype=bool)
+    for x, y, zc in design.coil_centres_m():
+        rho = np.hypot(p[:, 0] - x, p[:, 1] - y)
+        dz = p[:, 2] - zc
+        inside |= (rho >= c.inner_radius_m) & (rho <= c.outer_radius_m) & \
+            (np.abs(dz) <= c.length_m / 2)
+        if design.core is not None:
+            k = design.core
+            inside |= (rho <= k.radius_m) & (np.abs(dz - k.offset_m) <= k.length_m / 2)
+    return inside
+
+
+def _drop_solids(mesh):
+    """The slice without the cells that touch a point inside a solid (a structured grid)."""
+    solid = np.asarray(mesh[IN_SOLID], dtype=bool) if IN_SOLID in mesh.point_data.keys() \
+        else np.zeros(mesh.n_points, dtype=bool)
+    if not solid.any():
+        return mesh
+    return mesh.extract_points(~solid, adjacent_cells=False)
+
+
 def plot_slices(design: "Design", currents: Sequence[float] | None = None, *,
                 quantity: Literal["B", "F"] = "B", moment=None, height_m: float | None = None,
                 quality: Quality = "full", window_size=(1500, 640), data=None,
@@ -572,12 +661,18 @@ def plot_slices(design: "Design", currents: Sequence[float] | None = None, *,
                    if data is None else data)
     blocks = scene_meshes(design, cur) if blocks is None else blocks
     name = B_MT if quantity == "B" else F_MN
+    # points inside a core or a winding are not in air: they are left out of the picture
+    vert, horiz = (_drop_solids(mesh) for mesh in (vert, horiz))
     values = np.r_[np.asarray(vert[name]), np.asarray(horiz[name])]
-    # The 99th percentile, not the maximum: right above a core's rim the field is nearly
-    # singular and a few pixels would otherwise take the whole colour range.
-    hi = float(np.percentile(values, 99)) if values.size else 1.0
+    # the colour range is the data range (log scale: the near-singular values over a core's
+    # rim stay visible); only a floor 4 decades down is clipped, and then the title says so
+    hi = float(values.max()) if values.size else 1.0
     hi = hi if hi > 0 else 1.0
-    lo = max(hi * 1e-3, float(values.min()), 1e-9)
+    lo = max(float(values.min()), 1e-9)
+    clip_note = ""
+    if lo < hi * 1e-4:
+        lo = hi * 1e-4
+        clip_note = f"; colours below {lo:.2g} {'mT' if quantity == 'B' else 'mN'} clipped"
     label = "B (mT)" if quantity == "B" else "F (mN)"
     threshold_mn = design.render.threshold_n * 1e3
     z_low_m = -0.25 * design.coil.length_m  # show the top quarter of the coils
@@ -591,7 +686,7 @@ def plot_slices(design: "Design", currents: Sequence[float] | None = None, *,
                    name=f"slice-{view}", show_scalar_bar=(col == 1),
                    scalar_bar_args=_bar(label, fmt=_log_fmt(lo, hi), position_x=0.88,
                                         width=0.045))
-        notes = [_currents_text(cur), "cyan dot: design point"]
+        notes = [_currents_text(cur), "cyan dot: design point" + clip_note]
         if quantity == "F" and lo < threshold_mn < hi:
             iso = mm.contour([threshold_mn], scalars=name)
             if iso.n_points:
@@ -605,19 +700,21 @@ def plot_slices(design: "Design", currents: Sequence[float] | None = None, *,
                    render_points_as_spheres=True)
         bounds = list(mm.bounds)
         if view == "xz":
-            where = "vertical slice y = 0 (coils in outline below)"
+            where = "vertical slice y = 0 (coils in outline below; blank: inside iron)"
             bounds[4] = z_low_m * 1e3
             p.view_xz()
         else:
             where = f"horizontal slice z = {h * 1e3:.0f} mm"
             p.view_xy()
         _title(p, f"{head}\n{where}\n" + "; ".join(notes), font_size=10)
+        bounds, counts = _nice_bounds(bounds)
         p.show_bounds(bounds=bounds, xtitle="x (mm)", ytitle="y (mm)", ztitle="z (mm)",
                       color="black", font_size=9, grid=False, location="front",
-                      ticks="outside", show_yaxis=(view == "xy"), show_zaxis=(view == "xz"))
+                      ticks="outside", show_yaxis=(view == "xy"), show_zaxis=(view == "xz"),
+                      fmt="%g", **counts)
         p.enable_parallel_projection()
         p.reset_camera(bounds=bounds)
-        p.camera.zoom(1.12 if view == "xz" else 1.0)
+        p.camera.zoom(0.95 if view == "xz" else 0.9)  # room for the axis titles
         if view == "xy":
             # leave room for the colour bar on the right
             p.camera.position = tuple(np.asarray(p.camera.position) + (12.0, 0.0, 0.0))
@@ -637,7 +734,8 @@ def plot_force_map(design: "Design", currents: Sequence[float] | None = None, *,
              if data is None else data)
     blocks = scene_meshes(design, cur) if blocks is None else blocks
     p = _plotter(pv, window_size)
-    _add_device(p, design, blocks, opacity=1.0, magnet=False, workspace=True)
+    # see-through coils: opaque ones hide the arrows behind them in the oblique view
+    _add_device(p, design, blocks, opacity=0.25, magnet=False, workspace=True)
     f = np.asarray(cloud[F_N])
     fmag = np.linalg.norm(f, axis=1)
     fmax = float(fmag.max()) if fmag.size else 0.0
@@ -648,7 +746,8 @@ def plot_force_map(design: "Design", currents: Sequence[float] | None = None, *,
         # Length ~ sqrt(|F|): the force over a core is orders of magnitude above that at the
         # workspace's edge; a linear scale would show one arrow and dots.
         unit = f / np.where(fmag > 0, fmag, 1.0)[:, None]
-        mm["arrow"] = unit * np.sqrt(fmag / fmax)[:, None]
+        # at least MIN_ARROW of the spacing, so that the weak-force arrows stay visible
+        mm["arrow"] = unit * np.maximum(np.sqrt(fmag / fmax), MIN_ARROW)[:, None]
         glyphs = mm.glyph(orient="arrow", scale="arrow", factor=0.95 * spacing_mm,
                           geom=pv.Arrow(tip_length=0.35, tip_radius=0.15, shaft_radius=0.05))
         lo = max(fmax * 1e-3, float(fmag.min()) * 1e3, 1e-9)
@@ -660,10 +759,9 @@ def plot_force_map(design: "Design", currents: Sequence[float] | None = None, *,
     p.add_mesh(plane, color="#dddddd", opacity=0.25)
     _title(p, f"Force on the magnet ({_magnet_text(design, moment)}) at z = {h * 1e3:.0f} mm\n"
               f"largest: {fmax * 1e3:.4g} mN; {_currents_text(cur)}\n"
-              f"arrow length ~ square root of the force", font_size=11)
-    _axes(p)
-    half = _footprint_half_m(design) * 1e3
-    _iso_camera(p, (0.0, 0.0, h * 1e3 - 5.0), 7.2 * half, elevation_deg=38.0)
+              f"arrow length ~ square root of the force (at least {MIN_ARROW:g} of the "
+              f"largest)", font_size=11)
+    _fit_camera(p, _axes(p), elevation_deg=50.0)
     return p
 
 
@@ -688,14 +786,16 @@ def plot_force_isosurface(design: "Design", currents: Sequence[float] | None = N
         p.add_text(f"the vertical force stays below {lmn:g} mN everywhere in the box",
                    position="lower_left", color="black", font_size=11)
     p.add_mesh(_mm(vol.outline()), color="grey", line_width=1)
-    _title(p, f"Where the magnet ({_magnet_text(design, moment)}) feels Fz = +{lmn:g} mN "
-              f"(red, push up) and -{lmn:g} mN (blue, pull down)\n{_currents_text(cur)}; "
-              f"the force is larger between the surfaces and the coils; grey: computed box",
-           font_size=10)
-    _axes(p, np.asarray(vol.bounds) * 1e3)
     b = np.asarray(vol.bounds) * 1e3
-    _iso_camera(p, (0.0, 0.0, (b[4] + b[5]) / 2 - 30.0), 2.7 * max(b[1] - b[0], b[5] - b[4]),
-                elevation_deg=16.0)
+    reach = (f"; on the coil axes the vertical force passes {lmn:g} mN up to z = "
+             f"{float(vol.field_data[REACH_M][0]) * 1e3:.0f} mm" if REACH_M in vol.field_data
+             else "")
+    _title(p, f"Where the magnet ({_magnet_text(design, moment)}) feels Fz = +{lmn:g} mN "
+              f"(red, push up) and -{lmn:g} mN (blue, pull down); {_currents_text(cur)}\n"
+              f"the force is larger between the surfaces and the coils{reach}\n"
+              f"surfaces cut flat by the grey box: at z = {b[4]:.0f} mm (bottom of the "
+              f"workspace), z = {b[5]:.0f} mm and x, y = +-{b[1]:.0f} mm", font_size=10)
+    _fit_camera(p, _axes(p, b), elevation_deg=16.0, margin=1.12)
     return p
 
 
@@ -705,9 +805,49 @@ def save_png(plotter: "pyvista.Plotter", path: str | Path) -> Path:
     path = Path(path)
     if path.suffix.lower() != ".png":
         raise BadInputError("path", "a file name ending in .png", str(path))
+    _clear_bar_titles(plotter)
     with atomic_path(path, suffix=".png") as tmp:
         plotter.screenshot(str(tmp))
     return path
+
+
+def bar_label_values(lo: float, hi: float, log: bool) -> list[float]:
+    """Round label values for a colour bar over [lo, hi]: 1, 2, 5 x 10^k on a log bar (fewer
+    per decade when the range spans many), the ticks of :func:`nice_ticks` inside the range on
+    a linear one."""
+    if not (hi > lo):
+        return [lo]
+    if log and lo > 0:
+        for mants in ((1, 2, 5), (1, 3), (1,)):
+            vals = [m * 10.0 ** e for e in range(math.floor(math.log10(lo)),
+                                                math.ceil(math.log10(hi)) + 1) for m in mants]
+            vals = [x for x in vals if lo * (1 - 1e-9) <= x <= hi * (1 + 1e-9)]  # lo > 0 here
+            if len(vals) <= 7:
+                break
+        return vals if len(vals) >= 2 else [lo, hi]
+    a, b, step = nice_ticks(lo, hi)
+    vals = [a + k * step for k in range(int(round((b - a) / step)) + 1)]
+    return [x for x in vals if lo - 1e-9 * step <= x <= hi + 1e-9 * step]
+
+
+def _clear_bar_titles(plotter) -> None:
+    """Colour bars on round label values (:func:`bar_label_values`), their title lifted above
+    the top label (VTK draws them overlapping)."""
+    from vtkmodules.vtkCommonCore import vtkDoubleArray
+
+    for bar in plotter.scalar_bars.values():
+        size = bar.GetLabelTextProperty().GetFontSize()
+        bar.SetVerticalTitleSeparation(max(int(size), 12))
+        lut = bar.GetLookupTable()
+        if lut is None or bar.GetNumberOfLabels() <= 2:
+            continue  # two labels are the range's ends, e.g. -0.8 / +0.8 mN: round already
+        lo, hi = lut.GetRange()
+        labels = vtkDoubleArray()
+        for x in bar_label_values(lo, hi, bool(lut.GetScale())):
+            labels.InsertNextValue(x)
+        bar.SetUseCustomLabels(True)
+        bar.SetCustomLabels(labels)
+        bar.SetLabelFormat("%g")
 
 
 def render(kind: Kind, design: "Design", currents: Sequence[float] | None = None, *,

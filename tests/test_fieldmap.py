@@ -51,7 +51,7 @@ def test_bounds_and_meta(fm):
     assert fm.design_sha256 == SMALL.spec_hash()
     assert fm.max_current_a == SMALL.drive.max_current_a
     assert fm.total_current_a == SMALL.drive.total_current_a
-    np.testing.assert_allclose(fm.moment_a_m2, [0, 0, SMALL.magnet.moment_a_m2])
+    np.testing.assert_allclose(fm.moment_a_m2, SMALL.magnet.moment_vector_a_m2)
     assert fm.meta["version"] == 3 and fm.n_coils == 9
 
 
