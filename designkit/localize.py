@@ -16,7 +16,7 @@ with B the sum of
   ``CoilArray.magnet_core_field`` when the array provides it).
 
 Sensor non-idealities (defaults, all stated): noise 0.1 mT rms per axis (TLV493D datasheet, see
-shared HARDWARE.md section 4); offset 0.01 mT rms per axis (the residual of a 100-frame zero-field
+TLV493D-A1B6 datasheet); offset 0.01 mT rms per axis (the residual of a 100-frame zero-field
 calibration at 0.1 mT noise); gain error 1 % rms per axis (after calibration; the uncalibrated
 datasheet drift is +-20 %); mounting error 0.5 mm (random direction) and 1 degree (random axis)
 per sensor; optional dead sensors. Saturation: the 12-bit codes clip at -2048 / +2047 (+-200.7 mT)
@@ -48,7 +48,7 @@ TLV_LINEAR_RANGE_T = 0.130
 """Specified linear range, T; beyond it a reading is flagged saturated."""
 TLV_CODE_MIN, TLV_CODE_MAX = -2048, 2047
 TLV_NOISE_T = 0.1e-3
-"""Noise per axis, T rms (TLV493D datasheet figure quoted in HARDWARE.md section 4)."""
+"""Noise per axis, T rms (TLV493D-A1B6 datasheet figure)."""
 
 FieldCase = Literal["off", "static", "sinusoidal", "time-varying", "rendering"]
 FIELD_CASES: tuple[str, ...] = ("off", "static", "sinusoidal", "time-varying", "rendering")

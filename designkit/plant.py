@@ -207,7 +207,7 @@ class SimulatedDevice:
     resistance_ohm, inductance_h : float, optional
         The coils' true R and L (default: from the design's coil model).
 
-    The coil bus runs at 1 MHz (the PCA9685s on their own adapter, HARDWARE.md section 6), the
+    The coil bus runs at 1 MHz (the PCA9685s on their own adapter: Fm+, per the PCA9685 datasheet), the
     sensor bus at 400 kHz (the TCA9548A's limit); each has its own simulated clock.
     """
 

@@ -1,7 +1,7 @@
 """Hardware entry point on the controller: ``python -m firmware_io.run --bus 1 --map F --scene F``.
 
 Thin: parse, load the map and the scene (refusing a pair from different designs), open the bus
-(or two: ``--sensor-bus``), build the drivers with the default wiring (HARDWARE.md), put every
+(or two: ``--sensor-bus``), build the drivers with the default wiring (firmware_io.coils, firmware_io.sensors), put every
 coil in the safe state and run :class:`firmware_io.runner.Runner` until Ctrl-C or ``--duration``.
 Sensors are read in a background thread at the rate the bus allows; the control loop predicts
 between frames. Everything a user can get wrong is checked before any coil is energized.

@@ -25,6 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
+DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "array_coupling"
+"""Default output folder (git-ignored), whatever the working directory."""
+
+
 FEM_NOT_RUN = "fem: not run"
 
 
@@ -223,7 +227,7 @@ def cross_terms(arr, moment):
     return out
 
 
-def run(out_dir="out/array_coupling", quick: bool = False, fem: bool = False,
+def run(out_dir=DEFAULT_OUT, quick: bool = False, fem: bool = False,
         saturation_fem: bool = False, design=None) -> dict:
     """The study (module docs); ``design`` defaults to the default 3x3 design (the FEM table
     models the default array, so ``fem`` needs it)."""
@@ -393,6 +397,6 @@ def _print(res):
 
 if __name__ == "__main__":
     args = [a for a in sys.argv[1:] if not a.startswith("--")]
-    r = run(args[0] if args else "out/array_coupling", quick="--quick" in sys.argv,
+    r = run(args[0] if args else DEFAULT_OUT, quick="--quick" in sys.argv,
             fem="--fem" in sys.argv, saturation_fem="--saturation-fem" in sys.argv)
     _print(r)

@@ -37,6 +37,10 @@ from designkit._io import write_json_atomic
 from designkit.array import CoilArray, force_matrix, skew_matrix
 from firmware_io.allocation import allocate
 
+DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "bench_allocation"
+"""Default output folder (git-ignored), whatever the working directory."""
+
+
 ROWS = {1: [2], 3: [0, 1, 2], 6: [0, 1, 2, 3, 4, 5]}
 
 
@@ -135,7 +139,7 @@ def certify(probs, progress: bool = True) -> dict:
     return {"n": len(probs), "max_kkt_rel": worst_kkt, "max_bound_violation_a": worst_viol}
 
 
-def run(out_dir="out/bench_allocation", *, n_time: int = 20000, n_verify: int = 2000,
+def run(out_dir=DEFAULT_OUT, *, n_time: int = 20000, n_verify: int = 2000,
         n_kkt: int = 100000, n_pos: int = 400, quick: bool = False,
         progress: bool = True) -> dict:
     out_dir = Path(out_dir)
@@ -186,7 +190,7 @@ def run(out_dir="out/bench_allocation", *, n_time: int = 20000, n_verify: int = 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("out_dir", nargs="?", default="out/bench_allocation")
+    ap.add_argument("out_dir", nargs="?", default=DEFAULT_OUT)
     ap.add_argument("--n-time", type=int, default=20000)
     ap.add_argument("--n-verify", type=int, default=2000)
     ap.add_argument("--n-kkt", type=int, default=100000)

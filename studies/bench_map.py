@@ -33,6 +33,10 @@ from designkit.array import ROWS, CoilArray
 from firmware_io.mapfile import MapFile
 
 
+DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "bench_map"
+"""Default output folder (git-ignored), whatever the working directory."""
+
+
 def _t(fn, number: int, repeats: int) -> tuple[float, float]:
     r = np.array(repeat(fn, number=number, repeat=repeats)) / number
     return float(r.min()), float(np.median(r))
@@ -94,7 +98,7 @@ def _case(design, out_dir: Path, name: str, n_points: int, n_magnet: int, **buil
     return out
 
 
-def run(out_dir="out/bench_map", quick: bool = False, n_points: int = 10000) -> dict:
+def run(out_dir=DEFAULT_OUT, quick: bool = False, n_points: int = 10000) -> dict:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     d = default_design()

@@ -36,6 +36,10 @@ from designkit import default_design
 from designkit._io import write_json_atomic
 
 
+DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "bench_runner"
+"""Default output folder (git-ignored), whatever the working directory."""
+
+
 def _stats(times_s) -> dict:
     t = np.asarray(times_s) * 1e6
     return {"median_us": float(np.median(t)), "p99_us": float(np.percentile(t, 99)),
@@ -51,7 +55,7 @@ def _timed(fn, args_list, clock=time.perf_counter):
     return out
 
 
-def run(out_dir="out/bench_runner", *, map_path=None, n: int = 2000, quick: bool = False) -> dict:
+def run(out_dir=DEFAULT_OUT, *, map_path=None, n: int = 2000, quick: bool = False) -> dict:
     from designkit import fieldmap
     from designkit.array import CoilArray
     from designkit.localize import SensorSimulator
@@ -228,7 +232,7 @@ def _print(res: dict) -> None:
 
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("out", nargs="?", default="out/bench_runner")
+    ap.add_argument("out", nargs="?", default=DEFAULT_OUT)
     ap.add_argument("--map", default=None, help="an existing map file (default: build one)")
     ap.add_argument("--n", type=int, default=2000)
     ap.add_argument("--quick", action="store_true")

@@ -23,6 +23,10 @@ from pathlib import Path
 import numpy as np
 
 
+DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "fem3d_array"
+"""Default output folder (git-ignored), whatever the working directory."""
+
+
 def _rel(a, b, axis):
     return np.linalg.norm(a - b, axis=axis) / np.linalg.norm(b, axis=axis)
 
@@ -45,7 +49,7 @@ def _uncoupled(points, centre_xy=(0.0, 0.0)):
     return bw + bc, gw + gc
 
 
-def run(out_dir="out/fem3d_array", quick: bool = False, level: int | None = None,
+def run(out_dir=DEFAULT_OUT, quick: bool = False, level: int | None = None,
         cases: tuple[str, ...] | None = None) -> dict:
     """Run the cases (``cases``: a subset of two, centre, pull, single, block, corner; default
     all) and write the result files; returns the summary dict."""
@@ -162,7 +166,7 @@ if __name__ == "__main__":  # pragma: no cover
     import argparse
 
     ap = argparse.ArgumentParser()
-    ap.add_argument("out_dir", nargs="?", default="out/fem3d_array")
+    ap.add_argument("out_dir", nargs="?", default=DEFAULT_OUT)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--level", type=int, default=None)
     ap.add_argument("--cases", default=None,

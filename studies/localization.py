@@ -46,6 +46,10 @@ from designkit.localize import (THESIS_MAE_MM, SensorSimulator, case_currents, f
 from firmware_io.localization import (ConstantVelocityKalman, LearnedInverse, Localizer,
                                       SensorModel, calibrate)
 
+DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "localization"
+"""Default output folder (git-ignored), whatever the working directory."""
+
+
 CASES = ("off", "static", "sinusoidal", "time-varying", "rendering")
 METHODS = ("learned", "dipole-naive", "dipole", "model", "model-cal", "noise-limit")
 
@@ -78,7 +82,7 @@ def _noise_limited(sim, readings, k, p_true, currents, ind_true, ind_jac):
     return least_squares(res, p_true, x_scale=1e-3, method="lm").x
 
 
-def run(out_dir="out/localization", n: int = 1000, seed: int = 0, *, map_path=None,
+def run(out_dir=DEFAULT_OUT, n: int = 1000, seed: int = 0, *, map_path=None,
         quick: bool = False, n_workspace: int | None = None) -> dict:
     """Run the study; returns a dict of numbers (also written as JSON)."""
     out = Path(out_dir)
@@ -353,7 +357,7 @@ if __name__ == "__main__":
     import argparse
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("out_dir", nargs="?", default="out/localization")
+    ap.add_argument("out_dir", nargs="?", default=DEFAULT_OUT)
     ap.add_argument("--n", type=int, default=1000, help="positions in the 50 mm cube")
     ap.add_argument("--n-workspace", type=int, default=None,
                     help="positions in the rendering workspace (default: --n)")

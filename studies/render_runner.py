@@ -26,10 +26,14 @@ if __package__ in (None, ""):
 from designkit import default_design
 from designkit._io import write_json_atomic
 
+DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "render_runner"
+"""Default output folder (git-ignored), whatever the working directory."""
+
+
 OBJECTS = ("plane", "hemisphere", "half-cylinder", "wedge")
 
 
-def run(out_dir="out/render_runner", *, map_path=None, duration_s: float = 4.0,
+def run(out_dir=DEFAULT_OUT, *, map_path=None, duration_s: float = 4.0,
         quick: bool = False, objects=OBJECTS, rows=("force", "fz")) -> dict:
     from designkit import fieldmap
     from designkit.array import CoilArray
@@ -78,7 +82,7 @@ def _print(res: dict) -> None:
 
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("out", nargs="?", default="out/render_runner")
+    ap.add_argument("out", nargs="?", default=DEFAULT_OUT)
     ap.add_argument("--map", default=None)
     ap.add_argument("--duration", type=float, default=4.0)
     ap.add_argument("--quick", action="store_true")

@@ -41,6 +41,10 @@ from firmware_io.allocation import allocate
 U_A, T_A = 6.0, 54.0
 
 
+DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "render_thesis"
+"""Default output folder (git-ignored), whatever the working directory."""
+
+
 def blob_stl(path: Path, radius_mm: float = 40.0, res: int = 48) -> Path:
     """A closed bumpy blob (a stand-in for the thesis' heart scan), STL in millimetres."""
     import pyvista as pv
@@ -156,7 +160,7 @@ def figure(name, obj, pts, nrm, stats_u, stats_b, lam, out_png, source):
     plt.close(fig)
 
 
-def figures_only(out_dir="out/render_thesis", *, n_side: int = 31) -> None:
+def figures_only(out_dir=DEFAULT_OUT, *, n_side: int = 31) -> None:
     """Redraw the per-object figures (no lambda searches)."""
     out_dir = Path(out_dir)
     source = ArrayActuation.from_design(default_design())
@@ -175,7 +179,7 @@ def figures_only(out_dir="out/render_thesis", *, n_side: int = 31) -> None:
         figure(name, obj, pts, nrm, su, sb, 18.0, out_dir / f"render_{slug}.png", source)
 
 
-def run(out_dir="out/render_thesis", *, n_side: int = 31, quick: bool = False,
+def run(out_dir=DEFAULT_OUT, *, n_side: int = 31, quick: bool = False,
         progress: bool = True) -> dict:
     out_dir = Path(out_dir)
     t0 = time.perf_counter()
@@ -314,7 +318,7 @@ def _lambda_figure(res, out_png):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("out_dir", nargs="?", default="out/render_thesis")
+    ap.add_argument("out_dir", nargs="?", default=DEFAULT_OUT)
     ap.add_argument("--n-side", type=int, default=31)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--figures-only", action="store_true", help="redraw the object figures")

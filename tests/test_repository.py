@@ -94,6 +94,8 @@ def test_no_generated_output_is_tracked_and_study_output_is_ignored():
                 ("bench-optimize-out", "studies_out", "study_out", "out")]
     for study in (ROOT / "studies").glob("*.py"):
         text = study.read_text()
+        if "def run(" not in text:   # a helper module of the studies, it writes nothing
+            continue
         assert '"out" / "' in text, f"{study.name}: default output not under out/"
     ignored = subprocess.run(["git", "check-ignore", "-q", "out/bench_map/bench_map.json"],
                              cwd=ROOT)

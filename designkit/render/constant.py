@@ -75,7 +75,8 @@ def actuation_source(fieldmap):
     if not callable(getattr(fieldmap, "actuation", None)) or not isinstance(meta, dict):
         raise BadInputError("fieldmap", "a designkit FieldMap, a firmware_io MapFile or an "
                             "ArrayActuation", type(fieldmap).__name__)
-    return _MapSource(fieldmap, tuple(meta["magnet_moment_a_m2"]), meta["design_sha256"],
+    return _MapSource(fieldmap, tuple(np.asarray(fieldmap.moment_a_m2, float)),
+                      meta["design_sha256"],
                       tuple(np.asarray(b, float) for b in fieldmap.bounds))
 
 
