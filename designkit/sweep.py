@@ -486,26 +486,6 @@ def _shown(name: str, value: float) -> float:
     return value * 1e3 if name.endswith("_m") else value
 
 
-def plot(result: SweepResult, path: str | Path, *,
-         objective: str = "force at the design point",
-         limits: str = "R, 5 tau limits") -> Path:
-    """PNG of the force over the (first two) swept parameters: feasible designs coloured by
-    force, infeasible ones grey, the best feasible design starred (see :func:`sweep_figure`)."""
-    import matplotlib.pyplot as plt
-
-    from ._io import atomic_path
-
-    fig = sweep_figure(result, objective=objective, limits=limits)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png")
-    plt.close(fig)
-    return Path(path)
-
-
-def _shown(name: str, value: float) -> float:
-    return value * 1e3 if name.endswith("_m") else value
-
-
 def sweep_figure(result: SweepResult, *, objective: str = "force at the design point",
                  limits: str = "R and 5 L/R limits"):
     """The matplotlib figure of :func:`plot`.
