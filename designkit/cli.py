@@ -12,6 +12,8 @@ import importlib
 import sys
 
 from .commands._common import join_negative_values
+from firmware_io.errors import FirmwareIOError
+
 from .errors import DesignkitError
 
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -67,6 +69,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(module.run(args) or 0)
     except DesignkitError as exc:
+        print(f"designkit {name}: error: {exc}", file=sys.stderr)
+        return 1
+    except FirmwareIOError as exc:  # e.g. a map file refused by its (numpy-only) reader
         print(f"designkit {name}: error: {exc}", file=sys.stderr)
         return 1
     except OSError as exc:  # a disk or permission problem is a message, not a traceback

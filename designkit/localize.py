@@ -275,7 +275,7 @@ class SensorSimulator:
     errors : SensorErrors or 'ideal' or 'default'
         'default' draws :meth:`SensorErrors.random` with the module's stated defaults.
     noise_t : float, T rms per axis (default 0.1 mT, datasheet)
-    moment_direction : (3,), the magnet's axis (default +z, as the design's map stores it)
+    moment_direction : (3,), the magnet's axis (default: the design's, ``magnet.direction``)
     induced : {'coupled', 'rod', 'off'}
         The cores' field induced by the magnet: 'coupled' = ``CoilArray.magnet_core_field``
         (all cores solved together, the magnet as a point dipole; ~50 ms per position), 'rod' =
@@ -285,7 +285,7 @@ class SensorSimulator:
 
     def __init__(self, design: Design | None = None, *, array=None,
                  errors: SensorErrors | Literal["ideal", "default"] = "default",
-                 noise_t: float = TLV_NOISE_T, moment_direction=(0.0, 0.0, 1.0),
+                 noise_t: float = TLV_NOISE_T, moment_direction=None,
                  induced: Literal["coupled", "rod", "off"] = "coupled", seed: int = 0):
         from .array import CoilArray
 
@@ -303,6 +303,8 @@ class SensorSimulator:
                       else SensorErrors.random(n, np.random.default_rng(seed + 1)))
         self.errors = errors
         self.true_m = self.nominal_m + errors.position_errors_m
+        if moment_direction is None:
+            moment_direction = self.design.magnet.moment_vector_a_m2
         u = v.vector3("moment_direction", moment_direction)
         if not np.linalg.norm(u) > 0:
             raise BadInputError("moment_direction", "a non-zero 3-vector", u.tolist())
