@@ -533,37 +533,10 @@ class CoreModel:
         return np.moveaxis(res.reshape(nb, n, 3), 0, -1)
 
     def _m0_far(self, pts, rho, gradient):
-        from .field.kernels import loop_rz
-
-        nq = len(self.far_r)
-        n = len(rho)
-        res = loop_rz(np.tile(self.far_r, n), np.repeat(rho, nq),
-                      np.repeat(pts[:, 2], nq) - np.tile(self.far_z, n), gradient=gradient)
-        comps = [(q.reshape(n, nq) @ self.far_w) for q in res]
-        return self._rz_basis_to_xyz(pts, rho, comps, gradient)
+        return self._rz_basis_to_xyz(pts, rho, self._m0_rz(pts, rho, gradient, True), gradient)
 
     def _m0_near(self, pts, rho, gradient):
-        from .core import _disc_nodes
-        from .field.kernels import loop_rz, sheet_rz
-
-        n = len(rho)
-        z = pts[:, 2]
-        side, discs = self.side, self.discs
-        hh = 0.5 * (side[:, 1] - side[:, 0])
-        cc = 0.5 * (side[:, 1] + side[:, 0])
-        ns = len(hh)
-        rs = sheet_rz(self.radius, np.tile(hh, n), np.repeat(rho, ns),
-                      np.repeat(z, ns) - np.tile(cc, n), gradient=gradient)
-        nq = 4
-        rq, wq = _disc_nodes(discs[:, 1], discs[:, 2], nq)
-        nd = len(discs)
-        m = nd * nq
-        rl = loop_rz(np.tile(rq.ravel(), n), np.repeat(rho, m),
-                     np.repeat(z, m) - np.tile(np.repeat(discs[:, 0], nq), n), gradient=gradient)
-        ww = wq.ravel()
-        comps = [np.hstack([a.reshape(n, ns), (b.reshape(n, m) * ww).reshape(n, nd, nq)
-                            .sum(axis=2)]) for a, b in zip(rs, rl)]
-        return self._rz_basis_to_xyz(pts, rho, comps, gradient)
+        return self._rz_basis_to_xyz(pts, rho, self._m0_rz(pts, rho, gradient, False), gradient)
 
     @functools.cached_property
     def _charge_nodes_cache(self):
