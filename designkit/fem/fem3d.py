@@ -55,6 +55,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import BadInputError, require
+from .mesh import mesh_to_file
 from .runner import find_getdp
 
 AIR, SHELL, MAGNET, BOUNDARY = 1, 2, 3, 4
@@ -227,19 +228,7 @@ def build_mesh(bodies, msh_path, *, symmetry="none", level=0, refine=(), r_int=0
             for k, v in zip(("XCenter", "YCenter", "ZCenter"), c):
                 f.setNumber(bl, k, float(v))
             fields.append(bl)
-        shell = f.add("MathEval")
-        f.setString(shell, "F", f"{far_size * s * 2}")
-        fmin = f.add("Min")
-        f.setNumbers(fmin, "FieldsList", fields)
-        f.setAsBackgroundMesh(fmin)
-        gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
-        gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
-        gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
-        gmsh.option.setNumber("Mesh.Algorithm3D", 1)
-        gmsh.model.mesh.generate(3)
-        gmsh.option.setNumber("Mesh.MshFileVersion", 2.2)
-        gmsh.option.setNumber("Mesh.Binary", 0)
-        gmsh.write(str(msh_path))
+        mesh_to_file(gmsh, fields, 3, msh_path)
         nodes = len(gmsh.model.mesh.getNodes()[0])
         _, et, _ = gmsh.model.mesh.getElements(3)
         ntet = int(sum(len(t) for t in et))

@@ -60,6 +60,24 @@ def _size_near(f, what: str, tags, size_min: float, size_max: float, dist_min: f
     return thr
 
 
+def mesh_to_file(gmsh, fields, dim: int, msh_path: str | Path) -> None:
+    """Size the mesh by the minimum of the gmsh ``fields`` alone, mesh in ``dim`` (2: Frontal-
+    Delaunay, 3: Delaunay) and write ``msh_path`` as MSH 2.2 ASCII, the format Debian's GetDP
+    reads without a linked Gmsh."""
+    f = gmsh.model.mesh.field
+    fmin = f.add("Min")
+    f.setNumbers(fmin, "FieldsList", fields)
+    f.setAsBackgroundMesh(fmin)
+    gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
+    gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
+    gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
+    gmsh.option.setNumber("Mesh.Algorithm3D" if dim == 3 else "Mesh.Algorithm", 1 if dim == 3 else 6)
+    gmsh.model.mesh.generate(dim)
+    gmsh.option.setNumber("Mesh.MshFileVersion", 2.2)
+    gmsh.option.setNumber("Mesh.Binary", 0)
+    gmsh.write(str(msh_path))
+
+
 def build_mesh(spec: MeshSpec, msh_path: str | Path) -> dict:
     """Mesh the model with gmsh and write ``msh_path`` (MSH 2.2: the format Debian's GetDP reads without linked Gmsh).
 
@@ -160,19 +178,7 @@ def build_mesh(spec: MeshSpec, msh_path: str | Path) -> dict:
             f.setNumber(pbox, "YMax", spec.probe_box[2])
             f.setNumber(pbox, "Thickness", 0.02)
             fields.append(pbox)
-        shell_size = f.add("MathEval")
-        f.setString(shell_size, "F", f"{max(h_far, 0.02 * s)}")
-        fmin = f.add("Min")
-        f.setNumbers(fmin, "FieldsList", fields)
-        f.setAsBackgroundMesh(fmin)
-        gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
-        gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
-        gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
-        gmsh.option.setNumber("Mesh.Algorithm", 6)
-        gmsh.model.mesh.generate(2)
-        gmsh.option.setNumber("Mesh.MshFileVersion", 2.2)
-        gmsh.option.setNumber("Mesh.Binary", 0)
-        gmsh.write(str(msh_path))
+        mesh_to_file(gmsh, fields, 2, msh_path)
         node_tags, _, _ = gmsh.model.mesh.getNodes()
         etypes, etags, _ = gmsh.model.mesh.getElements(2)
         ntri = int(sum(len(t) for t in etags))
