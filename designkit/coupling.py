@@ -487,21 +487,8 @@ class CoreModel:
         shp = (n,) if pointwise else (n, k)
         h = np.empty((n, 3) + shp[1:])
         g = np.empty((n, 3, 3) + shp[1:]) if gradient else None
-        c4 = 1.0 / (4.0 * math.pi)
         for a in range(0, n, chunk):
-            p = pts[a:a + chunk]
-            d = p[:, None, :] - src[None]
-            r2 = np.einsum("cij,cij->ci", d, d)
-            inv3 = c4 / (r2 * np.sqrt(r2))
-            comps = [d[..., i] * inv3 for i in range(3)]
-            if gradient:
-                inv5 = 3.0 * inv3 / r2
-                for i in range(3):
-                    for kk in range(i, 3):
-                        t = -d[..., i] * d[..., kk] * inv5
-                        if i == kk:
-                            t = t + inv3
-                        comps.append(t)
+            comps = _unit_charge_terms(pts[a:a + chunk], src, gradient)
             if pointwise:
                 qq = q[:, a:a + chunk].T  # (c, nc)
                 red = np.stack([np.einsum("cs,cs->c", t, qq) for t in comps], axis=1)
@@ -509,10 +496,7 @@ class CoreModel:
                 red = np.stack([t @ q for t in comps], axis=1)  # (c, ncomp, k)
             h[a:a + chunk] = red[:, :3]
             if gradient:
-                for (i, kk), j in {(0, 0): 3, (0, 1): 4, (0, 2): 5, (1, 1): 6, (1, 2): 7,
-                                   (2, 2): 8}.items():
-                    g[a:a + chunk, i, kk] = red[:, j]
-                    g[a:a + chunk, kk, i] = red[:, j]
+                _fill_symmetric(g[a:a + chunk], red)
         return (h, g) if gradient else h
 
     def _rz_basis_to_xyz(self, pts, rho, comps, gradient):
@@ -576,33 +560,49 @@ class CoreModel:
         nb = nm * n1
         h = np.empty((n, 3, nb))
         g = np.empty((n, 3, 3, nb)) if gradient else None
-        c4 = 1.0 / (4.0 * math.pi)
         for a in range(0, n, chunk):
             p = pts[a:a + chunk]
             c = len(p)
-            d = p[:, None, :] - src[None]  # (c, ns, 3)
-            r2 = np.einsum("cij,cij->ci", d, d)
-            inv3 = c4 / (r2 * np.sqrt(r2))
-            comps = [d[..., i] * inv3 for i in range(3)]
-            if gradient:
-                inv5 = 3.0 * inv3 / r2
-                for i in range(3):
-                    for k in range(i, 3):
-                        t = -d[..., i] * d[..., k] * inv5
-                        if i == k:
-                            t = t + inv3
-                        comps.append(t)
+            comps = _unit_charge_terms(p, src, gradient)
             stack = np.stack(comps, axis=1).reshape(c, len(comps), n1 * ng, nphi)
             red = stack @ modes_t  # (c, ncomp, n1*ng, 2M)
             red = (red * wflat[None, None, :, None]).reshape(c, len(comps), n1, ng, nm).sum(3)
             red = np.swapaxes(red, 2, 3).reshape(c, len(comps), nb)  # mode-major
             h[a:a + chunk] = red[:, :3]
             if gradient:
-                idx = {(0, 0): 3, (0, 1): 4, (0, 2): 5, (1, 1): 6, (1, 2): 7, (2, 2): 8}
-                for (i, k), q in idx.items():
-                    g[a:a + chunk, i, k] = red[:, q]
-                    g[a:a + chunk, k, i] = red[:, q]
+                _fill_symmetric(g[a:a + chunk], red)
         return (h, g) if gradient else h
+
+
+_GRADIENT_PAIRS = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+"""(i, k) of dH_i/dx_k in the order of :func:`_unit_charge_terms`' components 3 to 8 (the
+gradient of a curl-free field is symmetric: six entries give all nine)."""
+
+
+def _unit_charge_terms(p, src, gradient):
+    """Field of unit point charges (A m) at ``src`` (ns, 3), m, at the points ``p`` (c, 3), m.
+
+    Returns a list of (c, ns) arrays, A/m per A m: H_x, H_y, H_z, then with ``gradient``
+    dH_i/dx_k for (i, k) in :data:`_GRADIENT_PAIRS`, A/m^2 per A m.
+    """
+    d = p[:, None, :] - src[None]  # (c, ns, 3)
+    r2 = np.einsum("cij,cij->ci", d, d)
+    inv3 = 1.0 / (4.0 * math.pi) / (r2 * np.sqrt(r2))
+    comps = [d[..., i] * inv3 for i in range(3)]
+    if gradient:
+        inv5 = 3.0 * inv3 / r2
+        for i, k in _GRADIENT_PAIRS:
+            t = -d[..., i] * d[..., k] * inv5
+            comps.append(t + inv3 if i == k else t)
+    return comps
+
+
+def _fill_symmetric(g, red):
+    """Write components 3 to 8 of ``red`` (c, ncomp, ...) into the symmetric ``g`` (c, 3, 3,
+    ...) in place."""
+    for j, (i, k) in enumerate(_GRADIENT_PAIRS, 3):
+        g[:, i, k] = red[:, j]
+        g[:, k, i] = red[:, j]
 
 
 def _self_charge_matrices(radius, z_lo, z_hi, kind, lo, hi, rho_c, z_c, m_max):
