@@ -234,8 +234,6 @@ def run_sweep(design: Design, ranges: Sequence[ParamRange], *, workers: int | No
     chunk_size : int
         Designs per task.
     """
-    import time
-
     if core_model not in CORE_MODEL_NAMES:
         raise BadInputError("core_model", f"one of {CORE_MODEL_NAMES}", core_model)
     if workers is not None:
@@ -245,41 +243,8 @@ def run_sweep(design: Design, ranges: Sequence[ParamRange], *, workers: int | No
     problem = CoilDesignProblem.from_design(design, core_model=core_model)
     base = _base_row(design)
     chunks = [vals[i:i + chunk_size] for i in range(0, len(vals), chunk_size)]
-    t0 = time.perf_counter()
-    bar = None
-    if progress:
-        from ._progress import tqdm
-
-        bar = tqdm(total=len(vals), desc="sweep", unit="design")
-    results: list = [None] * len(chunks)
-    if scheduler is not None:
-        backend = f"dask:{scheduler}"
-        n_workers = _run_dask(scheduler, problem, base, names, chunks, results, bar)
-    elif (workers or os.cpu_count() or 1) == 1 or len(chunks) == 1:
-        backend, n_workers = "serial", 1
-        for i, ch in enumerate(chunks):
-            results[i] = evaluate_chunk(problem, base, names, ch)
-            if bar is not None:
-                bar.update(len(ch))
-    else:
-        from concurrent.futures import ProcessPoolExecutor, as_completed
-
-        n_workers = workers or os.cpu_count() or 1
-        backend = "processes"
-        with ProcessPoolExecutor(max_workers=n_workers) as ex:
-            futs = {ex.submit(evaluate_chunk, problem, base, names, ch): i
-                    for i, ch in enumerate(chunks)}
-            for fut in as_completed(futs):
-                i = futs[fut]
-                results[i] = fut.result()
-                if bar is not None:
-                    bar.update(len(chunks[i]))
-    if bar is not None:
-        bar.close()
-    rows = [r for ch in results for r in ch]
-    feas = [i for i, r in enumerate(rows) if r["feasible"]]
-    best = max(feas, key=lambda i: rows[i]["force_n"]) if feas else None
-    return SweepResult(tuple(names), rows, best, time.perf_counter() - t0, n_workers, backend)
+    return _run_chunks(evaluate_chunk, (problem, base, names), names, chunks, workers=workers,
+                       scheduler=scheduler, progress=progress, desc="sweep")
 
 
 def evaluate_array_chunk(design: Design, names: Sequence[str], values: np.ndarray) -> list[dict]:
@@ -352,8 +317,6 @@ def run_array_sweep(design: Design, ranges: Sequence[ParamRange], *, workers: in
     """Sweep whole arrays with the rendering objective (:func:`evaluate_array_chunk`);
     local processes by default, a dask.distributed cluster with ``scheduler``. The best row is
     the feasible one with the largest rendering objective."""
-    import time
-
     if design.core is None:
         raise BadInputError("design.core", "a core (the array sweep models 1010-steel cores)",
                             None)
@@ -362,38 +325,49 @@ def run_array_sweep(design: Design, ranges: Sequence[ParamRange], *, workers: in
     chunk_size = v.positive_int("chunk_size", chunk_size)
     names, vals = grid(ranges)
     chunks = [vals[i:i + chunk_size] for i in range(0, len(vals), chunk_size)]
+    return _run_chunks(evaluate_array_chunk, (design, names), names, chunks, workers=workers,
+                       scheduler=scheduler, progress=progress, desc="array sweep")
+
+
+def _run_chunks(fn, head: tuple, names, chunks, *, workers: int | None, scheduler: str | None,
+                progress: bool, desc: str) -> SweepResult:
+    """Evaluate ``fn(*head, chunk)`` for every chunk (rows of one dict per design) on a dask
+    scheduler, local processes or, with one worker or one chunk, in this process; the best
+    row is the feasible one with the largest ``force_n``."""
+    import time
+
     t0 = time.perf_counter()
     bar = None
     if progress:
-        from tqdm import tqdm
+        from ._progress import tqdm
 
-        bar = tqdm(total=len(vals), desc="array sweep", unit="design")
+        bar = tqdm(total=sum(len(ch) for ch in chunks), desc=desc, unit="design")
     results: list = [None] * len(chunks)
-    if scheduler is not None:
-        backend = f"dask:{scheduler}"
-        n_workers = _run_dask_fn(scheduler, evaluate_array_chunk, (design, names), chunks,
-                                 results, bar)
-    elif (workers or os.cpu_count() or 1) == 1 or len(chunks) == 1:
-        backend, n_workers = "serial", 1
-        for i, ch in enumerate(chunks):
-            results[i] = evaluate_array_chunk(design, names, ch)
-            if bar is not None:
-                bar.update(len(ch))
-    else:
-        from concurrent.futures import ProcessPoolExecutor, as_completed
-
-        n_workers = workers or os.cpu_count() or 1
-        backend = "processes"
-        with ProcessPoolExecutor(max_workers=n_workers) as ex:
-            futs = {ex.submit(evaluate_array_chunk, design, names, ch): i
-                    for i, ch in enumerate(chunks)}
-            for fut in as_completed(futs):
-                i = futs[fut]
-                results[i] = fut.result()
+    try:
+        if scheduler is not None:
+            backend = f"dask:{scheduler}"
+            n_workers = _run_dask_fn(scheduler, fn, head, chunks, results, bar)
+        elif (workers or os.cpu_count() or 1) == 1 or len(chunks) == 1:
+            backend, n_workers = "serial", 1
+            for i, ch in enumerate(chunks):
+                results[i] = fn(*head, ch)
                 if bar is not None:
-                    bar.update(len(chunks[i]))
-    if bar is not None:
-        bar.close()
+                    bar.update(len(ch))
+        else:
+            from concurrent.futures import ProcessPoolExecutor, as_completed
+
+            n_workers = workers or os.cpu_count() or 1
+            backend = "processes"
+            with ProcessPoolExecutor(max_workers=n_workers) as ex:
+                futs = {ex.submit(fn, *head, ch): i for i, ch in enumerate(chunks)}
+                for fut in as_completed(futs):
+                    i = futs[fut]
+                    results[i] = fut.result()
+                    if bar is not None:
+                        bar.update(len(chunks[i]))
+    finally:
+        if bar is not None:
+            bar.close()
     rows = [r for ch in results for r in ch]
     feas = [i for i, r in enumerate(rows) if r["feasible"]]
     best = max(feas, key=lambda i: rows[i]["force_n"]) if feas else None
@@ -413,30 +387,6 @@ def _run_dask_fn(address, fn, head: tuple, chunks, results, bar) -> int:
     try:
         n = max(len(client.scheduler_info().get("workers", {})), 1)
         futs = [client.submit(fn, *head, ch, pure=False) for ch in chunks]
-        index = {f.key: i for i, f in enumerate(futs)}
-        for fut in distributed.as_completed(futs):
-            i = index[fut.key]
-            results[i] = fut.result()
-            if bar is not None:
-                bar.update(len(chunks[i]))
-    finally:
-        client.close()
-    return n
-
-
-def _run_dask(address, problem, base, names, chunks, results, bar) -> int:
-    from .errors import require
-
-    distributed = require("dask.distributed", "dask[distributed]", "designkit sweep --scheduler")
-    try:
-        client = distributed.Client(address, timeout="10s")
-    except OSError as exc:
-        raise BadInputError("--scheduler", "the address of a running dask scheduler",
-                            address, str(exc)) from None
-    try:
-        n = max(len(client.scheduler_info().get("workers", {})), 1)
-        futs = [client.submit(evaluate_chunk, problem, base, names, ch, pure=False)
-                for ch in chunks]
         index = {f.key: i for i, f in enumerate(futs)}
         for fut in distributed.as_completed(futs):
             i = index[fut.key]
@@ -468,7 +418,7 @@ def write_csv(result: SweepResult, path: str | Path,
 
 def plot(result: SweepResult, path: str | Path, *,
          objective: str = "force at the design point",
-         limits: str = "R, 5 tau limits") -> Path:
+         limits: str = "R and 5 L/R limits") -> Path:
     """PNG of the force over the (first two) swept parameters: feasible designs coloured by
     force, infeasible ones grey, the best feasible design starred (see :func:`sweep_figure`)."""
     import matplotlib.pyplot as plt
@@ -519,7 +469,7 @@ def sweep_figure(result: SweepResult, *, objective: str = "force at the design p
             sc = ax.scatter([_shown(xn, r[xn]) for r in fe], [_shown(yn, r[yn]) for r in fe],
                             c=[r["force_n"] * 1e3 for r in fe], s=14, cmap="viridis",
                             label="feasible")
-            fig.colorbar(sc, ax=ax, label="force (mN)")
+            fig.colorbar(sc, ax=ax, label=f"{objective} (mN)")
         ax.set_ylabel(_label(yn))
         by = _shown(yn, anchor[yn])
     else:
@@ -527,14 +477,14 @@ def sweep_figure(result: SweepResult, *, objective: str = "force at the design p
         ax.plot(xs, [r["force_n"] * 1e3 for r in valid], "-", color="0.6")
         ax.scatter([x for x, r in zip(xs, valid) if r["feasible"]],
                    [r["force_n"] * 1e3 for r in valid if r["feasible"]], s=12, label="feasible")
-        ax.set_ylabel("force (mN)")
+        ax.set_ylabel(f"{objective} (mN)")
         by = anchor["force_n"] * 1e3 if anchor["force_n"] is not None else None
     if result.best_index is not None:
         ax.plot([_shown(xn, anchor[xn])], [by], "r*", ms=14,
                 label=f"best {anchor['force_n'] * 1e3:.0f} mN")
     ax.set_xlabel(_label(xn))
     feasible = sum(1 for r in rows if r["feasible"])
-    title = f"{len(rows)} designs, {feasible} feasible (R and 5 L/R limits)"
+    title = f"{len(rows)} designs, {feasible} feasible ({limits})"
     if fixed:
         where = ", ".join(f"{_label(k).split(' (')[0]} = {_shown(k, anchor[k]):.4g}"
                           f"{' mm' if k.endswith('_m') else (' A' if k.endswith('_a') else '')}"

@@ -51,48 +51,45 @@ def run(args: argparse.Namespace) -> int:
         raise BadInputError("--workers", "a whole number >= 1", args.workers)
     design = load_design(args.design)
     if array:
-        return _run_array(args, design, ranges)
-    result = run_sweep(design, ranges, workers=args.workers, scheduler=args.scheduler,
-                       core_model=args.core_model, progress=show_progress(args))
+        result = run_array_sweep(design, ranges, workers=args.workers, scheduler=args.scheduler,
+                                 progress=show_progress(args))
+    else:
+        result = run_sweep(design, ranges, workers=args.workers, scheduler=args.scheduler,
+                           core_model=args.core_model, progress=show_progress(args))
     out = Path(args.out)
     # the CSV and the PNG are written only after every design is evaluated (atomic renames)
-    csv_path = write_csv(result, out / "sweep.csv")
-    png_path = plot(result, out / "sweep.png")
+    if array:
+        csv_path = write_csv(result, out / "sweep.csv", ARRAY_COLUMNS)
+        png_path = plot(result, out / "sweep.png",
+                        objective="smallest upward force over the workspace",
+                        limits="device constraints")
+    else:
+        csv_path = write_csv(result, out / "sweep.csv")
+        png_path = plot(result, out / "sweep.png")
     n = len(result.rows)
     feas = sum(1 for r in result.rows if r["feasible"])
-    print(f"{n} designs ({feas} feasible) in {result.seconds:.2f} s on {result.workers} "
-          f"worker(s) [{result.backend}]")
+    print(f"{n} {'arrays' if array else 'designs'} ({feas} feasible) in {result.seconds:.2f} s "
+          f"on {result.workers} worker(s) [{result.backend}]: "
+          f"{n / max(result.seconds, 1e-9):.2f} designs/s")
     if result.best_index is not None:
-        b = result.rows[result.best_index]
-        print(f"best feasible: Ri {b['inner_radius_m'] * 1e3:.2f} mm, Ro "
-              f"{b['outer_radius_m'] * 1e3:.2f} mm, L {b['length_m'] * 1e3:.2f} mm, "
-              f"{b['turns']} turns, R {b['resistance_ohm']:.3f} ohm, 5 tau "
-              f"{5e3 * b['time_constant_s']:.2f} ms, force {b['force_n'] * 1e3:.1f} mN")
-    if feas == 0:
+        describe = _best_array if array else _best_coil
+        print("best feasible: " + describe(result.rows[result.best_index]))
+    if feas == 0 and not array:
         print(f"no feasible design; why (column 'reason' of {csv_path.name}):\n"
               + reason_summary(result))
     print(f"wrote {csv_path} and {png_path}")
     return 0
 
 
-def _run_array(args, design, ranges) -> int:
-    result = run_array_sweep(design, ranges, workers=args.workers, scheduler=args.scheduler,
-                             progress=show_progress(args))
-    out = Path(args.out)
-    csv_path = write_csv(result, out / "sweep.csv", ARRAY_COLUMNS)
-    png_path = plot(result, out / "sweep.png",
-                    objective="smallest upward force over the workspace",
-                    limits="device constraints")
-    n = len(result.rows)
-    feas = sum(1 for r in result.rows if r["feasible"])
-    print(f"{n} arrays ({feas} feasible) in {result.seconds:.2f} s on {result.workers} "
-          f"worker(s) [{result.backend}]: {n / max(result.seconds, 1e-9):.2f} designs/s")
-    if result.best_index is not None:
-        b = result.rows[result.best_index]
-        print(f"best feasible: pitch {b['pitch_m'] * 1e3:.1f} mm, Ri/Ro/L "
-              f"{b['inner_radius_m'] * 1e3:.2f}/{b['outer_radius_m'] * 1e3:.2f}/"
-              f"{b['length_m'] * 1e3:.2f} mm, wire {b['wire_diameter_m'] * 1e3:.3f} mm, core "
-              f"{b['core_length_m'] * 1e3:.1f} mm, {b['turns']} turns: smallest upward Fz over "
-              f"the workspace {b['force_n'] * 1e3:.1f} mN")
-    print(f"wrote {csv_path} and {png_path}")
-    return 0
+def _best_coil(b: dict) -> str:
+    return (f"Ri {b['inner_radius_m'] * 1e3:.2f} mm, Ro {b['outer_radius_m'] * 1e3:.2f} mm, "
+            f"L {b['length_m'] * 1e3:.2f} mm, {b['turns']} turns, R {b['resistance_ohm']:.3f} "
+            f"ohm, 5 tau {5e3 * b['time_constant_s']:.2f} ms, force {b['force_n'] * 1e3:.1f} mN")
+
+
+def _best_array(b: dict) -> str:
+    return (f"pitch {b['pitch_m'] * 1e3:.1f} mm, Ri/Ro/L {b['inner_radius_m'] * 1e3:.2f}/"
+            f"{b['outer_radius_m'] * 1e3:.2f}/{b['length_m'] * 1e3:.2f} mm, wire "
+            f"{b['wire_diameter_m'] * 1e3:.3f} mm, core {b['core_length_m'] * 1e3:.1f} mm, "
+            f"{b['turns']} turns: smallest upward Fz over the workspace "
+            f"{b['force_n'] * 1e3:.1f} mN")
