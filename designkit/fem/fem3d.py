@@ -46,17 +46,14 @@ high-mu_r block) in the tests.
 from __future__ import annotations
 
 import math
-import subprocess
-import tempfile
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
-from ..errors import BadInputError, require
-from .mesh import mesh_to_file
-from .runner import find_getdp
+from ..errors import BadInputError
+from .mesh import gmsh_model, mesh_to_file
+from .runner import find_getdp, run_getdp, work_folder
 
 AIR, SHELL, MAGNET, BOUNDARY = 1, 2, 3, 4
 CORE0, WIND0 = 100, 200
@@ -120,15 +117,8 @@ def build_mesh(bodies, msh_path, *, symmetry="none", level=0, refine=(), r_int=0
     ``refine``: list of (xmin, xmax, ymin, ymax, zmin, zmax, size) boxes (m); ``balls``:
     points (m) meshed at ``point_size`` within FIT_HALF_WINDOW + 2 mm (the fitting lines).
     Sizes shrink by sqrt(2) per ``level``. Returns mesh statistics."""
-    gmsh = require("gmsh", "gmsh", "designkit.fem")
     s = 2.0 ** (-level / 2.0)
-    init = not gmsh.isInitialized()
-    if init:
-        gmsh.initialize(["-noenv"])
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.option.setNumber("General.NumThreads", 1)
-        gmsh.model.add("designkit_fem3d")
+    with gmsh_model("designkit_fem3d") as gmsh:
         occ = gmsh.model.occ
         outer = occ.addSphere(0, 0, 0, r_ext)
         inner = occ.addSphere(0, 0, 0, r_int)
@@ -232,12 +222,8 @@ def build_mesh(bodies, msh_path, *, symmetry="none", level=0, refine=(), r_int=0
         nodes = len(gmsh.model.mesh.getNodes()[0])
         _, et, _ = gmsh.model.mesh.getElements(3)
         ntet = int(sum(len(t) for t in et))
-        gmsh.model.remove()
         return {"nodes": nodes, "tetrahedra": ntet, "cores": sorted(body_groups),
                 "magnet": bool(groups[MAGNET])}
-    finally:
-        if init:
-            gmsh.finalize()
 
 
 def _on_sphere(gmsh, tag, r):
@@ -359,20 +345,6 @@ def _fit_lines(work, names, centres, mirror_axes=()):
     return b, g
 
 
-def _run(exe, work, pro_text, msh, timeout_s):
-    pro = work / "model.pro"
-    pro.write_text(pro_text)
-    t0 = time.perf_counter()
-    proc = subprocess.run([exe, str(pro), "-msh", str(msh), "-solve", "MagSta", "-pos", "Post",
-                           "-v", "2"], cwd=work, capture_output=True, text=True,
-                          timeout=timeout_s)
-    (work / "getdp.log").write_text(proc.stdout + "\n" + proc.stderr)
-    if proc.returncode != 0:
-        raise RuntimeError(f"getdp failed (exit {proc.returncode}); see {work / 'getdp.log'}:\n"
-                           + (proc.stderr or proc.stdout)[-2000:])
-    return time.perf_counter() - t0
-
-
 def solve(bodies, points, *, symmetry="none", level=0, refine=(), out_dir=None,
           magnet_force=False, face_nodes=4, timeout_s=1800.0, body_size=3.0e-3,
           point_size=2.0e-3) -> Fem3DResult:
@@ -406,14 +378,7 @@ def solve(bodies, points, *, symmetry="none", level=0, refine=(), out_dir=None,
     # points that fold onto the same modelled point are solved for once
     folded, inverse = np.unique(np.round(folded_all, 12), axis=0, return_inverse=True)
     inverse = inverse.ravel()
-    tmp = None
-    if out_dir is None:
-        tmp = tempfile.TemporaryDirectory(prefix="designkit_fem3d_")
-        work = Path(tmp.name)
-    else:
-        work = Path(out_dir)
-        work.mkdir(parents=True, exist_ok=True)
-    try:
+    with work_folder(out_dir, "designkit_fem3d_") as work:
         t0 = time.perf_counter()
         msh = work / "model.msh"
         stats = build_mesh(bodies, msh, symmetry=symmetry, level=level, refine=refine,
@@ -440,8 +405,8 @@ def solve(bodies, points, *, symmetry="none", level=0, refine=(), out_dir=None,
                 raise BadInputError("bodies", "exactly one magnet for magnet_force", len(mag))
             fq = _face_rule(mag[0], face_nodes, symmetry)
             plane = [(fq[0], "face_top.txt"), (fq[1], "face_bot.txt")]
-        t_solve = _run(exe, work, problem_text(bodies, stats, lines=lines, plane_points=plane),
-                       msh, timeout_s)
+        t_solve = run_getdp(exe, work, problem_text(bodies, stats, lines=lines,
+                                                    plane_points=plane), msh, timeout_s)[1]
         b, g = _fit_lines(work, names, folded, mirror_axes)
         b = b[inverse] * signs
         g = g[inverse] * signs[:, :, None] * signs[:, None, :]
@@ -449,8 +414,8 @@ def solve(bodies, points, *, symmetry="none", level=0, refine=(), out_dir=None,
         if magnet_force:
             top = np.loadtxt(work / "face_top.txt", ndmin=2)[:, -3:]
             bot = np.loadtxt(work / "face_bot.txt", ndmin=2)[:, -3:]
-            t_solve += _run(exe, work, problem_text(bodies, stats, mu_scale=0.0, lines=[],
-                                                    plane_points=plane), msh, timeout_s)
+            t_solve += run_getdp(exe, work, problem_text(bodies, stats, mu_scale=0.0, lines=[],
+                                                         plane_points=plane), msh, timeout_s)[1]
             top0 = np.loadtxt(work / "face_top.txt", ndmin=2)[:, -3:]
             bot0 = np.loadtxt(work / "face_bot.txt", ndmin=2)[:, -3:]
             w = fq[2]
@@ -466,9 +431,6 @@ def solve(bodies, points, *, symmetry="none", level=0, refine=(), out_dir=None,
                 fy = 0.0
             extra["force_n"] = np.array([fx, fy, fz])
         return Fem3DResult(pts, b, g, stats, t_solve, t_mesh, extra)
-    finally:
-        if tmp is not None:
-            tmp.cleanup()
 
 
 def _face_rule(mag, n, symmetry):

@@ -8,6 +8,7 @@ the winding, where the field gradients are largest; ``level`` halves all sizes p
 
 from __future__ import annotations
 
+import contextlib
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -60,6 +61,26 @@ def _size_near(f, what: str, tags, size_min: float, size_max: float, dist_min: f
     return thr
 
 
+@contextlib.contextmanager
+def gmsh_model(name: str):
+    """A fresh gmsh model ``name``, quiet and on one thread; yields the gmsh module. The model
+    is removed when the block ends normally, and gmsh finalized if it was started here (a
+    caller's own gmsh session is left running)."""
+    gmsh = require("gmsh", "gmsh", "designkit.fem")
+    started_here = not gmsh.isInitialized()
+    if started_here:
+        gmsh.initialize(["-noenv"])
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.option.setNumber("General.NumThreads", 1)
+        gmsh.model.add(name)
+        yield gmsh
+        gmsh.model.remove()
+    finally:
+        if started_here:
+            gmsh.finalize()
+
+
 def mesh_to_file(gmsh, fields, dim: int, msh_path: str | Path) -> None:
     """Size the mesh by the minimum of the gmsh ``fields`` alone, mesh in ``dim`` (2: Frontal-
     Delaunay, 3: Delaunay) and write ``msh_path`` as MSH 2.2 ASCII, the format Debian's GetDP
@@ -83,17 +104,10 @@ def build_mesh(spec: MeshSpec, msh_path: str | Path) -> dict:
 
     Returns mesh statistics: number of nodes and triangles.
     """
-    gmsh = require("gmsh", "gmsh", "designkit.fem")
     s = spec.scale
     ri, ro, hl = spec.inner_radius, spec.outer_radius, spec.length / 2
     rint, rext = spec.shell_inner, spec.shell_outer
-    initialized_here = not gmsh.isInitialized()
-    if initialized_here:
-        gmsh.initialize(["-noenv"])
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.option.setNumber("General.NumThreads", 1)
-        gmsh.model.add("designkit_coil")
+    with gmsh_model("designkit_coil") as gmsh:
         occ = gmsh.model.occ
         half_ext = occ.intersect([(2, occ.addDisk(0, 0, 0, rext, rext))],
                                  [(2, occ.addRectangle(0, -rext, 0, rext, 2 * rext))])[0]
@@ -182,13 +196,8 @@ def build_mesh(spec: MeshSpec, msh_path: str | Path) -> dict:
         node_tags, _, _ = gmsh.model.mesh.getNodes()
         etypes, etags, _ = gmsh.model.mesh.getElements(2)
         ntri = int(sum(len(t) for t in etags))
-        stats = {"nodes": int(len(node_tags)), "triangles": ntri,
-                 "h_line_m": h_line, "h_corner_m": h_corner}
-        gmsh.model.remove()
-        return stats
-    finally:
-        if initialized_here:
-            gmsh.finalize()
+        return {"nodes": int(len(node_tags)), "triangles": ntri,
+                "h_line_m": h_line, "h_corner_m": h_corner}
 
 
 def export_meshio(msh_path: str | Path, out_stem: str | Path) -> list[Path]:

@@ -8,6 +8,7 @@ densely sampled B (the FEM's b is piecewise linear; the fit averages its inter-e
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import shutil
@@ -48,6 +49,40 @@ def find_getdp() -> str:
     if path is None:
         raise GetDPNotFoundError()
     return path
+
+
+@contextlib.contextmanager
+def work_folder(out_dir: str | Path | None, prefix: str):
+    """The folder a GetDP run writes into: ``out_dir`` (created if needed, kept), or a
+    temporary folder named ``prefix...`` removed when the block ends."""
+    if out_dir is None:
+        with tempfile.TemporaryDirectory(prefix=prefix) as name:
+            yield Path(name)
+    else:
+        work = Path(out_dir)
+        work.mkdir(parents=True, exist_ok=True)
+        yield work
+
+
+def run_getdp(exe: str, work: Path, pro_text: str, msh: Path, timeout_s: float, *,
+              verbosity: int = 2, expect: str | None = None) -> tuple[str, float]:
+    """Write ``work/model.pro``, solve MagSta and run the post-operation Post on ``msh``.
+
+    GetDP's output goes to ``work/getdp.log``. Raises RuntimeError (with the log's tail) when
+    getdp fails or does not write ``work/expect``. Returns (stdout, seconds of the run).
+    """
+    pro = work / "model.pro"
+    pro.write_text(pro_text)
+    t0 = time.perf_counter()
+    proc = subprocess.run([exe, str(pro), "-msh", str(msh), "-solve", "MagSta", "-pos", "Post",
+                           "-v", str(verbosity)], cwd=work, capture_output=True, text=True,
+                          timeout=timeout_s)
+    seconds = time.perf_counter() - t0
+    (work / "getdp.log").write_text(proc.stdout + "\n" + proc.stderr)
+    if proc.returncode != 0 or (expect is not None and not (work / expect).exists()):
+        raise RuntimeError(f"getdp failed (exit {proc.returncode}); see {work / 'getdp.log'}:\n"
+                           + (proc.stderr or proc.stdout)[-2000:])
+    return proc.stdout, seconds
 
 
 @dataclass(frozen=True)
@@ -213,14 +248,7 @@ def solve(coil, current: float, *, mu_r: float | None = None, bh: str | None = N
                     core.radius if core else None, core.length if core else None,
                     core.offset if core else 0.0, z_lo - margin, z_hi + margin,
                     off_axis_r + 4e-3, level, probe_box=pbox)
-    tmp_ctx = None
-    if out_dir is None:
-        tmp_ctx = tempfile.TemporaryDirectory(prefix="designkit_fem_")
-        work = Path(tmp_ctx.name)
-    else:
-        work = Path(out_dir)
-        work.mkdir(parents=True, exist_ok=True)
-    try:
+    with work_folder(out_dir, "designkit_fem_") as work:
         t0 = time.perf_counter()
         msh = work / "model.msh"
         stats = build_mesh(spec, msh)
@@ -245,22 +273,12 @@ def solve(coil, current: float, *, mu_r: float | None = None, bh: str | None = N
         pro = problem_text(current_density=jd, mu_r=mu_r, bh=bh_tab, has_core=core is not None,
                            shell_inner=spec.shell_inner, shell_outer=spec.shell_outer,
                            lines=lines, winding_area=area, turns=coil.turns)
-        pro_path = work / "model.pro"
-        pro_path.write_text(pro)
-        files["pro"] = pro_path
-        t1 = time.perf_counter()
-        cmd = [exe, str(pro_path), "-msh", str(msh), "-solve", "MagSta", "-pos", "Post",
-               "-v", "3"]
-        proc = subprocess.run(cmd, cwd=work, capture_output=True, text=True, timeout=timeout_s)
-        t_solve = time.perf_counter() - t1
-        (work / "getdp.log").write_text(proc.stdout + "\n" + proc.stderr)
-        files["log"] = work / "getdp.log"
-        if proc.returncode != 0 or not (work / "line_axis.txt").exists():
-            raise RuntimeError(f"getdp failed (exit {proc.returncode}); see {work / 'getdp.log'}:\n"
-                               + (proc.stderr or proc.stdout)[-2000:])
+        stdout, t_solve = run_getdp(exe, work, pro, msh, timeout_s, verbosity=3,
+                                    expect="line_axis.txt")
+        files["pro"], files["log"] = work / "model.pro", work / "getdp.log"
         converged = True
         if bh_tab is not None:
-            converged = "Non linear" not in proc.stdout or "did not converge" not in proc.stdout
+            converged = "Non linear" not in stdout or "did not converge" not in stdout
         axis = _read_line(work / "line_axis.txt", 0.0)
         off = _read_line(work / "line_off.txt", off_axis_r)
         probe_out = None
@@ -277,9 +295,6 @@ def solve(coil, current: float, *, mu_r: float | None = None, bh: str | None = N
         linkage = 2 * math.pi * _read_global(work / "linkage.txt")
         return FemResult(current, axis, off, energy, linkage, t_solve, t_mesh, stats,
                          files if out_dir is not None else {}, converged, probe_out)
-    finally:
-        if tmp_ctx is not None:
-            tmp_ctx.cleanup()
 
 
 def write_result_json(result: FemResult, path: str | Path, extra: dict | None = None) -> Path:
