@@ -43,11 +43,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--oversize", choices=["error", "skip"], default="error",
                         help="a part larger than the build volume: fail (default) or skip it")
     parser.add_argument("--picture", choices=["png", "none"], default="png")
+    from designkit.commands._common import add_progress_argument
+
+    add_progress_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
     from designkit import _validate as v
-    from designkit.commands._common import check_output
+    from designkit.commands._common import check_output, show_progress
     from designkit.design import load_design
 
     from .export import export_all, parse_formats
@@ -63,7 +66,8 @@ def run(args: argparse.Namespace) -> int:
     params = from_design(design, mandrel=args.mandrel, printer=printer,
                          finger_diameter_mm=v.positive("--finger-diameter", args.finger_diameter, "mm"),
                          press_fit_clearance_mm=v.finite("--press-fit", args.press_fit, "mm"))
-    report = export_all(params, args.out, formats, picture=args.picture, oversize=args.oversize)
+    report = export_all(params, args.out, formats, picture=args.picture, oversize=args.oversize,
+                        progress="bar" if show_progress(args) else "none")
     print(f"designkit cad: {design.name} -> {args.out} ({report['seconds']['total']:.1f} s, "
           f"mandrel {report['mandrel']})")
     print(f"{'part':<20} {'qty':>3} {'material':<8} {'volume mm^3':>12} {'PLA g':>8} {'fits':>5}")

@@ -247,7 +247,7 @@ def export_all(p: CadParams, out_dir: str | Path, formats: Iterable[Format] = FO
     jobs = [(name, fmt) for name in exported if name not in skipped for fmt in formats]
     bar = None
     if progress == "bar":
-        from tqdm import tqdm
+        from designkit._progress import tqdm
 
         bar = tqdm(total=len(jobs) + 2 + (picture == "png"), desc="designkit cad", unit="file",
                    leave=False)

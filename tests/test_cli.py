@@ -49,6 +49,12 @@ OUT_FOLDER_COMMANDS = {
     "sweep": ["sweep", "--param", "inner_radius_m=0.006:0.01:3"],
     "cad": ["cad"],
     "fem": ["fem"],
+    "run": ["run", "--simulate"],
+}
+OUT_FILE_COMMANDS = {
+    "map": ["map"],
+    "scene": ["scene", "compile", "plane", "--lambda", "5"],
+    "viz": ["viz", "scene"],
 }
 
 
@@ -61,10 +67,14 @@ def test_out_naming_an_existing_file_is_one_line(tmp_path, command):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["taken"]
 
 
-def test_viz_out_naming_an_existing_folder_is_one_line(tmp_path):
-    (tmp_path / "fig.png").mkdir()
-    res = designkit("viz", "scene", "--out", "fig.png", cwd=tmp_path)
-    _one_clear_line(res, "--out", "existing folder")
+@pytest.mark.parametrize("command", sorted(OUT_FILE_COMMANDS))
+def test_out_naming_an_existing_folder_is_one_line(tmp_path, command):
+    (tmp_path / "taken.npz").mkdir()
+    (tmp_path / "taken.npz" / "keep").write_text("precious")
+    res = designkit(*OUT_FILE_COMMANDS[command], "--out", "taken.npz", cwd=tmp_path)
+    _one_clear_line(res, "--out", "existing folder", "taken.npz")
+    assert [p.name for p in (tmp_path / "taken.npz").iterdir()] == ["keep"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["taken.npz"]
 
 
 def test_out_under_a_file_is_one_line(tmp_path):
@@ -81,13 +91,22 @@ def _must_not_run(*a, **k):
     ("optimize", "designkit.commands.optimize.solve"),
     ("sweep", "designkit.commands.sweep.run_sweep"),
     ("report", "designkit.commands.report._run"),
+    ("cad", "cad.export.export_all"),
+    ("run", "designkit.plant.run_simulation"),
+    ("map", "designkit.fieldmap.build"),
+    ("scene", "designkit.render.make_object"),
 ])
 def test_out_is_checked_before_computing(tmp_path, monkeypatch, capsys, command, target):
     mod, _, name = target.rpartition(".")
     monkeypatch.setattr(importlib.import_module(mod), name, _must_not_run)
-    (tmp_path / "taken").write_text("")
-    assert main([*OUT_FOLDER_COMMANDS[command], "--out", str(tmp_path / "taken")]) == 1
-    assert "existing file" in capsys.readouterr().err
+    if command in OUT_FOLDER_COMMANDS:
+        args, taken, says = OUT_FOLDER_COMMANDS[command], tmp_path / "taken", "existing file"
+        taken.write_text("")
+    else:
+        args, taken, says = OUT_FILE_COMMANDS[command], tmp_path / "taken.npz", "existing folder"
+        taken.mkdir()
+    assert main([*args, "--out", str(taken)]) == 1
+    assert says in capsys.readouterr().err
 
 
 # ----------------------------------------------------------------------------- report: nothing half written
@@ -175,9 +194,10 @@ def test_over_limit_allowed_explicitly(tmp_path):
 
 
 # ----------------------------------------------------------------------------- progress
-@pytest.mark.parametrize("command", ["report", "optimize", "sweep", "map"])
+@pytest.mark.parametrize("command", ["report", "optimize", "sweep", "map", "cad", "run",
+                                     "scene compile"])
 def test_one_progress_flag_everywhere(command, capsys):
-    assert main([command, "--help"]) == 0
+    assert main([*command.split(), "--help"]) == 0
     text = capsys.readouterr().out
     assert "--no-progress" in text and "--quiet" in text
 

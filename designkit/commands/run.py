@@ -12,6 +12,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ._common import add_progress_argument, check_output, show_progress
+
 OBJECTS = ("plane", "hemisphere", "half-cylinder", "wedge")
 
 
@@ -41,7 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="force constant, N/m (default: the design's render.stiffness)")
     parser.add_argument("--seed", type=int, default=0, help="sensor-noise seed")
     parser.add_argument("--out", type=Path, default=Path("run-out"), help="output folder")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    add_progress_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -52,12 +54,13 @@ def run(args: argparse.Namespace) -> int:
         raise BadInputError("--simulate", "given (this machine has no coil hardware; on the "
                             "controller run `python -m firmware_io.run --bus N --map F --scene F`)",
                             False)
+    check_output(args.out, folder=True)
     summary = run_simulation(
         design=args.design, obj=args.object, trajectory=args.trajectory,
         duration_s=args.duration, faults=args.faults, map_path=args.map, method=args.method,
         period_s=args.period_ms * 1e-3, unipolar=args.unipolar, rows=args.rows,
         lam_n_per_m=args.lam, seed=args.seed, out=args.out,
-        progress=not args.no_progress)
+        progress=show_progress(args))
     print(f"wrote {args.out}/run.csv, summary.json, run.png, loop_timing.png: force error RMS "
           f"{_mn(summary['force_error_rms_n'])} (p95 {_mn(summary['force_error_p95_n'])}), "
           f"localization MAE {_mm(summary['localization_mae_m'])}, loop p99 "

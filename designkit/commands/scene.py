@@ -14,6 +14,7 @@ from pathlib import Path
 
 from ..design import load_design
 from ..errors import BadInputError
+from ._common import add_progress_argument, check_output, show_progress
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -46,12 +47,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="mesh file units to m (default 1e-3: mm)")
     parser.add_argument("--mesh-spacing", type=float, default=2.0,
                         help="signed-distance grid spacing, mm (default 2)")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_progress_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
     from .. import render
 
+    check_output(args.out, folder=False)
     obj = render.make_object(args.object, scale=args.mesh_scale,
                              spacing_m=args.mesh_spacing * 1e-3) \
         if Path(args.object).suffix.lower() in (".stl", ".ply") \
@@ -73,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     if args.lam is None:
         fc = render.force_constant(obj, source, current_limit_a=u, total_current_a=tl,
                                    unipolar=args.unipolar, rows=args.rows, n_side=args.n_side,
-                                   progress=not args.quiet)
+                                   progress=show_progress(args))
         lam = fc.lam_n_per_m
         extra["lambda_limiting_point_m"] = fc.limiting_point_m.tolist()
         extra["lambda_points"] = int(len(fc.points_m))
