@@ -353,6 +353,11 @@ class Scene:
         p = Path(path)
         if not p.is_file():
             raise BadInputError("scene file", "a path to an existing .npz scene", str(p))
+        with open(p, "rb") as fh:
+            magic = fh.read(4)
+        if magic != b"PK\x03\x04":  # every .npz is a zip archive (np.load would try pickle)
+            raise _bad(p, "a .npz archive; this file is not one, so it is not a scene file; "
+                          "make one with: designkit scene compile OBJECT --out FILE.npz")
         try:
             with np.load(p, allow_pickle=False) as z:
                 if "meta" not in z.files:
