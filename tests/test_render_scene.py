@@ -98,16 +98,3 @@ def test_cli_bad_input_no_traceback(tmp_path, capsys):
     assert main(["scene", "compile", "plane", "--lambda", "-1",
                  "--out", str(tmp_path / "x.npz")]) == 1
     assert not (tmp_path / "x.npz").exists()
-
-
-def test_firmware_scene_numpy_only():
-    import ast
-
-    src = ROOT / "firmware_io" / "scene.py"
-    mods = set()
-    for node in ast.walk(ast.parse(src.read_text())):
-        if isinstance(node, ast.Import):
-            mods |= {a.name.split(".")[0] for a in node.names}
-        elif isinstance(node, ast.ImportFrom) and node.level == 0:
-            mods.add(node.module.split(".")[0])
-    assert mods <= {"numpy", "hashlib", "json", "zipfile", "pathlib", "__future__"}, mods

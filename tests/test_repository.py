@@ -166,6 +166,24 @@ def test_imports_point_one_way():
     assert not bad, "\n".join(bad)
 
 
+def test_firmware_io_imports_numpy_smbus2_and_the_standard_library_only():
+    """firmware_io runs on the controller: every module, at any level (function-level imports
+    included), imports numpy, smbus2 (the bus only) and the standard library, nothing else."""
+    allowed = set(sys.stdlib_module_names) | {"numpy", "firmware_io"}
+    bad = []
+    for path in sorted((ROOT / "firmware_io").glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.level == 0:
+                names = [node.module]
+            else:
+                continue
+            ok = allowed | ({"smbus2"} if path.name == "bus.py" else set())
+            bad += [f"{path.name}: {n}" for n in names if n.split(".")[0] not in ok]
+    assert not bad, "\n".join(bad)
+
+
 def test_field_kernels_do_not_import_the_design_spec():
     for path in (ROOT / "designkit" / "field").glob("*.py"):
         assert "design import" not in path.read_text(), path.name
