@@ -231,7 +231,7 @@ def run(out_dir=DEFAULT_OUT, quick: bool = False, fem: bool = False,
         saturation_fem: bool = False, design=None) -> dict:
     """The study (module docs); ``design`` defaults to the default 3x3 design (the FEM table
     models the default array, so ``fem`` needs it)."""
-    from tqdm import tqdm
+    from designkit._progress import tqdm
 
     from designkit import default_design
     from designkit._io import write_json_atomic

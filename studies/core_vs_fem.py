@@ -126,7 +126,7 @@ def _around_one(geometry, material, level):
 
 
 def _around(level, quick):
-    from tqdm import tqdm
+    from designkit._progress import tqdm
 
     cases = [(g, m) for g in CORE_GEOMETRIES for m in MATERIALS]
     if quick:

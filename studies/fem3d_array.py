@@ -53,7 +53,7 @@ def run(out_dir=DEFAULT_OUT, quick: bool = False, level: int | None = None,
         cases: tuple[str, ...] | None = None) -> dict:
     """Run the cases (``cases``: a subset of two, centre, pull, single, block, corner; default
     all) and write the result files; returns the summary dict."""
-    from tqdm import tqdm
+    from designkit._progress import tqdm
 
     from designkit._io import write_json_atomic
     from designkit.fem import fem3d

@@ -93,12 +93,9 @@ def run(out_dir, quick=False):
     total = 0
     nonfinite = 0
     table = {}
-    try:
-        from tqdm import tqdm
-    except ImportError:  # pragma: no cover
-        def tqdm(x, **_):
-            return x
     import time
+
+    from designkit._progress import tqdm
 
     for name, p in tqdm(list(regs.items()), desc="regions", disable=quick):
         t0 = time.perf_counter()

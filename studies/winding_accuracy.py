@@ -45,7 +45,7 @@ def _one(case):
 
 def compute_refs(cases, processes=2, progress=True):
     """mpmath references (B per mu0 J in m, G per mu0 J) for each case, in parallel."""
-    from tqdm import tqdm
+    from designkit._progress import tqdm
 
     if processes > 1:
         from multiprocessing import get_context
