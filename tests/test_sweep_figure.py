@@ -109,3 +109,14 @@ def test_one_and_two_parameter_figures_have_no_slice_note(n):
     fig = sweep_figure(result)
     assert "slice" not in fig.axes[0].get_title()
     _extent_inside_canvas(fig)
+
+
+def test_figure_names_the_objective_and_limits_it_was_given():
+    # the array sweep plots another objective under other limits: the figure must say so
+    d = default_design()
+    result = run_sweep(d, [parse_param("inner_radius_m=0.006:0.014:4"),
+                           parse_param("length_m=0.03:0.1:3")], workers=1, progress=False)
+    fig = sweep_figure(result, objective="smallest upward force", limits="device constraints")
+    assert fig.axes[0].get_title().endswith("feasible (device constraints)")
+    assert fig.axes[1].get_ylabel() == "smallest upward force (mN)"  # the colour bar
+    _extent_inside_canvas(fig)
