@@ -68,9 +68,10 @@ ARRAY_PARAMETERS: dict[str, str] = {
 ARRAY_COLUMNS = ("pitch_m", "inner_radius_m", "outer_radius_m", "length_m", "wire_diameter_m",
                  "core_radius_m", "core_length_m", "core_protrusion_m", "turns", "force_n",
                  "force_design_point_n", "resistance_ohm", "settling_time_s",
-                 "voltage_needed_v", "time_to_max_temperature_s", "valid", "feasible")
+                 "voltage_needed_v", "time_to_max_temperature_s", "valid", "feasible", "reason")
 """``force_n`` of an array row is the rendering objective: the smallest upward force over the
-workspace region (:func:`designkit.optimize.rendering_force`)."""
+workspace region (:func:`designkit.optimize.rendering_force`); ``reason`` says why a row is not
+feasible (empty when it is)."""
 
 
 def parse_param(text: str, parameters: dict[str, str] | None = None) -> ParamRange:
@@ -256,10 +257,11 @@ def evaluate_array_chunk(design: Design, names: Sequence[str], values: np.ndarra
     :class:`designkit.optimize.DeviceProblem` (fast slice core model) and the rendering
     objective (smallest upward force over the workspace region, LP per point). Invalid rows
     (overlapping coils, no whole turn, core longer than winding + protrusion): valid = False.
+    ``reason``: why a row is invalid or which device constraints it breaks (empty if feasible).
     """
     from . import electrical as el
-    from .errors import DesignkitError
-    from .optimize import device_problem_for, rendering_force
+    from .errors import DesignkitError, DesignRuleError
+    from .optimize import DEVICE_CONSTRAINTS, device_problem_for, rendering_force
 
     c = design.coil
     k = design.core
@@ -283,30 +285,40 @@ def evaluate_array_chunk(design: Design, names: Sequence[str], values: np.ndarra
         n = 0
         if ro > ri:
             n = el.turns_from_geometry(ri, ro, ln, d_ins, design.wire.packing)
+        # no per-row numbers in a reason: equal reasons group in reason_summary
+        why = ("no whole turn fits the winding section" if n < 1 else
+               "core longer than winding + protrusion" if lc > ln + prot + 1e-12 else
+               "core protrusion < 0" if prot < 0 else "")
         try:
-            if n < 1 or lc > ln + prot + 1e-12 or prot < 0:
-                raise BadInputError("row", "a whole turn and a core inside winding + protrusion",
-                                    row)
+            if why:
+                raise BadInputError("row", why, row)
             d2 = design.replace(**{
                 "array.pitch_m": row["pitch_m"], "coil.inner_radius_m": ri,
                 "coil.outer_radius_m": ro, "coil.length_m": ln, "coil.turns": n,
                 "wire.diameter_m": row["wire_diameter_m"], "wire.insulated_diameter_m": d_ins,
                 "core.radius_m": ri, "core.length_m": lc,
                 "core.offset_m": ln / 2 + prot - lc / 2, "core.bh": "steel1010"})
-        except (DesignkitError, ValueError):
-            res.update(turns=n, valid=False, feasible=False)
+        except (DesignkitError, ValueError) as exc:
+            if not why:
+                why = ("coils overlap (2 x outer radius > pitch)"
+                       if isinstance(exc, DesignRuleError) else
+                       f"invalid design ({getattr(exc, 'name', type(exc).__name__)})")
+            res.update(turns=n, valid=False, feasible=False, reason=why)
             out.append(res)
             continue
         p = device_problem_for(d2)
         x = [ri, ro, ln, ri, lc, prot, row["wire_diameter_m"]]
         ev = p.evaluate(x, turns=n)
         rend = rendering_force(d2, coil_x=x, turns=n)
+        broken = [f"{name} limit" for name, g in zip(DEVICE_CONSTRAINTS, ev["g"]) if g > 0]
+        if prot > p.upper[5]:
+            broken.append("core protrusion above its bound")
         res.update(turns=n, force_n=rend["min_upward_force_n"],
                    force_design_point_n=ev["force_n"], resistance_ohm=ev["resistance_ohm"],
                    settling_time_s=ev["settling_time_s"],
                    voltage_needed_v=ev["voltage_needed_v"],
                    time_to_max_temperature_s=ev["time_to_max_temperature_s"], valid=True,
-                   feasible=bool(max(ev["g"]) <= 0 and prot <= p.upper[5]))
+                   feasible=not broken, reason="; ".join(broken))
         out.append(res)
     return out
 

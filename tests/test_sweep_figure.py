@@ -120,3 +120,24 @@ def test_figure_names_the_objective_and_limits_it_was_given():
     assert fig.axes[0].get_title().endswith("feasible (device constraints)")
     assert fig.axes[1].get_ylabel() == "smallest upward force (mN)"  # the colour bar
     _extent_inside_canvas(fig)
+
+
+def test_array_sweep_says_why_a_row_is_infeasible():
+    from designkit.design import named_design
+    from designkit.sweep import ARRAY_PARAMETERS, reason_summary, run_array_sweep
+
+    d = named_design("optimized")
+    result = run_array_sweep(d, [parse_param("pitch_m=0.03:0.05:2", ARRAY_PARAMETERS),
+                                 parse_param("core_length_m=0.05:0.08:2", ARRAY_PARAMETERS)],
+                             workers=1, progress=False)
+    room = d.coil.length_m + (d.core.offset_m + d.core.length_m / 2 - d.coil.length_m / 2)
+    for r in result.rows:
+        if r["core_length_m"] > room:
+            assert r["reason"] == "core longer than winding + protrusion"
+        elif 2 * d.coil.outer_radius_m > r["pitch_m"]:
+            assert r["reason"].startswith("coils overlap")
+        else:
+            assert r["valid"]
+        assert (r["reason"] == "") == r["feasible"]
+    assert any(r["feasible"] for r in result.rows)
+    assert "core longer than winding + protrusion" in reason_summary(result)

@@ -74,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     if result.best_index is not None:
         describe = _best_array if array else _best_coil
         print("best feasible: " + describe(result.rows[result.best_index]))
-    if feas == 0 and not array:
+    if feas == 0:
         print(f"no feasible design; why (column 'reason' of {csv_path.name}):\n"
               + reason_summary(result))
     print(f"wrote {csv_path} and {png_path}")
