@@ -83,6 +83,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._blas import one_blas_thread
 from .constants import MU0
 from .errors import BadInputError, DesignRuleError
 from .pose import Pose
@@ -106,22 +107,6 @@ N_PHI_MAGNET = 32
 Observation points where :meth:`CoreModel.far_mask` fails sum a core's panels (m = 0) and
 3 Gauss nodes x 32 azimuths per charge panel (m >= 1); the others use compressed product
 rules (FAR_NODES rings per interval, 12 azimuths)."""
-
-
-def _blas_one_thread():
-    """Context limiting BLAS to one thread when threadpoolctl is installed (optional).
-
-    The kernels here are many small matrix products; a multithreaded BLAS on a busy machine
-    spends far more time synchronizing than computing (measured 40x slower, 2 threads on 2
-    loaded cores).
-    """
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - optional
-        import contextlib
-
-        return contextlib.nullcontext()
-    return threadpool_limits(1, user_api="blas")
 
 
 # ============================================================================ per core type
@@ -783,7 +768,7 @@ class ArraySystem:
         self.factors = np.concatenate([m.factors() for m in self.models]) if n else np.zeros(0)
         mat = np.zeros((n, n))
         cache = {}
-        with _blas_one_thread():
+        with one_blas_thread():
             self._assemble(mat, cache)
         self.n_blocks = len(cache)
         self.n_unknowns = n
@@ -899,7 +884,7 @@ class ArraySystem:
         return self._field(points, x, gradient, True)
 
     def _field(self, points, x, gradient, pointwise, coil_columns=False):
-        with _blas_one_thread():
+        with one_blas_thread():
             return self._field_impl(points, x, gradient, pointwise, coil_columns)
 
     def _field_impl(self, points, x, gradient, pointwise, coil_columns=False):
@@ -965,7 +950,7 @@ class ArraySystem:
                 h = mag * (br[..., None] * er + bz[..., None] * u)
                 return np.swapaxes(h, 1, 2)
 
-        with _blas_one_thread():
+        with one_blas_thread():
             rhs = self._project_global_field(src, N_PHI_MAGNET, pos)
         return self.solve(rhs)
 
