@@ -1,0 +1,24 @@
+"""The hot paths' BLAS limit: one thread inside, the caller's setting restored after."""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg  # noqa: F401  (loads scipy's own BLAS, which must be limited too)
+from threadpoolctl import threadpool_info, threadpool_limits
+
+from designkit._blas import one_blas_thread
+
+
+def _blas_threads() -> list[int]:
+    return [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"]
+
+
+def test_one_blas_thread_inside_and_the_callers_setting_after():
+    assert _blas_threads(), "numpy and scipy link a BLAS"
+    with threadpool_limits(limits=2, user_api="blas"):
+        before = _blas_threads()
+        with one_blas_thread():
+            assert _blas_threads() == [1] * len(before)
+            a = np.random.default_rng(0).standard_normal((50, 50))
+            np.testing.assert_allclose(a @ np.linalg.inv(a), np.eye(50), atol=1e-10)
+        assert _blas_threads() == before
