@@ -349,22 +349,15 @@ def _run(args, design, current, currents_arg, out):
     show = show_progress(args)
     steps = ["design summary", "design point", "design vs optimized", "figures", "VTK files",
              "map file", "report"]
-    try:
-        from .._progress import tqdm
+    from .._progress import tqdm
 
-        bar = tqdm(total=len(steps), desc="designkit report", unit="step", disable=not show)
-    except ImportError:  # pragma: no cover - tqdm is a dependency
-        bar = None
+    bar = tqdm(total=len(steps), desc="designkit report", unit="step", disable=not show)
 
     def step(name: str):
-        if bar is not None:
-            bar.set_postfix_str(name)
-        elif show:
-            print(f"[designkit report] {name}")
+        bar.set_postfix_str(name)
 
     def done():
-        if bar is not None:
-            bar.update(1)
+        bar.update(1)
 
     skipped: dict[str, str] = {}
 
@@ -446,8 +439,7 @@ def _run(args, design, current, currents_arg, out):
     write_json_atomic(out / "report.json", report)
     write_text_atomic(out / "report.md", report_markdown(report))
     done()
-    if bar is not None:
-        bar.close()
+    bar.close()
     return summary, report
 
 

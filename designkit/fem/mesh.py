@@ -217,14 +217,8 @@ def export_meshio(msh_path: str | Path, out_stem: str | Path) -> list[Path]:
     for ext in (".vtu", ".xdmf"):
         target = Path(str(out_stem) + ext)
         if ext == ".xdmf":
-            try:
-                import h5py  # noqa: F401  (meshio's XDMF writer imports it even for XML data)
-            except ImportError:
-                import warnings
-
-                warnings.warn("XDMF export skipped: meshio's XDMF writer needs h5py "
-                              "(pip install h5py); the .vtu and .msh are written", stacklevel=2)
-                continue
+            # meshio's XDMF writer imports h5py even for XML data: a clear error if it is missing
+            require("h5py", "h5py", "designkit.fem XDMF export")
             # XDMF with XML data stays a single self-contained file (no HDF5 side file)
             with atomic_path(target) as tmp:
                 meshio.xdmf.write(str(tmp), mesh, data_format="XML")
