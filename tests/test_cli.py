@@ -168,7 +168,7 @@ def test_negative_currents_are_accepted(tmp_path):
 
 @pytest.mark.parametrize("args", [
     ["viz", "scene", "--currents", "60,0,0,0,0,0,0,0,0"],
-    ["report", "--quick", "--currents", "0,0,0,0,-6.5,0,0,0,0"],
+    ["report", "--quick", "--currents", "-6.5,0,0,0,0,0,0,0,0"],  # a leading minus too
     ["report", "--quick", "--current", "60"],
 ])
 def test_currents_over_the_limit_are_an_error(tmp_path, args):
