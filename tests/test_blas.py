@@ -22,3 +22,12 @@ def test_one_blas_thread_inside_and_the_callers_setting_after():
             a = np.random.default_rng(0).standard_normal((50, 50))
             np.testing.assert_allclose(a @ np.linalg.inv(a), np.eye(50), atol=1e-10)
         assert _blas_threads() == before
+
+
+def test_bench_blas_smoke(tmp_path):
+    from conftest import load_study
+
+    r = load_study("bench_blas").run(tmp_path, quick=True)
+    case = r["cases"]["array build"]
+    assert case["median_s"]["one_thread"] > 0 and case["median_s"]["default"] > 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bench_blas.json"]
