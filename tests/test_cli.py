@@ -226,6 +226,16 @@ def test_sweep_progress_in_a_pipe_has_no_carriage_returns(tmp_path):
     assert "\r" not in res.stderr and "sweep" in res.stderr
 
 
+# ----------------------------------------------------------------------------- map files
+def test_a_text_file_renamed_npz_is_not_a_map_file(tmp_path):
+    (tmp_path / "map.npz").write_text("hello, I am a text file\n")
+    res = designkit("scene", "compile", "plane", "--map", "map.npz", "--out", "s.npz",
+                    cwd=tmp_path)
+    line = _one_clear_line(res, "not a map file", "map.npz")
+    assert "pickle" not in line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["map.npz"]
+
+
 # ----------------------------------------------------------------------------- design files
 @pytest.mark.parametrize("text,param", [
     ("name = 5\n", "name"),
