@@ -1,5 +1,6 @@
 """Spec fields that used to be dead are read: core.saturation_t sets the saturation warning,
-drive.pwm_frequency_hz the PWM current ripple."""
+drive.pwm_frequency_hz the PWM current ripple, render.stiffness_n_per_m the run's force constant
+(sensors.range_t and lsb_t: tests/test_sensing.py)."""
 
 from __future__ import annotations
 
@@ -56,3 +57,31 @@ def test_electrical_report_uses_the_design_pwm_frequency():
                              coil)
     assert a.pwm_frequency_hz == d.drive.pwm_frequency_hz
     assert b.pwm_ripple_a == pytest.approx(a.pwm_ripple_a / 10, rel=1e-3)  # tau >> period
+
+
+def test_run_takes_lambda_from_the_design_render_stiffness(monkeypatch, tmp_path):
+    """render.stiffness_n_per_m is the force constant of ``designkit run`` without --lambda."""
+    from types import SimpleNamespace
+
+    import designkit.render.scenefile as scenefile
+    import firmware_io.mapfile as mapfile
+    from designkit.plant import run_simulation
+
+    class Stop(Exception):
+        pass
+
+    seen = {}
+
+    def compile_scene(obj, path, *, lam_n_per_m, **kwargs):
+        seen["lam"] = lam_n_per_m
+        raise Stop  # what follows (the run itself) is the runner tests' business
+
+    monkeypatch.setattr(mapfile.MapFile, "load",
+                        classmethod(lambda cls, *a, **k: SimpleNamespace(design_sha256="x")))
+    monkeypatch.setattr(scenefile, "compile_scene", compile_scene)
+    d = default_design().replace(**{"render.stiffness_n_per_m": 4.25})
+    for lam, want in ((None, 4.25), (7.0, 7.0)):
+        with pytest.raises(Stop):
+            run_simulation(design=d, map_path=tmp_path / "m.npz", out=tmp_path / "o",
+                           array=object(), duration_s=0.1, lam_n_per_m=lam)
+        assert seen["lam"] == want
