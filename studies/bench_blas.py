@@ -76,17 +76,16 @@ def run(out_dir, quick: bool = False, repeats: int = 3) -> dict:
         med = {m: float(np.median(v)) for m, v in runs.items()}
         rows[case] = {"seconds": runs, "median_s": med,
                       "default_over_one_thread": med["default"] / med["one_thread"]}
+    end = os.getloadavg()[0]
+    table = [f"load average (1 min): {load:.2f} -> {end:.2f}{'  QUICK RUN' if quick else ''}",
+             f"{'case':<14}{'one thread s':>14}{'default s':>12}{'default/one':>13}"]
+    table += [f"{case:<14}{r['median_s']['one_thread']:>14.2f}{r['median_s']['default']:>12.2f}"
+              f"{r['default_over_one_thread']:>13.2f}" for case, r in rows.items()]
+    print("\n".join(table))
     out = {"quick": quick, "repeats": repeats, "load_average_1min_start": load,
-           "load_average_1min_end": os.getloadavg()[0], "cases": rows}
+           "load_average_1min_end": end, "cases": rows}
     write_json_atomic(Path(out_dir) / "bench_blas.json", out)
-    print(f"load average (1 min): {load:.2f} -> {out['load_average_1min_end']:.2f}"
-          f"{'  QUICK RUN' if quick else ''}")
-    print(f"{'case':<14}{'one thread s':>14}{'default s':>12}{'default/one':>13}")
-    for case, r in rows.items():
-        print(f"{case:<14}{r['median_s']['one_thread']:>14.2f}{r['median_s']['default']:>12.2f}"
-              f"{r['default_over_one_thread']:>13.2f}")
     return out
-
 
 if __name__ == "__main__":
     args = [a for a in sys.argv[1:] if not a.startswith("--")]
