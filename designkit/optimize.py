@@ -962,32 +962,61 @@ class DeviceProblem:
 
         Returns a dict with force_n (upward force the coil renders at the design point with
         |I| = current_a, >= 0), winding/core shares of dBz/dz, R (hot, cold), L (secant,
-        incremental), tau, supply voltage needed, thermal time, peak core B and the scaled
-        constraints ``g`` (<= 0 feasible), in :data:`DEVICE_CONSTRAINTS` order.
+        incremental; the fast model only), tau, supply voltage needed, thermal time, peak core B
+        and the scaled constraints ``g`` (<= 0 feasible), in :data:`DEVICE_CONSTRAINTS` order.
         """
-        from .core_fast import solve_rod
-
         x = [float(q) for q in x]
+        if model == "fast":
+            many = self.evaluate_many(np.array([x]), None if turns is None else [turns])
+            return {k: (tuple(float(q) for q in val[0]) if k == "g" else float(val[0]))
+                    for k, val in many.items()}
+        if model != "panel":
+            raise BadInputError("model", "'fast' or 'panel'", model)
         ri, ro, ln, a, lc, prot, d = x
         n = self.turns(x) if turns is None else float(turns)
-        i = self.current_a
-        z_mag = ln / 2 + self.height_m  # magnet centre in the winding frame
-        j = n * i / ((ro - ri) * ln)
-        g_w = float(j * axial_gradient_per_current_density(ri, ro, ln, self.height_m))
-        a_eff = min(a, ri)
-        if model == "fast":
-            sol = solve_rod(ri, ro, ln, n, a_eff, lc, self.core_offset(x), i,
-                            n_slices=self.n_slices, quadrature="bessel")
-            g_c = float(sol.axis_field(z_mag)[1]) * self.corrections[0]
-            lam = sol.linkage_wb * self.corrections[1]
-            l_inc_core = sol.dlinkage_di_wb_per_a * self.corrections[1]
-            peak = sol.peak_b_t
-        elif model == "panel":
-            g_c, lam, peak = _panel_core(ri, ro, ln, n, a_eff, lc, self.core_offset(x), i, z_mag)
-            l_inc_core = float("nan")
-        else:
-            raise BadInputError("model", "'fast' or 'panel'", model)
+        g_c, lam, peak = _panel_core(ri, ro, ln, n, min(a, ri), lc, self.core_offset(x),
+                                     self.current_a, ln / 2 + self.height_m)
         l_air = el.air_inductance_from_geometry(ri, ro, ln, n, t_max=60.0)
+        out = self._assemble(np.array([x]), np.array([n]), np.array([g_c]), np.array([lam]),
+                             np.zeros(1), np.array([peak]), np.array([l_air]))
+        # the panel model solves at one current: no incremental inductance (not a NaN)
+        return {k: (tuple(float(q) for q in val[0]) if k == "g" else float(val[0]))
+                for k, val in out.items() if k != "inductance_incremental_h"}
+
+    def evaluate_many(self, xs, turns=None, air_cache: dict | None = None) -> dict:
+        """Fast-model numbers of B designs at once: xs (B, 7) physical variables (SI).
+
+        Same keys as :meth:`evaluate`, each a (B,) array (``g``: (B, 5)). ``air_cache``: a
+        dict reused across calls for the air inductance per turn^2 by (ri, ro, Lc).
+        """
+        from .core_fast import solve_rods
+
+        xs = np.atleast_2d(np.asarray(xs, dtype=float))
+        ri, ro, ln, a, lc, prot, d = xs.T
+        n = self.turns(xs.T) if turns is None else np.asarray(turns, dtype=float)
+        sol = solve_rods(ri, ro, ln, n, np.minimum(a, ri), lc, ln / 2 + prot - lc / 2,
+                         self.current_a, n_slices=self.n_slices, quadrature="bessel")
+        g_c = sol.axis_field(ln / 2 + self.height_m)[1] * self.corrections[0]
+        lam = sol.linkage_wb * self.corrections[1]
+        l_inc = sol.dlinkage_di_wb_per_a * self.corrections[1]
+        cache = {} if air_cache is None else air_cache
+        l_air = np.empty(len(xs))
+        for k in range(len(xs)):
+            key = (ri[k], ro[k], ln[k])
+            per = cache.get(key)
+            if per is None:
+                if len(cache) > 4096:
+                    cache.clear()
+                per = cache[key] = el.air_inductance_from_geometry(*key, 1.0, t_max=60.0)
+            l_air[k] = per * n[k] ** 2
+        return self._assemble(xs, n, g_c, lam, l_inc, sol.peak_b_t, l_air)
+
+    def _assemble(self, xs, n, g_c, lam, l_inc_core, peak, l_air) -> dict:
+        """The numbers of :meth:`evaluate` from the core's share (arrays over designs, SI)."""
+        ri, ro, ln, a, lc, prot, d = xs.T
+        i = self.current_a
+        j = n * i / ((ro - ri) * ln)
+        g_w = j * axial_gradient_per_current_density(ri, ro, ln, self.height_m)
         l_sec = l_air + lam / i
         wire_len = el.wire_length_from_geometry(ri, ro, n)
         area = math.pi * d * d / 4
@@ -1004,12 +1033,12 @@ class DeviceProblem:
                  * math.log1p(a_c * (self.hot_temperature_c - self.cold_temperature_c))
                  / (p0 * a_c))
         d_ins = self.insulated(d)
-        g = (r_hot / self.max_resistance_ohm - 1.0,
-             volt / self.supply_voltage_v - 1.0,
-             5.0 * tau / self.max_settling_time_s - 1.0,
-             1.0 - t_hot / self.min_time_to_hot_s,
-             (ri + d_ins - ro) / 1e-3)
-        return {"turns": n, "force_n": float(self.moment_a_m2 * abs(g_w + g_c)),
+        g = np.stack([r_hot / self.max_resistance_ohm - 1.0,
+                      volt / self.supply_voltage_v - 1.0,
+                      5.0 * tau / self.max_settling_time_s - 1.0,
+                      1.0 - t_hot / self.min_time_to_hot_s,
+                      (ri + d_ins - ro) / 1e-3], axis=1)
+        return {"turns": n, "force_n": self.moment_a_m2 * np.abs(g_w + g_c),
                 "dbz_dz_winding_t_per_m": g_w, "dbz_dz_core_t_per_m": g_c,
                 "resistance_ohm": r_hot, "resistance_cold_ohm": r_cold,
                 "inductance_h": l_sec, "inductance_air_h": l_air,
@@ -1085,6 +1114,7 @@ class _FastModel:
         self.lo = np.array([problem.lower[k] for k in self.free])
         self.hi = np.array([problem.upper[k] for k in self.free])
         self.cache: dict = {}
+        self.air_cache: dict = {}
         self.calls = 0
 
     def full_y(self, y) -> list[float]:
@@ -1100,35 +1130,43 @@ class _FastModel:
         return DeviceProblem.physical(self.full_y(y))
 
     def values(self, y) -> np.ndarray:
-        """[force_n, g_0, ..., g_6] at the free variables y (SI)."""
-        key = tuple(np.round(np.asarray(y, dtype=float), 14))
-        hit = self.cache.get(key)
-        if hit is None:
-            self.calls += 1
-            x = self.full_x(y)
-            if x[1] <= x[0] * (1 + 1e-9):  # empty winding: no force, depth constraint violated
-                hit = np.array([0.0, 0, 0, 0, 0, (x[0] + self.p.insulated(x[6]) - x[1]) / 1e-3])
-            else:
-                ev = self.p.evaluate(x)
-                hit = np.array([ev["force_n"], *ev["g"]], dtype=float)
-            if len(self.cache) > 4096:
+        """[force_n, g_0, ..., g_4] at the free variables y (SI)."""
+        return self.values_many(np.asarray(y, dtype=float)[None, :])[0]
+
+    def values_many(self, ys) -> np.ndarray:
+        """:meth:`values` of the rows of ys (B, n_free), the missing ones in one batch."""
+        ys = np.atleast_2d(np.asarray(ys, dtype=float))
+        keys = [tuple(np.round(row, 14)) for row in ys]
+        miss = [i for i, k in enumerate(keys) if k not in self.cache]
+        if miss:
+            if len(self.cache) + len(miss) > 4096:
                 self.cache.clear()
-            self.cache[key] = hit
-        return hit
+            xs = np.array([self.full_x(ys[i]) for i in miss])
+            out = np.zeros((len(miss), 1 + len(DEVICE_CONSTRAINTS)))
+            # empty winding: no force, depth constraint violated
+            empty = xs[:, 1] <= xs[:, 0] * (1 + 1e-9)
+            out[empty, -1] = (xs[empty, 0] + self.p.insulated(xs[empty, 6])
+                              - xs[empty, 1]) / 1e-3
+            if (~empty).any():
+                ev = self.p.evaluate_many(xs[~empty], air_cache=self.air_cache)
+                out[~empty, 0] = ev["force_n"]
+                out[~empty, 1:] = ev["g"]
+            self.calls += len(miss)
+            for i, row in zip(miss, out):
+                self.cache[keys[i]] = row
+        return np.array([self.cache[k] for k in keys])
 
     def with_gradient(self, y):
+        """Values and forward-difference Jacobian (steps 1e-6 of each span), one batch."""
         y = np.asarray(y, dtype=float)
-        base = self.values(y)
-        jac = np.zeros((len(base), len(y)))
         span = self.hi - self.lo
-        for k in range(len(y)):
-            h = 1e-6 * span[k]
-            yp = y.copy()
-            # step inwards at the upper bound so the model is never evaluated outside
-            if yp[k] + h > self.hi[k]:
-                h = -h
-            yp[k] += h
-            jac[:, k] = (self.values(yp) - base) / h
+        h = 1e-6 * span
+        # step inwards at the upper bound so the model is never evaluated outside
+        h = np.where(y + h > self.hi, -h, h)
+        pts = np.vstack([y[None, :], y[None, :] + np.diag(h)])
+        vals = self.values_many(pts)
+        base = vals[0]
+        jac = ((vals[1:] - base[None, :]) / h[:, None]).T
         return base, jac
 
 
