@@ -41,9 +41,22 @@ the exact Bessel air inductance, and the saturating core by the fast slice model
 :mod:`designkit.core_fast` *corrected* by the surface-current panel model of
 :mod:`designkit.core` (``bh='steel1010'``): the core's force and flux linkage in the fast model
 are multiplied by the ratios panel / fast measured at the current optimum, the problem is
-re-solved from there, and this repeats until the ratios settle (space mapping, zeroth order).
-At the reported optimum the corrected model equals the panel model (to the loop tolerance), so
-every reported number and margin is the panel model's; the fast model only steers the search.
+re-solved from there, and this repeats until the residual is within the bound (space mapping,
+zeroth order).
+
+Proof of the fast model (which kind): an *a-posteriori* bound, not a surrogate with an a-priori
+one. The reported optimum is always re-evaluated by the validated panel model and every
+reported number and margin is the panel model's. At that design the corrected fast model that
+found it must reproduce the panel model's upward force and secant inductance within
+:data:`RESIDUAL_BOUND` (1 %); if the measured residual exceeds it, the ratios are updated and
+the optimum re-solved (at most ``max_corrections`` panel evaluations). ``optimize.json`` carries
+``fast_model_check``: the residual (``force_rel_err``, ``inductance_rel_err``), the uncorrected
+fast model's error at the optimum, the bound and ``within_bound``. The uncorrected fast model
+stays within :data:`FAST_MODEL_ENVELOPE` of the panel model over the optimizer's bounds (a
+seeded randomized test); that envelope is wide (the fast model misses the radial structure of
+the core's magnetization) and only the residual bound is claimed for the numbers.
+Speed: :meth:`DeviceProblem.evaluate_many` solves a whole finite-difference stencil (or a grid
+block) as one batch (:func:`designkit.core_fast.solve_rods`).
 
 Search variables (:data:`SEARCH_VARIABLES`): inner/outer radius and length of the winding,
 core fill (core radius / inner radius), core depth fraction (core length / (winding length +
@@ -833,6 +846,15 @@ core length = core_depth_fraction x (winding length + protrusion) (the core's bo
 below the winding's), so those two limits are bounds, not constraints."""
 BOARD_THICKNESS_M = 0.8e-3
 """Upper sensor board above ``sensors.offset_m`` (assumed; gives the ~14.8 mm board top)."""
+FAST_MODEL_ENVELOPE = {"force_rel_err": (-0.2, 0.6), "inductance_rel_err": (-0.2, 0.05)}
+"""Uncorrected fast model / panel model - 1 over the optimizer's bounds (upward force, secant
+inductance at the operating current): the envelope that seeded random designs in the bounds
+stay inside (tests/test_optimize.py, 30 designs measured -0.10..+0.44 and -0.15..+0.01). Wide:
+the fast model only steers the search; the bound that matters is :data:`RESIDUAL_BOUND`."""
+RESIDUAL_BOUND = 1e-2
+"""Stated bound on the corrected fast model at the reported optimum: its upward force and
+secant inductance within 1 % of the panel model's (:func:`_correct_for_wire` re-solves until
+the residual meets it)."""
 
 
 @dataclass(frozen=True)
@@ -1250,6 +1272,9 @@ class DeviceResult:
     fast_evaluations: int
     panel_evaluations: int
     seconds: float
+    fast_model_check: dict = field(default_factory=dict)
+    """The fast model against the panel model at the reported design (:func:`_fast_vs_panel`;
+    method, bound, residual, whether within it)."""
     core_model: str = "steel1010 (fast slice model corrected by the surface-current panel model)"
 
     @property
@@ -1286,6 +1311,7 @@ class DeviceResult:
             "panel_evaluations": self.panel_evaluations,
             "corrections": {"force": self.corrections[0], "linkage": self.corrections[1]},
             "correction_history": [list(map(float, c)) for c in self.correction_history],
+            "fast_model_check": self.fast_model_check,
             "continuous_optimum": dict(zip(DEVICE_VARIABLES, map(float, self.x_continuous))),
             "search_variables": list(SEARCH_VARIABLES),
             "starts": len(self.starts),
@@ -1364,7 +1390,7 @@ def _one_blas_thread():
 
 
 def solve_device(problem: DeviceProblem, *, starts: int = 4, seed: int = 0,
-                 max_corrections: int = 4, correction_tol: float = 2e-2,
+                 max_corrections: int = 4, correction_tol: float = RESIDUAL_BOUND,
                  progress: bool = False) -> DeviceResult:
     """Optimize the device (see :func:`_solve_device`), BLAS on one thread."""
     with _one_blas_thread():
@@ -1374,7 +1400,7 @@ def solve_device(problem: DeviceProblem, *, starts: int = 4, seed: int = 0,
 
 
 def _solve_device(problem: DeviceProblem, *, starts: int = 4, seed: int = 0,
-                  max_corrections: int = 4, correction_tol: float = 2e-2,
+                  max_corrections: int = 4, correction_tol: float = RESIDUAL_BOUND,
                   progress: bool = False) -> DeviceResult:
     """Optimize the device (module notes above): fast multistart -> standard wire ->
     corrected re-solves until the panel model agrees -> whole turns, evaluated by the panel
@@ -1438,55 +1464,83 @@ def _solve_device(problem: DeviceProblem, *, starts: int = 4, seed: int = 0,
     return DeviceResult(c["x"], c["x_round"], c["turns"], wire, prob.insulated(wire),
                         c["evaluation"], c["constraints"], c["corrections"], c["history"],
                         tuple(runs), fast_calls + c["fast_calls"], c["panel_calls"],
-                        time.perf_counter() - t0)
+                        time.perf_counter() - t0, c["check"])
+
+
+def _fast_vs_panel(prob: DeviceProblem, ev_panel: dict, ev_fast_raw: dict,
+                   corr: tuple[float, float]) -> dict:
+    """Relative errors of the fast model against the panel model at one design: uncorrected,
+    and corrected with ``corr`` (force_n and inductance_h; dimensionless)."""
+    mom, i = prob.moment_a_m2, prob.current_a
+    g_w = ev_panel["dbz_dz_winding_t_per_m"]
+    f_p, l_p = ev_panel["force_n"], ev_panel["inductance_h"]
+    lam_fast = (ev_fast_raw["inductance_h"] - ev_fast_raw["inductance_air_h"]) * i
+    f_c = mom * abs(g_w + ev_fast_raw["dbz_dz_core_t_per_m"] * corr[0])
+    l_c = ev_panel["inductance_air_h"] + lam_fast * corr[1] / i
+    return {"force_rel_err": f_c / f_p - 1.0, "inductance_rel_err": l_c / l_p - 1.0,
+            "uncorrected_force_rel_err": ev_fast_raw["force_n"] / f_p - 1.0,
+            "uncorrected_inductance_rel_err": ev_fast_raw["inductance_h"] / l_p - 1.0}
 
 
 def _correct_for_wire(prob: DeviceProblem, wire: float, y, *, max_corrections: int = 4,
-                      correction_tol: float = 2e-2) -> dict:
-    """Correction loop for one wire: panel model at the rounded design -> ratios -> re-solve
-    the corrected fast model from there, until the ratios settle and the panel model finds the
-    design feasible. Returns the rounded design with its panel-model numbers (SI)."""
+                      correction_tol: float = RESIDUAL_BOUND) -> dict:
+    """A-posteriori correction loop for one wire (the proof of the fast model's numbers).
+
+    Each pass: the panel model (validated :mod:`designkit.core`, steel1010) at the rounded
+    design x_k; the *residual* of the corrected fast model that found x_k (force and secant
+    inductance, relative to the panel model's, at x_k); if both are within ``correction_tol``
+    and the panel model finds x_k feasible, x_k is the answer. Otherwise the panel / fast
+    ratios of the core's shares measured at x_k become the corrections and the corrected fast
+    model is re-solved from x_k. At most ``max_corrections`` panel evaluations; the reported
+    design is always one the panel model evaluated, and ``check['within_bound']`` says whether
+    its residual met the bound. Returns the rounded design with its panel-model numbers (SI).
+    """
     phys = DeviceProblem.physical
     history = []
     panel_calls = fast_calls = 0
     corr = (1.0, 1.0)
     y = list(y)
-    x_round, n = round_design(prob, phys(y))
-    ev_panel = None
-    for _ in range(max_corrections):
+    raw = dataclasses.replace(prob, corrections=(1.0, 1.0))
+    for k in range(max(int(max_corrections), 1)):
         x_round, n = round_design(prob, phys(y))
         ev_panel = prob.evaluate(x_round, turns=n, model="panel")
         panel_calls += 1
-        ev_fast = dataclasses.replace(prob, corrections=(1.0, 1.0)).evaluate(x_round, turns=n)
+        ev_fast = raw.evaluate(x_round, turns=n)
+        check = _fast_vs_panel(prob, ev_panel, ev_fast, corr)
         new = (ev_panel["dbz_dz_core_t_per_m"] / ev_fast["dbz_dz_core_t_per_m"],
                (ev_panel["inductance_h"] - ev_panel["inductance_air_h"])
                / max(ev_fast["inductance_h"] - ev_fast["inductance_air_h"], 1e-30))
         history.append(new)
-        converged = max(abs(new[0] / corr[0] - 1), abs(new[1] / corr[1] - 1)) < correction_tol
+        used = corr
+        within = max(abs(check["force_rel_err"]),
+                     abs(check["inductance_rel_err"])) <= correction_tol
         corr = new
         prob = dataclasses.replace(prob, corrections=corr)
-        feasible_now = all(gv <= 1e-9 for gv in ev_panel["g"])
-        if converged and feasible_now:
+        if (within and all(gv <= 1e-9 for gv in ev_panel["g"])) or k + 1 >= max_corrections:
             break
         m = _FastModel(prob, {6: wire})
-        r = _local(m, [y[k] for k in m.free])
+        r = _local(m, [y[q] for q in m.free])
         fast_calls += m.calls
         if not r.feasible:
             break
         y = m.full_y(r.x)
-    # the reported design: rounded, panel-model numbers (the last loop pass evaluated it
-    # unless the loop re-solved after it)
-    x = phys(y)
-    xr, n = round_design(prob, x)
-    if list(xr) != list(x_round):
-        ev_panel = prob.evaluate(xr, turns=n, model="panel")
-        panel_calls += 1
-    fit = el.turns_from_geometry(xr[0], xr[1], xr[2], prob.insulated(wire), prob.packing)
-    table_c = prob.constraint_table(xr, ev_panel, fit)
-    return {"x": tuple(map(float, x)), "x_round": tuple(map(float, xr)), "turns": n,
-            "evaluation": ev_panel, "constraints": table_c, "corrections": corr,
+    x_cont = phys(y)
+    fit = el.turns_from_geometry(x_round[0], x_round[1], x_round[2], prob.insulated(wire),
+                                 prob.packing)
+    table_c = prob.constraint_table(x_round, ev_panel, fit)
+    check.update({
+        "method": "a-posteriori correction: the optimum is re-evaluated by the panel model "
+                  "(designkit.core surface-current, steel1010) and every reported number is "
+                  "the panel model's; the corrected fast model that found it must reproduce "
+                  "the panel force and secant inductance there within bound_rel, else the "
+                  "panel/fast ratios are updated and the problem re-solved",
+        "bound_rel": float(correction_tol), "within_bound": bool(within),
+        "corrections_used": [float(c) for c in used], "panel_evaluations": panel_calls,
+        "uncorrected_envelope_rel": dict(FAST_MODEL_ENVELOPE)})
+    return {"x": tuple(map(float, x_cont)), "x_round": tuple(map(float, x_round)),
+            "turns": n, "evaluation": ev_panel, "constraints": table_c, "corrections": corr,
             "history": tuple(history), "fast_calls": fast_calls, "panel_calls": panel_calls,
-            "feasible": all(t["met"] for t in table_c.values())}
+            "feasible": all(t["met"] for t in table_c.values()), "check": check}
 
 
 def device_design(base: Design, result: DeviceResult, problem: DeviceProblem, *,

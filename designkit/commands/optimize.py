@@ -114,6 +114,14 @@ def device_summary(data: dict) -> str:
                      f"margin {c['margin']:+.4g}  {'ok' if c['met'] else 'VIOLATED'}  ({c['note']})")
     lines.append(f"core model: {data['core_model']}; {data['fast_evaluations']} fast + "
                  f"{data['panel_evaluations']} panel evaluations in {data['seconds']:.2f} s")
+    chk = data.get("fast_model_check")
+    if chk:
+        lines.append(
+            f"fast model vs panel model at the optimum: corrected {chk['force_rel_err'] * 100:+.2f} % "
+            f"force, {chk['inductance_rel_err'] * 100:+.2f} % inductance (bound "
+            f"{chk['bound_rel'] * 100:g} %: {'met' if chk['within_bound'] else 'NOT MET'}); "
+            f"uncorrected {chk['uncorrected_force_rel_err'] * 100:+.1f} % / "
+            f"{chk['uncorrected_inductance_rel_err'] * 100:+.1f} %")
     ver = data.get("verification")
     if ver:
         lines.append(
