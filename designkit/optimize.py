@@ -846,11 +846,12 @@ core length = core_depth_fraction x (winding length + protrusion) (the core's bo
 below the winding's), so those two limits are bounds, not constraints."""
 BOARD_THICKNESS_M = 0.8e-3
 """Upper sensor board above ``sensors.offset_m`` (assumed; gives the ~14.8 mm board top)."""
-FAST_MODEL_ENVELOPE = {"force_rel_err": (-0.2, 0.6), "inductance_rel_err": (-0.2, 0.05)}
+FAST_MODEL_ENVELOPE = {"force_rel_err": (-0.2, 0.6), "inductance_rel_err": (-0.25, 0.1)}
 """Uncorrected fast model / panel model - 1 over the optimizer's bounds (upward force, secant
 inductance at the operating current): the envelope that seeded random designs in the bounds
-stay inside (tests/test_optimize.py, 30 designs measured -0.10..+0.44 and -0.15..+0.01). Wide:
-the fast model only steers the search; the bound that matters is :data:`RESIDUAL_BOUND`."""
+stay inside (tests/test_optimize.py; 70 designs of two seeds measured -0.10..+0.44 and
+-0.15..+0.06). Measured, not proven, and wide: the fast model only steers the search; the
+bound claimed for the reported numbers is :data:`RESIDUAL_BOUND`."""
 RESIDUAL_BOUND = 1e-2
 """Stated bound on the corrected fast model at the reported optimum: its upward force and
 secant inductance within 1 % of the panel model's (:func:`_correct_for_wire` re-solves until
@@ -1712,18 +1713,20 @@ def _verify_device(problem: DeviceProblem, result: DeviceResult, *, starts: int 
     grid_best, grid_x, n_feas = -np.inf, None, 0
     import itertools
 
-    pts = list(itertools.product(*axes))
-    it = pts
+    pts = np.array(list(itertools.product(*axes)))
+    blocks = range(0, len(pts), 256)  # one batched fast-model solve per block
     if progress:
         from tqdm import tqdm
 
-        it = tqdm(pts, desc="grid", unit="design")
-    for y in it:
-        val = model.values(np.array(y))
-        if np.all(val[1:] <= 1e-8):
-            n_feas += 1
-            if val[0] > grid_best:
-                grid_best, grid_x = float(val[0]), y
+        blocks = tqdm(blocks, desc="grid", unit="block")
+    for b0 in blocks:
+        vals = model.values_many(pts[b0:b0 + 256])
+        ok = np.all(vals[:, 1:] <= 1e-8, axis=1)
+        n_feas += int(ok.sum())
+        if ok.any():
+            k = int(np.argmax(np.where(ok, vals[:, 0], -np.inf)))
+            if vals[k, 0] > grid_best:
+                grid_best, grid_x = float(vals[k, 0]), tuple(pts[b0 + k])
     out["grid"] = {"levels": grid_levels, "designs": len(pts), "feasible": n_feas,
                    "best_n": grid_best if n_feas else None,
                    "best_x": None if grid_x is None else
