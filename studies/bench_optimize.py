@@ -68,7 +68,7 @@ def run(out_dir, quick: bool = False) -> dict:
         "panel_evaluations": best.panel_evaluations,
         "panel_evaluation_seconds": panel_s,
         "force_n": d["force_n"], "margins": d["margins"], "feasible": best.feasible,
-        "corrections": d["corrections"],
+        "corrections": d["corrections"], "fast_model_check": d["fast_model_check"],
         "optimum": {k: d[k] for k in ("inner_radius_m", "outer_radius_m", "length_m", "turns",
                                       "wire_diameter_m", "core_radius_m", "core_length_m",
                                       "core_protrusion_m", "resistance_ohm", "inductance_h",
@@ -118,10 +118,29 @@ def _print(r: dict) -> None:
     print(f"median / target = {r['ratio_device_to_target']:.2f}; {r['fast_evaluations']} fast + "
           f"{r['panel_evaluations']} panel evaluations; upward Fz {r['force_n'] * 1e3:.1f} mN; "
           f"feasible {r['feasible']}")
+    chk = r["fast_model_check"]
+    print(f"fast model at the optimum vs the panel model: corrected "
+          f"{chk['force_rel_err'] * 100:+.2f} % force, {chk['inductance_rel_err'] * 100:+.2f} % "
+          f"inductance (bound {chk['bound_rel'] * 100:g} %, met: {chk['within_bound']}); "
+          f"uncorrected {chk['uncorrected_force_rel_err'] * 100:+.1f} % / "
+          f"{chk['uncorrected_inductance_rel_err'] * 100:+.1f} %")
     if "verification" in r:
         v = r["verification"]
-        print(f"verified global: {v['agree']} ({v['evaluations']} evaluations, "
-              f"{v['seconds']:.1f} s)")
+        st = v["stages"]
+        print(f"{'global check (corrected fast model)':<36}{'best (mN)':>12}{'evaluations':>13}"
+              f"{'seconds':>10}")
+        print(f"{'multistart, ' + str(st['multistart']['starts']) + ' SLSQP starts':<36}"
+              f"{(st['multistart']['best_n'] or 0) * 1e3:>12.2f}"
+              f"{st['multistart']['evaluations']:>13}{st['multistart']['seconds']:>10.1f}")
+        print(f"{'ISRES ' + str(st['isres']['evaluations_requested']) + ' + SLSQP polish':<36}"
+              f"{st['isres']['polished_value_n'] * 1e3:>12.2f}{st['isres']['evaluations']:>13}"
+              f"{st['isres']['seconds']:>10.1f}")
+        print(f"{'grid ' + str(st['grid']['levels']) + '^6 = ' + str(st['grid']['designs']):<36}"
+              f"{(st['grid']['best_n'] or 0) * 1e3:>12.2f}{st['grid']['evaluations']:>13}"
+              f"{st['grid']['seconds']:>10.1f}")
+        print(f"verified global: {v['agree']} (multistart agree {v['multistart_agree']}, ISRES "
+              f"agree {v['isres_agree']}, grid not better {v['grid_not_better']}; "
+              f"{v['evaluations']} evaluations, {v['seconds']:.1f} s)")
 
 
 if __name__ == "__main__":
