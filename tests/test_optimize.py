@@ -212,6 +212,51 @@ def test_slice_flux_fourier_bessel_matches_the_winding_field_quadrature():
         np.testing.assert_allclose(g_b, g_q, rtol=2e-3)
 
 
+def test_steel_curve_interpolant_is_scipys_pchip_and_odd():
+    """The written-out monotone cubic equals scipy's PchipInterpolator (independent code) on
+    and between the knots of the 1010 table, with its derivative; odd in B; slope 1/mu0 past
+    the table."""
+    from scipy.interpolate import PchipInterpolator
+
+    from designkit.core import STEEL1010_B, STEEL1010_H
+
+    ref = PchipInterpolator(STEEL1010_B, STEEL1010_H)
+    b = np.r_[np.random.default_rng(4).uniform(0, STEEL1010_B[-1], 2000), STEEL1010_B]
+    h, dh = core_fast.steel1010_h_smooth(b)
+    np.testing.assert_allclose(h, ref(b), rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(dh, ref.derivative()(b), rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(core_fast.steel1010_h_smooth(-b)[0], -h, rtol=0, atol=0)
+    h5, dh5 = core_fast.steel1010_h_smooth(np.array([5.0]))
+    assert dh5[0] == pytest.approx(1 / MU0) and h5[0] == pytest.approx(
+        STEEL1010_H[-1] + (5.0 - STEEL1010_B[-1]) / MU0)
+
+
+def test_batched_rod_solve_equals_one_design_at_a_time():
+    """solve_rods on a batch (with repeated radii and axial geometry, as a finite-difference
+    stencil has) gives each design's solve_rod numbers."""
+    rng = np.random.default_rng(8)
+    n = 6
+    ri = np.full(n, 0.009)
+    ri[1] += 1e-6
+    ro = rng.uniform(0.015, 0.024, n)
+    ro[2:4] = ro[0]
+    ln = np.full(n, 0.06)
+    ln[4] = 0.05
+    a = ri * rng.uniform(0.5, 1.0, n)
+    lc = rng.uniform(0.04, 0.07, n)
+    off = rng.uniform(-0.005, 0.01, n)
+    turns = rng.uniform(300, 1500, n)
+    bt = core_fast.solve_rods(ri, ro, ln, turns, a, lc, off, 6.0, n_slices=12,
+                              quadrature="bessel")
+    z = np.full(n, 0.06)
+    for i in range(n):
+        one = core_fast.solve_rod(ri[i], ro[i], ln[i], turns[i], a[i], lc[i], off[i], 6.0,
+                                  n_slices=12, quadrature="bessel")
+        assert bt.linkage_wb[i] == pytest.approx(one.linkage_wb, rel=1e-12)
+        assert bt.dlinkage_di_wb_per_a[i] == pytest.approx(one.dlinkage_di_wb_per_a, rel=1e-12)
+        assert bt.axis_field(z)[1][i] == pytest.approx(one.axis_field(0.06)[1], rel=1e-12)
+
+
 def test_toeplitz_slice_coupling_equals_the_interval_formula():
     a, lc, n = 0.008, 0.07, 10
     s = core_fast.solve_rod(0.009, 0.02, 0.06, 800, a, lc, 0.0, 1.0, n_slices=n,
