@@ -457,3 +457,57 @@ def test_optimized_design_agrees_with_getdp_within_3_percent():
     assert chk["fem_converged"]
     assert abs(chk["force_rel_err"]) < 0.03 and abs(chk["inductance_rel_err"]) < 0.03
     assert chk["within_3_percent"]
+
+
+# ====================================================================== pitch and rendering
+def test_render_points_folded_by_the_array_symmetry_keep_every_distinct_force():
+    """The rendering objective solves each symmetric point once: the forces over the whole
+    region (independent LPs at all 18 points) take exactly the values at the folded points."""
+    d = load_design("optimized")
+    full = opt.rendering_force(d)
+    p = opt.device_problem_for(d, objective="rendering")
+    assert len(p.render_points_m) < len(full["points_m"])
+    c, k = d.coil, d.core
+    x = [c.inner_radius_m, c.outer_radius_m, c.length_m, k.radius_m, k.length_m,
+         k.offset_m + k.length_m / 2 - c.length_m / 2, d.wire.diameter_m]
+    folded = p.render_forces(x, c.turns)
+    np.testing.assert_allclose(sorted(set(np.round(full["upward_force_n"], 9))),
+                               sorted(set(np.round(folded, 9))), rtol=1e-9)
+    assert folded.min() == pytest.approx(full["min_upward_force_n"], rel=1e-9)
+
+
+def test_pitch_variable_needs_the_rendering_objective_and_bounds_the_overlap():
+    d = default_design()
+    with pytest.raises(BadInputError, match="rendering"):
+        opt.device_problem_for(d, vary_pitch=True)
+    p = opt.device_problem_for(d, objective="rendering", vary_pitch=True,
+                               pitch_range_m=(0.04, 0.06))
+    assert p.n_search == 8 and p.pitch_bounds_m == (0.04, 0.06)
+    assert "coil_overlap_m" in p.constraint_names
+    # Ro's bound follows the largest pitch; the overlap is a constraint on each design
+    assert p.upper[1] == pytest.approx(min(0.5 * (0.06 - 1e-3), d.optimize.max_outer_radius_m))
+    m = opt._FastModel(p)
+    y = np.array(p.lower) + 0.5 * (np.array(p.upper) - np.array(p.lower))
+    y[1], y[7] = 0.02, 0.04  # 2 x 20 mm + 1 mm > 40 mm: overlap by 1 mm
+    assert m.values(y)[1 + len(opt.DEVICE_CONSTRAINTS)] == pytest.approx(1.0)
+    with pytest.raises(BadInputError, match="pitch_range_m"):
+        opt.device_problem_for(d, objective="rendering", vary_pitch=True,
+                               pitch_range_m=(0.005, 0.06))
+
+
+@pytest.mark.slow
+def test_pitch_optimum_meets_the_constraints_and_no_other_pitch_renders_more():
+    """--vary-pitch: the reported device is feasible under the panel model, its coils do not
+    overlap, and with its coil fixed a scan of the pitch finds no stronger rendering."""
+    d = default_design()
+    p = opt.device_problem_for(d, objective="rendering", vary_pitch=True)
+    res = opt.solve_device(p, starts=1)
+    assert res.feasible and res.fast_model_check["within_bound"]
+    x = list(res.x)
+    assert 2 * x[1] + p.coil_clearance_m <= x[7] + 1e-12
+    best = res.rendering["min_upward_force_n"]
+    pc = __import__("dataclasses").replace(p, corrections=res.corrections)
+    for pitch in np.linspace(2 * x[1] + p.coil_clearance_m, p.pitch_bounds_m[1], 7):
+        assert pc.render_forces(x[:7] + [pitch], res.turns).min() <= best * (1 + 1e-4)
+    # the written design carries the pitch
+    assert opt.device_design(d, res, p).array.pitch_m == pytest.approx(x[7])
