@@ -896,8 +896,9 @@ class DeviceProblem:
     min_time_to_hot_s: float
     magnet_bottom_clearance_m: float
     """Design height - magnet half length - upper-board top (>= 0 for the magnet to reach)."""
-    lower: tuple[float, ...]
-    upper: tuple[float, ...]
+    lower: tuple
+    upper: tuple
+    """Bounds (floats) of the search variables (:data:`SEARCH_VARIABLES` [+ pitch]), SI."""
     pitch_m: float
     board_top_m: float
     wire_table_m: tuple[float, ...] = METRIC_DIAMETERS_M
@@ -1413,10 +1414,11 @@ def round_design(problem: DeviceProblem, x) -> tuple[list[float], int]:
 class DeviceResult:
     """The optimized device (SI) and how it was found."""
 
-    x_continuous: tuple[float, ...]
     x: tuple[float, ...]
     """Rounded design: whole layers and turns per layer."""
     turns: int
+    x_continuous: tuple[float, ...]
+    """Continuous optimum, :data:`DEVICE_VARIABLES` (+ pitch when it varies)."""
     wire_diameter_m: float
     insulated_diameter_m: float
     evaluation: dict
@@ -1624,10 +1626,14 @@ def _solve_device(problem: DeviceProblem, *, starts: int = 4, seed: int = 0,
     if bar is not None:
         bar.update(1)
         bar.close()
-    return DeviceResult(c["x"], c["x_round"], c["turns"], wire, prob.insulated(wire),
-                        c["evaluation"], c["constraints"], c["corrections"], c["history"],
-                        tuple(runs), fast_calls + c["fast_calls"], c["panel_calls"],
-                        time.perf_counter() - t0, c["check"], c["rendering"])
+    return DeviceResult(
+        x=c["x_round"], turns=c["turns"], x_continuous=c["x"], wire_diameter_m=wire,
+        insulated_diameter_m=prob.insulated(wire), evaluation=c["evaluation"],
+        constraints=c["constraints"], corrections=c["corrections"],
+        correction_history=c["history"], starts=tuple(runs),
+        fast_evaluations=fast_calls + c["fast_calls"], panel_evaluations=c["panel_calls"],
+        seconds=time.perf_counter() - t0, fast_model_check=c["check"],
+        rendering=c["rendering"])
 
 
 def _fast_vs_panel(prob: DeviceProblem, ev_panel: dict, ev_fast_raw: dict,
