@@ -70,6 +70,16 @@ top 1 mm below the upper sensor board, whole layers of the insulated wire (round
 end). Gradients: forward differences of the fast model (smooth by construction: fixed
 quadrature rules, Newton to 1e-12 T). Global check: :func:`verify_device`. Infeasible bounds:
 :func:`_diagnose_infeasible` names each constraint that cannot be met and by how much.
+
+Rendering objective and pitch (``DeviceProblem.from_design(objective='rendering',
+vary_pitch=True)``, ``designkit optimize --vary-pitch``): the objective becomes the smallest
+upward force the array renders over the workspace region (bounded LP allocation per point,
+:func:`array_render_forces`; points folded by the array's symmetry), the pitch an 8th search
+variable with 2 Ro + coil_clearance_m <= pitch as a constraint. Local solves: SLSQP on the
+epigraph form, COBYLA polish where SLSQP stalls on the LP kinks; after rounding the pitch is
+re-chosen for the whole-layer coil. The core-model proof is the same (panel model at the
+reported coil, residual bound); the rendering forces use the panel/fast force ratio measured
+there. ~1 min on this machine (each evaluation solves one LP per point).
 """
 
 from __future__ import annotations
@@ -1557,7 +1567,12 @@ def _one_blas_thread():
 def solve_device(problem: DeviceProblem, *, starts: int = 4, seed: int = 0,
                  max_corrections: int = 4, correction_tol: float = RESIDUAL_BOUND,
                  progress: bool = False) -> DeviceResult:
-    """Optimize the device (see :func:`_solve_device`), BLAS on one thread."""
+    """Optimize the device (see :func:`_solve_device`), BLAS on one thread.
+
+    ``max_corrections``: at most this many panel-model evaluations in the correction loop
+    (:func:`_correct_for_wire`); ``correction_tol``: the residual bound it enforces
+    (:data:`RESIDUAL_BOUND`).
+    """
     with _one_blas_thread():
         return _solve_device(problem, starts=starts, seed=seed,
                              max_corrections=max_corrections, correction_tol=correction_tol,
