@@ -511,3 +511,18 @@ def test_pitch_optimum_meets_the_constraints_and_no_other_pitch_renders_more():
         assert pc.render_forces(x[:7] + [pitch], res.turns).min() <= best * (1 + 1e-4)
     # the written design carries the pitch
     assert opt.device_design(d, res, p).array.pitch_m == pytest.approx(x[7])
+
+
+@pytest.mark.slow
+def test_device_optimum_is_verified_global_by_isres_and_a_grid():
+    """Global check of the default problem: every multistart optimum and the polished nlopt
+    GN_ISRES optimum agree to 1e-3, a 4^6 grid finds no feasible better design, and no other
+    standard wire beats the chosen one under the panel model."""
+    p = opt.device_problem_for(default_design())
+    res = opt.solve_device(p)
+    ver = opt.verify_device(p, res)
+    assert ver["multistart_agree"] and ver["isres_agree"]
+    assert ver["grid_not_better"] and ver["grid"]["feasible"] > 0
+    assert ver["no_other_wire_better"] and ver["agree"]
+    assert ver["isres"]["polished_value_n"] == pytest.approx(ver["best_n"], rel=1e-3)
+    assert ver["grid"]["best_n"] < ver["best_n"]
