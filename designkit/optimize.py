@@ -1125,8 +1125,9 @@ class DeviceProblem:
         return self._assemble(xs, n, g_c, lam, l_inc, sol.peak_b_t, l_air)
 
     def pitch_of(self, x) -> float:
-        """The design's pitch, m: its 8th variable when the pitch varies, else ``pitch_m``."""
-        return float(x[7]) if self.pitch_bounds_m is not None else self.pitch_m
+        """The design's pitch, m: its 8th variable when the pitch varies (and x has one: a
+        given design's 7 variables sit at ``pitch_m``), else ``pitch_m``."""
+        return float(x[7]) if self.pitch_bounds_m is not None and len(x) > 7 else self.pitch_m
 
     def render_forces(self, x, turns: float | None = None) -> np.ndarray:
         """Largest upward force the array renders at each of ``render_points_m`` (N, (P,)),

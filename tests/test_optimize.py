@@ -493,6 +493,11 @@ def test_pitch_variable_needs_the_rendering_objective_and_bounds_the_overlap():
     with pytest.raises(BadInputError, match="pitch_range_m"):
         opt.device_problem_for(d, objective="rendering", vary_pitch=True,
                                pitch_range_m=(0.005, 0.06))
+    # a given design (7 variables, no pitch among them) is judged at its own pitch
+    rep = opt.evaluate_device(d, p)
+    od = rep["constraints"]["outer_diameter_m"]
+    assert od["limit"] == pytest.approx(d.array.pitch_m - 1e-3)
+    assert od["value"] == pytest.approx(2 * d.coil.outer_radius_m)
 
 
 @pytest.mark.slow
