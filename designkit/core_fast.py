@@ -50,7 +50,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
 from scipy.special import ellipe
 
 from .core import STEEL1010_B, STEEL1010_H
@@ -62,10 +61,33 @@ N_SLICES = 24
 """Default slice count; tests show the force and inductance change < 0.3 % from 24 to 48."""
 
 
+def _pchip_edge(h0, h1, m0, m1):
+    """End slope of a PCHIP: the one-sided three-point estimate, kept shape-preserving."""
+    d = ((2 * h0 + h1) * m0 - h0 * m1) / (h0 + h1)
+    if np.sign(d) != np.sign(m0):
+        return 0.0
+    if np.sign(m0) != np.sign(m1) and abs(d) > 3 * abs(m0):
+        return 3 * m0
+    return d
+
+
 @functools.lru_cache(maxsize=1)
 def _h_of_b():
-    f = PchipInterpolator(STEEL1010_B, STEEL1010_H, extrapolate=True)
-    return f, f.derivative()
+    """Knot slopes dH/dB of the monotone cubic (Fritsch-Carlson PCHIP with Fritsch-Butland
+    weighted harmonic means, the construction of scipy's PchipInterpolator; written out so
+    the optimizer does not import scipy.interpolate, ~1 s of a first call)."""
+    x, y = STEEL1010_B, STEEL1010_H
+    h = np.diff(x)
+    m = np.diff(y) / h
+    d = np.zeros_like(x)
+    w1 = 2 * h[1:] + h[:-1]
+    w2 = h[1:] + 2 * h[:-1]
+    same = m[:-1] * m[1:] > 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d[1:-1] = np.where(same, (w1 + w2) / (w1 / m[:-1] + w2 / m[1:]), 0.0)
+    d[0] = _pchip_edge(h[0], h[1], m[0], m[1])
+    d[-1] = _pchip_edge(h[-1], h[-2], m[-1], m[-2])
+    return d
 
 
 def steel1010_h_smooth(b_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -75,28 +97,41 @@ def steel1010_h_smooth(b_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """
     b = np.asarray(b_t, dtype=float)
     ab = np.abs(b)
-    f, df = _h_of_b()
-    top = STEEL1010_B[-1]
-    h = np.where(ab <= top, f(np.minimum(ab, top)), STEEL1010_H[-1] + (ab - top) / MU0)
-    dh = np.where(ab <= top, df(np.minimum(ab, top)), 1.0 / MU0)
+    x, y = STEEL1010_B, STEEL1010_H
+    d = _h_of_b()
+    top = x[-1]
+    k = np.clip(np.searchsorted(x, ab, side="right") - 1, 0, len(x) - 2)
+    hk = x[k + 1] - x[k]
+    t = (np.minimum(ab, top) - x[k]) / hk
+    t2, t3 = t * t, t * t * t
+    # cubic Hermite on [x_k, x_k+1] with end values y and slopes d
+    hv = ((2 * t3 - 3 * t2 + 1) * y[k] + (t3 - 2 * t2 + t) * hk * d[k]
+          + (-2 * t3 + 3 * t2) * y[k + 1] + (t3 - t2) * hk * d[k + 1])
+    dv = ((6 * t2 - 6 * t) * (y[k] - y[k + 1]) / hk + (3 * t2 - 4 * t + 1) * d[k]
+          + (3 * t2 - 2 * t) * d[k + 1])
+    h = np.where(ab <= top, hv, y[-1] + (ab - top) / MU0)
+    dh = np.where(ab <= top, dv, 1.0 / MU0)
     return np.sign(b) * h, dh
 
 
-def nagaoka_self(length_m: np.ndarray, radius_m: float) -> np.ndarray:
+def nagaoka_self(length_m: np.ndarray, radius_m) -> np.ndarray:
     """Q(l) = mu0 pi a^2 l k_N: self-inductance of a sheet of unit turn density (H m^2).
 
     Nagaoka's coefficient from the exact closed form used by
     :func:`designkit.core.demagnetizing_factor` (k_N = 1 - N_m), vectorized; Q(0) = 0.
+    ``radius_m`` (m) broadcasts against ``length_m`` (m).
     """
-    ell = np.abs(np.asarray(length_m, dtype=float))
-    out = np.zeros_like(ell)
+    ell, a = np.broadcast_arrays(np.abs(np.asarray(length_m, dtype=float)),
+                                 np.asarray(radius_m, dtype=float))
+    out = np.zeros(ell.shape)
     pos = ell > 0
-    asp = ell[pos] / (2.0 * radius_m)
+    ap = a[pos]
+    asp = ell[pos] / (2.0 * ap)
     d2 = 1.0 / (1.0 + asp * asp)
     k = np.sqrt(d2)
     kp = asp * k
     kn = 4.0 / (3.0 * math.pi * kp) * (kp * kp * cel(kp, 1.0, 0.0, 1.0) + ellipe(d2) - k)
-    out[pos] = MU0 * math.pi * radius_m ** 2 * ell[pos] * kn
+    out[pos] = MU0 * math.pi * ap ** 2 * ell[pos] * kn
     return out
 
 
@@ -148,15 +183,55 @@ class RodSolution:
     def axis_field(self, z_m) -> tuple[np.ndarray, np.ndarray]:
         """Core's Bz (T) and dBz/dz (T/m) on the axis at local heights z_m (any shape)."""
         z = np.asarray(z_m, dtype=float)[..., None]
-        a2 = self.radius_m ** 2
-        u1 = z - self.edges_m[:-1]
-        u2 = z - self.edges_m[1:]
-        s1 = np.sqrt(a2 + u1 * u1)
-        s2 = np.sqrt(a2 + u2 * u2)
-        k = 0.5 * MU0 * self.m_a_per_m
-        bz = np.sum(k * (u1 / s1 - u2 / s2), axis=-1)
-        g = np.sum(k * (a2 / s1 ** 3 - a2 / s2 ** 3), axis=-1)
-        return bz, g
+        return _sheet_axis(self.radius_m ** 2, z - self.edges_m[:-1], z - self.edges_m[1:],
+                           0.5 * MU0 * self.m_a_per_m)
+
+
+@dataclass(frozen=True)
+class RodBatch:
+    """Solved slices of B rod cores (:func:`solve_rods`), SI; arrays lead with the design.
+
+    radius_m (B,); edges_m (B, n + 1); b_t, m_a_per_m, b0_t (B, n); linkage_wb,
+    dlinkage_di_wb_per_a (B,). ``batch[i]`` is design i's :class:`RodSolution`.
+    """
+
+    radius_m: np.ndarray
+    edges_m: np.ndarray
+    b_t: np.ndarray
+    m_a_per_m: np.ndarray
+    b0_t: np.ndarray
+    current_a: float
+    linkage_wb: np.ndarray
+    dlinkage_di_wb_per_a: np.ndarray
+    newton_iterations: int
+
+    def __len__(self) -> int:
+        return len(self.radius_m)
+
+    def __getitem__(self, i: int) -> RodSolution:
+        return RodSolution(float(self.radius_m[i]), self.edges_m[i], self.b_t[i],
+                           self.m_a_per_m[i], self.b0_t[i], self.current_a,
+                           float(self.linkage_wb[i]), float(self.dlinkage_di_wb_per_a[i]),
+                           self.newton_iterations)
+
+    @property
+    def peak_b_t(self) -> np.ndarray:
+        return np.max(np.abs(self.b_t), axis=1)
+
+    def axis_field(self, z_m) -> tuple[np.ndarray, np.ndarray]:
+        """Each core's Bz (T) and dBz/dz (T/m) on its axis at local height z_m[i], (B,) each."""
+        z = np.broadcast_to(np.asarray(z_m, dtype=float), self.radius_m.shape)[:, None]
+        return _sheet_axis(self.radius_m[:, None] ** 2, z - self.edges_m[:, :-1],
+                           z - self.edges_m[:, 1:], 0.5 * MU0 * self.m_a_per_m)
+
+
+def _sheet_axis(a2, u1, u2, k):
+    """Bz and dBz/dz on the axis of stacked sheets (K = k 2 / mu0), summed over the last axis."""
+    s1 = np.sqrt(a2 + u1 * u1)
+    s2 = np.sqrt(a2 + u2 * u2)
+    bz = np.sum(k * (u1 / s1 - u2 / s2), axis=-1)
+    g = np.sum(k * (a2 / s1 ** 3 - a2 / s2 ** 3), axis=-1)
+    return bz, g
 
 
 def slice_edges(core_length_m: float, core_centre_m: float, n: int) -> np.ndarray:
@@ -215,25 +290,37 @@ def bessel_slice_flux(inner_radius_m, outer_radius_m, length_m, turns, radius_m,
     Fixed Gauss-Legendre panels in t = k ro up to ``t_max`` (quarter periods), so the result is
     a smooth function of the geometry (finite-difference gradients stay clean); the
     truncation leaves ~(ro / (a t_max))^2 relative.
+
+    Batched: the geometry arguments may be (B,) arrays with ``edges_m`` (B, n + 1); the
+    result is then (B, n) Wb m / A.
     """
     from scipy.special import j1
 
     from .electrical import _int_xj1
 
-    ro, ri = float(outer_radius_m), float(inner_radius_m)
-    a = float(radius_m)
+    edges = np.asarray(edges_m, dtype=float)
+    single = edges.ndim == 1
+    edges = np.atleast_2d(edges)
+    ro, ri, ln, nt, a = (np.asarray(q, dtype=float).reshape(-1, 1)
+                         for q in (outer_radius_m, inner_radius_m, length_m, turns, radius_m))
     t, wt, s_outer = _outer_nodes(float(t_max), int(nodes))
-    k = t / ro
-    wk = wt / ro
-    rad = (s_outer - _int_xj1(k * ri)) / (k * k)
-    w1, w2 = -length_m / 2, length_m / 2
-    p1 = np.asarray(edges_m[:-1], dtype=float)[:, None]
-    p2 = np.asarray(edges_m[1:], dtype=float)[:, None]
-    kk = k[None, :]
-    e = 0.5 * (_q_exp(kk, np.abs(p2 - w1)) + _q_exp(kk, np.abs(p1 - w2))
-               - _q_exp(kk, np.abs(p1 - w1)) - _q_exp(kk, np.abs(p2 - w2)))
-    n_w = turns / ((ro - ri) * length_m)
-    return MU0 * math.pi * a * n_w * (e @ (wk * j1(k * a) * rad))
+    k = t[None, :] / ro  # (B, T)
+    wk = wt[None, :] / ro
+    # the special functions and exponentials cost most: a finite-difference batch repeats
+    # many designs' radii or axial geometry, so each distinct row is computed once
+    uq, inv = np.unique(np.c_[ri, ro], axis=0, return_inverse=True)
+    kq = t[None, :] / uq[:, 1:2]
+    rad = ((s_outer[None, :] - _int_xj1(kq * uq[:, 0:1])) / (kq * kq))[inv.ravel()]
+    # E_k from the 2 (n + 1) distances between slice edges and winding ends
+    uz, invz = np.unique(np.c_[ro, ln, edges], axis=0, return_inverse=True)
+    kz = (t[None, :] / uz[:, 0:1])[:, None, :]
+    ez = uz[:, 2:, None]
+    q1 = _q_exp(kz, np.abs(ez + uz[:, 1:2, None] / 2))  # to the bottom end, -L/2
+    q2 = _q_exp(kz, np.abs(ez - uz[:, 1:2, None] / 2))  # to the top end, +L/2
+    e = (0.5 * (q1[:, 1:] + q2[:, :-1] - q1[:, :-1] - q2[:, 1:]))[invz.ravel()]
+    n_w = nt / ((ro - ri) * ln)
+    out = MU0 * math.pi * a * n_w * np.einsum("bnt,bt->bn", e, wk * j1(k * a) * rad)
+    return out[0] if single else out
 
 
 def solve_rod(inner_radius_m: float, outer_radius_m: float, length_m: float, turns: float,
@@ -258,66 +345,110 @@ def solve_rod(inner_radius_m: float, outer_radius_m: float, length_m: float, tur
 
     Returns
     -------
-    RodSolution
+    RodSolution (one design of :func:`solve_rods`)
     """
-    for name, val in (("core_radius_m", core_radius_m), ("core_length_m", core_length_m),
-                      ("current_a", current_a), ("turns", turns)):
-        if not (math.isfinite(val) and val > 0):
-            raise BadInputError(name, "a finite number > 0", val)
-    if not outer_radius_m > inner_radius_m > 0:
-        raise BadInputError("outer_radius_m", f"> inner_radius_m ({inner_radius_m} m) > 0",
-                            outer_radius_m)
-    if core_radius_m > inner_radius_m * (1 + 1e-12):
-        raise BadInputError("core_radius_m", f"<= inner_radius_m ({inner_radius_m} m)",
-                            core_radius_m)
-    a = float(core_radius_m)
-    edges = slice_edges(core_length_m, core_offset_m, n_slices)
-    vol = math.pi * a * a * np.diff(edges)
+    return solve_rods(inner_radius_m, outer_radius_m, length_m, turns, core_radius_m,
+                      core_length_m, core_offset_m, current_a, n_slices=n_slices, tol_t=tol_t,
+                      max_iter=max_iter, relative_permeability=relative_permeability,
+                      quadrature=quadrature)[0]
+
+
+def solve_rods(inner_radius_m, outer_radius_m, length_m, turns, core_radius_m, core_length_m,
+               core_offset_m, current_a: float, *, n_slices: int = N_SLICES,
+               tol_t: float = 1e-12, max_iter: int = 60,
+               relative_permeability: float | None = None,
+               quadrature: tuple[int, int] | str = (3, 3)) -> "RodBatch":
+    """:func:`solve_rod` for B designs at once (geometry arguments scalars or (B,) arrays, m).
+
+    One Newton iteration works on all designs still above ``tol_t`` together (stacked
+    n x n solves): an optimizer's finite-difference gradient costs about one solve, not one
+    per variable. Each design's iterates are those of its own solve.
+    """
+    geo = np.broadcast_arrays(*(np.atleast_1d(np.asarray(q, dtype=float)) for q in (
+        inner_radius_m, outer_radius_m, length_m, turns, core_radius_m, core_length_m,
+        core_offset_m)))
+    ri, ro, ln, nt, a, lc, off = (np.array(q, dtype=float) for q in geo)
+    for name, val in (("core_radius_m", a), ("core_length_m", lc), ("turns", nt)):
+        bad = ~(np.isfinite(val) & (val > 0))
+        if bad.any():
+            raise BadInputError(name, "a finite number > 0", float(val[bad][0]))
+    if not (math.isfinite(current_a) and current_a > 0):
+        raise BadInputError("current_a", "a finite number > 0", current_a)
+    bad = ~((ro > ri) & (ri > 0))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise BadInputError("outer_radius_m", f"> inner_radius_m ({ri[i]} m) > 0", ro[i])
+    bad = a > ri * (1 + 1e-12)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise BadInputError("core_radius_m", f"<= inner_radius_m ({ri[i]} m)", a[i])
+    n = int(n_slices)
+    nb = len(a)
+    edges = off[:, None] + lc[:, None] * (np.linspace(0.0, 1.0, n + 1)[None, :] - 0.5)
+    vol = math.pi * (a * a)[:, None] * np.diff(edges, axis=1)
     # uniform slices: C depends on |k - j| only (Toeplitz), Q at (m h), m = 0..n
-    hs = core_length_m / n_slices
-    qm = nagaoka_self(hs * np.arange(n_slices + 1), a)
-    idx = np.abs(np.arange(n_slices)[:, None] - np.arange(n_slices)[None, :])
-    qpad = np.concatenate([[qm[1]], qm])  # Q(-h) = Q(h): index m - 1 + 1
-    cm = 0.5 * (qm[np.minimum(idx + 1, n_slices)] + qpad[idx] - 2.0 * qm[idx])
-    t = cm / (MU0 * vol[:, None])
+    hs = lc / n
+    qm = nagaoka_self(hs[:, None] * np.arange(n + 1)[None, :], a[:, None])
+    idx = np.abs(np.arange(n)[:, None] - np.arange(n)[None, :])
+    qpad = np.concatenate([qm[:, 1:2], qm], axis=1)  # Q(-h) = Q(h): index m - 1 + 1
+    cm = 0.5 * (qm[:, np.minimum(idx + 1, n)] + qpad[:, idx] - 2.0 * qm[:, idx])
+    t = cm / (MU0 * vol[:, :, None])
     if quadrature == "bessel":
-        g = bessel_slice_flux(inner_radius_m, outer_radius_m, length_m, turns, a, edges)
+        g = bessel_slice_flux(ri, ro, ln, nt, a, edges)
     else:
-        g = applied_slice_flux(inner_radius_m, outer_radius_m, length_m, turns, a, edges,
-                               nr=quadrature[0], nz=quadrature[1])
+        g = np.stack([applied_slice_flux(ri[i], ro[i], ln[i], nt[i], a[i], edges[i],
+                                         nr=quadrature[0], nz=quadrature[1])
+                      for i in range(nb)])
     b0 = g * current_a / vol
-    eye = np.eye(n_slices)
+    eye = np.eye(n)
     mu_i = STEEL1010_B[1] / (MU0 * STEEL1010_H[1])
     if relative_permeability is not None:
         mu_i = float(relative_permeability)
-    b = np.linalg.solve(eye - t + t / mu_i, b0)
-    it = 0
+    b = np.linalg.solve(eye - t + t / mu_i, b0[:, :, None])[:, :, 0]
     if relative_permeability is not None:
         m = b / MU0 * (1.0 - 1.0 / mu_i)
-        return RodSolution(a, edges, b, m, b0, float(current_a), float(np.dot(m, g)),
-                           float(np.dot(m, g)) / current_a, 0)
-    jac = None
+        lk = np.sum(m * g, axis=1)
+        return RodBatch(a, edges, b, m, b0, float(current_a), lk, lk / current_a, 0)
+
+    def residual(tt, bb, bb0):
+        h = steel1010_h_smooth(bb)[0]
+        return bb - _mv(tt, bb) + _mv(tt, MU0 * h) - bb0
+
+    it = 0
     for it in range(1, max_iter + 1):
-        h, dh = steel1010_h_smooth(b)
-        r = (eye - t) @ b + t @ (MU0 * h) - b0
-        jac = (eye - t) + t * (MU0 * dh)[None, :]
-        step = np.linalg.solve(jac, r)
-        lam = 1.0
-        norm0 = np.max(np.abs(r))
-        if norm0 < tol_t:
+        r = residual(t, b, b0)
+        norm0 = np.max(np.abs(r), axis=1)
+        act = np.nonzero(norm0 >= tol_t)[0]
+        if not len(act):
             break
-        # backtracking: past the knee a full step can overshoot into the flat part
-        while lam > 1e-4:
-            bn = b - lam * step
-            rn = (eye - t) @ bn + t @ (MU0 * steel1010_h_smooth(bn)[0]) - b0
-            if np.max(np.abs(rn)) < norm0:
+        ta, ba, b0a, n0 = t[act], b[act], b0[act], norm0[act]
+        dh = steel1010_h_smooth(ba)[1]
+        jac = (eye - ta) + ta * (MU0 * dh)[:, None, :]
+        step = np.linalg.solve(jac, r[act][:, :, None])[:, :, 0]
+        # backtracking: past the knee a full step can overshoot into the flat part; a design
+        # that never decreases keeps the smallest step tried (lambda = 2^-13)
+        lam = np.ones(len(act))
+        searching = np.ones(len(act), dtype=bool)
+        bn = ba - step
+        for _ in range(14):
+            s_ = np.nonzero(searching)[0]
+            bn[s_] = ba[s_] - lam[s_, None] * step[s_]
+            rn = residual(ta[s_], bn[s_], b0a[s_])
+            done = np.max(np.abs(rn), axis=1) < n0[s_]
+            searching[s_[done]] = False
+            if not searching.any() or lam[searching][0] * 0.5 <= 1e-4:
                 break
-            lam *= 0.5
-        b = bn
+            lam[searching] *= 0.5
+        b[act] = bn
     h, dh = steel1010_h_smooth(b)
-    jac = (eye - t) + t * (MU0 * dh)[None, :]
+    jac = (eye - t) + t * (MU0 * dh)[:, None, :]
     m = b / MU0 - h
-    db = np.linalg.solve(jac, b0 / current_a)
+    db = np.linalg.solve(jac, (b0 / current_a)[:, :, None])[:, :, 0]
     dm = db / MU0 - dh * db
-    return RodSolution(a, edges, b, m, b0, float(current_a), float(np.dot(m, g)),
-                       float(np.dot(dm, g)), it)
+    return RodBatch(a, edges, b, m, b0, float(current_a), np.sum(m * g, axis=1),
+                    np.sum(dm * g, axis=1), it)
+
+
+def _mv(mat, vec):
+    """Stacked matrix-vector products (B, n, n) x (B, n) -> (B, n)."""
+    return np.matmul(mat, vec[:, :, None])[:, :, 0]

@@ -30,6 +30,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--problem", choices=("device", "coil"), default="device",
                         help="device (default): coil + wire + saturating core under every "
                              "constraint; coil: the thesis' eq. 2.14 winding-only problem")
+    parser.add_argument("--objective", choices=("design-point", "rendering"), default=None,
+                        help="device: the upward force at the design point (default) or the "
+                             "smallest upward force the array renders over the workspace "
+                             "region (bounded LP allocation)")
+    parser.add_argument("--vary-pitch", action="store_true",
+                        help="device: the array pitch is a variable too (coils may not overlap; "
+                             "implies --objective rendering; ~1 min)")
+    parser.add_argument("--pitch-range", default=None, metavar="LO:HI",
+                        help="with --vary-pitch: pitch bounds in m (default 0.6 x the design's "
+                             "pitch to 2 x max outer radius + 1 mm)")
     parser.add_argument("--verify", action="store_true",
                         help="device: also run the global checks (multistart, ISRES, grid)")
     parser.add_argument("--fem", action="store_true",
@@ -61,7 +71,12 @@ def _run_device(args, design, starts: int) -> int:
                             verify_device)
 
     t0 = time.perf_counter()
-    problem = device_problem_for(design)
+    if args.pitch_range is not None and not args.vary_pitch:
+        raise BadInputError("--pitch-range", "given together with --vary-pitch",
+                            args.pitch_range)
+    objective = args.objective or ("rendering" if args.vary_pitch else "design-point")
+    problem = device_problem_for(design, objective=objective, vary_pitch=args.vary_pitch,
+                                 pitch_range_m=_pitch_range(args.pitch_range))
     result = solve_device(problem, starts=starts, seed=args.seed,
                           progress=show_progress(args))
     data = {"design_name": design.name, "design_hash": design.spec_hash(),
@@ -87,6 +102,18 @@ def _run_device(args, design, starts: int) -> int:
     return 0
 
 
+def _pitch_range(text: str | None):
+    """'LO:HI' (m) -> (lo, hi); None passes through."""
+    if text is None:
+        return None
+    parts = text.split(":")
+    try:
+        lo, hi = (float(q) for q in parts)
+    except ValueError:
+        raise BadInputError("--pitch-range", "LO:HI in m, e.g. 0.04:0.06", text) from None
+    return lo, hi
+
+
 def device_summary(data: dict) -> str:
     """Table of the optimum and its constraint margins (units in the labels)."""
     rows = [
@@ -106,6 +133,12 @@ def device_summary(data: dict) -> str:
         (f"upward Fz at {data['design_height_m'] * 1e3:g} mm (mN)",
          f"{data['force_n'] * 1e3:.1f}"),
     ]
+    rend = data.get("rendering")
+    if rend:
+        rows.append((f"array pitch (mm){' (optimized)' if data.get('pitch_varied') else ''}",
+                     f"{data['pitch_m'] * 1e3:.2f}"))
+        rows.append((f"rendering: smallest upward Fz over {len(rend['points_m'])} points (mN)",
+                     f"{rend['min_upward_force_n'] * 1e3:.1f}"))
     w = max(len(r[0]) for r in rows)
     lines = [f"{k:<{w}}  {v}" for k, v in rows]
     lines.append("constraints (margin >= 0 is met):")
@@ -114,6 +147,14 @@ def device_summary(data: dict) -> str:
                      f"margin {c['margin']:+.4g}  {'ok' if c['met'] else 'VIOLATED'}  ({c['note']})")
     lines.append(f"core model: {data['core_model']}; {data['fast_evaluations']} fast + "
                  f"{data['panel_evaluations']} panel evaluations in {data['seconds']:.2f} s")
+    chk = data.get("fast_model_check")
+    if chk:
+        lines.append(
+            f"fast model vs panel model at the optimum: corrected {chk['force_rel_err'] * 100:+.2f} % "
+            f"force, {chk['inductance_rel_err'] * 100:+.2f} % inductance (bound "
+            f"{chk['bound_rel'] * 100:g} %: {'met' if chk['within_bound'] else 'NOT MET'}); "
+            f"uncorrected {chk['uncorrected_force_rel_err'] * 100:+.1f} % / "
+            f"{chk['uncorrected_inductance_rel_err'] * 100:+.1f} %")
     ver = data.get("verification")
     if ver:
         lines.append(
