@@ -56,6 +56,7 @@ from .errors import BadInputError
 
 MU0 = 4e-7 * math.pi
 _EYE = np.eye(3)
+_DIAG = np.arange(3)
 METHODS = ("learned", "dipole", "model", "kalman")
 DEFAULT_NOISE_T = 0.1e-3
 """TLV493D noise per axis, T rms (datasheet)."""
@@ -104,12 +105,14 @@ def multipole_field(points_m: np.ndarray, position_m: np.ndarray, moment_a_m2: n
         fss = k * 30 * s * rm72
         fsr = fsr + k * (-52.5 * s2 * rm92 + 7.5 * rm72)
         frr = frr + k * (78.75 * s2 * s * rm112 - 26.25 * s * rm92)
-    ur = u[None, :, None] * r[:, None, :]
-    d = 2 * fsr[:, None, None] * (ur + ur.transpose(0, 2, 1))
-    d += 4 * frr[:, None, None] * r[:, :, None] * r[:, None, :]
-    d += 2 * fr[:, None, None] * _EYE
+    # 2 fsr (u r^T + r u^T) + 4 frr r r^T + fss u u^T + 2 fr I, as r v1^T + u v2^T + 2 fr I
+    # (fewer small-array operations: this runs in every fit iteration)
+    v1 = (4 * frr)[:, None] * r + (2 * fsr)[:, None] * u
+    v2 = (2 * fsr)[:, None] * r
     if octupole_m2:
-        d += fss[:, None, None] * (u[:, None] * u[None, :])
+        v2 += fss[:, None] * u
+    d = r[:, :, None] * v1[:, None, :] + u[None, :, None] * v2[:, None, :]
+    d[:, _DIAG, _DIAG] += (2 * fr)[:, None]
     return b, MU0 * d  # d/d(position) = -d/dr
 
 
@@ -461,7 +464,10 @@ class Localizer:
         field at the sensors by the measured one.
     refresh_m : float, m -- the exact-magnet and core corrections are re-evaluated when the
         position moved farther than this from where they were last evaluated (linear in between);
-        their Jacobian (finite differences, 3 more evaluations) when it moved 6x farther.
+        their Jacobian (central differences, 6 more evaluations) when it moved 10x farther. A
+        warm-started fit re-linearizes when its solution lands beyond 1.5 times the reuse
+        radius (adapted from the linearization's observed error, kept near noise / 20, between
+        0.25 and 5 mm), a cold one until within refresh_m / 4.
     """
 
     def __init__(self, model: SensorModel, method: str = "model", *,
@@ -469,7 +475,7 @@ class Localizer:
                  relative_error: float | None = None, residual_limit: float = 5.0,
                  cores: bool | None = None, max_iterations: int = 30, calibration=None,
                  kalman: ConstantVelocityKalman | None = None, frame_period_s: float = 0.01,
-                 mount_position_m: float = 0.0, refresh_m: float = 0.5e-3):
+                 mount_position_m: float = 0.0, refresh_m: float = 1e-3):
         if method not in METHODS:
             raise BadInputError("method", f"one of {METHODS}", method)
         if method == "learned":
@@ -528,7 +534,9 @@ class Localizer:
                                  zs[zs < hi[2] - 0.002], indexing="ij"), -1)
         self._candidates = g.reshape(-1, 3)
         self._last: np.ndarray | None = None
-        self._lin = None  # (p_value, value (2n, 3), p_jacobian, jacobian (2n, 3, 3))
+        self._lin = {}  # per correction: (p_c, value (2n, 3), jacobian (2n, 3, 3), radius)
+        self._pj = None  # where the core term's Jacobian was last differenced
+        self._radius = self.refresh_m  # reuse radius of the linearization, adapted
 
     # -- construction from files -----------------------------------------------------------
     @classmethod
@@ -589,7 +597,8 @@ class Localizer:
                             lambda p: m.sensor_induced_field(np.clip(p, lo, hi)),
                             box_lo, box_hi, magnet_size_m, grad, known,
                             lambda q: m.actuation(np.clip(q, lo, hi)))
-        learned = LearnedInverse.load(weights) if weights is not None else None
+        learned = (LearnedInverse.load(weights) if weights is not None
+                   else kw.pop("learned", None))
         if calibration is not None and not isinstance(calibration, (SensorCalibration, tuple)):
             calibration = SensorCalibration.load(calibration)
         return cls(model, method, learned=learned, calibration=calibration, **kw)
@@ -677,38 +686,106 @@ class Localizer:
         s2 = (sig2n + self.rel**2 * mag**2).reshape(-1) + self._mount_var(d)
         return d, use, np.sqrt(s2)
 
+    def _exact_part(self, p):
+        """The exact cylinder's field minus the multipole at the sensors near p, and its
+        Jacobian (central differences, h = 0.1 mm, all in one vectorized call): (2n, 3) T,
+        (2n, 3, 3) T/m. The l >= 5 terms the multipole misses fall as (size / r)^4 of the
+        dipole's field: beyond 5 magnet lengths they are < 0.002 mT, 50x below the noise."""
+        m = self.model
+        a, length = m.magnet_size_m
+        val = np.zeros((len(self._pts), 3))
+        jac = np.zeros((len(self._pts), 3, 3))
+        rel = self._pts - p
+        near = np.einsum("ij,ij->i", rel, rel) < (5 * max(a, length)) ** 2
+        if near.any():
+            h = 1e-4
+            # the magnet moved by +-h e_k is the sensors moved by -+h e_k
+            shifts = np.r_[np.zeros((1, 3)), -h * _EYE, h * _EYE]
+            pts = (self._pts[near][None] + shifts[:, None]).reshape(-1, 3)
+            d = (cylinder_field(pts, p, m.moment_a_m2, a, length)
+                 - multipole_field(pts, p, m.moment_a_m2, m.octupole_m2)).reshape(7, -1, 3)
+            val[near] = d[0]
+            jac[near] = np.stack([(d[1 + k] - d[4 + k]) / (2 * h) for k in range(3)], -1)
+        return val, jac
+
+    def _induced_part(self, p):
+        return self.model.induced(p).reshape(-1, 3)
+
     def _extra(self, p) -> np.ndarray:
         """(2n, 3) T: what the multipole misses at the sensors -- the exact cylinder's field minus
         the multipole, plus the field of the cores the magnet magnetizes."""
-        m = self.model
         out = np.zeros((len(self._pts), 3))
         if self._exact:
-            a, length = m.magnet_size_m
-            out += (cylinder_field(self._pts, p, m.moment_a_m2, a, length)
-                    - multipole_field(self._pts, p, m.moment_a_m2, m.octupole_m2))
+            out += self._exact_part(p)[0]
         if self.cores:
-            out += m.induced(p).reshape(-1, 3)
+            out += self._induced_part(p)
         return out
 
-    def _linearized(self, p):
-        """(p_c, value (2n, 3), jacobian (2n, 3, 3)): the correction near p, linear about p_c.
+    def _refresh(self, key, p, tol, evaluate, first_radius):
+        """One correction's linearization near p: (p_c, value, jacobian), reused while p stays
+        within the adapted radius (and ``tol``); ``evaluate(p, old)`` -> (value, jacobian)."""
+        c = self._lin.get(key)
+        if c is not None and float(np.linalg.norm(p - c[0])) <= min(tol, c[3]):
+            return c
+        val, jac = evaluate(p, c)
+        radius = first_radius
+        if c is not None:
+            # the linearization's error grows as |dp|^2: keep it near noise / 20
+            dp = p - c[0]
+            err = float(np.abs(val - c[1] - c[2] @ dp).max())
+            step = float(np.linalg.norm(dp))
+            radius = (min(max(step * math.sqrt(0.05 * self.noise_t / err), 0.1e-3), 5e-3)
+                      if err > 0 else 5e-3)
+        self._lin[key] = (p, val, jac, radius)
+        return self._lin[key]
 
-        The value is reused while p stays within ``refresh_m`` of p_c, the Jacobian (central
-        differences, 6 evaluations) within 6 ``refresh_m``: the map's core term costs ~0.2 ms a
-        call, the warm-started fit only a few multipole evaluations."""
-        lin = self._lin
-        if lin is not None and float(np.linalg.norm(p - lin[0])) <= self.refresh_m:
-            return lin[0], lin[1], lin[3]
+    def _evaluate_induced(self, p, old):
+        val = self._induced_part(p)
+        if old is not None and float(np.linalg.norm(p - old[4])) <= 10 * self.refresh_m:
+            # Broyden: the reused Jacobian made exact along the move (free); the cores' field
+            # is smooth on the 10 mm scale
+            dp = p - old[0]
+            jac = old[2] + np.einsum("ki,j->kij", val - old[1] - old[2] @ dp,
+                                     dp / float(dp @ dp))
+            self._pj = old[4]
+            return val, jac
+        h = 0.25e-3
+        jac = np.stack([(self._induced_part(p + h * e) - self._induced_part(p - h * e))
+                        / (2 * h) for e in _EYE], -1)
+        self._pj = p
+        return val, jac
+
+    def _within(self, p, tol) -> bool:
+        """Is p close enough to every correction's linearization point (``tol``, or 1.5 times
+        each one's reuse radius)?"""
+        return all(float(np.linalg.norm(p - c[0])) <= (tol if tol is not None else 1.5 * c[3])
+                   for c in self._lin.values())
+
+    def _linearized(self, p, tol=None):
+        """(p, value (2n, 3), jacobian (2n, 3, 3)): the corrections to the multipole, linear
+        about p. Each part keeps its own linearization point and reuse radius (adapted from
+        the linearization's observed error): the exact magnet's part (cheap, curved near the
+        sensors: value and Jacobian fresh at each refresh) and the map's core term (~0.2 ms a
+        call; Jacobian by central differences within 10 ``refresh_m``, Broyden-updated)."""
         p = np.array(p, dtype=float)
-        val = self._extra(p)
-        if lin is not None and float(np.linalg.norm(p - lin[2])) <= 6 * self.refresh_m:
-            pj, jac = lin[2], lin[3]
-        else:
-            h = 0.25e-3
-            jac = np.stack([(self._extra(p + h * e) - self._extra(p - h * e)) / (2 * h)
-                            for e in _EYE], -1)
-            pj = p
-        self._lin = (p, val, pj, jac)
+        tol = math.inf if tol is None else tol
+        val = np.zeros((len(self._pts), 3))
+        jac = np.zeros((len(self._pts), 3, 3))
+        self._radius = math.inf
+        if self._exact:
+            # near the sensors the exact part curves on the 1 mm scale: start small
+            c = self._refresh("exact", p, tol, lambda q, old: self._exact_part(q), 0.25e-3)
+            val += c[1] + c[2] @ (p - c[0])
+            jac += c[2]
+            self._radius = min(self._radius, c[3])
+        if self.cores:
+            def ev(q, old):
+                out = self._evaluate_induced(q, None if old is None else old + (self._pj,))
+                return out
+            c = self._refresh("cores", p, tol, ev, self.refresh_m)
+            val += c[1] + c[2] @ (p - c[0])
+            jac += c[2]
+            self._radius = min(self._radius, c[3])
         return p, val, jac
 
     def _forward(self, p, subtract: bool, jac: bool, lin=None):
@@ -747,16 +824,15 @@ class Localizer:
                 return (r, (j[use] * w[:, None, None]).reshape(-1, 3)) if jac else r
             return resid
 
-        def solve(p0):
+        def solve(p0, tol):
             """LM with the corrections linearized near the position, re-linearized (at most 4
-            times) until the solution stays within refresh_m of the linearization point."""
+            times) until the solution stays within tol of the linearization point."""
             it = 0
             for _ in range(5):
-                lin = self._linearized(p0) if has_extra else None
+                lin = self._linearized(p0, tol) if has_extra else None
                 out = self._lm(residuals(lin), p0)
                 it += out[2]
-                if (lin is None or not out[3]
-                        or float(np.linalg.norm(out[0] - lin[0])) <= self.refresh_m):
+                if lin is None or not out[3] or self._within(out[0], tol):
                     break
                 p0 = out[0]
             return out[0], out[1], it, out[3]
@@ -766,10 +842,10 @@ class Localizer:
             cands = [self._lm(residuals(None), q0)
                      for q0 in self._global_starts(d, use, sig, subtract)]
             first = min(cands, key=lambda o: o[1])
-            return solve(first[0]) if has_extra else first
+            return solve(first[0], 0.25 * self.refresh_m) if has_extra else first
 
         if self._last is not None:
-            best = solve(self._last)
+            best = solve(self._last, None)
             if not self._ok(best, n_used)[0]:
                 # lost from the warm start: the global search once
                 other = cold()
@@ -831,8 +907,11 @@ class Localizer:
                 break
             if not np.all(np.isfinite(step)):
                 break
-            if lam < 1e-4 and float(step @ step) < 1e-12:
-                # a Gauss-Newton step below 1 um: converged (taking it changes nothing)
+            # a Gauss-Newton step below 1/20 of the estimate's own noise (1 / sqrt(diag(J^T J))
+            # per axis, <= the true standard deviation; 50 um at most): converged -- what it
+            # leaves is far below that noise (and ~(step)^2 / 10 mm for exact data)
+            xtol2 = min(0.0025 * float(np.sum(1.0 / (np.diag(a) + 1e-300))), 2.5e-9)
+            if lam < 1e-4 and float(step @ step) < xtol2:
                 p = p + step
                 converged = True
                 break
@@ -844,7 +923,7 @@ class Localizer:
             if np.isfinite(cn) and cn <= cost:
                 p, r, j = pn, rn, jn
                 # 1 um or a negligible cost decrease: far below what the noise allows
-                small = float(np.linalg.norm(step)) < 1e-6 or cost - cn <= 1e-6 * cost
+                small = float(np.linalg.norm(step)) < 1e-7 or cost - cn <= 1e-7 * cost
                 cost = cn
                 lam = max(lam * 0.2, 1e-9)
                 if small:

@@ -3,10 +3,18 @@ the two simulated Hall arrays, against the thesis (0.80 / 1.26 / 0.91 / 0.86 mm 
 cases 1-4) and against the noise limit -- and how much does the cores' magnetization by the magnet
 spoil the thesis' subtraction?
 
-Simulation (designkit.localize): exact 10 x 10 mm cylinder magnet (moment from the design, +z),
-coupled coil field at the currents, field of the cores magnetized by the magnet (coupled solve),
-TLV493D chain (0.1 mT rms noise, 0.098 mT LSB, flagged beyond +-130 mT), per-sensor errors
-(offset 0.01 mT, gain 1 %, mounting 0.5 mm / 1 degree; fixed draw, seed).
+Simulation (designkit.localize): exact 10 x 10 mm cylinder magnet (moment from the design),
+coupled coil field at the currents (at the sensors' true, displaced positions), field of the
+cores magnetized by the magnet (coupled solve), TLV493D chain (0.1 mT rms noise, 0.098 mT LSB,
+flagged beyond +-130 mT), per-sensor errors drawn once (the device): offset 0.01 mT rms, gain
+1 % rms per axis, mounting 0.5 mm in a random direction and 1 degree about a random axis.
+
+Calibration (firmware_io.localization.calibrate, what the device runs at start-up with the
+magnet away): 1000 coil-only frames, each coil alone at +-3 A, then random patterns within
++-1.5 A, read through the same sensor chain with an independent noise stream (seed + 1000);
+it recovers each sensor's offset, gains, mounting rotation and (upper array, inside the map's
+box) position error, and the coils' field as the sensors read it. The table reports what it
+recovered against the drawn truth.
 
 Positions: ``n`` uniform random in the thesis' 50 mm cube (|x|, |y| <= 25 mm, 20-70 mm above the
 coil tops) and ``n`` in the rendering workspace (|x|, |y| <= 75 mm, 20-80 mm: the magnet cannot
@@ -15,12 +23,15 @@ sinusoidal 0.65 A, time-varying 1 A peak) and full rendering currents (6 A peak,
 each frame takes the currents at a random time.
 
 Methods: 'learned' (thesis: subtraction + nearest-sensor MLP), 'dipole-naive' (subtraction +
-dipole fit ignoring the cores), 'dipole' (subtraction + fit with the map's core term), 'model'
-(model-based cancellation), 'model-cal' ('model' after the per-sensor affine calibration from
-coil-only frames, firmware_io.localization.calibrate), and 'noise-limit': the same readings
-fitted with the exact forward model (true sensor poses, gains and offsets; exact cylinder field;
-induced field linearized about the truth), which only noise and quantization limit. Every fit
-starts cold (global search), as when lost. Kalman: one smooth finger trajectory per case
+dipole/octupole fit ignoring the cores, uncalibrated), 'dipole' (subtraction + fit with the exact
+cylinder magnet and the map's core term, calibrated), 'model' (model-based cancellation, exact
+magnet + cores, uncalibrated), 'model-cal' (the same, calibrated), and 'noise-limit': the same
+readings fitted with the exact forward model (true sensor poses, gains and offsets; exact
+cylinder field; coupled induced field linearized about the truth), which only noise and
+quantization limit. Every fit starts cold (global search), as when lost.
+
+Error budget (noise-free readings, one error source at a time, 'model' and 'dipole' fits,
+positions in the lower half of the cube): what each source adds to the position error. Kalman: one smooth finger trajectory per case
 (100 Hz), error of 'model' alone and filtered. Benchmark: the per-estimate cost of the warm-started
 subtraction + dipole fit (median, p99) on this machine (shared, loaded: relative numbers).
 
@@ -30,6 +41,7 @@ Writes ``localization.json``, ``localization_table.txt``, ``localization.png`` (
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import sys
 import time
@@ -41,8 +53,9 @@ if __package__ in (None, ""):
 import numpy as np
 
 from designkit.design import default_design
-from designkit.localize import (THESIS_MAE_MM, SensorSimulator, case_currents, forward_model,
-                                magnet_field, random_positions, train_learned_inverse)
+from designkit.localize import (THESIS_MAE_MM, SensorErrors, SensorSimulator, analog_reading,
+                                case_currents, forward_model, magnet_field, random_positions,
+                                train_learned_inverse)
 from firmware_io.localization import (ConstantVelocityKalman, LearnedInverse, Localizer,
                                       SensorModel, calibrate)
 
@@ -92,41 +105,42 @@ def run(out_dir=DEFAULT_OUT, n: int = 1000, seed: int = 0, *, map_path=None,
     t_all = time.perf_counter()
     sim = SensorSimulator(design, errors="default", seed=seed,
                           induced="rod" if quick else "coupled")
+    mg = design.magnet
+    size = (mg.radius_m, mg.length_m)
     # the estimators' knowledge: the v2 map if given, else the same numbers from designkit
     if map_path is not None and Path(map_path).is_file():
-        mg = design.magnet
-        base = Localizer.from_map(map_path, "dipole",
-                                  octupole_m2=(mg.length_m / 2) ** 2 - 0.75 * mg.radius_m**2)
-        model = base.model
+        def make(method, **kw):
+            return Localizer.from_map(map_path, method, **kw)
+        model = make("dipole", magnet_size_m=size).model
         source = f"map {map_path}"
     else:
-        model = SensorModel.from_operator(**forward_model(sim))
+        base = SensorModel.from_operator(**forward_model(sim))
+
+        def make(method, magnet_size_m=None, **kw):
+            m = dataclasses.replace(base, magnet_size_m=magnet_size_m)
+            return Localizer(m, method, **kw)
+        model = make("dipole", magnet_size_m=size).model
         source = "designkit.localize.forward_model (rod induced model)"
-    naive_model = SensorModel(model.sensor_positions_m, model.coil_field_t_per_a,
-                              model.moment_a_m2, model.design_sha256, model.octupole_m2, None,
-                              model.box_lower_m, model.box_upper_m)
     t0 = time.perf_counter()
     learned = train_learned_inverse(model, n_samples=800 if quick else 4000, hidden=16,
                                     max_iterations=100 if quick else 600, seed=seed)
     learned.save(out / "learned_inverse.npz")
     learned = LearnedInverse.load(out / "learned_inverse.npz")
     t_train = time.perf_counter() - t0
-    # calibration: coil-only frames (no magnet), random currents <= 2 A
-    cal_i = rng.uniform(-2, 2, (60, model.n_coils))
-    zero = np.zeros((len(cal_i), 2, sim.n, 3))
-    cal = sim.read(np.zeros((len(cal_i), 3)) + [0, 0, 1.0], cal_i, parts=(zero, zero))
-    calibration = calibrate(cal.top_t, cal.bottom_t, cal_i, model)
+    calibration, cal_report = _calibrate(sim, model, seed + 1000, 200 if quick else 1000)
+    calibration.save(out / "calibration.npz")
 
-    locs = {"learned": Localizer(model, "learned", learned=learned),
-            "dipole-naive": Localizer(naive_model, "dipole"),
-            "dipole": Localizer(model, "dipole"),
-            "model": Localizer(model, "model"),
-            "model-cal": Localizer(model, "model", calibration=calibration,
-                                   relative_error=0.005)}
+    locs = {"learned": make("learned", magnet_size_m=size, learned=learned),
+            "dipole-naive": make("dipole", cores=False),
+            "dipole": make("dipole", magnet_size_m=size, calibration=calibration),
+            "model": make("model", magnet_size_m=size),
+            "model-cal": make("model", magnet_size_m=size, calibration=calibration)}
+    results_budget = _budget(sim, make, size, seed, 12 if quick else 150)
     regions = {"cube": dict(z_range_m=(0.020, 0.070), half_width_m=0.025),
                "workspace": dict(z_range_m=(0.020, 0.080), half_width_m=0.075)}
     counts = {"cube": n, "workspace": n if n_workspace is None else n_workspace}
-    results: dict = {"n": counts, "model_source": source, "train_s": t_train, "rows": []}
+    results: dict = {"n": counts, "model_source": source, "train_s": t_train, "rows": [],
+                     "calibration": cal_report, "budget": results_budget}
     errors_store = {}
     for region, box in regions.items():
         n = counts[region]
@@ -146,7 +160,8 @@ def run(out_dir=DEFAULT_OUT, n: int = 1000, seed: int = 0, *, map_path=None,
                                           - model.induced(pos[k] - dp)) / (2 * h)
         if region == "cube":
             # subtraction error from the cores' magnetization by the magnet, per position
-            sub = ind[:, 0] - np.einsum("sij,ksj->ksi", locs["dipole"]._mirror, ind[:, 1])
+            sub = ind[:, 0] - np.einsum("sij,ksj->ksi", locs["dipole-naive"]._mirror,
+                                        ind[:, 1])
             results["subtraction_core_error_t"] = {
                 "max_over_sensors_median": float(np.median(np.abs(sub).max(axis=(1, 2)))),
                 "max_over_sensors_max": float(np.abs(sub).max())}
@@ -154,8 +169,9 @@ def run(out_dir=DEFAULT_OUT, n: int = 1000, seed: int = 0, *, map_path=None,
             clean = mag + ind
             clean[np.any(np.abs(clean) > 0.130, axis=-1)] = np.nan  # saturated, as read
             e_naive, e_cores = np.empty(n), np.empty(n)
+            uncal_dipole = make("dipole", magnet_size_m=size)
             for k in range(n):
-                for loc, out_e in ((locs["dipole-naive"], e_naive), (locs["dipole"], e_cores)):
+                for loc, out_e in ((locs["dipole-naive"], e_naive), (uncal_dipole, e_cores)):
                     loc.reset()
                     est = loc.locate(clean[k, 0], clean[k, 1])
                     out_e[k] = np.linalg.norm(est.position_m - pos[k])
@@ -179,6 +195,7 @@ def run(out_dir=DEFAULT_OUT, n: int = 1000, seed: int = 0, *, map_path=None,
                 errs["noise-limit"][k] = np.linalg.norm(p - pos[k])
                 oks["noise-limit"][k] = True
             low = pos[:, 2] <= 0.045
+            nl = errs["noise-limit"] * 1e3
             for m in METHODS:
                 e_mm = errs[m] * 1e3
                 results["rows"].append({
@@ -192,13 +209,136 @@ def run(out_dir=DEFAULT_OUT, n: int = 1000, seed: int = 0, *, map_path=None,
                     "ok_fraction": float(oks[m].mean()),
                     "mae_ok_mm": float(e_mm[oks[m]].mean()) if oks[m].any() else float("nan"),
                     "saturated_sensor_fraction": float(rd.saturated.mean()),
+                    "noise_limit_mae_mm": float(nl.mean()),
+                    "noise_limit_p95_mm": float(np.percentile(nl, 95)),
+                    "noise_limit_mae_lower_half_mm": float(nl[low].mean()),
+                    "noise_limit_mae_upper_half_mm": float(nl[~low].mean()),
                     "thesis_mae_mm": THESIS_MAE_MM.get(case)})
             errors_store[(region, case)] = (pos, errs)
-    results["kalman"] = _kalman(sim, model, rng, quick)
+    results["kalman"] = _kalman(sim, model, rng, quick, locs)
     results["benchmark"] = _benchmark(sim, model, locs, rng, quick)
     results["total_s"] = time.perf_counter() - t_all
     _write(out, results, errors_store)
     return results
+
+
+def _calibration_frames(sim, seed, n_frames):
+    """Coil-only frames (no magnet) through the sensor chain, an independent noise stream:
+    each coil alone at +-3 A, then random patterns within +-1.5 A."""
+    rng = np.random.default_rng(seed)
+    nc = sim.array.n_coils
+    half = n_frames // 2
+    cur = rng.uniform(-1.5, 1.5, (n_frames, nc))
+    cur[:half] = 0.0
+    cur[np.arange(half), np.arange(half) % nc] = np.where(np.arange(half) % (2 * nc) < nc, 3.0,
+                                                          -3.0)
+    zero = np.zeros((n_frames, 2, sim.n, 3))
+    rd = sim.read(np.zeros((n_frames, 3)), cur, parts=(zero, zero), rng=rng)
+    return rd, cur
+
+
+def _calibrate(sim, model, seed, n_frames):
+    """Run the start-up calibration on simulated frames; report what it recovered."""
+    rd, cur = _calibration_frames(sim, seed, n_frames)
+    cal = calibrate(rd.top_t, rd.bottom_t, cur, model, noise_t=sim.noise_t)
+    e = sim.errors
+    g_true = e.gains[..., :, None] * np.swapaxes(e.rotations, -1, -2)   # reading = G B
+    left = np.einsum("asij,asjk->asik", cal.gain_inverse, g_true) - np.eye(3)
+    uncal = g_true - np.eye(3)
+    known = model.gradient_known if model.gradient_known is not None else np.zeros((2, sim.n),
+                                                                                   bool)
+    sh_err = np.linalg.norm(cal.shift_m - e.position_errors_m, axis=-1)
+    sh_true = np.linalg.norm(e.position_errors_m, axis=-1)
+    rep = {"frames": n_frames,
+           "gain_rotation_error_before_max": float(np.abs(uncal).max()),
+           "gain_rotation_error_after_upper_max": float(np.abs(left[0]).max()),
+           "gain_rotation_error_after_lower_max": float(np.abs(left[1]).max()),
+           "offset_true_rms_mt": float(np.sqrt(np.mean(e.offsets_t ** 2)) * 1e3),
+           "offset_error_after_rms_mt": float(np.sqrt(np.mean((cal.offsets_t - e.offsets_t) ** 2))
+                                              * 1e3),
+           "shift_true_mm": float(sh_true.mean() * 1e3),
+           "shift_error_after_mean_mm": float(sh_err[known].mean() * 1e3) if known.any()
+           else float("nan"),
+           "shift_error_after_max_mm": float(sh_err[known].max() * 1e3) if known.any()
+           else float("nan"),
+           "shift_recovered_sensors": int(known.sum())}
+    return cal, rep
+
+
+def _budget(sim, make, size, seed, n):
+    """Position error (MAE, mm) from one error source at a time, noise-free readings, positions
+    in the lower half of the cube (20-45 mm), coils off unless stated; 'model' and 'dipole'
+    fits with the exact magnet and the map's core term."""
+    rng = np.random.default_rng(seed + 2000)
+    pos = random_positions(n, rng, z_range_m=(0.020, 0.045))
+    design = sim.design
+    ideal = SensorSimulator(design, array=sim.array, errors="ideal", noise_t=0.0,
+                            induced=sim.induced_mode, seed=seed)
+    mag = ideal.magnet_part(pos)
+    ind = np.stack([ideal.induced_part(p[None])[0] for p in pos])
+    static = np.full((n, sim.array.n_coils), 0.65)
+    cal_frames = {}
+
+    def one(errors, *, noise=0.0, quant=False, currents=None, induced=True, exact=True,
+            cores=True, cal=False):
+        s2 = SensorSimulator(design, array=sim.array, errors=errors, noise_t=noise,
+                             induced="off", seed=seed)
+        cur = np.zeros((n, sim.array.n_coils)) if currents is None else currents
+        b = (s2.magnet_part(pos) if errors != "ideal" else mag) + (ind if induced else 0.0) \
+            + s2.coil_part(cur)
+        r = np.random.default_rng(seed + 3000)
+        if quant:
+            rd = s2.readout(b, rng=r)
+            top, bot = rd.top_t, rd.bottom_t
+        else:
+            a = analog_reading(b, s2.errors, noise, r)
+            a[np.any(np.abs(a) > 0.130, axis=-1)] = np.nan
+            top, bot = a[:, 0], a[:, 1]
+        calib = None
+        if cal:
+            key = id(errors)
+            if key not in cal_frames:
+                # the calibration frames carry the sensors' real noise
+                s_cal = SensorSimulator(design, array=sim.array, errors=errors,
+                                        noise_t=sim.noise_t, induced="off", seed=seed)
+                cal_frames[key] = _calibrate(s_cal, make("model").model, seed + 4000, 1000)[0]
+            calib = cal_frames[key]
+        out = {}
+        for method in ("model", "dipole"):
+            loc = make(method, magnet_size_m=size if exact else None, cores=cores,
+                       calibration=calib)
+            e = []
+            for k in range(n):
+                loc.reset()
+                e.append(np.linalg.norm(loc.locate(top[k], bot[k], cur[k]).position_m - pos[k]))
+            out[method] = float(np.mean(e) * 1e3)
+        return out
+
+    def errs(**kw):
+        base = dict(offset_t=0.0, gain=0.0, mount_position_m=0.0, mount_angle_deg=0.0)
+        base.update(kw)
+        return SensorErrors.random(sim.n, np.random.default_rng(seed + 5000), **base)
+
+    rows = {}
+    rows["multipole magnet (l <= 3) instead of exact"] = one("ideal", induced=False,
+                                                             exact=False, cores=False)
+    rows["exact magnet (closed form)"] = one("ideal", induced=False, cores=False)
+    rows["cores: coupled truth vs none in the model"] = one("ideal", cores=False)
+    rows["cores: coupled truth vs the map's term"] = one("ideal")
+    rows["coils 0.65 A static (map's coil field)"] = one("ideal", currents=static)
+    for name, kw in (("mounting shift 0.5 mm", dict(mount_position_m=0.5e-3)),
+                     ("mounting rotation 1 deg", dict(mount_angle_deg=1.0)),
+                     ("offset 0.01 mT rms", dict(offset_t=0.01e-3)),
+                     ("gain 1 % rms", dict(gain=0.01))):
+        e = errs(**kw)
+        rows[name] = one(e)
+        rows[name + ", calibrated"] = one(e, cal=True)
+    rows["quantization 0.098 mT"] = one("ideal", quant=True)
+    rows["noise 0.1 mT rms"] = one("ideal", noise=sim.noise_t)
+    e = errs(offset_t=0.01e-3, gain=0.01, mount_position_m=0.5e-3, mount_angle_deg=1.0)
+    rows["all of the above, uncalibrated"] = one(e, noise=sim.noise_t, quant=True)
+    rows["all of the above, calibrated"] = one(e, noise=sim.noise_t, quant=True, cal=True)
+    return {"n": n, "rows": rows}
 
 
 def _trajectory(n_frames, rate_hz, rng):
@@ -210,7 +350,7 @@ def _trajectory(n_frames, rate_hz, rng):
     return t, np.array([0.0, 0.0, 0.045]) + amp * wave
 
 
-def _kalman(sim, model, rng, quick):
+def _kalman(sim, model, rng, quick, locs):
     rate = 100.0
     t, path = _trajectory(60 if quick else 400, rate, rng)
     mag = sim.magnet_part(path)
@@ -219,8 +359,10 @@ def _kalman(sim, model, rng, quick):
     for case in ("time-varying", "rendering"):
         cur = case_currents(case, t, model.n_coils, seed=3)
         rd = sim.read(path, cur, parts=(mag, ind))
-        raw = Localizer(model, "model")
-        kf = Localizer(model, "kalman", kalman=ConstantVelocityKalman(2.0, 1.0e-3))
+        raw = locs["model-cal"]
+        raw.reset()
+        kf = Localizer(raw.model, "kalman", kalman=ConstantVelocityKalman(2.0, 1.0e-3),
+                       calibration=raw.calibration)
         e_raw, e_kf = [], []
         for k in range(len(t)):
             a = raw.locate(rd.top_t[k], rd.bottom_t[k], cur[k])
@@ -241,7 +383,7 @@ def _benchmark(sim, model, locs, rng, quick):
     cur = np.zeros((len(t), model.n_coils))
     rd = sim.read(path, cur, parts=(mag, ind))
     out = {}
-    for name in ("dipole-naive", "dipole", "model"):
+    for name in ("dipole-naive", "dipole", "model", "model-cal"):
         loc = locs[name]
         loc.reset()
         loc.locate(rd.top_t[0], rd.bottom_t[0], cur[0])
@@ -265,9 +407,12 @@ def _benchmark(sim, model, locs, rng, quick):
 
 
 def _write(out: Path, res: dict, store: dict) -> None:
+    est = [m for m in METHODS if m != "noise-limit"]
     lines = [f"localization study: positions per region {res['n']}, model: {res['model_source']}",
+             "MAE / p95 position error (mm), all frames (flagged ones included); 'noise-limit' is"
+             " the exact-model fit to the same readings; x NL = MAE / noise-limited MAE",
              f"{'region':10s} {'case':13s} " + " ".join(f"{m:>13s}" for m in METHODS)
-             + "   thesis   (MAE mm / p95 mm; lower half MAE)"]
+             + "  thesis"]
     rows = res["rows"]
     for region in ("cube", "workspace"):
         for case in CASES:
@@ -277,17 +422,31 @@ def _write(out: Path, res: dict, store: dict) -> None:
             th = rs[METHODS[0]]["thesis_mae_mm"]
             lines.append(f"{region:10s} {case:13s} " + " ".join(
                 f"{rs[m]['mae_mm']:6.2f}/{rs[m]['p95_mm']:6.2f}" for m in METHODS)
-                + (f"   {th:.2f}" if th else "      -"))
-            lines.append(f"{'':10s} {'  lower half':13s} " + " ".join(
-                f"{rs[m]['mae_lower_half_mm']:13.2f}" for m in METHODS))
+                + (f"  {th:.2f}" if th else "     -"))
+            lines.append(f"{'':10s} {'  x NL':13s} " + " ".join(
+                f"{rs[m]['mae_mm'] / rs[m]['noise_limit_mae_mm']:13.2f}" for m in METHODS))
+            for half, key in (("lower half", "lower"), ("upper half", "upper")):
+                lines.append(f"{'':10s} {'  ' + half:13s} " + " ".join(
+                    f"{rs[m][f'mae_{key}_half_mm']:13.2f}" for m in METHODS))
+                lines.append(f"{'':10s} {'    x NL':13s} " + " ".join(
+                    f"{rs[m][f'mae_{key}_half_mm'] / rs[m][f'noise_limit_mae_{key}_half_mm']:13.2f}"
+                    for m in METHODS))
             lines.append(f"{'':10s} {'  ok fraction':13s} " + " ".join(
                 f"{rs[m]['ok_fraction']:13.3f}" for m in METHODS))
-            lines.append(f"{'':10s} {'  MAE if ok':13s} " + " ".join(
-                f"{rs[m]['mae_ok_mm']:13.2f}" for m in METHODS))
-            lines.append(f"{'':10s} {'  median':13s} " + " ".join(
-                f"{rs[m]['median_mm']:13.2f}" for m in METHODS))
+            lines.append(f"{'':10s} {'  sat. sensors':13s} "
+                         f"{rs[est[0]]['saturated_sensor_fraction']:13.3f}")
+    lines.append("")
+    b = res["budget"]
+    lines.append(f"error budget: MAE (mm) of the fits on noise-free readings with one error source, "
+                 f"{b['n']} positions 20-45 mm above the coils")
+    lines.append(f"  {'source':48s} {'model':>8s} {'dipole':>8s}")
+    for name, v in b["rows"].items():
+        lines.append(f"  {name:48s} {v['model']:8.3f} {v['dipole']:8.3f}")
+    lines.append("calibration (recovered vs drawn): " + json.dumps(
+        {k: (round(v, 4) if isinstance(v, float) else v) for k, v in res["calibration"].items()}))
     lines.append(f"Kalman: {json.dumps(res['kalman'])}")
-    lines.append(f"benchmark (loaded machine): {json.dumps(res['benchmark'])}")
+    lines.append(f"benchmark (us per locate, warm start, shared machine): "
+                 f"{json.dumps(res['benchmark'])}")
     lines.append(f"subtraction error from the magnet-magnetized cores: "
                  f"{json.dumps(res['subtraction_core_error_t'])}")
     text = "\n".join(lines)
