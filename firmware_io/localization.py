@@ -431,14 +431,37 @@ def _field_gradient(rows: np.ndarray):
     return rows[:, :3], g
 
 
+def _solve3_damped(a, g, lam):
+    """Solve (A + lam diag(A)) x = g for a symmetric 3 x 3 A (nested lists) by the adjugate;
+    None when singular or not finite."""
+    m00, m11, m22 = (a[0][0] * (1 + lam) + 1e-30, a[1][1] * (1 + lam) + 1e-30,
+                     a[2][2] * (1 + lam) + 1e-30)
+    m01, m02, m12 = a[0][1], a[0][2], a[1][2]
+    c00 = m11 * m22 - m12 * m12
+    c01 = m02 * m12 - m01 * m22
+    c02 = m01 * m12 - m02 * m11
+    det = m00 * c00 + m01 * c01 + m02 * c02
+    if not (math.isfinite(det) and det != 0.0):
+        return None
+    c11 = m00 * m22 - m02 * m02
+    c12 = m01 * m02 - m00 * m12
+    c22 = m00 * m11 - m01 * m01
+    g0, g1, g2 = g
+    x = ((c00 * g0 + c01 * g1 + c02 * g2) / det, (c01 * g0 + c11 * g1 + c12 * g2) / det,
+         (c02 * g0 + c12 * g1 + c22 * g2) / det)
+    if not all(math.isfinite(v) for v in x):
+        return None
+    return x
+
+
 def _check_frame(name: str, a, n: int) -> np.ndarray:
     arr = np.asarray(a, dtype=float)
     if arr.shape != (n, 3):
         raise BadInputError(name, f"an array of shape ({n}, 3), T", f"shape {arr.shape}")
-    if np.any(np.isinf(arr)):
+    if not (np.abs(arr) <= 1.0).all() and np.any(np.isinf(arr)):  # NaN compares False
         raise BadInputError(name, "finite values or NaN (missing/saturated), T",
                             f"Inf at {np.argwhere(np.isinf(arr))[0].tolist()}")
-    if np.any(np.abs(arr) > 1.0):  # NaN compares False
+    if np.any(np.abs(arr) > 1.0):
         raise BadInputError(name, "fields in tesla (|B| <= 1 T; a TLV493D reads <= 0.2 T)",
                             f"{np.nanmax(np.abs(arr))!r} -- millitesla passed as tesla?")
     return arr
@@ -534,6 +557,8 @@ class Localizer:
                                  zs[zs < hi[2] - 0.002], indexing="ij"), -1)
         self._candidates = g.reshape(-1, 3)
         self._last: np.ndarray | None = None
+        self._box_lo = [float(x) for x in model.box_lower_m]
+        self._box_hi = [float(x) for x in model.box_upper_m]
         self._lin = {}  # per correction: (p_c, value (2n, 3), jacobian (2n, 3, 3), radius)
         self._pj = None  # where the core term's Jacobian was last differenced
         self._radius = self.refresh_m  # reuse radius of the linearization, adapted
@@ -813,15 +838,21 @@ class Localizer:
                                                                  + self.model.box_upper_m)
             return Estimate(p.copy(), 0.0, False, n_used, 0, method,
                             reason=f"only {n_used} usable sensors (need 3)")
-        dw = (d[use] / sig[use, None]).reshape(-1)
-        w = 1.0 / sig[use]
+        every = bool(use.all())
+        dw = ((d if every else d[use]) / (sig if every else sig[use])[:, None]).reshape(-1)
+        w = 1.0 / (sig if every else sig[use])
+        w2, w3 = w[:, None], w[:, None, None]
         has_extra = self._exact or self.cores
 
         def residuals(lin):
             def resid(p, jac):
                 b, j = self._forward(p, subtract, jac, lin)
-                r = dw - (b[use] * w[:, None]).reshape(-1)
-                return (r, (j[use] * w[:, None, None]).reshape(-1, 3)) if jac else r
+                if not every:
+                    b = b[use]
+                r = dw - (b * w2).reshape(-1)
+                if not jac:
+                    return r
+                return r, ((j if every else j[use]) * w3).reshape(-1, 3)
             return resid
 
         def solve(p0, tol):
@@ -892,38 +923,41 @@ class Localizer:
         return [c[k] for k in np.argsort(costs)[:keep]]
 
     def _lm(self, resid, p0):
+        """Levenberg-Marquardt on the position (3 unknowns: the 3 x 3 normal equations are
+        solved in closed form on Python floats, the small-array numpy overhead dominates
+        here)."""
         p = np.array(p0, dtype=float)
         r, j = resid(p, True)
         cost = float(r @ r)
         lam = 1e-6
         converged = False
         it = 0
+        lo, hi = self._box_lo, self._box_hi
         for it in range(1, self.max_iterations + 1):
-            a = j.T @ j
-            g = j.T @ r
-            try:
-                step = np.linalg.solve(a + lam * np.diag(np.diag(a) + 1e-30), g)
-            except np.linalg.LinAlgError:
-                break
-            if not np.all(np.isfinite(step)):
+            a = (j.T @ j).tolist()
+            g = (j.T @ r).tolist()
+            step = _solve3_damped(a, g, lam)
+            if step is None:
                 break
             # a Gauss-Newton step below 1/20 of the estimate's own noise (1 / sqrt(diag(J^T J))
             # per axis, <= the true standard deviation; 50 um at most): converged -- what it
             # leaves is far below that noise (and ~(step)^2 / 10 mm for exact data)
-            xtol2 = min(0.0025 * float(np.sum(1.0 / (np.diag(a) + 1e-300))), 2.5e-9)
-            if lam < 1e-4 and float(step @ step) < xtol2:
+            xtol2 = min(0.0025 * (1.0 / (a[0][0] + 1e-300) + 1.0 / (a[1][1] + 1e-300)
+                                  + 1.0 / (a[2][2] + 1e-300)), 2.5e-9)
+            s2 = step[0] * step[0] + step[1] * step[1] + step[2] * step[2]
+            if lam < 1e-4 and s2 < xtol2:
                 p = p + step
                 converged = True
                 break
             # the position stays in the plausible box: far outside it the magnet's field vanishes
             # and a step could run away on the (bounded) induced term alone
-            pn = np.minimum(np.maximum(p + step, self.model.box_lower_m), self.model.box_upper_m)
+            pn = np.array([min(max(p[k] + step[k], lo[k]), hi[k]) for k in range(3)])
             rn, jn = resid(pn, True)
             cn = float(rn @ rn)
-            if np.isfinite(cn) and cn <= cost:
+            if math.isfinite(cn) and cn <= cost:
                 p, r, j = pn, rn, jn
-                # 1 um or a negligible cost decrease: far below what the noise allows
-                small = float(np.linalg.norm(step)) < 1e-7 or cost - cn <= 1e-7 * cost
+                # 0.1 um or a negligible cost decrease: far below what the noise allows
+                small = s2 < 1e-14 or cost - cn <= 1e-7 * cost
                 cost = cn
                 lam = max(lam * 0.2, 1e-9)
                 if small:
@@ -932,7 +966,7 @@ class Localizer:
             else:
                 lam *= 10.0
                 if lam > 1e8:
-                    converged = float(np.linalg.norm(step)) < 1e-6
+                    converged = s2 < 1e-12
                     break
         return p, cost, it, converged
 
