@@ -38,6 +38,8 @@ import math
 import numpy as np
 from scipy.special import ellipe, ellipkm1
 
+from firmware_io.special import cel as _cel
+
 K2_SERIES = 0.3
 """Below this k^2 the series are used (<= 42 terms reach 1e-17); above it the K, E forms,
 whose recurrences divide by k^2 at most twice (error amplification <= 1/K2_SERIES^2 ~ 11)."""
@@ -106,31 +108,11 @@ def cel(kc, p, c, s, *, tol: float = 3e-9):
     cel(kc, p, c, s) = int_0^{pi/2} (c cos^2 t + s sin^2 t) /
                        ((cos^2 t + p sin^2 t) sqrt(cos^2 t + kc^2 sin^2 t)) dt
 
-    Bulirsch, Numer. Math. 13, 305 (1969). The iteration converges quadratically; stopping when
-    the relative AGM gap is below ``tol`` leaves an error ~ tol^2.
+    Bulirsch, Numer. Math. 13, 305 (1969); defined once, in :func:`firmware_io.special.cel`
+    (numpy only: the controller's exact magnet field needs it too). Stopping when the
+    relative AGM gap is below ``tol`` leaves an error ~ tol^2.
     """
-    kc = np.abs(np.asarray(kc, dtype=float))
-    p = np.asarray(p, dtype=float)
-    c = np.asarray(c, dtype=float)
-    s = np.asarray(s, dtype=float)
-    kc, p, c, s = np.broadcast_arrays(kc, p, c, s)
-    pp = np.sqrt(p)
-    ss = s / pp
-    cc = c.copy()
-    em = np.ones_like(kc)
-    qc = kc.copy()
-    kk = qc.copy()
-    for _ in range(60):
-        g = kk / pp
-        cc, ss = cc + ss / pp, 2.0 * (ss + cc * g)
-        pp = pp + g
-        g = em
-        em = em + qc
-        if np.all(np.abs(g - qc) <= g * tol):
-            break
-        qc = 2.0 * np.sqrt(kk)
-        kk = em * qc
-    return (math.pi / 2) * (ss + cc * em) / (em * (em + pp))
+    return _cel(kc, p, c, s, tol=tol)
 
 
 # --------------------------------------------------------------------------- current loop
