@@ -352,6 +352,44 @@ class SimulatedDevice:
         a = analog_reading(b[None], sim.errors, self.noise_t, self.rng)[0].reshape(-1, 3)
         return a + self.field_offset_t
 
+    def calibrate_sensors(self, model, *, frames: int = 40, current_a: float | None = None):
+        """The start-up sensor calibration through the firmware's path
+        (:func:`firmware_io.runner.record_calibration`: duties written to the simulated
+        PCA9685s, frames read from the register-level TLV493Ds) with the magnet away from the
+        board; while the firmware waits, the coils settle (R-L model at the applied voltage)
+        and the sensors see the coils' field through their errors, with noise.
+
+        Parameters
+        ----------
+        model : firmware_io.localization.SensorModel -- what the localizer knows
+        frames : int; current_a : float, A (default :data:`firmware_io.runner.
+            CALIBRATION_CURRENT_A`, at most the drive's limit)
+
+        Returns the Localizer's ``calibration`` (gain_inverse (2, n, 3, 3), offsets (2, n, 3)).
+        """
+        from firmware_io.runner import (CALIBRATION_CURRENT_A, calibrate_sensors,
+                                        calibration_currents, record_calibration, rl_step)
+
+        sim = self.sensor_sim
+
+        def settle(dt_s: float) -> None:
+            self.current_a = rl_step(self.current_a, self.applied_voltage_v(),
+                                     self.resistance_ohm, self.inductance_h, dt_s)
+            b = sim.coil_part(self.current_a[None])[0]
+            a = analog_reading(b[None], sim.errors, self.noise_t, self.rng)[0].reshape(-1, 3)
+            for sensor, bi in zip(self.tlv, a + self.field_offset_t):
+                sensor.field_t = tuple(bi)
+
+        amp = min(CALIBRATION_CURRENT_A if current_a is None else current_a,
+                  self.supply_v / self.resistance_ohm)
+        currents = calibration_currents(self.array.n_coils, amp, frames)
+        tau = self.inductance_h / self.resistance_ohm
+        top, bottom, applied = record_calibration(self.coils, self.sensors, currents,
+                                                  settle_s=7 * tau, sleep=settle)
+        settle(7 * tau)          # coils off: decayed before the run starts
+        self.current_a[:] = 0.0
+        return calibrate_sensors(model, top, bottom, applied)
+
     def sensor_source(self, position_at, period_s: float) -> "SimSensorSource":
         """The runner's sensor source on this device; ``position_at(t_s)`` is the true position
         (the path given to :meth:`prepare`, one sample per control period ``period_s``)."""
@@ -368,24 +406,44 @@ def _interp_rows(steps, idx, values):
 
 
 class SimSensorSource:
-    """Sensor frames for :class:`firmware_io.runner.Runner` from the simulated sensor bus.
+    """The sensor side of :class:`firmware_io.runner.Runner` on the simulated sensor bus, with
+    the timing of the sensor thread (:class:`firmware_io.run.ThreadedSensorSource`).
 
     :meth:`tick` does the simulation work (fields into the TLV493D models, one pass of
-    :meth:`firmware_io.sensors.SensorArrays.read` on the sensor bus); the plant calls it before each
-    runner step, outside the runner's timed section, as a reader thread would on hardware.
-    Sensors are read back to back: a pass started at t completes at t + its wire time. In
-    master-controlled mode a TLV493D returns the conversion triggered by the previous read, so
-    each frame carries the field of the previous pass's start time.
+    :meth:`firmware_io.sensors.SensorArrays.read` on the sensor bus, the runner's
+    :class:`firmware_io.runner.SensorPipeline` on the frame); the plant calls it before each
+    runner step, outside the runner's timed section, as the sensor thread runs beside the
+    control loop on hardware. The thread's cycle is: read a pass (its wire time on the bus
+    model), then fit (its measured compute time, this thread's CPU clock), publish the
+    :class:`firmware_io.runner.Fix`, read the next pass. The runner takes a result at the first
+    control step at or after the time it is published. In master-controlled mode a TLV493D
+    returns the conversion triggered by the previous read, so each frame carries the field of
+    the previous pass's start time. Without an attached pipeline raw frames are handed over.
+
+    Attributes
+    ----------
+    fit_s : list of float
+        Compute time of each fit on the sensor side, s.
+    frame_truth_m : ndarray (3,) or None
+        The true position at the time of the last handed-over frame (diagnostics).
     """
 
     def __init__(self, device: SimulatedDevice, position_at, period_s: float):
         self.device, self.position_at, self.period_s = device, position_at, period_s
         self.in_flight = None      # (ready time s, field time s, reading)
-        self.ready = None          # a frame the runner has not taken yet
+        self.fitted = None         # (publish time s, result, field time s)
+        self.ready = None          # a result the runner has not taken yet
         self.last_set_s = 0.0
         self.frame_truth_m = None
+        self.pipeline = None
+        self.fit_s: list = []
+
+    def attach(self, pipeline) -> None:
+        self.pipeline = pipeline
 
     def tick(self, t_s: float) -> None:
+        import time as _time
+
         from firmware_io.runner import SensorFrame
 
         dev = self.device
@@ -393,7 +451,21 @@ class SimSensorSource:
             ready_s, field_s, reading = self.in_flight
             if t_s + 1e-12 < ready_s:
                 return
-            self.ready = SensorFrame(reading.top_t, reading.bottom_t, reading.status, field_s)
+            self.in_flight = None
+            frame = SensorFrame(reading.top_t, reading.bottom_t, reading.status, field_s)
+            fit_s = 0.0
+            if self.pipeline is not None:
+                c0 = _time.thread_time()
+                frame = self.pipeline.process(frame)
+                fit_s = _time.thread_time() - c0
+                self.fit_s.append(fit_s)
+            self.fitted = (ready_s + fit_s, frame, field_s)
+        if self.fitted is not None:
+            publish_s, result, field_s = self.fitted
+            if t_s + 1e-12 < publish_s:
+                return
+            self.fitted = None
+            self.ready = result
             self.frame_truth_m = self.position_at(field_s)   # diagnostics: where it really was
         step = int(round(t_s / self.period_s))
         b = dev.sensor_readings_t(min(step, len(dev.path_m) - 1), self.position_at(t_s),
@@ -822,6 +894,12 @@ COIL_SURFACE_HEAT_TRANSFER_W_M2_K = 10.0
 the winding's cooling time constant m c / (h A) of the runner's I^2 t guard."""
 
 
+CALIBRATED_RELATIVE_ERROR = 0.005
+"""Relative model error of a calibrated sensor's reading (the localizer's sensor weights): what
+the affine calibration leaves of the 1 % gain and 1 degree mounting errors is the mounting shift
+and the coils' nonlinearity, a fraction of a percent (studies/localization.py's 'model-cal')."""
+
+
 def drive_data(design) -> dict:
     """The runner's drive data from the design (SI): coil R at the operating temperature, L
     (with the core), the supply (at most the MD10C's 30 V), the current bounds and the I^2 t
@@ -858,7 +936,8 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
                    duration_s: float | None = None, faults: str = "none", map_path=None,
                    method: str = "model", period_s: float = 1e-3, unipolar: bool = False,
                    lam_n_per_m: float | None = None, rows: str = "force", seed: int = 0,
-                   out=Path("run-out"), progress: bool = True, array=None) -> dict:
+                   out=Path("run-out"), progress: bool = True, array=None,
+                   calibrate: bool = True) -> dict:
     """Build (or load) the map, compile the scene, close the runner around the simulated device,
     and write run.csv, summary.json, run.png and loop_timing.png into ``out``. Returns the
     summary. Every input is checked before anything is computed.
@@ -866,11 +945,14 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
     ``rows``: 'force' renders the object's 3-D force, 'fz' only its vertical component (the
     thesis' eq. 4.6; the runner then evaluates only the two rows of A(p) Fz needs). ``array``:
     the design's CoilArray when the caller has one (its coupled solve is reused).
+    ``calibrate``: the start-up sensor calibration (:meth:`SimulatedDevice.calibrate_sensors`)
+    before the run; the localizer then weighs the sensors with
+    :data:`CALIBRATED_RELATIVE_ERROR`.
     """
     from firmware_io.allocation import allocate
-    from firmware_io.localization import ConstantVelocityKalman, Localizer
+    from firmware_io.localization import Localizer
     from firmware_io.mapfile import MapFile
-    from firmware_io.runner import Runner, RunnerConfig, SceneForce
+    from firmware_io.runner import ConstantVelocityTracker, Runner, RunnerConfig, SceneForce
     from firmware_io.scene import Scene
 
     from . import fieldmap
@@ -916,13 +998,22 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
     device = SimulatedDevice(design, array, seed=seed, resistance_ohm=drive["resistance_ohm"][0],
                              inductance_h=drive["inductance_h"][0])
 
+    # what the controller knows of the magnet besides the map: its l = 3 multipole term (the
+    # map does not carry it); the sensors are calibrated at start-up, coils only
+    mg = design.magnet
+    loc_kw = {"octupole_m2": (mg.length_m / 2) ** 2 - 0.75 * mg.radius_m ** 2}
+    if calibrate and method != "learned":
+        base = Localizer.from_map(map_path, method=method, **loc_kw)
+        loc_kw.update(calibration=device.calibrate_sensors(base.model),
+                      relative_error=CALIBRATED_RELATIVE_ERROR)
+
     def factory(source, clock, hook):
         cfg = RunnerConfig(**{k: tuple(v) if isinstance(v, list) else v
                               for k, v in drive.items()},
                            control_period_s=period_s, unipolar=unipolar,
                            force_axes="z" if rows == "fz" else "xyz")
-        localizer = Localizer.from_map(map_path, method=method)
-        runner = Runner(fmap, SceneForce(scene), localizer, ConstantVelocityKalman(),
+        localizer = Localizer.from_map(map_path, method=method, **loc_kw)
+        runner = Runner(fmap, SceneForce(scene), localizer, ConstantVelocityTracker(),
                         hook(allocate), device.coils, source, cfg, clock=clock,
                         log=lambda line: print(line) if progress else None)
         runner.start()

@@ -22,8 +22,19 @@ from .errors import FirmwareIOError
 EXIT_BAD_INPUT = 2
 
 
+SWITCH_INTERVAL_S = 1e-4
+"""Python's GIL hand-over interval while the sensor thread runs (default 5 ms): the control
+thread waits at most about this long for the interpreter when it wakes up for a step while the
+sensor thread is fitting."""
+
+
 class ThreadedSensorSource:
-    """Read the sensor arrays continuously in a thread; hand the newest frame to the loop once."""
+    """Read the sensor arrays and run the fit continuously in a thread; hand the newest
+    :class:`firmware_io.runner.Fix` to the loop once.
+
+    The runner attaches its :class:`firmware_io.runner.SensorPipeline` (:meth:`attach`); until
+    then (or without one) the thread hands over raw frames.
+    """
 
     def __init__(self, arrays, clock=time.monotonic):
         self.arrays, self.clock = arrays, clock
@@ -31,9 +42,14 @@ class ThreadedSensorSource:
         self._frame = None
         self._stop = threading.Event()
         self.error: BaseException | None = None
+        self.pipeline = None
         self.thread = threading.Thread(target=self._loop, name="sensors", daemon=True)
 
+    def attach(self, pipeline) -> None:
+        self.pipeline = pipeline
+
     def start(self) -> None:
+        sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL_S))
         self.thread.start()
 
     def stop(self) -> None:
@@ -43,8 +59,12 @@ class ThreadedSensorSource:
     def _loop(self) -> None:
         from .runner import SensorFrame
 
+        previous = None
         while not self._stop.is_set():
             t0 = self.clock()
+            # master-controlled TLV493D: a read returns the conversion the previous read
+            # triggered, so a frame holds the field at the previous pass's start
+            field_t, previous = (t0 if previous is None else previous), t0
             try:
                 r = self.arrays.read()
             except Exception as exc:  # noqa: BLE001 - the loop must see it, not the thread die
@@ -53,7 +73,13 @@ class ThreadedSensorSource:
                 n = len(status) // 2
                 frame = SensorFrame(np.full((n, 3), np.nan), np.full((n, 3), np.nan), status, t0)
             else:
-                frame = SensorFrame(r.top_t, r.bottom_t, r.status, t0)
+                frame = SensorFrame(r.top_t, r.bottom_t, r.status, field_t)
+            if self.pipeline is not None:
+                try:
+                    frame = self.pipeline.process(frame)
+                except Exception as exc:  # noqa: BLE001 - a fit that raises: no estimate
+                    self.error = exc
+                    continue
             with self._lock:
                 self._frame = frame
 
@@ -141,8 +167,7 @@ def open_device(bus_number: int, sensor_bus_number: int | None, drive_args: dict
 
 def main(argv: list[str] | None = None) -> int:
     from .allocation import allocate
-    from .localization import ConstantVelocityKalman
-    from .runner import Runner, SceneForce, config_from_map
+    from .runner import ConstantVelocityTracker, Runner, SceneForce, config_from_map
 
     args = build_parser().parse_args(argv)
     try:
@@ -160,7 +185,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     source = ThreadedSensorSource(arrays)
-    runner = Runner(fmap, SceneForce(scene), localizer, ConstantVelocityKalman(), allocate,
+    runner = Runner(fmap, SceneForce(scene), localizer, ConstantVelocityTracker(), allocate,
                     coils, source, cfg)
     runner.start()
     source.start()
