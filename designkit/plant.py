@@ -425,7 +425,7 @@ class SimSensorSource:
     fit_s : list of float
         Compute time of each fit on the sensor side, s.
     frame_truth_m : ndarray (3,) or None
-        The true position at the time of the last handed-over frame (diagnostics).
+        The true position at the field time of the last frame read (diagnostics).
     """
 
     def __init__(self, device: SimulatedDevice, position_at, period_s: float):
@@ -453,6 +453,7 @@ class SimSensorSource:
                 return
             self.in_flight = None
             frame = SensorFrame(reading.top_t, reading.bottom_t, reading.status, field_s)
+            self.frame_truth_m = self.position_at(field_s)   # diagnostics: where it really was
             fit_s = 0.0
             if self.pipeline is not None:
                 c0 = _time.thread_time()
@@ -466,7 +467,6 @@ class SimSensorSource:
                 return
             self.fitted = None
             self.ready = result
-            self.frame_truth_m = self.position_at(field_s)   # diagnostics: where it really was
         step = int(round(t_s / self.period_s))
         b = dev.sensor_readings_t(min(step, len(dev.path_m) - 1), self.position_at(t_s),
                                   dev.current_a)
