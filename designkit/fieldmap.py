@@ -714,9 +714,15 @@ class FieldMap:
             raise BadInputError("outside", "'error' or 'extrapolate'", outside)
         return outside == "extrapolate"
 
-    def actuation(self, points, *, outside: str = "error") -> np.ndarray:
-        """Coupled A: (3,) -> (8, n_coils), (n, 3) -> (n, 8, n_coils); T/A, T/(m A)."""
-        return self._call(self.file.actuation, points, self._outside(outside))
+    def actuation(self, points, *, outside: str = "error", rows=None,
+                  coils=None) -> np.ndarray:
+        """Coupled A: (3,) -> (8, n_coils), (n, 3) -> (n, 8, n_coils); T/A, T/(m A).
+        ``rows``, ``coils``: index subsets (MapFile.actuation), shapes (.., len(rows),
+        len(coils))."""
+        try:
+            return self.file.actuation(points, self._outside(outside), rows=rows, coils=coils)
+        except _FirmwareBadInput as exc:
+            raise _translate(exc) from None
 
     def bias_force(self, points, *, outside: str = "error") -> np.ndarray:
         """F0 at zero current, N: (3,) -> (3,), (n, 3) -> (n, 3)."""

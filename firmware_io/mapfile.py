@@ -539,7 +539,51 @@ def prepare_modes(tables: list, metas: list, positions, rotations) -> list:
             groups.append((key, cols))
             order += members
         t["groups"], t["order"] = groups, np.array(order, np.intp)
+        _prepare_one(t)
     return out
+
+
+def _prepare_one(t: dict) -> None:
+    """What :func:`mode_rows_one` needs: every group's quantities padded to 5 columns, so one
+    GEMM gives all polynomials and one batched matmul all basis rows.
+
+    ``one_src`` / ``one_dst``: scatter of the table's columns into (n_basis, 5 n_groups) per core
+    (basis in ``t['order']``); ``one_poly`` (15, 5 n_groups * 8): the groups' :data:`_POLY_T`
+    side by side (zero rows for the padding of m = 0's 4 quantities).
+    """
+    width = 5 * len(t["groups"])
+    src, dst = [], []
+    poly = np.zeros((15, width, 8))
+    s = 0
+    for g, ((m, c), cols) in enumerate(t["groups"]):
+        poly[:, 5 * g:5 * g + N_MODE_Q[m]] = _POLY_T[(m, c)].reshape(15, N_MODE_Q[m], 8)
+        for member in cols:
+            src += [int(x) for x in member]
+            dst += [s * width + 5 * g + q for q in range(len(member))]
+            s += 1
+    t["one_src"], t["one_dst"] = np.array(src, np.intp), np.array(dst, np.intp)
+    t["one_poly"], t["one_width"], t["one_nb"] = poly.reshape(15, -1), width, s
+
+
+_POW_X = np.array([0, 1, 0, 2, 1, 0, 3, 2, 1, 0, 4, 3, 2, 1, 0], np.intp)
+"""Powers of x, resp. y, of the 15 monomials of :func:`_monomials`."""
+_POW_Y = np.array([0, 0, 1, 0, 1, 2, 0, 1, 2, 3, 0, 1, 2, 3, 4], np.intp)
+_POW = np.arange(5.0)
+
+
+def mode_rows_one(t: dict, pq: np.ndarray) -> np.ndarray:
+    """:func:`mode_rows` for one point ``pq`` (1, 3) with few numpy calls: (k * n_basis, 8),
+    rows of core-major basis fields in ``t['order']`` (the layout of MapFile's coefficients)."""
+    if t["rot"] is not None:
+        return mode_rows(t, pq).reshape(-1, 8)
+    x, y, val = _bilinear(t, pq)
+    x, y, val = x[0], y[0], val[0]
+    k = len(x)
+    mono = (np.power(x[:, None], _POW)[:, _POW_X] * np.power(y[:, None], _POW)[:, _POW_Y])
+    poly = (mono @ t["one_poly"]).reshape(k, t["one_width"], 8)
+    pad = np.zeros((k, t["one_nb"] * t["one_width"]))
+    pad[:, t["one_dst"]] = val[:, t["one_src"]]
+    return np.matmul(pad.reshape(k, t["one_nb"], t["one_width"]), poly).reshape(-1, 8)
 
 
 def _bilinear(t: dict, p: np.ndarray):
@@ -638,27 +682,34 @@ def _poly_tensors() -> dict:
     return out
 
 
-def mode_rows(t: dict, p: np.ndarray) -> np.ndarray:
+def mode_rows(t: dict, p: np.ndarray, rows=None) -> np.ndarray:
     """Rows (n, k, n_basis, 8) of every basis field of the type's k cores at points (n, 3),
     global frame, basis in the order of ``t['order']`` (grouped by mode order and cos / sin;
-    :func:`prepare_modes` permutes the coefficients to match)."""
+    :func:`prepare_modes` permutes the coefficients to match). ``rows``: indices into
+    :data:`ROWS` to compute only those (last axis len(rows)); not with rotated coils."""
+    if rows is not None and t["rot"] is not None:
+        return mode_rows(t, p)[..., rows]
     x, y, val = _bilinear(t, p)
     n, k = x.shape
     mono = _monomials(x, y).reshape(n * k, 15)
+    nr = 8 if rows is None else len(rows)
     parts = []
     for (m, c), cols in t["groups"]:
         v = val[..., cols]  # (n, k, nb_g, Q_m)
-        pm = (mono @ _POLY_T[(m, c)]).reshape(n, k, 1, N_MODE_Q[m], 8)  # one GEMM
+        tens = _POLY_T[(m, c)]
+        if rows is not None:
+            tens = tens.reshape(15, N_MODE_Q[m], 8)[:, :, rows].reshape(15, -1)
+        pm = (mono @ tens).reshape(n, k, 1, N_MODE_Q[m], nr)  # one GEMM
         # a sum over the 4-5 quantities: numpy's batched matmul is slow on tiny matrices
         acc = v[..., 0, None] * pm[..., 0, :]
         for q in range(1, v.shape[-1]):
             acc += v[..., q, None] * pm[..., q, :]
-        parts.append(acc)  # (n, k, nb_g, 8)
-    rows = parts[0] if len(parts) == 1 else np.concatenate(parts, axis=2)
+        parts.append(acc)  # (n, k, nb_g, nr)
+    out = parts[0] if len(parts) == 1 else np.concatenate(parts, axis=2)
     if t["rot"] is not None:
-        flat = rows.transpose(3, 0, 2, 1).reshape(8, -1, k)
-        rows = _rotate_rows(flat, t["rot"]).reshape(8, n, -1, k).transpose(1, 3, 2, 0)
-    return rows
+        flat = out.transpose(3, 0, 2, 1).reshape(8, -1, k)
+        out = _rotate_rows(flat, t["rot"]).reshape(8, n, -1, k).transpose(1, 3, 2, 0)
+    return out
 
 
 _POLY_T = _poly_tensors()
@@ -853,38 +904,78 @@ class MapFile:
         return q
 
     # ------------------------------------------------------------------ the interpolators
-    def actuation(self, points, extrapolate: bool = False) -> np.ndarray:
+    def _subset(self, name: str, sel, n: int):
+        """None (all) or an index array (m,) for the ``rows=`` / ``coils=`` keywords."""
+        if sel is None:
+            return None
+        try:
+            idx = np.asarray(sel)
+            ok = idx.ndim == 1 and len(idx) > 0 and np.issubdtype(idx.dtype, np.integer)
+        except (TypeError, ValueError):
+            ok = False
+        if not ok or np.any(idx < 0) or np.any(idx >= n):
+            raise BadInputError(name, f"a non-empty sequence of indices 0..{n - 1}", sel)
+        return idx.astype(np.intp)
+
+    def actuation(self, points, extrapolate: bool = False, *, rows=None,
+                  coils=None) -> np.ndarray:
         """The coupled A at points (3,) -> (8, n_coils) or (n, 3) -> (n, 8, n_coils), float64.
 
         Rows :data:`ROWS`, T/A and T/(m A). Outside the box: BadInputError unless
         ``extrapolate`` (the end cells' polynomials, which degrade quickly away from the box).
+        ``rows``, ``coils``: index sequences (into :data:`ROWS`, resp. the coils) to evaluate
+        only those: (len(rows), len(coils)) per point, in the given order; the mode sum then
+        skips the other rows' polynomials and the other coils' coefficients.
         """
         nc = self.n_coils
+        r_sel = self._subset("rows", rows, 8)
+        c_sel = self._subset("coils", coils, nc)
+        nr = 8 if r_sel is None else len(r_sel)
+        ncs = nc if c_sel is None else len(c_sel)
         q = self._one_point(points, extrapolate)
         if q is not None:
-            if len(self.rz) == 1 and self.rz[0]["all"]:
-                a = _rz_one(self.rz[0], q).T  # (8, nc)
-            else:
-                a = np.empty((8, nc))
-                for t in self.rz:
-                    a[:, t["idx"]] = _rz_one(t, q).T
-            pq = np.array([q])
-            for t, c in zip(self.modes, self.coef):
-                a += mode_rows(t, pq).reshape(-1, 8).T @ c
+            a = self._actuation_one(q, r_sel, c_sel)
             return a if np.ndim(points) == 1 else a[None]
         p, single = self._points(points, extrapolate)
         n = len(p)
-        out = np.empty((n, 8, nc))
+        out = np.empty((n, nr, ncs))
         for s in range(0, n, RZ_CHUNK):
             e = min(n, s + RZ_CHUNK)
             m = e - s
-            a = interpolate_rz(self.rz, p[s:e], nc).transpose(2, 1, 0).astype(np.float64)
+            a = interpolate_rz(self.rz, p[s:e], nc)  # (nc, 8, m) float32
+            if c_sel is not None:
+                a = a[c_sel]
+            if r_sel is not None:
+                a = a[:, r_sel]
+            a = a.transpose(2, 1, 0).astype(np.float64)
             for t, c in zip(self.modes, self.coef):
-                rows = mode_rows(t, p[s:e])  # (m, k, nb, 8)
-                a += (rows.reshape(m, -1, 8).transpose(0, 2, 1).reshape(8 * m, -1) @ c
-                      ).reshape(m, 8, nc)
+                if c_sel is not None:
+                    c = c[:, c_sel]
+                fields = mode_rows(t, p[s:e], r_sel)  # (m, k, nb, nr)
+                a += (fields.reshape(m, -1, nr).transpose(0, 2, 1).reshape(nr * m, -1) @ c
+                      ).reshape(m, nr, ncs)
             out[s:e] = a
         return out[0] if single else out
+
+    def _actuation_one(self, q, r_sel, c_sel) -> np.ndarray:
+        """One point (3 floats): (n_rows, n_coils) float64 of the selection."""
+        nc = self.n_coils
+        if len(self.rz) == 1 and self.rz[0]["all"]:
+            a = _rz_one(self.rz[0], q)  # (nc, 8)
+        else:
+            a = np.empty((nc, 8))
+            for t in self.rz:
+                a[t["idx"]] = _rz_one(t, q)
+        if c_sel is not None:
+            a = a[c_sel]
+        a = a.T if r_sel is None else a[:, r_sel].T
+        pq = np.array([q])
+        for t, c in zip(self.modes, self.coef):
+            f = mode_rows_one(t, pq)  # (k * nb, 8)
+            if r_sel is not None:
+                f = f[:, r_sel]
+            a += f.T @ (c if c_sel is None else c[:, c_sel])
+        return a
 
     def bias_force(self, points, extrapolate: bool = False) -> np.ndarray:
         """F0, the force on the magnet (moment :attr:`moment_a_m2`) at zero current, N:

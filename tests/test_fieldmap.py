@@ -73,6 +73,29 @@ def test_single_point_shapes_agree_with_batch(fm, sample):
     np.testing.assert_array_equal(fm.actuation(p[:1])[0], fm.actuation(p[0]))
 
 
+def test_row_and_coil_subsets(fm, sample):
+    # the subsets are the same entries of the direct model's A (independent of the full path)
+    p, a = sample
+    rng = np.random.default_rng(12)
+    for _ in range(5):
+        r = rng.choice(8, rng.integers(1, 9), replace=False)
+        c = rng.choice(9, rng.integers(1, 10), replace=False)
+        got = fm.actuation(p[:300], rows=r, coils=c)
+        want = a[:300][:, r][:, :, c]
+        assert got.shape == (300, len(r), len(c))
+        scale = np.abs(a).max(axis=(0, 2))[r][None, :, None]
+        assert np.all(np.abs(got - want) < 1e-3 * scale)
+        one = fm.actuation(p[7], rows=list(r), coils=tuple(c))
+        assert one.shape == (len(r), len(c))
+        np.testing.assert_allclose(one, fm.actuation(p[7])[r][:, c], rtol=1e-12, atol=0)
+        assert fm.actuation(p[7:8], rows=r, coils=c).shape == (1, len(r), len(c))
+    for bad in ([], [8], [-1], [0.5], "x"):
+        with pytest.raises(BadInputError, match="rows"):
+            fm.actuation(p[0], rows=bad)
+    with pytest.raises(BadInputError, match="coils"):
+        fm.actuation(p[:3], coils=[9])
+
+
 def test_interpolated_gradient_is_the_derivative_of_interpolated_b(fm):
     # central differences of the interpolated B rows (interpolated independently of the
     # gradient rows): symmetric and traceless, and equal to the interpolated gradient rows
@@ -276,6 +299,11 @@ def test_coupled_map_against_direct_coupled_model(coupled):
     # target 1e-3; measured 2.1e-4 before i12c's last update, 1.3e-3 (dBx/dy) after it --
     # not the tables' resolution nor float16 (both checked); see the report
     assert np.all(err < 2e-3), err
+    r, c = [2, 3, 6], [1]
+    sub = fm.actuation(p, rows=r, coils=c)
+    assert np.all(np.abs(sub - a[:, r][:, :, c]) < 2e-3 * np.abs(a).max(axis=(0, 2))[r][:, None])
+    np.testing.assert_allclose(fm.actuation(p[5], rows=r, coils=c), sub[5], rtol=1e-5,
+                               atol=1e-7 * np.abs(sub).max())
     m = fm.moment_a_m2
     f = arr.bias_force(p[:20], m)
     # the bias force is the coarse part (per-core tables + a 25 mm grid): measured ~8 %
