@@ -96,6 +96,29 @@ def test_row_and_coil_subsets(fm, sample):
         fm.actuation(p[:3], coils=[9])
 
 
+def test_map_carries_the_drive_data_the_runner_reads(fm):
+    from firmware_io.runner import config_from_map
+
+    cfg = config_from_map(fm.file)
+    d = SMALL
+    # closed forms from the design's numbers: R = rho l / (pi d^2 / 4), l = N 2 pi r_mean
+    # (20 C = the reference temperature), Wheeler's multilayer formula for the air-core L
+    r_mean = (d.coil.inner_radius_m + d.coil.outer_radius_m) / 2
+    r = d.wire.resistivity_ohm_m * d.coil.turns * 2 * math.pi * r_mean / (
+        math.pi * d.wire.diameter_m ** 2 / 4)
+    np.testing.assert_allclose(cfg.resistance_ohm, [r] * 9, rtol=1e-9)
+    depth = d.coil.outer_radius_m - d.coil.inner_radius_m
+    wheeler = 31.6e-6 * d.coil.turns ** 2 * r_mean ** 2 / (6 * r_mean + 9 * d.coil.length_m
+                                                           + 10 * depth)
+    np.testing.assert_allclose(cfg.inductance_h, [wheeler] * 9, rtol=0.03)
+    volts = min(d.drive.supply_voltage_v, d.drive.driver_max_voltage_v)
+    assert cfg.supply_voltage_v == volts
+    assert cfg.current_limit_a == pytest.approx(min(d.drive.max_current_a, volts / r))
+    assert cfg.total_current_a == d.drive.total_current_a
+    assert 0 < cfg.thermal_continuous_current_a < cfg.current_limit_a
+    assert cfg.thermal_time_constant_s > 0
+
+
 def test_interpolated_gradient_is_the_derivative_of_interpolated_b(fm):
     # central differences of the interpolated B rows (interpolated independently of the
     # gradient rows): symmetric and traceless, and equal to the interpolated gradient rows
