@@ -249,29 +249,22 @@ core alone."""
 
 
 def prepare_rz(tables: list, metas: list, positions, rotations) -> list:
-    """Per coil type, what :func:`interpolate_rz` and the one-point kernel need."""
+    """Per coil type, what :func:`interpolate_rz` and the one-point kernels need."""
     prepared = []
     for tab, m in zip(tables, metas):
-        idx = np.asarray(m["coils"], dtype=np.intp)
-        rot = np.asarray(rotations, float)[idx]
-        pos = np.asarray(positions, float)[idx]
-        identity = bool(np.all(rot == np.eye(3)))
-        shared_z = identity and bool(np.all(pos[:, 2] == pos[0, 2]))
-        n_rho, n_u, _ = tab.shape
+        t = _table_constants(tab, m, positions, rotations)
+        idx, pos = t["idx"], t["pos"]
         tab32 = np.ascontiguousarray(tab, dtype=np.float32)
         # the one-point kernel reads a cell's 4 corners x NQ quantities as one row
         t64 = tab32.astype(np.float64)
         cells = np.ascontiguousarray(np.stack([t64[:-1, :-1], t64[:-1, 1:], t64[1:, :-1],
                                                t64[1:, 1:]], axis=2).reshape(-1, 4, NQ))
-        prepared.append({
-            "idx": idx,
-            "all": bool(len(idx) == len(positions) and np.all(idx == np.arange(len(idx)))),
-            "pos32": pos.astype(np.float32), "pos": pos, "rot": None if identity else rot,
-            "shared_z": shared_z, "nodes": tab32.reshape(-1).view(f"V{4 * NQ}"),
-            "cells": cells, "n_rho": n_rho, "n_u": n_u,
-            "inv_h": 1.0 / m["rho_step_m"], "inv_scale": 1.0 / m["rho_scale_m"],
-            "z_ref": m["z_ref_m"], "zr": pos[:, 2] + m["z_ref_m"], "u0": m["u0"],
-            "inv_du": 1.0 / m["u_step"]})
+        prepared.append(dict(
+            t, all=bool(len(idx) == len(positions) and np.all(idx == np.arange(len(idx)))),
+            pos32=pos.astype(np.float32),
+            shared_z=t["rot"] is None and bool(np.all(pos[:, 2] == pos[0, 2])),
+            nodes=tab32.reshape(-1).view(f"V{4 * NQ}"), cells=cells,
+            zr=pos[:, 2] + m["z_ref_m"]))
     return prepared
 
 
@@ -478,35 +471,28 @@ def prepare_magnet(tables: list, metas: list, positions, rotations) -> list:
     """Per coil type, what :func:`magnet_terms` needs."""
     out = []
     for tab, m in zip(tables, metas):
-        idx = np.asarray(m["coils"], dtype=np.intp)
-        rot = np.asarray(rotations, float)[idx]
-        out.append({"idx": idx, "pos": np.asarray(positions, float)[idx],
-                    "rot": None if np.all(rot == np.eye(3)) else rot,
-                    "flat": np.ascontiguousarray(tab, dtype=np.float64).reshape(-1, NQ_MAGNET),
-                    "n_rho": tab.shape[0], "n_u": tab.shape[1], "inv_h": 1.0 / m["rho_step_m"],
-                    "inv_scale": 1.0 / m["rho_scale_m"], "z_ref": m["z_ref_m"], "u0": m["u0"],
-                    "inv_du": 1.0 / m["u_step"]})
+        out.append(dict(_table_constants(tab, m, positions, rotations),
+                        flat=np.ascontiguousarray(tab, dtype=np.float64).reshape(-1, NQ_MAGNET)))
     return out
+
+
+def _table_constants(tab: np.ndarray, m: dict, positions, rotations) -> dict:
+    """What every (v, u) table lookup needs: its coils (idx, pos, rot or None), its size and
+    its steps (inverted), from the table and its meta entry."""
+    idx = np.asarray(m["coils"], dtype=np.intp)
+    rot = np.asarray(rotations, float)[idx]
+    return {"idx": idx, "pos": np.asarray(positions, float)[idx],
+            "rot": None if np.all(rot == np.eye(3)) else rot,
+            "n_rho": tab.shape[0], "n_u": tab.shape[1], "inv_h": 1.0 / m["rho_step_m"],
+            "inv_scale": 1.0 / m["rho_scale_m"], "z_ref": m["z_ref_m"], "u0": m["u0"],
+            "inv_du": 1.0 / m["u_step"]}
 
 
 def magnet_terms(prepared: list, p: np.ndarray) -> np.ndarray:
     """The magnet's pull at points (n, 3) summed over the cores, each core alone: (n, 3) N."""
-    n = len(p)
-    force = np.zeros((n, 3))
+    force = np.zeros((len(p), 3))
     for t in prepared:
-        d = p[:, None, :] - t["pos"][None]  # (n, k, 3)
-        loc = d if t["rot"] is None else np.einsum("nki,kij->nkj", d, t["rot"])
-        x, y = loc[..., 0], loc[..., 1]
-        rho = np.sqrt(x * x + y * y)
-        vv = np.minimum(rho * t["inv_h"] / (1.0 + rho * t["inv_scale"]), t["n_rho"] - 1.0001)
-        u = (np.log(np.maximum(loc[..., 2] - t["z_ref"], 1e-12)) - t["u0"]) * t["inv_du"]
-        u = np.clip(u, 0.0, t["n_u"] - 1.000001)
-        i, j = vv.astype(np.intp), u.astype(np.intp)
-        tr, tz = (vv - i)[..., None], (u - j)[..., None]
-        base = i * t["n_u"] + j
-        f = t["flat"]
-        val = ((1 - tr) * ((1 - tz) * f[base] + tz * f[base + 1])
-               + tr * ((1 - tz) * f[base + t["n_u"]] + tz * f[base + t["n_u"] + 1]))
+        x, y, val = _bilinear(t, p)  # val (n, k, 2): F_rho / rho, F_z
         fl = np.stack([val[..., 0] * x, val[..., 0] * y, val[..., 1]], axis=-1)  # local frame
         if t["rot"] is not None:
             fl = np.einsum("kij,nkj->nki", t["rot"], fl)
@@ -519,17 +505,11 @@ def prepare_modes(tables: list, metas: list, positions, rotations) -> list:
     """Per core type, what :func:`mode_rows` needs."""
     out = []
     for tab, m in zip(tables, metas):
-        idx = np.asarray(m["coils"], dtype=np.intp)
-        rot = np.asarray(rotations, float)[idx]
-        out.append({"idx": idx, "pos": np.asarray(positions, float)[idx],
-                    "rot": None if np.all(rot == np.eye(3)) else rot,
-                    "flat": (tab.reshape(-1, tab.shape[2]).astype(np.float64)
-                             * np.asarray(m["column_scale"], float)),
-                    "n_rho": tab.shape[0], "n_u": tab.shape[1], "inv_h": 1.0 / m["rho_step_m"],
-                    "inv_scale": 1.0 / m["rho_scale_m"], "z_ref": m["z_ref_m"], "u0": m["u0"],
-                    "inv_du": 1.0 / m["u_step"],
-                    "basis": [tuple(b) for b in m["basis"]],
-                    "col": {tuple(s): c for s, c in zip(m["shapes"], m["columns"])}})
+        out.append(dict(_table_constants(tab, m, positions, rotations),
+                        flat=(tab.reshape(-1, tab.shape[2]).astype(np.float64)
+                              * np.asarray(m["column_scale"], float)),
+                        basis=[tuple(b) for b in m["basis"]],
+                        col={tuple(s): c for s, c in zip(m["shapes"], m["columns"])}))
         t = out[-1]
         groups, order = [], []
         for key in sorted({(b[0], b[2]) for b in t["basis"]}):
@@ -885,6 +865,15 @@ def grid_lists(grid: tuple) -> tuple:
 
 
 # ============================================================================ the reader
+def check_currents(currents, n_coils: int, error=BadInputError) -> np.ndarray:
+    """``currents`` as a float array (n_coils,) A, or ``error`` (an InputRangeError class: the
+    caller's own, e.g. designkit's BadInputError) naming the parameter and the shape."""
+    i = np.asarray(currents, dtype=float)
+    if i.shape != (n_coils,) or not np.all(np.isfinite(i)):
+        raise error("currents", f"{n_coils} finite values, A", f"shape {i.shape}")
+    return i
+
+
 def _interp_factor(currents, sat_i, sat_f) -> np.ndarray:
     """Saturation factors (n_coils,) at the magnitudes of ``currents`` (clamped to the table)."""
     a = np.abs(np.asarray(currents, float))
@@ -904,15 +893,9 @@ class MapFile:
     meta: dict
     bounds: tuple
     n_coils: int
-    rz: tuple = field(repr=False)
-    modes: tuple = field(repr=False)
-    coef: tuple = field(repr=False)
-    scoef: tuple = field(repr=False)
-    magnet: tuple = field(repr=False)
-    magnet_f0: tuple = field(repr=False)
-    one: dict | None = field(repr=False, default=None)
-    sensor_one: dict | None = field(repr=False, default=None)
-    magnet_one: dict | None = field(repr=False, default=None)
+    kernels: dict = field(repr=False)
+    """The prepared lookups: 'rz', 'modes', 'coef', 'scoef', 'magnet', 'magnet_f0' and the
+    one-point kernels 'one', 'sensor_one', 'magnet_one' (None where the general path runs)."""
 
     @classmethod
     def load(cls, path, expected_design_sha256: str | None = None) -> "MapFile":
@@ -951,13 +934,16 @@ class MapFile:
         magnet = prepare_magnet([arrays[t["name"]] for t in mt], mt, meta["coil_positions_m"],
                                 meta["coil_rotations"])
         g = meta["box_m"]
+        kernels = {
+            "rz": tuple(rz), "modes": tuple(modes), "coef": coefs, "scoef": scoefs,
+            "magnet": tuple(magnet),
+            "magnet_f0": (maxes, np.ascontiguousarray(f0.reshape(-1, 3)), f0.shape[:3]),
+            "one": prepare_one(rz, modes, coefs, nc),
+            "sensor_one": (prepare_one((), smodes, tuple(c for _, c in scoefs), nc,
+                                       arrays["MOMENT"]) if smodes else None),
+            "magnet_one": _lookup(magnet[0], magnet[0]["flat"]) if len(magnet) == 1 else None}
         return cls(arrays, meta, (np.asarray(g[0], float), np.asarray(g[1], float)), nc,
-                   tuple(rz), tuple(modes), coefs, scoefs, tuple(magnet),
-                   (maxes, np.ascontiguousarray(f0.reshape(-1, 3)), f0.shape[:3]),
-                   prepare_one(rz, modes, coefs, nc),
-                   prepare_one((), smodes, tuple(c for _, c in scoefs), nc, arrays["MOMENT"])
-                   if smodes else None,
-                   _lookup(magnet[0], magnet[0]["flat"]) if len(magnet) == 1 else None)
+                   kernels)
 
     # ------------------------------------------------------------------ plain attributes
     @property
@@ -1073,13 +1059,13 @@ class MapFile:
         for s in range(0, n, RZ_CHUNK):
             e = min(n, s + RZ_CHUNK)
             m = e - s
-            a = interpolate_rz(self.rz, p[s:e], nc)  # (nc, 8, m) float32
+            a = interpolate_rz(self.kernels["rz"], p[s:e], nc)  # (nc, 8, m) float32
             if c_sel is not None:
                 a = a[c_sel]
             if r_sel is not None:
                 a = a[:, r_sel]
             a = a.transpose(2, 1, 0).astype(np.float64)
-            for t, c in zip(self.modes, self.coef):
+            for t, c in zip(self.kernels["modes"], self.kernels["coef"]):
                 if c_sel is not None:
                     c = c[:, c_sel]
                 fields = mode_rows(t, p[s:e], r_sel)  # (m, k, nb, nr)
@@ -1091,23 +1077,23 @@ class MapFile:
     def _actuation_one(self, q, r_sel, c_sel) -> np.ndarray:
         """One point (3 floats): (n_rows, n_coils) float64 of the selection."""
         nc = self.n_coils
-        if self.one is not None:
-            f = actuation_one(self.one, q)
-            c = self.one["coef"]
+        if self.kernels["one"] is not None:
+            f = actuation_one(self.kernels["one"], q)
+            c = self.kernels["one"]["coef"]
             if r_sel is not None:
                 f = f[:, r_sel]
             return f.T @ (c if c_sel is None else c[:, c_sel])
-        if len(self.rz) == 1 and self.rz[0]["all"]:
-            a = _rz_one(self.rz[0], q)  # (nc, 8)
+        if len(self.kernels["rz"]) == 1 and self.kernels["rz"][0]["all"]:
+            a = _rz_one(self.kernels["rz"][0], q)  # (nc, 8)
         else:
             a = np.empty((nc, 8))
-            for t in self.rz:
+            for t in self.kernels["rz"]:
                 a[t["idx"]] = _rz_one(t, q)
         if c_sel is not None:
             a = a[c_sel]
         a = a.T if r_sel is None else a[:, r_sel].T
         pq = np.array([q])
-        for t, c in zip(self.modes, self.coef):
+        for t, c in zip(self.kernels["modes"], self.kernels["coef"]):
             f = mode_rows_one(t, pq)  # (k * nb, 8)
             if r_sel is not None:
                 f = f[:, r_sel]
@@ -1119,18 +1105,18 @@ class MapFile:
         (3,) -> (3,), (n, 3) -> (n, 3)."""
         q = self._one_point(points, extrapolate)
         if q is not None:
-            L = self.magnet_one
+            L = self.kernels["magnet_one"]
             if L is None:
-                f = magnet_terms(self.magnet, np.array([q]))[0]
+                f = magnet_terms(self.kernels["magnet"], np.array([q]))[0]
             else:
-                d = np.subtract(q, self.magnet[0]["pos"])
+                d = np.subtract(q, self.kernels["magnet"][0]["pos"])
                 x, y = d[:, 0], d[:, 1]
                 val = _interp_one(L, np.sqrt(x * x + y * y), q[2])  # F_rho/rho, F_z per core
                 f = np.array([val[:, 0] @ x, val[:, 0] @ y, val[:, 1].sum()])
-            f += _trilinear_one(self.magnet_f0, q)
+            f += _trilinear_one(self.kernels["magnet_f0"], q)
             return f if np.ndim(points) == 1 else f[None]
         p, single = self._points(points, extrapolate)
-        f = magnet_terms(self.magnet, p) + _trilinear(self.magnet_f0, p)
+        f = magnet_terms(self.kernels["magnet"], p) + _trilinear(self.kernels["magnet_f0"], p)
         return f[0] if single else f
 
     def sensor_induced_field(self, magnet_position_m, extrapolate: bool = False) -> np.ndarray:
@@ -1141,15 +1127,15 @@ class MapFile:
         magnetized by a unit dipole along c at s -- a mode sum like A (``SCOEF``)."""
         nc = self.n_coils
         q = self._one_point(magnet_position_m, extrapolate, "magnet_position_m")
-        if q is not None and self.sensor_one is not None:
-            b = (actuation_one(self.sensor_one, q)[:, 0] @ self.sensor_one["coef"]
-                 ).reshape(2, nc, 3)
+        one = self.kernels["sensor_one"]
+        if q is not None and one is not None:
+            b = (actuation_one(one, q)[:, 0] @ one["coef"]).reshape(2, nc, 3)
             return b if np.ndim(magnet_position_m) == 1 else b[None]
         one = q is not None
         p, single = self._points(magnet_position_m, extrapolate, "magnet_position_m")
         m = self.arrays["MOMENT"]
         out = np.zeros((len(p), 6 * nc))
-        for t, c in self.scoef:
+        for t, c in self.kernels["scoef"]:
             rows = mode_rows(t, p)[..., :3]  # (n, k, nb, 3): B per unit coefficient
             out += (rows @ m).reshape(len(p), -1) @ c
         b = out.reshape(-1, 2, nc, 3)
@@ -1170,11 +1156,7 @@ class MapFile:
                               self.arrays["SAT_FACTOR"])
 
     def _currents(self, currents) -> np.ndarray:
-        i = np.asarray(currents, dtype=float)
-        if i.shape != (self.n_coils,) or not np.all(np.isfinite(i)):
-            raise BadInputError("currents", f"{self.n_coils} finite values, A",
-                                f"shape {i.shape}")
-        return i
+        return check_currents(currents, self.n_coils)
 
     def currents_for(self, point, wanted: np.ndarray, rows=slice(None)) -> np.ndarray:
         """Least-norm currents (A) with A[rows] I = wanted at ``point`` (pseudo-inverse)."""
