@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import BadInputError
+from .electrical import COIL_SURFACE_HEAT_TRANSFER_W_M2_K, drive_data  # noqa: F401 (re-exported)
 from .localize import analog_reading
 
 FAULT_TYPES = ("pwm_nack", "sensor_stuck", "sensor_dead", "sensor_saturated", "out_of_box",
@@ -889,47 +890,10 @@ def _inside(fieldmap, q) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------
 # the whole simulated run (designkit run --simulate)
 
-COIL_SURFACE_HEAT_TRANSFER_W_M2_K = 10.0
-"""Natural convection from the winding's outer surface and end faces (assumed), W/(m^2 K): sets
-the winding's cooling time constant m c / (h A) of the runner's I^2 t guard."""
-
-
 CALIBRATED_RELATIVE_ERROR = 0.005
 """Relative model error of a calibrated sensor's reading (the localizer's sensor weights): what
 the affine calibration leaves of the 1 % gain and 1 degree mounting errors is the mounting shift
 and the coils' nonlinearity, a fraction of a percent (studies/localization.py's 'model-cal')."""
-
-
-def drive_data(design) -> dict:
-    """The runner's drive data from the design (SI): coil R at the operating temperature, L
-    (with the core), the supply (at most the MD10C's 30 V), the current bounds and the I^2 t
-    budget (adiabatic heating from the operating temperature to 100 C at the current limit,
-    cooled with the time constant m c / (h A))."""
-    from . import electrical
-    from .coil import Coil
-
-    coil = Coil.from_design(design)
-    r = coil.resistance(design.wire)
-    ind = coil.inductance(design.wire)
-    w = design.wire
-    mass = electrical.copper_mass(design.coil.inner_radius_m, design.coil.outer_radius_m,
-                                  design.coil.turns, w.diameter_m)
-    limit = min(design.drive.max_current_a, design.drive.driver_max_voltage_v / r,
-                design.drive.supply_voltage_v / r)
-    t_max = electrical.time_to_temperature(mass, limit, r, w, w.operating_temperature_c,
-                                           electrical.DEFAULT_MAX_TEMPERATURE_C)
-    budget = limit ** 2 * t_max
-    c = design.coil
-    area = 2 * math.pi * c.outer_radius_m * c.length_m + 2 * math.pi * (
-        c.outer_radius_m ** 2 - c.inner_radius_m ** 2)
-    tau = mass * electrical.COPPER_SPECIFIC_HEAT_J_KG_K / (COIL_SURFACE_HEAT_TRANSFER_W_M2_K * area)
-    return {"resistance_ohm": [r] * design.array.rows * design.array.columns,
-            "inductance_h": [ind] * design.array.rows * design.array.columns,
-            "supply_voltage_v": min(design.drive.supply_voltage_v,
-                                    design.drive.driver_max_voltage_v),
-            "current_limit_a": float(limit), "total_current_a": design.drive.total_current_a,
-            "thermal_continuous_current_a": math.sqrt(budget / tau),
-            "thermal_time_constant_s": tau}
 
 
 def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "slide",
