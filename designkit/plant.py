@@ -490,13 +490,16 @@ class SimSensorSource:
 
 @dataclass
 class SimulationResult:
-    """Per-step columns (SI; the run.csv columns), the faults as injected (time s, type; overrun
-    and over-limit wait for a running step) and the runner's fault log."""
+    """Per-step columns (SI; the run.csv columns, plus ``new_frame`` (bool: the step took in a
+    new sensor result) and, when the runner profiles, ``stage_<name>_s``), the faults as
+    injected (time s, type; overrun and over-limit wait for a running step), the runner's fault
+    log and the sensor side's fit times (s, one per frame)."""
 
     columns: dict
     faults: list
     fault_log: list
     period_s: float
+    fit_s: list = field(default_factory=list)
 
 
 def _inject(device, runner, name: str, t_s: float, state: dict) -> None:
@@ -588,6 +591,8 @@ def simulate(device: SimulatedDevice, runner_factory, trajectory: Trajectory, *,
         "fx_n", "fy_n", "fz_n", "fx_obj_n", "fy_obj_n", "fz_obj_n", "loop_s")}
     cur = np.zeros((n_steps, n))
     cmd = np.zeros((n_steps, n))
+    new_frame = np.zeros(n_steps, dtype=bool)
+    stages: dict = {}
     states = []
     bar = tqdm(total=n_steps, desc="simulate", unit="step", disable=not progress,
                mininterval=0.5)
@@ -625,6 +630,10 @@ def simulate(device: SimulatedDevice, runner_factory, trajectory: Trajectory, *,
             cols["fx_obj_n"][s], cols["fy_obj_n"][s], cols["fz_obj_n"][s] = \
                 scene_force(true_p[s], vel[s])
         cols["loop_s"][s] = rec.loop_s
+        new_frame[s] = rec.new_frame
+        if runner.profile and rec.state == "running":
+            for name, v in runner.stages.items():
+                stages.setdefault(name, np.full(n_steps, np.nan))[s] = v
         cur[s] = i_true
         cmd[s] = rec.command_a
         states.append(rec.state)
@@ -638,7 +647,11 @@ def simulate(device: SimulatedDevice, runner_factory, trajectory: Trajectory, *,
     for k in range(n):
         cols[f"cmd{k + 1}_a"] = cmd[:, k]
     cols["state"] = np.array(states)
-    return SimulationResult(cols, injected, list(runner.fault_log), period_s)
+    cols["new_frame"] = new_frame
+    for name, v in stages.items():
+        cols[f"stage_{name}_s"] = v
+    return SimulationResult(cols, injected, list(runner.fault_log), period_s,
+                            list(getattr(source, "fit_s", [])))
 
 
 def _step(runner, ts: float, extra: dict):
@@ -690,6 +703,32 @@ def force_lag_s(reference, rendered, period_s: float, max_lag_s: float = 0.2) ->
     return float(np.argmax(scores) * period_s)
 
 
+def _p50_p99(x) -> dict:
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    if not len(x):
+        return {"n": 0, "p50_s": None, "p99_s": None}
+    return {"n": int(len(x)), "p50_s": float(np.percentile(x, 50)),
+            "p99_s": float(np.percentile(x, 99))}
+
+
+def loop_by_kind(result: SimulationResult) -> dict:
+    """Compute time of the running steps without and with a new sensor result (p50, p99, s),
+    per stage when the runner profiled, and of the fit on the sensor side."""
+    c = result.columns
+    running = c["state"] == "running"
+    fresh = np.asarray(c.get("new_frame", np.zeros(len(running), bool)), bool)
+    out = {"without_frame": _p50_p99(c["loop_s"][running & ~fresh]),
+           "with_frame": _p50_p99(c["loop_s"][running & fresh]),
+           "sensor_side_fit": _p50_p99(result.fit_s)}
+    stages = [k for k in c if k.startswith("stage_")]
+    if stages:
+        out["stages"] = {k[6:-2]: {"without_frame": _p50_p99(c[k][running & ~fresh]),
+                                   "with_frame": _p50_p99(c[k][running & fresh])}
+                         for k in stages}
+    return out
+
+
 def summarize(result: SimulationResult, causes: dict | None = None) -> dict:
     """summary.json: force error RMS/p95, localization MAE, loop p50/p99, faults, time to safe."""
     c = result.columns
@@ -719,6 +758,7 @@ def summarize(result: SimulationResult, causes: dict | None = None) -> dict:
         "localization_p95_m": float(np.percentile(loc, 95)) if len(loc) else None,
         "loop_p50_s": float(np.percentile(loop, 50)) if len(loop) else None,
         "loop_p99_s": float(np.percentile(loop, 99)) if len(loop) else None,
+        "loop_by_kind": loop_by_kind(result),
         "max_command_a": float(np.abs(currents).max()),
         "max_total_command_a": float(np.abs(currents).sum(axis=1).max()),
         "faults": time_to_safe(c, result.faults, result.period_s),
@@ -819,8 +859,11 @@ def _shade_faults(ax, t, running) -> None:
         ax.axvspan(t[a], t[min(b, len(t) - 1)], color="tab:red", alpha=0.08, lw=0)
 
 
-def force_error_causes(device: SimulatedDevice, fieldmap, result: SimulationResult) -> dict:
-    """Split the rendered-force error into its causes, over the running steps.
+def force_error_causes(device: SimulatedDevice, fieldmap, result: SimulationResult, *,
+                       max_steps: int = 500) -> dict:
+    """Split the rendered-force error into its causes, over the running steps (at most
+    ``max_steps`` of them, evenly spaced: the exact coupled model at each estimate is the
+    costly part; RMS and p95 of an evenly spaced subsample of a 4000-step run).
 
     With p the true and q the estimated position, I* the command and I the true currents,
     F(.) / F0(.) the exact force per ampere and bias force and Fm / F0m the map's::
@@ -838,6 +881,9 @@ def force_error_causes(device: SimulatedDevice, fieldmap, result: SimulationResu
     run = np.flatnonzero(c["state"] == "running")
     if len(run) == 0:
         return {}
+    n_running = len(run)
+    if n_running > max_steps:
+        run = run[np.unique(np.linspace(0, n_running - 1, max_steps).round().astype(int))]
     m = device.moment
     n = device.array.n_coils
     q = np.stack([c["xe_m"], c["ye_m"], c["ze_m"]], 1)[run]
@@ -878,7 +924,8 @@ def force_error_causes(device: SimulatedDevice, fieldmap, result: SimulationResu
                      "fz_p95_n": float(np.percentile(np.abs(v[:, 2]), 95)),
                      "norm_rms_n": float(np.sqrt(np.mean(mag ** 2))),
                      "norm_p95_n": float(np.percentile(mag, 95))}
-    out["steps"] = int(len(run))
+    out["steps"] = int(n_running)
+    out["steps_evaluated"] = int(len(run))
     return out
 
 
@@ -890,18 +937,13 @@ def _inside(fieldmap, q) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------
 # the whole simulated run (designkit run --simulate)
 
-CALIBRATED_RELATIVE_ERROR = 0.005
-"""Relative model error of a calibrated sensor's reading (the localizer's sensor weights): what
-the affine calibration leaves of the 1 % gain and 1 degree mounting errors is the mounting shift
-and the coils' nonlinearity, a fraction of a percent (studies/localization.py's 'model-cal')."""
-
-
 def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "slide",
                    duration_s: float | None = None, faults: str = "none", map_path=None,
                    method: str = "model", period_s: float = 1e-3, unipolar: bool = False,
                    lam_n_per_m: float | None = None, rows: str = "force", seed: int = 0,
                    out=Path("run-out"), progress: bool = True, array=None,
-                   calibrate: bool = True) -> dict:
+                   calibrate: bool = True, profile: bool = False,
+                   skip_force_n: float = 0.0) -> dict:
     """Build (or load) the map, compile the scene, close the runner around the simulated device,
     and write run.csv, summary.json, run.png and loop_timing.png into ``out``. Returns the
     summary. Every input is checked before anything is computed.
@@ -911,12 +953,14 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
     the design's CoilArray when the caller has one (its coupled solve is reused).
     ``calibrate``: the start-up sensor calibration (:meth:`SimulatedDevice.calibrate_sensors`)
     before the run; the localizer then weighs the sensors with
-    :data:`CALIBRATED_RELATIVE_ERROR`.
+    :data:`firmware_io.runner.CALIBRATED_RELATIVE_ERROR`. ``profile``: the runner times each stage of its step
+    (summary ``loop_by_kind['stages']``). ``skip_force_n``: the runner's coil-skip force, N.
     """
     from firmware_io.allocation import allocate
     from firmware_io.localization import Localizer
     from firmware_io.mapfile import MapFile
-    from firmware_io.runner import ConstantVelocityTracker, Runner, RunnerConfig, SceneForce
+    from firmware_io.runner import (CALIBRATED_RELATIVE_ERROR, ConstantVelocityTracker, Runner,
+                                    RunnerConfig, SceneForce)
     from firmware_io.scene import Scene
 
     from . import fieldmap
@@ -975,11 +1019,13 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
         cfg = RunnerConfig(**{k: tuple(v) if isinstance(v, list) else v
                               for k, v in drive.items()},
                            control_period_s=period_s, unipolar=unipolar,
-                           force_axes="z" if rows == "fz" else "xyz")
+                           force_axes="z" if rows == "fz" else "xyz",
+                           skip_force_n=skip_force_n)
         localizer = Localizer.from_map(map_path, method=method, **loc_kw)
         runner = Runner(fmap, SceneForce(scene), localizer, ConstantVelocityTracker(),
                         hook(allocate), device.coils, source, cfg, clock=clock,
                         log=lambda line: print(line) if progress else None)
+        runner.profile = profile
         runner.start()
         return runner
 

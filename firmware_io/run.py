@@ -63,8 +63,9 @@ class ThreadedSensorSource:
         while not self._stop.is_set():
             t0 = self.clock()
             # master-controlled TLV493D: a read returns the conversion the previous read
-            # triggered, so a frame holds the field at the previous pass's start
-            field_t, previous = (t0 if previous is None else previous), t0
+            # triggered, so a frame holds the field at the previous pass's start (the first
+            # pass's is from the configuration: dropped)
+            field_t, previous = previous, t0
             try:
                 r = self.arrays.read()
             except Exception as exc:  # noqa: BLE001 - the loop must see it, not the thread die
@@ -73,6 +74,8 @@ class ThreadedSensorSource:
                 n = len(status) // 2
                 frame = SensorFrame(np.full((n, 3), np.nan), np.full((n, 3), np.nan), status, t0)
             else:
+                if field_t is None:
+                    continue
                 frame = SensorFrame(r.top_t, r.bottom_t, r.status, field_t)
             if self.pipeline is not None:
                 try:
@@ -101,6 +104,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--period-ms", type=float, default=1.0, help="control period, ms (default 1)")
     p.add_argument("--duration", type=float, default=None, help="stop after this many s")
     p.add_argument("--unipolar", action="store_true", help="drive 0 <= I (the thesis' drive)")
+    p.add_argument("--calibrate", action="store_true",
+                   help="calibrate the sensors at start-up with the coils alone (~10 s; keep the "
+                        "finger magnet away from the board until the loop starts)")
     return p
 
 
@@ -165,6 +171,25 @@ def open_device(bus_number: int, sensor_bus_number: int | None, drive_args: dict
     return CoilDriver(boards, drives), SensorArrays(sbus)
 
 
+def calibrated_localizer(map_path: str, method: str, localizer, coils, arrays, cfg,
+                         sleep=time.sleep):
+    """The start-up sensor calibration (firmware_io.runner.record_calibration: coils alone,
+    each pattern held for 7 L/R), then a localizer that uses it."""
+    from .localization import Localizer
+    from .runner import (CALIBRATED_RELATIVE_ERROR, CALIBRATION_CURRENT_A, calibrate_sensors,
+                         calibration_currents, record_calibration)
+
+    tau = max(ind / r for ind, r in zip(cfg.inductance_h, cfg.resistance_ohm))
+    amp = min(CALIBRATION_CURRENT_A, cfg.current_limit_a)
+    print(f"calibrating the sensors ({amp:.1f} A patterns, keep the magnet away)...",
+          file=sys.stderr)
+    top, bottom, applied = record_calibration(coils, arrays, calibration_currents(cfg.n_coils, amp),
+                                              settle_s=7 * tau, sleep=sleep)
+    cal = calibrate_sensors(localizer.model, top, bottom, applied)
+    return Localizer.from_map(map_path, method=method, calibration=cal,
+                              relative_error=CALIBRATED_RELATIVE_ERROR)
+
+
 def main(argv: list[str] | None = None) -> int:
     from .allocation import allocate
     from .runner import ConstantVelocityTracker, Runner, SceneForce, config_from_map
@@ -181,6 +206,8 @@ def main(argv: list[str] | None = None) -> int:
             "n_coils": cfg.n_coils, "supply_voltage_v": cfg.supply_voltage_v,
             "resistance_ohm": cfg.resistance_ohm})
         check_sensor_arrays(arrays.configure(), cfg.n_coils)
+        if args.calibrate:
+            localizer = calibrated_localizer(args.map, args.method, localizer, coils, arrays, cfg)
     except (FirmwareIOError, OSError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -15,10 +15,12 @@ timing by designkit.plant's simulated source) reads the two arrays (10-20 ms per
          end of the period (within the supply), I^2 t thermal guard  [CoilDynamics, ThermalGuard]
       -> MD10C duty/direction, one block write per PCA9685           [CoilDriver]
 
-Only the rows of A(p) the force needs are evaluated (Fz alone for a z-dipole when the scene asks
-for the vertical force only) and coils whose force per ampere at p is below ``skip_fraction``
-of the largest are left out of the allocation (their current is 0): the force they could add is
-bounded by ``skip_fraction * max_k |F_k| * I_limit`` per coil (stated in the summary).
+Only the rows of A(p) the force law uses are evaluated (:func:`force_law_rows`: Fz alone of a
+z-dipole needs dBx/dx and dBy/dy, the 3-D force of a z-dipole four of the five gradient rows)
+and, with ``skip_force_n`` > 0, only the coils whose force at p could exceed it: a coil is left
+out of the allocation (its current is 0) when :class:`CoilSkipBound`'s upper bound of its force
+per ampere around p, times its current limit, is at most ``skip_force_n`` -- the force the
+skipped coils could have added is below ``skip_force_n`` each.
 
 Faults and the safe state. Every fault switches every coil off in the same step (one ALL_LED_OFF
 write per board: :meth:`CoilDriver.all_off`), writes one log line and records the state name.
@@ -56,7 +58,7 @@ import numpy as np
 
 from .devices import TLV493D_LINEAR_RANGE_T
 from .errors import BadInputError, CoilWriteError, FirmwareIOError
-from .localization import multipole_field
+from .localization import ConstantVelocityKalman, multipole_field
 
 SENSOR_FAULTS = {"stale": "sensor_stuck", "recovered": "sensor_stuck",
                  "saturated": "sensor_saturated", "nack": "sensor_dead", "failed": "sensor_dead",
@@ -158,6 +160,90 @@ class ThermalGuard:
 
 
 # ---------------------------------------------------------------------------------------------
+# what the force law needs of A(p)
+
+
+def force_law_rows(moment_a_m2, axes: str = "xyz") -> tuple[np.ndarray, np.ndarray]:
+    """Rows of A(p) (indices into Bx, By, Bz, dBx/dx, dBx/dy, dBx/dz, dBy/dy, dBy/dz) the force
+    on a dipole ``moment_a_m2`` uses, and the matrix that maps them to the force per ampere.
+
+    F = M(m) G5 (thesis eq. 2.5) with G5 = rows 3..7; a column of M(m) that is zero (for the
+    rendered axes) marks a row not needed: for a z-dipole the 3-D force needs dBx/dx, dBx/dz,
+    dBy/dy, dBy/dz, and Fz alone (``axes='z'``) dBx/dx and dBy/dy.
+
+    Returns
+    -------
+    rows : ndarray of int, shape (r,)
+    matrix : ndarray, shape (3, r) or (1, r) -- force per ampere = matrix @ A[rows]
+    """
+    mx, my, mz = (float(v) for v in moment_a_m2)
+    # F = F(m) G5 (thesis eq. 2.5), the one numpy definition on the controller side
+    full = np.array([[mx, my, mz, 0.0, 0.0],
+                     [0.0, mx, 0.0, my, mz],
+                     [-mz, 0.0, mx, -mz, my]])
+    if axes == "z":
+        full = full[2:3]
+    used = np.flatnonzero(np.any(full != 0.0, axis=0))
+    return used + 3, full[:, used].copy()
+
+
+def _accepts_selection(fieldmap, point) -> bool:
+    """True when ``fieldmap.actuation`` takes ``rows=`` and ``coils=`` (firmware_io.mapfile)."""
+    try:
+        fieldmap.actuation(point, rows=(3,), coils=(0,))
+    except TypeError:
+        return False
+    return True
+
+
+class CoilSkipBound:
+    """Upper bound of each coil's force per ampere |F_k| (N/A) near a point, from a grid.
+
+    At start-up the force per ampere of every coil is evaluated at the nodes of a grid of
+    spacing <= ``spacing_m`` over the map's box. In a cell, with c_max and c_min the largest and
+    smallest of |F_k| at its eight corners, the bound is ``c_max + (c_max - c_min)``: a smooth
+    |F_k| sampled finely enough that it varies within a cell by no more than between the cell's
+    corners stays below it (the coils' fields vary on the coil-size scale, ~20 mm; the default
+    spacing is 5 mm). A coil is skipped at p when bound_k(cell(p)) * I_limit,k <= the stated
+    force; the force the skipped coils could add is then at most that force each.
+
+    Parameters
+    ----------
+    fieldmap : object with ``actuation(points (N, 3)) -> (N, 8, n)`` and ``bounds``
+    rows, matrix : from :func:`force_law_rows`
+    spacing_m : float
+    """
+
+    def __init__(self, fieldmap, rows, matrix, spacing_m: float = 5e-3):
+        lo, hi = (np.asarray(b, float) for b in fieldmap.bounds)
+        counts = [max(2, int(math.ceil((hi[k] - lo[k]) / spacing_m)) + 1) for k in range(3)]
+        axes = [np.linspace(lo[k], hi[k], counts[k]) for k in range(3)]
+        g = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+        a = np.asarray(fieldmap.actuation(g), float)[:, rows]          # (N, r, n)
+        f = np.linalg.norm(np.einsum("ij,njk->nik", matrix, a), axis=1)  # (N, n)
+        f = f.reshape(*counts, -1)
+        corners = [f[i:i + counts[0] - 1, j:j + counts[1] - 1, k:k + counts[2] - 1]
+                   for i in (0, 1) for j in (0, 1) for k in (0, 1)]
+        cmax = np.maximum.reduce(corners)
+        cmin = np.minimum.reduce(corners)
+        self.bound_n_per_a = cmax + (cmax - cmin)        # (cx, cy, cz, n)
+        self.lo = lo
+        self.step = (hi - lo) / (np.asarray(counts) - 1)
+        self.cells = [c - 2 for c in counts]
+
+    def at(self, p) -> np.ndarray:
+        """(n,) N/A: the bound of each coil's force per ampere in the cell holding p (the
+        nearest cell outside the box)."""
+        idx = [min(max(int((p[k] - self.lo[k]) / self.step[k]), 0), self.cells[k])
+               for k in range(3)]
+        return self.bound_n_per_a[idx[0], idx[1], idx[2]]
+
+    def keep(self, p, limit_a: np.ndarray, force_n: float) -> np.ndarray:
+        """Indices of the coils whose force at their limit could exceed ``force_n`` near p."""
+        return np.flatnonzero(self.at(p) * limit_a > force_n)
+
+
+# ---------------------------------------------------------------------------------------------
 # configuration and records
 
 
@@ -181,9 +267,9 @@ class RunnerConfig:
     force_axes : {'z', 'xyz'}
         Force components to render: 'z' evaluates only the two rows of A(p) that Fz of a
         z-dipole needs.
-    skip_fraction : float
-        Coils whose |force per ampere| at p is below this fraction of the largest are not
-        driven (0: never skip).
+    skip_force_n : float
+        Leave a coil out when the bound of the force it could add at its current limit near p
+        is at most this, N (0: never skip; see :class:`CoilSkipBound`).
     feedforward : bool
         Voltage feed-forward through the L/R model (off: the duty is the steady-state one).
     thermal_continuous_current_a, thermal_time_constant_s : float
@@ -208,7 +294,7 @@ class RunnerConfig:
     unipolar: bool = False
     control_period_s: float = 1e-3
     force_axes: str = "z"
-    skip_fraction: float = 0.0
+    skip_force_n: float = 0.0
     feedforward: bool = True
     thermal_continuous_current_a: float = 3.0
     thermal_time_constant_s: float = 300.0
@@ -236,8 +322,8 @@ class RunnerConfig:
             raise BadInputError("control_period_s", "in (0, 0.1] s", self.control_period_s)
         if self.force_axes not in ("z", "xyz"):
             raise BadInputError("force_axes", "'z' or 'xyz'", self.force_axes)
-        if not 0 <= self.skip_fraction < 1:
-            raise BadInputError("skip_fraction", "in [0, 1)", self.skip_fraction)
+        if not (0 <= self.skip_force_n and math.isfinite(self.skip_force_n)):
+            raise BadInputError("skip_force_n", "a finite force >= 0 N", self.skip_force_n)
 
     @property
     def n_coils(self) -> int:
@@ -405,7 +491,7 @@ class SensorPipeline:
                    self.clock() - t0)
 
 
-class ConstantVelocityTracker:
+class ConstantVelocityTracker(ConstantVelocityKalman):
     """Constant-velocity Kalman filter, one (2, 2) covariance per axis, in scalar arithmetic
     (a few microseconds per call on the control thread).
 
@@ -426,12 +512,7 @@ class ConstantVelocityTracker:
     """
 
     def __init__(self, accel_rms_m_s2: float = 2.0, meas_rms_m: float = 1.5e-3):
-        for name, val in (("accel_rms_m_s2", accel_rms_m_s2), ("meas_rms_m", meas_rms_m)):
-            if not (isinstance(val, (int, float)) and math.isfinite(val) and val > 0):
-                raise BadInputError(name, "a finite number > 0", val)
-        self.q = float(accel_rms_m_s2) ** 2
-        self.r = float(meas_rms_m) ** 2
-        self.reset()
+        super().__init__(accel_rms_m_s2, meas_rms_m)
 
     def reset(self) -> None:
         self.x = None
@@ -526,13 +607,13 @@ class Runner:
                                     config.thermal_time_constant_s)
         m = np.asarray(fieldmap.moment_a_m2, float)
         self.moment = m
-        # F = F(m) G5 (thesis eq. 2.5), the one numpy definition on the controller side
         mx, my, mz = m
-        self.force_rows = np.array([[mx, my, mz, 0.0, 0.0],
-                                    [0.0, mx, 0.0, my, mz],
-                                    [-mz, 0.0, mx, -mz, my]])
         self.z_only = config.force_axes == "z" and abs(mx) + abs(my) <= 1e-12 * abs(mz)
+        self.law_rows, self.law_matrix = force_law_rows(m, "z" if self.z_only else "xyz")
         self.lo, self.hi = (np.asarray(b, float) for b in fieldmap.bounds)
+        self._rows_api = _accepts_selection(fieldmap, 0.5 * (self.lo + self.hi))
+        self.skip = (CoilSkipBound(fieldmap, self.law_rows, self.law_matrix)
+                     if config.skip_force_n > 0 else None)
         self.current_a = np.zeros(n)   # model of the coil currents (feed-forward state)
         self.command_a = np.zeros(n)
         self.state = "safe"
@@ -699,22 +780,28 @@ class Runner:
         self.pwm_reinit_needed = False
         return True
 
-    def force_matrix(self, p: np.ndarray) -> np.ndarray:
-        """Force per ampere at p: (1, n) N/A (Fz of a z-dipole) or (3, n)."""
-        if self.z_only:
-            rows = getattr(self.map, "actuation_rows", None)
-            if rows is not None:
-                a = rows(p, (3, 6))                       # dBx/dx, dBy/dy
-                return -self.moment[2] * (a[0] + a[1])[None, :]
-            a = self.map.actuation(p)
-            return -self.moment[2] * (a[3] + a[6])[None, :]
-        return self.force_rows @ self.map.actuation(p)[3:]
+    def force_matrix(self, p: np.ndarray, coils=None) -> np.ndarray:
+        """Force per ampere at p: (1, n) N/A (Fz of a z-dipole) or (3, n); with ``coils`` (index
+        array) only those columns."""
+        rows = self.law_rows
+        if self._rows_api:
+            a = self.map.actuation(p, rows=rows, coils=coils)
+        else:
+            a = self.map.actuation(p)[rows]
+            if coils is not None:
+                a = a[:, coils]
+        return self.law_matrix @ a
 
     def _allocate(self, p: np.ndarray, f_ref: np.ndarray) -> np.ndarray:
         cfg = self.cfg
         prof = self.profile
         tm = self.clock() if prof else 0.0
-        fm = self.force_matrix(p)
+        keep = None
+        if self.skip is not None:
+            k = self.skip.keep(p, self.limit, cfg.skip_force_n)
+            if len(k) < cfg.n_coils:
+                keep = k
+        fm = self.force_matrix(p, keep)
         target = f_ref[2:3] if self.z_only else f_ref
         bias = getattr(self.map, "bias_force", None)
         if bias is not None:
@@ -722,14 +809,16 @@ class Runner:
             target = target - (b[2:3] if self.z_only else b)
         if prof:
             tm = self._mark("force_matrix", tm)
-        keep = np.ones(cfg.n_coils, dtype=bool)
-        if cfg.skip_fraction > 0:
-            norms = np.abs(fm).max(axis=0)
-            keep = norms >= cfg.skip_fraction * norms.max()
-        command = np.zeros(cfg.n_coils)
-        i, _ = self.allocate(fm[:, keep], target, self.limit[keep], cfg.total_current_a,
-                             unipolar=cfg.unipolar)
-        command[keep] = i
+        if keep is None:
+            command, _ = self.allocate(fm, target, self.limit, cfg.total_current_a,
+                                       unipolar=cfg.unipolar)
+            command = np.asarray(command, float)
+        else:
+            command = np.zeros(cfg.n_coils)
+            if len(keep):
+                i, _ = self.allocate(fm, target, self.limit[keep], cfg.total_current_a,
+                                     unipolar=cfg.unipolar)
+                command[keep] = i
         if prof:
             self._mark("allocation", tm)
         return command
@@ -787,6 +876,12 @@ CALIBRATION_CURRENT_A = 2.0
 """Largest calibration current per coil, A: the iron cores stay near their linear range and the
 sensors above them below the TLV493D's linear range, while every sensor sees a coil field many
 times its noise along three independent directions."""
+
+
+CALIBRATED_RELATIVE_ERROR = 0.005
+"""Relative model error of a calibrated sensor's reading (the localizer's sensor weights): what
+the affine calibration leaves of the 1 % gain and 1 degree mounting errors is the mounting shift
+and the coils' nonlinearity, a fraction of a percent (studies/localization.py's 'model-cal')."""
 
 
 def calibration_currents(n_coils: int, amplitude_a: float = CALIBRATION_CURRENT_A,

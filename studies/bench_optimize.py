@@ -26,7 +26,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from designkit import default_design  # noqa: E402
-from designkit._io import write_json_atomic  # noqa: E402
+from studies._common import finish  # noqa: E402
 from designkit.optimize import (CoilDesignProblem, device_problem_for, solve,  # noqa: E402
                                 solve_device, verify_device)
 
@@ -94,9 +94,7 @@ def run(out_dir, quick: bool = False) -> dict:
     if "legacy_linear_core_seconds_2_starts" in out_d:
         out_d["ratio_device_to_legacy"] = (out_d["device_median_seconds"]
                                            / out_d["legacy_linear_core_seconds_2_starts"])
-    write_json_atomic(out / "bench_optimize.json", out_d)
-    _print(out_d)
-    return out_d
+    return finish(out / "bench_optimize.json", out_d, _print)
 
 
 def _print(r: dict) -> None:

@@ -69,14 +69,19 @@ def test_run_refuses_a_map_from_another_design(map_file, tmp_path):
 
 def test_bench_runner_smoke(map_file, tmp_path):
     res = load_study("bench_runner").run(tmp_path / "b", map_path=map_file, quick=True)
-    for k in ("localize_model", "object_force", "allocate_3d", "duty_conversion",
-              "pca9685_bytes"):
-        assert res[k]["median_us"] > 0
-    assert res["step_with_frame"]["median_us"] > res["step_without_frame"]["median_us"]
+    loop = res["loop_force"]
+    for kind in ("without_frame", "with_frame", "sensor_side_fit"):
+        assert loop[kind]["n"] > 0 and loop[kind]["median_us"] > 0
+    assert {"fix", "predict", "object_force", "force_matrix", "allocation", "drive"} \
+        <= set(loop["stages"])
+    skip = res["skip"]
+    assert skip["bound_holds"] and skip["rows_used_3d"] == [3, 5, 6, 7]
+    assert skip["rows_used_fz"] == [3, 6]
 
 
 def test_render_runner_study_smoke(map_file, tmp_path):
     res = load_study("render_runner").run(tmp_path / "r", map_path=map_file, quick=True)
-    [(key, v)] = res.items()
-    # a sanity bound: the 0.5 s quick run includes the cold start of the fit
-    assert key == "plane/force" and v["localization_mae_m"] < 1e-2
+    [(key, v)] = res["runs"].items()
+    # the 0.5 s quick run includes the cold start of the fit
+    assert key == "plane/force" and v["localization_mae_m"] < 3e-3
+    assert res["all_within_limits"]
