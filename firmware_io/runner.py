@@ -15,10 +15,12 @@ timing by designkit.plant's simulated source) reads the two arrays (10-20 ms per
          end of the period (within the supply), I^2 t thermal guard  [CoilDynamics, ThermalGuard]
       -> MD10C duty/direction, one block write per PCA9685           [CoilDriver]
 
-Only the rows of A(p) the force law uses are evaluated (:func:`force_law_rows`: Fz alone of a
-z-dipole needs dBx/dx and dBy/dy, the 3-D force of a z-dipole four of the five gradient rows)
-and, with ``skip_force_n`` > 0, only the coils whose force at p could exceed it: a coil is left
-out of the allocation (its current is 0) when :class:`CoilSkipBound`'s upper bound of its force
+Only the rows of A(p) the force law uses enter the force (:func:`force_law_rows`: Fz alone of a
+z-dipole needs dBx/dx and dBy/dy, the 3-D force of a z-dipole four of the five gradient rows;
+firmware_io.mapfile's one-point kernel evaluates all eight rows in one product, which costs less
+than selecting rows inside it, so the runner slices them -- studies/bench_runner.py measures
+both) and, with ``skip_force_n`` > 0, only the coils whose force at p could exceed it are
+evaluated and allocated: a coil is left out (its current is 0) when :class:`CoilSkipBound`'s upper bound of its force
 per ampere around p, times its current limit, is at most ``skip_force_n`` -- the force the
 skipped coils could have added is below ``skip_force_n`` each.
 
@@ -783,14 +785,16 @@ class Runner:
     def force_matrix(self, p: np.ndarray, coils=None) -> np.ndarray:
         """Force per ampere at p: (1, n) N/A (Fz of a z-dipole) or (3, n); with ``coils`` (index
         array) only those columns."""
-        rows = self.law_rows
-        if self._rows_api:
-            a = self.map.actuation(p, rows=rows, coils=coils)
+        # the map's one-point kernel evaluates all rows in one product: slicing the rows the law
+        # uses afterwards is cheaper than selecting them inside (studies/bench_runner.py); the
+        # coils are selected inside (their coefficients are skipped)
+        if coils is not None and self._rows_api:
+            a = self.map.actuation(p, coils=coils)
         else:
-            a = self.map.actuation(p)[rows]
+            a = self.map.actuation(p)
             if coils is not None:
                 a = a[:, coils]
-        return self.law_matrix @ a
+        return self.law_matrix @ a[self.law_rows]
 
     def _allocate(self, p: np.ndarray, f_ref: np.ndarray) -> np.ndarray:
         cfg = self.cfg

@@ -13,7 +13,8 @@ time on the sensor side separately. Target: p99 <= 1 ms for every step (a 1 kHz 
 
 "Skip what the scene doesn't need", against the full evaluation in the same process, one point
 at a time along the path: all 8 rows of A(p) for all coils, then only the rows the force law uses
-(firmware_io.runner.force_law_rows: 4 for the 3-D force of a z-dipole, 2 for Fz alone), then
+(firmware_io.runner.force_law_rows: 4 for the 3-D force of a z-dipole, 2 for Fz alone; selected
+inside the map's kernel, or sliced after it as the runner does), then
 also only the coils whose bound of force per ampere near p (firmware_io.runner.CoilSkipBound)
 times the current limit exceeds a stated force; with the allocation on the kept coils and the
 force it then misses against the full allocation.
@@ -114,6 +115,7 @@ def run(out_dir=DEFAULT_OUT, *, map_path=None, duration_s: float = 2.0,
     skip = {"rows_used_3d": rows3.tolist(), "rows_used_fz": force_law_rows(m, "z")[0].tolist()}
     skip["all_rows"] = _us(_timed(lambda k: full_mat @ fmap.actuation(path[k]), n))
     skip["law_rows"] = _us(_timed(lambda k: mat3 @ fmap.actuation(path[k], rows=rows3), n))
+    skip["law_rows_sliced"] = _us(_timed(lambda k: mat3 @ fmap.actuation(path[k])[rows3], n))
     rows_z, mat_z = force_law_rows(m, "z")
     skip["law_rows_fz"] = _us(_timed(lambda k: mat_z @ fmap.actuation(path[k], rows=rows_z), n))
     t0 = time.perf_counter()
@@ -132,7 +134,7 @@ def run(out_dir=DEFAULT_OUT, *, map_path=None, duration_s: float = 2.0,
 
         def step(k, force=force):
             keep = bound.keep(path[k], limit, force)
-            fm = mat3 @ fmap.actuation(path[k], rows=rows3, coils=keep)
+            fm = mat3 @ fmap.actuation(path[k], coils=keep)[rows3]
             i, _ = allocate(fm, f_obj[k] - bias[k], limit[keep], total)
             kept.append(len(keep))
             full = np.zeros(fmap.n_coils)
@@ -176,7 +178,7 @@ def _print(res: dict) -> None:
     s = res["skip"]
     print(f"\nskipping (one point, median / p99 us): rows used 3-D {s['rows_used_3d']}, "
           f"Fz {s['rows_used_fz']}")
-    for k in ("all_rows", "law_rows", "law_rows_fz", "allocate_all_coils"):
+    for k in ("all_rows", "law_rows", "law_rows_sliced", "law_rows_fz", "allocate_all_coils"):
         print(f"  {k:28s} {_fmt(s[k]['median_us'])} / {_fmt(s[k]['p99_us'])}")
     print(f"  coil bound table: {s['bound_table_s']:.2f} s at start-up; bound holds on the path: "
           f"{s['bound_holds']}")
