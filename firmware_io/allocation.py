@@ -59,7 +59,6 @@ _EXACT_FIT_TOL = 1e-11
 """The least-norm exact fit is accepted when ||F x - f|| <= this x (||f|| + ||F|| ||x||): two
 decades inside the 1e-9 KKT tolerance (the gradient F^T r is at most ||F|| ||r||)."""
 
-_SSN_STEPS = 4
 """Dual Newton steps before the primal active-set phase takes over (a pattern seen twice ends
 them earlier)."""
 
@@ -177,10 +176,13 @@ def allocate(force_matrix, target, current_limit, total_limit, *, unipolar: bool
 class Allocator:
     """`allocate` with a warm start, for a control loop that solves at nearby positions.
 
-    It keeps the dual point y (the residual direction, see ``_dual_newton``) of the last solve
-    in physical units and starts the next solve from it; the result is the exact answer of
-    `allocate` whatever the start (only the number of Newton steps changes). A call with a
-    different number of rows or coils starts cold.
+    It keeps the working set of the last solve (which coils were free, at 0, at +-u, and
+    whether the budget held with equality) and tries that face first: when it is still optimal
+    (the usual case between two control periods) the solve is one face solve, its multiplier
+    check and the eps -> 0 polish. The result is the exact answer of `allocate` whatever the
+    start (a stale face is only a start for the same active-set method). A call with another
+    number of rows or coils, another drive mode, or limits that change which coils are off,
+    starts cold.
 
     Usage::
 
@@ -188,16 +190,16 @@ class Allocator:
         currents_a, residual = alloc(F, f_n, 6.0, 54.0, unipolar=True)   # same as allocate
     """
 
-    __slots__ = ("z", "shape")
+    __slots__ = ("face", "key")
 
     def __init__(self):
-        self.z = None       # dual point, A/N per row unit: v = F^T z is in A
-        self.shape = None   # (k, n) of the problem z belongs to
+        self.face = None    # (free, sign, fixed value / u_i, budget) of the last final face
+        self.key = None     # (k, n, unipolar) it belongs to
 
     def reset(self) -> None:
         """Forget the warm start."""
-        self.z = None
-        self.shape = None
+        self.face = None
+        self.key = None
 
     def __call__(self, force_matrix, target, current_limit, total_limit, *,
                  unipolar: bool = False, bias=None, max_iter: int | None = None):
@@ -230,7 +232,6 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
             return np.zeros(n)
         fs, ft = fs[rows], ft[rows]
         k = fs.shape[0]
-        warm = None
     inv_umax = 1.0 / umax
     usl = [ui * inv_umax for ui in ul]
     ts = tl_eff * inv_umax
@@ -253,17 +254,10 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
         lim = _EXACT_FIT_TOL * (math.sqrt(float(ft @ ft)) + math.sqrt(c2 * float(x0 @ x0)))
         if float(r @ r) <= lim * lim:
             if warm is not None:
-                warm.z, warm.shape = None, None
+                warm.face = ([True] * n, [1.0 if v >= 0.0 else -1.0 for v in xl], [0.0] * n,
+                             False)
+                warm.key = (k, n, unipolar)
             return x0 * umax
-
-    # ---- start: globalized semismooth Newton on the k-dimensional dual finds the pattern
-    if warm is not None and warm.z is not None and warm.shape == (k, n):
-        y = warm.z * (fscale * eps / (umax * umax))
-    else:
-        y = eps * _fast_solve(ffT + eps * _eye(k), ft)
-    x, y = _dual_newton(fs, ft, usl, tsb, eps, unipolar, y)
-    if warm is not None:
-        warm.z, warm.shape = y * (umax * umax / (fscale * eps)), (k, n)
 
     h = fs.T @ fs
     q = fs.T @ ft
@@ -271,21 +265,54 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
     tol = _MULT_TOL * gscale
     if max_iter is None:
         max_iter = 50 + 10 * n
-    xl = x.tolist()
-    free = [0.0 < abs(v) < ui for v, ui in zip(xl, usl)]
-    sg = [1.0 if v >= 0.0 else -1.0 for v in xl]
-    fixv = [0.0 if fr else v for v, fr in zip(xl, free)]
-    bud = budget_possible and any(free) and math.fsum(map(abs, xl)) >= ts * (1 - 1e-12)
-    state = _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n,
-                        max_iter, x, free, sg, fixv, bud)
+    state = None
+    key = (k, n, unipolar)
+    if warm is not None and warm.face is not None and warm.key == key:
+        # ---- warm start: the last final face, if its minimizer is feasible here
+        free, sg, rel, bud = warm.face
+        fixv = [r * ui for r, ui in zip(rel, usl)]
+        if bud and not budget_possible:
+            bud = False
+        xh = _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k)
+        if _on_face(xh.tolist(), free, sg, usl, tsb, bud):
+            state = _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible,
+                                k, n, max_iter, xh, free, sg, fixv, bud, at_face=True)
+    if state is None:
+        # ---- cold start: the projection of the least-norm exact fit and its working set
+        xl, _ = _proj_list(xl, usl, tsb, unipolar)
+        x = np.array(xl)
+        free = [0.0 < abs(v) < ui for v, ui in zip(xl, usl)]
+        sg = [1.0 if v >= 0.0 else -1.0 for v in xl]
+        fixv = [0.0 if fr else v for v, fr in zip(xl, free)]
+        bud = budget_possible and any(free) and math.fsum(map(abs, xl)) >= ts * (1 - 1e-12)
+        state = _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n,
+                            max_iter, x, free, sg, fixv, bud)
     # ---- polish: the eps -> 0 limit on the final face (the lexicographic answer: least residual,
     # then least energy) removes the Tikhonov bias when it stays on the face; if it leaves the
     # face, a continuation pass with eps 1e4 x smaller (warm started, usually 1 face) first
-    x, ok = _polish(fs, ft, usl, ts, k, *state)
+    x, ok, y = _polish(fs, ft, usl, ts, k, *state)
     if not ok:
         state = _active_set(fs, ft, h, q, usl, ts, eps * 1e-4, tol, unipolar, budget_possible,
                             k, n, max_iter, *state)
-        x, _ = _polish(fs, ft, usl, ts, k, *state)
+        x, _, y = _polish(fs, ft, usl, ts, k, *state)
+    # ---- an exact fit: the least-energy stage on its own, free of eps (see _least_energy)
+    lim = _EXACT_FIT_TOL * (math.sqrt(float(ft @ ft)) + math.sqrt(c2 * float(x @ x)))
+    r = fs @ x - ft
+    if float(r @ r) <= lim * lim:
+        x2 = _least_energy(fs, ft, usl, tsb, unipolar, y0 if y is None else y, lim, c2, k)
+        if x2 is not None:
+            x = x2
+            if warm is not None:
+                xl = x.tolist()
+                free = [0.0 < abs(v) < ui for v, ui in zip(xl, usl)]
+                state = (x, free, [1.0 if v >= 0.0 else -1.0 for v in xl],
+                         [0.0 if fr else v for v, fr in zip(xl, free)],
+                         budget_possible and any(free)
+                         and math.fsum(map(abs, xl)) >= ts * (1 - 1e-12))
+    if warm is not None:
+        _, free, sg, fixv, bud = state
+        warm.face = (free, sg, [v / ui if ui > 0.0 else 0.0 for v, ui in zip(fixv, usl)], bud)
+        warm.key = key
     # ---- guarantee: never outside the bounds, whatever round-off did
     us = np.array(usl)
     x = np.minimum(np.maximum(x, lo * us), us)
@@ -319,24 +346,39 @@ def _inside(xl, usl, ts, unipolar):
     return tot <= ts
 
 
+def _on_face(xl, free, sg, usl, ts, bud):
+    """x (list) feasible and on the working face: free coils on their side inside the box,
+    fixed ones where they were put, the budget kept."""
+    tot = 0.0
+    for v, fr, s, ui in zip(xl, free, sg, usl):
+        a = s * v
+        if fr and not 0.0 <= a <= ui:
+            return False
+        tot += abs(v)
+    return bud or tot <= ts
+
+
 def _polish(fs, ft, usl, ts, k, x, free, sg, fixv, bud):
-    """(x, accepted): the eps = 0 face minimizer if it stays on the face and is no worse."""
+    """(x, accepted, y): the eps = 0 face minimizer if it stays on the face (box and budget)
+    and is no worse; y its kernel coefficients (None in the primal form)."""
     if not any(free):
-        return x, True
-    xp = _face_minimizer(fs, ft, 0.0, free, sg, fixv, bud, ts, k)
+        return x, True, None
+    xp, y = _face_minimizer(fs, ft, 0.0, free, sg, fixv, bud, ts, k, want_y=True)
     xpl = xp.tolist()
     slack = 1e-12 * max(usl)
     for i, fr in enumerate(free):
         if fr:
             a = sg[i] * xpl[i]
             if not -slack <= a <= usl[i] + slack:
-                return x, False
+                return x, False, None
             xpl[i] = sg[i] * min(max(a, 0.0), usl[i])
+    if not bud and math.fsum(map(abs, xpl)) > ts * (1 + 1e-12):
+        return x, False, None  # the Tikhonov bias kept it inside the budget; eps -> 0 does not
     xp = np.array(xpl)
     rp, rx = fs @ xp - ft, fs @ x - ft
     if rp @ rp <= rx @ rx:
-        return xp, True
-    return x, False
+        return xp, True, y
+    return x, False, None
 
 
 def _phi(fs, ft, eps, x):
@@ -345,13 +387,16 @@ def _phi(fs, ft, eps, x):
 
 
 def _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n, max_iter,
-                x, free, sg, fixv, bud):
+                x, free, sg, fixv, bud, at_face=False):
     """Primal active-set iterations from a feasible point x and its working set: ``free``
     (list of bool), the sign ``sg`` of each free coil, the value ``fixv`` of each fixed one and
-    ``bud`` (the budget held with equality)."""
+    ``bud`` (the budget held with equality). ``at_face``: x is already this face's minimizer."""
     rng = range(n)
     for _ in range(max_iter):
-        xh = _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k)
+        if at_face:
+            xh, at_face = x, False
+        else:
+            xh = _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k)
         if any(free):
             xl = x.tolist()
             hl = xh.tolist()
@@ -435,14 +480,15 @@ def _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n
     return x, free, sg, fixv, bud
 
 
-def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k):
+def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False):
     """Minimizer of the regularized objective on the working face (free coils keep their sign;
-    with ``bud`` the budget holds with equality)."""
+    with ``bud`` the budget holds with equality). ``want_y``: also the kernel coefficients y
+    (x_J = F_J^T y + t s) when the kernel form applies, else None."""
     fixed = np.array(fixv)
     j = [i for i, fr in enumerate(free) if fr]
     nf = len(j)
     if nf == 0:
-        return fixed
+        return (fixed, None) if want_y else fixed
     x = fixed.copy()
     r = ft - fs @ fixed
     fj = fs[:, j]
@@ -458,12 +504,14 @@ def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k):
                 mat[:k, :k] += eps * _eye(k)
             w = _lsolve(mat, np.append(r, c), eps > 0)
             x[j] = gmat @ w
+            y = w[:k]
         else:
             m = fj @ fj.T
             if eps:
                 m += eps * _eye(k)
-            x[j] = fj.T @ _lsolve(m, r, eps > 0)
-        return x
+            y = _lsolve(m, r, eps > 0)
+            x[j] = fj.T @ y
+        return (x, y) if want_y else x
     hj = fj.T @ fj
     if eps:
         hj += eps * _eye(nf)
@@ -477,7 +525,7 @@ def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k):
         x[j] = _lsolve(mat, np.append(b, c), eps > 0)[:nf]
     else:
         x[j] = _lsolve(hj, b, eps > 0)
-    return x
+    return (x, None) if want_y else x
 
 
 try:  # the gufunc behind np.linalg.solve without its Python wrapper and errstate (tiny systems)
@@ -539,75 +587,29 @@ def _proj_list(v, us, ts, unipolar):
     return [ci if vi >= 0.0 else -ci for ci, vi in zip(c, v)], tau
 
 
-def _pattern(x, us, tau):
-    """Piece of the projection: per coil 0 (off), +-1 (free), +-2 (at +-u); budget active."""
-    return (tuple(0 if xi == 0.0 else (1 if xi > 0.0 else -1) * (1 if abs(xi) < ui else 2)
-                  for xi, ui in zip(x, us)), tau > 0.0)
+def _least_energy(fs, ft, usl, ts, unipolar, y, lim, c2, k, steps=6):
+    """The least-energy exact fit: min ||x||^2 over {x in X, F x = f} for a reachable f.
 
-
-def _dual_newton(fs, ft, us, ts, eps, unipolar, y):
-    """Globalized semismooth Newton on the dual of the regularized problem.
-
-    With x(y) = proj_X(F^T y / eps) the dual is the convex, C^1, piecewise-quadratic function
-    Theta(y) = (F^T y) . x - eps/2 ||x||^2 + ||y||^2 / 2 - f . y, gradient F x + y - f (zero at
-    the optimum, where y is the residual f - F x). Newton on the current piece with Armijo
-    backtracking converges globally; the pieces being convex polyhedra, a full step that stays
-    on its piece is the optimum. Returns the feasible x(y) (ndarray) and y; the primal
-    active-set phase certifies it (the dual's free coordinates are only 1e-16/eps accurate:
-    the pattern, not x, is what this phase delivers)."""
-    k = fs.shape[0]
-    inv = 1.0 / eps
-    epsk = eps * _eye(k)
-
-    ftl = ft.tolist()
-
-    def point(yy):
-        wl = (fs.T @ yy).tolist()
-        xl, tau = _proj_list([w * inv for w in wl], us, ts, unipolar)
-        yl = yy.tolist()
-        th = 0.0
-        for w, xi in zip(wl, xl):
-            th += (w - 0.5 * eps * xi) * xi
-        for yi, fi in zip(yl, ftl):
-            th += (0.5 * yi - fi) * yi
-        return np.array(xl), xl, tau, th
-
-    xa, x, tau, th = point(y)
-    key = _pattern(x, us, tau)
-    seen = {key}
-    for _ in range(_SSN_STEPS):
-        g = fs @ xa + y - ft
-        j = [i for i, c in enumerate(key[0]) if c == 1 or c == -1]
-        if j:
-            fj = fs[:, j]
-            m = fj @ fj.T + epsk
-            if tau > 0.0:
-                wv = fj @ np.array([1.0 if key[0][i] > 0 else -1.0 for i in j])
-                m -= np.outer(wv, wv) / len(j)
-            d = _fast_solve(m, -eps * g)
-        else:
-            d = -g
-        slope = float(g @ d)
-        if not slope < 0.0:
-            break
-        yn = y + d
-        xan, xn, taun, thn = point(yn)
-        keyn = _pattern(xn, us, taun)
-        if keyn == key:
-            return xan, yn  # a full Newton step that stays on its (convex) piece: the optimum
-        # Armijo backtracking; the tolerance absorbs rounding in Theta (its decrease along the
-        # stiff free directions is ~eps |g|^2, near the end below round-off)
-        tol_th = 1e-14 * (1.0 + abs(th))
-        alpha = 1.0
-        while thn > th + 1e-4 * alpha * slope + tol_th:
-            alpha *= 0.25
-            if alpha < 1e-6:
-                return xa, y  # no progress the dual can resolve: the primal phase takes over
-            yn = y + alpha * d
-            xan, xn, taun, thn = point(yn)
-            keyn = _pattern(xn, us, taun)
-        y, xa, x, tau, th, key = yn, xan, xn, taun, thn, keyn
-        if key in seen:
-            break  # cycling between pieces (ties, round-off): the primal phase takes over
-        seen.add(key)
-    return xa, y
+    Its optimality conditions are x = proj_X(F^T y) with F x = f (y the multiplier of the fit),
+    a k-dimensional piecewise-linear equation solved by Newton from the polished face's y
+    (usually 0-1 steps). Unlike the eps-regularized active set, whose tie-break multipliers
+    are eps-small and so resolved only to ~1e-3 relative, this is exact. Returns None if
+    Newton does not land within ``steps`` (the caller keeps its answer)."""
+    shift = (1e-14 * c2) * _eye(k)
+    lim2 = lim * lim
+    for _ in range(steps):
+        xl, tau = _proj_list((fs.T @ y).tolist(), usl, ts, unipolar)
+        x = np.array(xl)
+        r = ft - fs @ x
+        if float(r @ r) <= lim2:
+            return x
+        j = [i for i, (v, ui) in enumerate(zip(xl, usl)) if 0.0 < abs(v) < ui]
+        if not j:
+            return None
+        fj = fs[:, j]
+        m = fj @ fj.T + shift
+        if tau > 0.0:
+            wv = fj @ np.array([1.0 if xl[i] > 0.0 else -1.0 for i in j])
+            m -= np.outer(wv, wv) / len(j)
+        y = y + _fast_solve(m, r)
+    return None
