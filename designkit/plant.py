@@ -956,7 +956,7 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
     :data:`firmware_io.runner.CALIBRATED_RELATIVE_ERROR`. ``profile``: the runner times each stage of its step
     (summary ``loop_by_kind['stages']``). ``skip_force_n``: the runner's coil-skip force, N.
     """
-    from firmware_io.allocation import allocate
+    from firmware_io.allocation import Allocator
     from firmware_io.localization import Localizer
     from firmware_io.mapfile import MapFile
     from firmware_io.runner import (CALIBRATED_RELATIVE_ERROR, ConstantVelocityTracker, Runner,
@@ -1023,7 +1023,7 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
                            skip_force_n=skip_force_n)
         localizer = Localizer.from_map(map_path, method=method, **loc_kw)
         runner = Runner(fmap, SceneForce(scene), localizer, ConstantVelocityTracker(),
-                        hook(allocate), device.coils, source, cfg, clock=clock,
+                        hook(Allocator()), device.coils, source, cfg, clock=clock,
                         log=lambda line: print(line) if progress else None)
         runner.profile = profile
         runner.start()

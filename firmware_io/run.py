@@ -191,7 +191,7 @@ def calibrated_localizer(map_path: str, method: str, localizer, coils, arrays, c
 
 
 def main(argv: list[str] | None = None) -> int:
-    from .allocation import allocate
+    from .allocation import Allocator
     from .runner import ConstantVelocityTracker, Runner, SceneForce, config_from_map
 
     args = build_parser().parse_args(argv)
@@ -212,7 +212,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     source = ThreadedSensorSource(arrays)
-    runner = Runner(fmap, SceneForce(scene), localizer, ConstantVelocityTracker(), allocate,
+    runner = Runner(fmap, SceneForce(scene), localizer, ConstantVelocityTracker(), Allocator(),
                     coils, source, cfg)
     runner.start()
     source.start()

@@ -938,16 +938,18 @@ def record_calibration(coils, arrays, currents_a: np.ndarray, *, settle_s: float
 
 
 def calibrate_sensors(model, top_t, bottom_t, applied_a):
-    """Per-sensor affine calibration (gain, mounting rotation, offset) from coil-only frames:
-    :func:`firmware_io.localization.calibrate`, checked. Returns (gain_inverse (2, n, 3, 3),
-    offsets_t (2, n, 3)) for the Localizer's ``calibration``."""
+    """Per-sensor calibration (gain, mounting rotation, offset) from coil-only frames:
+    :func:`firmware_io.localization.calibrate`, checked to be finite. Returns what it returns,
+    for the Localizer's ``calibration``."""
     from .localization import calibrate
 
     try:
         cal = calibrate(top_t, bottom_t, applied_a, model)
     except (np.linalg.LinAlgError, ValueError):
         cal = (np.full(1, np.nan),)
-    if not all(np.all(np.isfinite(c)) for c in cal):
+    parts = cal if isinstance(cal, tuple) else [
+        v for v in vars(cal).values() if isinstance(v, np.ndarray)]
+    if not all(np.all(np.isfinite(c)) for c in parts):
         raise FirmwareIOError("sensor calibration failed (a sensor saw too few usable frames); "
                               "check the sensors and that the magnet is away from the board")
     return cal
