@@ -976,15 +976,10 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
     if not 1e-4 <= period_s <= 0.05:
         raise BadInputError("period", "in [0.1, 50] ms", period_s * 1e3)
     virtual = make_object(obj)
-    if trajectory == "slide":
-        path = slide_trajectory(lambda x, y: virtual.height(np.c_[x, y, np.zeros_like(x)]),
-                                duration_s=duration_s or 4.0)
-    elif trajectory == "poke":
-        path = poke_trajectory(lambda x, y: virtual.height(np.c_[x, y, np.zeros_like(x)]),
-                               duration_s=duration_s or 3.0)
-    else:
-        path = Trajectory.from_csv(trajectory)
-    duration = float(duration_s or path.duration_s)
+    scripted = trajectory in ("slide", "poke")
+    path = None if scripted else Trajectory.from_csv(trajectory)
+    duration = float(duration_s or (path.duration_s if path is not None
+                                     else 4.0 if trajectory == "slide" else 3.0))
     if not 0 < duration <= 600:
         raise BadInputError("duration", "in (0, 600] s", duration)
     schedule = FaultSchedule.parse(faults, duration)
@@ -992,6 +987,14 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
     out.mkdir(parents=True, exist_ok=True)
 
     array = array if array is not None else CoilArray.from_design(design)
+    if scripted:
+        # the magnet cannot go below the upper sensor board: its centre stays half its length
+        # and 1 mm (the board and the sensor package) above the highest sensor
+        floor = (float(np.max(array.sensor_positions_m()[0, :, 2]))
+                 + design.magnet.length_m / 2 + 1e-3)
+        make = slide_trajectory if trajectory == "slide" else poke_trajectory
+        path = make(lambda x, y: virtual.height(np.c_[x, y, np.zeros_like(x)]),
+                    duration_s=duration, z_limits_m=(floor, 0.078))
     if map_path is None:
         map_path = out / "map.npz"
         data = fieldmap.build(design, array=array, progress=progress)

@@ -55,8 +55,9 @@ def check_run_csv(path, summary: dict) -> dict:
            "max_total_a": float(np.abs(cmd).sum(axis=1).max()),
            "current_limit_a": drive["current_limit_a"], "total_limit_a": drive["total_current_a"],
            "faults": []}
-    out["within_limits"] = bool(out["max_command_a"] <= drive["current_limit_a"] + 1e-9
-                                and out["max_total_a"] <= drive["total_current_a"] + 1e-9)
+    # run.csv holds 9 significant digits
+    out["within_limits"] = bool(out["max_command_a"] <= drive["current_limit_a"] * (1 + 1e-8)
+                                and out["max_total_a"] <= drive["total_current_a"] * (1 + 1e-8))
     log = summary.get("fault_log", [])
     for f in summary.get("faults", []):
         te = f["injected_s"]
@@ -67,12 +68,13 @@ def check_run_csv(path, summary: dict) -> dict:
         safe_at_detect = None
         if detect is not None:
             k = int(np.argmin(np.abs(t - detect)))
-            safe_at_detect = float((t[np.flatnonzero((t >= t[k]) & (state != "running"))[0]]
-                                    - detect) / period)
+            safe_at_detect = round(float((t[np.flatnonzero((t >= t[k]) & (state != "running"))[0]]
+                                          - detect) / period), 6)
         out["faults"].append({
             "fault": f["fault"], "injected_s": te,
             "state": None if first is None else str(state[first]),
-            "periods_from_injection": None if first is None else float((t[first] - te) / period),
+            "periods_from_injection": None if first is None else round(float((t[first] - te)
+                                                                             / period), 6),
             "detected_s": detect, "periods_from_detection": safe_at_detect})
     return out
 
@@ -118,26 +120,32 @@ def _mn(x) -> str:
 
 def _print(res: dict) -> None:
     print(f"slide {res['duration_s']} s per run; load average {res['load_average_1min']}")
-    print(f"{'object/rows':20s} {'|F| err RMS':>11s} {'p95':>8s} {'obj. RMS':>9s} "
-          f"{'loc. MAE':>9s} {'lag':>6s} | error by cause, RMS / p95 of |F| (mN): "
-          "localization, map, allocation, current lag")
+    print("rendered-force error, RMS / p95 in mN: of |F| for the 3-D law ('force'), of Fz for "
+          "the thesis' Fz-only law ('fz', whose lateral force is not controlled)")
+    print(f"{'object/rows':20s} {'error':>15s} {'|F| error':>15s} {'obj. RMS':>8s} "
+          f"{'loc. MAE':>8s} | by cause: {'localization':>15s} {'map':>15s} {'allocation':>15s} "
+          f"{'current lag':>15s}")
     for k, v in res["runs"].items():
         c = v["causes"]
-        causes = "  ".join(f"{_mn(c.get(n, {}).get('norm_rms_n'))}/{_mn(c.get(n, {}).get('norm_p95_n'))}"
-                           for n in ("localization", "map_interpolation", "allocation",
-                                     "current_lag"))
-        print(f"{k:20s} {_mn(v['force_error_rms_n'])} mN {_mn(v['force_error_p95_n'])} "
-              f"{_mn(v['object_force_rms_n'])} {(v['localization_mae_m'] or 0) * 1e3:6.2f} mm "
-              f"{v['force_lag_s'] * 1e3:4.0f} ms | {causes}")
+        key = "fz" if k.endswith("/fz") else "norm"
+
+        def pair(d):
+            return f"{_mn(d.get(key + '_rms_n'))}/{_mn(d.get(key + '_p95_n'))}"
+
+        causes = " ".join(pair(c.get(n, {})) for n in ("localization", "map_interpolation",
+                                                        "allocation", "current_lag"))
+        print(f"{k:20s} {pair(c.get('total', {}))} {_mn(v['force_error_rms_n'])}/"
+              f"{_mn(v['force_error_p95_n'])} {_mn(v['object_force_rms_n'])} "
+              f"{(v['localization_mae_m'] or 0) * 1e3:5.2f} mm | {causes}")
     if "faults" in res:
-        print("faults (hemisphere, --faults default): periods to the safe state from injection / "
-              "from detection")
+        print("faults (hemisphere, --faults default): control periods to the safe state, from "
+              "injection / from detection (the runner's log line)")
         for f in res["faults"]["faults"]:
-            print(f"  {f['fault']:18s} -> {f['state']!s:18s} "
-                  f"{f['periods_from_injection'] if f['periods_from_injection'] is not None else 'never':>6} / "
-                  f"{f['periods_from_detection'] if f['periods_from_detection'] is not None else 'n/a':>4}")
-    print(f"largest command {res['max_command_a']:.2f} A, largest total {res['max_total_a']:.2f} A; "
-          f"all within the limits: {res['all_within_limits']}")
+            a, b = f["periods_from_injection"], f["periods_from_detection"]
+            print(f"  {f['fault']:18s} -> {f['state']!s:18s} {'never' if a is None else a:>6} / "
+                  f"{'n/a' if b is None else b}")
+    print(f"largest command {res['max_command_a']:.3f} A, largest total {res['max_total_a']:.2f} A "
+          f"over every step of every run; all within the limits: {res['all_within_limits']}")
 
 
 if __name__ == "__main__":
