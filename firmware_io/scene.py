@@ -218,7 +218,8 @@ class SceneObject:
         ``height_m``: h(x, y) (n,) m when the caller has it already."""
         p = _points(points)
         h = self.height(p) if height_m is None else np.asarray(height_m, float)
-        top = np.c_[p[:, :2], h + 1e-5]
+        top = p.copy()
+        top[:, 2] = h + 1e-5
         return self.normal(top)
 
     def height(self, points) -> np.ndarray:

@@ -43,14 +43,16 @@ def test_designkit_run_simulate_writes_a_consistent_run(map_file, tmp_path):
     fix = [r for r in rows if r["xe_m"] != "nan"]
     err = [np.linalg.norm([float(r[a]) - float(r[b]) for a, b in
                            (("x_m", "xe_m"), ("y_m", "ye_m"), ("z_m", "ze_m"))]) for r in fix]
-    # a sanity bound: the localization itself is issue 14's (1.5-5 mm MAE today); here it only
-    # has to be a tracking estimate, not noise or a lost fit
-    assert np.median(err) < 1e-2
+    # with the start-up calibration and the fit on the sensor side the tracked estimate is
+    # ~0.7 mm from the finger (median, studies/render_runner.py); 3 mm leaves room for the
+    # cold start in this short run
+    assert np.median(err) < 3e-3
     # the scheduled defect reached no output, and no command ever exceeded its bounds
     drive = summary["drive"]
     cmd_a = np.array([[float(r[f"cmd{k}_a"]) for k in range(1, 10)] for r in rows])
-    assert np.abs(cmd_a).max() <= drive["current_limit_a"] + 1e-9
-    assert np.abs(cmd_a).sum(axis=1).max() <= drive["total_current_a"] + 1e-9
+    # run.csv holds 9 significant digits
+    assert np.abs(cmd_a).max() <= drive["current_limit_a"] * (1 + 1e-8)
+    assert np.abs(cmd_a).sum(axis=1).max() <= drive["total_current_a"] * (1 + 1e-8)
     [f] = summary["faults"]
     assert f["fault"] == "over_limit" and f["state"] == "over_limit"
     assert f["time_to_safe_s"] <= 1e-3 + 1e-12
