@@ -470,16 +470,14 @@ COIL_SURFACE_HEAT_TRANSFER_W_M2_K = 10.0
 the winding's cooling time constant m c / (h A) of the runner's I^2 t guard."""
 
 
-def drive_data(design) -> dict:
+def drive_data(design, coil) -> dict:
     """The runner's drive data from the design (SI): coil R at the operating temperature, L
     (with the core), the supply (at most the MD10C's 30 V), the current bounds and the I^2 t
     budget (adiabatic heating from the operating temperature to 100 C at the current limit,
-    cooled with the time constant m c / (h A))."""
-    from .coil import Coil
-
-    coil = Coil.from_design(design)
-    r = coil.resistance(design.wire)
-    ind = coil.inductance(design.wire)
+    cooled with the time constant m c / (h A)). ``coil``: ``Coil.from_design(design)`` (this
+    module sits below designkit.coil and does not build coils)."""
+    r = resistance(coil, design.wire)
+    ind = inductance(coil, design.wire)
     w = design.wire
     mass = copper_mass(design.coil.inner_radius_m, design.coil.outer_radius_m,
                        design.coil.turns, w.diameter_m)

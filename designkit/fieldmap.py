@@ -49,6 +49,7 @@ import numpy as np
 
 from . import _validate as v
 from .array import ROWS, CoilArray
+from .coil import Coil
 from .electrical import drive_data
 from .errors import BadInputError
 from firmware_io import mapfile as mf
@@ -625,7 +626,7 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
         "total_current_a": design.drive.total_current_a,
         # what firmware_io.runner.config_from_map needs (R, L, supply, limits, I^2 t guard)
         "drive": {k: ([float(x) for x in val] if isinstance(val, list) else float(val))
-                  for k, val in drive_data(design).items()},
+                  for k, val in drive_data(design, Coil.from_design(design)).items()},
         "physics": phys.source,
         "settings": {"spacing_m": spacing, "log_step": log_step,
                      "mode_tolerance": mode_tolerance,

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import BadInputError
-from .electrical import COIL_SURFACE_HEAT_TRANSFER_W_M2_K, drive_data  # noqa: F401 (re-exported)
+from .electrical import drive_data
 from .localize import analog_reading
 
 FAULT_TYPES = ("pwm_nack", "sensor_stuck", "sensor_dead", "sensor_saturated", "out_of_box",
@@ -966,6 +966,7 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
     from . import fieldmap
     from ._io import write_json_atomic
     from .array import CoilArray
+    from .coil import Coil
     from .design import Design, load_design
     from .render.laws import ConstraintLaw
     from .render.scenefile import compile_scene, make_object
@@ -1005,7 +1006,7 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
                                law=ConstraintLaw(lam), map_design_sha256=fmap.design_sha256,
                                extra_meta={"object": obj, "rows": rows})
     scene = Scene.load(scene_path, expected_design_sha256=fmap.design_sha256)
-    drive = drive_data(design)
+    drive = drive_data(design, Coil.from_design(design))
     device = SimulatedDevice(design, array, seed=seed, resistance_ohm=drive["resistance_ohm"][0],
                              inductance_h=drive["inductance_h"][0])
 
