@@ -39,9 +39,10 @@ from studies._common import design_and_map, finish, load_average
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "bench_runner"
 """Default output folder (git-ignored), whatever the working directory."""
 
-SKIP_FORCES_N = (1e-3, 3e-3, 1e-2)
+SKIP_FORCES_N = (1e-3, 1e-2, 0.1, 0.3)
 """Coil-skip forces benchmarked, N (the human force detection threshold is ~10-30 mN at the
-fingertip; 1 mN is far below it)."""
+fingertip; 1 mN is far below it; 0.1 and 0.3 N show where the 3x3 array's coils start to be
+skipped -- every coil can add more than 10 mN at its limit anywhere on the path)."""
 
 
 def _us(times_s) -> dict:
