@@ -947,8 +947,10 @@ def calibrate_sensors(model, top_t, bottom_t, applied_a):
         cal = calibrate(top_t, bottom_t, applied_a, model)
     except (np.linalg.LinAlgError, ValueError):
         cal = (np.full(1, np.nan),)
+    # (gain_inverse, offsets) or the localizer's calibration object with those attributes
     parts = cal if isinstance(cal, tuple) else [
-        v for v in vars(cal).values() if isinstance(v, np.ndarray)]
+        getattr(cal, a) for a in ("gain_inverse", "offsets_t", "shift_m", "coil_field_t_per_a")
+        if getattr(cal, a, None) is not None]
     if not all(np.all(np.isfinite(c)) for c in parts):
         raise FirmwareIOError("sensor calibration failed (a sensor saw too few usable frames); "
                               "check the sensors and that the magnet is away from the board")
