@@ -33,6 +33,7 @@ from . import _validate as v
 from .coil import Coil
 from .errors import BadInputError, DesignRuleError
 from .pose import Pose
+from firmware_io.mapfile import check_currents
 
 ROWS = ("Bx", "By", "Bz", "dBx/dx", "dBx/dy", "dBx/dz", "dBy/dy", "dBy/dz")
 """Row order of the actuation matrix (thesis eq. 2.13). Units: T/A for rows 0-2, T/(m A) 3-7."""
@@ -400,11 +401,7 @@ class CoilArray:
                 "core_flux_t_per_a": cmat}
 
     def _currents(self, currents) -> np.ndarray:
-        i = np.asarray(currents, dtype=float)
-        if i.shape != (self.n_coils,) or not np.all(np.isfinite(i)):
-            raise BadInputError("currents", f"{self.n_coils} finite values, A",
-                                f"shape {i.shape}")
-        return i
+        return check_currents(currents, self.n_coils, BadInputError)
 
     def field(self, points, currents) -> tuple[np.ndarray, np.ndarray]:
         """Total B (n, 3), T, and grad B (n, 3, 3), T/m, for the currents (n_coils,), A."""

@@ -460,3 +460,40 @@ def electrical_report(design: "Design", coil: "Coil", *,
         pwm_frequency_hz=design.drive.pwm_frequency_hz,
         pwm_ripple_a=pwm_ripple(design.drive.supply_voltage_v, r, tau,
                                 design.drive.pwm_frequency_hz))
+
+
+# ---------------------------------------------------------------------------------------------
+# the runner's drive data (written into the map file, read by firmware_io.runner.config_from_map)
+
+COIL_SURFACE_HEAT_TRANSFER_W_M2_K = 10.0
+"""Natural convection from the winding's outer surface and end faces (assumed), W/(m^2 K): sets
+the winding's cooling time constant m c / (h A) of the runner's I^2 t guard."""
+
+
+def drive_data(design, coil) -> dict:
+    """The runner's drive data from the design (SI): coil R at the operating temperature, L
+    (with the core), the supply (at most the MD10C's 30 V), the current bounds and the I^2 t
+    budget (adiabatic heating from the operating temperature to 100 C at the current limit,
+    cooled with the time constant m c / (h A)). ``coil``: ``Coil.from_design(design)`` (this
+    module sits below designkit.coil and does not build coils)."""
+    r = resistance(coil, design.wire)
+    ind = inductance(coil, design.wire)
+    w = design.wire
+    mass = copper_mass(design.coil.inner_radius_m, design.coil.outer_radius_m,
+                       design.coil.turns, w.diameter_m)
+    limit = min(design.drive.max_current_a, design.drive.driver_max_voltage_v / r,
+                design.drive.supply_voltage_v / r)
+    t_max = time_to_temperature(mass, limit, r, w, w.operating_temperature_c,
+                                DEFAULT_MAX_TEMPERATURE_C)
+    budget = limit ** 2 * t_max
+    c = design.coil
+    area = 2 * math.pi * c.outer_radius_m * c.length_m + 2 * math.pi * (
+        c.outer_radius_m ** 2 - c.inner_radius_m ** 2)
+    tau = mass * COPPER_SPECIFIC_HEAT_J_KG_K / (COIL_SURFACE_HEAT_TRANSFER_W_M2_K * area)
+    return {"resistance_ohm": [r] * design.array.rows * design.array.columns,
+            "inductance_h": [ind] * design.array.rows * design.array.columns,
+            "supply_voltage_v": min(design.drive.supply_voltage_v,
+                                    design.drive.driver_max_voltage_v),
+            "current_limit_a": float(limit), "total_current_a": design.drive.total_current_a,
+            "thermal_continuous_current_a": math.sqrt(budget / tau),
+            "thermal_time_constant_s": tau}

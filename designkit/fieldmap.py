@@ -49,6 +49,8 @@ import numpy as np
 
 from . import _validate as v
 from .array import ROWS, CoilArray
+from .coil import Coil
+from .electrical import drive_data
 from .errors import BadInputError
 from firmware_io import mapfile as mf
 from firmware_io.errors import BadInputError as _FirmwareBadInput
@@ -622,6 +624,9 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
         "coil_positions_m": positions.tolist(), "coil_rotations": rotations,
         "max_current_a": design.drive.max_current_a,
         "total_current_a": design.drive.total_current_a,
+        # what firmware_io.runner.config_from_map needs (R, L, supply, limits, I^2 t guard)
+        "drive": {k: ([float(x) for x in val] if isinstance(val, list) else float(val))
+                  for k, val in drive_data(design, Coil.from_design(design)).items()},
         "physics": phys.source,
         "settings": {"spacing_m": spacing, "log_step": log_step,
                      "mode_tolerance": mode_tolerance,
@@ -714,9 +719,15 @@ class FieldMap:
             raise BadInputError("outside", "'error' or 'extrapolate'", outside)
         return outside == "extrapolate"
 
-    def actuation(self, points, *, outside: str = "error") -> np.ndarray:
-        """Coupled A: (3,) -> (8, n_coils), (n, 3) -> (n, 8, n_coils); T/A, T/(m A)."""
-        return self._call(self.file.actuation, points, self._outside(outside))
+    def actuation(self, points, *, outside: str = "error", rows=None,
+                  coils=None) -> np.ndarray:
+        """Coupled A: (3,) -> (8, n_coils), (n, 3) -> (n, 8, n_coils); T/A, T/(m A).
+        ``rows``, ``coils``: index subsets (MapFile.actuation), shapes (.., len(rows),
+        len(coils))."""
+        try:
+            return self.file.actuation(points, self._outside(outside), rows=rows, coils=coils)
+        except _FirmwareBadInput as exc:
+            raise _translate(exc) from None
 
     def bias_force(self, points, *, outside: str = "error") -> np.ndarray:
         """F0 at zero current, N: (3,) -> (3,), (n, 3) -> (n, 3)."""

@@ -93,6 +93,7 @@ from typing import TYPE_CHECKING, Callable, Literal, Sequence
 
 import numpy as np
 
+from ._blas import one_blas_thread
 from . import _validate as v
 from . import electrical as el
 from .constants import MU0
@@ -1553,18 +1554,6 @@ def _diagnose_infeasible(problem: DeviceProblem) -> BadInputError:
                          "(they conflict inside these bounds).")
 
 
-def _one_blas_thread():
-    """Context: BLAS on one thread. The panel model's 280 x 280 solves ran 30x slower with
-    OpenBLAS threads fighting over a loaded 2-core machine (measured 0.16 s vs 5 ms each)."""
-    import contextlib
-
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - optional: only a speed-up
-        return contextlib.nullcontext()
-    return threadpool_limits(limits=1, user_api="blas")
-
-
 def solve_device(problem: DeviceProblem, *, starts: int = 4, seed: int = 0,
                  max_corrections: int = 4, correction_tol: float = RESIDUAL_BOUND,
                  progress: bool = False) -> DeviceResult:
@@ -1574,7 +1563,7 @@ def solve_device(problem: DeviceProblem, *, starts: int = 4, seed: int = 0,
     (:func:`_correct_for_wire`); ``correction_tol``: the residual bound it enforces
     (:data:`RESIDUAL_BOUND`).
     """
-    with _one_blas_thread():
+    with one_blas_thread():
         return _solve_device(problem, starts=starts, seed=seed,
                              max_corrections=max_corrections, correction_tol=correction_tol,
                              progress=progress)
@@ -1599,7 +1588,7 @@ def _solve_device(problem: DeviceProblem, *, starts: int = 4, seed: int = 0,
     it = list(_device_starts(problem, starts, seed))
     bar = None
     if progress:
-        from tqdm import tqdm
+        from ._progress import tqdm
 
         bar = tqdm(total=starts + 2, desc="optimize", unit="stage")
     for y0 in it:
@@ -1820,7 +1809,7 @@ def evaluate_device(design: Design, problem: DeviceProblem | None = None) -> dic
     x = [c.inner_radius_m, c.outer_radius_m, c.length_m, k.radius_m, k.length_m,
          max(prot, 0.0), w.diameter_m]
     p = dataclasses.replace(p, insulation_ratio=w.insulated_diameter_m / w.diameter_m)
-    with _one_blas_thread():
+    with one_blas_thread():
         ev = p.evaluate(x, turns=c.turns, model="panel")
     fit = el.turns_from_geometry(c.inner_radius_m, c.outer_radius_m, c.length_m,
                                  w.insulated_diameter_m, w.packing)
@@ -1855,7 +1844,7 @@ def verify_device(problem: DeviceProblem, result: DeviceResult, *, starts: int =
                   isres_evaluations: int = 3000, grid_levels: int = 4, seed: int = 0,
                   progress: bool = False) -> dict:
     """Global checks of a device optimum (see :func:`_verify_device`), BLAS on one thread."""
-    with _one_blas_thread():
+    with one_blas_thread():
         return _verify_device(problem, result, starts=starts,
                               isres_evaluations=isres_evaluations, grid_levels=grid_levels,
                               seed=seed, progress=progress)
@@ -1942,7 +1931,7 @@ def _verify_device(problem: DeviceProblem, result: DeviceResult, *, starts: int 
     pts = np.array(list(itertools.product(*axes)))
     blocks = range(0, len(pts), 256)  # one batched fast-model solve per block
     if progress:
-        from tqdm import tqdm
+        from ._progress import tqdm
 
         blocks = tqdm(blocks, desc="grid", unit="block")
     for b0 in blocks:

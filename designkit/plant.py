@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import BadInputError
+from .electrical import drive_data
 from .localize import analog_reading
 
 FAULT_TYPES = ("pwm_nack", "sensor_stuck", "sensor_dead", "sensor_saturated", "out_of_box",
@@ -352,6 +353,44 @@ class SimulatedDevice:
         a = analog_reading(b[None], sim.errors, self.noise_t, self.rng)[0].reshape(-1, 3)
         return a + self.field_offset_t
 
+    def calibrate_sensors(self, model, *, frames: int = 40, current_a: float | None = None):
+        """The start-up sensor calibration through the firmware's path
+        (:func:`firmware_io.runner.record_calibration`: duties written to the simulated
+        PCA9685s, frames read from the register-level TLV493Ds) with the magnet away from the
+        board; while the firmware waits, the coils settle (R-L model at the applied voltage)
+        and the sensors see the coils' field through their errors, with noise.
+
+        Parameters
+        ----------
+        model : firmware_io.localization.SensorModel -- what the localizer knows
+        frames : int; current_a : float, A (default :data:`firmware_io.runner.
+            CALIBRATION_CURRENT_A`, at most the drive's limit)
+
+        Returns the Localizer's ``calibration`` (gain_inverse (2, n, 3, 3), offsets (2, n, 3)).
+        """
+        from firmware_io.runner import (CALIBRATION_CURRENT_A, calibrate_sensors,
+                                        calibration_currents, record_calibration, rl_step)
+
+        sim = self.sensor_sim
+
+        def settle(dt_s: float) -> None:
+            self.current_a = rl_step(self.current_a, self.applied_voltage_v(),
+                                     self.resistance_ohm, self.inductance_h, dt_s)
+            b = sim.coil_part(self.current_a[None])[0]
+            a = analog_reading(b[None], sim.errors, self.noise_t, self.rng)[0].reshape(-1, 3)
+            for sensor, bi in zip(self.tlv, a + self.field_offset_t):
+                sensor.field_t = tuple(bi)
+
+        amp = min(CALIBRATION_CURRENT_A if current_a is None else current_a,
+                  self.supply_v / self.resistance_ohm)
+        currents = calibration_currents(self.array.n_coils, amp, frames)
+        tau = self.inductance_h / self.resistance_ohm
+        top, bottom, applied = record_calibration(self.coils, self.sensors, currents,
+                                                  settle_s=7 * tau, sleep=settle)
+        settle(7 * tau)          # coils off: decayed before the run starts
+        self.current_a[:] = 0.0
+        return calibrate_sensors(model, top, bottom, applied)
+
     def sensor_source(self, position_at, period_s: float) -> "SimSensorSource":
         """The runner's sensor source on this device; ``position_at(t_s)`` is the true position
         (the path given to :meth:`prepare`, one sample per control period ``period_s``)."""
@@ -368,24 +407,44 @@ def _interp_rows(steps, idx, values):
 
 
 class SimSensorSource:
-    """Sensor frames for :class:`firmware_io.runner.Runner` from the simulated sensor bus.
+    """The sensor side of :class:`firmware_io.runner.Runner` on the simulated sensor bus, with
+    the timing of the sensor thread (:class:`firmware_io.run.ThreadedSensorSource`).
 
     :meth:`tick` does the simulation work (fields into the TLV493D models, one pass of
-    :meth:`firmware_io.sensors.SensorArrays.read` on the sensor bus); the plant calls it before each
-    runner step, outside the runner's timed section, as a reader thread would on hardware.
-    Sensors are read back to back: a pass started at t completes at t + its wire time. In
-    master-controlled mode a TLV493D returns the conversion triggered by the previous read, so
-    each frame carries the field of the previous pass's start time.
+    :meth:`firmware_io.sensors.SensorArrays.read` on the sensor bus, the runner's
+    :class:`firmware_io.runner.SensorPipeline` on the frame); the plant calls it before each
+    runner step, outside the runner's timed section, as the sensor thread runs beside the
+    control loop on hardware. The thread's cycle is: read a pass (its wire time on the bus
+    model), then fit (its measured compute time, this thread's CPU clock), publish the
+    :class:`firmware_io.runner.Fix`, read the next pass. The runner takes a result at the first
+    control step at or after the time it is published. In master-controlled mode a TLV493D
+    returns the conversion triggered by the previous read, so each frame carries the field of
+    the previous pass's start time. Without an attached pipeline raw frames are handed over.
+
+    Attributes
+    ----------
+    fit_s : list of float
+        Compute time of each fit on the sensor side, s.
+    frame_truth_m : ndarray (3,) or None
+        The true position at the field time of the last frame read (diagnostics).
     """
 
     def __init__(self, device: SimulatedDevice, position_at, period_s: float):
         self.device, self.position_at, self.period_s = device, position_at, period_s
         self.in_flight = None      # (ready time s, field time s, reading)
-        self.ready = None          # a frame the runner has not taken yet
+        self.fitted = None         # (publish time s, result, field time s)
+        self.ready = None          # a result the runner has not taken yet
         self.last_set_s = 0.0
         self.frame_truth_m = None
+        self.pipeline = None
+        self.fit_s: list = []
+
+    def attach(self, pipeline) -> None:
+        self.pipeline = pipeline
 
     def tick(self, t_s: float) -> None:
+        import time as _time
+
         from firmware_io.runner import SensorFrame
 
         dev = self.device
@@ -393,8 +452,22 @@ class SimSensorSource:
             ready_s, field_s, reading = self.in_flight
             if t_s + 1e-12 < ready_s:
                 return
-            self.ready = SensorFrame(reading.top_t, reading.bottom_t, reading.status, field_s)
+            self.in_flight = None
+            frame = SensorFrame(reading.top_t, reading.bottom_t, reading.status, field_s)
             self.frame_truth_m = self.position_at(field_s)   # diagnostics: where it really was
+            fit_s = 0.0
+            if self.pipeline is not None:
+                c0 = _time.thread_time()
+                frame = self.pipeline.process(frame)
+                fit_s = _time.thread_time() - c0
+                self.fit_s.append(fit_s)
+            self.fitted = (ready_s + fit_s, frame, field_s)
+        if self.fitted is not None:
+            publish_s, result, field_s = self.fitted
+            if t_s + 1e-12 < publish_s:
+                return
+            self.fitted = None
+            self.ready = result
         step = int(round(t_s / self.period_s))
         b = dev.sensor_readings_t(min(step, len(dev.path_m) - 1), self.position_at(t_s),
                                   dev.current_a)
@@ -417,13 +490,16 @@ class SimSensorSource:
 
 @dataclass
 class SimulationResult:
-    """Per-step columns (SI; the run.csv columns), the faults as injected (time s, type; overrun
-    and over-limit wait for a running step) and the runner's fault log."""
+    """Per-step columns (SI; the run.csv columns, plus ``new_frame`` (bool: the step took in a
+    new sensor result) and, when the runner profiles, ``stage_<name>_s``), the faults as
+    injected (time s, type; overrun and over-limit wait for a running step), the runner's fault
+    log and the sensor side's fit times (s, one per frame)."""
 
     columns: dict
     faults: list
     fault_log: list
     period_s: float
+    fit_s: list = field(default_factory=list)
 
 
 def _inject(device, runner, name: str, t_s: float, state: dict) -> None:
@@ -515,6 +591,8 @@ def simulate(device: SimulatedDevice, runner_factory, trajectory: Trajectory, *,
         "fx_n", "fy_n", "fz_n", "fx_obj_n", "fy_obj_n", "fz_obj_n", "loop_s")}
     cur = np.zeros((n_steps, n))
     cmd = np.zeros((n_steps, n))
+    new_frame = np.zeros(n_steps, dtype=bool)
+    stages: dict = {}
     states = []
     bar = tqdm(total=n_steps, desc="simulate", unit="step", disable=not progress,
                mininterval=0.5)
@@ -552,6 +630,10 @@ def simulate(device: SimulatedDevice, runner_factory, trajectory: Trajectory, *,
             cols["fx_obj_n"][s], cols["fy_obj_n"][s], cols["fz_obj_n"][s] = \
                 scene_force(true_p[s], vel[s])
         cols["loop_s"][s] = rec.loop_s
+        new_frame[s] = rec.new_frame
+        if runner.profile and rec.state == "running":
+            for name, v in runner.stages.items():
+                stages.setdefault(name, np.full(n_steps, np.nan))[s] = v
         cur[s] = i_true
         cmd[s] = rec.command_a
         states.append(rec.state)
@@ -565,7 +647,11 @@ def simulate(device: SimulatedDevice, runner_factory, trajectory: Trajectory, *,
     for k in range(n):
         cols[f"cmd{k + 1}_a"] = cmd[:, k]
     cols["state"] = np.array(states)
-    return SimulationResult(cols, injected, list(runner.fault_log), period_s)
+    cols["new_frame"] = new_frame
+    for name, v in stages.items():
+        cols[f"stage_{name}_s"] = v
+    return SimulationResult(cols, injected, list(runner.fault_log), period_s,
+                            list(getattr(source, "fit_s", [])))
 
 
 def _step(runner, ts: float, extra: dict):
@@ -617,6 +703,32 @@ def force_lag_s(reference, rendered, period_s: float, max_lag_s: float = 0.2) ->
     return float(np.argmax(scores) * period_s)
 
 
+def _p50_p99(x) -> dict:
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    if not len(x):
+        return {"n": 0, "p50_s": None, "p99_s": None}
+    return {"n": int(len(x)), "p50_s": float(np.percentile(x, 50)),
+            "p99_s": float(np.percentile(x, 99))}
+
+
+def loop_by_kind(result: SimulationResult) -> dict:
+    """Compute time of the running steps without and with a new sensor result (p50, p99, s),
+    per stage when the runner profiled, and of the fit on the sensor side."""
+    c = result.columns
+    running = c["state"] == "running"
+    fresh = np.asarray(c.get("new_frame", np.zeros(len(running), bool)), bool)
+    out = {"without_frame": _p50_p99(c["loop_s"][running & ~fresh]),
+           "with_frame": _p50_p99(c["loop_s"][running & fresh]),
+           "sensor_side_fit": _p50_p99(result.fit_s)}
+    stages = [k for k in c if k.startswith("stage_")]
+    if stages:
+        out["stages"] = {k[6:-2]: {"without_frame": _p50_p99(c[k][running & ~fresh]),
+                                   "with_frame": _p50_p99(c[k][running & fresh])}
+                         for k in stages}
+    return out
+
+
 def summarize(result: SimulationResult, causes: dict | None = None) -> dict:
     """summary.json: force error RMS/p95, localization MAE, loop p50/p99, faults, time to safe."""
     c = result.columns
@@ -646,6 +758,7 @@ def summarize(result: SimulationResult, causes: dict | None = None) -> dict:
         "localization_p95_m": float(np.percentile(loc, 95)) if len(loc) else None,
         "loop_p50_s": float(np.percentile(loop, 50)) if len(loop) else None,
         "loop_p99_s": float(np.percentile(loop, 99)) if len(loop) else None,
+        "loop_by_kind": loop_by_kind(result),
         "max_command_a": float(np.abs(currents).max()),
         "max_total_command_a": float(np.abs(currents).sum(axis=1).max()),
         "faults": time_to_safe(c, result.faults, result.period_s),
@@ -746,8 +859,11 @@ def _shade_faults(ax, t, running) -> None:
         ax.axvspan(t[a], t[min(b, len(t) - 1)], color="tab:red", alpha=0.08, lw=0)
 
 
-def force_error_causes(device: SimulatedDevice, fieldmap, result: SimulationResult) -> dict:
-    """Split the rendered-force error into its causes, over the running steps.
+def force_error_causes(device: SimulatedDevice, fieldmap, result: SimulationResult, *,
+                       max_steps: int = 500) -> dict:
+    """Split the rendered-force error into its causes, over the running steps (at most
+    ``max_steps`` of them, evenly spaced: the exact coupled model at each estimate is the
+    costly part; RMS and p95 of an evenly spaced subsample of a 4000-step run).
 
     With p the true and q the estimated position, I* the command and I the true currents,
     F(.) / F0(.) the exact force per ampere and bias force and Fm / F0m the map's::
@@ -765,6 +881,9 @@ def force_error_causes(device: SimulatedDevice, fieldmap, result: SimulationResu
     run = np.flatnonzero(c["state"] == "running")
     if len(run) == 0:
         return {}
+    n_running = len(run)
+    if n_running > max_steps:
+        run = run[np.unique(np.linspace(0, n_running - 1, max_steps).round().astype(int))]
     m = device.moment
     n = device.array.n_coils
     q = np.stack([c["xe_m"], c["ye_m"], c["ze_m"]], 1)[run]
@@ -805,7 +924,8 @@ def force_error_causes(device: SimulatedDevice, fieldmap, result: SimulationResu
                      "fz_p95_n": float(np.percentile(np.abs(v[:, 2]), 95)),
                      "norm_rms_n": float(np.sqrt(np.mean(mag ** 2))),
                      "norm_p95_n": float(np.percentile(mag, 95))}
-    out["steps"] = int(len(run))
+    out["steps"] = int(n_running)
+    out["steps_evaluated"] = int(len(run))
     return out
 
 
@@ -817,48 +937,13 @@ def _inside(fieldmap, q) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------
 # the whole simulated run (designkit run --simulate)
 
-COIL_SURFACE_HEAT_TRANSFER_W_M2_K = 10.0
-"""Natural convection from the winding's outer surface and end faces (assumed), W/(m^2 K): sets
-the winding's cooling time constant m c / (h A) of the runner's I^2 t guard."""
-
-
-def drive_data(design) -> dict:
-    """The runner's drive data from the design (SI): coil R at the operating temperature, L
-    (with the core), the supply (at most the MD10C's 30 V), the current bounds and the I^2 t
-    budget (adiabatic heating from the operating temperature to 100 C at the current limit,
-    cooled with the time constant m c / (h A))."""
-    from . import electrical
-    from .coil import Coil
-
-    coil = Coil.from_design(design)
-    r = coil.resistance(design.wire)
-    ind = coil.inductance(design.wire)
-    w = design.wire
-    mass = electrical.copper_mass(design.coil.inner_radius_m, design.coil.outer_radius_m,
-                                  design.coil.turns, w.diameter_m)
-    limit = min(design.drive.max_current_a, design.drive.driver_max_voltage_v / r,
-                design.drive.supply_voltage_v / r)
-    t_max = electrical.time_to_temperature(mass, limit, r, w, w.operating_temperature_c,
-                                           electrical.DEFAULT_MAX_TEMPERATURE_C)
-    budget = limit ** 2 * t_max
-    c = design.coil
-    area = 2 * math.pi * c.outer_radius_m * c.length_m + 2 * math.pi * (
-        c.outer_radius_m ** 2 - c.inner_radius_m ** 2)
-    tau = mass * electrical.COPPER_SPECIFIC_HEAT_J_KG_K / (COIL_SURFACE_HEAT_TRANSFER_W_M2_K * area)
-    return {"resistance_ohm": [r] * design.array.rows * design.array.columns,
-            "inductance_h": [ind] * design.array.rows * design.array.columns,
-            "supply_voltage_v": min(design.drive.supply_voltage_v,
-                                    design.drive.driver_max_voltage_v),
-            "current_limit_a": float(limit), "total_current_a": design.drive.total_current_a,
-            "thermal_continuous_current_a": math.sqrt(budget / tau),
-            "thermal_time_constant_s": tau}
-
-
 def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "slide",
                    duration_s: float | None = None, faults: str = "none", map_path=None,
                    method: str = "model", period_s: float = 1e-3, unipolar: bool = False,
                    lam_n_per_m: float | None = None, rows: str = "force", seed: int = 0,
-                   out=Path("run-out"), progress: bool = True, array=None) -> dict:
+                   out=Path("run-out"), progress: bool = True, array=None,
+                   calibrate: bool = True, profile: bool = False,
+                   skip_force_n: float = 0.0) -> dict:
     """Build (or load) the map, compile the scene, close the runner around the simulated device,
     and write run.csv, summary.json, run.png and loop_timing.png into ``out``. Returns the
     summary. Every input is checked before anything is computed.
@@ -866,16 +951,22 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
     ``rows``: 'force' renders the object's 3-D force, 'fz' only its vertical component (the
     thesis' eq. 4.6; the runner then evaluates only the two rows of A(p) Fz needs). ``array``:
     the design's CoilArray when the caller has one (its coupled solve is reused).
+    ``calibrate``: the start-up sensor calibration (:meth:`SimulatedDevice.calibrate_sensors`)
+    before the run; the localizer then weighs the sensors with
+    :data:`firmware_io.runner.CALIBRATED_RELATIVE_ERROR`. ``profile``: the runner times each stage of its step
+    (summary ``loop_by_kind['stages']``). ``skip_force_n``: the runner's coil-skip force, N.
     """
-    from firmware_io.allocation import allocate
-    from firmware_io.localization import ConstantVelocityKalman, Localizer
+    from firmware_io.allocation import Allocator
+    from firmware_io.localization import Localizer
     from firmware_io.mapfile import MapFile
-    from firmware_io.runner import Runner, RunnerConfig, SceneForce
+    from firmware_io.runner import (CALIBRATED_RELATIVE_ERROR, ConstantVelocityTracker, Runner,
+                                    RunnerConfig, SceneForce)
     from firmware_io.scene import Scene
 
     from . import fieldmap
     from ._io import write_json_atomic
     from .array import CoilArray
+    from .coil import Coil
     from .design import Design, load_design
     from .render.laws import ConstraintLaw
     from .render.scenefile import compile_scene, make_object
@@ -886,15 +977,10 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
     if not 1e-4 <= period_s <= 0.05:
         raise BadInputError("period", "in [0.1, 50] ms", period_s * 1e3)
     virtual = make_object(obj)
-    if trajectory == "slide":
-        path = slide_trajectory(lambda x, y: virtual.height(np.c_[x, y, np.zeros_like(x)]),
-                                duration_s=duration_s or 4.0)
-    elif trajectory == "poke":
-        path = poke_trajectory(lambda x, y: virtual.height(np.c_[x, y, np.zeros_like(x)]),
-                               duration_s=duration_s or 3.0)
-    else:
-        path = Trajectory.from_csv(trajectory)
-    duration = float(duration_s or path.duration_s)
+    scripted = trajectory in ("slide", "poke")
+    path = None if scripted else Trajectory.from_csv(trajectory)
+    duration = float(duration_s or (path.duration_s if path is not None
+                                     else 4.0 if trajectory == "slide" else 3.0))
     if not 0 < duration <= 600:
         raise BadInputError("duration", "in (0, 600] s", duration)
     schedule = FaultSchedule.parse(faults, duration)
@@ -902,6 +988,14 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
     out.mkdir(parents=True, exist_ok=True)
 
     array = array if array is not None else CoilArray.from_design(design)
+    if scripted:
+        # the magnet cannot go below the upper sensor board: its centre stays half its length
+        # and 1 mm (the board and the sensor package) above the highest sensor
+        floor = (float(np.max(array.sensor_positions_m()[0, :, 2]))
+                 + design.magnet.length_m / 2 + 1e-3)
+        make = slide_trajectory if trajectory == "slide" else poke_trajectory
+        path = make(lambda x, y: virtual.height(np.c_[x, y, np.zeros_like(x)]),
+                    duration_s=duration, z_limits_m=(floor, 0.078))
     if map_path is None:
         map_path = out / "map.npz"
         data = fieldmap.build(design, array=array, progress=progress)
@@ -912,19 +1006,30 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
                                law=ConstraintLaw(lam), map_design_sha256=fmap.design_sha256,
                                extra_meta={"object": obj, "rows": rows})
     scene = Scene.load(scene_path, expected_design_sha256=fmap.design_sha256)
-    drive = drive_data(design)
+    drive = drive_data(design, Coil.from_design(design))
     device = SimulatedDevice(design, array, seed=seed, resistance_ohm=drive["resistance_ohm"][0],
                              inductance_h=drive["inductance_h"][0])
+
+    # what the controller knows of the magnet besides the map: its l = 3 multipole term (the
+    # map does not carry it); the sensors are calibrated at start-up, coils only
+    mg = design.magnet
+    loc_kw = {"octupole_m2": (mg.length_m / 2) ** 2 - 0.75 * mg.radius_m ** 2}
+    if calibrate and method != "learned":
+        base = Localizer.from_map(map_path, method=method, **loc_kw)
+        loc_kw.update(calibration=device.calibrate_sensors(base.model),
+                      relative_error=CALIBRATED_RELATIVE_ERROR)
 
     def factory(source, clock, hook):
         cfg = RunnerConfig(**{k: tuple(v) if isinstance(v, list) else v
                               for k, v in drive.items()},
                            control_period_s=period_s, unipolar=unipolar,
-                           force_axes="z" if rows == "fz" else "xyz")
-        localizer = Localizer.from_map(map_path, method=method)
-        runner = Runner(fmap, SceneForce(scene), localizer, ConstantVelocityKalman(),
-                        hook(allocate), device.coils, source, cfg, clock=clock,
+                           force_axes="z" if rows == "fz" else "xyz",
+                           skip_force_n=skip_force_n)
+        localizer = Localizer.from_map(map_path, method=method, **loc_kw)
+        runner = Runner(fmap, SceneForce(scene), localizer, ConstantVelocityTracker(),
+                        hook(Allocator()), device.coils, source, cfg, clock=clock,
                         log=lambda line: print(line) if progress else None)
+        runner.profile = profile
         runner.start()
         return runner
 

@@ -55,28 +55,42 @@ _MULT_TOL = 1e-13
 """Multipliers above -_MULT_TOL x (gradient scale) count as non-negative (rounding level,
 three decades below the eps-level multipliers of the tie-break)."""
 
+_EXACT_FIT_TOL = 1e-11
+"""The least-norm exact fit is accepted when ||F x - f|| <= this x (||f|| + ||F|| ||x||): two
+decades inside the 1e-9 KKT tolerance (the gradient F^T r is at most ||F|| ||r||)."""
 
-def _as_matrix(force_matrix) -> np.ndarray:
-    try:
-        f = np.asarray(force_matrix, dtype=float)
-    except (TypeError, ValueError):
-        raise BadInputError("force_matrix", "a (k, n) array of finite numbers, N/A",
-                            type(force_matrix).__name__) from None
-    if f.ndim == 1:
-        f = f[None, :]
-    if f.ndim != 2 or f.shape[0] < 1 or f.shape[1] < 1:
-        raise BadInputError("force_matrix", "a (k, n) array with k, n >= 1, N/A",
-                            f"shape {f.shape}")
-    if not np.all(np.isfinite(f)):
-        bad = np.argwhere(~np.isfinite(f))[0]
-        raise BadInputError("force_matrix", "finite (no NaN or Inf), N/A",
-                            f"{f[tuple(bad)]} at index {tuple(int(b) for b in bad)}")
-    return f
+"""Dual Newton steps before the primal active-set phase takes over (a pattern seen twice ends
+them earlier)."""
+
+_INF = math.inf
+
+
+def _bad_matrix(fm):
+    bad = np.argwhere(~np.isfinite(fm))[0]
+    raise BadInputError("force_matrix", "finite (no NaN or Inf), N/A",
+                        f"{fm[tuple(bad)]} at index {tuple(int(b) for b in bad)}")
 
 
 def _check_inputs(force_matrix, target, current_limit, total_limit, bias):
-    fm = _as_matrix(force_matrix)
+    """(F (k, n) ndarray, f (k,) ndarray, u list of n floats, I_t float); cheap checks first
+    (this runs every control period), the precise message only on failure."""
+    try:
+        fm = np.asarray(force_matrix, dtype=float)
+    except (TypeError, ValueError):
+        raise BadInputError("force_matrix", "a (k, n) array of finite numbers, N/A",
+                            type(force_matrix).__name__) from None
+    if fm.ndim != 2:
+        if fm.ndim != 1:
+            raise BadInputError("force_matrix", "a (k, n) array with k, n >= 1, N/A",
+                                f"shape {fm.shape}")
+        fm = fm[None, :]
     k, n = fm.shape
+    if k < 1 or n < 1:
+        raise BadInputError("force_matrix", "a (k, n) array with k, n >= 1, N/A",
+                            f"shape {fm.shape}")
+    if not math.isfinite(float(np.add.reduce(np.abs(fm), axis=None))):
+        if not np.all(np.isfinite(fm)):  # else only the sum overflowed
+            _bad_matrix(fm)
     try:
         t = np.asarray(target, dtype=float).reshape(-1)
     except (TypeError, ValueError):
@@ -84,34 +98,38 @@ def _check_inputs(force_matrix, target, current_limit, total_limit, bias):
     if t.shape != (k,):
         raise BadInputError("target", f"{k} values (one per row of force_matrix), N",
                             f"shape {np.shape(target)}")
-    if not np.all(np.isfinite(t)):
-        raise BadInputError("target", "finite (no NaN or Inf), N", t.tolist())
+    tl_ = t.tolist()
+    if not all(map(math.isfinite, tl_)):
+        raise BadInputError("target", "finite (no NaN or Inf), N", tl_)
     if bias is not None:
         b = np.asarray(bias, dtype=float).reshape(-1)
-        if b.shape != (k,) or not np.all(np.isfinite(b)):
+        if b.shape != (k,) or not all(map(math.isfinite, b.tolist())):
             raise BadInputError("bias", f"{k} finite values (the map's F0 in the target's "
                                 "rows), N", np.asarray(bias).tolist())
         t = t - b
-    try:
-        u = np.broadcast_to(np.asarray(current_limit, dtype=float), (n,)).astype(float)
-    except (TypeError, ValueError):
-        raise BadInputError("current_limit", f"a number or {n} numbers >= 0, A",
-                            current_limit) from None
-    if not np.all(np.isfinite(u)) or np.any(u < 0):
-        bad = u[~(np.isfinite(u) & (u >= 0))][0]
-        raise BadInputError("current_limit", "finite and >= 0 (per coil), A", float(bad))
+    if isinstance(current_limit, (float, int)) and not isinstance(current_limit, bool):
+        u = [float(current_limit)] * n
+    else:
+        try:
+            u = np.broadcast_to(np.asarray(current_limit, dtype=float), (n,)).tolist()
+        except (TypeError, ValueError):
+            raise BadInputError("current_limit", f"a number or {n} numbers >= 0, A",
+                                current_limit) from None
+    for ui in u:
+        if not 0.0 <= ui < _INF:
+            raise BadInputError("current_limit", "finite and >= 0 (per coil), A", ui)
     try:
         tl = float(total_limit)
     except (TypeError, ValueError):
         raise BadInputError("total_limit", ">= 0 A (inf: no budget)", total_limit) from None
-    if math.isnan(tl) or tl < 0:
+    if not tl >= 0.0:
         raise BadInputError("total_limit", ">= 0 A (inf: no budget); a negative budget "
                             "makes sum |I| <= I_t infeasible", tl)
     return fm, t, u, tl
 
 
 def allocate(force_matrix, target, current_limit, total_limit, *, unipolar: bool = False,
-             bias=None, max_iter: int | None = None):
+             bias=None, max_iter: int | None = None, warm: "Allocator | None" = None):
     """Currents that render ``target`` as closely as the bounds allow (thesis eq. 4.9).
 
     Parameters
@@ -133,6 +151,9 @@ def allocate(force_matrix, target, current_limit, total_limit, *, unipolar: bool
     max_iter : int, optional
         Active-set iteration cap (default 50 + 10 n); the returned currents are feasible even
         if it is hit.
+    warm : Allocator, optional
+        Keeps the dual point of the previous solve as the start of this one (see `Allocator`);
+        the answer is the same with or without it.
 
     Returns
     -------
@@ -147,233 +168,364 @@ def allocate(force_matrix, target, current_limit, total_limit, *, unipolar: bool
         Non-finite matrix/target/bias, wrong shapes, negative or NaN limits, I_t < 0.
     """
     fm, t, u, tl = _check_inputs(force_matrix, target, current_limit, total_limit, bias)
-    x = _solve(fm, t, u, tl, bool(unipolar), max_iter)
+    x = _solve(fm, t, u, tl, bool(unipolar), max_iter, warm)
     r = fm @ x - t
     return x, float(r @ r)
 
 
-def _solve(fm, f, u, tl, unipolar, max_iter):
+class Allocator:
+    """`allocate` with a warm start, for a control loop that solves at nearby positions.
+
+    It keeps the working set of the last solve (which coils were free, at 0, at +-u, and
+    whether the budget held with equality) and tries that face first: when it is still optimal
+    (the usual case between two control periods) the solve is one face solve, its multiplier
+    check and the eps -> 0 polish. The result is the exact answer of `allocate` whatever the
+    start (a stale face is only a start for the same active-set method). A call with another
+    number of rows or coils, another drive mode, or limits that change which coils are off,
+    starts cold.
+
+    Usage::
+
+        alloc = Allocator()
+        currents_a, residual = alloc(F, f_n, 6.0, 54.0, unipolar=True)   # same as allocate
+    """
+
+    __slots__ = ("face", "key")
+
+    def __init__(self):
+        self.face = None    # (free, sign, fixed value / u_i, budget) of the last final face
+        self.key = None     # (k, n, unipolar) it belongs to
+
+    def reset(self) -> None:
+        """Forget the warm start."""
+        self.face = None
+        self.key = None
+
+    def __call__(self, force_matrix, target, current_limit, total_limit, *,
+                 unipolar: bool = False, bias=None, max_iter: int | None = None):
+        return allocate(force_matrix, target, current_limit, total_limit, unipolar=unipolar,
+                        bias=bias, max_iter=max_iter, warm=self)
+
+
+def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
     k, n = fm.shape
-    umax = float(u.max())
-    tl_eff = min(tl, float(_add(u)))
+    umax = max(ul)
+    tl_eff = min(tl, math.fsum(ul))
     if umax == 0.0 or tl_eff == 0.0:
         return np.zeros(n)
     # scale currents by u_max and forces by the largest achievable column force
-    cs = math.sqrt(float((fm * fm).sum(axis=0).max())) * umax
-    fscale = max(cs, float(np.abs(f).max()))
+    colsq = np.add.reduce(fm * fm, axis=0)
+    cs = math.sqrt(float(np.maximum.reduce(colsq))) * umax
+    fmax = float(np.maximum.reduce(np.abs(f))) if k > 1 else abs(float(f[0]))
+    fscale = cs if cs > fmax else fmax
     if fscale == 0.0:
         return np.zeros(n)
+    if not math.isfinite(fscale) or not math.isfinite(cs):
+        # entries near the float range: rescale once more before squaring
+        big = float(np.maximum.reduce(np.abs(fm), axis=None))
+        return _solve(fm / big, f / big, ul, tl, unipolar, max_iter, None)
     fs = fm * (umax / fscale)
     ft = f / fscale
-    rows = _or(fs != 0.0, axis=1)
-    if not _and(rows):  # an all-zero row (e.g. torque about m) adds a constant residual only
-        if not _or(rows):
+    rows = np.logical_or.reduce(fs != 0.0, axis=1)
+    if not rows.all():  # an all-zero row (e.g. torque about m) adds a constant residual only
+        if not rows.any():
             return np.zeros(n)
         fs, ft = fs[rows], ft[rows]
         k = fs.shape[0]
-    us = u / umax
-    ts = tl_eff / umax
-    budget_possible = ts < _add(us) * (1 - 1e-15)
-    c2 = float((fs * fs).sum(axis=0).max())
+    inv_umax = 1.0 / umax
+    usl = [ui * inv_umax for ui in ul]
+    ts = tl_eff * inv_umax
+    budget_possible = ts < math.fsum(usl) * (1 - 1e-15)
+    tsb = ts if budget_possible else _INF
+    c2 = float(np.maximum.reduce(colsq)) * (umax / fscale) ** 2
     eps = EPS_REL * max(c2, 1e-300)
+    lo = 0.0 if unipolar else -1.0
+    ffT = fs @ fs.T
+
+    # ---- fast exit: the least-norm exact fit F^T (F F^T)^-1 f inside the bounds is the answer
+    # (a 1e-14 shift keeps the solve regular whatever F; one refinement step removes it)
+    mreg = ffT + (1e-14 * c2) * _eye(k)
+    y0 = _fast_solve(mreg, ft)
+    y0 += _fast_solve(mreg, ft - ffT @ y0)
+    x0 = fs.T @ y0
+    xl = x0.tolist()
+    if _inside(xl, usl, tsb, unipolar):
+        r = fs @ x0 - ft
+        lim = _EXACT_FIT_TOL * (math.sqrt(float(ft @ ft)) + math.sqrt(c2 * float(x0 @ x0)))
+        if float(r @ r) <= lim * lim:
+            if warm is not None:
+                warm.face = ([True] * n, [1.0 if v >= 0.0 else -1.0 for v in xl], [0.0] * n,
+                             False)
+                warm.key = (k, n, unipolar)
+            return x0 * umax
+
     h = fs.T @ fs
     q = fs.T @ ft
     gscale = c2 + math.sqrt(float(q @ q)) + 1e-300
     tol = _MULT_TOL * gscale
-    lo = 0.0 if unipolar else -1.0
     if max_iter is None:
         max_iter = 50 + 10 * n
-
-    # ---- start: a few semismooth-Newton steps on the k-dimensional dual guess the active set
-    x = _dual_guess(fs, ft, us, ts if budget_possible else np.inf, eps, unipolar)
-    ab = np.abs(x)
-    sg = np.where(x >= 0, 1.0, -1.0)
-    free = (ab > 0.0) & (ab < us)
-    bud = bool(budget_possible and _add(ab) >= ts * (1 - 1e-12))
-    if bud and not _or(free):
-        bud = False
-    fixed_val = np.where(free, 0.0, x)
-
-    state = _active_set(fs, ft, h, q, us, ts, eps, tol, unipolar, budget_possible, k, n,
-                        max_iter, x, free, sg, fixed_val, bud)
+    state = None
+    key = (k, n, unipolar)
+    if warm is not None and warm.face is not None and warm.key == key:
+        # ---- warm start: the last final face, if its minimizer is feasible here
+        free, sg, rel, bud = warm.face
+        fixv = [r * ui for r, ui in zip(rel, usl)]
+        if bud and not budget_possible:
+            bud = False
+        xh = _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k)
+        if _on_face(xh.tolist(), free, sg, usl, tsb, bud):
+            state = _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible,
+                                k, n, max_iter, xh, free, sg, fixv, bud, at_face=True)
+    if state is None:
+        # ---- cold start: the projection of the least-norm exact fit and its working set
+        xl, _ = _proj_list(xl, usl, tsb, unipolar)
+        x = np.array(xl)
+        free = [0.0 < abs(v) < ui for v, ui in zip(xl, usl)]
+        sg = [1.0 if v >= 0.0 else -1.0 for v in xl]
+        fixv = [0.0 if fr else v for v, fr in zip(xl, free)]
+        bud = budget_possible and any(free) and math.fsum(map(abs, xl)) >= ts * (1 - 1e-12)
+        state = _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n,
+                            max_iter, x, free, sg, fixv, bud)
     # ---- polish: the eps -> 0 limit on the final face (the lexicographic answer: least residual,
     # then least energy) removes the Tikhonov bias when it stays on the face; if it leaves the
     # face, a continuation pass with eps 1e4 x smaller (warm started, usually 1 face) first
-    x, ok = _polish(fs, ft, h, q, us, ts, k, *state)
+    x, ok, y = _polish(fs, ft, usl, ts, k, *state)
     if not ok:
-        state = _active_set(fs, ft, h, q, us, ts, eps * 1e-4, tol, unipolar, budget_possible,
+        state = _active_set(fs, ft, h, q, usl, ts, eps * 1e-4, tol, unipolar, budget_possible,
                             k, n, max_iter, *state)
-        x, _ = _polish(fs, ft, h, q, us, ts, k, *state)
+        x, _, y = _polish(fs, ft, usl, ts, k, *state)
+    # ---- an exact fit: the least-energy stage on its own, free of eps (see _least_energy)
+    lim = _EXACT_FIT_TOL * (math.sqrt(float(ft @ ft)) + math.sqrt(c2 * float(x @ x)))
+    r = fs @ x - ft
+    if float(r @ r) <= lim * lim:
+        x2 = _least_energy(fs, ft, usl, tsb, unipolar, y0 if y is None else y, lim, c2, k)
+        if x2 is not None:
+            x = x2
+            if warm is not None:
+                xl = x.tolist()
+                free = [0.0 < abs(v) < ui for v, ui in zip(xl, usl)]
+                state = (x, free, [1.0 if v >= 0.0 else -1.0 for v in xl],
+                         [0.0 if fr else v for v, fr in zip(xl, free)],
+                         budget_possible and any(free)
+                         and math.fsum(map(abs, xl)) >= ts * (1 - 1e-12))
+    if warm is not None:
+        _, free, sg, fixv, bud = state
+        warm.face = (free, sg, [v / ui if ui > 0.0 else 0.0 for v, ui in zip(fixv, usl)], bud)
+        warm.key = key
     # ---- guarantee: never outside the bounds, whatever round-off did
-    x = _clip(x, lo * us, us)
-    tot = float(_add(np.abs(x)))
+    us = np.array(usl)
+    x = np.minimum(np.maximum(x, lo * us), us)
+    tot = float(np.add.reduce(np.abs(x)))
     if tot > ts:
         x *= ts / tot
     return x * umax
 
 
-
-def _polish(fs, ft, h, q, us, ts, k, x, free, sg, fixed_val, bud):
-    """(x, accepted): the eps = 0 face minimizer if it stays on the face and is no worse."""
-    if not _or(free):
-        return x, True
-    xp = _face_minimizer(fs, ft, h, q, 0.0, free, sg, fixed_val, bud, ts, k)
-    a = sg[free] * xp[free]
-    slack = 1e-12 * float(us.max())
-    if _and(a >= -slack) and _and(a <= us[free] + slack):
-        xp[free] = sg[free] * _clip(a, 0.0, us[free])
-        rp, rx = fs @ xp - ft, fs @ x - ft
-        if rp @ rp <= rx @ rx:
-            return xp, True
-    return x, False
+_EYES = [np.eye(i) for i in range(16)]
 
 
-def _active_set(fs, ft, h, q, us, ts, eps, tol, unipolar, budget_possible, k, n, max_iter,
-                x, free, sg, fixed_val, bud):
-    """Primal active-set iterations from a feasible point and its working set."""
-    idx = np.arange(n)
-    solve_face = True
-    for _ in range(max_iter):
-        if solve_face:
-            xh = _face_minimizer(fs, ft, h, q, eps, free, sg, fixed_val, bud, ts, k)
-            p = xh - x
-            j = idx[free]
-            if j.size:
-                sp = sg[j] * p[j]
-                ax = sg[j] * x[j]
-                alpha, block, kind = 1.0, -1, 0
-                neg = sp < 0
-                if _or(neg):
-                    a = ax[neg] / -sp[neg]
-                    m = int(np.argmin(a))
-                    if a[m] < alpha:
-                        alpha, block, kind = float(a[m]), int(j[neg][m]), 0
-                pos = sp > 0
-                if _or(pos):
-                    a = (us[j[pos]] - ax[pos]) / sp[pos]
-                    m = int(np.argmin(a))
-                    if a[m] < alpha:
-                        alpha, block, kind = float(a[m]), int(j[pos][m]), 1
-                if budget_possible and not bud:
-                    rate = float(_add(sp))
-                    if rate > 0:
-                        a = (ts - float(_add(np.abs(x)))) / rate
-                        if a < alpha:
-                            alpha, block, kind = max(a, 0.0), -1, 2
-                if alpha < 1.0:
-                    alpha = max(alpha, 0.0)
-                    # projected full step: may fix several coils at once; taken when it beats
-                    # the blocked step (keeps descent and feasibility)
-                    xt, _ = _project(xh, us, ts if budget_possible else np.inf, unipolar)
-                    xb = x + alpha * p
-                    if _phi(fs, ft, eps, xt) < _phi(fs, ft, eps, xb):
-                        x = xt
-                        ab = np.abs(x)
-                        free = (ab > 0.0) & (ab < us)
-                        sg = np.where(x >= 0, 1.0, -1.0)
-                        fixed_val = np.where(free, 0.0, x)
-                        bud = bool(budget_possible and _add(ab) >= ts * (1 - 1e-12)
-                                   and _or(free))
-                        continue
-                    x = xb
-                    if kind == 2:
-                        bud = True
-                    else:
-                        free[block] = False
-                        fixed_val[block] = 0.0 if kind == 0 else sg[block] * us[block]
-                        x[block] = fixed_val[block]
-                    # keep free coordinates on their side and inside the box under round-off
-                    jj = idx[free]
-                    x[jj] = sg[jj] * _clip(sg[jj] * x[jj], 0.0, us[jj])
-                    if bud and not _or(free):
-                        bud = False  # implied by the bounds: a redundant working constraint
-                    continue
-            x = xh
-        # ---- at the face minimizer: multipliers of the working constraints
-        g = h @ x - q + eps * x
-        j = idx[free]
-        nu = 0.0
-        if bud and j.size:
-            nu = float(-(sg[j] * g[j]).mean())
-        lam = np.full(n, np.inf)
-        zero = ~free & (fixed_val == 0.0)
-        if unipolar:
-            lam[zero] = g[zero] + nu
-        else:
-            lam[zero] = nu - np.abs(g[zero])
-        up = ~free & (fixed_val != 0.0)
-        lam[up] = -(np.sign(fixed_val[up]) * g[up] + nu)
-        lam[us == 0.0] = np.inf  # a coil with u_i = 0 is off: nothing to release
-        m = int(np.argmin(lam))
-        lam_b = nu if bud else np.inf
-        if min(lam[m], lam_b) >= -tol:
-            break
-        if lam_b < lam[m]:
-            bud = False
-        else:
-            free[m] = True
-            if fixed_val[m] == 0.0:
-                sg[m] = 1.0 if (unipolar or g[m] < 0) else -1.0
-            else:
-                sg[m] = 1.0 if fixed_val[m] > 0 else -1.0
-            fixed_val[m] = 0.0
-        solve_face = True
-    return x, free, sg, fixed_val, bud
+def _eye(m):
+    return _EYES[m] if m < 16 else np.eye(m)
 
-def _face_minimizer(fs, ft, h, q, eps, free, sg, fixed_val, bud, ts, k):
-    """Minimizer of the regularized objective on the working face (free coils keep their sign;
-    with ``bud`` the budget holds with equality)."""
-    x = fixed_val.copy()
-    j = np.flatnonzero(free)
-    nf = j.size
-    if nf == 0:
-        return x
-    r = ft - fs @ fixed_val
-    s = sg[j]
-    fj = fs[:, j]
-    if nf > k + bud:
-        # kernel form: x_J = F_J^T y (+ t s), exact in the row space
-        if bud:
-            gmat = np.concatenate([fj.T, s[:, None]], axis=1)
-            top = fj @ gmat
-            top[:, :k] += eps * np.eye(k)
-            mat = np.concatenate([top, (s @ gmat)[None, :]], axis=0)
-            c = ts - float(_add(np.abs(fixed_val)))
-            w = _lsolve(mat, np.append(r, c), eps > 0)
-            x[j] = gmat @ w
-        else:
-            y = _lsolve(fj @ fj.T + eps * np.eye(k), r, eps > 0)
-            x[j] = fj.T @ y
-        return x
-    hj = h[np.ix_(j, j)] + eps * np.eye(nf)
-    b = fj.T @ r
-    if bud:
-        c = ts - float(_add(np.abs(fixed_val)))
-        mat = np.empty((nf + 1, nf + 1))
-        mat[:nf, :nf] = hj
-        mat[:nf, nf] = s
-        mat[nf, :nf] = s
-        mat[nf, nf] = 0.0
-        sol = _lsolve(mat, np.append(b, c), eps > 0)
-        x[j] = sol[:nf]
+
+def _inside(xl, usl, ts, unipolar):
+    """x (list) inside the box and the budget."""
+    tot = 0.0
+    if unipolar:
+        for v, ui in zip(xl, usl):
+            if not 0.0 <= v <= ui:
+                return False
+            tot += v
     else:
-        x[j] = _lsolve(hj, b, eps > 0)
-    return x
+        for v, ui in zip(xl, usl):
+            a = abs(v)
+            if not a <= ui:
+                return False
+            tot += a
+    return tot <= ts
 
 
-_add = np.add.reduce
-_and = np.logical_and.reduce
-_or = np.logical_or.reduce
+def _on_face(xl, free, sg, usl, ts, bud):
+    """x (list) feasible and on the working face: free coils on their side inside the box,
+    fixed ones where they were put, the budget kept."""
+    tot = 0.0
+    for v, fr, s, ui in zip(xl, free, sg, usl):
+        a = s * v
+        if fr and not 0.0 <= a <= ui:
+            return False
+        tot += abs(v)
+    return bud or tot <= ts
 
 
-def _clip(a, lo, hi):
-    """np.clip without its Python wrapper (this module's inner loops are call-bound)."""
-    return np.minimum(np.maximum(a, lo), hi)
+def _polish(fs, ft, usl, ts, k, x, free, sg, fixv, bud):
+    """(x, accepted, y): the eps = 0 face minimizer if it stays on the face (box and budget)
+    and is no worse; y its kernel coefficients (None in the primal form)."""
+    if not any(free):
+        return x, True, None
+    xp, y = _face_minimizer(fs, ft, 0.0, free, sg, fixv, bud, ts, k, want_y=True)
+    xpl = xp.tolist()
+    slack = 1e-12 * max(usl)
+    for i, fr in enumerate(free):
+        if fr:
+            a = sg[i] * xpl[i]
+            if not -slack <= a <= usl[i] + slack:
+                return x, False, None
+            xpl[i] = sg[i] * min(max(a, 0.0), usl[i])
+    if not bud and math.fsum(map(abs, xpl)) > ts * (1 + 1e-12):
+        return x, False, None  # the Tikhonov bias kept it inside the budget; eps -> 0 does not
+    xp = np.array(xpl)
+    rp, rx = fs @ xp - ft, fs @ x - ft
+    if rp @ rp <= rx @ rx:
+        return xp, True, y
+    return x, False, None
 
 
 def _phi(fs, ft, eps, x):
     r = fs @ x - ft
     return float(r @ r + eps * (x @ x))
+
+
+def _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n, max_iter,
+                x, free, sg, fixv, bud, at_face=False):
+    """Primal active-set iterations from a feasible point x and its working set: ``free``
+    (list of bool), the sign ``sg`` of each free coil, the value ``fixv`` of each fixed one and
+    ``bud`` (the budget held with equality). ``at_face``: x is already this face's minimizer."""
+    rng = range(n)
+    for _ in range(max_iter):
+        if at_face:
+            xh, at_face = x, False
+        else:
+            xh = _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k)
+        if any(free):
+            xl = x.tolist()
+            hl = xh.tolist()
+            alpha, block, kind, rate = 1.0, -1, 0, 0.0
+            for i in rng:
+                if free[i]:
+                    s = sg[i]
+                    sp = s * (hl[i] - xl[i])
+                    rate += sp
+                    if sp < 0.0:
+                        a = s * xl[i] / -sp
+                        if a < alpha:
+                            alpha, block, kind = a, i, 0
+                    elif sp > 0.0:
+                        a = (usl[i] - s * xl[i]) / sp
+                        if a < alpha:
+                            alpha, block, kind = a, i, 1
+            if budget_possible and not bud and rate > 0.0:
+                a = (ts - math.fsum(map(abs, xl))) / rate
+                if a < alpha:
+                    alpha, block, kind = max(a, 0.0), -1, 2
+            if alpha < 1.0:
+                alpha = max(alpha, 0.0)
+                xl = [v + alpha * (w - v) for v, w in zip(xl, hl)]
+                if kind == 2:
+                    bud = True
+                else:
+                    free = list(free)
+                    fixv = list(fixv)
+                    free[block] = False
+                    fixv[block] = 0.0 if kind == 0 else sg[block] * usl[block]
+                    xl[block] = fixv[block]
+                # keep free coordinates on their side and inside the box under round-off
+                for i in rng:
+                    if free[i]:
+                        s = sg[i]
+                        xl[i] = s * min(max(s * xl[i], 0.0), usl[i])
+                x = np.array(xl)
+                if bud and not any(free):
+                    bud = False  # implied by the bounds: a redundant working constraint
+                continue
+        x = xh
+        # ---- at the face minimizer: multipliers of the working constraints
+        g = (h @ x - q + eps * x).tolist()
+        nu = 0.0
+        if bud:
+            nf, acc = 0, 0.0
+            for i in rng:
+                if free[i]:
+                    nf += 1
+                    acc += sg[i] * g[i]
+            if nf:
+                nu = -acc / nf
+        best, m = _INF, -1
+        for i in rng:
+            if free[i] or usl[i] == 0.0:  # a coil with u_i = 0 is off: nothing to release
+                continue
+            fv = fixv[i]
+            if fv == 0.0:
+                lam = g[i] + nu if unipolar else nu - abs(g[i])
+            else:
+                lam = -(g[i] + nu) if fv > 0.0 else g[i] - nu
+            if lam < best:
+                best, m = lam, i
+        lam_b = nu if bud else _INF
+        if min(best, lam_b) >= -tol:
+            break
+        if lam_b < best:
+            bud = False
+        else:
+            free = list(free)
+            sg = list(sg)
+            fixv = list(fixv)
+            free[m] = True
+            fv = fixv[m]
+            if fv == 0.0:
+                sg[m] = 1.0 if (unipolar or g[m] < 0.0) else -1.0
+            else:
+                sg[m] = 1.0 if fv > 0.0 else -1.0
+            fixv[m] = 0.0
+    return x, free, sg, fixv, bud
+
+
+def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False):
+    """Minimizer of the regularized objective on the working face (free coils keep their sign;
+    with ``bud`` the budget holds with equality). ``want_y``: also the kernel coefficients y
+    (x_J = F_J^T y + t s) when the kernel form applies, else None."""
+    fixed = np.array(fixv)
+    j = [i for i, fr in enumerate(free) if fr]
+    nf = len(j)
+    if nf == 0:
+        return (fixed, None) if want_y else fixed
+    x = fixed.copy()
+    r = ft - fs @ fixed
+    fj = fs[:, j]
+    if bud:
+        s = np.array([sg[i] for i in j])
+        c = ts - math.fsum(map(abs, fixv))
+    if nf > k + bud:
+        # kernel form: x_J = F_J^T y (+ t s), exact in the row space
+        if bud:
+            gmat = np.concatenate([fj.T, s[:, None]], axis=1)
+            mat = np.concatenate([fj @ gmat, (s @ gmat)[None, :]], axis=0)
+            if eps:
+                mat[:k, :k] += eps * _eye(k)
+            w = _lsolve(mat, np.append(r, c), eps > 0)
+            x[j] = gmat @ w
+            y = w[:k]
+        else:
+            m = fj @ fj.T
+            if eps:
+                m += eps * _eye(k)
+            y = _lsolve(m, r, eps > 0)
+            x[j] = fj.T @ y
+        return (x, y) if want_y else x
+    hj = fj.T @ fj
+    if eps:
+        hj += eps * _eye(nf)
+    b = fj.T @ r
+    if bud:
+        mat = np.empty((nf + 1, nf + 1))
+        mat[:nf, :nf] = hj
+        mat[:nf, nf] = s
+        mat[nf, :nf] = s
+        mat[nf, nf] = 0.0
+        x[j] = _lsolve(mat, np.append(b, c), eps > 0)[:nf]
+    else:
+        x[j] = _lsolve(hj, b, eps > 0)
+    return (x, None) if want_y else x
 
 
 try:  # the gufunc behind np.linalg.solve without its Python wrapper and errstate (tiny systems)
@@ -390,61 +542,74 @@ def _lsolve(mat, rhs, regularized=True):
     floating-point guards; others fall back to least squares on an exactly singular face."""
     if regularized:
         out = _fast_solve(mat, rhs)
-        if _and(np.isfinite(out)):
+        if all(map(math.isfinite, out.tolist())):
             return out
     try:
         with np.errstate(invalid="raise", divide="raise", over="ignore"):
             out = _fast_solve(mat, rhs)
-        if _and(np.isfinite(out)):
+        if all(map(math.isfinite, out.tolist())):
             return out
     except (np.linalg.LinAlgError, FloatingPointError):
         pass
     return np.linalg.lstsq(mat, rhs, rcond=None)[0]
 
 
-def _project(v, us, ts, unipolar):
-    """Euclidean projection of v onto {lo <= x <= u, sum |x| <= ts}; also the threshold tau."""
-    a = v if unipolar else np.abs(v)
-    c = _clip(a, 0.0, us)
-    if _add(c) <= ts:
-        tau = 0.0
-    else:
-        # sum clip(a - tau, 0, u) is piecewise linear and decreasing in tau: bracket, interpolate
-        bp = np.concatenate([a - us, a])
-        bp = np.unique(bp[bp > 0.0])
-        sums = _clip(a[None, :] - bp[:, None], 0.0, us).sum(axis=1)
-        i = int(np.searchsorted(-sums, -ts))  # first breakpoint with sum <= ts
-        t_hi, s_hi = bp[i], sums[i]
-        t_lo, s_lo = (bp[i - 1], sums[i - 1]) if i > 0 else (0.0, _add(c))
-        tau = t_lo + (s_lo - ts) * (t_hi - t_lo) / max(s_lo - s_hi, 1e-300)
-        c = _clip(a - tau, 0.0, us)
-    return (c if unipolar else np.copysign(c, v)), tau
+def _proj_list(v, us, ts, unipolar):
+    """Euclidean projection of v (list) onto {lo <= x <= u, sum |x| <= ts} in plain Python
+    floats (n ~ 9: a loop is cheaper than a dozen numpy calls). Returns (x, tau), tau the
+    budget's soft threshold."""
+    a = v if unipolar else [abs(t) for t in v]
+    c = [(ai if ai < ui else ui) if ai > 0.0 else 0.0 for ai, ui in zip(a, us)]
+    s = math.fsum(c)
+    tau = 0.0
+    if s > ts:
+        # sum_i clip(a_i - tau, 0, u_i) is piecewise linear and decreasing in tau: sweep its
+        # breakpoints (coil i enters the sloped part at max(a_i - u_i, 0), leaves it at a_i)
+        ev = []
+        for ai, ui in zip(a, us):
+            if ai > 0.0 and ui > 0.0:
+                lo = ai - ui
+                ev.append((lo if lo > 0.0 else 0.0, -1))
+                ev.append((ai, 1))
+        ev.sort()
+        t0, s0, slope = 0.0, s, 0
+        tau = ev[-1][0]
+        for t, e in ev:
+            st = s0 + slope * (t - t0)
+            if st <= ts:
+                tau = t0 + (s0 - ts) / -slope
+                break
+            t0, s0 = t, st
+            slope += e
+        c = [min(max(ai - tau, 0.0), ui) for ai, ui in zip(a, us)]
+    if unipolar:
+        return c, tau
+    return [ci if vi >= 0.0 else -ci for ci, vi in zip(c, v)], tau
 
 
-def _dual_guess(fs, ft, us, ts, eps, unipolar, steps=6):
-    """x = proj_X(F^T y) with y from semismooth Newton on F proj_X(F^T y) + eps y = f (the
-    optimality condition of the regularized problem, y = (f - F x) / eps). Feasible always;
-    exact when the pattern of free/bound coils it finds is the optimal one."""
-    k = fs.shape[0]
-    eye = eps * np.eye(k)
-    y = _lsolve(fs @ fs.T + eye, ft)
-    v = fs.T @ y
-    x, tau = _project(v, us, ts, unipolar)
-    if tau == 0.0 and np.array_equal(x, v):
-        return x  # the unconstrained minimizer is feasible
-    seen = None
+def _least_energy(fs, ft, usl, ts, unipolar, y, lim, c2, k, steps=6):
+    """The least-energy exact fit: min ||x||^2 over {x in X, F x = f} for a reachable f.
+
+    Its optimality conditions are x = proj_X(F^T y) with F x = f (y the multiplier of the fit),
+    a k-dimensional piecewise-linear equation solved by Newton from the polished face's y
+    (usually 0-1 steps). Unlike the eps-regularized active set, whose tie-break multipliers
+    are eps-small and so resolved only to ~1e-3 relative, this is exact. Returns None if
+    Newton does not land within ``steps`` (the caller keeps its answer)."""
+    shift = (1e-14 * c2) * _eye(k)
+    lim2 = lim * lim
     for _ in range(steps):
-        ax = np.abs(x)
-        fr = (ax > 0.0) & (ax < us)
-        key = fr.tobytes() + (x > 0).tobytes() + (x < 0).tobytes()
-        if key == seen:
-            break
-        seen = key
-        ff = fs[:, fr]
-        jac = ff @ ff.T + eye
-        if tau > 0.0 and _or(fr):
-            w = ff @ np.sign(x[fr])
-            jac -= np.outer(w, w) / _add(fr)
-        y = y - _lsolve(jac, fs @ x + eps * y - ft)
-        x, tau = _project(fs.T @ y, us, ts, unipolar)
-    return x
+        xl, tau = _proj_list((fs.T @ y).tolist(), usl, ts, unipolar)
+        x = np.array(xl)
+        r = ft - fs @ x
+        if float(r @ r) <= lim2:
+            return x
+        j = [i for i, (v, ui) in enumerate(zip(xl, usl)) if 0.0 < abs(v) < ui]
+        if not j:
+            return None
+        fj = fs[:, j]
+        m = fj @ fj.T + shift
+        if tau > 0.0:
+            wv = fj @ np.array([1.0 if xl[i] > 0.0 else -1.0 for i in j])
+            m -= np.outer(wv, wv) / len(j)
+        y = y + _fast_solve(m, r)
+    return None

@@ -249,29 +249,22 @@ core alone."""
 
 
 def prepare_rz(tables: list, metas: list, positions, rotations) -> list:
-    """Per coil type, what :func:`interpolate_rz` and the one-point kernel need."""
+    """Per coil type, what :func:`interpolate_rz` and the one-point kernels need."""
     prepared = []
     for tab, m in zip(tables, metas):
-        idx = np.asarray(m["coils"], dtype=np.intp)
-        rot = np.asarray(rotations, float)[idx]
-        pos = np.asarray(positions, float)[idx]
-        identity = bool(np.all(rot == np.eye(3)))
-        shared_z = identity and bool(np.all(pos[:, 2] == pos[0, 2]))
-        n_rho, n_u, _ = tab.shape
+        t = _table_constants(tab, m, positions, rotations)
+        idx, pos = t["idx"], t["pos"]
         tab32 = np.ascontiguousarray(tab, dtype=np.float32)
         # the one-point kernel reads a cell's 4 corners x NQ quantities as one row
         t64 = tab32.astype(np.float64)
         cells = np.ascontiguousarray(np.stack([t64[:-1, :-1], t64[:-1, 1:], t64[1:, :-1],
                                                t64[1:, 1:]], axis=2).reshape(-1, 4, NQ))
-        prepared.append({
-            "idx": idx,
-            "all": bool(len(idx) == len(positions) and np.all(idx == np.arange(len(idx)))),
-            "pos32": pos.astype(np.float32), "pos": pos, "rot": None if identity else rot,
-            "shared_z": shared_z, "nodes": tab32.reshape(-1).view(f"V{4 * NQ}"),
-            "cells": cells, "n_rho": n_rho, "n_u": n_u,
-            "inv_h": 1.0 / m["rho_step_m"], "inv_scale": 1.0 / m["rho_scale_m"],
-            "z_ref": m["z_ref_m"], "zr": pos[:, 2] + m["z_ref_m"], "u0": m["u0"],
-            "inv_du": 1.0 / m["u_step"]})
+        prepared.append(dict(
+            t, all=bool(len(idx) == len(positions) and np.all(idx == np.arange(len(idx)))),
+            pos32=pos.astype(np.float32),
+            shared_z=t["rot"] is None and bool(np.all(pos[:, 2] == pos[0, 2])),
+            nodes=tab32.reshape(-1).view(f"V{4 * NQ}"), cells=cells,
+            zr=pos[:, 2] + m["z_ref_m"]))
     return prepared
 
 
@@ -478,35 +471,28 @@ def prepare_magnet(tables: list, metas: list, positions, rotations) -> list:
     """Per coil type, what :func:`magnet_terms` needs."""
     out = []
     for tab, m in zip(tables, metas):
-        idx = np.asarray(m["coils"], dtype=np.intp)
-        rot = np.asarray(rotations, float)[idx]
-        out.append({"idx": idx, "pos": np.asarray(positions, float)[idx],
-                    "rot": None if np.all(rot == np.eye(3)) else rot,
-                    "flat": np.ascontiguousarray(tab, dtype=np.float64).reshape(-1, NQ_MAGNET),
-                    "n_rho": tab.shape[0], "n_u": tab.shape[1], "inv_h": 1.0 / m["rho_step_m"],
-                    "inv_scale": 1.0 / m["rho_scale_m"], "z_ref": m["z_ref_m"], "u0": m["u0"],
-                    "inv_du": 1.0 / m["u_step"]})
+        out.append(dict(_table_constants(tab, m, positions, rotations),
+                        flat=np.ascontiguousarray(tab, dtype=np.float64).reshape(-1, NQ_MAGNET)))
     return out
+
+
+def _table_constants(tab: np.ndarray, m: dict, positions, rotations) -> dict:
+    """What every (v, u) table lookup needs: its coils (idx, pos, rot or None), its size and
+    its steps (inverted), from the table and its meta entry."""
+    idx = np.asarray(m["coils"], dtype=np.intp)
+    rot = np.asarray(rotations, float)[idx]
+    return {"idx": idx, "pos": np.asarray(positions, float)[idx],
+            "rot": None if np.all(rot == np.eye(3)) else rot,
+            "n_rho": tab.shape[0], "n_u": tab.shape[1], "inv_h": 1.0 / m["rho_step_m"],
+            "inv_scale": 1.0 / m["rho_scale_m"], "z_ref": m["z_ref_m"], "u0": m["u0"],
+            "inv_du": 1.0 / m["u_step"]}
 
 
 def magnet_terms(prepared: list, p: np.ndarray) -> np.ndarray:
     """The magnet's pull at points (n, 3) summed over the cores, each core alone: (n, 3) N."""
-    n = len(p)
-    force = np.zeros((n, 3))
+    force = np.zeros((len(p), 3))
     for t in prepared:
-        d = p[:, None, :] - t["pos"][None]  # (n, k, 3)
-        loc = d if t["rot"] is None else np.einsum("nki,kij->nkj", d, t["rot"])
-        x, y = loc[..., 0], loc[..., 1]
-        rho = np.sqrt(x * x + y * y)
-        vv = np.minimum(rho * t["inv_h"] / (1.0 + rho * t["inv_scale"]), t["n_rho"] - 1.0001)
-        u = (np.log(np.maximum(loc[..., 2] - t["z_ref"], 1e-12)) - t["u0"]) * t["inv_du"]
-        u = np.clip(u, 0.0, t["n_u"] - 1.000001)
-        i, j = vv.astype(np.intp), u.astype(np.intp)
-        tr, tz = (vv - i)[..., None], (u - j)[..., None]
-        base = i * t["n_u"] + j
-        f = t["flat"]
-        val = ((1 - tr) * ((1 - tz) * f[base] + tz * f[base + 1])
-               + tr * ((1 - tz) * f[base + t["n_u"]] + tz * f[base + t["n_u"] + 1]))
+        x, y, val = _bilinear(t, p)  # val (n, k, 2): F_rho / rho, F_z
         fl = np.stack([val[..., 0] * x, val[..., 0] * y, val[..., 1]], axis=-1)  # local frame
         if t["rot"] is not None:
             fl = np.einsum("kij,nkj->nki", t["rot"], fl)
@@ -519,17 +505,11 @@ def prepare_modes(tables: list, metas: list, positions, rotations) -> list:
     """Per core type, what :func:`mode_rows` needs."""
     out = []
     for tab, m in zip(tables, metas):
-        idx = np.asarray(m["coils"], dtype=np.intp)
-        rot = np.asarray(rotations, float)[idx]
-        out.append({"idx": idx, "pos": np.asarray(positions, float)[idx],
-                    "rot": None if np.all(rot == np.eye(3)) else rot,
-                    "flat": (tab.reshape(-1, tab.shape[2]).astype(np.float64)
-                             * np.asarray(m["column_scale"], float)),
-                    "n_rho": tab.shape[0], "n_u": tab.shape[1], "inv_h": 1.0 / m["rho_step_m"],
-                    "inv_scale": 1.0 / m["rho_scale_m"], "z_ref": m["z_ref_m"], "u0": m["u0"],
-                    "inv_du": 1.0 / m["u_step"],
-                    "basis": [tuple(b) for b in m["basis"]],
-                    "col": {tuple(s): c for s, c in zip(m["shapes"], m["columns"])}})
+        out.append(dict(_table_constants(tab, m, positions, rotations),
+                        flat=(tab.reshape(-1, tab.shape[2]).astype(np.float64)
+                              * np.asarray(m["column_scale"], float)),
+                        basis=[tuple(b) for b in m["basis"]],
+                        col={tuple(s): c for s, c in zip(m["shapes"], m["columns"])}))
         t = out[-1]
         groups, order = [], []
         for key in sorted({(b[0], b[2]) for b in t["basis"]}):
@@ -539,7 +519,51 @@ def prepare_modes(tables: list, metas: list, positions, rotations) -> list:
             groups.append((key, cols))
             order += members
         t["groups"], t["order"] = groups, np.array(order, np.intp)
+        _prepare_one(t)
     return out
+
+
+def _prepare_one(t: dict) -> None:
+    """What :func:`mode_rows_one` needs: every group's quantities padded to 5 columns, so one
+    GEMM gives all polynomials and one batched matmul all basis rows.
+
+    ``one_src`` / ``one_dst``: scatter of the table's columns into (n_basis, 5 n_groups) per core
+    (basis in ``t['order']``); ``one_poly`` (15, 5 n_groups * 8): the groups' :data:`_POLY_T`
+    side by side (zero rows for the padding of m = 0's 4 quantities).
+    """
+    width = 5 * len(t["groups"])
+    src, dst = [], []
+    poly = np.zeros((15, width, 8))
+    s = 0
+    for g, ((m, c), cols) in enumerate(t["groups"]):
+        poly[:, 5 * g:5 * g + N_MODE_Q[m]] = _POLY_T[(m, c)].reshape(15, N_MODE_Q[m], 8)
+        for member in cols:
+            src += [int(x) for x in member]
+            dst += [s * width + 5 * g + q for q in range(len(member))]
+            s += 1
+    t["one_src"], t["one_dst"] = np.array(src, np.intp), np.array(dst, np.intp)
+    t["one_poly"], t["one_width"], t["one_nb"] = poly.reshape(15, -1), width, s
+
+
+_POW_X = np.array([0, 1, 0, 2, 1, 0, 3, 2, 1, 0, 4, 3, 2, 1, 0], np.intp)
+"""Powers of x, resp. y, of the 15 monomials of :func:`_monomials`."""
+_POW_Y = np.array([0, 0, 1, 0, 1, 2, 0, 1, 2, 3, 0, 1, 2, 3, 4], np.intp)
+_POW = np.arange(5.0)
+
+
+def mode_rows_one(t: dict, pq: np.ndarray) -> np.ndarray:
+    """:func:`mode_rows` for one point ``pq`` (1, 3) with few numpy calls: (k * n_basis, 8),
+    rows of core-major basis fields in ``t['order']`` (the layout of MapFile's coefficients)."""
+    if t["rot"] is not None:
+        return mode_rows(t, pq).reshape(-1, 8)
+    x, y, val = _bilinear(t, pq)
+    x, y, val = x[0], y[0], val[0]
+    k = len(x)
+    mono = (np.power(x[:, None], _POW)[:, _POW_X] * np.power(y[:, None], _POW)[:, _POW_Y])
+    poly = (mono @ t["one_poly"]).reshape(k, t["one_width"], 8)
+    pad = np.zeros((k, t["one_nb"] * t["one_width"]))
+    pad[:, t["one_dst"]] = val[:, t["one_src"]]
+    return np.matmul(pad.reshape(k, t["one_nb"], t["one_width"]), poly).reshape(-1, 8)
 
 
 def _bilinear(t: dict, p: np.ndarray):
@@ -638,30 +662,151 @@ def _poly_tensors() -> dict:
     return out
 
 
-def mode_rows(t: dict, p: np.ndarray) -> np.ndarray:
+def mode_rows(t: dict, p: np.ndarray, rows=None) -> np.ndarray:
     """Rows (n, k, n_basis, 8) of every basis field of the type's k cores at points (n, 3),
     global frame, basis in the order of ``t['order']`` (grouped by mode order and cos / sin;
-    :func:`prepare_modes` permutes the coefficients to match)."""
+    :func:`prepare_modes` permutes the coefficients to match). ``rows``: indices into
+    :data:`ROWS` to compute only those (last axis len(rows)); not with rotated coils."""
+    if rows is not None and t["rot"] is not None:
+        return mode_rows(t, p)[..., rows]
     x, y, val = _bilinear(t, p)
     n, k = x.shape
     mono = _monomials(x, y).reshape(n * k, 15)
+    nr = 8 if rows is None else len(rows)
     parts = []
     for (m, c), cols in t["groups"]:
         v = val[..., cols]  # (n, k, nb_g, Q_m)
-        pm = (mono @ _POLY_T[(m, c)]).reshape(n, k, 1, N_MODE_Q[m], 8)  # one GEMM
+        tens = _POLY_T[(m, c)]
+        if rows is not None:
+            tens = tens.reshape(15, N_MODE_Q[m], 8)[:, :, rows].reshape(15, -1)
+        pm = (mono @ tens).reshape(n, k, 1, N_MODE_Q[m], nr)  # one GEMM
         # a sum over the 4-5 quantities: numpy's batched matmul is slow on tiny matrices
         acc = v[..., 0, None] * pm[..., 0, :]
         for q in range(1, v.shape[-1]):
             acc += v[..., q, None] * pm[..., q, :]
-        parts.append(acc)  # (n, k, nb_g, 8)
-    rows = parts[0] if len(parts) == 1 else np.concatenate(parts, axis=2)
+        parts.append(acc)  # (n, k, nb_g, nr)
+    out = parts[0] if len(parts) == 1 else np.concatenate(parts, axis=2)
     if t["rot"] is not None:
-        flat = rows.transpose(3, 0, 2, 1).reshape(8, -1, k)
-        rows = _rotate_rows(flat, t["rot"]).reshape(8, n, -1, k).transpose(1, 3, 2, 0)
-    return rows
+        flat = out.transpose(3, 0, 2, 1).reshape(8, -1, k)
+        out = _rotate_rows(flat, t["rot"]).reshape(8, n, -1, k).transpose(1, 3, 2, 0)
+    return out
 
 
 _POLY_T = _poly_tensors()
+
+
+# ============================================================================ one-point kernels
+# One point through the whole sum in ~40 small numpy calls (each ~0.3-1 us: the call, not the
+# arithmetic, is the cost): every core's coil table and mode table looked up with one gather
+# of the 4 corners and one matmul for the weights; the coil alone as one more "mode" whose
+# coefficient is 1 on its own column, so all polynomials are one GEMM and the sum one GEMV.
+_POLY15 = np.zeros((15, 5, 8))
+"""The coil tables' :data:`_POLY` on the 15 monomials of :func:`_monomials` (padded to 5
+quantities like the mode groups)."""
+for _r15, _r7 in ((0, 0), (1, 1), (2, 2), (3, 3), (4, 4), (4, 5), (5, 6)):
+    _POLY15[_r15, :NQ] += _POLY.reshape(7, NQ, 8)[_r7]
+
+
+def _lookup(t: dict, flat: np.ndarray) -> dict | None:
+    """A table of a prepared type as :func:`_interp_one` reads it; None unless its coils are
+    unrotated at one height (then z and u are scalars)."""
+    pos = np.asarray(t["pos"], float)
+    if t["rot"] is not None or not np.all(pos[:, 2] == pos[0, 2]):
+        return None
+    nu = t["n_u"]
+    return {"flat": np.ascontiguousarray(flat, dtype=np.float64), "n_u": nu,
+            "inv_h": t["inv_h"], "inv_scale": t["inv_scale"], "vmax": t["n_rho"] - 1.0001,
+            "zr0": float(pos[0, 2] + t["z_ref"]), "u0": t["u0"], "inv_du": t["inv_du"],
+            "umax": nu - 1.000001, "off4": np.array([0, 1, nu, nu + 1], np.intp)}
+
+
+def _interp_one(L: dict, rho: np.ndarray, zq: float) -> np.ndarray:
+    """Bilinear in (v, u) at one height ``zq`` (global, m) for every coil's rho (k,) m:
+    (k, Q) float64, the same cells and weights as the batch kernels."""
+    vv = rho * L["inv_h"]
+    vv /= rho * L["inv_scale"] + 1.0
+    np.minimum(vv, L["vmax"], out=vv)
+    i = vv.astype(np.intp)
+    vv -= i
+    zz = zq - L["zr0"]
+    u = (math.log(zz if zz > 1e-12 else 1e-12) - L["u0"]) * L["inv_du"]
+    u = min(max(u, 0.0), L["umax"])
+    j = int(u)
+    tz = u - j
+    sz = 1.0 - tz
+    corners = L["flat"][(i * L["n_u"] + j)[:, None] + L["off4"]]  # (k, 4, Q)
+    w = np.multiply.outer(vv, (-sz, -tz, sz, tz))
+    w += (sz, tz, 0.0, 0.0)
+    return np.matmul(w[:, None, :], corners)[:, 0]
+
+
+def prepare_one(rz: tuple, modes: tuple, coefs: tuple, nc: int,
+                moment=None) -> dict | None:
+    """The one-point kernel's constants for a sum of coil tables ``rz`` (the coils alone: one
+    more basis field per core with coefficient 1 on its own column; ``()`` for none) and mode
+    tables with coefficients ``coefs`` ((k * n_basis, n_out) per type, MapFile's layout).
+    With ``moment`` (3,) A m^2 the kernel gives m . B per basis field instead of the 8 rows
+    (the sensor fields). None: the general path is used (several types, rotated coils or
+    coils at different heights)."""
+    if len(rz) > 1 or len(modes) > 1 or (rz and not rz[0]["all"]) or not (rz or modes):
+        return None
+    first = rz[0] if rz else modes[0]
+    lrz = _lookup(rz[0], rz[0]["nodes"].view(np.float32).reshape(-1, NQ)) if rz else None
+    if rz and lrz is None:
+        return None
+    n_out = coefs[0].shape[1] if modes else nc
+    n_self = NQ if rz else 0
+    src, dst, poly = [np.arange(n_self)], [np.arange(n_self)], [_POLY15[:, :n_self]]
+    if modes:
+        mt = modes[0]
+        if not np.array_equal(mt["idx"], first["idx"]):
+            return None
+        lcm = _lookup(mt, mt["flat"])
+        if lcm is None:
+            return None
+        nb, width = mt["one_nb"], mt["one_width"]
+        shift = 1 if rz else 0  # basis 0: the coil alone
+        src.append(n_self + mt["one_src"])
+        dst.append((mt["one_dst"] // width + shift) * (width + n_self)
+                   + n_self + mt["one_dst"] % width)
+        poly.append(mt["one_poly"].reshape(15, width, 8))
+        cm = coefs[0].reshape(len(mt["idx"]), nb, n_out)
+    else:
+        lcm, nb, width = None, 0, 0
+        cm = np.zeros((nc, 0, nc))
+    poly = np.concatenate(poly, axis=1)
+    if moment is not None:
+        poly = poly[..., :3] @ np.asarray(moment, float)
+    # on all 25 products x^a y^b (a, b <= 4): those of degree > 4 get zero rows
+    poly25 = np.zeros((5, 5) + poly.shape[1:])
+    poly25[_POW_X, _POW_Y] = poly
+    coef = (np.concatenate([np.eye(nc)[:, None, :], cm], axis=1) if rz else cm)
+    return {"pos": first["pos"], "rz": lrz, "cm": lcm, "src": np.concatenate(src),
+            "dst": np.concatenate(dst), "poly": np.ascontiguousarray(poly25.reshape(25, -1)),
+            "nb": nb + (1 if rz else 0), "width": width + n_self,
+            "n_rows": 1 if moment is not None else 8,
+            "coef": np.ascontiguousarray(coef.reshape(-1, n_out))}
+
+
+def actuation_one(F: dict, q) -> np.ndarray:
+    """One point ``q`` (3 floats, m): rows (k * (n_basis + 1), 8) of every core's coil-alone
+    field and basis fields; A (8, nc) = rows.T @ F['coef'] (see :func:`prepare_one`)."""
+    d = np.subtract(q, F["pos"])
+    x, y = d[:, 0], d[:, 1]
+    rho = np.sqrt(x * x + y * y)
+    if F["rz"] is None:
+        val = _interp_one(F["cm"], rho, q[2])
+    else:
+        val = _interp_one(F["rz"], rho, q[2])
+        if F["cm"] is not None:
+            val = np.concatenate([val, _interp_one(F["cm"], rho, q[2])], axis=1)
+    k = len(x)
+    pw = np.power(d[:, :2, None], _POW)  # (k, 2, 5): powers 0..4 of x and y
+    poly = ((pw[:, 0, :, None] * pw[:, 1, None, :]).reshape(k, 25) @ F["poly"]
+            ).reshape(k, F["width"], F["n_rows"])
+    pad = np.zeros((k, F["nb"] * F["width"]))
+    pad[:, F["dst"]] = val[:, F["src"]]
+    return np.matmul(pad.reshape(k, F["nb"], F["width"]), poly).reshape(-1, F["n_rows"])
 
 
 # ============================================================================ 3-D grids
@@ -720,6 +865,15 @@ def grid_lists(grid: tuple) -> tuple:
 
 
 # ============================================================================ the reader
+def check_currents(currents, n_coils: int, error=BadInputError) -> np.ndarray:
+    """``currents`` as a float array (n_coils,) A, or ``error`` (an InputRangeError class: the
+    caller's own, e.g. designkit's BadInputError) naming the parameter and the shape."""
+    i = np.asarray(currents, dtype=float)
+    if i.shape != (n_coils,) or not np.all(np.isfinite(i)):
+        raise error("currents", f"{n_coils} finite values, A", f"shape {i.shape}")
+    return i
+
+
 def _interp_factor(currents, sat_i, sat_f) -> np.ndarray:
     """Saturation factors (n_coils,) at the magnitudes of ``currents`` (clamped to the table)."""
     a = np.abs(np.asarray(currents, float))
@@ -739,12 +893,9 @@ class MapFile:
     meta: dict
     bounds: tuple
     n_coils: int
-    rz: tuple = field(repr=False)
-    modes: tuple = field(repr=False)
-    coef: tuple = field(repr=False)
-    scoef: tuple = field(repr=False)
-    magnet: tuple = field(repr=False)
-    magnet_f0: tuple = field(repr=False)
+    kernels: dict = field(repr=False)
+    """The prepared lookups: 'rz', 'modes', 'coef', 'scoef', 'magnet', 'magnet_f0' and the
+    one-point kernels 'one', 'sensor_one', 'magnet_one' (None where the general path runs)."""
 
     @classmethod
     def load(cls, path, expected_design_sha256: str | None = None) -> "MapFile":
@@ -783,9 +934,16 @@ class MapFile:
         magnet = prepare_magnet([arrays[t["name"]] for t in mt], mt, meta["coil_positions_m"],
                                 meta["coil_rotations"])
         g = meta["box_m"]
+        kernels = {
+            "rz": tuple(rz), "modes": tuple(modes), "coef": coefs, "scoef": scoefs,
+            "magnet": tuple(magnet),
+            "magnet_f0": (maxes, np.ascontiguousarray(f0.reshape(-1, 3)), f0.shape[:3]),
+            "one": prepare_one(rz, modes, coefs, nc),
+            "sensor_one": (prepare_one((), smodes, tuple(c for _, c in scoefs), nc,
+                                       arrays["MOMENT"]) if smodes else None),
+            "magnet_one": _lookup(magnet[0], magnet[0]["flat"]) if len(magnet) == 1 else None}
         return cls(arrays, meta, (np.asarray(g[0], float), np.asarray(g[1], float)), nc,
-                   tuple(rz), tuple(modes), coefs, scoefs, tuple(magnet),
-                   (maxes, np.ascontiguousarray(f0.reshape(-1, 3)), f0.shape[:3]))
+                   kernels)
 
     # ------------------------------------------------------------------ plain attributes
     @property
@@ -833,69 +991,132 @@ class MapFile:
                                     " (or extrapolate=True)", f"{p[k].tolist()} at row {k}")
         return p, single
 
-    def _one_point(self, points, extrapolate: bool):
+    def _one_point(self, points, extrapolate: bool, name: str = "points"):
         """Three Python floats, or None when ``points`` is not one point."""
-        shape = np.shape(points)
-        if shape not in ((3,), (1, 3)):
-            return None
         try:
-            q = tuple(float(c) for c in np.asarray(points, dtype=float).reshape(3))
+            arr = np.asarray(points, dtype=float)
         except (TypeError, ValueError):
-            raise BadInputError("points", "array-like of shape (3,) or (n, 3), m",
+            raise BadInputError(name, "array-like of shape (3,) or (n, 3), m",
                                 points) from None
-        lo, hi = self.bounds
+        if arr.shape != (3,) and arr.shape != (1, 3):
+            return None
+        q = arr.reshape(3).tolist()
+        lo, hi = self._box_lists
         for k in range(3):
             if not math.isfinite(q[k]):
-                raise BadInputError("points", "finite (no NaN or Inf)", list(q))
-            if not extrapolate and not (lo[k] - 1e-9 <= q[k] <= hi[k] + 1e-9):
-                raise BadInputError("points", f"inside the map box {lo.tolist()} .. "
-                                    f"{hi.tolist()} m (or extrapolate=True)", list(q))
+                raise BadInputError(name, "finite (no NaN or Inf)", q)
+            if not extrapolate and not (lo[k] <= q[k] <= hi[k]):
+                raise BadInputError(name, f"inside the map box {self.bounds[0].tolist()} .. "
+                                    f"{self.bounds[1].tolist()} m (or extrapolate=True)", q)
         return q
 
+    @property
+    def _box_lists(self) -> tuple:
+        """The box corners as Python floats widened by the 1e-9 m tolerance."""
+        got = self.__dict__.get("_box_cache")
+        if got is None:
+            got = ([float(v) - 1e-9 for v in self.bounds[0]],
+                   [float(v) + 1e-9 for v in self.bounds[1]])
+            object.__setattr__(self, "_box_cache", got)
+        return got
+
     # ------------------------------------------------------------------ the interpolators
-    def actuation(self, points, extrapolate: bool = False) -> np.ndarray:
+    def _subset(self, name: str, sel, n: int):
+        """None (all) or an index array (m,) for the ``rows=`` / ``coils=`` keywords."""
+        if sel is None:
+            return None
+        try:
+            idx = np.asarray(sel)
+            ok = idx.ndim == 1 and len(idx) > 0 and np.issubdtype(idx.dtype, np.integer)
+        except (TypeError, ValueError):
+            ok = False
+        if not ok or np.any(idx < 0) or np.any(idx >= n):
+            raise BadInputError(name, f"a non-empty sequence of indices 0..{n - 1}", sel)
+        return idx.astype(np.intp)
+
+    def actuation(self, points, extrapolate: bool = False, *, rows=None,
+                  coils=None) -> np.ndarray:
         """The coupled A at points (3,) -> (8, n_coils) or (n, 3) -> (n, 8, n_coils), float64.
 
         Rows :data:`ROWS`, T/A and T/(m A). Outside the box: BadInputError unless
         ``extrapolate`` (the end cells' polynomials, which degrade quickly away from the box).
+        ``rows``, ``coils``: index sequences (into :data:`ROWS`, resp. the coils) to evaluate
+        only those: (len(rows), len(coils)) per point, in the given order; the mode sum then
+        skips the other rows' polynomials and the other coils' coefficients.
         """
         nc = self.n_coils
+        r_sel = self._subset("rows", rows, 8)
+        c_sel = self._subset("coils", coils, nc)
+        nr = 8 if r_sel is None else len(r_sel)
+        ncs = nc if c_sel is None else len(c_sel)
         q = self._one_point(points, extrapolate)
         if q is not None:
-            if len(self.rz) == 1 and self.rz[0]["all"]:
-                a = _rz_one(self.rz[0], q).T  # (8, nc)
-            else:
-                a = np.empty((8, nc))
-                for t in self.rz:
-                    a[:, t["idx"]] = _rz_one(t, q).T
-            pq = np.array([q])
-            for t, c in zip(self.modes, self.coef):
-                a += mode_rows(t, pq).reshape(-1, 8).T @ c
+            a = self._actuation_one(q, r_sel, c_sel)
             return a if np.ndim(points) == 1 else a[None]
         p, single = self._points(points, extrapolate)
         n = len(p)
-        out = np.empty((n, 8, nc))
+        out = np.empty((n, nr, ncs))
         for s in range(0, n, RZ_CHUNK):
             e = min(n, s + RZ_CHUNK)
             m = e - s
-            a = interpolate_rz(self.rz, p[s:e], nc).transpose(2, 1, 0).astype(np.float64)
-            for t, c in zip(self.modes, self.coef):
-                rows = mode_rows(t, p[s:e])  # (m, k, nb, 8)
-                a += (rows.reshape(m, -1, 8).transpose(0, 2, 1).reshape(8 * m, -1) @ c
-                      ).reshape(m, 8, nc)
+            a = interpolate_rz(self.kernels["rz"], p[s:e], nc)  # (nc, 8, m) float32
+            if c_sel is not None:
+                a = a[c_sel]
+            if r_sel is not None:
+                a = a[:, r_sel]
+            a = a.transpose(2, 1, 0).astype(np.float64)
+            for t, c in zip(self.kernels["modes"], self.kernels["coef"]):
+                if c_sel is not None:
+                    c = c[:, c_sel]
+                fields = mode_rows(t, p[s:e], r_sel)  # (m, k, nb, nr)
+                a += (fields.reshape(m, -1, nr).transpose(0, 2, 1).reshape(nr * m, -1) @ c
+                      ).reshape(m, nr, ncs)
             out[s:e] = a
         return out[0] if single else out
+
+    def _actuation_one(self, q, r_sel, c_sel) -> np.ndarray:
+        """One point (3 floats): (n_rows, n_coils) float64 of the selection."""
+        nc = self.n_coils
+        if self.kernels["one"] is not None:
+            f = actuation_one(self.kernels["one"], q)
+            c = self.kernels["one"]["coef"]
+            if r_sel is not None:
+                f = f[:, r_sel]
+            return f.T @ (c if c_sel is None else c[:, c_sel])
+        if len(self.kernels["rz"]) == 1 and self.kernels["rz"][0]["all"]:
+            a = _rz_one(self.kernels["rz"][0], q)  # (nc, 8)
+        else:
+            a = np.empty((nc, 8))
+            for t in self.kernels["rz"]:
+                a[t["idx"]] = _rz_one(t, q)
+        if c_sel is not None:
+            a = a[c_sel]
+        a = a.T if r_sel is None else a[:, r_sel].T
+        pq = np.array([q])
+        for t, c in zip(self.kernels["modes"], self.kernels["coef"]):
+            f = mode_rows_one(t, pq)  # (k * nb, 8)
+            if r_sel is not None:
+                f = f[:, r_sel]
+            a += f.T @ (c if c_sel is None else c[:, c_sel])
+        return a
 
     def bias_force(self, points, extrapolate: bool = False) -> np.ndarray:
         """F0, the force on the magnet (moment :attr:`moment_a_m2`) at zero current, N:
         (3,) -> (3,), (n, 3) -> (n, 3)."""
         q = self._one_point(points, extrapolate)
         if q is not None:
-            f = magnet_terms(self.magnet, np.array([q]))[0]
-            f += _trilinear_one(self.magnet_f0, q)
+            L = self.kernels["magnet_one"]
+            if L is None:
+                f = magnet_terms(self.kernels["magnet"], np.array([q]))[0]
+            else:
+                d = np.subtract(q, self.kernels["magnet"][0]["pos"])
+                x, y = d[:, 0], d[:, 1]
+                val = _interp_one(L, np.sqrt(x * x + y * y), q[2])  # F_rho/rho, F_z per core
+                f = np.array([val[:, 0] @ x, val[:, 0] @ y, val[:, 1].sum()])
+            f += _trilinear_one(self.kernels["magnet_f0"], q)
             return f if np.ndim(points) == 1 else f[None]
         p, single = self._points(points, extrapolate)
-        f = magnet_terms(self.magnet, p) + _trilinear(self.magnet_f0, p)
+        f = magnet_terms(self.kernels["magnet"], p) + _trilinear(self.kernels["magnet_f0"], p)
         return f[0] if single else f
 
     def sensor_induced_field(self, magnet_position_m, extrapolate: bool = False) -> np.ndarray:
@@ -905,11 +1126,16 @@ class MapFile:
         By reciprocity (linear cores): component c at sensor s is m . B(p) of the cores
         magnetized by a unit dipole along c at s -- a mode sum like A (``SCOEF``)."""
         nc = self.n_coils
-        one = self._one_point(magnet_position_m, extrapolate) is not None
+        q = self._one_point(magnet_position_m, extrapolate, "magnet_position_m")
+        one = self.kernels["sensor_one"]
+        if q is not None and one is not None:
+            b = (actuation_one(one, q)[:, 0] @ one["coef"]).reshape(2, nc, 3)
+            return b if np.ndim(magnet_position_m) == 1 else b[None]
+        one = q is not None
         p, single = self._points(magnet_position_m, extrapolate, "magnet_position_m")
         m = self.arrays["MOMENT"]
         out = np.zeros((len(p), 6 * nc))
-        for t, c in self.scoef:
+        for t, c in self.kernels["scoef"]:
             rows = mode_rows(t, p)[..., :3]  # (n, k, nb, 3): B per unit coefficient
             out += (rows @ m).reshape(len(p), -1) @ c
         b = out.reshape(-1, 2, nc, 3)
@@ -930,11 +1156,7 @@ class MapFile:
                               self.arrays["SAT_FACTOR"])
 
     def _currents(self, currents) -> np.ndarray:
-        i = np.asarray(currents, dtype=float)
-        if i.shape != (self.n_coils,) or not np.all(np.isfinite(i)):
-            raise BadInputError("currents", f"{self.n_coils} finite values, A",
-                                f"shape {i.shape}")
-        return i
+        return check_currents(currents, self.n_coils)
 
     def currents_for(self, point, wanted: np.ndarray, rows=slice(None)) -> np.ndarray:
         """Least-norm currents (A) with A[rows] I = wanted at ``point`` (pseudo-inverse)."""

@@ -22,8 +22,19 @@ from .errors import FirmwareIOError
 EXIT_BAD_INPUT = 2
 
 
+SWITCH_INTERVAL_S = 1e-4
+"""Python's GIL hand-over interval while the sensor thread runs (default 5 ms): the control
+thread waits at most about this long for the interpreter when it wakes up for a step while the
+sensor thread is fitting."""
+
+
 class ThreadedSensorSource:
-    """Read the sensor arrays continuously in a thread; hand the newest frame to the loop once."""
+    """Read the sensor arrays and run the fit continuously in a thread; hand the newest
+    :class:`firmware_io.runner.Fix` to the loop once.
+
+    The runner attaches its :class:`firmware_io.runner.SensorPipeline` (:meth:`attach`); until
+    then (or without one) the thread hands over raw frames.
+    """
 
     def __init__(self, arrays, clock=time.monotonic):
         self.arrays, self.clock = arrays, clock
@@ -31,9 +42,14 @@ class ThreadedSensorSource:
         self._frame = None
         self._stop = threading.Event()
         self.error: BaseException | None = None
+        self.pipeline = None
         self.thread = threading.Thread(target=self._loop, name="sensors", daemon=True)
 
+    def attach(self, pipeline) -> None:
+        self.pipeline = pipeline
+
     def start(self) -> None:
+        sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL_S))
         self.thread.start()
 
     def stop(self) -> None:
@@ -43,8 +59,13 @@ class ThreadedSensorSource:
     def _loop(self) -> None:
         from .runner import SensorFrame
 
+        previous = None
         while not self._stop.is_set():
             t0 = self.clock()
+            # master-controlled TLV493D: a read returns the conversion the previous read
+            # triggered, so a frame holds the field at the previous pass's start (the first
+            # pass's is from the configuration: dropped)
+            field_t, previous = previous, t0
             try:
                 r = self.arrays.read()
             except Exception as exc:  # noqa: BLE001 - the loop must see it, not the thread die
@@ -53,7 +74,15 @@ class ThreadedSensorSource:
                 n = len(status) // 2
                 frame = SensorFrame(np.full((n, 3), np.nan), np.full((n, 3), np.nan), status, t0)
             else:
-                frame = SensorFrame(r.top_t, r.bottom_t, r.status, t0)
+                if field_t is None:
+                    continue
+                frame = SensorFrame(r.top_t, r.bottom_t, r.status, field_t)
+            if self.pipeline is not None:
+                try:
+                    frame = self.pipeline.process(frame)
+                except Exception as exc:  # noqa: BLE001 - a fit that raises: no estimate
+                    self.error = exc
+                    continue
             with self._lock:
                 self._frame = frame
 
@@ -75,6 +104,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--period-ms", type=float, default=1.0, help="control period, ms (default 1)")
     p.add_argument("--duration", type=float, default=None, help="stop after this many s")
     p.add_argument("--unipolar", action="store_true", help="drive 0 <= I (the thesis' drive)")
+    p.add_argument("--calibrate", action="store_true",
+                   help="calibrate the sensors at start-up with the coils alone (~10 s; keep the "
+                        "finger magnet away from the board until the loop starts)")
     return p
 
 
@@ -139,10 +171,28 @@ def open_device(bus_number: int, sensor_bus_number: int | None, drive_args: dict
     return CoilDriver(boards, drives), SensorArrays(sbus)
 
 
+def calibrated_localizer(map_path: str, method: str, localizer, coils, arrays, cfg,
+                         sleep=time.sleep):
+    """The start-up sensor calibration (firmware_io.runner.record_calibration: coils alone,
+    each pattern held for 7 L/R), then a localizer that uses it."""
+    from .localization import Localizer
+    from .runner import (CALIBRATED_RELATIVE_ERROR, CALIBRATION_CURRENT_A, calibrate_sensors,
+                         calibration_currents, record_calibration)
+
+    tau = max(ind / r for ind, r in zip(cfg.inductance_h, cfg.resistance_ohm))
+    amp = min(CALIBRATION_CURRENT_A, cfg.current_limit_a)
+    print(f"calibrating the sensors ({amp:.1f} A patterns, keep the magnet away)...",
+          file=sys.stderr)
+    top, bottom, applied = record_calibration(coils, arrays, calibration_currents(cfg.n_coils, amp),
+                                              settle_s=7 * tau, sleep=sleep)
+    cal = calibrate_sensors(localizer.model, top, bottom, applied)
+    return Localizer.from_map(map_path, method=method, calibration=cal,
+                              relative_error=CALIBRATED_RELATIVE_ERROR)
+
+
 def main(argv: list[str] | None = None) -> int:
-    from .allocation import allocate
-    from .localization import ConstantVelocityKalman
-    from .runner import Runner, SceneForce, config_from_map
+    from .allocation import Allocator
+    from .runner import ConstantVelocityTracker, Runner, SceneForce, config_from_map
 
     args = build_parser().parse_args(argv)
     try:
@@ -156,11 +206,13 @@ def main(argv: list[str] | None = None) -> int:
             "n_coils": cfg.n_coils, "supply_voltage_v": cfg.supply_voltage_v,
             "resistance_ohm": cfg.resistance_ohm})
         check_sensor_arrays(arrays.configure(), cfg.n_coils)
+        if args.calibrate:
+            localizer = calibrated_localizer(args.map, args.method, localizer, coils, arrays, cfg)
     except (FirmwareIOError, OSError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     source = ThreadedSensorSource(arrays)
-    runner = Runner(fmap, SceneForce(scene), localizer, ConstantVelocityKalman(), allocate,
+    runner = Runner(fmap, SceneForce(scene), localizer, ConstantVelocityTracker(), Allocator(),
                     coils, source, cfg)
     runner.start()
     source.start()

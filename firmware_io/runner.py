@@ -1,19 +1,28 @@
 """The rendering runner: sensors -> position -> object force -> currents -> PWM, fail-safe.
 
-One control step (period ``T``, default 1 ms)::
+Two sides. The sensor side (:class:`SensorPipeline`, run by the sensor thread
+:class:`firmware_io.run.ThreadedSensorSource` on the controller, and modelled with the same
+timing by designkit.plant's simulated source) reads the two arrays (10-20 ms per pass on one
+400 kHz bus), checks each sensor's health and runs the localizer's fit, then publishes a
+:class:`Fix` (estimate, frame time, sensor problems). The control step (period ``T``, default
+1 ms) never fits::
 
-    newest sensor frame (two (9, 3) arrays, per-sensor status)      [SensorSource]
-      -> localize on a new frame, constant-velocity prediction to now [localizer, tracker]
+    newest Fix, if any (estimate of a frame ~2 passes old)          [sensor side]
+      -> Kalman update at the frame's time, prediction to now        [tracker]
       -> object force f at the predicted position                   [scene]
       -> currents: min ||F(p) I - (f - F0(p))|| within the bounds    [allocation]
       -> coil dynamics: voltage feed-forward so that the current reaches the command at the
          end of the period (within the supply), I^2 t thermal guard  [CoilDynamics, ThermalGuard]
       -> MD10C duty/direction, one block write per PCA9685           [CoilDriver]
 
-Only the rows of A(p) the force needs are evaluated (Fz alone for a z-dipole when the scene asks
-for the vertical force only) and coils whose force per ampere at p is below ``skip_fraction``
-of the largest are left out of the allocation (their current is 0): the force they could add is
-bounded by ``skip_fraction * max_k |F_k| * I_limit`` per coil (stated in the summary).
+Only the rows of A(p) the force law uses enter the force (:func:`force_law_rows`: Fz alone of a
+z-dipole needs dBx/dx and dBy/dy, the 3-D force of a z-dipole four of the five gradient rows;
+firmware_io.mapfile's one-point kernel evaluates all eight rows in one product, which costs less
+than selecting rows inside it, so the runner slices them -- studies/bench_runner.py measures
+both) and, with ``skip_force_n`` > 0, only the coils whose force at p could exceed it are
+evaluated and allocated: a coil is left out (its current is 0) when :class:`CoilSkipBound`'s upper bound of its force
+per ampere around p, times its current limit, is at most ``skip_force_n`` -- the force the
+skipped coils could have added is below ``skip_force_n`` each.
 
 Faults and the safe state. Every fault switches every coil off in the same step (one ALL_LED_OFF
 write per board: :meth:`CoilDriver.all_off`), writes one log line and records the state name.
@@ -51,7 +60,7 @@ import numpy as np
 
 from .devices import TLV493D_LINEAR_RANGE_T
 from .errors import BadInputError, CoilWriteError, FirmwareIOError
-from .localization import multipole_field
+from .localization import ConstantVelocityKalman, multipole_field
 
 SENSOR_FAULTS = {"stale": "sensor_stuck", "recovered": "sensor_stuck",
                  "saturated": "sensor_saturated", "nack": "sensor_dead", "failed": "sensor_dead",
@@ -153,6 +162,90 @@ class ThermalGuard:
 
 
 # ---------------------------------------------------------------------------------------------
+# what the force law needs of A(p)
+
+
+def force_law_rows(moment_a_m2, axes: str = "xyz") -> tuple[np.ndarray, np.ndarray]:
+    """Rows of A(p) (indices into Bx, By, Bz, dBx/dx, dBx/dy, dBx/dz, dBy/dy, dBy/dz) the force
+    on a dipole ``moment_a_m2`` uses, and the matrix that maps them to the force per ampere.
+
+    F = M(m) G5 (thesis eq. 2.5) with G5 = rows 3..7; a column of M(m) that is zero (for the
+    rendered axes) marks a row not needed: for a z-dipole the 3-D force needs dBx/dx, dBx/dz,
+    dBy/dy, dBy/dz, and Fz alone (``axes='z'``) dBx/dx and dBy/dy.
+
+    Returns
+    -------
+    rows : ndarray of int, shape (r,)
+    matrix : ndarray, shape (3, r) or (1, r) -- force per ampere = matrix @ A[rows]
+    """
+    mx, my, mz = (float(v) for v in moment_a_m2)
+    # F = F(m) G5 (thesis eq. 2.5), the one numpy definition on the controller side
+    full = np.array([[mx, my, mz, 0.0, 0.0],
+                     [0.0, mx, 0.0, my, mz],
+                     [-mz, 0.0, mx, -mz, my]])
+    if axes == "z":
+        full = full[2:3]
+    used = np.flatnonzero(np.any(full != 0.0, axis=0))
+    return used + 3, full[:, used].copy()
+
+
+def _accepts_selection(fieldmap, point) -> bool:
+    """True when ``fieldmap.actuation`` takes ``rows=`` and ``coils=`` (firmware_io.mapfile)."""
+    try:
+        fieldmap.actuation(point, rows=(3,), coils=(0,))
+    except TypeError:
+        return False
+    return True
+
+
+class CoilSkipBound:
+    """Upper bound of each coil's force per ampere |F_k| (N/A) near a point, from a grid.
+
+    At start-up the force per ampere of every coil is evaluated at the nodes of a grid of
+    spacing <= ``spacing_m`` over the map's box. In a cell, with c_max and c_min the largest and
+    smallest of |F_k| at its eight corners, the bound is ``c_max + (c_max - c_min)``: a smooth
+    |F_k| sampled finely enough that it varies within a cell by no more than between the cell's
+    corners stays below it (the coils' fields vary on the coil-size scale, ~20 mm; the default
+    spacing is 5 mm). A coil is skipped at p when bound_k(cell(p)) * I_limit,k <= the stated
+    force; the force the skipped coils could add is then at most that force each.
+
+    Parameters
+    ----------
+    fieldmap : object with ``actuation(points (N, 3)) -> (N, 8, n)`` and ``bounds``
+    rows, matrix : from :func:`force_law_rows`
+    spacing_m : float
+    """
+
+    def __init__(self, fieldmap, rows, matrix, spacing_m: float = 5e-3):
+        lo, hi = (np.asarray(b, float) for b in fieldmap.bounds)
+        counts = [max(2, int(math.ceil((hi[k] - lo[k]) / spacing_m)) + 1) for k in range(3)]
+        axes = [np.linspace(lo[k], hi[k], counts[k]) for k in range(3)]
+        g = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+        a = np.asarray(fieldmap.actuation(g), float)[:, rows]          # (N, r, n)
+        f = np.linalg.norm(np.einsum("ij,njk->nik", matrix, a), axis=1)  # (N, n)
+        f = f.reshape(*counts, -1)
+        corners = [f[i:i + counts[0] - 1, j:j + counts[1] - 1, k:k + counts[2] - 1]
+                   for i in (0, 1) for j in (0, 1) for k in (0, 1)]
+        cmax = np.maximum.reduce(corners)
+        cmin = np.minimum.reduce(corners)
+        self.bound_n_per_a = cmax + (cmax - cmin)        # (cx, cy, cz, n)
+        self.lo = lo
+        self.step = (hi - lo) / (np.asarray(counts) - 1)
+        self.cells = [c - 2 for c in counts]
+
+    def at(self, p) -> np.ndarray:
+        """(n,) N/A: the bound of each coil's force per ampere in the cell holding p (the
+        nearest cell outside the box)."""
+        idx = [min(max(int((p[k] - self.lo[k]) / self.step[k]), 0), self.cells[k])
+               for k in range(3)]
+        return self.bound_n_per_a[idx[0], idx[1], idx[2]]
+
+    def keep(self, p, limit_a: np.ndarray, force_n: float) -> np.ndarray:
+        """Indices of the coils whose force at their limit could exceed ``force_n`` near p."""
+        return np.flatnonzero(self.at(p) * limit_a > force_n)
+
+
+# ---------------------------------------------------------------------------------------------
 # configuration and records
 
 
@@ -176,9 +269,9 @@ class RunnerConfig:
     force_axes : {'z', 'xyz'}
         Force components to render: 'z' evaluates only the two rows of A(p) that Fz of a
         z-dipole needs.
-    skip_fraction : float
-        Coils whose |force per ampere| at p is below this fraction of the largest are not
-        driven (0: never skip).
+    skip_force_n : float
+        Leave a coil out when the bound of the force it could add at its current limit near p
+        is at most this, N (0: never skip; see :class:`CoilSkipBound`).
     feedforward : bool
         Voltage feed-forward through the L/R model (off: the duty is the steady-state one).
     thermal_continuous_current_a, thermal_time_constant_s : float
@@ -203,7 +296,7 @@ class RunnerConfig:
     unipolar: bool = False
     control_period_s: float = 1e-3
     force_axes: str = "z"
-    skip_fraction: float = 0.0
+    skip_force_n: float = 0.0
     feedforward: bool = True
     thermal_continuous_current_a: float = 3.0
     thermal_time_constant_s: float = 300.0
@@ -231,8 +324,8 @@ class RunnerConfig:
             raise BadInputError("control_period_s", "in (0, 0.1] s", self.control_period_s)
         if self.force_axes not in ("z", "xyz"):
             raise BadInputError("force_axes", "'z' or 'xyz'", self.force_axes)
-        if not 0 <= self.skip_fraction < 1:
-            raise BadInputError("skip_fraction", "in [0, 1)", self.skip_fraction)
+        if not (0 <= self.skip_force_n and math.isfinite(self.skip_force_n)):
+            raise BadInputError("skip_force_n", "a finite force >= 0 N", self.skip_force_n)
 
     @property
     def n_coils(self) -> int:
@@ -264,6 +357,204 @@ class SensorFrame:
     t_s: float
 
 
+@dataclass
+class Fix:
+    """What the sensor side publishes for one frame (SI).
+
+    Attributes
+    ----------
+    position_m : ndarray, shape (3,), m -- the localizer's estimate
+    ok : bool -- the localizer trusts it
+    frame_t_s : float, s -- when the frame's field was sampled
+    problems : tuple of (fault name, detail)
+    excluded : ndarray, shape (2 n,), bool -- sensors left out of the fit
+    fit_s : float, s -- compute time of the health checks and the fit
+    """
+
+    position_m: np.ndarray
+    ok: bool
+    frame_t_s: float
+    problems: tuple
+    excluded: np.ndarray
+    fit_s: float
+
+
+class CurrentHistory:
+    """Ring buffer of the modelled coil currents at the start of each control step.
+
+    Written by the control loop, read by the sensor thread (a frame is ~2 bus passes old: the
+    fit needs the currents its field was sampled at). A row's current is written before its
+    time, so a reader never takes a half-written row unless the frame is older than the whole
+    buffer (``length`` steps).
+    """
+
+    def __init__(self, n_coils: int, length: int):
+        self.t_s = np.full(length, -math.inf)
+        self.current_a = np.zeros((length, n_coils))
+        self.k = 0
+
+    def push(self, t_s: float, current_a: np.ndarray) -> None:
+        j = self.k % len(self.t_s)
+        self.current_a[j] = current_a
+        self.t_s[j] = t_s
+        self.k += 1
+
+    def at(self, t_s: float) -> np.ndarray:
+        """Currents (n,) A of the newest step that started at or before ``t_s`` (the oldest
+        kept when none did; zeros before the first step)."""
+        t = self.t_s
+        before = t <= t_s + 1e-12
+        if not before.any():
+            if self.k == 0:
+                return np.zeros(self.current_a.shape[1])
+            return self.current_a[int(np.argmin(t))].copy()
+        return self.current_a[int(np.argmax(np.where(before, t, -math.inf)))].copy()
+
+
+class SensorPipeline:
+    """The sensor side: one :class:`SensorFrame` -> one :class:`Fix` (health checks, fit).
+
+    Parameters
+    ----------
+    localizer : object
+        ``locate(top, bottom, currents=None)`` -> an estimate with ``position_m`` and ``ok``.
+    fieldmap : object
+        Optionally ``sensor_coil_field() -> (2, n, 3, n)`` T/A and ``sensor_positions_m``
+        (2, n, 3) m: the expected-saturation test (:data:`EXPECTED_SATURATION`).
+    n_coils : int
+    currents_at : callable
+        ``currents_at(t_s) -> (n,)`` A: the modelled currents when the frame was sampled.
+    moment_a_m2 : ndarray, shape (3,)
+    clock : callable, s
+    """
+
+    def __init__(self, localizer, fieldmap, n_coils: int, currents_at: Callable,
+                 moment_a_m2, clock: Callable[[], float] = time.perf_counter):
+        self.localizer, self.map, self.n = localizer, fieldmap, n_coils
+        self.currents_at, self.clock = currents_at, clock
+        self.moment = np.asarray(moment_a_m2, float)
+        self.excluded = np.zeros(2 * n_coils, dtype=bool)
+        self.position_m: np.ndarray | None = None     # last ok estimate
+        coil_field = getattr(fieldmap, "sensor_coil_field", None)
+        self._coil_field = None
+        if coil_field is not None:
+            g = np.asarray(coil_field(), float) if callable(coil_field) else None
+            if g is not None and g.shape == (2, n_coils, 3, n_coils):
+                self._coil_field = g.reshape(2 * n_coils * 3, n_coils)
+                self._sensor_pts = np.asarray(fieldmap.sensor_positions_m,
+                                              float).reshape(-1, 3)
+
+    def expected_saturation(self, currents_a: np.ndarray) -> np.ndarray:
+        """(2 n,) bool: sensors the model expects beyond :data:`EXPECTED_SATURATION` of the
+        linear range (coils at ``currents_a``, plus the magnet's dipole at the last estimate)."""
+        if self._coil_field is None:
+            return np.zeros(2 * self.n, dtype=bool)
+        b = (self._coil_field @ currents_a).reshape(2 * self.n, 3)
+        if self.position_m is not None:
+            b = b + multipole_field(self._sensor_pts, self.position_m, self.moment)
+        return np.any(np.abs(b) > EXPECTED_SATURATION * TLV493D_LINEAR_RANGE_T, axis=1)
+
+    def process(self, frame: SensorFrame) -> Fix:
+        t0 = self.clock()
+        n = self.n
+        status = list(frame.status)
+        values = np.concatenate([frame.top_t, frame.bottom_t])
+        beyond = np.any(np.abs(values) > TLV493D_LINEAR_RANGE_T, axis=1)
+        for i in np.flatnonzero(beyond):
+            if status[i] == "ok":
+                status[i] = "saturated"
+        # the currents the coils really carried when the frame's field was sampled (R-L
+        # model), not the command they lag nor today's
+        currents = self.currents_at(frame.t_s)
+        expected = self.expected_saturation(currents)
+        healthy = np.array([s == "ok" for s in status])
+        # an expected saturation: excluded, not a fault
+        quiet = expected & ~healthy & np.array([s == "saturated" for s in status])
+        self.excluded |= quiet
+        newly = [(i, s) for i, s in enumerate(status)
+                 if not healthy[i] and not self.excluded[i]]
+        self.excluded = ~healthy
+        problems = []
+        if newly:
+            i, s = newly[0]
+            problems.append((SENSOR_FAULTS.get(s, "sensor_dead"),
+                             f"sensor {i} ({'top' if i < n else 'bottom'} {i % n}) reports "
+                             f"{s!r}; excluded"))
+        top = np.where(self.excluded[:n, None], np.nan, frame.top_t)
+        bottom = np.where(self.excluded[n:, None], np.nan, frame.bottom_t)
+        est = self.localizer.locate(top, bottom, currents=currents)
+        ok = bool(est.ok)
+        p = np.asarray(est.position_m, float).copy()
+        if ok:
+            self.position_m = p
+        else:
+            problems.append(("lost", "the localizer flagged its estimate (residual test)"))
+        return Fix(p, ok, float(frame.t_s), tuple(problems), self.excluded.copy(),
+                   self.clock() - t0)
+
+
+class ConstantVelocityTracker(ConstantVelocityKalman):
+    """Constant-velocity Kalman filter, one (2, 2) covariance per axis, in scalar arithmetic
+    (a few microseconds per call on the control thread).
+
+    State per axis: position x (m) and velocity v (m/s); process: white acceleration of
+    ``accel_rms_m_s2`` (q = a^2: Q = q [[dt^4/4, dt^3/2], [dt^3/2, dt^2]]); measurement: the
+    position with variance ``meas_rms_m``^2. The same model as
+    :class:`firmware_io.localization.ConstantVelocityKalman`, with the interface the runner uses:
+    ``update(position_m, time_s, ok)``, ``predict(time_s)`` and ``x`` ((2, 3) position,
+    velocity).
+
+    Defaults: a finger's accelerations while exploring a surface, ~2 m/s^2 rms; the
+    measurement variance is that of the calibrated fit on the simulated device (raw error
+    median 0.5 mm, p95 1.7 mm along a slide over the hemisphere, correlated over many
+    frames). Only the ratio accel/meas matters for the gain; replaying one simulated slide
+    (133 frames/s, 15 ms old at hand-over) the tracked error (mean / p95) was 0.87 / 2.07 mm at
+    the ratio 4000 s^-2 (2 m/s^2, 0.5 mm), 0.69 / 1.46 mm at 1000 and 0.70 / 1.32 mm at 500;
+    1333 (2 m/s^2, 1.5 mm) keeps the filter responsive for faster fingers.
+    """
+
+    def __init__(self, accel_rms_m_s2: float = 2.0, meas_rms_m: float = 1.5e-3):
+        super().__init__(accel_rms_m_s2, meas_rms_m)
+
+    def reset(self) -> None:
+        self.x = None
+        self.t = None
+        self.p = (0.0, 0.0, 0.0)     # p00, p01, p11 (the same for each axis)
+
+    def update(self, position_m, time_s: float, ok: bool = True):
+        z = np.asarray(position_m, dtype=float)
+        if self.x is None:
+            if ok:
+                self.x = np.stack([z, np.zeros(3)])
+                self.p = (self.r, 0.0, 1.0)
+                self.t = float(time_s)
+            return z.copy(), np.zeros(3)
+        dt = max(float(time_s) - self.t, 0.0)
+        p00, p01, p11 = self.p
+        q = self.q
+        # predict: F P F^T + Q with F = [[1, dt], [0, 1]]
+        p00, p01, p11 = (p00 + 2 * dt * p01 + dt * dt * p11 + q * dt ** 4 / 4,
+                         p01 + dt * p11 + q * dt ** 3 / 2, p11 + q * dt * dt)
+        x = self.x[0] + dt * self.x[1]
+        v = self.x[1]
+        if ok:
+            s = p00 + self.r
+            k0, k1 = p00 / s, p01 / s
+            innov = z - x
+            x = x + k0 * innov
+            v = v + k1 * innov
+            p00, p01, p11 = p00 - k0 * p00, p01 - k0 * p01, p11 - k1 * p01
+        self.x = np.stack([x, v])
+        self.p = (p00, p01, p11)
+        self.t = float(time_s)
+        return x.copy(), v.copy()
+
+    def predict(self, time_s: float) -> np.ndarray:
+        if self.x is None:
+            raise BadInputError("filter state", "at least one ok estimate before predict", None)
+        return self.x[0] + max(float(time_s) - self.t, 0.0) * self.x[1]
+
+
 # ---------------------------------------------------------------------------------------------
 # the runner
 
@@ -290,7 +581,10 @@ class Runner:
         -> (currents, residual) (firmware_io.allocation).
     coils : CoilDriver
     sensors : callable
-        ``sensors(t_s) -> SensorFrame | None``: the newest frame not yet handed out, or None.
+        ``sensors(t_s) -> Fix | SensorFrame | None``: the newest result not yet handed out, or
+        None. A source with ``attach(pipeline)`` is given this runner's
+        :class:`SensorPipeline` and runs it on its side (the sensor thread); a raw
+        :class:`SensorFrame` is processed inside the step.
     config : RunnerConfig
     log : callable
         ``log(line)`` for one line per fault/resume.
@@ -315,13 +609,13 @@ class Runner:
                                     config.thermal_time_constant_s)
         m = np.asarray(fieldmap.moment_a_m2, float)
         self.moment = m
-        # F = F(m) G5 (thesis eq. 2.5), the one numpy definition on the controller side
         mx, my, mz = m
-        self.force_rows = np.array([[mx, my, mz, 0.0, 0.0],
-                                    [0.0, mx, 0.0, my, mz],
-                                    [-mz, 0.0, mx, -mz, my]])
         self.z_only = config.force_axes == "z" and abs(mx) + abs(my) <= 1e-12 * abs(mz)
+        self.law_rows, self.law_matrix = force_law_rows(m, "z" if self.z_only else "xyz")
         self.lo, self.hi = (np.asarray(b, float) for b in fieldmap.bounds)
+        self._rows_api = _accepts_selection(fieldmap, 0.5 * (self.lo + self.hi))
+        self.skip = (CoilSkipBound(fieldmap, self.law_rows, self.law_matrix)
+                     if config.skip_force_n > 0 else None)
         self.current_a = np.zeros(n)   # model of the coil currents (feed-forward state)
         self.command_a = np.zeros(n)
         self.state = "safe"
@@ -331,15 +625,20 @@ class Runner:
         self.latched = False
         self.pwm_failures = 0
         self.pwm_reinit_needed = False
-        self.excluded = np.zeros(2 * n, dtype=bool)
         self.last_estimate_ok = False
         self.have_fix = False
         self.position_m = np.full(3, np.nan)
         self.fault_log: list[tuple[float, str, str]] = []
-        # modelled currents at the start of each of the last steps (frames arrive late)
-        self.history: list[tuple[float, np.ndarray]] = []
-        self.history_len = max(8, int(0.1 / config.control_period_s))
-        self.last_frame: SensorFrame | None = None
+        # modelled currents at the start of each of the last 0.2 s of steps (frames arrive late)
+        self.history = CurrentHistory(n, max(16, int(0.2 / config.control_period_s)))
+        self.pipeline = SensorPipeline(localizer, fieldmap, n, self.history.at, m)
+        self.last_fix: Fix | None = None
+        # per-stage compute times of the last step (s), when ``profile`` is set
+        self.profile = False
+        self.stages: dict[str, float] = {}
+        attach = getattr(sensors, "attach", None)
+        if attach is not None:
+            attach(self.pipeline)       # the source runs the fit on its side
 
     # -- life cycle ----------------------------------------------------------------------------
     def start(self, pwm_frequency_hz: float = 1526.0) -> None:
@@ -394,47 +693,36 @@ class Runner:
         return False
 
     # -- the step ------------------------------------------------------------------------------
+    def _mark(self, name: str, t_prev: float) -> float:
+        t = self.clock()
+        self.stages[name] = t - t_prev
+        return t
+
     def step(self, t_s: float) -> StepRecord:
-        """One control step at time ``t_s`` (s). Never raises for a device fault."""
+        """One control step at time ``t_s`` (s). Never raises for a device fault.
+
+        ``self.sensors(t_s)`` hands over the newest :class:`Fix` of the sensor side, or None;
+        a source that hands over raw :class:`SensorFrame` s instead has them processed here
+        (the single-threaded fallback: the fit then counts in this step).
+        """
         t0 = self.clock()
         cfg = self.cfg
-        self._remember(t_s)
-        frame = self.sensors(t_s)
-        new_frame = frame is not None
+        prof = self.profile
+        self.history.push(t_s, self.current_a)
+        item = self.sensors(t_s)
+        if isinstance(item, SensorFrame):
+            item = self.pipeline.process(item)
+        fix: Fix | None = item
+        new_frame = fix is not None
         problems: list[tuple[str, str]] = []
         if new_frame:
-            self.last_frame = frame
-            status = list(frame.status)
-            n = cfg.n_coils
-            values = np.concatenate([frame.top_t, frame.bottom_t])
-            beyond = np.any(np.abs(values) > TLV493D_LINEAR_RANGE_T, axis=1)
-            for i in np.flatnonzero(beyond):
-                if status[i] == "ok":
-                    status[i] = "saturated"
-            expected = self._expected_saturation()
-            healthy = np.array([s == "ok" for s in status])
-            # an expected saturation: excluded, not a fault
-            quiet = expected & ~healthy & np.array([s == "saturated" for s in status])
-            self.excluded |= quiet
-            newly = [(i, s) for i, s in enumerate(status)
-                     if not healthy[i] and not self.excluded[i]]
-            self.excluded = ~healthy
-            if newly:
-                i, s = newly[0]
-                problems.append((SENSOR_FAULTS.get(s, "sensor_dead"),
-                                 f"sensor {i} ({'top' if i < n else 'bottom'} {i % n}) reports "
-                                 f"{s!r}; excluded"))
-            top = np.where(self.excluded[:n, None], np.nan, frame.top_t)
-            bottom = np.where(self.excluded[n:, None], np.nan, frame.bottom_t)
-            # the currents the coils really carried when the frame's field was sampled (R-L
-            # model), not the command they lag nor today's
-            est = self.localizer.locate(top, bottom, currents=self._current_at(frame.t_s))
-            self.last_estimate_ok = bool(est.ok)
-            if est.ok:
-                self.tracker.update(np.asarray(est.position_m, float), frame.t_s, True)
+            self.last_fix = fix
+            problems.extend(fix.problems)
+            self.last_estimate_ok = fix.ok
+            if fix.ok:
+                self.tracker.update(fix.position_m, fix.frame_t_s, True)
                 self.have_fix = True
-            else:
-                problems.append(("lost", "the localizer flagged its estimate (residual test)"))
+        tm = self._mark("fix", t0) if prof else t0
         if not self.have_fix:
             return self._record(t_s, t0, np.full(3, np.nan), np.zeros(3), new_frame,
                                 off=True)
@@ -462,8 +750,12 @@ class Runner:
                 return self._record(t_s, t0, p, np.zeros(3), new_frame, off=True)
         if self.fault is not None:
             return self._record(t_s, t0, p, np.zeros(3), new_frame, off=True)
+        if prof:
+            tm = self._mark("predict", tm)
 
         f_ref = np.asarray(self.scene.force(p, vel), float)
+        if prof:
+            tm = self._mark("object_force", tm)
         command = self._allocate(p, f_ref)
         total = float(np.sum(np.abs(command)))
         if np.any(np.abs(command) > self.limit + 1e-9) or total > cfg.total_current_a + 1e-9 \
@@ -473,32 +765,6 @@ class Runner:
                               f"(limits {cfg.current_limit_a} A, {cfg.total_current_a} A)")
             return self._record(t_s, t0, p, f_ref, new_frame, off=True)
         return self._drive(t_s, t0, p, f_ref, command, new_frame)
-
-    def _current_at(self, t_s: float) -> np.ndarray:
-        """Modelled coil currents at time ``t_s`` from the recent history (A, (n,))."""
-        hist = self.history
-        k = len(hist) - 1
-        while k > 0 and hist[k][0] > t_s + 1e-12:
-            k -= 1
-        return hist[k][1].copy() if hist else self.current_a.copy()
-
-    def _remember(self, t_s: float) -> None:
-        self.history.append((t_s, self.current_a.copy()))
-        if len(self.history) > self.history_len:
-            del self.history[0]
-
-    def _expected_saturation(self) -> np.ndarray:
-        """(2 n,) bool: sensors the model expects beyond :data:`EXPECTED_SATURATION` of the
-        linear range (coils at the modelled currents, plus the magnet's dipole field)."""
-        n = self.cfg.n_coils
-        coil_field = getattr(self.map, "sensor_coil_field", None)
-        if coil_field is None:
-            return np.zeros(2 * n, dtype=bool)
-        b = np.asarray(coil_field(self.current_a), float).reshape(2 * n, 3)
-        if self.have_fix and np.all(np.isfinite(self.position_m)):
-            pts = np.asarray(self.map.sensor_positions_m, float).reshape(-1, 3)
-            b = b + multipole_field(pts, self.position_m, self.moment)
-        return np.any(np.abs(b) > EXPECTED_SATURATION * TLV493D_LINEAR_RANGE_T, axis=1)
 
     def _reinit_pwm(self, t_s: float) -> bool:
         """Re-initialise the PWM boards after a NACK; latch after ``max_pwm_retries`` failures."""
@@ -516,37 +782,54 @@ class Runner:
         self.pwm_reinit_needed = False
         return True
 
-    def force_matrix(self, p: np.ndarray) -> np.ndarray:
-        """Force per ampere at p: (1, n) N/A (Fz of a z-dipole) or (3, n)."""
-        if self.z_only:
-            rows = getattr(self.map, "actuation_rows", None)
-            if rows is not None:
-                a = rows(p, (3, 6))                       # dBx/dx, dBy/dy
-                return -self.moment[2] * (a[0] + a[1])[None, :]
+    def force_matrix(self, p: np.ndarray, coils=None) -> np.ndarray:
+        """Force per ampere at p: (1, n) N/A (Fz of a z-dipole) or (3, n); with ``coils`` (index
+        array) only those columns."""
+        # the map's one-point kernel evaluates all rows in one product: slicing the rows the law
+        # uses afterwards is cheaper than selecting them inside (studies/bench_runner.py); the
+        # coils are selected inside (their coefficients are skipped)
+        if coils is not None and self._rows_api:
+            a = self.map.actuation(p, coils=coils)
+        else:
             a = self.map.actuation(p)
-            return -self.moment[2] * (a[3] + a[6])[None, :]
-        return self.force_rows @ self.map.actuation(p)[3:]
+            if coils is not None:
+                a = a[:, coils]
+        return self.law_matrix @ a[self.law_rows]
 
     def _allocate(self, p: np.ndarray, f_ref: np.ndarray) -> np.ndarray:
         cfg = self.cfg
-        fm = self.force_matrix(p)
+        prof = self.profile
+        tm = self.clock() if prof else 0.0
+        keep = None
+        if self.skip is not None:
+            k = self.skip.keep(p, self.limit, cfg.skip_force_n)
+            if len(k) < cfg.n_coils:
+                keep = k
+        fm = self.force_matrix(p, keep)
         target = f_ref[2:3] if self.z_only else f_ref
         bias = getattr(self.map, "bias_force", None)
         if bias is not None:
             b = np.asarray(bias(p), float)
             target = target - (b[2:3] if self.z_only else b)
-        keep = np.ones(cfg.n_coils, dtype=bool)
-        if cfg.skip_fraction > 0:
-            norms = np.abs(fm).max(axis=0)
-            keep = norms >= cfg.skip_fraction * norms.max()
-        command = np.zeros(cfg.n_coils)
-        i, _ = self.allocate(fm[:, keep], target, self.limit[keep], cfg.total_current_a,
-                             unipolar=cfg.unipolar)
-        command[keep] = i
+        if prof:
+            tm = self._mark("force_matrix", tm)
+        if keep is None:
+            command, _ = self.allocate(fm, target, self.limit, cfg.total_current_a,
+                                       unipolar=cfg.unipolar)
+            command = np.asarray(command, float)
+        else:
+            command = np.zeros(cfg.n_coils)
+            if len(keep):
+                i, _ = self.allocate(fm, target, self.limit[keep], cfg.total_current_a,
+                                     unipolar=cfg.unipolar)
+                command[keep] = i
+        if prof:
+            self._mark("allocation", tm)
         return command
 
     def _drive(self, t_s, t0, p, f_ref, command, new_frame) -> StepRecord:
         cfg = self.cfg
+        tm = self.clock() if self.profile else 0.0
         if cfg.feedforward:
             v = feedforward_voltage(command, self.current_a, self.r, self.ind,
                                     cfg.control_period_s, cfg.supply_voltage_v)
@@ -569,6 +852,8 @@ class Runner:
         self.current_a = rl_step(self.current_a, v_out, self.r, self.ind, cfg.control_period_s)
         self.thermal.update(self.current_a, cfg.control_period_s)
         self.state = "running"
+        if self.profile:
+            self._mark("drive", tm)
         return StepRecord(t_s, p, f_ref, command.copy(), v_out, self.current_a.copy(),
                           self.clock() - t0, self.state, new_frame)
 
@@ -586,6 +871,90 @@ class Runner:
         return StepRecord(t_s, np.asarray(p, float).copy(), np.asarray(f_ref, float),
                           self.command_a.copy(), np.zeros(cfg.n_coils), self.current_a.copy(),
                           self.clock() - t0, self.state, new_frame)
+
+
+# ---------------------------------------------------------------------------------------------
+# sensor calibration at start-up (coils only, no magnet on the board)
+
+CALIBRATION_CURRENT_A = 2.0
+"""Largest calibration current per coil, A: the iron cores stay near their linear range and the
+sensors above them below the TLV493D's linear range, while every sensor sees a coil field many
+times its noise along three independent directions."""
+
+
+CALIBRATED_RELATIVE_ERROR = 0.005
+"""Relative model error of a calibrated sensor's reading (the localizer's sensor weights): what
+the affine calibration leaves of the 1 % gain and 1 degree mounting errors is the mounting shift
+and the coils' nonlinearity, a fraction of a percent (studies/localization.py's 'model-cal')."""
+
+
+def calibration_currents(n_coils: int, amplitude_a: float = CALIBRATION_CURRENT_A,
+                         frames: int = 40, seed: int = 0) -> np.ndarray:
+    """Current patterns for :func:`record_calibration`, (frames, n_coils) A: a zero frame (the
+    offsets) then uniform random patterns in [-amplitude, amplitude] (with nine coils every
+    sensor sees coil fields along three independent directions; fixed seed: repeatable)."""
+    if not (0 < amplitude_a <= 13.0):
+        raise BadInputError("amplitude_a", "in (0, 13] A", amplitude_a)
+    if frames < 8:
+        raise BadInputError("frames", ">= 8 (4 unknowns per sensor axis, with margin)", frames)
+    rng = np.random.default_rng(seed)
+    out = rng.uniform(-amplitude_a, amplitude_a, (frames, n_coils))
+    out[0] = 0.0
+    return out
+
+
+def record_calibration(coils, arrays, currents_a: np.ndarray, *, settle_s: float,
+                       sleep: Callable[[float], None] = time.sleep):
+    """Initialise the PWM boards, drive each current pattern, wait ``settle_s`` (several L/R),
+    read the arrays twice (a
+    master-controlled TLV493D returns the conversion the previous read triggered) and keep the
+    second frame; all coils off at the end, also on an error.
+
+    The finger magnet must be away from the board (its field would be taken for an offset).
+
+    Returns
+    -------
+    top_t, bottom_t : ndarray, shape (k, n, 3), T (NaN where a sensor was not 'ok')
+    applied_a : ndarray, shape (k, n_coils), A -- the steady-state currents of the duties
+        written (quantized, clamped by the drive)
+    """
+    i = np.asarray(currents_a, float)
+    tops, bottoms, applied = [], [], []
+    coils.initialize()
+    try:
+        for row in i:
+            res = coils.command(row)
+            sleep(settle_s)
+            arrays.read()
+            r = arrays.read()
+            bad = np.array([s != "ok" for s in r.status])
+            n = len(bad) // 2
+            tops.append(np.where(bad[:n, None], np.nan, r.top_t))
+            bottoms.append(np.where(bad[n:, None], np.nan, r.bottom_t))
+            applied.append(np.asarray(res.current_a, float))
+    finally:
+        coils.all_off()
+    return np.array(tops), np.array(bottoms), np.array(applied)
+
+
+def calibrate_sensors(model, top_t, bottom_t, applied_a):
+    """Per-sensor calibration (gain, mounting rotation, offset) from coil-only frames:
+    :func:`firmware_io.localization.calibrate`, checked to be finite. Returns what it returns,
+    for the Localizer's ``calibration``."""
+    from .localization import calibrate
+
+    try:
+        cal = calibrate(top_t, bottom_t, applied_a, model)
+    except (np.linalg.LinAlgError, ValueError):
+        cal = (np.full(1, np.nan),)
+    # (gain_inverse, offsets) or the localizer's calibration object with those attributes
+    parts = cal if isinstance(cal, tuple) else [
+        getattr(cal, a) for a in ("gain_inverse", "offsets_t", "shift_m", "coil_field_t_per_a")
+        if getattr(cal, a, None) is not None]
+    if not all(np.all(np.isfinite(c)) for c in parts):
+        raise FirmwareIOError("sensor calibration failed (a sensor saw too few usable frames); "
+                              "check the sensors and that the magnet is away from the board")
+    return cal
 
 
 def config_from_map(fieldmap, **overrides) -> RunnerConfig:

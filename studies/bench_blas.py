@@ -31,8 +31,6 @@ import numpy as np
 import designkit.coupling as cp, designkit.optimize as op
 if sys.argv[1] == "default":
     cp.one_blas_thread = contextlib.nullcontext
-    if hasattr(op, "_one_blas_thread"):
-        op._one_blas_thread = contextlib.nullcontext
     if hasattr(op, "one_blas_thread"):
         op.one_blas_thread = contextlib.nullcontext
 from designkit.array import CoilArray

@@ -27,9 +27,10 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from designkit import default_design  # noqa: E402
-from designkit._io import write_json_atomic  # noqa: E402
-from designkit.optimize import (CoilDesignProblem, _one_blas_thread,  # noqa: E402
-                                device_problem_for, solve, solve_device, verify_device)
+from designkit._blas import one_blas_thread  # noqa: E402
+from designkit.optimize import (CoilDesignProblem, device_problem_for, solve,  # noqa: E402
+                                solve_device, verify_device)
+from studies._common import finish  # noqa: E402
 
 
 def _clear_caches():
@@ -60,7 +61,7 @@ def run(out_dir, quick: bool = False) -> dict:
     panel_s = None
     if not quick:  # reference: one saturating panel-model evaluation at the optimum
         _clear_caches()
-        with _one_blas_thread():  # as inside solve_device (threads thrash a loaded machine)
+        with one_blas_thread():  # as inside solve_device (threads thrash a loaded machine)
             t0 = time.perf_counter()
             problem.evaluate(best.x, turns=best.turns, model="panel")
             panel_s = time.perf_counter() - t0
@@ -88,7 +89,7 @@ def run(out_dir, quick: bool = False) -> dict:
         out_d["verification"]["stages"] = {k: ver[k] for k in ("multistart", "isres", "grid")}
         legacy = CoilDesignProblem.from_design(design, core_model="surface-current")
         _clear_caches()
-        with _one_blas_thread():
+        with one_blas_thread():
             t0 = time.perf_counter()
             res = solve(legacy, starts=2, thesis_point=False)
             out_d["legacy_linear_core_seconds_2_starts"] = time.perf_counter() - t0
@@ -100,9 +101,7 @@ def run(out_dir, quick: bool = False) -> dict:
     if "legacy_linear_core_seconds_2_starts" in out_d:
         out_d["ratio_device_to_legacy"] = (out_d["device_median_seconds"]
                                            / out_d["legacy_linear_core_seconds_2_starts"])
-    write_json_atomic(out / "bench_optimize.json", out_d)
-    _print(out_d)
-    return out_d
+    return finish(out / "bench_optimize.json", out_d, _print)
 
 
 def _print(r: dict) -> None:

@@ -1,23 +1,25 @@
-"""Question: how long does one control step of the rendering runner take, part by part, and what
-does skipping what the scene does not need save?
+"""Question: how long does one control step of the rendering runner take -- with and without a
+new sensor result, stage by stage -- how long does the fit take on the sensor side, and what does
+skipping what the scene does not need save?
 
-A control step of firmware_io.runner is: the localization update (on a new sensor frame: the fit
-of firmware_io.localization, warm-started), the Kalman prediction to now, the object's force
-(firmware_io.scene), the force matrix at p (the map), the bounded allocation
-(firmware_io.allocation), the duty conversion (voltage feed-forward + MD10C duty/direction) and
-the PCA9685 byte building (firmware_io.coils.CoilDriver.plan). Each part is timed alone on
-realistic inputs (positions along a slide over the hemisphere, simulated sensor frames with
-coil currents), then whole Runner.step calls on the simulated buses, with the time spent inside
-the simulated devices subtracted (SimBus.model_time_s). Target: p99 <= 1 ms per step (a 1 kHz
-haptic loop in Python).
+The closed loop (designkit.plant: firmware_io's Runner on the simulated device, a slide over the
+hemisphere, the fit on the sensor side with the sensor thread's timing) runs with the runner's
+stage timer on: per control step the compute time (this thread's CPU clock, the simulated PWM
+boards' own time subtracted) of 'fix' (taking the sensor side's result, Kalman update),
+'predict', 'object_force', 'force_matrix' (A(p) rows the law uses + the bias force, the map),
+'allocation' and 'drive' (voltage feed-forward, MD10C duty/direction, PCA9685 bytes, the block
+writes). Split by step kind (with / without a new sensor result) as median and p99, and the fit's
+time on the sensor side separately. Target: p99 <= 1 ms for every step (a 1 kHz loop in Python).
 
-"Skip what the scene doesn't need", measured against the full evaluation in the same run:
-(a) Fz only (the thesis' law on a z-dipole): 2 rows of A(p) and a 1 x n allocation instead of 8
-rows and 3 x n; (b) coil skipping: coils whose force per ampere at p is below a fraction of the
-largest are left out of the allocation -- the force they could add is bounded by that fraction
-times the largest coil's force at the current limit, stated per row.
+"Skip what the scene doesn't need", against the full evaluation in the same process, one point
+at a time along the path: all 8 rows of A(p) for all coils, then only the rows the force law uses
+(firmware_io.runner.force_law_rows: 4 for the 3-D force of a z-dipole, 2 for Fz alone; selected
+inside the map's kernel, or sliced after it as the runner does), then
+also only the coils whose bound of force per ampere near p (firmware_io.runner.CoilSkipBound)
+times the current limit exceeds a stated force; with the allocation on the kept coils and the
+force it then misses against the full allocation.
 
-    python studies/bench_runner.py [OUT_DIR] [--map FILE] [--n N] [--quick]
+    python studies/bench_runner.py [OUT_DIR] [--map FILE] [--duration S] [--quick]
 """
 
 from __future__ import annotations
@@ -32,209 +34,170 @@ if __package__ in (None, ""):
 
 import numpy as np
 
-from designkit import default_design
-from designkit._io import write_json_atomic
-
+from studies._common import design_and_map, finish, load_average
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "bench_runner"
 """Default output folder (git-ignored), whatever the working directory."""
 
+SKIP_FORCES_N = (1e-3, 1e-2, 0.1, 0.3)
+"""Coil-skip forces benchmarked, N (the human force detection threshold is ~10-30 mN at the
+fingertip; 1 mN is far below it; 0.1 and 0.3 N show where the 3x3 array's coils start to be
+skipped -- every coil can add more than 10 mN at its limit anywhere on the path)."""
 
-def _stats(times_s) -> dict:
-    t = np.asarray(times_s) * 1e6
+
+def _us(times_s) -> dict:
+    t = np.asarray(times_s, float) * 1e6
     return {"median_us": float(np.median(t)), "p99_us": float(np.percentile(t, 99)),
             "n": int(len(t))}
 
 
-def _timed(fn, args_list, clock=time.perf_counter):
+def _timed(fn, n, clock=time.thread_time):
     out = []
-    for a in args_list:
+    for k in range(n):
         t0 = clock()
-        fn(*a)
+        fn(k)
         out.append(clock() - t0)
     return out
 
 
-def run(out_dir=DEFAULT_OUT, *, map_path=None, n: int = 2000, quick: bool = False) -> dict:
-    from designkit import fieldmap
-    from designkit.array import CoilArray
-    from designkit.localize import SensorSimulator
-    from designkit.plant import drive_data, slide_trajectory
-    from designkit.render.laws import ConstraintLaw
-    from designkit.render.scenefile import compile_scene, make_object
+def _loop(summary: dict) -> dict:
+    """The closed loop's timing in microseconds, from run_simulation's summary."""
+    lk = summary["loop_by_kind"]
+
+    def conv(d):
+        return {"median_us": None if d["p50_s"] is None else d["p50_s"] * 1e6,
+                "p99_us": None if d["p99_s"] is None else d["p99_s"] * 1e6, "n": d["n"]}
+
+    out = {k: conv(lk[k]) for k in ("without_frame", "with_frame", "sensor_side_fit")}
+    out["stages"] = {name: {kind: conv(v[kind]) for kind in ("without_frame", "with_frame")}
+                     for name, v in lk.get("stages", {}).items()}
+    out["running_fraction"] = summary["running_fraction"]
+    return out
+
+
+def run(out_dir=DEFAULT_OUT, *, map_path=None, duration_s: float = 2.0,
+        quick: bool = False) -> dict:
+    from designkit.coil import Coil
+    from designkit.electrical import drive_data
+    from designkit.plant import run_simulation, slide_trajectory
+    from designkit.render.scenefile import make_object
     from firmware_io.allocation import allocate
-    from firmware_io.localization import ConstantVelocityKalman, Localizer
     from firmware_io.mapfile import MapFile
-    from firmware_io.md10c import current_to_command
-    from firmware_io.runner import RunnerConfig, feedforward_voltage
+    from firmware_io.runner import CoilSkipBound, force_law_rows
     from firmware_io.scene import Scene
 
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    design = default_design()
-    array = CoilArray.from_design(design)
-    if map_path is None:
-        map_path = out_dir / "map.npz"
-        fieldmap.write(map_path, fieldmap.build(design, array=array, progress=not quick))
+    out_dir, design, array, map_path = design_and_map(out_dir, map_path, progress=not quick)
+    duration_s = min(duration_s, 0.4) if quick else duration_s
+    res: dict = {"load_average_1min": load_average(), "duration_s": duration_s,
+                 "clock": "thread CPU time", "target_p99_us": 1000.0}
+
+    # -- the closed loop, stage by stage, 3-D force and Fz alone
+    for rows in (("force",) if quick else ("force", "fz")):
+        s = run_simulation(design=design, obj="hemisphere", trajectory="slide",
+                           duration_s=duration_s, map_path=map_path, rows=rows,
+                           out=out_dir / f"loop-{rows}", progress=False, array=array,
+                           profile=True)
+        res[f"loop_{rows}"] = _loop(s)
+
+    # -- skipping rows and coils, one point at a time along the path
     fmap = MapFile.load(map_path)
     obj = make_object("hemisphere")
-    lam = design.render.stiffness_n_per_m
-    scene = Scene.load(compile_scene(obj, out_dir / "scene.npz", lam_n_per_m=lam,
-                                     law=ConstraintLaw(lam), map_design_sha256=fmap.design_sha256),
-                       expected_design_sha256=fmap.design_sha256)
-    n = 200 if quick else n
+    n = 100 if quick else 1000
     path = slide_trajectory(lambda x, y: obj.height(np.c_[x, y, np.zeros_like(x)]),
-                            duration_s=4.0, samples=n)
-    p = path.position_m
-    rng = np.random.default_rng(0)
-    drive = drive_data(design)
-    u = drive["current_limit_a"]
-    currents = rng.uniform(-0.3, 0.3, (n, array.n_coils)) * u
-    sim = SensorSimulator(design, array=array, errors="default",
-                          moment_direction=design.magnet.moment_vector_a_m2,
-                          induced="coupled" if not quick else "off", seed=1)
-    k_frames = min(n, 60 if quick else 400)
-    idx = np.linspace(0, n - 1, k_frames).astype(int)
-    frames = sim.read(p[idx], currents[idx])
-    res: dict = {"n_steps": n, "frames": k_frames, "clock": "perf_counter (wall)"}
+                            duration_s=4.0, samples=n).position_m
+    scene = Scene.load(out_dir / "loop-force" / "scene.npz")
+    f_obj = scene.force(path, np.zeros_like(path))
+    bias = fmap.bias_force(path)
+    m = fmap.moment_a_m2
+    drive = drive_data(design, Coil.from_design(design))
+    limit = np.full(fmap.n_coils, drive["current_limit_a"])
+    total = drive["total_current_a"]
+    rows3, mat3 = force_law_rows(m, "xyz")
+    full_mat = np.zeros((3, 8))           # the same force from all 8 rows
+    full_mat[:, rows3] = mat3
+    skip = {"rows_used_3d": rows3.tolist(), "rows_used_fz": force_law_rows(m, "z")[0].tolist()}
+    skip["all_rows"] = _us(_timed(lambda k: full_mat @ fmap.actuation(path[k]), n))
+    skip["law_rows"] = _us(_timed(lambda k: mat3 @ fmap.actuation(path[k], rows=rows3), n))
+    skip["law_rows_sliced"] = _us(_timed(lambda k: mat3 @ fmap.actuation(path[k])[rows3], n))
+    rows_z, mat_z = force_law_rows(m, "z")
+    skip["law_rows_fz"] = _us(_timed(lambda k: mat_z @ fmap.actuation(path[k], rows=rows_z), n))
+    t0 = time.perf_counter()
+    bound = CoilSkipBound(fmap, rows3, mat3)
+    skip["bound_table_s"] = time.perf_counter() - t0
+    full_i = [allocate(mat3 @ fmap.actuation(path[k], rows=rows3), f_obj[k] - bias[k], limit,
+                       total)[0] for k in range(n)]
+    skip["allocate_all_coils"] = _us(_timed(
+        lambda k: allocate(mat3 @ fmap.actuation(path[k], rows=rows3), f_obj[k] - bias[k],
+                           limit, total), n))
+    # the bound must hold: the exact force per ampere at the path points is below it
+    exact = np.linalg.norm(np.einsum("ij,njk->nik", mat3, fmap.actuation(path)[:, rows3]), axis=1)
+    skip["bound_holds"] = bool(np.all(exact <= np.array([bound.at(p) for p in path]) + 1e-15))
+    for force in SKIP_FORCES_N:
+        kept, miss = [], []
 
-    # -- localization update (warm start along the path) and the Kalman filter
-    for method in ("model", "dipole"):
-        loc = Localizer.from_map(map_path, method=method)
-        loc.locate(frames.top_t[0], frames.bottom_t[0], currents[idx[0]])   # cold start once
-        t = _timed(lambda k: loc.locate(frames.top_t[k], frames.bottom_t[k], currents[idx[k]]),
-                   [(k,) for k in range(1, k_frames)])
-        res[f"localize_{method}"] = _stats(t)
-    kf = ConstantVelocityKalman()
-    kf.update(p[0], 0.0)
-    res["kalman_update"] = _stats(_timed(lambda k: kf.update(p[k], k * 1e-3),
-                                         [(k,) for k in range(1, n)]))
-    res["kalman_predict"] = _stats(_timed(lambda k: kf.predict(k * 1e-3 + 5e-4),
-                                          [(k,) for k in range(1, n)]))
-
-    # -- object force
-    res["object_force"] = _stats(_timed(lambda k: scene.force(p[k][None], np.zeros((1, 3))),
-                                        [(k,) for k in range(n)]))
-
-    # -- force matrix: full 3-D vs Fz only (2 rows) vs the (1, 3) shape of the point
-    m = np.asarray(fmap.moment_a_m2, float)
-    fm3 = np.array([[m[0], m[1], m[2], 0, 0], [0, m[0], 0, m[1], m[2]],
-                    [-m[2], 0, m[0], -m[2], m[1]]])
-
-    def force3(k):
-        return fm3 @ fmap.actuation(p[k])[3:]
-
-    def force_z(k):
-        rows = getattr(fmap, "actuation_rows", None)
-        a = rows(p[k], (3, 6)) if rows is not None else fmap.actuation(p[k])[[3, 6]]
-        return -m[2] * (a[0] + a[1])[None]
-
-    res["force_matrix_3d"] = _stats(_timed(force3, [(k,) for k in range(n)]))
-    res["force_matrix_fz"] = _stats(_timed(force_z, [(k,) for k in range(n)]))
-    res["force_matrix_fz_note"] = ("rows-only interpolation" if hasattr(fmap, "actuation_rows")
-                                   else "the map interpolates all 8 rows; Fz uses 2 of them")
-
-    # -- allocation: 3-D, Fz, Fz with coil skipping
-    f_obj = scene.force(p, np.zeros_like(p))
-    bias = fmap.bias_force(p)
-    F3 = [force3(k) for k in range(n)]
-    Fz = [force_z(k) for k in range(n)]
-    tl = drive["total_current_a"]
-    res["allocate_3d"] = _stats(_timed(
-        lambda k: allocate(F3[k], f_obj[k] - bias[k], np.full(9, u), tl), [(k,) for k in range(n)]))
-    res["allocate_fz"] = _stats(_timed(
-        lambda k: allocate(Fz[k], f_obj[k, 2:] - bias[k, 2:], np.full(9, u), tl),
-        [(k,) for k in range(n)]))
-    skip = {}
-    for frac in (0.02, 0.05, 0.1):
-        kept, err = [], []
-
-        def alloc_skip(k, frac=frac):
-            norms = np.abs(F3[k]).max(axis=0)
-            keep = norms >= frac * norms.max()
-            i, _ = allocate(F3[k][:, keep], f_obj[k] - bias[k], np.full(keep.sum(), u), tl)
-            kept.append(int(keep.sum()))
-            full = np.zeros(9)
+        def step(k, force=force):
+            keep = bound.keep(path[k], limit, force)
+            fm = mat3 @ fmap.actuation(path[k], coils=keep)[rows3]
+            i, _ = allocate(fm, f_obj[k] - bias[k], limit[keep], total)
+            kept.append(len(keep))
+            full = np.zeros(fmap.n_coils)
             full[keep] = i
-            err.append(float(np.linalg.norm(F3[k] @ full - (f_obj[k] - bias[k]))))
+            return full
 
-        t = _timed(alloc_skip, [(k,) for k in range(n)])
-        full_err = [float(np.linalg.norm(F3[k] @ allocate(F3[k], f_obj[k] - bias[k],
-                                                            np.full(9, u), tl)[0]
-                                         - (f_obj[k] - bias[k]))) for k in range(0, n, 10)]
-        skip[str(frac)] = {**_stats(t), "coils_kept_mean": float(np.mean(kept)),
-                           "residual_p95_n": float(np.percentile(err, 95)),
-                           "residual_full_p95_n": float(np.percentile(full_err, 95)),
-                           "bound_per_skipped_coil": f"{frac} x max_k |F_k| x {u:.2f} A"}
-    res["allocate_3d_skip"] = skip
+        t = _timed(step, n)
+        for k in range(n):
+            i = step(k)
+            fk = mat3 @ fmap.actuation(path[k], rows=rows3)
+            miss.append(float(np.linalg.norm(fk @ (i - full_i[k]))))
+        kept = kept[n:]
+        skip[f"skip_{force * 1e3:g}mN"] = {
+            **_us(t), "coils_kept_mean": float(np.mean(kept)), "coils_kept_min": int(min(kept)),
+            "force_change_p95_n": float(np.percentile(miss, 95)),
+            "force_change_max_n": float(np.max(miss))}
+    res["skip"] = skip
+    return finish(out_dir / "bench_runner.json", res, _print)
 
-    # -- duty conversion and PCA9685 byte building
-    from firmware_io.coils import CoilDriver
-    from firmware_io.devices import PCA9685, pca9685_channel_bytes
-    from firmware_io.md10c import CoilDrive
-    from firmware_io.sim import SimBus, SimPCA9685
 
-    cfg = RunnerConfig(**{kk: tuple(v) if isinstance(v, list) else v for kk, v in drive.items()})
-    r_ohm, ind = np.asarray(cfg.resistance_ohm), np.asarray(cfg.inductance_h)
-    dr = [CoilDrive(cfg.supply_voltage_v, r, min(cfg.supply_voltage_v / r, 13.0)) for r in r_ohm]
-
-    def duty(k):
-        v = feedforward_voltage(currents[k], currents[k - 1], r_ohm, ind, 1e-3,
-                                cfg.supply_voltage_v)
-        return [current_to_command(float(x), d) for x, d in zip(v / r_ohm, dr)]
-
-    res["duty_conversion"] = _stats(_timed(duty, [(k,) for k in range(1, n)]))
-    bus = SimBus([SimPCA9685(0x40), SimPCA9685(0x41)])
-    coils = CoilDriver([PCA9685(bus, 0x40), PCA9685(bus, 0x41)], dr)
-    coils.initialize()
-
-    def build_bytes(k):
-        _, first, _, _ = coils.plan(np.clip(currents[k], -u, u))
-        return [b"".join(pca9685_channel_bytes(v) for _, v in sorted(w.items())) for w in first]
-
-    res["pca9685_bytes"] = _stats(_timed(build_bytes, [(k,) for k in range(n)]))
-
-    # -- the sum of the parts, per step without and with a new frame
-    base = ["kalman_predict", "object_force", "force_matrix_3d", "allocate_3d",
-            "duty_conversion", "pca9685_bytes"]
-    med = sum(res[k]["median_us"] for k in base)
-    p99 = sum(res[k]["p99_us"] for k in base)
-    res["step_without_frame"] = {"median_us": med, "p99_us_bound": p99}
-    res["step_with_frame"] = {"median_us": med + res["localize_model"]["median_us"]
-                              + res["kalman_update"]["median_us"],
-                              "p99_us_bound": p99 + res["localize_model"]["p99_us"]
-                              + res["kalman_update"]["p99_us"]}
-    res["target_p99_us"] = 1000.0
-    write_json_atomic(out_dir / "bench_runner.json", res)
-    _print(res)
-    return res
+def _fmt(v) -> str:
+    return "    n/a" if v is None else f"{v:7.0f}"
 
 
 def _print(res: dict) -> None:
-    print(f"runner step parts, {res['n_steps']} steps, {res['frames']} frames ({res['clock']})")
-    print(f"{'part':28s} {'median us':>10s} {'p99 us':>10s}")
-    for k, v in res.items():
-        if isinstance(v, dict) and "median_us" in v and "p99_us" in v:
-            print(f"{k:28s} {v['median_us']:10.1f} {v['p99_us']:10.1f}")
-    for k in ("step_without_frame", "step_with_frame"):
-        v = res[k]
-        print(f"{k:28s} {v['median_us']:10.1f} {v['p99_us_bound']:10.1f} (sum of p99s)")
-    print("coil skipping (3-D allocation):")
-    for frac, v in res["allocate_3d_skip"].items():
-        print(f"  below {float(frac):4.0%} of the largest: {v['coils_kept_mean']:.1f} coils kept, "
-              f"median {v['median_us']:.1f} us (all 9: {res['allocate_3d']['median_us']:.1f}), "
-              f"residual p95 {v['residual_p95_n'] * 1e3:.3f} mN (all: "
-              f"{v['residual_full_p95_n'] * 1e3:.3f} mN)")
-    print(f"Fz only: force matrix {res['force_matrix_fz']['median_us']:.1f} us vs 3-D "
-          f"{res['force_matrix_3d']['median_us']:.1f} us ({res['force_matrix_fz_note']}); "
-          f"allocation {res['allocate_fz']['median_us']:.1f} vs {res['allocate_3d']['median_us']:.1f} us")
+    print(f"runner control step, {res['duration_s']} s slide over the hemisphere per mode "
+          f"({res['clock']}; load average {res['load_average_1min']}; target p99 "
+          f"{res['target_p99_us']:.0f} us)")
+    for key in [k for k in res if k.startswith("loop_")]:
+        lp = res[key]
+        print(f"\n{key[5:]}: step kind / stage        median us   p99 us    steps")
+        for kind in ("without_frame", "with_frame", "sensor_side_fit"):
+            v = lp[kind]
+            label = {"without_frame": "step, no new frame", "with_frame": "step, new frame",
+                     "sensor_side_fit": "fit (sensor side)"}[kind]
+            print(f"  {label:30s} {_fmt(v['median_us'])}  {_fmt(v['p99_us'])}  {v['n']:7d}")
+        for name, v in lp["stages"].items():
+            a, b = v["without_frame"], v["with_frame"]
+            print(f"    {name:14s} no frame {_fmt(a['median_us'])} / {_fmt(a['p99_us'])}   "
+                  f"new frame {_fmt(b['median_us'])} / {_fmt(b['p99_us'])}")
+    s = res["skip"]
+    print(f"\nskipping (one point, median / p99 us): rows used 3-D {s['rows_used_3d']}, "
+          f"Fz {s['rows_used_fz']}")
+    for k in ("all_rows", "law_rows", "law_rows_sliced", "law_rows_fz", "allocate_all_coils"):
+        print(f"  {k:28s} {_fmt(s[k]['median_us'])} / {_fmt(s[k]['p99_us'])}")
+    print(f"  coil bound table: {s['bound_table_s']:.2f} s at start-up; bound holds on the path: "
+          f"{s['bound_holds']}")
+    for k, v in s.items():
+        if k.startswith("skip_"):
+            print(f"  {k:28s} {_fmt(v['median_us'])} / {_fmt(v['p99_us'])}  (map + allocation), "
+                  f"coils kept {v['coils_kept_mean']:.1f} (min {v['coils_kept_min']}), force "
+                  f"change p95 {v['force_change_p95_n'] * 1e3:.3f} mN, max "
+                  f"{v['force_change_max_n'] * 1e3:.3f} mN")
 
 
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", nargs="?", default=DEFAULT_OUT)
     ap.add_argument("--map", default=None, help="an existing map file (default: build one)")
-    ap.add_argument("--n", type=int, default=2000)
+    ap.add_argument("--duration", type=float, default=2.0, help="simulated seconds per mode")
     ap.add_argument("--quick", action="store_true")
     a = ap.parse_args()
-    run(a.out, map_path=a.map, n=a.n, quick=a.quick)
+    run(a.out, map_path=a.map, duration_s=a.duration, quick=a.quick)

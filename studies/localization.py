@@ -77,7 +77,7 @@ METHODS = ("learned", "dipole-naive", "dipole", "model", "model-cal", "noise-lim
 
 
 def _progress(it, desc):
-    from tqdm import tqdm
+    from designkit._progress import tqdm
 
     return tqdm(it, desc=desc, mininterval=2.0, file=sys.stderr)
 

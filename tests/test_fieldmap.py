@@ -73,6 +73,52 @@ def test_single_point_shapes_agree_with_batch(fm, sample):
     np.testing.assert_array_equal(fm.actuation(p[:1])[0], fm.actuation(p[0]))
 
 
+def test_row_and_coil_subsets(fm, sample):
+    # the subsets are the same entries of the direct model's A (independent of the full path)
+    p, a = sample
+    rng = np.random.default_rng(12)
+    for _ in range(5):
+        r = rng.choice(8, rng.integers(1, 9), replace=False)
+        c = rng.choice(9, rng.integers(1, 10), replace=False)
+        got = fm.actuation(p[:300], rows=r, coils=c)
+        want = a[:300][:, r][:, :, c]
+        assert got.shape == (300, len(r), len(c))
+        scale = np.abs(a).max(axis=(0, 2))[r][None, :, None]
+        assert np.all(np.abs(got - want) < 1e-3 * scale)
+        one = fm.actuation(p[7], rows=list(r), coils=tuple(c))
+        assert one.shape == (len(r), len(c))
+        np.testing.assert_allclose(one, fm.actuation(p[7])[r][:, c], rtol=1e-12, atol=0)
+        assert fm.actuation(p[7:8], rows=r, coils=c).shape == (1, len(r), len(c))
+    for bad in ([], [8], [-1], [0.5], "x"):
+        with pytest.raises(BadInputError, match="rows"):
+            fm.actuation(p[0], rows=bad)
+    with pytest.raises(BadInputError, match="coils"):
+        fm.actuation(p[:3], coils=[9])
+
+
+def test_map_carries_the_drive_data_the_runner_reads(fm):
+    from firmware_io.runner import config_from_map
+
+    cfg = config_from_map(fm.file)
+    d = SMALL
+    # closed forms from the design's numbers: R = rho l / (pi d^2 / 4), l = N 2 pi r_mean
+    # (20 C = the reference temperature), Wheeler's multilayer formula for the air-core L
+    r_mean = (d.coil.inner_radius_m + d.coil.outer_radius_m) / 2
+    r = d.wire.resistivity_ohm_m * d.coil.turns * 2 * math.pi * r_mean / (
+        math.pi * d.wire.diameter_m ** 2 / 4)
+    np.testing.assert_allclose(cfg.resistance_ohm, [r] * 9, rtol=1e-9)
+    depth = d.coil.outer_radius_m - d.coil.inner_radius_m
+    wheeler = 31.6e-6 * d.coil.turns ** 2 * r_mean ** 2 / (6 * r_mean + 9 * d.coil.length_m
+                                                           + 10 * depth)
+    np.testing.assert_allclose(cfg.inductance_h, [wheeler] * 9, rtol=0.03)
+    volts = min(d.drive.supply_voltage_v, d.drive.driver_max_voltage_v)
+    assert cfg.supply_voltage_v == volts
+    assert cfg.current_limit_a == pytest.approx(min(d.drive.max_current_a, volts / r))
+    assert cfg.total_current_a == d.drive.total_current_a
+    assert 0 < cfg.thermal_continuous_current_a < cfg.current_limit_a
+    assert cfg.thermal_time_constant_s > 0
+
+
 def test_interpolated_gradient_is_the_derivative_of_interpolated_b(fm):
     # central differences of the interpolated B rows (interpolated independently of the
     # gradient rows): symmetric and traceless, and equal to the interpolated gradient rows
@@ -276,6 +322,11 @@ def test_coupled_map_against_direct_coupled_model(coupled):
     # target 1e-3; measured 2.1e-4 before i12c's last update, 1.3e-3 (dBx/dy) after it --
     # not the tables' resolution nor float16 (both checked); see the report
     assert np.all(err < 2e-3), err
+    r, c = [2, 3, 6], [1]
+    sub = fm.actuation(p, rows=r, coils=c)
+    assert np.all(np.abs(sub - a[:, r][:, :, c]) < 2e-3 * np.abs(a).max(axis=(0, 2))[r][:, None])
+    np.testing.assert_allclose(fm.actuation(p[5], rows=r, coils=c), sub[5], rtol=1e-5,
+                               atol=1e-7 * np.abs(sub).max())
     m = fm.moment_a_m2
     f = arr.bias_force(p[:20], m)
     # the bias force is the coarse part (per-core tables + a 25 mm grid): measured ~8 %

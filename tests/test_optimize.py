@@ -387,7 +387,7 @@ def _random_designs_in_bounds(p, n, seed):
 
 def _fast_panel_errors(p, xs):
     errs = []
-    with opt._one_blas_thread():
+    with opt.one_blas_thread():
         for x in xs:
             f = p.evaluate(x)
             q = p.evaluate(x, model="panel")
@@ -426,7 +426,7 @@ def test_device_optimum_is_panel_evaluated_and_the_corrected_residual_meets_the_
     res = opt.solve_device(p, starts=2)
     chk = res.fast_model_check
     assert chk["within_bound"] and chk["bound_rel"] == opt.RESIDUAL_BOUND
-    with opt._one_blas_thread():
+    with opt.one_blas_thread():
         panel = p.evaluate(res.x, turns=res.turns, model="panel")
     fast = dataclasses.replace(p, corrections=tuple(chk["corrections_used"])).evaluate(
         res.x, turns=res.turns)

@@ -43,14 +43,16 @@ def test_designkit_run_simulate_writes_a_consistent_run(map_file, tmp_path):
     fix = [r for r in rows if r["xe_m"] != "nan"]
     err = [np.linalg.norm([float(r[a]) - float(r[b]) for a, b in
                            (("x_m", "xe_m"), ("y_m", "ye_m"), ("z_m", "ze_m"))]) for r in fix]
-    # a sanity bound: the localization itself is issue 14's (1.5-5 mm MAE today); here it only
-    # has to be a tracking estimate, not noise or a lost fit
-    assert np.median(err) < 1e-2
+    # with the start-up calibration and the fit on the sensor side the tracked estimate is
+    # ~0.7 mm from the finger (median, studies/render_runner.py); 3 mm leaves room for the
+    # cold start in this short run
+    assert np.median(err) < 3e-3
     # the scheduled defect reached no output, and no command ever exceeded its bounds
     drive = summary["drive"]
     cmd_a = np.array([[float(r[f"cmd{k}_a"]) for k in range(1, 10)] for r in rows])
-    assert np.abs(cmd_a).max() <= drive["current_limit_a"] + 1e-9
-    assert np.abs(cmd_a).sum(axis=1).max() <= drive["total_current_a"] + 1e-9
+    # run.csv holds 9 significant digits
+    assert np.abs(cmd_a).max() <= drive["current_limit_a"] * (1 + 1e-8)
+    assert np.abs(cmd_a).sum(axis=1).max() <= drive["total_current_a"] * (1 + 1e-8)
     [f] = summary["faults"]
     assert f["fault"] == "over_limit" and f["state"] == "over_limit"
     assert f["time_to_safe_s"] <= 1e-3 + 1e-12
@@ -69,14 +71,20 @@ def test_run_refuses_a_map_from_another_design(map_file, tmp_path):
 
 def test_bench_runner_smoke(map_file, tmp_path):
     res = load_study("bench_runner").run(tmp_path / "b", map_path=map_file, quick=True)
-    for k in ("localize_model", "object_force", "allocate_3d", "duty_conversion",
-              "pca9685_bytes"):
-        assert res[k]["median_us"] > 0
-    assert res["step_with_frame"]["median_us"] > res["step_without_frame"]["median_us"]
+    loop = res["loop_force"]
+    for kind in ("without_frame", "with_frame", "sensor_side_fit"):
+        assert loop[kind]["n"] > 0 and loop[kind]["median_us"] > 0
+    assert {"fix", "predict", "object_force", "force_matrix", "allocation", "drive"} \
+        <= set(loop["stages"])
+    skip = res["skip"]
+    assert skip["bound_holds"] and skip["rows_used_3d"] == [3, 5, 6, 7]
+    assert skip["rows_used_fz"] == [3, 6]
 
 
 def test_render_runner_study_smoke(map_file, tmp_path):
     res = load_study("render_runner").run(tmp_path / "r", map_path=map_file, quick=True)
-    [(key, v)] = res.items()
-    # a sanity bound: the 0.5 s quick run includes the cold start of the fit
+    [(key, v)] = res["runs"].items()
+    # a sanity bound: the quick run squeezes the 80 mm slide there and back into 0.5 s (peak
+    # 0.5 m/s, 16 m/s^2: far faster than a finger, and the cold start of the fit)
     assert key == "plane/force" and v["localization_mae_m"] < 1e-2
+    assert res["all_within_limits"]
