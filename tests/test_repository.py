@@ -246,8 +246,7 @@ def test_no_import_cycles_between_designkit_modules():
     assert not cycles, cycles
 
 
-RAW_TQDM_PENDING = {"designkit/optimize.py", "studies/bench_allocation.py",
-                    "studies/localization.py"}
+RAW_TQDM_PENDING = {"studies/bench_allocation.py"}
 """Files other helpers own this session that still import tqdm itself (a carriage-return flood
 in a log): each is to import ``designkit._progress.tqdm`` and leave this set."""
 
