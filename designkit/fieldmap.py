@@ -21,18 +21,22 @@ into azimuthal orders m (:mod:`designkit.coupling`). So nothing of A is sampled 
   interpolation error counts ~0.15 x.
 * SVD truncation and m >= 3 (below 1e-4 of the coupling, designkit.coupling) are the rest.
 
-Measured on the default 3 x 3 array (``studies/bench_map.py``, Nov 2026, machine heavily
-loaded): file 3.75 MB; A within 4.3e-4 of each row's maximum at 1000 random points against the
-coupled model as first merged, 1.27e-3 (dBx/dx; other rows <= 7.1e-4) at 300 points after
-designkit.coupling's update that evaluates each core's own column by designkit.core's (sharper)
-rules -- the decomposition itself is exact to 1.3e-5 and neither finer tables nor float32 nor
-more modes changed the 2-core error, which sits at the core rims: to be resolved with the
-coupling's quadrature rules. The sensor-induced field (same modes, by reciprocity) within 2 % of
-its maximum; the bias force within 0.3 % (per-core pull tables plus a 25 mm grid of the cores'
-interaction). Not met: speed -- a lookup sums 9 cores x ~20 core modes (~25 k multiply-adds per
-point): ~160 us for one point, (3,) or (1, 3) alike, and ~1.5 s for 1e4 points on the loaded
-machine (targets 20 us, 5 ms); the build (mode tables, nonlinear saturation solves) took 163 s
-there (target 30 s).
+Measured (``studies/bench_map.py``; tests/test_fieldmap_accuracy.py, slow): A within 1e-3 of
+each row's maximum at 1e4 random points (half in the lowest 10 mm of the box) against the
+coupled model for random 1 x 2, 2 x 2 and 3 x 3 geometries, once designkit.coupling's
+compressed m >= 1 ring rules got 24 azimuths (12 left up to 8.7e-4 of a row's maximum 8 mm
+above a core's rim, where both the direct model and these tables switch to them: the 1.3e-3 seen
+before). File 3.75 MB at the default settings.
+
+Speed: a lookup is a sum over the cores of ~20 basis fields (the coil alone + its modes), each a
+bilinear table lookup times polynomials in the core-local x, y, then one GEMV / GEMM with the
+coefficients (firmware_io.mapfile: ``actuation_one`` for one point, ~40 numpy calls;
+``kernel_rows_many`` for blocks of points). That is ~25 k multiply-adds per point: the 5 ms
+target for 1e4 points is out of its reach in numpy (~0.1-0.3 s). A 3-D grid, the only kind of
+term cheap enough, cannot carry the coupling: trilinear on a 5 mm grid (31 x 31 x 25 nodes,
+3.5 MB in float16) left 7 % of a row's maximum in the lowest 10 mm (2.4e-3 above), the
+coupling there varying on the ~5 mm scale of the cores' rims. ``rows=`` / ``coils=`` subsets
+cut the polynomial and coefficient work in proportion.
 
 The build checks itself: it evaluates the coupled model directly at ``n_check`` random points
 in the box and records the errors of the finished map in ``meta['errors']``.

@@ -55,6 +55,14 @@ Usage::
     a = m.actuation((0.0, 0.0, 0.03))            # (8, n_coils)
     f0 = m.bias_force((0.0, 0.0, 0.03))          # (3,) N
     b = m.sensor_induced_field((0.0, 0.0, 0.03))  # (2, n_coils, 3) T
+    a = m.actuation(points, rows=(3, 6), coils=(0, 4))  # (n, 2, 2): only those entries
+
+How a lookup runs: every core contributes its coil alone (coefficient 1 on its own column)
+and its mode fields as one list of basis fields; each is a bilinear (v, u) lookup times
+polynomials in the core-local x, y, and A = rows @ coefficients. One point (:func:`actuation_one`)
+does that in ~40 small numpy calls (point as (3,) or (1, 3) alike); blocks of points
+(:func:`kernel_rows_many`) in a few large ones. Maps whose coils are rotated, at different
+heights or of several types take the general path (:func:`interpolate_rz`, :func:`mode_rows`).
 """
 
 from __future__ import annotations
@@ -1213,10 +1221,16 @@ class MapFile:
         if q is not None and one is not None:
             b = (actuation_one(one, q)[:, 0] @ one["coef"]).reshape(2, nc, 3)
             return b if np.ndim(magnet_position_m) == 1 else b[None]
-        one = q is not None
         p, single = self._points(magnet_position_m, extrapolate, "magnet_position_m")
-        m = self.arrays["MOMENT"]
         out = np.zeros((len(p), 6 * nc))
+        if one is not None:
+            for s in range(0, len(p), BATCH_CHUNK):
+                f = kernel_rows_many(one, p[s:s + BATCH_CHUNK])  # (m, 1, K): m . B per basis
+                out[s:s + BATCH_CHUNK] = f[:, 0] @ one["coef"]
+            b = out.reshape(-1, 2, nc, 3)
+            return b[0] if single else b
+        one = q is not None
+        m = self.arrays["MOMENT"]
         for t, c in self.kernels["scoef"]:
             rows = mode_rows(t, p)[..., :3]  # (n, k, nb, 3): B per unit coefficient
             out += (rows @ m).reshape(len(p), -1) @ c

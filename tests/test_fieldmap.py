@@ -319,12 +319,12 @@ def test_coupled_map_against_direct_coupled_model(coupled):
     p = rng.uniform(lo, hi, (300, 3))
     a = arr.actuation_matrix(p)
     err = np.abs(fm.actuation(p) - a).max(axis=(0, 2)) / np.abs(a).max(axis=(0, 2))
-    # target 1e-3; measured 2.1e-4 before i12c's last update, 1.3e-3 (dBx/dy) after it --
-    # not the tables' resolution nor float16 (both checked); see the report
-    assert np.all(err < 2e-3), err
+    # target 1e-3 (1.3e-3 with 12 azimuths in designkit.coupling's far ring rules; 6.4e-4 at
+    # 1e4 points with 24); more geometries in test_fieldmap_accuracy.py
+    assert np.all(err < 1e-3), err
     r, c = [2, 3, 6], [1]
     sub = fm.actuation(p, rows=r, coils=c)
-    assert np.all(np.abs(sub - a[:, r][:, :, c]) < 2e-3 * np.abs(a).max(axis=(0, 2))[r][:, None])
+    assert np.all(np.abs(sub - a[:, r][:, :, c]) < 1e-3 * np.abs(a).max(axis=(0, 2))[r][:, None])
     np.testing.assert_allclose(fm.actuation(p[5], rows=r, coils=c), sub[5], rtol=1e-5,
                                atol=1e-7 * np.abs(sub).max())
     m = fm.moment_a_m2
