@@ -369,7 +369,7 @@ def coupled_modes(arr: CoilArray, tolerance: float = 1e-4,
             "sensor_coef": coefs[1].reshape(nc, coefs[1].shape[1], 2, nc, 3)}
 
 
-def compute_mode_tables(t: dict, spec: dict) -> list:
+def compute_mode_tables(t: dict, spec: dict, progress=None) -> list:
     """The mode tables (n_rho, n_u, Q) float64 of one core type, one per shape set of ``t``
     (A, sensors): for each shape, the quantities of :data:`N_MODE_Q` from the core model's
     basis fields at (rho, 0, z), local frame (one evaluation of the basis for all sets)."""
@@ -392,6 +392,8 @@ def compute_mode_tables(t: dict, spec: dict) -> list:
     out = np.zeros((R.size, q_tot))
     chunk = 256
     for s in range(0, len(pts), chunk):
+        if progress is not None:  # the longest step of a build: show how far it is
+            progress(s / len(pts))
         p = pts[s:s + chunk]
         # the fine charge quadrature where the compressed rules are not accurate (near the
         # core), as the coupled model's own field evaluation does
@@ -568,12 +570,22 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
             mrz_meta.append({"name": f"MRZ{s}", "coils": [int(k) for k in idx], **m_specs[s]})
         elif kind == "mode tables":
             for k, t in enumerate(modes["types"] if modes else []):
-                for which, prefix, metas, step, lstep in (
-                        (0, "CM", cm_meta, mode_rz_step, mode_rz_log_step),
-                        (1, "SM", sm_meta, sensor_mode_rz_step, sensor_mode_rz_log_step)):
+                sets = ((0, "CM", cm_meta, mode_rz_step, mode_rz_log_step),
+                        (1, "SM", sm_meta, sensor_mode_rz_step, sensor_mode_rz_log_step))
+                set_specs = [specs([t["coils"]], step, lstep, 1)[0]
+                             for _, _, _, step, lstep in sets]
+                # one evaluation of the cores' basis fields serves both sets on one grid
+                def show(frac, k=k, last=[-1]):
+                    if int(frac * 10) != last[0]:  # a line per 10 %, not per chunk
+                        last[0] = int(frac * 10)
+                        bar.set_postfix_str(f"mode tables {k + 1}: {frac:.0%}")
+
+                both = (compute_mode_tables(t, set_specs[0], show)
+                        if set_specs[0] == set_specs[1] else None)
+                for (which, prefix, metas, _, _), spec in zip(sets, set_specs):
                     st = t["sets"][which]
-                    spec = specs([t["coils"]], step, lstep, 1)[0]
-                    tab = compute_mode_tables({**t, "sets": [st]}, spec)[0]
+                    tab = (both[which] if both is not None
+                           else compute_mode_tables({**t, "sets": [st]}, spec)[0])
                     shapes = [[m, r] for m in sorted(st["U"])
                               for r in range(st["U"][m].shape[1])]
                     cols = np.cumsum([0] + [N_MODE_Q[m] for m, _ in shapes])[:-1].tolist()
