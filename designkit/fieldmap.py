@@ -640,8 +640,7 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
         "max_current_a": design.drive.max_current_a,
         "total_current_a": design.drive.total_current_a,
         # what firmware_io.runner.config_from_map needs (R, L, supply, limits, I^2 t guard)
-        "drive": {k: ([float(x) for x in val] if isinstance(val, list) else float(val))
-                  for k, val in drive_data(design).items()},
+        "drive": drive_data(design, _drive_coils(arr)),
         "physics": phys.source,
         "settings": {"spacing_m": spacing, "log_step": log_step,
                      "mode_tolerance": mode_tolerance,
@@ -671,6 +670,16 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
     seconds["fits and check"] = time.perf_counter() - t0
     meta["build_seconds"] = seconds
     return {"arrays": arrays, "meta": meta}
+
+
+def _drive_coils(arr: CoilArray) -> list:
+    """One coil model per channel for the drive data: R and L do not depend on the pose, so
+    each coil type's prototype stands for its coils (one inductance solve per type)."""
+    out = [None] * arr.n_coils
+    for proto, idx in arr.coil_types().items():
+        for k in idx:
+            out[k] = proto
+    return out
 
 
 # ============================================================================ write / load

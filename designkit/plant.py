@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from . import electrical
 from .errors import BadInputError
-from .electrical import COIL_SURFACE_HEAT_TRANSFER_W_M2_K, drive_data  # noqa: F401 (re-exported)
 from .localize import analog_reading
 
 FAULT_TYPES = ("pwm_nack", "sensor_stuck", "sensor_dead", "sensor_saturated", "out_of_box",
@@ -817,6 +817,14 @@ def _inside(fieldmap, q) -> np.ndarray:
 
 # ---------------------------------------------------------------------------------------------
 # the whole simulated run (designkit run --simulate)
+
+def drive_data(design) -> dict:
+    """:func:`designkit.electrical.drive_data` for the design's own (identical) coils."""
+    from .coil import Coil
+
+    return electrical.drive_data(design, [Coil.from_design(design)]
+                                 * (design.array.rows * design.array.columns))
+
 
 def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "slide",
                    duration_s: float | None = None, faults: str = "none", map_path=None,
