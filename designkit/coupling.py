@@ -100,13 +100,18 @@ designkit.core's far field, here linear in the panel values)."""
 FAR_RHO = 2.6
 """Bernstein-ellipse parameter a point needs w.r.t. every interval of the compressed rules
 (error ~ FAR_RHO^-12 ~ 1e-5 with 6 nodes)."""
+FAR_AZIMUTHS = 24
+"""Azimuths of the compressed m >= 1 ring rules. A point 8 mm above a core's rim sees the
+kernel vary over ~8 mm / radius in phi: 12 azimuths left up to 8.7e-4 of A's row maxima in the
+coupling's gradient rows (against 12 Gauss nodes x 256 azimuths per panel, 2-core array), 24
+leave < 3.2e-5 (36: unchanged)."""
 N_PHI_RING = 12
 """Azimuthal samples per collocation ring when projecting another core's / a winding's field."""
 N_PHI_MAGNET = 32
 """... and when projecting the magnet's field (it can be ~5 mm from a core top).
 Observation points where :meth:`CoreModel.far_mask` fails sum a core's panels (m = 0) and
 3 Gauss nodes x 32 azimuths per charge panel (m >= 1); the others use compressed product
-rules (FAR_NODES rings per interval, 12 azimuths)."""
+rules (FAR_NODES rings per interval, FAR_AZIMUTHS azimuths)."""
 
 
 # ============================================================================ per core type
@@ -437,10 +442,10 @@ class CoreModel:
     def _charges(self, x1: np.ndarray, rule):
         """Point charges of the m >= 1 unknowns x1 (2 m_max n1, k): positions (nc, 3), m, and
         charges (nc, k), A m. ``rule``: (Gauss nodes per panel, azimuths) or 'far' (the
-        compressed product rule, ``FAR_NODES`` rings per interval, 12 azimuths)."""
+        compressed product rule, ``FAR_NODES`` rings per interval, ``FAR_AZIMUTHS``)."""
         k = x1.shape[1]
         if rule == "far":
-            nphi = 12
+            nphi = FAR_AZIMUTHS
             phi = 2.0 * math.pi * (np.arange(nphi) + 0.5) / nphi
             r, z = self.far1_r, self.far1_z
             pos = np.stack([r[:, None] * np.cos(phi), r[:, None] * np.sin(phi),

@@ -470,15 +470,19 @@ COIL_SURFACE_HEAT_TRANSFER_W_M2_K = 10.0
 the winding's cooling time constant m c / (h A) of the runner's I^2 t guard."""
 
 
-def drive_data(design, coil) -> dict:
-    """The runner's drive data from the design (SI): coil R at the operating temperature, L
-    (with the core), the supply (at most the MD10C's 30 V), the current bounds and the I^2 t
+def drive_data(design, coils) -> dict:
+    """The runner's drive data (SI) for ``design``'s coils ``coils`` (designkit Coil objects,
+    one per channel, in the array's order): per coil R at the operating temperature and L
+    (with the core); the supply (at most the MD10C's 30 V), the current bounds and the I^2 t
     budget (adiabatic heating from the operating temperature to 100 C at the current limit,
-    cooled with the time constant m c / (h A)). ``coil``: ``Coil.from_design(design)`` (this
-    module sits below designkit.coil and does not build coils)."""
-    r = resistance(coil, design.wire)
-    ind = inductance(coil, design.wire)
+    cooled with the time constant m c / (h A)), from the winding in ``design``.
+
+    The coils come from the caller (this layer sits below designkit.coil): fieldmap passes the
+    map's array, plant the design's coil."""
     w = design.wire
+    r_all = [float(c.resistance(w)) for c in coils]
+    ind = [float(c.inductance(w)) for c in coils]
+    r = max(r_all)  # the bounds must hold for every channel
     mass = copper_mass(design.coil.inner_radius_m, design.coil.outer_radius_m,
                        design.coil.turns, w.diameter_m)
     limit = min(design.drive.max_current_a, design.drive.driver_max_voltage_v / r,
@@ -490,10 +494,9 @@ def drive_data(design, coil) -> dict:
     area = 2 * math.pi * c.outer_radius_m * c.length_m + 2 * math.pi * (
         c.outer_radius_m ** 2 - c.inner_radius_m ** 2)
     tau = mass * COPPER_SPECIFIC_HEAT_J_KG_K / (COIL_SURFACE_HEAT_TRANSFER_W_M2_K * area)
-    return {"resistance_ohm": [r] * design.array.rows * design.array.columns,
-            "inductance_h": [ind] * design.array.rows * design.array.columns,
-            "supply_voltage_v": min(design.drive.supply_voltage_v,
-                                    design.drive.driver_max_voltage_v),
-            "current_limit_a": float(limit), "total_current_a": design.drive.total_current_a,
+    return {"resistance_ohm": r_all, "inductance_h": ind,
+            "supply_voltage_v": float(min(design.drive.supply_voltage_v,
+                                          design.drive.driver_max_voltage_v)),
+            "current_limit_a": float(limit), "total_current_a": float(design.drive.total_current_a),
             "thermal_continuous_current_a": math.sqrt(budget / tau),
             "thermal_time_constant_s": tau}

@@ -21,18 +21,24 @@ into azimuthal orders m (:mod:`designkit.coupling`). So nothing of A is sampled 
   interpolation error counts ~0.15 x.
 * SVD truncation and m >= 3 (below 1e-4 of the coupling, designkit.coupling) are the rest.
 
-Measured on the default 3 x 3 array (``studies/bench_map.py``, Nov 2026, machine heavily
-loaded): file 3.75 MB; A within 4.3e-4 of each row's maximum at 1000 random points against the
-coupled model as first merged, 1.27e-3 (dBx/dx; other rows <= 7.1e-4) at 300 points after
-designkit.coupling's update that evaluates each core's own column by designkit.core's (sharper)
-rules -- the decomposition itself is exact to 1.3e-5 and neither finer tables nor float32 nor
-more modes changed the 2-core error, which sits at the core rims: to be resolved with the
-coupling's quadrature rules. The sensor-induced field (same modes, by reciprocity) within 2 % of
-its maximum; the bias force within 0.3 % (per-core pull tables plus a 25 mm grid of the cores'
-interaction). Not met: speed -- a lookup sums 9 cores x ~20 core modes (~25 k multiply-adds per
-point): ~160 us for one point, (3,) or (1, 3) alike, and ~1.5 s for 1e4 points on the loaded
-machine (targets 20 us, 5 ms); the build (mode tables, nonlinear saturation solves) took 163 s
-there (target 30 s).
+Measured (``studies/bench_map.py``; tests/test_fieldmap_accuracy.py, slow): A within 1e-3 of
+each row's maximum at 1e4 random points (half in the lowest 10 mm of the box) against the
+coupled model for random 1 x 2, 2 x 2 and 3 x 3 geometries, once designkit.coupling's
+compressed m >= 1 ring rules got 24 azimuths (12 left up to 8.7e-4 of a row's maximum 8 mm
+above a core's rim, where both the direct model and these tables switch to them: the 1.3e-3 seen
+before). File 3.75 MB at the default settings; its build took 8.6 s of CPU (32 s wall on two
+cores shared with ~9 other busy processes), mostly the coupled solve and the mode tables (the
+cores' basis fields evaluated once for both shape sets).
+
+Speed: a lookup is a sum over the cores of ~20 basis fields (the coil alone + its modes), each a
+bilinear table lookup times polynomials in the core-local x, y, then one GEMV / GEMM with the
+coefficients (firmware_io.mapfile: ``actuation_one`` for one point, ~40 numpy calls;
+``kernel_rows_many`` for blocks of points). That is ~25 k multiply-adds per point: the 5 ms
+target for 1e4 points is out of its reach in numpy (~0.1-0.3 s). A 3-D grid, the only kind of
+term cheap enough, cannot carry the coupling: trilinear on a 5 mm grid (31 x 31 x 25 nodes,
+3.5 MB in float16) left 7 % of a row's maximum in the lowest 10 mm (2.4e-3 above), the
+coupling there varying on the ~5 mm scale of the cores' rims. ``rows=`` / ``coils=`` subsets
+cut the polynomial and coefficient work in proportion.
 
 The build checks itself: it evaluates the coupled model directly at ``n_check`` random points
 in the box and records the errors of the finished map in ``meta['errors']``.
@@ -366,7 +372,7 @@ def coupled_modes(arr: CoilArray, tolerance: float = 1e-4,
             "sensor_coef": coefs[1].reshape(nc, coefs[1].shape[1], 2, nc, 3)}
 
 
-def compute_mode_tables(t: dict, spec: dict) -> list:
+def compute_mode_tables(t: dict, spec: dict, progress=None) -> list:
     """The mode tables (n_rho, n_u, Q) float64 of one core type, one per shape set of ``t``
     (A, sensors): for each shape, the quantities of :data:`N_MODE_Q` from the core model's
     basis fields at (rho, 0, z), local frame (one evaluation of the basis for all sets)."""
@@ -389,6 +395,8 @@ def compute_mode_tables(t: dict, spec: dict) -> list:
     out = np.zeros((R.size, q_tot))
     chunk = 256
     for s in range(0, len(pts), chunk):
+        if progress is not None:  # the longest step of a build: show how far it is
+            progress(s / len(pts))
         p = pts[s:s + chunk]
         # the fine charge quadrature where the compressed rules are not accurate (near the
         # core), as the coupled model's own field evaluation does
@@ -565,12 +573,22 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
             mrz_meta.append({"name": f"MRZ{s}", "coils": [int(k) for k in idx], **m_specs[s]})
         elif kind == "mode tables":
             for k, t in enumerate(modes["types"] if modes else []):
-                for which, prefix, metas, step, lstep in (
-                        (0, "CM", cm_meta, mode_rz_step, mode_rz_log_step),
-                        (1, "SM", sm_meta, sensor_mode_rz_step, sensor_mode_rz_log_step)):
+                sets = ((0, "CM", cm_meta, mode_rz_step, mode_rz_log_step),
+                        (1, "SM", sm_meta, sensor_mode_rz_step, sensor_mode_rz_log_step))
+                set_specs = [specs([t["coils"]], step, lstep, 1)[0]
+                             for _, _, _, step, lstep in sets]
+                # one evaluation of the cores' basis fields serves both sets on one grid
+                def show(frac, k=k, last=[-1]):
+                    if int(frac * 10) != last[0]:  # a line per 10 %, not per chunk
+                        last[0] = int(frac * 10)
+                        bar.set_postfix_str(f"mode tables {k + 1}: {frac:.0%}")
+
+                both = (compute_mode_tables(t, set_specs[0], show)
+                        if set_specs[0] == set_specs[1] else None)
+                for (which, prefix, metas, _, _), spec in zip(sets, set_specs):
                     st = t["sets"][which]
-                    spec = specs([t["coils"]], step, lstep, 1)[0]
-                    tab = compute_mode_tables({**t, "sets": [st]}, spec)[0]
+                    tab = (both[which] if both is not None
+                           else compute_mode_tables({**t, "sets": [st]}, spec)[0])
                     shapes = [[m, r] for m in sorted(st["U"])
                               for r in range(st["U"][m].shape[1])]
                     cols = np.cumsum([0] + [N_MODE_Q[m] for m, _ in shapes])[:-1].tolist()
@@ -625,8 +643,7 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
         "max_current_a": design.drive.max_current_a,
         "total_current_a": design.drive.total_current_a,
         # what firmware_io.runner.config_from_map needs (R, L, supply, limits, I^2 t guard)
-        "drive": {k: ([float(x) for x in val] if isinstance(val, list) else float(val))
-                  for k, val in drive_data(design, Coil.from_design(design)).items()},
+        "drive": drive_data(design, _drive_coils(arr)),
         "physics": phys.source,
         "settings": {"spacing_m": spacing, "log_step": log_step,
                      "mode_tolerance": mode_tolerance,
@@ -656,6 +673,16 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
     seconds["fits and check"] = time.perf_counter() - t0
     meta["build_seconds"] = seconds
     return {"arrays": arrays, "meta": meta}
+
+
+def _drive_coils(arr: CoilArray) -> list:
+    """One coil model per channel for the drive data: R and L do not depend on the pose, so
+    each coil type's prototype stands for its coils (one inductance solve per type)."""
+    out = [None] * arr.n_coils
+    for proto, idx in arr.coil_types().items():
+        for k in idx:
+            out[k] = proto
+    return out
 
 
 # ============================================================================ write / load

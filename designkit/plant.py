@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from . import electrical
 from .errors import BadInputError
-from .electrical import drive_data
 from .localize import analog_reading
 
 FAULT_TYPES = ("pwm_nack", "sensor_stuck", "sensor_dead", "sensor_saturated", "out_of_box",
@@ -937,6 +937,14 @@ def _inside(fieldmap, q) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------
 # the whole simulated run (designkit run --simulate)
 
+def drive_data(design) -> dict:
+    """:func:`designkit.electrical.drive_data` for the design's own (identical) coils."""
+    from .coil import Coil
+
+    return electrical.drive_data(design, [Coil.from_design(design)]
+                                 * (design.array.rows * design.array.columns))
+
+
 def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "slide",
                    duration_s: float | None = None, faults: str = "none", map_path=None,
                    method: str = "model", period_s: float = 1e-3, unipolar: bool = False,
@@ -966,7 +974,6 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
     from . import fieldmap
     from ._io import write_json_atomic
     from .array import CoilArray
-    from .coil import Coil
     from .design import Design, load_design
     from .render.laws import ConstraintLaw
     from .render.scenefile import compile_scene, make_object
@@ -1006,7 +1013,7 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
                                law=ConstraintLaw(lam), map_design_sha256=fmap.design_sha256,
                                extra_meta={"object": obj, "rows": rows})
     scene = Scene.load(scene_path, expected_design_sha256=fmap.design_sha256)
-    drive = drive_data(design, Coil.from_design(design))
+    drive = drive_data(design)
     device = SimulatedDevice(design, array, seed=seed, resistance_ohm=drive["resistance_ohm"][0],
                              inductance_h=drive["inductance_h"][0])
 

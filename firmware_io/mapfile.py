@@ -55,6 +55,14 @@ Usage::
     a = m.actuation((0.0, 0.0, 0.03))            # (8, n_coils)
     f0 = m.bias_force((0.0, 0.0, 0.03))          # (3,) N
     b = m.sensor_induced_field((0.0, 0.0, 0.03))  # (2, n_coils, 3) T
+    a = m.actuation(points, rows=(3, 6), coils=(0, 4))  # (n, 2, 2): only those entries
+
+How a lookup runs: every core contributes its coil alone (coefficient 1 on its own column)
+and its mode fields as one list of basis fields; each is a bilinear (v, u) lookup times
+polynomials in the core-local x, y, and A = rows @ coefficients. One point (:func:`actuation_one`)
+does that in ~40 small numpy calls (point as (3,) or (1, 3) alike); blocks of points
+(:func:`kernel_rows_many`) in a few large ones. Maps whose coils are rotated, at different
+heights or of several types take the general path (:func:`interpolate_rz`, :func:`mode_rows`).
 """
 
 from __future__ import annotations
@@ -781,9 +789,20 @@ def prepare_one(rz: tuple, modes: tuple, coefs: tuple, nc: int,
     poly25 = np.zeros((5, 5) + poly.shape[1:])
     poly25[_POW_X, _POW_Y] = poly
     coef = (np.concatenate([np.eye(nc)[:, None, :], cm], axis=1) if rz else cm)
-    return {"pos": first["pos"], "rz": lrz, "cm": lcm, "src": np.concatenate(src),
-            "dst": np.concatenate(dst), "poly": np.ascontiguousarray(poly25.reshape(25, -1)),
-            "nb": nb + (1 if rz else 0), "width": width + n_self,
+    src, dst = np.concatenate(src), np.concatenate(dst)
+    # for the batch kernel: the basis fields grouped by the block of polynomials they use
+    # (the coil alone, then each mode order and cos / sin), values unpadded
+    tw = width + n_self
+    blocks: dict = {}
+    for b in np.unique(dst // tw):
+        sel = dst // tw == b
+        cols = dst[sel] % tw
+        blocks.setdefault(int(cols.min()), []).append((int(b), src[sel][np.argsort(cols)]))
+    groups = [(start, len(mem[0][1]), np.array([b for b, _ in mem], np.intp),
+               np.array([v for _, v in mem], np.intp)) for start, mem in sorted(blocks.items())]
+    return {"pos": first["pos"], "rz": lrz, "cm": lcm, "src": src, "dst": dst,
+            "poly": np.ascontiguousarray(poly25.reshape(25, -1)),
+            "nb": nb + (1 if rz else 0), "width": tw, "groups": groups,
             "n_rows": 1 if moment is not None else 8,
             "coef": np.ascontiguousarray(coef.reshape(-1, n_out))}
 
@@ -807,6 +826,69 @@ def actuation_one(F: dict, q) -> np.ndarray:
     pad = np.zeros((k, F["nb"] * F["width"]))
     pad[:, F["dst"]] = val[:, F["src"]]
     return np.matmul(pad.reshape(k, F["nb"], F["width"]), poly).reshape(-1, F["n_rows"])
+
+
+def _interp_many(L: dict, rho: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """:func:`_interp_one` for points (m,) at heights ``z`` (m,) m, rho (m, k) m: (m, k, Q)."""
+    vv = rho * L["inv_h"]
+    vv /= rho * L["inv_scale"] + 1.0
+    np.minimum(vv, L["vmax"], out=vv)
+    i = vv.astype(np.intp)
+    vv -= i
+    u = np.log(np.maximum(z - L["zr0"], 1e-12))
+    u -= L["u0"]
+    u *= L["inv_du"]
+    np.clip(u, 0.0, L["umax"], out=u)
+    j = u.astype(np.intp)
+    tz = (u - j)[:, None, None]
+    f, nu = L["flat"], L["n_u"]
+    base = i * nu + j[:, None]
+    lo = f[base]
+    lo += tz * (f[base + 1] - lo)
+    base += nu
+    hi = f[base]
+    hi += tz * (f[base + 1] - hi)
+    hi -= lo
+    hi *= vv[..., None]
+    hi += lo
+    return hi
+
+
+BATCH_CHUNK = 256
+"""Points per block of :func:`kernel_rows_many` (~k * 1.5 k floats of temporaries per point:
+small blocks stay in cache)."""
+
+
+def kernel_rows_many(F: dict, p: np.ndarray, rows=None) -> np.ndarray:
+    """:func:`actuation_one` for points (m, 3): (m, nr, k * n_basis) -- the basis fields' rows
+    (all 8, or ``rows``), transposed for one GEMM with ``F['coef']``."""
+    m = len(p)
+    d = p[:, None, :] - F["pos"]  # (m, k, 3)
+    k = d.shape[1]
+    x, y = d[..., 0], d[..., 1]
+    rho = np.sqrt(x * x + y * y)
+    if F["rz"] is None:
+        val = _interp_many(F["cm"], rho, p[:, 2])
+    else:
+        val = _interp_many(F["rz"], rho, p[:, 2])
+        if F["cm"] is not None:
+            val = np.concatenate([val, _interp_many(F["cm"], rho, p[:, 2])], axis=2)
+    nr = F["n_rows"] if rows is None else len(rows)
+    poly_t = F["poly"] if rows is None else (
+        F["poly"].reshape(25, F["width"], 8)[:, :, rows].reshape(25, -1))
+    pw = np.empty((m, k, 2, 5))  # powers 0..4 of x and y (products: np.power is slow)
+    pw[..., 0] = 1.0
+    pw[..., 1] = d[..., :2]
+    for e in range(2, 5):
+        np.multiply(pw[..., e - 1], pw[..., 1], out=pw[..., e])
+    mono = (pw[..., 0, :, None] * pw[..., 1, None, :]).reshape(m * k, 25)
+    poly = (mono @ poly_t).reshape(m * k, F["width"], nr)
+    # per block of polynomials, its basis fields' values (m k, n_g, Q) @ (m k, Q, nr)
+    out = np.empty((m * k, F["nb"], nr))
+    flat = val.reshape(m * k, -1)
+    for start, nq, basis, cols in F["groups"]:
+        out[:, basis] = np.matmul(flat[:, cols], poly[:, start:start + nq])
+    return out.reshape(m, k * F["nb"], nr).transpose(0, 2, 1)
 
 
 # ============================================================================ 3-D grids
@@ -1056,6 +1138,14 @@ class MapFile:
         p, single = self._points(points, extrapolate)
         n = len(p)
         out = np.empty((n, nr, ncs))
+        F = self.kernels["one"]
+        if F is not None:
+            c = F["coef"] if c_sel is None else F["coef"][:, c_sel]
+            for s in range(0, n, BATCH_CHUNK):
+                e = min(n, s + BATCH_CHUNK)
+                f = kernel_rows_many(F, p[s:e], r_sel)  # (m, nr, K)
+                np.matmul(f.reshape(-1, f.shape[2]), c, out=out[s:e].reshape(-1, ncs))
+            return out[0] if single else out
         for s in range(0, n, RZ_CHUNK):
             e = min(n, s + RZ_CHUNK)
             m = e - s
@@ -1131,10 +1221,16 @@ class MapFile:
         if q is not None and one is not None:
             b = (actuation_one(one, q)[:, 0] @ one["coef"]).reshape(2, nc, 3)
             return b if np.ndim(magnet_position_m) == 1 else b[None]
-        one = q is not None
         p, single = self._points(magnet_position_m, extrapolate, "magnet_position_m")
-        m = self.arrays["MOMENT"]
         out = np.zeros((len(p), 6 * nc))
+        if one is not None:
+            for s in range(0, len(p), BATCH_CHUNK):
+                f = kernel_rows_many(one, p[s:s + BATCH_CHUNK])  # (m, 1, K): m . B per basis
+                out[s:s + BATCH_CHUNK] = f[:, 0] @ one["coef"]
+            b = out.reshape(-1, 2, nc, 3)
+            return b[0] if single else b
+        one = q is not None
+        m = self.arrays["MOMENT"]
         for t, c in self.kernels["scoef"]:
             rows = mode_rows(t, p)[..., :3]  # (n, k, nb, 3): B per unit coefficient
             out += (rows @ m).reshape(len(p), -1) @ c

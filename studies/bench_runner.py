@@ -77,8 +77,7 @@ def _loop(summary: dict) -> dict:
 
 def run(out_dir=DEFAULT_OUT, *, map_path=None, duration_s: float = 2.0,
         quick: bool = False) -> dict:
-    from designkit.coil import Coil
-    from designkit.electrical import drive_data
+    from designkit.plant import drive_data
     from designkit.plant import run_simulation, slide_trajectory
     from designkit.render.scenefile import make_object
     from firmware_io.allocation import allocate
@@ -109,7 +108,7 @@ def run(out_dir=DEFAULT_OUT, *, map_path=None, duration_s: float = 2.0,
     f_obj = scene.force(path, np.zeros_like(path))
     bias = fmap.bias_force(path)
     m = fmap.moment_a_m2
-    drive = drive_data(design, Coil.from_design(design))
+    drive = drive_data(design)
     limit = np.full(fmap.n_coils, drive["current_limit_a"])
     total = drive["total_current_a"]
     rows3, mat3 = force_law_rows(m, "xyz")
