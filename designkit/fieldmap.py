@@ -641,6 +641,8 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
         "mode_tables": cm_meta, "sensor_mode_tables": sm_meta, "magnet_tables": mrz_meta,
         "coil_positions_m": positions.tolist(), "coil_rotations": rotations,
         "max_current_a": design.drive.max_current_a,
+        # the finger magnet's cylinder (the localizer's exact magnet field; MOMENT is its moment)
+        "magnet_radius_m": design.magnet.radius_m, "magnet_length_m": design.magnet.length_m,
         "total_current_a": design.drive.total_current_a,
         # what firmware_io.runner.config_from_map needs (R, L, supply, limits, I^2 t guard)
         "drive": drive_data(design, _drive_coils(arr)),

@@ -1017,10 +1017,9 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
     device = SimulatedDevice(design, array, seed=seed, resistance_ohm=drive["resistance_ohm"][0],
                              inductance_h=drive["inductance_h"][0])
 
-    # what the controller knows of the magnet besides the map: its l = 3 multipole term (the
-    # map does not carry it); the sensors are calibrated at start-up, coils only
-    mg = design.magnet
-    loc_kw = {"octupole_m2": (mg.length_m / 2) ** 2 - 0.75 * mg.radius_m ** 2}
+    # the map carries the magnet's cylinder (the localizer's exact magnet field); the sensors
+    # are calibrated at start-up, coils only
+    loc_kw = {}
     if calibrate and method != "learned":
         base = Localizer.from_map(map_path, method=method, **loc_kw)
         loc_kw.update(calibration=device.calibrate_sensors(base.model),
