@@ -56,8 +56,9 @@ def kkt_violation(fm, f, u, tl, x, unipolar=False, *, zero_tol=None):
     return best / scale, infeas
 
 
-def slsqp_reference(fm, f, u, tl, unipolar=False, *, starts=2):
-    """min ||F x - f||^2 with SLSQP on the split x = P - N (scaled to O(1)); the objective."""
+def slsqp_reference(fm, f, u, tl, unipolar=False, *, starts=2, ftol=1e-16, maxiter=1000):
+    """min ||F x - f||^2 with SLSQP on the split x = P - N (scaled to O(1)); the objective.
+    ``ftol`` is SLSQP's (absolute) precision goal on the scaled objective, ``maxiter`` its cap."""
     from scipy.optimize import minimize
 
     fm = np.atleast_2d(np.asarray(fm, float))
@@ -90,7 +91,7 @@ def slsqp_reference(fm, f, u, tl, unipolar=False, *, starts=2):
         if z0.sum() > ts:
             z0 *= ts / z0.sum()
         res = minimize(fun, z0, jac=True, method="SLSQP", bounds=bounds, constraints=cons,
-                       options={"ftol": 1e-16, "maxiter": 1000})
+                       options={"ftol": ftol, "maxiter": maxiter})
         z = np.clip(res.x, 0, None)
         z = np.minimum(z, np.concatenate([us] * (1 if unipolar else 2)))
         if z.sum() > ts:
