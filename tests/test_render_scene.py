@@ -93,13 +93,7 @@ def test_cli_bad_input_no_traceback(tmp_path, capsys):
 
 
 def test_firmware_scene_numpy_only():
-    import ast
+    from conftest import top_level_imports
 
-    src = ROOT / "firmware_io" / "scene.py"
-    mods = set()
-    for node in ast.walk(ast.parse(src.read_text())):
-        if isinstance(node, ast.Import):
-            mods |= {a.name.split(".")[0] for a in node.names}
-        elif isinstance(node, ast.ImportFrom) and node.level == 0:
-            mods.add(node.module.split(".")[0])
+    mods = top_level_imports(ROOT / "firmware_io" / "scene.py")
     assert mods <= {"numpy", "hashlib", "json", "zipfile", "pathlib", "__future__"}, mods
