@@ -36,6 +36,8 @@ if __package__ in (None, ""):
 
 import numpy as np
 
+from bench_allocation import wrenches  # (n_pos, 6, 9) force and torque per ampere, the design's A(p)
+
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "allocation_check"
 """Default output folder (git-ignored), whatever the working directory."""
 
@@ -43,21 +45,6 @@ ROWS = {"fz": [2], "force": [0, 1, 2], "force+torque": [0, 1, 2, 3, 4, 5]}
 REL_TOL = 1e-6
 VIOL_TOL_A = 1e-9
 KKT_TOL = 1e-9
-
-
-def wrenches(n_pos: int, seed: int = 0) -> np.ndarray:
-    """(n_pos, 6, 9) force (N/A) and torque (N m/A) per ampere at random workspace points."""
-    from designkit import default_design
-    from designkit.array import CoilArray, force_matrix, skew_matrix
-
-    d = default_design()
-    rng = np.random.default_rng(seed)
-    ws = d.workspace
-    h = ws.half_width_m
-    pts = rng.uniform([-h, -h, ws.z_min_m], [h, h, ws.z_max_m], (n_pos, 3))
-    a = CoilArray.from_design(d).actuation_matrix(pts, rtol=1e-7)
-    m = np.asarray(d.magnet.moment_vector_a_m2)
-    return np.concatenate([force_matrix(m) @ a[:, 3:, :], skew_matrix(m) @ a[:, :3, :]], axis=1)
 
 
 def problem(w: np.ndarray, seed: int):
@@ -163,19 +150,11 @@ def _init(w):
     _W = w
 
 
-def _blas_one_thread():
-    """One BLAS thread (threadpoolctl, optional): SLSQP's tiny products on a multithreaded BLAS
-    of a busy machine spend far more time synchronizing than computing (measured 15x)."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - optional
-        import contextlib
-
-        return contextlib.nullcontext()
-    return threadpool_limits(1, user_api="blas")
-
-
 def _chunk(seeds):
+    from designkit.coupling import _blas_one_thread
+
+    # one BLAS thread: SLSQP's tiny products on a multithreaded BLAS of a busy machine spend
+    # far more time synchronizing than computing (measured 15x)
     with _blas_one_thread():
         return [check_one(_W, s) for s in seeds]
 
@@ -185,13 +164,14 @@ def run(out_dir=DEFAULT_OUT, *, n: int = 100_000, workers: int = 2, n_pos: int =
     from tqdm import tqdm
 
     from designkit._io import write_json_atomic
+    from designkit.coupling import _blas_one_thread
 
     if quick:
         n, n_pos = min(n, 200), 12
     out_dir = Path(out_dir)
     t0 = time.perf_counter()
     with _blas_one_thread():
-        w = wrenches(n_pos, seed)
+        w = wrenches(n_pos, seed=seed)
     seeds = np.arange(seed * 10_000_000, seed * 10_000_000 + n).tolist()
     size = 250
     chunks = [seeds[i:i + size] for i in range(0, n, size)]
@@ -258,13 +238,12 @@ def run(out_dir=DEFAULT_OUT, *, n: int = 100_000, workers: int = 2, n_pos: int =
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("out_dir", nargs="?", default=DEFAULT_OUT)
-    ap.add_argument("--n", type=int, default=100_000)
-    ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--n-positions", type=int, default=500)
-    ap.add_argument("--seed", type=int, default=2026)
+    for flag, dest, default in (("--n", "n", 100_000), ("--workers", "workers", 2),
+                                ("--n-positions", "n_pos", 500), ("--seed", "seed", 2026)):
+        ap.add_argument(flag, dest=dest, type=int, default=default)
     ap.add_argument("--quick", action="store_true")
-    a = ap.parse_args(argv)
-    run(a.out_dir, n=a.n, workers=a.workers, n_pos=a.n_positions, seed=a.seed, quick=a.quick)
+    kw = vars(ap.parse_args(argv))
+    run(kw.pop("out_dir"), **kw)
 
 
 if __name__ == "__main__":

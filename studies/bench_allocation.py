@@ -38,6 +38,7 @@ from alloc_reference import kkt_violation, slsqp_reference
 from designkit import default_design
 from designkit._io import write_json_atomic
 from designkit.array import CoilArray, force_matrix, skew_matrix
+from designkit.coupling import _blas_one_thread  # the control loop's setting; fair to lsq_linear
 from firmware_io.allocation import Allocator, allocate
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "bench_allocation"
@@ -84,18 +85,6 @@ def _times(probs):
         allocate(fm, f, u, tl, unipolar=uni)
         t[i] = time.perf_counter() - t0
     return t
-
-
-def _blas_one_thread():
-    """One BLAS thread (threadpoolctl, optional): the control loop's setting, and a fair one for
-    lsq_linear (a multithreaded BLAS on tiny matrices of a busy machine mostly synchronizes)."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - optional
-        import contextlib
-
-        return contextlib.nullcontext()
-    return threadpool_limits(1, user_api="blas")
 
 
 def path_problems(n_steps: int, design=None):
