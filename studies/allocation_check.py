@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+import warnings
 from pathlib import Path
 
 if __package__ in (None, ""):
@@ -103,16 +104,22 @@ def _trust_constr_reference(fm, f, u, tl, uni, x_start):
     z0 = np.maximum(xs, 0) if uni else np.concatenate([np.maximum(xs, 0), np.maximum(-xs, 0)])
     z0 = np.clip(z0 * (1 - 1e-3), 1e-3 * ub, ub * (1 - 1e-3))
     hess = 2 * d.T @ d
-    res = minimize(lambda z: float((d @ z - b) @ (d @ z - b)), z0,
-                   jac=lambda z: 2 * d.T @ (d @ z - b), hess=lambda z: hess,
-                   method="trust-constr", bounds=Bounds(np.zeros_like(ub), ub),
-                   constraints=[LinearConstraint(np.ones((1, d.shape[1])), -np.inf, ts)],
-                   options={"gtol": 1e-14, "xtol": 1e-14, "maxiter": 3000})
+    with warnings.catch_warnings():  # "singular Jacobian, using SVD": the budget row and bounds
+        warnings.simplefilter("ignore", UserWarning)
+        res = _trust_constr(minimize, Bounds, LinearConstraint, d, b, z0, hess, ub, ts)
     z = np.clip(res.x, 0, ub)
     if z.sum() > ts:
         z *= ts / z.sum()
     r = d @ z - b
     return float(r @ r) * fsc * fsc
+
+
+def _trust_constr(minimize, Bounds, LinearConstraint, d, b, z0, hess, ub, ts):
+    return minimize(lambda z: float((d @ z - b) @ (d @ z - b)), z0,
+                    jac=lambda z: 2 * d.T @ (d @ z - b), hess=lambda z: hess,
+                    method="trust-constr", bounds=Bounds(np.zeros_like(ub), ub),
+                    constraints=[LinearConstraint(np.ones((1, d.shape[1])), -np.inf, ts)],
+                    options={"gtol": 1e-14, "xtol": 1e-14, "maxiter": 3000})
 
 
 def check_one(w, seed):
