@@ -29,15 +29,29 @@ Each equality-constrained sub-problem is solved in the smaller of two exact form
 normal equations when at most k coils are free, otherwise the kernel form I_J = F_J^T y (+ t s),
 which keeps the solution exactly in the row space (the least-energy direction) by construction.
 
+The steps of one solve (each cheap for n ~ 9: the bookkeeping is plain Python over the coils,
+numpy only for the products and the k x k / n x n solves):
+
+1. Fast exit: the least-norm exact fit F^T (F F^T)^-1 f, if inside the bounds, is the answer.
+2. Start: the last final face (``Allocator``, warm) if its minimizer is still feasible, else the
+   projection of the least-norm fit onto the bounds and its working set (cold).
+3. The primal active set above; then the eps -> 0 polish on its final face.
+4. Reachable targets: the least-energy stage exactly, as its own problem -- x = proj(F^T y) with
+   F x = f, Newton on y (``_least_energy``). The eps-regularized active set resolves the
+   tie-break only through eps-sized multipliers (to ~1e-3 relative in the currents); this step
+   makes it exact, so the cold and the warm start give the same currents.
+
 The bias force: the magnet's pull on the iron cores at zero current, F0(p), is not produced by
 the currents, so the currents must render ``f - F0(p)``. Pass ``bias=F0`` (same rows as
 ``target``) or subtract it yourself; with map v2 it is ``MapFile.bias_force(points)``.
 
 Usage::
 
-    from firmware_io.allocation import allocate
+    from firmware_io.allocation import Allocator, allocate
     currents_a, residual = allocate(F, f_n, 6.0, 54.0)               # bipolar
     currents_a, residual = allocate(F, f_n, 6.0, 54.0, unipolar=True)
+    alloc = Allocator()                                               # in a control loop:
+    currents_a, residual = alloc(F, f_n, 6.0, 54.0, unipolar=True)   # same answer, warm start
 """
 
 from __future__ import annotations
@@ -379,11 +393,6 @@ def _polish(fs, ft, usl, ts, k, x, free, sg, fixv, bud):
     if rp @ rp <= rx @ rx:
         return xp, True, y
     return x, False, None
-
-
-def _phi(fs, ft, eps, x):
-    r = fs @ x - ft
-    return float(r @ r + eps * (x @ x))
 
 
 def _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n, max_iter,
