@@ -252,3 +252,23 @@ def test_allocation_check_study_1e4(tmp_path):
     a = res["all"]
     assert a["n"] == 10_000 and a["n_ours_higher"] == 0 and a["n_bound_violations"] == 0
     assert a["max_rel_excess_over_reference"] <= 1e-6 and a["max_kkt_rel"] <= 1e-9
+
+
+@pytest.mark.parametrize("fm, f, u", [
+    ([[1e300, 1e300]], [1e308], 1.0),       # F^T F beyond the float range
+    ([[1e-300, 2e-300]], [1e-300], 1.0),    # F^T F below it
+    ([[1.0, 2.0]], [1e300], 1e-300),        # a target 1e600 times the reach
+    ([[1.0, 2.0]], [1.0], 1e300),           # limits near the float range
+])
+def test_float_range_ends_finite_and_silent(fm, f, u):
+    """No overflow warning, no inf/NaN out, bounds kept, exact where the problem is exact."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        x, res = allocate(fm, f, u, np.inf)
+    assert np.all(np.isfinite(x)) and np.isfinite(res) and np.all(np.abs(x) <= u)
+    s = np.abs(fm[0]).max()
+    a = np.asarray(fm[0]) / s  # the least-norm exact fit a f / |a|^2, computed in range
+    if abs(f[0]) / s <= np.abs(a).sum() * u:  # reachable
+        np.testing.assert_allclose(x, a * (f[0] / s) / (a @ a), rtol=1e-12)
