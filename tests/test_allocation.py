@@ -231,13 +231,12 @@ def test_warm_start_gives_the_cold_answer(wrench_matrices):
 
 def test_allocation_check_study_1e3():
     """The independent 1e5-problem check (studies/allocation_check.py) on a 1e3 subset."""
-    from conftest import load_study
-
-    mod = load_study("allocation_check")
     import tempfile
 
+    import allocation_check
+
     with tempfile.TemporaryDirectory() as tmp:
-        res = mod.run(tmp, n=1000, workers=1, n_pos=40, progress=False)
+        res = allocation_check.run(tmp, n=1000, workers=1, n_pos=40, progress=False)
     a = res["all"]
     assert a["n"] == 1000 and a["n_ours_higher"] == 0 and a["n_bound_violations"] == 0
     assert a["max_rel_excess_over_reference"] <= 1e-6 and a["max_kkt_rel"] <= 1e-9
@@ -245,10 +244,10 @@ def test_allocation_check_study_1e3():
 
 @pytest.mark.slow
 def test_allocation_check_study_1e4(tmp_path):
-    from conftest import load_study
+    import allocation_check  # by name (studies/ is on sys.path): the workers unpickle it
 
-    res = load_study("allocation_check").run(tmp_path, n=10_000, workers=2, n_pos=200,
-                                             seed=7, progress=False)
+    res = allocation_check.run(tmp_path, n=10_000, workers=2, n_pos=200, seed=7,
+                               progress=False)
     a = res["all"]
     assert a["n"] == 10_000 and a["n_ours_higher"] == 0 and a["n_bound_violations"] == 0
     assert a["max_rel_excess_over_reference"] <= 1e-6 and a["max_kkt_rel"] <= 1e-9
