@@ -142,6 +142,41 @@ def check_overlap(coils) -> None:
                         "Move them apart or make them smaller.")
 
 
+def check_separation(coils) -> None:
+    """Raise :class:`DesignRuleError` naming any core that overlaps or touches another coil's
+    core or winding (the coupled solve needs every core surrounded by air).
+
+    coils : sequence of :class:`designkit.Coil` in their poses.
+    """
+    for i, ci in enumerate(coils):
+        if ci.core is None:
+            continue
+        c = ci.core
+        core_cyl = ("core", c.radius, c.offset - c.length / 2, c.offset + c.length / 2)
+        for j, cj in enumerate(coils):
+            if j == i:
+                continue
+            others = [("winding", cj.outer_radius, -cj.length / 2, cj.length / 2)]
+            if cj.core is not None and j > i:
+                d = cj.core
+                others.append(("core", d.radius, d.offset - d.length / 2, d.offset + d.length / 2))
+            for o in others:
+                if _cyl_overlap(ci.pose, _grow(core_cyl), cj.pose, _grow(o)):
+                    raise DesignRuleError(
+                        f"The core of coil {i} (at "
+                        f"{np.round(np.asarray(ci.pose.position) * 1e3, 3).tolist()} mm) "
+                        f"{'overlaps or touches'} the {o[0]} of coil {j} (at "
+                        f"{np.round(np.asarray(cj.pose.position) * 1e3, 3).tolist()} mm); "
+                        "cores must be separated from every other coil by air. Move the coils "
+                        "apart or make them smaller.")
+
+
+def _grow(cyl, eps=1e-9):
+    """Grow a cylinder by eps so that touching counts as overlapping."""
+    name, r, z0, z1 = cyl
+    return (name, r + eps, z0 - eps, z1 + eps)
+
+
 # ---------------------------------------------------------------------------- the array
 @dataclass(frozen=True)
 class CoilArray:
@@ -167,8 +202,6 @@ class CoilArray:
         object.__setattr__(self, "coils", coils)
         v.nonnegative("sensor_offset_m", self.sensor_offset_m)
         check_overlap(coils)
-        from .coupling import check_separation
-
         check_separation(coils)
 
     @classmethod

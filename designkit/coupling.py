@@ -85,7 +85,7 @@ import numpy as np
 
 from ._blas import one_blas_thread
 from .constants import MU0
-from .errors import BadInputError, DesignRuleError
+from .errors import BadInputError
 from .pose import Pose
 
 M_MAX = 2
@@ -1055,41 +1055,5 @@ def saturation_table(coil, height_m: float = 0.03, currents_a=None) -> dict:
     return {"current_a": currents, "factor": factor}
 
 
-def check_separation(coils) -> None:
-    """Raise :class:`DesignRuleError` naming any core that overlaps or touches another coil's
-    core or winding (the coupled solve needs every core surrounded by air).
-
-    coils : sequence of :class:`designkit.Coil` in their poses.
-    """
-    from .array import _cyl_overlap
-    for i, ci in enumerate(coils):
-        if ci.core is None:
-            continue
-        c = ci.core
-        core_cyl = ("core", c.radius, c.offset - c.length / 2, c.offset + c.length / 2)
-        for j, cj in enumerate(coils):
-            if j == i:
-                continue
-            others = [("winding", cj.outer_radius, -cj.length / 2, cj.length / 2)]
-            if cj.core is not None and j > i:
-                d = cj.core
-                others.append(("core", d.radius, d.offset - d.length / 2, d.offset + d.length / 2))
-            for o in others:
-                if _cyl_overlap(ci.pose, _grow(core_cyl), cj.pose, _grow(o)):
-                    raise DesignRuleError(
-                        f"The core of coil {i} (at "
-                        f"{np.round(np.asarray(ci.pose.position) * 1e3, 3).tolist()} mm) "
-                        f"{'overlaps or touches'} the {o[0]} of coil {j} (at "
-                        f"{np.round(np.asarray(cj.pose.position) * 1e3, 3).tolist()} mm); "
-                        "cores must be separated from every other coil by air. Move the coils "
-                        "apart or make them smaller.")
-
-
-def _grow(cyl, eps=1e-9):
-    """Grow a cylinder by eps so that touching counts as overlapping."""
-    name, r, z0, z1 = cyl
-    return (name, r + eps, z0 - eps, z1 + eps)
-
-
-__all__ = ["ArraySystem", "CoreModel", "core_model", "saturation_table", "check_separation",
+__all__ = ["ArraySystem", "CoreModel", "core_model", "saturation_table",
            "M_MAX", "BadInputError"]

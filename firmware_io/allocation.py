@@ -29,15 +29,29 @@ Each equality-constrained sub-problem is solved in the smaller of two exact form
 normal equations when at most k coils are free, otherwise the kernel form I_J = F_J^T y (+ t s),
 which keeps the solution exactly in the row space (the least-energy direction) by construction.
 
+The steps of one solve (each cheap for n ~ 9: the bookkeeping is plain Python over the coils,
+numpy only for the products and the k x k / n x n solves):
+
+1. Fast exit: the least-norm exact fit F^T (F F^T)^-1 f, if inside the bounds, is the answer.
+2. Start: the last final face (``Allocator``, warm) if its minimizer is still feasible, else the
+   projection of the least-norm fit onto the bounds and its working set (cold).
+3. The primal active set above; then the eps -> 0 polish on its final face.
+4. Reachable targets: the least-energy stage exactly, as its own problem -- x = proj(F^T y) with
+   F x = f, Newton on y (``_least_energy``). The eps-regularized active set resolves the
+   tie-break only through eps-sized multipliers (to ~1e-3 relative in the currents); this step
+   makes it exact, so the cold and the warm start give the same currents.
+
 The bias force: the magnet's pull on the iron cores at zero current, F0(p), is not produced by
 the currents, so the currents must render ``f - F0(p)``. Pass ``bias=F0`` (same rows as
 ``target``) or subtract it yourself; with map v2 it is ``MapFile.bias_force(points)``.
 
 Usage::
 
-    from firmware_io.allocation import allocate
+    from firmware_io.allocation import Allocator, allocate
     currents_a, residual = allocate(F, f_n, 6.0, 54.0)               # bipolar
     currents_a, residual = allocate(F, f_n, 6.0, 54.0, unipolar=True)
+    alloc = Allocator()                                               # in a control loop:
+    currents_a, residual = alloc(F, f_n, 6.0, 54.0, unipolar=True)   # same answer, warm start
 """
 
 from __future__ import annotations
@@ -63,6 +77,7 @@ decades inside the 1e-9 KKT tolerance (the gradient F^T r is at most ||F|| ||r||
 them earlier)."""
 
 _INF = math.inf
+_FLOAT_MAX = float.fromhex("0x1.fffffffffffffp+1023")
 
 
 def _bad_matrix(fm):
@@ -88,9 +103,19 @@ def _check_inputs(force_matrix, target, current_limit, total_limit, bias):
     if k < 1 or n < 1:
         raise BadInputError("force_matrix", "a (k, n) array with k, n >= 1, N/A",
                             f"shape {fm.shape}")
-    if not math.isfinite(float(np.add.reduce(np.abs(fm), axis=None))):
+    asum = float(np.add.reduce(np.abs(fm), axis=None))
+    if not math.isfinite(asum):
         if not np.all(np.isfinite(fm)):  # else only the sum overflowed
             _bad_matrix(fm)
+    if not 1e-150 < asum < 1e150 and asum > 0.0:
+        # entries near the ends of the float range: an exact power-of-two rescale of F and the
+        # target (the currents do not change; the residual is scaled back) keeps F^T F finite
+        amax = float(np.maximum.reduce(np.abs(fm), axis=None))
+        e = math.frexp(amax)[1]
+        fm = np.ldexp(fm, -e)
+        scale_e = e
+    else:
+        scale_e = 0
     try:
         t = np.asarray(target, dtype=float).reshape(-1)
     except (TypeError, ValueError):
@@ -107,6 +132,8 @@ def _check_inputs(force_matrix, target, current_limit, total_limit, bias):
             raise BadInputError("bias", f"{k} finite values (the map's F0 in the target's "
                                 "rows), N", np.asarray(bias).tolist())
         t = t - b
+    if scale_e:
+        t = np.ldexp(t, -scale_e)
     if isinstance(current_limit, (float, int)) and not isinstance(current_limit, bool):
         u = [float(current_limit)] * n
     else:
@@ -125,7 +152,7 @@ def _check_inputs(force_matrix, target, current_limit, total_limit, bias):
     if not tl >= 0.0:
         raise BadInputError("total_limit", ">= 0 A (inf: no budget); a negative budget "
                             "makes sum |I| <= I_t infeasible", tl)
-    return fm, t, u, tl
+    return fm, t, u, tl, scale_e
 
 
 def allocate(force_matrix, target, current_limit, total_limit, *, unipolar: bool = False,
@@ -167,10 +194,23 @@ def allocate(force_matrix, target, current_limit, total_limit, *, unipolar: bool
     BadInputError (a ValueError)
         Non-finite matrix/target/bias, wrong shapes, negative or NaN limits, I_t < 0.
     """
-    fm, t, u, tl = _check_inputs(force_matrix, target, current_limit, total_limit, bias)
+    fm, t, u, tl, scale_e = _check_inputs(force_matrix, target, current_limit, total_limit,
+                                          bias)
     x = _solve(fm, t, u, tl, bool(unipolar), max_iter, warm)
     r = fm @ x - t
-    return x, float(r @ r)
+    big = max(map(abs, r.tolist()))
+    if big < 1e150:
+        res = float(r @ r)
+    else:  # the square of a target beyond 1e154: scaled, and capped at the largest float
+        e = math.frexp(big)[1]
+        rs = np.ldexp(r, -e)
+        res, scale_e = float(rs @ rs), scale_e + e
+    if scale_e and res > 0.0:
+        try:
+            res = math.ldexp(res, 2 * scale_e)
+        except OverflowError:  # beyond the float range: the largest float, never inf
+            res = _FLOAT_MAX
+    return x, res
 
 
 class Allocator:
@@ -213,19 +253,26 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
     tl_eff = min(tl, math.fsum(ul))
     if umax == 0.0 or tl_eff == 0.0:
         return np.zeros(n)
-    # scale currents by u_max and forces by the largest achievable column force
+    # scale currents by u_max and forces by the largest achievable column force u_max |F_i|
+    # (or the target, if larger)
     colsq = np.add.reduce(fm * fm, axis=0)
-    cs = math.sqrt(float(np.maximum.reduce(colsq))) * umax
+    cmax = float(np.maximum.reduce(colsq))
     fmax = float(np.maximum.reduce(np.abs(f))) if k > 1 else abs(float(f[0]))
+    cs = math.sqrt(cmax) * umax
     fscale = cs if cs > fmax else fmax
     if fscale == 0.0:
         return np.zeros(n)
-    if not math.isfinite(fscale) or not math.isfinite(cs):
-        # entries near the float range: rescale once more before squaring
-        big = float(np.maximum.reduce(np.abs(fm), axis=None))
-        return _solve(fm / big, f / big, ul, tl, unipolar, max_iter, None)
-    fs = fm * (umax / fscale)
-    ft = f / fscale
+    if math.isfinite(fscale):
+        fs = fm * (umax / fscale)
+        ft = f / fscale
+        c2 = cmax * (umax / fscale) ** 2
+    else:  # limits near the float range: the same scaling written as ratios
+        cn = math.sqrt(cmax)
+        rt = fmax / umax  # inf for a target beyond the float range here: fs -> 0 below
+        denom = cn if cn >= rt else rt
+        fs = fm / denom
+        ft = (f / umax) / cn if cn >= rt else f / fmax
+        c2 = cmax / (denom * denom)
     rows = np.logical_or.reduce(fs != 0.0, axis=1)
     if not rows.all():  # an all-zero row (e.g. torque about m) adds a constant residual only
         if not rows.any():
@@ -237,7 +284,6 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
     ts = tl_eff * inv_umax
     budget_possible = ts < math.fsum(usl) * (1 - 1e-15)
     tsb = ts if budget_possible else _INF
-    c2 = float(np.maximum.reduce(colsq)) * (umax / fscale) ** 2
     eps = EPS_REL * max(c2, 1e-300)
     lo = 0.0 if unipolar else -1.0
     ffT = fs @ fs.T
@@ -379,11 +425,6 @@ def _polish(fs, ft, usl, ts, k, x, free, sg, fixv, bud):
     if rp @ rp <= rx @ rx:
         return xp, True, y
     return x, False, None
-
-
-def _phi(fs, ft, eps, x):
-    r = fs @ x - ft
-    return float(r @ r + eps * (x @ x))
 
 
 def _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n, max_iter,

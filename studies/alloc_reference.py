@@ -56,9 +56,10 @@ def kkt_violation(fm, f, u, tl, x, unipolar=False, *, zero_tol=None):
     return best / scale, infeas
 
 
-def slsqp_reference(fm, f, u, tl, unipolar=False, *, starts=2):
-    """min ||F x - f||^2 with SLSQP on the split x = P - N (scaled to O(1)); the objective."""
-    from scipy.optimize import minimize
+def slsqp_reference(fm, f, u, tl, unipolar=False, *, starts=2, ftol=1e-16, maxiter=1000):
+    """min ||F x - f||^2 with SLSQP on the split x = P - N (scaled to O(1)); the objective.
+    ``ftol`` is SLSQP's (absolute) precision goal on the scaled objective, ``maxiter`` its cap."""
+    from designkit._blas import one_blas_thread
 
     fm = np.atleast_2d(np.asarray(fm, float))
     k, n = fm.shape
@@ -75,22 +76,27 @@ def slsqp_reference(fm, f, u, tl, unipolar=False, *, starts=2):
     else:
         d = np.concatenate([a, -a], axis=1)
         bounds = [(0, ui) for ui in us] * 2
-    hess = 2 * d.T @ d
-    lin = -2 * d.T @ b
-
     def fun(z):
         r = d @ z - b
         return r @ r, 2 * d.T @ r
 
     cons = [{"type": "ineq", "fun": lambda z: ts - z.sum(),
              "jac": lambda z: -np.ones_like(z)}]
+    with one_blas_thread():  # tiny products: a multithreaded BLAS of a busy machine only waits
+        best = _slsqp_runs(fun, d, b, us, ts, unipolar, bounds, cons, starts, ftol, maxiter)
+    return best * fs * fs
+
+
+def _slsqp_runs(fun, d, b, us, ts, unipolar, bounds, cons, starts, ftol, maxiter):
+    from scipy.optimize import minimize
+
     best = None
     for z0 in (np.zeros(d.shape[1]), np.clip(np.linalg.lstsq(d, b, rcond=None)[0], 0, None))[:starts]:
         z0 = np.minimum(z0, np.concatenate([us] * (1 if unipolar else 2)))
         if z0.sum() > ts:
             z0 *= ts / z0.sum()
         res = minimize(fun, z0, jac=True, method="SLSQP", bounds=bounds, constraints=cons,
-                       options={"ftol": 1e-16, "maxiter": 1000})
+                       options={"ftol": ftol, "maxiter": maxiter})
         z = np.clip(res.x, 0, None)
         z = np.minimum(z, np.concatenate([us] * (1 if unipolar else 2)))
         if z.sum() > ts:
@@ -98,6 +104,5 @@ def slsqp_reference(fm, f, u, tl, unipolar=False, *, starts=2):
         val = fun(z)[0]
         if best is None or val < best:
             best = val
-    del hess, lin
-    return best * fs * fs
+    return best
 

@@ -22,6 +22,20 @@ def load_study(name: str):
     return module
 
 
+def top_level_imports(path) -> set:
+    """Top-level modules a source file imports (absolute imports only): the numpy-only checks
+    of the firmware_io modules."""
+    import ast
+
+    mods = set()
+    for node in ast.walk(ast.parse(Path(path).read_text())):
+        if isinstance(node, ast.Import):
+            mods |= {a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.level == 0:
+            mods.add(node.module.split(".")[0])
+    return mods
+
+
 def _ci() -> bool:
     return bool(os.environ.get("DESIGNKIT_CI"))
 

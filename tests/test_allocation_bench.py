@@ -19,3 +19,5 @@ def test_bench_allocation_quick(tmp_path):
     c = res["certify"]
     assert c["n"] == 300 and c["max_kkt_rel"] <= 1e-9 and c["max_bound_violation_a"] <= 1e-9
     assert res["mix_median_us"] > 0 and res["speedup_vs_lsq_linear_median"] > 0
+    for p in res["path"].values():  # warm start: the same answers as cold
+        assert p["max_difference_a"] <= 1e-9 and p["warm_median_us"] > 0

@@ -185,10 +185,8 @@ def test_firmware_io_imports_numpy_smbus2_and_the_standard_library_only():
     assert not bad, "\n".join(bad)
 
 
-KNOWN_CYCLE_EDGES = {("designkit.coupling", "designkit.array")}
-"""Import edges known to close a cycle, each to be removed with its fix: coupling.
-check_separation imports array._cyl_overlap inside the function while array imports coupling
-(the fix: check_separation moves into designkit/array.py next to check_overlap)."""
+KNOWN_CYCLE_EDGES: set = set()
+"""Import edges known to close a cycle, each to be removed with its fix (none left)."""
 
 
 def _module_graph() -> dict[str, set[str]]:
@@ -246,11 +244,6 @@ def test_no_import_cycles_between_designkit_modules():
     assert not cycles, cycles
 
 
-RAW_TQDM_PENDING = {"studies/bench_allocation.py"}
-"""Files other helpers own this session that still import tqdm itself (a carriage-return flood
-in a log): each is to import ``designkit._progress.tqdm`` and leave this set."""
-
-
 def test_progress_bars_go_through_the_line_wise_wrapper():
     """Every progress bar writes plain lines when its stream is not a terminal: nothing but
     designkit._progress imports tqdm itself."""
@@ -262,8 +255,7 @@ def test_progress_bars_go_through_the_line_wise_wrapper():
                    or isinstance(n, ast.Import) and any(a.name == "tqdm" for a in n.names)
                    for n in ast.walk(tree)):
                 raw.add(path.relative_to(ROOT).as_posix())
-    assert raw - RAW_TQDM_PENDING == {"designkit/_progress.py"}
-    assert RAW_TQDM_PENDING <= raw, f"fixed: remove {RAW_TQDM_PENDING - raw} from the set"
+    assert raw == {"designkit/_progress.py"}
 
 
 def test_field_kernels_do_not_import_the_design_spec():
