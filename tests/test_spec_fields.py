@@ -83,5 +83,6 @@ def test_run_takes_lambda_from_the_design_render_stiffness(monkeypatch, tmp_path
     for lam, want in ((None, 4.25), (7.0, 7.0)):
         with pytest.raises(Stop):
             run_simulation(design=d, map_path=tmp_path / "m.npz", out=tmp_path / "o",
-                           array=object(), duration_s=0.1, lam_n_per_m=lam)
+                           array=SimpleNamespace(sensor_positions_m=lambda: np.zeros((2, 9, 3))),
+                           duration_s=0.1, lam_n_per_m=lam)
         assert seen["lam"] == want
