@@ -107,9 +107,11 @@ def _noise_limited(sim, readings, k, p_true, currents, ind_true, ind_jac):
 
 
 def run(out_dir=DEFAULT_OUT, n: int = 1000, seed: int = 0, *, map_path=None,
-        quick: bool = False, n_workspace: int | None = None, bench_only: bool = False) -> dict:
+        quick: bool = False, n_workspace: int | None = None, bench_only: bool = False,
+        static_only: bool = False) -> dict:
     """Run the study; returns a dict of numbers (also written as JSON). ``bench_only``: only
-    the warm-start timing benchmark (printed and returned, nothing written)."""
+    the warm-start timing benchmark (printed and returned, nothing written); ``static_only``:
+    only the static-hold table (printed, written as ``static_hold.json``)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     design = default_design()
@@ -151,6 +153,11 @@ def run(out_dir=DEFAULT_OUT, n: int = 1000, seed: int = 0, *, map_path=None,
         bench = _benchmark(sim, model, locs, rng, quick)
         print(f"benchmark (us per locate, warm start, shared machine): {json.dumps(bench)}")
         return {"benchmark": bench}
+    if static_only:
+        hold = _static_hold(sim, locs, rng, 12 if quick else n)
+        print("\n".join(_print_static(hold)))
+        (out / "static_hold.json").write_text(json.dumps(hold, indent=1))
+        return {"static_hold": hold}
     results_budget = _budget(sim, make, size, seed, 12 if quick else 150)
     regions = {"cube": dict(z_range_m=(0.020, 0.070), half_width_m=0.025),
                "workspace": dict(z_range_m=(0.020, 0.080), half_width_m=0.075)}
@@ -232,6 +239,7 @@ def run(out_dir=DEFAULT_OUT, n: int = 1000, seed: int = 0, *, map_path=None,
                     "thesis_mae_mm": THESIS_MAE_MM.get(case)})
             errors_store[(region, case)] = (pos, errs)
     results["kalman"] = _kalman(sim, model, rng, quick, locs)
+    results["static_hold"] = _static_hold(sim, locs, rng, 12 if quick else counts["cube"])
     results["benchmark"] = _benchmark(sim, model, locs, rng, quick)
     results["total_s"] = time.perf_counter() - t_all
     _write(out, results, errors_store)
@@ -391,6 +399,55 @@ def _kalman(sim, model, rng, quick, locs):
     return out
 
 
+def _static_hold(sim, locs, rng, n, frames=20, rate_hz=100.0):
+    """The thesis' cases hold the finger still: MAE (mm) over ``n`` positions in the lower half
+    of the cube (20-45 mm) of one frame's 'model-cal' fit, of the runner's constant-velocity
+    Kalman filter (method 4, tuned for a moving finger: 2 m/s^2, 1 mm) after ``frames`` frames
+    at ``rate_hz`` (a 0.2 s hold at 100 Hz), and of the mean of the frames' fits. Per-frame
+    noise, quantization and currents are drawn anew; the sensors' errors are the simulator's."""
+    raw = locs["model-cal"]
+    pos = random_positions(n, rng, z_range_m=(0.020, 0.045), half_width_m=0.025)
+    mag = sim.magnet_part(pos)
+    ind = np.stack([sim.induced_part(p[None])[0] for p in _progress(pos, "static hold")])
+    out = {"n": n, "frames": frames, "rate_hz": rate_hz}
+    for case in CASES[:4]:
+        e1, ek, em = np.empty(n), np.empty(n), np.empty(n)
+        for k in range(n):
+            t = rng.uniform(0, 20) + np.arange(frames) / rate_hz
+            cur = case_currents(case, t, raw.model.n_coils, seed=7)
+            rep = np.zeros(frames, int) + k
+            rd = sim.read(pos[rep], cur, parts=(mag[rep], ind[rep]))
+            kf = Localizer(raw.model, "kalman", kalman=ConstantVelocityKalman(2.0, 1.0e-3),
+                           calibration=raw.calibration)
+            raw.reset()
+            fits = []
+            for f in range(frames):
+                fits.append(raw.locate(rd.top_t[f], rd.bottom_t[f], cur[f]).position_m)
+                last = kf.locate(rd.top_t[f], rd.bottom_t[f], cur[f], time_s=t[f]).position_m
+            e1[k] = np.linalg.norm(fits[0] - pos[k])
+            ek[k] = np.linalg.norm(last - pos[k])
+            em[k] = np.linalg.norm(np.mean(fits, axis=0) - pos[k])
+        out[case] = {"one_frame_mae_mm": float(e1.mean() * 1e3),
+                     "kalman_mae_mm": float(ek.mean() * 1e3),
+                     "kalman_p95_mm": float(np.percentile(ek, 95) * 1e3),
+                     "frame_mean_mae_mm": float(em.mean() * 1e3),
+                     "thesis_mae_mm": THESIS_MAE_MM[case]}
+    return out
+
+
+def _print_static(res: dict) -> list:
+    lines = [f"static hold, lower half of the cube ({res['n']} positions, {res['frames']} frames at "
+             f"{res['rate_hz']:.0f} Hz): MAE (mm) of one frame's 'model-cal' fit, of the Kalman "
+             "filter (method 4) after the hold [p95], of the mean of the frames' fits; thesis",
+             f"  {'case':13s} {'one frame':>10s} {'Kalman':>16s} {'frame mean':>11s} {'thesis':>7s}"]
+    for case in CASES[:4]:
+        r = res[case]
+        lines.append(f"  {case:13s} {r['one_frame_mae_mm']:10.2f} {r['kalman_mae_mm']:8.2f} "
+                     f"[{r['kalman_p95_mm']:5.2f}] {r['frame_mean_mae_mm']:11.2f} "
+                     f"{r['thesis_mae_mm']:7.2f}")
+    return lines
+
+
 def _benchmark(sim, model, locs, rng, quick):
     """Warm-started fits along a trajectory; per-call times."""
     t, path = _trajectory(60 if quick else 300, 100.0, rng)
@@ -467,6 +524,7 @@ def _write(out: Path, res: dict, store: dict) -> None:
     lines.append("calibration (recovered vs drawn): " + json.dumps(
         {k: (round(v, 4) if isinstance(v, float) else v) for k, v in res["calibration"].items()}))
     lines.append(f"Kalman: {json.dumps(res['kalman'])}")
+    lines += _print_static(res["static_hold"])
     lines.append(f"benchmark (us per locate, warm start, shared machine): "
                  f"{json.dumps(res['benchmark'])}")
     lines.append(f"subtraction error from the magnet-magnetized cores: "
@@ -574,6 +632,8 @@ if __name__ == "__main__":
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--bench-only", action="store_true",
                     help="only the warm-start timing benchmark")
+    ap.add_argument("--static-only", action="store_true",
+                    help="only the static-hold table (lower half of the cube, four thesis cases)")
     ap.add_argument("--replot", action="store_true",
                     help="redraw localization.png from out_dir/localization.json")
     a = ap.parse_args()
@@ -581,4 +641,4 @@ if __name__ == "__main__":
         _plot_mae(Path(a.out_dir), json.loads((Path(a.out_dir) / "localization.json").read_text()))
         sys.exit(0)
     run(a.out_dir, a.n, map_path=a.map, quick=a.quick, n_workspace=a.n_workspace,
-        bench_only=a.bench_only)
+        bench_only=a.bench_only, static_only=a.static_only)

@@ -53,6 +53,9 @@ def test_localization_study_smoke(tmp_path):
     assert set(res["budget"]["rows"]) >= {"mounting shift 0.5 mm", "noise 0.1 mT rms",
                                           "all of the above, calibrated"}
     assert res["calibration"]["frames"] > 0
+    hold = res["static_hold"]
+    assert all(np.isfinite(hold[c][k]) for c in mod.CASES[:4]
+               for k in ("one_frame_mae_mm", "kalman_mae_mm", "frame_mean_mae_mm"))
     for name in ("localization.png", "subtraction_error.png", "localization.json",
                  "localization_table.txt", "learned_inverse.npz", "calibration.npz"):
         assert (tmp_path / name).is_file()
