@@ -80,6 +80,12 @@ DEFAULT_NOISE_T = 0.1e-3
 
 
 # ---------------------------------------------------------------------------- magnet model
+def _dist(a: np.ndarray, b: np.ndarray) -> float:
+    """|a - b| of two (3,) vectors (np.linalg.norm costs ~5x more on the fit's hot path)."""
+    d = a - b
+    return math.sqrt(float(d @ d))
+
+
 def multipole_field(points_m: np.ndarray, position_m: np.ndarray, moment_a_m2: np.ndarray,
                     octupole_m2: float = 0.0, *, jacobian: bool = False):
     """Field of an axisymmetric magnet (dipole + l = 3 term) at points, (n, 3) T.
@@ -101,27 +107,29 @@ def multipole_field(points_m: np.ndarray, position_m: np.ndarray, moment_a_m2: n
     s = r @ u
     c = mag / (4 * math.pi)
     ir = 1.0 / rho
-    rm32 = ir * np.sqrt(ir)          # rho^-3/2
-    rm52 = rm32 * ir
-    fs = c * rm32
-    fr = -1.5 * c * s * rm52
+    a = ir * ir * np.sqrt(ir)        # rho^-5/2: every derivative below is a = times a polynomial
+    sa = s * a
     if octupole_m2:
+        # with t = s^2 / rho (cos^2 of the polar angle) and w = k / rho, k = c q / 2:
+        # f_s = a (c rho + k (15 t - 3)), f_rho = s a (-3c/2 + w (15/2 - 35 t / 2)), ...
         k = 0.5 * c * octupole_m2
-        rm72 = rm52 * ir
-        rm92 = rm72 * ir
-        s2 = s * s
-        fs = fs + k * (15 * s2 * rm72 - 3 * rm52)
-        fr = fr + k * (-17.5 * s2 * s * rm92 + 7.5 * s * rm72)
+        t = s * s * ir
+        w = k * ir
+        fs = a * (c * rho + k * (15.0 * t - 3.0))
+        fr = sa * (w * (7.5 - 17.5 * t) - 1.5 * c)
+    else:
+        fs = c * rho * a
+        fr = -1.5 * c * sa
     b = -MU0 * (fs[:, None] * u[None] + 2 * fr[:, None] * r)
     if not jacobian:
         return b
-    fsr = -1.5 * c * rm52
-    frr = 3.75 * c * s * rm52 * ir
     if octupole_m2:
-        rm112 = rm92 * ir
-        fss = k * 30 * s * rm72
-        fsr = fsr + k * (-52.5 * s2 * rm92 + 7.5 * rm72)
-        frr = frr + k * (78.75 * s2 * s * rm112 - 26.25 * s * rm92)
+        fsr = a * (w * (7.5 - 52.5 * t) - 1.5 * c)
+        frr = sa * ir * (w * (78.75 * t - 26.25) + 3.75 * c)
+        fss = 30.0 * w * sa
+    else:
+        fsr = -1.5 * c * a
+        frr = 3.75 * c * sa * ir
     # 2 fsr (u r^T + r u^T) + 4 frr r r^T + fss u u^T + 2 fr I, as r v1^T + u v2^T + 2 fr I
     # (fewer small-array operations: this runs in every fit iteration)
     v1 = (4 * frr)[:, None] * r + (2 * fsr)[:, None] * u
@@ -739,7 +747,7 @@ class Localizer:
         """One correction's linearization near p: (p_c, value, jacobian), reused while p stays
         within the adapted radius (and ``tol``); ``evaluate(p, old)`` -> (value, jacobian)."""
         c = self._lin.get(key)
-        if c is not None and float(np.linalg.norm(p - c[0])) <= min(tol, c[3]):
+        if c is not None and _dist(p, c[0]) <= min(tol, c[3]):
             return c
         val, jac = evaluate(p, c)
         radius = first_radius
@@ -747,7 +755,7 @@ class Localizer:
             # the linearization's error grows as |dp|^2: keep it near noise / 20
             dp = p - c[0]
             err = float(np.abs(val - c[1] - c[2] @ dp).max())
-            step = float(np.linalg.norm(dp))
+            step = math.sqrt(float(dp @ dp))
             radius = (min(max(step * math.sqrt(0.05 * self.noise_t / err), 0.1e-3), 5e-3)
                       if err > 0 else 5e-3)
         self._lin[key] = (p, val, jac, radius)
@@ -755,7 +763,7 @@ class Localizer:
 
     def _evaluate_induced(self, p, old):
         val = self._induced_part(p)
-        if old is not None and float(np.linalg.norm(p - old[4])) <= 10 * self.refresh_m:
+        if old is not None and _dist(p, old[4]) <= 10 * self.refresh_m:
             # Broyden: the reused Jacobian made exact along the move (free); the cores' field
             # is smooth on the 10 mm scale
             dp = p - old[0]
@@ -772,7 +780,7 @@ class Localizer:
     def _within(self, p, tol) -> bool:
         """Is p close enough to every correction's linearization point (``tol``, or 1.5 times
         each one's reuse radius)?"""
-        return all(float(np.linalg.norm(p - c[0])) <= (tol if tol is not None else 1.5 * c[3])
+        return all(_dist(p, c[0]) <= (tol if tol is not None else 1.5 * c[3])
                    for c in self._lin.values())
 
     def _linearized(self, p, tol=None):
@@ -887,7 +895,7 @@ class Localizer:
         if not converged:
             return False, "fit did not converge"
         lo, hi = self.model.box_lower_m, self.model.box_upper_m
-        if not (np.all(p > lo + 1e-6) and np.all(p < hi - 1e-6)):
+        if not ((p > lo + 1e-6).all() and (p < hi - 1e-6).all()):
             return False, "position at or outside the plausible box's edge"
         if rms > self.residual_limit:
             return False, f"residual {rms:.3g} > {self.residual_limit:g} (lost or implausible)"
