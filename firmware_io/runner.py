@@ -495,15 +495,8 @@ class SensorPipeline:
 
 
 class ConstantVelocityTracker(ConstantVelocityKalman):
-    """Constant-velocity Kalman filter, one (2, 2) covariance per axis, in scalar arithmetic
-    (a few microseconds per call on the control thread).
-
-    State per axis: position x (m) and velocity v (m/s); process: white acceleration of
-    ``accel_rms_m_s2`` (q = a^2: Q = q [[dt^4/4, dt^3/2], [dt^3/2, dt^2]]); measurement: the
-    position with variance ``meas_rms_m``^2. The same model as
-    :class:`firmware_io.localization.ConstantVelocityKalman`, with the interface the runner uses:
-    ``update(position_m, time_s, ok)``, ``predict(time_s)`` and ``x`` ((2, 3) position,
-    velocity).
+    """:class:`firmware_io.localization.ConstantVelocityKalman` with the runner's tuning
+    (``update(position_m, time_s, ok)``, ``predict(time_s)``, ``x`` (2, 3) position, velocity).
 
     Defaults: a finger's accelerations while exploring a surface, ~2 m/s^2 rms; the
     measurement variance is that of the calibrated fit on the simulated device (raw error
@@ -516,44 +509,6 @@ class ConstantVelocityTracker(ConstantVelocityKalman):
 
     def __init__(self, accel_rms_m_s2: float = 2.0, meas_rms_m: float = 1.5e-3):
         super().__init__(accel_rms_m_s2, meas_rms_m)
-
-    def reset(self) -> None:
-        self.x = None
-        self.t = None
-        self.p = (0.0, 0.0, 0.0)     # p00, p01, p11 (the same for each axis)
-
-    def update(self, position_m, time_s: float, ok: bool = True):
-        z = np.asarray(position_m, dtype=float)
-        if self.x is None:
-            if ok:
-                self.x = np.stack([z, np.zeros(3)])
-                self.p = (self.r, 0.0, 1.0)
-                self.t = float(time_s)
-            return z.copy(), np.zeros(3)
-        dt = max(float(time_s) - self.t, 0.0)
-        p00, p01, p11 = self.p
-        q = self.q
-        # predict: F P F^T + Q with F = [[1, dt], [0, 1]]
-        p00, p01, p11 = (p00 + 2 * dt * p01 + dt * dt * p11 + q * dt ** 4 / 4,
-                         p01 + dt * p11 + q * dt ** 3 / 2, p11 + q * dt * dt)
-        x = self.x[0] + dt * self.x[1]
-        v = self.x[1]
-        if ok:
-            s = p00 + self.r
-            k0, k1 = p00 / s, p01 / s
-            innov = z - x
-            x = x + k0 * innov
-            v = v + k1 * innov
-            p00, p01, p11 = p00 - k0 * p00, p01 - k0 * p01, p11 - k1 * p01
-        self.x = np.stack([x, v])
-        self.p = (p00, p01, p11)
-        self.t = float(time_s)
-        return x.copy(), v.copy()
-
-    def predict(self, time_s: float) -> np.ndarray:
-        if self.x is None:
-            raise BadInputError("filter state", "at least one ok estimate before predict", None)
-        return self.x[0] + max(float(time_s) - self.t, 0.0) * self.x[1]
 
 
 # ---------------------------------------------------------------------------------------------
