@@ -67,6 +67,9 @@ def test_run_refuses_a_map_from_another_design(map_file, tmp_path):
                          timeout=600)
     assert res.returncode != 0
     assert "Traceback" not in res.stderr and "design" in res.stderr
+    # the refusal came after the map was read: nothing half written is left behind
+    assert not (tmp_path / "r").exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".r.")]
 
 
 def test_bench_runner_smoke(map_file, tmp_path):

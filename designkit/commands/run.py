@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ._common import add_progress_argument, check_output, show_progress
+from ._common import add_progress_argument, show_progress, staged_folder
 
 OBJECTS = ("plane", "hemisphere", "half-cylinder", "wedge")
 
@@ -54,13 +54,15 @@ def run(args: argparse.Namespace) -> int:
         raise BadInputError("--simulate", "given (this machine has no coil hardware; on the "
                             "controller run `python -m firmware_io.run --bus N --map F --scene F`)",
                             False)
-    check_output(args.out, folder=True)
-    summary = run_simulation(
+    # staged: a run that fails (bad trajectory file, a fault, Ctrl-C) leaves no half-written
+    # folder (map and scene without a summary) behind
+    with staged_folder(args.out) as stage:
+        summary = run_simulation(
         design=args.design, obj=args.object, trajectory=args.trajectory,
-        duration_s=args.duration, faults=args.faults, map_path=args.map, method=args.method,
-        period_s=args.period_ms * 1e-3, unipolar=args.unipolar, rows=args.rows,
-        lam_n_per_m=args.lam, seed=args.seed, out=args.out,
-        progress=show_progress(args))
+            duration_s=args.duration, faults=args.faults, map_path=args.map,
+            method=args.method, period_s=args.period_ms * 1e-3, unipolar=args.unipolar,
+            rows=args.rows, lam_n_per_m=args.lam, seed=args.seed, out=stage,
+            progress=show_progress(args))
     print(f"wrote {args.out}/run.csv, summary.json, run.png, loop_timing.png: force error RMS "
           f"{_mn(summary['force_error_rms_n'])} (p95 {_mn(summary['force_error_p95_n'])}), "
           f"localization MAE {_mm(summary['localization_mae_m'])}, loop p99 "
