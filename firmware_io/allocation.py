@@ -293,9 +293,10 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
     y0 += _fast_solve(mreg, ft - ffT @ y0)
     x0 = fs.T @ y0
     xl = x0.tolist()
+    ft2 = float(ft @ ft)
     if _inside(xl, usl, tsb, unipolar):
         r = fs @ x0 - ft
-        lim = _EXACT_FIT_TOL * (math.sqrt(float(ft @ ft)) + math.sqrt(c2 * float(x0 @ x0)))
+        lim = _EXACT_FIT_TOL * (math.sqrt(ft2) + math.sqrt(c2 * float(x0 @ x0)))
         if float(r @ r) <= lim * lim:
             if warm is not None:
                 warm.face = ([True] * n, [1.0 if v >= 0.0 else -1.0 for v in xl], [0.0] * n,
@@ -323,7 +324,7 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
                                 k, n, max_iter, xh, free, sg, fixv, bud, at_face=True)
     if state is None:
         # ---- cold start: the projection of the least-norm exact fit and its working set
-        xl = _cold_start(fs, ft, q, x0, xl, usl, tsb, unipolar)
+        xl = _cold_start(fs, ft, q, xl, usl, tsb, unipolar)
         x = np.array(xl)
         free = [0.0 < abs(v) < ui for v, ui in zip(xl, usl)]
         sg = [1.0 if v >= 0.0 else -1.0 for v in xl]
@@ -334,15 +335,17 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
     # ---- polish: the eps -> 0 limit on the final face (the lexicographic answer: least residual,
     # then least energy) removes the Tikhonov bias when it stays on the face; if it leaves the
     # face, a continuation pass with eps 1e4 x smaller (warm started, usually 1 face) first
-    x, ok, y = _polish(fs, ft, usl, ts, k, unipolar, *state)
+    x, ok, y, res2 = _polish(fs, ft, usl, ts, k, unipolar, *state)
     if not ok:
         state = _active_set(fs, ft, h, q, usl, ts, eps * 1e-4, tol, unipolar, budget_possible,
                             k, n, max_iter, *state)
-        x, _, y = _polish(fs, ft, usl, ts, k, unipolar, *state)
+        x, _, y, res2 = _polish(fs, ft, usl, ts, k, unipolar, *state)
+    if res2 is None:
+        r = fs @ x - ft
+        res2 = float(r @ r)
     # ---- an exact fit: the least-energy stage on its own, free of eps (see _least_energy)
-    lim = _EXACT_FIT_TOL * (math.sqrt(float(ft @ ft)) + math.sqrt(c2 * float(x @ x)))
-    r = fs @ x - ft
-    if float(r @ r) <= lim * lim:
+    lim = _EXACT_FIT_TOL * (math.sqrt(ft2) + math.sqrt(c2 * float(x @ x)))
+    if res2 <= lim * lim:
         x2 = _least_energy(fs, ft, usl, tsb, unipolar, y0 if y is None else y, lim, c2, k)
         if x2 is not None:
             x = x2
@@ -358,12 +361,10 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
         warm.face = (free, sg, [v / ui if ui > 0.0 else 0.0 for v, ui in zip(fixv, usl)], bud)
         warm.key = key
     # ---- guarantee: never outside the bounds, whatever round-off did
-    us = np.array(usl)
-    x = np.minimum(np.maximum(x, lo * us), us)
-    tot = float(np.add.reduce(np.abs(x)))
-    if tot > ts:
-        x *= ts / tot
-    return x * umax
+    xl = [(v if v < ui else ui) if v > lo * ui else lo * ui for v, ui in zip(x.tolist(), usl)]
+    tot = math.fsum(map(abs, xl))
+    sc = umax * ts / tot if tot > ts else umax
+    return np.array(xl) * sc
 
 
 _EYES = [np.eye(i) for i in range(16)]
@@ -409,7 +410,8 @@ def _polish(fs, ft, usl, ts, k, unipolar, x, free, sg, fixv, bud):
     and is no worse; y its kernel coefficients (None in the primal form). Bipolar without the
     budget in the working set, a free coil may take either sign (see `_active_set`)."""
     if not any(free):
-        return x, True, None
+        r = fs @ x - ft
+        return x, True, None, float(r @ r)
     xp, y = _face_minimizer(fs, ft, 0.0, free, sg, fixv, bud, ts, k, want_y=True)
     xpl = xp.tolist()
     slack = 1e-12 * max(usl)
@@ -419,20 +421,21 @@ def _polish(fs, ft, usl, ts, k, unipolar, x, free, sg, fixv, bud):
             if signfree:
                 a, ui = xpl[i], usl[i]
                 if not -ui - slack <= a <= ui + slack:
-                    return x, False, None
+                    return x, False, None, None
                 xpl[i] = min(max(a, -ui), ui)
                 continue
             a = sg[i] * xpl[i]
             if not -slack <= a <= usl[i] + slack:
-                return x, False, None
+                return x, False, None, None
             xpl[i] = sg[i] * min(max(a, 0.0), usl[i])
     if not bud and math.fsum(map(abs, xpl)) > ts * (1 + 1e-12):
-        return x, False, None  # the Tikhonov bias kept it inside the budget; eps -> 0 does not
+        return x, False, None, None  # the Tikhonov bias kept it inside the budget; eps -> 0 does not
     xp = np.array(xpl)
     rp, rx = fs @ xp - ft, fs @ x - ft
-    if rp @ rp <= rx @ rx:
-        return xp, True, y
-    return x, False, None
+    ep, ex = float(rp @ rp), float(rx @ rx)
+    if ep <= ex:
+        return xp, True, y, ep
+    return x, False, None, ex
 
 
 def _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n, max_iter,
@@ -445,7 +448,9 @@ def _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n
     aug_a = np.empty((k + 1, n))
     aug_a[:k] = fs
     aug_a[k] = sg
-    aug_b = np.append(ft, ts)
+    aug_b = np.empty(k + 1)
+    aug_b[:k] = ft
+    aug_b[k] = ts
     aug = (aug_a, aug_b)
     xl = x.tolist()
     for _ in range(max_iter):
@@ -584,31 +589,22 @@ def _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n
     return x, free, sg, fixv, bud
 
 
-_START_MODE = (1, 3)
-
-
-def _cold_start(fs, ft, q, x0, xl, usl, ts, unipolar):
-    """The best (least residual) of a few feasible projections."""
-    cands = [_proj_list(xl, usl, ts, unipolar)[0]]
-    ql = q.tolist()
+def _cold_start(fs, ft, q, xl, usl, ts, unipolar):
+    """The cold start: the better (least residual) of two feasible projections, of the
+    least-norm exact fit ``xl`` and of a far multiple of F^T f (the bang-bang guess: coils at
+    their limits with the sign of their correlation with the target, the budget spent on the
+    best-correlated ones). Unreachable targets end at such a pattern; starting from the
+    least-norm fit alone, each coil whose sign is wrong there costs 2-4 faces to flip."""
+    cand = _proj_list(xl, usl, ts, unipolar)[0]
     fq = fs @ q
     den = float(fq @ fq)
-    if den > 0.0:
-        c = float(ft @ fq) / den
-        if 2 in _START_MODE:
-            cands.append(_proj_list([c * v for v in ql], usl, ts, unipolar)[0])
-        if 3 in _START_MODE:
-            cands.append(_proj_list([1e3 * c * v for v in ql], usl, ts, unipolar)[0])
-        if 5 in _START_MODE:
-            cands.append(_proj_list([10 * c * v for v in ql], usl, ts, unipolar)[0])
-    if 4 in _START_MODE:
-        cands.append(_proj_list([1e3 * v for v in xl], usl, ts, unipolar)[0])
-    if len(cands) == 1:
-        return cands[0]
-    xs = np.array(cands)
-    r = xs @ fs.T - ft
-    obj = np.add.reduce(r * r, axis=1).tolist()
-    return cands[obj.index(min(obj))]
+    if not den > 0.0:
+        return cand
+    c = min(1e3 * float(ft @ fq) / den, 1e290)  # scaled |q_i| <= k: no overflow below
+    cand2 = _proj_list([c * v for v in q.tolist()], usl, ts, unipolar)[0]
+    r = np.array([cand, cand2]) @ fs.T - ft
+    o1, o2 = np.add.reduce(r * r, axis=1).tolist()
+    return cand2 if o2 < o1 else cand
 
 
 def _budget_hit(xl, hl, alpha, ts):
