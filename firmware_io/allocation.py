@@ -451,7 +451,17 @@ def _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n
     aug_b = np.empty(k + 1)
     aug_b[:k] = ft
     aug_b[k] = ts
-    aug = (aug_a, aug_b)
+    # the bordered [[F^T F + eps I, sg], [sg^T, 0]] and [F^T f; I_t]: a budget face's primal
+    # system is their (free coils + budget) slice
+    hb = np.empty((n + 1, n + 1))
+    hb[:n, :n] = heps
+    hb[n, :n] = sg
+    hb[:n, n] = sg
+    hb[n, n] = 0.0
+    qb = np.empty(n + 1)
+    qb[:n] = q
+    qb[n] = ts
+    aug = (aug_a, aug_b, hb, qb)
     xl = x.tolist()
     for _ in range(max_iter):
         if at_face:
@@ -504,7 +514,7 @@ def _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n
                 if kind == 1:
                     sg = list(sg)
                     sg[block] = bsign
-                    aug_a[k, block] = bsign
+                    aug_a[k, block] = hb[n, block] = hb[block, n] = bsign
             if alpha < 1.0:
                 alpha = max(alpha, 0.0)
                 xl = [v + alpha * (w - v) for v, w in zip(xl, hl)]
@@ -519,6 +529,8 @@ def _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n
                                 sg[i] = (1.0 if v > 0.0 else -1.0) if v != 0.0 else (
                                     1.0 if hl[i] >= 0.0 else -1.0)
                         aug_a[k] = sg
+                        hb[n, :n] = sg
+                        hb[:n, n] = sg
                     bud = True
                 else:
                     free = list(free)
@@ -582,7 +594,7 @@ def _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n
                 sg[m] = 1.0 if (unipolar or g[m] < 0.0) else -1.0
             else:
                 sg[m] = 1.0 if fv > 0.0 else -1.0
-            aug_a[k, m] = sg[m]
+            aug_a[k, m] = hb[n, m] = hb[m, n] = sg[m]
             fixv[m] = 0.0
     if x is None:  # the iteration cap hit after a step: the current feasible point
         x = np.array(xl)
@@ -642,14 +654,14 @@ def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False, heps=
     fixed = np.array(fixv) if anyfix else np.zeros(n)
     if nf == 0:
         return (fixed, None) if want_y else fixed
-    if bud and (aug is None or nf <= k + 1):
+    if bud and aug is None:
         c = ts - math.fsum(map(abs, fixv))
     if nf > k + bud:
         # kernel form: x_J = F_J^T y (+ t s), exact in the row space
         if bud:
             # [F_J; s^T] [F_J; s^T]^T [y; t] = [r; c] (+ eps on the y block)
             if aug is not None:
-                a, bt = aug
+                a, bt = aug[0], aug[1]
                 aj = a[:, j]
                 rhs = (bt - a @ fixed) if anyfix else bt
             else:
@@ -672,6 +684,15 @@ def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False, heps=
         x[j] = aj.T @ w
         return (x, w[:k]) if want_y else x
     # primal normal equations on the free coils
+    if bud and aug is not None:
+        hb, qb = aug[2], aug[3]
+        jj = j + [n]
+        hr = hb[jj]
+        fe = np.array(fixv + [0.0]) if anyfix else None
+        rhs = (qb[jj] - hr @ fe) if anyfix else qb[jj]
+        x = fixed.copy() if anyfix else fixed
+        x[j] = _lsolve(hr[:, jj], rhs, eps > 0)[:nf]
+        return (x, None) if want_y else x
     if heps is None:
         fj = fs[:, j]
         hj = fj.T @ fj
