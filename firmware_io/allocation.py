@@ -445,6 +445,9 @@ def _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n
     ``bud`` (the budget held with equality). ``at_face``: x is already this face's minimizer."""
     rng = range(n)
     heps = h + eps * _eye(n)
+    if not budget_possible:  # no budget face will be solved
+        return _active_set_loop(fs, ft, heps, q, usl, ts, tol, unipolar, False, k, n,
+                                max_iter, x, free, sg, fixv, bud, at_face, eps, None)
     aug_a = np.empty((k + 1, n))
     aug_a[:k] = fs
     aug_a[k] = sg
@@ -462,6 +465,15 @@ def _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n
     qb[:n] = q
     qb[n] = ts
     aug = (aug_a, aug_b, hb, qb)
+    return _active_set_loop(fs, ft, heps, q, usl, ts, tol, unipolar, True, k, n,
+                            max_iter, x, free, sg, fixv, bud, at_face, eps, aug)
+
+
+def _active_set_loop(fs, ft, heps, q, usl, ts, tol, unipolar, budget_possible, k, n, max_iter,
+                     x, free, sg, fixv, bud, at_face, eps, aug):
+    rng = range(n)
+    if aug is not None:
+        aug_a, hb = aug[0], aug[2]
     xl = x.tolist()
     for _ in range(max_iter):
         if at_face:
@@ -514,7 +526,8 @@ def _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n
                 if kind == 1:
                     sg = list(sg)
                     sg[block] = bsign
-                    aug_a[k, block] = hb[n, block] = hb[block, n] = bsign
+                    if aug is not None:
+                        aug_a[k, block] = hb[n, block] = hb[block, n] = bsign
             if alpha < 1.0:
                 alpha = max(alpha, 0.0)
                 xl = [v + alpha * (w - v) for v, w in zip(xl, hl)]
@@ -594,7 +607,8 @@ def _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n
                 sg[m] = 1.0 if (unipolar or g[m] < 0.0) else -1.0
             else:
                 sg[m] = 1.0 if fv > 0.0 else -1.0
-            aug_a[k, m] = hb[n, m] = hb[m, n] = sg[m]
+            if aug is not None:
+                aug_a[k, m] = hb[n, m] = hb[m, n] = sg[m]
             fixv[m] = 0.0
     if x is None:  # the iteration cap hit after a step: the current feasible point
         x = np.array(xl)
@@ -651,7 +665,21 @@ def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False, heps=
     nf = len(j)
     n = len(fixv)
     anyfix = any(fixv)
-    fixed = np.array(fixv) if anyfix else np.zeros(n)
+    if bud and aug is not None and 0 < nf <= k + 1:
+        # primal normal equations of a budget face: a slice of the kept bordered system
+        hb, qb = aug[2], aug[3]
+        jj = j + [n]
+        hr = hb[jj]
+        if anyfix:
+            fe = np.array(fixv + [0.0])
+            rhs = qb[jj] - hr @ fe
+            x = fe[:n]
+        else:
+            rhs = qb[jj]
+            x = np.zeros(n)
+        x[j] = _lsolve(hr[:, jj], rhs, eps > 0)[:nf]
+        return (x, None) if want_y else x
+    fixed = np.array(fixv) if anyfix else np.zeros(n)  # a new array: written in place below
     if nf == 0:
         return (fixed, None) if want_y else fixed
     if bud and aug is None:
@@ -680,19 +708,10 @@ def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False, heps=
         if eps:
             mat += _eps_diag(eps, k, mat.shape[0])
         w = _lsolve(mat, rhs, eps > 0)
-        x = fixed.copy() if anyfix else fixed
+        x = fixed
         x[j] = aj.T @ w
         return (x, w[:k]) if want_y else x
     # primal normal equations on the free coils
-    if bud and aug is not None:
-        hb, qb = aug[2], aug[3]
-        jj = j + [n]
-        hr = hb[jj]
-        fe = np.array(fixv + [0.0]) if anyfix else None
-        rhs = (qb[jj] - hr @ fe) if anyfix else qb[jj]
-        x = fixed.copy() if anyfix else fixed
-        x[j] = _lsolve(hr[:, jj], rhs, eps > 0)[:nf]
-        return (x, None) if want_y else x
     if heps is None:
         fj = fs[:, j]
         hj = fj.T @ fj
@@ -705,7 +724,7 @@ def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False, heps=
         b = q[j]
         if anyfix:  # the eps part of heps meets only free coordinates, where fixed is 0
             b = b - hr @ fixed
-    x = fixed.copy() if anyfix else fixed
+    x = fixed
     if bud:
         mat = np.empty((nf + 1, nf + 1))
         mat[:nf, :nf] = hj
