@@ -57,6 +57,7 @@ Usage::
 from __future__ import annotations
 
 import math
+from itertools import compress
 
 import numpy as np
 
@@ -368,6 +369,7 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
 
 
 _EYES = [np.eye(i) for i in range(16)]
+_RANGES = [range(i) for i in range(16)]
 
 
 def _eye(m):
@@ -664,9 +666,9 @@ def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False, heps=
     ~10 small numpy calls, so every call saved counts). ``aug``: the (k + 1, n) matrix [F; sg]
     and the (k + 1,) vector [f; I_t] if the caller keeps them (a fixed coil's sign times its
     value is its |value|, so [f; I_t] - aug @ fixed is the kernel form's right-hand side)."""
-    j = [i for i, fr in enumerate(free) if fr]
-    nf = len(j)
     n = len(fixv)
+    j = list(compress(_RANGES[n] if n < 16 else range(n), free))
+    nf = len(j)
     anyfix = any(fixv)
     if bud and aug is not None and 0 < nf <= k + 1:
         # primal normal equations of a budget face: a slice of the kept bordered system
@@ -774,7 +776,7 @@ def _lsolve(mat, rhs, regularized=True):
     floating-point guards; others fall back to least squares on an exactly singular face."""
     if regularized:
         out = _fast_solve(mat, rhs)
-        if all(map(math.isfinite, out.tolist())):
+        if math.isfinite(sum(out.tolist())):  # inf - inf is nan: not finite either
             return out
     try:
         with np.errstate(invalid="raise", divide="raise", over="ignore"):
