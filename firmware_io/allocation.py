@@ -57,7 +57,6 @@ Usage::
 from __future__ import annotations
 
 import math
-from itertools import compress
 
 import numpy as np
 
@@ -369,7 +368,6 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
 
 
 _EYES = [np.eye(i) for i in range(16)]
-_RANGES = [range(i) for i in range(16)]
 
 
 def _eye(m):
@@ -667,7 +665,7 @@ def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False, heps=
     and the (k + 1,) vector [f; I_t] if the caller keeps them (a fixed coil's sign times its
     value is its |value|, so [f; I_t] - aug @ fixed is the kernel form's right-hand side)."""
     n = len(fixv)
-    j = list(compress(_RANGES[n] if n < 16 else range(n), free))
+    j = [i for i, fr in enumerate(free) if fr]
     nf = len(j)
     anyfix = any(fixv)
     if bud and aug is not None and 0 < nf <= k + 1:
