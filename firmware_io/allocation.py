@@ -33,9 +33,15 @@ The steps of one solve (each cheap for n ~ 9: the bookkeeping is plain Python ov
 numpy only for the products and the k x k / n x n solves):
 
 1. Fast exit: the least-norm exact fit F^T (F F^T)^-1 f, if inside the bounds, is the answer.
-2. Start: the last final face (``Allocator``, warm) if its minimizer is still feasible, else the
-   projection of the least-norm fit onto the bounds and its working set (cold).
-3. The primal active set above; then the eps -> 0 polish on its final face.
+2. Start: the last final face (``Allocator``, warm) if its minimizer is still feasible, else
+   (cold) the better of two projections onto the bounds and their working set: of the
+   least-norm fit, and of a far multiple of F^T f (the bang-bang pattern unreachable targets
+   end at; from the least-norm fit alone each wrong-signed coil costs 2-4 faces).
+3. The primal active set above; then the eps -> 0 polish on its final face. Bipolar, while
+   the budget is not in the working set, the face does not depend on a free coil's sign, so a
+   coil crosses 0 in one step (only +-u block it; the budget's ratio test follows sum |x|,
+   piecewise linear along the step, ``_budget_hit``). Budget faces slice a kept bordered
+   system [[F^T F + eps I, sg], [sg^T, 0]] (each face solve is ~10 small numpy calls).
 4. Reachable targets: the least-energy stage exactly, as its own problem -- x = proj(F^T y) with
    F x = f, Newton on y (``_least_energy``). The eps-regularized active set resolves the
    tie-break only through eps-sized multipliers (to ~1e-3 relative in the currents); this step
@@ -73,8 +79,6 @@ _EXACT_FIT_TOL = 1e-11
 """The least-norm exact fit is accepted when ||F x - f|| <= this x (||f|| + ||F|| ||x||): two
 decades inside the 1e-9 KKT tolerance (the gradient F^T r is at most ||F|| ||r||)."""
 
-"""Dual Newton steps before the primal active-set phase takes over (a pattern seen twice ends
-them earlier)."""
 
 _INF = math.inf
 _FLOAT_MAX = float.fromhex("0x1.fffffffffffffp+1023")
@@ -295,9 +299,10 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
     y0 += _fast_solve(mreg, ft - ffT @ y0)
     x0 = fs.T @ y0
     xl = x0.tolist()
+    ft2 = float(ft @ ft)
     if _inside(xl, usl, tsb, unipolar):
         r = fs @ x0 - ft
-        lim = _EXACT_FIT_TOL * (math.sqrt(float(ft @ ft)) + math.sqrt(c2 * float(x0 @ x0)))
+        lim = _EXACT_FIT_TOL * (math.sqrt(ft2) + math.sqrt(c2 * float(x0 @ x0)))
         if float(r @ r) <= lim * lim:
             if warm is not None:
                 warm.face = ([True] * n, [1.0 if v >= 0.0 else -1.0 for v in xl], [0.0] * n,
@@ -320,12 +325,12 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
         if bud and not budget_possible:
             bud = False
         xh = _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k)
-        if _on_face(xh.tolist(), free, sg, usl, tsb, bud):
+        if _on_face(xh.tolist(), free, sg, usl, tsb, bud, unipolar):
             state = _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible,
                                 k, n, max_iter, xh, free, sg, fixv, bud, at_face=True)
     if state is None:
         # ---- cold start: the projection of the least-norm exact fit and its working set
-        xl, _ = _proj_list(xl, usl, tsb, unipolar)
+        xl = _cold_start(fs, ft, q, xl, usl, tsb, unipolar)
         x = np.array(xl)
         free = [0.0 < abs(v) < ui for v, ui in zip(xl, usl)]
         sg = [1.0 if v >= 0.0 else -1.0 for v in xl]
@@ -336,15 +341,17 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
     # ---- polish: the eps -> 0 limit on the final face (the lexicographic answer: least residual,
     # then least energy) removes the Tikhonov bias when it stays on the face; if it leaves the
     # face, a continuation pass with eps 1e4 x smaller (warm started, usually 1 face) first
-    x, ok, y = _polish(fs, ft, usl, ts, k, *state)
+    x, ok, y, res2 = _polish(fs, ft, usl, ts, k, unipolar, *state)
     if not ok:
         state = _active_set(fs, ft, h, q, usl, ts, eps * 1e-4, tol, unipolar, budget_possible,
                             k, n, max_iter, *state)
-        x, _, y = _polish(fs, ft, usl, ts, k, *state)
+        x, _, y, res2 = _polish(fs, ft, usl, ts, k, unipolar, *state)
+    if res2 is None:
+        r = fs @ x - ft
+        res2 = float(r @ r)
     # ---- an exact fit: the least-energy stage on its own, free of eps (see _least_energy)
-    lim = _EXACT_FIT_TOL * (math.sqrt(float(ft @ ft)) + math.sqrt(c2 * float(x @ x)))
-    r = fs @ x - ft
-    if float(r @ r) <= lim * lim:
+    lim = _EXACT_FIT_TOL * (math.sqrt(ft2) + math.sqrt(c2 * float(x @ x)))
+    if res2 <= lim * lim:
         x2 = _least_energy(fs, ft, usl, tsb, unipolar, y0 if y is None else y, lim, c2, k)
         if x2 is not None:
             x = x2
@@ -360,12 +367,10 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
         warm.face = (free, sg, [v / ui if ui > 0.0 else 0.0 for v, ui in zip(fixv, usl)], bud)
         warm.key = key
     # ---- guarantee: never outside the bounds, whatever round-off did
-    us = np.array(usl)
-    x = np.minimum(np.maximum(x, lo * us), us)
-    tot = float(np.add.reduce(np.abs(x)))
-    if tot > ts:
-        x *= ts / tot
-    return x * umax
+    xl = [(v if v < ui else ui) if v > lo * ui else lo * ui for v, ui in zip(x.tolist(), usl)]
+    tot = math.fsum(map(abs, xl))
+    sc = umax * ts / tot if tot > ts else umax
+    return np.array(xl) * sc
 
 
 _EYES = [np.eye(i) for i in range(16)]
@@ -392,39 +397,54 @@ def _inside(xl, usl, ts, unipolar):
     return tot <= ts
 
 
-def _on_face(xl, free, sg, usl, ts, bud):
-    """x (list) feasible and on the working face: free coils on their side inside the box,
-    fixed ones where they were put, the budget kept."""
+def _on_face(xl, free, sg, usl, ts, bud, unipolar):
+    """x (list) feasible and on the working face: free coils on their side inside the box
+    (either side, bipolar without the budget), fixed ones where they were put, the budget
+    kept."""
     tot = 0.0
+    signfree = not (unipolar or bud)
     for v, fr, s, ui in zip(xl, free, sg, usl):
-        a = s * v
+        a = abs(v) if signfree else s * v
         if fr and not 0.0 <= a <= ui:
             return False
         tot += abs(v)
     return bud or tot <= ts
 
 
-def _polish(fs, ft, usl, ts, k, x, free, sg, fixv, bud):
+def _polish(fs, ft, usl, ts, k, unipolar, x, free, sg, fixv, bud):
     """(x, accepted, y): the eps = 0 face minimizer if it stays on the face (box and budget)
-    and is no worse; y its kernel coefficients (None in the primal form)."""
+    and is no worse; y its kernel coefficients (None in the primal form). Bipolar without the
+    budget in the working set, a free coil may take either sign (see `_active_set`)."""
     if not any(free):
-        return x, True, None
+        r = fs @ x - ft
+        return x, True, None, float(r @ r)
     xp, y = _face_minimizer(fs, ft, 0.0, free, sg, fixv, bud, ts, k, want_y=True)
     xpl = xp.tolist()
     slack = 1e-12 * max(usl)
+    signfree = not (unipolar or bud)
     for i, fr in enumerate(free):
         if fr:
+            if signfree:
+                a, ui = xpl[i], usl[i]
+                if not -ui - slack <= a <= ui + slack:
+                    return x, False, None, None
+                xpl[i] = min(max(a, -ui), ui)
+                continue
             a = sg[i] * xpl[i]
             if not -slack <= a <= usl[i] + slack:
-                return x, False, None
+                return x, False, None, None
             xpl[i] = sg[i] * min(max(a, 0.0), usl[i])
     if not bud and math.fsum(map(abs, xpl)) > ts * (1 + 1e-12):
-        return x, False, None  # the Tikhonov bias kept it inside the budget; eps -> 0 does not
+        return x, False, None, None  # the Tikhonov bias kept it inside the budget; eps -> 0 does not
     xp = np.array(xpl)
     rp, rx = fs @ xp - ft, fs @ x - ft
-    if rp @ rp <= rx @ rx:
-        return xp, True, y
-    return x, False, None
+    ep, ex = float(rp @ rp), float(rx @ rx)
+    # "no worse" up to rounding: the two objectives often agree to 1e-16 relative (eps only
+    # shifts a determined face by ~1e-10), and a coin flip there would send a third of the
+    # hard problems through the continuation pass for nothing
+    if ep <= ex * (1.0 + 1e-12) + 1e-24 * float(ft @ ft):
+        return xp, True, y, ep
+    return x, False, None, ex
 
 
 def _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n, max_iter,
@@ -433,36 +453,106 @@ def _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n
     (list of bool), the sign ``sg`` of each free coil, the value ``fixv`` of each fixed one and
     ``bud`` (the budget held with equality). ``at_face``: x is already this face's minimizer."""
     rng = range(n)
+    heps = h + eps * _eye(n)
+    if not budget_possible:  # no budget face will be solved
+        return _active_set_loop(fs, ft, heps, q, usl, ts, tol, unipolar, False, k, n,
+                                max_iter, x, free, sg, fixv, bud, at_face, eps, None)
+    aug_a = np.empty((k + 1, n))
+    aug_a[:k] = fs
+    aug_a[k] = sg
+    aug_b = np.empty(k + 1)
+    aug_b[:k] = ft
+    aug_b[k] = ts
+    # the bordered [[F^T F + eps I, sg], [sg^T, 0]] and [F^T f; I_t]: a budget face's primal
+    # system is their (free coils + budget) slice
+    hb = np.empty((n + 1, n + 1))
+    hb[:n, :n] = heps
+    hb[n, :n] = sg
+    hb[:n, n] = sg
+    hb[n, n] = 0.0
+    qb = np.empty(n + 1)
+    qb[:n] = q
+    qb[n] = ts
+    aug = (aug_a, aug_b, hb, qb)
+    return _active_set_loop(fs, ft, heps, q, usl, ts, tol, unipolar, True, k, n,
+                            max_iter, x, free, sg, fixv, bud, at_face, eps, aug)
+
+
+def _active_set_loop(fs, ft, heps, q, usl, ts, tol, unipolar, budget_possible, k, n, max_iter,
+                     x, free, sg, fixv, bud, at_face, eps, aug):
+    rng = range(n)
+    if aug is not None:
+        aug_a, hb = aug[0], aug[2]
+    xl = x.tolist()
     for _ in range(max_iter):
         if at_face:
             xh, at_face = x, False
         else:
-            xh = _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k)
+            xh = _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, heps=heps, q=q,
+                                 aug=aug)
         if any(free):
-            xl = x.tolist()
             hl = xh.tolist()
             alpha, block, kind, rate = 1.0, -1, 0, 0.0
-            for i in rng:
-                if free[i]:
-                    s = sg[i]
-                    sp = s * (hl[i] - xl[i])
-                    rate += sp
-                    if sp < 0.0:
-                        a = s * xl[i] / -sp
-                        if a < alpha:
-                            alpha, block, kind = a, i, 0
-                    elif sp > 0.0:
-                        a = (usl[i] - s * xl[i]) / sp
-                        if a < alpha:
-                            alpha, block, kind = a, i, 1
-            if budget_possible and not bud and rate > 0.0:
-                a = (ts - math.fsum(map(abs, xl))) / rate
-                if a < alpha:
-                    alpha, block, kind = max(a, 0.0), -1, 2
+            if unipolar or bud:
+                for i in rng:
+                    if free[i]:
+                        s = sg[i]
+                        sp = s * (hl[i] - xl[i])
+                        rate += sp
+                        if sp < 0.0:
+                            a = s * xl[i] / -sp
+                            if a < alpha:
+                                alpha, block, kind = a, i, 0
+                        elif sp > 0.0:
+                            a = (usl[i] - s * xl[i]) / sp
+                            if a < alpha:
+                                alpha, block, kind = a, i, 1
+                if budget_possible and not bud and rate > 0.0:
+                    a = (ts - math.fsum(map(abs, xl))) / rate
+                    if a < alpha:
+                        alpha, block, kind = max(a, 0.0), -1, 2
+            else:
+                # bipolar, budget not in the working set: the face does not depend on a free
+                # coil's sign, so a coil crosses 0 in one step (the split form's -u -> 0 -> +u
+                # would cost two extra faces); only +-u block, and the budget, whose sum |x|
+                # is piecewise linear along the step
+                bsign = 1.0
+                for i in rng:
+                    if free[i]:
+                        d = hl[i] - xl[i]
+                        if d > 0.0:
+                            a = (usl[i] - xl[i]) / d
+                            if a < alpha:
+                                alpha, block, kind, bsign = a, i, 1, 1.0
+                        elif d < 0.0:
+                            a = (usl[i] + xl[i]) / -d
+                            if a < alpha:
+                                alpha, block, kind, bsign = a, i, 1, -1.0
+                if budget_possible:
+                    a = _budget_hit(xl, hl, alpha, ts)
+                    if a < alpha:
+                        alpha, block, kind = a, -1, 2
+                if kind == 1:
+                    sg = list(sg)
+                    sg[block] = bsign
+                    if aug is not None:
+                        aug_a[k, block] = hb[n, block] = hb[block, n] = bsign
             if alpha < 1.0:
                 alpha = max(alpha, 0.0)
                 xl = [v + alpha * (w - v) for v, w in zip(xl, hl)]
                 if kind == 2:
+                    if not bud and not unipolar:
+                        # the budget face fixes each free coil's sign: the side it is on (or
+                        # moving to, at 0)
+                        sg = list(sg)
+                        for i in rng:
+                            if free[i]:
+                                v = xl[i]
+                                sg[i] = (1.0 if v > 0.0 else -1.0) if v != 0.0 else (
+                                    1.0 if hl[i] >= 0.0 else -1.0)
+                        aug_a[k] = sg
+                        hb[n, :n] = sg
+                        hb[:n, n] = sg
                     bud = True
                 else:
                     free = list(free)
@@ -471,17 +561,26 @@ def _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n
                     fixv[block] = 0.0 if kind == 0 else sg[block] * usl[block]
                     xl[block] = fixv[block]
                 # keep free coordinates on their side and inside the box under round-off
-                for i in rng:
-                    if free[i]:
-                        s = sg[i]
-                        xl[i] = s * min(max(s * xl[i], 0.0), usl[i])
-                x = np.array(xl)
+                if unipolar or bud:
+                    for i in rng:
+                        if free[i]:
+                            s = sg[i]
+                            xl[i] = s * min(max(s * xl[i], 0.0), usl[i])
+                else:
+                    for i in rng:
+                        if free[i]:
+                            ui = usl[i]
+                            xl[i] = min(max(xl[i], -ui), ui)
+                x = None
                 if bud and not any(free):
                     bud = False  # implied by the bounds: a redundant working constraint
                 continue
+            xl = hl
+        else:
+            xl = xh.tolist()
         x = xh
         # ---- at the face minimizer: multipliers of the working constraints
-        g = (h @ x - q + eps * x).tolist()
+        g = (heps @ x - q).tolist()
         nu = 0.0
         if bud:
             nf, acc = 0, 0.0
@@ -517,56 +616,154 @@ def _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n
                 sg[m] = 1.0 if (unipolar or g[m] < 0.0) else -1.0
             else:
                 sg[m] = 1.0 if fv > 0.0 else -1.0
+            if aug is not None:
+                aug_a[k, m] = hb[n, m] = hb[m, n] = sg[m]
             fixv[m] = 0.0
+    if x is None:  # the iteration cap hit after a step: the current feasible point
+        x = np.array(xl)
     return x, free, sg, fixv, bud
 
 
-def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False):
+def _cold_start(fs, ft, q, xl, usl, ts, unipolar):
+    """The cold start: the better (least residual) of two feasible projections, of the
+    least-norm exact fit ``xl`` and of a far multiple of F^T f (the bang-bang guess: coils at
+    their limits with the sign of their correlation with the target, the budget spent on the
+    best-correlated ones). Unreachable targets end at such a pattern; starting from the
+    least-norm fit alone, each coil whose sign is wrong there costs 2-4 faces to flip."""
+    cand = _proj_list(xl, usl, ts, unipolar)[0]
+    fq = fs @ q
+    den = float(fq @ fq)
+    if not den > 0.0:
+        return cand
+    c = min(1e3 * float(ft @ fq) / den, 1e290)  # scaled |q_i| <= k: no overflow below
+    cand2 = _proj_list([c * v for v in q.tolist()], usl, ts, unipolar)[0]
+    r = np.array([cand, cand2]) @ fs.T - ft
+    o1, o2 = np.add.reduce(r * r, axis=1).tolist()
+    return cand2 if o2 < o1 else cand
+
+
+def _budget_hit(xl, hl, alpha, ts):
+    """The first step a in [0, alpha] at which sum |x + a (h - x)| reaches ts (lists; convex
+    and piecewise linear in a, breakpoints where a coordinate crosses 0); _INF if it stays
+    within ts up to alpha."""
+    d = [w - v for v, w in zip(xl, hl)]
+    t0 = math.fsum(map(abs, xl))
+    tend = math.fsum(abs(v + alpha * e) for v, e in zip(xl, d))
+    if tend <= ts:
+        return _INF
+    bps = sorted(-v / e for v, e in zip(xl, d) if e != 0.0 and 0.0 < -v / e < alpha)
+    a0 = 0.0
+    for a1 in bps + [alpha]:
+        t1 = tend if a1 == alpha else math.fsum(abs(v + a1 * e) for v, e in zip(xl, d))
+        if t1 > ts and t1 > t0:  # convex: once rising, it keeps rising
+            return max(a0, a0 + (a1 - a0) * (ts - t0) / (t1 - t0))
+        a0, t0 = a1, t1
+    return alpha
+
+
+def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False, heps=None, q=None,
+                    aug=None):
     """Minimizer of the regularized objective on the working face (free coils keep their sign;
     with ``bud`` the budget holds with equality). ``want_y``: also the kernel coefficients y
-    (x_J = F_J^T y + t s) when the kernel form applies, else None."""
-    fixed = np.array(fixv)
+    (x_J = F_J^T y + t s) when the kernel form applies, else None. ``heps``, ``q``: F^T F +
+    eps I and F^T f if the caller has them (the primal form then slices them; one solve is
+    ~10 small numpy calls, so every call saved counts). ``aug``: the (k + 1, n) matrix [F; sg]
+    and the (k + 1,) vector [f; I_t] if the caller keeps them (a fixed coil's sign times its
+    value is its |value|, so [f; I_t] - aug @ fixed is the kernel form's right-hand side)."""
+    n = len(fixv)
     j = [i for i, fr in enumerate(free) if fr]
     nf = len(j)
+    anyfix = any(fixv)
+    if bud and aug is not None and 0 < nf <= k + 1:
+        # primal normal equations of a budget face: a slice of the kept bordered system
+        hb, qb = aug[2], aug[3]
+        jj = j + [n]
+        hr = hb[jj]
+        if anyfix:
+            fe = np.array(fixv + [0.0])
+            rhs = qb[jj] - hr @ fe
+            x = fe[:n]
+        else:
+            rhs = qb[jj]
+            x = np.zeros(n)
+        x[j] = _lsolve(hr[:, jj], rhs, eps > 0)[:nf]
+        return (x, None) if want_y else x
+    fixed = np.array(fixv) if anyfix else np.zeros(n)  # a new array: written in place below
     if nf == 0:
         return (fixed, None) if want_y else fixed
-    x = fixed.copy()
-    r = ft - fs @ fixed
-    fj = fs[:, j]
-    if bud:
-        s = np.array([sg[i] for i in j])
+    if bud and aug is None:
         c = ts - math.fsum(map(abs, fixv))
     if nf > k + bud:
         # kernel form: x_J = F_J^T y (+ t s), exact in the row space
         if bud:
-            gmat = np.concatenate([fj.T, s[:, None]], axis=1)
-            mat = np.concatenate([fj @ gmat, (s @ gmat)[None, :]], axis=0)
-            if eps:
-                mat[:k, :k] += eps * _eye(k)
-            w = _lsolve(mat, np.append(r, c), eps > 0)
-            x[j] = gmat @ w
-            y = w[:k]
+            # [F_J; s^T] [F_J; s^T]^T [y; t] = [r; c] (+ eps on the y block)
+            if aug is not None:
+                a, bt = aug[0], aug[1]
+                aj = a[:, j]
+                rhs = (bt - a @ fixed) if anyfix else bt
+            else:
+                a = np.empty((k + 1, n))
+                a[:k] = fs
+                a[k] = sg
+                aj = a[:, j]
+                rhs = np.empty(k + 1)
+                rhs[:k] = (ft - fs @ fixed) if anyfix else ft
+                rhs[k] = c
+            mat = aj @ aj.T
         else:
-            m = fj @ fj.T
-            if eps:
-                m += eps * _eye(k)
-            y = _lsolve(m, r, eps > 0)
-            x[j] = fj.T @ y
-        return (x, y) if want_y else x
-    hj = fj.T @ fj
-    if eps:
-        hj += eps * _eye(nf)
-    b = fj.T @ r
+            aj = fs[:, j]
+            mat = aj @ aj.T
+            rhs = (ft - fs @ fixed) if anyfix else ft
+        if eps:
+            mat += _eps_diag(eps, k, mat.shape[0])
+        w = _lsolve(mat, rhs, eps > 0)
+        x = fixed
+        x[j] = aj.T @ w
+        return (x, w[:k]) if want_y else x
+    # primal normal equations on the free coils
+    if heps is None:
+        fj = fs[:, j]
+        hj = fj.T @ fj
+        if eps:
+            hj += eps * _eye(nf)
+        b = fj.T @ ((ft - fs @ fixed) if anyfix else ft)
+    else:
+        hr = heps[j]
+        hj = hr[:, j]
+        b = q[j]
+        if anyfix:  # the eps part of heps meets only free coordinates, where fixed is 0
+            b = b - hr @ fixed
+    x = fixed
     if bud:
         mat = np.empty((nf + 1, nf + 1))
         mat[:nf, :nf] = hj
-        mat[:nf, nf] = s
-        mat[nf, :nf] = s
+        sj = [sg[i] for i in j]
+        mat[:nf, nf] = sj
+        mat[nf, :nf] = sj
         mat[nf, nf] = 0.0
-        x[j] = _lsolve(mat, np.append(b, c), eps > 0)[:nf]
+        rhs = np.empty(nf + 1)
+        rhs[:nf] = b
+        rhs[nf] = c
+        x[j] = _lsolve(mat, rhs, eps > 0)[:nf]
     else:
         x[j] = _lsolve(hj, b, eps > 0)
     return (x, None) if want_y else x
+
+
+_EPS_DIAG = {}
+
+
+def _eps_diag(eps, k, m):
+    """eps on the first k diagonal entries of an m x m matrix (cached per eps: one per solve)."""
+    key = (eps, k, m)
+    d = _EPS_DIAG.get(key)
+    if d is None:
+        if len(_EPS_DIAG) > 64:
+            _EPS_DIAG.clear()
+        d = np.zeros((m, m))
+        d[range(k), range(k)] = eps
+        _EPS_DIAG[key] = d
+    return d
 
 
 try:  # the gufunc behind np.linalg.solve without its Python wrapper and errstate (tiny systems)
@@ -583,7 +780,7 @@ def _lsolve(mat, rhs, regularized=True):
     floating-point guards; others fall back to least squares on an exactly singular face."""
     if regularized:
         out = _fast_solve(mat, rhs)
-        if all(map(math.isfinite, out.tolist())):
+        if math.isfinite(sum(out.tolist())):  # inf - inf is nan: not finite either
             return out
     try:
         with np.errstate(invalid="raise", divide="raise", over="ignore"):

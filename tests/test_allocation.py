@@ -271,3 +271,55 @@ def test_float_range_ends_finite_and_silent(fm, f, u):
     a = np.asarray(fm[0]) / s  # the least-norm exact fit a f / |a|^2, computed in range
     if abs(f[0]) / s <= np.abs(a).sum() * u:  # reachable
         np.testing.assert_allclose(x, a * (f[0] / s) / (a @ a), rtol=1e-12)
+
+
+@pytest.mark.parametrize("k", [1, 3, 6])
+@pytest.mark.parametrize("uni", [False, True])
+def test_binding_budget_far_targets_match_slsqp(wrench_matrices, k, uni):
+    """The paths added for speed: far targets (the bang-bang cold start wins), a budget that
+    binds (the kept bordered face system), bipolar coils that cross 0 with the budget out of
+    the working set (the piecewise-linear budget ratio test) -- checked against SLSQP and the
+    KKT certificate, with the budget verified to bind."""
+    rng = np.random.default_rng(100 + 10 * k + uni)
+    w = wrench_matrices
+    n_bind = 0
+    for _ in range(12):
+        fm = w[rng.integers(len(w))][ROWS[k]]
+        u = rng.uniform(0.5, 6.0, fm.shape[1]) if rng.random() < 0.5 else 6.0
+        tl = float(rng.uniform(2.0, 30.0))
+        reach = np.abs(fm).sum(axis=1) * 6.0
+        f = rng.normal(size=k) * reach * rng.choice([0.5, 2.0, 5.0])
+        x, res = allocate(fm, f, u, tl, unipolar=uni)
+        kv, infeas = kkt_violation(fm, f, u, tl, x, uni)
+        assert infeas <= 1e-9 and kv <= 1e-9, (kv, infeas)
+        ref = slsqp_reference(fm, f, u, tl, uni)
+        if res > ref + 1e-6 * ref + 1e-12 * (f @ f):  # SLSQP from 0 can stop early: 2nd start
+            ref = slsqp_reference(fm, f, u, tl, uni, starts=2)
+        assert res <= ref + 1e-6 * ref + 1e-12 * (f @ f), (res, ref)
+        n_bind += abs(np.abs(x).sum() - min(tl, np.broadcast_to(u, (9,)).sum())) <= 1e-9 * tl
+    assert n_bind >= 3  # the budget really is active in a good part of them
+
+
+def test_budget_hit_is_the_first_crossing():
+    """_budget_hit (the step at which sum |x + a d| reaches the budget, coils crossing 0 on
+    the way) against a dense scan of the same function (independent: no breakpoints)."""
+    from firmware_io.allocation import _budget_hit
+
+    rng = np.random.default_rng(7)
+    grid = np.linspace(0.0, 1.0, 200001)
+    for _ in range(40):
+        x = rng.uniform(-1, 1, 9)
+        h = rng.uniform(-1, 1, 9) * rng.choice([1.0, 3.0])
+        ts = float(np.abs(x).sum() + rng.uniform(-0.3, 2.0))
+        if np.abs(x).sum() > ts:  # the start must be feasible
+            ts = float(np.abs(x).sum())
+        alpha = float(rng.uniform(0.3, 1.0))
+        a = _budget_hit(x.tolist(), h.tolist(), alpha, ts)
+        path = np.abs(x[None, :] + (grid * alpha)[:, None] * (h - x)[None, :]).sum(axis=1)
+        over = np.nonzero(path > ts * (1 + 1e-12))[0]
+        if len(over) == 0:
+            assert a == np.inf
+        else:
+            first = grid[over[0]] * alpha
+            assert first - alpha / 200000 - 1e-12 <= a <= first + 1e-12, (a, first)
+            assert np.abs(x + a * (h - x)).sum() == pytest.approx(ts, rel=1e-12)
