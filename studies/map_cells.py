@@ -13,7 +13,7 @@ corner), against direct evaluation of the coupled model (``CoilArray.actuation_m
   B = grad phi with phi harmonic) as a harmonic polynomial of degree L ((L + 1)^2 - 1
   coefficients per coil, constant dropped), least squares on Chebyshev nodes of all 8 rows
   (each row weighted by 1 / its row max); the 8 rows are its first and second derivatives, so
-  a cell stores ~1/8 of the tensor form's numbers per output for the same order.
+  a cell stores (L + 1)^2 - 1 numbers per coil instead of the tensor form's 8 (d + 1)^3.
 
 Per configuration it prints the worst error over the sites and check points, relative to each
 row's largest |A| over a box sample (the map's acceptance measure), the bytes per cell at int16
@@ -21,7 +21,8 @@ row's largest |A| over a box sample (the map's acceptance measure), the bytes pe
 multiply-adds per point of a batch lookup in monomial form (float32 matmul). References, in
 the same process: the direct model's cost per point (which sets what a build can afford to fit
 against within 30 s), and one (1e4, K) @ (K, 8 n_coils) float32 matmul against the same
-arithmetic split over 50 .. 1400 occupied cells (the per-cell loop of a batch lookup).
+arithmetic split over 50 .. 1400 occupied cells (the per-cell loop of a batch lookup); one
+8 x n_coils @ n_coils matvec against a one-point harmonic-cell lookup.
 
     python studies/map_cells.py [OUT_DIR]        (default out/map_cells)
 """
@@ -168,6 +169,37 @@ def batch_cost(n_points: int, cells, widths, nc: int) -> list:
     return out
 
 
+def one_point_cost(degrees, nc: int, n_cells: int = 900) -> list:
+    """Time (min of 7, us) of one point's lookup in a harmonic cell of potential degree L in
+    monomial form (random coefficients): the cell by closed-form floor divisions in Python,
+    the C(L + 2, 3) monomials of degree <= L - 1 from the per-axis powers, one
+    (K,) @ (K, 8 n_coils) product; against one 8 x n_coils @ n_coils numpy matvec (the cost of
+    a single numpy call)."""
+    from timeit import repeat
+
+    rng = np.random.default_rng(2)
+    a, v = rng.random((8, nc)), rng.random(nc)
+    ref = min(repeat(lambda: a @ v, number=2000, repeat=7)) / 2000
+    out = []
+    print(f"{'L':>3} {'K':>4} {'one point us':>12} {'ref call us':>11} {'ratio':>6}")
+    for deg in degrees:
+        ex, ey, ez = exponents(deg - 1).T.copy()
+        coef = rng.random((n_cells, len(ex), 8 * nc))
+        powers = np.arange(deg)
+        side = int(math.isqrt(n_cells))
+
+        def one(q=(0.0123, -0.0311, 0.0121)):
+            c = int((q[0] + 0.075) * 200.0) * side + int((q[1] + 0.075) * 200.0)
+            pw = (np.array(q) * 400.0)[:, None] ** powers  # local coordinates, (3, L)
+            return (pw[0, ex] * pw[1, ey] * pw[2, ez] @ coef[c]).reshape(8, nc)
+
+        one()
+        t = min(repeat(one, number=2000, repeat=7)) / 2000
+        out.append({"L": deg, "K": len(ex), "one_point_us": t * 1e6, "ref_call_us": ref * 1e6})
+        print(f"{deg:3d} {len(ex):4d} {t * 1e6:12.1f} {ref * 1e6:11.2f} {t / ref:6.1f}")
+    return out
+
+
 def sites(arr: CoilArray, lo, hi) -> list:
     """Lateral cell centres (x, y) m: above the axis and the rim of the core nearest the
     box centre, above the outer rim of the core nearest the box corner, between those two
@@ -222,8 +254,9 @@ def run(out_dir=DEFAULT_OUT, quick: bool = False) -> dict:
               f"{row['mb_per_layer']:8.2f} {row['mac_per_point']:7d}")
     loop = batch_cost(n_points=2000 if quick else 10000,
                       cells=(10, 50) if quick else (50, 300, 1400), widths=(64, 220), nc=nc)
+    one = one_point_cost((6,) if quick else (6, 8, 10), nc)
     res = {"direct_us_per_point": direct_us, "row_max": row_max.tolist(), "configs": rows,
-           "batch_cost": loop}
+           "batch_cost": loop, "one_point": one}
     write_json_atomic(out_dir / "map_cells.json", res)
     return res
 

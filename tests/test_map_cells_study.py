@@ -28,3 +28,4 @@ def test_map_cells_quick(tmp_path):
     assert res["direct_us_per_point"] > 0 and len(res["configs"]) == 2
     assert all(0 < c["max_rel"] < 1 and c["bytes_per_cell"] > 0 for c in res["configs"])
     assert len(res["batch_cost"]) == 4 and all(b["loop_ms"] > 0 for b in res["batch_cost"])
+    assert len(res["one_point"]) == 1 and res["one_point"][0]["one_point_us"] > 0
