@@ -141,6 +141,47 @@ def multipole_field(points_m: np.ndarray, position_m: np.ndarray, moment_a_m2: n
     return b, MU0 * d  # d/d(position) = -d/dr
 
 
+def _multipole_rows(r: np.ndarray, u: np.ndarray, c: float, k: float, out: np.ndarray):
+    """The fit's hot path: :func:`multipole_field`'s Jacobian and field at r = points - position
+    (n, 3) m, written as out[:, :, :3] = dB/d(position) / mu0 (T/m per mu0) and out[:, :, 3] =
+    B / mu0 (T per mu0), out (n, 3, 4); c = |m| / (4 pi), k = c q / 2, u the unit moment. The
+    same algebra as :func:`multipole_field` (tested equal), fused so one matrix product maps
+    the field and its Jacobian together (each small numpy call costs ~1 us here)."""
+    rho = np.einsum("ij,ij->i", r, r)
+    s = r @ u
+    ir = 1.0 / rho
+    a = ir * ir * np.sqrt(ir)
+    sa = s * a
+    if k:
+        t = s * s * ir
+        w = k * ir
+        fs = a * (c * rho + k * (15.0 * t - 3.0))
+        fr2 = sa * (w * (15.0 - 35.0 * t) - 3.0 * c)          # 2 f_rho
+        fsr2 = a * (w * (15.0 - 105.0 * t) - 3.0 * c)         # 2 f_s rho
+        frr4 = sa * ir * (w * (315.0 * t - 105.0) + 15.0 * c)  # 4 f_rho rho
+        fss = 30.0 * w * sa
+    else:
+        fs = c * rho * a
+        fr2 = -3.0 * c * sa
+        fsr2 = -3.0 * c * a
+        frr4 = 15.0 * c * sa * ir
+        fss = None
+    # row i of out[k] is r_i P_k + u_i Q_k (+ 2 f_rho on the Jacobian's diagonal) with
+    # P = [4 frr r + 2 fsr u, -2 fr], Q = [2 fsr r + fss u, -fs]
+    n = len(r)
+    pq = np.empty((n, 2, 4))
+    pq[:, 0, :3] = frr4[:, None] * r + fsr2[:, None] * u
+    pq[:, 1, :3] = fsr2[:, None] * r
+    if fss is not None:
+        pq[:, 1, :3] += fss[:, None] * u
+    pq[:, 0, 3] = -fr2
+    pq[:, 1, 3] = -fs
+    np.multiply(r[:, :, None], pq[:, 0, None, :], out=out)
+    out += u[None, :, None] * pq[:, 1, None, :]
+    out.reshape(n, 12)[:, 0:12:5] += fr2[:, None]
+    return out
+
+
 def cylinder_field(points_m: np.ndarray, position_m: np.ndarray, moment_a_m2: np.ndarray,
                    radius_m: float, length_m: float) -> np.ndarray:
     """Exact field (n, 3) T of a uniformly magnetized cylinder magnet (axis along the moment).
@@ -460,7 +501,9 @@ def _check_frame(name: str, a, n: int) -> np.ndarray:
     arr = np.asarray(a, dtype=float)
     if arr.shape != (n, 3):
         raise BadInputError(name, f"an array of shape ({n}, 3), T", f"shape {arr.shape}")
-    if not (np.abs(arr) <= 1.0).all() and np.any(np.isinf(arr)):  # NaN compares False
+    if (np.abs(arr) <= 1.0).all():  # the usual frame: one test (False with NaN, Inf, > 1 T)
+        return arr
+    if np.any(np.isinf(arr)):  # NaN compares False
         raise BadInputError(name, "finite values or NaN (missing/saturated), T",
                             f"Inf at {np.argwhere(np.isinf(arr))[0].tolist()}")
     if np.any(np.abs(arr) > 1.0):
@@ -544,9 +587,26 @@ class Localizer:
             if self.calibration.coil_field_t_per_a is not None:
                 cf = self.calibration.coil_field_t_per_a
         self._coil = cf
+        self._coil_flat = cf.reshape(2, n, 3, -1)
         # subtraction: the lower sensor's coil field mapped onto the upper one's (for the
         # symmetric array diag(-1, -1, 1): Br is odd about the coil's mid-plane)
         self._mirror = np.stack([cf[0, i] @ np.linalg.pinv(cf[1, i]) for i in range(n)])
+        # the residual's linear maps of the 2n sensors' fields (rows: per used sensor, 3 each):
+        # subtraction top - P bottom, or the identity for the model-based fit
+        sub = np.zeros((n, 3, 2, n, 3))
+        for s_ in range(n):
+            sub[s_, :, 0, s_] = _EYE
+            sub[s_, :, 1, s_] = -self._mirror[s_]
+        self._sub_op = sub.reshape(n, 3, 6 * n)
+        self._id_op = np.eye(6 * n).reshape(2 * n, 3, 6 * n)
+        self._sub_op_all = self._sub_op.reshape(3 * n, 6 * n)
+        self._id_op_all = self._id_op.reshape(6 * n, 6 * n)
+        mom = model.moment_a_m2
+        mag = math.sqrt(float(mom @ mom))
+        c_ = mag / (4 * math.pi)
+        # the multipole's constants for _multipole_rows (u, c, k) and its (2n, 3, 4) buffer
+        self._mp = (mom / mag, c_, 0.5 * c_ * model.octupole_m2)
+        self._mp_buf = np.empty((2 * n, 3, 4))
         self._exact = model.magnet_size_m is not None
         lo, hi = model.box_lower_m, model.box_upper_m
         # ~1 cm apart: the dipole's field varies over the sensor spacing, a coarser grid can put
@@ -701,16 +761,18 @@ class Localizer:
 
     def _data(self, meas, currents):
         sig2n = self.noise_t**2
-        mag = np.linalg.norm(meas, axis=-1)
+        mag2 = np.einsum("asi,asi->as", meas, meas)
         if currents is None:
             d = meas[0] - np.einsum("sij,sj->si", self._mirror, meas[1])
-            use = np.all(np.isfinite(d), axis=1)
-            s2 = 2 * sig2n + self.rel**2 * (mag[0] ** 2 + mag[1] ** 2) + self._mount_var(d)
-            return d, use, np.sqrt(s2)
-        pred = np.einsum("asdc,c->asd", self._coil, currents)
-        d = (meas - pred).reshape(-1, 3)
-        use = np.all(np.isfinite(d), axis=1)
-        s2 = (sig2n + self.rel**2 * mag**2).reshape(-1) + self._mount_var(d)
+            # a row sum is NaN when any component is (|B| <= 1 T: no overflow)
+            use = np.isfinite(d.sum(1))
+            s2 = 2 * sig2n + self.rel**2 * (mag2[0] + mag2[1])
+        else:
+            d = (meas - self._coil_flat @ currents).reshape(-1, 3)
+            use = np.isfinite(d.sum(1))
+            s2 = sig2n + self.rel**2 * mag2.reshape(-1)
+        if self.mount_position_m:
+            s2 = s2 + self._mount_var(d)
         return d, use, np.sqrt(s2)
 
     def _exact_part(self, p):
@@ -840,22 +902,33 @@ class Localizer:
                                                                  + self.model.box_upper_m)
             return Estimate(p.copy(), 0.0, False, n_used, 0, method,
                             reason=f"only {n_used} usable sensors (need 3)")
-        every = bool(use.all())
-        dw = ((d if every else d[use]) / (sig if every else sig[use])[:, None]).reshape(-1)
-        w = 1.0 / (sig if every else sig[use])
-        w2, w3 = w[:, None], w[:, None, None]
+        # the whole weighted (and, for subtraction, mirrored) residual is one linear map of the
+        # 2n sensors' field and Jacobian: op (3 m, 6 n), built once per frame
+        every = n_used == len(use)
+        if every:
+            op = self._sub_op_all if subtract else self._id_op_all
+            w3 = np.repeat(1.0 / sig, 3)
+            dw = d.reshape(-1) * w3
+        else:
+            op = (self._sub_op if subtract else self._id_op)[use].reshape(
+                -1, 6 * self.model.n_sensors)
+            w3 = np.repeat(1.0 / sig[use], 3)
+            dw = d[use].reshape(-1) * w3
+        op = w3[:, None] * op
         has_extra = self._exact or self.cores
 
         def residuals(lin):
-            def resid(p, jac):
-                b, j = self._forward(p, subtract, jac, lin)
-                if not every:
-                    b = b[use]
-                r = dw - (b * w2).reshape(-1)
-                if not jac:
-                    return r
-                return r, ((j if every else j[use]) * w3).reshape(-1, 3)
-            return resid
+            """p -> the 4 x 4 Gram matrix of [J, b - d] (weighted): J^T J, -J^T r and the cost
+            r^T r in one product. The linearized corrections b_c(p) = val + L (p - p_c) enter as
+            a constant A = op L and offset, precomputed for this linearization."""
+            if lin is None:
+                a_lin, c = None, dw
+            else:
+                pc, val, lj = lin
+                lf = lj.reshape(-1, 3)
+                a_lin = op @ lf
+                c = dw - op @ (val.reshape(-1) - lf @ pc)
+            return self._make_eval(op, c, a_lin)
 
         def solve(p0, tol):
             """LM with the corrections linearized near the position, re-linearized (at most 4
@@ -887,7 +960,7 @@ class Localizer:
         else:
             best = cold()
         p, cost, iters, converged = best
-        dof = max(dw.size - 3, 1)
+        dof = max(3 * n_used - 3, 1)
         rms = math.sqrt(cost / dof)
         ok, reason = self._ok(best, n_used)
         self._last = p.copy() if ok else None
@@ -899,8 +972,8 @@ class Localizer:
         rms = math.sqrt(cost / dof)
         if not converged:
             return False, "fit did not converge"
-        lo, hi = self.model.box_lower_m, self.model.box_upper_m
-        if not ((p > lo + 1e-6).all() and (p < hi - 1e-6).all()):
+        lo, hi = self._box_lo, self._box_hi
+        if not all(lo[k] + 1e-6 < p[k] < hi[k] - 1e-6 for k in range(3)):
             return False, "position at or outside the plausible box's edge"
         if rms > self.residual_limit:
             return False, f"residual {rms:.3g} > {self.residual_limit:g} (lost or implausible)"
@@ -924,20 +997,38 @@ class Localizer:
         costs[~np.isfinite(costs)] = np.inf
         return [c[k] for k in np.argsort(costs)[:keep]]
 
-    def _lm(self, resid, p0):
+    def _make_eval(self, op, c, a_lin):
+        """p -> (Gram matrix of [J, -r] as nested lists, (3,) point) for :meth:`_lm`."""
+        u, cc, k = self._mp
+        pts = self._pts
+        buf = self._mp_buf
+        flat = buf.reshape(-1, 4)
+        opm = MU0 * op
+
+        def evaluate(p):
+            _multipole_rows(pts - p, u, cc, k, buf)
+            y = opm @ flat
+            if a_lin is not None:
+                y[:, :3] += a_lin
+                y[:, 3] += a_lin @ p
+            y[:, 3] -= c
+            return (y.T @ y).tolist()
+        return evaluate
+
+    def _lm(self, evaluate, p0):
         """Levenberg-Marquardt on the position (3 unknowns: the 3 x 3 normal equations are
         solved in closed form on Python floats, the small-array numpy overhead dominates
-        here)."""
+        here). ``evaluate(p)`` -> the Gram matrix of [J, -r] (4 x 4 nested lists)."""
         p = np.array(p0, dtype=float)
-        r, j = resid(p, True)
-        cost = float(r @ r)
+        gm = evaluate(p)
+        cost = gm[3][3]
         lam = 1e-6
         converged = False
         it = 0
         lo, hi = self._box_lo, self._box_hi
         for it in range(1, self.max_iterations + 1):
-            a = (j.T @ j).tolist()
-            g = (j.T @ r).tolist()
+            a = gm
+            g = (-gm[0][3], -gm[1][3], -gm[2][3])
             step = _solve3_damped(a, g, lam)
             if step is None:
                 break
@@ -954,10 +1045,10 @@ class Localizer:
             # the position stays in the plausible box: far outside it the magnet's field vanishes
             # and a step could run away on the (bounded) induced term alone
             pn = np.array([min(max(p[k] + step[k], lo[k]), hi[k]) for k in range(3)])
-            rn, jn = resid(pn, True)
-            cn = float(rn @ rn)
+            gn = evaluate(pn)
+            cn = gn[3][3]
             if math.isfinite(cn) and cn <= cost:
-                p, r, j = pn, rn, jn
+                p, gm = pn, gn
                 # 0.1 um or a negligible cost decrease: far below what the noise allows
                 small = s2 < 1e-14 or cost - cn <= 1e-7 * cost
                 cost = cn
