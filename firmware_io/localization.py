@@ -141,45 +141,58 @@ def multipole_field(points_m: np.ndarray, position_m: np.ndarray, moment_a_m2: n
     return b, MU0 * d  # d/d(position) = -d/dr
 
 
-def _multipole_rows(r: np.ndarray, u: np.ndarray, c: float, k: float, out: np.ndarray):
+def _multipole_rows(r: np.ndarray, u: np.ndarray, c: float, k: float, out: np.ndarray,
+                    work: tuple | None = None):
     """The fit's hot path: :func:`multipole_field`'s Jacobian and field at r = points - position
     (n, 3) m, written as out[:, :, :3] = dB/d(position) / mu0 (T/m per mu0) and out[:, :, 3] =
-    B / mu0 (T per mu0), out (n, 3, 4); c = |m| / (4 pi), k = c q / 2, u the unit moment. The
-    same algebra as :func:`multipole_field` (tested equal), fused so one matrix product maps
-    the field and its Jacobian together (each small numpy call costs ~1 us here)."""
+    B / mu0 (T per mu0), out (n, 3, 4); c = |m| / (4 pi), k = c q / 2, u the unit moment;
+    ``work``: :func:`_multipole_work` (n, u), reused between calls. The same algebra as
+    :func:`multipole_field` (tested equal), arranged as two batched matrix products so that one
+    more product maps field and Jacobian together (each small numpy call costs ~1 us here)."""
     rho = np.einsum("ij,ij->i", r, r)
     s = r @ u
     ir = 1.0 / rho
     a = ir * ir * np.sqrt(ir)
     sa = s * a
+    b3, r5, pq, cm = work if work is not None else _multipole_work(len(r), u)
     if k:
         t = s * s * ir
         w = k * ir
         fs = a * (c * rho + k * (15.0 * t - 3.0))
-        fr2 = sa * (w * (15.0 - 35.0 * t) - 3.0 * c)          # 2 f_rho
-        fsr2 = a * (w * (15.0 - 105.0 * t) - 3.0 * c)         # 2 f_s rho
-        frr4 = sa * ir * (w * (315.0 * t - 105.0) + 15.0 * c)  # 4 f_rho rho
-        fss = 30.0 * w * sa
+        fr2 = sa * (w * (15.0 - 35.0 * t) - 3.0 * c)                       # 2 f_rho
+        cm[:, 0, 1] = cm[:, 1, 0] = a * (w * (15.0 - 105.0 * t) - 3.0 * c)  # 2 f_s rho
+        cm[:, 0, 0] = sa * ir * (w * (315.0 * t - 105.0) + 15.0 * c)        # 4 f_rho rho
+        cm[:, 1, 1] = 30.0 * w * sa                                         # f_ss
     else:
         fs = c * rho * a
         fr2 = -3.0 * c * sa
-        fsr2 = -3.0 * c * a
-        frr4 = 15.0 * c * sa * ir
-        fss = None
-    # row i of out[k] is r_i P_k + u_i Q_k (+ 2 f_rho on the Jacobian's diagonal) with
-    # P = [4 frr r + 2 fsr u, -2 fr], Q = [2 fsr r + fss u, -fs]
-    n = len(r)
-    pq = np.empty((n, 2, 4))
-    pq[:, 0, :3] = frr4[:, None] * r + fsr2[:, None] * u
-    pq[:, 1, :3] = fsr2[:, None] * r
-    if fss is not None:
-        pq[:, 1, :3] += fss[:, None] * u
-    pq[:, 0, 3] = -fr2
-    pq[:, 1, 3] = -fs
-    np.multiply(r[:, :, None], pq[:, 0, None, :], out=out)
-    out += u[None, :, None] * pq[:, 1, None, :]
-    out.reshape(n, 12)[:, 0:12:5] += fr2[:, None]
+        cm[:, 0, 1] = cm[:, 1, 0] = -3.0 * c * a
+        cm[:, 0, 0] = 15.0 * c * sa * ir
+        cm[:, 1, 1] = 0.0
+    cm[:, 0, 2] = -fr2
+    cm[:, 1, 2] = -fs
+    # row i of out[k] is r_i P_k + u_i Q_k + 2 f_rho [e_i, 0] with P = [4 frr r + 2 fsr u, -2 fr]
+    # and Q = [2 fsr r + fss u, -fs]: [P; Q] = cm @ [[r, 0], [u, 0], [0, 0, 0, 1]], then
+    # out = [r, u, I] @ [P; Q; 2 f_rho [I, 0]]
+    b3[:, 0, :3] = r
+    r5[:, :, 0] = r
+    np.matmul(cm, b3, out=pq[:, :2])
+    pq[:, 2, 0] = pq[:, 3, 1] = pq[:, 4, 2] = fr2
+    np.matmul(r5, pq, out=out)
     return out
+
+
+def _multipole_work(n: int, u: np.ndarray) -> tuple:
+    """Buffers of :func:`_multipole_rows` for n points and unit moment u: b3 (n, 3, 4) = [[r, 0],
+    [u, 0], [0, 0, 0, 1]], r5 (n, 3, 5) = [r, u, I], pq (n, 5, 4) (rows 2-4: 2 f_rho [I, 0]),
+    cm (n, 2, 3); r and the radial functions are filled in per call."""
+    b3 = np.zeros((n, 3, 4))
+    b3[:, 1, :3] = u
+    b3[:, 2, 3] = 1.0
+    r5 = np.zeros((n, 3, 5))
+    r5[:, :, 1] = u
+    r5[:, :, 2:] = _EYE
+    return b3, r5, np.zeros((n, 5, 4)), np.zeros((n, 2, 3))
 
 
 def cylinder_field(points_m: np.ndarray, position_m: np.ndarray, moment_a_m2: np.ndarray,
@@ -607,6 +620,7 @@ class Localizer:
         # the multipole's constants for _multipole_rows (u, c, k) and its (2n, 3, 4) buffer
         self._mp = (mom / mag, c_, 0.5 * c_ * model.octupole_m2)
         self._mp_buf = np.empty((2 * n, 3, 4))
+        self._mp_work = _multipole_work(2 * n, self._mp[0])
         self._exact = model.magnet_size_m is not None
         lo, hi = model.box_lower_m, model.box_upper_m
         # ~1 cm apart: the dipole's field varies over the sensor spacing, a coarser grid can put
@@ -1001,12 +1015,12 @@ class Localizer:
         """p -> (Gram matrix of [J, -r] as nested lists, (3,) point) for :meth:`_lm`."""
         u, cc, k = self._mp
         pts = self._pts
-        buf = self._mp_buf
+        buf, work = self._mp_buf, self._mp_work
         flat = buf.reshape(-1, 4)
         opm = MU0 * op
 
         def evaluate(p):
-            _multipole_rows(pts - p, u, cc, k, buf)
+            _multipole_rows(pts - p, u, cc, k, buf, work)
             y = opm @ flat
             if a_lin is not None:
                 y[:, :3] += a_lin
