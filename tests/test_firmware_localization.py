@@ -59,6 +59,36 @@ def test_multipole_dipole_matches_magpylib_and_jacobian_matches_differences():
     assert np.abs(jac - fd).max() < 1e-6 * np.abs(fd).max()
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_fused_multipole_rows_match_magpylib_and_differences(seed):
+    """The fit's fused field + Jacobian (one (n, 3, 4) block, in units of mu0): the dipole part
+    against magpylib, the octupole's field and Jacobian against central differences of the
+    field, random moments and points 5-80 mm away."""
+    from firmware_io.localization import MU0, _multipole_rows, _multipole_work
+
+    rng = np.random.default_rng(seed)
+    d = rng.normal(size=(18, 3))
+    c = rng.normal(scale=0.02, size=3)
+    pts = c + d / np.linalg.norm(d, axis=1)[:, None] * rng.uniform(0.005, 0.08, (18, 1))
+    m = rng.normal(size=3)
+    mag = np.linalg.norm(m)
+    u, cc = m / mag, mag / (4 * math.pi)
+    work = _multipole_work(18, u)
+    out = np.empty((18, 3, 4))
+    _multipole_rows(pts - c, u, cc, 0.0, out, work)
+    ref = magpy.misc.Dipole(moment=m, position=c).getB(pts)
+    assert np.allclose(MU0 * out[..., 3], ref, rtol=1e-9, atol=1e-9 * np.abs(ref).max())
+    q = rng.uniform(-3e-5, 3e-5)
+    _multipole_rows(pts - c, u, cc, 0.5 * cc * q, out, work)   # the buffers reused
+    b = multipole_field(pts, c, m, q)
+    assert np.allclose(MU0 * out[..., 3], b, rtol=1e-12, atol=1e-12 * np.abs(b).max())
+    h = 1e-8
+    fd = np.stack([(multipole_field(pts, c + h * e, m, q) - multipole_field(pts, c - h * e, m, q))
+                   / (2 * h) for e in np.eye(3)], -1)
+    scale = np.abs(fd).max(axis=(1, 2))[:, None, None]
+    assert np.all(np.abs(MU0 * out[..., :3] - fd) < 1e-5 * scale)
+
+
 def test_octupole_term_approaches_the_exact_cylinder():
     """10 x 10 mm cylinder, 20-60 mm away: the l = 3 term (h^2 - 3 a^2 / 4) cuts the dipole's
     worst error (3 %) > 4x, to < 1 % (what is left is the l = 5 term)."""
