@@ -635,7 +635,9 @@ class Localizer:
         self._last: np.ndarray | None = None
         self._box_lo = [float(x) for x in model.box_lower_m]
         self._box_hi = [float(x) for x in model.box_upper_m]
-        self._lin = {}  # per correction: (p_c, value (2n, 3), jacobian (2n, 3, 3), radius)
+        # per correction: (p_c, value (2n, 3), jacobian (2n, 3, 3), radius, const (6n,),
+        # jacobian (6n, 3)) -- the last two the same linearization as const + jacobian @ q
+        self._lin = {}
         self._pj = None  # where the core term's Jacobian was last differenced
         self._radius = self.refresh_m  # reuse radius of the linearization, adapted
 
@@ -839,7 +841,9 @@ class Localizer:
             step = math.sqrt(float(dp @ dp))
             radius = (min(max(step * math.sqrt(0.05 * self.noise_t / err), 0.1e-3), 5e-3)
                       if err > 0 else 5e-3)
-        self._lin[key] = (p, val, jac, radius)
+        # also as the affine map the fit uses: value + J (q - p) = const + J q, flattened
+        jf = jac.reshape(-1, 3)
+        self._lin[key] = (p, val, jac, radius, val.reshape(-1) - jf @ p, jf)
         return self._lin[key]
 
     def _evaluate_induced(self, p, old):
@@ -865,31 +869,28 @@ class Localizer:
                    for c in self._lin.values())
 
     def _linearized(self, p, tol=None):
-        """(p, value (2n, 3), jacobian (2n, 3, 3)): the corrections to the multipole, linear
-        about p. Each part keeps its own linearization point and reuse radius (adapted from
-        the linearization's observed error): the exact magnet's part (cheap, curved near the
-        sensors: value and Jacobian fresh at each refresh) and the map's core term (~0.2 ms a
-        call; Jacobian by central differences within 10 ``refresh_m``, Broyden-updated)."""
+        """(const (6n,) T, jacobian (6n, 3) T/m): the corrections to the multipole at the 2n
+        sensors, affine in the position q near p: const + jacobian @ q. Each part keeps its own
+        linearization point and reuse radius (adapted from the linearization's observed error):
+        the exact magnet's part (cheap, curved near the sensors: value and Jacobian fresh at each
+        refresh) and the map's core term (~0.2 ms a call; Jacobian by central differences
+        within 10 ``refresh_m``, Broyden-updated)."""
         p = np.array(p, dtype=float)
         tol = math.inf if tol is None else tol
-        val = np.zeros((len(self._pts), 3))
-        jac = np.zeros((len(self._pts), 3, 3))
+        parts = []
         self._radius = math.inf
         if self._exact:
             # near the sensors the exact part curves on the 1 mm scale: start small
-            c = self._refresh("exact", p, tol, lambda q, old: self._exact_part(q), 0.25e-3)
-            val += c[1] + c[2] @ (p - c[0])
-            jac += c[2]
-            self._radius = min(self._radius, c[3])
+            parts.append(self._refresh("exact", p, tol, lambda q, old: self._exact_part(q),
+                                       0.25e-3))
         if self.cores:
             def ev(q, old):
-                out = self._evaluate_induced(q, None if old is None else old + (self._pj,))
-                return out
-            c = self._refresh("cores", p, tol, ev, self.refresh_m)
-            val += c[1] + c[2] @ (p - c[0])
-            jac += c[2]
-            self._radius = min(self._radius, c[3])
-        return p, val, jac
+                return self._evaluate_induced(q, None if old is None else old[:4] + (self._pj,))
+            parts.append(self._refresh("cores", p, tol, ev, self.refresh_m))
+        self._radius = min(c[3] for c in parts)
+        if len(parts) == 1:
+            return parts[0][4], parts[0][5]
+        return parts[0][4] + parts[1][4], parts[0][5] + parts[1][5]
 
     def _forward(self, p, subtract: bool, jac: bool, lin=None):
         m = self.model
@@ -936,13 +937,9 @@ class Localizer:
             r^T r in one product. The linearized corrections b_c(p) = val + L (p - p_c) enter as
             a constant A = op L and offset, precomputed for this linearization."""
             if lin is None:
-                a_lin, c = None, dw
-            else:
-                pc, val, lj = lin
-                lf = lj.reshape(-1, 3)
-                a_lin = op @ lf
-                c = dw - op @ (val.reshape(-1) - lf @ pc)
-            return self._make_eval(op, c, a_lin)
+                return self._make_eval(op, dw, None)
+            const, lf = lin
+            return self._make_eval(op, dw - op @ const, op @ lf)
 
         def solve(p0, tol):
             """LM with the corrections linearized near the position, re-linearized (at most 4
