@@ -619,7 +619,8 @@ class Localizer:
         c_ = mag / (4 * math.pi)
         # the multipole's constants for _multipole_rows (u, c, k) and its (2n, 3, 4) buffer
         self._mp = (mom / mag, c_, 0.5 * c_ * model.octupole_m2)
-        self._mp_buf = np.empty((2 * n, 3, 4))
+        self._mp_stack = np.zeros((6 * n + 4, 4))
+        self._mp_stack[-4:] = np.eye(4)
         self._mp_work = _multipole_work(2 * n, self._mp[0])
         self._exact = model.magnet_size_m is not None
         lo, hi = model.box_lower_m, model.box_upper_m
@@ -746,7 +747,7 @@ class Localizer:
         meas = np.stack([top, bottom])
         if self.calibration is not None:
             cal = self.calibration
-            meas = np.einsum("asij,asj->asi", cal.gain_inverse, meas - cal.offsets_t)
+            meas = np.matmul(cal.gain_inverse, (meas - cal.offsets_t)[..., None])[..., 0]
         method = self.method
         if method == "model" and i is None:
             raise BadInputError("currents", f"{self.model.n_coils} commanded currents, A, for "
@@ -779,7 +780,7 @@ class Localizer:
         sig2n = self.noise_t**2
         mag2 = np.einsum("asi,asi->as", meas, meas)
         if currents is None:
-            d = meas[0] - np.einsum("sij,sj->si", self._mirror, meas[1])
+            d = meas[0] - np.matmul(self._mirror, meas[1][..., None])[..., 0]
             # a row sum is NaN when any component is (|B| <= 1 T: no overflow)
             use = np.isfinite(d.sum(1))
             s2 = 2 * sig2n + self.rel**2 * (mag2[0] + mag2[1])
@@ -1012,17 +1013,18 @@ class Localizer:
         """p -> (Gram matrix of [J, -r] as nested lists, (3,) point) for :meth:`_lm`."""
         u, cc, k = self._mp
         pts = self._pts
-        buf, work = self._mp_buf, self._mp_work
-        flat = buf.reshape(-1, 4)
-        opm = MU0 * op
+        work = self._mp_work
+        # one product: [mu0 op | A | -c] @ [[multipole rows (6n, 4)], [I, p], [0, 0, 0, 1]] =
+        # op b(p) + A p - c next to op J(p) + A (A = 0 without corrections)
+        stack = self._mp_stack
+        buf = stack[:-4].reshape(-1, 3, 4)
+        big = np.concatenate([MU0 * op, a_lin if a_lin is not None
+                              else np.zeros((len(op), 3)), -c[:, None]], 1)
 
         def evaluate(p):
             _multipole_rows(pts - p, u, cc, k, buf, work)
-            y = opm @ flat
-            if a_lin is not None:
-                y[:, :3] += a_lin
-                y[:, 3] += a_lin @ p
-            y[:, 3] -= c
+            stack[-4:-1, 3] = p
+            y = big @ stack
             return (y.T @ y).tolist()
         return evaluate
 
