@@ -614,6 +614,9 @@ class Localizer:
         self._id_op = np.eye(6 * n).reshape(2 * n, 3, 6 * n)
         self._sub_op_all = self._sub_op.reshape(3 * n, 6 * n)
         self._id_op_all = self._id_op.reshape(6 * n, 6 * n)
+        # every sensor usable (the usual frame): (op, mu0 op) by subtract
+        self._ops = {True: (self._sub_op_all, MU0 * self._sub_op_all),
+                     False: (self._id_op_all, MU0 * self._id_op_all)}
         mom = model.moment_a_m2
         mag = math.sqrt(float(mom @ mom))
         c_ = mag / (4 * math.pi)
@@ -920,27 +923,30 @@ class Localizer:
                             reason=f"only {n_used} usable sensors (need 3)")
         # the whole weighted (and, for subtraction, mirrored) residual is one linear map of the
         # 2n sensors' field and Jacobian: op (3 m, 6 n), built once per frame
-        every = n_used == len(use)
-        if every:
-            op = self._sub_op_all if subtract else self._id_op_all
-            w3 = np.repeat(1.0 / sig, 3)
-            dw = d.reshape(-1) * w3
+        if n_used == len(use):
+            op, opm = self._ops[subtract]
+            w3 = (1.0 / sig).repeat(3)[:, None]
+            du = d.reshape(-1)
         else:
             op = (self._sub_op if subtract else self._id_op)[use].reshape(
                 -1, 6 * self.model.n_sensors)
-            w3 = np.repeat(1.0 / sig[use], 3)
-            dw = d[use].reshape(-1) * w3
-        op = w3[:, None] * op
+            opm = MU0 * op
+            w3 = (1.0 / sig[use]).repeat(3)[:, None]
+            du = d[use].reshape(-1)
         has_extra = self._exact or self.cores
 
         def residuals(lin):
             """p -> the 4 x 4 Gram matrix of [J, b - d] (weighted): J^T J, -J^T r and the cost
-            r^T r in one product. The linearized corrections b_c(p) = val + L (p - p_c) enter as
-            a constant A = op L and offset, precomputed for this linearization."""
+            r^T r in one product. The linearized corrections b_c(p) = const + L p enter as the
+            constant columns A = op L and op const - d, weighted with the rows."""
             if lin is None:
-                return self._make_eval(op, dw, None)
-            const, lf = lin
-            return self._make_eval(op, dw - op @ const, op @ lf)
+                a_lin, c = np.zeros((len(op), 3)), du
+            else:
+                const, lf = lin
+                a_lin, c = op @ lf, du - op @ const
+            big = np.concatenate([opm, a_lin, -c[:, None]], 1)
+            big *= w3
+            return self._make_eval(big)
 
         def solve(p0, tol):
             """LM with the corrections linearized near the position, re-linearized (at most 4
@@ -1009,8 +1015,9 @@ class Localizer:
         costs[~np.isfinite(costs)] = np.inf
         return [c[k] for k in np.argsort(costs)[:keep]]
 
-    def _make_eval(self, op, c, a_lin):
-        """p -> (Gram matrix of [J, -r] as nested lists, (3,) point) for :meth:`_lm`."""
+    def _make_eval(self, big):
+        """p -> the Gram matrix of [J, -r] (4 x 4 nested lists) for :meth:`_lm`; big (3 m, 6 n + 4)
+        = the weighted [mu0 op | A | -c] (see :meth:`_fit`)."""
         u, cc, k = self._mp
         pts = self._pts
         work = self._mp_work
@@ -1018,8 +1025,6 @@ class Localizer:
         # op b(p) + A p - c next to op J(p) + A (A = 0 without corrections)
         stack = self._mp_stack
         buf = stack[:-4].reshape(-1, 3, 4)
-        big = np.concatenate([MU0 * op, a_lin if a_lin is not None
-                              else np.zeros((len(op), 3)), -c[:, None]], 1)
 
         def evaluate(p):
             _multipole_rows(pts - p, u, cc, k, buf, work)
