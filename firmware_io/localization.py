@@ -146,53 +146,58 @@ def _multipole_rows(r: np.ndarray, u: np.ndarray, c: float, k: float, out: np.nd
     """The fit's hot path: :func:`multipole_field`'s Jacobian and field at r = points - position
     (n, 3) m, written as out[:, :, :3] = dB/d(position) / mu0 (T/m per mu0) and out[:, :, 3] =
     B / mu0 (T per mu0), out (n, 3, 4); c = |m| / (4 pi), k = c q / 2, u the unit moment;
-    ``work``: :func:`_multipole_work` (n, u), reused between calls. The same algebra as
-    :func:`multipole_field` (tested equal), arranged as two batched matrix products so that one
-    more product maps field and Jacobian together (each small numpy call costs ~1 us here)."""
+    ``work``: :func:`_multipole_work` (n, u, c), reused between calls. The same algebra as
+    :func:`multipole_field` (tested equal), arranged as a few matrix products (each small numpy
+    call costs ~0.5-1 us here, more than its arithmetic)."""
+    b3, r5, pq, cm, tv, v, k6 = work if work is not None else _multipole_work(len(r), u, c)
     rho = np.einsum("ij,ij->i", r, r)
     s = r @ u
     ir = 1.0 / rho
     a = ir * ir * np.sqrt(ir)
-    sa = s * a
-    b3, r5, pq, cm = work if work is not None else _multipole_work(len(r), u)
-    if k:
-        t = s * s * ir
-        w = k * ir
-        fs = a * (c * rho + k * (15.0 * t - 3.0))
-        fr2 = sa * (w * (15.0 - 35.0 * t) - 3.0 * c)                       # 2 f_rho
-        cm[:, 0, 1] = cm[:, 1, 0] = a * (w * (15.0 - 105.0 * t) - 3.0 * c)  # 2 f_s rho
-        cm[:, 0, 0] = sa * ir * (w * (315.0 * t - 105.0) + 15.0 * c)        # 4 f_rho rho
-        cm[:, 1, 1] = 30.0 * w * sa                                         # f_ss
-    else:
-        fs = c * rho * a
-        fr2 = -3.0 * c * sa
-        cm[:, 0, 1] = cm[:, 1, 0] = -3.0 * c * a
-        cm[:, 0, 0] = 15.0 * c * sa * ir
-        cm[:, 1, 1] = 0.0
-    cm[:, 0, 2] = -fr2
-    cm[:, 1, 2] = -fs
+    # the radial functions, each a = rho^-5/2 times (a power of s, 1/rho, rho) times a polynomial
+    # c0 c + c1 w + c2 w t in w = k / rho and t = s^2 / rho (see multipole_field), in the order
+    # of cm: [4 f_rho rho, 2 f_s rho, -2 f_rho; 2 f_s rho, f_ss, -f_s]
+    np.multiply(ir, k, out=tv[:, 1])
+    np.multiply(tv[:, 1], s * s * ir, out=tv[:, 2])
+    np.multiply(s, ir, out=v[:, 0])
+    v[:, 2] = v[:, 4] = s
+    v[:, 5] = rho
+    x = tv @ k6
+    x *= v
+    np.multiply(x, a[:, None], out=cm.reshape(-1, 6))
     # row i of out[k] is r_i P_k + u_i Q_k + 2 f_rho [e_i, 0] with P = [4 frr r + 2 fsr u, -2 fr]
     # and Q = [2 fsr r + fss u, -fs]: [P; Q] = cm @ [[r, 0], [u, 0], [0, 0, 0, 1]], then
     # out = [r, u, I] @ [P; Q; 2 f_rho [I, 0]]
     b3[:, 0, :3] = r
     r5[:, :, 0] = r
     np.matmul(cm, b3, out=pq[:, :2])
-    pq[:, 2, 0] = pq[:, 3, 1] = pq[:, 4, 2] = fr2
+    np.negative(cm[:, 0, 2], out=pq[:, 2, 0])
+    pq[:, 3, 1] = pq[:, 4, 2] = pq[:, 2, 0]
     np.matmul(r5, pq, out=out)
     return out
 
 
-def _multipole_work(n: int, u: np.ndarray) -> tuple:
-    """Buffers of :func:`_multipole_rows` for n points and unit moment u: b3 (n, 3, 4) = [[r, 0],
-    [u, 0], [0, 0, 0, 1]], r5 (n, 3, 5) = [r, u, I], pq (n, 5, 4) (rows 2-4: 2 f_rho [I, 0]),
-    cm (n, 2, 3); r and the radial functions are filled in per call."""
+def _multipole_work(n: int, u: np.ndarray, c: float) -> tuple:
+    """Buffers and constants of :func:`_multipole_rows` for n points, unit moment u and c =
+    |m| / (4 pi): b3 (n, 3, 4) = [[r, 0], [u, 0], [0, 0, 0, 1]], r5 (n, 3, 5) = [r, u, I],
+    pq (n, 5, 4) (rows 2-4: 2 f_rho [I, 0]), cm (n, 2, 3), tv (n, 3) = [1, w, w t],
+    v (n, 6) = [s / rho, 1, s, 1, s, rho], k6 (3, 6) the polynomials' coefficients; r, s, rho,
+    w, t are filled in per call."""
     b3 = np.zeros((n, 3, 4))
     b3[:, 1, :3] = u
     b3[:, 2, 3] = 1.0
     r5 = np.zeros((n, 3, 5))
     r5[:, :, 1] = u
     r5[:, :, 2:] = _EYE
-    return b3, r5, np.zeros((n, 5, 4)), np.zeros((n, 2, 3))
+    tv = np.zeros((n, 3))
+    tv[:, 0] = 1.0
+    v = np.ones((n, 6))
+    # columns: 4 f_rho rho / (a s / rho), 2 f_s rho / a, -2 f_rho / (a s), 2 f_s rho / a,
+    # f_ss / (a s), -f_s / (a rho) as c0 c + c1 w + c2 w t
+    k6 = np.array([[15.0 * c, -3.0 * c, 3.0 * c, -3.0 * c, 0.0, -c],
+                   [-105.0, 15.0, -15.0, 15.0, 30.0, 3.0],
+                   [315.0, -105.0, 35.0, -105.0, 0.0, -15.0]])
+    return b3, r5, np.zeros((n, 5, 4)), np.zeros((n, 2, 3)), tv, v, k6
 
 
 def cylinder_field(points_m: np.ndarray, position_m: np.ndarray, moment_a_m2: np.ndarray,
@@ -624,7 +629,7 @@ class Localizer:
         self._mp = (mom / mag, c_, 0.5 * c_ * model.octupole_m2)
         self._mp_stack = np.zeros((6 * n + 4, 4))
         self._mp_stack[-4:] = np.eye(4)
-        self._mp_work = _multipole_work(2 * n, self._mp[0])
+        self._mp_work = _multipole_work(2 * n, self._mp[0], c_)
         self._exact = model.magnet_size_m is not None
         lo, hi = model.box_lower_m, model.box_upper_m
         # ~1 cm apart: the dipole's field varies over the sensor spacing, a coarser grid can put

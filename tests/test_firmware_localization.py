@@ -73,7 +73,7 @@ def test_fused_multipole_rows_match_magpylib_and_differences(seed):
     m = rng.normal(size=3)
     mag = np.linalg.norm(m)
     u, cc = m / mag, mag / (4 * math.pi)
-    work = _multipole_work(18, u)
+    work = _multipole_work(18, u, cc)
     out = np.empty((18, 3, 4))
     _multipole_rows(pts - c, u, cc, 0.0, out, work)
     ref = magpy.misc.Dipole(moment=m, position=c).getB(pts)
