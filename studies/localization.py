@@ -320,13 +320,16 @@ def _budget(sim, make, size, seed, n):
             top, bot = a[:, 0], a[:, 1]
         calib = None
         if cal:
+            # keyed by id() with the object kept and checked: an id alone can be reused by a
+            # later errors object once the earlier one is freed (it picked a stale calibration)
             key = id(errors)
-            if key not in cal_frames:
+            if key not in cal_frames or cal_frames[key][0] is not errors:
                 # the calibration frames carry the sensors' real noise
                 s_cal = SensorSimulator(design, array=sim.array, errors=errors,
                                         noise_t=sim.noise_t, induced="off", seed=seed)
-                cal_frames[key] = _calibrate(s_cal, make("model").model, seed + 4000, 1000)[0]
-            calib = cal_frames[key]
+                cal_frames[key] = (errors, _calibrate(s_cal, make("model").model, seed + 4000,
+                                                      1000)[0])
+            calib = cal_frames[key][1]
         out = {}
         for method in ("model", "dipole"):
             loc = make(method, magnet_size_m=size if exact else None, cores=cores,
