@@ -141,6 +141,65 @@ def multipole_field(points_m: np.ndarray, position_m: np.ndarray, moment_a_m2: n
     return b, MU0 * d  # d/d(position) = -d/dr
 
 
+def _multipole_rows(r: np.ndarray, u: np.ndarray, c: float, k: float, out: np.ndarray,
+                    work: tuple | None = None):
+    """The fit's hot path: :func:`multipole_field`'s Jacobian and field at r = points - position
+    (n, 3) m, written as out[:, :, :3] = dB/d(position) / mu0 (T/m per mu0) and out[:, :, 3] =
+    B / mu0 (T per mu0), out (n, 3, 4); c = |m| / (4 pi), k = c q / 2, u the unit moment;
+    ``work``: :func:`_multipole_work` (n, u, c), reused between calls. The same algebra as
+    :func:`multipole_field` (tested equal), arranged as a few matrix products (each small numpy
+    call costs ~0.5-1 us here, more than its arithmetic)."""
+    b3, r5, pq, cm, tv, v, k6 = work if work is not None else _multipole_work(len(r), u, c)
+    rho = np.einsum("ij,ij->i", r, r)
+    s = r @ u
+    ir = 1.0 / rho
+    a = ir * ir * np.sqrt(ir)
+    # the radial functions, each a = rho^-5/2 times (a power of s, 1/rho, rho) times a polynomial
+    # c0 c + c1 w + c2 w t in w = k / rho and t = s^2 / rho (see multipole_field), in the order
+    # of cm: [4 f_rho rho, 2 f_s rho, -2 f_rho; 2 f_s rho, f_ss, -f_s]
+    np.multiply(ir, k, out=tv[:, 1])
+    np.multiply(tv[:, 1], s * s * ir, out=tv[:, 2])
+    np.multiply(s, ir, out=v[:, 0])
+    v[:, 2] = v[:, 4] = s
+    v[:, 5] = rho
+    x = tv @ k6
+    x *= v
+    np.multiply(x, a[:, None], out=cm.reshape(-1, 6))
+    # row i of out[k] is r_i P_k + u_i Q_k + 2 f_rho [e_i, 0] with P = [4 frr r + 2 fsr u, -2 fr]
+    # and Q = [2 fsr r + fss u, -fs]: [P; Q] = cm @ [[r, 0], [u, 0], [0, 0, 0, 1]], then
+    # out = [r, u, I] @ [P; Q; 2 f_rho [I, 0]]
+    b3[:, 0, :3] = r
+    r5[:, :, 0] = r
+    np.matmul(cm, b3, out=pq[:, :2])
+    np.negative(cm[:, 0, 2], out=pq[:, 2, 0])
+    pq[:, 3, 1] = pq[:, 4, 2] = pq[:, 2, 0]
+    np.matmul(r5, pq, out=out)
+    return out
+
+
+def _multipole_work(n: int, u: np.ndarray, c: float) -> tuple:
+    """Buffers and constants of :func:`_multipole_rows` for n points, unit moment u and c =
+    |m| / (4 pi): b3 (n, 3, 4) = [[r, 0], [u, 0], [0, 0, 0, 1]], r5 (n, 3, 5) = [r, u, I],
+    pq (n, 5, 4) (rows 2-4: 2 f_rho [I, 0]), cm (n, 2, 3), tv (n, 3) = [1, w, w t],
+    v (n, 6) = [s / rho, 1, s, 1, s, rho], k6 (3, 6) the polynomials' coefficients; r, s, rho,
+    w, t are filled in per call."""
+    b3 = np.zeros((n, 3, 4))
+    b3[:, 1, :3] = u
+    b3[:, 2, 3] = 1.0
+    r5 = np.zeros((n, 3, 5))
+    r5[:, :, 1] = u
+    r5[:, :, 2:] = _EYE
+    tv = np.zeros((n, 3))
+    tv[:, 0] = 1.0
+    v = np.ones((n, 6))
+    # columns: 4 f_rho rho / (a s / rho), 2 f_s rho / a, -2 f_rho / (a s), 2 f_s rho / a,
+    # f_ss / (a s), -f_s / (a rho) as c0 c + c1 w + c2 w t
+    k6 = np.array([[15.0 * c, -3.0 * c, 3.0 * c, -3.0 * c, 0.0, -c],
+                   [-105.0, 15.0, -15.0, 15.0, 30.0, 3.0],
+                   [315.0, -105.0, 35.0, -105.0, 0.0, -15.0]])
+    return b3, r5, np.zeros((n, 5, 4)), np.zeros((n, 2, 3)), tv, v, k6
+
+
 def cylinder_field(points_m: np.ndarray, position_m: np.ndarray, moment_a_m2: np.ndarray,
                    radius_m: float, length_m: float) -> np.ndarray:
     """Exact field (n, 3) T of a uniformly magnetized cylinder magnet (axis along the moment).
@@ -460,7 +519,9 @@ def _check_frame(name: str, a, n: int) -> np.ndarray:
     arr = np.asarray(a, dtype=float)
     if arr.shape != (n, 3):
         raise BadInputError(name, f"an array of shape ({n}, 3), T", f"shape {arr.shape}")
-    if not (np.abs(arr) <= 1.0).all() and np.any(np.isinf(arr)):  # NaN compares False
+    if (np.abs(arr) <= 1.0).all():  # the usual frame: one test (False with NaN, Inf, > 1 T)
+        return arr
+    if np.any(np.isinf(arr)):  # NaN compares False
         raise BadInputError(name, "finite values or NaN (missing/saturated), T",
                             f"Inf at {np.argwhere(np.isinf(arr))[0].tolist()}")
     if np.any(np.abs(arr) > 1.0):
@@ -544,9 +605,31 @@ class Localizer:
             if self.calibration.coil_field_t_per_a is not None:
                 cf = self.calibration.coil_field_t_per_a
         self._coil = cf
+        self._coil_flat = cf.reshape(2, n, 3, -1)
         # subtraction: the lower sensor's coil field mapped onto the upper one's (for the
         # symmetric array diag(-1, -1, 1): Br is odd about the coil's mid-plane)
         self._mirror = np.stack([cf[0, i] @ np.linalg.pinv(cf[1, i]) for i in range(n)])
+        # the residual's linear maps of the 2n sensors' fields (rows: per used sensor, 3 each):
+        # subtraction top - P bottom, or the identity for the model-based fit
+        sub = np.zeros((n, 3, 2, n, 3))
+        for s_ in range(n):
+            sub[s_, :, 0, s_] = _EYE
+            sub[s_, :, 1, s_] = -self._mirror[s_]
+        self._sub_op = sub.reshape(n, 3, 6 * n)
+        self._id_op = np.eye(6 * n).reshape(2 * n, 3, 6 * n)
+        self._sub_op_all = self._sub_op.reshape(3 * n, 6 * n)
+        self._id_op_all = self._id_op.reshape(6 * n, 6 * n)
+        # every sensor usable (the usual frame): (op, mu0 op) by subtract
+        self._ops = {True: (self._sub_op_all, MU0 * self._sub_op_all),
+                     False: (self._id_op_all, MU0 * self._id_op_all)}
+        mom = model.moment_a_m2
+        mag = math.sqrt(float(mom @ mom))
+        c_ = mag / (4 * math.pi)
+        # the multipole's constants for _multipole_rows (u, c, k) and its (2n, 3, 4) buffer
+        self._mp = (mom / mag, c_, 0.5 * c_ * model.octupole_m2)
+        self._mp_stack = np.zeros((6 * n + 4, 4))
+        self._mp_stack[-4:] = np.eye(4)
+        self._mp_work = _multipole_work(2 * n, self._mp[0], c_)
         self._exact = model.magnet_size_m is not None
         lo, hi = model.box_lower_m, model.box_upper_m
         # ~1 cm apart: the dipole's field varies over the sensor spacing, a coarser grid can put
@@ -561,7 +644,9 @@ class Localizer:
         self._last: np.ndarray | None = None
         self._box_lo = [float(x) for x in model.box_lower_m]
         self._box_hi = [float(x) for x in model.box_upper_m]
-        self._lin = {}  # per correction: (p_c, value (2n, 3), jacobian (2n, 3, 3), radius)
+        # per correction: (p_c, value (2n, 3), jacobian (2n, 3, 3), radius, const (6n,),
+        # jacobian (6n, 3)) -- the last two the same linearization as const + jacobian @ q
+        self._lin = {}
         self._pj = None  # where the core term's Jacobian was last differenced
         self._radius = self.refresh_m  # reuse radius of the linearization, adapted
 
@@ -670,7 +755,7 @@ class Localizer:
         meas = np.stack([top, bottom])
         if self.calibration is not None:
             cal = self.calibration
-            meas = np.einsum("asij,asj->asi", cal.gain_inverse, meas - cal.offsets_t)
+            meas = np.matmul(cal.gain_inverse, (meas - cal.offsets_t)[..., None])[..., 0]
         method = self.method
         if method == "model" and i is None:
             raise BadInputError("currents", f"{self.model.n_coils} commanded currents, A, for "
@@ -701,16 +786,18 @@ class Localizer:
 
     def _data(self, meas, currents):
         sig2n = self.noise_t**2
-        mag = np.linalg.norm(meas, axis=-1)
+        mag2 = np.einsum("asi,asi->as", meas, meas)
         if currents is None:
-            d = meas[0] - np.einsum("sij,sj->si", self._mirror, meas[1])
-            use = np.all(np.isfinite(d), axis=1)
-            s2 = 2 * sig2n + self.rel**2 * (mag[0] ** 2 + mag[1] ** 2) + self._mount_var(d)
-            return d, use, np.sqrt(s2)
-        pred = np.einsum("asdc,c->asd", self._coil, currents)
-        d = (meas - pred).reshape(-1, 3)
-        use = np.all(np.isfinite(d), axis=1)
-        s2 = (sig2n + self.rel**2 * mag**2).reshape(-1) + self._mount_var(d)
+            d = meas[0] - np.matmul(self._mirror, meas[1][..., None])[..., 0]
+            # a row sum is NaN when any component is (|B| <= 1 T: no overflow)
+            use = np.isfinite(d.sum(1))
+            s2 = 2 * sig2n + self.rel**2 * (mag2[0] + mag2[1])
+        else:
+            d = (meas - self._coil_flat @ currents).reshape(-1, 3)
+            use = np.isfinite(d.sum(1))
+            s2 = sig2n + self.rel**2 * mag2.reshape(-1)
+        if self.mount_position_m:
+            s2 = s2 + self._mount_var(d)
         return d, use, np.sqrt(s2)
 
     def _exact_part(self, p):
@@ -763,7 +850,9 @@ class Localizer:
             step = math.sqrt(float(dp @ dp))
             radius = (min(max(step * math.sqrt(0.05 * self.noise_t / err), 0.1e-3), 5e-3)
                       if err > 0 else 5e-3)
-        self._lin[key] = (p, val, jac, radius)
+        # also as the affine map the fit uses: value + J (q - p) = const + J q, flattened
+        jf = jac.reshape(-1, 3)
+        self._lin[key] = (p, val, jac, radius, val.reshape(-1) - jf @ p, jf)
         return self._lin[key]
 
     def _evaluate_induced(self, p, old):
@@ -789,31 +878,28 @@ class Localizer:
                    for c in self._lin.values())
 
     def _linearized(self, p, tol=None):
-        """(p, value (2n, 3), jacobian (2n, 3, 3)): the corrections to the multipole, linear
-        about p. Each part keeps its own linearization point and reuse radius (adapted from
-        the linearization's observed error): the exact magnet's part (cheap, curved near the
-        sensors: value and Jacobian fresh at each refresh) and the map's core term (~0.2 ms a
-        call; Jacobian by central differences within 10 ``refresh_m``, Broyden-updated)."""
+        """(const (6n,) T, jacobian (6n, 3) T/m): the corrections to the multipole at the 2n
+        sensors, affine in the position q near p: const + jacobian @ q. Each part keeps its own
+        linearization point and reuse radius (adapted from the linearization's observed error):
+        the exact magnet's part (cheap, curved near the sensors: value and Jacobian fresh at each
+        refresh) and the map's core term (~0.2 ms a call; Jacobian by central differences
+        within 10 ``refresh_m``, Broyden-updated)."""
         p = np.array(p, dtype=float)
         tol = math.inf if tol is None else tol
-        val = np.zeros((len(self._pts), 3))
-        jac = np.zeros((len(self._pts), 3, 3))
+        parts = []
         self._radius = math.inf
         if self._exact:
             # near the sensors the exact part curves on the 1 mm scale: start small
-            c = self._refresh("exact", p, tol, lambda q, old: self._exact_part(q), 0.25e-3)
-            val += c[1] + c[2] @ (p - c[0])
-            jac += c[2]
-            self._radius = min(self._radius, c[3])
+            parts.append(self._refresh("exact", p, tol, lambda q, old: self._exact_part(q),
+                                       0.25e-3))
         if self.cores:
             def ev(q, old):
-                out = self._evaluate_induced(q, None if old is None else old + (self._pj,))
-                return out
-            c = self._refresh("cores", p, tol, ev, self.refresh_m)
-            val += c[1] + c[2] @ (p - c[0])
-            jac += c[2]
-            self._radius = min(self._radius, c[3])
-        return p, val, jac
+                return self._evaluate_induced(q, None if old is None else old[:4] + (self._pj,))
+            parts.append(self._refresh("cores", p, tol, ev, self.refresh_m))
+        self._radius = min(c[3] for c in parts)
+        if len(parts) == 1:
+            return parts[0][4], parts[0][5]
+        return parts[0][4] + parts[1][4], parts[0][5] + parts[1][5]
 
     def _forward(self, p, subtract: bool, jac: bool, lin=None):
         m = self.model
@@ -840,22 +926,32 @@ class Localizer:
                                                                  + self.model.box_upper_m)
             return Estimate(p.copy(), 0.0, False, n_used, 0, method,
                             reason=f"only {n_used} usable sensors (need 3)")
-        every = bool(use.all())
-        dw = ((d if every else d[use]) / (sig if every else sig[use])[:, None]).reshape(-1)
-        w = 1.0 / (sig if every else sig[use])
-        w2, w3 = w[:, None], w[:, None, None]
+        # the whole weighted (and, for subtraction, mirrored) residual is one linear map of the
+        # 2n sensors' field and Jacobian: op (3 m, 6 n), built once per frame
+        if n_used == len(use):
+            op, opm = self._ops[subtract]
+            w3 = (1.0 / sig).repeat(3)[:, None]
+            du = d.reshape(-1)
+        else:
+            op = (self._sub_op if subtract else self._id_op)[use].reshape(
+                -1, 6 * self.model.n_sensors)
+            opm = MU0 * op
+            w3 = (1.0 / sig[use]).repeat(3)[:, None]
+            du = d[use].reshape(-1)
         has_extra = self._exact or self.cores
 
         def residuals(lin):
-            def resid(p, jac):
-                b, j = self._forward(p, subtract, jac, lin)
-                if not every:
-                    b = b[use]
-                r = dw - (b * w2).reshape(-1)
-                if not jac:
-                    return r
-                return r, ((j if every else j[use]) * w3).reshape(-1, 3)
-            return resid
+            """p -> the 4 x 4 Gram matrix of [J, b - d] (weighted): J^T J, -J^T r and the cost
+            r^T r in one product. The linearized corrections b_c(p) = const + L p enter as the
+            constant columns A = op L and op const - d, weighted with the rows."""
+            if lin is None:
+                a_lin, c = np.zeros((len(op), 3)), du
+            else:
+                const, lf = lin
+                a_lin, c = op @ lf, du - op @ const
+            big = np.concatenate([opm, a_lin, -c[:, None]], 1)
+            big *= w3
+            return self._make_eval(big)
 
         def solve(p0, tol):
             """LM with the corrections linearized near the position, re-linearized (at most 4
@@ -887,7 +983,7 @@ class Localizer:
         else:
             best = cold()
         p, cost, iters, converged = best
-        dof = max(dw.size - 3, 1)
+        dof = max(3 * n_used - 3, 1)
         rms = math.sqrt(cost / dof)
         ok, reason = self._ok(best, n_used)
         self._last = p.copy() if ok else None
@@ -899,8 +995,8 @@ class Localizer:
         rms = math.sqrt(cost / dof)
         if not converged:
             return False, "fit did not converge"
-        lo, hi = self.model.box_lower_m, self.model.box_upper_m
-        if not ((p > lo + 1e-6).all() and (p < hi - 1e-6).all()):
+        lo, hi = self._box_lo, self._box_hi
+        if not all(lo[k] + 1e-6 < p[k] < hi[k] - 1e-6 for k in range(3)):
             return False, "position at or outside the plausible box's edge"
         if rms > self.residual_limit:
             return False, f"residual {rms:.3g} > {self.residual_limit:g} (lost or implausible)"
@@ -924,20 +1020,38 @@ class Localizer:
         costs[~np.isfinite(costs)] = np.inf
         return [c[k] for k in np.argsort(costs)[:keep]]
 
-    def _lm(self, resid, p0):
+    def _make_eval(self, big):
+        """p -> the Gram matrix of [J, -r] (4 x 4 nested lists) for :meth:`_lm`; big (3 m, 6 n + 4)
+        = the weighted [mu0 op | A | -c] (see :meth:`_fit`)."""
+        u, cc, k = self._mp
+        pts = self._pts
+        work = self._mp_work
+        # one product: [mu0 op | A | -c] @ [[multipole rows (6n, 4)], [I, p], [0, 0, 0, 1]] =
+        # op b(p) + A p - c next to op J(p) + A (A = 0 without corrections)
+        stack = self._mp_stack
+        buf = stack[:-4].reshape(-1, 3, 4)
+
+        def evaluate(p):
+            _multipole_rows(pts - p, u, cc, k, buf, work)
+            stack[-4:-1, 3] = p
+            y = big @ stack
+            return (y.T @ y).tolist()
+        return evaluate
+
+    def _lm(self, evaluate, p0):
         """Levenberg-Marquardt on the position (3 unknowns: the 3 x 3 normal equations are
         solved in closed form on Python floats, the small-array numpy overhead dominates
-        here)."""
+        here). ``evaluate(p)`` -> the Gram matrix of [J, -r] (4 x 4 nested lists)."""
         p = np.array(p0, dtype=float)
-        r, j = resid(p, True)
-        cost = float(r @ r)
+        gm = evaluate(p)
+        cost = gm[3][3]
         lam = 1e-6
         converged = False
         it = 0
         lo, hi = self._box_lo, self._box_hi
         for it in range(1, self.max_iterations + 1):
-            a = (j.T @ j).tolist()
-            g = (j.T @ r).tolist()
+            a = gm
+            g = (-gm[0][3], -gm[1][3], -gm[2][3])
             step = _solve3_damped(a, g, lam)
             if step is None:
                 break
@@ -954,10 +1068,10 @@ class Localizer:
             # the position stays in the plausible box: far outside it the magnet's field vanishes
             # and a step could run away on the (bounded) induced term alone
             pn = np.array([min(max(p[k] + step[k], lo[k]), hi[k]) for k in range(3)])
-            rn, jn = resid(pn, True)
-            cn = float(rn @ rn)
+            gn = evaluate(pn)
+            cn = gn[3][3]
             if math.isfinite(cn) and cn <= cost:
-                p, r, j = pn, rn, jn
+                p, gm = pn, gn
                 # 0.1 um or a negligible cost decrease: far below what the noise allows
                 small = s2 < 1e-14 or cost - cn <= 1e-7 * cost
                 cost = cn
