@@ -452,7 +452,6 @@ def _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n
     """Primal active-set iterations from a feasible point x and its working set: ``free``
     (list of bool), the sign ``sg`` of each free coil, the value ``fixv`` of each fixed one and
     ``bud`` (the budget held with equality). ``at_face``: x is already this face's minimizer."""
-    rng = range(n)
     heps = h + eps * _eye(n)
     if not budget_possible:  # no budget face will be solved
         return _active_set_loop(fs, ft, heps, q, usl, ts, tol, unipolar, False, k, n,

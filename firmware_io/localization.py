@@ -605,7 +605,6 @@ class Localizer:
             if self.calibration.coil_field_t_per_a is not None:
                 cf = self.calibration.coil_field_t_per_a
         self._coil = cf
-        self._coil_flat = cf.reshape(2, n, 3, -1)
         # subtraction: the lower sensor's coil field mapped onto the upper one's (for the
         # symmetric array diag(-1, -1, 1): Br is odd about the coil's mid-plane)
         self._mirror = np.stack([cf[0, i] @ np.linalg.pinv(cf[1, i]) for i in range(n)])
@@ -793,7 +792,7 @@ class Localizer:
             use = np.isfinite(d.sum(1))
             s2 = 2 * sig2n + self.rel**2 * (mag2[0] + mag2[1])
         else:
-            d = (meas - self._coil_flat @ currents).reshape(-1, 3)
+            d = (meas - self._coil @ currents).reshape(-1, 3)
             use = np.isfinite(d.sum(1))
             s2 = sig2n + self.rel**2 * mag2.reshape(-1)
         if self.mount_position_m:
@@ -901,21 +900,15 @@ class Localizer:
             return parts[0][4], parts[0][5]
         return parts[0][4] + parts[1][4], parts[0][5] + parts[1][5]
 
-    def _forward(self, p, subtract: bool, jac: bool, lin=None):
+    def _subtracted_model(self, p, extra=None):
+        """The model of the subtracted data at position p: (n, 3) T, the multipole plus the
+        corrections ``extra`` (2n, 3) T at the 2n sensors, mapped by the fit's own subtraction
+        operator."""
         m = self.model
-        res = multipole_field(self._pts, p, m.moment_a_m2, m.octupole_m2, jacobian=jac)
-        b, j = (res if jac else (res, None))
-        if lin is not None:
-            pc, val, lj = lin
-            b = b + val + lj @ (p - pc)
-            if jac:
-                j = j + lj
-        n = m.n_sensors
-        if subtract:
-            b = b[:n] - np.einsum("sij,sj->si", self._mirror, b[n:])
-            if jac:
-                j = j[:n] - np.einsum("sij,sjk->sik", self._mirror, j[n:])
-        return b, j
+        b = multipole_field(self._pts, p, m.moment_a_m2, m.octupole_m2)
+        if extra is not None:
+            b = b + extra
+        return (self._sub_op_all @ b.reshape(-1)).reshape(-1, 3)
 
     def _fit(self, meas, currents, method) -> Estimate:
         subtract = currents is None
@@ -1096,9 +1089,7 @@ class Localizer:
         k = int(np.argmax(mag))
         rel, inside = self.learned(d[k])
         p = self.model.sensor_positions_m[0, k] + rel
-        lin = ((p, self._extra(p), np.zeros((len(self._pts), 3, 3)))
-               if (self._exact or self.cores) else None)
-        b, _ = self._forward(p, True, False, lin)
+        b = self._subtracted_model(p, self._extra(p) if (self._exact or self.cores) else None)
         r = ((d[use] - b[use]) / sig[use, None]).reshape(-1)
         rms = math.sqrt(float(r @ r) / max(r.size - 3, 1))
         ok, reason = inside, "" if inside else "outside the learned inverse's training box"
