@@ -140,6 +140,8 @@ def _check_inputs(force_matrix, target, current_limit, total_limit, bias):
         t = np.ldexp(t, -scale_e)
     if isinstance(current_limit, (float, int)) and not isinstance(current_limit, bool):
         u = [float(current_limit)] * n
+    elif type(current_limit) is np.ndarray and current_limit.shape == (n,):
+        u = current_limit.astype(float).tolist()
     else:
         try:
             u = np.broadcast_to(np.asarray(current_limit, dtype=float), (n,)).tolist()
@@ -201,14 +203,14 @@ def allocate(force_matrix, target, current_limit, total_limit, *, unipolar: bool
     fm, t, u, tl, scale_e = _check_inputs(force_matrix, target, current_limit, total_limit,
                                           bias)
     x = _solve(fm, t, u, tl, bool(unipolar), max_iter, warm)
-    r = fm @ x - t
+    r = fm.dot(x) - t
     big = max(map(abs, r.tolist()))
     if big < 1e150:
-        res = float(r @ r)
+        res = float(r.dot(r))
     else:  # the square of a target beyond 1e154: scaled, and capped at the largest float
         e = math.frexp(big)[1]
         rs = np.ldexp(r, -e)
-        res, scale_e = float(rs @ rs), scale_e + e
+        res, scale_e = float(rs.dot(rs)), scale_e + e
     if scale_e and res > 0.0:
         try:
             res = math.ldexp(res, 2 * scale_e)
@@ -290,29 +292,29 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
     tsb = ts if budget_possible else _INF
     eps = EPS_REL * max(c2, 1e-300)
     lo = 0.0 if unipolar else -1.0
-    ffT = fs @ fs.T
+    ffT = fs.dot(fs.T)
 
     # ---- fast exit: the least-norm exact fit F^T (F F^T)^-1 f inside the bounds is the answer
     # (a 1e-14 shift keeps the solve regular whatever F; one refinement step removes it)
     mreg = ffT + (1e-14 * c2) * _eye(k)
     y0 = _fast_solve(mreg, ft)
-    y0 += _fast_solve(mreg, ft - ffT @ y0)
-    x0 = fs.T @ y0
+    y0 += _fast_solve(mreg, ft - ffT.dot(y0))
+    x0 = fs.T.dot(y0)
     xl = x0.tolist()
-    ft2 = float(ft @ ft)
+    ft2 = float(ft.dot(ft))
     if _inside(xl, usl, tsb, unipolar):
-        r = fs @ x0 - ft
-        lim = _EXACT_FIT_TOL * (math.sqrt(ft2) + math.sqrt(c2 * float(x0 @ x0)))
-        if float(r @ r) <= lim * lim:
+        r = fs.dot(x0) - ft
+        lim = _EXACT_FIT_TOL * (math.sqrt(ft2) + math.sqrt(c2 * float(x0.dot(x0))))
+        if float(r.dot(r)) <= lim * lim:
             if warm is not None:
                 warm.face = ([True] * n, [1.0 if v >= 0.0 else -1.0 for v in xl], [0.0] * n,
                              False)
                 warm.key = (k, n, unipolar)
             return x0 * umax
 
-    h = fs.T @ fs
-    q = fs.T @ ft
-    gscale = c2 + math.sqrt(float(q @ q)) + 1e-300
+    h = fs.T.dot(fs)
+    q = fs.T.dot(ft)
+    gscale = c2 + math.sqrt(float(q.dot(q))) + 1e-300
     tol = _MULT_TOL * gscale
     if max_iter is None:
         max_iter = 50 + 10 * n
@@ -347,10 +349,10 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
                             k, n, max_iter, *state)
         x, _, y, res2 = _polish(fs, ft, usl, ts, k, unipolar, *state)
     if res2 is None:
-        r = fs @ x - ft
-        res2 = float(r @ r)
+        r = fs.dot(x) - ft
+        res2 = float(r.dot(r))
     # ---- an exact fit: the least-energy stage on its own, free of eps (see _least_energy)
-    lim = _EXACT_FIT_TOL * (math.sqrt(ft2) + math.sqrt(c2 * float(x @ x)))
+    lim = _EXACT_FIT_TOL * (math.sqrt(ft2) + math.sqrt(c2 * float(x.dot(x))))
     if res2 <= lim * lim:
         x2 = _least_energy(fs, ft, usl, tsb, unipolar, y0 if y is None else y, lim, c2, k)
         if x2 is not None:
@@ -416,8 +418,8 @@ def _polish(fs, ft, usl, ts, k, unipolar, x, free, sg, fixv, bud):
     and is no worse; y its kernel coefficients (None in the primal form). Bipolar without the
     budget in the working set, a free coil may take either sign (see `_active_set`)."""
     if not any(free):
-        r = fs @ x - ft
-        return x, True, None, float(r @ r)
+        r = fs.dot(x) - ft
+        return x, True, None, float(r.dot(r))
     xp, y = _face_minimizer(fs, ft, 0.0, free, sg, fixv, bud, ts, k, want_y=True)
     xpl = xp.tolist()
     slack = 1e-12 * max(usl)
@@ -437,12 +439,12 @@ def _polish(fs, ft, usl, ts, k, unipolar, x, free, sg, fixv, bud):
     if not bud and math.fsum(map(abs, xpl)) > ts * (1 + 1e-12):
         return x, False, None, None  # the Tikhonov bias kept it inside the budget; eps -> 0 does not
     xp = np.array(xpl)
-    rp, rx = fs @ xp - ft, fs @ x - ft
-    ep, ex = float(rp @ rp), float(rx @ rx)
+    rp, rx = fs.dot(xp) - ft, fs.dot(x) - ft
+    ep, ex = float(rp.dot(rp)), float(rx.dot(rx))
     # "no worse" up to rounding: the two objectives often agree to 1e-16 relative (eps only
     # shifts a determined face by ~1e-10), and a coin flip there would send a third of the
     # hard problems through the continuation pass for nothing
-    if ep <= ex * (1.0 + 1e-12) + 1e-24 * float(ft @ ft):
+    if ep <= ex * (1.0 + 1e-12) + 1e-24 * float(ft.dot(ft)):
         return xp, True, y, ep
     return x, False, None, ex
 
@@ -579,7 +581,7 @@ def _active_set_loop(fs, ft, heps, q, usl, ts, tol, unipolar, budget_possible, k
             xl = xh.tolist()
         x = xh
         # ---- at the face minimizer: multipliers of the working constraints
-        g = (heps @ x - q).tolist()
+        g = (heps.dot(x) - q).tolist()
         nu = 0.0
         if bud:
             nf, acc = 0, 0.0
@@ -630,13 +632,13 @@ def _cold_start(fs, ft, q, xl, usl, ts, unipolar):
     best-correlated ones). Unreachable targets end at such a pattern; starting from the
     least-norm fit alone, each coil whose sign is wrong there costs 2-4 faces to flip."""
     cand = _proj_list(xl, usl, ts, unipolar)[0]
-    fq = fs @ q
-    den = float(fq @ fq)
+    fq = fs.dot(q)
+    den = float(fq.dot(fq))
     if not den > 0.0:
         return cand
-    c = min(1e3 * float(ft @ fq) / den, 1e290)  # scaled |q_i| <= k: no overflow below
+    c = min(1e3 * float(ft.dot(fq)) / den, 1e290)  # scaled |q_i| <= k: no overflow below
     cand2 = _proj_list([c * v for v in q.tolist()], usl, ts, unipolar)[0]
-    r = np.array([cand, cand2]) @ fs.T - ft
+    r = np.array([cand, cand2]).dot(fs.T) - ft
     o1, o2 = np.add.reduce(r * r, axis=1).tolist()
     return cand2 if o2 < o1 else cand
 
@@ -680,7 +682,7 @@ def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False, heps=
         hr = hb[jj]
         if anyfix:
             fe = np.array(fixv + [0.0])
-            rhs = qb[jj] - hr @ fe
+            rhs = qb[jj] - hr.dot(fe)
             x = fe[:n]
         else:
             rhs = qb[jj]
@@ -699,39 +701,39 @@ def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False, heps=
             if aug is not None:
                 a, bt = aug[0], aug[1]
                 aj = a[:, j]
-                rhs = (bt - a @ fixed) if anyfix else bt
+                rhs = (bt - a.dot(fixed)) if anyfix else bt
             else:
                 a = np.empty((k + 1, n))
                 a[:k] = fs
                 a[k] = sg
                 aj = a[:, j]
                 rhs = np.empty(k + 1)
-                rhs[:k] = (ft - fs @ fixed) if anyfix else ft
+                rhs[:k] = (ft - fs.dot(fixed)) if anyfix else ft
                 rhs[k] = c
-            mat = aj @ aj.T
+            mat = aj.dot(aj.T)
         else:
             aj = fs[:, j]
-            mat = aj @ aj.T
-            rhs = (ft - fs @ fixed) if anyfix else ft
+            mat = aj.dot(aj.T)
+            rhs = (ft - fs.dot(fixed)) if anyfix else ft
         if eps:
             mat += _eps_diag(eps, k, mat.shape[0])
         w = _lsolve(mat, rhs, eps > 0)
         x = fixed
-        x[j] = aj.T @ w
+        x[j] = aj.T.dot(w)
         return (x, w[:k]) if want_y else x
     # primal normal equations on the free coils
     if heps is None:
         fj = fs[:, j]
-        hj = fj.T @ fj
+        hj = fj.T.dot(fj)
         if eps:
             hj += eps * _eye(nf)
-        b = fj.T @ ((ft - fs @ fixed) if anyfix else ft)
+        b = fj.T.dot((ft - fs.dot(fixed)) if anyfix else ft)
     else:
         hr = heps[j]
         hj = hr[:, j]
         b = q[j]
         if anyfix:  # the eps part of heps meets only free coordinates, where fixed is 0
-            b = b - hr @ fixed
+            b = b - hr.dot(fixed)
     x = fixed
     if bud:
         mat = np.empty((nf + 1, nf + 1))
@@ -835,18 +837,18 @@ def _least_energy(fs, ft, usl, ts, unipolar, y, lim, c2, k, steps=6):
     shift = (1e-14 * c2) * _eye(k)
     lim2 = lim * lim
     for _ in range(steps):
-        xl, tau = _proj_list((fs.T @ y).tolist(), usl, ts, unipolar)
+        xl, tau = _proj_list(fs.T.dot(y).tolist(), usl, ts, unipolar)
         x = np.array(xl)
-        r = ft - fs @ x
-        if float(r @ r) <= lim2:
+        r = ft - fs.dot(x)
+        if float(r.dot(r)) <= lim2:
             return x
         j = [i for i, (v, ui) in enumerate(zip(xl, usl)) if 0.0 < abs(v) < ui]
         if not j:
             return None
         fj = fs[:, j]
-        m = fj @ fj.T + shift
+        m = fj.dot(fj.T) + shift
         if tau > 0.0:
-            wv = fj @ np.array([1.0 if xl[i] > 0.0 else -1.0 for i in j])
+            wv = fj.dot(np.array([1.0 if xl[i] > 0.0 else -1.0 for i in j]))
             m -= np.outer(wv, wv) / len(j)
         y = y + _fast_solve(m, r)
     return None
