@@ -679,15 +679,15 @@ def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False, heps=
         # primal normal equations of a budget face: a slice of the kept bordered system
         hb, qb = aug[2], aug[3]
         jj = j + [n]
-        hr = hb[jj]
+        hr = hb.take(jj, 0)
         if anyfix:
             fe = np.array(fixv + [0.0])
-            rhs = qb[jj] - hr.dot(fe)
+            rhs = qb.take(jj) - hr.dot(fe)
             x = fe[:n]
         else:
-            rhs = qb[jj]
+            rhs = qb.take(jj)
             x = np.zeros(n)
-        x[j] = _lsolve(hr[:, jj], rhs, eps > 0)[:nf]
+        x.put(j, _lsolve(hr.take(jj, 1), rhs, eps > 0)[:nf])
         return (x, None) if want_y else x
     fixed = np.array(fixv) if anyfix else np.zeros(n)  # a new array: written in place below
     if nf == 0:
@@ -700,38 +700,38 @@ def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False, heps=
             # [F_J; s^T] [F_J; s^T]^T [y; t] = [r; c] (+ eps on the y block)
             if aug is not None:
                 a, bt = aug[0], aug[1]
-                aj = a[:, j]
+                aj = a.take(j, 1)
                 rhs = (bt - a.dot(fixed)) if anyfix else bt
             else:
                 a = np.empty((k + 1, n))
                 a[:k] = fs
                 a[k] = sg
-                aj = a[:, j]
+                aj = a.take(j, 1)
                 rhs = np.empty(k + 1)
                 rhs[:k] = (ft - fs.dot(fixed)) if anyfix else ft
                 rhs[k] = c
             mat = aj.dot(aj.T)
         else:
-            aj = fs[:, j]
+            aj = fs.take(j, 1)
             mat = aj.dot(aj.T)
             rhs = (ft - fs.dot(fixed)) if anyfix else ft
         if eps:
             mat += _eps_diag(eps, k, mat.shape[0])
         w = _lsolve(mat, rhs, eps > 0)
         x = fixed
-        x[j] = aj.T.dot(w)
+        x.put(j, aj.T.dot(w))
         return (x, w[:k]) if want_y else x
     # primal normal equations on the free coils
     if heps is None:
-        fj = fs[:, j]
+        fj = fs.take(j, 1)
         hj = fj.T.dot(fj)
         if eps:
             hj += eps * _eye(nf)
         b = fj.T.dot((ft - fs.dot(fixed)) if anyfix else ft)
     else:
-        hr = heps[j]
-        hj = hr[:, j]
-        b = q[j]
+        hr = heps.take(j, 0)
+        hj = hr.take(j, 1)
+        b = q.take(j)
         if anyfix:  # the eps part of heps meets only free coordinates, where fixed is 0
             b = b - hr.dot(fixed)
     x = fixed
@@ -745,9 +745,9 @@ def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False, heps=
         rhs = np.empty(nf + 1)
         rhs[:nf] = b
         rhs[nf] = c
-        x[j] = _lsolve(mat, rhs, eps > 0)[:nf]
+        x.put(j, _lsolve(mat, rhs, eps > 0)[:nf])
     else:
-        x[j] = _lsolve(hj, b, eps > 0)
+        x.put(j, _lsolve(hj, b, eps > 0))
     return (x, None) if want_y else x
 
 
@@ -845,7 +845,7 @@ def _least_energy(fs, ft, usl, ts, unipolar, y, lim, c2, k, steps=6):
         j = [i for i, (v, ui) in enumerate(zip(xl, usl)) if 0.0 < abs(v) < ui]
         if not j:
             return None
-        fj = fs[:, j]
+        fj = fs.take(j, 1)
         m = fj.dot(fj.T) + shift
         if tau > 0.0:
             wv = fj.dot(np.array([1.0 if xl[i] > 0.0 else -1.0 for i in j]))
