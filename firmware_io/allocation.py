@@ -261,9 +261,8 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
         return np.zeros(n)
     # scale currents by u_max and forces by the largest achievable column force u_max |F_i|
     # (or the target, if larger)
-    colsq = np.add.reduce(fm * fm, axis=0)
-    cmax = float(np.maximum.reduce(colsq))
-    fmax = float(np.maximum.reduce(np.abs(f))) if k > 1 else abs(float(f[0]))
+    cmax = float(np.maximum.reduce(np.add.reduce(fm * fm, axis=0)))
+    fmax = max(map(abs, f.tolist()))
     cs = math.sqrt(cmax) * umax
     fscale = cs if cs > fmax else fmax
     if fscale == 0.0:
@@ -279,12 +278,15 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
         fs = fm / denom
         ft = (f / umax) / cn if cn >= rt else f / fmax
         c2 = cmax / (denom * denom)
-    rows = np.logical_or.reduce(fs != 0.0, axis=1)
-    if not rows.all():  # an all-zero row (e.g. torque about m) adds a constant residual only
-        if not rows.any():
-            return np.zeros(n)
-        fs, ft = fs[rows], ft[rows]
-        k = fs.shape[0]
+    ffT = fs.dot(fs.T)
+    if 0.0 in ffT.diagonal().tolist():  # a zero row, or one whose squares underflow
+        rows = np.logical_or.reduce(fs != 0.0, axis=1)
+        if not rows.all():  # an all-zero row (e.g. torque about m): a constant residual only
+            if not rows.any():
+                return np.zeros(n)
+            fs, ft = fs[rows], ft[rows]
+            k = fs.shape[0]
+            ffT = fs.dot(fs.T)
     inv_umax = 1.0 / umax
     usl = [ui * inv_umax for ui in ul]
     ts = tl_eff * inv_umax
@@ -292,7 +294,6 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
     tsb = ts if budget_possible else _INF
     eps = EPS_REL * max(c2, 1e-300)
     lo = 0.0 if unipolar else -1.0
-    ffT = fs.dot(fs.T)
 
     # ---- fast exit: the least-norm exact fit F^T (F F^T)^-1 f inside the bounds is the answer
     # (a 1e-14 shift keeps the solve regular whatever F; one refinement step removes it)
