@@ -344,11 +344,11 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
     # ---- polish: the eps -> 0 limit on the final face (the lexicographic answer: least residual,
     # then least energy) removes the Tikhonov bias when it stays on the face; if it leaves the
     # face, a continuation pass with eps 1e4 x smaller (warm started, usually 1 face) first
-    x, ok, y, res2 = _polish(fs, ft, usl, ts, k, unipolar, *state)
+    x, ok, y, res2 = _polish(fs, ft, h, q, usl, ts, k, unipolar, *state)
     if not ok:
         state = _active_set(fs, ft, h, q, usl, ts, eps * 1e-4, tol, unipolar, budget_possible,
                             k, n, max_iter, *state)
-        x, _, y, res2 = _polish(fs, ft, usl, ts, k, unipolar, *state)
+        x, _, y, res2 = _polish(fs, ft, h, q, usl, ts, k, unipolar, *state)
     if res2 is None:
         r = fs.dot(x) - ft
         res2 = float(r.dot(r))
@@ -414,14 +414,15 @@ def _on_face(xl, free, sg, usl, ts, bud, unipolar):
     return bud or tot <= ts
 
 
-def _polish(fs, ft, usl, ts, k, unipolar, x, free, sg, fixv, bud):
+def _polish(fs, ft, h, q, usl, ts, k, unipolar, x, free, sg, fixv, bud):
     """(x, accepted, y): the eps = 0 face minimizer if it stays on the face (box and budget)
     and is no worse; y its kernel coefficients (None in the primal form). Bipolar without the
-    budget in the working set, a free coil may take either sign (see `_active_set`)."""
+    budget in the working set, a free coil may take either sign (see `_active_set`). ``h``,
+    ``q``: F^T F and F^T f."""
     if not any(free):
         r = fs.dot(x) - ft
         return x, True, None, float(r.dot(r))
-    xp, y = _face_minimizer(fs, ft, 0.0, free, sg, fixv, bud, ts, k, want_y=True)
+    xp, y = _face_minimizer(fs, ft, 0.0, free, sg, fixv, bud, ts, k, want_y=True, heps=h, q=q)
     xpl = xp.tolist()
     slack = 1e-12 * max(usl)
     signfree = not (unipolar or bud)
