@@ -261,7 +261,7 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
         return np.zeros(n)
     # scale currents by u_max and forces by the largest achievable column force u_max |F_i|
     # (or the target, if larger)
-    cmax = float(np.maximum.reduce(np.add.reduce(fm * fm, axis=0)))
+    cmax = max(fm.T.dot(fm).diagonal().tolist())  # entries < 1e150 here (_check_inputs)
     fmax = max(map(abs, f.tolist()))
     cs = math.sqrt(cmax) * umax
     fscale = cs if cs > fmax else fmax
@@ -799,8 +799,12 @@ def _proj_list(v, us, ts, unipolar):
     """Euclidean projection of v (list) onto {lo <= x <= u, sum |x| <= ts} in plain Python
     floats (n ~ 9: a loop is cheaper than a dozen numpy calls). Returns (x, tau), tau the
     budget's soft threshold."""
-    a = v if unipolar else [abs(t) for t in v]
-    c = [(ai if ai < ui else ui) if ai > 0.0 else 0.0 for ai, ui in zip(a, us)]
+    if unipolar:
+        a = v
+        c = [(ai if ai < ui else ui) if ai > 0.0 else 0.0 for ai, ui in zip(a, us)]
+    else:
+        a = list(map(abs, v))
+        c = list(map(min, a, us))
     s = math.fsum(c)
     tau = 0.0
     if s > ts:
@@ -825,7 +829,7 @@ def _proj_list(v, us, ts, unipolar):
         c = [min(max(ai - tau, 0.0), ui) for ai, ui in zip(a, us)]
     if unipolar:
         return c, tau
-    return [ci if vi >= 0.0 else -ci for ci, vi in zip(c, v)], tau
+    return list(map(math.copysign, c, v)), tau
 
 
 def _least_energy(fs, ft, usl, ts, unipolar, y, lim, c2, k, steps=6):
