@@ -689,7 +689,7 @@ def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False, heps=
         else:
             rhs = qb.take(jj)
             x = np.zeros(n)
-        x.put(j, _lsolve(hr.take(jj, 1), rhs, eps > 0)[:nf])
+        x.put(j, _lsolve(hr.take(jj, 1), rhs, eps > 0))  # put: the first nf values
         return (x, None) if want_y else x
     fixed = np.array(fixv) if anyfix else np.zeros(n)  # a new array: written in place below
     if nf == 0:
@@ -747,7 +747,7 @@ def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False, heps=
         rhs = np.empty(nf + 1)
         rhs[:nf] = b
         rhs[nf] = c
-        x.put(j, _lsolve(mat, rhs, eps > 0)[:nf])
+        x.put(j, _lsolve(mat, rhs, eps > 0))
     else:
         x.put(j, _lsolve(hj, b, eps > 0))
     return (x, None) if want_y else x
