@@ -327,10 +327,11 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
         fixv = [r * ui for r, ui in zip(rel, usl)]
         if bud and not budget_possible:
             bud = False
-        xh = _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k)
+        kept = []
+        xh = _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, keep=kept)
         if _on_face(xh.tolist(), free, sg, usl, tsb, bud, unipolar):
             state = _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible,
-                                k, n, max_iter, xh, free, sg, fixv, bud, at_face=True)
+                                k, n, max_iter, xh, free, sg, fixv, bud, at_face=kept)
     if state is None:
         # ---- cold start: the projection of the least-norm exact fit and its working set
         xl = _cold_start(fs, ft, q, xl, usl, tsb, unipolar)
@@ -344,11 +345,12 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
     # ---- polish: the eps -> 0 limit on the final face (the lexicographic answer: least residual,
     # then least energy) removes the Tikhonov bias when it stays on the face; if it leaves the
     # face, a continuation pass with eps 1e4 x smaller (warm started, usually 1 face) first
-    x, ok, y, res2 = _polish(fs, ft, h, q, usl, ts, k, unipolar, *state)
+    # (state: x, free, sg, fixv, bud and the final face's system, see _active_set)
+    x, ok, y, res2 = _polish(fs, ft, h, q, usl, ts, k, unipolar, *state, eps)
     if not ok:
         state = _active_set(fs, ft, h, q, usl, ts, eps * 1e-4, tol, unipolar, budget_possible,
-                            k, n, max_iter, *state)
-        x, _, y, res2 = _polish(fs, ft, h, q, usl, ts, k, unipolar, *state)
+                            k, n, max_iter, *state[:5])
+        x, _, y, res2 = _polish(fs, ft, h, q, usl, ts, k, unipolar, *state, eps * 1e-4)
     if res2 is None:
         r = fs.dot(x) - ft
         res2 = float(r.dot(r))
@@ -364,9 +366,9 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
                 state = (x, free, [1.0 if v >= 0.0 else -1.0 for v in xl],
                          [0.0 if fr else v for v, fr in zip(xl, free)],
                          budget_possible and any(free)
-                         and math.fsum(map(abs, xl)) >= ts * (1 - 1e-12))
+                         and math.fsum(map(abs, xl)) >= ts * (1 - 1e-12), [])
     if warm is not None:
-        _, free, sg, fixv, bud = state
+        _, free, sg, fixv, bud, _ = state
         warm.face = (free, sg, [v / ui if ui > 0.0 else 0.0 for v, ui in zip(fixv, usl)], bud)
         warm.key = key
     # ---- guarantee: never outside the bounds, whatever round-off did
@@ -377,10 +379,16 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
 
 
 _EYES = [np.eye(i) for i in range(16)]
+_EYES_B = [np.diag([1.0] * i + [0.0]) for i in range(16)]
 
 
 def _eye(m):
     return _EYES[m] if m < 16 else np.eye(m)
+
+
+def _eye_bordered(m):
+    """The (m + 1) x (m + 1) identity with a 0 in the last place (the border)."""
+    return _EYES_B[m] if m < 16 else np.diag([1.0] * m + [0.0])
 
 
 def _inside(xl, usl, ts, unipolar):
@@ -414,15 +422,30 @@ def _on_face(xl, free, sg, usl, ts, bud, unipolar):
     return bud or tot <= ts
 
 
-def _polish(fs, ft, h, q, usl, ts, k, unipolar, x, free, sg, fixv, bud):
+def _polish(fs, ft, h, q, usl, ts, k, unipolar, x, free, sg, fixv, bud, kept, eps):
     """(x, accepted, y): the eps = 0 face minimizer if it stays on the face (box and budget)
     and is no worse; y its kernel coefficients (None in the primal form). Bipolar without the
     budget in the working set, a free coil may take either sign (see `_active_set`). ``h``,
-    ``q``: F^T F and F^T f."""
+    ``q``: F^T F and F^T f. ``kept``: this face's system as the active set last solved it
+    (`_face_minimizer`'s ``keep``; empty if it did not), whose eps part is taken out."""
     if not any(free):
         r = fs.dot(x) - ft
         return x, True, None, float(r.dot(r))
-    xp, y = _face_minimizer(fs, ft, 0.0, free, sg, fixv, bud, ts, k, want_y=True, heps=h, q=q)
+    if kept:
+        j, mat, rhs, aj, m = kept
+        size = mat.shape[0]
+        mat = mat - eps * (_eye(size) if m == size else _eye_bordered(m))
+        sol = _lsolve(mat, rhs, False)
+        xp = np.array(fixv)
+        if aj is None:
+            xp.put(j, sol)
+            y = None
+        else:
+            xp.put(j, aj.T.dot(sol))
+            y = sol[:k]
+    else:
+        xp, y = _face_minimizer(fs, ft, 0.0, free, sg, fixv, bud, ts, k, want_y=True, heps=h,
+                                q=q)
     xpl = xp.tolist()
     slack = 1e-12 * max(usl)
     signfree = not (unipolar or bud)
@@ -452,10 +475,12 @@ def _polish(fs, ft, h, q, usl, ts, k, unipolar, x, free, sg, fixv, bud):
 
 
 def _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n, max_iter,
-                x, free, sg, fixv, bud, at_face=False):
+                x, free, sg, fixv, bud, at_face=None):
     """Primal active-set iterations from a feasible point x and its working set: ``free``
     (list of bool), the sign ``sg`` of each free coil, the value ``fixv`` of each fixed one and
-    ``bud`` (the budget held with equality). ``at_face``: x is already this face's minimizer."""
+    ``bud`` (the budget held with equality). ``at_face``: x is already this face's minimizer,
+    and this (a list, maybe empty) its system from `_face_minimizer`'s ``keep``. Returns
+    (x, free, sg, fixv, bud, system of the final face as ``keep`` has it, or [])."""
     heps = h + eps * _eye(n)
     if not budget_possible:  # no budget face will be solved
         return _active_set_loop(fs, ft, heps, q, usl, ts, tol, unipolar, False, k, n,
@@ -487,12 +512,13 @@ def _active_set_loop(fs, ft, heps, q, usl, ts, tol, unipolar, budget_possible, k
     if aug is not None:
         aug_a, hb = aug[0], aug[2]
     xl = x.tolist()
+    keep = at_face if at_face is not None else []  # the last face system solved (the polish)
     for _ in range(max_iter):
-        if at_face:
-            xh, at_face = x, False
+        if at_face is not None:
+            xh, at_face = x, None
         else:
             xh = _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, heps=heps, q=q,
-                                 aug=aug)
+                                 aug=aug, keep=keep)
         if any(free):
             hl = xh.tolist()
             alpha, block, kind, rate = 1.0, -1, 0, 0.0
@@ -624,7 +650,8 @@ def _active_set_loop(fs, ft, heps, q, usl, ts, tol, unipolar, budget_possible, k
             fixv[m] = 0.0
     if x is None:  # the iteration cap hit after a step: the current feasible point
         x = np.array(xl)
-    return x, free, sg, fixv, bud
+        keep = []
+    return x, free, sg, fixv, bud, keep
 
 
 def _cold_start(fs, ft, q, xl, usl, ts, unipolar):
@@ -665,14 +692,15 @@ def _budget_hit(xl, hl, alpha, ts):
 
 
 def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False, heps=None, q=None,
-                    aug=None):
+                    aug=None, keep=None):
     """Minimizer of the regularized objective on the working face (free coils keep their sign;
     with ``bud`` the budget holds with equality). ``want_y``: also the kernel coefficients y
     (x_J = F_J^T y + t s) when the kernel form applies, else None. ``heps``, ``q``: F^T F +
     eps I and F^T f if the caller has them (the primal form then slices them; one solve is
     ~10 small numpy calls, so every call saved counts). ``aug``: the (k + 1, n) matrix [F; sg]
     and the (k + 1,) vector [f; I_t] if the caller keeps them (a fixed coil's sign times its
-    value is its |value|, so [f; I_t] - aug @ fixed is the kernel form's right-hand side)."""
+    value is its |value|, so [f; I_t] - aug @ fixed is the kernel form's right-hand side).
+    ``keep``: a list that receives this face's system (see `_polish`)."""
     n = len(fixv)
     j = [i for i, fr in enumerate(free) if fr]
     nf = len(j)
@@ -689,7 +717,10 @@ def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False, heps=
         else:
             rhs = qb.take(jj)
             x = np.zeros(n)
-        x.put(j, _lsolve(hr.take(jj, 1), rhs, eps > 0))  # put: the first nf values
+        mat = hr.take(jj, 1)
+        if keep is not None:
+            keep[:] = (j, mat, rhs, None, nf)
+        x.put(j, _lsolve(mat, rhs, eps > 0))  # put: the first nf values
         return (x, None) if want_y else x
     fixed = np.array(fixv) if anyfix else np.zeros(n)  # a new array: written in place below
     if nf == 0:
@@ -719,6 +750,8 @@ def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False, heps=
             rhs = (ft - fs.dot(fixed)) if anyfix else ft
         if eps:
             mat += _eps_diag(eps, k, mat.shape[0])
+        if keep is not None:
+            keep[:] = (j, mat, rhs, aj, k)
         w = _lsolve(mat, rhs, eps > 0)
         x = fixed
         x.put(j, aj.T.dot(w))
@@ -747,9 +780,11 @@ def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False, heps=
         rhs = np.empty(nf + 1)
         rhs[:nf] = b
         rhs[nf] = c
-        x.put(j, _lsolve(mat, rhs, eps > 0))
     else:
-        x.put(j, _lsolve(hj, b, eps > 0))
+        mat, rhs = hj, b
+    if keep is not None:
+        keep[:] = (j, mat, rhs, None, nf)
+    x.put(j, _lsolve(mat, rhs, eps > 0))
     return (x, None) if want_y else x
 
 
