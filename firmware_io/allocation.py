@@ -280,13 +280,14 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
         c2 = cmax / (denom * denom)
     ffT = fs.dot(fs.T)
     if 0.0 in ffT.diagonal().tolist():  # a zero row, or one whose squares underflow
-        rows = np.logical_or.reduce(fs != 0.0, axis=1)
-        if not rows.all():  # an all-zero row (e.g. torque about m): a constant residual only
-            if not rows.any():
+        rows = np.logical_or.reduce(fs != 0.0, axis=1).tolist()
+        if not all(rows):  # an all-zero row (e.g. torque about m): a constant residual only
+            keep = [i for i, nz in enumerate(rows) if nz]
+            if not keep:
                 return np.zeros(n)
-            fs, ft = fs[rows], ft[rows]
-            k = fs.shape[0]
-            ffT = fs.dot(fs.T)
+            fs, ft = fs.take(keep, 0), ft.take(keep)
+            k = len(keep)
+            ffT = ffT.take(keep, 0).take(keep, 1)
     inv_umax = 1.0 / umax
     usl = [ui * inv_umax for ui in ul]
     ts = tl_eff * inv_umax
