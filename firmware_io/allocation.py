@@ -521,12 +521,14 @@ def _active_set_loop(fs, ft, heps, q, usl, ts, tol, unipolar, budget_possible, k
         aug_a, hb = aug[0], aug[2]
     xl = x.tolist()
     keep = at_face if at_face is not None else []  # the last face system solved (the polish)
+    j = [i for i in rng if free[i]]  # the free coils and [fixv, 0], kept with free and fixv
+    fe = np.array(fixv + [0.0])
     for _ in range(max_iter):
         if at_face is not None:
             xh, at_face = x, None
         else:
             xh = _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, heps=heps, q=q,
-                                 aug=aug, keep=keep)
+                                 aug=aug, keep=keep, jfe=(j, fe))
         if any(free):
             hl = xh.tolist()
             alpha, block, kind, rate = 1.0, -1, 0, 0.0
@@ -595,8 +597,9 @@ def _active_set_loop(fs, ft, heps, q, usl, ts, tol, unipolar, budget_possible, k
                     free = list(free)
                     fixv = list(fixv)
                     free[block] = False
-                    fixv[block] = 0.0 if kind == 0 else sg[block] * usl[block]
-                    xl[block] = fixv[block]
+                    fixv[block] = fe[block] = xl[block] = (0.0 if kind == 0
+                                                           else sg[block] * usl[block])
+                    j = [i for i in j if i != block]
                 # keep free coordinates on their side and inside the box under round-off
                 if unipolar or bud:
                     for i in rng:
@@ -655,7 +658,8 @@ def _active_set_loop(fs, ft, heps, q, usl, ts, tol, unipolar, budget_possible, k
                 sg[m] = 1.0 if fv > 0.0 else -1.0
             if aug is not None:
                 aug_a[k, m] = hb[n, m] = hb[m, n] = sg[m]
-            fixv[m] = 0.0
+            fixv[m] = fe[m] = 0.0
+            j = sorted(j + [m])
     if x is None:  # the iteration cap hit after a step: the current feasible point
         x = np.array(xl)
         keep = []
@@ -709,7 +713,7 @@ def _budget_hit(xl, hl, alpha, ts):
 
 
 def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False, heps=None, q=None,
-                    aug=None, keep=None):
+                    aug=None, keep=None, jfe=None):
     """Minimizer of the regularized objective on the working face (free coils keep their sign;
     with ``bud`` the budget holds with equality). ``want_y``: also the kernel coefficients y
     (x_J = F_J^T y + t s) when the kernel form applies, else None. ``heps``, ``q``: F^T F +
@@ -717,9 +721,14 @@ def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False, heps=
     ~10 small numpy calls, so every call saved counts). ``aug``: the (k + 1, n) matrix [F; sg]
     and the (k + 1,) vector [f; I_t] if the caller keeps them (a fixed coil's sign times its
     value is its |value|, so [f; I_t] - aug @ fixed is the kernel form's right-hand side).
-    ``keep``: a list that receives this face's system (see `_polish`)."""
+    ``keep``: a list that receives this face's system (see `_polish`). ``jfe``: the free
+    coils' indices and the array [fixv, 0], if the caller keeps them (``_active_set_loop``)."""
     n = len(fixv)
-    j = [i for i, fr in enumerate(free) if fr]
+    if jfe is None:
+        j = [i for i, fr in enumerate(free) if fr]
+        fe = None
+    else:
+        j, fe = jfe
     nf = len(j)
     anyfix = any(fixv)
     if bud and aug is not None and 0 < nf <= k + 1:
@@ -728,9 +737,10 @@ def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False, heps=
         jj = j + [n]
         hr = hb.take(jj, 0)
         if anyfix:
-            fe = np.array(fixv + [0.0])
+            if fe is None:
+                fe = np.array(fixv + [0.0])
             rhs = qb.take(jj) - hr.dot(fe)
-            x = fe[:n]
+            x = fe[:n].copy()
         else:
             rhs = qb.take(jj)
             x = np.zeros(n)
@@ -739,7 +749,10 @@ def _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, want_y=False, heps=
             keep[:] = (j, mat, rhs, None, nf)
         x.put(j, _lsolve(mat, rhs, eps > 0))  # put: the first nf values
         return (x, None) if want_y else x
-    fixed = np.array(fixv) if anyfix else np.zeros(n)  # a new array: written in place below
+    if anyfix:  # a new array: written in place below
+        fixed = np.array(fixv) if fe is None else fe[:n].copy()
+    else:
+        fixed = np.zeros(n)
     if nf == 0:
         return (fixed, None) if want_y else fixed
     if bud and aug is None:
