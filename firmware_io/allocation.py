@@ -529,23 +529,22 @@ def _active_set_loop(fs, ft, heps, q, usl, ts, tol, unipolar, budget_possible, k
         else:
             xh = _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, heps=heps, q=q,
                                  aug=aug, keep=keep, jfe=(j, fe))
-        if any(free):
+        if j:
             hl = xh.tolist()
             alpha, block, kind, rate = 1.0, -1, 0, 0.0
             if unipolar or bud:
-                for i in rng:
-                    if free[i]:
-                        s = sg[i]
-                        sp = s * (hl[i] - xl[i])
-                        rate += sp
-                        if sp < 0.0:
-                            a = s * xl[i] / -sp
-                            if a < alpha:
-                                alpha, block, kind = a, i, 0
-                        elif sp > 0.0:
-                            a = (usl[i] - s * xl[i]) / sp
-                            if a < alpha:
-                                alpha, block, kind = a, i, 1
+                for i in j:
+                    s = sg[i]
+                    sp = s * (hl[i] - xl[i])
+                    rate += sp
+                    if sp < 0.0:
+                        a = s * xl[i] / -sp
+                        if a < alpha:
+                            alpha, block, kind = a, i, 0
+                    elif sp > 0.0:
+                        a = (usl[i] - s * xl[i]) / sp
+                        if a < alpha:
+                            alpha, block, kind = a, i, 1
                 if budget_possible and not bud and rate > 0.0:
                     a = (ts - math.fsum(map(abs, xl))) / rate
                     if a < alpha:
@@ -556,17 +555,16 @@ def _active_set_loop(fs, ft, heps, q, usl, ts, tol, unipolar, budget_possible, k
                 # would cost two extra faces); only +-u block, and the budget, whose sum |x|
                 # is piecewise linear along the step
                 bsign = 1.0
-                for i in rng:
-                    if free[i]:
-                        d = hl[i] - xl[i]
-                        if d > 0.0:
-                            a = (usl[i] - xl[i]) / d
-                            if a < alpha:
-                                alpha, block, kind, bsign = a, i, 1, 1.0
-                        elif d < 0.0:
-                            a = (usl[i] + xl[i]) / -d
-                            if a < alpha:
-                                alpha, block, kind, bsign = a, i, 1, -1.0
+                for i in j:
+                    d = hl[i] - xl[i]
+                    if d > 0.0:
+                        a = (usl[i] - xl[i]) / d
+                        if a < alpha:
+                            alpha, block, kind, bsign = a, i, 1, 1.0
+                    elif d < 0.0:
+                        a = (usl[i] + xl[i]) / -d
+                        if a < alpha:
+                            alpha, block, kind, bsign = a, i, 1, -1.0
                 if budget_possible:
                     a = _budget_hit(xl, hl, alpha, ts)
                     if a < alpha:
@@ -578,17 +576,18 @@ def _active_set_loop(fs, ft, heps, q, usl, ts, tol, unipolar, budget_possible, k
                         aug_a[k, block] = hb[n, block] = hb[block, n] = bsign
             if alpha < 1.0:
                 alpha = max(alpha, 0.0)
-                xl = [v + alpha * (w - v) for v, w in zip(xl, hl)]
+                for i in j:  # (a fixed coil is at its value in both xl and hl)
+                    v = xl[i]
+                    xl[i] = v + alpha * (hl[i] - v)
                 if kind == 2:
                     if not bud and not unipolar:
                         # the budget face fixes each free coil's sign: the side it is on (or
                         # moving to, at 0)
                         sg = list(sg)
-                        for i in rng:
-                            if free[i]:
-                                v = xl[i]
-                                sg[i] = (1.0 if v > 0.0 else -1.0) if v != 0.0 else (
-                                    1.0 if hl[i] >= 0.0 else -1.0)
+                        for i in j:
+                            v = xl[i]
+                            sg[i] = (1.0 if v > 0.0 else -1.0) if v != 0.0 else (
+                                1.0 if hl[i] >= 0.0 else -1.0)
                         aug_a[k] = sg
                         hb[n, :n] = sg
                         hb[:n, n] = sg
@@ -602,17 +601,15 @@ def _active_set_loop(fs, ft, heps, q, usl, ts, tol, unipolar, budget_possible, k
                     j = [i for i in j if i != block]
                 # keep free coordinates on their side and inside the box under round-off
                 if unipolar or bud:
-                    for i in rng:
-                        if free[i]:
-                            s = sg[i]
-                            xl[i] = s * min(max(s * xl[i], 0.0), usl[i])
+                    for i in j:
+                        s = sg[i]
+                        xl[i] = s * min(max(s * xl[i], 0.0), usl[i])
                 else:
-                    for i in rng:
-                        if free[i]:
-                            ui = usl[i]
-                            xl[i] = min(max(xl[i], -ui), ui)
+                    for i in j:
+                        ui = usl[i]
+                        xl[i] = min(max(xl[i], -ui), ui)
                 x = None
-                if bud and not any(free):
+                if bud and not j:
                     bud = False  # implied by the bounds: a redundant working constraint
                 continue
             xl = hl
@@ -622,14 +619,11 @@ def _active_set_loop(fs, ft, heps, q, usl, ts, tol, unipolar, budget_possible, k
         # ---- at the face minimizer: multipliers of the working constraints
         g = (heps.dot(x) - q).tolist()
         nu = 0.0
-        if bud:
-            nf, acc = 0, 0.0
-            for i in rng:
-                if free[i]:
-                    nf += 1
-                    acc += sg[i] * g[i]
-            if nf:
-                nu = -acc / nf
+        if bud and j:
+            acc = 0.0
+            for i in j:
+                acc += sg[i] * g[i]
+            nu = -acc / len(j)
         best, m = _INF, -1
         for i in rng:
             if free[i] or usl[i] == 0.0:  # a coil with u_i = 0 is off: nothing to release
