@@ -691,6 +691,8 @@ def _budget_hit(xl, hl, alpha, ts):
     """The first step a in [0, alpha] at which sum |x + a (h - x)| reaches ts (lists; convex
     and piecewise linear in a, breakpoints where a coordinate crosses 0); _INF if it stays
     within ts up to alpha."""
+    if math.fsum(map(abs, hl)) <= ts:  # x is feasible and sum |.| convex: never above ts
+        return _INF
     d = [w - v for v, w in zip(xl, hl)]
     t0 = math.fsum(map(abs, xl))
     tend = math.fsum(abs(v + alpha * e) for v, e in zip(xl, d))
