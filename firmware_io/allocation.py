@@ -341,7 +341,7 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
             state = _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible,
                                 k, n, max_iter, xh, free, sg, fixv, bud, at_face=kept)
     if state is None:
-        # ---- cold start: the projection of the least-norm exact fit and its working set
+        # ---- cold start: a feasible point between two projections (_cold_start), its face
         xl = _cold_start(fs, ft, q, xl, usl, tsb, unipolar)
         x = np.array(xl)
         free = [0.0 < abs(v) < ui for v, ui in zip(xl, usl)]
