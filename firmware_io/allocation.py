@@ -457,21 +457,27 @@ def _polish(fs, ft, h, q, usl, ts, k, unipolar, x, free, sg, fixv, bud, kept, ep
     xpl = xp.tolist()
     slack = 1e-12 * max(usl)
     signfree = not (unipolar or bud)
+    clamped = False
     for i, fr in enumerate(free):
         if fr:
+            a, ui = xpl[i], usl[i]
             if signfree:
-                a, ui = xpl[i], usl[i]
                 if not -ui - slack <= a <= ui + slack:
                     return x, False, None, None
-                xpl[i] = min(max(a, -ui), ui)
+                if not -ui <= a <= ui:
+                    xpl[i] = min(max(a, -ui), ui)
+                    clamped = True
                 continue
-            a = sg[i] * xpl[i]
-            if not -slack <= a <= usl[i] + slack:
+            s = sg[i]
+            if not -slack <= s * a <= ui + slack:
                 return x, False, None, None
-            xpl[i] = sg[i] * min(max(a, 0.0), usl[i])
+            if not 0.0 <= s * a <= ui:
+                xpl[i] = s * min(max(s * a, 0.0), ui)
+                clamped = True
     if not bud and math.fsum(map(abs, xpl)) > ts * (1 + 1e-12):
         return x, False, None, None  # the Tikhonov bias kept it inside the budget; eps -> 0 does not
-    xp = np.array(xpl)
+    if clamped:
+        xp = np.array(xpl)
     rp, rx = fs.dot(xp) - ft, fs.dot(x) - ft
     ep, ex = float(rp.dot(rp)), float(rx.dot(rx))
     # "no worse" up to rounding: the two objectives often agree to 1e-16 relative (eps only
@@ -833,17 +839,24 @@ def _eps_diag(eps, k, m):
 try:  # the gufunc behind np.linalg.solve without its Python wrapper and errstate (tiny systems)
     from numpy.linalg import _umath_linalg as _ul
 
+    _solve1 = _ul.solve1
+    _SIG = {"signature": "dd->d"}
+
     def _fast_solve(mat, rhs):
-        return _ul.solve1(mat, rhs, signature="dd->d")
+        return _solve1(mat, rhs, signature="dd->d")
 except (ImportError, AttributeError):  # pragma: no cover - other numpy layouts
     _fast_solve = np.linalg.solve
+    _SIG = {}
+
+    def _solve1(mat, rhs):
+        return np.linalg.solve(mat, rhs)
 
 
 def _lsolve(mat, rhs, regularized=True):
     """Solve; ``regularized`` systems (eps > 0) are never singular, so they skip the
     floating-point guards; others fall back to least squares on an exactly singular face."""
     if regularized:
-        out = _fast_solve(mat, rhs)
+        out = _solve1(mat, rhs, **_SIG)
         if math.isfinite(sum(out.tolist())):  # inf - inf is nan: not finite either
             return out
     try:
