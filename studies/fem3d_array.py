@@ -8,7 +8,13 @@ with the axisymmetric GetDP to ~1 %), and the magnet force (vs the image method)
 mesh levels; and what are the reference values for (1) two cores at the 50 mm pitch with one
 coil energized, (2) the 3x3 array with the centre (and, unless quick, the corner) coil
 energized, (3) the magnet's pull on one core at 20, 30, 50 mm (magnet centre above the winding
-top)? The uncoupled single-coil model is set beside (1) and (2) to show the coupling effect.
+top)? The uncoupled single-coil model is set beside (1) and (2) to show the coupling effect,
+and designkit's coupled model (designkit.coupling via CoilArray) is checked against (1)-(3):
+per point |dB|/|B| and ||dG||_F/||G||_F over the workspace points (12, 20, 30, 50, 80 mm, the
+rows above the default workspace's floor reported separately) and the pull at each height.
+Default level 0 for the reference cases (~80-90k tetrahedra, ~2-3 min each on this machine;
+level -1 leaves ~2.6 % in ||grad B|| on the single coil, level 0 ~1 %), one level coarser for
+the corner case (full model, no symmetry).
 
 Writes ``fem3d_array.npz`` (every case's points, B, G, forces) and ``fem3d_array.json``
 (summary) under the output folder (default out/fem3d_array/); returns the summary dict.
@@ -49,6 +55,67 @@ def _uncoupled(points, centre_xy=(0.0, 0.0)):
     return bw + bc, gw + gc
 
 
+def _gradient(a, k):
+    """The full 3 x 3 gradient (n, 3, 3) of column k of A (n, 8, n_coils) (rows as
+    designkit.array.ROWS: dBz/dz = -(dBx/dx + dBy/dy))."""
+    gxx, gxy, gxz, gyy, gyz = np.moveaxis(a[:, 3:, k], 1, 0)
+    return np.stack([np.stack([gxx, gxy, gxz], -1), np.stack([gxy, gyy, gyz], -1),
+                     np.stack([gxz, gyz, -gxx - gyy], -1)], axis=1)
+
+
+def _coupled(points, case):
+    """designkit's coupled model (designkit.coupling through CoilArray: every core of the case
+    solved together, linear mu_r 1000, 1 A) at the case's points (its frame): B (n, 3) T,
+    G (n, 3, 3) T/m. Cases: 'two' (fem3d puts coil 0 at the origin, the design's 1 x 2 array
+    has it at x = -pitch / 2), 'centre', 'corner' (the 3 x 3 array, coil 4 resp. 0)."""
+    from designkit.array import CoilArray
+    from designkit.design import default_design
+
+    d = default_design()
+    if case == "two":
+        arr = CoilArray.from_design(d.replace(**{"array.rows": 1, "array.columns": 2}))
+        p, k = points - np.array([d.array.pitch_m / 2, 0.0, 0.0]), 0
+    else:
+        arr, p, k = CoilArray.from_design(d), points, 4 if case == "centre" else 0
+    a = arr.actuation_matrix(p)
+    return a[:, :3, k], _gradient(a, k)
+
+
+def model_vs_fem(points, b, g, case) -> dict:
+    """The coupled model against the FEM at the case's points: per point |dB| / |B| and
+    ||dG||_F / ||G||_F (FEM as reference), max and median overall, max per height, and max
+    over the points inside the default workspace (z >= its floor)."""
+    from designkit.design import default_design
+
+    bm, gm = _coupled(points, case)
+    eb, eg = _rel(bm, b, 1), _rel(gm, g, (1, 2))
+    z_min = default_design().workspace.z_min_m
+    inside = points[:, 2] >= z_min - 1e-9
+    heights = np.unique(np.round(points[:, 2], 6))
+    return {"b_max": float(eb.max()), "b_median": float(np.median(eb)),
+            "g_max": float(eg.max()), "g_median": float(np.median(eg)),
+            "workspace_z_min_m": z_min,
+            "b_max_in_workspace": float(eb[inside].max()) if inside.any() else None,
+            "g_max_in_workspace": float(eg[inside].max()) if inside.any() else None,
+            "by_height_mm": {f"{1e3 * h:g}": {
+                "b_max": float(eb[np.isclose(points[:, 2], h)].max()),
+                "g_max": float(eg[np.isclose(points[:, 2], h)].max())} for h in heights}}
+
+
+def model_pull(heights) -> np.ndarray:
+    """designkit's pull of one core on the exact 10 x 10 mm magnet (coupling solve, face
+    charges; designkit.array.CoilArray.bias_force with ``magnet_size_m``) at the heights of
+    the magnet's centre above the winding's top (m): Fz (k,) N."""
+    from designkit.array import CoilArray
+    from designkit.design import default_design
+
+    d = default_design()
+    a1 = CoilArray.from_design(d.replace(**{"array.rows": 1, "array.columns": 1}))
+    m = np.asarray(d.magnet.moment_vector_a_m2, float)
+    size = (d.magnet.radius_m, d.magnet.length_m)
+    return np.array([a1.bias_force([0.0, 0.0, h], m, magnet_size_m=size)[2] for h in heights])
+
+
 def run(out_dir=DEFAULT_OUT, quick: bool = False, level: int | None = None,
         cases: tuple[str, ...] | None = None) -> dict:
     """Run the cases (``cases``: a subset of two, centre, pull, single, block, corner; default
@@ -60,11 +127,11 @@ def run(out_dir=DEFAULT_OUT, quick: bool = False, level: int | None = None,
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    lv = (-2 if quick else -1) if level is None else level
+    lv = (-2 if quick else 0) if level is None else level
     levels = (lv,) if quick else (lv - 1, lv)
     geo = fem3d.thesis_geometry()
     pitch = geo["pitch"]
-    heights = (0.012, 0.030, 0.050, 0.080)
+    heights = (0.012, 0.020, 0.030, 0.050, 0.080)
     # odd counts put a point on the centre coil's axis (the design point at 30 mm)
     ws = fem3d.workspace_points(n_side=3 if quick else 5, heights=heights)
     rng = np.random.default_rng(11)
@@ -101,7 +168,10 @@ def run(out_dir=DEFAULT_OUT, quick: bool = False, level: int | None = None,
                                       "tets": r["mesh"]["tetrahedra"]}
         elif name == "pull":
             h, fz = fem3d.magnet_pull_case(level=l)
-            summary[f"pull_L{l}"] = {"heights_m": h.tolist(), "fz_n": fz.tolist()}
+            fm = model_pull(h)
+            summary[f"pull_L{l}"] = {"heights_m": h.tolist(), "fz_n": fz.tolist(),
+                                     "model_fz_n": fm.tolist(),
+                                     "model_vs_fem": (fm / fz - 1).tolist()}
             arrays[f"pull_L{l}_heights"], arrays[f"pull_L{l}_fz"] = h, fz
         elif name == "two":
             b, g, res = fem3d.two_cores_case(pair, level=l)
@@ -109,7 +179,8 @@ def run(out_dir=DEFAULT_OUT, quick: bool = False, level: int | None = None,
             summary["two_cores"] = {
                 "coupling_b_max": float(_rel(b, bm, 1).max()),
                 "coupling_dbz_at_design_point": float(g[1, 2, 2] / gm[1, 2, 2] - 1),
-                "tets": res.mesh_stats["tetrahedra"]}
+                "tets": res.mesh_stats["tetrahedra"], "level": l,
+                "model_vs_fem": model_vs_fem(pair, b, g, "two")}
             arrays["two_points"], arrays["two_b"], arrays["two_g"] = pair, b, g
         elif name in ("centre", "corner"):
             b, g, res = fem3d.array_case(ws, energized=name, level=l)
@@ -122,7 +193,8 @@ def run(out_dir=DEFAULT_OUT, quick: bool = False, level: int | None = None,
                 "dbz_vs_uncoupled_nearest_design_point":
                     float(g[i0, 2, 2] / gm[i0, 2, 2] - 1),
                 "design_point_m": ws[i0].tolist(), "level": l,
-                "tets": res.mesh_stats["tetrahedra"]}
+                "tets": res.mesh_stats["tetrahedra"],
+                "model_vs_fem": model_vs_fem(ws, b, g, name)}
             arrays[f"{name}_points"], arrays[f"{name}_b"], arrays[f"{name}_g"] = ws, b, g
         summary["seconds"][f"{name}_L{l}"] = time.perf_counter() - t0
         np.savez(out / "fem3d_array.npz", **arrays)
@@ -147,6 +219,10 @@ def print_table(s: dict) -> None:
         cells = ", ".join(f"{1e3 * h:.0f} mm: {1e3 * f:.1f} mN" for h, f in
                           zip(e["heights_m"], e["fz_n"]))
         print(f"   magnet pull on one core (no current), {key[5:]}: {cells}")
+        if "model_fz_n" in e:
+            cells = ", ".join(f"{1e3 * f:.1f} mN ({100 * r:+.1f} %)" for f, r in
+                              zip(e["model_fz_n"], e["model_vs_fem"]))
+            print(f"      designkit (coupling solve, exact cylinder): {cells}")
     if "two_cores" in s:
         e = s["two_cores"]
         print(f"   two cores, coil 0 at 1 A: |B| differs from the uncoupled model by up to"
@@ -159,6 +235,21 @@ def print_table(s: dict) -> None:
                   f" uncoupled up to {100 * e['coupling_b_max']:.1f} % (median"
                   f" {100 * e['coupling_b_median']:.1f} %); dBz/dz at {e['design_point_m']}"
                   f" {100 * e['dbz_vs_uncoupled_nearest_design_point']:+.1f} %")
+    print("   coupled model vs FEM, per point |dB|/|B| and ||dG||_F/||G||_F (FEM reference):")
+    for key, label in (("two_cores", "two cores"), ("array_centre", "3x3, centre coil"),
+                       ("array_corner", "3x3, corner coil")):
+        e = s.get(key, {}).get("model_vs_fem")
+        if e is None:
+            continue
+        heights = "; ".join(f"{h} mm: {100 * v['b_max']:.2f} / {100 * v['g_max']:.2f} %"
+                            for h, v in e["by_height_mm"].items())
+        ws = ("" if e["b_max_in_workspace"] is None else
+              f"; in the workspace (z >= {1e3 * e['workspace_z_min_m']:g} mm) max"
+              f" {100 * e['b_max_in_workspace']:.2f} / {100 * e['g_max_in_workspace']:.2f} %")
+        print(f"      {label} (L{s[key]['level']}): B max {100 * e['b_max']:.2f} % (median"
+              f" {100 * e['b_median']:.2f} %), G max {100 * e['g_max']:.2f} % (median"
+              f" {100 * e['g_median']:.2f} %){ws}")
+        print(f"         max by height B / G: {heights}")
     print("   seconds: " + ", ".join(f"{k} {v:.0f}" for k, v in s["seconds"].items()))
 
 
