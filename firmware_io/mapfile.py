@@ -6,27 +6,25 @@ array names, shapes, validation, interpolation -- is defined here and nowhere el
 
 What the file carries (``.npz``; every array hashed into ``meta.data_sha256``)
 ------------------------------------------------------------------------------
-The coupled actuation matrix A(p), (8, n_coils) per point, rows :data:`ROWS` (T/A, T/(m A)):
-column k is coil k alone plus the extra magnetization coil k gives every core (the coupling),
-written in the cores' own modes::
+The coupled actuation matrix A(p), (8, n_coils) per point, rows :data:`ROWS` (T/A, T/(m A)),
+as harmonic cells. The box is current-free, so coil k's field per ampere (all cores
+magnetized, the coupling included) is B = grad(psi_k) with psi_k harmonic; every row of A is
+a first or second derivative of one potential, so the stored field is divergence- and
+curl-free by construction and its rows agree with each other.
 
-    A(p)[:, k] = A_alone_k(p) + sum over cores j and basis fields b of  F_jb(p) COEF[j, b, k]
-
-* ``RZ0``, ``RZ1``, ...: per identical coil type (meta ``rz_tables``), the exact axisymmetric
-  field per ampere of one coil alone (winding + its own core magnetized by it alone),
-  (n_rho, n_u, 4) float32: the smooth, even-in-rho quantities b = Br/rho, Bz,
-  e = (dBr/dz)/rho, w = (dBr/drho - Br/rho)/rho^2 on a grid uniform in
-  v = rho / (1 + rho / rho_scale) and u = log(z - z_ref) (z_ref: top of the coil's sources), so
-  the steps grow with the distance from the core's rim. Bilinear in (v, u), then Bx = b x,
-  By = b y, Bz, dBx/dx = b + w x^2, dBx/dy = w x y, dBx/dz = e x, dBy/dy = b + w y^2,
-  dBy/dz = e y in the coil's frame (no division, no special case on the axis).
-* ``CM0``, ... (meta ``mode_tables``): per core type, the fields F_b of a few magnetization
-  shapes of the core (the SVD of every core's extra magnetization in the coupled solve, per
-  azimuthal order m = 0, 1, 2; cos and sin for m >= 1) on the same kind of (v, u) grid: m = 0
-  as the coil tables, m = 1, 2 as the potentials x G, y G resp. (x^2 - y^2) H, 2 x y H with
-  G, H smooth in (rho^2, z): 5 quantities (a, a1, a2, az, a1z) = -mu0 (G, G', G'', G_z, G'_z)
-  give all 8 rows (:func:`mode_rows`); float32 (float16 for the sensor field's), each column
-  divided by its largest |value| (meta ``column_scale``). ``COEF`` (n_coils, n_basis, n_coils) float64.
+* meta ``a_layers``: the box cut in z into layers stacked from its floor to its top, each a
+  uniform nx x ny grid of cells over the box's footprint: ``z_lo_m``, ``z_hi_m``, ``x0_m``,
+  ``y0_m``, ``nx``, ``ny``, ``cell_x_m``, ``cell_y_m``, ``degree`` L. The cells grow with the
+  height above the sources (designkit.fieldmap.cell_layers), so the cell of a point is found in
+  O(1): its layer by z (a handful of layers), then two floor divisions.
+* ``AH0``, ``AH1``, ...: per layer, (nx * ny, (L + 1)^2 - 1, n_coils) float32, cell index
+  ix * ny + iy: psi of every coil as a harmonic polynomial of degree L in the cell-local
+  coordinates s = (p - centre) / r, r = half the cell's largest side (isotropic, so harmonic
+  in s too). The numbers stored are psi's coefficients (T m / A) on its free monomials
+  s_x^a s_y^b s_z^c, c in (0, 1), 1 <= a + b + c <= L (:func:`harmonic_terms`); the others
+  follow from Laplace's equation (:func:`harmonic_potential`), the constant is dropped.
+  A's rows are then polynomials of degree <= L - 1 in s (:func:`harmonic_rows`: d/ds / r for
+  B, d2/ds2 / r^2 for the gradient rows).
 
 The magnet's interaction with the cores, as functions of the magnet's position p:
 
@@ -57,12 +55,17 @@ Usage::
     b = m.sensor_induced_field((0.0, 0.0, 0.03))  # (2, n_coils, 3) T
     a = m.actuation(points, rows=(3, 6), coils=(0, 4))  # (n, 2, 2): only those entries
 
-How a lookup runs: every core contributes its coil alone (coefficient 1 on its own column)
-and its mode fields as one list of basis fields; each is a bilinear (v, u) lookup times
-polynomials in the core-local x, y, and A = rows @ coefficients. One point (:func:`actuation_one`)
-does that in ~40 small numpy calls (point as (3,) or (1, 3) alike); blocks of points
-(:func:`kernel_rows_many`) in a few large ones. Maps whose coils are rotated, at different
-heights or of several types take the general path (:func:`interpolate_rz`, :func:`mode_rows`).
+How a lookup of A runs (:func:`prepare_cells` expands every cell's coefficients once, at
+load, into its rows' monomial coefficients (M, 8 n_coils) float32, M = C(L + 2, 3)): one point
+(:func:`cells_one`, as (3,) or (1, 3) alike) finds its cell with Python arithmetic, forms the
+M monomials from per-axis powers and takes one (M,) @ (M, 8 n_coils) product; blocks of points
+(:func:`cells_many`) are sorted by cell (a radix sort of 16-bit cell indices), their monomials
+computed once per layer, then one (n_c, M) @ (M, 8 n_coils) float32 product per occupied cell
+on its contiguous run. Outside the box (``extrapolate=True``) a point takes its nearest
+layer's and grid's cell, whose polynomial degrades quickly away from it. ``rows=`` /
+``coils=`` select columns of the products. The bias force and the sensor field keep their own
+kernels (:func:`modes_one`, :func:`kernel_rows_many`; the general path :func:`mode_rows`,
+:func:`magnet_terms` for rotated or mixed coils).
 """
 
 from __future__ import annotations
@@ -797,6 +800,9 @@ def prepare_cells(layers: list, tables: list, nc: int) -> dict:
             "one_idx": {d: (e[:, 0], e[:, 1] + d + 1, e[:, 2] + 2 * (d + 1))
                         for d, e in exps.items()},
             "exps": monomial_exponents(max(degree) - 1),
+            # per layer (its last cell, its monomials' degree), for the batch path
+            "layer_degree": [(g[6] + g[4] * g[5] - 1, lay_deg) for g, lay_deg in
+                             zip(grid, [int(lay["degree"]) - 1 for lay in layers])],
             "cell_degree": [d - 1 for d in degree], "n_cells": off, "nc": nc}
 
 
@@ -845,10 +851,17 @@ def cells_many(C: dict, p: np.ndarray, cols=None) -> np.ndarray:
     s = p[order]
     s -= C["centre"][cs]
     s *= C["inv_r"][cs][:, None]
-    mono = _scratch("mono", (len(C["exps"]), n), np.float32)
-    monomials(s.astype(np.float32), C["degree"], mono)
+    s = s.astype(np.float32)
     counts = np.bincount(cs, minlength=C["n_cells"])
     ends = np.cumsum(counts).tolist()
+    # a layer's points are one run of the sorted order: monomials to that layer's degree only
+    mono = _scratch("mono", (len(C["exps"]), n), np.float32)
+    a = 0
+    for off, deg in C["layer_degree"]:
+        b = ends[off]
+        if b > a:
+            monomials(s[a:b], deg, mono[:math.comb(deg + 3, 3), a:b])
+        a = b
     counts = counts.tolist()
     width = 8 * C["nc"] if cols is None else len(cols)
     res = _scratch("res", (n, width), np.float32)
@@ -1113,8 +1126,9 @@ class MapFile:
         Rows :data:`ROWS`, T/A and T/(m A). Outside the box: BadInputError unless
         ``extrapolate`` (the end cells' polynomials, which degrade quickly away from the box).
         ``rows``, ``coils``: index sequences (into :data:`ROWS`, resp. the coils) to evaluate
-        only those: (len(rows), len(coils)) per point, in the given order; the mode sum then
-        skips the other rows' polynomials and the other coils' coefficients.
+        only those: (len(rows), len(coils)) per point, in the given order; a batch's per-cell
+        products then take only those columns (a single point computes all 8 x n_coils and
+        selects).
         """
         nc = self.n_coils
         r_sel = self._subset("rows", rows, 8)

@@ -106,6 +106,23 @@ def _general_path(fm):
                    dict(f.kernels, sensor_one=None, magnet_one=None))
 
 
+def test_harmonic_cell_rows_of_a_known_potential():
+    # psi = x^3 - 3 x y^2 + z (x^2 + y^2) - 2 z^3 / 3 is harmonic; its free coefficients
+    # (x^3: 1, x y^2: -3, x^2 z: 1, y^2 z: 1) must give its 8 rows in closed form
+    from firmware_io.mapfile import harmonic_rows, harmonic_terms, monomials
+
+    coef = np.zeros(len(harmonic_terms(3)))
+    for term, c in (((3, 0, 0), 1.0), ((1, 2, 0), -3.0), ((2, 0, 1), 1.0), ((0, 2, 1), 1.0)):
+        coef[harmonic_terms(3).index(term)] = c
+    s = np.random.default_rng(3).uniform(-1, 1, (50, 3))
+    x, y, z = s.T
+    want = np.stack([3 * x**2 - 3 * y**2 + 2 * x * z, -6 * x * y + 2 * y * z,
+                     x**2 + y**2 - 2 * z**2, 6 * x + 2 * z, -6 * y, 2 * x,
+                     -6 * x + 2 * z, 2 * y], 1)
+    got = np.einsum("mn,rmk,k->nr", monomials(s, 2), harmonic_rows(3), coef)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-13)
+
+
 def test_harmonic_cell_basis_against_finite_differences():
     # every free coefficient's potential is harmonic, and the 8 rows the reader evaluates are
     # its first and second derivatives (central differences of the potential itself)
