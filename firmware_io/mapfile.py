@@ -832,11 +832,11 @@ def _scratch(name: str, shape: tuple, dtype) -> np.ndarray:
 _WORK = threading.local()
 
 
-GEMM_CAP = 200_000
+GEMM_CAP = 400_000
 """Largest multiply-add count of one per-cell product in :func:`cells_many` (cells with more
-points are split): OpenBLAS runs products above ~2.6e5 on all cores, and on a core that is busy
-with other work each such call waits milliseconds (measured: 1e4 points took 0.28 s instead of
-4 ms while another process kept one of two cores busy)."""
+points are split): OpenBLAS (0.3.31 here) runs products above ~5.2e5 on all cores, and when
+another process keeps a core busy each such call waits milliseconds (measured: 1e4 points took
+0.28 s instead of ~4 ms without a cap, products up to 7e5, while one of two cores was busy)."""
 
 
 def cells_many(C: dict, p: np.ndarray, cols=None) -> np.ndarray:
@@ -1064,11 +1064,14 @@ class MapFile:
             raise BadInputError(name, "array-like of shape (3,) or (n, 3), m",
                                 f"shape {p.shape}")
         p = p.reshape(-1, 3)
-        if not np.all(np.isfinite(p)):
+        # per-column extremes first (two reductions; NaN propagates into them): the row-wise
+        # search below runs only for a bad input
+        p_min, p_max = p.min(axis=0), p.max(axis=0)
+        if not (np.all(np.isfinite(p_min)) and np.all(np.isfinite(p_max))):
             raise BadInputError(name, "finite (no NaN or Inf)", p.tolist()[:3])
-        if not extrapolate:
-            lo, hi = self.bounds
-            tol = 1e-9
+        lo, hi = self.bounds
+        tol = 1e-9
+        if not extrapolate and (np.any(p_min < lo - tol) or np.any(p_max > hi + tol)):
             bad = np.any((p < lo - tol) | (p > hi + tol), axis=1)
             if bad.any():
                 k = int(np.argmax(bad))
