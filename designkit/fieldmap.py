@@ -10,25 +10,37 @@ Representation and error budget (target: <= 1e-3 of each row's largest |A| over 
 -----------------------------------------------------------------------------------------
 A is stored as harmonic cells (format in firmware_io.mapfile): the box is current-free, so per
 cell and coil one harmonic polynomial potential of degree L carries all 8 rows, each an exact
-derivative of it. A polynomial's error in a cell falls like (cell size / distance to the nearest
-source)^L, the sources being the cores' tops and rims below the box; so the cells grow with the
-height d of their layer's floor above the sources' top (:func:`cell_layers`): layers 0.5 d
-thick, cells no wider than 0.67 d (degree 9) in the lowest layer, which holds every row's
-maximum, and 0.55 d (degree 7) above. On the default box (20-80 mm above the coil tops, 5 mm
-above the cores' tops) that is 15 x 15, 13 x 13, 9 x 9 and 6 x 6 cells (511, 2.0 MB of
-float32 coefficients). Each cell is a least-squares fit, every row weighted by 1 / its
-maximum, to the coupled model on 4 x 4 x 4 Chebyshev-Lobatto nodes (shared across cell faces:
-19,444 evaluations of the coupled model, ~0.4 ms each, for the default box).
-Measured per layer at 4000 random points (the first and the next three layers): the lowest
-layer 2.9e-4 with degree 9 (9.4e-4 with degree 8, 2.9e-4 with degree 8 on 0.55 d cells, which
-are 361 instead of 225 lookups' products), 4.9e-4 above with degree 7 (1.2e-3 with degree 6);
-float32 coefficients and products add < 1e-6.
+derivative of it. A polynomial's error in a cell falls like (cell size / distance to the
+nearest source)^L, the sources being the cores' tops and rims below the box; so the cells grow
+with the height d of their layer's floor above the sources' top (:func:`cell_layers`): layers
+0.5 d thick, cells no wider than 0.67 d with degree 9 in the lowest layer, which holds every
+row's maximum, and 0.5 d with degree 7 above. On the default box (20-80 mm above the coil
+tops, 15 mm above the cores' tops) that is 15 x 15, 14 x 14, 9 x 9 and 6 x 6 cells (538;
+1.5 MB of float32 coefficients, 2.5 MB file with the bias-force and sensor-field tables).
+Each cell is a least-squares fit, every row weighted by 1 / its maximum, to the coupled model
+on 4 x 4 x 4 Chebyshev-Lobatto nodes shared across cell faces: 20,440 evaluations of the
+coupled model for the default box (~0.4 ms each on a quiet machine).
 
-The floor matters: the old 10 mm floor (5 mm above the cores' tops) needed 4 x smaller cells
-for the same error; the default floor is 20 mm now (designkit.design.WorkspaceSpec), and a
-design with a lower floor gets more, smaller cells (a longer build, slower batches).
+Measured (these choices): the lowest layer alone at 3000 random points, 2.9e-4 with degree 9
+on 0.67 d cells (9.4e-4 with degree 8; 2.9e-4 with degree 8 on 0.55 d cells, 361 cells
+instead of 225); the layers above 4.9e-4 with degree 7 on 0.55 d cells (1.2e-3 with degree 6),
+up to 9.3e-4 in one random 2 x 2 geometry, 4.7e-4 there on the 0.5 d cells now used. The
+float32 coefficients and products add ~1e-6 of a row's maximum.
+``studies/bench_map.py`` (default design, 1e4 points, half in the lowest 10 mm): max 3.7e-4
+(Bx 6.3e-5, Bz 3.9e-5, dBx/dy 3.6e-4); tests/test_fieldmap_accuracy.py (slow, random
+geometries, floors 18-24 mm, 1e4 points each): 3.5e-4, 4.7e-4, 3.0e-4 for its 1 x 2, 2 x 2,
+3 x 3 cases (5.8e-4, 9.3e-4, 5.3e-4 with 0.55 d cells above the lowest layer). A design with a
+lower floor gets more, smaller cells (a longer build and slower batches, the same error); the
+old 10 mm floor is 5 mm above the cores' tops, where studies/map_cells.py measured that 5 mm
+cells of degree 8-10 are needed for this error.
 
-MEASURED
+Cost (bench_map.py, two cores shared with other busy processes, load average ~4: the coupled
+model ran at 1.05 ms/point instead of ~0.4): one point 6.2 us as (3,), 6.3 us as (1, 3) (8 x
+one 8 x 9 numpy matvec); 1e4 points 6.9 ms (min of 21; median 11.1); build 40.5 s, of which the
+cell nodes 18.2 s and the sensor field's core modes 6.8 s (quiet: ~15 s in all). A batch
+lookup is ~540 small float32 GEMMs (one per occupied cell, capped at 4e5 multiply-adds each:
+see firmware_io.mapfile.GEMM_CAP) of ~84-165 monomials x 72 outputs per point: the products
+and their per-call cost are ~60 % of it, the sort, the monomials and the scatter back the rest.
 
 The build checks itself: it evaluates the coupled model directly at ``n_check`` random points
 in the box (default 400) and records the errors of the finished map in ``meta['errors']``, with
@@ -46,7 +58,6 @@ import numpy as np
 
 from . import _validate as v
 from .array import ROWS, CoilArray
-from .coil import Coil
 from .electrical import drive_data
 from .errors import BadInputError
 from firmware_io import mapfile as mf
@@ -241,7 +252,8 @@ def map_physics(design) -> MapPhysics:
 
 # ============================================================================ coupled core modes
 N_MODE_Q = {0: 4, 1: 5, 2: 5}
-"""Table quantities per core mode: m = 0 (b, Bz, e, w as the coil tables), m = 1, 2 (the
+"""Table quantities per core mode: m = 0 (b = Br/rho, Bz, e = (dBr/dz)/rho,
+w = (dBr/drho - Br/rho)/rho^2), m = 1, 2 (the
 potential x G resp. (x^2 - y^2) H with G(rho^2, z): a, a1, a2, az, a1z = -mu0 (G, G', G'', G_z,
 G'_z), ' = d/d(rho^2))."""
 
@@ -395,12 +407,13 @@ def cell_layers(lower, upper, z_top: float, cell_ratio: tuple, layer_ratio: floa
     """The harmonic-cell layout of A over the box (meta ``a_layers``): layers from the floor
     up, each ``layer_ratio`` x its floor's height d above the sources' top ``z_top`` (m) thick,
     cut into a uniform grid of cells no wider than ``cell_ratio`` x d, potentials of degree
-    ``degree``; both pairs are (lowest layer, the layers above). A polynomial's error in a
-    cell grows with (cell size / distance to the sources)^degree, so fixed ratios keep it about
-    even and the cells grow upwards (the default box: 15 x 15 cells of degree 8, then 14 x 14,
-    9 x 9 and 6 x 6 of degree 7). The lowest layer holds every row's maximum, where the error
-    measure is tightest: there a higher degree keeps the cells (and the lookups' loop) fewer.
-    A thin remainder at the top is shared with the layer below."""
+    ``degree``; both are sequences per layer from the lowest, the last entry serving every
+    layer above. A polynomial's error in a cell grows with (cell size / distance to the
+    sources)^degree, so fixed ratios keep it about even and the cells grow upwards (the default
+    box: 15 x 15 cells of degree 9, then 14 x 14, 9 x 9 and 6 x 6 of degree 7). The lowest
+    layer holds every row's maximum, where the error measure is tightest: there a higher degree
+    keeps the cells (and a batch lookup's products) fewer. A thin remainder at the top is
+    shared with the layer below."""
     lo, hi = np.asarray(lower, float), np.asarray(upper, float)
     if lo[2] - z_top < 1e-4:
         raise BadInputError("box", f"above the top of every coil's sources (z > {z_top} m; the "
@@ -471,7 +484,7 @@ def fit_layer(lay: dict, values: np.ndarray, row_max: np.ndarray, n: int) -> np.
 
 
 def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
-          cell_ratio=(0.67, 0.55), layer_ratio: float = 0.5, degree=(9, 7),
+          cell_ratio=(0.67, 0.5), layer_ratio: float = 0.5, degree=(9, 7),
           fit_nodes: int = 4, sensor_mode_tolerance: float = 1e-3,
           rz_rho_scale: float = 0.05, sensor_mode_rz_step: float = 2.5e-4,
           sensor_mode_rz_log_step: float = 0.04, magnet_rz_step: float = 2e-3,
@@ -489,7 +502,8 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
         A's harmonic cells (:func:`cell_layers`): cells no wider than ``cell_ratio`` and layers
         ``layer_ratio`` x the height of their floor above the sources' top, potentials of
         degree ``degree`` (K = (degree + 1)^2 - 1 coefficients per cell and coil);
-        ``cell_ratio`` and ``degree`` are pairs (lowest layer, the layers above); fitted on
+        ``cell_ratio`` and ``degree`` per layer from the lowest (the last entry for the layers
+        above); fitted on
         ``fit_nodes``^3 Chebyshev-Lobatto nodes per cell (shared across faces; each node is one
         evaluation of the coupled model, ~0.4 ms).
     sensor_mode_tolerance : float

@@ -357,7 +357,7 @@ def prepare_modes(tables: list, metas: list, positions, rotations) -> list:
 
 
 def _prepare_one(t: dict) -> None:
-    """What :func:`mode_rows_one` needs: every group's quantities padded to 5 columns, so one
+    """What :func:`prepare_one` needs: every group's quantities padded to 5 columns, so one
     GEMM gives all polynomials and one batched matmul all basis rows.
 
     ``one_src`` / ``one_dst``: scatter of the table's columns into (n_basis, 5 n_groups) per core
@@ -382,21 +382,6 @@ _POW_X = np.array([0, 1, 0, 2, 1, 0, 3, 2, 1, 0, 4, 3, 2, 1, 0], np.intp)
 """Powers of x, resp. y, of the 15 monomials of :func:`_monomials`."""
 _POW_Y = np.array([0, 0, 1, 0, 1, 2, 0, 1, 2, 3, 0, 1, 2, 3, 4], np.intp)
 _POW = np.arange(5.0)
-
-
-def mode_rows_one(t: dict, pq: np.ndarray) -> np.ndarray:
-    """:func:`mode_rows` for one point ``pq`` (1, 3) with few numpy calls: (k * n_basis, 8),
-    rows of core-major basis fields in ``t['order']`` (the layout of MapFile's coefficients)."""
-    if t["rot"] is not None:
-        return mode_rows(t, pq).reshape(-1, 8)
-    x, y, val = _bilinear(t, pq)
-    x, y, val = x[0], y[0], val[0]
-    k = len(x)
-    mono = (np.power(x[:, None], _POW)[:, _POW_X] * np.power(y[:, None], _POW)[:, _POW_Y])
-    poly = (mono @ t["one_poly"]).reshape(k, t["one_width"], 8)
-    pad = np.zeros((k, t["one_nb"] * t["one_width"]))
-    pad[:, t["one_dst"]] = val[:, t["one_src"]]
-    return np.matmul(pad.reshape(k, t["one_nb"], t["one_width"]), poly).reshape(-1, 8)
 
 
 def _bilinear(t: dict, p: np.ndarray):
@@ -495,29 +480,22 @@ def _poly_tensors() -> dict:
     return out
 
 
-def mode_rows(t: dict, p: np.ndarray, rows=None) -> np.ndarray:
+def mode_rows(t: dict, p: np.ndarray) -> np.ndarray:
     """Rows (n, k, n_basis, 8) of every basis field of the type's k cores at points (n, 3),
     global frame, basis in the order of ``t['order']`` (grouped by mode order and cos / sin;
-    :func:`prepare_modes` permutes the coefficients to match). ``rows``: indices into
-    :data:`ROWS` to compute only those (last axis len(rows)); not with rotated coils."""
-    if rows is not None and t["rot"] is not None:
-        return mode_rows(t, p)[..., rows]
+    :func:`prepare_modes` permutes the coefficients to match)."""
     x, y, val = _bilinear(t, p)
     n, k = x.shape
     mono = _monomials(x, y).reshape(n * k, 15)
-    nr = 8 if rows is None else len(rows)
     parts = []
     for (m, c), cols in t["groups"]:
         v = val[..., cols]  # (n, k, nb_g, Q_m)
-        tens = _POLY_T[(m, c)]
-        if rows is not None:
-            tens = tens.reshape(15, N_MODE_Q[m], 8)[:, :, rows].reshape(15, -1)
-        pm = (mono @ tens).reshape(n, k, 1, N_MODE_Q[m], nr)  # one GEMM
+        pm = (mono @ _POLY_T[(m, c)]).reshape(n, k, 1, N_MODE_Q[m], 8)  # one GEMM
         # a sum over the 4-5 quantities: numpy's batched matmul is slow on tiny matrices
         acc = v[..., 0, None] * pm[..., 0, :]
         for q in range(1, v.shape[-1]):
             acc += v[..., q, None] * pm[..., q, :]
-        parts.append(acc)  # (n, k, nb_g, nr)
+        parts.append(acc)  # (n, k, nb_g, 8)
     out = parts[0] if len(parts) == 1 else np.concatenate(parts, axis=2)
     if t["rot"] is not None:
         flat = out.transpose(3, 0, 2, 1).reshape(8, -1, k)
