@@ -817,10 +817,15 @@ another process keeps a core busy each such call waits milliseconds (measured: 1
 0.28 s instead of ~4 ms without a cap, products up to 7e5, while one of two cores was busy)."""
 
 
-def cells_many(C: dict, p: np.ndarray, cols=None) -> np.ndarray:
-    """A at points (n, 3): (n, 8 nc) float64, or only the flat columns ``cols`` (row * nc +
-    coil) (n, len(cols)). Points are sorted by cell (stable), their monomials computed once,
-    then one float32 (n_c, M) @ (M, n_out) product per occupied cell."""
+CELL_CHUNK = 32768
+"""Points per block of :func:`cells_many` (its scratch is ~(M + 8 n_coils) floats per point)."""
+
+
+def cells_many(C: dict, p: np.ndarray, cols=None, out=None) -> np.ndarray:
+    """A at points (n, 3) (n <= :data:`CELL_CHUNK`): (n, 8 nc) float64, or only the flat
+    columns ``cols`` (row * nc + coil) (n, len(cols)), into ``out`` if given. Points are sorted
+    by cell (stable), their monomials computed once, then one float32 (n_c, M) @ (M, n_out)
+    product per occupied cell."""
     n = len(p)
     cell = cell_index(C, p)
     # 16-bit keys sort by radix (~8x faster than a merge sort of intp)
@@ -854,7 +859,7 @@ def cells_many(C: dict, p: np.ndarray, cols=None) -> np.ndarray:
             for a in range(b - k, b, step):
                 e = min(b, a + step)
                 dot(mono[:m, a:e].T, w, out=res[a:e])
-    out = np.empty((n, width))
+    out = np.empty((n, width)) if out is None else out
     out[order] = res
     return out
 
@@ -1124,12 +1129,17 @@ class MapFile:
                 a = a[:, c_sel]
             return a if np.ndim(points) == 1 else a[None]
         p, single = self._points(points, extrapolate)
-        if r_sel is None and c_sel is None:
-            out = cells_many(C, p).reshape(-1, 8, nc)
+        r = np.arange(8) if r_sel is None else r_sel
+        c = np.arange(nc) if c_sel is None else c_sel
+        cols = None if r_sel is None and c_sel is None else (r[:, None] * nc + c).ravel()
+        n = len(p)
+        if n <= CELL_CHUNK:
+            out = cells_many(C, p, cols)
         else:
-            r = np.arange(8) if r_sel is None else r_sel
-            c = np.arange(nc) if c_sel is None else c_sel
-            out = cells_many(C, p, (r[:, None] * nc + c).ravel()).reshape(-1, len(r), len(c))
+            out = np.empty((n, 8 * nc if cols is None else len(cols)))
+            for s in range(0, n, CELL_CHUNK):
+                cells_many(C, p[s:s + CELL_CHUNK], cols, out[s:s + CELL_CHUNK])
+        out = out.reshape(n, len(r), len(c))
         return out[0] if single else out
 
     def bias_force(self, points, extrapolate: bool = False) -> np.ndarray:
