@@ -35,12 +35,16 @@ old 10 mm floor is 5 mm above the cores' tops, where studies/map_cells.py measur
 cells of degree 8-10 are needed for this error.
 
 Cost (bench_map.py, two cores shared with other busy processes, load average ~4: the coupled
-model ran at 1.05 ms/point instead of ~0.4): one point 6.2 us as (3,), 6.3 us as (1, 3) (8 x
-one 8 x 9 numpy matvec); 1e4 points 6.9 ms (min of 21; median 11.1); build 40.5 s, of which the
-cell nodes 18.2 s and the sensor field's core modes 6.8 s (quiet: ~15 s in all). A batch
-lookup is ~540 small float32 GEMMs (one per occupied cell, capped at 4e5 multiply-adds each:
-see firmware_io.mapfile.GEMM_CAP) of ~84-165 monomials x 72 outputs per point: the products
-and their per-call cost are ~60 % of it, the sort, the monomials and the scatter back the rest.
+model ran at 0.57 ms/point instead of ~0.4): one point 6.4 us as (3,), 6.6 us as (1, 3) (8 x
+one 8 x 9 numpy matvec); 1e4 points 6.7 ms (min of 21; median 6.9), over the 5 ms target;
+build 39.3 s, of which the cell nodes 10.1 s, the sensor field's core modes 17.4 s and the
+saturation solves 6.6 s, both of those BLAS-heavy and 6-17 x slower than at load ~1 (the
+whole build took 15.6 s then, with 19,444 cell nodes). A batch lookup is ~580 small float32 GEMMs (one per occupied cell, capped
+at 4e5 multiply-adds each: firmware_io.mapfile.GEMM_CAP), ~2/3 of its time: per 1e4 uniform
+points the lowest layer's 225 products (1261 points, 165 monomials) took 1.1 ms, the 351 of
+the layers above (8739 points, 84 monomials) 1.8 ms; numpy's ~1.6 us per call and the packing
+of each cell's (M, 72) matrix dominate the small ones. The sort, the monomials and the scatter
+back to the caller's order are the rest.
 
 The build checks itself: it evaluates the coupled model directly at ``n_check`` random points
 in the box (default 400) and records the errors of the finished map in ``meta['errors']``, with
