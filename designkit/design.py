@@ -161,7 +161,12 @@ class SensorSpec:
 class WorkspaceSpec:
     """Box in which the finger magnet moves, m, in the array frame."""
 
-    z_min_m: float = 0.010
+    z_min_m: float = 0.020
+    """Lowest magnet-centre height above the coil tops, m. The magnet's centre cannot go lower:
+    the upper Hall-sensor board sits ``sensors.offset_m`` (14 mm) above the coil tops and the
+    magnet is 10 mm long, so its centre is >= 19 mm up plus the board's thickness. (It was
+    10 mm: the 10 mm below 20 mm, 5-15 mm above the cores' rims, were where the field map was
+    costliest and the cores' coupling least smooth.)"""
     z_max_m: float = 0.080
     half_width_m: float = 0.075
     """Half the side of the square footprint the box covers in x and y, m."""

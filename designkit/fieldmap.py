@@ -8,40 +8,47 @@ errors. All the physics the map samples comes through one function, :func:`map_p
 
 Representation and error budget (target: <= 1e-3 of each row's largest |A| over the box)
 -----------------------------------------------------------------------------------------
-The coupled A is not axisymmetric, but every core is a body of revolution whose response splits
-into azimuthal orders m (:mod:`designkit.coupling`). So nothing of A is sampled on a 3-D grid:
+A is stored as harmonic cells (format in firmware_io.mapfile): the box is current-free, so per
+cell and coil one harmonic polynomial potential of degree L carries all 8 rows, each an exact
+derivative of it. A polynomial's error in a cell falls like (cell size / distance to the
+nearest source)^L, the sources being the cores' tops and rims below the box; so the cells grow
+with the height d of their layer's floor above the sources' top (:func:`cell_layers`): layers
+0.5 d thick, cells no wider than 0.67 d with degree 9 in the lowest layer, which holds every
+row's maximum, and 0.5 d with degree 7 above. On the default box (20-80 mm above the coil
+tops, 15 mm above the cores' tops) that is 15 x 15, 14 x 14, 9 x 9 and 6 x 6 cells (538;
+1.5 MB of float32 coefficients, 2.5 MB file with the bias-force and sensor-field tables).
+Each cell is a least-squares fit, every row weighted by 1 / its maximum, to the coupled model
+on 4 x 4 x 4 Chebyshev-Lobatto nodes shared across cell faces: 20,440 evaluations of the
+coupled model for the default box (~0.4 ms each on a quiet machine).
 
-* coil tables: per coil type, the exact axisymmetric field of one coil alone (0.7 MB; ~1.3e-4
-  of each row's maximum: steps 0.1 mm in rho near the axis, growing as (1 + rho / 50 mm)^2, and
-  2.5 % of the height above the core's top in z);
-* coupling: the extra magnetization of every core by every coil, from the coupled solve itself,
-  compressed per core type and order m by an SVD (``mode_tolerance``: m = 0 needs 2-3 shapes at
-  1e-4, m = 1, 2 about 2 each) and tabulated as fields of those shapes (:func:`mode_rows`
-  in firmware_io.mapfile); 0.25 mm / 4 % steps: the coupling is ~15 % of A, so their
-  interpolation error counts ~0.15 x.
-* SVD truncation and m >= 3 (below 1e-4 of the coupling, designkit.coupling) are the rest.
+Measured (these choices): the lowest layer alone at 3000 random points, 2.9e-4 with degree 9
+on 0.67 d cells (9.4e-4 with degree 8; 2.9e-4 with degree 8 on 0.55 d cells, 361 cells
+instead of 225); the layers above 4.9e-4 with degree 7 on 0.55 d cells (1.2e-3 with degree 6),
+up to 9.3e-4 in one random 2 x 2 geometry, 4.7e-4 there on the 0.5 d cells now used. The
+float32 coefficients and products add ~1e-6 of a row's maximum.
+``studies/bench_map.py`` (default design, 1e4 points, half in the lowest 10 mm): max 3.7e-4
+(Bx 6.3e-5, Bz 3.9e-5, dBx/dy 3.6e-4); tests/test_fieldmap_accuracy.py (slow, random
+geometries, floors 18-24 mm, 1e4 points each): 3.5e-4, 4.7e-4, 3.0e-4 for its 1 x 2, 2 x 2,
+3 x 3 cases (5.8e-4, 9.3e-4, 5.3e-4 with 0.55 d cells above the lowest layer). A design with a
+lower floor gets more, smaller cells (a longer build and slower batches, the same error); the
+old 10 mm floor is 5 mm above the cores' tops, where studies/map_cells.py measured that 5 mm
+cells of degree 8-10 are needed for this error.
 
-Measured (``studies/bench_map.py``; tests/test_fieldmap_accuracy.py, slow): A within 1e-3 of
-each row's maximum at 1e4 random points (half in the lowest 10 mm of the box) against the
-coupled model for random 1 x 2, 2 x 2 and 3 x 3 geometries, once designkit.coupling's
-compressed m >= 1 ring rules got 24 azimuths (12 left up to 8.7e-4 of a row's maximum 8 mm
-above a core's rim, where both the direct model and these tables switch to them: the 1.3e-3 seen
-before). File 3.75 MB at the default settings; its build took 8.6 s of CPU (32 s wall on two
-cores shared with ~9 other busy processes), mostly the coupled solve and the mode tables (the
-cores' basis fields evaluated once for both shape sets).
-
-Speed: a lookup is a sum over the cores of ~20 basis fields (the coil alone + its modes), each a
-bilinear table lookup times polynomials in the core-local x, y, then one GEMV / GEMM with the
-coefficients (firmware_io.mapfile: ``actuation_one`` for one point, ~40 numpy calls;
-``kernel_rows_many`` for blocks of points). That is ~25 k multiply-adds per point: the 5 ms
-target for 1e4 points is out of its reach in numpy (~0.1-0.3 s). A 3-D grid, the only kind of
-term cheap enough, cannot carry the coupling: trilinear on a 5 mm grid (31 x 31 x 25 nodes,
-3.5 MB in float16) left 7 % of a row's maximum in the lowest 10 mm (2.4e-3 above), the
-coupling there varying on the ~5 mm scale of the cores' rims. ``rows=`` / ``coils=`` subsets
-cut the polynomial and coefficient work in proportion.
+Cost (bench_map.py, two cores shared with other busy processes, load average ~4: the coupled
+model ran at 0.57 ms/point instead of ~0.4): one point 6.4 us as (3,), 6.6 us as (1, 3) (8 x
+one 8 x 9 numpy matvec); 1e4 points 6.7 ms (min of 21; median 6.9), over the 5 ms target;
+build 39.3 s, of which the cell nodes 10.1 s, the sensor field's core modes 17.4 s and the
+saturation solves 6.6 s, both of those BLAS-heavy and 6-17 x slower than at load ~1 (the
+whole build took 15.6 s then, with 19,444 cell nodes). A batch lookup is ~580 small float32 GEMMs (one per occupied cell, capped
+at 4e5 multiply-adds each: firmware_io.mapfile.GEMM_CAP), ~2/3 of its time: per 1e4 uniform
+points the lowest layer's 225 products (1261 points, 165 monomials) took 1.1 ms, the 351 of
+the layers above (8739 points, 84 monomials) 1.8 ms; numpy's ~1.6 us per call and the packing
+of each cell's (M, 72) matrix dominate the small ones. The sort, the monomials and the scatter
+back to the caller's order are the rest.
 
 The build checks itself: it evaluates the coupled model directly at ``n_check`` random points
-in the box and records the errors of the finished map in ``meta['errors']``.
+in the box (default 400) and records the errors of the finished map in ``meta['errors']``, with
+the largest error at the fit nodes themselves.
 """
 
 from __future__ import annotations
@@ -55,7 +62,6 @@ import numpy as np
 
 from . import _validate as v
 from .array import ROWS, CoilArray
-from .coil import Coil
 from .electrical import drive_data
 from .errors import BadInputError
 from firmware_io import mapfile as mf
@@ -105,10 +111,8 @@ def _nodes(axes) -> np.ndarray:
 
 
 # ============================================================================ (rho, z) tables
-RZ_QUANTITIES = ("Br/rho", "Bz", "(dBr/dz)/rho", "(dBr/drho - Br/rho)/rho^2")
-"""Per-ampere quantities of a (rho, z) table, units T/(m A), T/A, T/(m^2 A), T/(m^3 A)."""
-
-
+# per core type, on a grid uniform in v = rho / (1 + rho / rho_scale) and log(z - z_ref): the
+# magnet's pull on one core and the sensor field's core modes
 def rz_table_spec(coil, lower, upper, rho_step: float, log_step: float,
                   rho_scale: float = 0.05, n_q: int = 8) -> dict | None:
     """Grid of the (v, u) table covering the box for ``coil``'s pose.
@@ -156,33 +160,6 @@ def _even_on_axis(out: np.ndarray, rho: np.ndarray, cols) -> None:
     f = f0 + f2 rho^2 + O(rho^4) -> f0 = (r2^2 f(r1) - r1^2 f(r2)) / (r2^2 - r1^2)."""
     r1, r2 = rho[1] ** 2, rho[2] ** 2
     out[0, :, cols] = ((r2 * out[1, :, cols] - r1 * out[2, :, cols]) / (r2 - r1))
-
-
-def compute_rz_table(coil, spec: dict, *, chunk: int = 8192) -> np.ndarray:
-    """The table (n_rho, n_u, 4) float64 of ``spec``: b, Bz, e, w (see :data:`RZ_QUANTITIES`)
-    of the coil alone (winding + its own core), by direct evaluation (Coil.field, rtol 1e-10) on
-    the nodes; e and w on the axis by Richardson extrapolation (both are even in rho)."""
-    from .scene import _rz_direct
-
-    rho, z = _spec_nodes(spec)
-    n_rho, n_u = len(rho), len(z)
-    R, Z = np.meshgrid(rho[1:], z, indexing="ij")
-    r, zz = R.ravel(), Z.ravel()
-    out = np.zeros((n_rho, n_u, 4))
-    flat = out[1:].reshape(-1, 4)
-    for s in range(0, len(r), chunk):
-        sl = slice(s, s + chunk)
-        d = _rz_direct(coil, r[sl], zz[sl], True)
-        b = d["br_over_rho"]
-        flat[sl, 0] = b
-        flat[sl, 1] = d["bz"]
-        flat[sl, 2] = d["dbr_dz"] / r[sl]
-        flat[sl, 3] = (d["dbr_drho"] - b) / r[sl] ** 2
-    d0 = _rz_direct(coil, np.zeros(n_u), z, True)
-    out[0, :, 0] = d0["br_over_rho"]
-    out[0, :, 1] = d0["bz"]
-    _even_on_axis(out, rho, [2, 3])
-    return out
 
 
 def compute_magnet_table(phys: "MapPhysics", coil, spec: dict) -> np.ndarray:
@@ -279,102 +256,71 @@ def map_physics(design) -> MapPhysics:
 
 # ============================================================================ coupled core modes
 N_MODE_Q = {0: 4, 1: 5, 2: 5}
-"""Table quantities per core mode: m = 0 (b, Bz, e, w as the coil tables), m = 1, 2 (the
+"""Table quantities per core mode: m = 0 (b = Br/rho, Bz, e = (dBr/dz)/rho,
+w = (dBr/drho - Br/rho)/rho^2), m = 1, 2 (the
 potential x G resp. (x^2 - y^2) H with G(rho^2, z): a, a1, a2, az, a1z = -mu0 (G, G', G'', G_z,
 G'_z), ' = d/d(rho^2))."""
 
 
-def coupled_modes(arr: CoilArray, tolerance: float = 1e-4,
-                  sensor_tolerance: float = 1e-3) -> dict | None:
-    """The cores' coupling as a few modes per core type (None without coupled cores).
+def coupled_modes(arr: CoilArray, sensor_tolerance: float = 1e-3) -> dict | None:
+    """The field the magnet-magnetized cores give at the sensors, as a few core modes per core
+    type (None without coupled cores).
 
-    The coupled solve gives every core's unknowns X_j (m = 0 surface currents, m = 1, 2 cos and
-    sin charges; :mod:`designkit.coupling`) per ampere in each coil. Column k of A is the
-    uncoupled coil k (the tables RZ) plus the fields of dX_j = X_j - (X_self if j == k): the
-    extra magnetization of every core. Per core type and mode order m, the SVD of all dX blocks
-    gives the shapes U_m (kept while the singular values are above ``tolerance`` x the
-    largest of the m = 0 block); the coefficients C[j, b, k] = U_m^T dX_j[:, k].
+    By reciprocity (linear cores) the field at sensor s along e_c of the cores magnetized by
+    the magnet m at p is m . B(p) of the cores magnetized by a unit dipole e_c at s: fixed
+    sources, 3 x 2 x n_coils columns of core unknowns X_j (m = 0 surface currents, m = 1, 2
+    cos and sin charges; :mod:`designkit.coupling`). Per core type and mode order m, the SVD of
+    all X blocks gives the shapes U_m (kept while the singular values are above
+    ``sensor_tolerance`` x the largest of their order); the coefficients C[j, b, (s, c)] =
+    U_m^T X_j[:, (s, c)].
 
-    Returns {"types": [{"model", "coils", "sets": [A, sensors], each {"U": {m: (n_m, R_m)},
-    "basis": [(m, r, c)]}}],
-    "coef": (n_coils, n_basis_max, n_coils), "sensor_coef": (n_coils, n_basis_max, 2, n_coils,
-    3)}; basis entries (m, r, c): mode order, shape index, c = 0 cos / 1 sin (m = 0: c = 0).
-    ``sensor_coef[..., s, c]``: the coefficients of the cores magnetized by a unit dipole
-    (1 A m^2) along axis c at sensor s (reciprocity, see the code).
+    Returns {"types": [{"model", "coils", "sets": [sensors] ({"U": {m: (n_m, R_m)},
+    "basis": [(m, r, c)]})}], "sensor_coef": (n_coils, n_basis_max, 2, n_coils, 3)}; basis
+    entries (m, r, c): mode order, shape index, c = 0 cos / 1 sin (m = 0: c = 0).
     """
-    from .pose import Pose
-
     system = arr.coupled()
     if system is None:
         return None
-    x = system.coil_solution()  # (n_unknowns, nc)
     nc = arr.n_coils
-    # reciprocity (linear cores): the field at sensor s along e_c of the cores magnetized by the
-    # magnet m at p is m . B(p) of the cores magnetized by a unit dipole e_c at s. Those are
-    # fixed sources: 3 x 2 x nc more columns, so the sensors' field is a mode sum too.
     sens = arr.sensor_positions_m().reshape(-1, 3)
-    xs = np.stack([system.magnet_solution(sens, e) for e in np.eye(3)], axis=-1)  # (nu, ns, 3)
-    xs = xs.reshape(len(xs), -1)  # columns (sensor, component)
-    n_src = nc + xs.shape[1]
-    x = np.concatenate([x, xs], axis=1)
+    x = np.stack([system.magnet_solution(sens, e) for e in np.eye(3)], axis=-1)  # (nu, ns, 3)
+    x = x.reshape(len(x), -1)  # columns (sensor, component)
     blocks = {}
     for jj, k in enumerate(system.core_index):
         model = system.models[jj]
         blocks.setdefault(id(model), (model, []))[1].append((jj, k))
     types = []
     for model, members in blocks.values():
-        proto = arr.coils[members[0][1]].replace(pose=Pose())
-        alone = CoilArray((proto,)).coupled()
-        x_self = alone.coil_solution()[:, 0]
         n0, n1, m_max = model.n0, model.n1, model.m_max
-        dx = {}
-        for jj, k in members:
-            d = x[system.offsets[jj]:system.offsets[jj + 1]].copy()
-            d[:, k] -= x_self
-            dx[k] = d
+        dx = {k: x[system.offsets[jj]:system.offsets[jj + 1]] for jj, k in members}
         parts = {0: [(slice(0, n0), 0)]}
         for m in range(1, m_max + 1):
             parts[m] = [(slice(n0 + (2 * (m - 1) + c) * n1, n0 + (2 * (m - 1) + c + 1) * n1), c)
                         for c in range(2)]
-        def shapes_of(cols, tol):
-            """Per mode order: the SVD shapes of these source columns (None: no coupling)."""
-            out = {}
-            for m in parts:
-                mat = np.concatenate([dx[k][sl][:, cols] for k in dx for sl, _ in parts[m]],
-                                     axis=1)
-                u, sv, _ = np.linalg.svd(mat, full_matrices=False)
-                if sv[0] > 0:
-                    out[m] = u[:, :max(1, int(np.sum(sv > tol * sv[0])))]
-            return out
-
-        # A and the sensors get their own shapes: the sensor dipoles sit ~9 mm from a core's
-        # end and need many more, which A should not pay for at every lookup
-        sets = []
-        for cols, tol in ((slice(0, nc), tolerance), (slice(nc, n_src), sensor_tolerance)):
-            U = shapes_of(cols, tol)
-            basis = [(m, r, c) for m in sorted(U) for r in range(U[m].shape[1])
-                     for c in ((0,) if m == 0 else (0, 1))]
-            sets.append({"U": U, "basis": basis})
-        types.append({"model": model, "coils": [k for _, k in members], "sets": sets,
-                      "parts": parts, "dx": dx})
-    coefs = []
-    for which, cols in ((0, slice(0, nc)), (1, slice(nc, n_src))):
-        nb = max(len(t["sets"][which]["basis"]) for t in types)
-        coef = np.zeros((nc, nb, cols.stop - cols.start))
-        for t in types:
-            st = t["sets"][which]
-            for k, d in t["dx"].items():
-                for b, (m, r, c) in enumerate(st["basis"]):
-                    sl = [s for s, cc in t["parts"][m] if cc == c][0]
-                    coef[k, b] = st["U"][m][:, r] @ d[sl][:, cols]
-        coefs.append(coef)
-    return {"types": types, "coef": coefs[0],
-            "sensor_coef": coefs[1].reshape(nc, coefs[1].shape[1], 2, nc, 3)}
+        U = {}
+        for m in parts:
+            mat = np.concatenate([dx[k][sl] for k in dx for sl, _ in parts[m]], axis=1)
+            u, sv, _ = np.linalg.svd(mat, full_matrices=False)
+            if sv[0] > 0:
+                U[m] = u[:, :max(1, int(np.sum(sv > sensor_tolerance * sv[0])))]
+        basis = [(m, r, c) for m in sorted(U) for r in range(U[m].shape[1])
+                 for c in ((0,) if m == 0 else (0, 1))]
+        types.append({"model": model, "coils": [k for _, k in members],
+                      "sets": [{"U": U, "basis": basis}], "parts": parts, "dx": dx})
+    nb = max(len(t["sets"][0]["basis"]) for t in types)
+    coef = np.zeros((nc, nb, x.shape[1]))
+    for t in types:
+        st = t["sets"][0]
+        for k, d in t["dx"].items():
+            for b, (m, r, c) in enumerate(st["basis"]):
+                sl = [s for s, cc in t["parts"][m] if cc == c][0]
+                coef[k, b] = st["U"][m][:, r] @ d[sl]
+    return {"types": types, "sensor_coef": coef.reshape(nc, nb, 2, nc, 3)}
 
 
 def compute_mode_tables(t: dict, spec: dict, progress=None) -> list:
     """The mode tables (n_rho, n_u, Q) float64 of one core type, one per shape set of ``t``
-    (A, sensors): for each shape, the quantities of :data:`N_MODE_Q` from the core model's
+    (the sensor field's): for each shape, the quantities of :data:`N_MODE_Q` from the core model's
     basis fields at (rho, 0, z), local frame (one evaluation of the basis for all sets)."""
     from .constants import MU0
 
@@ -460,13 +406,93 @@ def compute_mode_tables(t: dict, spec: dict, progress=None) -> list:
 
 
 # ============================================================================ build
+def cell_layers(lower, upper, z_top: float, cell_ratio: tuple, layer_ratio: float,
+                degree: tuple) -> list:
+    """The harmonic-cell layout of A over the box (meta ``a_layers``): layers from the floor
+    up, each ``layer_ratio`` x its floor's height d above the sources' top ``z_top`` (m) thick,
+    cut into a uniform grid of cells no wider than ``cell_ratio`` x d, potentials of degree
+    ``degree``; both are sequences per layer from the lowest, the last entry serving every
+    layer above. A polynomial's error in a cell grows with (cell size / distance to the
+    sources)^degree, so fixed ratios keep it about even and the cells grow upwards (the default
+    box: 15 x 15 cells of degree 9, then 14 x 14, 9 x 9 and 6 x 6 of degree 7). The lowest
+    layer holds every row's maximum, where the error measure is tightest: there a higher degree
+    keeps the cells (and a batch lookup's products) fewer. A thin remainder at the top is
+    shared with the layer below."""
+    lo, hi = np.asarray(lower, float), np.asarray(upper, float)
+    if lo[2] - z_top < 1e-4:
+        raise BadInputError("box", f"above the top of every coil's sources (z > {z_top} m; the "
+                            "map's potential is harmonic only there), m",
+                            (lo.tolist(), hi.tolist()))
+    wx, wy = hi[0] - lo[0], hi[1] - lo[1]
+    layers, z = [], float(lo[2])
+    while z < hi[2] - 1e-12:
+        d = z - z_top
+        dz = layer_ratio * d
+        rest = float(hi[2]) - z
+        if rest <= 1.5 * dz:
+            dz = rest if rest <= dz else rest / 2
+        z1 = float(hi[2]) if hi[2] - (z + dz) < 1e-9 else z + dz
+        ratio = cell_ratio[min(len(layers), len(cell_ratio) - 1)]
+        nx = max(1, math.ceil(wx / (ratio * d) - 1e-9))
+        ny = max(1, math.ceil(wy / (ratio * d) - 1e-9))
+        layers.append({"name": f"AH{len(layers)}", "z_lo_m": z, "z_hi_m": z1,
+                       "x0_m": float(lo[0]), "y0_m": float(lo[1]), "nx": nx, "ny": ny,
+                       "cell_x_m": float(wx / nx), "cell_y_m": float(wy / ny),
+                       "degree": int(degree[min(len(layers), len(degree) - 1)])})
+        z = z1
+    return layers
+
+
+def _lobatto(n: int) -> np.ndarray:
+    """n Chebyshev-Lobatto nodes on [0, 1] (both ends: neighbouring cells share them)."""
+    return (1.0 - np.cos(np.pi * np.arange(n) / (n - 1))) / 2
+
+
+def layer_nodes(lay: dict, n: int) -> list:
+    """The fit lattice of a layer: x, y, z node axes (m), ``n`` Chebyshev-Lobatto nodes per
+    cell and axis, shared across cell faces."""
+    t = _lobatto(n)[:-1]
+
+    def axis(x0, h, count):
+        return np.r_[(x0 + h * (np.arange(count)[:, None] + t)).ravel(), x0 + h * count]
+
+    return [axis(lay["x0_m"], lay["cell_x_m"], lay["nx"]),
+            axis(lay["y0_m"], lay["cell_y_m"], lay["ny"]),
+            lay["z_lo_m"] + (lay["z_hi_m"] - lay["z_lo_m"]) * _lobatto(n)]
+
+
+def fit_layer(lay: dict, values: np.ndarray, row_max: np.ndarray, n: int) -> np.ndarray:
+    """Harmonic coefficients (nx * ny, K, nc) float32 of one layer from A on its fit lattice
+    (NX, NY, n, 8, nc): per cell the least-squares potential over its n^3 nodes, every row
+    weighted by 1 / its largest |A| over the box (the error measure); one pseudo-inverse per
+    layer (every cell has the same local nodes)."""
+    nx, ny, deg = lay["nx"], lay["ny"], lay["degree"]
+    hx, hy = lay["cell_x_m"], lay["cell_y_m"]
+    dz = lay["z_hi_m"] - lay["z_lo_m"]
+    r = max(hx, hy, dz) / 2
+    t = _lobatto(n) - 0.5
+    s = np.stack(np.meshgrid(t * hx / r, t * hy / r, t * dz / r, indexing="ij"), -1)
+    ops = mf.harmonic_rows(deg)  # (8, M, K)
+    scale = np.array([r] * 3 + [r * r] * 5) * row_max
+    g = np.einsum("mp,rmk->prk", mf.monomials(s.reshape(-1, 3), deg - 1), ops)
+    g /= scale[None, :, None]
+    pinv = np.linalg.pinv(g.reshape(-1, g.shape[2]))  # (K, n^3 * 8)
+    nc = values.shape[-1]
+    out = np.empty((nx * ny, g.shape[2], nc), np.float32)
+    w = (1.0 / row_max)[:, None]
+    for i in range(nx):
+        for j in range(ny):
+            a = values[i * (n - 1):i * (n - 1) + n, j * (n - 1):j * (n - 1) + n]
+            out[i * ny + j] = pinv @ (a * w).reshape(-1, nc)
+    return out
+
+
 def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
-          mode_tolerance: float = 1e-4, sensor_mode_tolerance: float = 1e-3,
-          rz_step: float = 1e-4, rz_log_step: float = 0.025,
-          rz_rho_scale: float = 0.05, mode_rz_step: float = 2.5e-4,
-          mode_rz_log_step: float = 0.04, sensor_mode_rz_step: float = 2.5e-4,
+          cell_ratio=(0.67, 0.5), layer_ratio: float = 0.5, degree=(9, 7),
+          fit_nodes: int = 4, sensor_mode_tolerance: float = 1e-3,
+          rz_rho_scale: float = 0.05, sensor_mode_rz_step: float = 2.5e-4,
           sensor_mode_rz_log_step: float = 0.04, magnet_rz_step: float = 2e-3,
-          magnet_rz_log_step: float = 0.15, box=None, n_check: int = 100,
+          magnet_rz_log_step: float = 0.15, box=None, n_check: int = 400,
           progress: bool = True, array: CoilArray | None = None) -> dict:
     """Compute the map v2 of ``design``: ``{"arrays": {...}, "meta": {...}}`` (not yet written).
 
@@ -474,42 +500,49 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
     ----------
     spacing, log_step : float
         x, y step (m) of the grids over magnet positions that carry what the per-core magnet
-        tables miss (bias force, sensor fields); their z steps grow from ``log_step`` x the
-        height above the cores' tops, never above ``spacing``.
-    mode_tolerance, sensor_mode_tolerance : float
-        Coupled core modes are kept while their singular value is above this fraction of the
-        largest of their order (m = 0, 1, 2); for A, resp. for the sensor-induced field (whose
-        unit dipoles ~9 mm from a core's end need many more shapes; 1e-3 keeps the file small
-        for an error of ~2 % of the field, itself a few mT).
-    rz_step : float, m
-        rho step of the coil tables on the axis (default 0.1 mm, growing as
-        (1 + rho / rz_rho_scale)^2 with rz_rho_scale 50 mm: ~0.4 mm at 50 mm from the axis);
-        ``rz_log_step`` is the step in log(z - z_ref) (default 0.025: 2.5 % of the height
-        above the core's top). ``mode_rz_step``, ``mode_rz_log_step``: the same for the mode
-        tables of A (0.25 mm, 4 %: they carry the coupling, ~15-25 % of A);
-        ``sensor_mode_rz_step``, ``sensor_mode_rz_log_step`` for those of the sensor field
-        (0.25 mm, 4 %); ``magnet_rz_step``,
-        ``magnet_rz_log_step`` for the magnet tables (2 mm, 15 %).
+        tables miss (bias force); their z steps grow from ``log_step`` x the height above the
+        cores' tops, never above ``spacing``.
+    cell_ratio, layer_ratio, degree, fit_nodes
+        A's harmonic cells (:func:`cell_layers`): cells no wider than ``cell_ratio`` and layers
+        ``layer_ratio`` x the height of their floor above the sources' top, potentials of
+        degree ``degree`` (K = (degree + 1)^2 - 1 coefficients per cell and coil);
+        ``cell_ratio`` and ``degree`` per layer from the lowest (the last entry for the layers
+        above); fitted on
+        ``fit_nodes``^3 Chebyshev-Lobatto nodes per cell (shared across faces; each node is one
+        evaluation of the coupled model, ~0.4 ms).
+    sensor_mode_tolerance : float
+        The sensor field's core modes are kept while their singular value is above this
+        fraction of the largest of their order (m = 0, 1, 2) (the unit dipoles ~9 mm from a
+        core's end need many; 1e-3 keeps the file small for an error of ~2 % of the field,
+        itself a few mT).
+    rz_rho_scale : float, m
+        The (rho, z) tables' rho steps grow as (1 + rho / rz_rho_scale)^2.
+        ``sensor_mode_rz_step``, ``sensor_mode_rz_log_step``: rho step on the axis (m) and step
+        in log(z - z_ref) of the sensor field's mode tables (0.25 mm, 4 %);
+        ``magnet_rz_step``, ``magnet_rz_log_step`` for the magnet tables (2 mm, 15 %).
     box : (lower, upper) or None
         Corners, m; default :func:`default_box`.
     n_check : int
         Random points where the finished map is compared with direct evaluation of the coupled
-        model (meta 'errors'; each costs a full coupled evaluation).
+        model (meta 'errors'; each costs a full coupled evaluation, ~0.4 ms).
     """
     from ._progress import tqdm
 
     from . import __version__
+    from .scene import source_box
 
     spacing = v.in_range("spacing", spacing, 5e-4, 0.1, "m")
     log_step = v.in_range("log_step", log_step, 1e-3, 2.0)
-    mode_tolerance = v.in_range("mode_tolerance", mode_tolerance, 1e-8, 1e-1)
+    if np.ndim(cell_ratio) != 1 or np.ndim(degree) != 1 or not len(cell_ratio) or not len(degree):
+        raise BadInputError("cell_ratio, degree", "sequences, per layer from the lowest (the "
+                            "last one for the layers above)", (cell_ratio, degree))
+    cell_ratio = tuple(v.in_range("cell_ratio", r, 0.05, 2.0) for r in cell_ratio)
+    layer_ratio = v.in_range("layer_ratio", layer_ratio, 0.05, 2.0)
+    degree = tuple(int(v.in_range("degree", d, 2, 12)) for d in degree)
+    fit_nodes = int(v.in_range("fit_nodes", fit_nodes, 3, 8))
     sensor_mode_tolerance = v.in_range("sensor_mode_tolerance", sensor_mode_tolerance, 1e-8,
                                        1e-1)
-    rz_step = v.in_range("rz_step", rz_step, 1e-5, 0.01, "m")
-    rz_log_step = v.in_range("rz_log_step", rz_log_step, 1e-3, 0.5)
     rz_rho_scale = v.in_range("rz_rho_scale", rz_rho_scale, 1e-3, 10.0, "m")
-    mode_rz_step = v.in_range("mode_rz_step", mode_rz_step, 1e-5, 0.01, "m")
-    mode_rz_log_step = v.in_range("mode_rz_log_step", mode_rz_log_step, 1e-3, 0.5)
     sensor_mode_rz_step = v.in_range("sensor_mode_rz_step", sensor_mode_rz_step, 1e-5, 0.01, "m")
     sensor_mode_rz_log_step = v.in_range("sensor_mode_rz_log_step", sensor_mode_rz_log_step,
                                          1e-3, 0.5)
@@ -538,9 +571,16 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
             out.append(_union_spec(s))
         return out
 
-    a_specs = specs([idx for _, idx in types], rz_step, rz_log_step, 4)
     m_specs = specs([idx for _, idx in types], magnet_rz_step, magnet_rz_log_step, 2)
-    z_ref = max(arr.coils[k].pose.position[2] + s["z_ref_m"] for (_, idx), s in zip(types, a_specs)
+    # the top of all sources (any pose): the cells' potentials are harmonic above it
+    corners = [np.array([[x, y, z] for x in (-r, r) for y in (-r, r) for z in (zl, zh)])
+               for r, zl, zh in (source_box(c) for c in arr.coils)]
+    z_top = max(float((c.pose.vectors_to_global(k)[:, 2] + c.pose.position[2]).max())
+                for c, k in zip(arr.coils, corners))
+    layers = cell_layers(lower, upper, z_top, cell_ratio, layer_ratio, degree)
+    lattices = [layer_nodes(lay, fit_nodes) for lay in layers]
+    fit_pts = np.concatenate([_nodes(ax) for ax in lattices])
+    z_ref = max(arr.coils[k].pose.position[2] + s["z_ref_m"] for (_, idx), s in zip(types, m_specs)
                 for k in idx)
     m_axes = box_axes(lower, upper, spacing, z_ref, log_step)
     m_nodes = _nodes(m_axes)
@@ -548,14 +588,16 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
     check = rng.uniform(lower, upper, (n_check, 3))
     n_mcheck = min(n_check, 50)
     chunk = 64
-    work = ([("coupled solve", 0)] + [("coil tables", k) for k in range(len(types))]
-            + [("mode tables", 0)]
+    fit_chunk = 512
+    work = ([("coupled solve", 0)] + [("cell nodes", s) for s in range(0, len(fit_pts), fit_chunk)]
+            + [("magnet tables", k) for k in range(len(types))] + [("mode tables", 0)]
             + [("magnet", s) for s in range(0, len(m_nodes), chunk)]
             + [("check", s) for s in range(0, n_check, chunk)] + [("magnet check", 0),
                                                                   ("saturation", 0)])
     arrays: dict = {}
-    rz_meta, mrz_meta, cm_meta, sm_meta = [], [], [], []
+    mrz_meta, sm_meta = [], []
     f0 = np.empty((len(m_nodes), 3))
+    a_fit = np.empty((len(fit_pts), 8, nc))
     a_check = np.empty((n_check, 8, nc))
     seconds: dict = {}
     modes = None
@@ -564,44 +606,36 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
         bar.set_postfix_str(kind, refresh=False)
         t0 = time.perf_counter()
         if kind == "coupled solve":
-            modes = coupled_modes(arr, mode_tolerance, sensor_mode_tolerance)
-        elif kind == "coil tables":
+            arr.actuation_matrix(fit_pts[:1])  # the coupled solve, once
+            modes = coupled_modes(arr, sensor_mode_tolerance)
+        elif kind == "cell nodes":
+            a_fit[s:s + fit_chunk] = phys.actuation(arr, fit_pts[s:s + fit_chunk])
+        elif kind == "magnet tables":
             proto, idx = types[s]
-            arrays[f"RZ{s}"] = compute_rz_table(proto, a_specs[s]).astype(np.float32)
-            rz_meta.append({"name": f"RZ{s}", "coils": [int(k) for k in idx], **a_specs[s]})
             arrays[f"MRZ{s}"] = compute_magnet_table(phys, proto, m_specs[s]).astype(np.float32)
             mrz_meta.append({"name": f"MRZ{s}", "coils": [int(k) for k in idx], **m_specs[s]})
         elif kind == "mode tables":
             for k, t in enumerate(modes["types"] if modes else []):
-                sets = ((0, "CM", cm_meta, mode_rz_step, mode_rz_log_step),
-                        (1, "SM", sm_meta, sensor_mode_rz_step, sensor_mode_rz_log_step))
-                set_specs = [specs([t["coils"]], step, lstep, 1)[0]
-                             for _, _, _, step, lstep in sets]
-                # one evaluation of the cores' basis fields serves both sets on one grid
+                spec = specs([t["coils"]], sensor_mode_rz_step, sensor_mode_rz_log_step, 1)[0]
+
                 def show(frac, k=k, last=[-1]):
                     if int(frac * 10) != last[0]:  # a line per 10 %, not per chunk
                         last[0] = int(frac * 10)
                         bar.set_postfix_str(f"mode tables {k + 1}: {frac:.0%}")
 
-                both = (compute_mode_tables(t, set_specs[0], show)
-                        if set_specs[0] == set_specs[1] else None)
-                for (which, prefix, metas, _, _), spec in zip(sets, set_specs):
-                    st = t["sets"][which]
-                    tab = (both[which] if both is not None
-                           else compute_mode_tables({**t, "sets": [st]}, spec)[0])
-                    shapes = [[m, r] for m in sorted(st["U"])
-                              for r in range(st["U"][m].shape[1])]
-                    cols = np.cumsum([0] + [N_MODE_Q[m] for m, _ in shapes])[:-1].tolist()
-                    # float16, each column scaled to its largest |value|: these tables carry
-                    # the coupling (~15-25 % of A); measured: float32 changes the 2-core error
-                    # by < 1 %, and float16 halves the file
-                    col_scale = np.maximum(np.abs(tab).max(axis=(0, 1)), 1e-300)
-                    arrays[f"{prefix}{k}"] = (tab / col_scale).astype(np.float16)
-                    metas.append({"name": f"{prefix}{k}", "coils": [int(c) for c in t["coils"]],
-                                  **spec, "shape": list(tab.shape), "shapes": shapes,
-                                  "column_scale": col_scale.tolist(),
-                                  "columns": [int(c) for c in cols],
-                                  "basis": [list(b) for b in st["basis"]]})
+                tab = compute_mode_tables(t, spec, show)[0]
+                st = t["sets"][0]
+                shapes = [[m, r] for m in sorted(st["U"]) for r in range(st["U"][m].shape[1])]
+                cols = np.cumsum([0] + [N_MODE_Q[m] for m, _ in shapes])[:-1].tolist()
+                # float16, each column scaled to its largest |value|: the sensor field is a
+                # few mT, its budget ~2 %
+                col_scale = np.maximum(np.abs(tab).max(axis=(0, 1)), 1e-300)
+                arrays[f"SM{k}"] = (tab / col_scale).astype(np.float16)
+                sm_meta.append({"name": f"SM{k}", "coils": [int(c) for c in t["coils"]],
+                                **spec, "shape": list(tab.shape), "shapes": shapes,
+                                "column_scale": col_scale.tolist(),
+                                "columns": [int(c) for c in cols],
+                                "basis": [list(b) for b in st["basis"]]})
         elif kind == "magnet":
             f0[s:s + chunk] = phys.bias_force(arr, m_nodes[s:s + chunk])
         elif kind == "check":
@@ -614,15 +648,21 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
         seconds[kind] = seconds.get(kind, 0.0) + time.perf_counter() - t0
     bar.close()
     t0 = time.perf_counter()
+    row_max = np.maximum(np.abs(a_fit).max(axis=(0, 2)), 1e-300)
+    start = 0
+    for lay, axes in zip(layers, lattices):
+        shape = tuple(len(a) for a in axes)
+        stop = start + int(np.prod(shape))
+        arrays[lay["name"]] = fit_layer(lay, a_fit[start:stop].reshape(shape + (8, nc)),
+                                        row_max, fit_nodes)
+        start = stop
     positions = arr.positions()
     rotations = [list(map(list, c.pose.rotation)) for c in arr.coils]
     mprep = mf.prepare_magnet([arrays[t["name"]] for t in mrz_meta], mrz_meta, positions,
                               rotations)
     f_pair = mf.magnet_terms(mprep, m_nodes)
     m_shape = tuple(len(a) for a in m_axes)
-    coef = modes["coef"] if modes else np.zeros((nc, 0, nc))
     arrays.update({
-        "COEF": coef,
         "SCOEF": modes["sensor_coef"] if modes else np.zeros((nc, 0, 2, nc, 3)),
         "F0_RES": (f0 - f_pair).reshape(m_shape + (3,)).astype(np.float32),
         "M_X": m_axes[0], "M_Y": m_axes[1], "M_Z": m_axes[2],
@@ -634,11 +674,11 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
     meta = {
         "format": FORMAT, "version": FORMAT_VERSION, "designkit_version": __version__,
         "design_name": design.name, "design_sha256": design.spec_hash(),
-        "rows": list(ROWS), "units": UNITS, "n_coils": nc, "n_basis": int(coef.shape[1]),
+        "rows": list(ROWS), "units": UNITS, "n_coils": nc,
         "n_sensor_basis": int(arrays["SCOEF"].shape[1]),
         "box_m": [lower.tolist(), upper.tolist()],
-        "rz_tables": rz_meta, "rz_quantities": list(RZ_QUANTITIES),
-        "mode_tables": cm_meta, "sensor_mode_tables": sm_meta, "magnet_tables": mrz_meta,
+        "a_layers": layers, "sources_top_m": z_top,
+        "sensor_mode_tables": sm_meta, "magnet_tables": mrz_meta,
         "coil_positions_m": positions.tolist(), "coil_rotations": rotations,
         "max_current_a": design.drive.max_current_a,
         # the finger magnet's cylinder (the localizer's exact magnet field; MOMENT is its moment)
@@ -648,10 +688,11 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
         "drive": drive_data(design, _drive_coils(arr)),
         "physics": phys.source,
         "settings": {"spacing_m": spacing, "log_step": log_step,
-                     "mode_tolerance": mode_tolerance,
-                     "sensor_mode_tolerance": sensor_mode_tolerance, "rz_step_m": rz_step,
-                     "rz_log_step": rz_log_step, "rz_rho_scale_m": rz_rho_scale,
-                     "mode_rz_step_m": mode_rz_step, "mode_rz_log_step": mode_rz_log_step,
+                     "cell_ratio": list(cell_ratio), "layer_ratio": layer_ratio,
+                     "degree": list(degree), "fit_nodes": fit_nodes,
+                     "n_fit_points": len(fit_pts),
+                     "sensor_mode_tolerance": sensor_mode_tolerance,
+                     "rz_rho_scale_m": rz_rho_scale,
                      "sensor_mode_rz_step_m": sensor_mode_rz_step,
                      "sensor_mode_rz_log_step": sensor_mode_rz_log_step,
                      "magnet_rz_step_m": magnet_rz_step,
@@ -660,6 +701,7 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
     reader = mf.MapFile.from_arrays(arrays, meta)
     scale = np.maximum(np.abs(a_check).max(axis=(0, 2)), 1e-300)
     err = np.abs(reader.actuation(check) - a_check) / scale[None, :, None]
+    fit_err = np.abs(reader.actuation(fit_pts, True) - a_fit) / row_max[None, :, None]
 
     def rel(got, ref):
         return float(np.abs(got - ref).max() / max(np.abs(ref).max(), 1e-300))
@@ -668,6 +710,8 @@ def build(design, *, spacing: float = 0.025, log_step: float = 0.5,
         "n_points": n_check,
         "actuation_max_rel_per_row": dict(zip(ROWS, err.max(axis=(0, 2)).tolist())),
         "actuation_rms_rel": float(np.sqrt((err ** 2).mean())),
+        "n_fit_points": len(fit_pts),
+        "actuation_fit_nodes_max_rel": float(fit_err.max()),
         "n_magnet_points": n_mcheck,
         "bias_force_max_rel": rel(reader.bias_force(check[:n_mcheck]), f0_check),
         "sensor_induced_max_rel": rel(reader.sensor_induced_field(check[:n_mcheck]),

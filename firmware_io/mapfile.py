@@ -6,27 +6,25 @@ array names, shapes, validation, interpolation -- is defined here and nowhere el
 
 What the file carries (``.npz``; every array hashed into ``meta.data_sha256``)
 ------------------------------------------------------------------------------
-The coupled actuation matrix A(p), (8, n_coils) per point, rows :data:`ROWS` (T/A, T/(m A)):
-column k is coil k alone plus the extra magnetization coil k gives every core (the coupling),
-written in the cores' own modes::
+The coupled actuation matrix A(p), (8, n_coils) per point, rows :data:`ROWS` (T/A, T/(m A)),
+as harmonic cells. The box is current-free, so coil k's field per ampere (all cores
+magnetized, the coupling included) is B = grad(psi_k) with psi_k harmonic; every row of A is
+a first or second derivative of one potential, so the stored field is divergence- and
+curl-free by construction and its rows agree with each other.
 
-    A(p)[:, k] = A_alone_k(p) + sum over cores j and basis fields b of  F_jb(p) COEF[j, b, k]
-
-* ``RZ0``, ``RZ1``, ...: per identical coil type (meta ``rz_tables``), the exact axisymmetric
-  field per ampere of one coil alone (winding + its own core magnetized by it alone),
-  (n_rho, n_u, 4) float32: the smooth, even-in-rho quantities b = Br/rho, Bz,
-  e = (dBr/dz)/rho, w = (dBr/drho - Br/rho)/rho^2 on a grid uniform in
-  v = rho / (1 + rho / rho_scale) and u = log(z - z_ref) (z_ref: top of the coil's sources), so
-  the steps grow with the distance from the core's rim. Bilinear in (v, u), then Bx = b x,
-  By = b y, Bz, dBx/dx = b + w x^2, dBx/dy = w x y, dBx/dz = e x, dBy/dy = b + w y^2,
-  dBy/dz = e y in the coil's frame (no division, no special case on the axis).
-* ``CM0``, ... (meta ``mode_tables``): per core type, the fields F_b of a few magnetization
-  shapes of the core (the SVD of every core's extra magnetization in the coupled solve, per
-  azimuthal order m = 0, 1, 2; cos and sin for m >= 1) on the same kind of (v, u) grid: m = 0
-  as the coil tables, m = 1, 2 as the potentials x G, y G resp. (x^2 - y^2) H, 2 x y H with
-  G, H smooth in (rho^2, z): 5 quantities (a, a1, a2, az, a1z) = -mu0 (G, G', G'', G_z, G'_z)
-  give all 8 rows (:func:`mode_rows`); float32 (float16 for the sensor field's), each column
-  divided by its largest |value| (meta ``column_scale``). ``COEF`` (n_coils, n_basis, n_coils) float64.
+* meta ``a_layers``: the box cut in z into layers stacked from its floor to its top, each a
+  uniform nx x ny grid of cells over the box's footprint: ``z_lo_m``, ``z_hi_m``, ``x0_m``,
+  ``y0_m``, ``nx``, ``ny``, ``cell_x_m``, ``cell_y_m``, ``degree`` L. The cells grow with the
+  height above the sources (designkit.fieldmap.cell_layers), so the cell of a point is found in
+  O(1): its layer by z (a handful of layers), then two floor divisions.
+* ``AH0``, ``AH1``, ...: per layer, (nx * ny, (L + 1)^2 - 1, n_coils) float32, cell index
+  ix * ny + iy: psi of every coil as a harmonic polynomial of degree L in the cell-local
+  coordinates s = (p - centre) / r, r = half the cell's largest side (isotropic, so harmonic
+  in s too). The numbers stored are psi's coefficients (T m / A) on its free monomials
+  s_x^a s_y^b s_z^c, c in (0, 1), 1 <= a + b + c <= L (:func:`harmonic_terms`); the others
+  follow from Laplace's equation (:func:`harmonic_potential`), the constant is dropped.
+  A's rows are then polynomials of degree <= L - 1 in s (:func:`harmonic_rows`: d/ds / r for
+  B, d2/ds2 / r^2 for the gradient rows).
 
 The magnet's interaction with the cores, as functions of the magnet's position p:
 
@@ -57,12 +55,19 @@ Usage::
     b = m.sensor_induced_field((0.0, 0.0, 0.03))  # (2, n_coils, 3) T
     a = m.actuation(points, rows=(3, 6), coils=(0, 4))  # (n, 2, 2): only those entries
 
-How a lookup runs: every core contributes its coil alone (coefficient 1 on its own column)
-and its mode fields as one list of basis fields; each is a bilinear (v, u) lookup times
-polynomials in the core-local x, y, and A = rows @ coefficients. One point (:func:`actuation_one`)
-does that in ~40 small numpy calls (point as (3,) or (1, 3) alike); blocks of points
-(:func:`kernel_rows_many`) in a few large ones. Maps whose coils are rotated, at different
-heights or of several types take the general path (:func:`interpolate_rz`, :func:`mode_rows`).
+How a lookup of A runs (:func:`prepare_cells` expands every cell's coefficients once, at
+load, into its rows' monomial coefficients (M, 8 n_coils) float32, M = C(L + 2, 3); 18 MB in
+memory for the default map's 1.5 MB of coefficients): one point
+(:func:`cells_one`, as (3,) or (1, 3) alike) finds its cell with Python arithmetic, forms the
+M monomials from per-axis powers and takes one (M,) @ (M, 8 n_coils) product; blocks of points
+(:func:`cells_many`) are sorted by cell (a radix sort of 16-bit cell indices), their monomials
+computed once per layer, then one (n_c, M) @ (M, 8 n_coils) float32 product per occupied cell
+on its contiguous run. Outside the box (``extrapolate=True``) a point takes its nearest
+layer's and grid's cell, whose polynomial degrades quickly away from it. ``rows=`` /
+``coils=`` select columns of the products. The bias force and the sensor field keep their own
+kernels (:func:`modes_one`, :func:`kernel_rows_many`; the general path :func:`mode_rows`,
+:func:`magnet_terms` for rotated or mixed coils). The error budget, the layout's choices and
+the measured errors and timings are in designkit.fieldmap's docstring.
 """
 
 from __future__ import annotations
@@ -81,27 +86,27 @@ import numpy as np
 from .errors import BadInputError
 
 FORMAT = "designkit-fieldmap"
-FORMAT_VERSION = 3
-"""Format version of map v2 (coupled A, bias force, sensor fields); 1 and 2 were grid-only maps."""
+FORMAT_VERSION = 4
+"""Format version of map v2 with A as harmonic cells (coupled A, bias force, sensor fields); 3
+held A as (rho, z) and core-mode tables, 1 and 2 were grid-only maps."""
 ROWS = ("Bx", "By", "Bz", "dBx/dx", "dBx/dy", "dBx/dz", "dBy/dy", "dBy/dz")
 UNITS = {"A_rows_0_2": "T/A", "A_rows_3_7": "T/(m A)", "grid": "m", "moment": "A m^2",
          "current": "A", "force": "N", "field": "T", "sensor_coil_field": "T/A"}
-REBUILD = ("Rebuild it for this version: designkit map --design <design.toml> "
-           "--out <file.npz>")
+REBUILD = ("Rebuild it for this version: designkit map --out <file.npz> (with --design "
+           "<design.toml> for a design of your own)")
 
 # name -> (dtype, shape as a function of the sizes); the single list of arrays in a map file
-_FIXED = ("COEF", "SCOEF", "F0_RES", "M_X", "M_Y", "M_Z", "SENSOR_POS", "SENSOR_COIL",
+_FIXED = ("SCOEF", "F0_RES", "M_X", "M_Y", "M_Z", "SENSOR_POS", "SENSOR_COIL",
           "MOMENT", "SAT_I", "SAT_FACTOR")
 
 
 def _shapes(meta: dict, arrays: dict) -> dict:
     nc = int(meta["n_coils"])
     mx, my, mz = (len(arrays[k]) for k in ("M_X", "M_Y", "M_Z"))
-    nb = int(meta["n_basis"])
     ns = len(arrays["SAT_I"])
     f32, f64 = np.float32, np.float64
     nbs = int(meta["n_sensor_basis"])
-    return {"COEF": (f64, (nc, nb, nc)), "SCOEF": (f64, (nc, nbs, 2, nc, 3)),
+    return {"SCOEF": (f64, (nc, nbs, 2, nc, 3)),
             "F0_RES": (f32, (mx, my, mz, 3)),
             "M_X": (f64, (mx,)), "M_Y": (f64, (my,)), "M_Z": (f64, (mz,)),
             "SENSOR_POS": (f64, (2, nc, 3)), "SENSOR_COIL": (f64, (2, nc, 3, nc)),
@@ -109,15 +114,14 @@ def _shapes(meta: dict, arrays: dict) -> dict:
 
 
 def array_names(keys) -> list:
-    """The arrays of a map in hashing order: the fixed ones present, then RZ0, RZ1, ...,
-    MRZ0, ..., CM0, ..."""
+    """The arrays of a map in hashing order: the fixed ones present, then AH0, AH1, ...,
+    MRZ0, ..., SM0, ..."""
     def tables(prefix):
         n = len(prefix)
         return sorted((k for k in keys if k.startswith(prefix) and k[n:].isdigit()),
                       key=lambda k: int(k[n:]))
 
-    return ([k for k in _FIXED if k in keys] + tables("RZ") + tables("MRZ") + tables("CM")
-            + tables("SM"))
+    return ([k for k in _FIXED if k in keys] + tables("AH") + tables("MRZ") + tables("SM"))
 
 
 def data_hash(arrays: dict) -> str:
@@ -176,9 +180,9 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise _bad(p, f"meta.format == {FORMAT!r} -- a foreign file")
     if meta.get("version") != FORMAT_VERSION:
-        raise _bad(p, f"format version {FORMAT_VERSION} (map v2: coupled array, bias force, "
-                   f"sensor fields); this file is version {meta.get('version')!r}, written "
-                   "before v2", REBUILD)
+        raise _bad(p, f"format version {FORMAT_VERSION} (map v2, A as harmonic cells); this "
+                   f"file is version {meta.get('version')!r}, written by an older designkit",
+                   REBUILD)
     if meta.get("units") != UNITS or meta.get("rows") != list(ROWS):
         raise _bad(p, f"units {UNITS} and rows {ROWS}")
     try:
@@ -196,12 +200,13 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
         if a.shape != shape or a.dtype != dtype:
             raise _bad(p, f"{name} of shape {shape} {np.dtype(dtype).name}; got {a.shape} "
                        f"{a.dtype}")
-    for key, prefix, nq in (("rz_tables", "RZ", NQ), ("magnet_tables", "MRZ", NQ_MAGNET),
-                            ("mode_tables", "CM", None), ("sensor_mode_tables", "SM", None)):
+    _validate_layers(arrays, meta, nc, p)
+    for key, prefix, nq in (("magnet_tables", "MRZ", NQ_MAGNET),
+                            ("sensor_mode_tables", "SM", None)):
         tabs = meta.get(key)
-        n_basis = int(meta["n_basis" if prefix == "CM" else "n_sensor_basis"])
+        n_basis = int(meta["n_sensor_basis"])
         if not isinstance(tabs, list) or (not tabs and nq is not None):
-            raise _bad(p, f"meta.{key} (a list, non-empty for coil and magnet tables)")
+            raise _bad(p, f"meta.{key} (a list, non-empty for the magnet tables)")
         covered = []
         for k, t in enumerate(tabs):
             try:
@@ -244,173 +249,46 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
         raise _bad(p, "data matching its recorded SHA-256 (corrupted)")
 
 
-# ============================================================================ (rho, z) tables
-NQ = 4
-"""Quantities per node of a (rho, z) coil table: b, Bz, e, w of the coil alone (winding + its
-own core magnetized by it alone), per ampere."""
+def _validate_layers(arrays: dict, meta: dict, nc: int, p) -> None:
+    """The harmonic cells of A: layers stacked without gaps over the box's z range, each grid
+    covering the box in x and y, each table AH<k> (nx * ny, (L + 1)^2 - 1, n_coils) float32."""
+    layers = meta.get("a_layers")
+    try:
+        lo, hi = (np.asarray(c, float) for c in meta["box_m"])
+        ok = isinstance(layers, list) and len(layers) > 0 and lo.shape == hi.shape == (3,)
+        z = float(lo[2]) if ok else 0.0
+        tol = 1e-9
+        for k, lay in enumerate(layers if ok else []):
+            tab = arrays.get(f"AH{k}")
+            deg, nx, ny = int(lay["degree"]), int(lay["nx"]), int(lay["ny"])
+            hx, hy = float(lay["cell_x_m"]), float(lay["cell_y_m"])
+            ok = ok and (lay["name"] == f"AH{k}" and tab is not None and 1 <= deg <= 16
+                         and nx >= 1 and ny >= 1 and hx > 0 and hy > 0
+                         and tab.dtype == np.float32
+                         and tab.shape == (nx * ny, (deg + 1) ** 2 - 1, nc)
+                         and abs(float(lay["z_lo_m"]) - z) <= tol
+                         and float(lay["z_hi_m"]) > z
+                         and lay["x0_m"] <= lo[0] + tol and lay["y0_m"] <= lo[1] + tol
+                         and lay["x0_m"] + nx * hx >= hi[0] - tol
+                         and lay["y0_m"] + ny * hy >= hi[1] - tol)
+            z = float(lay["z_hi_m"])
+        ok = ok and abs(z - float(hi[2])) <= tol
+        ok = ok and sorted(k for k in arrays if k.startswith("AH")) == sorted(
+            f"AH{k}" for k in range(len(layers)))
+    except (KeyError, TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise _bad(p, "meta.a_layers: harmonic-cell layers stacked over the box's z range, each "
+                   "with a float32 table AH<k> (nx * ny, (degree + 1)^2 - 1, n_coils)")
+
+
+# ============================================================================ core tables
 N_MODE_Q = {0: 4, 1: 5, 2: 5}
 """Quantities per node and shape of a mode table: m = 0 (b, Bz, e, w), m = 1, 2 (a, a1, a2, az,
 a1z, see :func:`mode_rows`)."""
 NQ_MAGNET = 2
 """Quantities per node of a magnet table: F_rho/rho, F_z (N/m, N) of the magnet's pull on one
 core alone."""
-
-
-def prepare_rz(tables: list, metas: list, positions, rotations) -> list:
-    """Per coil type, what :func:`interpolate_rz` and the one-point kernels need."""
-    prepared = []
-    for tab, m in zip(tables, metas):
-        t = _table_constants(tab, m, positions, rotations)
-        idx, pos = t["idx"], t["pos"]
-        tab32 = np.ascontiguousarray(tab, dtype=np.float32)
-        # the one-point kernel reads a cell's 4 corners x NQ quantities as one row
-        t64 = tab32.astype(np.float64)
-        cells = np.ascontiguousarray(np.stack([t64[:-1, :-1], t64[:-1, 1:], t64[1:, :-1],
-                                               t64[1:, 1:]], axis=2).reshape(-1, 4, NQ))
-        prepared.append(dict(
-            t, all=bool(len(idx) == len(positions) and np.all(idx == np.arange(len(idx)))),
-            pos32=pos.astype(np.float32),
-            shared_z=t["rot"] is None and bool(np.all(pos[:, 2] == pos[0, 2])),
-            nodes=tab32.reshape(-1).view(f"V{4 * NQ}"), cells=cells,
-            zr=pos[:, 2] + m["z_ref_m"]))
-    return prepared
-
-
-_WORK = threading.local()
-RZ_CHUNK = 2048
-"""Points per block of the batch kernels (bounds their scratch memory, keeps it in cache)."""
-
-
-def _scratch(name: str, size: int, dtype) -> np.ndarray:
-    """A reusable per-thread 1-D buffer of at least ``size`` elements (first ``size`` returned).
-
-    Fresh large temporaries cost more than the arithmetic here: each new array above glibc's
-    mmap threshold is page-faulted in again on every call (~3x the kernel's time).
-    """
-    bufs = _WORK.__dict__.setdefault("bufs", {})
-    b = bufs.get(name)
-    if b is None or b.size < size or b.dtype != dtype:
-        b = bufs[name] = np.empty(size, dtype=dtype)
-    return b[:size]
-
-
-def interpolate_rz(prepared: list, p: np.ndarray, nc: int) -> np.ndarray:
-    """The batch kernel of the coil tables: points (n, 3) -> rows (nc, 8, n) float32
-    (coil-major), rows :data:`ROWS`, of every coil alone.
-
-    Per (point, coil) pair everything is flat and contiguous -- numpy is fast on long inner
-    loops and slow on short ones -- and written into reused scratch buffers; a node's 8 float32
-    quantities are gathered as one 16-byte element.
-    """
-    n = len(p)
-    whole = np.empty((nc, 8, n), np.float32)
-    for s in range(0, n, RZ_CHUNK):
-        e = min(n, s + RZ_CHUNK)
-        for t in prepared:
-            _rz_block(t, p[s:e], whole[:, :, s:e])
-    return whole
-
-
-def _rz_block(t: dict, p: np.ndarray, whole: np.ndarray) -> None:
-    """One coil type, one block of points: rows into ``whole`` (nc, 8, n)[idx]."""
-    f32 = np.float32
-    n, k = len(p), len(t["idx"])
-    m = n * k
-    x = _scratch("x", m, f32)
-    y = _scratch("y", m, f32)
-    if t["rot"] is None:
-        pf = p.astype(f32)
-        np.subtract(pf[:, 0:1], t["pos32"][:, 0], out=x.reshape(n, k))
-        np.subtract(pf[:, 1:2], t["pos32"][:, 1], out=y.reshape(n, k))
-        if t["shared_z"]:
-            z = p[:, 2] - t["zr"][0]
-        else:
-            z = (p[:, 2:3] - t["zr"]).reshape(m)
-    else:
-        loc = np.einsum("nki,kij->nkj", p[:, None, :] - t["pos"], t["rot"])
-        x[:] = loc[:, :, 0].reshape(m)
-        y[:] = loc[:, :, 1].reshape(m)
-        z = loc[:, :, 2].reshape(m) - t["z_ref"]
-    # u = log(z - z_ref): per point when all coils of the type share a height
-    u = np.log(np.maximum(z, 1e-12))
-    u -= t["u0"]
-    u *= t["inv_du"]
-    np.clip(u, 0.0, t["n_u"] - 1.000001, out=u)
-    j = u.astype(np.intp)
-    tz = (u - j).astype(f32)
-    # v = rho / (1 + rho / rho_scale) in steps
-    rho = _scratch("rho", m, f32)
-    tr = _scratch("tr", m, f32)
-    np.multiply(x, x, out=rho)
-    np.multiply(y, y, out=tr)
-    rho += tr
-    np.sqrt(rho, out=rho)
-    np.multiply(rho, f32(t["inv_scale"]), out=tr)
-    tr += f32(1.0)
-    np.divide(rho, tr, out=tr)
-    tr *= f32(t["inv_h"])
-    np.minimum(tr, f32(t["n_rho"] - 1.0001), out=tr)
-    i = _scratch("i", m, np.intp)
-    np.copyto(i, tr, casting="unsafe")  # truncation = floor (tr >= 0)
-    np.subtract(tr, i, out=tr, casting="unsafe")
-    i *= t["n_u"]
-    if t["shared_z"]:
-        i.reshape(n, k)[:] += j[:, None]
-    else:
-        i += j
-    nodes, n_u = t["nodes"], t["n_u"]
-    c = _scratch("c", 4 * m, np.dtype(f"V{4 * NQ}")).reshape(4, m)
-    # mode='clip' (indices are in range): with the default 'raise', out= costs a copy
-    np.take(nodes, i, out=c[0], mode="clip")
-    i += 1
-    np.take(nodes, i, out=c[1], mode="clip")
-    i += n_u
-    np.take(nodes, i, out=c[3], mode="clip")
-    i -= 1
-    np.take(nodes, i, out=c[2], mode="clip")
-    cf = c.view(f32)  # (4, 8 m): per pair the 8 quantities of a corner
-    # along u on both rho rows, then along rho with the 8 quantities transposed to rows
-    tzb = tz[:, None] if t["shared_z"] else np.repeat(tz, NQ).reshape(m, NQ)
-    for lo, hi in ((0, 1), (2, 3)):
-        a, b = cf[lo].reshape(n, -1), cf[hi].reshape(n, -1)
-        if not t["shared_z"]:
-            a, b = a.reshape(m, NQ), b.reshape(m, NQ)
-        b -= a
-        b *= tzb
-        b += a
-    q = _scratch("q", NQ * m, f32).reshape(NQ, m)
-    lo_t = cf[1].reshape(m, NQ).T
-    np.subtract(cf[3].reshape(m, NQ).T, lo_t, out=q)
-    q *= tr
-    q += lo_t
-    rows = _scratch("rows", 8 * m, f32).reshape(1, 8, m)
-    wx = _scratch("wx", m, f32)
-    for part in range(1):
-        bb, bz, e, w = q[4 * part:4 * part + 4]
-        r = rows[part]
-        # Bx = b x, By = b y, Bz, Gxx = b + w x^2, Gxy = w x y, Gxz = e x, Gyy = b + w y^2,
-        # Gyz = e y
-        np.multiply(bb, x, out=r[0])
-        np.multiply(bb, y, out=r[1])
-        r[2] = bz
-        np.multiply(w, x, out=wx)
-        np.multiply(wx, x, out=r[3])
-        r[3] += bb
-        np.multiply(wx, y, out=r[4])
-        np.multiply(e, x, out=r[5])
-        np.multiply(w, y, out=r[6])
-        r[6] *= y
-        r[6] += bb
-        np.multiply(e, y, out=r[7])
-    for part, out in ((0, whole),):
-        r = rows[part].reshape(8, n, k)
-        if t["rot"] is not None:
-            r = _rotate_rows(r, t["rot"])
-        r = r.transpose(2, 0, 1)
-        if t["all"]:
-            out[...] = r
-        else:
-            out[t["idx"]] = r
 
 
 def _rotate_rows(rows: np.ndarray, rot: np.ndarray) -> np.ndarray:
@@ -422,57 +300,6 @@ def _rotate_rows(rows: np.ndarray, rot: np.ndarray) -> np.ndarray:
     bg = np.einsum("kia,ank->ink", rot, b)
     gg = np.einsum("kia,abnk,kjb->ijnk", rot, g, rot)
     return np.stack([bg[0], bg[1], bg[2], gg[0, 0], gg[0, 1], gg[0, 2], gg[1, 1], gg[1, 2]])
-
-
-# one point: rows (8,) of a part = (b, Bz, e, w) @ M, M (4, 8) = mono @ _POLY with the monomials
-# mono = (1, x, y, x x, x y, y x, y y) of the coil-local horizontal offsets
-_POLY = np.zeros((7, 4, 8))
-_POLY[1, 0, 0] = _POLY[2, 0, 1] = _POLY[0, 0, 3] = _POLY[0, 0, 6] = 1.0  # b: Bx, By, Gxx, Gyy
-_POLY[0, 1, 2] = 1.0                                                       # Bz
-_POLY[1, 2, 5] = _POLY[2, 2, 7] = 1.0                                      # e: Gxz, Gyz
-_POLY[3, 3, 3] = _POLY[4, 3, 4] = _POLY[6, 3, 6] = 1.0                     # w: Gxx, Gxy, Gyy
-_POLY = _POLY.reshape(7, 32)
-
-
-def _rz_one(t: dict, q) -> np.ndarray:
-    """One point (3 floats), one coil type: rows (k, 8) float64 of its k coils alone, global
-    frame."""
-    if t["rot"] is None:
-        d = np.subtract(q, t["pos"])
-        if t["shared_z"]:
-            zz = q[2] - t["zr"][0]
-            u = (math.log(zz if zz > 1e-12 else 1e-12) - t["u0"]) * t["inv_du"]
-            u = min(max(u, 0.0), t["n_u"] - 1.000001)
-            j = int(u)
-            tz = u - j
-        else:
-            u = (np.log(np.maximum(q[2] - t["zr"], 1e-12)) - t["u0"]) * t["inv_du"]
-            u = np.clip(u, 0.0, t["n_u"] - 1.000001)
-            j = u.astype(np.intp)
-            tz = u[:, None]
-    else:
-        d = np.einsum("ki,kij->kj", np.subtract(q, t["pos"]), t["rot"])
-        u = (np.log(np.maximum(d[:, 2] - t["z_ref"], 1e-12)) - t["u0"]) * t["inv_du"]
-        u = np.clip(u, 0.0, t["n_u"] - 1.000001)
-        j = u.astype(np.intp)
-        tz = (u - j)[:, None]
-    xy = d[:, :2]
-    k = len(xy)
-    outer = (xy[:, :, None] * xy[:, None, :]).reshape(k, 4)
-    rho = np.sqrt(outer[:, 0] + outer[:, 3])
-    vv = np.minimum(rho * t["inv_h"] / (1.0 + rho * t["inv_scale"]), t["n_rho"] - 1.0001)
-    i = vv.astype(np.intp)
-    tr = (vv - i)[:, None]
-    cells = t["cells"][i * (t["n_u"] - 1) + j]  # (k, corner, quantity)
-    # bilinear weights of the corners (rho_i, u_j), (rho_i, u_j+1), (rho_i+1, u_j), (.., ..)
-    wz = np.concatenate([1.0 - tz, tz], axis=-1) if np.ndim(tz) else np.array([1.0 - tz, tz])
-    w = (np.concatenate([1.0 - tr, tr], axis=1)[:, :, None] * wz[..., None, :]).reshape(k, 1, 4)
-    val = np.matmul(w, cells)  # (k, 1, 4): b Bz e w
-    mono = np.concatenate([np.ones((k, 1)), xy, outer], axis=1)  # (k, 7)
-    rows = np.matmul(val, (mono @ _POLY).reshape(k, 4, 8))[:, 0]  # (k, 8) local frame
-    if t["rot"] is not None:
-        rows = _rotate_rows(rows.T[:, None, :], t["rot"])[:, 0, :].T
-    return rows
 
 
 def prepare_magnet(tables: list, metas: list, positions, rotations) -> list:
@@ -532,7 +359,7 @@ def prepare_modes(tables: list, metas: list, positions, rotations) -> list:
 
 
 def _prepare_one(t: dict) -> None:
-    """What :func:`mode_rows_one` needs: every group's quantities padded to 5 columns, so one
+    """What :func:`prepare_one` needs: every group's quantities padded to 5 columns, so one
     GEMM gives all polynomials and one batched matmul all basis rows.
 
     ``one_src`` / ``one_dst``: scatter of the table's columns into (n_basis, 5 n_groups) per core
@@ -557,21 +384,6 @@ _POW_X = np.array([0, 1, 0, 2, 1, 0, 3, 2, 1, 0, 4, 3, 2, 1, 0], np.intp)
 """Powers of x, resp. y, of the 15 monomials of :func:`_monomials`."""
 _POW_Y = np.array([0, 0, 1, 0, 1, 2, 0, 1, 2, 3, 0, 1, 2, 3, 4], np.intp)
 _POW = np.arange(5.0)
-
-
-def mode_rows_one(t: dict, pq: np.ndarray) -> np.ndarray:
-    """:func:`mode_rows` for one point ``pq`` (1, 3) with few numpy calls: (k * n_basis, 8),
-    rows of core-major basis fields in ``t['order']`` (the layout of MapFile's coefficients)."""
-    if t["rot"] is not None:
-        return mode_rows(t, pq).reshape(-1, 8)
-    x, y, val = _bilinear(t, pq)
-    x, y, val = x[0], y[0], val[0]
-    k = len(x)
-    mono = (np.power(x[:, None], _POW)[:, _POW_X] * np.power(y[:, None], _POW)[:, _POW_Y])
-    poly = (mono @ t["one_poly"]).reshape(k, t["one_width"], 8)
-    pad = np.zeros((k, t["one_nb"] * t["one_width"]))
-    pad[:, t["one_dst"]] = val[:, t["one_src"]]
-    return np.matmul(pad.reshape(k, t["one_nb"], t["one_width"]), poly).reshape(-1, 8)
 
 
 def _bilinear(t: dict, p: np.ndarray):
@@ -670,29 +482,22 @@ def _poly_tensors() -> dict:
     return out
 
 
-def mode_rows(t: dict, p: np.ndarray, rows=None) -> np.ndarray:
+def mode_rows(t: dict, p: np.ndarray) -> np.ndarray:
     """Rows (n, k, n_basis, 8) of every basis field of the type's k cores at points (n, 3),
     global frame, basis in the order of ``t['order']`` (grouped by mode order and cos / sin;
-    :func:`prepare_modes` permutes the coefficients to match). ``rows``: indices into
-    :data:`ROWS` to compute only those (last axis len(rows)); not with rotated coils."""
-    if rows is not None and t["rot"] is not None:
-        return mode_rows(t, p)[..., rows]
+    :func:`prepare_modes` permutes the coefficients to match)."""
     x, y, val = _bilinear(t, p)
     n, k = x.shape
     mono = _monomials(x, y).reshape(n * k, 15)
-    nr = 8 if rows is None else len(rows)
     parts = []
     for (m, c), cols in t["groups"]:
         v = val[..., cols]  # (n, k, nb_g, Q_m)
-        tens = _POLY_T[(m, c)]
-        if rows is not None:
-            tens = tens.reshape(15, N_MODE_Q[m], 8)[:, :, rows].reshape(15, -1)
-        pm = (mono @ tens).reshape(n, k, 1, N_MODE_Q[m], nr)  # one GEMM
+        pm = (mono @ _POLY_T[(m, c)]).reshape(n, k, 1, N_MODE_Q[m], 8)  # one GEMM
         # a sum over the 4-5 quantities: numpy's batched matmul is slow on tiny matrices
         acc = v[..., 0, None] * pm[..., 0, :]
         for q in range(1, v.shape[-1]):
             acc += v[..., q, None] * pm[..., q, :]
-        parts.append(acc)  # (n, k, nb_g, nr)
+        parts.append(acc)  # (n, k, nb_g, 8)
     out = parts[0] if len(parts) == 1 else np.concatenate(parts, axis=2)
     if t["rot"] is not None:
         flat = out.transpose(3, 0, 2, 1).reshape(8, -1, k)
@@ -704,17 +509,9 @@ _POLY_T = _poly_tensors()
 
 
 # ============================================================================ one-point kernels
-# One point through the whole sum in ~40 small numpy calls (each ~0.3-1 us: the call, not the
-# arithmetic, is the cost): every core's coil table and mode table looked up with one gather
-# of the 4 corners and one matmul for the weights; the coil alone as one more "mode" whose
-# coefficient is 1 on its own column, so all polynomials are one GEMM and the sum one GEMV.
-_POLY15 = np.zeros((15, 5, 8))
-"""The coil tables' :data:`_POLY` on the 15 monomials of :func:`_monomials` (padded to 5
-quantities like the mode groups)."""
-for _r15, _r7 in ((0, 0), (1, 1), (2, 2), (3, 3), (4, 4), (4, 5), (5, 6)):
-    _POLY15[_r15, :NQ] += _POLY.reshape(7, NQ, 8)[_r7]
-
-
+# The sensor field for one magnet position in a few small numpy calls (each ~0.3-1 us: the
+# call, not the arithmetic, is the cost): every core's mode table looked up with one gather of
+# the 4 corners and one matmul for the weights, all polynomials one GEMM and the sum one GEMV.
 def _lookup(t: dict, flat: np.ndarray) -> dict | None:
     """A table of a prepared type as :func:`_interp_one` reads it; None unless its coils are
     unrotated at one height (then z and u are scalars)."""
@@ -748,84 +545,52 @@ def _interp_one(L: dict, rho: np.ndarray, zq: float) -> np.ndarray:
     return np.matmul(w[:, None, :], corners)[:, 0]
 
 
-def prepare_one(rz: tuple, modes: tuple, coefs: tuple, nc: int,
-                moment=None) -> dict | None:
-    """The one-point kernel's constants for a sum of coil tables ``rz`` (the coils alone: one
-    more basis field per core with coefficient 1 on its own column; ``()`` for none) and mode
-    tables with coefficients ``coefs`` ((k * n_basis, n_out) per type, MapFile's layout).
-    With ``moment`` (3,) A m^2 the kernel gives m . B per basis field instead of the 8 rows
-    (the sensor fields). None: the general path is used (several types, rotated coils or
-    coils at different heights)."""
-    if len(rz) > 1 or len(modes) > 1 or (rz and not rz[0]["all"]) or not (rz or modes):
+def prepare_one(modes: tuple, coefs: tuple, moment) -> dict | None:
+    """The one-point kernel's constants for a sum of mode tables with coefficients ``coefs``
+    ((k * n_basis, n_out) per type, MapFile's layout), giving m . B per basis field for the
+    moment ``moment`` (3,) A m^2 (the sensor fields). None: the general path is used (several
+    types, rotated coils or coils at different heights)."""
+    if len(modes) != 1:
         return None
-    first = rz[0] if rz else modes[0]
-    lrz = _lookup(rz[0], rz[0]["nodes"].view(np.float32).reshape(-1, NQ)) if rz else None
-    if rz and lrz is None:
+    mt = modes[0]
+    lcm = _lookup(mt, mt["flat"])
+    if lcm is None:
         return None
-    n_out = coefs[0].shape[1] if modes else nc
-    n_self = NQ if rz else 0
-    src, dst, poly = [np.arange(n_self)], [np.arange(n_self)], [_POLY15[:, :n_self]]
-    if modes:
-        mt = modes[0]
-        if not np.array_equal(mt["idx"], first["idx"]):
-            return None
-        lcm = _lookup(mt, mt["flat"])
-        if lcm is None:
-            return None
-        nb, width = mt["one_nb"], mt["one_width"]
-        shift = 1 if rz else 0  # basis 0: the coil alone
-        src.append(n_self + mt["one_src"])
-        dst.append((mt["one_dst"] // width + shift) * (width + n_self)
-                   + n_self + mt["one_dst"] % width)
-        poly.append(mt["one_poly"].reshape(15, width, 8))
-        cm = coefs[0].reshape(len(mt["idx"]), nb, n_out)
-    else:
-        lcm, nb, width = None, 0, 0
-        cm = np.zeros((nc, 0, nc))
-    poly = np.concatenate(poly, axis=1)
-    if moment is not None:
-        poly = poly[..., :3] @ np.asarray(moment, float)
+    n_out = coefs[0].shape[1]
+    nb, width = mt["one_nb"], mt["one_width"]
+    src, dst = mt["one_src"], mt["one_dst"]
+    poly = mt["one_poly"].reshape(15, width, 8)[..., :3] @ np.asarray(moment, float)
     # on all 25 products x^a y^b (a, b <= 4): those of degree > 4 get zero rows
     poly25 = np.zeros((5, 5) + poly.shape[1:])
     poly25[_POW_X, _POW_Y] = poly
-    coef = (np.concatenate([np.eye(nc)[:, None, :], cm], axis=1) if rz else cm)
-    src, dst = np.concatenate(src), np.concatenate(dst)
     # for the batch kernel: the basis fields grouped by the block of polynomials they use
-    # (the coil alone, then each mode order and cos / sin), values unpadded
-    tw = width + n_self
+    # (each mode order and cos / sin), values unpadded
     blocks: dict = {}
-    for b in np.unique(dst // tw):
-        sel = dst // tw == b
-        cols = dst[sel] % tw
+    for b in np.unique(dst // width):
+        sel = dst // width == b
+        cols = dst[sel] % width
         blocks.setdefault(int(cols.min()), []).append((int(b), src[sel][np.argsort(cols)]))
     groups = [(start, len(mem[0][1]), np.array([b for b, _ in mem], np.intp),
                np.array([v for _, v in mem], np.intp)) for start, mem in sorted(blocks.items())]
-    return {"pos": first["pos"], "rz": lrz, "cm": lcm, "src": src, "dst": dst,
+    return {"pos": mt["pos"], "cm": lcm, "src": src, "dst": dst,
             "poly": np.ascontiguousarray(poly25.reshape(25, -1)),
-            "nb": nb + (1 if rz else 0), "width": tw, "groups": groups,
-            "n_rows": 1 if moment is not None else 8,
-            "coef": np.ascontiguousarray(coef.reshape(-1, n_out))}
+            "nb": nb, "width": width, "groups": groups,
+            "coef": np.ascontiguousarray(coefs[0].reshape(-1, n_out))}
 
 
-def actuation_one(F: dict, q) -> np.ndarray:
-    """One point ``q`` (3 floats, m): rows (k * (n_basis + 1), 8) of every core's coil-alone
-    field and basis fields; A (8, nc) = rows.T @ F['coef'] (see :func:`prepare_one`)."""
+def modes_one(F: dict, q) -> np.ndarray:
+    """One point ``q`` (3 floats, m): m . B (k * n_basis,) of every core's basis fields; the
+    sensor field = that @ F['coef'] (see :func:`prepare_one`)."""
     d = np.subtract(q, F["pos"])
     x, y = d[:, 0], d[:, 1]
-    rho = np.sqrt(x * x + y * y)
-    if F["rz"] is None:
-        val = _interp_one(F["cm"], rho, q[2])
-    else:
-        val = _interp_one(F["rz"], rho, q[2])
-        if F["cm"] is not None:
-            val = np.concatenate([val, _interp_one(F["cm"], rho, q[2])], axis=1)
+    val = _interp_one(F["cm"], np.sqrt(x * x + y * y), q[2])
     k = len(x)
     pw = np.power(d[:, :2, None], _POW)  # (k, 2, 5): powers 0..4 of x and y
     poly = ((pw[:, 0, :, None] * pw[:, 1, None, :]).reshape(k, 25) @ F["poly"]
-            ).reshape(k, F["width"], F["n_rows"])
+            ).reshape(k, F["width"], 1)
     pad = np.zeros((k, F["nb"] * F["width"]))
     pad[:, F["dst"]] = val[:, F["src"]]
-    return np.matmul(pad.reshape(k, F["nb"], F["width"]), poly).reshape(-1, F["n_rows"])
+    return np.matmul(pad.reshape(k, F["nb"], F["width"]), poly).reshape(-1)
 
 
 def _interp_many(L: dict, rho: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -859,36 +624,267 @@ BATCH_CHUNK = 256
 small blocks stay in cache)."""
 
 
-def kernel_rows_many(F: dict, p: np.ndarray, rows=None) -> np.ndarray:
-    """:func:`actuation_one` for points (m, 3): (m, nr, k * n_basis) -- the basis fields' rows
-    (all 8, or ``rows``), transposed for one GEMM with ``F['coef']``."""
+def kernel_rows_many(F: dict, p: np.ndarray) -> np.ndarray:
+    """:func:`modes_one` for points (m, 3): (m, k * n_basis), for one GEMM with
+    ``F['coef']``."""
     m = len(p)
     d = p[:, None, :] - F["pos"]  # (m, k, 3)
     k = d.shape[1]
     x, y = d[..., 0], d[..., 1]
-    rho = np.sqrt(x * x + y * y)
-    if F["rz"] is None:
-        val = _interp_many(F["cm"], rho, p[:, 2])
-    else:
-        val = _interp_many(F["rz"], rho, p[:, 2])
-        if F["cm"] is not None:
-            val = np.concatenate([val, _interp_many(F["cm"], rho, p[:, 2])], axis=2)
-    nr = F["n_rows"] if rows is None else len(rows)
-    poly_t = F["poly"] if rows is None else (
-        F["poly"].reshape(25, F["width"], 8)[:, :, rows].reshape(25, -1))
+    val = _interp_many(F["cm"], np.sqrt(x * x + y * y), p[:, 2])
     pw = np.empty((m, k, 2, 5))  # powers 0..4 of x and y (products: np.power is slow)
     pw[..., 0] = 1.0
     pw[..., 1] = d[..., :2]
     for e in range(2, 5):
         np.multiply(pw[..., e - 1], pw[..., 1], out=pw[..., e])
     mono = (pw[..., 0, :, None] * pw[..., 1, None, :]).reshape(m * k, 25)
-    poly = (mono @ poly_t).reshape(m * k, F["width"], nr)
-    # per block of polynomials, its basis fields' values (m k, n_g, Q) @ (m k, Q, nr)
-    out = np.empty((m * k, F["nb"], nr))
+    poly = (mono @ F["poly"]).reshape(m * k, F["width"], 1)
+    # per block of polynomials, its basis fields' values (m k, n_g, Q) @ (m k, Q, 1)
+    out = np.empty((m * k, F["nb"], 1))
     flat = val.reshape(m * k, -1)
     for start, nq, basis, cols in F["groups"]:
         out[:, basis] = np.matmul(flat[:, cols], poly[:, start:start + nq])
-    return out.reshape(m, k * F["nb"], nr).transpose(0, 2, 1)
+    return out.reshape(m, k * F["nb"])
+
+
+# ============================================================================ harmonic cells
+# A(p): the box is current-free, so every coil's field per ampere is B = grad(psi) with psi
+# harmonic. The box is cut into layers (z), each a uniform grid of cells; per cell and coil the
+# file holds psi as a harmonic polynomial of degree L in cell-local scaled coordinates
+# s = (p - centre) / r (r = half the cell's largest side): all 8 rows are exact first and
+# second derivatives of one potential (divergence- and curl-free by construction).
+def harmonic_terms(degree: int) -> list:
+    """The potential's free monomials s_x^a s_y^b s_z^c, c in (0, 1), 1 <= a + b + c <=
+    ``degree``, in file order: total degree ascending, then c, then a descending; K = (L + 1)^2
+    - 1 of them. The coefficients stored are those of these monomials in psi; all others follow
+    from Laplace's equation (:func:`harmonic_potential`)."""
+    return [(a, n - c - a, c) for n in range(1, degree + 1) for c in (0, 1)
+            for a in range(n - c, -1, -1)]
+
+
+def monomial_exponents(degree: int) -> np.ndarray:
+    """(M, 3) exponents (a, b, c) of the monomials s_x^a s_y^b s_z^c of total degree <=
+    ``degree``, M = C(degree + 3, 3): total degree ascending, then a descending, then b
+    descending (those of degree <= d are the first C(d + 3, 3): one order serves every
+    degree)."""
+    return np.array([(a, b, n - a - b) for n in range(degree + 1)
+                     for a in range(n, -1, -1) for b in range(n - a, -1, -1)],
+                    dtype=np.intp).reshape(-1, 3)
+
+
+def harmonic_potential(degree: int) -> np.ndarray:
+    """(K, M) float64: the monomial coefficients (:func:`monomial_exponents` order, degree <=
+    L) of psi per unit free coefficient (:func:`harmonic_terms`): the free term
+    s_x^a s_y^b s_z^c plus the z^(c + 2k) terms Laplace's equation requires,
+    P_k = -Laplacian_xy(P_(k-1)) / ((c + 2k)(c + 2k - 1)), P_0 = s_x^a s_y^b."""
+    index = {tuple(e): i for i, e in enumerate(monomial_exponents(degree).tolist())}
+    terms = harmonic_terms(degree)
+    out = np.zeros((len(terms), len(index)))
+    for f, (a, b, c) in enumerate(terms):
+        poly, k = {(a, b): 1.0}, 0
+        while poly:
+            for (i, j), val in poly.items():
+                out[f, index[(i, j, c + 2 * k)]] += val
+            k += 1
+            div = (c + 2 * k) * (c + 2 * k - 1)
+            nxt: dict = {}
+            for (i, j), val in poly.items():
+                if i >= 2:
+                    nxt[(i - 2, j)] = nxt.get((i - 2, j), 0.0) - val * i * (i - 1) / div
+                if j >= 2:
+                    nxt[(i, j - 2)] = nxt.get((i, j - 2), 0.0) - val * j * (j - 1) / div
+            poly = {key: val for key, val in nxt.items() if val != 0.0}
+    return out
+
+
+def harmonic_rows(degree: int) -> np.ndarray:
+    """(8, M, K) float64 with M = C(L + 2, 3): row r of A (:data:`ROWS`: the derivatives
+    d/ds_x, d/ds_y, d/ds_z, d2/ds_x2, d2/ds_x ds_y, d2/ds_x ds_z, d2/ds_y2, d2/ds_y ds_z of psi)
+    as monomial coefficients of degree <= L - 1 per unit free coefficient. In metres: divide
+    rows 0-2 by r and rows 3-7 by r^2."""
+    e = monomial_exponents(degree)
+    index = {tuple(x): i for i, x in enumerate(e.tolist())}
+    m_low = len(monomial_exponents(degree - 1))
+    pot = harmonic_potential(degree).T  # (M_L, K)
+
+    def diff(coef: np.ndarray, axis: int) -> np.ndarray:
+        out = np.zeros_like(coef)
+        for i, x in enumerate(e.tolist()):
+            if x[axis] >= 1:
+                y = list(x)
+                y[axis] -= 1
+                out[index[tuple(y)]] += x[axis] * coef[i]
+        return out
+
+    dx, dy, dz = (diff(pot, a) for a in range(3))
+    rows = [dx, dy, dz, diff(dx, 0), diff(dx, 1), diff(dx, 2), diff(dy, 1), diff(dy, 2)]
+    return np.stack([r[:m_low] for r in rows])
+
+
+def monomials(s: np.ndarray, degree: int, out: np.ndarray | None = None) -> np.ndarray:
+    """(M, n) monomials of degree <= ``degree`` (:func:`monomial_exponents` order) of local
+    coordinates s (n, 3), built degree by degree (3 products per degree: x times the previous
+    degree's block, y times its x-free part, z times its last)."""
+    n = len(s)
+    if out is None:
+        out = np.empty((len(monomial_exponents(degree)), n), s.dtype)
+    out[0] = 1.0
+    x, y, z = s[:, 0], s[:, 1], s[:, 2]
+    start, size = 0, 1  # the previous degree's block
+    for d in range(1, degree + 1):
+        new = start + size
+        prev = out[start:new]
+        np.multiply(prev, x, out=out[new:new + size])
+        np.multiply(prev[size - d:], y, out=out[new + size:new + size + d])
+        np.multiply(prev[size - 1:], z, out=out[new + size + d:new + size + d + 1])
+        start, size = new, size + d + 1
+    return out
+
+
+def prepare_cells(layers: list, tables: list, nc: int) -> dict:
+    """What the A lookups need: per cell its rows as monomial coefficients (M_l, 8 nc) float32
+    (coefficients x :func:`harmonic_rows`, in T/A and T/(m A) per unit local monomial), its
+    centre and 1 / r, and per layer the grid constants (lists for the one-point path)."""
+    cells, centres, inv_r, degree = [], [], [], []
+    grid, z_edges = [], []
+    exps: dict = {}
+    off = 0
+    for lay, tab in zip(layers, tables):
+        deg, nx, ny = int(lay["degree"]), int(lay["nx"]), int(lay["ny"])
+        hx, hy = float(lay["cell_x_m"]), float(lay["cell_y_m"])
+        z0, z1 = float(lay["z_lo_m"]), float(lay["z_hi_m"])
+        r = max(hx, hy, z1 - z0) / 2
+        ops = harmonic_rows(deg)  # (8, M, K)
+        scale = np.array([r] * 3 + [r * r] * 5)[:, None, None]
+        m = ops.shape[1]
+        # (n_cells, K, nc) -> (n_cells, M, 8, nc): every row of every coil per monomial
+        rows = np.einsum("rmk,ckn->cmrn", ops / scale, tab.astype(np.float64))
+        cells += list(rows.reshape(len(tab), m, 8 * nc).astype(np.float32))
+        ix, iy = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
+        centres.append(np.c_[lay["x0_m"] + (ix.ravel() + 0.5) * hx,
+                             lay["y0_m"] + (iy.ravel() + 0.5) * hy,
+                             np.full(nx * ny, (z0 + z1) / 2)])
+        inv_r += [1.0 / r] * (nx * ny)
+        degree += [deg] * (nx * ny)
+        grid.append((float(lay["x0_m"]), float(lay["y0_m"]), 1.0 / hx, 1.0 / hy, nx, ny, off))
+        z_edges.append(z1)
+        off += nx * ny
+        exps[deg - 1] = monomial_exponents(deg - 1)
+    centres = np.concatenate(centres)
+    g = np.array(grid, float)
+    return {"cells": cells, "centre": centres, "inv_r": np.array(inv_r),
+            "centre_inv_r": [tuple(c) + (ir,) for c, ir in zip(centres.tolist(), inv_r)],
+            "n_mono": [len(monomial_exponents(d - 1)) for d in degree],
+            "degree": max(degree) - 1, "grid": grid, "grid_arr": g,
+            "z_inner": z_edges[:-1], "z_inner_arr": np.array(z_edges[:-1]),
+            "one_idx": {d: (e[:, 0], e[:, 1] + d + 1, e[:, 2] + 2 * (d + 1))
+                        for d, e in exps.items()},
+            "exps": monomial_exponents(max(degree) - 1),
+            # per layer (its last cell, its monomials' degree), for the batch path
+            "layer_degree": [(g[6] + g[4] * g[5] - 1, lay_deg) for g, lay_deg in
+                             zip(grid, [int(lay["degree"]) - 1 for lay in layers])],
+            "cell_degree": [d - 1 for d in degree], "n_cells": off, "nc": nc}
+
+
+def cell_index(C: dict, p: np.ndarray) -> np.ndarray:
+    """Cell (n,) of points (n, 3): layer by z (outside the box: the end layer), then the
+    layer's uniform grid (outside: the edge cells, whose polynomials extrapolate)."""
+    g = C["grid_arr"][np.searchsorted(C["z_inner_arr"], p[:, 2], side="right")]  # (n, 7)
+    fx = (p[:, 0] - g[:, 0]) * g[:, 2]
+    np.clip(fx, 0.0, g[:, 4] - 1.0, out=fx)
+    fy = (p[:, 1] - g[:, 1]) * g[:, 3]
+    np.clip(fy, 0.0, g[:, 5] - 1.0, out=fy)
+    return (fx.astype(np.intp) * g[:, 5].astype(np.intp) + fy.astype(np.intp)
+            + g[:, 6].astype(np.intp))
+
+
+def _scratch(name: str, shape: tuple, dtype) -> np.ndarray:
+    """A reusable per-thread buffer of ``shape`` (fresh multi-MB temporaries cost more than the
+    arithmetic here: each is page-faulted in again on every call)."""
+    bufs = _WORK.__dict__.setdefault("bufs", {})
+    size = int(np.prod(shape))
+    b = bufs.get(name)
+    if b is None or b.size < size or b.dtype != dtype:
+        b = bufs[name] = np.empty(size, dtype=dtype)
+    return b[:size].reshape(shape)
+
+
+_WORK = threading.local()
+
+
+GEMM_CAP = 400_000
+"""Largest multiply-add count of one per-cell product in :func:`cells_many` (cells with more
+points are split): OpenBLAS (0.3.31 here) runs products above ~5.2e5 on all cores, and when
+another process keeps a core busy each such call waits milliseconds (measured: 1e4 points took
+0.28 s instead of ~4 ms without a cap, products up to 7e5, while one of two cores was busy)."""
+
+
+CELL_CHUNK = 32768
+"""Points per block of :func:`cells_many` (its scratch is ~(M + 8 n_coils) floats per point)."""
+
+
+def cells_many(C: dict, p: np.ndarray, cols=None, out=None) -> np.ndarray:
+    """A at points (n, 3) (n <= :data:`CELL_CHUNK`): (n, 8 nc) float64, or only the flat
+    columns ``cols`` (row * nc + coil) (n, len(cols)), into ``out`` if given. Points are sorted
+    by cell (stable), their monomials computed once, then one float32 (n_c, M) @ (M, n_out)
+    product per occupied cell."""
+    n = len(p)
+    cell = cell_index(C, p)
+    # 16-bit keys sort by radix (~8x faster than a merge sort of intp)
+    order = np.argsort(cell.astype(np.int16) if C["n_cells"] < 32768 else cell, kind="stable")
+    cs = cell[order]
+    s = p[order]
+    s -= C["centre"][cs]
+    s *= C["inv_r"][cs][:, None]
+    s = s.astype(np.float32)
+    counts = np.bincount(cs, minlength=C["n_cells"])
+    ends = np.cumsum(counts).tolist()
+    # a layer's points are one run of the sorted order: monomials to that layer's degree only
+    mono = _scratch("mono", (len(C["exps"]), n), np.float32)
+    a = 0
+    for off, deg in C["layer_degree"]:
+        b = ends[off]
+        if b > a:
+            monomials(s[a:b], deg, mono[:math.comb(deg + 3, 3), a:b])
+        a = b
+    counts = counts.tolist()
+    width = 8 * C["nc"] if cols is None else len(cols)
+    res = _scratch("res", (n, width), np.float32)
+    cells, n_mono = C["cells"], C["n_mono"]
+    dot = np.dot
+    for c, k in enumerate(counts):
+        if k:
+            b = ends[c]
+            m = n_mono[c]
+            w = cells[c] if cols is None else cells[c][:, cols]
+            step = max(1, GEMM_CAP // (m * width))
+            for a in range(b - k, b, step):
+                e = min(b, a + step)
+                dot(mono[:m, a:e].T, w, out=res[a:e])
+    out = np.empty((n, width)) if out is None else out
+    out[order] = res
+    return out
+
+
+def cells_one(C: dict, q) -> np.ndarray:
+    """A at one point (3 Python floats): (8 nc,) float32; the cell by Python arithmetic."""
+    x, y, z = q
+    lay = C["grid"][bisect.bisect_right(C["z_inner"], z)]
+    x0, y0, ihx, ihy, nx, ny, off = lay
+    i = int(min(max((x - x0) * ihx, 0.0), nx - 1.0))
+    j = int(min(max((y - y0) * ihy, 0.0), ny - 1.0))
+    c = off + i * ny + j
+    cx, cy, cz, ir = C["centre_inv_r"][c]
+    sx, sy, sz = (x - cx) * ir, (y - cy) * ir, (z - cz) * ir
+    d = C["cell_degree"][c]
+    px, py, pz = [1.0], [1.0], [1.0]
+    for _ in range(d):
+        px.append(px[-1] * sx)
+        py.append(py[-1] * sy)
+        pz.append(pz[-1] * sz)
+    pw = np.array(px + py + pz, np.float32)
+    ia, ib, ic = C["one_idx"][d]
+    return (pw[ia] * pw[ib] * pw[ic]) @ C["cells"][c]
 
 
 # ============================================================================ 3-D grids
@@ -976,8 +972,9 @@ class MapFile:
     bounds: tuple
     n_coils: int
     kernels: dict = field(repr=False)
-    """The prepared lookups: 'rz', 'modes', 'coef', 'scoef', 'magnet', 'magnet_f0' and the
-    one-point kernels 'one', 'sensor_one', 'magnet_one' (None where the general path runs)."""
+    """The prepared lookups: 'cells' (A, :func:`prepare_cells`), 'scoef', 'magnet',
+    'magnet_f0' and the one-point kernels 'sensor_one', 'magnet_one' (None where the general
+    path runs)."""
 
     @classmethod
     def load(cls, path, expected_design_sha256: str | None = None) -> "MapFile":
@@ -994,16 +991,8 @@ class MapFile:
     def from_arrays(cls, arrays: dict, meta: dict) -> "MapFile":
         """A MapFile from already validated arrays (what :func:`read` returns)."""
         nc = int(meta["n_coils"])
-        tabs = meta["rz_tables"]
-        rz = prepare_rz([arrays[t["name"]] for t in tabs], tabs, meta["coil_positions_m"],
-                         meta["coil_rotations"])
-        mtabs = meta["mode_tables"]
-        modes = prepare_modes([arrays[t["name"]] for t in mtabs], mtabs,
-                              meta["coil_positions_m"], meta["coil_rotations"])
-        coef = arrays["COEF"]
-        # per type: COEF rows of its cores and its basis, laid out (k * n_basis, nc)
-        coefs = tuple(np.ascontiguousarray(coef[t["idx"]][:, t["order"]].reshape(-1, nc))
-                      for t in modes)
+        layers = meta["a_layers"]
+        cells = prepare_cells(layers, [arrays[lay["name"]] for lay in layers], nc)
         stabs = meta["sensor_mode_tables"]
         smodes = prepare_modes([arrays[t["name"]] for t in stabs], stabs,
                                meta["coil_positions_m"], meta["coil_rotations"])
@@ -1017,12 +1006,11 @@ class MapFile:
                                 meta["coil_rotations"])
         g = meta["box_m"]
         kernels = {
-            "rz": tuple(rz), "modes": tuple(modes), "coef": coefs, "scoef": scoefs,
+            "cells": cells, "scoef": scoefs,
             "magnet": tuple(magnet),
             "magnet_f0": (maxes, np.ascontiguousarray(f0.reshape(-1, 3)), f0.shape[:3]),
-            "one": prepare_one(rz, modes, coefs, nc),
-            "sensor_one": (prepare_one((), smodes, tuple(c for _, c in scoefs), nc,
-                                       arrays["MOMENT"]) if smodes else None),
+            "sensor_one": (prepare_one(smodes, tuple(c for _, c in scoefs), arrays["MOMENT"])
+                           if smodes else None),
             "magnet_one": _lookup(magnet[0], magnet[0]["flat"]) if len(magnet) == 1 else None}
         return cls(arrays, meta, (np.asarray(g[0], float), np.asarray(g[1], float)), nc,
                    kernels)
@@ -1061,11 +1049,14 @@ class MapFile:
             raise BadInputError(name, "array-like of shape (3,) or (n, 3), m",
                                 f"shape {p.shape}")
         p = p.reshape(-1, 3)
-        if not np.all(np.isfinite(p)):
+        # per-column extremes first (two reductions; NaN propagates into them): the row-wise
+        # search below runs only for a bad input
+        p_min, p_max = p.min(axis=0), p.max(axis=0)
+        if not (np.all(np.isfinite(p_min)) and np.all(np.isfinite(p_max))):
             raise BadInputError(name, "finite (no NaN or Inf)", p.tolist()[:3])
-        if not extrapolate:
-            lo, hi = self.bounds
-            tol = 1e-9
+        lo, hi = self.bounds
+        tol = 1e-9
+        if not extrapolate and (np.any(p_min < lo - tol) or np.any(p_max > hi + tol)):
             bad = np.any((p < lo - tol) | (p > hi + tol), axis=1)
             if bad.any():
                 k = int(np.argmax(bad))
@@ -1123,72 +1114,35 @@ class MapFile:
         Rows :data:`ROWS`, T/A and T/(m A). Outside the box: BadInputError unless
         ``extrapolate`` (the end cells' polynomials, which degrade quickly away from the box).
         ``rows``, ``coils``: index sequences (into :data:`ROWS`, resp. the coils) to evaluate
-        only those: (len(rows), len(coils)) per point, in the given order; the mode sum then
-        skips the other rows' polynomials and the other coils' coefficients.
+        only those: (len(rows), len(coils)) per point, in the given order; a batch's per-cell
+        products then take only those columns (a single point computes all 8 x n_coils and
+        selects).
         """
         nc = self.n_coils
         r_sel = self._subset("rows", rows, 8)
         c_sel = self._subset("coils", coils, nc)
-        nr = 8 if r_sel is None else len(r_sel)
-        ncs = nc if c_sel is None else len(c_sel)
+        C = self.kernels["cells"]
         q = self._one_point(points, extrapolate)
         if q is not None:
-            a = self._actuation_one(q, r_sel, c_sel)
+            a = cells_one(C, q).astype(np.float64).reshape(8, nc)
+            if r_sel is not None:
+                a = a[r_sel]
+            if c_sel is not None:
+                a = a[:, c_sel]
             return a if np.ndim(points) == 1 else a[None]
         p, single = self._points(points, extrapolate)
+        r = np.arange(8) if r_sel is None else r_sel
+        c = np.arange(nc) if c_sel is None else c_sel
+        cols = None if r_sel is None and c_sel is None else (r[:, None] * nc + c).ravel()
         n = len(p)
-        out = np.empty((n, nr, ncs))
-        F = self.kernels["one"]
-        if F is not None:
-            c = F["coef"] if c_sel is None else F["coef"][:, c_sel]
-            for s in range(0, n, BATCH_CHUNK):
-                e = min(n, s + BATCH_CHUNK)
-                f = kernel_rows_many(F, p[s:e], r_sel)  # (m, nr, K)
-                np.matmul(f.reshape(-1, f.shape[2]), c, out=out[s:e].reshape(-1, ncs))
-            return out[0] if single else out
-        for s in range(0, n, RZ_CHUNK):
-            e = min(n, s + RZ_CHUNK)
-            m = e - s
-            a = interpolate_rz(self.kernels["rz"], p[s:e], nc)  # (nc, 8, m) float32
-            if c_sel is not None:
-                a = a[c_sel]
-            if r_sel is not None:
-                a = a[:, r_sel]
-            a = a.transpose(2, 1, 0).astype(np.float64)
-            for t, c in zip(self.kernels["modes"], self.kernels["coef"]):
-                if c_sel is not None:
-                    c = c[:, c_sel]
-                fields = mode_rows(t, p[s:e], r_sel)  # (m, k, nb, nr)
-                a += (fields.reshape(m, -1, nr).transpose(0, 2, 1).reshape(nr * m, -1) @ c
-                      ).reshape(m, nr, ncs)
-            out[s:e] = a
-        return out[0] if single else out
-
-    def _actuation_one(self, q, r_sel, c_sel) -> np.ndarray:
-        """One point (3 floats): (n_rows, n_coils) float64 of the selection."""
-        nc = self.n_coils
-        if self.kernels["one"] is not None:
-            f = actuation_one(self.kernels["one"], q)
-            c = self.kernels["one"]["coef"]
-            if r_sel is not None:
-                f = f[:, r_sel]
-            return f.T @ (c if c_sel is None else c[:, c_sel])
-        if len(self.kernels["rz"]) == 1 and self.kernels["rz"][0]["all"]:
-            a = _rz_one(self.kernels["rz"][0], q)  # (nc, 8)
+        if n <= CELL_CHUNK:
+            out = cells_many(C, p, cols)
         else:
-            a = np.empty((nc, 8))
-            for t in self.kernels["rz"]:
-                a[t["idx"]] = _rz_one(t, q)
-        if c_sel is not None:
-            a = a[c_sel]
-        a = a.T if r_sel is None else a[:, r_sel].T
-        pq = np.array([q])
-        for t, c in zip(self.kernels["modes"], self.kernels["coef"]):
-            f = mode_rows_one(t, pq)  # (k * nb, 8)
-            if r_sel is not None:
-                f = f[:, r_sel]
-            a += f.T @ (c if c_sel is None else c[:, c_sel])
-        return a
+            out = np.empty((n, 8 * nc if cols is None else len(cols)))
+            for s in range(0, n, CELL_CHUNK):
+                cells_many(C, p[s:s + CELL_CHUNK], cols, out[s:s + CELL_CHUNK])
+        out = out.reshape(n, len(r), len(c))
+        return out[0] if single else out
 
     def bias_force(self, points, extrapolate: bool = False) -> np.ndarray:
         """F0, the force on the magnet (moment :attr:`moment_a_m2`) at zero current, N:
@@ -1219,14 +1173,14 @@ class MapFile:
         q = self._one_point(magnet_position_m, extrapolate, "magnet_position_m")
         one = self.kernels["sensor_one"]
         if q is not None and one is not None:
-            b = (actuation_one(one, q)[:, 0] @ one["coef"]).reshape(2, nc, 3)
+            b = (modes_one(one, q) @ one["coef"]).reshape(2, nc, 3)
             return b if np.ndim(magnet_position_m) == 1 else b[None]
         p, single = self._points(magnet_position_m, extrapolate, "magnet_position_m")
         out = np.zeros((len(p), 6 * nc))
         if one is not None:
             for s in range(0, len(p), BATCH_CHUNK):
-                f = kernel_rows_many(one, p[s:s + BATCH_CHUNK])  # (m, 1, K): m . B per basis
-                out[s:s + BATCH_CHUNK] = f[:, 0] @ one["coef"]
+                f = kernel_rows_many(one, p[s:s + BATCH_CHUNK])  # (m, K): m . B per basis
+                out[s:s + BATCH_CHUNK] = f @ one["coef"]
             b = out.reshape(-1, 2, nc, 3)
             return b[0] if single else b
         one = q is not None

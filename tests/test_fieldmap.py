@@ -52,7 +52,7 @@ def test_bounds_and_meta(fm):
     assert fm.max_current_a == SMALL.drive.max_current_a
     assert fm.total_current_a == SMALL.drive.total_current_a
     np.testing.assert_allclose(fm.moment_a_m2, SMALL.magnet.moment_vector_a_m2)
-    assert fm.meta["version"] == 3 and fm.n_coils == 9
+    assert fm.meta["version"] == 4 and fm.n_coils == 9
 
 
 def test_interpolation_error_against_direct(fm, sample):
@@ -97,24 +97,61 @@ def test_row_and_coil_subsets(fm, sample):
 
 
 def _general_path(fm):
-    """The same map with the one-point / block kernels switched off: the per-type tables
-    (interpolate_rz, mode_rows) that rotated or mixed coils use."""
+    """The same map with the one-point kernels of the bias force and the sensor field switched
+    off: the per-type tables (mode_rows, magnet_terms) that rotated or mixed coils use."""
     from firmware_io.mapfile import MapFile
 
     f = fm.file
     return MapFile(f.arrays, f.meta, f.bounds, f.n_coils,
-                   dict(f.kernels, one=None, sensor_one=None, magnet_one=None))
+                   dict(f.kernels, sensor_one=None, magnet_one=None))
 
 
-def test_fast_kernels_agree_with_the_general_path(fm, sample):
-    p, _ = sample
-    g = _general_path(fm)
-    r, c = [0, 5, 6], [8, 1]
-    tol = 1e-6 * np.abs(g.actuation(p[:50])).max()  # the general batch path is float32
-    for pts in (p[:500], p[3], p[3:4]):
-        np.testing.assert_allclose(fm.actuation(pts), g.actuation(pts), rtol=1e-5, atol=tol)
-        np.testing.assert_allclose(fm.actuation(pts, rows=r, coils=c),
-                                   g.actuation(pts, rows=r, coils=c), rtol=1e-5, atol=tol)
+def test_harmonic_cell_rows_of_a_known_potential():
+    # psi = x^3 - 3 x y^2 + z (x^2 + y^2) - 2 z^3 / 3 is harmonic; its free coefficients
+    # (x^3: 1, x y^2: -3, x^2 z: 1, y^2 z: 1) must give its 8 rows in closed form
+    from firmware_io.mapfile import harmonic_rows, harmonic_terms, monomials
+
+    coef = np.zeros(len(harmonic_terms(3)))
+    for term, c in (((3, 0, 0), 1.0), ((1, 2, 0), -3.0), ((2, 0, 1), 1.0), ((0, 2, 1), 1.0)):
+        coef[harmonic_terms(3).index(term)] = c
+    s = np.random.default_rng(3).uniform(-1, 1, (50, 3))
+    x, y, z = s.T
+    want = np.stack([3 * x**2 - 3 * y**2 + 2 * x * z, -6 * x * y + 2 * y * z,
+                     x**2 + y**2 - 2 * z**2, 6 * x + 2 * z, -6 * y, 2 * x,
+                     -6 * x + 2 * z, 2 * y], 1)
+    got = np.einsum("mn,rmk,k->nr", monomials(s, 2), harmonic_rows(3), coef)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-13)
+
+
+def test_harmonic_cell_basis_against_finite_differences():
+    # every free coefficient's potential is harmonic, and the 8 rows the reader evaluates are
+    # its first and second derivatives (central differences of the potential itself)
+    from firmware_io.mapfile import (harmonic_potential, harmonic_rows, harmonic_terms,
+                                     monomial_exponents, monomials)
+
+    rng = np.random.default_rng(5)
+    s = rng.uniform(-1, 1, (6, 3))
+    for deg in (2, 4, 8):
+        e = monomial_exponents(deg)
+        assert len(e) == math.comb(deg + 3, 3) and len(harmonic_terms(deg)) == (deg + 1) ** 2 - 1
+        np.testing.assert_allclose(monomials(s, deg), np.prod(s[None] ** e[:, None], axis=2),
+                                   rtol=1e-14, atol=1e-15)
+        pot = harmonic_potential(deg)
+
+        def phi(q):
+            return np.prod(q[None] ** e[:, None], axis=2).T @ pot.T  # (n, K)
+
+        h = 1e-3
+        u = np.eye(3) * h
+        d1 = [(phi(s + u[a]) - phi(s - u[a])) / (2 * h) for a in range(3)]
+        d2 = {(a, b): (phi(s + u[a] + u[b]) - phi(s + u[a] - u[b]) - phi(s - u[a] + u[b])
+                       + phi(s - u[a] - u[b])) / (4 * h * h) for a in range(3) for b in range(3)}
+        lap = sum(d2[(a, a)] for a in range(3))
+        scale = max(np.abs(d2[(a, a)]).max() for a in range(3))
+        assert np.abs(lap).max() <= 1e-4 * scale  # h^2 truncation: ~3e-5 at degree 8
+        want = np.stack(d1 + [d2[(0, 0)], d2[(0, 1)], d2[(0, 2)], d2[(1, 1)], d2[(1, 2)]], 1)
+        got = np.einsum("mn,rmk->nrk", monomials(s, deg - 1), harmonic_rows(deg))
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-4 * np.abs(want).max())
 
 
 def test_map_carries_the_drive_data_the_runner_reads(fm):
@@ -217,7 +254,7 @@ def test_bad_files(mapfile, tmp_path):
         fieldmap.load(tmp_path / "missing.npz")
     arrays, meta = read(mapfile)
     bad = tmp_path / "bad.npz"
-    for name in ("RZ0", "MRZ0", "F0_RES", "SENSOR_COIL"):
+    for name in ("AH0", "MRZ0", "F0_RES", "SENSOR_COIL"):
         a2 = arrays[name].copy()
         a2.reshape(-1)[0] = np.nan
         _resave(bad, {**arrays, name: a2}, meta)
@@ -227,26 +264,37 @@ def test_bad_files(mapfile, tmp_path):
         _resave(bad, {**arrays, name: a2}, meta)
         with pytest.raises(BadInputError, match="SHA-256"):
             fieldmap.load(bad)
-    _resave(bad, {k: v for k, v in arrays.items() if k != "COEF"}, meta)
-    with pytest.raises(BadInputError, match="COEF"):
+    _resave(bad, {k: v for k, v in arrays.items() if k != "SCOEF"}, meta)
+    with pytest.raises(BadInputError, match="SCOEF"):
         fieldmap.load(bad)
-    _resave(bad, {**arrays, "RZ0": arrays["RZ0"][:-1]}, meta)
-    with pytest.raises(BadInputError, match="RZ0"):
+    _resave(bad, {**arrays, "AH0": arrays["AH0"][:-1]}, meta)
+    with pytest.raises(BadInputError, match="a_layers"):
+        fieldmap.load(bad)
+    gap = [dict(lay) for lay in meta["a_layers"]]
+    gap[-1]["z_lo_m"] += 1e-4
+    _resave(bad, arrays, dict(meta, a_layers=gap))
+    with pytest.raises(BadInputError, match="a_layers"):
         fieldmap.load(bad)
     _resave(bad, arrays, dict(meta, units={**meta["units"], "grid": "mm"}))
     with pytest.raises(BadInputError, match="units"):
         fieldmap.load(bad)
 
 
-def test_map_written_before_v2_is_refused_with_the_rebuild_command(mapfile, tmp_path):
-    # a v1-era file: the 3-D grid A/dG and meta version 2
+def test_older_maps_are_refused_with_the_rebuild_command(mapfile, tmp_path):
+    # a v1-era file (the 3-D grid A/dG, version 2) and a version-3 file (A as (rho, z) tables)
+    from firmware_io.mapfile import read
+
     old = tmp_path / "old.npz"
     meta = {"format": "designkit-fieldmap", "version": 2, "units": {}, "rows": []}
     np.savez(old, A=np.zeros((2, 2, 2, 8, 9), np.float32), dG=np.zeros((2, 2, 2, 7, 9)),
              meta=np.array(json.dumps(meta)))
-    with pytest.raises(BadInputError, match="before v2") as info:
-        fieldmap.load(old)
-    assert "designkit map --design" in str(info.value)
+    arrays, meta3 = read(mapfile)
+    v3 = tmp_path / "v3.npz"
+    _resave(v3, {**arrays, "RZ0": np.zeros((3, 3, 4), np.float32)}, dict(meta3, version=3))
+    for path, version in ((old, 2), (v3, 3)):
+        with pytest.raises(BadInputError, match=f"version {version}, written by an older") as e:
+            fieldmap.load(path)
+        assert "designkit map --out" in str(e.value)
 
 
 def test_write_is_atomic_and_refuses_folders(mapfile, tmp_path):
@@ -279,9 +327,11 @@ def test_firmware_reader_numpy_only(mapfile, fm, sample):
     root = Path(__file__).resolve().parents[1]
     subprocess.run([sys.executable, "-c", code, str(out)], check=True, cwd=root,
                    env={"PYTHONPATH": str(root), "PATH": "/usr/bin:/bin"})
-    np.testing.assert_allclose(np.load(out), fm.actuation(p[:100]), rtol=1e-12, atol=0)
+    # A is float32 arithmetic: BLAS may pick other kernels (threads) in another process
+    tol = 1e-6 * np.abs(fm.actuation(p[:100])).max()
+    np.testing.assert_allclose(np.load(out), fm.actuation(p[:100]), rtol=1e-5, atol=tol)
     np.testing.assert_allclose(np.load(out.with_name("fw_one.npy")), fm.actuation(p[7]),
-                               rtol=1e-12, atol=0)
+                               rtol=1e-5, atol=tol)
     np.testing.assert_array_equal(np.load(out.with_name("fw_f0.npy")), fm.bias_force(p[:100]))
 
 
@@ -340,8 +390,7 @@ def test_coupled_map_against_direct_coupled_model(coupled):
     p = rng.uniform(lo, hi, (300, 3))
     a = arr.actuation_matrix(p)
     err = np.abs(fm.actuation(p) - a).max(axis=(0, 2)) / np.abs(a).max(axis=(0, 2))
-    # target 1e-3 (1.3e-3 with 12 azimuths in designkit.coupling's far ring rules; 6.4e-4 at
-    # 1e4 points with 24); more geometries in test_fieldmap_accuracy.py
+    # target 1e-3; more geometries and 1e4 points in test_fieldmap_accuracy.py
     assert np.all(err < 1e-3), err
     r, c = [2, 3, 6], [1]
     sub = fm.actuation(p, rows=r, coils=c)
@@ -349,8 +398,6 @@ def test_coupled_map_against_direct_coupled_model(coupled):
     np.testing.assert_allclose(fm.actuation(p[5], rows=r, coils=c), sub[5], rtol=1e-5,
                                atol=1e-7 * np.abs(sub).max())
     g = _general_path(fm)
-    np.testing.assert_allclose(fm.actuation(p), g.actuation(p), rtol=1e-5,
-                               atol=1e-6 * np.abs(a).max())
     np.testing.assert_allclose(fm.sensor_induced_field(p[:50]), g.sensor_induced_field(p[:50]),
                                rtol=1e-9, atol=1e-15)
     np.testing.assert_allclose(fm.bias_force(p[7]), g.bias_force(p[7]), rtol=1e-9, atol=1e-15)

@@ -20,8 +20,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--design", type=Path, default=None,
                         help="design TOML file (default: the embedded thesis design)")
     parser.add_argument("--spacing", type=float, default=25.0,
-                        help="x, y step in mm of the grids over magnet positions (bias force, "
-                             "sensor fields beyond the per-core tables; default 25)")
+                        help="x, y step in mm of the grid over magnet positions (the bias force "
+                             "beyond the per-core tables; default 25)")
     parser.add_argument("--out", type=Path, default=Path("fieldmap.npz"),
                         help="output file, .npz (default ./fieldmap.npz)")
     add_progress_argument(parser)
@@ -41,7 +41,8 @@ def run(args: argparse.Namespace) -> int:
     meta = data["meta"]
     err = meta["errors"]
     print(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB) for design {meta['design_name']!r}: "
-          f"{meta['n_coils']} coils, {meta['n_basis']} coupled core modes per core, "
+          f"{meta['n_coils']} coils, A in {sum(lay['nx'] * lay['ny'] for lay in meta['a_layers'])}"
+          f" harmonic cells, "
           f"{time.perf_counter() - t0:.1f} s; "
           f"largest error at {err['n_points']} random points (of each row's max |A|): "
           f"{max(err['actuation_max_rel_per_row'].values()):.1e}")
