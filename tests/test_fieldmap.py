@@ -403,8 +403,10 @@ def test_coupled_map_against_direct_coupled_model(coupled):
     np.testing.assert_allclose(fm.bias_force(p[7]), g.bias_force(p[7]), rtol=1e-9, atol=1e-15)
     m = fm.moment_a_m2
     f = arr.bias_force(p[:20], m)
-    # the bias force is the coarse part (per-core tables + a 25 mm grid): measured ~8 %
-    assert np.abs(fm.bias_force(p[:20]) - f).max() < 0.15 * np.abs(f).max()
+    # per-core tables (0.5 mm, 2 %) + a 10 mm grid of the cores' interaction: ~0.5 % of the
+    # largest F0 (the former 2 mm, 15 % tables and 25 mm grid: ~8-12 %)
+    err = np.abs(fm.bias_force(p[:20]) - f).max() / np.abs(f).max()
+    assert err < 0.01, err
     s = fm.sensor_positions_m
     np.testing.assert_allclose(s, arr.sensor_positions_m())
     direct = arr.actuation_matrix(s.reshape(-1, 3))[:, :3, :].reshape(2, 2, 3, 2)

@@ -19,9 +19,9 @@ from ._common import add_progress_argument, show_progress
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--design", type=Path, default=None,
                         help="design TOML file (default: the embedded thesis design)")
-    parser.add_argument("--spacing", type=float, default=25.0,
-                        help="x, y step in mm of the grid over magnet positions (the bias force "
-                             "beyond the per-core tables; default 25)")
+    parser.add_argument("--spacing", type=float, default=10.0,
+                        help="x, y step in mm of the grid over magnet positions that carries "
+                             "the bias force beyond the per-core tables (default 10)")
     parser.add_argument("--out", type=Path, default=Path("fieldmap.npz"),
                         help="output file, .npz (default ./fieldmap.npz)")
     add_progress_argument(parser)

@@ -45,7 +45,7 @@ from ..design import Design, design_to_toml, load_design
 from ._common import (add_currents_arguments, add_progress_argument, check_current_limit,
                       check_output, parse_currents, show_progress, staged_folder)
 
-MAP_SPACING_M = {"quick": 0.025, "full": 0.015}
+MAP_SPACING_M = {"quick": 0.025, "full": 0.01}
 """Step of the report map's grid of magnet positions (bias force), m: coarse, quick."""
 
 FIGURES = ("scene", "fieldlines", "slice-B", "slice-F", "forcemap", "isosurface")
