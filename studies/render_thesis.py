@@ -13,8 +13,9 @@ For the flat surface (100 mm square at 50 mm), hemisphere (100 mm), half-cylinde
 * one Fig. 4.5/4.6-like figure per object: surface + required forces, error map, currents and
   forces along a line across the object.
 
-Source of A(p): designkit's CoilArray (default core model) through ArrayActuation -- the map v2
-and the bias force F0 are not in yet (F0 would be subtracted by the allocator).
+Source of A(p) and of the bias force F0(p) (the magnet's pull on the cores with every coil off,
+which the allocator subtracts: lambda h n - F0 is what the coils must render): designkit's
+coupled CoilArray directly, through ArrayActuation (the map v2 carries the same within 1e-3).
 
     python studies/render_thesis.py [OUT_DIR] [--n-side N] [--quick]
 """

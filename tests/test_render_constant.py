@@ -32,9 +32,13 @@ def test_fz_rows_equal_knapsack(source, unipolar):
     res = force_constant(Hemisphere(), source, current_limit_a=6.0, total_current_a=20.0,
                          unipolar=unipolar, rows="fz", n_side=5, progress=False)
     fm = force_matrices(source, res.points_m, "fz")[:, 0, :]
+    # the coils render lambda h - F0z (F0: the magnet's pull on the cores, coils off; direct
+    # coupled model, not the code's path)
+    f0z = source.array.bias_force(res.points_m, np.asarray(source.moment_a_m2))[:, 2]
+    assert np.all(f0z < 0)
     for j in range(len(res.points_m)):
         c = fm[j] if unipolar else np.abs(fm[j])
-        want = _knapsack(c, 6.0, 20.0) / res.heights_m[j]
+        want = (_knapsack(c, 6.0, 20.0) + f0z[j]) / res.heights_m[j]
         assert res.lam_per_point[j] == pytest.approx(want, rel=2e-6)
     assert res.lam_n_per_m == res.lam_per_point.min()
     np.testing.assert_array_equal(res.limiting_point_m, res.points_m[res.limiting_index])
@@ -47,15 +51,16 @@ def test_force_rows_equal_linprog(source, unipolar):
     res = force_constant(Wedge(), source, current_limit_a=6.0, total_current_a=54.0,
                          unipolar=unipolar, rows="force", n_side=4, progress=False)
     fm = force_matrices(source, res.points_m, "force")
+    f0 = source.array.bias_force(res.points_m, np.asarray(source.moment_a_m2))
     n = fm.shape[2]
     for j in range(len(res.points_m)):
         d = res.heights_m[j] * res.normals[j]
-        # variables: I+ (n), I- (n), lambda; max lambda s.t. F (I+ - I-) = lambda d
+        # variables: I+ (n), I- (n), lambda; max lambda s.t. F (I+ - I-) = lambda d - F0
         a_eq = np.c_[fm[j], -fm[j], -d[:, None]]
         nvar = 2 * n + 1
         bounds = [(0, 6.0)] * n + [(0, 0.0 if unipolar else 6.0)] * n + [(0, None)]
         a_ub = np.r_[np.ones(2 * n), 0.0][None, :]
-        lp = linprog(-np.eye(nvar)[-1], A_ub=a_ub, b_ub=[54.0], A_eq=a_eq, b_eq=np.zeros(3),
+        lp = linprog(-np.eye(nvar)[-1], A_ub=a_ub, b_ub=[54.0], A_eq=a_eq, b_eq=-f0[j],
                      bounds=bounds, method="highs")
         assert lp.status == 0
         assert res.lam_per_point[j] == pytest.approx(lp.x[-1], rel=1e-5)

@@ -28,8 +28,9 @@ from ..errors import BadInputError
 @dataclass(frozen=True)
 class ArrayActuation:
     """Adapter giving designkit's CoilArray the map interface: ``actuation(points)`` (n, 8, nc),
-    ``moment_a_m2`` (3,), ``design_sha256``, ``bounds`` (workspace box) and ``bias_force``
-    (None until the coupled-array model provides F0)."""
+    ``moment_a_m2`` (3,), ``design_sha256``, ``bounds`` (workspace box) and
+    ``bias_force(points)`` (n, 3) N, the magnet's pull on the cores at zero current F0 (the
+    coupled model directly: ~1.4 ms per point, the map's table ~20 us)."""
 
     array: object
     moment_a_m2: tuple
@@ -48,7 +49,8 @@ class ArrayActuation:
     def actuation(self, points) -> np.ndarray:
         return self.array.actuation_matrix(np.atleast_2d(points), rtol=self.rtol)
 
-    bias_force = None
+    def bias_force(self, points) -> np.ndarray:
+        return self.array.bias_force(np.atleast_2d(points), np.asarray(self.moment_a_m2))
 
 
 @dataclass(frozen=True)
