@@ -231,11 +231,16 @@ class MapPhysics:
             out[a:a + chunk] = np.moveaxis(b, -1, 0).reshape((-1,) + sens.shape)
         return out
 
-    def sensor_coil_field(self, array: CoilArray) -> np.ndarray:
-        """(2, n_coils, 3, n_coils) T/A: the coupled field of each coil at the sensors."""
+    def sensor_coil_rows(self, array: CoilArray) -> np.ndarray:
+        """(2, n_coils, 8, n_coils): the coupled field (T/A) and gradient rows (T/(m A),
+        :data:`~designkit.array.ROWS`) of each coil at the sensors."""
         s = self.sensor_positions(array).reshape(-1, 3)
         nc = array.n_coils
-        return self.actuation(array, s)[:, :3, :].reshape(2, nc, 3, nc)
+        return self.actuation(array, s).reshape(2, nc, 8, nc)
+
+    def sensor_coil_field(self, array: CoilArray) -> np.ndarray:
+        """(2, n_coils, 3, n_coils) T/A: the coupled field of each coil at the sensors."""
+        return self.sensor_coil_rows(array)[:, :, :3]
 
     def saturation(self, array: CoilArray) -> tuple[np.ndarray, np.ndarray]:
         """Currents (n_s,) A and per-coil factors (n_s, n_coils) on the columns of A
@@ -666,12 +671,14 @@ def build(design, *, spacing: float = 0.01, log_step: float = 0.25,
                               rotations)
     f_pair = mf.magnet_terms(mprep, m_nodes)
     m_shape = tuple(len(a) for a in m_axes)
+    sensor_rows = phys.sensor_coil_rows(arr)
     arrays.update({
         "SCOEF": modes["sensor_coef"] if modes else np.zeros((nc, 0, 2, nc, 3)),
         "F0_RES": (f0 - f_pair).reshape(m_shape + (3,)).astype(np.float32),
         "M_X": m_axes[0], "M_Y": m_axes[1], "M_Z": m_axes[2],
         "SENSOR_POS": phys.sensor_positions(arr).astype(np.float64),
-        "SENSOR_COIL": phys.sensor_coil_field(arr).astype(np.float64),
+        "SENSOR_COIL": sensor_rows[:, :, :3].astype(np.float64),
+        "SENSOR_COIL_GRAD": sensor_rows[:, :, 3:].astype(np.float64),
         "MOMENT": phys.moment_a_m2.astype(np.float64),
         "SAT_I": sat_i.astype(np.float64), "SAT_FACTOR": sat_f.astype(np.float64),
     })
@@ -773,7 +780,8 @@ class FieldMap:
     """A loaded map v2: :class:`firmware_io.mapfile.MapFile` with designkit's errors.
 
     Attributes and methods are the MapFile's (``actuation``, ``bias_force``,
-    ``sensor_induced_field``, ``sensor_coil_field``, ``saturation_factor``, ``bounds``, ``meta``,
+    ``sensor_induced_field``, ``sensor_coil_field``, ``sensor_coil_gradient``,
+    ``saturation_factor``, ``bounds``, ``meta``,
     ``n_coils``, ``sensor_positions_m``, ``moment_a_m2``, ``design_sha256``, ``max_current_a``,
     ``total_current_a``); ``outside='extrapolate'`` is the MapFile's ``extrapolate=True``.
     """

@@ -261,8 +261,9 @@ class SensorModel:
         sensors' position errors; ``gradient_known`` (2, n) bool says where it is known.
     coil_rows : callable (k, 3) m -> (k, 8, n_coils), or None: the coils' field and gradient
         rows (Bx, By, Bz, dBx/dx, dBx/dy, dBx/dz, dBy/dy, dBy/dz per ampere) at any point where
-        ``gradient_known`` (the map's A(p)); lets :func:`calibrate` use the exact field at the
-        shifted position instead of the linearization.
+        ``gradient_known``; given, :func:`calibrate` uses the exact field at the shifted
+        position, else its linearization C(p + d) = C(p) + grad C d (from_map: the map's
+        gradient at the sensors; a 0.5 mm shift ~9 mm from a core's end leaves ~0.1 % of C).
     """
 
     sensor_positions_m: np.ndarray
@@ -667,7 +668,8 @@ class Localizer:
         from .mapfile import MapFile
 
         m = MapFile.load(path, expected_design_sha256=expected_design_sha256)
-        need = ("sensor_positions_m", "sensor_coil_field", "sensor_induced_field", "moment_a_m2",
+        need = ("sensor_positions_m", "sensor_coil_field", "sensor_coil_gradient",
+                "sensor_induced_field", "moment_a_m2",
                 "design_sha256")
         missing = [a for a in need if not hasattr(m, a)]
         if missing:
@@ -692,22 +694,16 @@ class Localizer:
                 octupole_m2 = (length / 2) ** 2 - 0.75 * a * a
             else:
                 octupole_m2 = float(m.meta.get("magnet_octupole_m2", 0.0))
-        # the coils' field gradient at the sensors inside the map's box (the upper array, 1 mm
-        # margin for the calibration's shifts) for calibrate()
-        grad = np.zeros(sp.shape[:2] + (3, 3, m.n_coils))
-        known = np.zeros(sp.shape[:2], bool)
-        for a_ in range(2):
-            inside = np.all((sp[a_] >= lo + 1e-3) & (sp[a_] <= hi - 1e-3), axis=1)
-            if inside.any():
-                grad[a_, inside] = _field_gradient(m.actuation(sp[a_][inside]))[1]
-                known[a_, inside] = True
+        # the coils' field gradient at every sensor (the map's SENSOR_COIL_GRAD: the sensors sit
+        # below the box of A) for calibrate() to recover their position errors
+        grad = np.asarray(m.sensor_coil_gradient(), float)
+        known = np.ones(sp.shape[:2], bool)
         model = SensorModel(sp, np.asarray(scf, float), np.asarray(mom, float), str(sha),
                             float(octupole_m2),
                             # the induced term is a small correction: outside the map's box the
                             # nearest box point is safer than extrapolating its polynomials
                             lambda p: m.sensor_induced_field(np.clip(p, lo, hi)),
-                            box_lo, box_hi, magnet_size_m, grad, known,
-                            lambda q: m.actuation(np.clip(q, lo, hi)))
+                            box_lo, box_hi, magnet_size_m, grad, known)
         learned = (LearnedInverse.load(weights) if weights is not None
                    else kw.pop("learned", None))
         if calibration is not None and not isinstance(calibration, (SensorCalibration, tuple)):
@@ -1182,9 +1178,10 @@ def calibrate(frames_top, frames_bottom, currents, model: SensorModel, *,
     Gauss-Newton: the residuals weighted by the noise of K, plus the priors g = 1 +- prior_gain,
     |w| ~ prior_angle_deg, d ~ prior_shift_m per axis (the tolerances, not the realization:
     directions the coils' fields do not excite -- the lateral gains, mostly -- stay near the
-    prior instead of fitting the noise). C and its gradient come from ``model.coil_rows`` (the
-    map's A(p) at the shifted position) where ``model.gradient_known``; elsewhere (the lower
-    array, outside the map's box) d = 0. The estimators then use gain_inverse = G^-1, the
+    prior instead of fitting the noise). C and its gradient come from ``model.coil_rows`` at the
+    shifted position where given, else from the linearization about the nominal position with
+    ``model.coil_gradient_t_per_a_m`` (from_map: the map's SENSOR_COIL_GRAD), wherever
+    ``model.gradient_known``; elsewhere d = 0. The estimators then use gain_inverse = G^-1, the
     offsets, the sensors at nominal + d for the magnet's field and G^-1 K as the coils' field.
 
     Parameters
@@ -1227,9 +1224,10 @@ def calibrate(frames_top, frames_bottom, currents, model: SensorModel, *,
             # noise of K's entries: sigma sqrt(diag((X^T X)^-1)), the same for the 3 rows
             w = 1.0 / (noise_t * np.sqrt(np.diag(np.linalg.inv(x.T @ x))[:nc]))
             shifts = (fit_shift and model.gradient_known is not None
-                      and model.coil_rows is not None and bool(model.gradient_known[a, s]))
+                      and bool(model.gradient_known[a, s]))
             c_nom = model.coil_field_t_per_a[a, s]
-            if shifts:
+            exact = shifts and model.coil_rows is not None
+            if exact:
                 c0 = _field_gradient(model.coil_rows(model.sensor_positions_m[a, s][None]))[0][0]
             theta = np.zeros(9 if shifts else 6)      # gains - 1, angles, shift
             prior = np.r_[np.full(3, prior_gain), np.full(3, math.radians(prior_angle_deg)),
@@ -1237,11 +1235,14 @@ def calibrate(frames_top, frames_bottom, currents, model: SensorModel, *,
             for _ in range(iterations):
                 g = 1.0 + theta[:3]
                 rot = np.eye(3) - _skew(theta[3:6])
-                if shifts:
+                if exact:
                     cc, gg = _field_gradient(model.coil_rows(
                         (model.sensor_positions_m[a, s] + theta[6:])[None]))
-                    # SENSOR_COIL at d = 0 plus the map's change: no interpolation offset
+                    # SENSOR_COIL at d = 0 plus the change: no interpolation offset
                     c, dc = c_nom + cc[0] - c0, gg[0]
+                elif shifts:  # linearized: C(p + d) = C(p) + grad C d
+                    dc = model.coil_gradient_t_per_a_m[a, s]
+                    c = c_nom + np.einsum("ijk,j->ik", dc, theta[6:])
                 else:
                     c = c_nom
                 rc = rot @ c

@@ -41,7 +41,9 @@ The magnet's interaction with the cores, as functions of the magnet's position p
   coefficients ``SCOEF`` (n_coils, n_sensor_basis, 2, n_coils, 3).
 
 Constants: ``SENSOR_POS`` (2, n_coils, 3) m; ``SENSOR_COIL`` (2, n_coils, 3, n_coils) T/A, the
-coils' (coupled) field at the sensors per ampere; ``MOMENT`` (3,) A m^2; saturation ``SAT_I``
+coils' (coupled) field at the sensors per ampere, ``SENSOR_COIL_GRAD`` (2, n_coils, 5, n_coils)
+T/(m A) its gradient rows (dBx/dx, dBx/dy, dBx/dz, dBy/dy, dBy/dz; the sensors sit outside the
+box of A, below the workspace, and the sensor calibration needs them); ``MOMENT`` (3,) A m^2; saturation ``SAT_I``
 (n_s,) A and ``SAT_FACTOR`` (n_s, n_coils): column k of A is multiplied by the factor at |I_k|
 (linear interpolation; 1 for air coils). ``meta``: a JSON string (format, version, units,
 rows, coil poses, design name and SHA-256, current limit and total budget, build settings and the
@@ -97,7 +99,7 @@ REBUILD = ("Rebuild it for this version: designkit map --out <file.npz> (with --
 
 # name -> (dtype, shape as a function of the sizes); the single list of arrays in a map file
 _FIXED = ("SCOEF", "F0_RES", "M_X", "M_Y", "M_Z", "SENSOR_POS", "SENSOR_COIL",
-          "MOMENT", "SAT_I", "SAT_FACTOR")
+          "SENSOR_COIL_GRAD", "MOMENT", "SAT_I", "SAT_FACTOR")
 
 
 def _shapes(meta: dict, arrays: dict) -> dict:
@@ -110,6 +112,7 @@ def _shapes(meta: dict, arrays: dict) -> dict:
             "F0_RES": (f32, (mx, my, mz, 3)),
             "M_X": (f64, (mx,)), "M_Y": (f64, (my,)), "M_Z": (f64, (mz,)),
             "SENSOR_POS": (f64, (2, nc, 3)), "SENSOR_COIL": (f64, (2, nc, 3, nc)),
+            "SENSOR_COIL_GRAD": (f64, (2, nc, 5, nc)),
             "MOMENT": (f64, (3,)), "SAT_I": (f64, (ns,)), "SAT_FACTOR": (f64, (ns, nc))}
 
 
@@ -1198,6 +1201,18 @@ class MapFile:
         if currents is None:
             return g.copy()
         return g @ self._currents(currents)
+
+    def sensor_coil_gradient(self) -> np.ndarray:
+        """The coils' field gradient at the sensors per ampere, (2, n_coils, 3, 3, n_coils)
+        T/(m A), entry [a, s, i, j, k] = dB_i/dx_j of coil k (the full symmetric, traceless
+        tensor from the stored rows)."""
+        r = self.arrays["SENSOR_COIL_GRAD"]
+        g = np.empty(r.shape[:2] + (3, 3, r.shape[3]))
+        g[:, :, 0, 0], g[:, :, 0, 1], g[:, :, 0, 2] = r[:, :, 0], r[:, :, 1], r[:, :, 2]
+        g[:, :, 1, 0], g[:, :, 1, 1], g[:, :, 1, 2] = r[:, :, 1], r[:, :, 3], r[:, :, 4]
+        g[:, :, 2, 0], g[:, :, 2, 1] = r[:, :, 2], r[:, :, 4]
+        g[:, :, 2, 2] = -(r[:, :, 0] + r[:, :, 3])
+        return g
 
     def saturation_factor(self, currents) -> np.ndarray:
         """Per-coil factors (n_coils,) on the columns of A at these currents (A): the
