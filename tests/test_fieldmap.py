@@ -213,6 +213,14 @@ def test_sensor_positions_and_coil_field_against_direct(fm):
     np.testing.assert_allclose(fm.sensor_coil_field(i), direct @ i, rtol=1e-12,
                                atol=1e-15)
     np.testing.assert_array_equal(fm.saturation_factor(i), np.ones(9))
+    # the gradient at the sensors (below the box of A) against central differences of the
+    # direct model's field (h = 1 um): [a, s, i, j, k] = dB_i/dx_j of coil k
+    h, pts = 1e-6, s.reshape(-1, 3)
+    fd = np.stack([(arr.actuation_matrix(pts + h * e)[:, :3] - arr.actuation_matrix(pts - h * e)
+                    [:, :3]) / (2 * h) for e in np.eye(3)], axis=2).reshape(2, 9, 3, 3, 9)
+    g = fm.sensor_coil_gradient()
+    np.testing.assert_allclose(g, fd, rtol=0, atol=1e-6 * np.abs(fd).max())
+    np.testing.assert_allclose(g, np.swapaxes(g, 2, 3), atol=1e-12 * np.abs(g).max())
 
 
 def test_outside_points(fm):
