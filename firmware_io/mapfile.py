@@ -192,7 +192,7 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
         nc = int(meta["n_coils"])
         missing = [k for k in _FIXED if k not in arrays]
         if missing:
-            raise _bad(p, f"arrays {list(_FIXED)}; missing {missing}")
+            raise _bad(p, f"arrays {list(_FIXED)}; missing {missing}", REBUILD)
         shapes = _shapes(meta, arrays)
     except (KeyError, TypeError, ValueError) as exc:
         if isinstance(exc, BadInputError):
