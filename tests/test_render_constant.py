@@ -98,3 +98,9 @@ def test_map_source_matches_array_and_cli_records_its_hash(tmp_path):
     assert main(["scene", "compile", "plane", "--map", str(path), "--lambda", "1",
                  "--out", str(out)]) == 0
     assert Scene.load(out, expected_design_sha256=small.spec_hash()).lam_n_per_m == 1.0
+    # the CLI wraps the map once and passes the wrapped source on: taken as is
+    from designkit.render.constant import actuation_source
+
+    src = actuation_source(fm)
+    assert actuation_source(src) is src
+    assert force_constant(plane, src, **kw).lam_n_per_m == via_map.lam_n_per_m

@@ -71,7 +71,7 @@ class _MapSource:
 def actuation_source(fieldmap):
     """ArrayActuation as is; a FieldMap / MapFile (anything with ``actuation`` and ``meta``)
     wrapped with the moment and design hash its file records."""
-    if isinstance(fieldmap, ArrayActuation):
+    if isinstance(fieldmap, (ArrayActuation, _MapSource)):
         return fieldmap
     meta = getattr(fieldmap, "meta", None)
     if not callable(getattr(fieldmap, "actuation", None)) or not isinstance(meta, dict):
