@@ -70,6 +70,7 @@ import numpy as np
 
 from . import special
 from .errors import BadInputError
+from .mapfile import gradient_tensor
 
 MU0 = 4e-7 * math.pi
 _EYE = np.eye(3)
@@ -483,14 +484,10 @@ class LearnedInverse:
 # ---------------------------------------------------------------------------- the localizer
 def _field_gradient(rows: np.ndarray):
     """Rows (k, 8, n_coils) (Bx, By, Bz, dBx/dx, dBx/dy, dBx/dz, dBy/dy, dBy/dz) -> field
-    (k, 3, n_coils) and full gradient (k, 3, 3, n_coils), [.., i, j, ..] = dB_i/dx_j (curl- and
-    divergence-free outside the sources)."""
-    g = np.empty((len(rows), 3, 3, rows.shape[2]))
-    g[:, 0, 0], g[:, 0, 1], g[:, 0, 2] = rows[:, 3], rows[:, 4], rows[:, 5]
-    g[:, 1, 0], g[:, 1, 1], g[:, 1, 2] = rows[:, 4], rows[:, 6], rows[:, 7]
-    g[:, 2, 0], g[:, 2, 1] = rows[:, 5], rows[:, 7]
-    g[:, 2, 2] = -(rows[:, 3] + rows[:, 6])
-    return rows[:, :3], g
+    (k, 3, n_coils) and full gradient (k, 3, 3, n_coils), [.., i, j, ..] = dB_i/dx_j
+    (:func:`firmware_io.mapfile.gradient_tensor`)."""
+    g = gradient_tensor(np.moveaxis(rows[:, 3:8], 1, -1))  # (k, n_coils, 3, 3)
+    return rows[:, :3], np.moveaxis(g, 1, -1)
 
 
 def _solve3_damped(a, g, lam):

@@ -294,6 +294,14 @@ NQ_MAGNET = 2
 core alone."""
 
 
+def gradient_tensor(g5: np.ndarray) -> np.ndarray:
+    """Gradient rows (..., 5) (dBx/dx, dBx/dy, dBx/dz, dBy/dy, dBy/dz) -> the full gradient
+    (..., 3, 3), [i, j] = dB_i/dx_j: symmetric (curl-free) and traceless (divergence-free)."""
+    gxx, gxy, gxz, gyy, gyz = np.moveaxis(np.asarray(g5), -1, 0)
+    return np.stack([np.stack([gxx, gxy, gxz], -1), np.stack([gxy, gyy, gyz], -1),
+                     np.stack([gxz, gyz, -gxx - gyy], -1)], -2)
+
+
 def _rotate_rows(rows: np.ndarray, rot: np.ndarray) -> np.ndarray:
     """Local rows (8, n, k) of coils with rotations (k, 3, 3) -> global rows (8, n, k)."""
     b = rows[:3].astype(np.float64)
@@ -1204,15 +1212,10 @@ class MapFile:
 
     def sensor_coil_gradient(self) -> np.ndarray:
         """The coils' field gradient at the sensors per ampere, (2, n_coils, 3, 3, n_coils)
-        T/(m A), entry [a, s, i, j, k] = dB_i/dx_j of coil k (the full symmetric, traceless
-        tensor from the stored rows)."""
-        r = self.arrays["SENSOR_COIL_GRAD"]
-        g = np.empty(r.shape[:2] + (3, 3, r.shape[3]))
-        g[:, :, 0, 0], g[:, :, 0, 1], g[:, :, 0, 2] = r[:, :, 0], r[:, :, 1], r[:, :, 2]
-        g[:, :, 1, 0], g[:, :, 1, 1], g[:, :, 1, 2] = r[:, :, 1], r[:, :, 3], r[:, :, 4]
-        g[:, :, 2, 0], g[:, :, 2, 1] = r[:, :, 2], r[:, :, 4]
-        g[:, :, 2, 2] = -(r[:, :, 0] + r[:, :, 3])
-        return g
+        T/(m A), entry [a, s, i, j, k] = dB_i/dx_j of coil k (:func:`gradient_tensor` of the
+        stored rows)."""
+        g = gradient_tensor(np.moveaxis(self.arrays["SENSOR_COIL_GRAD"], 2, -1))
+        return np.moveaxis(g, (-2, -1), (2, 3))
 
     def saturation_factor(self, currents) -> np.ndarray:
         """Per-coil factors (n_coils,) on the columns of A at these currents (A): the

@@ -55,14 +55,6 @@ def _uncoupled(points, centre_xy=(0.0, 0.0)):
     return bw + bc, gw + gc
 
 
-def _gradient(a, k):
-    """The full 3 x 3 gradient (n, 3, 3) of column k of A (n, 8, n_coils) (rows as
-    designkit.array.ROWS: dBz/dz = -(dBx/dx + dBy/dy))."""
-    gxx, gxy, gxz, gyy, gyz = np.moveaxis(a[:, 3:, k], 1, 0)
-    return np.stack([np.stack([gxx, gxy, gxz], -1), np.stack([gxy, gyy, gyz], -1),
-                     np.stack([gxz, gyz, -gxx - gyy], -1)], axis=1)
-
-
 def _coupled(points, case):
     """designkit's coupled model (designkit.coupling through CoilArray: every core of the case
     solved together, linear mu_r 1000, 1 A) at the case's points (its frame): B (n, 3) T,
@@ -77,8 +69,10 @@ def _coupled(points, case):
         p, k = points - np.array([d.array.pitch_m / 2, 0.0, 0.0]), 0
     else:
         arr, p, k = CoilArray.from_design(d), points, 4 if case == "centre" else 0
+    from designkit.array import gradient_from_g5
+
     a = arr.actuation_matrix(p)
-    return a[:, :3, k], _gradient(a, k)
+    return a[:, :3, k], gradient_from_g5(a[:, 3:, k])
 
 
 def model_vs_fem(points, b, g, case) -> dict:
