@@ -75,6 +75,7 @@ the measured errors and timings are in designkit.fieldmap's docstring.
 from __future__ import annotations
 
 import bisect
+import functools
 import hashlib
 import json
 import math
@@ -752,25 +753,134 @@ def monomials(s: np.ndarray, degree: int, out: np.ndarray | None = None) -> np.n
     return out
 
 
+@functools.lru_cache(maxsize=None)
+def solid_harmonic_betas(degree: int) -> list:
+    """Per degree l <= ``degree`` (a tuple, cached) the (2l - 3, 1) factors beta_l^m = ((l - 1)^2 - m^2) /
+    ((2l - 1)(2l - 3)) of the z-recurrence of :func:`solid_harmonics` (rows m = 0, 1, 1, 2,
+    2, ...; empty for l < 2)."""
+    out = []
+    for ell in range(degree + 1):
+        m = np.array([(j + 1) // 2 for j in range(max(0, 2 * ell - 3))], float)
+        out.append((((ell - 1) ** 2 - m * m) / ((2 * ell - 1) * (2 * ell - 3)))[:, None])
+    return tuple(out)
+
+
+def solid_harmonic_coefficients(degree: int) -> np.ndarray:
+    """(M, (degree + 1)^2) float64: the monomial coefficients (:func:`monomial_exponents`
+    order, M = C(degree + 3, 3)) of the basis :func:`solid_harmonics` evaluates, exact (the
+    same recurrence run on coefficient vectors)."""
+    e = monomial_exponents(degree)
+    index = {tuple(x): i for i, x in enumerate(e.tolist())}
+    up = [np.array([index.get(tuple(x + np.eye(3, dtype=np.intp)[a]), -1) for x in e])
+          for a in range(3)]
+
+    def times(v, a):  # v times s_a (v of degree < ``degree``)
+        out = np.zeros_like(v)
+        nz = np.flatnonzero(v)
+        out[up[a][nz]] = v[nz]
+        return out
+
+    betas = solid_harmonic_betas(degree)
+    cols = [np.eye(len(e))[0]]
+    for ell in range(1, degree + 1):
+        b, b1, b2 = ell * ell, (ell - 1) ** 2, max(ell - 2, 0) ** 2
+        for j in range(2 * ell - 1):
+            v = times(cols[b1 + j], 2)
+            if j < 2 * ell - 3:
+                r2 = sum(times(times(cols[b2 + j], a), a) for a in range(3))
+                v = v - betas[ell][j, 0] * r2
+            cols.append(v)
+        c = cols[b - 2] if ell > 1 else cols[0]
+        s = cols[b - 1] if ell > 1 else np.zeros(len(e))
+        cols += [times(c, 0) - times(s, 1), times(c, 1) + times(s, 0)]
+    return np.stack(cols, axis=1)
+
+
+def solid_harmonics(s: np.ndarray, degree: int, out: np.ndarray | None = None,
+                    work: np.ndarray | None = None) -> np.ndarray:
+    """((degree + 1)^2, n) the real regular solid harmonics of degree <= ``degree`` at local
+    coordinates ``s`` (3, n) (rows x, y, z), a basis of the harmonic polynomials of that degree
+    (A's rows in a cell are such polynomials: their (L)^2 coefficients instead of the
+    C(L + 2, 3) monomials' halve a batch's multiply-adds). Block l (rows l^2 .. (l + 1)^2 - 1)
+    holds G_l^0, then the cos and sin parts of G_l^m, m = 1..l:
+    G_l^l = Re, Im (s_x + i s_y)^l (from G_(l-1)^(l-1) by one complex product) and, for m < l,
+    G_l^m = s_z G_(l-1)^m - beta_l^m |s|^2 G_(l-2)^m (:func:`solid_harmonic_betas`; r^l P_l^m
+    of the associated Legendre functions up to a factor per (l, m)). ``work``: scratch of
+    shape (2 degree + 4, n) or more; both buffers take the dtype of ``s``."""
+    n = s.shape[1]
+    if out is None:
+        out = np.empty(((degree + 1) ** 2, n), s.dtype)
+    if work is None:
+        work = np.empty((2 * degree + 4, n), s.dtype)
+    x, y, z = s
+    out[0] = 1.0
+    if degree == 0:
+        return out
+    out[1], out[2], out[3] = z, x, y
+    r2, xx, ym = work[0], work[1:3], work[3:5]
+    np.multiply(x, x, out=r2)
+    r2 += y * y
+    r2 += z * z
+    xx[0], xx[1], ym[0], ym[1] = x, x, y, y
+    np.negative(ym[0], out=ym[0])
+    tmp = work[5:]
+    betas = solid_harmonic_betas(degree)
+    for ell in range(2, degree + 1):
+        b, b1, b2 = ell * ell, (ell - 1) ** 2, (ell - 2) ** 2
+        k = 2 * ell - 3
+        np.multiply(out[b1:b], z, out=out[b:b + k + 2])
+        t = tmp[:k]
+        np.multiply(out[b2:b1], r2, out=t)
+        t *= betas[ell]
+        out[b:b + k] -= t
+        sec = out[b + k + 2:b + k + 4]
+        np.multiply(out[b - 2:b], xx, out=sec)
+        np.multiply(out[b - 1:b - 3:-1], ym, out=tmp[:2])
+        sec += tmp[:2]
+    return out
+
+
+def _rows_on_harmonics(degree: int) -> tuple[np.ndarray, np.ndarray]:
+    """(8, H, K) float64: :func:`harmonic_rows` of a potential of degree ``degree`` on the
+    H = degree^2 :func:`solid_harmonics` of degree <= degree - 1 (every row is harmonic, so it
+    lies in their span: checked to rounding), and (M, H) their monomial coefficients."""
+    got = _ROWS_H.get(degree)
+    if got is None:
+        ops = harmonic_rows(degree)  # (8, M, K)
+        hc = solid_harmonic_coefficients(degree - 1)  # (M, H)
+        ops_h = np.linalg.pinv(hc) @ ops
+        resid = np.abs(hc @ ops_h - ops).max()
+        if not resid <= 1e-9 * np.abs(ops).max():  # pragma: no cover - a bug, not bad input
+            raise AssertionError(f"rows of degree {degree} off the harmonic span ({resid})")
+        got = _ROWS_H[degree] = (ops_h, hc)
+    return got
+
+
+_ROWS_H: dict = {}
+
+
 def prepare_cells(layers: list, tables: list, nc: int) -> dict:
-    """What the A lookups need: per cell its rows as monomial coefficients (M_l, 8 nc) float32
-    (coefficients x :func:`harmonic_rows`, in T/A and T/(m A) per unit local monomial), its
-    centre and 1 / r, and per layer the grid constants (lists for the one-point path)."""
+    """What the A lookups need: per cell its rows on the solid harmonics of degree <= L - 1,
+    (L^2, 8 nc) float32 (coefficients x :func:`_rows_on_harmonics`, in T/A and T/(m A) per
+    unit :func:`solid_harmonics`), its centre and 1 / r, per layer the grid constants (lists
+    for the one-point path) and per degree the harmonics' monomial coefficients (M, L^2)
+    float32 (one point: its monomials @ those, then @ the cell's)."""
     cells, centres, inv_r, degree = [], [], [], []
     grid, z_edges = [], []
     exps: dict = {}
+    to_h: dict = {}
     off = 0
     for lay, tab in zip(layers, tables):
         deg, nx, ny = int(lay["degree"]), int(lay["nx"]), int(lay["ny"])
         hx, hy = float(lay["cell_x_m"]), float(lay["cell_y_m"])
         z0, z1 = float(lay["z_lo_m"]), float(lay["z_hi_m"])
         r = max(hx, hy, z1 - z0) / 2
-        ops = harmonic_rows(deg)  # (8, M, K)
+        ops, hc = _rows_on_harmonics(deg)  # (8, H, K), (M, H)
         scale = np.array([r] * 3 + [r * r] * 5)[:, None, None]
-        m = ops.shape[1]
-        # (n_cells, K, nc) -> (n_cells, M, 8, nc): every row of every coil per monomial
-        rows = np.einsum("rmk,ckn->cmrn", ops / scale, tab.astype(np.float64))
-        cells += list(rows.reshape(len(tab), m, 8 * nc).astype(np.float32))
+        h = ops.shape[1]
+        # (n_cells, K, nc) -> (n_cells, H, 8, nc): every row of every coil per harmonic
+        rows = np.einsum("rhk,ckn->chrn", ops / scale, tab.astype(np.float64))
+        cells += list(rows.reshape(len(tab), h, 8 * nc).astype(np.float32))
         ix, iy = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
         centres.append(np.c_[lay["x0_m"] + (ix.ravel() + 0.5) * hx,
                              lay["y0_m"] + (iy.ravel() + 0.5) * hy,
@@ -781,17 +891,18 @@ def prepare_cells(layers: list, tables: list, nc: int) -> dict:
         z_edges.append(z1)
         off += nx * ny
         exps[deg - 1] = monomial_exponents(deg - 1)
+        to_h[deg - 1] = hc.astype(np.float32)
     centres = np.concatenate(centres)
     g = np.array(grid, float)
     return {"cells": cells, "centre": centres, "inv_r": np.array(inv_r),
             "centre_inv_r": [tuple(c) + (ir,) for c, ir in zip(centres.tolist(), inv_r)],
-            "n_mono": [len(monomial_exponents(d - 1)) for d in degree],
+            "n_harm": [d * d for d in degree],
             "degree": max(degree) - 1, "grid": grid, "grid_arr": g,
             "z_inner": z_edges[:-1], "z_inner_arr": np.array(z_edges[:-1]),
             "one_idx": {d: (e[:, 0], e[:, 1] + d + 1, e[:, 2] + 2 * (d + 1))
                         for d, e in exps.items()},
-            "exps": monomial_exponents(max(degree) - 1),
-            # per layer (its last cell, its monomials' degree), for the batch path
+            "to_harm": to_h,
+            # per layer (its last cell, its harmonics' degree), for the batch path
             "layer_degree": [(g[6] + g[4] * g[5] - 1, lay_deg) for g, lay_deg in
                              zip(grid, [int(lay["degree"]) - 1 for lay in layers])],
             "cell_degree": [d - 1 for d in degree], "n_cells": off, "nc": nc}
@@ -837,8 +948,8 @@ CELL_CHUNK = 32768
 def cells_many(C: dict, p: np.ndarray, cols=None, out=None) -> np.ndarray:
     """A at points (n, 3) (n <= :data:`CELL_CHUNK`): (n, 8 nc) float64, or only the flat
     columns ``cols`` (row * nc + coil) (n, len(cols)), into ``out`` if given. Points are sorted
-    by cell (stable), their monomials computed once, then one float32 (n_c, M) @ (M, n_out)
-    product per occupied cell."""
+    by cell (stable), their solid harmonics computed once per layer, then one float32
+    (n_c, H) @ (H, n_out) product per occupied cell."""
     n = len(p)
     cell = cell_index(C, p)
     # 16-bit keys sort by radix (~8x faster than a merge sort of intp)
@@ -847,38 +958,42 @@ def cells_many(C: dict, p: np.ndarray, cols=None, out=None) -> np.ndarray:
     s = p[order]
     s -= C["centre"][cs]
     s *= C["inv_r"][cs][:, None]
-    s = s.astype(np.float32)
+    st = _scratch("s", (3, n), np.float32)
+    st[...] = s.T
     counts = np.bincount(cs, minlength=C["n_cells"])
     ends = np.cumsum(counts).tolist()
-    # a layer's points are one run of the sorted order: monomials to that layer's degree only
-    mono = _scratch("mono", (len(C["exps"]), n), np.float32)
+    # a layer's points are one run of the sorted order: harmonics to that layer's degree only
+    d_max = C["degree"]
+    harm = _scratch("harm", ((d_max + 1) ** 2, n), np.float32)
+    work = _scratch("harm_work", (2 * d_max + 4, n), np.float32)
     a = 0
     for off, deg in C["layer_degree"]:
         b = ends[off]
         if b > a:
-            monomials(s[a:b], deg, mono[:math.comb(deg + 3, 3), a:b])
+            solid_harmonics(st[:, a:b], deg, harm[:(deg + 1) ** 2, a:b], work[:, a:b])
         a = b
     counts = counts.tolist()
     width = 8 * C["nc"] if cols is None else len(cols)
     res = _scratch("res", (n, width), np.float32)
-    cells, n_mono = C["cells"], C["n_mono"]
+    cells, n_harm = C["cells"], C["n_harm"]
     dot = np.dot
     for c, k in enumerate(counts):
         if k:
             b = ends[c]
-            m = n_mono[c]
+            m = n_harm[c]
             w = cells[c] if cols is None else cells[c][:, cols]
             step = max(1, GEMM_CAP // (m * width))
             for a in range(b - k, b, step):
                 e = min(b, a + step)
-                dot(mono[:m, a:e].T, w, out=res[a:e])
+                dot(harm[:m, a:e].T, w, out=res[a:e])
     out = np.empty((n, width)) if out is None else out
     out[order] = res
     return out
 
 
 def cells_one(C: dict, q) -> np.ndarray:
-    """A at one point (3 Python floats): (8 nc,) float32; the cell by Python arithmetic."""
+    """A at one point (3 Python floats): (8 nc,) float32; the cell by Python arithmetic, the
+    monomials from per-axis powers, the harmonics from those (one small product)."""
     x, y, z = q
     lay = C["grid"][bisect.bisect_right(C["z_inner"], z)]
     x0, y0, ihx, ihy, nx, ny, off = lay
@@ -895,7 +1010,7 @@ def cells_one(C: dict, q) -> np.ndarray:
         pz.append(pz[-1] * sz)
     pw = np.array(px + py + pz, np.float32)
     ia, ib, ic = C["one_idx"][d]
-    return (pw[ia] * pw[ib] * pw[ic]) @ C["cells"][c]
+    return ((pw[ia] * pw[ib] * pw[ic]) @ C["to_harm"][d]) @ C["cells"][c]
 
 
 # ============================================================================ 3-D grids
@@ -1060,14 +1175,20 @@ class MapFile:
             raise BadInputError(name, "array-like of shape (3,) or (n, 3), m",
                                 f"shape {p.shape}")
         p = p.reshape(-1, 3)
-        # per-column extremes first (two reductions; NaN propagates into them): the row-wise
-        # search below runs only for a bad input
-        p_min, p_max = p.min(axis=0), p.max(axis=0)
-        if not (np.all(np.isfinite(p_min)) and np.all(np.isfinite(p_max))):
+        # per-column extremes first (NaN propagates into them; one reduction per column: numpy's
+        # p.min(axis=0) over (n, 3) is ~20x slower): the row-wise search below runs only for a
+        # bad input
+        if not len(p):
+            return p, single
+        p_min = [p[:, k].min() for k in range(3)]
+        p_max = [p[:, k].max() for k in range(3)]
+        if not all(math.isfinite(v) for v in p_min + p_max):
             raise BadInputError(name, "finite (no NaN or Inf)", p.tolist()[:3])
         lo, hi = self.bounds
         tol = 1e-9
-        if not extrapolate and (np.any(p_min < lo - tol) or np.any(p_max > hi + tol)):
+        box_lo, box_hi = self._box_lists
+        if not extrapolate and (any(v < b for v, b in zip(p_min, box_lo))
+                                or any(v > b for v, b in zip(p_max, box_hi))):
             bad = np.any((p < lo - tol) | (p > hi + tol), axis=1)
             if bad.any():
                 k = int(np.argmax(bad))

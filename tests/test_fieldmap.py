@@ -154,6 +154,36 @@ def test_harmonic_cell_basis_against_finite_differences():
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-4 * np.abs(want).max())
 
 
+def test_solid_harmonics_are_legendre_solid_harmonics():
+    # the batch lookup's basis: G_l^m = c_lm r^l P_l^m(cos theta) (cos, sin)(m phi), one
+    # constant c_lm per (l, m) (scipy's associated Legendre functions, an independent source),
+    # and the monomial coefficients the one-point path uses give the same values
+    from scipy.special import lpmv
+
+    from firmware_io.mapfile import monomials, solid_harmonic_coefficients, solid_harmonics
+
+    deg = 8
+    s = np.random.default_rng(7).uniform(-1, 1, (40, 3))
+    got = solid_harmonics(s.T.copy(), deg)
+    assert got.shape == ((deg + 1) ** 2, len(s))
+    np.testing.assert_allclose(monomials(s, deg).T @ solid_harmonic_coefficients(deg), got.T,
+                               rtol=0, atol=1e-12)
+    r = np.linalg.norm(s, axis=1)
+    phi = np.arctan2(s[:, 1], s[:, 0])
+    for ell in range(deg + 1):
+        for m in range(ell + 1):
+            base = r ** ell * lpmv(m, ell, s[:, 2] / r)
+            for row, trig in ((ell * ell + max(2 * m - 1, 0), np.cos),
+                              (ell * ell + 2 * m, np.sin)):
+                if m == 0 and trig is np.sin:
+                    continue
+                want = base * trig(m * phi)
+                c = got[row] @ want / (want @ want)  # the per-(l, m) constant
+                assert abs(c) > 0
+                np.testing.assert_allclose(got[row], c * want, rtol=0,
+                                           atol=1e-11 * np.abs(c * want).max())
+
+
 def test_map_carries_the_drive_data_the_runner_reads(fm):
     from firmware_io.runner import config_from_map
 
