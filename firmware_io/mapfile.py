@@ -797,45 +797,55 @@ def solid_harmonic_coefficients(degree: int) -> np.ndarray:
 
 
 def solid_harmonics(s: np.ndarray, degree: int, out: np.ndarray | None = None,
-                    work: np.ndarray | None = None) -> np.ndarray:
+                    work: np.ndarray | None = None, spans=None) -> np.ndarray:
     """((degree + 1)^2, n) the real regular solid harmonics of degree <= ``degree`` at local
     coordinates ``s`` (3, n) (rows x, y, z), a basis of the harmonic polynomials of that degree
-    (A's rows in a cell are such polynomials: their (L)^2 coefficients instead of the
+    (A's rows in a cell are such polynomials: their L^2 coefficients instead of the
     C(L + 2, 3) monomials' halve a batch's multiply-adds). Block l (rows l^2 .. (l + 1)^2 - 1)
     holds G_l^0, then the cos and sin parts of G_l^m, m = 1..l:
     G_l^l = Re, Im (s_x + i s_y)^l (from G_(l-1)^(l-1) by one complex product) and, for m < l,
     G_l^m = s_z G_(l-1)^m - beta_l^m |s|^2 G_(l-2)^m (:func:`solid_harmonic_betas`; r^l P_l^m
     of the associated Legendre functions up to a factor per (l, m)). ``work``: scratch of
-    shape (2 degree + 4, n) or more; both buffers take the dtype of ``s``."""
+    shape (2 degree + 4, n) or more; both buffers take the dtype of ``s``. ``spans``: per
+    degree l a range (a, b) of the columns that need it (nested: each within the one of l - 1);
+    the other columns of block l are left unset."""
     n = s.shape[1]
     if out is None:
         out = np.empty(((degree + 1) ** 2, n), s.dtype)
     if work is None:
         work = np.empty((2 * degree + 4, n), s.dtype)
-    x, y, z = s
-    out[0] = 1.0
+    if spans is None:
+        spans = [(0, n)] * (degree + 1)
+    a, b = spans[0]
+    out[0, a:b] = 1.0
     if degree == 0:
         return out
-    out[1], out[2], out[3] = z, x, y
-    r2, xx, ym = work[0], work[1:3], work[3:5]
+    a, b = spans[1]
+    x, y, z = s[:, a:b]
+    out[1, a:b], out[2, a:b], out[3, a:b] = z, x, y
+    r2, xx, ym = work[0, a:b], work[1:3, a:b], work[3:5, a:b]
     np.multiply(x, x, out=r2)
     r2 += y * y
     r2 += z * z
     xx[0], xx[1], ym[0], ym[1] = x, x, y, y
     np.negative(ym[0], out=ym[0])
-    tmp = work[5:]
+    a1 = a
     betas = solid_harmonic_betas(degree)
     for ell in range(2, degree + 1):
-        b, b1, b2 = ell * ell, (ell - 1) ** 2, (ell - 2) ** 2
+        a, b = spans[ell]
+        o = a - a1  # this degree's columns within the work rows
+        z_, r2_, xx_, ym_ = z[o:o + b - a], r2[o:o + b - a], xx[:, o:o + b - a], ym[:, o:o + b - a]
+        tmp = work[5:, a:b]
+        c, c1, c2 = ell * ell, (ell - 1) ** 2, (ell - 2) ** 2
         k = 2 * ell - 3
-        np.multiply(out[b1:b], z, out=out[b:b + k + 2])
+        np.multiply(out[c1:c, a:b], z_, out=out[c:c + k + 2, a:b])
         t = tmp[:k]
-        np.multiply(out[b2:b1], r2, out=t)
+        np.multiply(out[c2:c1, a:b], r2_, out=t)
         t *= betas[ell]
-        out[b:b + k] -= t
-        sec = out[b + k + 2:b + k + 4]
-        np.multiply(out[b - 2:b], xx, out=sec)
-        np.multiply(out[b - 1:b - 3:-1], ym, out=tmp[:2])
+        out[c:c + k, a:b] -= t
+        sec = out[c + k + 2:c + k + 4, a:b]
+        np.multiply(out[c - 2:c, a:b], xx_, out=sec)
+        np.multiply(out[c - 1:c - 3:-1, a:b], ym_, out=tmp[:2])
         sec += tmp[:2]
     return out
 
@@ -894,30 +904,64 @@ def prepare_cells(layers: list, tables: list, nc: int) -> dict:
         to_h[deg - 1] = hc.astype(np.float32)
     centres = np.concatenate(centres)
     g = np.array(grid, float)
+    lay_deg = [int(lay["degree"]) - 1 for lay in layers]
+    r_lay = [max(float(lay["cell_x_m"]), float(lay["cell_y_m"]),
+                 float(lay["z_hi_m"]) - float(lay["z_lo_m"])) / 2 for lay in layers]
+    # per layer, for cell_local's gathers: origin, 1 / cell sides, last index, cell side / r,
+    # z centre, 1 / r, cells per row, first cell
+    lay_f = np.array([(x0, y0, ihx, ihy, nx - 1.0, ny - 1.0, 1.0 / (ihx * r), 1.0 / (ihy * r),
+                       (float(lay["z_lo_m"]) + float(lay["z_hi_m"])) / 2, 1.0 / r)
+                      for (x0, y0, ihx, ihy, nx, ny, _), lay, r in zip(grid, layers, r_lay)])
+    lay_i = np.array([(ny, o) for (_, _, _, _, _, ny, o) in grid], np.intp)
     return {"cells": cells, "centre": centres, "inv_r": np.array(inv_r),
             "centre_inv_r": [tuple(c) + (ir,) for c, ir in zip(centres.tolist(), inv_r)],
             "n_harm": [d * d for d in degree],
+            "cap": [max(1, GEMM_CAP // (d * d * 8 * nc)) for d in degree],
             "degree": max(degree) - 1, "grid": grid, "grid_arr": g,
+            "layer_f": tuple(np.ascontiguousarray(c) for c in lay_f.T),
+            "layer_i": tuple(np.ascontiguousarray(c) for c in lay_i.T),
             "z_inner": z_edges[:-1], "z_inner_arr": np.array(z_edges[:-1]),
             "one_idx": {d: (e[:, 0], e[:, 1] + d + 1, e[:, 2] + 2 * (d + 1))
                         for d, e in exps.items()},
             "to_harm": to_h,
             # per layer (its last cell, its harmonics' degree), for the batch path
-            "layer_degree": [(g[6] + g[4] * g[5] - 1, lay_deg) for g, lay_deg in
-                             zip(grid, [int(lay["degree"]) - 1 for lay in layers])],
+            "layer_degree": [(g[6] + g[4] * g[5] - 1, d) for g, d in zip(grid, lay_deg)],
             "cell_degree": [d - 1 for d in degree], "n_cells": off, "nc": nc}
 
 
+def cell_local(C: dict, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cells (n,) intp of points (n, 3) and their cell-local coordinates s = (p - centre) / r
+    (3, n) float64: the layer by z (outside the box: the end layer), then the layer's uniform
+    grid (outside: the edge cells, whose polynomials extrapolate). One gather per layer
+    constant, every operation on contiguous (n,) rows."""
+    x, y, z = p.T.copy()
+    li = np.searchsorted(C["z_inner_arr"], z, side="right")
+    x0, y0, ihx, ihy, mx, my, kx, ky, zc, ir = (c.take(li) for c in C["layer_f"])
+    ny, off = (c.take(li) for c in C["layer_i"])
+    s = np.empty((3, len(p)))
+    x -= x0
+    x *= ihx  # in cell widths from the layer's origin
+    y -= y0
+    y *= ihy
+    ix = np.clip(x, 0.0, mx).astype(np.intp)
+    iy = np.clip(y, 0.0, my).astype(np.intp)
+    x -= ix
+    x -= 0.5
+    np.multiply(x, kx, out=s[0])
+    y -= iy
+    y -= 0.5
+    np.multiply(y, ky, out=s[1])
+    z -= zc
+    np.multiply(z, ir, out=s[2])
+    ix *= ny
+    ix += iy
+    ix += off
+    return ix, s
+
+
 def cell_index(C: dict, p: np.ndarray) -> np.ndarray:
-    """Cell (n,) of points (n, 3): layer by z (outside the box: the end layer), then the
-    layer's uniform grid (outside: the edge cells, whose polynomials extrapolate)."""
-    g = C["grid_arr"][np.searchsorted(C["z_inner_arr"], p[:, 2], side="right")]  # (n, 7)
-    fx = (p[:, 0] - g[:, 0]) * g[:, 2]
-    np.clip(fx, 0.0, g[:, 4] - 1.0, out=fx)
-    fy = (p[:, 1] - g[:, 1]) * g[:, 3]
-    np.clip(fy, 0.0, g[:, 5] - 1.0, out=fy)
-    return (fx.astype(np.intp) * g[:, 5].astype(np.intp) + fy.astype(np.intp)
-            + g[:, 6].astype(np.intp))
+    """Cell (n,) of points (n, 3) (:func:`cell_local`)."""
+    return cell_local(C, p)[0]
 
 
 def _scratch(name: str, shape: tuple, dtype) -> np.ndarray:
@@ -948,47 +992,68 @@ CELL_CHUNK = 32768
 def cells_many(C: dict, p: np.ndarray, cols=None, out=None) -> np.ndarray:
     """A at points (n, 3) (n <= :data:`CELL_CHUNK`): (n, 8 nc) float64, or only the flat
     columns ``cols`` (row * nc + coil) (n, len(cols)), into ``out`` if given. Points are sorted
-    by cell (stable), their solid harmonics computed once per layer, then one float32
-    (n_c, H) @ (H, n_out) product per occupied cell."""
+    by cell (stable), their solid harmonics computed once (each degree over the run of the
+    layers that need it), then one float32 (n_c, H) @ (H, n_out) product per occupied cell;
+    the rows are gathered back to the caller's order in blocks."""
     n = len(p)
-    cell = cell_index(C, p)
+    cell, s = cell_local(C, p)
     # 16-bit keys sort by radix (~8x faster than a merge sort of intp)
     order = np.argsort(cell.astype(np.int16) if C["n_cells"] < 32768 else cell, kind="stable")
-    cs = cell[order]
-    s = p[order]
-    s -= C["centre"][cs]
-    s *= C["inv_r"][cs][:, None]
-    st = _scratch("s", (3, n), np.float32)
-    st[...] = s.T
-    counts = np.bincount(cs, minlength=C["n_cells"])
+    counts = np.bincount(cell, minlength=C["n_cells"])
     ends = np.cumsum(counts).tolist()
-    # a layer's points are one run of the sorted order: harmonics to that layer's degree only
     d_max = C["degree"]
+    st = _scratch("s", (3, n), np.float32)
+    for k in range(3):
+        st[k] = s[k].take(order)
     harm = _scratch("harm", ((d_max + 1) ** 2, n), np.float32)
     work = _scratch("harm_work", (2 * d_max + 4, n), np.float32)
+    spans = []  # per degree the run of sorted points whose layer needs it
     a = 0
     for off, deg in C["layer_degree"]:
         b = ends[off]
         if b > a:
-            solid_harmonics(st[:, a:b], deg, harm[:(deg + 1) ** 2, a:b], work[:, a:b])
+            for d in range(deg + 1):
+                if d < len(spans):
+                    spans[d] = (min(spans[d][0], a), max(spans[d][1], b))
+                else:
+                    spans.append((a, b))
         a = b
-    counts = counts.tolist()
+    if spans:
+        solid_harmonics(st, len(spans) - 1, harm, work, spans)
     width = 8 * C["nc"] if cols is None else len(cols)
     res = _scratch("res", (n, width), np.float32)
     cells, n_harm = C["cells"], C["n_harm"]
+    caps = C["cap"] if cols is None else [max(1, GEMM_CAP // (h * width)) for h in n_harm]
+    views = {h: harm[:h] for h in set(n_harm)}
     dot = np.dot
-    for c, k in enumerate(counts):
-        if k:
-            b = ends[c]
-            m = n_harm[c]
-            w = cells[c] if cols is None else cells[c][:, cols]
-            step = max(1, GEMM_CAP // (m * width))
-            for a in range(b - k, b, step):
+    counts = counts.tolist()
+    for c in np.flatnonzero(counts).tolist():
+        b = ends[c]
+        a = b - counts[c]
+        h = views[n_harm[c]]
+        w = cells[c] if cols is None else cells[c][:, cols]
+        step = caps[c]
+        if b - a <= step:
+            dot(h[:, a:b].T, w, out=res[a:b])
+        else:
+            for a in range(a, b, step):
                 e = min(b, a + step)
-                dot(harm[:m, a:e].T, w, out=res[a:e])
+                dot(h[:, a:e].T, w, out=res[a:e])
     out = np.empty((n, width)) if out is None else out
-    out[order] = res
+    # back to the caller's order: a gather (sequential writes) in blocks that stay in cache,
+    # faster than the scatter out[order] = res
+    inv = np.empty(n, np.intp)
+    inv[order] = np.arange(n)
+    blk = _scratch("blk", (GATHER_BLOCK, width), np.float32)
+    for a in range(0, n, GATHER_BLOCK):
+        b = min(n, a + GATHER_BLOCK)
+        np.take(res, inv[a:b], axis=0, out=blk[:b - a])
+        out[a:b] = blk[:b - a]
     return out
+
+
+GATHER_BLOCK = 1024
+"""Rows per block of :func:`cells_many`'s gather back to the caller's order."""
 
 
 def cells_one(C: dict, q) -> np.ndarray:
