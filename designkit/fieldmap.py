@@ -411,18 +411,21 @@ def compute_mode_tables(t: dict, spec: dict, progress=None) -> list:
 
 
 # ============================================================================ build
-def cell_layers(lower, upper, z_top: float, cell_ratio: tuple, layer_ratio: float,
+def cell_layers(lower, upper, z_top: float, cell_ratio: tuple, layer_ratio,
                 degree: tuple) -> list:
     """The harmonic-cell layout of A over the box (meta ``a_layers``): layers from the floor
     up, each ``layer_ratio`` x its floor's height d above the sources' top ``z_top`` (m) thick,
     cut into a uniform grid of cells no wider than ``cell_ratio`` x d, potentials of degree
-    ``degree``; both are sequences per layer from the lowest, the last entry serving every
-    layer above. A polynomial's error in a cell grows with (cell size / distance to the
-    sources)^degree, so fixed ratios keep it about even and the cells grow upwards (the default
-    box: 15 x 15 cells of degree 9, then 14 x 14, 9 x 9 and 6 x 6 of degree 7). The lowest
-    layer holds every row's maximum, where the error measure is tightest: there a higher degree
-    keeps the cells (and a batch lookup's products) fewer. A thin remainder at the top is
-    shared with the layer below."""
+    ``degree``; all three are sequences per layer from the lowest, the last entry serving every
+    layer above (``layer_ratio`` may be one number for all). A polynomial's error in a cell
+    grows with (cell size / distance to the sources)^degree, so fixed ratios keep it about even
+    and the cells grow upwards (the default box: 10 x 10 cells of degree 12, then 12 x 12,
+    8 x 8 and 6 x 6 of degree 7). The lowest layer holds every row's maximum, where the error
+    measure is tightest; with a higher degree there its cells are larger and thicker: fewer
+    cells (a batch lookup's products cost ~2-4 us each, mostly per call, for the ~5-10 points a
+    small cell gets of 1e4) and fewer fit nodes. A thin remainder at the top is shared with the
+    layer below."""
+    layer_ratio = tuple(np.atleast_1d(layer_ratio).tolist())
     lo, hi = np.asarray(lower, float), np.asarray(upper, float)
     if lo[2] - z_top < 1e-4:
         raise BadInputError("box", f"above the top of every coil's sources (z > {z_top} m; the "
@@ -432,7 +435,7 @@ def cell_layers(lower, upper, z_top: float, cell_ratio: tuple, layer_ratio: floa
     layers, z = [], float(lo[2])
     while z < hi[2] - 1e-12:
         d = z - z_top
-        dz = layer_ratio * d
+        dz = layer_ratio[min(len(layers), len(layer_ratio) - 1)] * d
         rest = float(hi[2]) - z
         if rest <= 1.5 * dz:
             dz = rest if rest <= dz else rest / 2
@@ -493,7 +496,7 @@ def fit_layer(lay: dict, values: np.ndarray, row_max: np.ndarray, n: int) -> np.
 
 
 def build(design, *, spacing: float = 0.01, log_step: float = 0.25,
-          cell_ratio=(0.67, 0.5), layer_ratio: float = 0.5, degree=(9, 7),
+          cell_ratio=(1.0, 0.5), layer_ratio=(0.7, 0.5), degree=(12, 7),
           fit_nodes: int = 4, sensor_mode_tolerance: float = 1e-3,
           rz_rho_scale: float = 0.05, sensor_mode_rz_step: float = 2.5e-4,
           sensor_mode_rz_log_step: float = 0.04, magnet_rz_step: float = 5e-4,
@@ -513,11 +516,11 @@ def build(design, *, spacing: float = 0.01, log_step: float = 0.25,
     cell_ratio, layer_ratio, degree, fit_nodes
         A's harmonic cells (:func:`cell_layers`): cells no wider than ``cell_ratio`` and layers
         ``layer_ratio`` x the height of their floor above the sources' top, potentials of
-        degree ``degree`` (K = (degree + 1)^2 - 1 coefficients per cell and coil);
-        ``cell_ratio`` and ``degree`` per layer from the lowest (the last entry for the layers
-        above); fitted on
-        ``fit_nodes``^3 Chebyshev-Lobatto nodes per cell (shared across faces; each node is one
-        evaluation of the coupled model, ~0.4 ms).
+        degree ``degree`` (K = (degree + 1)^2 - 1 coefficients per cell and coil); each a
+        sequence per layer from the lowest (the last entry for the layers above;
+        ``layer_ratio`` may be one number); fitted on ``fit_nodes``^3 Chebyshev-Lobatto nodes
+        per cell (shared across faces; each node is one evaluation of the coupled model,
+        ~0.4 ms).
     sensor_mode_tolerance : float
         The sensor field's core modes are kept while their singular value is above this
         fraction of the largest of their order (m = 0, 1, 2) (the unit dipoles ~9 mm from a
@@ -542,11 +545,15 @@ def build(design, *, spacing: float = 0.01, log_step: float = 0.25,
 
     spacing = v.in_range("spacing", spacing, 5e-4, 0.1, "m")
     log_step = v.in_range("log_step", log_step, 1e-3, 2.0)
-    if np.ndim(cell_ratio) != 1 or np.ndim(degree) != 1 or not len(cell_ratio) or not len(degree):
-        raise BadInputError("cell_ratio, degree", "sequences, per layer from the lowest (the "
-                            "last one for the layers above)", (cell_ratio, degree))
+    if np.ndim(layer_ratio) == 0:
+        layer_ratio = (layer_ratio,)
+    if (np.ndim(cell_ratio) != 1 or np.ndim(degree) != 1 or np.ndim(layer_ratio) != 1
+            or not len(cell_ratio) or not len(degree) or not len(layer_ratio)):
+        raise BadInputError("cell_ratio, layer_ratio, degree", "sequences, per layer from the "
+                            "lowest (the last one for the layers above)",
+                            (cell_ratio, layer_ratio, degree))
     cell_ratio = tuple(v.in_range("cell_ratio", r, 0.05, 2.0) for r in cell_ratio)
-    layer_ratio = v.in_range("layer_ratio", layer_ratio, 0.05, 2.0)
+    layer_ratio = tuple(v.in_range("layer_ratio", r, 0.05, 2.0) for r in layer_ratio)
     degree = tuple(int(v.in_range("degree", d, 2, 12)) for d in degree)
     fit_nodes = int(v.in_range("fit_nodes", fit_nodes, 3, 8))
     sensor_mode_tolerance = v.in_range("sensor_mode_tolerance", sensor_mode_tolerance, 1e-8,
@@ -699,7 +706,7 @@ def build(design, *, spacing: float = 0.01, log_step: float = 0.25,
         "drive": drive_data(design, _drive_coils(arr)),
         "physics": phys.source,
         "settings": {"spacing_m": spacing, "log_step": log_step,
-                     "cell_ratio": list(cell_ratio), "layer_ratio": layer_ratio,
+                     "cell_ratio": list(cell_ratio), "layer_ratio": list(layer_ratio),
                      "degree": list(degree), "fit_nodes": fit_nodes,
                      "n_fit_points": len(fit_pts),
                      "sensor_mode_tolerance": sensor_mode_tolerance,
