@@ -58,17 +58,22 @@ Usage::
     a = m.actuation(points, rows=(3, 6), coils=(0, 4))  # (n, 2, 2): only those entries
 
 How a lookup of A runs (:func:`prepare_cells` expands every cell's coefficients once, at
-load, into its rows' monomial coefficients (M, 8 n_coils) float32, M = C(L + 2, 3); 18 MB in
-memory for the default map's 1.5 MB of coefficients): one point
+load, into its rows' coefficients on the L^2 real solid harmonics of degree <= L - 1
+(:func:`solid_harmonics`: A's rows are harmonic polynomials of that degree, so L^2 numbers
+per row and coil instead of C(L + 2, 3) monomial coefficients), (L^2, 8 n_coils) float32 per
+cell; 7.6 MB in memory for the default map's 1.2 MB of coefficients): one point
 (:func:`cells_one`, as (3,) or (1, 3) alike) finds its cell with Python arithmetic, forms the
-M monomials from per-axis powers and takes one (M,) @ (M, 8 n_coils) product; blocks of points
-(:func:`cells_many`) are sorted by cell (a radix sort of 16-bit cell indices), their monomials
-computed once per layer, then one (n_c, M) @ (M, 8 n_coils) float32 product per occupied cell
-on its contiguous run. Outside the box (``extrapolate=True``) a point takes its nearest
-layer's and grid's cell, whose polynomial degrades quickly away from it. ``rows=`` /
-``coils=`` select columns of the products. The bias force and the sensor field keep their own
-kernels (:func:`modes_one`, :func:`kernel_rows_many`; the general path :func:`mode_rows`,
-:func:`magnet_terms` for rotated or mixed coils). The error budget, the layout's choices and
+C(L + 2, 3) monomials from per-axis powers and takes (M,) @ (M, L^2) (the harmonics'
+monomial coefficients) @ (L^2, 8 n_coils); blocks of points (:func:`cells_many`) get their
+cells and cell-local coordinates in one pass (:func:`cell_local`), are sorted by cell (a radix
+sort of 16-bit cell indices), their solid harmonics computed once (a recurrence in z and one
+complex product per degree, each degree over the layers that need it), then one
+(n_c, L^2) @ (L^2, 8 n_coils) float32 product per occupied cell on its contiguous run, and the
+rows are gathered back to the caller's order in cache-sized blocks. Outside the box
+(``extrapolate=True``) a point takes its nearest layer's and grid's cell, whose polynomial
+degrades quickly away from it. ``rows=`` / ``coils=`` select columns of the products. The bias
+force and the sensor field keep their own kernels (:func:`modes_one`, :func:`kernel_rows_many`;
+the general path :func:`mode_rows`, :func:`magnet_terms` for rotated or mixed coils). The error budget, the layout's choices and
 the measured errors and timings are in designkit.fieldmap's docstring.
 """
 
@@ -986,7 +991,8 @@ another process keeps a core busy each such call waits milliseconds (measured: 1
 
 
 CELL_CHUNK = 32768
-"""Points per block of :func:`cells_many` (its scratch is ~(M + 8 n_coils) floats per point)."""
+"""Points per block of :func:`cells_many` (its scratch is ~(2 L^2 + 8 n_coils) floats per
+point)."""
 
 
 def cells_many(C: dict, p: np.ndarray, cols=None, out=None) -> np.ndarray:

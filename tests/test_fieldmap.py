@@ -184,6 +184,24 @@ def test_solid_harmonics_are_legendre_solid_harmonics():
                                            atol=1e-11 * np.abs(c * want).max())
 
 
+def test_cell_layers_per_layer_ratios():
+    # floor 20 mm above sources at 5 mm: d = 15 mm -> a 0.7 d = 10.5 mm first layer of 1.0 d
+    # = 15 mm cells; then d = 25.5 mm -> 0.5 d = 12.75 mm with 0.5 d = 12.75 mm cells; one
+    # number for layer_ratio serves every layer
+    lay = fieldmap.cell_layers([-0.06, -0.06, 0.02], [0.06, 0.06, 0.08], 0.005, (1.0, 0.5),
+                               (0.7, 0.5), (12, 7))
+    assert [x["degree"] for x in lay[:2]] == [12, 7]
+    assert lay[0]["z_hi_m"] == pytest.approx(0.0305) and lay[1]["z_hi_m"] == pytest.approx(0.04325)
+    assert (lay[0]["nx"], lay[1]["nx"]) == (math.ceil(0.12 / 0.015), math.ceil(0.12 / 0.01275))
+    assert lay[-1]["z_hi_m"] == pytest.approx(0.08)
+    one = fieldmap.cell_layers([-0.06, -0.06, 0.02], [0.06, 0.06, 0.08], 0.005, (1.0,), 0.5,
+                               (7,))
+    assert one[0]["z_hi_m"] == pytest.approx(0.0275)
+    for bad in ((), (0.7, "x"), ((0.5, 0.5),), 0.0):
+        with pytest.raises(BadInputError):
+            fieldmap.build(SMALL, layer_ratio=bad, progress=False)
+
+
 def test_map_carries_the_drive_data_the_runner_reads(fm):
     from firmware_io.runner import config_from_map
 
