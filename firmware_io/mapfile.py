@@ -923,8 +923,7 @@ def prepare_cells(layers: list, tables: list, nc: int) -> dict:
             "n_harm": [d * d for d in degree],
             "cap": [max(1, GEMM_CAP // (d * d * 8 * nc)) for d in degree],
             "degree": max(degree) - 1, "grid": grid, "grid_arr": g,
-            "layer_f": tuple(np.ascontiguousarray(c) for c in lay_f.T),
-            "layer_i": tuple(np.ascontiguousarray(c) for c in lay_i.T),
+            "layer_f": np.ascontiguousarray(lay_f.T), "layer_i": np.ascontiguousarray(lay_i.T),
             "z_inner": z_edges[:-1], "z_inner_arr": np.array(z_edges[:-1]),
             "one_idx": {d: (e[:, 0], e[:, 1] + d + 1, e[:, 2] + 2 * (d + 1))
                         for d, e in exps.items()},
@@ -937,12 +936,12 @@ def prepare_cells(layers: list, tables: list, nc: int) -> dict:
 def cell_local(C: dict, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Cells (n,) intp of points (n, 3) and their cell-local coordinates s = (p - centre) / r
     (3, n) float64: the layer by z (outside the box: the end layer), then the layer's uniform
-    grid (outside: the edge cells, whose polynomials extrapolate). One gather per layer
-    constant, every operation on contiguous (n,) rows."""
+    grid (outside: the edge cells, whose polynomials extrapolate). One gather of the layer
+    constants, every operation on contiguous (n,) rows."""
     x, y, z = p.T.copy()
     li = np.searchsorted(C["z_inner_arr"], z, side="right")
-    x0, y0, ihx, ihy, mx, my, kx, ky, zc, ir = (c.take(li) for c in C["layer_f"])
-    ny, off = (c.take(li) for c in C["layer_i"])
+    x0, y0, ihx, ihy, mx, my, kx, ky, zc, ir = np.take(C["layer_f"], li, axis=1)
+    ny, off = np.take(C["layer_i"], li, axis=1)
     s = np.empty((3, len(p)))
     x -= x0
     x *= ihx  # in cell widths from the layer's origin
@@ -1031,7 +1030,7 @@ def cells_many(C: dict, p: np.ndarray, cols=None, out=None) -> np.ndarray:
     cells, n_harm = C["cells"], C["n_harm"]
     caps = C["cap"] if cols is None else [max(1, GEMM_CAP // (h * width)) for h in n_harm]
     views = {h: harm[:h] for h in set(n_harm)}
-    dot = np.dot
+    dot = np.matmul
     counts = counts.tolist()
     for c in np.flatnonzero(counts).tolist():
         b = ends[c]
