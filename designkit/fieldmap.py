@@ -27,34 +27,33 @@ Measured (these choices; per layer, relative to the rows' maxima over the whole 
 0.5 d thick, 225, the former layout; 1.3e-4 with degree 13 on 1.1 d cells, 0.8 d thick, but
 slower batches: more multiply-adds); the layers above 3.3e-4 with degree 7 on 0.5 d cells
 (4.5e-4 on 0.55 d cells, up to 9.3e-4 in one random 2 x 2 geometry; 9.1e-4 with degree 6 on
-0.42 d cells, no faster: more cells; 2.1e-4 with degree 8 on 0.62 d cells, 5 % slower). The float32 coefficients and
-products add ~1e-6 of a row's maximum.
-``studies/bench_map.py`` (default design, 1e4 points, half in the lowest 10 mm): max 3.3e-4
-(Bx 5.9e-5, Bz 4.3e-5, dBx/dy 3.3e-4); tests/test_fieldmap_accuracy.py (slow, random
-geometries, floors 18-24 mm, 1e4 points each): 2.3e-4, 2.9e-4, 4.5e-4 for its 1 x 2, 2 x 2,
-3 x 3 cases (3.5e-4, 4.7e-4, 3.0e-4 with the former layout). A design with a lower floor gets
-more, smaller cells (a longer build and slower batches, the same error); the old 10 mm floor is
-5 mm above the cores' tops, where studies/map_cells.py measured that 5 mm cells of degree 8-10
-are needed for this error.
+0.42 d cells, no faster: more cells; 2.1e-4 with degree 8 on 0.62 d cells, 5 % slower). The
+float32 coefficients and products add ~1e-6 of a row's maximum. ``studies/bench_map.py``
+(default design, 1e4 points, half in the lowest 10 mm): max 3.3e-4 (Bx 5.9e-5, Bz 4.3e-5,
+dBx/dy 3.3e-4); tests/test_fieldmap_accuracy.py (slow, random geometries, floors 18-24 mm, 1e4
+points each): 2.3e-4, 2.9e-4, 4.5e-4 for its 1 x 2, 2 x 2, 3 x 3 cases (3.5e-4, 4.7e-4, 3.0e-4
+with the former layout). A design with a lower floor gets more, smaller cells (a longer build
+and slower batches, the same error); the old 10 mm floor is 5 mm above the cores' tops, where
+studies/map_cells.py measured that 5 mm cells of degree 8-10 are needed for this error.
 
-Cost (bench_map.py, two cores shared with other busy processes, load average ~3.5: the
-coupled model ran at 0.58 ms/point instead of ~0.4): one point 9.5 us as (3,), 9.7 us as
-(1, 3) (14 x one 8 x 9 numpy matvec: its 364 monomials @ the (364, 144) harmonics' monomial
-coefficients @ the cell's (144, 72)); 1e4 points 3.3 ms (min of 21; median 3.4), the 5 ms
-target (6.4 ms, median 6.6, before: 538 cells, rows on monomials); build 37.3 s, of which the
-cell nodes 5.6 s, the sensor field's core modes 10.1 s and the saturation solves 9.4 s, both
-of those BLAS-heavy and several times slower than at load ~1. A batch lookup of A
-(firmware_io.mapfile.cells_many), 1e4 uniform points: ~2.1 ms in the ~350 small float32
-GEMMs (one per occupied cell, capped at 4e5 multiply-adds each: firmware_io.mapfile.GEMM_CAP;
-~2-4 us each for the 15-20 points of a lower cell, mostly per call and the packing of the
-cell's (L^2, 72) matrix; the upper layers' 50-80 points per cell run at ~30 GMAC/s), 0.5 ms
-for the solid harmonics, 0.5 ms to gather the rows back to the caller's order as float64 (a
-random permutation of 5.8 MB), 0.25 ms for the cells and local coordinates, 0.15 ms for the
-sort and the rest. On the monomials (C(L + 2, 3) per point instead of L^2) the products took
-3.7 ms: 1.8 x the multiply-adds and 2.4 x the matrices' bytes (18 MB instead of 7.6). Tried
-without gain: fewer, larger cells of degree 8-9 above the lowest layer (their products are
-bound by the multiply-adds: 5-10 % slower), the harmonics point-major for the products (faster products,
-but the extra copy and cache traffic cost more), np.dot (5 % slower than np.matmul here).
+Cost (bench_map.py, two cores shared with other busy processes, load average ~3.5: the coupled
+model ran at 0.58 ms/point instead of ~0.4): one point 9.5 us as (3,), 9.7 us as (1, 3) (14 x
+one 8 x 9 numpy matvec: its 364 monomials @ the (364, 144) harmonics' monomial coefficients @
+the cell's (144, 72)); 1e4 points 3.3 ms (min of 21; median 3.4), the 5 ms target (6.4 ms,
+median 6.6, before: 538 cells, rows on monomials); build 37.3 s, of which the cell nodes 5.6 s,
+the sensor field's core modes 10.1 s and the saturation solves 9.4 s, both of those BLAS-heavy
+and several times slower than at load ~1. A batch lookup of A (firmware_io.mapfile.cells_many),
+1e4 uniform points: ~2.1 ms in the ~350 small float32 GEMMs (one per occupied cell, capped at
+4e5 multiply-adds each: firmware_io.mapfile.GEMM_CAP; ~2-4 us each for the 15-20 points of a
+lower cell, mostly per call and the packing of the cell's (L^2, 72) matrix; the upper layers'
+50-80 points per cell run at ~30 GMAC/s), 0.5 ms for the solid harmonics, 0.5 ms to gather the
+rows back to the caller's order as float64 (a random permutation of 5.8 MB), 0.25 ms for the
+cells and local coordinates, 0.15 ms for the sort and the rest. On the monomials (C(L + 2, 3)
+per point instead of L^2) the products took 3.7 ms: 1.8 x the multiply-adds and 2.4 x the
+matrices' bytes (18 MB instead of 7.6). Tried without gain: fewer, larger cells of degree 8-9
+above the lowest layer (their products are bound by the multiply-adds: 5-10 % slower), the
+harmonics point-major for the products (faster products, but the extra copy and cache traffic
+cost more), np.dot (5 % slower than np.matmul here).
 
 The build checks itself: it evaluates the coupled model directly at ``n_check`` random points
 in the box (default 400) and records the errors of the finished map in ``meta['errors']``, with

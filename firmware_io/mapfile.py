@@ -73,8 +73,9 @@ rows are gathered back to the caller's order in cache-sized blocks. Outside the 
 (``extrapolate=True``) a point takes its nearest layer's and grid's cell, whose polynomial
 degrades quickly away from it. ``rows=`` / ``coils=`` select columns of the products. The bias
 force and the sensor field keep their own kernels (:func:`modes_one`, :func:`kernel_rows_many`;
-the general path :func:`mode_rows`, :func:`magnet_terms` for rotated or mixed coils). The error budget, the layout's choices and
-the measured errors and timings are in designkit.fieldmap's docstring.
+the general path :func:`mode_rows`, :func:`magnet_terms` for rotated or mixed coils). The error
+budget, the layout's choices and the measured errors and timings are in designkit.fieldmap's
+docstring.
 """
 
 from __future__ import annotations
@@ -759,10 +760,10 @@ def monomials(s: np.ndarray, degree: int, out: np.ndarray | None = None) -> np.n
 
 
 @functools.lru_cache(maxsize=None)
-def solid_harmonic_betas(degree: int) -> list:
-    """Per degree l <= ``degree`` (a tuple, cached) the (2l - 3, 1) factors beta_l^m = ((l - 1)^2 - m^2) /
-    ((2l - 1)(2l - 3)) of the z-recurrence of :func:`solid_harmonics` (rows m = 0, 1, 1, 2,
-    2, ...; empty for l < 2)."""
+def solid_harmonic_betas(degree: int) -> tuple:
+    """Per degree l <= ``degree`` (a tuple, cached) the (2l - 3, 1) factors
+    beta_l^m = ((l - 1)^2 - m^2) / ((2l - 1)(2l - 3)) of the z-recurrence of
+    :func:`solid_harmonics` (rows m = 0, 1, 1, 2, 2, ...; empty for l < 2)."""
     out = []
     for ell in range(degree + 1):
         m = np.array([(j + 1) // 2 for j in range(max(0, 2 * ell - 3))], float)
@@ -908,7 +909,6 @@ def prepare_cells(layers: list, tables: list, nc: int) -> dict:
         exps[deg - 1] = monomial_exponents(deg - 1)
         to_h[deg - 1] = hc.astype(np.float32)
     centres = np.concatenate(centres)
-    g = np.array(grid, float)
     lay_deg = [int(lay["degree"]) - 1 for lay in layers]
     r_lay = [max(float(lay["cell_x_m"]), float(lay["cell_y_m"]),
                  float(lay["z_hi_m"]) - float(lay["z_lo_m"])) / 2 for lay in layers]
@@ -918,11 +918,11 @@ def prepare_cells(layers: list, tables: list, nc: int) -> dict:
                        (float(lay["z_lo_m"]) + float(lay["z_hi_m"])) / 2, 1.0 / r)
                       for (x0, y0, ihx, ihy, nx, ny, _), lay, r in zip(grid, layers, r_lay)])
     lay_i = np.array([(ny, o) for (_, _, _, _, _, ny, o) in grid], np.intp)
-    return {"cells": cells, "centre": centres, "inv_r": np.array(inv_r),
+    return {"cells": cells,
             "centre_inv_r": [tuple(c) + (ir,) for c, ir in zip(centres.tolist(), inv_r)],
             "n_harm": [d * d for d in degree],
             "cap": [max(1, GEMM_CAP // (d * d * 8 * nc)) for d in degree],
-            "degree": max(degree) - 1, "grid": grid, "grid_arr": g,
+            "degree": max(degree) - 1, "grid": grid,
             "layer_f": np.ascontiguousarray(lay_f.T), "layer_i": np.ascontiguousarray(lay_i.T),
             "z_inner": z_edges[:-1], "z_inner_arr": np.array(z_edges[:-1]),
             "one_idx": {d: (e[:, 0], e[:, 1] + d + 1, e[:, 2] + 2 * (d + 1))
