@@ -36,24 +36,26 @@ with the former layout). A design with a lower floor gets more, smaller cells (a
 and slower batches, the same error); the old 10 mm floor is 5 mm above the cores' tops, where
 studies/map_cells.py measured that 5 mm cells of degree 8-10 are needed for this error.
 
-Cost (bench_map.py, two cores shared with other busy processes, load average ~3.5: the coupled
-model ran at 0.58 ms/point instead of ~0.4): one point 9.5 us as (3,), 9.7 us as (1, 3) (14 x
-one 8 x 9 numpy matvec: its 364 monomials @ the (364, 144) harmonics' monomial coefficients @
-the cell's (144, 72)); 1e4 points 3.3 ms (min of 21; median 3.4), the 5 ms target (6.4 ms,
-median 6.6, before: 538 cells, rows on monomials); build 37.3 s, of which the cell nodes 5.6 s,
-the sensor field's core modes 10.1 s and the saturation solves 9.4 s, both of those BLAS-heavy
-and several times slower than at load ~1. A batch lookup of A (firmware_io.mapfile.cells_many),
-1e4 uniform points: ~2.1 ms in the ~350 small float32 GEMMs (one per occupied cell, capped at
-4e5 multiply-adds each: firmware_io.mapfile.GEMM_CAP; ~2-4 us each for the 15-20 points of a
-lower cell, mostly per call and the packing of the cell's (L^2, 72) matrix; the upper layers'
-50-80 points per cell run at ~30 GMAC/s), 0.5 ms for the solid harmonics, 0.5 ms to gather the
-rows back to the caller's order as float64 (a random permutation of 5.8 MB), 0.25 ms for the
-cells and local coordinates, 0.15 ms for the sort and the rest. On the monomials (C(L + 2, 3)
-per point instead of L^2) the products took 3.7 ms: 1.8 x the multiply-adds and 2.4 x the
-matrices' bytes (18 MB instead of 7.6). Tried without gain: fewer, larger cells of degree 8-9
-above the lowest layer (their products are bound by the multiply-adds: 5-10 % slower), the
-harmonics point-major for the products (faster products, but the extra copy and cache traffic
-cost more), np.dot (5 % slower than np.matmul here).
+Cost (bench_map.py, median of 3 runs; two cores shared with other busy processes, load average
+~3: the coupled model ran at 0.53-0.57 ms/point instead of ~0.4): one point 9.6 us as (3,), 9.8
+us as (1, 3) in the lowest layer (14 x one 8 x 9 numpy matvec: its 364 monomials @ the (364,
+144) harmonics' monomial coefficients @ the cell's (144, 72); 6.4 us above it); 1e4 points 3.2
+ms (min of 21; median 3.4), under the 5 ms target (6.4 ms, median 6.6, in the same conditions
+before: 538 cells, rows on monomials); build 44 s, of which the cell nodes 5.5 s (were 9-10 s),
+the sensor field's core modes 14 s and the saturation solves 9 s, both of those BLAS-heavy and
+several times slower than at load ~1 (~21 s for the whole build then, with the former 20,440
+cell nodes). A batch lookup of A (firmware_io.mapfile.cells_many), 1e4 uniform points: ~2.1 ms
+in the ~350 small float32 GEMMs (one per occupied cell, capped at 4e5 multiply-adds each:
+firmware_io.mapfile.GEMM_CAP; ~2-4 us each for the 15-20 points of a lower cell, mostly per
+call and the packing of the cell's (L^2, 72) matrix; the upper layers' 50-80 points per cell
+run at ~30 GMAC/s), 0.5 ms for the solid harmonics, 0.5 ms to gather the rows back to the
+caller's order as float64 (a random permutation of 5.8 MB), 0.25 ms for the cells and local
+coordinates, 0.15 ms for the sort and the rest. On the monomials (C(L + 2, 3) per point instead
+of L^2) the products took 3.7 ms: 1.8 x the multiply-adds and 2.4 x the matrices' bytes (18 MB
+instead of 7.6). Tried without gain: fewer, larger cells of degree 8-9 above the lowest layer
+(their products are bound by the multiply-adds: 5-10 % slower), the harmonics point-major for
+the products (faster products, but the extra copy and cache traffic cost more), np.dot (5 %
+slower than np.matmul here).
 
 The build checks itself: it evaluates the coupled model directly at ``n_check`` random points
 in the box (default 400) and records the errors of the finished map in ``meta['errors']``, with
