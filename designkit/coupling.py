@@ -23,14 +23,14 @@ projected field) are built once per design. Solving the block system for a sourc
 cores' magnetization at once (a dense LU, factorized once per design and reused for every
 source: each coil's winding per ampere, the finger magnet at each position).
 
-Costs (n_c cores, n_u = n0 + 2 m_max n1 unknowns per core; default 80 + 2*2*40 = 240, 2160
+Costs (n_c cores, n_u = n0 + 2 m_max n1 unknowns per core; default 80 + 2*3*64 = 464, 4176
 for the 3 x 3 array):
 
 * per design (once, cached on the :class:`~designkit.array.CoilArray`): the self blocks of each
   core type (m = 0: core.py's influence matrix; m >= 1: n1^2 graded quadratures), one cross
   block per distinct relative placement of two cores (24 in a 3 x 3 grid; each = the basis
   fields of one core at (n0 + n1) x N_PHI_RING points of the other), one dense LU of
-  n_c n_u (2160^2), and the coil columns (each winding sampled on every core's rings, one per
+  n_c n_u (4176^2), and the coil columns (each winding sampled on every core's rings, one per
   distinct relative placement, then an LU back-substitution). Measured 4-7 s + 0.6 s for the
   default array on a loaded 2-core machine (single-threaded BLAS);
 * per point of A: the n_c windings (as uncoupled) plus, per core, ~30 compressed m = 0 rings and
@@ -42,10 +42,14 @@ for the 3 x 3 array):
   back-substitution, one evaluation: ~5 ms per position (dipole), ~4x that for the finite
   cylinder (face quadrature).
 
-Accuracy (measured, tests/test_coupling.py, studies/array_coupling.py): m_max 2 -> 3 changes
-the cores' field by < 2e-4 of its maximum; refine 1 -> 2 (twice the panels) changes dBz/dz at the
-design point by ~1e-4; the solve is reciprocal to ~0.2 %; two cores vs the 3-D GetDP FEM
-(designkit.fem.fem3d) within the FEM's coarse-mesh error (~2-4 % in B).
+Accuracy (measured, tests/test_coupling.py, studies/fem3d_array.py): against the 3-D GetDP
+FEM (designkit.fem.fem3d, B and grad B from the iron's magnetization, converged to ~0.3 %),
+per point |dB|/|B| and ||dG||_F/||G||_F over a 5 x 5 grid 150 mm wide: 3 x 3 array, centre coil
+at 1 A, max 1.2 / 1.8 % at 20 mm, 0.7 / 1.0 % at 30 mm, < 0.5 % from 50 mm (1.9 / 2.8 % at
+12 mm, 7 mm above the cores' tops); two cores: 1.6 / 2.2 % at 20 mm. The largest errors are
+beside the array's edge cores, where the energized coil's field is mostly that of the
+neighbour cores it magnetizes; they fall like 1 / n1 (:data:`N1_SIDE`). The solve is
+reciprocal to ~0.2 %.
 
 Magnet-core interaction (linear cores): the magnet magnetizes the cores
 (:meth:`ArraySystem.magnet_solution`); the field of these cores anywhere is
@@ -88,10 +92,22 @@ from .constants import MU0
 from .errors import BadInputError
 from .pose import Pose
 
-M_MAX = 2
-"""Highest azimuthal mode kept (m >= 3 measured below 1e-4 of the coupling effect; studies)."""
-N1_SIDE = 24
-N1_CAP = 8
+M_MAX = 3
+"""Highest azimuthal mode kept. Against the converged 3-D FEM (3 x 3 array, centre coil, 12 mm
+above the cores' tops beside an edge core) m_max 2 leaves ~4 % more error in grad B than 3;
+4 and 6 change nothing further (studies/array_coupling.py, convergence)."""
+N1_SIDE = 40
+N1_CAP = 12
+"""m >= 1 charge panels on the side and on each end face (n1 = 64), graded towards the rims
+with :data:`N1_GRADING`. The piecewise-constant charges converge like 1 / n1 next to the
+rims' field singularity: the error in B and grad B 12-20 mm above a neighbour core (the
+largest anywhere in the workspace) against the converged 3-D FEM was, 24 + 8 + 8 panels
+graded cos / sin: 2.8 / 5.4 % at 20 mm; 40 + 12 + 12 graded cubically: 1.2 / 1.8 %
+(designkit.fem.fem3d, level 1, iron-integral outputs)."""
+N1_GRADING = 3.0
+"""Panel edges of the m >= 1 charges: u -> u^q towards each rim (side: both ends; end faces:
+the rim), q = N1_GRADING. q = 1 (uniform) triples the error of q = 2; q = 3 is ~20 % below
+q = 2 and q = 4, 5 (same panel counts)."""
 FAR_DISTANCE = 8e-3
 """Points nearer than this (m) to a core's bounding cylinder always sum its panels."""
 FAR_NODES = 6
@@ -158,17 +174,19 @@ def _phi_nodes_graded(levels=22, n=8):
     return np.concatenate(ph), np.concatenate(wt)
 
 
-def _graded_sin(lo, hi, n):
-    """Edges on [lo, hi] clustered towards hi (the rim) like core._graded(..., 'hi')."""
+def _graded_hi(lo, hi, n, q=N1_GRADING):
+    """n + 1 edges on [lo, hi] clustered towards hi (the rim): hi - (hi - lo) (1 - u)^q."""
     u = np.linspace(0.0, 1.0, n + 1)
-    e = lo + (hi - lo) * np.sin(0.5 * np.pi * u)
+    e = lo + (hi - lo) * (1.0 - (1.0 - u) ** q)
     e[0], e[-1] = lo, hi
     return e
 
 
-def _graded_both(lo, hi, n):
+def _graded_both(lo, hi, n, q=N1_GRADING):
+    """n + 1 edges on [lo, hi] clustered towards both ends ((2u)^q / 2 on each half)."""
     u = np.linspace(0.0, 1.0, n + 1)
-    e = lo + (hi - lo) * 0.5 * (1.0 - np.cos(np.pi * u))
+    g = np.where(u < 0.5, 0.5 * (2.0 * u) ** q, 1.0 - 0.5 * (2.0 * (1.0 - u)) ** q)
+    e = lo + (hi - lo) * g
     e[0], e[-1] = lo, hi
     return e
 
@@ -325,14 +343,13 @@ class CoreModel:
                 else:
                     h[:, :, self.n0:] = res
             else:
-                # compressed rings where accurate (ring density = far1_w @ sigma, one unit per
-                # (mode, panel)), panel charges elsewhere
-                eye = np.eye(2 * self.m_max * self.n1)
+                # compressed rings where accurate (ring density = far1_w @ sigma), panel
+                # charges elsewhere; each reduced per mode before the unknowns are expanded
                 for sel, rule in ((far, "far"), (~far, (3, 32))):
                     if not np.any(sel):
                         continue
-                    src, q = self._charges(eye, rule)
-                    res = self._charge_kernel(pts[sel], src, gradient, q, False)
+                    res = self._m1_field(pts[sel], *((None, None) if rule == "far" else rule),
+                                         gradient)
                     if gradient:
                         h[sel, :, self.n0:], g[sel, :, :, self.n0:] = res
                     else:
@@ -537,15 +554,31 @@ class CoreModel:
         return cache[key]
 
     def _m1_field(self, pts, ng, nphi, gradient, chunk=128):
-        pos, wt, phi = self._charge_nodes(ng, nphi)
+        """H [and G] of every m >= 1 unknown (unit density) at local points: (n, 3, nb) A/m
+        [, (n, 3, 3, nb) A/m^2], nb = 2 m_max n1 in unknown order. The kernel is summed over
+        azimuth per mode first ((nphi, 2 m_max) weights), then over the panel's nodes: the
+        cost is that of the charge nodes, not nodes x unknowns. ``ng`` Gauss nodes per panel
+        and ``nphi`` azimuths, or ``ng = None``: the compressed far rule (``FAR_NODES`` rings
+        per interval, ``FAR_AZIMUTHS``; ring weight = far1_w @ panel densities)."""
         n1 = self.n1
+        if ng is None:
+            nphi = FAR_AZIMUTHS
+            phi = 2.0 * math.pi * (np.arange(nphi) + 0.5) / nphi
+            r, z = self.far1_r, self.far1_z
+            pos = np.stack([r[:, None] * np.cos(phi), r[:, None] * np.sin(phi),
+                            np.repeat(z[:, None], nphi, axis=1)], axis=-1)
+            # ring -> panels: (n_rings, n1) with the ring's arc weight r dphi
+            ring_w = self.far1_w * (r * 2.0 * math.pi / nphi)[:, None]
+        else:
+            pos, wt, phi = self._charge_nodes(ng, nphi)
+            ring_w = None
         modes = []
         for m in range(1, self.m_max + 1):
             modes += [np.cos(m * phi), np.sin(m * phi)]
         modes_t = np.array(modes).T.copy()  # (nphi, 2M)
         nm = modes_t.shape[1]
-        src = pos.reshape(-1, 3)  # (n1*ng*nphi, 3), phi fastest
-        wflat = wt.reshape(-1)  # (n1*ng,)
+        src = pos.reshape(-1, 3)  # (rings * nphi, 3), phi fastest
+        n_rings = len(src) // nphi
         n = len(pts)
         nb = nm * n1
         h = np.empty((n, 3, nb))
@@ -554,10 +587,15 @@ class CoreModel:
             p = pts[a:a + chunk]
             c = len(p)
             comps = _unit_charge_terms(p, src, gradient)
-            stack = np.stack(comps, axis=1).reshape(c, len(comps), n1 * ng, nphi)
-            red = stack @ modes_t  # (c, ncomp, n1*ng, 2M)
-            red = (red * wflat[None, None, :, None]).reshape(c, len(comps), n1, ng, nm).sum(3)
-            red = np.swapaxes(red, 2, 3).reshape(c, len(comps), nb)  # mode-major
+            stack = np.stack(comps, axis=1).reshape(c, len(comps), n_rings, nphi)
+            red = stack @ modes_t  # (c, ncomp, rings, 2M)
+            if ring_w is None:
+                red = (red * wt.reshape(-1)[None, None, :, None]).reshape(
+                    c, len(comps), n1, ng, nm).sum(3)
+                red = np.swapaxes(red, 2, 3)
+            else:
+                red = np.swapaxes(red, 2, 3) @ ring_w  # (c, ncomp, 2M, n1)
+            red = red.reshape(c, len(comps), nb)  # mode-major
             h[a:a + chunk] = red[:, :3]
             if gradient:
                 _fill_symmetric(g[a:a + chunk], red)
@@ -693,7 +731,7 @@ def core_model(radius: float, length: float, offset: float, mu_r: float, key: tu
     # m >= 1 panels
     n1s, n1c = N1_SIDE * refine, N1_CAP * refine
     e_side = _graded_both(lo, hi, n1s)
-    e_cap = _graded_sin(0.0, radius, n1c)
+    e_cap = _graded_hi(0.0, radius, n1c)
     kind = np.r_[np.zeros(n1s, int), np.ones(n1c, int), np.full(n1c, 2)]
     lo1 = np.r_[e_side[:-1], e_cap[:-1], e_cap[:-1]]
     hi1 = np.r_[e_side[1:], e_cap[1:], e_cap[1:]]

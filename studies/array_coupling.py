@@ -236,7 +236,7 @@ def run(out_dir=DEFAULT_OUT, quick: bool = False, fem: bool = False,
     from designkit import default_design
     from designkit._io import write_json_atomic
     from designkit.array import CoilArray
-    from designkit.coupling import ArraySystem
+    from designkit.coupling import M_MAX, ArraySystem
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -329,10 +329,11 @@ def run(out_dir=DEFAULT_OUT, quick: bool = False, fem: bool = False,
     bar.set_postfix_str("convergence")
     p = np.array([[0.0, 0.0, 0.03], [0.05, 0.0, 0.03]])
     conv = {}
-    variants = [(2, 1)] if quick else [(0, 1), (1, 1), (2, 1), (3, 1), (2, 2)]
+    variants = [(M_MAX, 1)] if quick else [(1, 1), (2, 1), (M_MAX, 1), (M_MAX + 1, 1),
+                                          (M_MAX, 2)]
     for m_max, refine in variants:
-        s = system if (m_max, refine) == (2, 1) else ArraySystem(arr, m_max=m_max,
-                                                                 refine=refine)
+        s = system if (m_max, refine) == (M_MAX, 1) else ArraySystem(arr, m_max=m_max,
+                                                                     refine=refine)
         b, g = s.core_field(p, s.coil_solution(), gradient=True)
         bw = np.stack([c.field(p, 1.0, include="winding") for c in arr.coils], -1)
         gw = np.stack([c.field(p, 1.0, gradient=True, include="winding")[1] for c in arr.coils],

@@ -30,9 +30,8 @@ def _model_single(points, mu_r=1000.0):
 
 
 def test_single_core_3d_matches_axisymmetric_model_coarse():
-    """Quarter model, coarse mesh: B within 2 % at points on all sides (mirrored into the
-    modelled quarter), the gradient's size within 35 % (the coarse mesh's fit; the study's
-    finer levels converge it)."""
+    """Quarter model, coarse mesh (~6k tetrahedra): B and grad B from the iron's magnetization
+    within 1.5 % at points on all sides (measured <= 0.8 %, 20 points)."""
     from designkit.fem import fem3d
 
     rng = np.random.default_rng(7)
@@ -41,9 +40,9 @@ def test_single_core_3d_matches_axisymmetric_model_coarse():
     b, g, res = fem3d.single_core_case(pts, level=-2)
     bm, gm = _model_single(pts)
     eb = np.linalg.norm(b - bm, axis=1) / np.linalg.norm(bm, axis=1)
-    assert eb.max() < 0.02, eb
+    assert eb.max() < 0.015, eb
     eg = np.linalg.norm(g - gm, axis=(1, 2)) / np.linalg.norm(gm, axis=(1, 2))
-    assert eg.max() < 0.35, eg
+    assert eg.max() < 0.015, eg
     # the mirror symmetry is applied: Bx changes sign with x like the model's
     assert np.all(np.sign(b[:, 0]) == np.sign(bm[:, 0]))
 
