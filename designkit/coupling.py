@@ -31,12 +31,13 @@ for the 3 x 3 array):
   block per distinct relative placement of two cores (24 in a 3 x 3 grid; each = the basis
   fields of one core at (n0 + n1) x N_PHI_RING points of the other), one dense LU of
   n_c n_u (4176^2), and the coil columns (each winding sampled on every core's rings, one per
-  distinct relative placement, then an LU back-substitution). Measured 4-7 s + 0.6 s for the
-  default array on a loaded 2-core machine (single-threaded BLAS);
+  distinct relative placement, then an LU back-substitution). Measured 3.3 s for the default
+  array, both together, on a loaded 2-core machine (studies/bench_map.py, stage 'coupled
+  solve'; the charges' basis fields are summed per mode before the unknowns are expanded);
 * per point of A: the n_c windings (as uncoupled) plus, per core, ~30 compressed m = 0 rings and
-  ~360 compressed m >= 1 charges (far points) or 176 panel kernels and 3840 panel charges
-  (points the Bernstein-ellipse test puts near): ~0.8 ms coupled vs ~0.4 ms uncoupled per point
-  with gradient, 9 columns (loaded machine);
+  the compressed m >= 1 rings x FAR_AZIMUTHS charges (far points) or 176 panel kernels and
+  6144 panel charges (points the Bernstein-ellipse test puts near): ~0.7 ms per point with
+  gradient, 9 columns (loaded machine; studies/bench_map.py, 'direct coupled model');
 * per magnet position (F0, torque, induced field): the magnet's field sampled on every core's
   rings (N_PHI_MAGNET azimuths on cores within 30 mm, N_PHI_RING on the others), one
   back-substitution, one evaluation: ~5 ms per position (dipole), ~4x that for the finite
