@@ -44,10 +44,11 @@ for the 3 x 3 array):
   cylinder (face quadrature).
 
 Accuracy (measured, tests/test_coupling.py, studies/fem3d_array.py): against the 3-D GetDP
-FEM (designkit.fem.fem3d, B and grad B from the iron's magnetization, converged to ~0.3 %),
-per point |dB|/|B| and ||dG||_F/||G||_F over a 5 x 5 grid 150 mm wide: 3 x 3 array, centre coil
-at 1 A, max 1.2 / 1.8 % at 20 mm, 0.7 / 1.0 % at 30 mm, < 0.5 % from 50 mm (1.9 / 2.8 % at
-12 mm, 7 mm above the cores' tops); two cores: 1.6 / 2.2 % at 20 mm. The largest errors are
+FEM (designkit.fem.fem3d, level 1, B and grad B from the iron's magnetization; level 0 -> 1
+changes them by <= 0.6 / 1.3 %), per point |dB|/|B| and ||dG||_F/||G||_F over a 5 x 5 grid
+150 mm wide: 3 x 3 array, centre coil at 1 A, max 1.15 / 1.78 % at 20 mm, 0.65 / 1.01 % at
+30 mm, < 0.5 % from 50 mm (1.92 / 2.80 % at 12 mm, 7 mm above the cores' tops); two cores
+(18 points 12-60 mm): 0.62 / 1.27 %. The largest errors are
 beside the array's edge cores, where the energized coil's field is mostly that of the
 neighbour cores it magnetizes; they fall like 1 / n1 (:data:`N1_SIDE`). The solve is
 reciprocal to ~0.2 %.

@@ -38,8 +38,8 @@ surface-current model, which agrees with the axisymmetric GetDP to < 0.5 % in B 
 20 points 12-80 mm above, beside and between; relative to |B| and ||grad B||_F at each point):
 iron outputs, level -2 (~6k tetrahedra, ~1 s) B 0.67 %, grad B 0.78 %; level -1 (~15k) 0.30 /
 0.39 %. Line fits: level -2 B 0.9 %, grad B 30 %; level 0 (~42k) 0.28 / 1.0 %. The 3 x 3 array
-(centre coil, quarter model) changes by < 0.3 % in B and grad B from level 0 (~52k) to 1
-(~139k) at every point of a 5 x 5 x 5 grid 12-80 mm high.
+(centre coil, quarter model) changes by at most 0.6 % in B and 1.3 % in grad B from level 0
+(~55k) to 1 (~147k) over a 5 x 5 x 5 grid 12-80 mm high (studies/fem3d_array.py).
 
 Force on the magnet from the iron: F = integral over the magnet of (M . grad) B_ind dV with
 B_ind = B(with cores) - B(cores replaced by air), both on the same mesh (so the magnet's own
