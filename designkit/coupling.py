@@ -95,16 +95,16 @@ from .errors import BadInputError
 from .pose import Pose
 
 M_MAX = 3
-"""Highest azimuthal mode kept. Against the converged 3-D FEM (3 x 3 array, centre coil, 12 mm
-above the cores' tops beside an edge core) m_max 2 leaves ~4 % more error in grad B than 3;
+"""Highest azimuthal mode kept. Against the 3-D FEM (3 x 3 array, centre coil, 12 mm above the
+windings beside an edge core) m_max 2 leaves ~4 % more error in grad B than 3;
 4 and 6 change nothing further (studies/array_coupling.py, convergence)."""
 N1_SIDE = 40
 N1_CAP = 12
 """m >= 1 charge panels on the side and on each end face (n1 = 64), graded towards the rims
 with :data:`N1_GRADING`. The piecewise-constant charges converge like 1 / n1 next to the
 rims' field singularity: the error in B and grad B 12-20 mm above a neighbour core (the
-largest anywhere in the workspace) against the converged 3-D FEM was, 24 + 8 + 8 panels
-graded cos / sin: 2.8 / 5.4 % at 20 mm; 40 + 12 + 12 graded cubically: 1.2 / 1.8 %
+largest anywhere in the workspace) against the level-1 3-D FEM was, 24 + 8 + 8 panels
+graded cos / sin (m_max 2): 2.9 / 5.7 % at 20 mm; 40 + 12 + 12 graded cubically: 1.2 / 1.8 %
 (designkit.fem.fem3d, level 1, iron-integral outputs)."""
 N1_GRADING = 3.0
 """Panel edges of the m >= 1 charges: u -> u^q towards each rim (side: both ends; end faces:
