@@ -22,7 +22,8 @@ is reported (the FEM's own convergence: level 0 -> 1 changes B by <= 0.6 %, grad
 
 Writes ``fem3d_array.npz`` (every case's points, B, G, forces) and ``fem3d_array.json``
 (summary) under the output folder (default out/fem3d_array/); returns the summary dict.
-Usage: ``PYTHONPATH=$PWD python studies/fem3d_array.py [out_dir] [--quick] [--level N]``.
+Usage: ``PYTHONPATH=$PWD python studies/fem3d_array.py [out_dir] [--quick] [--level N]
+[--cases two,centre,...] [--timeout S]``.
 """
 
 from __future__ import annotations
@@ -115,9 +116,11 @@ def model_pull(heights) -> np.ndarray:
 
 
 def run(out_dir=DEFAULT_OUT, quick: bool = False, level: int | None = None,
-        cases: tuple[str, ...] | None = None) -> dict:
+        cases: tuple[str, ...] | None = None, timeout_s: float = 1800.0) -> dict:
     """Run the cases (``cases``: a subset of two, centre, pull, single, block, corner; default
-    all) and write the result files; returns the summary dict."""
+    all) and write the result files; returns the summary dict. ``timeout_s`` bounds each GetDP
+    run of the 3 x 3 array cases (the full corner model at level 0 needs more than 1800 s on
+    a loaded 2-core machine)."""
     from designkit._progress import tqdm
 
     from designkit._io import write_json_atomic
@@ -189,7 +192,7 @@ def run(out_dir=DEFAULT_OUT, quick: bool = False, level: int | None = None,
                     "b_max": float(eb.max()), "g_max": float(eg.max()),
                     "tets": res.mesh_stats["tetrahedra"]}
         elif name in ("centre", "corner"):
-            b, g, res = fem3d.array_case(ws, energized=name, level=l)
+            b, g, res = fem3d.array_case(ws, energized=name, level=l, timeout_s=timeout_s)
             c = (0.0, 0.0) if name == "centre" else (-pitch, pitch)
             bm, gm = _uncoupled(ws, c)
             i0 = int(np.argmin(np.linalg.norm(ws - np.array([c[0], c[1], 0.03]), axis=1)))
@@ -271,8 +274,11 @@ if __name__ == "__main__":  # pragma: no cover
     ap.add_argument("out_dir", nargs="?", default=DEFAULT_OUT)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--level", type=int, default=None)
+    ap.add_argument("--timeout", type=float, default=1800.0,
+                    help="seconds allowed per GetDP run of the 3x3 array cases")
     ap.add_argument("--cases", default=None,
                     help="comma-separated subset of two,centre,pull,single,block,corner")
     a = ap.parse_args()
     print_table(run(a.out_dir, quick=a.quick, level=a.level,
-                    cases=None if a.cases is None else tuple(a.cases.split(","))))
+                    cases=None if a.cases is None else tuple(a.cases.split(",")),
+                    timeout_s=a.timeout))

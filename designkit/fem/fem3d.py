@@ -684,11 +684,11 @@ def two_cores_case(points, *, mu_r=1000.0, current=1.0, level=0, out_dir=None):
 
 
 def array_case(points, *, energized="centre", mu_r=1000.0, current=1.0, level=0,
-               out_dir=None):
+               out_dir=None, timeout_s=1800.0):
     """The default 3x3 array (``Design.coil_centres_m()``; every core iron, only one winding
     carrying ``current`` A): ``energized`` 'centre' (coil 4; quarter model) or 'corner'
-    (coil 0; full model). Returns (B (n, 3) T, G (n, 3, 3) T/m, Fem3DResult), array frame
-    (coil top faces in z = 0)."""
+    (coil 0; full model); ``timeout_s`` (s) bounds GetDP's run. Returns (B (n, 3) T,
+    G (n, 3, 3) T/m, Fem3DResult), array frame (coil top faces in z = 0)."""
     from ..design import default_design
 
     if energized not in ("centre", "corner"):
@@ -700,7 +700,7 @@ def array_case(points, *, energized="centre", mu_r=1000.0, current=1.0, level=0,
     bodies.append(_winding_body(geo, float(centres[k][0]), float(centres[k][1]), current))
     sym = "quarter" if energized == "centre" else "none"
     res = solve(bodies, points, symmetry=sym, level=level, out_dir=out_dir,
-                refine=_refine_workspace(sym, 8e-3), body_size=4e-3)
+                refine=_refine_workspace(sym, 8e-3), body_size=4e-3, timeout_s=timeout_s)
     return res.b, res.g, res
 
 
