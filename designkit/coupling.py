@@ -464,19 +464,16 @@ class CoreModel:
         compressed product rule, ``FAR_NODES`` rings per interval, ``FAR_AZIMUTHS``)."""
         k = x1.shape[1]
         if rule == "far":
-            nphi = FAR_AZIMUTHS
-            phi = 2.0 * math.pi * (np.arange(nphi) + 0.5) / nphi
-            r, z = self.far1_r, self.far1_z
-            pos = np.stack([r[:, None] * np.cos(phi), r[:, None] * np.sin(phi),
-                            np.repeat(z[:, None], nphi, axis=1)], axis=-1)
-            dens = np.zeros((len(r), nphi, k))
+            pos, phi, arc = self._far_charge_nodes
+            nphi = len(phi)
+            dens = np.zeros((len(arc), nphi, k))
             for m in range(1, self.m_max + 1):
                 a = (2 * (m - 1)) * self.n1
                 wc = self.far1_w @ x1[a:a + self.n1]
                 ws = self.far1_w @ x1[a + self.n1:a + 2 * self.n1]
                 dens += wc[:, None, :] * np.cos(m * phi)[None, :, None]
                 dens += ws[:, None, :] * np.sin(m * phi)[None, :, None]
-            q = dens * (r * 2.0 * math.pi / nphi)[:, None, None]
+            q = dens * arc[:, None, None]
             return pos.reshape(-1, 3), q.reshape(-1, k)
         ng, nphi = rule
         pos, wt, phi = self._charge_nodes(ng, nphi)
@@ -532,6 +529,17 @@ class CoreModel:
         return self._rz_basis_to_xyz(pts, rho, self._m0_rz(pts, rho, gradient, False), gradient)
 
     @functools.cached_property
+    def _far_charge_nodes(self):
+        """The compressed m >= 1 rule's charge positions (n_rings, FAR_AZIMUTHS, 3) m, their
+        azimuths (FAR_AZIMUTHS,) and the rings' arc weights r dphi (n_rings,) m."""
+        nphi = FAR_AZIMUTHS
+        phi = 2.0 * math.pi * (np.arange(nphi) + 0.5) / nphi
+        r, z = self.far1_r, self.far1_z
+        pos = np.stack([r[:, None] * np.cos(phi), r[:, None] * np.sin(phi),
+                        np.repeat(z[:, None], nphi, axis=1)], axis=-1)
+        return pos, phi, r * (2.0 * math.pi / nphi)
+
+    @functools.cached_property
     def _charge_nodes_cache(self):
         return {}
 
@@ -564,13 +572,9 @@ class CoreModel:
         per interval, ``FAR_AZIMUTHS``; ring weight = far1_w @ panel densities)."""
         n1 = self.n1
         if ng is None:
-            nphi = FAR_AZIMUTHS
-            phi = 2.0 * math.pi * (np.arange(nphi) + 0.5) / nphi
-            r, z = self.far1_r, self.far1_z
-            pos = np.stack([r[:, None] * np.cos(phi), r[:, None] * np.sin(phi),
-                            np.repeat(z[:, None], nphi, axis=1)], axis=-1)
-            # ring -> panels: (n_rings, n1) with the ring's arc weight r dphi
-            ring_w = self.far1_w * (r * 2.0 * math.pi / nphi)[:, None]
+            pos, phi, arc = self._far_charge_nodes
+            nphi = len(phi)
+            ring_w = self.far1_w * arc[:, None]  # ring -> panels, with the arc weight r dphi
         else:
             pos, wt, phi = self._charge_nodes(ng, nphi)
             ring_w = None
