@@ -1,0 +1,28 @@
+"""The library keeps the house rules of its layout (tests/layout.py measures them): modules of
+one concept (<= 700 lines), functions in named phases (<= 100 lines), short module docstrings
+without run logs, imports at the top except heavy optional ones, and no import cycle."""
+
+import pytest
+
+import layout
+
+
+@pytest.fixture(scope="module")
+def found():
+    return layout.report()
+
+
+@pytest.mark.parametrize("rule", ["module lines", "function lines", "docstring lines",
+                                  "stale docstring", "lazy import", "cycle"])
+def test_layout_rule(found, rule):
+    assert found[rule] == [], f"{rule}: " + "; ".join(found[rule])
+
+
+def test_the_checker_sees_a_cycle_and_a_long_function():
+    # the checker itself: a planted cycle and a planted long function are found
+    assert layout.cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert layout.cycles({"a": {"b"}, "b": set()}) == []
+    src = "def f():\n" + "    x = 1\n" * (layout.MAX_FUNCTION_LINES + 1)
+    import ast
+    fn = ast.parse(src).body[0]
+    assert fn.end_lineno - fn.lineno + 1 > layout.MAX_FUNCTION_LINES
