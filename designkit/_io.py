@@ -9,6 +9,8 @@ import tempfile
 from pathlib import Path
 from typing import Any, Iterator
 
+import numpy as np
+
 
 @contextlib.contextmanager
 def atomic_path(path: str | Path, suffix: str | None = None) -> Iterator[Path]:
@@ -43,7 +45,6 @@ def write_json_atomic(path: str | Path, data: Any) -> Path:
 
 
 def _json_default(obj: Any):
-    import numpy as np
 
     if isinstance(obj, np.ndarray):
         return obj.tolist()

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import sys
 
+from tqdm import tqdm as _tqdm
+
 __all__ = ["tqdm", "LineWriter"]
 
 
@@ -46,7 +48,6 @@ def _isatty(stream) -> bool:
 
 def tqdm(*args, **kwargs):
     """``tqdm.tqdm`` with line-wise output when the target stream is not a terminal."""
-    from tqdm import tqdm as _tqdm
 
     stream = kwargs.get("file") or sys.stderr
     if not isinstance(stream, LineWriter) and not _isatty(stream):

@@ -14,6 +14,7 @@ import sys
 from .commands._common import join_negative_values
 from firmware_io.errors import FirmwareIOError
 
+from . import __version__
 from .errors import DesignkitError
 
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -44,8 +45,6 @@ def main(argv: list[str] | None = None) -> int:
         print(_usage())
         return 0 if argv else 2
     if argv[0] == "--version":
-        from . import __version__
-
         print(__version__)
         return 0
     name, rest = argv[0], argv[1:]

@@ -7,6 +7,8 @@ They keep their fields and pickle, because sweeps run in worker processes.
 
 from __future__ import annotations
 
+import importlib
+
 from firmware_io.errors import InputRangeError
 
 
@@ -42,7 +44,6 @@ class MissingDependencyError(ImportError, DesignkitError):
 
 def require(module: str, package: str | None = None, purpose: str = "this feature"):
     """Import an optional module or raise :class:`MissingDependencyError` with the install hint."""
-    import importlib
 
     try:
         return importlib.import_module(module)

@@ -172,7 +172,7 @@ def test_firmware_io_imports_numpy_smbus2_and_the_standard_library_only():
     included), imports numpy, smbus2 (the bus only) and the standard library, nothing else."""
     allowed = set(sys.stdlib_module_names) | {"numpy", "firmware_io"}
     bad = []
-    for path in sorted((ROOT / "firmware_io").glob("*.py")):
+    for path in sorted((ROOT / "firmware_io").rglob("*.py")):
         for node in ast.walk(ast.parse(path.read_text())):
             if isinstance(node, ast.Import):
                 names = [a.name for a in node.names]
@@ -183,65 +183,6 @@ def test_firmware_io_imports_numpy_smbus2_and_the_standard_library_only():
             ok = allowed | ({"smbus2"} if path.name == "bus.py" else set())
             bad += [f"{path.name}: {n}" for n in names if n.split(".")[0] not in ok]
     assert not bad, "\n".join(bad)
-
-
-KNOWN_CYCLE_EDGES: set = set()
-"""Import edges known to close a cycle, each to be removed with its fix (none left)."""
-
-
-def _module_graph() -> dict[str, set[str]]:
-    """designkit module -> the designkit modules it imports at run time (function level too,
-    ``if TYPE_CHECKING:`` blocks left out), each resolved to the longest existing module name."""
-    paths = {}
-    for path in sorted((ROOT / "designkit").rglob("*.py")):
-        paths[".".join(path.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__")] = path
-
-    def resolve(name: str) -> str | None:
-        parts = name.split(".")
-        return next((".".join(parts[:k]) for k in range(len(parts), 0, -1)
-                     if ".".join(parts[:k]) in paths), None)
-
-    graph = {}
-    for module, path in paths.items():
-        package = module if path.name == "__init__.py" else module.rpartition(".")[0]
-        targets = set()
-        todo = [ast.parse(path.read_text())]
-        while todo:
-            node = todo.pop()
-            if isinstance(node, ast.If) and getattr(node.test, "id", None) == "TYPE_CHECKING":
-                todo += node.orelse
-                continue
-            if isinstance(node, ast.ImportFrom):
-                base = node.module or ""
-                if node.level:
-                    parts = package.split(".")
-                    base = ".".join(parts[:len(parts) - (node.level - 1)] + ([base] if base else []))
-                targets |= {resolve(f"{base}.{a.name}") or resolve(base) for a in node.names}
-            elif isinstance(node, ast.Import):
-                targets |= {resolve(a.name) for a in node.names}
-            todo += ast.iter_child_nodes(node)
-        graph[module] = {t for t in targets if t and t != module}
-    return graph
-
-
-def test_no_import_cycles_between_designkit_modules():
-    """No two modules import each other, directly or through others, even inside functions
-    (a function-level import hides a cycle from the import system, not from the design)."""
-    graph = _module_graph()
-    for a, b in KNOWN_CYCLE_EDGES:
-        assert b in graph[a], f"{a} -> {b} is gone: remove it from KNOWN_CYCLE_EDGES"
-        graph[a].discard(b)
-
-    def reach(start):
-        seen, todo = set(), [start]
-        while todo:
-            for nxt in graph[todo.pop()] - seen:
-                seen.add(nxt)
-                todo.append(nxt)
-        return seen
-
-    cycles = sorted({tuple(sorted((a, b))) for a in graph for b in graph[a] if a in reach(b)})
-    assert not cycles, cycles
 
 
 def test_progress_bars_go_through_the_line_wise_wrapper():
