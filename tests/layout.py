@@ -1,8 +1,8 @@
 """The house rules for the library's layout, measured from the source (no import is executed).
 
 Run as a script for a report (``python tests/layout.py [PATH ...]``, default: designkit,
-firmware_io, cad); ``tests/test_layout.py`` asserts the same rules. The limits are the ones of
-shared/design/STYLE.md: one concept a file (<= 700 lines), named phases (<= 100 lines a
+firmware_io, cad); ``tests/test_layout.py`` asserts the same rules. The limits are the house
+style's: one concept a file (<= 700 lines), named phases (<= 100 lines a
 function), short timeless module docstrings, top-level imports except heavy optional ones,
 imports that point one way.
 """
