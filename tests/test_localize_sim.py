@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from designkit.localize import TLV_LSB_T, magnet_field
-from firmware_io.devices import TLV493D
-from firmware_io.sim import SimBus, SimClock, SimTLV493D
+from firmware_io.hw.tlv493d import TLV493D
+from firmware_io.hw.sim import SimBus, SimClock, SimTLV493D
 
 
 def test_sim_tlv493d_reads_a_field_source():
