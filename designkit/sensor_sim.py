@@ -19,7 +19,6 @@ Stated defaults of the sensor errors, and the model's details: docs/localization
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Literal, Sequence
