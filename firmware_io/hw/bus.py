@@ -130,7 +130,7 @@ def open_bus(bus: int | str) -> Any:
     try:
         import smbus2
     except ImportError:
-        raise ImportError("firmware_io.bus.open_bus needs smbus2: pip install smbus2") from None
+        raise ImportError("firmware_io.hw.bus.open_bus needs smbus2: pip install smbus2") from None
     return smbus2.SMBus(bus)
 
 

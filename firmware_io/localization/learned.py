@@ -44,7 +44,8 @@ class LearnedInverse:
                           z["box_lower_m"].astype(float), z["box_upper_m"].astype(float),
                           tuple(meta["log_b_range"]), meta["design_sha256"])
         except (KeyError, ValueError, OSError, EOFError) as exc:
-            raise BadInputError("weights", "a learned-inverse file written by designkit.learned_inverse"
+            raise BadInputError("weights", "a learned-inverse file written by "
+                                "designkit.learned_inverse"
                                 f" ({type(exc).__name__}: {exc})", str(p)) from None
         return out
 
