@@ -7,16 +7,15 @@ real bus (imported lazily). Nothing here imports designkit.
 Main entry points::
 
     from firmware_io import open_bus, CoilDriver, CoilDrive, SensorArrays
-    from firmware_io.devices import PCA9685, TLV493D, TCA9548A
-    from firmware_io.sim import SimBus          # register-level simulated devices
+    from firmware_io.hw import PCA9685, TLV493D, TCA9548A
+    from firmware_io.hw.sim import SimBus       # register-level simulated devices
 """
 
-from .bus import I2CBus, open_bus
 from .coils import CoilCommandResult, CoilDriver, CoilOutput, default_coil_wiring
-from .devices import PCA9685, TCA9548A, TLV493D
 from .errors import BadInputError, CoilWriteError, FirmwareIOError, I2CError, SensorConfigError
+from .hw import (PCA9685, TCA9548A, TLV493D, ArraysReading, I2CBus, SensorArrays, SensorSlot,
+                 default_sensor_layout, open_bus)
 from .md10c import CoilDrive, DriveCommand, current_to_command
-from .sensors import ArraysReading, SensorArrays, SensorSlot, default_sensor_layout
 
 __all__ = [
     "I2CBus", "open_bus", "CoilDriver", "CoilOutput", "CoilCommandResult", "default_coil_wiring",

@@ -66,9 +66,9 @@ if __package__ in (None, ""):
 import numpy as np
 
 from designkit.design import default_design
-from designkit.localize import (THESIS_MAE_MM, SensorErrors, SensorSimulator, analog_reading,
-                                case_currents, forward_model, random_positions,
-                                train_learned_inverse)
+from designkit.learned_inverse import train_learned_inverse
+from designkit.sensor_sim import (THESIS_MAE_MM, SensorErrors, SensorSimulator, analog_reading,
+                                  case_currents, forward_model, random_positions)
 from firmware_io.localization import (ConstantVelocityKalman, LearnedInverse, Localizer,
                                       SensorModel, calibrate, cylinder_field)
 

@@ -7,9 +7,9 @@ full ON = ON_H bit 4, full OFF = OFF_H bit 4, LED0_ON_L = 0x06, ALL_LED_OFF_H = 
 
 import pytest
 
-from firmware_io.devices import PCA9685, pca9685_prescale
+from firmware_io.hw.pca9685 import PCA9685, pca9685_prescale
 from firmware_io.errors import BadInputError, I2CError
-from firmware_io.sim import SimAddressConflict, SimBus, SimClock, SimPCA9685, SimTCA9548A
+from firmware_io.hw.sim import SimAddressConflict, SimBus, SimClock, SimPCA9685, SimTCA9548A
 
 
 def make(address=0x40):

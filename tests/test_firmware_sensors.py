@@ -12,7 +12,7 @@ import pytest
 
 from firmware_io import SensorArrays, SensorSlot
 from firmware_io.errors import BadInputError
-from firmware_io.sim import SimBus, SimClock, SimTCA9548A, SimTLV493D
+from firmware_io.hw.sim import SimBus, SimClock, SimTCA9548A, SimTLV493D
 
 LSB = 0.098e-3
 
@@ -85,7 +85,7 @@ def test_layout_validation():
 
 
 def test_firmware_io_imports_neither_designkit_nor_smbus2():
-    code = ("import sys, firmware_io, firmware_io.sim, firmware_io.devices; "
+    code = ("import sys, firmware_io, firmware_io.hw.sim, firmware_io.hw; "
             "bad = [m for m in sys.modules if m.split('.')[0] in ('designkit', 'smbus2', 'scipy')]; "
             "assert not bad, bad")
     subprocess.run([sys.executable, "-c", code], check=True, cwd=str(__import__("pathlib").Path(__file__).parents[1]))

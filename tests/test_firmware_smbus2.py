@@ -12,10 +12,10 @@ import smbus2  # noqa: E402  (a required dependency: no skip)
 import smbus2.smbus2 as smbus2_impl  # noqa: E402
 
 from firmware_io import open_bus  # noqa: E402
-from firmware_io import bus as fio_bus  # noqa: E402
-from firmware_io.devices import PCA9685, TCA9548A, TLV493D  # noqa: E402
+from firmware_io.hw import bus as fio_bus  # noqa: E402
+from firmware_io.hw import PCA9685, TCA9548A, TLV493D  # noqa: E402
 from firmware_io.errors import BadInputError  # noqa: E402
-from firmware_io.sim import SimBus, SimClock, SimI2cDevFile, SimPCA9685, SimTCA9548A, SimTLV493D  # noqa: E402
+from firmware_io.hw.sim import SimBus, SimClock, SimI2cDevFile, SimPCA9685, SimTCA9548A, SimTLV493D  # noqa: E402
 
 
 @pytest.fixture

@@ -3,10 +3,10 @@ the new mask connects only after STOP, enabled channels share the upstream addre
 
 import pytest
 
-from firmware_io.bus import i2c_msg_class
-from firmware_io.devices import TCA9548A
+from firmware_io.hw.bus import i2c_msg_class
+from firmware_io.hw.tca9548a import TCA9548A
 from firmware_io.errors import BadInputError, I2CError
-from firmware_io.sim import SimAddressConflict, SimBus, SimTCA9548A, SimTLV493D
+from firmware_io.hw.sim import SimAddressConflict, SimBus, SimTCA9548A, SimTLV493D
 
 
 def make():

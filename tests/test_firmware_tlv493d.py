@@ -10,11 +10,11 @@ import pickle
 
 import pytest
 
-from firmware_io.bus import raw_write
+from firmware_io.hw.bus import raw_write
 
-from firmware_io.devices import TLV493D, tlv493d_address, tlv493d_decode, tlv493d_write_frame
+from firmware_io.hw.tlv493d import TLV493D, tlv493d_address, tlv493d_decode, tlv493d_write_frame
 from firmware_io.errors import BadInputError, I2CError, SensorConfigError
-from firmware_io.sim import SimBus, SimClock, SimTLV493D
+from firmware_io.hw.sim import SimBus, SimClock, SimTLV493D
 
 LSB = 0.098e-3
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from designkit.localize import TLV_LSB_T, magnet_field
-from firmware_io.devices import TLV493D
-from firmware_io.sim import SimBus, SimClock, SimTLV493D
+from designkit.sensor_sim import TLV_LSB_T, magnet_field
+from firmware_io.hw.tlv493d import TLV493D
+from firmware_io.hw.sim import SimBus, SimClock, SimTLV493D
 
 
 def test_sim_tlv493d_reads_a_field_source():
@@ -69,7 +69,7 @@ def test_from_map_end_to_end_and_design_check(tmp_path):
     interpolation, the multipole magnet) stays below the noise-limited error at 30-60 mm (~1-2
     mm); it refuses another design's map."""
     from designkit import default_design, fieldmap
-    from designkit.localize import SensorSimulator
+    from designkit.sensor_sim import SensorSimulator
     from firmware_io.errors import BadInputError
     from firmware_io.localization import Localizer
 
@@ -104,7 +104,7 @@ def test_calibration_removes_the_mounting_bias(tmp_path):
     the exact coil field at the shifted sensors, 0.150 mm with the map's linearization since
     the sensors left the box of A; uncalibrated 0.6-0.9 mm)."""
     from designkit import default_design, fieldmap
-    from designkit.localize import SensorSimulator, random_positions
+    from designkit.sensor_sim import SensorSimulator, random_positions
     from firmware_io.localization import Localizer, calibrate
 
     d = default_design()

@@ -1,0 +1,178 @@
+"""SensorArrays: the 18 TLV493D sensors -> two (9, 3) field arrays in tesla with per-sensor health.
+
+Default topology: one sensor per mux channel, so sensors that share an
+address never see each other and each reset reaches one sensor only: 18 sensors on three
+TCA9548A at 0x71, 0x72, 0x73 (0x70 is left to the PCA9685 All-Call), sensor i on mux
+0x71 + i // 8, channel i % 8. Sensors 0-8 form the top array, 9-17 the bottom array, each in
+coil order. Only one mux has a channel enabled at any time.
+
+A runner calls :meth:`SensorArrays.read` once per loop; a sensor that fails keeps its last good
+value, is marked unhealthy, and is reset and reconfigured after ``hang_threshold`` bad reads in
+a row (a hung ADC, a NACK), at most once every ``retry_interval`` reads once it has failed.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from ..errors import BadInputError, FirmwareIOError, I2CError
+from .bus import I2CBus
+from .tca9548a import TCA9548A
+from .tlv493d import TLV493D
+
+
+@dataclass(frozen=True)
+class SensorSlot:
+    """Where one sensor sits: mux address, mux channel (0..7), sensor address."""
+
+    mux_address: int
+    mux_channel: int
+    sensor_address: int = 0x5E
+
+
+def default_sensor_layout(n_sensors: int = 18, first_mux: int = 0x71) -> tuple[SensorSlot, ...]:
+    """One sensor per channel: sensor i on mux ``first_mux + i // 8``, channel ``i % 8``."""
+    return tuple(SensorSlot(first_mux + i // 8, i % 8) for i in range(n_sensors))
+
+
+@dataclass(frozen=True)
+class ArraysReading:
+    """One pass over every sensor.
+
+    Attributes
+    ----------
+    top_t, bottom_t : ndarray, shape (9, 3), T
+        (Bx, By, Bz) of sensors 0-8 and 9-17; an unhealthy sensor shows its last good value
+        (zeros before it ever read well), a saturated one its clipped value.
+    status : tuple of str, length 18
+        Per-sensor status (see :meth:`firmware_io.hw.tlv493d.TLV493D.read`).
+    healthy : ndarray, shape (18,), bool
+        ``status == 'ok'``.
+    """
+
+    top_t: np.ndarray
+    bottom_t: np.ndarray
+    status: tuple[str, ...]
+    healthy: np.ndarray
+
+
+class SensorArrays:
+    """Reads the two sensor arrays through TCA9548A muxes.
+
+    Parameters
+    ----------
+    bus : smbus2.SMBus-like
+    layout : sequence of SensorSlot, length 2 * n_per_array
+        Default :func:`default_sensor_layout` (18 sensors).
+    temperature : {'off', 'on'}
+    hang_threshold : int
+        Bad reads in a row before a sensor is reset and reconfigured.
+    retry_interval : int
+        Reads between configuration attempts of a sensor that failed.
+    sleep : callable
+    """
+
+    def __init__(self, bus: I2CBus, layout: Sequence[SensorSlot] | None = None, *,
+                 temperature: Literal["off", "on"] = "off", hang_threshold: int = 3,
+                 retry_interval: int = 100, sleep: Callable[[float], None] = time.sleep):
+        self.layout = tuple(layout) if layout is not None else default_sensor_layout()
+        n = len(self.layout)
+        if n == 0 or n % 2:
+            raise BadInputError("layout", "an even, non-zero number of SensorSlot (two arrays)", n)
+        seen = set()
+        for s in self.layout:
+            # sensors sharing a channel see one SDA level at reset and cannot be told apart
+            key = (s.mux_address, s.mux_channel)
+            if key in seen:
+                raise BadInputError("layout", "one sensor per (mux, channel)", key)
+            seen.add(key)
+        self.bus = bus
+        self.muxes = {a: TCA9548A(bus, a) for a in sorted({s.mux_address for s in self.layout})}
+        self.sensors = [TLV493D(bus, s.sensor_address, temperature=temperature,
+                                hang_threshold=hang_threshold, sleep=sleep) for s in self.layout]
+        self.hang_threshold = hang_threshold
+        self.retry_interval = int(retry_interval)
+        self.n_per_array = n // 2
+        self._last_good = np.zeros((n, 3))
+        self._bad_in_row = [0] * n
+        self._retry_countdown = [0] * n
+        self.status: list[str] = ["unconfigured"] * n
+
+    def _route(self, i: int) -> None:
+        slot = self.layout[i]
+        for addr, mux in self.muxes.items():
+            if addr != slot.mux_address and mux.mask != 0:
+                mux.disable()
+        self.muxes[slot.mux_address].select(slot.mux_channel)
+
+    def configure(self) -> tuple[str, ...]:
+        """Disconnect every mux channel, then reset and configure each sensor alone.
+
+        Returns the per-sensor status ('ok' or 'failed'); failures do not stop the others.
+        """
+        for mux in self.muxes.values():
+            mux.invalidate()
+            try:
+                mux.disable()
+            except I2CError:
+                pass  # _route below reports the mux again if it stays silent
+        for i in range(len(self.sensors)):
+            self._configure_one(i)
+        return tuple(self.status)
+
+    def _configure_one(self, i: int) -> None:
+        try:
+            self._route(i)
+            self.sensors[i].configure()
+            self.status[i] = "ok"
+            self._bad_in_row[i] = 0
+        except FirmwareIOError:
+            self.status[i] = "failed"
+            self._retry_countdown[i] = self.retry_interval
+
+    def read(self) -> ArraysReading:
+        """Read every sensor once (one mux select, when it changes, and one frame read each)."""
+        n = len(self.sensors)
+        for i in range(n):
+            if self.status[i] in ("failed", "unconfigured"):
+                self._retry_countdown[i] -= 1
+                if self._retry_countdown[i] <= 0:
+                    self._configure_one(i)
+                if self.status[i] != "ok":
+                    continue
+            sensor = self.sensors[i]
+            try:
+                self._route(i)
+                b = sensor.read()
+                status = sensor.status
+            except I2CError:
+                status = "nack"
+                b = None
+            except FirmwareIOError:  # the sensor's own recovery failed
+                status = "failed"
+                b = None
+            if status in ("ok", "saturated") and b is not None:
+                self._last_good[i] = b
+                self._bad_in_row[i] = 0
+            elif status == "failed":
+                self._retry_countdown[i] = self.retry_interval
+            elif status not in ("stale", "recovered"):  # the sensor itself debounces stale frames
+                self._bad_in_row[i] += 1
+                if self._bad_in_row[i] >= self.hang_threshold:
+                    self._configure_one(i)
+                    status = "recovered" if self.status[i] == "ok" else "failed"
+                    self._bad_in_row[i] = 0
+            self.status[i] = status
+        status = tuple(self.status)
+        k = self.n_per_array
+        return ArraysReading(
+            top_t=self._last_good[:k].copy(),
+            bottom_t=self._last_good[k:].copy(),
+            status=status,
+            healthy=np.array([s == "ok" for s in status]),
+        )

@@ -1,0 +1,236 @@
+"""Per-sensor calibration from frames with the coils driven and the magnet away: :func:`calibrate`.
+
+Per sensor, least squares over the frames gives the measured response ``reading = K I + o``
+(K (3, n_coils) T/A, o the offset T); the sensor's gains, mounting rotation (small angles, rad)
+and position error (m) then follow from ``K = diag(g) (I - [w]x) C(p_nominal + d)`` by
+regularized Gauss-Newton against the coils' field C of the map. The result,
+:class:`SensorCalibration`, is what :class:`firmware_io.localization.Localizer` applies:
+corrected reading = gain_inverse @ (reading - offset), sensors moved by the shift, the measured
+coil field in place of the map's. Method and accuracy: docs/localization.md.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import BadInputError
+from ..mapfile import gradient_tensor
+from .sensor_model import DEFAULT_NOISE_T, SensorModel
+
+
+@dataclass(frozen=True)
+class SensorCalibration:
+    """What :func:`calibrate` recovers for each sensor (upper array, then lower).
+
+    gain_inverse : (2, n, 3, 3) -- corrected reading = gain_inverse @ (reading - offset), in the
+        array frame (undoes gain and mounting rotation)
+    offsets_t : (2, n, 3) T -- zero-field reading (chip offset + any static background)
+    shift_m : (2, n, 3) m -- the sensor's position minus its nominal one (0 where the map gives
+        no field gradient at the sensor)
+    coil_field_t_per_a : (2, n, 3, n_coils) T/A -- the coils' field at the sensors as measured
+        (after the gain correction); the estimators use it instead of the map's
+    """
+
+    gain_inverse: np.ndarray
+    offsets_t: np.ndarray
+    shift_m: np.ndarray
+    coil_field_t_per_a: np.ndarray | None = None
+
+    @classmethod
+    def coerce(cls, value, n: int, n_coils: int) -> "SensorCalibration":
+        """A SensorCalibration from itself or the (gain_inverse, offsets) pair; shapes checked."""
+        if isinstance(value, cls):
+            cal = value
+        else:
+            try:
+                gi, off = value
+            except (TypeError, ValueError):
+                raise BadInputError("calibration", "a SensorCalibration or (gain_inverse, "
+                                    "offsets_t)", type(value).__name__) from None
+            cal = cls(np.asarray(gi, float), np.asarray(off, float), np.zeros((2, n, 3)))
+        shapes = {"gain_inverse": (2, n, 3, 3), "offsets_t": (2, n, 3), "shift_m": (2, n, 3)}
+        if cal.coil_field_t_per_a is not None:
+            shapes["coil_field_t_per_a"] = (2, n, 3, n_coils)
+        for name, shape in shapes.items():
+            a = np.asarray(getattr(cal, name), float)
+            if a.shape != shape or not np.all(np.isfinite(a)):
+                raise BadInputError(f"calibration.{name}", f"finite, shape {shape}",
+                                    f"shape {a.shape}")
+        return cal
+
+    def save(self, path) -> None:
+        arrays = {"gain_inverse": self.gain_inverse, "offsets_t": self.offsets_t,
+                  "shift_m": self.shift_m}
+        if self.coil_field_t_per_a is not None:
+            arrays["coil_field_t_per_a"] = self.coil_field_t_per_a
+        np.savez(path, format=np.array("designkit-sensor-calibration"), **arrays)
+
+    @classmethod
+    def load(cls, path) -> "SensorCalibration":
+        p = Path(path)
+        try:
+            with np.load(p, allow_pickle=False) as z:
+                if str(z["format"]) != "designkit-sensor-calibration":
+                    raise ValueError(f"format {str(z['format'])!r}")
+                return cls(z["gain_inverse"].astype(float), z["offsets_t"].astype(float),
+                           z["shift_m"].astype(float),
+                           z["coil_field_t_per_a"].astype(float)
+                           if "coil_field_t_per_a" in z.files else None)
+        except (KeyError, ValueError, OSError, EOFError) as exc:
+            raise BadInputError("calibration", "a sensor calibration .npz written by "
+                                f"SensorCalibration.save ({type(exc).__name__}: {exc})",
+                                str(p)) from None
+
+
+def _skew(w: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+
+
+
+def _field_gradient(rows: np.ndarray):
+    """Rows (k, 8, n_coils) (Bx, By, Bz, dBx/dx, dBx/dy, dBx/dz, dBy/dy, dBy/dz) -> field
+    (k, 3, n_coils) and full gradient (k, 3, 3, n_coils), [.., i, j, ..] = dB_i/dx_j
+    (:func:`firmware_io.mapfile.gradient_tensor`)."""
+    g = gradient_tensor(np.moveaxis(rows[:, 3:8], 1, -1))  # (k, n_coils, 3, 3)
+    return rows[:, :3], np.moveaxis(g, 1, -1)
+
+
+def calibrate(frames_top, frames_bottom, currents, model: SensorModel, *,
+              noise_t: float = DEFAULT_NOISE_T, prior_gain: float = 0.02,
+              prior_angle_deg: float = 2.0, prior_shift_m: float = 0.5e-3,
+              fit_shift: bool = True, iterations: int = 10) -> SensorCalibration:
+    """Per-sensor calibration from frames with the coils driven and the magnet away.
+
+    The device runs it at start-up with the finger magnet away from the arrays: drive the
+    coils with known currents (each coil alone at +-3 A, then random patterns, every sensor
+    below 130 mT), read both arrays, ~1000 frames. Per sensor, least squares over the frames
+    gives the measured response ``reading = K I + o`` (K (3, n_coils) T/A; o = the offset: the
+    magnet-free offset capture, Earth's field included). The map predicts K from the sensor's
+    nominal pose; the sensor's gains g (3), mounting rotation w (3, small angles) and position
+    error d (3) follow from ``K = diag(g) (I - [w]x) C(p_nominal + d)`` by regularized
+    Gauss-Newton: the residuals weighted by the noise of K, plus the priors g = 1 +- prior_gain,
+    |w| ~ prior_angle_deg, d ~ prior_shift_m per axis (the tolerances, not the realization:
+    directions the coils' fields do not excite -- the lateral gains, mostly -- stay near the
+    prior instead of fitting the noise). C and its gradient come from ``model.coil_rows`` at the
+    shifted position where given, else from the linearization about the nominal position with
+    ``model.coil_gradient_t_per_a_m`` (from_map: the map's SENSOR_COIL_GRAD), wherever
+    ``model.gradient_known``; elsewhere d = 0. The estimators then use gain_inverse = G^-1, the
+    offsets, the sensors at nominal + d for the magnet's field and G^-1 K as the coils' field.
+
+    Parameters
+    ----------
+    frames_top, frames_bottom : (k, n, 3) T -- readings; rows with NaN (saturated) are skipped
+    currents : (k, n_coils) A -- each frame's currents; together they must excite every coil
+        independently (rank n_coils + 1 with the offset)
+    model : SensorModel
+    noise_t : float, T rms per axis of one reading
+    prior_gain, prior_angle_deg, prior_shift_m : prior standard deviations (see above)
+
+    Returns
+    -------
+    SensorCalibration
+    """
+    meas = np.stack([np.asarray(frames_top, float), np.asarray(frames_bottom, float)], 1)
+    i = np.asarray(currents, float)
+    k, _, n, _ = meas.shape
+    nc = model.n_coils
+    if i.shape != (k, nc) or not np.all(np.isfinite(i)):
+        raise BadInputError("currents", f"finite, shape ({k}, {nc}), A", f"shape {i.shape}")
+    for name, val in (("noise_t", noise_t), ("prior_gain", prior_gain),
+                      ("prior_angle_deg", prior_angle_deg), ("prior_shift_m", prior_shift_m)):
+        if not (math.isfinite(val) and val > 0):
+            raise BadInputError(name, "a finite number > 0", val)
+    prior_all = np.r_[np.full(3, prior_gain), np.full(3, math.radians(prior_angle_deg)),
+                      np.full(3, prior_shift_m)]
+    gi = np.empty((2, n, 3, 3))
+    off = np.empty((2, n, 3))
+    shift = np.zeros((2, n, 3))
+    coil = np.empty((2, n, 3, nc))
+    for a in range(2):
+        for s in range(n):
+            kk, off[a, s], w = _measured_response(meas[:, a, s], i, noise_t, f"{a}:{s}")
+            shifts = (fit_shift and model.gradient_known is not None
+                      and bool(model.gradient_known[a, s]))
+            theta = _fit_sensor_pose(model, a, s, kk, w, prior_all[:9 if shifts else 6],
+                                     iterations)
+            g_mat = (1.0 + theta[:3])[:, None] * (np.eye(3) - _skew(theta[3:6]))
+            gi[a, s] = np.linalg.inv(g_mat)
+            if shifts:
+                shift[a, s] = theta[6:]
+            coil[a, s] = gi[a, s] @ kk
+    return SensorCalibration(gi, off, shift, coil)
+
+
+def _measured_response(readings, currents, noise_t: float, label: str):
+    """One sensor's response to the coils by least squares over the frames.
+
+    Parameters
+    ----------
+    readings : (k, 3) T; rows with NaN are skipped
+    currents : (k, n_coils) A
+    noise_t : float, T rms per axis
+    label : str, 'array:index' for the error message
+
+    Returns
+    -------
+    kk : (3, n_coils) T/A, the measured response
+    offset : (3,) T
+    w : (n_coils,) A/T, the inverse noise of K's entries (the same for the 3 rows)
+    """
+    nc = currents.shape[1]
+    ok = np.all(np.isfinite(readings), axis=1)
+    x = np.c_[currents[ok], np.ones(ok.sum())]
+    if ok.sum() < nc + 1 or np.linalg.matrix_rank(x) < nc + 1:
+        raise BadInputError("currents", f"frames that excite sensor {label} with every "
+                            "coil independently (rank n_coils + 1)", f"{ok.sum()} frames")
+    coef, *_ = np.linalg.lstsq(x, readings[ok], rcond=None)
+    # noise of K's entries: sigma sqrt(diag((X^T X)^-1)), the same for the 3 rows
+    w = 1.0 / (noise_t * np.sqrt(np.diag(np.linalg.inv(x.T @ x))[:nc]))
+    return coef[:nc].T, coef[nc], w
+
+
+def _fit_sensor_pose(model: SensorModel, a: int, s: int, kk, w, prior, iterations: int):
+    """Regularized Gauss-Newton for sensor ``a, s``: theta = (gains - 1 (3), mounting angles (3)
+    rad[, position error (3) m when ``prior`` has 9 entries]) so that diag(g) (I - [w]x)
+    C(p + d) matches the measured response ``kk`` (3, n_coils) T/A, residuals weighted by ``w``
+    (n_coils,) A/T, plus the priors theta ~ 0 +- ``prior``."""
+    shifts = prior.size == 9
+    c_nom = model.coil_field_t_per_a[a, s]
+    exact = shifts and model.coil_rows is not None
+    if exact:
+        c0 = _field_gradient(model.coil_rows(model.sensor_positions_m[a, s][None]))[0][0]
+    theta = np.zeros(prior.size)      # gains - 1, angles, shift
+    for _ in range(iterations):
+        g = 1.0 + theta[:3]
+        rot = np.eye(3) - _skew(theta[3:6])
+        if exact:
+            cc, gg = _field_gradient(model.coil_rows(
+                (model.sensor_positions_m[a, s] + theta[6:])[None]))
+            # SENSOR_COIL at d = 0 plus the change: no interpolation offset
+            c, dc = c_nom + cc[0] - c0, gg[0]
+        elif shifts:  # linearized: C(p + d) = C(p) + grad C d
+            dc = model.coil_gradient_t_per_a_m[a, s]
+            c = c_nom + np.einsum("ijk,j->ik", dc, theta[6:])
+        else:
+            c = c_nom
+        rc = rot @ c
+        pred = g[:, None] * rc
+        cols = [np.eye(3)[q][:, None] * rc for q in range(3)]
+        for q in range(3):
+            cols.append(g[:, None] * (-_skew(np.eye(3)[q]) @ c))
+        if shifts:
+            for q in range(3):
+                cols.append(g[:, None] * (rot @ dc[:, q, :]))
+        jac = np.stack([cc_.ravel() for cc_ in cols], 1) * np.tile(w, 3)[:, None]
+        res = ((kk - pred) * w[None]).ravel()
+        ja = np.r_[jac, np.diag(1.0 / prior)]
+        ra = np.r_[res, -theta / prior]
+        step, *_ = np.linalg.lstsq(ja, ra, rcond=None)
+        theta = theta + step
+        if np.all(np.abs(step) < 1e-6 * prior):
+            break
+    return theta

@@ -1,0 +1,659 @@
+"""The magnet's position from one frame of the two Hall arrays: :class:`Localizer`.
+
+Methods ``'learned'`` (the thesis' nearest-sensor inverse), ``'dipole'`` (subtract the lower
+array from the upper one, fit the magnet), ``'model'`` (subtract the coils' field predicted from
+the commanded currents, fit the magnet and the magnet-induced core field to every sensor) and
+``'kalman'`` (``'model'`` or ``'dipole'`` followed by :class:`ConstantVelocityKalman`). The fits
+are Levenberg-Marquardt on the position (3 unknowns) over the multipole magnet model with its
+analytic Jacobian; the exact cylinder's and the cores' fields enter as corrections linearized
+about a recent position. Sensors are weighted by sigma^2 = noise^2 + (relative_error |B|)^2.
+
+Inputs: readings (n, 3) T per array (NaN = missing or saturated), currents (n_coils,) A.
+Output: :class:`Estimate` (position m, normalized residual, ok). ``ok`` is False when the fit
+did not converge, the residual exceeds ``residual_limit``, fewer than 3 sensors are usable or
+the position leaves the plausible box -- the runner then fails safe. The models and their
+derivations: docs/localization.md.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import BadInputError
+from ..mapfile import MapFile
+from .calibration import SensorCalibration
+from .filter import ConstantVelocityKalman
+from .learned import LearnedInverse
+from .magnet import _EYE, MU0, _multipole_rows, _multipole_work, cylinder_field, multipole_field
+from .sensor_model import DEFAULT_NOISE_T, SensorModel
+
+METHODS = ("learned", "dipole", "model", "kalman")
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """position_m (3,) m; residual: normalized rms fit residual (1 ~ noise level; 0.0 when no
+    fit was possible, then ok is False and ``reason`` says why); ok; n_used
+    sensors (pairs for subtraction); iterations; method; velocity_m_s (3,) (Kalman only);
+    reason: why ok is False ('' when ok)."""
+
+    position_m: np.ndarray
+    residual: float
+    ok: bool
+    n_used: int
+    iterations: int
+    method: str
+    velocity_m_s: np.ndarray | None = None
+    reason: str = ""
+
+
+
+def _dist(a: np.ndarray, b: np.ndarray) -> float:
+    """|a - b| of two (3,) vectors (cheaper than np.linalg.norm on the fit's hot path)."""
+    d = a - b
+    return math.sqrt(float(d @ d))
+
+
+
+def _solve3_damped(a, g, lam):
+    """Solve (A + lam diag(A)) x = g for a symmetric 3 x 3 A (nested lists) by the adjugate;
+    None when singular or not finite."""
+    m00, m11, m22 = (a[0][0] * (1 + lam) + 1e-30, a[1][1] * (1 + lam) + 1e-30,
+                     a[2][2] * (1 + lam) + 1e-30)
+    m01, m02, m12 = a[0][1], a[0][2], a[1][2]
+    c00 = m11 * m22 - m12 * m12
+    c01 = m02 * m12 - m01 * m22
+    c02 = m01 * m12 - m02 * m11
+    det = m00 * c00 + m01 * c01 + m02 * c02
+    if not (math.isfinite(det) and det != 0.0):
+        return None
+    c11 = m00 * m22 - m02 * m02
+    c12 = m01 * m02 - m00 * m12
+    c22 = m00 * m11 - m01 * m01
+    g0, g1, g2 = g
+    x = ((c00 * g0 + c01 * g1 + c02 * g2) / det, (c01 * g0 + c11 * g1 + c12 * g2) / det,
+         (c02 * g0 + c12 * g1 + c22 * g2) / det)
+    if not all(math.isfinite(v) for v in x):
+        return None
+    return x
+
+
+def _check_frame(name: str, a, n: int) -> np.ndarray:
+    arr = np.asarray(a, dtype=float)
+    if arr.shape != (n, 3):
+        raise BadInputError(name, f"an array of shape ({n}, 3), T", f"shape {arr.shape}")
+    if (np.abs(arr) <= 1.0).all():  # the usual frame: one test (False with NaN, Inf, > 1 T)
+        return arr
+    if np.any(np.isinf(arr)):  # NaN compares False
+        raise BadInputError(name, "finite values or NaN (missing/saturated), T",
+                            f"Inf at {np.argwhere(np.isinf(arr))[0].tolist()}")
+    if np.any(np.abs(arr) > 1.0):
+        raise BadInputError(name, "fields in tesla (|B| <= 1 T; a TLV493D reads <= 0.2 T)",
+                            f"{np.nanmax(np.abs(arr))!r} -- millitesla passed as tesla?")
+    return arr
+
+
+class Localizer:
+    """Magnet position from the two arrays' readings (methods: the module docstring and
+    docs/localization.md).
+
+    Parameters
+    ----------
+    model : SensorModel
+    method : {'learned', 'dipole', 'model', 'kalman'}
+    learned : LearnedInverse, needed for 'learned'
+    noise_t : float, T rms per axis
+    relative_error : float, relative model error of a sensor's reading (gain, mounting);
+        default 0.02, or 0.003 with a calibration
+    residual_limit : float, largest normalized rms residual for ok
+    cores : bool or None, model the magnet-induced core field ('dipole'; default: if known)
+    mount_position_m : float, m -- sensor position uncertainty, weighs near-field sensors
+    calibration : SensorCalibration (see :func:`calibrate`), or (gain_inverse (2, n, 3, 3),
+        offsets_t (2, n, 3)), or None: corrected reading = gain_inverse @ (reading - offset); a
+        SensorCalibration also moves the sensors by its ``shift_m`` and replaces the map's coil
+        field at the sensors by the measured one.
+    refresh_m : float, m -- the exact-magnet and core corrections are re-evaluated when the
+        position moved farther than this from where they were last evaluated (linear in between);
+        their Jacobian (central differences, 6 more evaluations) when it moved 10x farther. A
+        warm-started fit re-linearizes when its solution lands beyond 1.5 times the reuse
+        radius (adapted from the linearization's observed error, kept near noise / 20, between
+        0.25 and 5 mm), a cold one until within refresh_m / 4.
+    """
+
+    def __init__(self, model: SensorModel, method: str = "model", *,
+                 learned: LearnedInverse | None = None, noise_t: float = DEFAULT_NOISE_T,
+                 relative_error: float | None = None, residual_limit: float = 5.0,
+                 cores: bool | None = None, max_iterations: int = 30, calibration=None,
+                 kalman: ConstantVelocityKalman | None = None, frame_period_s: float = 0.01,
+                 mount_position_m: float = 0.0, refresh_m: float = 1e-3):
+        if method not in METHODS:
+            raise BadInputError("method", f"one of {METHODS}", method)
+        if method == "learned":
+            if learned is None:
+                raise BadInputError("weights", "a learned-inverse file for method 'learned'", None)
+            if learned.design_sha256 != model.design_sha256:
+                raise BadInputError("weights", f"trained for design {model.design_sha256[:12]}...",
+                                    f"design {learned.design_sha256[:12]}...",
+                                    "Retrain: designkit.learned_inverse.train_learned_inverse.")
+        if relative_error is None:
+            relative_error = 0.02 if calibration is None else 0.003
+        for name, val in (("noise_t", noise_t), ("relative_error", relative_error + 1e-300),
+                          ("residual_limit", residual_limit), ("frame_period_s", frame_period_s),
+                          ("refresh_m", refresh_m)):
+            if not (math.isfinite(val) and val > 0):
+                raise BadInputError(name, "a finite number > 0", val)
+        self.model = model
+        self.method = method
+        self.learned = learned
+        self.noise_t = float(noise_t)
+        self.rel = float(relative_error)
+        if not (math.isfinite(mount_position_m) and mount_position_m >= 0):
+            raise BadInputError("mount_position_m", "a finite number >= 0, m", mount_position_m)
+        self.mount_position_m = float(mount_position_m)
+        self._moment = float(np.linalg.norm(model.moment_a_m2))
+        self.residual_limit = float(residual_limit)
+        self.cores = (model.induced is not None) if cores is None else bool(cores)
+        if self.cores and model.induced is None:
+            raise BadInputError("cores", "False (the model carries no induced core field)", cores)
+        self.max_iterations = int(max_iterations)
+        self.frame_period_s = float(frame_period_s)
+        self.kalman = kalman or (ConstantVelocityKalman() if method == "kalman" else None)
+        n = model.n_sensors
+        self.refresh_m = float(refresh_m)
+        self._pts = model.sensor_positions_m.reshape(-1, 3)
+        cf = model.coil_field_t_per_a
+        self.calibration = None
+        if calibration is not None:
+            self.calibration = SensorCalibration.coerce(calibration, n, model.n_coils)
+            self._pts = (model.sensor_positions_m + self.calibration.shift_m).reshape(-1, 3)
+            if self.calibration.coil_field_t_per_a is not None:
+                cf = self.calibration.coil_field_t_per_a
+        self._coil = cf
+        # subtraction: the lower sensor's coil field mapped onto the upper one's (for the
+        # symmetric array diag(-1, -1, 1): Br is odd about the coil's mid-plane)
+        self._mirror = np.stack([cf[0, i] @ np.linalg.pinv(cf[1, i]) for i in range(n)])
+        # the residual's linear maps of the 2n sensors' fields (rows: per used sensor, 3 each):
+        # subtraction top - P bottom, or the identity for the model-based fit
+        sub = np.zeros((n, 3, 2, n, 3))
+        for s_ in range(n):
+            sub[s_, :, 0, s_] = _EYE
+            sub[s_, :, 1, s_] = -self._mirror[s_]
+        self._sub_op = sub.reshape(n, 3, 6 * n)
+        self._id_op = np.eye(6 * n).reshape(2 * n, 3, 6 * n)
+        self._sub_op_all = self._sub_op.reshape(3 * n, 6 * n)
+        self._id_op_all = self._id_op.reshape(6 * n, 6 * n)
+        # every sensor usable (the usual frame): (op, mu0 op) by subtract
+        self._ops = {True: (self._sub_op_all, MU0 * self._sub_op_all),
+                     False: (self._id_op_all, MU0 * self._id_op_all)}
+        mom = model.moment_a_m2
+        mag = math.sqrt(float(mom @ mom))
+        c_ = mag / (4 * math.pi)
+        # the multipole's constants for _multipole_rows (u, c, k) and its (2n, 3, 4) buffer
+        self._mp = (mom / mag, c_, 0.5 * c_ * model.octupole_m2)
+        self._mp_stack = np.zeros((6 * n + 4, 4))
+        self._mp_stack[-4:] = np.eye(4)
+        self._mp_work = _multipole_work(2 * n, self._mp[0], c_)
+        self._exact = model.magnet_size_m is not None
+        lo, hi = model.box_lower_m, model.box_upper_m
+        # ~1 cm apart: the dipole's field varies over the sensor spacing, a coarser grid can put
+        # every start in a wrong basin near the board
+        nx = max(int(round((hi[0] - lo[0]) / 0.012)), 5)
+        ny = max(int(round((hi[1] - lo[1]) / 0.012)), 5)
+        zs = lo[2] + np.array([0.004, 0.010, 0.018, 0.028, 0.042, 0.060, 0.085])
+        g = np.stack(np.meshgrid(np.linspace(lo[0] + 0.005, hi[0] - 0.005, nx),
+                                 np.linspace(lo[1] + 0.005, hi[1] - 0.005, ny),
+                                 zs[zs < hi[2] - 0.002], indexing="ij"), -1)
+        self._candidates = g.reshape(-1, 3)
+        self._last: np.ndarray | None = None
+        self._box_lo = [float(x) for x in model.box_lower_m]
+        self._box_hi = [float(x) for x in model.box_upper_m]
+        # per correction: (p_c, value (2n, 3), jacobian (2n, 3, 3), radius, const (6n,),
+        # jacobian (6n, 3)) -- the last two the same linearization as const + jacobian @ q
+        self._lin = {}
+        self._pj = None  # where the core term's Jacobian was last differenced
+        self._radius = self.refresh_m  # reuse radius of the linearization, adapted
+
+    # -- construction from files -----------------------------------------------------------
+    @classmethod
+    def from_map(cls, path, method: str = "model", *, weights=None,
+                 expected_design_sha256: str | None = None, octupole_m2: float | None = None,
+                 magnet_size_m=None, calibration=None, **kw) -> "Localizer":
+        """From a v2 map file (its sensor section) and, for 'learned', a weights file.
+
+        ``magnet_size_m``: (radius, length) m of the cylinder magnet -> its exact field; default
+        the map's ``meta['magnet_radius_m']``, ``meta['magnet_length_m']`` if it has them.
+        ``octupole_m2``: the magnet's l = 3 coefficient ratio h^2 - 3 a^2 / 4 (m^2); default from
+        the magnet's size, else the map's ``meta['magnet_octupole_m2']``, else 0 (pure dipole).
+        ``calibration``: a :class:`SensorCalibration`, or a path to one saved with
+        :meth:`SensorCalibration.save` (default None: uncalibrated). Other keywords go to
+        :class:`Localizer`.
+        """
+        m = MapFile.load(path, expected_design_sha256=expected_design_sha256)
+        need = ("sensor_positions_m", "sensor_coil_field", "sensor_coil_gradient",
+                "sensor_induced_field", "moment_a_m2",
+                "design_sha256")
+        missing = [a for a in need if not hasattr(m, a)]
+        if missing:
+            raise BadInputError("map file", "a v2 map with the sensor section (missing "
+                                f"{', '.join(missing)})", str(path))
+        sp = np.asarray(m.sensor_positions_m() if callable(m.sensor_positions_m)
+                        else m.sensor_positions_m, float)
+        scf = m.sensor_coil_field() if callable(m.sensor_coil_field) else m.sensor_coil_field
+        mom = m.moment_a_m2() if callable(m.moment_a_m2) else m.moment_a_m2
+        sha = m.design_sha256() if callable(m.design_sha256) else m.design_sha256
+        lo, hi = (np.asarray(b, float) for b in m.bounds)
+        # plausible positions: the map's box widened (the magnet model is analytic; outside the
+        # box the runner fails safe on its own 'out_of_box' test), never below the upper board
+        box_lo = lo - [0.015, 0.015, 0.0]
+        box_hi = hi + [0.015, 0.015, 0.02]
+        box_lo[2] = max(lo[2], float(sp[0, :, 2].max()) + 0.002)
+        if magnet_size_m is None and "magnet_radius_m" in m.meta and "magnet_length_m" in m.meta:
+            magnet_size_m = (m.meta["magnet_radius_m"], m.meta["magnet_length_m"])
+        if octupole_m2 is None:
+            if magnet_size_m is not None:
+                a, length = (float(x) for x in magnet_size_m)
+                octupole_m2 = (length / 2) ** 2 - 0.75 * a * a
+            else:
+                octupole_m2 = float(m.meta.get("magnet_octupole_m2", 0.0))
+        # the coils' field gradient at every sensor (the map's SENSOR_COIL_GRAD: the sensors sit
+        # below the box of A) for calibrate() to recover their position errors
+        grad = np.asarray(m.sensor_coil_gradient(), float)
+        known = np.ones(sp.shape[:2], bool)
+        model = SensorModel(sp, np.asarray(scf, float), np.asarray(mom, float), str(sha),
+                            float(octupole_m2),
+                            # the induced term is a small correction: outside the map's box the
+                            # nearest box point is safer than extrapolating its polynomials
+                            lambda p: m.sensor_induced_field(np.clip(p, lo, hi)),
+                            box_lo, box_hi, magnet_size_m, grad, known)
+        learned = (LearnedInverse.load(weights) if weights is not None
+                   else kw.pop("learned", None))
+        if calibration is not None and not isinstance(calibration, (SensorCalibration, tuple)):
+            calibration = SensorCalibration.load(calibration)
+        return cls(model, method, learned=learned, calibration=calibration, **kw)
+
+    @property
+    def sensor_positions_m(self) -> np.ndarray:
+        """(2, n, 3) m: upper array, lower array, in the order :meth:`locate` expects."""
+        return self.model.sensor_positions_m.copy()
+
+    def reset(self) -> None:
+        """Forget the warm start and the filter state."""
+        self._last = None
+        if self.kalman is not None:
+            self.kalman.reset()
+
+    def predict(self, time_s: float) -> np.ndarray:
+        """Kalman-extrapolated position (3,) m at ``time_s`` (method 'kalman')."""
+        if self.kalman is None:
+            raise BadInputError("method", "'kalman' for predict()", self.method)
+        return self.kalman.predict(time_s)
+
+    # -- the estimate ------------------------------------------------------------------------
+    def locate(self, top, bottom, currents=None, *, time_s: float | None = None) -> Estimate:
+        """Estimate the magnet's position from one frame.
+
+        Parameters
+        ----------
+        top, bottom : array-like, shape (n, 3), T; NaN marks a missing or saturated sensor
+        currents : array-like, shape (n_coils,), A -- commanded currents ('model'; optional else)
+        time_s : float, frame time for 'kalman' (default: one ``frame_period_s`` per call)
+        """
+        n = self.model.n_sensors
+        top = _check_frame("top", top, n)
+        bottom = _check_frame("bottom", bottom, n)
+        i = None
+        if currents is not None:
+            i = np.asarray(currents, dtype=float)
+            if i.shape != (self.model.n_coils,) or not np.all(np.isfinite(i)):
+                raise BadInputError("currents", f"{self.model.n_coils} finite values, A",
+                                    f"shape {i.shape}" if i.shape != (self.model.n_coils,)
+                                    else i.tolist())
+        meas = np.stack([top, bottom])
+        if self.calibration is not None:
+            cal = self.calibration
+            meas = np.matmul(cal.gain_inverse, (meas - cal.offsets_t)[..., None])[..., 0]
+        method = self.method
+        if method == "model" and i is None:
+            raise BadInputError("currents", f"{self.model.n_coils} commanded currents, A, for "
+                                "method 'model'", None)
+        if method == "kalman":
+            method = "model" if i is not None else "dipole"
+        if method == "learned":
+            est = self._learned(meas)
+        else:
+            est = self._fit(meas, i if method == "model" else None, method)
+        if self.kalman is not None:
+            t = time_s if time_s is not None else (
+                (self.kalman.t + self.frame_period_s) if self.kalman.t is not None else 0.0)
+            pos, vel = self.kalman.update(est.position_m, t, est.ok)
+            est = Estimate(pos, est.residual, est.ok, est.n_used, est.iterations, "kalman",
+                           vel, est.reason)
+        return est
+
+    # subtraction: d = top - P bottom; model-based: both arrays minus the coils' field
+    def _mount_var(self, d):
+        """Variance from the sensors' position uncertainty: |dB| ~ 3 |B| dr / r for the magnet's
+        field, with r from |B| (on-axis dipole: |B| = mu0 |m| / (2 pi r^3))."""
+        if self.mount_position_m == 0.0:
+            return 0.0
+        b = np.linalg.norm(np.nan_to_num(d), axis=-1)
+        r = np.cbrt(MU0 * self._moment / (2 * math.pi * np.maximum(b, 1e-9)))
+        return (3 * self.mount_position_m * b / r) ** 2
+
+    def _data(self, meas, currents):
+        sig2n = self.noise_t**2
+        mag2 = np.einsum("asi,asi->as", meas, meas)
+        if currents is None:
+            d = meas[0] - np.matmul(self._mirror, meas[1][..., None])[..., 0]
+            # a row sum is NaN when any component is (|B| <= 1 T: no overflow)
+            use = np.isfinite(d.sum(1))
+            s2 = 2 * sig2n + self.rel**2 * (mag2[0] + mag2[1])
+        else:
+            d = (meas - self._coil @ currents).reshape(-1, 3)
+            use = np.isfinite(d.sum(1))
+            s2 = sig2n + self.rel**2 * mag2.reshape(-1)
+        if self.mount_position_m:
+            s2 = s2 + self._mount_var(d)
+        return d, use, np.sqrt(s2)
+
+    def _exact_part(self, p):
+        """The exact cylinder's field minus the multipole at the sensors near p, and its
+        Jacobian (central differences, h = 0.1 mm, all in one vectorized call): (2n, 3) T,
+        (2n, 3, 3) T/m. The l >= 5 terms the multipole misses fall as (size / r)^4 of the
+        dipole's field: beyond 5 magnet lengths they are < 0.002 mT, 50x below the noise."""
+        m = self.model
+        a, length = m.magnet_size_m
+        val = np.zeros((len(self._pts), 3))
+        jac = np.zeros((len(self._pts), 3, 3))
+        rel = self._pts - p
+        near = np.einsum("ij,ij->i", rel, rel) < (5 * max(a, length)) ** 2
+        if near.any():
+            h = 1e-4
+            # the magnet moved by +-h e_k is the sensors moved by -+h e_k
+            shifts = np.r_[np.zeros((1, 3)), -h * _EYE, h * _EYE]
+            pts = (self._pts[near][None] + shifts[:, None]).reshape(-1, 3)
+            d = (cylinder_field(pts, p, m.moment_a_m2, a, length)
+                 - multipole_field(pts, p, m.moment_a_m2, m.octupole_m2)).reshape(7, -1, 3)
+            val[near] = d[0]
+            jac[near] = np.stack([(d[1 + k] - d[4 + k]) / (2 * h) for k in range(3)], -1)
+        return val, jac
+
+    def _induced_part(self, p):
+        return self.model.induced(p).reshape(-1, 3)
+
+    def _extra(self, p) -> np.ndarray:
+        """(2n, 3) T: what the multipole misses at the sensors -- the exact cylinder's field minus
+        the multipole, plus the field of the cores the magnet magnetizes."""
+        out = np.zeros((len(self._pts), 3))
+        if self._exact:
+            out += self._exact_part(p)[0]
+        if self.cores:
+            out += self._induced_part(p)
+        return out
+
+    def _refresh(self, key, p, tol, evaluate, first_radius):
+        """One correction's linearization near p: (p_c, value, jacobian), reused while p stays
+        within the adapted radius (and ``tol``); ``evaluate(p, old)`` -> (value, jacobian)."""
+        c = self._lin.get(key)
+        if c is not None and _dist(p, c[0]) <= min(tol, c[3]):
+            return c
+        val, jac = evaluate(p, c)
+        radius = first_radius
+        if c is not None:
+            # the linearization's error grows as |dp|^2: keep it near noise / 20
+            dp = p - c[0]
+            err = float(np.abs(val - c[1] - c[2] @ dp).max())
+            step = math.sqrt(float(dp @ dp))
+            radius = (min(max(step * math.sqrt(0.05 * self.noise_t / err), 0.1e-3), 5e-3)
+                      if err > 0 else 5e-3)
+        # also as the affine map the fit uses: value + J (q - p) = const + J q, flattened
+        jf = jac.reshape(-1, 3)
+        self._lin[key] = (p, val, jac, radius, val.reshape(-1) - jf @ p, jf)
+        return self._lin[key]
+
+    def _evaluate_induced(self, p, old):
+        val = self._induced_part(p)
+        if old is not None and _dist(p, old[4]) <= 10 * self.refresh_m:
+            # Broyden: the reused Jacobian made exact along the move (free); the cores' field
+            # is smooth on the 10 mm scale
+            dp = p - old[0]
+            jac = old[2] + np.einsum("ki,j->kij", val - old[1] - old[2] @ dp,
+                                     dp / float(dp @ dp))
+            self._pj = old[4]
+            return val, jac
+        h = 0.25e-3
+        jac = np.stack([(self._induced_part(p + h * e) - self._induced_part(p - h * e))
+                        / (2 * h) for e in _EYE], -1)
+        self._pj = p
+        return val, jac
+
+    def _within(self, p, tol) -> bool:
+        """Is p close enough to every correction's linearization point (``tol``, or 1.5 times
+        each one's reuse radius)?"""
+        return all(_dist(p, c[0]) <= (tol if tol is not None else 1.5 * c[3])
+                   for c in self._lin.values())
+
+    def _linearized(self, p, tol=None):
+        """(const (6n,) T, jacobian (6n, 3) T/m): the corrections to the multipole at the 2n
+        sensors, affine in the position q near p: const + jacobian @ q. Each part keeps its own
+        linearization point and reuse radius (adapted from the linearization's observed error):
+        the exact magnet's part (cheap, curved near the sensors: value and Jacobian fresh at each
+        refresh) and the map's core term (the expensive one; Jacobian by central differences
+        within 10 ``refresh_m``, Broyden-updated)."""
+        p = np.array(p, dtype=float)
+        tol = math.inf if tol is None else tol
+        parts = []
+        self._radius = math.inf
+        if self._exact:
+            # near the sensors the exact part curves on the 1 mm scale: start small
+            parts.append(self._refresh("exact", p, tol, lambda q, old: self._exact_part(q),
+                                       0.25e-3))
+        if self.cores:
+            def ev(q, old):
+                return self._evaluate_induced(q, None if old is None else old[:4] + (self._pj,))
+            parts.append(self._refresh("cores", p, tol, ev, self.refresh_m))
+        self._radius = min(c[3] for c in parts)
+        if len(parts) == 1:
+            return parts[0][4], parts[0][5]
+        return parts[0][4] + parts[1][4], parts[0][5] + parts[1][5]
+
+    def _subtracted_model(self, p, extra=None):
+        """The model of the subtracted data at position p: (n, 3) T, the multipole plus the
+        corrections ``extra`` (2n, 3) T at the 2n sensors, mapped by the fit's own subtraction
+        operator."""
+        m = self.model
+        b = multipole_field(self._pts, p, m.moment_a_m2, m.octupole_m2)
+        if extra is not None:
+            b = b + extra
+        return (self._sub_op_all @ b.reshape(-1)).reshape(-1, 3)
+
+    def _fit(self, meas, currents, method) -> Estimate:
+        subtract = currents is None
+        d, use, sig = self._data(meas, np.asarray(currents) if currents is not None else None)
+        n_used = int(use.sum())
+        if n_used < 3:
+            p = self._last if self._last is not None else 0.5 * (self.model.box_lower_m
+                                                                 + self.model.box_upper_m)
+            return Estimate(p.copy(), 0.0, False, n_used, 0, method,
+                            reason=f"only {n_used} usable sensors (need 3)")
+        # the whole weighted (and, for subtraction, mirrored) residual is one linear map of the
+        # 2n sensors' field and Jacobian: op (3 m, 6 n), built once per frame
+        if n_used == len(use):
+            op, opm = self._ops[subtract]
+            w3 = (1.0 / sig).repeat(3)[:, None]
+            du = d.reshape(-1)
+        else:
+            op = (self._sub_op if subtract else self._id_op)[use].reshape(
+                -1, 6 * self.model.n_sensors)
+            opm = MU0 * op
+            w3 = (1.0 / sig[use]).repeat(3)[:, None]
+            du = d[use].reshape(-1)
+        has_extra = self._exact or self.cores
+
+        def residuals(lin):
+            """p -> the 4 x 4 Gram matrix of [J, b - d] (weighted): J^T J, -J^T r and the cost
+            r^T r in one product. The linearized corrections b_c(p) = const + L p enter as the
+            constant columns A = op L and op const - d, weighted with the rows."""
+            if lin is None:
+                a_lin, c = np.zeros((len(op), 3)), du
+            else:
+                const, lf = lin
+                a_lin, c = op @ lf, du - op @ const
+            big = np.concatenate([opm, a_lin, -c[:, None]], 1)
+            big *= w3
+            return self._make_eval(big)
+
+        def solve(p0, tol):
+            """LM with the corrections linearized near the position, re-linearized (at most 4
+            times) until the solution stays within tol of the linearization point."""
+            it = 0
+            for _ in range(5):
+                lin = self._linearized(p0, tol) if has_extra else None
+                out = self._lm(residuals(lin), p0)
+                it += out[2]
+                if lin is None or not out[3] or self._within(out[0], tol):
+                    break
+                p0 = out[0]
+            return out[0], out[1], it, out[3]
+
+        def cold():
+            # the multipole alone from the grid's best candidates, then the full model
+            cands = [self._lm(residuals(None), q0)
+                     for q0 in self._global_starts(d, use, sig, subtract)]
+            first = min(cands, key=lambda o: o[1])
+            return solve(first[0], 0.25 * self.refresh_m) if has_extra else first
+
+        if self._last is not None:
+            best = solve(self._last, None)
+            if not self._ok(best, n_used)[0]:
+                # lost from the warm start: the global search once
+                other = cold()
+                if other[1] < best[1]:
+                    best = other
+        else:
+            best = cold()
+        p, cost, iters, converged = best
+        dof = max(3 * n_used - 3, 1)
+        rms = math.sqrt(cost / dof)
+        ok, reason = self._ok(best, n_used)
+        self._last = p.copy() if ok else None
+        return Estimate(p, rms, ok, n_used, iters, method, reason=reason)
+
+    def _ok(self, out, n_used):
+        p, cost, _, converged = out
+        dof = max(3 * n_used - 3, 1)
+        rms = math.sqrt(cost / dof)
+        if not converged:
+            return False, "fit did not converge"
+        lo, hi = self._box_lo, self._box_hi
+        if not all(lo[k] + 1e-6 < p[k] < hi[k] - 1e-6 for k in range(3)):
+            return False, "position at or outside the plausible box's edge"
+        if rms > self.residual_limit:
+            return False, f"residual {rms:.3g} > {self.residual_limit:g} (lost or implausible)"
+        return True, ""
+
+    def _global_starts(self, d, use, sig, subtract, keep: int = 3):
+        """The best ``keep`` points of a coarse grid over the plausible box (dipole term only,
+        all candidates in one vectorized pass)."""
+        m = self.model
+        c = self._candidates
+        r = self._pts[None] - c[:, None]                          # (C, 2n, 3)
+        rho = np.einsum("cij,cij->ci", r, r)
+        u = m.moment_a_m2
+        b = MU0 / (4 * math.pi) * (3 * r * (r @ u)[..., None] / rho[..., None] ** 2.5
+                                   - u / rho[..., None] ** 1.5)
+        n = m.n_sensors
+        if subtract:
+            b = b[:, :n] - np.einsum("sij,csj->csi", self._mirror, b[:, n:])
+        res = (d[None, use] - b[:, use]) / sig[None, use, None]
+        costs = np.einsum("cij,cij->c", res, res)
+        costs[~np.isfinite(costs)] = np.inf
+        return [c[k] for k in np.argsort(costs)[:keep]]
+
+    def _make_eval(self, big):
+        """p -> the Gram matrix of [J, -r] (4 x 4 nested lists) for :meth:`_lm`; big (3 m, 6 n + 4)
+        = the weighted [mu0 op | A | -c] (see :meth:`_fit`)."""
+        u, cc, k = self._mp
+        pts = self._pts
+        work = self._mp_work
+        # one product: [mu0 op | A | -c] @ [[multipole rows (6n, 4)], [I, p], [0, 0, 0, 1]] =
+        # op b(p) + A p - c next to op J(p) + A (A = 0 without corrections)
+        stack = self._mp_stack
+        buf = stack[:-4].reshape(-1, 3, 4)
+
+        def evaluate(p):
+            _multipole_rows(pts - p, u, cc, k, buf, work)
+            stack[-4:-1, 3] = p
+            y = big @ stack
+            return (y.T @ y).tolist()
+        return evaluate
+
+    def _lm(self, evaluate, p0):
+        """Levenberg-Marquardt on the position (3 unknowns: the 3 x 3 normal equations are
+        solved in closed form on Python floats, the small-array numpy overhead dominates
+        here). ``evaluate(p)`` -> the Gram matrix of [J, -r] (4 x 4 nested lists)."""
+        p = np.array(p0, dtype=float)
+        gm = evaluate(p)
+        cost = gm[3][3]
+        lam = 1e-6
+        converged = False
+        it = 0
+        lo, hi = self._box_lo, self._box_hi
+        for it in range(1, self.max_iterations + 1):
+            a = gm
+            g = (-gm[0][3], -gm[1][3], -gm[2][3])
+            step = _solve3_damped(a, g, lam)
+            if step is None:
+                break
+            # a Gauss-Newton step below 1/20 of the estimate's own noise (1 / sqrt(diag(J^T J))
+            # per axis, <= the true standard deviation; 50 um at most): converged -- what it
+            # leaves is far below that noise (and ~(step)^2 / 10 mm for exact data)
+            xtol2 = min(0.0025 * (1.0 / (a[0][0] + 1e-300) + 1.0 / (a[1][1] + 1e-300)
+                                  + 1.0 / (a[2][2] + 1e-300)), 2.5e-9)
+            s2 = step[0] * step[0] + step[1] * step[1] + step[2] * step[2]
+            if lam < 1e-4 and s2 < xtol2:
+                p = p + step
+                converged = True
+                break
+            # the position stays in the plausible box: far outside it the magnet's field vanishes
+            # and a step could run away on the (bounded) induced term alone
+            pn = np.array([min(max(p[k] + step[k], lo[k]), hi[k]) for k in range(3)])
+            gn = evaluate(pn)
+            cn = gn[3][3]
+            if math.isfinite(cn) and cn <= cost:
+                p, gm = pn, gn
+                # 0.1 um or a negligible cost decrease: far below what the noise allows
+                small = s2 < 1e-14 or cost - cn <= 1e-7 * cost
+                cost = cn
+                lam = max(lam * 0.2, 1e-9)
+                if small:
+                    converged = True
+                    break
+            else:
+                lam *= 10.0
+                if lam > 1e8:
+                    converged = s2 < 1e-12
+                    break
+        return p, cost, it, converged
+
+    def _learned(self, meas) -> Estimate:
+        n = self.model.n_sensors
+        d, use, sig = self._data(meas, None)
+        if not use.any():
+            return Estimate(np.zeros(3), 0.0, False, 0, 0, "learned",
+                            reason="no usable sensor pair")
+        mag = np.where(use, np.linalg.norm(np.nan_to_num(d), axis=1), -1.0)
+        k = int(np.argmax(mag))
+        rel, inside = self.learned(d[k])
+        p = self.model.sensor_positions_m[0, k] + rel
+        b = self._subtracted_model(p, self._extra(p) if (self._exact or self.cores) else None)
+        r = ((d[use] - b[use]) / sig[use, None]).reshape(-1)
+        rms = math.sqrt(float(r @ r) / max(r.size - 3, 1))
+        ok, reason = inside, "" if inside else "outside the learned inverse's training box"
+        if ok and rms > self.residual_limit:
+            ok, reason = False, f"residual {rms:.3g} > {self.residual_limit:g}"
+        return Estimate(p, rms, ok, int(use.sum()), 0, "learned", reason=reason)
+

@@ -1,0 +1,118 @@
+"""What the estimators know about the sensors: positions, the coils' field per ampere there, the
+magnet's moment and the optional corrections (the v2 map's sensor section).
+
+:class:`SensorModel` holds the nominal sensor poses (2 arrays x n sensors, m), the coils' field
+and gradient at the sensors per ampere (T/A, T/(m A)), the magnet (moment A m^2, multipole
+ratio m^2, cylinder size m) and the field of the cores the magnet magnetizes (a callable of the
+position). :data:`DEFAULT_NOISE_T` is the TLV493D datasheet's noise per axis.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from ..errors import BadInputError
+from .magnet import MU0, multipole_field
+
+DEFAULT_NOISE_T = 0.1e-3
+"""TLV493D noise per axis, T rms (datasheet)."""
+
+
+@dataclass
+class SensorModel:
+    """What the estimators know (the v2 map's sensor section).
+
+    sensor_positions_m : (2, n, 3) m, upper array then lower array
+    coil_field_t_per_a : (2, n, 3, n_coils) T/A, the coils' field at the sensors per ampere
+    moment_a_m2 : (3,) A m^2
+    design_sha256 : str
+    octupole_m2 : float, m^2 (0 = pure dipole)
+    induced : callable (3,) m -> (2, n, 3) T, or None: field of the magnet-magnetized cores
+    box_lower_m, box_upper_m : (3,) plausible magnet positions (outside: ok = False)
+    magnet_size_m : (radius, length) m of the cylinder magnet, or None. Given, the fits use its
+        exact field (:func:`cylinder_field`; the multipole with its analytic Jacobian carries
+        the iterations, the difference enters as a per-frame linearized correction).
+    coil_gradient_t_per_a_m : (2, n, 3, 3, n_coils) T/(m A) or None: the coils' field gradient
+        at the sensors (entry [a, s, i, j] = dB_i/dx_j), for :func:`calibrate` to recover the
+        sensors' position errors; ``gradient_known`` (2, n) bool says where it is known.
+    coil_rows : callable (k, 3) m -> (k, 8, n_coils), or None: the coils' field and gradient
+        rows (Bx, By, Bz, dBx/dx, dBx/dy, dBx/dz, dBy/dy, dBy/dz per ampere) at any point where
+        ``gradient_known``; given, :func:`calibrate` uses the exact field at the shifted
+        position, else its linearization C(p + d) = C(p) + grad C d (from_map: the map's
+        gradient at the sensors; a 0.5 mm shift ~9 mm from a core's end leaves ~0.1 % of C).
+    """
+
+    sensor_positions_m: np.ndarray
+    coil_field_t_per_a: np.ndarray
+    moment_a_m2: np.ndarray
+    design_sha256: str
+    octupole_m2: float = 0.0
+    induced: Callable[[np.ndarray], np.ndarray] | None = None
+    box_lower_m: np.ndarray | None = None
+    box_upper_m: np.ndarray | None = None
+    magnet_size_m: tuple | None = None
+    coil_gradient_t_per_a_m: np.ndarray | None = None
+    gradient_known: np.ndarray | None = None
+    coil_rows: Callable[[np.ndarray], np.ndarray] | None = None
+
+    def __post_init__(self):
+        sp = np.asarray(self.sensor_positions_m, dtype=float)
+        if sp.ndim != 3 or sp.shape[0] != 2 or sp.shape[2] != 3 or not np.all(np.isfinite(sp)):
+            raise BadInputError("sensor_positions_m", "finite, shape (2, n, 3), m", f"shape {sp.shape}")
+        n = sp.shape[1]
+        cf = np.asarray(self.coil_field_t_per_a, dtype=float)
+        if cf.ndim != 4 or cf.shape[:3] != (2, n, 3) or not np.all(np.isfinite(cf)):
+            raise BadInputError("coil_field_t_per_a", f"finite, shape (2, {n}, 3, n_coils), T/A",
+                                f"shape {cf.shape}")
+        m = np.asarray(self.moment_a_m2, dtype=float)
+        if m.shape != (3,) or not np.all(np.isfinite(m)) or not np.linalg.norm(m) > 0:
+            raise BadInputError("moment_a_m2", "a finite non-zero 3-vector, A m^2", m.tolist())
+        self.sensor_positions_m, self.coil_field_t_per_a, self.moment_a_m2 = sp, cf, m
+        if self.magnet_size_m is not None:
+            size = tuple(float(x) for x in self.magnet_size_m)
+            if len(size) != 2 or not all(math.isfinite(x) and x > 0 for x in size):
+                raise BadInputError("magnet_size_m", "(radius, length) > 0, m", self.magnet_size_m)
+            self.magnet_size_m = size
+        if self.coil_gradient_t_per_a_m is not None:
+            g = np.asarray(self.coil_gradient_t_per_a_m, dtype=float)
+            if g.shape != (2, n, 3, 3, cf.shape[3]) or not np.all(np.isfinite(g)):
+                raise BadInputError("coil_gradient_t_per_a_m", f"finite, shape (2, {n}, 3, 3, "
+                                    f"{cf.shape[3]}), T/(m A)", f"shape {g.shape}")
+            self.coil_gradient_t_per_a_m = g
+            k = (np.ones((2, n), bool) if self.gradient_known is None
+                 else np.asarray(self.gradient_known, bool))
+            if k.shape != (2, n):
+                raise BadInputError("gradient_known", f"bool, shape (2, {n})", f"shape {k.shape}")
+            self.gradient_known = k
+        if self.box_lower_m is None:
+            xy = np.abs(sp[..., :2]).max()
+            self.box_lower_m = np.array([-xy - 0.05, -xy - 0.05, sp[0, :, 2].max() + 0.002])
+            self.box_upper_m = np.array([xy + 0.05, xy + 0.05, sp[0, :, 2].max() + 0.15])
+
+    @classmethod
+    def from_operator(cls, *, induced_samples_m, induced_operator, **kw) -> "SensorModel":
+        """Induced field as a linear operator on the magnet's applied H_z at sample points
+        (designkit.sensor_sim.InducedCoreModel), evaluated with the multipole magnet model."""
+        samples = np.asarray(induced_samples_m, float)
+        op = np.asarray(induced_operator, float)
+        model = cls(**kw)
+        shape = model.sensor_positions_m.shape
+
+        def induced(p):
+            h = multipole_field(samples, p, model.moment_a_m2, model.octupole_m2)[:, 2] / MU0
+            return (op @ h).reshape(shape)
+
+        model.induced = induced
+        return model
+
+    @property
+    def n_sensors(self) -> int:
+        return self.sensor_positions_m.shape[1]
+
+    @property
+    def n_coils(self) -> int:
+        return self.coil_field_t_per_a.shape[3]
