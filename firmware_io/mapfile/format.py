@@ -22,8 +22,9 @@ from ..errors import BadInputError
 
 FORMAT = "designkit-fieldmap"
 FORMAT_VERSION = 4
-"""Format version of map v2 with A as harmonic cells (coupled A, bias force, sensor fields); 3
-held A as (rho, z) and core-mode tables, 1 and 2 were grid-only maps."""
+"""Format version of map v2 with A as harmonic cells (coupled A, bias force, sensor fields); a
+file of any other version is refused with the command that rebuilds it (docs/mapfile_format.md
+lists the versions)."""
 ROWS = ("Bx", "By", "Bz", "dBx/dx", "dBx/dy", "dBx/dz", "dBy/dy", "dBy/dz")
 UNITS = {"A_rows_0_2": "T/A", "A_rows_3_7": "T/(m A)", "grid": "m", "moment": "A m^2",
          "current": "A", "force": "N", "field": "T", "sensor_coil_field": "T/A"}
@@ -219,8 +220,10 @@ def _validate_layers(arrays: dict, meta: dict, nc: int, p) -> None:
 
 
 N_MODE_Q = {0: 4, 1: 5, 2: 5}
-"""Quantities per node and shape of a mode table: m = 0 (b, Bz, e, w), m = 1, 2 (a, a1, a2, az,
-a1z, see :func:`mode_rows`)."""
+"""Quantities per node and shape of a mode table: m = 0 (b = Br/rho, Bz, e = (dBr/dz)/rho,
+w = (dBr/drho - Br/rho)/rho^2), m = 1, 2 (the potential x G resp. (x^2 - y^2) H with
+G(rho^2, z): a, a1, a2, az, a1z = -mu0 (G, G', G'', G_z, G'_z), ' = d/d(rho^2); the rows they
+give: :func:`firmware_io.mapfile.modes.mode_rows`)."""
 NQ_MAGNET = 2
 """Quantities per node of a magnet table: F_rho/rho, F_z (N/m, N) of the magnet's pull on one
 core alone."""
