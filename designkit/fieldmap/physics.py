@@ -72,4 +72,5 @@ class MapPhysics:
 
 def map_physics(design) -> MapPhysics:
     """The one place the map's physics comes from (see :class:`MapPhysics`)."""
-    return MapPhysics(np.asarray(design.magnet.moment_vector_a_m2, float), design.drive.max_current_a)
+    return MapPhysics(np.asarray(design.magnet.moment_vector_a_m2, float),
+                      design.drive.max_current_a)

@@ -142,6 +142,10 @@ def _bilinear(t: dict, p: np.ndarray):
     return x, y, lo
 
 
+_MIRROR_XY = np.array([1, 0, 2, 6, 4, 7, 3, 5], np.intp)
+"""The rows of A (Bx, By, Bz, Gxx, Gxy, Gxz, Gyy, Gyz) with x and y exchanged."""
+
+
 def _poly(x: np.ndarray, y: np.ndarray, m: int, c: int) -> np.ndarray:
     """(n, k, Q_m, 8): row r of a basis field = sum over its quantities q of val[q] * P[q, r].
 
@@ -164,13 +168,8 @@ def _poly(x: np.ndarray, y: np.ndarray, m: int, c: int) -> np.ndarray:
         P[..., 2, 3], P[..., 2, 4], P[..., 2, 6] = 4 * x * xx, 4 * xx * y, 4 * x * yy
         P[..., 3, 2], P[..., 3, 5] = x, 1.0
         P[..., 4, 5], P[..., 4, 7] = 2 * xx, 2 * xy
-    elif m == 1:
-        P[..., 0, 1] = 1.0
-        P[..., 1, 0], P[..., 1, 1], P[..., 1, 3], P[..., 1, 4], P[..., 1, 6] = (
-            2 * xy, 2 * yy, 2 * y, 2 * x, 6 * y)
-        P[..., 2, 3], P[..., 2, 4], P[..., 2, 6] = 4 * xx * y, 4 * x * yy, 4 * y * yy
-        P[..., 3, 2], P[..., 3, 7] = y, 1.0
-        P[..., 4, 5], P[..., 4, 7] = 2 * xy, 2 * yy
+    elif m == 1:  # y G is x G mirrored in x = y: swap x, y and the rows (x <-> y)
+        return _poly(y, x, 1, 0)[..., _MIRROR_XY]
     elif c == 0:
         pp = xx - yy
         P[..., 0, 0], P[..., 0, 1], P[..., 0, 3], P[..., 0, 6] = 2 * x, -2 * y, 2.0, -2.0
