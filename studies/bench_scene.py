@@ -30,7 +30,7 @@ import numpy as np
 from designkit import default_design
 from designkit._io import write_json_atomic
 from designkit.array import CoilArray, force_matrix
-from designkit.scene import Scene
+from designkit.skipping import SkippingEvaluator as Scene
 
 VARIANTS = {"direct": ("never", "never"), "skip": ("never", "bound"),
             "tables": ("always", "never"), "tables+skip": ("always", "bound"),

@@ -395,10 +395,33 @@ def test_one_format_definition():
     # designkit builds, firmware_io defines: no private firmware_io name used in designkit
     import re
 
-    src = (Path(__file__).resolve().parents[1] / "designkit" / "fieldmap.py").read_text()
+    pkg = Path(__file__).resolve().parents[1] / "designkit" / "fieldmap"
+    src = "\n".join(f.read_text() for f in sorted(pkg.glob("*.py")))
     assert not re.search(r"\bmf\._\w+", src)
     assert "from firmware_io.mapfile import _" not in src
     assert "savez" not in src and "FORMAT_VERSION =" not in src
+
+
+def test_map_file_and_field_map_are_actuation_sources(mapfile, fm, sample):
+    # both satisfy firmware_io.actuation.ActuationSource, and a selection of rows and coils is
+    # the same selection of the full A (one point and a batch)
+    from firmware_io.actuation import ActuationSource
+    from firmware_io.mapfile import MapFile
+
+    m = MapFile.load(mapfile)
+    assert isinstance(m, ActuationSource) and isinstance(fm, ActuationSource)
+    p, _ = sample
+    rows, coils = (1, 3, 7), (8, 0, 4)
+    for src in (m, fm):
+        assert src.n_coils == 9 and src.design_sha256 == SMALL.spec_hash()
+        assert len(src.bounds) == 2 and np.shape(src.moment_a_m2) == (3,)
+        full = src.actuation(p[:50])
+        np.testing.assert_allclose(src.actuation(p[:50], rows=rows, coils=coils),
+                                   full[:, rows][:, :, coils], rtol=1e-5,
+                                   atol=1e-6 * np.abs(full).max())  # float32 products
+        np.testing.assert_array_equal(src.actuation(p[3], rows=rows, coils=coils),
+                                      src.actuation(p[3])[rows, :][:, coils])
+        assert src.bias_force(p[:4]).shape == (4, 3) and src.bias_force(p[0]).shape == (3,)
 
 
 def test_cli_map_writes_one_file(tmp_path):

@@ -12,6 +12,8 @@ import argparse
 import time
 from pathlib import Path
 
+from .. import fieldmap
+from .._validate import in_range
 from ..design import load_design
 from ._common import add_progress_argument, show_progress
 
@@ -28,9 +30,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .. import fieldmap
-    from .._validate import in_range
-
     # everything that can be refused is refused before the (long) computation
     out = fieldmap.check_output(args.out)
     spacing = in_range("--spacing", args.spacing, 0.5, 100.0, "mm")

@@ -1,0 +1,203 @@
+"""The map's per-core (rho, z) tables: the magnet's pull on one core (``MRZ<k>``) and the core
+modes of the sensor field (``SM<k>``, with their coefficients ``SCOEF``).
+
+Each table is computed for one coil alone at the origin (local frame) on the grid of a spec
+(:func:`designkit.fieldmap.plan.rz_table_spec`); the reader (:mod:`firmware_io.mapfile.modes`)
+evaluates it for every coil of its type. Forces in N, fields in T, lengths in m. The sensor
+field uses reciprocity (linear cores): the field at sensor s along e_c of the cores magnetized
+by the magnet m at p is m . B(p) of the cores magnetized by a unit dipole e_c at s.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from firmware_io.mapfile import N_MODE_Q
+
+from ..array import CoilArray
+from ..constants import MU0
+from ..pose import Pose
+from .physics import MapPhysics
+from .plan import _spec_nodes
+
+
+def _even_on_axis(out: np.ndarray, rho: np.ndarray, cols) -> None:
+    """Fill row 0 (rho = 0) of ``out[..., cols]`` for quantities even in rho:
+    f = f0 + f2 rho^2 + O(rho^4) -> f0 = (r2^2 f(r1) - r1^2 f(r2)) / (r2^2 - r1^2)."""
+    r1, r2 = rho[1] ** 2, rho[2] ** 2
+    out[0, :, cols] = ((r2 * out[1, :, cols] - r1 * out[2, :, cols]) / (r2 - r1))
+
+
+def compute_magnet_table(phys: "MapPhysics", coil, spec: dict) -> np.ndarray:
+    """The magnet table (n_rho, n_u, 2) float64 of one coil alone at the origin: F_rho/rho and
+    F_z of the magnet's pull on its core (N/m, N) for the magnet at (rho, 0, z)."""
+    alone = CoilArray((coil.replace(pose=Pose()),))
+    rho, z = _spec_nodes(spec)
+    R, Z = np.meshgrid(rho, z, indexing="ij")
+    pts = np.c_[R.ravel(), np.zeros(R.size), Z.ravel()]
+    f = phys.bias_force(alone, pts)
+    out = np.empty((len(rho), len(z), 2))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out[..., 0] = (f[:, 0] / pts[:, 0]).reshape(R.shape)
+    out[..., 1] = f[:, 2].reshape(R.shape)
+    _even_on_axis(out, rho, [0])
+    return out
+
+
+def coupled_modes(arr: CoilArray, sensor_tolerance: float = 1e-3) -> dict | None:
+    """The field the magnet-magnetized cores give at the sensors, as a few core modes per core
+    type (None without coupled cores).
+
+    By reciprocity (linear cores) the field at sensor s along e_c of the cores magnetized by
+    the magnet m at p is m . B(p) of the cores magnetized by a unit dipole e_c at s: fixed
+    sources, 3 x 2 x n_coils columns of core unknowns X_j (m = 0 surface currents, m = 1, 2
+    cos and sin charges; :mod:`designkit.coupling`). Per core type and mode order m, the SVD of
+    all X blocks gives the shapes U_m (kept while the singular values are above
+    ``sensor_tolerance`` x the largest of their order); the coefficients C[j, b, (s, c)] =
+    U_m^T X_j[:, (s, c)].
+
+    Returns {"types": [{"model", "coils", "sets": [sensors] ({"U": {m: (n_m, R_m)},
+    "basis": [(m, r, c)]})}], "sensor_coef": (n_coils, n_basis_max, 2, n_coils, 3)}; basis
+    entries (m, r, c): mode order, shape index, c = 0 cos / 1 sin (m = 0: c = 0).
+    """
+    system = arr.coupled()
+    if system is None:
+        return None
+    nc = arr.n_coils
+    sens = arr.sensor_positions_m().reshape(-1, 3)
+    x = np.stack([system.magnet_solution(sens, e) for e in np.eye(3)], axis=-1)  # (nu, ns, 3)
+    x = x.reshape(len(x), -1)  # columns (sensor, component)
+    blocks = {}
+    for jj, k in enumerate(system.core_index):
+        model = system.models[jj]
+        blocks.setdefault(id(model), (model, []))[1].append((jj, k))
+    types = []
+    for model, members in blocks.values():
+        n0, n1, m_max = model.n0, model.n1, model.m_max
+        dx = {k: x[system.offsets[jj]:system.offsets[jj + 1]] for jj, k in members}
+        parts = {0: [(slice(0, n0), 0)]}
+        # the tables hold m <= 2 (N_MODE_Q); the core solve's m = 3 part of the field at the
+        # sensors is left out (bench_map: sensor_field error against the full model)
+        for m in range(1, min(m_max, max(N_MODE_Q)) + 1):
+            parts[m] = [(slice(n0 + (2 * (m - 1) + c) * n1, n0 + (2 * (m - 1) + c + 1) * n1), c)
+                        for c in range(2)]
+        U = {}
+        for m in parts:
+            mat = np.concatenate([dx[k][sl] for k in dx for sl, _ in parts[m]], axis=1)
+            u, sv, _ = np.linalg.svd(mat, full_matrices=False)
+            if sv[0] > 0:
+                U[m] = u[:, :max(1, int(np.sum(sv > sensor_tolerance * sv[0])))]
+        basis = [(m, r, c) for m in sorted(U) for r in range(U[m].shape[1])
+                 for c in ((0,) if m == 0 else (0, 1))]
+        types.append({"model": model, "coils": [k for _, k in members],
+                      "sets": [{"U": U, "basis": basis}], "parts": parts, "dx": dx})
+    nb = max(len(t["sets"][0]["basis"]) for t in types)
+    coef = np.zeros((nc, nb, x.shape[1]))
+    for t in types:
+        st = t["sets"][0]
+        for k, d in t["dx"].items():
+            for b, (m, r, c) in enumerate(st["basis"]):
+                sl = [s for s, cc in t["parts"][m] if cc == c][0]
+                coef[k, b] = st["U"][m][:, r] @ d[sl]
+    return {"types": types, "sensor_coef": coef.reshape(nc, nb, 2, nc, 3)}
+
+
+def compute_mode_tables(t: dict, spec: dict, progress=None) -> list:
+    """The mode tables (n_rho, n_u, Q) float64 of one core type, one per shape set of ``t``
+    (the sensor field's): for each shape, the quantities of :data:`N_MODE_Q` from the core model's
+    basis fields at (rho, 0, z), local frame (one evaluation of the basis for all sets)."""
+    model = t["model"]
+    t_sets = t["sets"]
+    rho, z = _spec_nodes(spec)
+    R, Z = np.meshgrid(rho, z, indexing="ij")
+    pts = np.c_[R.ravel(), np.zeros(R.size), Z.ravel()]
+    n0, n1 = model.n0, model.n1
+    # all shapes of all sets side by side; split at the end
+    U = {}
+    for st in t["sets"]:
+        for m, u in st["U"].items():
+            U[m] = u if m not in U else np.concatenate([U[m], u], axis=1)
+    t = {"U": U}
+    shapes = [(m, r) for m in sorted(t["U"]) for r in range(t["U"][m].shape[1])]
+    q_tot = sum(N_MODE_Q[m] for m, _ in shapes)
+    out = np.zeros((R.size, q_tot))
+    chunk = 256
+    for s in range(0, len(pts), chunk):
+        if progress is not None:  # the longest step of a build: show how far it is
+            progress(s / len(pts))
+        p = pts[s:s + chunk]
+        # the fine charge quadrature where the compressed rules are not accurate (near the
+        # core), as the coupled model's own field evaluation does
+        near = ~model.far_mask(np.hypot(p[:, 0], p[:, 1]), p[:, 2])
+        h = np.zeros((len(p), 3, model.n_unknowns))
+        g = np.zeros((len(p), 3, 3, model.n_unknowns))
+        for sel, fine in ((near, True), (~near, False)):
+            if np.any(sel):
+                h[sel], g[sel] = model.basis_field(p[sel], gradient=True, fine=fine)
+        r_ = p[:, 0]
+        col = 0
+        for m, r in shapes:
+            u = t["U"][m][:, r]
+            if m == 0:
+                b = MU0 * h[:, :, :n0] @ u
+                gg = MU0 * g[:, :, :, :n0] @ u
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    bb = gg[:, 1, 1]  # Br/rho = dBy/dy on the x axis
+                    out[s:s + chunk, col:col + 4] = np.c_[
+                        bb, b[:, 2], gg[:, 0, 2] / r_, (gg[:, 0, 0] - bb) / r_ ** 2]
+            else:
+                cs = [slice(n0 + (2 * (m - 1) + c) * n1, n0 + (2 * (m - 1) + c + 1) * n1)
+                      for c in range(2)]
+                bc, gc = MU0 * h[:, :, cs[0]] @ u, MU0 * g[:, :, :, cs[0]] @ u
+                bs, gs = MU0 * h[:, :, cs[1]] @ u, MU0 * g[:, :, :, cs[1]] @ u
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    if m == 1:  # cos: x G, sin: y G (formulas in firmware_io.mapfile)
+                        a = bs[:, 1]
+                        az = gs[:, 1, 2]
+                        a1 = gc[:, 1, 1] / (2 * r_)
+                        a2 = (gc[:, 0, 0] - 6 * r_ * a1) / (4 * r_ ** 3)
+                        a1z = (gc[:, 0, 2] - az) / (2 * r_ ** 2)
+                    else:  # cos: (x^2 - y^2) H, sin: 2 x y H
+                        a = bs[:, 1] / (2 * r_)
+                        az = gs[:, 1, 2] / (2 * r_)
+                        a1 = (gc[:, 1, 1] + 2 * a) / (2 * r_ ** 2)
+                        a2 = (gc[:, 0, 0] - 2 * a - 10 * r_ ** 2 * a1) / (4 * r_ ** 4)
+                        a1z = (gc[:, 0, 2] - 2 * r_ * az) / (2 * r_ ** 3)
+                out[s:s + chunk, col:col + 5] = np.c_[a, a1, a2, az, a1z]
+            col += N_MODE_Q[m]
+    out = out.reshape(len(rho), len(z), q_tot)
+    # rho = 0: every quantity is even in rho -> Richardson from the next two nodes
+    _even_on_axis(out, rho, slice(None))
+    # split per set, in each set's own shape order (m ascending, r ascending)
+    col = {}
+    c0 = 0
+    for m, r in shapes:
+        col[(m, r)] = c0
+        c0 += N_MODE_Q[m]
+    tables, offset = [], {m: 0 for m in U}
+    for st in t_sets:
+        cols = []
+        for m in sorted(st["U"]):
+            for r in range(st["U"][m].shape[1]):
+                c = col[(m, offset[m] + r)]
+                cols.extend(range(c, c + N_MODE_Q[m]))
+            offset[m] += st["U"][m].shape[1]
+        tables.append(out[..., cols])
+    return tables
+
+
+def mode_table_entry(t: dict, spec: dict, k: int, progress=None) -> tuple[np.ndarray, dict]:
+    """Core type ``k``'s sensor-field mode table as stored, (n_rho, n_u, Q) float16 with each
+    column scaled to its largest |value| (the sensor field is a few mT, its budget ~2 %), and
+    its entry of meta ``sensor_mode_tables``."""
+    tab = compute_mode_tables(t, spec, progress)[0]
+    st = t["sets"][0]
+    shapes = [[m, r] for m in sorted(st["U"]) for r in range(st["U"][m].shape[1])]
+    cols = np.cumsum([0] + [N_MODE_Q[m] for m, _ in shapes])[:-1].tolist()
+    col_scale = np.maximum(np.abs(tab).max(axis=(0, 1)), 1e-300)
+    meta = {"name": f"SM{k}", "coils": [int(c) for c in t["coils"]],
+            **spec, "shape": list(tab.shape), "shapes": shapes,
+            "column_scale": col_scale.tolist(),
+            "columns": [int(c) for c in cols],
+            "basis": [list(b) for b in st["basis"]]}
+    return (tab / col_scale).astype(np.float16), meta
