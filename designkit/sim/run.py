@@ -26,7 +26,7 @@ from ..coil import Coil
 from ..design import Design, load_design
 from ..errors import BadInputError
 from ..render.laws import ConstraintLaw
-from ..render.scenefile import compile_scene, make_object
+from ..render import scenefile  # called through the module: tests substitute its functions
 from .device import SimulatedDevice
 from .faults import FaultSchedule
 from .loop import simulate
@@ -76,9 +76,10 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
         path = _scripted_path(design, array, virtual, trajectory, duration)
     map_path, fmap = _map(design, array, map_path, out, progress)
     lam = design.render.stiffness_n_per_m if lam_n_per_m is None else float(lam_n_per_m)
-    scene_path = compile_scene(virtual, out / "scene.npz", lam_n_per_m=lam,
-                               law=ConstraintLaw(lam), map_design_sha256=fmap.design_sha256,
-                               extra_meta={"object": obj, "rows": rows})
+    scene_path = scenefile.compile_scene(virtual, out / "scene.npz", lam_n_per_m=lam,
+                                         law=ConstraintLaw(lam),
+                                         map_design_sha256=fmap.design_sha256,
+                                         extra_meta={"object": obj, "rows": rows})
     scene = Scene.load(scene_path, expected_design_sha256=fmap.design_sha256)
     drive = drive_data(design)
     device = SimulatedDevice(design, array, seed=seed, resistance_ohm=drive["resistance_ohm"][0],
@@ -120,7 +121,7 @@ def _checked_inputs(obj, trajectory, duration_s, faults, rows, period_s):
         raise BadInputError("rows", "'force' (3-D) or 'fz' (the thesis' vertical force)", rows)
     if not 1e-4 <= period_s <= 0.05:
         raise BadInputError("period", "in [0.1, 50] ms", period_s * 1e3)
-    virtual = make_object(obj)
+    virtual = scenefile.make_object(obj)
     scripted = trajectory in ("slide", "poke")
     path = None if scripted else Trajectory.from_csv(trajectory)
     duration = float(duration_s or (path.duration_s if path is not None
