@@ -24,6 +24,12 @@ from .errors import BadInputError, CoilWriteError
 from .md10c import CoilDrive, DriveCommand, current_to_command, voltage_to_command
 
 
+Plan = tuple[list[DriveCommand], list[dict[int, ChannelValue]], list[dict[int, ChannelValue]],
+             list[int]]
+"""What :meth:`CoilDriver.plan` returns: the commands, the first and second writes per board,
+and the coils that reverse under current."""
+
+
 @dataclass(frozen=True)
 class CoilOutput:
     """Where one coil's MD10C is wired.
@@ -174,8 +180,7 @@ class CoilDriver:
                              safe_state=safe) from exc
 
     # -- the command ---------------------------------------------------------------------------
-    def plan(self, currents_a: Sequence[float] | np.ndarray) -> tuple[
-            list[DriveCommand], list[dict[int, ChannelValue]], list[dict[int, ChannelValue]], list[int]]:
+    def plan(self, currents_a: Sequence[float] | np.ndarray) -> Plan:
         """Work out the writes for a current command without touching the bus.
 
         Returns
@@ -187,8 +192,7 @@ class CoilDriver:
         arr = self._checked(currents_a, "currents_a", "currents in A")
         return self._plan([current_to_command(float(i), d) for i, d in zip(arr, self.drives)])
 
-    def plan_voltage(self, voltages_v: Sequence[float] | np.ndarray) -> tuple[
-            list[DriveCommand], list[dict[int, ChannelValue]], list[dict[int, ChannelValue]], list[int]]:
+    def plan_voltage(self, voltages_v: Sequence[float] | np.ndarray) -> Plan:
         """:meth:`plan` for average coil voltages (shape (n_coils,), V, signed)."""
         arr = self._checked(voltages_v, "voltages_v", "voltages in V")
         return self._plan([voltage_to_command(float(v), d) for v, d in zip(arr, self.drives)])
@@ -199,8 +203,7 @@ class CoilDriver:
             raise BadInputError(name, f"{self.n_coils} finite {what}", values)
         return arr
 
-    def _plan(self, commands: list[DriveCommand]) -> tuple[
-            list[DriveCommand], list[dict[int, ChannelValue]], list[dict[int, ChannelValue]], list[int]]:
+    def _plan(self, commands: list[DriveCommand]) -> Plan:
         first: list[dict[int, ChannelValue]] = [{} for _ in self.boards]
         second: list[dict[int, ChannelValue]] = [{} for _ in self.boards]
         reversed_coils = []

@@ -1,9 +1,9 @@
 """Hardware entry point on the controller: ``python -m firmware_io.run --bus 1 --map F --scene F``.
 
 Thin: parse, load the map and the scene (refusing a pair from different designs), open the bus
-(or two: ``--sensor-bus``), build the drivers with the default wiring (firmware_io.coils, firmware_io.sensors), put every
-coil in the safe state and run :class:`firmware_io.runner.Runner` until Ctrl-C or ``--duration``.
-Sensors are read in a background thread at the rate the bus allows; the control loop predicts
+(or two: ``--sensor-bus``), build the drivers with the default wiring (firmware_io.coils,
+firmware_io.sensors), put every coil in the safe state and run
+:class:`firmware_io.runner.Runner` until Ctrl-C or ``--duration``. Sensors are read in a background thread at the rate the bus allows; the control loop predicts
 between frames. Everything a user can get wrong is checked before any coil is energized.
 Needs numpy and smbus2 only.
 """
@@ -35,9 +35,9 @@ EXIT_BAD_INPUT = 2
 
 
 SWITCH_INTERVAL_S = 1e-4
-"""Python's GIL hand-over interval while the sensor thread runs (default 5 ms): the control
-thread waits at most about this long for the interpreter when it wakes up for a step while the
-sensor thread is fitting."""
+"""Python's GIL hand-over interval while the sensor thread runs, s: the control thread waits at
+most about this long for the interpreter when it wakes up for a step while the sensor thread is
+fitting (docs/runner.md, "Threads")."""
 
 
 class ThreadedSensorSource:

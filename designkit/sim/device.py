@@ -49,8 +49,9 @@ class SimulatedDevice:
     resistance_ohm, inductance_h : float, optional
         The coils' true R and L (default: from the design's coil model).
 
-    The coil bus runs at 1 MHz (the PCA9685s on their own adapter: Fm+, per the PCA9685 datasheet), the
-    sensor bus at 400 kHz (the TCA9548A's limit); each has its own simulated clock.
+    The coil bus runs at 1 MHz (the PCA9685s on their own adapter: Fm+, per the PCA9685
+    datasheet), the sensor bus at 400 kHz (the TCA9548A's limit); each has its own simulated
+    clock.
     """
 
     def __init__(self, design, array=None, *, noise_t: float = 1e-4, seed: int = 0,

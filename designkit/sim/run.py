@@ -63,8 +63,8 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
     the design's CoilArray when the caller has one (its coupled solve is reused).
     ``calibrate``: the start-up sensor calibration (:meth:`SimulatedDevice.calibrate_sensors`)
     before the run; the localizer then weighs the sensors with
-    :data:`firmware_io.runner.CALIBRATED_RELATIVE_ERROR`. ``profile``: the runner times each stage of its step
-    (summary ``loop_by_kind['stages']``). ``skip_force_n``: the runner's coil-skip force, N.
+    :data:`firmware_io.runner.CALIBRATED_RELATIVE_ERROR`. ``profile``: the runner times each
+    stage of its step (summary ``loop_by_kind['stages']``). ``skip_force_n``: the runner's coil-skip force, N.
     """
     design = design if isinstance(design, Design) else load_design(design)
     virtual, path, duration, schedule = _checked_inputs(obj, trajectory, duration_s, faults,
