@@ -12,8 +12,8 @@ sensor arrays, checks each sensor's health and fits the magnet's position, publi
       -> voltages: R-L feed-forward within the supply; I^2 t guard [drive, thermal]
       -> MD10C duty/direction, one block write per PCA9685        [firmware_io.coils]
 
-Configuration: :mod:`.config`; start-up sensor calibration: :mod:`.calibration`. The fault
-table, the resume policy and the timing rationale: docs/runner.md. Imports numpy only (plus
+Configuration: :mod:`.config`; start-up sensor calibration: :mod:`.calibration`. For the fault
+table, the resume policy and the timing rationale see docs/runner.md. Imports numpy only (plus
 the firmware_io drivers); the hardware entry point is ``python -m firmware_io.run``.
 """
 

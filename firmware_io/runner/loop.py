@@ -6,7 +6,8 @@ Each :meth:`Runner.step` takes the sensor side's newest :class:`~firmware_io.run
 force f (N) there, allocates currents (A) with min ||F(p) I - (f - F0(p))|| within the bounds,
 turns them into the voltages of the R-L feed-forward (:mod:`firmware_io.runner.drive`) and
 writes the MD10C duties, one block write per PCA9685. Every fault switches every coil off in
-the same step. The fault table, the resume policy and the timing rationale: docs/runner.md.
+the same step. For the fault table, the resume policy and the timing rationale see
+docs/runner.md.
 """
 
 from __future__ import annotations
