@@ -82,7 +82,9 @@ class Runner:
     allocate : callable
         ``allocate(force_matrix, target, current_limit, total_limit, unipolar=...)``
         -> (currents, residual) (firmware_io.allocation).
-    coils : CoilDriver
+    coils : firmware_io.coils.CoilDriver
+        Takes the voltages of the current path (``command_voltage``); ``all_off`` is the safe
+        state.
     sensors : callable
         ``sensors(t_s) -> Fix | SensorFrame | None``: the newest result not yet handed out, or
         None. A source with ``attach(pipeline)`` is given this runner's
