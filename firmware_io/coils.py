@@ -1,4 +1,4 @@
-"""CoilDriver: nine signed coil currents -> PWM and DIR outputs on two PCA9685 boards.
+"""CoilDriver: nine signed coil voltages or currents -> PWM and DIR outputs on two PCA9685 boards.
 
 Each coil needs two outputs (MD10C PWM = magnitude, DIR = direction), so nine coils need 18 > 16
 outputs and two boards. A coil's PWM and DIR sit on one chip, so the STOP of that chip's single
@@ -21,7 +21,13 @@ import numpy as np
 
 from .devices import PCA9685, ChannelValue
 from .errors import BadInputError, CoilWriteError
-from .md10c import CoilDrive, DriveCommand, current_to_command
+from .md10c import CoilDrive, DriveCommand, current_to_command, voltage_to_command
+
+
+Plan = tuple[list[DriveCommand], list[dict[int, ChannelValue]], list[dict[int, ChannelValue]],
+             list[int]]
+"""What :meth:`CoilDriver.plan` returns: the commands, the first and second writes per board,
+and the coils that reverse under current."""
 
 
 @dataclass(frozen=True)
@@ -58,6 +64,8 @@ class CoilCommandResult:
     ----------
     current_a : ndarray, shape (n_coils,), A
         Steady currents the written duties produce (signed, clamped, quantised).
+    voltage_v : ndarray, shape (n_coils,), V
+        Average voltages the written duties apply (signed, clamped, quantised).
     clamped : ndarray, shape (n_coils,), bool
         Requests that exceeded a coil's limit.
     reversed_coils : tuple of int
@@ -69,6 +77,7 @@ class CoilCommandResult:
     clamped: np.ndarray
     reversed_coils: tuple[int, ...]
     commands: tuple[DriveCommand, ...]
+    voltage_v: np.ndarray
 
 
 class CoilDriver:
@@ -171,9 +180,8 @@ class CoilDriver:
                              safe_state=safe) from exc
 
     # -- the command ---------------------------------------------------------------------------
-    def plan(self, currents_a: Sequence[float] | np.ndarray) -> tuple[
-            list[DriveCommand], list[dict[int, ChannelValue]], list[dict[int, ChannelValue]], list[int]]:
-        """Work out the writes for a command without touching the bus.
+    def plan(self, currents_a: Sequence[float] | np.ndarray) -> Plan:
+        """Work out the writes for a current command without touching the bus.
 
         Returns
         -------
@@ -181,10 +189,21 @@ class CoilDriver:
             ``first_writes[b]`` / ``second_writes[b]`` are the channel maps for board b (the
             second step exists only for boards with a reversing coil).
         """
-        arr = np.asarray(currents_a, dtype=float)
+        arr = self._checked(currents_a, "currents_a", "currents in A")
+        return self._plan([current_to_command(float(i), d) for i, d in zip(arr, self.drives)])
+
+    def plan_voltage(self, voltages_v: Sequence[float] | np.ndarray) -> Plan:
+        """:meth:`plan` for average coil voltages (shape (n_coils,), V, signed)."""
+        arr = self._checked(voltages_v, "voltages_v", "voltages in V")
+        return self._plan([voltage_to_command(float(v), d) for v, d in zip(arr, self.drives)])
+
+    def _checked(self, values, name: str, what: str) -> np.ndarray:
+        arr = np.asarray(values, dtype=float)
         if arr.shape != (self.n_coils,) or not np.all(np.isfinite(arr)):
-            raise BadInputError("currents_a", f"{self.n_coils} finite currents in A", currents_a)
-        commands = [current_to_command(float(i), d) for i, d in zip(arr, self.drives)]
+            raise BadInputError(name, f"{self.n_coils} finite {what}", values)
+        return arr
+
+    def _plan(self, commands: list[DriveCommand]) -> Plan:
         first: list[dict[int, ChannelValue]] = [{} for _ in self.boards]
         second: list[dict[int, ChannelValue]] = [{} for _ in self.boards]
         reversed_coils = []
@@ -213,7 +232,14 @@ class CoilDriver:
         write after :attr:`reversal_dwell_s`. Raises :class:`CoilWriteError` (all coils off)
         if any write fails.
         """
-        commands, first, second, reversed_coils = self.plan(currents_a)
+        return self._write(*self.plan(currents_a))
+
+    def command_voltage(self, voltages_v: Sequence[float] | np.ndarray) -> CoilCommandResult:
+        """Apply the average voltages ``voltages_v`` (shape (n_coils,), V, signed): the duty is
+        ``|V| / Vs``. Writes and failure as :meth:`command`."""
+        return self._write(*self.plan_voltage(voltages_v))
+
+    def _write(self, commands, first, second, reversed_coils) -> CoilCommandResult:
         try:
             for b, values in zip(self.boards, first):
                 if values:
@@ -234,6 +260,7 @@ class CoilDriver:
             clamped=np.array([c.clamped for c in commands]),
             reversed_coils=tuple(reversed_coils),
             commands=tuple(commands),
+            voltage_v=np.array([c.voltage_v for c in commands]),
         )
 
     def _dwell(self) -> float:

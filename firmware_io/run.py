@@ -1,9 +1,9 @@
 """Hardware entry point on the controller: ``python -m firmware_io.run --bus 1 --map F --scene F``.
 
 Thin: parse, load the map and the scene (refusing a pair from different designs), open the bus
-(or two: ``--sensor-bus``), build the drivers with the default wiring (firmware_io.coils, firmware_io.sensors), put every
-coil in the safe state and run :class:`firmware_io.runner.Runner` until Ctrl-C or ``--duration``.
-Sensors are read in a background thread at the rate the bus allows; the control loop predicts
+(or two: ``--sensor-bus``), build the drivers with the default wiring (firmware_io.coils,
+firmware_io.sensors), put every coil in the safe state and run
+:class:`firmware_io.runner.Runner` until Ctrl-C or ``--duration``. Sensors are read in a background thread at the rate the bus allows; the control loop predicts
 between frames. Everything a user can get wrong is checked before any coil is energized.
 Needs numpy and smbus2 only.
 """
@@ -11,21 +11,33 @@ Needs numpy and smbus2 only.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import threading
 import time
 
 import numpy as np
 
+from .allocation import Allocator
+from .bus import open_bus
+from .coils import CoilDriver
+from .devices import PCA9685
 from .errors import FirmwareIOError
+from .localization import Localizer
+from .mapfile import MapFile
+from .runner import (CALIBRATED_RELATIVE_ERROR, CALIBRATION_CURRENT_A, ConstantVelocityTracker,
+                     Runner, SceneForce, SensorFrame, calibrate_sensors, calibration_currents,
+                     config_from_map, record_calibration)
+from .scene import Scene
+from .sensors import SensorArrays
 
 EXIT_BAD_INPUT = 2
 
 
 SWITCH_INTERVAL_S = 1e-4
-"""Python's GIL hand-over interval while the sensor thread runs (default 5 ms): the control
-thread waits at most about this long for the interpreter when it wakes up for a step while the
-sensor thread is fitting."""
+"""Python's GIL hand-over interval while the sensor thread runs, s: the control thread waits at
+most about this long for the interpreter when it wakes up for a step while the sensor thread is
+fitting (docs/runner.md, "Threads")."""
 
 
 class ThreadedSensorSource:
@@ -57,8 +69,6 @@ class ThreadedSensorSource:
         self.thread.join(timeout=1.0)
 
     def _loop(self) -> None:
-        from .runner import SensorFrame
-
         previous = None
         while not self._stop.is_set():
             t0 = self.clock()
@@ -112,8 +122,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _bus_number(text: str, what: str, dev_dir: str = "/dev") -> int:
     """The adapter number, checked to exist (``/dev/i2c-N``) before anything else is done."""
-    import os
-
     try:
         n = int(text)
     except ValueError:
@@ -143,31 +151,18 @@ def check_sensor_arrays(status, n_per_array: int, min_per_array: int = 4) -> Non
 
 def load_inputs(map_path: str, scene_path: str, method: str):
     """Map, scene and localizer, checked against each other (no device is touched)."""
-    from .localization import Localizer
-    from .mapfile import MapFile
-    from .scene import Scene
-
     fmap = MapFile.load(map_path)
     scene = Scene.load(scene_path, expected_design_sha256=fmap.design_sha256)
     localizer = Localizer.from_map(map_path, method=method)
     return fmap, scene, localizer
 
 
-def open_device(bus_number: int, sensor_bus_number: int | None, drive_args: dict):
-    """Open the bus(es) and build the PWM boards and sensor arrays (default wiring)."""
-    from .bus import open_bus
-    from .coils import CoilDriver
-    from .devices import PCA9685
-    from .md10c import CoilDrive
-    from .sensors import SensorArrays
-
+def open_device(bus_number: int, sensor_bus_number: int | None, drives):
+    """Open the bus(es) and build the PWM boards (one :class:`firmware_io.md10c.CoilDrive` per
+    coil: the runner configuration's ``drives``) and sensor arrays (default wiring)."""
     bus = open_bus(bus_number)
     sbus = bus if sensor_bus_number is None else open_bus(sensor_bus_number)
-    n = drive_args["n_coils"]
-    boards = [PCA9685(bus, 0x40 + b) for b in range((n + 7) // 8)]
-    drives = [CoilDrive(drive_args["supply_voltage_v"], r,
-                        min(drive_args["supply_voltage_v"] / r, 13.0))
-              for r in drive_args["resistance_ohm"]]
+    boards = [PCA9685(bus, 0x40 + b) for b in range((len(drives) + 7) // 8)]
     return CoilDriver(boards, drives), SensorArrays(sbus)
 
 
@@ -175,11 +170,7 @@ def calibrated_localizer(map_path: str, method: str, localizer, coils, arrays, c
                          sleep=time.sleep):
     """The start-up sensor calibration (firmware_io.runner.record_calibration: coils alone,
     each pattern held for 7 L/R), then a localizer that uses it."""
-    from .localization import Localizer
-    from .runner import (CALIBRATED_RELATIVE_ERROR, CALIBRATION_CURRENT_A, calibrate_sensors,
-                         calibration_currents, record_calibration)
-
-    tau = max(ind / r for ind, r in zip(cfg.inductance_h, cfg.resistance_ohm))
+    tau = max(d.inductance_h / d.resistance_ohm for d in cfg.drives)
     amp = min(CALIBRATION_CURRENT_A, cfg.current_limit_a)
     print(f"calibrating the sensors ({amp:.1f} A patterns, keep the magnet away)...",
           file=sys.stderr)
@@ -191,9 +182,6 @@ def calibrated_localizer(map_path: str, method: str, localizer, coils, arrays, c
 
 
 def main(argv: list[str] | None = None) -> int:
-    from .allocation import Allocator
-    from .runner import ConstantVelocityTracker, Runner, SceneForce, config_from_map
-
     args = build_parser().parse_args(argv)
     try:
         bus_n = _bus_number(args.bus, "--bus")
@@ -202,9 +190,7 @@ def main(argv: list[str] | None = None) -> int:
         rows = scene.meta.get("rows", "force")
         cfg = config_from_map(fmap, control_period_s=args.period_ms * 1e-3,
                               unipolar=args.unipolar, force_axes="z" if rows == "fz" else "xyz")
-        coils, arrays = open_device(bus_n, sbus_n, {
-            "n_coils": cfg.n_coils, "supply_voltage_v": cfg.supply_voltage_v,
-            "resistance_ohm": cfg.resistance_ohm})
+        coils, arrays = open_device(bus_n, sbus_n, cfg.drives)
         check_sensor_arrays(arrays.configure(), cfg.n_coils)
         if args.calibrate:
             localizer = calibrated_localizer(args.map, args.method, localizer, coils, arrays, cfg)

@@ -77,8 +77,7 @@ def _loop(summary: dict) -> dict:
 
 def run(out_dir=DEFAULT_OUT, *, map_path=None, duration_s: float = 2.0,
         quick: bool = False) -> dict:
-    from designkit.plant import drive_data
-    from designkit.plant import run_simulation, slide_trajectory
+    from designkit.sim import drive_data, run_simulation, slide_trajectory
     from designkit.render.scenefile import make_object
     from firmware_io.allocation import allocate
     from firmware_io.mapfile import MapFile

@@ -81,7 +81,7 @@ def check_run_csv(path, summary: dict) -> dict:
 
 def run(out_dir=DEFAULT_OUT, *, map_path=None, duration_s: float = 4.0,
         quick: bool = False, objects=OBJECTS, rows=("force", "fz")) -> dict:
-    from designkit.plant import run_simulation
+    from designkit.sim import run_simulation
 
     out_dir, design, array, map_path = design_and_map(out_dir, map_path, progress=not quick)
     if quick:

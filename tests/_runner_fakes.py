@@ -47,9 +47,11 @@ class ConstantMap:
         self.moment_a_m2 = np.asarray(moment, float)
         self._bias = bias
 
-    def actuation(self, p):
+    def actuation(self, p, *, rows=None, coils=None):
         p = np.asarray(p, float)
-        return self.a if p.ndim == 1 else np.broadcast_to(self.a, (len(p),) + self.a.shape)
+        a = self.a if rows is None else self.a[list(rows)]
+        a = a if coils is None else a[:, list(coils)]
+        return a if p.ndim == 1 else np.broadcast_to(a, (len(p),) + a.shape)
 
     def bias_force(self, p):
         b = np.zeros(3) if self._bias is None else np.asarray(self._bias, float)

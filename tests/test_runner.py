@@ -14,8 +14,8 @@ from scipy.integrate import solve_ivp
 from designkit.array import CoilArray
 from designkit.design import default_design
 from designkit.errors import BadInputError
-from designkit.plant import (FAULT_TYPES, FaultSchedule, SimulatedDevice, Trajectory, simulate,
-                             slide_trajectory, time_to_safe)
+from designkit.sim import (FAULT_TYPES, FaultSchedule, SimulatedDevice, Trajectory, simulate,
+                           slide_trajectory, time_to_safe)
 from firmware_io.errors import FirmwareIOError
 from firmware_io.runner import (Runner, RunnerConfig, ThermalGuard, feedforward_voltage,
                                 rl_step)

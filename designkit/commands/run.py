@@ -1,7 +1,7 @@
 """``designkit run --simulate``: the hardware rendering runner closed around the simulated device.
 
 The runner is firmware_io's (the code that runs on the controller); the device is
-:mod:`designkit.plant` (exact array physics, R-L coils, register-level sensors and PWM boards).
+:mod:`designkit.sim` (exact array physics, R-L coils, register-level sensors and PWM boards).
 Writes ``run.csv`` (one row per control step), ``summary.json``, ``run.png`` (thesis Fig. 4.5-like)
 and ``loop_timing.png`` into ``--out``. On the controller itself use
 ``python -m firmware_io.run --bus 1 --map FILE --scene FILE``.
@@ -12,6 +12,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..errors import BadInputError
+from ..sim import run_simulation
 from ._common import add_progress_argument, show_progress, staged_folder
 
 OBJECTS = ("plane", "hemisphere", "half-cylinder", "wedge")
@@ -47,9 +49,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..errors import BadInputError
-    from ..plant import run_simulation
-
     if not args.simulate:
         raise BadInputError("--simulate", "given (this machine has no coil hardware; on the "
                             "controller run `python -m firmware_io.run --bus N --map F --scene F`)",
@@ -58,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     # folder (map and scene without a summary) behind
     with staged_folder(args.out) as stage:
         summary = run_simulation(
-        design=args.design, obj=args.object, trajectory=args.trajectory,
+            design=args.design, obj=args.object, trajectory=args.trajectory,
             duration_s=args.duration, faults=args.faults, map_path=args.map,
             method=args.method, period_s=args.period_ms * 1e-3, unipolar=args.unipolar,
             rows=args.rows, lam_n_per_m=args.lam, seed=args.seed, out=stage,

@@ -1,0 +1,219 @@
+"""The closed loop: firmware_io's runner driven step by step against the simulated device.
+
+Per control period T (s): scheduled faults are injected, the sensor source ticks (outside the
+runner's timed section, as the sensor thread runs beside the loop on hardware), the runner
+steps, the true force on the magnet (N) is taken at the true position with the true coil
+currents (A), and the coils advance one R-L step under the voltages the PWM registers hold.
+The runner's compute time is this thread's CPU time less the time spent inside the simulated
+PWM boards (the plant's work, not the runner's). Output: :class:`SimulationResult`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .._progress import tqdm
+from .device import SimulatedDevice
+from .faults import FaultSchedule, inject
+from .trajectory import Trajectory
+
+OUT_OF_BOX_LIFT_M = 0.06
+"""An injected ``out_of_box`` lifts the finger this far (above the map box), m."""
+
+OUT_OF_BOX_S = 0.3
+"""How long an injected ``out_of_box`` keeps the finger lifted, s."""
+
+COLUMNS = ("t_s", "x_m", "y_m", "z_m", "xe_m", "ye_m", "ze_m", "fx_ref_n", "fy_ref_n",
+           "fz_ref_n", "fx_n", "fy_n", "fz_n", "fx_obj_n", "fy_obj_n", "fz_obj_n", "loop_s")
+"""The per-step float columns (SI); coil currents and commands are added per coil."""
+
+
+@dataclass
+class SimulationResult:
+    """Per-step columns (SI; the run.csv columns, plus ``new_frame`` (bool: the step took in a
+    new sensor result) and, when the runner profiles, ``stage_<name>_s``), the faults as
+    injected (time s, type; overrun and over-limit wait for a running step), the runner's fault
+    log and the sensor side's fit times (s, one per frame)."""
+
+    columns: dict
+    faults: list
+    fault_log: list
+    period_s: float
+    fit_s: list = field(default_factory=list)
+
+
+class _Injector:
+    """The fault schedule during a run: what to inject before each step, and the hooks that
+    let a defect reach the runner (the allocation wrapper, the out-of-box lift)."""
+
+    def __init__(self, device: SimulatedDevice, faults: FaultSchedule):
+        self.device = device
+        self.events = list(faults.events)
+        self.pending: list = []
+        self.injected: list = []
+        self.state: dict = {}
+        self.out_windows = [(te, te + OUT_OF_BOX_S) for te, f in self.events
+                            if f == "out_of_box"]
+
+    def position(self, trajectory: Trajectory, ts: float) -> np.ndarray:
+        """The true position at ``ts`` (s), lifted out of the box in an out-of-box window."""
+        p = trajectory.at(ts)
+        if any(a <= ts < b for a, b in self.out_windows):
+            p = p + np.array([0.0, 0.0, OUT_OF_BOX_LIFT_M])   # above the map box
+        return p
+
+    def allocate_hook(self, allocate):
+        """Wrap the allocator so that an injected over-limit defect asks for 1.5x the limit."""
+        def wrapped(*args, **kw):
+            i, r = allocate(*args, **kw)
+            if self.state.pop("over_limit_step", False):     # a defect upstream
+                i = 1.5 * np.asarray(args[2], float) * np.where(i < 0, -1.0, 1.0)
+            return i, r
+        return wrapped
+
+    def before_step(self, runner, ts: float) -> bool:
+        """Inject what is due at ``ts`` and end expired ones; True when this step overruns."""
+        device, state = self.device, self.state
+        n = device.array.n_coils
+        while self.events and self.events[0][0] <= ts + 1e-12:
+            _, name = self.events.pop(0)
+            if name in ("overrun", "over_limit"):
+                self.pending.append(name)     # a defect of a running loop: wait for one
+            else:
+                self._inject(runner, name, ts)
+        if self.pending and runner.state == "running":
+            self._inject(runner, self.pending.pop(0), ts)
+        if ts >= state.get("saturated_until", np.inf):
+            device.field_offset_t[0] = 0.0
+            state.pop("saturated_until")
+        if ts >= state.get("dead_until", np.inf):
+            device.tlv[n + 1].nack_always = False
+            state.pop("dead_until")
+        return state.pop("overrun_step", False)
+
+    def _inject(self, runner, name: str, ts: float) -> None:
+        inject(self.device, runner, name, ts, self.state)
+        self.injected.append((float(ts), name))
+
+
+class _Recorder:
+    """The per-step columns of a run (see :class:`SimulationResult`)."""
+
+    def __init__(self, n_steps: int, n_coils: int):
+        self.cols = {k: np.zeros(n_steps) for k in COLUMNS}
+        self.cur = np.zeros((n_steps, n_coils))
+        self.cmd = np.zeros((n_steps, n_coils))
+        self.new_frame = np.zeros(n_steps, dtype=bool)
+        self.stages: dict = {}
+        self.states: list = []
+
+    def add(self, s: int, rec, true_p, f_true, f_obj, i_true, runner) -> None:
+        cols = self.cols
+        cols["t_s"][s] = rec.t_s
+        cols["x_m"][s], cols["y_m"][s], cols["z_m"][s] = true_p
+        cols["xe_m"][s], cols["ye_m"][s], cols["ze_m"][s] = rec.position_m
+        cols["fx_ref_n"][s], cols["fy_ref_n"][s], cols["fz_ref_n"][s] = rec.force_ref_n
+        cols["fx_n"][s], cols["fy_n"][s], cols["fz_n"][s] = f_true
+        if f_obj is not None:
+            cols["fx_obj_n"][s], cols["fy_obj_n"][s], cols["fz_obj_n"][s] = f_obj
+        cols["loop_s"][s] = rec.loop_s
+        self.new_frame[s] = rec.new_frame
+        if runner.profile and rec.state == "running":
+            for name, v in runner.stages.items():
+                self.stages.setdefault(name, np.full(len(self.new_frame), np.nan))[s] = v
+        self.cur[s] = i_true
+        self.cmd[s] = rec.command_a
+        self.states.append(rec.state)
+
+    def columns(self) -> dict:
+        cols = self.cols
+        n = self.cur.shape[1]
+        for k in range(n):
+            cols[f"i{k + 1}_a"] = self.cur[:, k]
+        for k in range(n):
+            cols[f"cmd{k + 1}_a"] = self.cmd[:, k]
+        cols["state"] = np.array(self.states)
+        cols["new_frame"] = self.new_frame
+        for name, v in self.stages.items():
+            cols[f"stage_{name}_s"] = v
+        return cols
+
+
+def simulate(device: SimulatedDevice, runner_factory, trajectory: Trajectory, *,
+             duration_s: float, period_s: float, faults: FaultSchedule = FaultSchedule(),
+             scene_force=None, progress: bool = True) -> SimulationResult:
+    """Close the loop: ``runner_factory(sensor_source, clock, allocate_hook)`` -> a started Runner.
+
+    Parameters
+    ----------
+    device : SimulatedDevice
+    runner_factory : callable
+        Builds the :class:`firmware_io.runner.Runner` around the given sensor source, compute
+        clock and allocation wrapper (the plant wraps both to inject overrun and over-limit
+        faults), on ``device.coils``.
+    trajectory : Trajectory
+    duration_s, period_s : float, s
+    faults : FaultSchedule
+    scene_force : callable, optional
+        ``scene_force(p, v) -> (3,)``: the object's force at the TRUE position (the reference the
+        rendered force is judged against).
+    """
+    n_steps = int(round(duration_s / period_s))
+    t = np.arange(n_steps) * period_s
+    injector = _Injector(device, faults)
+
+    def position_at(ts: float) -> np.ndarray:
+        return injector.position(trajectory, ts)
+
+    true_p = np.array([position_at(ts) for ts in t])
+    vel = np.gradient(true_p, period_s, axis=0)
+    device.prepare(true_p)
+    source = device.sensor_source(position_at, period_s)
+
+    # compute time = this thread's CPU time (the plant shares the host with the runner; other
+    # processes would otherwise show up as overruns) less the time spent inside the simulated
+    # PWM boards (the plant's, not the runner's)
+    def clock() -> float:
+        return time.thread_time() - device.coil_bus.model_time_s
+
+    runner = runner_factory(source, clock, injector.allocate_hook)
+    rec_all = _Recorder(n_steps, device.array.n_coils)
+    bar = tqdm(total=n_steps, desc="simulate", unit="step", disable=not progress,
+               mininterval=0.5)
+    for s in range(n_steps):
+        ts = t[s]
+        overrun = injector.before_step(runner, ts)
+        source.tick(ts)
+        rec = _step(runner, ts, overrun)
+        i_true = device.current_a.copy()
+        f_obj = scene_force(true_p[s], vel[s]) if scene_force is not None else None
+        rec_all.add(s, rec, true_p[s], device.true_force_n(s, i_true), f_obj, i_true, runner)
+        device.advance_currents(period_s)
+        device.coil_bus.clear_log()
+        bar.update()
+    bar.close()
+    runner.stop()
+    return SimulationResult(rec_all.columns(), injector.injected, list(runner.fault_log),
+                            period_s, list(getattr(source, "fit_s", [])))
+
+
+def _step(runner, ts: float, overrun: bool):
+    """One runner step; an injected overrun makes the compute clock jump inside the step."""
+    if overrun:
+        original = runner.clock
+        calls = {"n": 0}
+
+        def slow_clock() -> float:
+            calls["n"] += 1
+            return original() + (0.0 if calls["n"] == 1 else 5 * runner.cfg.control_period_s
+                                  * runner.cfg.overrun_factor)
+
+        runner.clock = slow_clock
+        try:
+            return runner.step(ts)
+        finally:
+            runner.clock = original
+    return runner.step(ts)

@@ -1,0 +1,163 @@
+"""``designkit run --simulate`` end to end: map, scene, simulated device, runner, results.
+
+Builds (or loads) the force-current map of a design, compiles the virtual object into a scene,
+closes firmware_io's runner (the code that runs on the controller) around the simulated device
+and writes run.csv (one row per control step, SI), summary.json, run.png and loop_timing.png.
+Every input is checked before anything is computed.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from firmware_io.allocation import Allocator
+from firmware_io.localization import Localizer
+from firmware_io.mapfile import MapFile
+from firmware_io.runner import (CALIBRATED_RELATIVE_ERROR, ConstantVelocityTracker, Runner,
+                                RunnerConfig, SceneForce)
+from firmware_io.scene import Scene
+
+from .. import electrical, fieldmap
+from .._io import write_json_atomic
+from ..array import CoilArray
+from ..coil import Coil
+from ..design import Design, load_design
+from ..errors import BadInputError
+from ..render.laws import ConstraintLaw
+from ..render import scenefile  # called through the module: tests substitute its functions
+from .device import SimulatedDevice
+from .faults import FaultSchedule
+from .loop import simulate
+from .plot import plot_run
+from .report import force_error_causes, summarize, write_run_csv
+from .trajectory import Trajectory, poke_trajectory, slide_trajectory
+
+MAX_DURATION_S = 600.0
+"""Longest simulated run, s."""
+
+TOP_OF_BOX_M = 0.078
+"""Highest finger position of a scripted trajectory, m (inside the map box)."""
+
+
+def drive_data(design) -> dict:
+    """:func:`designkit.electrical.drive_data` for the design's own (identical) coils."""
+    return electrical.drive_data(design, [Coil.from_design(design)]
+                                 * (design.array.rows * design.array.columns))
+
+
+def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "slide",
+                   duration_s: float | None = None, faults: str = "none", map_path=None,
+                   method: str = "model", period_s: float = 1e-3, unipolar: bool = False,
+                   lam_n_per_m: float | None = None, rows: str = "force", seed: int = 0,
+                   out=Path("run-out"), progress: bool = True, array=None,
+                   calibrate: bool = True, profile: bool = False,
+                   skip_force_n: float = 0.0) -> dict:
+    """Build (or load) the map, compile the scene, close the runner around the simulated device,
+    and write run.csv, summary.json, run.png and loop_timing.png into ``out``. Returns the
+    summary. Every input is checked before anything is computed.
+
+    ``rows``: 'force' renders the object's 3-D force, 'fz' only its vertical component (the
+    thesis' eq. 4.6; the runner then evaluates only the two rows of A(p) Fz needs). ``array``:
+    the design's CoilArray when the caller has one (its coupled solve is reused).
+    ``calibrate``: the start-up sensor calibration (:meth:`SimulatedDevice.calibrate_sensors`)
+    before the run; the localizer then weighs the sensors with
+    :data:`firmware_io.runner.CALIBRATED_RELATIVE_ERROR`. ``profile``: the runner times each
+    stage of its step (summary ``loop_by_kind['stages']``). ``skip_force_n``: the runner's coil-skip force, N.
+    """
+    design = design if isinstance(design, Design) else load_design(design)
+    virtual, path, duration, schedule = _checked_inputs(obj, trajectory, duration_s, faults,
+                                                        rows, period_s)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    array = array if array is not None else CoilArray.from_design(design)
+    if path is None:
+        path = _scripted_path(design, array, virtual, trajectory, duration)
+    map_path, fmap = _map(design, array, map_path, out, progress)
+    lam = design.render.stiffness_n_per_m if lam_n_per_m is None else float(lam_n_per_m)
+    scene_path = scenefile.compile_scene(virtual, out / "scene.npz", lam_n_per_m=lam,
+                                         law=ConstraintLaw(lam),
+                                         map_design_sha256=fmap.design_sha256,
+                                         extra_meta={"object": obj, "rows": rows})
+    scene = Scene.load(scene_path, expected_design_sha256=fmap.design_sha256)
+    drive = drive_data(design)
+    device = SimulatedDevice(design, array, seed=seed, resistance_ohm=drive["resistance_ohm"][0],
+                             inductance_h=drive["inductance_h"][0])
+    loc_kw = _localizer_options(device, map_path, method, calibrate)
+
+    def factory(source, clock, hook):
+        cfg = RunnerConfig(**{k: tuple(v) if isinstance(v, list) else v
+                              for k, v in drive.items()},
+                           control_period_s=period_s, unipolar=unipolar,
+                           force_axes="z" if rows == "fz" else "xyz",
+                           skip_force_n=skip_force_n)
+        localizer = Localizer.from_map(map_path, method=method, **loc_kw)
+        runner = Runner(fmap, SceneForce(scene), localizer, ConstantVelocityTracker(),
+                        hook(Allocator()), device.coils, source, cfg, clock=clock,
+                        log=lambda line: print(line) if progress else None)
+        runner.profile = profile
+        runner.start()
+        return runner
+
+    res = simulate(device, factory, path, duration_s=duration, period_s=period_s,
+                   faults=schedule, scene_force=SceneForce(scene).force, progress=progress)
+    summary = summarize(res, force_error_causes(device, fmap, res))
+    summary.update({"object": obj, "trajectory": str(trajectory), "design": design.name,
+                    "rows": rows,
+                    "lambda_n_per_m": lam, "method": method, "unipolar": unipolar,
+                    "drive": drive})
+    write_run_csv(out / "run.csv", res.columns)
+    write_json_atomic(out / "summary.json", summary)
+    plot_run(res, out, surface_height=lambda x, y: virtual.height(np.c_[x, y, np.zeros_like(x)]),
+             title=f"{obj}: {trajectory}, lambda = {lam:g} N/m")
+    return summary
+
+
+def _checked_inputs(obj, trajectory, duration_s, faults, rows, period_s):
+    """The run's inputs, checked: (virtual object, trajectory from a file or None for a scripted
+    one, duration s, fault schedule)."""
+    if rows not in ("force", "fz"):
+        raise BadInputError("rows", "'force' (3-D) or 'fz' (the thesis' vertical force)", rows)
+    if not 1e-4 <= period_s <= 0.05:
+        raise BadInputError("period", "in [0.1, 50] ms", period_s * 1e3)
+    virtual = scenefile.make_object(obj)
+    scripted = trajectory in ("slide", "poke")
+    path = None if scripted else Trajectory.from_csv(trajectory)
+    duration = float(duration_s or (path.duration_s if path is not None
+                                     else 4.0 if trajectory == "slide" else 3.0))
+    if not 0 < duration <= MAX_DURATION_S:
+        raise BadInputError("duration", "in (0, 600] s", duration)
+    return virtual, path, duration, FaultSchedule.parse(faults, duration)
+
+
+def _scripted_path(design, array, virtual, trajectory: str, duration: float) -> Trajectory:
+    """``slide`` or ``poke`` over the virtual object, kept above the upper sensor board."""
+    # the magnet cannot go below the upper sensor board: its centre stays half its length
+    # and 1 mm (the board and the sensor package) above the highest sensor
+    floor = (float(np.max(array.sensor_positions_m()[0, :, 2]))
+             + design.magnet.length_m / 2 + 1e-3)
+    make = slide_trajectory if trajectory == "slide" else poke_trajectory
+    return make(lambda x, y: virtual.height(np.c_[x, y, np.zeros_like(x)]),
+                duration_s=duration, z_limits_m=(floor, TOP_OF_BOX_M))
+
+
+def _map(design, array, map_path, out: Path, progress: bool):
+    """The map file (built into ``out`` when none is given) and its loaded MapFile, checked to
+    be the design's."""
+    if map_path is None:
+        map_path = out / "map.npz"
+        data = fieldmap.build(design, array=array, progress=progress)
+        fieldmap.write(map_path, data)
+    return map_path, MapFile.load(map_path, expected_design_sha256=design.spec_hash())
+
+
+def _localizer_options(device: SimulatedDevice, map_path, method: str, calibrate: bool) -> dict:
+    """The localizer's keywords: the start-up calibration (coils only; the map carries the
+    magnet's cylinder) and the calibrated sensors' weight, unless not calibrating."""
+    loc_kw: dict = {}
+    if calibrate and method != "learned":
+        base = Localizer.from_map(map_path, method=method, **loc_kw)
+        loc_kw.update(calibration=device.calibrate_sensors(base.model),
+                      relative_error=CALIBRATED_RELATIVE_ERROR)
+    return loc_kw

@@ -1,0 +1,95 @@
+"""The runner's sensor source on the simulated sensor bus, with the sensor thread's timing.
+
+Models :class:`firmware_io.run.ThreadedSensorSource`: read a pass of both arrays (its wire time
+on the simulated 400 kHz bus), fit it (its measured compute time on this thread's CPU clock),
+publish the :class:`firmware_io.runner.Fix`, read the next pass. Each frame carries the field
+(T) of the previous pass's start, as a master-controlled TLV493D returns the conversion the
+previous read triggered.
+"""
+
+from __future__ import annotations
+
+import time
+
+from firmware_io.runner import SensorFrame
+
+class SimSensorSource:
+    """The sensor side of :class:`firmware_io.runner.Runner` on the simulated sensor bus, with
+    the timing of the sensor thread (:class:`firmware_io.run.ThreadedSensorSource`).
+
+    :meth:`tick` does the simulation work (fields into the TLV493D models, one pass of
+    :meth:`firmware_io.sensors.SensorArrays.read` on the sensor bus, the runner's
+    :class:`firmware_io.runner.SensorPipeline` on the frame); the plant calls it before each
+    runner step, outside the runner's timed section, as the sensor thread runs beside the
+    control loop on hardware. The thread's cycle is: read a pass (its wire time on the bus
+    model), then fit (its measured compute time, this thread's CPU clock), publish the
+    :class:`firmware_io.runner.Fix`, read the next pass. The runner takes a result at the first
+    control step at or after the time it is published. In master-controlled mode a TLV493D
+    returns the conversion triggered by the previous read, so each frame carries the field of
+    the previous pass's start time. Without an attached pipeline raw frames are handed over.
+
+    Parameters
+    ----------
+    device : designkit.sim.device.SimulatedDevice
+    position_at : callable, ``position_at(t_s) -> (3,)`` m, the true position
+    period_s : float, s -- the control period
+
+    Attributes
+    ----------
+    fit_s : list of float
+        Compute time of each fit on the sensor side, s.
+    frame_truth_m : ndarray (3,) or None
+        The true position at the field time of the last frame read (diagnostics).
+    """
+
+    def __init__(self, device, position_at, period_s: float):
+        self.device, self.position_at, self.period_s = device, position_at, period_s
+        self.in_flight = None      # (ready time s, field time s, reading)
+        self.fitted = None         # (publish time s, result, field time s)
+        self.ready = None          # a result the runner has not taken yet
+        self.last_set_s = 0.0
+        self.frame_truth_m = None
+        self.pipeline = None
+        self.fit_s: list = []
+
+    def attach(self, pipeline) -> None:
+        self.pipeline = pipeline
+
+    def tick(self, t_s: float) -> None:
+        dev = self.device
+        if self.in_flight is not None:
+            ready_s, field_s, reading = self.in_flight
+            if t_s + 1e-12 < ready_s:
+                return
+            self.in_flight = None
+            frame = SensorFrame(reading.top_t, reading.bottom_t, reading.status, field_s)
+            self.frame_truth_m = self.position_at(field_s)   # diagnostics: where it really was
+            fit_s = 0.0
+            if self.pipeline is not None:
+                c0 = time.thread_time()
+                frame = self.pipeline.process(frame)
+                fit_s = time.thread_time() - c0
+                self.fit_s.append(fit_s)
+            self.fitted = (ready_s + fit_s, frame, field_s)
+        if self.fitted is not None:
+            publish_s, result, field_s = self.fitted
+            if t_s + 1e-12 < publish_s:
+                return
+            self.fitted = None
+            self.ready = result
+        step = int(round(t_s / self.period_s))
+        b = dev.sensor_readings_t(min(step, len(dev.path_m) - 1), self.position_at(t_s),
+                                  dev.current_a)
+        for sensor, bi in zip(dev.tlv, b):
+            sensor.field_t = tuple(bi)
+        dev.sensor_clock.t = t_s
+        reading = dev.sensors.read()
+        dev.sensor_bus.clear_log()
+        self.in_flight = (dev.sensor_clock.t, self.last_set_s, reading)
+        self.last_set_s = t_s
+
+    def __call__(self, t_s: float):
+        frame, self.ready = self.ready, None
+        return frame
+
+
