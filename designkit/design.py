@@ -20,6 +20,7 @@ import math
 import numbers
 import tomllib
 from dataclasses import dataclass, field, fields
+from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -324,8 +325,6 @@ def named_design(name: str) -> Design:
     fname = NAMED_DESIGNS[name]
     if fname is None:
         return default_design()
-    from importlib import resources
-
     text = resources.files("designkit").joinpath("data", fname).read_text()
     return design_from_dict(tomllib.loads(text), source=f"designkit/data/{fname}")
 
