@@ -38,7 +38,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "region (bounded LP allocation)")
     parser.add_argument("--vary-pitch", action="store_true",
                         help="device: the array pitch is a variable too (coils may not overlap; "
-                             "implies --objective rendering; ~1 min)")
+                             "implies --objective rendering; slow: one LP per point)")
     parser.add_argument("--pitch-range", default=None, metavar="LO:HI",
                         help="with --vary-pitch: pitch bounds in m (default 0.6 x the design's "
                              "pitch to 2 x max outer radius + 1 mm)")
@@ -46,7 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="device: also run the global checks (multistart, ISRES, grid)")
     parser.add_argument("--fem", action="store_true",
                         help="device: check the optimum's force and inductance against GetDP "
-                             "(nonlinear 1010 steel; ~1 min)")
+                             "(nonlinear 1010 steel; slow)")
     parser.add_argument("--core-model", choices=CORE_MODEL_NAMES, default="air",
                         help="coil problem only: force/inductance model (default air)")
     parser.add_argument("--starts", type=int, default=None,

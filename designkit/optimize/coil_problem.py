@@ -30,6 +30,7 @@ from ..design import CoreSpec, Design
 from ..errors import BadInputError
 from ..pose import Pose
 from .axial_kernel import axial_gradient_per_current_density
+from .design_view import DesignView
 from .wire_table import insulated_diameter_for
 
 CoreModelName = Literal["air", "thesis-uniform", "surface-current"]
@@ -66,7 +67,7 @@ class Evaluation:
 
 
 @dataclass(frozen=True)
-class CoilDesignProblem:
+class CoilDesignProblem(DesignView):
     """Coil design problem of thesis eq. 2.14 on a design (all SI). Build with
     :meth:`from_design`.
 
@@ -166,19 +167,6 @@ class CoilDesignProblem:
 
     # ------------------------------------------------------------------ the design's numbers
     @property
-    def height_m(self) -> float:
-        """Design point: magnet centre above the coil's top face, m."""
-        return self.design.optimize.height_m
-
-    @property
-    def moment_a_m2(self) -> float:
-        return self.design.magnet.moment_a_m2
-
-    @property
-    def current_a(self) -> float:
-        return self.design.drive.max_current_a
-
-    @property
     def wire_diameter_m(self) -> float:
         return self.design.wire.diameter_m
 
@@ -190,18 +178,6 @@ class CoilDesignProblem:
     def resistivity_ohm_m(self) -> float:
         """Copper resistivity at the wire's operating temperature, ohm m."""
         return el.resistivity(self.design.wire)
-
-    @property
-    def packing(self) -> str:
-        return self.design.wire.packing
-
-    @property
-    def max_resistance_ohm(self) -> float:
-        return self.design.optimize.max_resistance_ohm
-
-    @property
-    def max_settling_time_s(self) -> float:
-        return self.design.optimize.max_settling_time_s
 
     @property
     def core_relative_permeability(self) -> float:

@@ -29,6 +29,7 @@ from ..core_fast import solve_rods
 from ..design import Design
 from ..errors import BadInputError
 from .axial_kernel import axial_gradient_per_current_density
+from .design_view import DesignView
 from .rendering import array_render_forces
 from .wire_table import GRADE1_INSULATION_RATIO, METRIC_DIAMETERS_M
 from .workspace import BOARD_THICKNESS_M, _fold_points, workspace_region
@@ -86,7 +87,7 @@ def _array_pitch(design: Design) -> float:
 
 def _pitch_bounds(design: Design, coil_clearance_m: float,
                   pitch_range_m: tuple[float, float] | None) -> tuple[float, float]:
-    """Checked pitch bounds of a varying pitch, m (default: see :meth:`DeviceProblem.from_design`)."""
+    """Checked (lo, hi) of a varying pitch, m (default: :meth:`DeviceProblem.from_design`)."""
     o, pitch = design.optimize, _array_pitch(design)
     if design.array.rows * design.array.columns < 2:
         raise BadInputError("array", "at least 2 coils when the pitch varies",
@@ -106,7 +107,8 @@ def _pitch_bounds(design: Design, coil_clearance_m: float,
 
 def _search_bounds(design: Design, pitch_bounds, coil_clearance_m: float,
                    board_clearance_m: float) -> tuple[tuple, tuple]:
-    """(lower, upper) of :data:`SEARCH_VARIABLES` [+ pitch] (see :meth:`DeviceProblem.from_design`)."""
+    """(lower, upper) of :data:`SEARCH_VARIABLES` [+ pitch], SI (see
+    :meth:`DeviceProblem.from_design`)."""
     o = design.optimize
     widest = pitch_bounds[1] if pitch_bounds else _array_pitch(design)
     r_out = min(0.5 * (widest - coil_clearance_m), o.max_outer_radius_m)
@@ -121,7 +123,7 @@ def _search_bounds(design: Design, pitch_bounds, coil_clearance_m: float,
 
 
 @dataclass(frozen=True)
-class DeviceProblem:
+class DeviceProblem(DesignView):
     """The real device's coil problem on a design (SI). Build with :meth:`from_design`.
 
     The design gives the magnet, design height, drive (current, driver rating, total current),
@@ -239,20 +241,6 @@ class DeviceProblem:
 
     # ------------------------------------------------------------------ the design's numbers
     @property
-    def height_m(self) -> float:
-        """Design point: magnet centre above the coil tops, m."""
-        return self.design.optimize.height_m
-
-    @property
-    def moment_a_m2(self) -> float:
-        return self.design.magnet.moment_a_m2
-
-    @property
-    def current_a(self) -> float:
-        """Operating current, A (``drive.max_current_a``)."""
-        return self.design.drive.max_current_a
-
-    @property
     def total_current_a(self) -> float:
         return self.design.drive.total_current_a
 
@@ -260,14 +248,6 @@ class DeviceProblem:
     def supply_voltage_v(self) -> float:
         """The driver's rating, V (``drive.driver_max_voltage_v``)."""
         return self.design.drive.driver_max_voltage_v
-
-    @property
-    def max_resistance_ohm(self) -> float:
-        return self.design.optimize.max_resistance_ohm
-
-    @property
-    def max_settling_time_s(self) -> float:
-        return self.design.optimize.max_settling_time_s
 
     @property
     def resistivity_ref_ohm_m(self) -> float:
@@ -285,10 +265,6 @@ class DeviceProblem:
     def cold_temperature_c(self) -> float:
         """Temperature of the settling-time constraint, deg C (the wire's reference)."""
         return self.design.wire.reference_temperature_c
-
-    @property
-    def packing(self) -> str:
-        return self.design.wire.packing
 
     @property
     def pitch_m(self) -> float:

@@ -51,7 +51,8 @@ class OptimizeResult:
     global_method: str
     starts_agree: bool
     """At least two starts reach the best objective to 1e-6 and none does better (a multistart
-    agreement only; the device problem's :func:`designkit.optimize.verify_device` is the global check)."""
+    agreement only; the device problem's :func:`designkit.optimize.verify_device` is the
+    global check)."""
     thesis_point: dict = field(default_factory=dict)
 
     def as_dict(self) -> dict:
