@@ -144,6 +144,19 @@ def _base_row(design: Design) -> dict:
             "height_m": design.optimize.height_m, "current_a": design.drive.max_current_a}
 
 
+def _row_problem(problem: CoilDesignProblem, height_m: float, current_a: float,
+                 wire_diameter_m: float) -> CoilDesignProblem:
+    """``problem`` at another design height (m), current (A) and bare wire (m; the insulated
+    diameter keeps the design's ratio)."""
+    d = problem.design
+    ratio = problem.insulated_diameter_m / problem.wire_diameter_m
+    return problem.with_design(
+        optimize=dataclasses.replace(d.optimize, height_m=height_m),
+        drive=dataclasses.replace(d.drive, max_current_a=current_a),
+        wire=dataclasses.replace(d.wire, diameter_m=wire_diameter_m,
+                                 insulated_diameter_m=wire_diameter_m * ratio))
+
+
 def evaluate_chunk(problem: CoilDesignProblem, base: dict, names: Sequence[str],
                    values: np.ndarray) -> list[dict]:
     """Evaluate designs (rows of ``values`` for ``names`` over ``base``); worker entry point.
@@ -152,17 +165,15 @@ def evaluate_chunk(problem: CoilDesignProblem, base: dict, names: Sequence[str],
     ``valid = False`` and empty numbers (None). Feasible = valid and R <= Rmax and
     5 tau <= T.
     """
-    ratio = problem.insulated_diameter_m / problem.wire_diameter_m
+    problems: dict = {}  # rows that differ only in the geometry share one problem
     out = []
     for row_vals in values:
         row = dict(base)
         row.update(zip(names, map(float, row_vals)))
-        d = problem.design
-        p = problem.with_design(
-            optimize=dataclasses.replace(d.optimize, height_m=row["height_m"]),
-            drive=dataclasses.replace(d.drive, max_current_a=row["current_a"]),
-            wire=dataclasses.replace(d.wire, diameter_m=row["wire_diameter_m"],
-                                     insulated_diameter_m=row["wire_diameter_m"] * ratio))
+        key = (row["height_m"], row["current_a"], row["wire_diameter_m"])
+        p = problems.get(key)
+        if p is None:
+            p = problems[key] = _row_problem(problem, *key)
         x = (row["inner_radius_m"], row["outer_radius_m"], row["length_m"])
         n = math.floor(p.turns(x) + 1e-9) if x[1] > x[0] else 0
         res = dict.fromkeys(COLUMNS)

@@ -424,7 +424,8 @@ class DeviceProblem(DesignView):
             "supply_voltage_v": (ev["voltage_needed_v"], self.supply_voltage_v, 1,
                                  f"I R at {self.hot_temperature_c:g} C vs the MD10C rating"),
             "settling_time_s": (ev["settling_time_s"], self.max_settling_time_s, 1,
-                                f"5 L_secant({self.current_a:g} A) / R({self.cold_temperature_c:g} C)"),
+                                f"5 L_secant({self.current_a:g} A) / "
+                                f"R({self.cold_temperature_c:g} C)"),
             "time_to_max_temperature_s": (ev["time_to_max_temperature_s"],
                                           self.min_time_to_hot_s, -1,
                                           f"adiabatic, {self.render_duty:g} duty at "

@@ -208,7 +208,7 @@ def solve_device(problem: DeviceProblem, *, starts: int = 4, seed: int = 0,
 def _solve_device(problem: DeviceProblem, *, starts: int = 4, seed: int = 0,
                   max_corrections: int = 4, correction_tol: float = RESIDUAL_BOUND,
                   progress: bool = False) -> DeviceResult:
-    """Optimize the device (module notes above): fast multistart -> standard wire ->
+    """Optimize the device (stages in the module docstring): fast multistart -> standard wire ->
     corrected re-solves until the panel model agrees -> whole turns, evaluated by the panel
     model.
 
