@@ -20,6 +20,7 @@ import math
 import numbers
 import tomllib
 from dataclasses import dataclass, field, fields
+from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -140,11 +141,12 @@ class DriveSpec:
     total_current_a: float = 54.0
     """Budget for the sum of |I| over all coils, A (assumed: 9 x 6 A)."""
     driver_max_voltage_v: float = 30.0
-    """Cytron MD10C motor supply rating, V (the thesis' 36 V exceeds it)."""
+    """Motor supply rating of the Cytron MD10C driver, V (datasheet: 30 V; the thesis' 36 V
+    exceeds it)."""
     driver_continuous_current_a: float = 13.0
     pwm_frequency_hz: float = 1526.0
-    """PWM frequency of the drivers, Hz (PCA9685 maximum); sets the current ripple
-    (``electrical.pwm_ripple``)."""
+    """PWM frequency of the drivers, Hz (datasheet: the PCA9685's maximum); sets the current
+    ripple (``electrical.pwm_ripple``)."""
 
 
 @dataclass(frozen=True)
@@ -164,9 +166,8 @@ class WorkspaceSpec:
     z_min_m: float = 0.020
     """Lowest magnet-centre height above the coil tops, m. The magnet's centre cannot go lower:
     the upper Hall-sensor board sits ``sensors.offset_m`` (14 mm) above the coil tops and the
-    magnet is 10 mm long, so its centre is >= 19 mm up plus the board's thickness. (It was
-    10 mm: the 10 mm below 20 mm, 5-15 mm above the cores' rims, were where the field map was
-    costliest and the cores' coupling least smooth.)"""
+    magnet is 10 mm long, so its centre is >= 19 mm up plus the board's thickness
+    (docs/optimize.md, "Workspace floor")."""
     z_max_m: float = 0.080
     half_width_m: float = 0.075
     """Half the side of the square footprint the box covers in x and y, m."""
@@ -324,8 +325,6 @@ def named_design(name: str) -> Design:
     fname = NAMED_DESIGNS[name]
     if fname is None:
         return default_design()
-    from importlib import resources
-
     text = resources.files("designkit").joinpath("data", fname).read_text()
     return design_from_dict(tomllib.loads(text), source=f"designkit/data/{fname}")
 

@@ -1,21 +1,26 @@
 """Design sweeps: evaluate a grid of coils (force at the design height, R, L, tau, power,
-feasibility) on local worker processes or on a Dask distributed cluster.
+feasibility) or of whole arrays (rendering objective, device constraints) on local worker
+processes or on a Dask distributed cluster.
 
 A sweep is the Cartesian product of parameter ranges (:func:`parse_param` reads
 ``NAME=START:STOP:N``) applied to the design's coil problem
 (:class:`designkit.optimize.CoilDesignProblem`); parameters not swept keep the design's values.
 Each design is rounded to whole turns (floor of the fully packed section, as the optimizer's
 reported designs) and evaluated with the optimizer's model (closed-form on-axis force, Bessel
-inductance; ~0.5 ms per design with the air model).
+inductance). Throughput: docs/optimize.md.
 """
 
 from __future__ import annotations
 
+import collections
+import csv
 import dataclasses
 import itertools
 import math
 import os
 import textwrap
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -23,9 +28,13 @@ from typing import Sequence
 import numpy as np
 
 from . import _validate as v
+from . import electrical as el
+from ._io import atomic_path
+from ._progress import tqdm
 from .design import Design
-from .errors import BadInputError
-from .optimize import CORE_MODEL_NAMES, CoilDesignProblem
+from .errors import BadInputError, DesignkitError, DesignRuleError, require
+from .optimize import (CORE_MODEL_NAMES, DEVICE_CONSTRAINTS, CoilDesignProblem, device_candidate,
+                       device_problem_for, rendering_force)
 
 PARAMETERS: dict[str, str] = {
     "inner_radius_m": "winding inner radius, m",
@@ -135,6 +144,19 @@ def _base_row(design: Design) -> dict:
             "height_m": design.optimize.height_m, "current_a": design.drive.max_current_a}
 
 
+def _row_problem(problem: CoilDesignProblem, height_m: float, current_a: float,
+                 wire_diameter_m: float) -> CoilDesignProblem:
+    """``problem`` at another design height (m), current (A) and bare wire (m; the insulated
+    diameter keeps the design's ratio)."""
+    d = problem.design
+    ratio = problem.insulated_diameter_m / problem.wire_diameter_m
+    return problem.with_design(
+        optimize=dataclasses.replace(d.optimize, height_m=height_m),
+        drive=dataclasses.replace(d.drive, max_current_a=current_a),
+        wire=dataclasses.replace(d.wire, diameter_m=wire_diameter_m,
+                                 insulated_diameter_m=wire_diameter_m * ratio))
+
+
 def evaluate_chunk(problem: CoilDesignProblem, base: dict, names: Sequence[str],
                    values: np.ndarray) -> list[dict]:
     """Evaluate designs (rows of ``values`` for ``names`` over ``base``); worker entry point.
@@ -143,14 +165,15 @@ def evaluate_chunk(problem: CoilDesignProblem, base: dict, names: Sequence[str],
     ``valid = False`` and empty numbers (None). Feasible = valid and R <= Rmax and
     5 tau <= T.
     """
-    ratio = problem.insulated_diameter_m / problem.wire_diameter_m
+    problems: dict = {}  # rows that differ only in the geometry share one problem
     out = []
     for row_vals in values:
         row = dict(base)
         row.update(zip(names, map(float, row_vals)))
-        p = dataclasses.replace(problem, height_m=row["height_m"], current_a=row["current_a"],
-                                wire_diameter_m=row["wire_diameter_m"],
-                                insulated_diameter_m=row["wire_diameter_m"] * ratio)
+        key = (row["height_m"], row["current_a"], row["wire_diameter_m"])
+        p = problems.get(key)
+        if p is None:
+            p = problems[key] = _row_problem(problem, *key)
         x = (row["inner_radius_m"], row["outer_radius_m"], row["length_m"])
         n = math.floor(p.turns(x) + 1e-9) if x[1] > x[0] else 0
         res = dict.fromkeys(COLUMNS)
@@ -199,8 +222,6 @@ def infeasible_reason(problem: CoilDesignProblem, row: dict) -> str:
 
 def reason_summary(result: "SweepResult", most: int = 3) -> str:
     """The commonest reasons designs were infeasible, with counts, one per line."""
-    import collections
-
     counts = collections.Counter(r["reason"] for r in result.rows if not r["feasible"])
     lines = [f"  {n} x {why}" for why, n in counts.most_common(most)]
     if len(counts) > most:
@@ -259,10 +280,6 @@ def evaluate_array_chunk(design: Design, names: Sequence[str], values: np.ndarra
     (overlapping coils, no whole turn, core longer than winding + protrusion): valid = False.
     ``reason``: why a row is invalid or which device constraints it breaks (empty if feasible).
     """
-    from . import electrical as el
-    from .errors import DesignkitError, DesignRuleError
-    from .optimize import DEVICE_CONSTRAINTS, device_problem_for, rendering_force
-
     c = design.coil
     k = design.core
     ratio = design.wire.insulated_diameter_m / design.wire.diameter_m
@@ -282,6 +299,7 @@ def evaluate_array_chunk(design: Design, names: Sequence[str], values: np.ndarra
         d_ins = row["wire_diameter_m"] * ratio
         ri, ro, ln = row["inner_radius_m"], row["outer_radius_m"], row["length_m"]
         prot, lc = row["core_protrusion_m"], row["core_length_m"]
+        x = [ri, ro, ln, ri, lc, prot, row["wire_diameter_m"]]  # core radius = inner radius
         n = 0
         if ro > ri:
             n = el.turns_from_geometry(ri, ro, ln, d_ins, design.wire.packing)
@@ -292,12 +310,7 @@ def evaluate_array_chunk(design: Design, names: Sequence[str], values: np.ndarra
         try:
             if why:
                 raise BadInputError("row", why, row)
-            d2 = design.replace(**{
-                "array.pitch_m": row["pitch_m"], "coil.inner_radius_m": ri,
-                "coil.outer_radius_m": ro, "coil.length_m": ln, "coil.turns": n,
-                "wire.diameter_m": row["wire_diameter_m"], "wire.insulated_diameter_m": d_ins,
-                "core.radius_m": ri, "core.length_m": lc,
-                "core.offset_m": ln / 2 + prot - lc / 2, "core.bh": "steel1010"})
+            d2 = device_candidate(design, x, n, d_ins, pitch_m=row["pitch_m"])
         except (DesignkitError, ValueError) as exc:
             if not why:
                 why = ("coils overlap (2 x outer radius > pitch)"
@@ -307,7 +320,6 @@ def evaluate_array_chunk(design: Design, names: Sequence[str], values: np.ndarra
             out.append(res)
             continue
         p = device_problem_for(d2)
-        x = [ri, ro, ln, ri, lc, prot, row["wire_diameter_m"]]
         ev = p.evaluate(x, turns=n)
         rend = rendering_force(d2, coil_x=x, turns=n)
         broken = [f"{name} limit" for name, g in zip(DEVICE_CONSTRAINTS, ev["g"]) if g > 0]
@@ -346,13 +358,9 @@ def _run_chunks(fn, head: tuple, names, chunks, *, workers: int | None, schedule
     """Evaluate ``fn(*head, chunk)`` for every chunk (rows of one dict per design) on a dask
     scheduler, local processes or, with one worker or one chunk, in this process; the best
     row is the feasible one with the largest ``force_n``."""
-    import time
-
     t0 = time.perf_counter()
     bar = None
     if progress:
-        from ._progress import tqdm
-
         bar = tqdm(total=sum(len(ch) for ch in chunks), desc=desc, unit="design")
     results: list = [None] * len(chunks)
     try:
@@ -366,8 +374,6 @@ def _run_chunks(fn, head: tuple, names, chunks, *, workers: int | None, schedule
                 if bar is not None:
                     bar.update(len(ch))
         else:
-            from concurrent.futures import ProcessPoolExecutor, as_completed
-
             n_workers = workers or os.cpu_count() or 1
             backend = "processes"
             with ProcessPoolExecutor(max_workers=n_workers) as ex:
@@ -388,8 +394,6 @@ def _run_chunks(fn, head: tuple, names, chunks, *, workers: int | None, schedule
 
 def _run_dask_fn(address, fn, head: tuple, chunks, results, bar) -> int:
     """Submit ``fn(*head, chunk)`` per chunk to a dask scheduler; fill ``results`` in order."""
-    from .errors import require
-
     distributed = require("dask.distributed", "dask[distributed]", "designkit sweep --scheduler")
     try:
         client = distributed.Client(address, timeout="10s")
@@ -414,10 +418,6 @@ def _run_dask_fn(address, fn, head: tuple, chunks, results, bar) -> int:
 def write_csv(result: SweepResult, path: str | Path,
               columns: Sequence[str] = COLUMNS) -> Path:
     """Rows as CSV (SI units in the column names; empty cells for invalid geometry)."""
-    import csv
-
-    from ._io import atomic_path
-
     with atomic_path(path) as tmp:
         with open(tmp, "w", newline="") as fh:
             w = csv.writer(fh)
@@ -434,8 +434,6 @@ def plot(result: SweepResult, path: str | Path, *,
     """PNG of the force over the (first two) swept parameters: feasible designs coloured by
     force, infeasible ones grey, the best feasible design starred (see :func:`sweep_figure`)."""
     import matplotlib.pyplot as plt
-
-    from ._io import atomic_path
 
     fig = sweep_figure(result, objective=objective, limits=limits)
     with atomic_path(path) as tmp:

@@ -17,7 +17,9 @@ from pathlib import Path
 from .._io import write_json_atomic, write_text_atomic
 from ..design import design_to_toml, load_design
 from ..errors import BadInputError
-from ..optimize import CORE_MODEL_NAMES, GLOBAL_METHODS, CoilDesignProblem, solve
+from ..optimize import (CORE_MODEL_NAMES, GLOBAL_METHODS, CoilDesignProblem, device_design,
+                        device_problem_for, evaluate_device, getdp_check, solve, solve_device,
+                        verify_device)
 from ._common import add_progress_argument, check_output, show_progress
 
 
@@ -36,7 +38,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "region (bounded LP allocation)")
     parser.add_argument("--vary-pitch", action="store_true",
                         help="device: the array pitch is a variable too (coils may not overlap; "
-                             "implies --objective rendering; ~1 min)")
+                             "implies --objective rendering; slow: one LP per point)")
     parser.add_argument("--pitch-range", default=None, metavar="LO:HI",
                         help="with --vary-pitch: pitch bounds in m (default 0.6 x the design's "
                              "pitch to 2 x max outer radius + 1 mm)")
@@ -44,7 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="device: also run the global checks (multistart, ISRES, grid)")
     parser.add_argument("--fem", action="store_true",
                         help="device: check the optimum's force and inductance against GetDP "
-                             "(nonlinear 1010 steel; ~1 min)")
+                             "(nonlinear 1010 steel; slow)")
     parser.add_argument("--core-model", choices=CORE_MODEL_NAMES, default="air",
                         help="coil problem only: force/inductance model (default air)")
     parser.add_argument("--starts", type=int, default=None,
@@ -67,9 +69,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_device(args, design, starts: int) -> int:
-    from ..optimize import (device_design, device_problem_for, evaluate_device, solve_device,
-                            verify_device)
-
     t0 = time.perf_counter()
     if args.pitch_range is not None and not args.vary_pitch:
         raise BadInputError("--pitch-range", "given together with --vary-pitch",
@@ -87,8 +86,6 @@ def _run_device(args, design, starts: int) -> int:
         data["verification"] = verify_device(problem, result, seed=args.seed,
                                              progress=show_progress(args))
     if getattr(args, "fem", False):
-        from ..optimize import getdp_check
-
         data["getdp_check"] = getdp_check(optimum, data)
     if design.core is not None:
         data["base_design"] = evaluate_device(design, problem)

@@ -1,0 +1,64 @@
+"""A given design judged as a device: its coil and core under the device problem's panel model
+and every constraint, with what it misses (the side-by-side report of the thesis device and
+the optimized one). Numbers SI; the turns that fit and the design's own supply and workspace
+are checked too.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from .. import electrical as el
+from .._blas import one_blas_thread
+from ..design import Design
+from ..errors import BadInputError
+from .device_problem import DeviceProblem, device_problem_for
+from .workspace import reachable_height_m
+
+
+def evaluate_device(design: Design, problem: DeviceProblem | None = None) -> dict:
+    """A design's coil and core under the device problem's panel model and constraints (SI).
+
+    Used for the side-by-side report: the thesis device with every constraint it misses, the
+    optimized device with its margins. Needs a core (``design.core``).
+    """
+    if design.core is None:
+        raise BadInputError("design.core", "a core (the device problem has an iron core)", None)
+    p = problem if problem is not None else device_problem_for(design)
+    c, k, w = design.coil, design.core, design.wire
+    top = c.length_m / 2
+    prot = k.offset_m + k.length_m / 2 - top
+    x = [c.inner_radius_m, c.outer_radius_m, c.length_m, k.radius_m, k.length_m,
+         max(prot, 0.0), w.diameter_m]
+    p = dataclasses.replace(p, insulation_ratio=w.insulated_diameter_m / w.diameter_m)
+    with one_blas_thread():
+        ev = p.evaluate(x, turns=c.turns, model="panel")
+    fit = el.turns_from_geometry(c.inner_radius_m, c.outer_radius_m, c.length_m,
+                                 w.insulated_diameter_m, w.packing)
+    table = p.constraint_table(x, ev, fit)
+    # the design's own supply is a constraint too (the thesis' 36 V > the MD10C's 30 V)
+    table["design_supply_voltage_v"] = {
+        "value": float(design.drive.supply_voltage_v), "limit": p.supply_voltage_v,
+        "unit": "V", "kind": "upper", "margin": p.supply_voltage_v - design.drive.supply_voltage_v,
+        "met": design.drive.supply_voltage_v <= p.supply_voltage_v,
+        "note": "the design's supply vs the MD10C rating"}
+    reach = reachable_height_m(design)
+    table["workspace_z_min_m"] = {
+        "value": float(design.workspace.z_min_m), "limit": reach, "unit": "m", "kind": "lower",
+        "margin": float(design.workspace.z_min_m - reach),
+        "met": bool(design.workspace.z_min_m >= reach - 1e-12),
+        "note": "workspace starts where the magnet fits above the upper sensor board"}
+    out = {k2: v2 for k2, v2 in ev.items() if k2 != "g"}
+    out.update({"name": design.name, "turns": int(c.turns), "turns_that_fit": fit,
+                "inner_radius_m": c.inner_radius_m, "outer_radius_m": c.outer_radius_m,
+                "length_m": c.length_m, "wire_diameter_m": w.diameter_m,
+                "core_radius_m": k.radius_m, "core_length_m": k.length_m,
+                "core_protrusion_m": prot, "current_a": p.current_a,
+                "temperature_c": p.hot_temperature_c,
+                "core_model": "steel1010 surface-current panel model",
+                "constraints": table,
+                "violated": sorted(n for n, t in table.items() if not t["met"]),
+                "feasible": all(t["met"] for t in table.values())})
+    return out
+
+
