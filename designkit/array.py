@@ -263,8 +263,8 @@ class CoilArray:
         """A(p) of thesis eq. 2.13 with all cores solved together (coupled).
 
         Column k: winding k per ampere plus the field of every core magnetized by it (and by
-        each other). Cost: per point, the 9 windings plus ~9 x 300 kernel terms; the core
-        solve is built on the first call (seconds) and cached on the array.
+        each other). The core solve is built on the first call and cached on the array (its
+        cost: docs/coupling.md).
 
         Parameters
         ----------

@@ -309,42 +309,28 @@ class CoreModel(ChargeModes):
         return self._rz_basis_to_xyz(pts, rho, self._m0_rz(pts, rho, gradient, False), gradient)
 
 
-@functools.lru_cache(maxsize=32)
-def core_model(radius: float, length: float, offset: float, mu_r: float, key: tuple,
-               m_max: int = M_MAX, refine: int = 1) -> CoreModel:
-    """Discretization and self blocks of a linear core (cached per core type).
-
-    ``refine`` multiplies every panel count (convergence studies, wide cores).
-    """
-    side, side_slice, discs = panel_geometry(radius, length, offset, n_side=N_SIDE * refine,
-                                        n_cap=N_CAP * refine)
-    a, _, rho0, z0 = influence_system(radius, side, discs, WindingGeometry(*key))
-    f_side = interface_factor(np.full(len(side), mu_r), 1.0)
-    below = discs[:, 3].astype(int)
-    above = discs[:, 4].astype(int)
-    f_disc = interface_factor(np.where(below < 0, 1.0, mu_r), np.where(above < 0, 1.0, mu_r))
-    f0 = np.concatenate([f_side, f_disc])
-    self0 = np.eye(len(f0)) - f0[:, None] * a
-    lo, hi = offset - length / 2, offset + length / 2
-    # far rule (compressed rings), as CoreSolution.groups
-    L = hi - lo
-    end = min(0.15 * L, 2 * radius)
-    rr, zz, ww = [], [], []
-    nodes, w = product_matrix(side[:, 0], side[:, 1],
-                               [(lo, lo + end), (lo + end, hi - end), (hi - end, hi)], FAR_NODES)
-    ns = len(side)
-    rr.append(np.full_like(nodes, radius))
-    zz.append(nodes)
-    ww.append(np.hstack([w, np.zeros((len(nodes), len(discs)))]))
-    for zp in np.unique(discs[:, 0]):
-        sel = np.flatnonzero(discs[:, 0] == zp)
-        nodes, w = product_matrix(discs[sel, 1], discs[sel, 2], [(0.0, radius)], FAR_NODES)
-        full = np.zeros((len(nodes), len(f0)))
-        full[:, ns + sel] = w
+def _far_rings(radius, side_intervals, side_lo, side_hi, faces, n_cols):
+    """Compressed ring rule of a core's panel values (:func:`product_matrix` with FAR_NODES
+    nodes): rings on the side at r = radius over ``side_intervals`` (the side panels are
+    columns 0 .. len(side_lo) - 1), then on each face ``(z, r_lo, r_hi, columns)`` over
+    [0, radius]. Returns ring r, ring z (m) and W (n_rings, n_cols): ring density = W @ x."""
+    nodes, w = product_matrix(side_lo, side_hi, side_intervals, FAR_NODES)
+    full = np.zeros((len(nodes), n_cols))
+    full[:, :len(side_lo)] = w
+    rr, zz, ww = [np.full_like(nodes, radius)], [nodes], [full]
+    for zp, r_lo, r_hi, cols in faces:
+        nodes, w = product_matrix(r_lo, r_hi, [(0.0, radius)], FAR_NODES)
+        full = np.zeros((len(nodes), n_cols))
+        full[:, cols] = w
         rr.append(nodes)
         zz.append(np.full_like(nodes, zp))
         ww.append(full)
-    # m >= 1 panels
+    return np.concatenate(rr), np.concatenate(zz), np.vstack(ww)
+
+
+def _charge_panels(radius, lo, hi, refine):
+    """The m >= 1 charge panels: kind (0 side, 1 top face, 2 bottom face), parameter
+    interval [lo1, hi1] (z on the side, r on a face) and collocation point (rho1, z1), m."""
     n1s, n1c = N1_SIDE * refine, N1_CAP * refine
     e_side = graded_both(lo, hi, n1s)
     e_cap = graded_hi(0.0, radius, n1c)
@@ -354,32 +340,47 @@ def core_model(radius: float, length: float, offset: float, mu_r: float, key: tu
     mid = 0.5 * (lo1 + hi1)
     rho1 = np.where(kind == 0, radius, mid)
     z1 = np.where(kind == 0, mid, np.where(kind == 1, hi, lo))
+    return kind, lo1, hi1, rho1, z1
+
+
+@functools.lru_cache(maxsize=32)
+def core_model(radius: float, length: float, offset: float, mu_r: float, key: tuple,
+               m_max: int = M_MAX, refine: int = 1) -> CoreModel:
+    """Discretization and self blocks of a linear core (cached per core type).
+
+    ``key``: the driving winding (a :class:`designkit.winding.WindingGeometry` or the tuple
+    of its four numbers); ``refine`` multiplies every panel count (convergence studies, wide
+    cores).
+    """
+    # m = 0: the single-core panels and influence matrix
+    side, _, discs = panel_geometry(radius, length, offset, n_side=N_SIDE * refine,
+                                    n_cap=N_CAP * refine)
+    a, _, rho0, z0 = influence_system(radius, side, discs, WindingGeometry(*key))
+    below = discs[:, 3].astype(int)
+    above = discs[:, 4].astype(int)
+    f_disc = interface_factor(np.where(below < 0, 1.0, mu_r), np.where(above < 0, 1.0, mu_r))
+    f0 = np.concatenate([interface_factor(np.full(len(side), mu_r), 1.0), f_disc])
+    self0 = np.eye(len(f0)) - f0[:, None] * a
+    # m >= 1: charge panels and their mode-diagonal self blocks
+    lo, hi = offset - length / 2, offset + length / 2
+    kind, lo1, hi1, rho1, z1 = _charge_panels(radius, lo, hi, refine)
     self1 = ()
     if m_max:
         d = self_charge_matrices(radius, lo, hi, kind, lo1, hi1, rho1, z1, m_max)
         lam2 = 2.0 * (mu_r - 1.0) / (mu_r + 1.0)
         self1 = tuple(np.eye(len(kind)) - lam2 * d[m] for m in range(m_max))
-    # compressed far rule of the m >= 1 charges (same product rule as m = 0)
-    r1, z1f, w1 = [], [], []
-    n1 = len(kind)
-    nodes, w = product_matrix(lo1[:n1s], hi1[:n1s],
-                               [(lo, lo + end), (lo + end, hi - end), (hi - end, hi)], FAR_NODES)
-    r1.append(np.full_like(nodes, radius))
-    z1f.append(nodes)
-    w1.append(np.hstack([w, np.zeros((len(nodes), n1 - n1s))]))
-    for kk, zp in ((1, hi), (2, lo)):
-        sel = np.flatnonzero(kind == kk)
-        nodes, w = product_matrix(lo1[sel], hi1[sel], [(0.0, radius)], FAR_NODES)
-        full = np.zeros((len(nodes), n1))
-        full[:, sel] = w
-        r1.append(nodes)
-        z1f.append(np.full_like(nodes, zp))
-        w1.append(full)
-    segs = np.array([[[radius, a], [radius, b]] for a, b in
-                     [(lo, lo + end), (lo + end, hi - end), (hi - end, hi)]]
+    # compressed far rules of both (as CoreSolution.groups): the side in three stretches
+    end = min(0.15 * (hi - lo), 2 * radius)
+    stretches = [(lo, lo + end), (lo + end, hi - end), (hi - end, hi)]
+    ns = len(side)
+    faces0 = [(zp, discs[sel, 1], discs[sel, 2], ns + sel) for zp in np.unique(discs[:, 0])
+              for sel in [np.flatnonzero(discs[:, 0] == zp)]]
+    far0 = _far_rings(radius, stretches, side[:, 0], side[:, 1], faces0, len(f0))
+    n1s = int(np.sum(kind == 0))
+    faces1 = [(zp, lo1[sel], hi1[sel], sel) for kk, zp in ((1, hi), (2, lo))
+              for sel in [np.flatnonzero(kind == kk)]]
+    far1 = _far_rings(radius, stretches, lo1[:n1s], hi1[:n1s], faces1, len(kind))
+    segs = np.array([[[radius, a], [radius, b]] for a, b in stretches]
                     + [[[0.0, zp], [radius, zp]] for zp in (lo, hi)])
-    return CoreModel(radius, lo, hi, mu_r, m_max, side, discs, f0, self0, rho0, z0,
-                     np.concatenate(rr), np.concatenate(zz), np.vstack(ww), kind, lo1, hi1,
-                     rho1, z1, self1, np.concatenate(r1), np.concatenate(z1f), np.vstack(w1),
-                     segs)
-
+    return CoreModel(radius, lo, hi, mu_r, m_max, side, discs, f0, self0, rho0, z0, *far0,
+                     kind, lo1, hi1, rho1, z1, self1, *far1, segs)
