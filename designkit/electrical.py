@@ -156,9 +156,6 @@ def resistance(coil: WindingGeometry, wire: WireSpec | None = None,
 
 
 # ====================================================================== inductance
-_GL_NODES = 8
-
-
 def _tail(rho_i: float, h: float, t_max: float) -> float:
     """int_T^inf of the Bessel integrand in mean: with x J0(x) ~ sqrt(2x/pi) cos(x - pi/4),
     S^2 averages to (t/pi) (1 + rho - 2 sqrt(rho) cos((1 - rho) t)) and g(t h) ~ t h, so the
@@ -185,7 +182,7 @@ def _reduced_inductance(rho_i: float, h: float, t_max: float) -> tuple[float, ..
     Q = int_0^inf S(t)^2 g(t h) / t^6 dt, g(u) = u + exp(-u) - 1, S = [int x J1]_{rho_i t}^{t}.
     Then L = 2 pi mu0 N^2 ro^5 Q / (w^2 length^2) with w = ro - ri.
     """
-    t, wt = quarter_period_panels(t_max, _GL_NODES)
+    t, wt = quarter_period_panels(t_max)
     s = int_x_j1(t) - int_x_j1(rho_i * t)
     u = t * h
     g = u + np.expm1(-u)
