@@ -155,15 +155,12 @@ def check_separation(coils) -> None:
     for i, ci in enumerate(coils):
         if ci.core is None:
             continue
-        c = ci.core
-        core_cyl = ("core", c.radius, c.offset - c.length / 2, c.offset + c.length / 2)
+        core_cyl = _cylinders(ci)[1]
         for j, cj in enumerate(coils):
             if j == i:
                 continue
-            others = [("winding", cj.outer_radius, -cj.length / 2, cj.length / 2)]
-            if cj.core is not None and j > i:
-                d = cj.core
-                others.append(("core", d.radius, d.offset - d.length / 2, d.offset + d.length / 2))
+            # winding and core of cj; core-core pairs once (j > i)
+            others = _cylinders(cj) if j > i else _cylinders(cj)[:1]
             for o in others:
                 if _cyl_overlap(ci.pose, _grow(core_cyl), cj.pose, _grow(o)):
                     raise DesignRuleError(
