@@ -52,6 +52,16 @@ def _rel_key(pa, pb):
     return tuple(np.round(rel_pos, 9)) + tuple(np.round(rel_rot.ravel(), 12))
 
 
+def _cylinder_magnet(moment, magnet_size_m):
+    """The uniformly magnetized cylinder of moment ``moment`` (3,) A m^2 and size (radius,
+    length) m: radius, length, its axis (unit, along the moment; +z for a zero moment) and
+    its magnetization M = |m| / volume, A/m."""
+    a, length = (float(v) for v in magnet_size_m)
+    mm = float(np.linalg.norm(moment))
+    u = moment / mm if mm > 0 else np.array([0.0, 0.0, 1.0])
+    return a, length, u, mm / (math.pi * a * a * length)
+
+
 class ArraySystem:
     """All cores of a :class:`~designkit.array.CoilArray` solved together (linear cores).
 
@@ -236,10 +246,7 @@ class ArraySystem:
                 h = (3.0 * d * (mr * inv_r ** 5)[..., None] - m * (inv_r ** 3)[..., None])
                 return np.swapaxes(h, 1, 2) / (4.0 * math.pi)
         else:
-            a, length = (float(v) for v in magnet_size_m)
-            mm = float(np.linalg.norm(m))
-            u = m / mm if mm > 0 else np.array([0.0, 0.0, 1.0])
-            mag = mm / (math.pi * a * a * length)
+            a, length, u, mag = _cylinder_magnet(m, magnet_size_m)
 
             def src(glob, cols):
                 d = glob[:, None, :] - pos[None, cols, :]  # (n, k, 3)
@@ -274,10 +281,7 @@ class ArraySystem:
         if magnet_size_m is None:
             b, g = self.core_field_pointwise(pos, x, gradient=True)
             return np.einsum("nji,j->ni", g, m), np.cross(m[None], b)
-        a, length = (float(v) for v in magnet_size_m)
-        mm = float(np.linalg.norm(m))
-        u = m / mm if mm > 0 else np.array([0.0, 0.0, 1.0])
-        mag = mm / (math.pi * a * a * length)
+        a, length, u, mag = _cylinder_magnet(m, magnet_size_m)
         e1 = np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0])
         e1 /= np.linalg.norm(e1)
         e2 = np.cross(u, e1)
