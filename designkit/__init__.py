@@ -6,8 +6,9 @@ gmsh, smbus2) are imported only by the modules that need them.
 
 from .array import CoilArray
 from .coil import Coil
-from .core import Core
-from .design import MU0, Design, default_design, load_design
+from .constants import MU0
+from .cores import Core
+from .design import Design, default_design, load_design
 from .errors import BadInputError, DesignkitError, DesignRuleError, MissingDependencyError
 from .pose import Pose
 

@@ -9,7 +9,7 @@ Five numbers describe grad B because, outside every source, grad B is symmetric 
 traceless (div B = 0); :func:`gradient_from_g5` rebuilds the full tensor from them.
 
 The array is one magnetic system: every core is magnetized by every winding, by the other
-cores and by the finger magnet, all solved together (:mod:`designkit.coupling`, linear cores at
+cores and by the finger magnet, all solved together (:mod:`designkit.cores.coupled`, linear cores at
 ``relative_permeability``; solved once per array and cached). Column k of A is the field per
 ampere in coil k with all cores present. With linear cores the force on the magnet is
 ``F(p, I) = F(m) A(p) I + F0(p)`` with the bias force F0 (:meth:`CoilArray.bias_force`) of the
@@ -28,9 +28,13 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
+from scipy.optimize import linprog
 
 from . import _validate as v
+from ._io import atomic_path
 from .coil import Coil
+from .cores import ArraySystem, saturation_table
+from .design import default_design
 from .errors import BadInputError, DesignRuleError
 from .pose import Pose
 from firmware_io.mapfile import check_currents
@@ -151,15 +155,12 @@ def check_separation(coils) -> None:
     for i, ci in enumerate(coils):
         if ci.core is None:
             continue
-        c = ci.core
-        core_cyl = ("core", c.radius, c.offset - c.length / 2, c.offset + c.length / 2)
+        core_cyl = _cylinders(ci)[1]
         for j, cj in enumerate(coils):
             if j == i:
                 continue
-            others = [("winding", cj.outer_radius, -cj.length / 2, cj.length / 2)]
-            if cj.core is not None and j > i:
-                d = cj.core
-                others.append(("core", d.radius, d.offset - d.length / 2, d.offset + d.length / 2))
+            # winding and core of cj; core-core pairs once (j > i)
+            others = _cylinders(cj) if j > i else _cylinders(cj)[:1]
             for o in others:
                 if _cyl_overlap(ci.pose, _grow(core_cyl), cj.pose, _grow(o)):
                     raise DesignRuleError(
@@ -214,8 +215,6 @@ class CoilArray:
     @classmethod
     def default(cls) -> "CoilArray":
         """The thesis array: 9 coils, 3 x 3, 50 mm pitch (with the default core)."""
-        from .design import default_design
-
         return cls.from_design(default_design())
 
     @property
@@ -245,13 +244,11 @@ class CoilArray:
 
     # ------------------------------------------------------------------ coupled cores
     def coupled(self):
-        """The array-level core solve (:class:`designkit.coupling.ArraySystem`), built once.
+        """The array-level core solve (:class:`designkit.cores.ArraySystem`), built once.
 
         None when no core takes part (air coils, or only ``model='thesis-uniform'`` cores).
         """
         if "_system" not in self.__dict__:
-            from .coupling import ArraySystem
-
             idx = [k for k, c in enumerate(self.coils)
                    if c.core is not None and c.core.model == "surface-current"]
             # frozen dataclass: cache the derived solve on the instance
@@ -263,8 +260,8 @@ class CoilArray:
         """A(p) of thesis eq. 2.13 with all cores solved together (coupled).
 
         Column k: winding k per ampere plus the field of every core magnetized by it (and by
-        each other). Cost: per point, the 9 windings plus ~9 x 300 kernel terms; the core
-        solve is built on the first call (seconds) and cached on the array.
+        each other). The core solve is built on the first call and cached on the array (its
+        cost: docs/coupling.md).
 
         Parameters
         ----------
@@ -397,7 +394,7 @@ class CoilArray:
         return out
 
     def saturation_correction(self, height_m: float = 0.03, currents_a=None) -> dict:
-        """Saturation correction of the 1010-steel cores (form: :func:`designkit.coupling.
+        """Saturation correction of the 1010-steel cores (form: :func:`designkit.cores.
         saturation_table`).
 
         Returns dict: ``saturation_current_a`` (k,) A; ``saturation_factor`` (k, n_coils)
@@ -405,8 +402,6 @@ class CoilArray:
         axial flux density at core k's mid-plane per ampere in coil j (zero rows for air
         coils), for the per-state use.
         """
-        from .coupling import saturation_table
-
         tables = {}
         for c in self.coils:
             if c.core is not None:
@@ -499,8 +494,6 @@ def max_vertical_force(fz_coeff: np.ndarray, max_current: float, total_current: 
         return out
     if lateral != "zero":
         raise BadInputError("lateral", "'free' or 'zero'", lateral)
-    from scipy.optimize import linprog
-
     f = np.asarray(fz_coeff, dtype=float)
     nc = f.shape[2]
     # I = Ip - In with Ip, In >= 0: the L1 budget becomes linear
@@ -569,8 +562,6 @@ def _plot_metrics(res: dict, out_png) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from ._io import atomic_path
 
     hs = res["heights_m"]
     ext = np.array([res["x_m"][0], res["x_m"][-1]] * 2) * 1e3

@@ -2,26 +2,25 @@
 
 The winding is modelled with uniform current density ``turns * current / ((Ro - Ri) * L)`` over
 its rectangular (r, z) section (see :func:`designkit.field.winding_field`); the core's field is
-added by :class:`designkit.core.Core`.
+added by :class:`designkit.cores.Core`, which sees only the winding's geometry
+(:attr:`Coil.winding`, a :class:`designkit.winding.WindingGeometry`).
 """
 
 from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from . import _validate as v
 from . import electrical
-from .core import Core
+from .cores import Core
+from .design import Design, WireSpec
 from .errors import BadInputError
 from .field import winding_field
 from .pose import Pose
-
-if TYPE_CHECKING:  # pragma: no cover
-    from .design import Design, WireSpec
+from .winding import WindingGeometry
 
 
 @dataclass(frozen=True)
@@ -67,7 +66,7 @@ class Coil:
 
     # ------------------------------------------------------------------ constructors
     @classmethod
-    def from_design(cls, design: "Design", position=(0.0, 0.0, None)) -> "Coil":
+    def from_design(cls, design: Design, position=(0.0, 0.0, None)) -> "Coil":
         """The design's coil; by default its top face at z = 0 (centre at -length/2)."""
         c = design.coil
         x, y, z = position
@@ -90,9 +89,15 @@ class Coil:
 
     # ------------------------------------------------------------------ geometry
     @property
+    def winding(self) -> WindingGeometry:
+        """The winding's geometry alone (radii and length in m, turns): what the core and the
+        electrical models read of a coil."""
+        return WindingGeometry.of(self)
+
+    @property
     def current_density_per_amp(self) -> float:
         """Azimuthal current density per ampere of terminal current, A/m^2 per A."""
-        return self.turns / ((self.outer_radius - self.inner_radius) * self.length)
+        return self.winding.current_density_per_amp
 
     @property
     def top_z_local(self) -> float:
@@ -144,7 +149,7 @@ class Coil:
             else:
                 b += res
         if self.core is not None and include in ("all", "core"):
-            res = self.core.field_local(local, self, current, gradient=gradient)
+            res = self.core.field_local(local, self.winding, current, gradient=gradient)
             if gradient:
                 b += res[0]
                 g += res[1]
@@ -157,10 +162,10 @@ class Coil:
         return b[0] if single else b
 
     # ------------------------------------------------------------------ electrical
-    def resistance(self, wire: "WireSpec | None" = None) -> float:
+    def resistance(self, wire: WireSpec | None = None) -> float:
         """DC resistance of the winding, ohm (see :mod:`designkit.electrical`)."""
         return electrical.resistance(self, wire)
 
-    def inductance(self, wire: "WireSpec | None" = None) -> float:
+    def inductance(self, wire: WireSpec | None = None) -> float:
         """Self-inductance including the core, H (see :mod:`designkit.electrical`)."""
         return electrical.inductance(self, wire)

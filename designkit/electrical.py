@@ -1,59 +1,38 @@
 """Electrical and thermal model of a coil: turns, wire length, resistance, inductance, heating.
 
-Pure functions of SI numbers (the ``*_from_geometry`` kernels) and, one layer up, functions of a
-:class:`designkit.Coil` and a :class:`designkit.design.WireSpec` / :class:`Design`.
+Pure functions of SI numbers (the ``*_from_geometry`` kernels) and, one layer up, functions of
+a coil (:class:`designkit.winding.CoilLike`: a :class:`designkit.Coil`) and a
+:class:`designkit.design.WireSpec` / :class:`Design`. Inputs in m, A, V, deg C; outputs in ohm,
+H, s, kg, W.
 
-Models and their stated assumptions
------------------------------------
-Turns
-    ``layered`` (square packing): layers = floor(depth / d_ins), turns per layer =
-    floor(length / d_ins). ``orthocyclic``: each layer after the first nests in the grooves of
-    the one below, so the layer pitch is d_ins sqrt(3)/2 and every second layer holds one turn
-    less (unless half a pitch of axial room is left). The *continuous* counterparts
-    (section area / (d_ins^2) and / (d_ins^2 sqrt(3)/2)) are what the optimizer uses; the thesis'
-    1429 turns are exactly 7 mm x 100 mm / (0.7 mm)^2 = 1428.6, rounded.
-Resistance
-    R = rho(T) l / (pi d^2 / 4), l = turns x 2 pi x mean radius (leads ignored),
-    rho(T) = rho_ref (1 + alpha (T - T_ref)) (IEC 60028 annealed copper by default).
-Air-core self-inductance
-    Exact for a uniform azimuthal current density over the rectangular section (the same
-    idealisation as the field model), by the Bessel-function (Fourier-Bessel) integral
+Models (assumptions and derivations: docs/electrical.md):
 
-        L = 2 pi mu0 N^2 / (w^2 h^2) int_0^inf S(k)^2 (k h + exp(-k h) - 1) / k^6 dk,
-        S(k) = int_{k ri}^{k ro} x J1(x) dx = [int_0^x J0 - x J0(x)]_{k ri}^{k ro},
-
-    (w = ro - ri, h = length; from the mutual inductance of coaxial loops
-    mu0 pi a b int J1(ka) J1(kb) exp(-k|z|) dk integrated over both sections; Dodd & Deeds 1968,
-    Conway IEEE Trans. Magn. 46, 75 (2010)). Gauss-Legendre on panels of one half-period up to
-    t = k ro = T, plus the analytic mean of the tail (:func:`_tail`). The difference from a real winding of round wires (Rosa's correction) is ~0.1 %
-    for the thesis coil. Tests check it against filament sums with Maxwell's formula, the
-    Lorenz/Nagaoka current-sheet formula (mpmath) and Wheeler's multilayer formula.
-Iron core
-    ``coil.core.extra_inductance(coil)`` (:mod:`designkit.core`, its own stated model).
-Thermal
-    Lumped and adiabatic (no cooling, conservative): copper mass m c dT/dt = I^2 R(T) at a
-    constant (regulated) current, so t = m c ln(1 + alpha' dT) / (I^2 R0 alpha'), alpha' the
-    temperature coefficient referred to the starting temperature.
+- turns: ``layered`` (square) or ``orthocyclic`` packing of the insulated wire, whole turns
+  by layer counts, a continuous count (section area / d_ins^2 / packing) for the optimizer;
+- resistance: R = rho(T) l / (pi d^2 / 4), l = turns x 2 pi x mean radius (leads ignored),
+  rho(T) linear in T (IEC 60028 annealed copper by default);
+- air-core inductance: exact for a uniform current density over the rectangular section, by
+  the Fourier-Bessel integral (Dodd & Deeds 1968; Conway, IEEE Trans. Magn. 46, 75 (2010));
+- iron core: ``coil.core.extra_inductance(coil)`` (:mod:`designkit.cores`);
+- thermal: lumped and adiabatic at a constant current (conservative).
 """
 
 from __future__ import annotations
 
-import functools
+import dataclasses
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import Literal
 
 import numpy as np
-from scipy.special import itj0y0, j0, j1
+from scipy.special import j1, sici
 
 from . import _validate as v
 from .constants import MU0
-from .design import DriveSpec, OptimizeSpec, WireSpec
+from .design import Design, DriveSpec, OptimizeSpec, WireSpec
 from .errors import BadInputError
-
-if TYPE_CHECKING:  # pragma: no cover
-    from .coil import Coil
-    from .design import Design
+from .fourier_bessel import int_x_j1, quarter_period_panels
+from .winding import CoilLike, WindingGeometry
 
 Packing = Literal["layered", "orthocyclic"]
 PACKINGS: tuple[str, ...] = ("layered", "orthocyclic")
@@ -158,13 +137,14 @@ def _check_wire(wire: WireSpec) -> WireSpec:
     return wire
 
 
-def resistance(coil: "Coil", wire: WireSpec | None = None,
+def resistance(coil: WindingGeometry, wire: WireSpec | None = None,
                temperature_c: float | None = None) -> float:
     """DC resistance of the coil's winding, ohm.
 
     Parameters
     ----------
-    coil : Coil
+    coil : WindingGeometry or Coil
+        The winding (m, turns).
     wire : WireSpec, optional
         Default: ``WireSpec()`` (0.7 mm bare copper at 20 C).
     temperature_c : float, optional
@@ -176,44 +156,12 @@ def resistance(coil: "Coil", wire: WireSpec | None = None,
 
 
 # ====================================================================== inductance
-_GL_NODES = 8
-
-
-@functools.lru_cache(maxsize=8)
-def _panels(t_max: float, nodes: int = _GL_NODES):
-    """Gauss-Legendre nodes/weights on [0, t_max] in panels of length pi/2 (a quarter period
-    of the slowest Bessel oscillation in t = k ro, so every panel sees a smooth integrand)."""
-    x, w = np.polynomial.legendre.leggauss(nodes)
-    n_pan = int(math.ceil(t_max / (0.5 * math.pi)))
-    edges = np.linspace(0.0, t_max, n_pan + 1)
-    half = 0.5 * np.diff(edges)
-    mid = 0.5 * (edges[1:] + edges[:-1])
-    t = (mid[:, None] + half[:, None] * x[None, :]).ravel()
-    wt = (half[:, None] * w[None, :]).ravel()
-    return t, wt
-
-
-def _int_xj1(x):
-    """int_0^x t J1(t) dt = int_0^x J0 - x J0(x); a series below x = 0.1 avoids the x^3/6
-    that the difference would lose to cancellation."""
-    x = np.asarray(x, dtype=float)
-    small = x < 0.1
-    xs = np.where(small, x, 0.0)
-    x2 = xs * xs
-    series = xs ** 3 / 6.0 * (1.0 - x2 * (3.0 / 40.0) * (1.0 - x2 * (5.0 / 126.0)))
-    ij0 = itj0y0(np.where(small, 1.0, x))[0]
-    big = ij0 - x * j0(x)
-    return np.where(small, series, big)
-
-
 def _tail(rho_i: float, h: float, t_max: float) -> float:
     """int_T^inf of the Bessel integrand in mean: with x J0(x) ~ sqrt(2x/pi) cos(x - pi/4),
     S^2 averages to (t/pi) (1 + rho - 2 sqrt(rho) cos((1 - rho) t)) and g(t h) ~ t h, so the
     tail is h/pi [(1 + rho)/(3 T^3) - 2 sqrt(rho) delta^3 C4(delta T)], delta = 1 - rho,
     C4(x) = int_x^inf cos(u)/u^4 du (by parts down to Ci, Si). The cos term matters for thin
     windings, where the two Bessel oscillations stay in phase far out."""
-    from scipy.special import sici
-
     delta = 1.0 - rho_i
     x = delta * t_max
     if x < 1e-3:  # C4 ~ 1/(3x^3) - 1/(2x) + ...: the tail is (1 - sqrt(rho))^2 h / (3 pi T^3)
@@ -234,8 +182,8 @@ def _reduced_inductance(rho_i: float, h: float, t_max: float) -> tuple[float, ..
     Q = int_0^inf S(t)^2 g(t h) / t^6 dt, g(u) = u + exp(-u) - 1, S = [int x J1]_{rho_i t}^{t}.
     Then L = 2 pi mu0 N^2 ro^5 Q / (w^2 length^2) with w = ro - ri.
     """
-    t, wt = _panels(t_max)
-    s = _int_xj1(t) - _int_xj1(rho_i * t)
+    t, wt = quarter_period_panels(t_max)
+    s = int_x_j1(t) - int_x_j1(rho_i * t)
     u = t * h
     g = u + np.expm1(-u)
     t6 = t ** 6
@@ -262,7 +210,7 @@ def air_inductance_from_geometry(inner_radius: float, outer_radius: float, lengt
     turns : float
     t_max : float
         Truncation of the Bessel integral in t = k outer_radius (the tail beyond is added in
-        mean); 400 gives ~1e-9 relative, 60 ~1e-7 (optimizer).
+        mean); its measured accuracy is in docs/electrical.md.
     gradient : bool
         Also return (dL/d inner_radius, dL/d outer_radius, dL/d length) at *fixed turns*, H/m.
 
@@ -301,13 +249,13 @@ def wheeler_inductance(inner_radius: float, outer_radius: float, length: float,
     return 0.8e-6 * a * a * turns ** 2 / (6 * a + 9 * ell + 10 * c)
 
 
-def air_inductance(coil: "Coil") -> float:
+def air_inductance(coil: WindingGeometry) -> float:
     """Air-core self-inductance of the coil's winding, H (uniform current density model)."""
     return air_inductance_from_geometry(coil.inner_radius, coil.outer_radius, coil.length,
                                         coil.turns)
 
 
-def inductance(coil: "Coil", wire: WireSpec | None = None) -> float:
+def inductance(coil: CoilLike, wire: WireSpec | None = None) -> float:
     """Self-inductance of the coil, H: air-core winding plus the core's extra inductance.
 
     ``wire`` is accepted for symmetry with :func:`resistance`; the uniform-current-density
@@ -388,8 +336,6 @@ class ElectricalReport:
     """Worst-case (50 % duty) peak-to-peak current ripple of the PWM drive, A."""
 
     def as_dict(self) -> dict:
-        import dataclasses
-
         d = dataclasses.asdict(self)
         d["violations"] = list(self.violations)
         return d
@@ -426,7 +372,7 @@ def design_rule_violations(*, resistance_ohm: float, settling_time_s: float, tur
     return out
 
 
-def electrical_report(design: "Design", coil: "Coil", *,
+def electrical_report(design: Design, coil: CoilLike, *,
                       max_temperature_c: float = DEFAULT_MAX_TEMPERATURE_C) -> ElectricalReport:
     """Everything electrical and thermal about ``coil`` (``Coil.from_design(design)`` for the
     design's own: this module sits below designkit.coil and does not build coils).

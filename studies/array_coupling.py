@@ -185,7 +185,7 @@ def saturation(design, fem_run=False, currents=(1.0, 2.0, 3.0, 4.0, 5.0, 6.0), l
     """designkit's per-coil factor vs the nonlinear axisymmetric GetDP FEM (ratio of dBz/dz at
     the design point, nonlinear at I over I x linear mu_r at 1 A)."""
     from designkit.coil import Coil
-    from designkit.coupling import saturation_table
+    from designkit.cores import saturation_table
 
     coil = Coil.from_design(design)
     tab = saturation_table(coil, design.optimize.height_m, np.r_[0.0, currents])
@@ -243,7 +243,7 @@ def run(out_dir=DEFAULT_OUT, quick: bool = False, fem: bool = False,
     from designkit import default_design
     from designkit._io import write_json_atomic
     from designkit.array import CoilArray
-    from designkit.coupling import M_MAX, ArraySystem
+    from designkit.cores import M_MAX, ArraySystem
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -50,8 +50,8 @@ def _max_errors(coil, res, heights, model):
 
 
 def _timings(repeats: int = 20) -> dict:
-    import designkit.core as core_mod
-    from designkit.core import Core
+    import designkit.cores.panel as core_mod
+    from designkit.cores import Core
     from designkit.field.winding import winding_rz
 
     coil = _coil(Core(0.012, 0.110, 1000.0))
@@ -103,7 +103,7 @@ CLASSES = ("above", "below", "beside", "bore", "between")
 
 
 def _around_one(geometry, material, level):
-    from designkit.core import Core
+    from designkit.cores import Core
     from designkit.fem import solve
     from designkit.fem.compare import probe_errors, probe_set
 
@@ -156,7 +156,7 @@ def _around_convergence():
 
 
 def run(out_dir, quick: bool = False) -> dict:
-    from designkit.core import Core, SaturationWarning
+    from designkit.cores import Core, SaturationWarning
     from designkit.design import default_design
     from designkit.electrical import resistance
     from designkit.fem import solve

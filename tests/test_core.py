@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from designkit.coil import Coil
-from designkit.core import (EVAL_RTOL, Core, SaturationWarning, demagnetizing_factor,
-                            steel1010_h)
+from designkit.cores import (EVAL_RTOL, Core, SaturationWarning, demagnetizing_factor,
+                             steel1010_h)
 from designkit.design import MU0
 from designkit.errors import BadInputError
 from designkit.field.winding import winding_rz
@@ -188,7 +188,7 @@ def test_face_panels_match_adaptive_scipy_quadrature_near_the_face():
     face, over and beyond the face."""
     from scipy.integrate import quad
 
-    from designkit.core import _panels_rz
+    from designkit.cores.quadrature import panels_rz as _panels_rz
     from designkit.field.kernels import loop_rz
 
     core = Core(0.012, 0.110, 1000.0)

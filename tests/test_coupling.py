@@ -11,8 +11,7 @@ import pytest
 
 from designkit import Coil, Pose, default_design
 from designkit.array import CoilArray, g5_from_gradient
-from designkit.core import Core
-from designkit.coupling import ArraySystem
+from designkit.cores import ArraySystem, Core
 from designkit.design import MU0, ArraySpec
 from designkit.errors import DesignRuleError
 from designkit.field import dipole_field
@@ -305,7 +304,7 @@ def test_saturation_factor_against_axisymmetric_fem():
     # dBz/dz at the design point: the factor designkit tabulates
     import dataclasses
 
-    from designkit.coupling import saturation_table
+    from designkit.cores import saturation_table
     from designkit.fem.runner import solve
 
     coil = Coil.from_design(D)

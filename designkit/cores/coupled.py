@@ -1,0 +1,306 @@
+"""The array as one magnetic system: all cores magnetized together, by every source at hand.
+
+Per core type a :class:`designkit.cores.core_model.CoreModel` (m = 0 surface currents,
+m >= 1 surface charges about the core's own axis). The applied field of a core is the
+sources' field plus the field of every *other* core, sampled on its collocation rings and
+projected onto the modes; the self blocks are mode-diagonal, the cross blocks (core i's
+unknowns -> core j's projected field) are built once per distinct relative placement. One
+dense LU per array, reused for every source: each coil's winding per ampere, the finger
+magnet at each position (point dipole or uniformly magnetized cylinder).
+
+Inputs: a :class:`designkit.array.CoilArray` (m, A); outputs: unknowns per source and the
+cores' B (T) and grad B (T/m) at global points, force (N) and torque (N m) on the magnet.
+Derivation, costs and the measured accuracy against the 3-D GetDP FEM: docs/coupling.md.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+from scipy.linalg import lu_factor, lu_solve
+
+from .._blas import one_blas_thread
+from ..constants import MU0
+from ..field.kernels import sheet_rz
+from ..pose import Pose
+from ..winding import WindingGeometry
+from .charges import gauss
+from .core_model import M_MAX, CoreModel, core_model
+
+N_PHI_RING = 12
+"""Azimuthal samples per collocation ring when projecting another core's / a winding's field."""
+N_PHI_MAGNET = 32
+"""... and when projecting the magnet's field (it can be ~5 mm from a core top).
+Observation points where :meth:`CoreModel.far_mask` fails sum a core's panels (m = 0) and
+3 Gauss nodes x 32 azimuths per charge panel (m >= 1); the others use compressed product
+rules (FAR_NODES rings per interval, FAR_AZIMUTHS azimuths)."""
+
+
+def _core_model_of(coil, m_max, refine=1) -> CoreModel:
+    c = coil.core
+    return core_model(float(c.radius), float(c.length), float(c.offset),
+                      float(c.relative_permeability), WindingGeometry.of(coil), int(m_max),
+                      int(refine))
+
+
+def _rel_key(pa, pb):
+    """Hashable relative placement of pose b seen from pose a (rounded to 1e-9 m / 1e-12)."""
+    rel_pos = pa.to_local(np.asarray(pb.position, dtype=float)[None])[0]
+    rel_rot = pa.matrix.T @ pb.matrix
+    return tuple(np.round(rel_pos, 9)) + tuple(np.round(rel_rot.ravel(), 12))
+
+
+def _cylinder_magnet(moment, magnet_size_m):
+    """The uniformly magnetized cylinder of moment ``moment`` (3,) A m^2 and size (radius,
+    length) m: radius, length, its axis (unit, along the moment; +z for a zero moment) and
+    its magnetization M = |m| / volume, A/m."""
+    a, length = (float(v) for v in magnet_size_m)
+    mm = float(np.linalg.norm(moment))
+    u = moment / mm if mm > 0 else np.array([0.0, 0.0, 1.0])
+    return a, length, u, mm / (math.pi * a * a * length)
+
+
+class ArraySystem:
+    """All cores of a :class:`~designkit.array.CoilArray` solved together (linear cores).
+
+    Built once per array (:meth:`designkit.array.CoilArray.coupled`). Sources are projected
+    onto the cores' modes, the block system is solved by a stored LU factorization, and the
+    cores' fields are evaluated from the solved unknowns.
+    """
+
+    def __init__(self, array, m_max: int = M_MAX, refine: int = 1):
+        self.array = array
+        self.m_max = int(m_max)
+        # linear at relative_permeability (a 1010-steel core too: its saturation is the
+        # separate correction, saturation_table); 'thesis-uniform' cores stay uncoupled
+        self.core_index = [k for k, c in enumerate(array.coils)
+                           if c.core is not None and c.core.model == "surface-current"]
+        self.models = [_core_model_of(array.coils[k], self.m_max, refine)
+                       for k in self.core_index]
+        self.poses = [array.coils[k].pose for k in self.core_index]
+        sizes = [m.n_unknowns for m in self.models]
+        self.offsets = np.r_[0, np.cumsum(sizes)].astype(int)
+        n = int(self.offsets[-1])
+        self.factors = np.concatenate([m.factors() for m in self.models]) if n else np.zeros(0)
+        mat = np.zeros((n, n))
+        cache = {}
+        with one_blas_thread():
+            self._assemble(mat, cache)
+        self.n_blocks = len(cache)
+        self.n_unknowns = n
+        self._lu = lu_factor(mat) if n else None
+        self._coil_solution = None
+
+    def _assemble(self, mat, cache):
+        for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
+            sj = slice(self.offsets[jj], self.offsets[jj + 1])
+            mat[sj, sj] = mj.self_block()
+            for ii, (mi, pi) in enumerate(zip(self.models, self.poses)):
+                if ii == jj:
+                    continue
+                key = (id(mi), id(mj), _rel_key(pi, pj))
+                if key not in cache:
+                    cache[key] = self._cross_block(mi, pi, mj, pj)
+                si = slice(self.offsets[ii], self.offsets[ii + 1])
+                mat[sj, si] = -mj.factors()[:, None] * cache[key]
+
+    # ------------------------------------------------------------------ assembly
+    @staticmethod
+    def _cross_block(mi, pi, mj, pj):
+        """Projected field at core j's rings per unit unknown of core i, (nu_j, nu_i)."""
+        ring = mj.ring_points(N_PHI_RING)  # local j
+        shape = ring.shape[:2]
+        glob = ring.reshape(-1, 3) @ pj.matrix.T + np.asarray(pj.position)
+        loc_i = pi.to_local(glob)
+        h = mi.basis_field(loc_i, fine=False)  # (n, 3, nu_i) in frame i
+        rot = pj.matrix.T @ pi.matrix  # frame i -> frame j
+        h = np.einsum("ab,nbu->nau", rot, h)
+        return mj.project(h.reshape(shape + (3, -1)))
+
+    def _project_global_field(self, field_fn, n_phi, near_points=None) -> np.ndarray:
+        """RHS: F * projection of a source's H (callable on global points -> (n, 3, k)).
+
+        Without ``near_points``: ``n_phi`` azimuths per ring on every core. With
+        ``near_points`` (k, 3) global m, one source per column (column q sits at
+        near_points[q], and ``field_fn(points, cols)`` evaluates only columns ``cols``): a
+        core uses ``n_phi`` azimuths for the sources closer than 30 mm to it and
+        ``N_PHI_RING`` for the others (a source that far has no significant azimuthal
+        content beyond the kept modes on the core's rings). Returns (n_unknowns, k).
+        """
+        rows = []
+        for mj, pj in zip(self.models, self.poses):
+            if near_points is None:
+                groups = [(n_phi, None)]
+            else:
+                loc = pj.to_local(near_points)
+                rho = np.hypot(loc[:, 0], loc[:, 1])
+                dist = np.maximum.reduce([mj.z_lo - loc[:, 2], loc[:, 2] - mj.z_hi,
+                                          rho - mj.radius])
+                close = dist < 0.03
+                groups = [(n_phi, np.flatnonzero(close)), (N_PHI_RING, np.flatnonzero(~close))]
+            out = None
+            for nphi, cols in groups:
+                if cols is not None and len(cols) == 0:
+                    continue
+                ring = mj.ring_points(nphi)
+                glob = ring.reshape(-1, 3) @ pj.matrix.T + np.asarray(pj.position)
+                h = field_fn(glob) if cols is None else field_fn(glob, cols)  # (n, 3, k)
+                h = np.einsum("ba,nbk->nak", pj.matrix, h)  # to local j
+                proj = mj.project(h.reshape(ring.shape[:2] + h.shape[1:]))
+                if cols is None:
+                    out = proj
+                else:
+                    if out is None:
+                        out = np.zeros((mj.n_unknowns, len(near_points)))
+                    out[:, cols] = proj
+            rows.append(out)
+        return self.factors[:, None] * np.concatenate(rows, axis=0)
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        return lu_solve(self._lu, rhs)
+
+    # ------------------------------------------------------------------ coil sources
+    def coil_solution(self) -> np.ndarray:
+        """Unknowns of all cores per ampere in each coil, (n_unknowns, n_coils) (cached)."""
+        if self._coil_solution is None:
+            coils = self.array.coils
+
+            rhs = np.zeros((self.n_unknowns, len(coils)))
+            cache = {}
+            for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
+                ring = mj.ring_points(N_PHI_RING)
+                glob = ring.reshape(-1, 3) @ pj.matrix.T + np.asarray(pj.position)
+                for k, c in enumerate(coils):
+                    # identical windings at the same relative placement: one evaluation
+                    key = (dataclasses.replace(c, core=None, pose=Pose()), id(mj),
+                           _rel_key(c.pose, pj))
+                    if key not in cache:
+                        h = c.field(glob, 1.0, include="winding", rtol=1e-9) / MU0
+                        h = h @ pj.matrix  # to local j
+                        cache[key] = mj.project(h.reshape(ring.shape[:2] + (3,)))
+                    rhs[self.offsets[jj]:self.offsets[jj + 1], k] = cache[key]
+            self._coil_solution = self.solve(self.factors[:, None] * rhs)
+        return self._coil_solution
+
+    # ------------------------------------------------------------------ evaluation
+    def core_field(self, points: np.ndarray, x: np.ndarray, gradient: bool = False, *,
+                   coil_columns: bool = False):
+        """B of all cores for the unknown columns x (n_unknowns, k) at global points.
+
+        ``coil_columns``: x is :meth:`coil_solution` (column k = coil k), and each core's own
+        column is evaluated by the single-core field rules. Returns B (n, 3, k) T [, G (n, 3, 3, k)
+        T/m].
+        """
+        return self._field(points, x, gradient, False, coil_columns)
+
+    def core_field_pointwise(self, points: np.ndarray, x: np.ndarray, gradient: bool = False):
+        """Like :meth:`core_field` but point i uses its own column x[:, i]: B (n, 3) [, G]."""
+        return self._field(points, x, gradient, True)
+
+    def _field(self, points, x, gradient, pointwise, coil_columns=False):
+        with one_blas_thread():
+            return self._field_impl(points, x, gradient, pointwise, coil_columns)
+
+    def _field_impl(self, points, x, gradient, pointwise, coil_columns=False):
+        pts = np.asarray(points, dtype=float)
+        tail = () if pointwise else (x.shape[1],)
+        b = np.zeros((len(pts), 3) + tail)
+        g = np.zeros((len(pts), 3, 3) + tail) if gradient else None
+        for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
+            xs = x[self.offsets[jj]:self.offsets[jj + 1]]
+            res = mj.field(pj.to_local(pts), xs, gradient, pointwise,
+                           self.core_index[jj] if coil_columns else None)
+            rot = pj.matrix
+            h = res[0] if gradient else res
+            if pj.is_identity_rotation:
+                b += MU0 * h
+                if gradient:
+                    g += MU0 * res[1]
+                continue
+            b += MU0 * np.einsum("ab,nb...->na...", rot, h)
+            if gradient:
+                gl = np.einsum("ab,nbc...->nac...", rot, res[1])
+                g += MU0 * np.einsum("nac...,dc->nad...", gl, rot)
+        return (b, g) if gradient else b
+
+    # ------------------------------------------------------------------ magnet source
+    def magnet_solution(self, positions: np.ndarray, moment: np.ndarray,
+                        magnet_size_m=None) -> np.ndarray:
+        """Unknowns of all cores magnetized by the magnet at each position, (nu, n).
+
+        ``magnet_size_m``: None for a point dipole ``moment``; (radius, length) m for the
+        uniformly magnetized cylinder (axis along ``moment``, M = |m| / volume; its exact
+        field, :func:`designkit.field.magnetized_cylinder_field`).
+        """
+        pos = np.atleast_2d(np.asarray(positions, dtype=float))
+        m = np.asarray(moment, dtype=float)
+        if magnet_size_m is None:
+            def src(glob, cols):
+                # H of the point dipole (magnet outside every core: r > 0 at ring points)
+                d = glob[:, None, :] - pos[None, cols, :]  # (n, k, 3)
+                r2 = np.einsum("nki,nki->nk", d, d)
+                inv_r = 1.0 / np.sqrt(r2)
+                mr = d @ m
+                h = (3.0 * d * (mr * inv_r ** 5)[..., None] - m * (inv_r ** 3)[..., None])
+                return np.swapaxes(h, 1, 2) / (4.0 * math.pi)
+        else:
+            a, length, u, mag = _cylinder_magnet(m, magnet_size_m)
+
+            def src(glob, cols):
+                d = glob[:, None, :] - pos[None, cols, :]  # (n, k, 3)
+                zl = d @ u
+                rv = d - zl[..., None] * u
+                rho = np.sqrt(np.einsum("nki,nki->nk", rv, rv))
+                br, bz = sheet_rz(a, 0.5 * length, rho.ravel(), zl.ravel())
+                br, bz = br.reshape(rho.shape), bz.reshape(rho.shape)
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    er = np.where(rho[..., None] > 0, rv / np.where(rho > 0, rho, 1.0)[..., None],
+                                  0.0)
+                h = mag * (br[..., None] * er + bz[..., None] * u)
+                return np.swapaxes(h, 1, 2)
+
+        with one_blas_thread():
+            rhs = self._project_global_field(src, N_PHI_MAGNET, pos)
+        return self.solve(rhs)
+
+    def magnet_load(self, positions: np.ndarray, moment: np.ndarray, magnet_size_m=None,
+                    n_r: int = 4, n_phi: int = 8):
+        """Force (n, 3) N and torque (n, 3) N m on the magnet from the cores it magnetizes.
+
+        Point dipole (``magnet_size_m`` None): F = (m . grad) B_ind(p), tau = m x B_ind(p).
+        Cylinder (radius, length): its uniform axial M as face charges +-M on the end faces,
+        F = M [int_top B_ind dA - int_bot B_ind dA], tau = M [int_top (r - p) x B_ind dA -
+        int_bot ...] (exact for a uniformly magnetized body in a curl-free field; Gauss rule
+        of n_r x n_phi points per face).
+        """
+        pos = np.atleast_2d(np.asarray(positions, dtype=float))
+        m = np.asarray(moment, dtype=float)
+        x = self.magnet_solution(pos, m, magnet_size_m)
+        if magnet_size_m is None:
+            b, g = self.core_field_pointwise(pos, x, gradient=True)
+            return np.einsum("nji,j->ni", g, m), np.cross(m[None], b)
+        a, length, u, mag = _cylinder_magnet(m, magnet_size_m)
+        e1 = np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0])
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(u, e1)
+        xr, wr = gauss(n_r)
+        s = 0.5 * (xr + 1.0)
+        r = a * np.sqrt(s)
+        ph = 2.0 * math.pi * np.arange(n_phi) / n_phi
+        R, P = np.meshgrid(r, ph, indexing="ij")
+        w = np.repeat(0.5 * wr * math.pi * a * a / n_phi, n_phi)  # area weights
+        disc = (R.ravel()[:, None] * (np.cos(P.ravel())[:, None] * e1
+                                      + np.sin(P.ravel())[:, None] * e2))
+        nq = len(w)
+        force = np.zeros((len(pos), 3))
+        torque = np.zeros((len(pos), 3))
+        for sign in (1.0, -1.0):
+            rel = disc + sign * 0.5 * length * u  # (nq, 3) about the centre
+            pts = (pos[:, None, :] + rel[None]).reshape(-1, 3)
+            bq = self.core_field_pointwise(pts, np.repeat(x, nq, axis=1))
+            bq = bq.reshape(len(pos), nq, 3)
+            force += sign * mag * np.einsum("q,nqi->ni", w, bq)
+            torque += sign * mag * np.einsum("q,nqi->ni", w, np.cross(rel[None], bq))
+        return force, torque
