@@ -14,8 +14,8 @@ FIT_HALF_WINDOW = 5e-3
 """Half-length of the three fitting lines through every output point, m."""
 FIT_SAMPLES = 33
 FIT_DEGREE = 3
-"""Degree of the least-squares polynomials along the fitting lines: a quadratic's slope carries
-a cubic-term error ~ (window / field scale)^2, ~8 % at 15 mm above a core; quartic: < 0.5 %."""
+"""Degree of the least-squares polynomials along the fitting lines (the slope error of a
+lower degree grows as (window / field scale)^2: docs/fem.md)."""
 
 
 def line_specs(folded, mirror_axes):
