@@ -15,6 +15,7 @@ from typing import Literal
 
 import numpy as np
 
+from . import parts as P
 from .params import CadParams
 
 Material = Literal["PLA", "steel", "copper", "NdFeB"]
@@ -91,8 +92,6 @@ def part_names(p: CadParams, kind: Literal["all", "exported"] = "all") -> list[s
 
 def build_part(p: CadParams, name: str):
     """Build one named part (build123d Part) in its local frame."""
-    from . import parts as P
-
     builders = {
         "bobbin": lambda: P.bobbin(p.bobbin),
         "bobbin_flange": lambda: P.bobbin_flange(p.bobbin),

@@ -10,6 +10,13 @@ import argparse
 import dataclasses
 from pathlib import Path
 
+from designkit import _validate as v
+from designkit.commands._common import add_progress_argument, check_output, show_progress
+from designkit.design import load_design
+
+from . import export
+from .params import PrinterParams, from_design
+
 
 def _triple(text: str) -> tuple[float, float, float]:
     try:
@@ -22,6 +29,7 @@ def _triple(text: str) -> tuple[float, float, float]:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``designkit cad``."""
     parser.add_argument("--design", type=Path, default=None,
                         help="design TOML file (default: the thesis design)")
     parser.add_argument("--out", type=Path, default=Path("cad_out"), help="output folder")
@@ -43,21 +51,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--oversize", choices=["error", "skip"], default="error",
                         help="a part larger than the build volume: fail (default) or skip it")
     parser.add_argument("--picture", choices=["png", "none"], default="png")
-    from designkit.commands._common import add_progress_argument
-
     add_progress_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
-    from designkit import _validate as v
-    from designkit.commands._common import check_output, show_progress
-    from designkit.design import load_design
-
-    from .export import export_all, parse_formats
-    from .params import PrinterParams, from_design
-
+    """Export the design's parts to --out and print the parts table; 3 when parts were skipped."""
     check_output(args.out, folder=True)
-    formats = parse_formats(args.format)
+    formats = export.parse_formats(args.format)
     printer = dataclasses.replace(
         PrinterParams(), build_volume_mm=tuple(args.build_volume),
         min_wall_mm=v.positive("--min-wall", args.min_wall, "mm"),
@@ -66,8 +66,9 @@ def run(args: argparse.Namespace) -> int:
     params = from_design(design, mandrel=args.mandrel, printer=printer,
                          finger_diameter_mm=v.positive("--finger-diameter", args.finger_diameter, "mm"),
                          press_fit_clearance_mm=v.finite("--press-fit", args.press_fit, "mm"))
-    report = export_all(params, args.out, formats, picture=args.picture, oversize=args.oversize,
-                        progress="bar" if show_progress(args) else "none")
+    report = export.export_all(params, args.out, formats, picture=args.picture,
+                               oversize=args.oversize,
+                               progress="bar" if show_progress(args) else "none")
     print(f"designkit cad: {design.name} -> {args.out} ({report['seconds']['total']:.1f} s, "
           f"mandrel {report['mandrel']})")
     print(f"{'part':<20} {'qty':>3} {'material':<8} {'volume mm^3':>12} {'PLA g':>8} {'fits':>5}")

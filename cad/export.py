@@ -16,17 +16,21 @@ from __future__ import annotations
 import contextlib
 import json
 import time
+import zipfile
 from dataclasses import asdict
 from pathlib import Path
 from typing import Iterable, Literal
+from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
 from designkit._io import atomic_path
+from designkit._progress import tqdm
 from designkit.errors import BadInputError, DesignRuleError
 
 from . import meshcheck
-from .assembly import PART_INFO, build_parts, part_names, placements, quantities
+from .assembly import (PART_INFO, assembly, build_parts, interferences, part_names, placements,
+                       quantities)
 from .params import CadParams
 from .rules import check_rules, fit_in_build_volume
 
@@ -106,9 +110,6 @@ def write_3mf(vertices: np.ndarray, triangles: np.ndarray, path: str | Path, nam
     Written here rather than with build123d's Mesher because Mesher re-triangulates with a
     relative deflection; this writes exactly the checked triangulation.
     """
-    import zipfile
-    from xml.sax.saxutils import quoteattr
-
     vx = "".join(f'<vertex x="{x:.9g}" y="{y:.9g}" z="{z:.9g}"/>' for x, y, z in vertices)
     tx = "".join(f'<triangle v1="{a}" v2="{b}" v3="{c}"/>' for a, b, c in triangles)
     model = ('<?xml version="1.0" encoding="UTF-8"?>\n<model unit="millimeter" xml:lang="en-US" '
@@ -184,6 +185,78 @@ def _part_row(name: str, shape, qty: int, p: CadParams) -> dict:
     return row
 
 
+class _Staging:
+    """Files staged as temporary names next to their destinations (``out_dir``); the
+    ExitStack renames them into place when its block ends without an error."""
+
+    def __init__(self, stack: contextlib.ExitStack, out: Path):
+        self.stack, self.out = stack, out
+        self.files: dict[str, Path] = {}
+
+    def __call__(self, filename: str) -> Path:
+        """The temporary path to write ``filename`` to."""
+        dest = self.out / filename
+        tmp = self.stack.enter_context(atomic_path(dest))
+        self.files[filename] = dest
+        return tmp
+
+
+def _refuse_oversize(rows: dict, p: CadParams, oversize: str) -> list[str]:
+    """Names of the printed parts too big for the build volume (raise with 'error')."""
+    too_big = [r for r in rows.values() if r.get("fits_printer") is False]
+    if too_big and oversize == "error":
+        bv = " x ".join(f"{v:g}" for v in p.printer.build_volume_mm)
+        raise DesignRuleError("; ".join(
+            f"{r['part']} is {' x '.join(f'{s:.1f}' for s in r['size_mm'])} mm and fits the "
+            f"{bv} mm build volume in no orientation" for r in too_big)
+            + ": split the part, use a larger printer (--build-volume), or --oversize skip.")
+    return [r["part"] for r in too_big]
+
+
+def _refuse_interference(p: CadParams, parts: dict) -> None:
+    """Raise DesignRuleError when instances of the assembly share volume."""
+    hits = interferences(p, parts)
+    if hits:
+        raise DesignRuleError("parts interfere in the assembly: " + "; ".join(
+            f"{a} and {b} share {v:.3g} mm^3" for a, b, v in hits[:8])
+            + ". Check the clearances (pocket_clearance_mm, core_clearance_mm) and "
+            "sensors.offset_m.")
+
+
+def _write_parts(stage: _Staging, jobs, parts: dict, rows: dict, p: CadParams,
+                 bar) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Write and check every (part, format) job; record the checks in ``rows``. Returns the
+    checked meshes by part (the first mesh format written), for the picture."""
+    meshes: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for name, fmt in jobs:
+        tmp = stage(f"{name}.{fmt}")
+        _write_part(name, parts[name], tmp, fmt, p)
+        summary = _check_file(name, parts[name], tmp, fmt, p)
+        mesh = summary.pop("_mesh", None)
+        if mesh is not None and name not in meshes:
+            meshes[name] = mesh
+        rows[name].setdefault("checks", {})[fmt] = summary
+        if bar is not None:
+            bar.update()
+    return meshes
+
+
+def _write_assembly_step(stage: _Staging, p: CadParams, parts: dict) -> None:
+    """assembly.step: every instance, labelled and coloured."""
+    from build123d import export_step
+
+    export_step(assembly(p, parts), stage("assembly.step"))
+
+
+def _write_picture(stage: _Staging, p: CadParams, parts: dict, meshes: dict) -> None:
+    """assembly.png; reference parts (winding, magnet) and parts not exported as a mesh are
+    drawn from an in-memory tessellation with the same tolerance."""
+    for name in part_names(p):
+        if name not in meshes:
+            meshes[name] = _tessellate(parts[name], p)
+    render_assembly_png(p, meshes, stage("assembly.png"))
+
+
 def export_all(p: CadParams, out_dir: str | Path, formats: Iterable[Format] = FORMATS, *,
                picture: Literal["png", "none"] = "png",
                oversize: Literal["error", "skip"] = "error",
@@ -223,75 +296,31 @@ def export_all(p: CadParams, out_dir: str | Path, formats: Iterable[Format] = FO
     exported = part_names(p, "exported")
     rows = {name: _part_row(name, parts[name], qty[name], p) for name in part_names(p)}
     seconds["build"] = time.perf_counter() - t
-    too_big = [r for r in rows.values() if r.get("fits_printer") is False]
-    if too_big and oversize == "error":
-        bv = " x ".join(f"{v:g}" for v in p.printer.build_volume_mm)
-        raise DesignRuleError("; ".join(
-            f"{r['part']} is {' x '.join(f'{s:.1f}' for s in r['size_mm'])} mm and fits the "
-            f"{bv} mm build volume in no orientation" for r in too_big)
-            + ": split the part, use a larger printer (--build-volume), or --oversize skip.")
-    skipped = [r["part"] for r in too_big]
-
+    skipped = _refuse_oversize(rows, p, oversize)
     if check_interference == "yes":
-        from .assembly import interferences
-
         t = time.perf_counter()
-        hits = interferences(p, parts)
+        _refuse_interference(p, parts)
         seconds["interference"] = time.perf_counter() - t
-        if hits:
-            raise DesignRuleError("parts interfere in the assembly: " + "; ".join(
-                f"{a} and {b} share {v:.3g} mm^3" for a, b, v in hits[:8])
-                + ". Check the clearances (pocket_clearance_mm, core_clearance_mm) and "
-                "sensors.offset_m.")
 
     jobs = [(name, fmt) for name in exported if name not in skipped for fmt in formats]
     bar = None
     if progress == "bar":
-        from designkit._progress import tqdm
-
         bar = tqdm(total=len(jobs) + 2 + (picture == "png"), desc="designkit cad", unit="file",
                    leave=False)
-    files: dict[str, Path] = {}
-    meshes: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     t = time.perf_counter()
     with contextlib.ExitStack() as stack:
-        def staged(filename: str) -> Path:
-            dest = out / filename
-            tmp = stack.enter_context(atomic_path(dest))
-            files[filename] = dest
-            return tmp
-
-        for name, fmt in jobs:
-            tmp = staged(f"{name}.{fmt}")
-            _write_part(name, parts[name], tmp, fmt, p)
-            summary = _check_file(name, parts[name], tmp, fmt, p)
-            mesh = summary.pop("_mesh", None)
-            if mesh is not None and name not in meshes:
-                meshes[name] = mesh
-            rows[name].setdefault("checks", {})[fmt] = summary
-            if bar is not None:
-                bar.update()
+        stage = _Staging(stack, out)
+        meshes = _write_parts(stage, jobs, parts, rows, p, bar)
         seconds["parts"] = time.perf_counter() - t
 
         t = time.perf_counter()
-        from build123d import export_step
-
-        from .assembly import assembly
-
-        asm = assembly(p, parts)
-        export_step(asm, staged("assembly.step"))
+        _write_assembly_step(stage, p, parts)
         seconds["assembly_step"] = time.perf_counter() - t
         if bar is not None:
             bar.update()
-
         if picture == "png":
             t = time.perf_counter()
-            # Reference parts (winding, magnet) and parts not exported as STL are drawn from
-            # an in-memory tessellation with the same tolerance.
-            for name in part_names(p):
-                if name not in meshes:
-                    meshes[name] = _tessellate(parts[name], p)
-            render_assembly_png(p, meshes, staged("assembly.png"))
+            _write_picture(stage, p, parts, meshes)
             seconds["png"] = time.perf_counter() - t
             if bar is not None:
                 bar.update()
@@ -303,11 +332,11 @@ def export_all(p: CadParams, out_dir: str | Path, formats: Iterable[Format] = FO
             "parts": list(rows.values()), "skipped_oversize": skipped,
             "totals": _totals(rows.values()), "seconds": seconds,
         }
-        staged("parts.json").write_text(json.dumps(report, indent=2) + "\n")
-        staged("parts.md").write_text(parts_markdown(report))
+        stage("parts.json").write_text(json.dumps(report, indent=2) + "\n")
+        stage("parts.md").write_text(parts_markdown(report))
         if bar is not None:
             bar.close()
-    report["files"] = {k: v.stat().st_size for k, v in sorted(files.items())}
+    report["files"] = {k: v.stat().st_size for k, v in sorted(stage.files.items())}
     return report
 
 

@@ -1,9 +1,10 @@
 """Frozen parameter dataclasses of every part, and the one SI (m) -> mm conversion.
 
-:func:`from_design` is the only place where the design's metres become millimetres; every
-part function takes one of the dataclasses below and nothing else. Values the thesis does
-not give (fits, wall thicknesses, board size, finger diameter) are printing choices, stated
-in the field docs and overridable through :func:`from_design`'s keyword arguments.
+:func:`from_design` (with the per-part helpers it calls) is the only place where the
+design's metres become millimetres; every part function takes one of the dataclasses below
+and nothing else. Values the thesis does not give (fits, wall thicknesses, board size, finger
+diameter) are printing choices, stated in the field docs and overridable through
+:func:`from_design`'s keyword arguments.
 
 Frame: the design's array frame in mm, coil top faces at z = 0, z up, coil (0, 0) at the
 array centre for an odd number of rows and columns.
@@ -252,7 +253,7 @@ def from_design(
 ) -> CadParams:
     """Convert a design (SI, m) into the parameters of every part (mm).
 
-    This is the only function in cad/ that reads metres. Keyword arguments are printing
+    This (with its per-part helpers) is the only code in cad/ that reads metres. Keyword arguments are printing
     choices in mm; they are not range-checked here beyond being finite numbers, because
     :func:`cad.rules.check_rules` reports every violated rule with the fix.
 
@@ -269,18 +270,62 @@ def from_design(
     -------
     CadParams
     """
+    _check_choices(mandrel, core_clearance_mm=core_clearance_mm,
+                   press_fit_clearance_mm=press_fit_clearance_mm,
+                   finger_diameter_mm=finger_diameter_mm)
+    printer = printer or PrinterParams()
+    bobbin, core_p = _bobbin_and_core(design, mandrel, printer, core_clearance_mm,
+                                      air_core_tube_wall_mm, flange_thickness_mm, flange_lip_mm)
+    pocket_r = bobbin.flange_radius_mm + pocket_clearance_mm
+    if fixing_inset_mm is None:
+        fixing_inset_mm = standoff_outer_radius_mm + 1.2
+    grid = _grid(design, printer, pocket_r, fixing_inset_mm, fixing_hole_radius_mm,
+                 standoff_outer_radius_mm)
+    length = bobbin.winding_length_mm
+    mid = -length / 2
+    frame = FrameParams(grid=grid, thickness_mm=plate_thickness_mm, pocket_radius_mm=pocket_r,
+                        pocket_depth_mm=flange_thickness_mm, through_radius_mm=bobbin.bore_radius_mm,
+                        mirror_z_mm=mid)
+    standoff = StandoffParams(outer_radius_mm=standoff_outer_radius_mm,
+                              hole_radius_mm=fixing_hole_radius_mm, length_mm=length)
+    sensors = SensorMountParams(
+        grid=grid, sensor_z_mm=design.sensors.offset_m * MM_PER_M,
+        board_size_mm=tuple(board_size_mm),
+        board_thickness_mm=board_thickness_mm, pocket_clearance_mm=board_clearance_mm,
+        floor_thickness_mm=mount_floor_mm, channel_width_mm=channel_width_mm,
+        leg_outer_radius_mm=standoff_outer_radius_mm, leg_bottom_z_mm=plate_thickness_mm,
+        mirror_z_mm=mid)
+    holder = MagnetHolderParams(
+        magnet_radius_mm=design.magnet.radius_m * MM_PER_M,
+        magnet_length_mm=design.magnet.length_m * MM_PER_M,
+        press_fit_clearance_mm=press_fit_clearance_mm, finger_diameter_mm=finger_diameter_mm,
+        ring_wall_mm=ring_wall_mm, ring_width_mm=ring_width_mm, boss_wall_mm=boss_wall_mm,
+        floor_thickness_mm=holder_floor_mm)
+    # The design point sits above coil (0, 0) of the optimization; in the array that is the
+    # array centre (a coil axis for odd rows x columns).
+    magnet_centre = (0.0, 0.0, design.optimize.height_m * MM_PER_M)
+    return CadParams(design_name=design.name, bobbin=bobbin, core=core_p, grid=grid, frame=frame,
+                     standoff=standoff, sensor_mount=sensors, magnet_holder=holder,
+                     printer=printer, magnet_centre_mm=magnet_centre)
+
+
+def _check_choices(mandrel, **finite_mm) -> None:
+    """The mandrel name, and the keyword values that must be finite numbers (mm)."""
     if mandrel not in ("auto", "printed_tube", "core"):
         raise BadInputError("mandrel", "one of 'auto', 'printed_tube', 'core'", mandrel)
-    printer = printer or PrinterParams()
-    for name, value in [("core_clearance_mm", core_clearance_mm),
-                        ("press_fit_clearance_mm", press_fit_clearance_mm),
-                        ("finger_diameter_mm", finger_diameter_mm)]:
+    for name, value in finite_mm.items():
         if not math.isfinite(float(value)):
             raise BadInputError(name, "a finite number (mm)", value)
-    mm = MM_PER_M
-    coil, core, arr = design.coil, design.core, design.array
-    r_in, r_out, length = coil.inner_radius_m * mm, coil.outer_radius_m * mm, coil.length_m * mm
 
+
+def _bobbin_and_core(design: Design, mandrel: Mandrel, printer: PrinterParams,
+                     core_clearance_mm: float, air_core_tube_wall_mm: float,
+                     flange_thickness_mm: float, flange_lip_mm: float
+                     ) -> tuple[BobbinParams, CoreParams | None]:
+    """The bobbin (with the chosen mandrel) and the core, mm, from the design's coil and core."""
+    mm = MM_PER_M
+    coil, core = design.coil, design.core
+    r_in, r_out, length = coil.inner_radius_m * mm, coil.outer_radius_m * mm, coil.length_m * mm
     if core is None:
         bore = r_in - air_core_tube_wall_mm
         core_p = None
@@ -296,20 +341,23 @@ def from_design(
             chosen = "printed_tube" if r_in - bore >= printer.min_wall_mm else "core"
         else:
             chosen = mandrel
-    flange_r = r_out + flange_lip_mm
     bobbin = BobbinParams(
         bore_radius_mm=bore, winding_inner_radius_mm=r_in, winding_outer_radius_mm=r_out,
         winding_length_mm=length, flange_thickness_mm=flange_thickness_mm,
-        flange_radius_mm=flange_r,
+        flange_radius_mm=r_out + flange_lip_mm,
         # two wire diameters side by side (lead in and out) plus a printing allowance
         slot_width_mm=2 * design.wire.insulated_diameter_m * mm + 0.4,
         mandrel=chosen,
     )
+    return bobbin, core_p
 
+
+def _grid(design: Design, printer: PrinterParams, pocket_r: float, fixing_inset_mm: float,
+          fixing_hole_radius_mm: float, standoff_outer_radius_mm: float) -> GridParams:
+    """Coil centres, pitch and footprint (mm) of the design's array."""
+    mm = MM_PER_M
+    arr = design.array
     pitch = arr.pitch_m * mm
-    pocket_r = flange_r + pocket_clearance_mm
-    if fixing_inset_mm is None:
-        fixing_inset_mm = standoff_outer_radius_mm + 1.2
     # The footprint is the design's (n x pitch) unless the outer pockets would break out or
     # the corner standoffs would not clear the corner flanges (they sit on the diagonal).
     corner = (pocket_r + printer.min_wall_mm + standoff_outer_radius_mm) / math.sqrt(2) + fixing_inset_mm
@@ -317,30 +365,6 @@ def from_design(
     fx = max(arr.columns * pitch, (arr.columns - 1) * pitch + 2 * edge)
     fy = max(arr.rows * pitch, (arr.rows - 1) * pitch + 2 * edge)
     centres = tuple((x * mm, y * mm) for x, y, _ in design.coil_centres_m())
-    grid = GridParams(rows=arr.rows, columns=arr.columns, pitch_mm=pitch, centres_xy_mm=centres,
+    return GridParams(rows=arr.rows, columns=arr.columns, pitch_mm=pitch, centres_xy_mm=centres,
                       footprint_x_mm=fx, footprint_y_mm=fy, fixing_inset_mm=fixing_inset_mm,
                       fixing_hole_radius_mm=fixing_hole_radius_mm)
-    mid = -length / 2
-    frame = FrameParams(grid=grid, thickness_mm=plate_thickness_mm, pocket_radius_mm=pocket_r,
-                        pocket_depth_mm=flange_thickness_mm, through_radius_mm=bore,
-                        mirror_z_mm=mid)
-    standoff = StandoffParams(outer_radius_mm=standoff_outer_radius_mm,
-                              hole_radius_mm=fixing_hole_radius_mm, length_mm=length)
-    sensors = SensorMountParams(
-        grid=grid, sensor_z_mm=design.sensors.offset_m * mm, board_size_mm=tuple(board_size_mm),
-        board_thickness_mm=board_thickness_mm, pocket_clearance_mm=board_clearance_mm,
-        floor_thickness_mm=mount_floor_mm, channel_width_mm=channel_width_mm,
-        leg_outer_radius_mm=standoff_outer_radius_mm, leg_bottom_z_mm=plate_thickness_mm,
-        mirror_z_mm=mid)
-    holder = MagnetHolderParams(
-        magnet_radius_mm=design.magnet.radius_m * mm, magnet_length_mm=design.magnet.length_m * mm,
-        press_fit_clearance_mm=press_fit_clearance_mm, finger_diameter_mm=finger_diameter_mm,
-        ring_wall_mm=ring_wall_mm, ring_width_mm=ring_width_mm, boss_wall_mm=boss_wall_mm,
-        floor_thickness_mm=holder_floor_mm)
-    # The design point sits above coil (0, 0) of the optimization; in the array that is the
-    # array centre (a coil axis for odd rows x columns).
-    magnet_centre = (0.0, 0.0, design.optimize.height_m * mm)
-    return CadParams(design_name=design.name, bobbin=bobbin, core=core_p, grid=grid, frame=frame,
-                     standoff=standoff, sensor_mount=sensors, magnet_holder=holder,
-                     printer=printer, magnet_centre_mm=magnet_centre)
-

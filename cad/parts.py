@@ -13,6 +13,8 @@ from typing import Literal
 
 from build123d import Align, Box, Cylinder, Part, Pos, Rot
 
+from designkit.errors import BadInputError
+
 from .params import (BobbinParams, CoreParams, FrameParams, MagnetHolderParams,
                      SensorMountParams, StandoffParams)
 
@@ -117,7 +119,6 @@ def frame_plate(p: FrameParams, side: Literal["upper", "lower"] = "upper") -> Pa
     mirror image).
     """
     if side not in ("upper", "lower"):
-        from designkit.errors import BadInputError
         raise BadInputError("side", "'upper' or 'lower'", side)
     g, T = p.grid, p.thickness_mm
     plate = _box(-g.footprint_x_mm / 2, g.footprint_x_mm / 2, -g.footprint_y_mm / 2,
@@ -151,7 +152,6 @@ def sensor_mount(p: SensorMountParams, side: Literal["upper", "lower"] = "upper"
     holes (the M3 rods pass through them). Lower: the same part turned over.
     """
     if side not in ("upper", "lower"):
-        from designkit.errors import BadInputError
         raise BadInputError("side", "'upper' or 'lower'", side)
     g = p.grid
     top, bottom = p.top_z_mm, p.bottom_z_mm

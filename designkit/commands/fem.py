@@ -9,8 +9,19 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
+
+from .._io import write_json_atomic
+from ..coil import Coil
+from ..design import load_design
+from ..errors import BadInputError
+from ..fem.compare import air_inductance, comparison_table, plot_comparison
+from ..fem.runner import solve
+from ._common import check_output
+
 
 def add_arguments(parser) -> None:
+    """The options of ``designkit fem``."""
     parser.add_argument("--design", default=None, help="design TOML (default: the thesis design)")
     mat = parser.add_mutually_exclusive_group()
     mat.add_argument("--mu-r", type=float, default=None,
@@ -24,17 +35,7 @@ def add_arguments(parser) -> None:
 
 
 def run(args) -> int:
-    import numpy as np
-
-    from .._io import write_json_atomic
-    from ..coil import Coil
-    from ..design import load_design
-    from ..errors import BadInputError
-    from ..fem.compare import air_inductance, comparison_table, plot_comparison
-    from ..fem.runner import solve
-
-    from ._common import check_output
-
+    """Solve the design's coil with GetDP, compare designkit's models, write --out."""
     out = check_output(args.out, folder=True)
     design = load_design(args.design)
     coil = Coil.from_design(design)

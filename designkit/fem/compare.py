@@ -8,22 +8,21 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
 
+from .._io import atomic_path
 from ..constants import MU0
+from ..core import SaturationWarning
 from ..errors import BadInputError
+from ..field.winding import winding_rz
 from .runner import FemResult
 
 
 def model_field(coil, current: float, r: float, z_local: np.ndarray, core_model: str | None):
     """Bz, dBz/dz (T, T/m) of winding + core (``core_model``; None = winding only) on r = const."""
-    import warnings
-
-    from ..core import SaturationWarning
-    from ..field.winding import winding_rz
-
     z_local = np.asarray(z_local, dtype=float)
     n = len(z_local)
     j = coil.turns * current / ((coil.outer_radius - coil.inner_radius) * coil.length)
@@ -48,10 +47,8 @@ def air_inductance(coil, nr: int = 16, nz: int = 48) -> float:
 
     L = (N / S)^2 int_S Phi(r, z) dS / (N J / S ...) -- written per ampere: the flux through the
     disc of radius r at height z, averaged over the winding section, times N. Independent of
-    the FEM; agrees with it to < 1e-6 on the thesis coil.
+    the FEM: the reference the FEM's air-core inductance is checked against (docs/fem.md).
     """
-    from ..field.winding import winding_rz
-
     ri, ro, length, n_turns = coil.inner_radius, coil.outer_radius, coil.length, coil.turns
     j = n_turns / ((ro - ri) * length)
 
@@ -114,8 +111,6 @@ def plot_comparison(coil, fem: FemResult, path: str | Path, title: str = "") -> 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .._io import atomic_path
-
     top = coil.length / 2
     fig, axes = plt.subplots(2, 2, figsize=(11, 7), sharex=True)
     models = [None] if coil.core is None else ["surface-current", "thesis-uniform"]
@@ -150,11 +145,6 @@ def model_rz(coil, current: float, r: np.ndarray, z_local: np.ndarray, *,
              core_model: str | None = "surface-current", rule: str = "auto") -> dict:
     """Winding + core field of designkit at local (r, z) points: dict of arrays br, bz (T),
     dbr_dz, dbz_dz, dbr_dr, br_over_r (T/m); ``core_model`` None = winding only."""
-    import warnings
-
-    from ..core import SaturationWarning
-    from ..field.winding import winding_rz
-
     r = np.asarray(r, dtype=float)
     z = np.asarray(z_local, dtype=float)
     j = coil.turns * current / ((coil.outer_radius - coil.inner_radius) * coil.length)
@@ -220,7 +210,7 @@ def probe_set(coil, pitch: float = PITCH_M) -> tuple[np.ndarray, list[str]]:
     """Probe points all around ``coil`` (local frame, m) and their class labels.
 
     Classes: ``above`` / ``below`` the coil and core, ``beside`` the winding (level with it,
-    including the three points of issue 11), ``bore`` (inside the bore beyond the core's ends
+    including (r, z) = (20, -6), (25, 20), (30, 0) mm, docs/fem.md), ``bore`` (inside the bore beyond the core's ends
     or between a thin core and the winding, when there is room), ``between`` (half-way to and
     at the neighbours' axes at ``pitch``, side and diagonal). Every vertical probe segment
     (+-2.5 mm) lies in air.

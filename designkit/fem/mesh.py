@@ -13,6 +13,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+from .._io import atomic_path
 from ..errors import require
 
 CORE, WINDING, AIR, SHELL, AXIS, OUTER = 1, 2, 3, 4, 11, 12
@@ -203,7 +204,6 @@ def build_mesh(spec: MeshSpec, msh_path: str | Path) -> dict:
 def export_meshio(msh_path: str | Path, out_stem: str | Path) -> list[Path]:
     """Convert the gmsh mesh to .vtu and .xdmf (XML data) with meshio; returns the paths."""
     meshio = require("meshio", "meshio", "designkit.fem mesh export")
-    from .._io import atomic_path
 
     m = meshio.read(str(msh_path))
     # keep only triangles with their physical tags, in 3D coordinates (x = r, y = z)

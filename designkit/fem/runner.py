@@ -20,7 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
+from .._io import write_json_atomic
 from ..constants import MU0
+from ..core import STEEL1010_B, STEEL1010_H
 from ..errors import BadInputError, MissingDependencyError
 from .mesh import MeshSpec, build_mesh, export_meshio
 from .problem import problem_text
@@ -179,6 +181,57 @@ def _read_global(path: Path) -> float:
     return float(tokens[-1])
 
 
+def _material(core, mu_r, bh):
+    """The core's material: (mu_r, bh) with the core's own when neither is given."""
+    if bh not in (None, "steel1010"):
+        raise BadInputError("bh", "None or 'steel1010'", bh)
+    if core is not None and mu_r is None and bh is None:
+        if core.bh == "steel1010":
+            bh = "steel1010"
+        else:
+            mu_r = float(core.relative_permeability)
+    return mu_r, bh
+
+
+def _probe_box(probes, half_window):
+    """Checked probes (n, 2) m and the (r_max, z_lo, z_hi) box meshed at the probe size."""
+    probes = np.atleast_2d(np.asarray(probes, dtype=float))
+    if probes.ndim != 2 or probes.shape[1] != 2 or not np.all(np.isfinite(probes)) \
+            or np.any(probes[:, 0] < 0) or np.any(np.hypot(*probes.T) > 0.2):
+        raise BadInputError("probes", "finite (r >= 0, z) pairs within 0.2 m of the coil",
+                            probes.shape)
+    pw = half_window
+    pbox = (float(probes[:, 0].max()) + 5e-3, float(probes[:, 1].min()) - pw - 5e-3,
+            float(probes[:, 1].max()) + pw + 5e-3)
+    return probes, pbox
+
+
+def _extraction_lines(z_lo, z_hi, margin, sample_step, off_axis_r, probes, probe_half_window):
+    """(r0, z0, r1, z1, n, file) of the axis line, the off-axis line and each probe segment."""
+    n = int(round((z_hi - z_lo + 2 * margin) / sample_step))
+    r_axis = 1e-7  # on r = 0 exactly VolAxiSqu divides by r; 0.1 um off is the axis value
+    lines = [(r_axis, z_lo - margin, r_axis, z_hi + margin, n, "line_axis.txt"),
+             (off_axis_r, z_lo - margin, off_axis_r, z_hi + margin, n, "line_off.txt")]
+    if probes is not None:
+        npw = max(16, int(round(2 * probe_half_window / (0.1e-3))))
+        for i, (pr, pz) in enumerate(probes):
+            rr, pz = max(float(pr), 1e-7), float(pz)
+            lines.append((rr, pz - probe_half_window, rr, pz + probe_half_window, npw,
+                          f"probe_{i}.txt"))
+    return lines
+
+
+def _read_probes(work: Path, probes, probe_half_window) -> dict:
+    """B and its z-derivatives at each probe from the fit along its segment (FemResult.probes)."""
+    cols = {k: np.empty(len(probes)) for k in ("br", "bz", "dbr_dz", "dbz_dz")}
+    for i, (pr, pz) in enumerate(probes):
+        fit = _read_line(work / f"probe_{i}.txt", pr).fit(
+            np.array([pz]), half_window=probe_half_window)
+        for k in cols:
+            cols[k][i] = fit[k][0]
+    return {"r": probes[:, 0].copy(), "z": probes[:, 1].copy(), **cols}
+
+
 def solve(coil, current: float, *, mu_r: float | None = None, bh: str | None = None,
           level: int = 1, line_z=(0.010, 0.105), off_axis_r: float = 0.010,
           out_dir: str | Path | None = None, export: bool = False,
@@ -215,8 +268,6 @@ def solve(coil, current: float, *, mu_r: float | None = None, bh: str | None = N
     -------
     FemResult
     """
-    from ..core import STEEL1010_B, STEEL1010_H
-
     exe = find_getdp()
     current = float(current)
     if not (math.isfinite(current) and current > 0):
@@ -224,26 +275,13 @@ def solve(coil, current: float, *, mu_r: float | None = None, bh: str | None = N
     if not (isinstance(level, int) and 0 <= level <= 6):
         raise BadInputError("level", "an integer in [0, 6]", level)
     core = coil.core
-    if bh not in (None, "steel1010"):
-        raise BadInputError("bh", "None or 'steel1010'", bh)
-    if core is not None and mu_r is None and bh is None:
-        if core.bh == "steel1010":
-            bh = "steel1010"
-        else:
-            mu_r = float(core.relative_permeability)
+    mu_r, bh = _material(core, mu_r, bh)
     top = coil.length / 2
     z_lo, z_hi = top + line_z[0], top + line_z[1]
     margin = 6e-3
     pbox = None
     if probes is not None:
-        probes = np.atleast_2d(np.asarray(probes, dtype=float))
-        if probes.ndim != 2 or probes.shape[1] != 2 or not np.all(np.isfinite(probes)) \
-                or np.any(probes[:, 0] < 0) or np.any(np.hypot(*probes.T) > 0.2):
-            raise BadInputError("probes", "finite (r >= 0, z) pairs within 0.2 m of the coil",
-                                probes.shape)
-        pw = probe_half_window
-        pbox = (float(probes[:, 0].max()) + 5e-3, float(probes[:, 1].min()) - pw - 5e-3,
-                float(probes[:, 1].max()) + pw + 5e-3)
+        probes, pbox = _probe_box(probes, probe_half_window)
     spec = MeshSpec(coil.inner_radius, coil.outer_radius, coil.length,
                     core.radius if core else None, core.length if core else None,
                     core.offset if core else 0.0, z_lo - margin, z_hi + margin,
@@ -259,16 +297,8 @@ def solve(coil, current: float, *, mu_r: float | None = None, bh: str | None = N
         t_mesh = time.perf_counter() - t0
         area = (coil.outer_radius - coil.inner_radius) * coil.length
         jd = coil.turns * current / area
-        n = int(round((z_hi - z_lo + 2 * margin) / sample_step))
-        r_axis = 1e-7  # on r = 0 exactly VolAxiSqu divides by r; 0.1 um off is the axis value
-        lines = [(r_axis, z_lo - margin, r_axis, z_hi + margin, n, "line_axis.txt"),
-                 (off_axis_r, z_lo - margin, off_axis_r, z_hi + margin, n, "line_off.txt")]
-        if probes is not None:
-            npw = max(16, int(round(2 * probe_half_window / (0.1e-3))))
-            for i, (pr, pz) in enumerate(probes):
-                rr, pz = max(float(pr), 1e-7), float(pz)
-                lines.append((rr, pz - probe_half_window, rr, pz + probe_half_window, npw,
-                              f"probe_{i}.txt"))
+        lines = _extraction_lines(z_lo, z_hi, margin, sample_step, off_axis_r, probes,
+                                  probe_half_window)
         bh_tab = (STEEL1010_H, STEEL1010_B) if bh == "steel1010" else None
         pro = problem_text(current_density=jd, mu_r=mu_r, bh=bh_tab, has_core=core is not None,
                            shell_inner=spec.shell_inner, shell_outer=spec.shell_outer,
@@ -281,15 +311,7 @@ def solve(coil, current: float, *, mu_r: float | None = None, bh: str | None = N
             converged = "Non linear" not in stdout or "did not converge" not in stdout
         axis = _read_line(work / "line_axis.txt", 0.0)
         off = _read_line(work / "line_off.txt", off_axis_r)
-        probe_out = None
-        if probes is not None:
-            cols = {k: np.empty(len(probes)) for k in ("br", "bz", "dbr_dz", "dbz_dz")}
-            for i, (pr, pz) in enumerate(probes):
-                fit = _read_line(work / f"probe_{i}.txt", pr).fit(
-                    np.array([pz]), half_window=probe_half_window)
-                for k in cols:
-                    cols[k][i] = fit[k][0]
-            probe_out = {"r": probes[:, 0].copy(), "z": probes[:, 1].copy(), **cols}
+        probe_out = None if probes is None else _read_probes(work, probes, probe_half_window)
         # GetDP's axisymmetric Jacobians integrate per radian of azimuth: times 2 pi
         energy = 2 * math.pi * _read_global(work / "energy.txt")
         linkage = 2 * math.pi * _read_global(work / "linkage.txt")
@@ -298,8 +320,7 @@ def solve(coil, current: float, *, mu_r: float | None = None, bh: str | None = N
 
 
 def write_result_json(result: FemResult, path: str | Path, extra: dict | None = None) -> Path:
-    from .._io import write_json_atomic
-
+    """``result.to_dict()`` (plus ``extra``) as JSON at ``path``, written atomically."""
     data = result.to_dict()
     if extra:
         data.update(extra)

@@ -1,0 +1,120 @@
+"""Solve one 3-D model with GetDP and return B and grad B at points (and the magnet's force).
+
+mesh (:mod:`.mesh`) -> .pro (:mod:`.problem`) -> getdp -> outputs: the iron's magnetization
+(:mod:`.iron`, windings-only models) or line fits (:mod:`.lines`, models with a magnet);
+with ``magnet_force`` a second run with the cores as air gives the force (:mod:`.force`).
+Points in m, B in T, G in T/m (G[i, j] = dB_i/dx_j); the formulation is in docs/fem.md.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ...errors import BadInputError
+from ..runner import find_getdp, run_getdp, work_folder
+from .bodies import MIRROR_AXES, mirror
+from .force import face_rule, force_on_magnet, read_faces
+from .iron import iron_field
+from .lines import fit_lines, line_specs
+from .mesh import build_mesh
+from .problem import problem_text
+
+
+@dataclass
+class Fem3DResult:
+    """B (n, 3) T and G (n, 3, 3) T/m (G[i, j] = dB_i/dx_j) at the requested points."""
+
+    points: np.ndarray
+    b: np.ndarray
+    g: np.ndarray
+    mesh_stats: dict
+    solve_seconds: float
+    mesh_seconds: float
+    extra: dict = field(default_factory=dict)
+
+
+def _checked(bodies, points, symmetry, outputs):
+    """Validate; return (points (n, 3), the outputs mode)."""
+    if symmetry not in ("none", "half", "quarter"):
+        raise BadInputError("symmetry", "'none', 'half' or 'quarter'", symmetry)
+    pts = np.atleast_2d(np.asarray(points, dtype=float))
+    if pts.ndim != 2 or pts.shape[1] != 3 or not np.all(np.isfinite(pts)):
+        raise BadInputError("points", "finite array of shape (n, 3), m", pts.shape)
+    has_magnet = any(b.kind == "magnet" for b in bodies)
+    outputs = ("lines" if has_magnet else "iron") if outputs is None else outputs
+    if outputs not in ("iron", "lines") or (outputs == "iron" and has_magnet):
+        raise BadInputError("outputs", "'lines', or 'iron' when no body is a magnet", outputs)
+    return pts, outputs
+
+
+def solve(bodies, points, *, symmetry="none", level=0, refine=(), out_dir=None,
+          magnet_force=False, face_nodes=4, timeout_s=1800.0, body_size=3.0e-3,
+          point_size=2.0e-3, outputs=None) -> Fem3DResult:
+    """Solve one 3-D model and return B, grad B at ``points`` (and the force on the magnet).
+
+    Parameters
+    ----------
+    bodies : list of :class:`Cyl`
+    points : ndarray (n, 3), m
+        Output points (outside the bodies, >= FIT_HALF_WINDOW from any body surface).
+    symmetry : {'none', 'half', 'quarter'}
+        Model only y >= 0 ('half') or x, y >= 0 ('quarter'); the bodies must be symmetric.
+    level : int
+        Mesh refinement level; sizes shrink by sqrt(2) per level.
+    refine : list of (xmin, xmax, ymin, ymax, zmin, zmax, size) boxes, m
+    magnet_force : bool
+        Also solve with the cores replaced by air on the same mesh and return
+        ``extra['force_n']`` (3,) N: the force of the magnetized iron on the magnet.
+    outputs : {'iron', 'lines'} or None
+        How B and grad B at the points are obtained (docs/fem.md): 'iron' (exact windings
+        + the cores' magnetization; only without a magnet) or 'lines' (fits of the FEM's B);
+        None: 'iron' when there is no magnet.
+
+    Returns
+    -------
+    Fem3DResult
+    """
+    exe = find_getdp()
+    pts, outputs = _checked(bodies, points, symmetry, outputs)
+    folded_all, signs = mirror(pts, symmetry)
+    # points that fold onto the same modelled point are solved for once
+    folded, inverse = np.unique(np.round(folded_all, 12), axis=0, return_inverse=True)
+    inverse = inverse.ravel()
+    with work_folder(out_dir, "designkit_fem3d_") as work:
+        t0 = time.perf_counter()
+        msh = work / "model.msh"
+        stats = build_mesh(bodies, msh, symmetry=symmetry, level=level, refine=refine,
+                           body_size=body_size, balls=folded if outputs == "lines" else (),
+                           point_size=point_size)
+        t_mesh = time.perf_counter() - t0
+        mirror_axes = MIRROR_AXES[symmetry]
+        lines, names = line_specs(folded if outputs == "lines" else (), mirror_axes)
+        plane = []
+        mag = [b for b in bodies if b.kind == "magnet"]
+        if magnet_force:
+            if len(mag) != 1:
+                raise BadInputError("bodies", "exactly one magnet for magnet_force", len(mag))
+            fq = face_rule(mag[0], face_nodes, symmetry)
+            plane = [(fq[0], "face_top.txt"), (fq[1], "face_bot.txt")]
+        t_solve = run_getdp(exe, work, problem_text(bodies, stats, lines=lines,
+                                                    plane_points=plane,
+                                                    core_table=outputs == "iron"),
+                            msh, timeout_s)[1]
+        if outputs == "iron":  # the whole iron (mirror images included) at the points
+            b, g = iron_field(work, stats, bodies, pts, symmetry)
+        else:
+            b, g = fit_lines(work, names, folded, mirror_axes)
+            b = b[inverse] * signs
+            g = g[inverse] * signs[:, :, None] * signs[:, None, :]
+        extra = {}
+        if magnet_force:
+            with_iron = read_faces(work)
+            t_solve += run_getdp(exe, work, problem_text(bodies, stats, mu_scale=0.0, lines=[],
+                                                         plane_points=plane), msh, timeout_s)[1]
+            extra["force_n"] = force_on_magnet(mag[0].magnetization, fq[2], with_iron,
+                                               read_faces(work), symmetry)
+        return Fem3DResult(pts, b, g, stats, t_solve, t_mesh, extra)
+
