@@ -12,8 +12,8 @@ from .common import FZ_MN, REACH_M, Quality, _image, _pv, _quality
 from .physics import (_add_field_arrays, _footprint_half_m, array_field, force_from_gradient,
                       magnet_moment, resolve_currents)
 from .scene import scene_meshes
-from .style import _add_device, _axes, _bar, _currents_text, _fit_camera, _magnet_text, _mm, \
-    _plotter, _title
+from .style import (_add_device, _axes, _bar, _currents_text, _fit_camera, _magnet_text, _mm,
+                    _plotter, _title)
 
 if TYPE_CHECKING:  # pragma: no cover
     import pyvista
