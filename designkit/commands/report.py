@@ -9,24 +9,18 @@ Runs the whole pipeline and writes a report folder ``OUT`` (default ``./designki
     constraint with its margin, violations flagged, the upward force at the design point and
     the smallest upward force the array renders over the workspace region), the files
     written, the steps ``skipped`` with the reason, and ``quick`` (true for a --quick run).
-``report.md``
-    The same for people: tables and the figures.
-``design.json``, ``design.md``, ``design.toml``
-    The design summary (every field, SI, with derived coil quantities) as JSON, a Markdown
-    table and the TOML that reproduces it.
-``designs.json``
-    The side-by-side evaluation in full (constraint tables, rendering points).
-``figures/*.png``
-    Array scene, field lines, |B| and |F| slices, force map, Fz = +/-0.8 mN iso-surface.
-``vtk/*``
-    The figures' data for ParaView (see :func:`designkit.viz.export_vtk`).
-``map/forcemap.npz``
-    A force-current map file on a coarse grid (5 mm; 15 mm with ``--quick``) when
-    :mod:`designkit.fieldmap` is available; the controller's map comes from ``designkit map``.
+``report.md``: the same for people, tables and the figures.
+``design.json``, ``design.md``, ``design.toml``: the design summary (every field, SI, with
+    derived coil quantities) as JSON, a Markdown table and the TOML that reproduces it.
+``designs.json``: the side-by-side evaluation in full (constraint tables, rendering points).
+``figures/*.png``: array scene, field lines, |B| and |F| slices, force map, Fz = +/-0.8 mN
+    iso-surface; ``vtk/*``: their data for ParaView (:func:`designkit.viz.export_vtk`).
+``map/forcemap.npz``: a force-current map file on a coarse grid (:data:`MAP_SPACING_M`);
+    the controller's map comes from ``designkit map``.
 
 Every file is written atomically and re-running overwrites the same files with the same
 content (no time stamps), so the job is idempotent. ``--quick`` uses coarse grids, small images
-and fewer optimizer starts (seconds instead of about a minute); tests use it.
+and fewer optimizer starts; tests use it.
 """
 
 from __future__ import annotations
@@ -37,18 +31,22 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import __version__
+from .. import __version__, fieldmap, viz
 from .._io import write_json_atomic, write_text_atomic
+from .._progress import tqdm
 from ..array import force_matrix, g5_from_gradient
 from ..coil import Coil
-from ..design import Design, design_to_toml, load_design
+from ..design import Design, default_design, design_to_toml, load_design, named_design
+from ..optimize import device_problem_for, evaluate_device, rendering_force
+from ..sensing import sensor_headroom
 from ._common import (add_currents_arguments, add_progress_argument, check_current_limit,
                       check_output, parse_currents, show_progress, staged_folder)
 
 MAP_SPACING_M = {"quick": 0.025, "full": 0.01}
 """Step of the report map's grid of magnet positions (bias force), m: coarse, quick."""
 
-FIGURES = ("scene", "fieldlines", "slice-B", "slice-F", "forcemap", "isosurface")
+FIGURES = viz.KINDS
+"""The figures of the report, in its order: every kind ``designkit viz`` draws."""
 FIGURE_TITLES = {
     "scene": "Coil array, magnet at the design point, workspace",
     "fieldlines": "Field lines of B",
@@ -289,9 +287,6 @@ def designs_side_by_side(design: Design) -> dict:
     Fz sign convention: z up (away from the coils); ``*_upward_*`` forces are Fz >= 0 rendered
     with the current's sign chosen (bipolar drive).
     """
-    from ..design import default_design, named_design
-    from ..optimize import device_problem_for, evaluate_device, rendering_force
-
     optimized = named_design("optimized")
     left = default_design() if design.name == optimized.name else design
     out = {}
@@ -317,8 +312,6 @@ def designs_side_by_side(design: Design) -> dict:
 
 def _field_map(design: Design, out: Path, quality: str) -> Path:
     """A coarse force-current map (the controller's map: ``designkit map``, 2 mm grid)."""
-    from .. import fieldmap
-
     spacing = MAP_SPACING_M[quality]
     data = fieldmap.build(design, spacing=spacing, progress=False)
     return fieldmap.write(out / "map" / "forcemap.npz", data)
@@ -333,11 +326,9 @@ def run(args: argparse.Namespace) -> int:
     current = design.drive.max_current_a if args.current is None else float(args.current)
     allow = getattr(args, "allow_over_limit", False)
     check_current_limit(design, [current], allow=allow, param="--current")
-    from ..viz import resolve_currents
-
     currents_arg = parse_currents(getattr(args, "currents", None))
     if currents_arg is not None:
-        check_current_limit(design, resolve_currents(design, currents_arg), allow=allow)
+        check_current_limit(design, viz.resolve_currents(design, currents_arg), allow=allow)
     with staged_folder(out) as stage:
         summary, report = _run(args, design, current, currents_arg, stage)
     _print_summary(design, summary, current, report, out)
@@ -349,8 +340,6 @@ def _run(args, design, current, currents_arg, out):
     show = show_progress(args)
     steps = ["design summary", "design point", "design vs optimized", "figures", "VTK files",
              "map file", "report"]
-    from .._progress import tqdm
-
     bar = tqdm(total=len(steps), desc="designkit report", unit="step", disable=not show)
 
     def step(name: str):
@@ -383,12 +372,8 @@ def _run(args, design, current, currents_arg, out):
         "design_point": summary,
         "coil": derived,
     }
-    viz = None
+    currents = viz.resolve_currents(design, currents_arg)
     try:
-        from .. import viz as viz_module
-
-        viz = viz_module
-        currents = viz.resolve_currents(design, currents_arg)
         b, g = viz.array_field(design, np.array([design.design_point_m]), currents)
         f = viz.force_from_gradient(g, viz.magnet_moment(design))[0]
         report["array"] = {"currents_a": currents.tolist(),
@@ -412,15 +397,10 @@ def _run(args, design, current, currents_arg, out):
     done()
 
     # 4-5. figures and VTK files from the same datasets
-    if viz is None:
-        skipped["figures"] = skipped["VTK files"] = "designkit.viz unavailable"
-        done()
-        done()
-    else:
-        try:
-            _figures_and_vtk(viz, design, currents, quality, out, report, step, done, steps)
-        except ImportError as exc:  # pyvista missing: MissingDependencyError
-            skipped["figures"] = skipped["VTK files"] = str(exc)
+    try:
+        _figures_and_vtk(viz, design, currents, quality, out, report, step, done, steps)
+    except ImportError as exc:  # pyvista missing: MissingDependencyError
+        skipped["figures"] = skipped["VTK files"] = str(exc)
 
     # 6. map file
     step(steps[5])
@@ -433,8 +413,6 @@ def _run(args, design, current, currents_arg, out):
     # 7. report
     step(steps[6])
     report["skipped"] = skipped
-    from ..sensing import sensor_headroom
-
     report["sensors"] = sensor_headroom(design)
     write_json_atomic(out / "report.json", report)
     write_text_atomic(out / "report.md", report_markdown(report))

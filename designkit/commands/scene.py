@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from .. import fieldmap, render
 from ..design import load_design
 from ..errors import BadInputError
 from ._common import add_progress_argument, check_output, show_progress
@@ -51,16 +52,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .. import render
-
     check_output(args.out, folder=False)
     obj = render.make_object(args.object, scale=args.mesh_scale,
                              spacing_m=args.mesh_spacing * 1e-3) \
         if Path(args.object).suffix.lower() in (".stl", ".ply") \
         else render.make_object(args.object)
     if args.map is not None:
-        from .. import fieldmap
-
         fm = fieldmap.load(args.map)
         source = render.actuation_source(fm)
         u_default, t_default = fm.meta["max_current_a"], fm.meta["total_current_a"]

@@ -11,11 +11,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from .. import viz
+from ..design import load_design
 from ..errors import BadInputError
 from ._common import (add_currents_arguments, check_current_limit, check_output,
                       parse_currents)
-
-_KINDS = ("scene", "fieldlines", "slice-B", "slice-F", "forcemap", "isosurface")
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -27,7 +27,7 @@ def parse_size(text: str) -> tuple[int, int]:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("kind", choices=_KINDS, help="which figure")
+    parser.add_argument("kind", choices=viz.KINDS, help="which figure")
     parser.add_argument("--design", type=Path, default=None,
                         help="design TOML file (default: the embedded thesis design)")
     add_currents_arguments(parser, "per-coil currents in A, comma-separated, row-major "
@@ -42,9 +42,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .. import viz
-    from ..design import load_design
-
     out = check_output(args.out or Path(f"designkit-viz-{args.kind}.png"), folder=False)
     if out.suffix.lower() != ".png":
         raise BadInputError("--out", "a file name ending in .png", str(out))

@@ -17,18 +17,9 @@ With ``gradient=True`` each returns the 7-tuple
 ``(br, bz, dbr_drho, dbr_dz, dbz_drho, dbz_dz, br_over_rho)`` (derivatives carry one more 1/m),
 ``br_over_rho`` being Br / rho evaluated without 0/0 on the axis.
 
-Formulation (see also the module docs of designkit.field)
----------------------------------------------------------
-In units of the loop radius, with beta^2 = (1 + rho)^2 + z^2, k^2 = 4 rho / beta^2 and
-kc^2 = ((1 - rho)^2 + z^2) / beta^2 (both formed directly, never as 1 - other), the loop
-integrals are sums of
-    I_{n,s} = int_0^{pi/2} u^n (1 - k^2 u)^(-s) dt,   u = sin^2 t.
-For k^2 < K2_SERIES they are summed as hypergeometric series in k^2, with the cancellations
-that the closed forms suffer near the axis and in the far field removed analytically (e.g. the
-j = 0 term of Br vanishes identically, so Br / rho is a series with no 0/0). Elsewhere the closed
-forms in K(k), E(k) are written in the variable v = 1 - u (powers of cos^2 t), in which the
-coefficients of the terms that diverge at the wire are formed exactly ((1 - rho), (1 - rho)^2):
-no cancellation near the wire.
+Formulation: hypergeometric series in k^2 below ``K2_SERIES`` (no cancellation near the axis or
+far away), closed forms in K(k), E(k) in the variable 1 - sin^2 t elsewhere (no cancellation
+near the wire); the derivation is in docs/field_winding.md ("Loop and sheet kernels").
 """
 
 from __future__ import annotations

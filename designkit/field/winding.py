@@ -2,62 +2,22 @@
 
 Two formulations; each point gets the one whose error bound, evaluated for that point's
 position relative to the section (in units of the section's own dimensions), is below ``rtol``
--- the cheaper one when both are.
+-- the cheaper one when both are:
 
-Near formulation (any point): B(rho, z) = mu0 J int_{ri}^{ro} B_sheet(a; rho, z) da, the
-current-sheet closed forms integrated over the winding radius. In the offset variable
-delta = a - rho the integrand is analytic except at the sheet through the point (a jump at
-delta = 0 when |z| < h) and at the end rims, a = rho +- i tau (tau: distance to the nearer end
-plane), and their mirror a = -rho +- i tau. The interval is cut at the real point c of
-[ri - rho, ro - rho] nearest to those singularities and graded geometrically (x4) and
-*symmetrically* about it until the innermost piece is no wider than the singularity's distance
-``dist`` (mirrored Gauss-Legendre pieces make the odd, principal-value part of the end-loop
-integrands cancel). Each piece gets the fewest Gauss-Legendre nodes whose Bernstein-ellipse
-bound reaches ``rtol`` (ellipse half-way to the nearest singularity, SAFETY for the integrand's
-growth there near the singularity, times the a^2 growth of the far field over the ellipse:
-:func:`_growth`); a piece that would need more than 64 nodes is bisected until none does -- there
-is no silent node cap. The grading stops at L = ceil(log4(1e3 A / rtol)) levels, A =
-max(1, (Ro - Ri) / L) (the innermost piece then holds < rtol / 1e3 of the result: deeper
-grading buys nothing for B); for the
-gradient it goes on down to the singularity's distance unless that is below 4^-30 of the
-innermost piece, which then sees the nascent-delta part of the end-loop integrand as its
-principal value, and the one-sided limit is added in closed form (dBr/dz jumps by mu0 J across
-an end face; inside it is PV + mu0 J / 2, outside PV - mu0 J / 2). Such innermost pieces get a
-fixed 8-node rule.
+* near (any point): the current-sheet closed forms integrated over the winding radius with
+  graded, mirrored Gauss-Legendre pieces about the nearest singularity, node counts from
+  Bernstein-ellipse bounds (no silent node cap);
+* far (points outside the section only): a tensor Gauss-Legendre sum over (a, z') of filament
+  loops, allowed only where both node counts are <= 64.
 
-Far formulation (points outside the section only): a tensor Gauss-Legendre sum over (a, z') of
-filament loops, whose series have no cancellation far away. The loop field is analytic in a
-except at a = +-rho +- i dz and in z' except at z' = z +- i dr (dz, dr the axial and radial
-distances from the section), so the Bernstein bound gives the node counts; the formulation is
-allowed only when both are <= 64, i.e. only at points whose distance from the section is a
-sizeable fraction of the section's own extent in that direction.
+Both return, with each value, the sum of the absolute values of its terms: the rounding bound
+(``ROUND_ULPS``) that decides when a near value is recomputed with the far formulation.
+Gradients need no further integrals (end-loop differences, dBz/drho = dBr/dz - mu0 J_phi,
+divergence-free dBr/drho). Supported domain: :data:`RTOL_MIN`, :data:`RATIO_RANGE`,
+:data:`ASPECT_RANGE` (verified against mpmath in tests/test_field_winding_random.py).
 
-Rounding: the sheet closed forms subtract their two end terms (far away that cancels like
-R^3 / (a^2 L)); the loop sums add terms of both signs near the winding. Both formulations
-return, with each value, the sum of the absolute values of the terms it was formed from; the
-rounding error is <= ROUND_ULPS eps times that magnitude (kernels are accurate to a few ulps
-per term). A point whose near-formulation rounding bound exceeds rtol / ROUND_SAFETY of the
-computed |B| (or |G|) is recomputed with the far formulation where that is allowed and better.
-
-Gradients need no further integrals:
-* d/dz of each sheet is K times the difference of its two end loops;
-* dBz/drho = dBr/dz - mu0 J_phi (the J term only inside the winding);
-* dBr/drho = -dBz/dz - Br/rho (divergence-free), Br/rho taken from the sheet's own Br/rho.
-
-Supported domain (verified against mpmath in tests/test_field_winding_random.py): see
-:data:`RTOL_MIN`, :data:`RATIO_RANGE`, :data:`ASPECT_RANGE`.
-
-Singular points. B is continuous and bounded everywhere. G is bounded except at the four
-corners of the section, where it grows like (mu0 J / 2 pi) ln(size / d) at distance d (the 2-D
-field of a quarter plane of current). Exactly at a corner (and closer than ~1e-18 of the
-section) the value returned is finite: the radius integral with the grading stopped at
-4^-30 of its width (MAX_LEVELS, whatever rtol), i.e. G at d ~ 1e-18..1e-20 of the size
-(|G| ~ 10 mu0 J for the thesis coil: a finite placeholder, not a limit).
-Conditioning near a corner: G changes by ~ mu0 J eps |p| / d when the point moves by one ulp,
-so near a corner the relative accuracy of G is limited to ~eps (size / d) / ln(size / d) by the
-point's own rounding (e.g. ~1e-10 at d = 1e-6 of the size, 1e-7 at 1e-9), whatever rtol says.
-On the winding's surface the mu0 J_phi term of dBz/drho (and the jump of dBr/dz on end faces)
-takes half its value.
+The derivation, the error bounds, the grading rule and the behaviour at the section's corners
+and surface: docs/field_winding.md ("Thick winding").
 """
 
 from __future__ import annotations

@@ -18,68 +18,89 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from firmware_io.actuation import ActuationSource
 from firmware_io.allocation import allocate
 
 from .. import _validate as v
-from ..array import force_matrix
+from .._progress import tqdm
+from ..array import CoilArray, force_matrix
 from ..errors import BadInputError
+from ..fieldmap import default_box
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class ArrayActuation:
-    """Adapter giving designkit's CoilArray the map interface: ``actuation(points)`` (n, 8, nc),
-    ``moment_a_m2`` (3,), ``design_sha256``, ``bounds`` (workspace box) and
-    ``bias_force(points)`` (n, 3) N, the magnet's pull on the cores at zero current F0 (the
-    coupled model directly: ~1.4 ms per point, the map's table ~20 us)."""
+    """designkit's coupled CoilArray as an :class:`~firmware_io.actuation.ActuationSource`: the
+    direct model, without a map's interpolation (and at a map's cost per point many times over:
+    docs/rendering.md).
 
-    array: object
-    moment_a_m2: tuple
+    Attributes
+    ----------
+    array : CoilArray
+    moment_a_m2 : ndarray, shape (3,), A m^2 -- the finger magnet's moment (read-only)
+    design_sha256 : str
+    bounds : (lower (3,), upper (3,)), m -- the workspace box
+    rtol : float -- relative accuracy of the winding quadrature
+    """
+
+    array: CoilArray
+    moment_a_m2: np.ndarray
     design_sha256: str
     bounds: tuple
     rtol: float = 1e-6
 
+    def __post_init__(self):
+        m = np.array(self.moment_a_m2, dtype=float).reshape(3)
+        m.flags.writeable = False
+        object.__setattr__(self, "moment_a_m2", m)
+
     @classmethod
     def from_design(cls, design, rtol: float = 1e-6) -> "ArrayActuation":
-        from ..array import CoilArray
-        from ..fieldmap import default_box
-
-        return cls(CoilArray.from_design(design), tuple(design.magnet.moment_vector_a_m2),
+        return cls(CoilArray.from_design(design), design.magnet.moment_vector_a_m2,
                    design.spec_hash(), default_box(design), rtol)
 
-    def actuation(self, points) -> np.ndarray:
-        return self.array.actuation_matrix(np.atleast_2d(points), rtol=self.rtol)
+    @property
+    def n_coils(self) -> int:
+        return self.array.n_coils
+
+    def actuation(self, points, *, rows=None, coils=None) -> np.ndarray:
+        """The coupled A (thesis eq. 2.13): (3,) -> (r, c), (n, 3) -> (n, r, c); T/A and
+        T/(m A). ``rows``, ``coils``: index sequences into the eight rows and the coils,
+        selected after computing all of them (r = len(rows), c = len(coils))."""
+        r_sel = _indices("rows", rows, 8)
+        c_sel = _indices("coils", coils, self.n_coils)
+        a = self.array.actuation_matrix(points, rtol=self.rtol)
+        if r_sel is not None:
+            a = a.take(r_sel, axis=-2)
+        if c_sel is not None:
+            a = a.take(c_sel, axis=-1)
+        return a
 
     def bias_force(self, points) -> np.ndarray:
-        return self.array.bias_force(np.atleast_2d(points), np.asarray(self.moment_a_m2))
+        """F0, the magnet's pull on the cores at zero current, N: (3,) -> (3,), (n, 3) -> (n, 3)."""
+        return self.array.bias_force(points, self.moment_a_m2)
 
 
-@dataclass(frozen=True)
-class _MapSource:
-    fieldmap: object
-    moment_a_m2: tuple
-    design_sha256: str
-    bounds: tuple
-
-    def actuation(self, points) -> np.ndarray:
-        return np.ascontiguousarray(self.fieldmap.actuation(np.atleast_2d(points)))
-
-    @property
-    def bias_force(self):
-        return getattr(self.fieldmap, "bias_force", None)
+def _indices(name: str, sel, n: int):
+    """None (all) or the index list given as ``rows=`` / ``coils=`` (each in 0..n-1)."""
+    if sel is None:
+        return None
+    try:
+        idx = [int(i) for i in sel] if np.ndim(sel) == 1 else []
+    except (TypeError, ValueError):
+        idx = []
+    if not idx or min(idx) < 0 or max(idx) >= n:
+        raise BadInputError(name, f"a non-empty sequence of indices 0..{n - 1}", sel)
+    return idx
 
 
-def actuation_source(fieldmap):
-    """ArrayActuation as is; a FieldMap / MapFile (anything with ``actuation`` and ``meta``)
-    wrapped with the moment and design hash its file records."""
-    if isinstance(fieldmap, (ArrayActuation, _MapSource)):
-        return fieldmap
-    meta = getattr(fieldmap, "meta", None)
-    if not callable(getattr(fieldmap, "actuation", None)) or not isinstance(meta, dict):
+def actuation_source(fieldmap) -> ActuationSource:
+    """``fieldmap`` itself once it is an :class:`~firmware_io.actuation.ActuationSource` (a
+    designkit FieldMap, a firmware_io MapFile or an ArrayActuation); BadInputError if not."""
+    if not isinstance(fieldmap, ActuationSource):
         raise BadInputError("fieldmap", "a designkit FieldMap, a firmware_io MapFile or an "
                             "ArrayActuation", type(fieldmap).__name__)
-    return _MapSource(fieldmap, tuple(np.asarray(fieldmap.moment_a_m2, float)),
-                      meta["design_sha256"],
-                      tuple(np.asarray(b, float) for b in fieldmap.bounds))
+    return fieldmap
 
 
 @dataclass(frozen=True)
@@ -111,9 +132,10 @@ def _targets(rows, normals, heights):
     return heights[:, None]
 
 
-def force_matrices(source, points, rows: str) -> np.ndarray:
-    """Per-point force per ampere, (n, k, n_coils), N/A (k = 3 'force' or 1 'fz')."""
-    a = source.actuation(points)
+def force_matrices(source: ActuationSource, points, rows: str) -> np.ndarray:
+    """Per-point force per ampere at points (n, 3) m, (n, k, n_coils), N/A (k = 3 'force' or
+    1 'fz')."""
+    a = np.ascontiguousarray(source.actuation(np.atleast_2d(points)))
     fm = force_matrix(source.moment_a_m2) @ a[:, 3:, :]
     return fm if rows == "force" else fm[:, 2:3, :]
 
@@ -177,17 +199,16 @@ def force_constant(obj, fieldmap, *, current_limit_a: float, total_current_a: fl
     Parameters
     ----------
     obj : designkit.render.VirtualObject
-    fieldmap : FieldMap, MapFile or :class:`ArrayActuation` (designkit's CoilArray directly)
+    fieldmap : ActuationSource
+        A FieldMap, a MapFile or an :class:`ArrayActuation` (designkit's CoilArray directly).
     current_limit_a, total_current_a : the bounds u_i and I_t, A
     unipolar : 0 <= I_i <= u_i (the thesis) instead of |I_i| <= u_i
     rows : 'force' (3-D lambda h n) or 'fz' (eq. 4.2: F_z = lambda h only)
     n_side : surface discretization (61 x 61 grid over the footprint, the thesis' 3721)
 
-    The magnet's pull on the cores at zero current, F0, is included when the source provides
-    ``bias_force`` (map v2); then lambda d - F0 must be renderable.
+    The magnet's pull on the cores at zero current, F0 (the source's ``bias_force``), is
+    included: lambda d - F0 must be renderable.
     """
-    from .._progress import tqdm
-
     if rows not in ("force", "fz"):
         raise BadInputError("rows", "'force' or 'fz'", rows)
     u = v.nonnegative("current_limit_a", current_limit_a, "A")
@@ -204,7 +225,7 @@ def force_constant(obj, fieldmap, *, current_limit_a: float, total_current_a: fl
     heights = obj.height(pts)
     d_all = _targets(rows, nrm, heights)
     fms = force_matrices(src, pts, rows)
-    bias = src.bias_force(pts) if callable(src.bias_force) else np.zeros((len(pts), 3))
+    bias = src.bias_force(pts)
     bias = bias if rows == "force" else bias[:, 2:3]
     n_c = fms.shape[2]
     uu = np.full(n_c, u)

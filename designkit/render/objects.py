@@ -17,7 +17,7 @@ import numpy as np
 from firmware_io.scene import SceneObject
 
 from .. import _validate as v
-from ..errors import BadInputError
+from ..errors import BadInputError, require
 
 
 class VirtualObject:
@@ -342,6 +342,4 @@ def _top_height(sdf: np.ndarray, z0: float, h: float) -> np.ndarray:
 
 
 def _pyvista():
-    from ..errors import require
-
     return require("pyvista", "pyvista", "meshes (STL/PLY) for rendering")

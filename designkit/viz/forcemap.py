@@ -1,0 +1,89 @@
+"""Arrows of the force on the magnet over a square grid across the workspace at one height,
+coloured by its magnitude (mN, log scale)."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Sequence
+
+import numpy as np
+
+from .. import _validate as v
+from .common import F_MN, F_N, MIN_ARROW, Quality, _pv, _quality
+from .physics import _add_field_arrays, array_field, magnet_moment, resolve_currents
+from .scene import scene_meshes
+from .style import (_add_device, _axes, _bar, _currents_text, _fit_camera, _log_fmt,
+                    _magnet_text, _mm, _plotter, _title)
+
+if TYPE_CHECKING:  # pragma: no cover
+    import pyvista
+
+    from ..design import Design
+
+
+def force_map_data(design: "Design", currents: Sequence[float] | None = None, *,
+                   moment=None, height_m: float | None = None, quality: Quality = "full"):
+    """Force on the magnet at the nodes of a square grid over the workspace at one height.
+
+    Returns
+    -------
+    pyvista.PolyData
+        Points (m) with ``"F (N)"``, ``"F magnitude (mN)"``, ``"Fz (mN)"``, ``"B (T)"``, ``"B magnitude (mT)"``.
+    """
+    pv = _pv()
+    res = _quality(quality)
+    cur = resolve_currents(design, currents)
+    m = magnet_moment(design, moment)
+    h = design.optimize.height_m if height_m is None else v.positive("height_m", height_m)
+    hw = design.workspace.half_width_m
+    n = res["map"]
+    xs = np.linspace(-hw, hw, n)
+    xx, yy = np.meshgrid(xs, xs, indexing="ij")
+    pts = np.c_[xx.ravel(), yy.ravel(), np.full(xx.size, h)]
+    cloud = pv.PolyData(pts)
+    b, g = array_field(design, pts, cur, gradient=True)
+    _add_field_arrays(cloud, b, g, m)
+    return cloud
+
+
+def plot_force_map(design: "Design", currents: Sequence[float] | None = None, *,
+                   moment=None, height_m: float | None = None, quality: Quality = "full",
+                   window_size=(1024, 768), data=None, blocks=None) -> "pyvista.Plotter":
+    """Arrows of the force on the magnet over a grid at one height, coloured by its magnitude
+    (mN, log scale); arrow length grows as the square root of the magnitude."""
+    pv = _pv()
+    cur = resolve_currents(design, currents)
+    h = design.optimize.height_m if height_m is None else height_m
+    cloud = (force_map_data(design, cur, moment=moment, height_m=h, quality=quality)
+             if data is None else data)
+    blocks = scene_meshes(design, cur) if blocks is None else blocks
+    p = _plotter(pv, window_size)
+    # see-through coils: opaque ones hide the arrows behind them in the oblique view
+    _add_device(p, design, blocks, opacity=0.25, magnet=False, workspace=True)
+    f = np.asarray(cloud[F_N])
+    fmag = np.linalg.norm(f, axis=1)
+    fmax = float(fmag.max()) if fmag.size else 0.0
+    n = int(round(math.sqrt(cloud.n_points))) or 1
+    spacing_mm = 2e3 * design.workspace.half_width_m / max(n - 1, 1)
+    mm = _mm(cloud)
+    if fmax > 0:
+        # Length ~ sqrt(|F|): the force over a core is orders of magnitude above that at the
+        # workspace's edge; a linear scale would show one arrow and dots.
+        unit = f / np.where(fmag > 0, fmag, 1.0)[:, None]
+        # at least MIN_ARROW of the spacing, so that the weak-force arrows stay visible
+        mm["arrow"] = unit * np.maximum(np.sqrt(fmag / fmax), MIN_ARROW)[:, None]
+        glyphs = mm.glyph(orient="arrow", scale="arrow", factor=0.95 * spacing_mm,
+                          geom=pv.Arrow(tip_length=0.35, tip_radius=0.15, shaft_radius=0.05))
+        lo = max(fmax * 1e-3, float(fmag.min()) * 1e3, 1e-9)
+        p.add_mesh(glyphs, scalars=F_MN, cmap="plasma", log_scale=True,
+                   clim=(lo, fmax * 1e3), name="force-arrows",
+                   scalar_bar_args=_bar("F (mN)", fmt=_log_fmt(lo, fmax * 1e3)))
+    plane = pv.Plane(center=(0, 0, h * 1e3), i_size=2e3 * design.workspace.half_width_m,
+                     j_size=2e3 * design.workspace.half_width_m)
+    p.add_mesh(plane, color="#dddddd", opacity=0.25)
+    _title(p, f"Force on the magnet ({_magnet_text(design, moment)}) at z = {h * 1e3:.0f} mm\n"
+              f"largest: {fmax * 1e3:.4g} mN; {_currents_text(cur)}\n"
+              f"arrow length ~ square root of the force (at least {MIN_ARROW:g} of the "
+              f"largest)", font_size=11)
+    _fit_camera(p, _axes(p), elevation_deg=50.0)
+    return p

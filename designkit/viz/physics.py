@@ -1,0 +1,128 @@
+"""The array's field and the force on the magnet at the points of a figure (design frame, m).
+
+The force on the finger magnet is ``F = (grad B)^T m`` (:func:`designkit.array.force_matrix`,
+thesis eq. 2.5) with ``m`` the design's magnet moment (MagnetSpec.direction, default -z) unless
+another moment is given. Default currents (``currents=None``): the coil nearest the array
+centre at the design's ``drive.max_current_a`` and every other coil at 0 A -- the situation of
+the design point in ``designkit report``.
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import TYPE_CHECKING, Sequence
+
+import numpy as np
+
+from .. import _validate as v
+from ..array import array_for_design, force_matrix, g5_from_gradient
+from ..errors import BadInputError
+from .common import B_MT, B_T, F_MN, F_N, FZ_MN, GRAD_T_M
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..design import Design
+
+
+def resolve_currents(design: "Design", currents: Sequence[float] | None = None) -> np.ndarray:
+    """Per-coil currents, A, shape (ncoils,), row-major like :meth:`Design.coil_centres_m`.
+
+    ``None`` gives the default: the coil nearest the array centre at ``drive.max_current_a``.
+    """
+    centres = np.array(design.coil_centres_m())
+    n = len(centres)
+    if currents is None:
+        out = np.zeros(n)
+        out[int(np.argmin(np.hypot(centres[:, 0], centres[:, 1])))] = design.drive.max_current_a
+        return out
+    try:
+        arr = np.asarray(currents, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise BadInputError("currents", f"{n} numbers in A (one per coil)", currents) from None
+    if arr.size != n:
+        raise BadInputError("currents", f"{n} numbers in A (one per coil, row-major)",
+                            f"{arr.size} values")
+    if not np.all(np.isfinite(arr)):
+        raise BadInputError("currents", "finite numbers in A", arr.tolist())
+    return arr
+
+
+def magnet_moment(design: "Design", moment=None) -> np.ndarray:
+    """The finger magnet's dipole moment, A m^2, shape (3,): the design's (MagnetSpec.direction)."""
+    if moment is None:
+        return np.array(design.magnet.moment_vector_a_m2)
+    return np.asarray(v.vector3("moment", moment, "A m^2"), dtype=float)
+
+
+def array_field(design: "Design", points, currents: Sequence[float] | None = None, *,
+                gradient: bool = True):
+    """Flux density (and gradient) of the design's whole coil array at points.
+
+    :class:`designkit.array.CoilArray` of the whole array (its cores solved together, so the
+    unpowered coils' cores count too): the one place where the coils' fields are summed.
+
+    Parameters
+    ----------
+    design : Design
+    points : array-like, shape (n, 3), m
+    currents : sequence of float, shape (ncoils,), A, or None (see :func:`resolve_currents`)
+    gradient : bool
+        Also return ``G[:, i, j] = dB_i/dx_j``.
+
+    Returns
+    -------
+    B : ndarray, shape (n, 3), T
+    G : ndarray, shape (n, 3, 3), T/m (only when gradient=True)
+    """
+    p, _ = v.points(points)
+    cur = resolve_currents(design, currents)
+    if not np.any(cur):
+        b, g = np.zeros((len(p), 3)), np.zeros((len(p), 3, 3))
+    else:
+        # the whole array, unpowered coils included: their cores are magnetized by the others
+        with warnings.catch_warnings():
+            # A figure is not the place to repeat the linear-core saturation warning for every
+            # grid; `designkit report` states it once in its summary.
+            warnings.simplefilter("ignore")
+            b, g = array_for_design(design).field(p, cur)
+    return (b, g) if gradient else b
+
+
+def force_from_gradient(gradient_t_per_m: np.ndarray, moment_a_m2: np.ndarray) -> np.ndarray:
+    """Force on a point dipole in air, ``F = F(m) G5`` (:func:`designkit.array.force_matrix`),
+    N, shape (n, 3), from the gradient (n, 3, 3), T/m."""
+    return g5_from_gradient(np.asarray(gradient_t_per_m)) @ force_matrix(moment_a_m2).T
+
+
+def _add_field_arrays(mesh, b, g=None, moment=None):
+    mesh.point_data[B_T] = b
+    mesh.point_data[B_MT] = np.linalg.norm(b, axis=1) * 1e3
+    if g is not None:
+        f = force_from_gradient(g, moment)
+        mesh.point_data[GRAD_T_M] = g.reshape(-1, 9)
+        mesh.point_data[F_N] = f
+        mesh.point_data[F_MN] = np.linalg.norm(f, axis=1) * 1e3
+        mesh.point_data[FZ_MN] = f[:, 2] * 1e3
+    return mesh
+
+
+def _footprint_half_m(design: "Design") -> float:
+    """Half side of a square that covers the coils and the workspace, m."""
+    a = design.array
+    coils = max(a.rows, a.columns) - 1
+    return max(design.workspace.half_width_m, coils * a.pitch_m / 2 + design.coil.outer_radius_m)
+
+
+def inside_solids(design: "Design", points) -> np.ndarray:
+    """Boolean mask (n,): the points (m) that lie inside a core or a winding of the array."""
+    p, _ = v.points(points)
+    c = design.coil
+    inside = np.zeros(len(p), dtype=bool)
+    for x, y, zc in design.coil_centres_m():
+        rho = np.hypot(p[:, 0] - x, p[:, 1] - y)
+        dz = p[:, 2] - zc
+        inside |= (rho >= c.inner_radius_m) & (rho <= c.outer_radius_m) & \
+            (np.abs(dz) <= c.length_m / 2)
+        if design.core is not None:
+            k = design.core
+            inside |= (rho <= k.radius_m) & (np.abs(dz - k.offset_m) <= k.length_m / 2)
+    return inside

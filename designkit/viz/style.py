@@ -1,0 +1,199 @@
+"""How every figure looks: the off-screen plotter, millimetre copies of the meshes, titles,
+colour bars on round labels, axes on round ticks, the camera and the device drawn in context.
+
+Figures are drawn in millimetres (the datasets stay in metres); tick and colour-bar labels are
+1, 2 or 5 x 10^k values that VTK's own axis actor then labels as such.
+"""
+
+from __future__ import annotations
+
+import math
+import textwrap
+
+import numpy as np
+
+from .common import _COPPER, _MAGNET, _STEEL, _window
+from .physics import magnet_moment
+
+
+def _plotter(pv, window_size, shape=(1, 1)):
+    p = pv.Plotter(off_screen=True, window_size=_window(window_size), shape=shape)
+    p.set_background("white")
+    return p
+
+
+def _mm(mesh):
+    """A copy of the mesh with its points in millimetres (data arrays untouched)."""
+    out = mesh.cast_to_structured_grid() if hasattr(mesh, "spacing") else mesh.copy()
+    out.points = np.asarray(out.points) * 1e3
+    return out
+
+
+def _bar(title, **extra):
+    args = dict(title=title, color="black", vertical=True, position_x=0.87, position_y=0.2,
+                width=0.05, height=0.6, title_font_size=14, label_font_size=12, fmt="%.3g",
+                n_labels=5)
+    args.update(extra)
+    return args
+
+
+def _title(p, text, font_size=12):
+    """Title at the upper left, each line wrapped to the width of its (sub)plot."""
+    width = p.window_size[0] / p.shape[1]
+    # VTK's default font: a character is about 0.6 font sizes wide, in pixels
+    chars = max(20, int(0.92 * width / (0.6 * font_size)))
+    lines = [w for line in text.split("\n") for w in (textwrap.wrap(line, chars) or [""])]
+    p.add_text("\n".join(lines), position="upper_left", font_size=font_size, color="black")
+
+
+def _vtk_tick_spacing(span: float) -> float:
+    """The major tick spacing ``vtkCubeAxesActor`` picks for an axis of this span (it labels
+    ``vmin + k * spacing`` whatever label count it is asked for, once that count reaches its
+    own; pyvista's ``_axis_label_values`` mirrors the same rule)."""
+    power = math.log10(span)
+    if power != 0.0:
+        power = math.copysign(abs(power) + 10.0e-10, power)
+    if power < 0.0:
+        power -= 1.0
+    decade = 10.0 ** float(int(power))
+    ticks = int(span / decade) + 1
+    return decade / (5.0 if ticks <= 2 else 2.0 if ticks < 5 else 1.0)
+
+
+def nice_ticks(lo: float, hi: float, target: int = 5) -> tuple[float, float, float]:
+    """``(lo', hi', step)``: the range widened so that the axis VTK draws over it is labelled
+    on round values: ``lo'`` a multiple of ``step``, ``step`` VTK's own tick spacing for the
+    widened span (a 1, 2 or 5 x 10^k), 3 to 11 labels; of those, the least widening (then the
+    label count nearest ``target`` + 1)."""
+    span = hi - lo
+    if not (span > 0 and math.isfinite(span)):
+        return lo - 1.0, hi + 1.0, 1.0
+    k = 10.0 ** math.floor(math.log10(span))
+    best = None
+    for base in (0.05, 0.1, 0.2, 0.25, 0.5, 1.0, 2.0, 2.5, 5.0):
+        step = base * k
+        a = math.floor(lo / step + 1e-9) * step
+        b = math.ceil(hi / step - 1e-9) * step
+        major = _vtk_tick_spacing(b - a)
+        if abs(a / major - round(a / major)) > 1e-9:
+            continue  # VTK would label a + j * major: not round
+        a, b = round(a / major) * major, b  # exact multiples, no 1e-17 residues in the labels
+        n = math.floor((b - a) / major + 1e-9)
+        if 2 <= n <= 10:
+            key = ((b - a) / span, abs(n - target))
+            if best is None or key < best[0]:
+                best = (key, (a, b, major))
+    return best[1] if best else (lo, hi, span / target)
+
+
+def _nice_bounds(bounds) -> tuple[list[float], dict]:
+    b = list(map(float, bounds))
+    counts = {}
+    for i, axis in enumerate("xyz"):
+        lo, hi, step = nice_ticks(b[2 * i], b[2 * i + 1])
+        b[2 * i], b[2 * i + 1] = lo, hi
+        # at least VTK's own count: it then labels lo + k * step (see _vtk_tick_spacing)
+        counts[f"n_{axis}labels"] = int(math.floor((hi - lo) / step + 1e-9)) + 1
+    return b, counts
+
+
+def _axes(p, mesh_bounds=None, location="outer", **kw):
+    """Axes in mm on round tick values (the bounds are widened to the nearest round ticks)."""
+    b, counts = _nice_bounds(p.bounds if mesh_bounds is None else mesh_bounds)
+    p.show_bounds(bounds=b, xtitle="x (mm)", ytitle="y (mm)", ztitle="z (mm)",
+                  color="black", font_size=10, grid=False, location=location, ticks="outside",
+                  minor_ticks=False, fmt="%g", **counts, **kw)
+    return b
+
+
+def _fit_camera(p, bounds_mm, elevation_deg=25.0, azimuth_deg=-58.0, margin=1.22):
+    """Look at the box from (elevation, azimuth) from just far enough that its bounding sphere,
+    widened by ``margin`` for the axis labels, fits the view: nothing is cut at the edges."""
+    b = np.asarray(bounds_mm, dtype=float)
+    every = np.asarray(p.bounds, dtype=float)  # every actor, e.g. coils below the axes box
+    b[0::2], b[1::2] = np.minimum(b[0::2], every[0::2]), np.maximum(b[1::2], every[1::2])
+    centre = (b[0::2] + b[1::2]) / 2
+    radius = 0.5 * float(np.linalg.norm(b[1::2] - b[0::2]))
+    half_angle = math.radians(p.camera.view_angle / 2)
+    _iso_camera(p, tuple(centre), margin * radius / math.sin(half_angle), elevation_deg,
+                azimuth_deg)
+
+
+def _add_device(p, design, blocks, *, opacity=1.0, magnet=True, workspace=True):
+    p.add_mesh(_mm(blocks["windings"]), color=_COPPER, opacity=opacity, smooth_shading=True,
+               name="windings")
+    if "cores" in blocks.keys():
+        p.add_mesh(_mm(blocks["cores"]), color=_STEEL, opacity=opacity, name="cores")
+    if magnet:
+        p.add_mesh(_mm(blocks["magnet"]), color=_MAGNET, name="magnet")
+    if workspace:
+        p.add_mesh(_mm(blocks["workspace"]), color="#1f4e9c", line_width=1.5, name="workspace")
+
+
+def _currents_text(cur) -> str:
+    nz = [(i, c) for i, c in enumerate(cur) if c != 0.0]
+    if not nz:
+        return "all coils at 0 A"
+    if len(nz) <= 3:
+        return ", ".join(f"coil {i + 1} at {c:+.3g} A" for i, c in nz) + ", others 0 A" * (
+            len(nz) < len(cur))
+    return "I = [" + ", ".join(f"{c:+.2g}" for c in cur) + "] A"
+
+
+def _log_fmt(lo: float, hi: float) -> str:
+    if lo >= 1.0:
+        return "%.0f"
+    return "%.2g" if hi < 100 else "%.3g"
+
+
+def _iso_camera(p, focus_mm, distance_mm, elevation_deg=28.0, azimuth_deg=-58.0):
+    el, az = math.radians(elevation_deg), math.radians(azimuth_deg)
+    d = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+    pos = np.asarray(focus_mm) + distance_mm * d
+    p.camera_position = [tuple(pos), tuple(focus_mm), (0.0, 0.0, 1.0)]
+
+
+def _magnet_text(design, moment) -> str:
+    m = magnet_moment(design, moment)
+    direction = "+z" if np.allclose(m[:2], 0) and m[2] > 0 else (
+        "-z" if np.allclose(m[:2], 0) else "(" + ", ".join(f"{x:.2g}" for x in m) + ")")
+    return f"m = {np.linalg.norm(m):.3g} A m^2 along {direction}"
+
+
+def bar_label_values(lo: float, hi: float, log: bool) -> list[float]:
+    """Round label values for a colour bar over [lo, hi]: 1, 2, 5 x 10^k on a log bar (fewer
+    per decade when the range spans many), the ticks of :func:`nice_ticks` inside the range on
+    a linear one."""
+    if not (hi > lo):
+        return [lo]
+    if log and lo > 0:
+        for mants in ((1, 2, 5), (1, 3), (1,)):
+            vals = [m * 10.0 ** e for e in range(math.floor(math.log10(lo)),
+                                                math.ceil(math.log10(hi)) + 1) for m in mants]
+            vals = [x for x in vals if lo * (1 - 1e-9) <= x <= hi * (1 + 1e-9)]  # lo > 0 here
+            if len(vals) <= 7:
+                break
+        return vals if len(vals) >= 2 else [lo, hi]
+    a, b, step = nice_ticks(lo, hi)
+    vals = [a + k * step for k in range(int(round((b - a) / step)) + 1)]
+    return [x for x in vals if lo - 1e-9 * step <= x <= hi + 1e-9 * step]
+
+
+def _clear_bar_titles(plotter) -> None:
+    """Colour bars on round label values (:func:`bar_label_values`), their title lifted above
+    the top label (VTK draws them overlapping)."""
+    from vtkmodules.vtkCommonCore import vtkDoubleArray
+
+    for bar in plotter.scalar_bars.values():
+        size = bar.GetLabelTextProperty().GetFontSize()
+        bar.SetVerticalTitleSeparation(max(int(size), 12))
+        lut = bar.GetLookupTable()
+        if lut is None or bar.GetNumberOfLabels() <= 2:
+            continue  # two labels are the range's ends, e.g. -0.8 / +0.8 mN: round already
+        lo, hi = lut.GetRange()
+        labels = vtkDoubleArray()
+        for x in bar_label_values(lo, hi, bool(lut.GetScale())):
+            labels.InsertNextValue(x)
+        bar.SetUseCustomLabels(True)
+        bar.SetCustomLabels(labels)
+        bar.SetLabelFormat("%g")
