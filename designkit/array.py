@@ -542,7 +542,7 @@ def workspace_metrics(design, *, spacing: float = 0.005, heights=None, out_png=N
     for h in heights:
         X, Y = np.meshgrid(xs, xs, indexing="xy")
         pts = np.c_[X.ravel(), Y.ravel(), np.full(X.size, h)]
-        # the array's own exact matrix: designkit.scene (tables, faster) imports this module
+        # the array's own exact matrix: designkit.skipping (tables, faster) imports this module
         a = arr.actuation_matrix(pts)
         fz = fz_per_amp(a, m)
         fmax.append(max_vertical_force(fz, design.drive.max_current_a,

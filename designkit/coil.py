@@ -3,7 +3,7 @@
 The winding is modelled with uniform current density ``turns * current / ((Ro - Ri) * L)`` over
 its rectangular (r, z) section (see :func:`designkit.field.winding_field`); the core's field is
 added by :class:`designkit.cores.Core`, which sees only the winding's geometry
-(:attr:`Coil.winding`, a :class:`designkit.winding.WindingGeometry`).
+(:attr:`Coil.winding`, a :class:`designkit.winding_geometry.WindingGeometry`).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from .design import Design, WireSpec
 from .errors import BadInputError
 from .field import winding_field
 from .pose import Pose
-from .winding import WindingGeometry
+from .winding_geometry import WindingGeometry
 
 
 @dataclass(frozen=True)

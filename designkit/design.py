@@ -120,7 +120,7 @@ class CoreSpec:
     bh: str = "linear"
     """Core material law: 'linear' (relative_permeability; keeps fields linear in the currents,
     which the actuation matrix and the controller assume) or 'steel1010' (nonlinear B-H curve,
-    see designkit.core)."""
+    see designkit.cores)."""
 
 
 @dataclass(frozen=True)

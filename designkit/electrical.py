@@ -1,7 +1,7 @@
 """Electrical and thermal model of a coil: turns, wire length, resistance, inductance, heating.
 
 Pure functions of SI numbers (the ``*_from_geometry`` kernels) and, one layer up, functions of
-a coil (:class:`designkit.winding.CoilLike`: a :class:`designkit.Coil`) and a
+a coil (:class:`designkit.winding_geometry.CoilLike`: a :class:`designkit.Coil`) and a
 :class:`designkit.design.WireSpec` / :class:`Design`. Inputs in m, A, V, deg C; outputs in ohm,
 H, s, kg, W.
 
@@ -32,7 +32,7 @@ from .constants import MU0
 from .design import Design, DriveSpec, OptimizeSpec, WireSpec
 from .errors import BadInputError
 from .fourier_bessel import int_x_j1, quarter_period_panels
-from .winding import CoilLike, WindingGeometry
+from .winding_geometry import CoilLike, WindingGeometry
 
 Packing = Literal["layered", "orthocyclic"]
 PACKINGS: tuple[str, ...] = ("layered", "orthocyclic")

@@ -11,15 +11,16 @@ Main entry points::
     from firmware_io.hw.sim import SimBus       # register-level simulated devices
 """
 
-from .coils import CoilCommandResult, CoilDriver, CoilOutput, default_coil_wiring
 from .errors import BadInputError, CoilWriteError, FirmwareIOError, I2CError, SensorConfigError
-from .hw import (PCA9685, TCA9548A, TLV493D, ArraysReading, I2CBus, SensorArrays, SensorSlot,
-                 default_sensor_layout, open_bus)
-from .md10c import CoilDrive, DriveCommand, current_to_command
+from .hw import (PCA9685, TCA9548A, TLV493D, ArraysReading, CoilCommandResult, CoilDrive,
+                 CoilDriver, CoilOutput, DriveCommand, I2CBus, SensorArrays, SensorSlot,
+                 current_to_command, default_coil_wiring, default_sensor_layout, open_bus,
+                 voltage_to_command)
 
 __all__ = [
     "I2CBus", "open_bus", "CoilDriver", "CoilOutput", "CoilCommandResult", "default_coil_wiring",
     "PCA9685", "TCA9548A", "TLV493D", "BadInputError", "CoilWriteError", "FirmwareIOError",
     "I2CError", "SensorConfigError", "CoilDrive", "DriveCommand", "current_to_command",
+    "voltage_to_command",
     "ArraysReading", "SensorArrays", "SensorSlot", "default_sensor_layout",
 ]

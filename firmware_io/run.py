@@ -1,8 +1,8 @@
 """Hardware entry point on the controller: ``python -m firmware_io.run --bus 1 --map F --scene F``.
 
 Thin: parse, load the map and the scene (refusing a pair from different designs), open the bus
-(or two: ``--sensor-bus``), build the drivers with the default wiring (firmware_io.coils,
-firmware_io.sensors), put every coil in the safe state and run
+(or two: ``--sensor-bus``), build the drivers with the default wiring (firmware_io.hw.coils,
+firmware_io.hw.sensors), put every coil in the safe state and run
 :class:`firmware_io.runner.Runner` until Ctrl-C or ``--duration``. Sensors are read in a background thread at the rate the bus allows; the control loop predicts
 between frames. Everything a user can get wrong is checked before any coil is energized.
 Needs numpy and smbus2 only.
@@ -19,9 +19,9 @@ import time
 import numpy as np
 
 from .allocation import Allocator
-from .bus import open_bus
-from .coils import CoilDriver
-from .devices import PCA9685
+from .hw.bus import open_bus
+from .hw.coils import CoilDriver
+from .hw.pca9685 import PCA9685
 from .errors import FirmwareIOError
 from .localization import Localizer
 from .mapfile import MapFile
@@ -29,7 +29,7 @@ from .runner import (CALIBRATED_RELATIVE_ERROR, CALIBRATION_CURRENT_A, ConstantV
                      Runner, SceneForce, SensorFrame, calibrate_sensors, calibration_currents,
                      config_from_map, record_calibration)
 from .scene import Scene
-from .sensors import SensorArrays
+from .hw.sensors import SensorArrays
 
 EXIT_BAD_INPUT = 2
 
@@ -158,7 +158,7 @@ def load_inputs(map_path: str, scene_path: str, method: str):
 
 
 def open_device(bus_number: int, sensor_bus_number: int | None, drives):
-    """Open the bus(es) and build the PWM boards (one :class:`firmware_io.md10c.CoilDrive` per
+    """Open the bus(es) and build the PWM boards (one :class:`firmware_io.hw.md10c.CoilDrive` per
     coil: the runner configuration's ``drives``) and sensor arrays (default wiring)."""
     bus = open_bus(bus_number)
     sbus = bus if sensor_bus_number is None else open_bus(sensor_bus_number)

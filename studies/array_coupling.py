@@ -2,7 +2,7 @@
 the iron and saturation change what the controller must know?
 
 Question: over the workspace of the default 3x3 array (linear mu_r 1000 cores), how different
-is the coupled actuation matrix (all cores solved together, designkit.coupling) from the
+is the coupled actuation matrix (all cores solved together, designkit.cores.coupled) from the
 thesis' uncoupled one (each core magnetized by its own winding), and from the 3-D GetDP FEM
 (designkit.fem.fem3d, with ``--fem``: level 0, within 0.6 / 1.3 % (B / grad B) of its level-1 solution; level -2
 with ``--quick``)? What is the magnet's pull on the iron F0(p) with every

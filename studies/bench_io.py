@@ -3,8 +3,8 @@
 One loop of the rendering runner reads all 18 TLV493D sensors (with the TCA9548A selects they
 need) and writes one coil command to the two PCA9685 boards. This study
 
-1. records that loop's transactions on the register-level simulated bus (firmware_io.sim) and
-   turns them into wire time at 100 kHz, 400 kHz and 1 MHz with the formula of firmware_io.bus
+1. records that loop's transactions on the register-level simulated bus (firmware_io.hw.sim) and
+   turns them into wire time at 100 kHz, 400 kHz and 1 MHz with the formula of firmware_io.hw.bus
    (9 clocks per byte including the address byte, + START/STOP, + 1 per repeated START);
 2. measures the Python cost per loop of the firmware_io drivers on this host, subtracting the
    time spent inside the simulated device models (reference run in the same process);
@@ -32,8 +32,8 @@ if __package__ in (None, ""):
 import numpy as np
 
 from firmware_io import CoilDrive, CoilDriver, SensorArrays
-from firmware_io.devices import PCA9685
-from firmware_io.sim import SimBus, SimClock, SimPCA9685, SimTCA9548A, SimTLV493D
+from firmware_io.hw.pca9685 import PCA9685
+from firmware_io.hw.sim import SimBus, SimClock, SimPCA9685, SimTCA9548A, SimTLV493D
 
 SCL_HZ = (100e3, 400e3, 1e6)
 IOCTL_OVERHEAD_S = {"optimistic": 0.05e-3, "pessimistic": 0.3e-3}

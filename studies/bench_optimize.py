@@ -28,16 +28,15 @@ if str(ROOT) not in sys.path:
 
 from designkit import default_design  # noqa: E402
 from designkit._blas import one_blas_thread  # noqa: E402
+from designkit.cores import panel  # noqa: E402
 from designkit.optimize import (CoilDesignProblem, device_problem_for, solve,  # noqa: E402
                                 solve_device, verify_device)
 from studies._common import finish  # noqa: E402
 
 
 def _clear_caches():
-    from designkit import core
-
-    core._solve_nonlinear.cache_clear()
-    core._solve_linear.cache_clear()
+    panel._solve_nonlinear.cache_clear()
+    panel._solve_linear.cache_clear()
 
 
 def run(out_dir, quick: bool = False) -> dict:

@@ -2,7 +2,7 @@
 new sensor result, stage by stage -- how long does the fit take on the sensor side, and what does
 skipping what the scene does not need save?
 
-The closed loop (designkit.plant: firmware_io's Runner on the simulated device, a slide over the
+The closed loop (designkit.sim: firmware_io's Runner on the simulated device, a slide over the
 hemisphere, the fit on the sensor side with the sensor thread's timing) runs with the runner's
 stage timer on: per control step the compute time (this thread's CPU clock, the simulated PWM
 boards' own time subtracted) of 'fix' (taking the sensor side's result, Kalman update),

@@ -9,7 +9,7 @@ mesh levels; and what are the reference values for (1) two cores at the 50 mm pi
 coil energized, (2) the 3x3 array with the centre (and, unless quick, the corner) coil
 energized, (3) the magnet's pull on one core at 20, 30, 50 mm (magnet centre above the winding
 top)? The uncoupled single-coil model is set beside (1) and (2) to show the coupling effect,
-and designkit's coupled model (designkit.coupling via CoilArray) is checked against (1)-(3):
+and designkit's coupled model (designkit.cores.coupled via CoilArray) is checked against (1)-(3):
 per point |dB|/|B| and ||dG||_F/||G||_F over the workspace points (12, 20, 30, 50, 80 mm, the
 rows above the default workspace's floor reported separately) and the pull at each height.
 B and grad B come from the cores' FEM magnetization plus the windings' exact field
@@ -46,7 +46,7 @@ def _uncoupled(points, centre_xy=(0.0, 0.0)):
     """designkit's single-coil model (winding + its own core, mu_r 1000, 1 A) at array-frame
     points for a coil centred at ``centre_xy``: the uncoupled reference."""
     from designkit.coil import Coil
-    from designkit.core import Core
+    from designkit.cores.panel import Core
     from designkit.fem import fem3d
     from designkit.field import winding_field
 
@@ -61,7 +61,7 @@ def _uncoupled(points, centre_xy=(0.0, 0.0)):
 
 
 def _coupled(points, case):
-    """designkit's coupled model (designkit.coupling through CoilArray: every core of the case
+    """designkit's coupled model (designkit.cores.coupled through CoilArray: every core of the case
     solved together, linear mu_r 1000, 1 A) at the case's points (its frame): B (n, 3) T,
     G (n, 3, 3) T/m. Cases: 'two' (fem3d puts coil 0 at the origin, the design's 1 x 2 array
     has it at x = -pitch / 2), 'centre', 'corner' (the 3 x 3 array, coil 4 resp. 0)."""

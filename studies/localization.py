@@ -3,7 +3,7 @@ the two simulated Hall arrays, against the thesis (0.80 / 1.26 / 0.91 / 0.86 mm 
 cases 1-4) and against the noise limit -- and how much does the cores' magnetization by the magnet
 spoil the thesis' subtraction?
 
-Simulation (designkit.localize): exact 10 x 10 mm cylinder magnet (moment from the design),
+Simulation (designkit.sensor_sim): exact 10 x 10 mm cylinder magnet (moment from the design),
 coupled coil field at the currents (at the sensors' true, displaced positions), field of the
 cores magnetized by the magnet (coupled solve), TLV493D chain (0.1 mT rms noise, 0.098 mT LSB,
 flagged beyond +-130 mT), per-sensor errors drawn once (the device): offset 0.01 mT rms, gain
@@ -138,7 +138,7 @@ def run(out_dir=DEFAULT_OUT, n: int = 1000, seed: int = 0, *, map_path=None,
             m = dataclasses.replace(base, magnet_size_m=magnet_size_m)
             return Localizer(m, method, **kw)
         model = make("dipole", magnet_size_m=size).model
-        source = "designkit.localize.forward_model (rod induced model)"
+        source = "designkit.sensor_sim.forward_model (rod induced model)"
     t0 = time.perf_counter()
     learned = train_learned_inverse(model, n_samples=800 if quick else 4000, hidden=16,
                                     max_iterations=100 if quick else 600, seed=seed)

@@ -4,12 +4,12 @@ where does the force error come from, and does every fault end in the safe state
 For the flat surface (100 mm square at 50 mm), the hemisphere, the half-cylinder and the wedge,
 a finger slides across the object 4 mm below its surface, there and back in 4 s (thesis
 Fig. 4.5), with the thesis' constraint law (lambda = the design's 6 N/m) rendered as a 3-D force
-and as Fz alone (the thesis' eq. 4.6). designkit.plant closes firmware_io's runner around the
+and as Fz alone (the thesis' eq. 4.6). designkit.sim closes firmware_io's runner around the
 simulated device (exact coupled array physics, R-L coils at 30 V, register-level sensors with
 noise and mounting errors, calibrated at start-up with the coils alone). The rendered-force
 error (true force on the magnet vs the object's force at the true position) is split into
 localization, map interpolation, allocation residual and current lag
-(designkit.plant.force_error_causes). The thesis reports none of these; its only number is a
+(designkit.sim.force_error_causes). The thesis reports none of these; its only number is a
 participant's 14 mm largest deviation from the flat surface.
 
 Faults: one more run over the hemisphere with every fault type injected once

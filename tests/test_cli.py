@@ -92,7 +92,7 @@ def _must_not_run(*a, **k):
     ("sweep", "designkit.commands.sweep.run_sweep"),
     ("report", "designkit.commands.report._run"),
     ("cad", "cad.export.export_all"),
-    ("run", "designkit.plant.run_simulation"),
+    ("run", "designkit.commands.run.run_simulation"),
     ("map", "designkit.fieldmap.build"),
     ("scene", "designkit.render.make_object"),
 ])

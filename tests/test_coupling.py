@@ -1,4 +1,4 @@
-"""The array as one magnetic system (designkit.coupling): independent references.
+"""The array as one magnetic system (designkit.cores.coupled): independent references.
 
 References: the image method (dipole above a wide high-mu slab, closed form), the first-order
 (Born) volume integral of M = chi H0 for mu_r -> 1, reciprocity and energy conservation

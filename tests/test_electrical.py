@@ -146,7 +146,7 @@ def test_design_rules_are_reported_in_words_for_the_thesis_device():
 
 
 def test_core_adds_inductance_and_breaks_the_tau_rule():
-    design = default_design()  # mu_r 1000 core (designkit.core's model)
+    design = default_design()  # mu_r 1000 core (designkit.cores's model)
     rep = el.electrical_report(design, Coil.from_design(design))
     assert rep.inductance_core_h > 3 * rep.inductance_air_h
     assert any("5 L/R" in s for s in rep.violations)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from designkit.coil import Coil
-from designkit.core import Core
+from designkit.cores.panel import Core
 from designkit.fem.compare import air_inductance, model_field
 
 pytestmark = pytest.mark.skipif(shutil.which("getdp") is None,

@@ -11,9 +11,9 @@ import pickle
 import pytest
 
 from firmware_io import CoilDrive, CoilDriver, CoilOutput, CoilWriteError, current_to_command
-from firmware_io.devices import PCA9685
+from firmware_io.hw.pca9685 import PCA9685
 from firmware_io.errors import BadInputError
-from firmware_io.sim import SimBus, SimClock, SimPCA9685
+from firmware_io.hw.sim import SimBus, SimClock, SimPCA9685
 
 LOW, HIGH, OFF = b"\x00\x00\x00\x10", b"\x00\x10\x00\x00", b"\x00\x00\x00\x10"
 

@@ -1,4 +1,4 @@
-"""designkit.localize: simulated Hall arrays, checked against magpylib, the TLV493D datasheet and
+"""designkit.sensor_sim: simulated Hall arrays, checked against magpylib, the TLV493D datasheet and
 an independent 3-D solve."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The simulated TLV493D reads its field from designkit.localize; the study's smoke test."""
+"""The simulated TLV493D reads its field from designkit.sensor_sim; the study's smoke test."""
 
 from __future__ import annotations
 

@@ -147,7 +147,7 @@ def test_freeing_the_core_protrusion_cannot_lower_the_optimum():
     Also guards the driver against returning the start point when SLSQP stops on round-off."""
     import warnings
 
-    from designkit.core import SaturationWarning
+    from designkit.cores.saturation import SaturationWarning
 
     design = default_design()
     with warnings.catch_warnings():
@@ -163,7 +163,7 @@ def test_freeing_the_core_protrusion_cannot_lower_the_optimum():
 
 
 # ====================================================================== the real device
-from designkit import core_fast  # noqa: E402
+from designkit.cores import material, nagaoka, rod  # noqa: E402
 from designkit.design import MU0, load_design  # noqa: E402
 
 
@@ -191,7 +191,7 @@ def test_nagaoka_sheet_integral_matches_a_double_integral_of_loop_mutuals():
             # log singularity at t = 0 (integrable); the rule may touch the end point
             ref = 2 * mp.quad(lambda t: (ell - t) * _loop_mutual_mp(a, a, t) if t > 0 else 0,
                               pts)
-        assert core_fast.nagaoka_self(np.array([ell]), a)[0] == pytest.approx(float(ref),
+        assert nagaoka.nagaoka_self(np.array([ell]), a)[0] == pytest.approx(float(ref),
                                                                               rel=1e-7)
 
 
@@ -206,9 +206,9 @@ def test_slice_flux_fourier_bessel_matches_the_winding_field_quadrature():
         a = ri * rng.uniform(0.4, 1.0)
         lc = rng.uniform(0.02, 0.12)
         off = rng.uniform(-0.01, 0.01)
-        edges = core_fast.slice_edges(lc, off, 8)
-        g_q = core_fast.applied_slice_flux(ri, ro, ln, 500, a, edges, nr=6, nz=6)
-        g_b = core_fast.bessel_slice_flux(ri, ro, ln, 500, a, edges)
+        edges = rod.slice_edges(lc, off, 8)
+        g_q = rod.applied_slice_flux(ri, ro, ln, 500, a, edges, nr=6, nz=6)
+        g_b = rod.bessel_slice_flux(ri, ro, ln, 500, a, edges)
         np.testing.assert_allclose(g_b, g_q, rtol=2e-3)
 
 
@@ -218,15 +218,15 @@ def test_steel_curve_interpolant_is_scipys_pchip_and_odd():
     the table."""
     from scipy.interpolate import PchipInterpolator
 
-    from designkit.core import STEEL1010_B, STEEL1010_H
+    from designkit.cores.material import STEEL1010_B, STEEL1010_H
 
     ref = PchipInterpolator(STEEL1010_B, STEEL1010_H)
     b = np.r_[np.random.default_rng(4).uniform(0, STEEL1010_B[-1], 2000), STEEL1010_B]
-    h, dh = core_fast.steel1010_h_smooth(b)
+    h, dh = material.steel1010_h_smooth(b)
     np.testing.assert_allclose(h, ref(b), rtol=1e-12, atol=1e-9)
     np.testing.assert_allclose(dh, ref.derivative()(b), rtol=1e-12, atol=1e-9)
-    np.testing.assert_allclose(core_fast.steel1010_h_smooth(-b)[0], -h, rtol=0, atol=0)
-    h5, dh5 = core_fast.steel1010_h_smooth(np.array([5.0]))
+    np.testing.assert_allclose(material.steel1010_h_smooth(-b)[0], -h, rtol=0, atol=0)
+    h5, dh5 = material.steel1010_h_smooth(np.array([5.0]))
     assert dh5[0] == pytest.approx(1 / MU0) and h5[0] == pytest.approx(
         STEEL1010_H[-1] + (5.0 - STEEL1010_B[-1]) / MU0)
 
@@ -246,11 +246,11 @@ def test_batched_rod_solve_equals_one_design_at_a_time():
     lc = rng.uniform(0.04, 0.07, n)
     off = rng.uniform(-0.005, 0.01, n)
     turns = rng.uniform(300, 1500, n)
-    bt = core_fast.solve_rods(ri, ro, ln, turns, a, lc, off, 6.0, n_slices=12,
+    bt = rod.solve_rods(ri, ro, ln, turns, a, lc, off, 6.0, n_slices=12,
                               quadrature="bessel")
     z = np.full(n, 0.06)
     for i in range(n):
-        one = core_fast.solve_rod(ri[i], ro[i], ln[i], turns[i], a[i], lc[i], off[i], 6.0,
+        one = rod.solve_rod(ri[i], ro[i], ln[i], turns[i], a[i], lc[i], off[i], 6.0,
                                   n_slices=12, quadrature="bessel")
         assert bt.linkage_wb[i] == pytest.approx(one.linkage_wb, rel=1e-12)
         assert bt.dlinkage_di_wb_per_a[i] == pytest.approx(one.dlinkage_di_wb_per_a, rel=1e-12)
@@ -259,11 +259,11 @@ def test_batched_rod_solve_equals_one_design_at_a_time():
 
 def test_toeplitz_slice_coupling_equals_the_interval_formula():
     a, lc, n = 0.008, 0.07, 10
-    s = core_fast.solve_rod(0.009, 0.02, 0.06, 800, a, lc, 0.0, 1.0, n_slices=n,
+    s = rod.solve_rod(0.009, 0.02, 0.06, 800, a, lc, 0.0, 1.0, n_slices=n,
                             relative_permeability=500.0)
-    e = core_fast.slice_edges(lc, 0.0, n)
+    e = rod.slice_edges(lc, 0.0, n)
     iv = np.column_stack([e[:-1], e[1:]])
-    c = core_fast.interval_mutual(iv, iv, a)
+    c = rod.interval_mutual(iv, iv, a)
     vol = np.pi * a * a * np.diff(e)
     t = c / (MU0 * vol[:, None])
     # the solved B satisfies (I - T + T / mu_r) B = B0 with the interval formula's T
@@ -272,16 +272,16 @@ def test_toeplitz_slice_coupling_equals_the_interval_formula():
 
 def test_fast_rod_saturates_and_its_incremental_inductance_is_the_derivative():
     geo = (0.009, 0.024, 0.063, 1173, 0.009, 0.07, 0.009)
-    lo = core_fast.solve_rod(*geo, 0.5, quadrature="bessel")
-    hi = core_fast.solve_rod(*geo, 6.0, quadrature="bessel")
+    lo = rod.solve_rod(*geo, 0.5, quadrature="bessel")
+    hi = rod.solve_rod(*geo, 6.0, quadrature="bessel")
     # saturation: past the 1.5 T knee the incremental inductance drops below the secant one
     assert hi.peak_b_t > 1.5 > lo.peak_b_t
     assert hi.incremental_extra_inductance_h < 0.95 * hi.secant_extra_inductance_h
     assert lo.incremental_extra_inductance_h >= 0.99 * lo.secant_extra_inductance_h
     # incremental = d linkage / dI (central difference of independent solves)
     h = 1e-3
-    p = core_fast.solve_rod(*geo, 6.0 + h, quadrature="bessel").linkage_wb
-    m = core_fast.solve_rod(*geo, 6.0 - h, quadrature="bessel").linkage_wb
+    p = rod.solve_rod(*geo, 6.0 + h, quadrature="bessel").linkage_wb
+    m = rod.solve_rod(*geo, 6.0 - h, quadrature="bessel").linkage_wb
     assert hi.incremental_extra_inductance_h == pytest.approx((p - m) / (2 * h), rel=1e-5)
 
 
@@ -405,7 +405,7 @@ def _assert_in_envelope(errs):
 
 def test_uncorrected_fast_model_stays_in_its_stated_envelope_on_random_designs():
     """The stated envelope of the uncorrected fast model against the independent panel model
-    (designkit.core surface-current, steel1010) on random designs of the optimizer's bounds."""
+    (designkit.cores surface-current, steel1010) on random designs of the optimizer's bounds."""
     p = opt.device_problem_for(default_design())
     _assert_in_envelope(_fast_panel_errors(p, _random_designs_in_bounds(p, 5, 23)))
 

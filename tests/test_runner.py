@@ -1,4 +1,4 @@
-"""firmware_io.runner and designkit.plant: the closed loop on the simulated device, its fault
+"""firmware_io.runner and designkit.sim: the closed loop on the simulated device, its fault
 handling and its current dynamics, checked against independent references (an ODE solver, the
 PCA9685 register file, the bounds)."""
 
@@ -255,8 +255,8 @@ def test_hardware_entry_refuses_a_bus_that_does_not_exist(tmp_path, capsys):
 def test_hardware_entry_refuses_a_missing_sensor_array():
     from firmware_io.errors import FirmwareIOError
     from firmware_io.run import check_sensor_arrays
-    from firmware_io.sensors import SensorArrays
-    from firmware_io.sim import SimBus, SimClock, SimTCA9548A, SimTLV493D
+    from firmware_io.hw.sensors import SensorArrays
+    from firmware_io.hw.sim import SimBus, SimClock, SimTCA9548A, SimTLV493D
 
     clock = SimClock()
     bus = SimBus(clock=clock)
@@ -313,7 +313,7 @@ def test_runner_imports_numpy_only():
 
 
 def test_start_up_calibration_through_the_firmware_recovers_the_sensor_errors(device_and_a):
-    from designkit.localize import analog_reading
+    from designkit.sensor_sim import analog_reading
     from firmware_io.localization import SensorModel
 
     design, array, a = device_and_a

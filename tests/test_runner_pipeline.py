@@ -198,7 +198,7 @@ class _FakeArrays:
         self.n = 0
 
     def read(self):
-        from firmware_io.sensors import ArraysReading
+        from firmware_io.hw.sensors import ArraysReading
 
         self.n += 1
         time.sleep(2e-3)

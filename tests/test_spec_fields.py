@@ -12,7 +12,8 @@ from scipy.integrate import solve_ivp
 
 from designkit import Coil, default_design
 from designkit import electrical as el
-from designkit.core import KNEE_T, SaturationWarning
+from designkit.cores.material import KNEE_T
+from designkit.cores.saturation import SaturationWarning
 
 
 def _warns(design) -> bool:
@@ -65,7 +66,7 @@ def test_run_takes_lambda_from_the_design_render_stiffness(monkeypatch, tmp_path
 
     import designkit.render.scenefile as scenefile
     import firmware_io.mapfile as mapfile
-    from designkit.plant import run_simulation
+    from designkit.sim import run_simulation
 
     class Stop(Exception):
         pass

@@ -38,7 +38,7 @@ from ..array import force_matrix, g5_from_gradient
 from ..coil import Coil
 from ..design import Design, default_design, design_to_toml, load_design, named_design
 from ..optimize import device_problem_for, evaluate_device, rendering_force
-from ..sensing import sensor_headroom
+from ..sensor_headroom import sensor_headroom
 from ._common import (add_currents_arguments, add_progress_argument, check_current_limit,
                       check_output, parse_currents, show_progress, staged_folder)
 

@@ -25,7 +25,7 @@ from .._blas import one_blas_thread
 from ..constants import MU0
 from ..field.kernels import sheet_rz
 from ..pose import Pose
-from ..winding import WindingGeometry
+from ..winding_geometry import WindingGeometry
 from .charges import gauss
 from .core_model import M_MAX, CoreModel, core_model
 

@@ -27,7 +27,7 @@ from scipy.special import j1
 from ..constants import MU0
 from ..errors import BadInputError
 from ..fourier_bessel import int_x_j1, quarter_period_panels
-from ..winding import WindingGeometry
+from ..winding_geometry import WindingGeometry
 from .material import STEEL1010_B, STEEL1010_H, steel1010_h_smooth
 from .nagaoka import nagaoka_self
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from .._io import atomic_path
 from ..constants import MU0
-from ..core import SaturationWarning
+from ..cores.saturation import SaturationWarning
 from ..errors import BadInputError
 from ..field.winding import winding_rz
 from .runner import FemResult

@@ -22,7 +22,7 @@ import numpy as np
 
 from .._io import write_json_atomic
 from ..constants import MU0
-from ..core import STEEL1010_B, STEEL1010_H
+from ..cores.material import STEEL1010_B, STEEL1010_H
 from ..errors import BadInputError, MissingDependencyError
 from .mesh import MeshSpec, build_mesh, export_meshio
 from .problem import problem_text

@@ -28,10 +28,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import require
+
 
 def _mp():
-    from ..errors import require
-
     return require("mpmath", "mpmath", "designkit.field.reference")
 
 

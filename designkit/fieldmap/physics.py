@@ -1,5 +1,5 @@
 """What the map samples, for one design: :class:`MapPhysics`, the one place its physics comes
-from (the coupled array model, :mod:`designkit.coupling` through :class:`CoilArray`); SI units."""
+from (the coupled array model, :mod:`designkit.cores.coupled` through :class:`CoilArray`); SI units."""
 
 from __future__ import annotations
 
@@ -14,12 +14,12 @@ from ..array import CoilArray
 class MapPhysics:
     """What the map samples, for one design (all SI); every method takes the CoilArray it is
     about (the design's array, or one coil alone for the per-type tables). All of it comes from
-    the coupled array model (:mod:`designkit.coupling` through :class:`CoilArray`).
+    the coupled array model (:mod:`designkit.cores.coupled` through :class:`CoilArray`).
     """
 
     moment_a_m2: np.ndarray
     max_current_a: float
-    source: str = "designkit.coupling (all cores solved together, linear cores)"
+    source: str = "designkit.cores.coupled (all cores solved together, linear cores)"
 
     def sensor_positions(self, array: CoilArray) -> np.ndarray:
         """(2, n_coils, 3) m: upper array then lower array, one sensor per coil axis."""

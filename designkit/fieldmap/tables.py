@@ -51,7 +51,7 @@ def coupled_modes(arr: CoilArray, sensor_tolerance: float = 1e-3) -> dict | None
     By reciprocity (linear cores) the field at sensor s along e_c of the cores magnetized by
     the magnet m at p is m . B(p) of the cores magnetized by a unit dipole e_c at s: fixed
     sources, 3 x 2 x n_coils columns of core unknowns X_j (m = 0 surface currents, m = 1, 2
-    cos and sin charges; :mod:`designkit.coupling`). Per core type and mode order m, the SVD of
+    cos and sin charges; :mod:`designkit.cores.coupled`). Per core type and mode order m, the SVD of
     all X blocks gives the shapes U_m (kept while the singular values are above
     ``sensor_tolerance`` x the largest of their order); the coefficients C[j, b, (s, c)] =
     U_m^T X_j[:, (s, c)].

@@ -25,7 +25,8 @@ import numpy as np
 from .. import _validate as v
 from .. import electrical as el
 from ..coil import Coil
-from ..core import Core, SaturationWarning
+from ..cores.panel import Core
+from ..cores.saturation import SaturationWarning
 from ..design import CoreSpec, Design
 from ..errors import BadInputError
 from ..pose import Pose

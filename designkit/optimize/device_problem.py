@@ -10,8 +10,8 @@ rendering duty >= its minimum, a winding at least one wire deep; with a varying 
 2 Ro + clearance <= pitch. Objective: the upward force on the axis at the design height, or
 the smallest upward force the array renders over the workspace region (:mod:`.rendering`).
 Models: the closed-form winding gradient (:mod:`.axial_kernel`), the exact Bessel air
-inductance, the core by the fast slice model of :mod:`designkit.core_fast` (corrected by the
-surface-current panel model of :mod:`designkit.core`). Details: docs/optimize.md.
+inductance, the core by the fast slice model of :mod:`designkit.cores.rod` (corrected by the
+surface-current panel model of :mod:`designkit.cores`). Details: docs/optimize.md.
 """
 
 from __future__ import annotations
@@ -24,8 +24,8 @@ import numpy as np
 from .. import _validate as v
 from .. import electrical as el
 from ..coil import Coil
-from ..core import Core
-from ..core_fast import solve_rods
+from ..cores.panel import Core
+from ..cores.rod import solve_rods
 from ..design import Design
 from ..errors import BadInputError
 from .axial_kernel import axial_gradient_per_current_density

@@ -3,7 +3,7 @@
 Stages of :func:`solve_device`: SLSQP multistart on the corrected fast model (coarse
 tolerances: the starts only find the basin) -> the two IEC 60317 sizes around the continuous
 wire, each re-solved -> the a-posteriori correction loop (:func:`_correct_for_wire`): the panel
-model (:mod:`designkit.core`, steel1010) at the rounded design, the panel/fast ratios of the
+model (:mod:`designkit.cores`, steel1010) at the rounded design, the panel/fast ratios of the
 core's shares as corrections, re-solve until the corrected fast model reproduces the panel
 model within :data:`RESIDUAL_BOUND` -> whole layers and turns, every reported number the panel
 model's. With a varying pitch the rounded coil's pitch is re-chosen (bounded Brent).
@@ -314,7 +314,7 @@ def _correct_for_wire(prob: DeviceProblem, wire: float, y, *, max_corrections: i
                       correction_tol: float = RESIDUAL_BOUND) -> dict:
     """A-posteriori correction loop for one wire (the proof of the fast model's numbers).
 
-    Each pass: the panel model (validated :mod:`designkit.core`, steel1010) at the rounded
+    Each pass: the panel model (validated :mod:`designkit.cores`, steel1010) at the rounded
     design x_k; the *residual* of the corrected fast model that found x_k (force and secant
     inductance, relative to the panel model's, at x_k); if both are within ``correction_tol``
     and the panel model finds x_k feasible, x_k is the answer. Otherwise the panel / fast
@@ -372,7 +372,7 @@ def _correct_for_wire(prob: DeviceProblem, wire: float, y, *, max_corrections: i
                                     "symmetries (each distinct point once)"}
     check.update({
         "method": "a-posteriori correction: the optimum is re-evaluated by the panel model "
-                  "(designkit.core surface-current, steel1010) and every reported number is "
+                  "(designkit.cores surface-current, steel1010) and every reported number is "
                   "the panel model's; the corrected fast model that found it must reproduce "
                   "the panel force and secant inductance there within bound_rel, else the "
                   "panel/fast ratios are updated and the problem re-solved",

@@ -1,7 +1,7 @@
 """The rendering objective: the smallest upward force an array of cored coils can render.
 
 Each coil is its winding (exact kernel) plus its 1010-steel core magnetized as the fast slice
-model of :mod:`designkit.core_fast` gives at the operating current; the force per ampere on
+model of :mod:`designkit.cores.rod` gives at the operating current; the force per ampere on
 the finger magnet (a z-axis dipole) of every coil at every point feeds one bounded LP per point
 (:func:`designkit.array.max_vertical_force`: |I_k| <= the coil limit, sum |I_k| <= the total,
 Fx = Fy = 0). The bipolar drive makes the result independent of the magnet's polarity.
@@ -15,7 +15,7 @@ import numpy as np
 
 from ..array import max_vertical_force
 from ..constants import MU0
-from ..core_fast import solve_rod
+from ..cores.rod import solve_rod
 from ..design import Design
 from ..errors import BadInputError
 from ..field import cylindrical_to_cartesian

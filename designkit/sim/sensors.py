@@ -18,7 +18,7 @@ class SimSensorSource:
     the timing of the sensor thread (:class:`firmware_io.run.ThreadedSensorSource`).
 
     :meth:`tick` does the simulation work (fields into the TLV493D models, one pass of
-    :meth:`firmware_io.sensors.SensorArrays.read` on the sensor bus, the runner's
+    :meth:`firmware_io.hw.sensors.SensorArrays.read` on the sensor bus, the runner's
     :class:`firmware_io.runner.SensorPipeline` on the frame); the plant calls it before each
     runner step, outside the runner's timed section, as the sensor thread runs beside the
     control loop on hardware. The thread's cycle is: read a pass (its wire time on the bus

@@ -10,7 +10,7 @@ sensor arrays, checks each sensor's health and fits the magnet's position, publi
       -> object force f at the predicted position                 [scene]
       -> currents: min ||F(p) I - (f - F0(p))|| within the bounds  [allocation, forcelaw, skip]
       -> voltages: R-L feed-forward within the supply; I^2 t guard [drive, thermal]
-      -> MD10C duty/direction, one block write per PCA9685        [firmware_io.coils]
+      -> MD10C duty/direction, one block write per PCA9685        [firmware_io.hw.coils]
 
 Configuration: :mod:`.config`; start-up sensor calibration: :mod:`.calibration`. For the fault
 table, the resume policy and the timing rationale see docs/runner.md. Imports numpy only (plus

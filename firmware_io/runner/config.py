@@ -1,6 +1,6 @@
 """The runner's configuration: bounds, period, rendered axes, fault policy, and the coil drives.
 
-R, L and the MD10C supply voltage live in one tuple of :class:`firmware_io.md10c.CoilDrive`
+R, L and the MD10C supply voltage live in one tuple of :class:`firmware_io.hw.md10c.CoilDrive`
 (``RunnerConfig.drives``), which the runner's current path and the PWM driver both read;
 ``resistance_ohm``, ``inductance_h`` and ``supply_voltage_v`` are views of it. A map file
 carries the drive data (``meta['drive']``, written by designkit.electrical.drive_data):
@@ -16,7 +16,7 @@ from dataclasses import InitVar, dataclass, field
 import numpy as np
 
 from ..errors import BadInputError, FirmwareIOError
-from ..md10c import MD10C_CONTINUOUS_A, MD10C_SUPPLY_MAX_V, MD10C_SUPPLY_MIN_V, CoilDrive
+from ..hw.md10c import MD10C_CONTINUOUS_A, MD10C_SUPPLY_MAX_V, MD10C_SUPPLY_MIN_V, CoilDrive
 
 
 @dataclass(frozen=True)

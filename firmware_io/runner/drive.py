@@ -3,9 +3,9 @@
 
 One unit change per hop: the allocator's currents (A) become, through the exact R-L step
 response, the average voltage (V, within the supply) that brings each coil to its command at
-the end of the period; :meth:`firmware_io.coils.CoilDriver.command_voltage` turns that voltage
+the end of the period; :meth:`firmware_io.hw.coils.CoilDriver.command_voltage` turns that voltage
 into the PCA9685 duty (``|V| / Vs``); the model advances by the voltage the quantised duty
-really applies. R, L and Vs are read from the coils' :class:`firmware_io.md10c.CoilDrive`
+really applies. R, L and Vs are read from the coils' :class:`firmware_io.hw.md10c.CoilDrive`
 records (the configuration's ``drives``), the one place they are stored.
 """
 
@@ -15,7 +15,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..md10c import CoilDrive
+from ..hw.md10c import CoilDrive
 
 
 def feedforward_voltage(target_a, current_a, resistance_ohm, inductance_h, period_s,

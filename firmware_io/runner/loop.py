@@ -82,7 +82,7 @@ class Runner:
     allocate : callable
         ``allocate(force_matrix, target, current_limit, total_limit, unipolar=...)``
         -> (currents, residual) (firmware_io.allocation).
-    coils : firmware_io.coils.CoilDriver
+    coils : firmware_io.hw.coils.CoilDriver
         Takes the voltages of the current path (``command_voltage``); ``all_off`` is the safe
         state.
     sensors : callable

@@ -17,14 +17,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..devices import TLV493D_LINEAR_RANGE_T
+from ..hw.tlv493d import TLV493D_LINEAR_RANGE_T
 from ..localization import multipole_field
 
 SENSOR_FAULTS = {"stale": "sensor_stuck", "recovered": "sensor_stuck",
                  "saturated": "sensor_saturated", "nack": "sensor_dead", "failed": "sensor_dead",
                  "unconfigured": "sensor_dead", "not_ready": "sensor_dead",
                  "test_mode": "sensor_dead"}
-"""Per-sensor status (firmware_io.sensors / devices.TLV493D) -> the runner's fault name; any status
+"""Per-sensor status (firmware_io.hw.sensors / devices.TLV493D) -> the runner's fault name; any status
 but 'ok' excludes the sensor from localization."""
 
 EXPECTED_SATURATION = 0.8

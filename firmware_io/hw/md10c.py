@@ -16,7 +16,7 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
-from .errors import BadInputError
+from ..errors import BadInputError
 
 MD10C_SUPPLY_MIN_V = 5.0
 MD10C_SUPPLY_MAX_V = 30.0

@@ -19,8 +19,8 @@ from typing import Literal
 
 import numpy as np
 
-from .devices import PCA9685, ChannelValue
-from .errors import BadInputError, CoilWriteError
+from .pca9685 import PCA9685, ChannelValue
+from ..errors import BadInputError, CoilWriteError
 from .md10c import CoilDrive, DriveCommand, current_to_command, voltage_to_command
 
 
