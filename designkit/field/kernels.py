@@ -290,8 +290,7 @@ def _sheet_far(r, omr, zz, hh, gradient, mag=False):
     """Unit-radius sheet as a Gauss-Legendre sum of loops over z' (for far points).
 
     The closed forms subtract the two ends' terms: at distance R that cancels and loses
-    ~eps R^3 / (a^2 L) (measured 4e-3 at R = 1e4 L for a 10 mm magnet). The loop series have no
-    cancellation; the loop field is analytic in z' except at z' = z +- i|rho - a|, so the node
+    ~eps R^3 / (a^2 L) relative (docs/field_winding.md). The loop series have no cancellation; the loop field is analytic in z' except at z' = z +- i|rho - a|, so the node
     count follows from the Bernstein ellipse through that point (target 1e-16)."""
     n = r.shape[0]
     x = (zz + 1j * np.maximum(np.abs(omr), 1e-300)) / hh
