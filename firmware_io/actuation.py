@@ -15,6 +15,8 @@ from typing import Protocol, Sequence, runtime_checkable
 
 import numpy as np
 
+from .errors import BadInputError
+
 ROWS = ("Bx", "By", "Bz", "dBx/dx", "dBx/dy", "dBx/dz", "dBy/dy", "dBy/dz")
 """The eight rows of A(p): B (T/A), then the five independent entries of the symmetric,
 traceless gradient (T/(m A))."""
@@ -44,3 +46,19 @@ class ActuationSource(Protocol):
 
     def bias_force(self, points) -> np.ndarray:
         """F0, the force on the magnet at zero current, N: (3,) -> (3,), (n, 3) -> (n, 3)."""
+
+
+def selection(name: str, sel, n: int, error: type[ValueError] = BadInputError):
+    """The ``rows=`` / ``coils=`` keyword of :meth:`ActuationSource.actuation` checked: None
+    (all) or an index array (m,) of ints in 0..n-1, in the order given; ``error(name, valid,
+    received)`` (a BadInputError of the caller's package) otherwise."""
+    if sel is None:
+        return None
+    try:
+        idx = np.asarray(sel)
+        ok = idx.ndim == 1 and len(idx) > 0 and np.issubdtype(idx.dtype, np.integer)
+    except (TypeError, ValueError):
+        ok = False
+    if not ok or np.any(idx < 0) or np.any(idx >= n):
+        raise error(name, f"a non-empty sequence of indices 0..{n - 1}", sel)
+    return idx.astype(np.intp)

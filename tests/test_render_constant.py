@@ -104,3 +104,26 @@ def test_map_source_matches_array_and_cli_records_its_hash(tmp_path):
     src = actuation_source(fm)
     assert actuation_source(src) is src
     assert force_constant(plane, src, **kw).lam_n_per_m == via_map.lam_n_per_m
+
+
+def test_direct_model_is_an_actuation_source(source):
+    # the protocol the runner, force_constant and the localizer type against; a selection of
+    # rows and coils is that part of the full matrix, in the order asked, and F0 keeps the shape
+    from firmware_io.actuation import ActuationSource
+
+    assert isinstance(source, ActuationSource)
+    p = np.array([[0.0, 0.01, 0.03], [0.012, -0.02, 0.045]])
+    full = source.actuation(p)
+    assert full.shape == (2, 8, source.n_coils)
+    sel = source.actuation(p, rows=(5, 3), coils=(4, 0))
+    np.testing.assert_array_equal(sel, full[:, [5, 3]][:, :, [4, 0]])
+    np.testing.assert_allclose(source.actuation(p[1]), full[1], rtol=0,
+                               atol=1e-12 * np.abs(full[1]).max())
+    assert source.bias_force(p[0]).shape == (3,)
+    f0 = source.bias_force(p)[0]
+    np.testing.assert_allclose(source.bias_force(p[0]), f0, rtol=0, atol=1e-12 * np.abs(f0).max())
+    with pytest.raises(BadInputError, match="coils"):
+        source.actuation(p, coils=(source.n_coils,))
+    with pytest.raises(BadInputError, match="fieldmap"):
+        force_constant(Plane(), object(), current_limit_a=6.0, total_current_a=54.0,
+                       progress=False)

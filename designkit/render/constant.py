@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from firmware_io.actuation import ActuationSource
+from firmware_io.actuation import ActuationSource, selection
 from firmware_io.allocation import allocate
 
 from .. import _validate as v
@@ -67,8 +67,8 @@ class ArrayActuation:
         """The coupled A (thesis eq. 2.13): (3,) -> (r, c), (n, 3) -> (n, r, c); T/A and
         T/(m A). ``rows``, ``coils``: index sequences into the eight rows and the coils,
         selected after computing all of them (r = len(rows), c = len(coils))."""
-        r_sel = _indices("rows", rows, 8)
-        c_sel = _indices("coils", coils, self.n_coils)
+        r_sel = selection("rows", rows, 8, BadInputError)
+        c_sel = selection("coils", coils, self.n_coils, BadInputError)
         a = self.array.actuation_matrix(points, rtol=self.rtol)
         if r_sel is not None:
             a = a.take(r_sel, axis=-2)
@@ -79,19 +79,6 @@ class ArrayActuation:
     def bias_force(self, points) -> np.ndarray:
         """F0, the magnet's pull on the cores at zero current, N: (3,) -> (3,), (n, 3) -> (n, 3)."""
         return self.array.bias_force(points, self.moment_a_m2)
-
-
-def _indices(name: str, sel, n: int):
-    """None (all) or the index list given as ``rows=`` / ``coils=`` (each in 0..n-1)."""
-    if sel is None:
-        return None
-    try:
-        idx = [int(i) for i in sel] if np.ndim(sel) == 1 else []
-    except (TypeError, ValueError):
-        idx = []
-    if not idx or min(idx) < 0 or max(idx) >= n:
-        raise BadInputError(name, f"a non-empty sequence of indices 0..{n - 1}", sel)
-    return idx
 
 
 def actuation_source(fieldmap) -> ActuationSource:

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..actuation import selection
 from ..errors import BadInputError
 from .cells import CELL_CHUNK, cells_many, cells_one, prepare_cells
 from .format import REBUILD, _bad, read
@@ -189,19 +190,6 @@ class MapFile:
         return got
 
     # ------------------------------------------------------------------ the interpolators
-    def _subset(self, name: str, sel, n: int):
-        """None (all) or an index array (m,) for the ``rows=`` / ``coils=`` keywords."""
-        if sel is None:
-            return None
-        try:
-            idx = np.asarray(sel)
-            ok = idx.ndim == 1 and len(idx) > 0 and np.issubdtype(idx.dtype, np.integer)
-        except (TypeError, ValueError):
-            ok = False
-        if not ok or np.any(idx < 0) or np.any(idx >= n):
-            raise BadInputError(name, f"a non-empty sequence of indices 0..{n - 1}", sel)
-        return idx.astype(np.intp)
-
     def actuation(self, points, extrapolate: bool = False, *, rows=None,
                   coils=None) -> np.ndarray:
         """The coupled A at points (3,) -> (8, n_coils) or (n, 3) -> (n, 8, n_coils), float64.
@@ -214,8 +202,8 @@ class MapFile:
         selects).
         """
         nc = self.n_coils
-        r_sel = self._subset("rows", rows, 8)
-        c_sel = self._subset("coils", coils, nc)
+        r_sel = selection("rows", rows, 8)
+        c_sel = selection("coils", coils, nc)
         C = self.kernels["cells"]
         q = self._one_point(points, extrapolate)
         if q is not None:
