@@ -305,7 +305,7 @@ def test_binding_budget_far_targets_match_slsqp(wrench_matrices, k, uni):
 def test_budget_hit_is_the_first_crossing():
     """_budget_hit (the step at which sum |x + a d| reaches the budget, coils crossing 0 on
     the way) against a dense scan of the same function (independent: no breakpoints)."""
-    from firmware_io.allocation import _budget_hit
+    from firmware_io.allocation.feasible import _budget_hit
 
     rng = np.random.default_rng(7)
     grid = np.linspace(0.0, 1.0, 200001)

@@ -64,7 +64,7 @@ def test_fused_multipole_rows_match_magpylib_and_differences(seed):
     """The fit's fused field + Jacobian (one (n, 3, 4) block, in units of mu0): the dipole part
     against magpylib, the octupole's field and Jacobian against central differences of the
     field, random moments and points 5-80 mm away."""
-    from firmware_io.localization import MU0, _multipole_rows, _multipole_work
+    from firmware_io.localization.magnet import MU0, _multipole_rows, _multipole_work
 
     rng = np.random.default_rng(seed)
     d = rng.normal(size=(18, 3))

@@ -8,6 +8,8 @@ import pytest
 from designkit import Coil, default_design
 from designkit import electrical as el
 from designkit import optimize as opt
+from designkit._blas import one_blas_thread
+from designkit.optimize import fast_model
 from designkit.errors import BadInputError
 from designkit.field import loop_field, winding_field
 from designkit.pose import Pose
@@ -346,8 +348,8 @@ def test_device_optimum_beats_a_dense_two_variable_grid():
 
     pc = dataclasses.replace(p, corrections=res.corrections)
     y = opt.DeviceProblem.search(res.x_continuous)
-    m = opt._FastModel(pc, {6: res.wire_diameter_m})
-    ref = opt._local(m, [y[k] for k in m.free]).value
+    m = fast_model._FastModel(pc, {6: res.wire_diameter_m})
+    ref = fast_model._local(m, [y[k] for k in m.free]).value
     best = 0.0
     for ri in np.linspace(p.lower[0], 0.015, 20):
         for ln in np.linspace(p.lower[2], p.upper[2], 20):
@@ -387,7 +389,7 @@ def _random_designs_in_bounds(p, n, seed):
 
 def _fast_panel_errors(p, xs):
     errs = []
-    with opt.one_blas_thread():
+    with one_blas_thread():
         for x in xs:
             f = p.evaluate(x)
             q = p.evaluate(x, model="panel")
@@ -426,7 +428,7 @@ def test_device_optimum_is_panel_evaluated_and_the_corrected_residual_meets_the_
     res = opt.solve_device(p, starts=2)
     chk = res.fast_model_check
     assert chk["within_bound"] and chk["bound_rel"] == opt.RESIDUAL_BOUND
-    with opt.one_blas_thread():
+    with one_blas_thread():
         panel = p.evaluate(res.x, turns=res.turns, model="panel")
     fast = dataclasses.replace(p, corrections=tuple(chk["corrections_used"])).evaluate(
         res.x, turns=res.turns)
@@ -486,7 +488,7 @@ def test_pitch_variable_needs_the_rendering_objective_and_bounds_the_overlap():
     assert "coil_overlap_m" in p.constraint_names
     # Ro's bound follows the largest pitch; the overlap is a constraint on each design
     assert p.upper[1] == pytest.approx(min(0.5 * (0.06 - 1e-3), d.optimize.max_outer_radius_m))
-    m = opt._FastModel(p)
+    m = fast_model._FastModel(p)
     y = np.array(p.lower) + 0.5 * (np.array(p.upper) - np.array(p.lower))
     y[1], y[7] = 0.02, 0.04  # 2 x 20 mm + 1 mm > 40 mm: overlap by 1 mm
     assert m.values(y)[1 + len(opt.DEVICE_CONSTRAINTS)] == pytest.approx(1.0)

@@ -58,7 +58,14 @@ def test_conftest_turns_a_skip_into_a_failure_in_ci(tmp_path):
     (tmp_path / "test_skips.py").write_text(
         "import pytest\n\ndef test_a():\n    pytest.skip('tool missing')\n\n"
         "@pytest.mark.xfail(reason='known')\ndef test_b():\n    assert False\n")
-    env = dict(os.environ, PYTHONPATH=f"{ROOT}{os.pathsep}{ROOT / 'tests'}")
+    # a stand-in getdp on PATH: this test is about skips, and must not depend on whether the
+    # machine running it has GetDP (conftest refuses to start in CI without one)
+    stub = tmp_path / "bin"
+    stub.mkdir()
+    (stub / "getdp").write_text("#!/bin/sh\nexit 0\n")
+    (stub / "getdp").chmod(0o755)
+    env = dict(os.environ, PYTHONPATH=f"{ROOT}{os.pathsep}{ROOT / 'tests'}",
+               PATH=f"{stub}{os.pathsep}{os.environ.get('PATH', '')}")
     base = [sys.executable, "-m", "pytest", "-q", "-p", "conftest", "-p", "no:cacheprovider",
             str(tmp_path / "test_skips.py"), "--rootdir", str(tmp_path)]
     env.pop("DESIGNKIT_CI", None)

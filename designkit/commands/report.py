@@ -377,7 +377,7 @@ def _run(args, design, current, currents_arg, out):
         b, g = viz.array_field(design, np.array([design.design_point_m]), currents)
         f = viz.force_from_gradient(g, viz.magnet_moment(design))[0]
         report["array"] = {"currents_a": currents.tolist(),
-                           "currents_text": viz._currents_text(currents),
+                           "currents_text": viz.currents_text(currents),
                            "point_m": list(design.design_point_m),
                            "flux_density_t": b[0].tolist(), "gradient_t_per_m": g[0].tolist(),
                            "dbz_dz_t_per_m": float(g[0, 2, 2]), "force_n": f.tolist()}

@@ -17,7 +17,7 @@ The loop is :mod:`.loop`, what a run says :mod:`.report` and :mod:`.plot`, the w
 ``designkit run --simulate`` :mod:`.run`.
 """
 
-from .device import SimulatedDevice, magnet_moment
+from .device import SimulatedDevice
 from .faults import FAULT_TYPES, FaultSchedule, inject
 from .loop import SimulationResult, simulate
 from .plot import plot_run
@@ -28,7 +28,7 @@ from .sensors import SimSensorSource
 from .trajectory import TRAJECTORY_COLUMNS, Trajectory, poke_trajectory, slide_trajectory
 
 __all__ = [
-    "SimulatedDevice", "magnet_moment", "FAULT_TYPES", "FaultSchedule", "inject",
+    "SimulatedDevice", "FAULT_TYPES", "FaultSchedule", "inject",
     "SimulationResult", "simulate", "plot_run", "force_error_causes", "force_lag_s",
     "loop_by_kind", "summarize", "time_to_safe", "write_run_csv", "drive_data",
     "run_simulation", "SimSensorSource", "TRAJECTORY_COLUMNS", "Trajectory", "poke_trajectory",

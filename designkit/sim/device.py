@@ -26,11 +26,6 @@ from ..coil import Coil
 from ..sensor_sim import SensorSimulator, analog_reading
 from .sensors import SimSensorSource
 
-def magnet_moment(design) -> np.ndarray:
-    """The design's magnet moment vector, A m^2 (the polarity convention lives in the design)."""
-    return np.asarray(design.magnet.moment_vector_a_m2, float)
-
-
 
 class SimulatedDevice:
     """Register-level PWM boards and sensors on two simulated buses, driven by exact physics.
@@ -68,7 +63,7 @@ class SimulatedDevice:
         self.supply_v = min(design.drive.supply_voltage_v, design.drive.driver_max_voltage_v)
         self.noise_t = float(noise_t)
         self.rng = np.random.default_rng(seed)
-        self.moment = magnet_moment(design)
+        self.moment = np.asarray(design.magnet.moment_vector_a_m2, float)
         # the localization issue's sensor physics: exact magnet field, coils + cores, the cores
         # the magnet magnetizes (coupled solve), offsets/gains/mounting errors and noise
         self.sensor_sim = SensorSimulator(design, array=self.array, errors=sensor_errors,

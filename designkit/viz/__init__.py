@@ -31,7 +31,7 @@ from .physics import (array_field, force_from_gradient, inside_solids, magnet_mo
                       resolve_currents)
 from .scene import plot_array_scene, scene_meshes
 from .slices import plot_slices, slice_data
-from .style import _currents_text, bar_label_values, nice_ticks
+from .style import bar_label_values, currents_text, nice_ticks
 
 __all__ = ["B_MT", "B_T", "CURRENT_A", "F_MN", "F_N", "FZ_MN", "GRAD_T_M", "IN_SOLID", "KINDS",
            "MIN_ARROW", "QUALITIES", "REACH_M", "Kind", "Quality", "array_field",
@@ -39,4 +39,4 @@ __all__ = ["B_MT", "B_T", "CURRENT_A", "F_MN", "F_N", "FZ_MN", "GRAD_T_M", "IN_S
            "force_isosurface_data", "force_map_data", "inside_solids", "magnet_moment",
            "nice_ticks", "plot_array_scene", "plot_field_lines", "plot_force_isosurface",
            "plot_force_map", "plot_slices", "render", "resolve_currents", "save_png",
-           "scene_meshes", "slice_data", "_currents_text"]
+           "scene_meshes", "slice_data", "currents_text"]

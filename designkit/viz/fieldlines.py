@@ -10,7 +10,7 @@ import numpy as np
 from .common import B_MT, B_T, Quality, _image, _pv, _quality
 from .physics import _add_field_arrays, _footprint_half_m, array_field, resolve_currents
 from .scene import scene_meshes
-from .style import (_add_device, _axes, _bar, _currents_text, _fit_camera, _log_fmt, _mm,
+from .style import (_add_device, _axes, _bar, currents_text, _fit_camera, _log_fmt, _mm,
                     _plotter, _title)
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -83,7 +83,7 @@ def plot_field_lines(design: "Design", currents: Sequence[float] | None = None, 
     else:
         p.add_text("no field: all coils at 0 A", position="lower_left", color="black")
     p.add_mesh(_mm(vol.outline()), color="grey", line_width=1)
-    _title(p, f"Field lines of B, coloured by its magnitude (log scale)\n{_currents_text(cur)}; "
+    _title(p, f"Field lines of B, coloured by its magnitude (log scale)\n{currents_text(cur)}; "
               f"lines end at the edge of the computed box{clip_note}", font_size=11)
     _fit_camera(p, _axes(p), elevation_deg=12.0)
     return p

@@ -12,7 +12,7 @@ from .. import _validate as v
 from .common import F_MN, F_N, MIN_ARROW, Quality, _pv, _quality
 from .physics import _add_field_arrays, array_field, magnet_moment, resolve_currents
 from .scene import scene_meshes
-from .style import (_add_device, _axes, _bar, _currents_text, _fit_camera, _log_fmt,
+from .style import (_add_device, _axes, _bar, currents_text, _fit_camera, _log_fmt,
                     _magnet_text, _mm, _plotter, _title)
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -82,7 +82,7 @@ def plot_force_map(design: "Design", currents: Sequence[float] | None = None, *,
                      j_size=2e3 * design.workspace.half_width_m)
     p.add_mesh(plane, color="#dddddd", opacity=0.25)
     _title(p, f"Force on the magnet ({_magnet_text(design, moment)}) at z = {h * 1e3:.0f} mm\n"
-              f"largest: {fmax * 1e3:.4g} mN; {_currents_text(cur)}\n"
+              f"largest: {fmax * 1e3:.4g} mN; {currents_text(cur)}\n"
               f"arrow length ~ square root of the force (at least {MIN_ARROW:g} of the "
               f"largest)", font_size=11)
     _fit_camera(p, _axes(p), elevation_deg=50.0)

@@ -12,7 +12,7 @@ from .common import FZ_MN, REACH_M, Quality, _image, _pv, _quality
 from .physics import (_add_field_arrays, _footprint_half_m, array_field, force_from_gradient,
                       magnet_moment, resolve_currents)
 from .scene import scene_meshes
-from .style import (_add_device, _axes, _bar, _currents_text, _fit_camera, _magnet_text, _mm,
+from .style import (_add_device, _axes, _bar, currents_text, _fit_camera, _magnet_text, _mm,
                     _plotter, _title)
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -100,7 +100,7 @@ def plot_force_isosurface(design: "Design", currents: Sequence[float] | None = N
              f"{float(vol.field_data[REACH_M][0]) * 1e3:.0f} mm" if REACH_M in vol.field_data
              else "")
     _title(p, f"Where the magnet ({_magnet_text(design, moment)}) feels Fz = +{lmn:g} mN "
-              f"(red, push up) and -{lmn:g} mN (blue, pull down); {_currents_text(cur)}\n"
+              f"(red, push up) and -{lmn:g} mN (blue, pull down); {currents_text(cur)}\n"
               f"the force is larger between the surfaces and the coils{reach}\n"
               f"surfaces cut flat by the grey box: at z = {b[4]:.0f} mm (bottom of the "
               f"workspace), z = {b[5]:.0f} mm and x, y = +-{b[1]:.0f} mm", font_size=10)

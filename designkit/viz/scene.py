@@ -9,7 +9,7 @@ import numpy as np
 
 from .common import _MAGNET, _STEEL, CURRENT_A, _pv
 from .physics import magnet_moment, resolve_currents
-from .style import _axes, _bar, _currents_text, _fit_camera, _magnet_text, _mm, _plotter, _title
+from .style import _axes, _bar, currents_text, _fit_camera, _magnet_text, _mm, _plotter, _title
 
 if TYPE_CHECKING:  # pragma: no cover
     import pyvista
@@ -88,7 +88,7 @@ def plot_array_scene(design: "Design", currents: Sequence[float] | None = None, 
               f"{c.inner_radius_m * 1e3:.0f}/{c.outer_radius_m * 1e3:.0f}/"
               f"{c.length_m * 1e3:.0f} mm, {c.turns} turns\n"
               f"magnet ({_magnet_text(design, moment)}) at the design point "
-              f"z = {design.optimize.height_m * 1e3:.0f} mm; {_currents_text(cur)}",
+              f"z = {design.optimize.height_m * 1e3:.0f} mm; {currents_text(cur)}",
            font_size=10)
     _fit_camera(p, _axes(p), elevation_deg=22.0)
     return p

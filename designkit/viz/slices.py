@@ -13,7 +13,7 @@ from .common import B_MT, F_MN, IN_SOLID, Quality, _image, _pv, _quality
 from .physics import (_add_field_arrays, _footprint_half_m, array_field, inside_solids,
                       magnet_moment, resolve_currents)
 from .scene import scene_meshes
-from .style import (_bar, _currents_text, _log_fmt, _magnet_text, _mm, _nice_bounds, _plotter,
+from .style import (_bar, currents_text, _log_fmt, _magnet_text, _mm, _nice_bounds, _plotter,
                     _title)
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -117,7 +117,7 @@ def plot_slices(design: "Design", currents: Sequence[float] | None = None, *,
                    name=f"slice-{view}", show_scalar_bar=(col == 1),
                    scalar_bar_args=_bar(label, fmt=_log_fmt(lo, hi), position_x=0.88,
                                         width=0.045))
-        notes = [_currents_text(cur), "cyan dot: design point" + clip_note]
+        notes = [currents_text(cur), "cyan dot: design point" + clip_note]
         if quantity == "F" and lo < threshold_mn < hi:
             iso = mm.contour([threshold_mn], scalars=name)
             if iso.n_points:

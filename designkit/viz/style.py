@@ -130,7 +130,7 @@ def _add_device(p, design, blocks, *, opacity=1.0, magnet=True, workspace=True):
         p.add_mesh(_mm(blocks["workspace"]), color="#1f4e9c", line_width=1.5, name="workspace")
 
 
-def _currents_text(cur) -> str:
+def currents_text(cur) -> str:
     nz = [(i, c) for i, c in enumerate(cur) if c != 0.0]
     if not nz:
         return "all coils at 0 A"

@@ -24,7 +24,6 @@ Usage::
 
 from __future__ import annotations
 
-from .feasible import _budget_hit  # noqa: F401  (the budget's ratio test, tested on its own)
 from .problem import EPS_REL
 from .solve import Allocator, allocate
 

@@ -18,8 +18,7 @@ from .calibration import SensorCalibration, calibrate
 from .estimator import METHODS, Estimate, Localizer
 from .filter import ConstantVelocityKalman
 from .learned import LearnedInverse
-from .magnet import (MU0, _multipole_rows, _multipole_work,  # noqa: F401
-                     cylinder_field, multipole_field)
+from .magnet import MU0, cylinder_field, multipole_field
 from .sensor_model import DEFAULT_NOISE_T, SensorModel
 
 __all__ = [

@@ -15,8 +15,8 @@ import math
 import numpy as np
 
 from .. import special
+from ..constants import MU0
 
-MU0 = 4e-7 * math.pi
 _EYE = np.eye(3)
 _DIAG = np.arange(3)
 
