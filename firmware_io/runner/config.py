@@ -1,8 +1,8 @@
 """The runner's configuration: bounds, period, rendered axes, fault policy, and the coil drives.
 
-R, L and the MD10C supply voltage live in one tuple of :class:`firmware_io.hw.md10c.CoilDrive`
-(``RunnerConfig.drives``), which the runner's current path and the PWM driver both read;
-``resistance_ohm``, ``inductance_h`` and ``supply_voltage_v`` are views of it. A map file
+R, L and the MD10C supply voltage are stored once, in the configuration; its
+``drives`` (one :class:`firmware_io.hw.md10c.CoilDrive` per coil, derived from them) is what
+the runner's current path and the PWM driver both read. A map file
 carries the drive data (``meta['drive']``, written by designkit.electrical.drive_data):
 :func:`config_from_map`. SI units throughout; the fault and resume policy the fields tune is
 described in docs/runner.md.
@@ -10,8 +10,9 @@ described in docs/runner.md.
 
 from __future__ import annotations
 
+import functools
 import math
-from dataclasses import InitVar, dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -27,9 +28,9 @@ class RunnerConfig:
     ----------
     resistance_ohm, inductance_h : tuple of float, one per coil
         Coil resistance at the operating temperature and inductance (secant, at the operating
-        current) -> the L/R lag the feed-forward compensates. Stored in ``drives``.
+        current) -> the L/R lag the feed-forward compensates.
     supply_voltage_v : float
-        MD10C motor supply, V (<= 30 V). Stored in ``drives``.
+        MD10C motor supply, V (<= 30 V).
     current_limit_a, total_current_a : float
         Per-coil bound |I_k| <= u and the budget sum |I_k| <= I_t, A.
     unipolar : bool
@@ -53,13 +54,13 @@ class RunnerConfig:
     overrun_factor : float
         A step is an overrun when its compute time exceeds ``overrun_factor * control_period_s``
         (why 10: docs/runner.md, "Overrun").
-    drives : tuple of CoilDrive
+    drives : tuple of CoilDrive (derived)
         One per coil: R, L, the supply, and the current the supply can push through R.
     """
 
-    resistance_ohm: InitVar[tuple]
-    inductance_h: InitVar[tuple]
-    supply_voltage_v: InitVar[float]
+    resistance_ohm: tuple
+    inductance_h: tuple
+    supply_voltage_v: float
     current_limit_a: float
     total_current_a: float
     unipolar: bool = False
@@ -72,11 +73,9 @@ class RunnerConfig:
     resume_after_s: float = 0.25
     max_pwm_retries: int = 3
     overrun_factor: float = 10.0
-    drives: tuple = field(init=False)
 
-    def __post_init__(self, resistance_ohm, inductance_h, supply_voltage_v):
-        object.__setattr__(self, "drives",
-                           _coil_drives(resistance_ohm, inductance_h, supply_voltage_v))
+    def __post_init__(self):
+        self.drives  # noqa: B018  (checks R, L and the supply, names the field in the error)
         if not (0 < self.current_limit_a <= MD10C_CONTINUOUS_A):
             raise BadInputError("current_limit_a", "in (0, 13] A", self.current_limit_a)
         if not (self.total_current_a >= 0 and math.isfinite(self.total_current_a)):
@@ -87,6 +86,11 @@ class RunnerConfig:
             raise BadInputError("force_axes", "'z' or 'xyz'", self.force_axes)
         if not (0 <= self.skip_force_n and math.isfinite(self.skip_force_n)):
             raise BadInputError("skip_force_n", "a finite force >= 0 N", self.skip_force_n)
+
+    @functools.cached_property
+    def drives(self) -> tuple[CoilDrive, ...]:
+        """One :class:`CoilDrive` per coil from R, L and the supply."""
+        return _coil_drives(self.resistance_ohm, self.inductance_h, self.supply_voltage_v)
 
     @property
     def n_coils(self) -> int:
@@ -106,18 +110,6 @@ def _coil_drives(resistance_ohm, inductance_h, supply_voltage_v) -> tuple[CoilDr
         raise BadInputError("supply_voltage_v", "in [5, 30] V (MD10C rating)", supply_voltage_v)
     return tuple(CoilDrive.supply_limited(supply_voltage_v, float(rk), float(lk))
                  for rk, lk in zip(resistance_ohm, inductance_h))
-
-
-# views of the drives under the configuration's field names (InitVars above: set afterwards)
-RunnerConfig.resistance_ohm = property(  # type: ignore[attr-defined]
-    lambda self: tuple(d.resistance_ohm for d in self.drives),
-    doc="Coil resistances, ohm, one per coil (from ``drives``).")
-RunnerConfig.inductance_h = property(  # type: ignore[attr-defined]
-    lambda self: tuple(d.inductance_h for d in self.drives),
-    doc="Coil inductances, H, one per coil (from ``drives``).")
-RunnerConfig.supply_voltage_v = property(  # type: ignore[attr-defined]
-    lambda self: self.drives[0].supply_voltage_v,
-    doc="The MD10C motor supply, V (from ``drives``).")
 
 
 def config_from_map(fieldmap, **overrides) -> RunnerConfig:
