@@ -12,7 +12,7 @@ from pathlib import Path
 
 from designkit import _validate as v
 from designkit.commands._common import add_progress_argument, check_output, show_progress
-from designkit.design import load_design
+from designkit.design import NAMED_DESIGNS, load_design
 
 from . import export
 from .params import PrinterParams, from_design
@@ -30,28 +30,40 @@ def _triple(text: str) -> tuple[float, float, float]:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``designkit cad``."""
-    parser.add_argument("--design", type=Path, default=None,
-                        help="design TOML file (default: the thesis design)")
-    parser.add_argument("--out", type=Path, default=Path("cad_out"), help="output folder")
+    parser.add_argument("--design", default=None,
+                        help="design TOML file or a shipped name "
+                             f"({', '.join(sorted(NAMED_DESIGNS))}); default: the thesis design")
+    parser.add_argument("--out", type=Path, default=Path("cad_out"),
+                        help="output folder (default: ./cad_out)")
     parser.add_argument("--format", default="stl,step,3mf",
-                        help="comma-separated subset of stl,step,3mf (default: all)")
-    parser.add_argument("--mandrel", choices=["auto", "printed_tube", "core"], default="auto",
+                        help="comma-separated subset of stl,step,3mf (default: all); the "
+                             "assembly is written as assembly.step only when step is asked for")
+    parser.add_argument("--mandrel", choices=["auto", "printed_tube", "core"], default=None,
                         help="what carries the winding: a printed tube, or the core itself "
-                             "(auto: a tube when the core leaves room for one)")
+                             "(auto: a tube when the core leaves room for one; default: the "
+                             "design's cad.mandrel, 'auto' unless set)")
     parser.add_argument("--build-volume", type=_triple, default=(230.0, 190.0, 200.0),
                         metavar="X,Y,Z", help="printer build volume in mm (default 230,190,200)")
-    parser.add_argument("--min-wall", type=float, default=0.8,
-                        help="thinnest printable wall in mm (default 0.8)")
+    parser.add_argument("--min-wall", type=float, default=None,
+                        help="thinnest printable wall in mm (default: the design's "
+                             "cad.min_wall_m, 0.8 mm unless set)")
     parser.add_argument("--tolerance", type=float, default=0.02,
                         help="tessellation linear deflection in mm (default 0.02)")
-    parser.add_argument("--finger-diameter", type=float, default=18.0,
-                        help="inner diameter of the finger ring in mm (default 18)")
-    parser.add_argument("--press-fit", type=float, default=0.05,
-                        help="radial clearance of the magnet pocket in mm (default 0.05)")
+    parser.add_argument("--finger-diameter", type=float, default=None,
+                        help="inner diameter of the finger ring in mm (default: the design's "
+                             "cad.finger_diameter_m, 18 mm unless set)")
+    parser.add_argument("--press-fit", type=float, default=None,
+                        help="radial clearance of the magnet pocket in mm (default: the "
+                             "design's cad.press_fit_clearance_m, 0.05 mm unless set)")
     parser.add_argument("--oversize", choices=["error", "skip"], default="error",
                         help="a part larger than the build volume: fail (default) or skip it")
-    parser.add_argument("--picture", choices=["png", "none"], default="png")
+    parser.add_argument("--picture", choices=["png", "none"], default="png",
+                        help="assembly.png picture (default png)")
     add_progress_argument(parser)
+
+
+def _mm(name: str, value, check):
+    return None if value is None else check(name, value, "mm")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -60,22 +72,23 @@ def run(args: argparse.Namespace) -> int:
     formats = export.parse_formats(args.format)
     printer = dataclasses.replace(
         PrinterParams(), build_volume_mm=tuple(args.build_volume),
-        min_wall_mm=v.positive("--min-wall", args.min_wall, "mm"),
         tolerance_mm=v.positive("--tolerance", args.tolerance, "mm"))
+    min_wall = _mm("--min-wall", args.min_wall, v.positive)
+    finger = _mm("--finger-diameter", args.finger_diameter, v.positive)
+    press_fit = _mm("--press-fit", args.press_fit, v.finite)
     design = load_design(args.design)
-    params = from_design(design, mandrel=args.mandrel, printer=printer,
-                         finger_diameter_mm=v.positive("--finger-diameter", args.finger_diameter, "mm"),
-                         press_fit_clearance_mm=v.finite("--press-fit", args.press_fit, "mm"))
+    params = from_design(design, mandrel=args.mandrel, printer=printer, min_wall_mm=min_wall,
+                         finger_diameter_mm=finger, press_fit_clearance_mm=press_fit)
     report = export.export_all(params, args.out, formats, picture=args.picture,
                                oversize=args.oversize,
                                progress="bar" if show_progress(args) else "none")
     print(f"designkit cad: {design.name} -> {args.out} ({report['seconds']['total']:.1f} s, "
           f"mandrel {report['mandrel']})")
-    print(f"{'part':<20} {'qty':>3} {'material':<8} {'volume mm^3':>12} {'PLA g':>8} {'fits':>5}")
+    print(f"{'part':<20} {'qty':>3} {'material':<8} {'volume mm^3':>12} {'mass g':>8} {'fits':>5}")
     for r in report["parts"]:
         fits = {True: "yes", False: "NO"}.get(r.get("fits_printer"), "-")
         print(f"{r['part']:<20} {r['quantity']:>3} {r['material']:<8} {r['volume_mm3']:>12.1f} "
-              f"{r['mass_pla_g']:>8.1f} {fits:>5}")
+              f"{r['mass_g']:>8.1f} {fits:>5}")
     for name in report["skipped_oversize"]:
         size = next(r["size_mm"] for r in report["parts"] if r["part"] == name)
         print(f"NOT exported, larger than the build volume: {name} "

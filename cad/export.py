@@ -174,8 +174,7 @@ def _part_row(name: str, shape, qty: int, p: CadParams) -> dict:
         "part": name, "description": info.description, "quantity": qty,
         "material": info.material, "kind": info.kind,
         "volume_mm3": v, "area_mm2": float(shape.area), "size_mm": size,
-        "mass_pla_g": v * p.printer.density_pla_g_cm3 * 1e-3,
-        "mass_steel_g": v * p.printer.density_steel_g_cm3 * 1e-3,
+        "mass_g": v * dict(p.printer.density_g_cm3)[info.material] * 1e-3,
     }
     if info.kind == "printed":
         order = fit_in_build_volume(size, p.printer.build_volume_mm)
@@ -313,9 +312,10 @@ def export_all(p: CadParams, out_dir: str | Path, formats: Iterable[Format] = FO
         meshes = _write_parts(stage, jobs, parts, rows, p, bar)
         seconds["parts"] = time.perf_counter() - t
 
-        t = time.perf_counter()
-        _write_assembly_step(stage, p, parts)
-        seconds["assembly_step"] = time.perf_counter() - t
+        if "step" in formats:  # the assembly STEP is a STEP file: only when STEP is asked for
+            t = time.perf_counter()
+            _write_assembly_step(stage, p, parts)
+            seconds["assembly_step"] = time.perf_counter() - t
         if bar is not None:
             bar.update()
         if picture == "png":
@@ -341,32 +341,36 @@ def export_all(p: CadParams, out_dir: str | Path, formats: Iterable[Format] = FO
 
 
 def _totals(rows) -> dict:
+    rows = list(rows)
     printed = [r for r in rows if r["kind"] == "printed"]
-    return {
-        "pla_g": sum(r["mass_pla_g"] * r["quantity"] for r in printed),
-        "steel_g": sum(r["mass_steel_g"] * r["quantity"] for r in rows if r["material"] == "steel"),
-        "print_time_proxy_h": sum(r["print_time_proxy_h"] * r["quantity"] for r in printed),
-    }
+    masses = {}
+    for r in rows:
+        masses[r["material"]] = masses.get(r["material"], 0.0) + r["mass_g"] * r["quantity"]
+    return {"mass_g": masses,
+            "print_time_proxy_h": sum(r["print_time_proxy_h"] * r["quantity"] for r in printed)}
 
 
 def parts_markdown(report: dict) -> str:
     """The parts list as a Markdown table (mm, g, h)."""
     lines = [f"# Parts list: {report['design']}", "",
              f"Bobbin mandrel: `{report['mandrel']}`. Masses per piece; print time is a proxy "
-             f"(solid volume / {report['printer']['flow_mm3_per_s']:g} mm^3/s).", "",
-             "| part | qty | material | kind | volume mm^3 | mass PLA g | mass steel g | size mm "
+             f"(solid volume / {report['printer']['flow_mm3_per_s']:g} mm^3/s); each mass is "
+             "the part's volume times the density of its own material "
+             f"({', '.join(f'{m} {d:g}' for m, d in report['printer']['density_g_cm3'])} "
+             "g/cm^3).", "",
+             "| part | qty | material | kind | volume mm^3 | mass g | size mm "
              "| fits printer | print time proxy h |",
-             "| --- | ---: | --- | --- | ---: | ---: | ---: | --- | --- | ---: |"]
+             "| --- | ---: | --- | --- | ---: | ---: | --- | --- | ---: |"]
     for r in report["parts"]:
         size = " x ".join(f"{s:.1f}" for s in r["size_mm"])
         fits = {True: "yes", False: "NO"}.get(r.get("fits_printer"), "-")
         ptime = f"{r['print_time_proxy_h']:.2f}" if "print_time_proxy_h" in r else "-"
         lines.append(f"| {r['part']} | {r['quantity']} | {r['material']} | {r['kind']} | "
-                     f"{r['volume_mm3']:.1f} | {r['mass_pla_g']:.1f} | {r['mass_steel_g']:.1f} | "
+                     f"{r['volume_mm3']:.1f} | {r['mass_g']:.1f} | "
                      f"{size} | {fits} | {ptime} |")
     t = report["totals"]
-    lines += ["", f"Totals: PLA {t['pla_g']:.0f} g, steel {t['steel_g']:.0f} g, print time proxy "
-              f"{t['print_time_proxy_h']:.1f} h."]
+    per = ", ".join(f"{m} {g:.0f} g" for m, g in t["mass_g"].items())
+    lines += ["", f"Totals (all pieces): {per}; print time proxy {t['print_time_proxy_h']:.1f} h."]
     if report["skipped_oversize"]:
         lines.append(f"Not exported (larger than the build volume): {', '.join(report['skipped_oversize'])}.")
     return "\n".join(lines) + "\n"

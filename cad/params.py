@@ -18,6 +18,7 @@ from typing import Literal
 
 from designkit.design import Design
 from designkit.errors import BadInputError
+from designkit.rules import Layout, layout
 
 MM_PER_M = 1000.0
 """The one unit factor of cad/: millimetres per metre."""
@@ -31,16 +32,16 @@ class PrinterParams:
 
     build_volume_mm: tuple[float, float, float] = (230.0, 190.0, 200.0)
     """Usable build volume x, y, z, mm (Ultimaker-class default)."""
-    min_wall_mm: float = 0.8
-    """Thinnest wall the printer makes reliably (two 0.4 mm perimeters), mm."""
     tolerance_mm: float = 0.02
     """Linear deflection of the tessellation (max chord-to-surface distance), mm."""
     angular_tolerance_rad: float = 0.2
     flow_mm3_per_s: float = 4.0
     """Print-time proxy: volumetric rate of a 0.4 mm nozzle at 0.2 mm layers and 50 mm/s,
     mm^3/s, applied to the solid volume (100 % infill: an upper bound on time)."""
-    density_pla_g_cm3: float = 1.24
-    density_steel_g_cm3: float = 7.85
+    density_g_cm3: tuple[tuple[str, float], ...] = (
+        ("PLA", 1.24), ("steel", 7.85), ("copper", 8.96), ("NdFeB", 7.5))
+    """Density of each part material, g/cm^3 (copper: the winding as solid copper, an upper
+    bound; NdFeB: sintered N52 datasheet value)."""
 
 
 @dataclass(frozen=True)
@@ -223,148 +224,116 @@ class CadParams:
     printer: PrinterParams
     magnet_centre_mm: tuple[float, float, float]
     """Where the assembly puts the magnet: the design point above the array centre, mm."""
+    design: Design
+    """The design with every override applied: what the rule book checks."""
 
 
-def from_design(
-    design: Design,
-    *,
-    mandrel: Mandrel = "auto",
-    printer: PrinterParams | None = None,
-    core_clearance_mm: float = 0.15,
-    air_core_tube_wall_mm: float = 1.2,
-    flange_thickness_mm: float = 2.0,
-    flange_lip_mm: float = 1.5,
-    pocket_clearance_mm: float = 0.3,
-    plate_thickness_mm: float = 6.0,
-    fixing_inset_mm: float | None = None,
-    fixing_hole_radius_mm: float = 1.7,
-    standoff_outer_radius_mm: float = 4.0,
-    board_size_mm: tuple[float, float] = (12.0, 12.0),
-    board_thickness_mm: float = 1.6,
-    board_clearance_mm: float = 0.2,
-    mount_floor_mm: float = 2.0,
-    channel_width_mm: float = 4.0,
-    press_fit_clearance_mm: float = 0.05,
-    finger_diameter_mm: float = 18.0,
-    ring_wall_mm: float = 2.5,
-    ring_width_mm: float = 14.0,
-    boss_wall_mm: float = 1.6,
-    holder_floor_mm: float = 1.2,
-) -> CadParams:
+_OVERRIDES_MM = ("min_wall", "core_clearance", "air_core_tube_wall", "flange_thickness",
+                 "flange_lip", "pocket_clearance", "plate_thickness", "fixing_inset",
+                 "fixing_hole_radius", "standoff_outer_radius", "board_width", "board_thickness",
+                 "board_clearance", "mount_floor", "channel_width", "press_fit_clearance",
+                 "finger_diameter", "ring_wall", "ring_width", "boss_wall", "holder_floor")
+"""Keyword arguments ``<name>_mm`` of :func:`from_design`: the design's ``cad.<name>_m`` in mm."""
+
+
+def with_overrides(design: Design, mandrel: str | None = None, **overrides_mm) -> Design:
+    """The design with ``cad`` keys replaced by printing choices given in mm (None: keep)."""
+    changes = {} if mandrel is None else {"cad.mandrel": mandrel}
+    for key, value in overrides_mm.items():
+        name = key.removesuffix("_mm")
+        if not key.endswith("_mm") or name not in _OVERRIDES_MM:
+            raise BadInputError("cad option", f"one of {[n + '_mm' for n in _OVERRIDES_MM]}", key)
+        if value is not None:
+            if not math.isfinite(float(value)):
+                raise BadInputError(key, "a finite number (mm)", value)
+            changes[f"cad.{name}_m"] = float(value) / MM_PER_M
+    return design.replace(**changes) if changes else design
+
+
+def from_design(design: Design, *, mandrel: Mandrel | None = None,
+                printer: PrinterParams | None = None, **overrides_mm) -> CadParams:
     """Convert a design (SI, m) into the parameters of every part (mm).
 
-    This (with its per-part helpers) is the only code in cad/ that reads metres. Keyword arguments are printing
-    choices in mm; they are not range-checked here beyond being finite numbers, because
-    :func:`cad.rules.check_rules` reports every violated rule with the fix.
+    This (with the rule book's :func:`designkit.rules.layout`) is the only code in cad/ that
+    reads metres. ``mandrel`` and ``<name>_mm`` keyword arguments override the design's
+    ``cad`` keys (:func:`with_overrides`); they are not range-checked here beyond being finite
+    numbers, because :func:`cad.rules.check_rules` reports every violated rule with the fix.
 
     Parameters
     ----------
     design : Design
-        The device; its coil, core, array, sensors, magnet and optimize.height_m are used.
-    mandrel : {'auto', 'printed_tube', 'core'}
-        What carries the winding. 'auto' prints a tube when the radial room between the
-        core (plus clearance) and the winding's inner radius is at least the printer's
-        minimum wall, else winds on the core (see :attr:`BobbinParams.mandrel`).
+        The device; its coil, core, array, sensors, magnet, cad and optimize.height_m are used.
+    mandrel : {'auto', 'printed_tube', 'core'}, optional
+        What carries the winding (default: ``cad.mandrel``). 'auto' prints a tube when the
+        radial room between the core (plus clearance) and the winding's inner radius is at
+        least the printer's minimum wall, else winds on the core (see
+        :attr:`BobbinParams.mandrel`).
 
     Returns
     -------
     CadParams
     """
-    _check_choices(mandrel, core_clearance_mm=core_clearance_mm,
-                   press_fit_clearance_mm=press_fit_clearance_mm,
-                   finger_diameter_mm=finger_diameter_mm)
+    if mandrel is not None and mandrel not in ("auto", "printed_tube", "core"):
+        raise BadInputError("mandrel", "one of 'auto', 'printed_tube', 'core'", mandrel)
+    if mandrel == "core" and design.core is None:
+        raise BadInputError("mandrel", "'auto' or 'printed_tube' for a design without a core",
+                            mandrel, "An air-core coil needs a printed tube to wind on.")
+    design = with_overrides(design, mandrel, **overrides_mm)
     printer = printer or PrinterParams()
-    bobbin, core_p = _bobbin_and_core(design, mandrel, printer, core_clearance_mm,
-                                      air_core_tube_wall_mm, flange_thickness_mm, flange_lip_mm)
-    pocket_r = bobbin.flange_radius_mm + pocket_clearance_mm
-    if fixing_inset_mm is None:
-        fixing_inset_mm = standoff_outer_radius_mm + 1.2
-    grid = _grid(design, printer, pocket_r, fixing_inset_mm, fixing_hole_radius_mm,
-                 standoff_outer_radius_mm)
+    g = layout(design)
+    c, mm = design.cad, MM_PER_M
+    bobbin, core_p = _bobbin_and_core(design, g)
+    grid = GridParams(rows=design.array.rows, columns=design.array.columns,
+                      pitch_mm=design.array.pitch_m * mm,
+                      centres_xy_mm=tuple((x * mm, y * mm) for x, y in g.centres_xy_m),
+                      footprint_x_mm=g.footprint_x_m * mm, footprint_y_mm=g.footprint_y_m * mm,
+                      fixing_inset_mm=c.fixing_inset_m * mm,
+                      fixing_hole_radius_mm=c.fixing_hole_radius_m * mm)
     length = bobbin.winding_length_mm
     mid = -length / 2
-    frame = FrameParams(grid=grid, thickness_mm=plate_thickness_mm, pocket_radius_mm=pocket_r,
-                        pocket_depth_mm=flange_thickness_mm, through_radius_mm=bobbin.bore_radius_mm,
-                        mirror_z_mm=mid)
-    standoff = StandoffParams(outer_radius_mm=standoff_outer_radius_mm,
-                              hole_radius_mm=fixing_hole_radius_mm, length_mm=length)
+    frame = FrameParams(grid=grid, thickness_mm=c.plate_thickness_m * mm,
+                        pocket_radius_mm=g.pocket_radius_m * mm,
+                        pocket_depth_mm=c.flange_thickness_m * mm,
+                        through_radius_mm=bobbin.bore_radius_mm, mirror_z_mm=mid)
+    standoff = StandoffParams(outer_radius_mm=c.standoff_outer_radius_m * mm,
+                              hole_radius_mm=c.fixing_hole_radius_m * mm, length_mm=length)
     sensors = SensorMountParams(
-        grid=grid, sensor_z_mm=design.sensors.offset_m * MM_PER_M,
-        board_size_mm=tuple(board_size_mm),
-        board_thickness_mm=board_thickness_mm, pocket_clearance_mm=board_clearance_mm,
-        floor_thickness_mm=mount_floor_mm, channel_width_mm=channel_width_mm,
-        leg_outer_radius_mm=standoff_outer_radius_mm, leg_bottom_z_mm=plate_thickness_mm,
-        mirror_z_mm=mid)
+        grid=grid, sensor_z_mm=design.sensors.offset_m * mm,
+        board_size_mm=(c.board_width_m * mm, c.board_width_m * mm),
+        board_thickness_mm=c.board_thickness_m * mm,
+        pocket_clearance_mm=c.board_clearance_m * mm, floor_thickness_mm=c.mount_floor_m * mm,
+        channel_width_mm=c.channel_width_m * mm, leg_outer_radius_mm=c.standoff_outer_radius_m * mm,
+        leg_bottom_z_mm=c.plate_thickness_m * mm, mirror_z_mm=mid)
     holder = MagnetHolderParams(
-        magnet_radius_mm=design.magnet.radius_m * MM_PER_M,
-        magnet_length_mm=design.magnet.length_m * MM_PER_M,
-        press_fit_clearance_mm=press_fit_clearance_mm, finger_diameter_mm=finger_diameter_mm,
-        ring_wall_mm=ring_wall_mm, ring_width_mm=ring_width_mm, boss_wall_mm=boss_wall_mm,
-        floor_thickness_mm=holder_floor_mm)
+        magnet_radius_mm=design.magnet.radius_m * mm, magnet_length_mm=design.magnet.length_m * mm,
+        press_fit_clearance_mm=c.press_fit_clearance_m * mm,
+        finger_diameter_mm=c.finger_diameter_m * mm, ring_wall_mm=c.ring_wall_m * mm,
+        ring_width_mm=c.ring_width_m * mm, boss_wall_mm=c.boss_wall_m * mm,
+        floor_thickness_mm=c.holder_floor_m * mm)
     # The design point sits above coil (0, 0) of the optimization; in the array that is the
     # array centre (a coil axis for odd rows x columns).
-    magnet_centre = (0.0, 0.0, design.optimize.height_m * MM_PER_M)
+    magnet_centre = (0.0, 0.0, design.optimize.height_m * mm)
     return CadParams(design_name=design.name, bobbin=bobbin, core=core_p, grid=grid, frame=frame,
                      standoff=standoff, sensor_mount=sensors, magnet_holder=holder,
-                     printer=printer, magnet_centre_mm=magnet_centre)
+                     printer=printer, magnet_centre_mm=magnet_centre, design=design)
 
 
-def _check_choices(mandrel, **finite_mm) -> None:
-    """The mandrel name, and the keyword values that must be finite numbers (mm)."""
-    if mandrel not in ("auto", "printed_tube", "core"):
-        raise BadInputError("mandrel", "one of 'auto', 'printed_tube', 'core'", mandrel)
-    for name, value in finite_mm.items():
-        if not math.isfinite(float(value)):
-            raise BadInputError(name, "a finite number (mm)", value)
-
-
-def _bobbin_and_core(design: Design, mandrel: Mandrel, printer: PrinterParams,
-                     core_clearance_mm: float, air_core_tube_wall_mm: float,
-                     flange_thickness_mm: float, flange_lip_mm: float
-                     ) -> tuple[BobbinParams, CoreParams | None]:
-    """The bobbin (with the chosen mandrel) and the core, mm, from the design's coil and core."""
+def _bobbin_and_core(design: Design, g: Layout) -> tuple[BobbinParams, CoreParams | None]:
+    """The bobbin (with the rule book's mandrel) and the core, mm, from the design."""
     mm = MM_PER_M
     coil, core = design.coil, design.core
-    r_in, r_out, length = coil.inner_radius_m * mm, coil.outer_radius_m * mm, coil.length_m * mm
-    if core is None:
-        bore = r_in - air_core_tube_wall_mm
-        core_p = None
-        if mandrel == "core":
-            raise BadInputError("mandrel", "'auto' or 'printed_tube' for a design without a core",
-                                mandrel, "An air-core coil needs a printed tube to wind on.")
-        chosen = "printed_tube"
-    else:
-        bore = core.radius_m * mm + core_clearance_mm
+    length = coil.length_m * mm
+    core_p = None
+    if core is not None:
         core_p = CoreParams(radius_mm=core.radius_m * mm, length_mm=core.length_m * mm,
                             centre_z_mm=-length / 2 + core.offset_m * mm)
-        if mandrel == "auto":
-            chosen = "printed_tube" if r_in - bore >= printer.min_wall_mm else "core"
-        else:
-            chosen = mandrel
     bobbin = BobbinParams(
-        bore_radius_mm=bore, winding_inner_radius_mm=r_in, winding_outer_radius_mm=r_out,
-        winding_length_mm=length, flange_thickness_mm=flange_thickness_mm,
-        flange_radius_mm=r_out + flange_lip_mm,
+        bore_radius_mm=g.bore_radius_m * mm, winding_inner_radius_mm=coil.inner_radius_m * mm,
+        winding_outer_radius_mm=coil.outer_radius_m * mm, winding_length_mm=length,
+        flange_thickness_mm=design.cad.flange_thickness_m * mm,
+        flange_radius_mm=g.flange_radius_m * mm,
         # two wire diameters side by side (lead in and out) plus a printing allowance
         slot_width_mm=2 * design.wire.insulated_diameter_m * mm + 0.4,
-        mandrel=chosen,
+        mandrel=g.mandrel,
     )
     return bobbin, core_p
-
-
-def _grid(design: Design, printer: PrinterParams, pocket_r: float, fixing_inset_mm: float,
-          fixing_hole_radius_mm: float, standoff_outer_radius_mm: float) -> GridParams:
-    """Coil centres, pitch and footprint (mm) of the design's array."""
-    mm = MM_PER_M
-    arr = design.array
-    pitch = arr.pitch_m * mm
-    # The footprint is the design's (n x pitch) unless the outer pockets would break out or
-    # the corner standoffs would not clear the corner flanges (they sit on the diagonal).
-    corner = (pocket_r + printer.min_wall_mm + standoff_outer_radius_mm) / math.sqrt(2) + fixing_inset_mm
-    edge = max(pocket_r + printer.min_wall_mm, corner)
-    fx = max(arr.columns * pitch, (arr.columns - 1) * pitch + 2 * edge)
-    fy = max(arr.rows * pitch, (arr.rows - 1) * pitch + 2 * edge)
-    centres = tuple((x * mm, y * mm) for x, y, _ in design.coil_centres_m())
-    return GridParams(rows=arr.rows, columns=arr.columns, pitch_mm=pitch, centres_xy_mm=centres,
-                      footprint_x_mm=fx, footprint_y_mm=fy, fixing_inset_mm=fixing_inset_mm,
-                      fixing_hole_radius_mm=fixing_hole_radius_mm)

@@ -19,6 +19,7 @@ from .errors import DesignkitError
 
 COMMANDS: dict[str, tuple[str, str]] = {
     "report": ("designkit.commands.report", "main job: whole pipeline on a design -> report folder"),
+    "check": ("designkit.commands.check", "every design rule and constraint: value, limit, fix"),
     "optimize": ("designkit.commands.optimize", "the real device: coil, wire, saturating core"),
     "sweep": ("designkit.commands.sweep", "evaluate a grid of coil designs (parallel)"),
     "map": ("designkit.commands.map", "force-current map file for the controller"),

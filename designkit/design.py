@@ -198,6 +198,45 @@ class RenderSpec:
 
 
 @dataclass(frozen=True)
+class CadSpec:
+    """Printing choices of the parts (cad/), m: the keys that fix a buildability rule
+    (:mod:`designkit.rules`; rationale in docs/rules.md). Defaults: an FDM printer with a
+    0.4 mm nozzle and a 12 mm x 1.6 mm Hall-sensor breakout board (assumed)."""
+
+    mandrel: str = "auto"
+    """What carries the winding: 'printed_tube', 'core' (wound on the insulated core) or
+    'auto' (a tube when the core leaves room for one)."""
+    min_wall_m: float = 0.8e-3
+    """Thinnest wall the printer makes reliably (two 0.4 mm perimeters), m."""
+    core_clearance_m: float = 0.15e-3
+    air_core_tube_wall_m: float = 1.2e-3
+    flange_thickness_m: float = 2.0e-3
+    flange_lip_m: float = 1.5e-3
+    """Bobbin flange radius - winding outer radius, m."""
+    pocket_clearance_m: float = 0.3e-3
+    """Frame-plate flange seat radius - flange radius, m."""
+    plate_thickness_m: float = 6.0e-3
+    fixing_inset_m: float = 5.2e-3
+    """Distance of the corner fixing holes from the footprint edges, m."""
+    fixing_hole_radius_m: float = 1.7e-3
+    standoff_outer_radius_m: float = 4.0e-3
+    board_width_m: float = 12e-3
+    """Side of the square Hall-sensor board, m."""
+    board_thickness_m: float = 1.6e-3
+    """Sensor board thickness, m; its mid-plane is the sensing plane (sensors.offset_m)."""
+    board_clearance_m: float = 0.2e-3
+    mount_floor_m: float = 2.0e-3
+    channel_width_m: float = 4.0e-3
+    press_fit_clearance_m: float = 0.05e-3
+    """Radial oversize of the magnet pocket, m (FDM holes print undersize: a press fit)."""
+    finger_diameter_m: float = 18e-3
+    ring_wall_m: float = 2.5e-3
+    ring_width_m: float = 14e-3
+    boss_wall_m: float = 1.6e-3
+    holder_floor_m: float = 1.2e-3
+
+
+@dataclass(frozen=True)
 class Design:
     """The whole device. Immutable; sweeps use :func:`dataclasses.replace`."""
 
@@ -212,6 +251,7 @@ class Design:
     workspace: WorkspaceSpec = field(default_factory=WorkspaceSpec)
     optimize: OptimizeSpec = field(default_factory=OptimizeSpec)
     render: RenderSpec = field(default_factory=RenderSpec)
+    cad: CadSpec = field(default_factory=CadSpec)
 
     def __post_init__(self):
         check_design(self)
@@ -242,8 +282,10 @@ class Design:
         return dataclasses.asdict(self)
 
     def spec_hash(self) -> str:
-        """SHA-256 of the canonical JSON of the spec (stable across runs and machines)."""
-        blob = json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"), default=float)
+        """SHA-256 of the canonical JSON of the physics spec (stable across runs and machines;
+        the printing choices of ``cad`` change no field, so they are not part of it)."""
+        spec = {k: val for k, val in self.to_dict().items() if k != "cad"}
+        blob = json.dumps(spec, sort_keys=True, separators=(",", ":"), default=float)
         return hashlib.sha256(blob.encode()).hexdigest()
 
 
@@ -251,6 +293,7 @@ _SECTIONS = {
     "magnet": MagnetSpec, "wire": WireSpec, "coil": CoilSpec, "core": CoreSpec,
     "array": ArraySpec, "drive": DriveSpec, "sensors": SensorSpec,
     "workspace": WorkspaceSpec, "optimize": OptimizeSpec, "render": RenderSpec,
+    "cad": CadSpec,
 }
 
 
@@ -380,6 +423,22 @@ def _check_type(name: str, value: Any, default: Any) -> None:
         raise BadInputError(name, "a number (in TOML: unquoted)", value)
 
 
+MAX_LENGTH_M = 1.0
+"""Largest length (key ending in ``_m``) a design may give, m; radii at most half of it. A
+larger value is almost always millimetres written where metres are expected."""
+
+
+def _check_metres(name: str, value: Any) -> None:
+    """Refuse a length that reads as millimetres (``coil.inner_radius_m = 12``), with the hint."""
+    if not name.endswith("_m") or name.endswith("_per_m") or isinstance(value, bool) or not isinstance(value, numbers.Real):
+        return
+    limit = MAX_LENGTH_M / 2 if "radius" in name else MAX_LENGTH_M
+    if abs(value) > limit:
+        raise BadInputError(name, f"a length in metres, at most {limit:g} m", value,
+                            f"Millimetres where metres are expected? {value:g} mm is "
+                            f"{value / 1000:g} m: design files are in SI units.")
+
+
 def check_design(d: Design) -> None:
     """Type and range checks of every field; raises BadInputError naming the dotted parameter."""
     _check_type("name", d.name, "")
@@ -400,15 +459,20 @@ def check_design(d: Design) -> None:
                                         "direction; default [0, 0, -1])", val)
                 continue
             _check_type(name, val, f.default)
+            _check_metres(name, val)
             if f.name == "bh":
                 if val not in ("linear", "steel1010"):
                     raise BadInputError(name, "'linear' or 'steel1010'", val)
             elif f.name == "packing":
                 if val not in ("layered", "orthocyclic"):
                     raise BadInputError(name, "'layered' or 'orthocyclic'", val)
+            elif f.name == "mandrel":
+                if val not in ("auto", "printed_tube", "core"):
+                    raise BadInputError(name, "'auto', 'printed_tube' or 'core'", val)
             elif f.name in ("turns", "rows", "columns"):
                 v.positive_int(name, val)
-            elif f.name in ("offset_m", "reference_temperature_c", "operating_temperature_c"):
+            elif f.name in ("offset_m", "reference_temperature_c", "operating_temperature_c",
+                            "core_clearance_m", "press_fit_clearance_m"):
                 v.finite(name, val)
             elif f.name == "z_min_m":
                 v.nonnegative(name, val)

@@ -150,20 +150,19 @@ def test_rule_flanges_overlap_at_pitch():
 
 
 def test_rule_min_wall():
-    from cad.params import PrinterParams
-
-    msg = _rule_error(printer=PrinterParams(min_wall_mm=2.5))
-    assert "flange thickness is 2 mm, thinner than the printer minimum wall 2.5 mm" in msg
+    msg = _rule_error(min_wall_mm=2.5)
+    assert "flange thickness (printer minimum wall): 2 mm < the limit 2.5 mm" in msg
+    assert "cad.flange_thickness_m" in msg
 
 
 def test_rule_magnet_pocket_smaller_than_magnet():
     msg = _rule_error(press_fit_clearance_mm=-0.1)
-    assert "smaller than the magnet" in msg and "press_fit_clearance_mm" in msg
+    assert "smaller than the magnet" in msg and "cad.press_fit_clearance_m" in msg
 
 
 def test_rule_sensor_inside_bobbin():
     msg = _rule_error(default_design().replace(**{"sensors.offset_m": 0.004}))
-    assert "inside the bobbin/core" in msg and "sensors.offset_m to >= 0.0058" in msg
+    assert "sensor board above the bobbin/core" in msg and "sensors.offset_m to >= 0.0058" in msg
 
 
 def test_rule_printed_tube_without_room_suggests_fix():
@@ -271,7 +270,11 @@ def test_parts_list(exported, params):
     rows = {r["part"]: r for r in report["parts"]}
     core = rows["core"]
     assert core["material"] == "steel" and core["quantity"] == 9
-    assert core["mass_steel_g"] == pytest.approx(pi * 12**2 * 110 * 7.85e-3, rel=1e-9)
+    assert core["mass_g"] == pytest.approx(pi * 12**2 * 110 * 7.85e-3, rel=1e-9)
+    # each part's mass in its own material (copper winding, NdFeB magnet)
+    assert rows["magnet"]["mass_g"] == pytest.approx(pi * 5**2 * 10 * 7.5e-3, rel=1e-9)
+    assert rows["winding"]["mass_g"] == pytest.approx(pi * (19**2 - 12**2) * 100 * 8.96e-3,
+                                                      rel=1e-9)
     for r in rows.values():
         if r["kind"] == "printed":
             assert r["fits_printer"] is True

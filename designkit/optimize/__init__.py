@@ -23,7 +23,7 @@ from .candidate import device_candidate
 from .coil_problem import (CORE_MODEL_NAMES, EXTRA_VARIABLES, MAGNET_CLEARANCE_M, MIN_LENGTH_M,
                            THESIS_CORE_PROTRUSION_M, VARIABLES, CoilDesignProblem, CoreModelName,
                            DesignResult, Evaluation, evaluate_design, force_field_engine)
-from .device_check import evaluate_device
+from .device_check import evaluate_device, rule_table
 from .device_problem import (DEVICE_CONSTRAINTS, DEVICE_OBJECTIVES, DEVICE_VARIABLES,
                              PITCH_VARIABLE, SEARCH_VARIABLES, DeviceProblem, device_problem_for)
 from .device_solve import DeviceResult, device_design, round_design, solve_device
@@ -36,4 +36,5 @@ from .solve import (GLOBAL_METHODS, THESIS_FORCE_N, THESIS_POINT, THESIS_TURNS, 
 from .verify import best_fast_ref, getdp_check, verify_device
 from .wire_table import (AWG_DIAMETERS_M, GRADE1_INSULATION_RATIO, METRIC_DIAMETERS_M,
                          insulated_diameter_for)
-from .workspace import BOARD_THICKNESS_M, reachable_height_m, workspace_region
+from ..rules import reachable_height_m
+from .workspace import workspace_region

@@ -1,7 +1,7 @@
 """A given design judged as a device: its coil and core under the device problem's panel model
 and every constraint, with what it misses (the side-by-side report of the thesis device and
-the optimized one). Numbers SI; the turns that fit and the design's own supply and workspace
-are checked too.
+the optimized one). Numbers SI; the rule book (:mod:`designkit.rules`: winding fit, the
+design's own supply, workspace floor, the printed assembly) is checked too.
 """
 
 from __future__ import annotations
@@ -9,11 +9,11 @@ from __future__ import annotations
 import dataclasses
 
 from .. import electrical as el
+from .. import rules
 from .._blas import one_blas_thread
 from ..design import Design
 from ..errors import BadInputError
 from .device_problem import DeviceProblem, device_problem_for
-from .workspace import reachable_height_m
 
 
 def evaluate_device(design: Design, problem: DeviceProblem | None = None) -> dict:
@@ -35,19 +35,10 @@ def evaluate_device(design: Design, problem: DeviceProblem | None = None) -> dic
         ev = p.evaluate(x, turns=c.turns, model="panel")
     fit = el.turns_from_geometry(c.inner_radius_m, c.outer_radius_m, c.length_m,
                                  w.insulated_diameter_m, w.packing)
-    table = p.constraint_table(x, ev, fit)
-    # the design's own supply is a constraint too (the thesis' 36 V > the MD10C's 30 V)
-    table["design_supply_voltage_v"] = {
-        "value": float(design.drive.supply_voltage_v), "limit": p.supply_voltage_v,
-        "unit": "V", "kind": "upper", "margin": p.supply_voltage_v - design.drive.supply_voltage_v,
-        "met": design.drive.supply_voltage_v <= p.supply_voltage_v,
-        "note": "the design's supply vs the MD10C rating"}
-    reach = reachable_height_m(design)
-    table["workspace_z_min_m"] = {
-        "value": float(design.workspace.z_min_m), "limit": reach, "unit": "m", "kind": "lower",
-        "margin": float(design.workspace.z_min_m - reach),
-        "met": bool(design.workspace.z_min_m >= reach - 1e-12),
-        "note": "workspace starts where the magnet fits above the upper sensor board"}
+    table = p.constraint_table(x, ev)
+    # the rule book: winding fit, the design's supply vs the driver, workspace floor, and
+    # every rule the printed assembly must meet (what cad refuses)
+    table.update({r.name: r.as_dict() for r in rules.rules(design)})
     out = {k2: v2 for k2, v2 in ev.items() if k2 != "g"}
     out.update({"name": design.name, "turns": int(c.turns), "turns_that_fit": fit,
                 "inner_radius_m": c.inner_radius_m, "outer_radius_m": c.outer_radius_m,
@@ -62,3 +53,16 @@ def evaluate_device(design: Design, problem: DeviceProblem | None = None) -> dic
     return out
 
 
+
+
+def rule_table(design: Design) -> dict:
+    """Every rule and constraint of a design, by name -> :meth:`designkit.rules.Rule.as_dict`
+    rows: the device constraints under the panel model (:func:`evaluate_device`, a cored
+    design) and the rule book (:func:`designkit.rules.rules`, any design)."""
+    if design.core is None:
+        return {r.name: r.as_dict() for r in rules.rules(design)}
+    table = evaluate_device(design)["constraints"]
+    for row in table.values():
+        row.setdefault("group", "device")
+        row.setdefault("keys", [])
+    return table

@@ -23,6 +23,7 @@ import numpy as np
 
 from .. import _validate as v
 from .. import electrical as el
+from .. import rules
 from ..coil import Coil
 from ..cores.panel import Core
 from ..cores.rod import solve_rods
@@ -32,7 +33,7 @@ from .axial_kernel import axial_gradient_per_current_density
 from .design_view import DesignView
 from .rendering import array_render_forces
 from .wire_table import GRADE1_INSULATION_RATIO, METRIC_DIAMETERS_M
-from .workspace import BOARD_THICKNESS_M, _fold_points, workspace_region
+from .workspace import _fold_points, workspace_region
 
 DEVICE_VARIABLES = ("inner_radius_m", "outer_radius_m", "length_m", "core_radius_m",
                     "core_length_m", "core_protrusion_m", "wire_diameter_m")
@@ -54,8 +55,6 @@ RENDER_DUTY = 0.5
 """Mean duty of the rendering drive for the heating constraint (assumed)."""
 MIN_TIME_TO_HOT_S = 60.0
 """Shortest adiabatic time from cold to ``HOT_TEMPERATURE_C`` at the rendering duty, s."""
-COIL_CLEARANCE_M = 1e-3
-"""Gap between neighbouring coils' outer diameters, m (assumed, assembly)."""
 BOARD_CLEARANCE_M = 1e-3
 """Gap between the core top and the upper sensor board's underside, m (assumed, assembly)."""
 
@@ -112,7 +111,9 @@ def _search_bounds(design: Design, pitch_bounds, coil_clearance_m: float,
     o = design.optimize
     widest = pitch_bounds[1] if pitch_bounds else _array_pitch(design)
     r_out = min(0.5 * (widest - coil_clearance_m), o.max_outer_radius_m)
-    max_prot = max(design.sensors.offset_m - board_clearance_m, MIN_PROTRUSION_BOUND_M)
+    # buildability (designkit.rules): the core top stays below the upper sensor mount
+    max_prot = max(min(design.sensors.offset_m - board_clearance_m,
+                       rules.max_core_protrusion_m(design)), MIN_PROTRUSION_BOUND_M)
     lower = (o.min_inner_radius_m, o.min_inner_radius_m + MIN_WINDING_DEPTH_M,
              MIN_WINDING_LENGTH_M, CORE_FILL_BOUNDS[0], CORE_DEPTH_BOUNDS[0], 0.0,
              WIRE_BOUNDS_M[0]) + ((pitch_bounds[0],) if pitch_bounds else ())
@@ -160,7 +161,9 @@ class DeviceProblem(DesignView):
     """Pitch as the 8th search variable (:data:`PITCH_VARIABLE`) within these bounds, m; None:
     the pitch is fixed at ``pitch_m``. Then the no-overlap condition 2 Ro + coil_clearance_m
     <= pitch is a constraint (not a bound)."""
-    coil_clearance_m: float = COIL_CLEARANCE_M
+    coil_clearance_m: float = 0.0
+    """Pitch - 2 x outer radius that the rule book needs (flange lips, pocket clearances and
+    the frame web: :func:`designkit.rules.pitch_clearance_m`; set by :meth:`from_design`), m."""
     centres_per_pitch: tuple = ((0.0, 0.0),)
     """Coil centres (x, y) in units of the pitch (the array's row-major layout)."""
     render_points_m: tuple = ()
@@ -179,7 +182,7 @@ class DeviceProblem(DesignView):
     def from_design(cls, design: Design, *, hot_temperature_c: float = HOT_TEMPERATURE_C,
                     render_duty: float = RENDER_DUTY,
                     min_time_to_hot_s: float = MIN_TIME_TO_HOT_S,
-                    coil_clearance_m: float = COIL_CLEARANCE_M,
+                    coil_clearance_m: float | None = None,
                     board_clearance_m: float = BOARD_CLEARANCE_M,
                     objective: str = "design-point", vary_pitch: bool = False,
                     pitch_range_m: tuple[float, float] | None = None,
@@ -202,6 +205,8 @@ class DeviceProblem(DesignView):
         """
         if objective not in DEVICE_OBJECTIVES:
             raise BadInputError("objective", f"one of {DEVICE_OBJECTIVES}", objective)
+        if coil_clearance_m is None:
+            coil_clearance_m = rules.pitch_clearance_m(design)
         if vary_pitch and objective != "rendering":
             raise BadInputError("objective", "'rendering' when the pitch varies (the force at "
                                 "one point does not depend on the pitch)", objective)
@@ -274,7 +279,7 @@ class DeviceProblem(DesignView):
     @property
     def board_top_m(self) -> float:
         """Top of the upper sensor board above the coil tops, m."""
-        return self.design.sensors.offset_m + BOARD_THICKNESS_M
+        return rules.board_top_m(self.design)
 
     @property
     def magnet_bottom_clearance_m(self) -> float:
@@ -432,10 +437,8 @@ class DeviceProblem(DesignView):
                                           f"{self.current_a:g} A, {self.cold_temperature_c:g} "
                                           f"-> {self.hot_temperature_c:g} C"),
             "core_radius_m": (a, ri, 1, "core fits the bore"),
-            "outer_diameter_m": (2 * ro, self.pitch_of(x) - (self.coil_clearance_m
-                                                             if self.pitch_bounds_m else 0.0), 1,
-                                 "coils do not overlap at the pitch"
-                                 + (" (minus the clearance)" if self.pitch_bounds_m else "")),
+            "outer_diameter_m": (2 * ro, self.pitch_of(x) - self.coil_clearance_m, 1,
+                                 "coils, flanges and frame pockets fit at the pitch"),
             "core_protrusion_m": (prot, self.upper[5], 1,
                                   "core top below the upper sensor board"),
             "magnet_bottom_m": (self.magnet_bottom_clearance_m + self.board_top_m,

@@ -33,7 +33,7 @@ from .device_problem import (DEVICE_CONSTRAINTS, DEVICE_VARIABLES, PITCH_VARIABL
                              SEARCH_VARIABLES, DeviceProblem)
 from .fast_model import FAST_MODEL_ENVELOPE, RESIDUAL_BOUND, _FastModel, _local
 from .nlopt_driver import LocalRun, _sobol
-from .workspace import reachable_height_m
+from ..rules import reachable_height_m
 
 
 def _device_starts(problem: DeviceProblem, n: int, seed: int) -> np.ndarray:

@@ -1,7 +1,7 @@
 """The rendering region: where the finger magnet can be above the array (SI: m).
 
 The magnet's centre cannot go below the upper Hall-sensor board's top plus its half length
-(:func:`reachable_height_m`); :func:`workspace_region` samples the region the rendering
+(:func:`designkit.rules.reachable_height_m`); :func:`workspace_region` samples the region the rendering
 objective is judged on, and :func:`_fold_points` keeps one point of each set the array's mirror
 symmetries map onto each other.
 """
@@ -12,17 +12,8 @@ from typing import Sequence
 
 import numpy as np
 
+from .. import rules
 from ..design import Design
-
-BOARD_THICKNESS_M = 0.8e-3
-"""Upper sensor board above ``sensors.offset_m``, m (assumed; gives the ~14.8 mm board top)."""
-
-
-def reachable_height_m(design: Design) -> float:
-    """Lowest magnet-centre height above the coil tops: the upper sensor board's top
-    (sensors.offset_m + :data:`BOARD_THICKNESS_M`) plus the magnet's half length, m."""
-    return design.sensors.offset_m + BOARD_THICKNESS_M + design.magnet.length_m / 2
-
 
 def workspace_region(design: Design, *, half_width_m: float | None = None,
                      heights_m: Sequence[float] | None = None, n_xy: int = 3) -> np.ndarray:
@@ -32,7 +23,7 @@ def workspace_region(design: Design, *, half_width_m: float | None = None,
     workspace.z_min_m -- and the design height)."""
     hw = design.array.pitch_m if half_width_m is None else float(half_width_m)
     if heights_m is None:
-        reach = reachable_height_m(design)
+        reach = rules.reachable_height_m(design)
         heights_m = (max(design.workspace.z_min_m, reach), design.optimize.height_m)
     xs = np.linspace(-hw, hw, n_xy)
     X, Y, Z = np.meshgrid(xs, xs, np.asarray(heights_m, dtype=float), indexing="ij")
