@@ -29,6 +29,7 @@ import numpy as np
 
 from . import _validate as v
 from . import electrical as el
+from . import rules
 from ._io import atomic_path
 from ._progress import tqdm
 from .design import Design
@@ -49,7 +50,7 @@ _ALIASES.update({"wire.diameter_m": "wire_diameter_m", "optimize.height_m": "hei
 MAX_DESIGNS = 5_000_000
 COLUMNS = ("inner_radius_m", "outer_radius_m", "length_m", "wire_diameter_m", "height_m",
            "current_a", "turns", "force_n", "resistance_ohm", "inductance_h", "time_constant_s",
-           "power_w", "valid", "feasible", "reason")
+           "power_w", "valid", "feasible", "reason", "core_model")
 
 
 @dataclass(frozen=True)
@@ -68,7 +69,7 @@ ARRAY_PARAMETERS: dict[str, str] = {
     "pitch_m": "array pitch (centre to centre), m",
     "core_length_m": "core length, m",
     "core_protrusion_m": "core top above the winding's top face, m",
-    "inner_radius_m": "winding inner radius (= core radius), m",
+    "inner_radius_m": "winding inner radius (the core keeps the design's radius ratio), m",
     "outer_radius_m": "winding outer radius, m",
     "length_m": "winding length, m",
     "wire_diameter_m": "bare wire diameter, m (insulated scales with the design's ratio)",
@@ -77,10 +78,19 @@ ARRAY_PARAMETERS: dict[str, str] = {
 ARRAY_COLUMNS = ("pitch_m", "inner_radius_m", "outer_radius_m", "length_m", "wire_diameter_m",
                  "core_radius_m", "core_length_m", "core_protrusion_m", "turns", "force_n",
                  "force_design_point_n", "resistance_ohm", "settling_time_s",
-                 "voltage_needed_v", "time_to_max_temperature_s", "valid", "feasible", "reason")
+                 "voltage_needed_v", "time_to_max_temperature_s", "valid", "feasible", "reason",
+                 "core_model")
 """``force_n`` of an array row is the rendering objective: the smallest upward force over the
 workspace region (:func:`designkit.optimize.rendering_force`); ``reason`` says why a row is not
-feasible (empty when it is)."""
+feasible (empty when it is); ``core_model`` names the force model of every row."""
+ARRAY_CORE_MODEL = "steel1010 fast slice model"
+"""The core model of an array sweep row (:mod:`designkit.cores.rod`)."""
+
+
+def design_core_model(design: Design) -> str:
+    """The design's own force model: 'air' without a core, else 'surface-current' (the panel
+    model of the design's core, as ``report`` evaluates it)."""
+    return "air" if design.core is None else "surface-current"
 
 
 def parse_param(text: str, parameters: dict[str, str] | None = None) -> ParamRange:
@@ -137,11 +147,12 @@ def grid(ranges: Sequence[ParamRange]) -> tuple[list[str], np.ndarray]:
     return names, vals
 
 
-def _base_row(design: Design) -> dict:
+def _base_row(design: Design, core_model: str) -> dict:
     c, w = design.coil, design.wire
     return {"inner_radius_m": c.inner_radius_m, "outer_radius_m": c.outer_radius_m,
             "length_m": c.length_m, "wire_diameter_m": w.diameter_m,
-            "height_m": design.optimize.height_m, "current_a": design.drive.max_current_a}
+            "height_m": design.optimize.height_m, "current_a": design.drive.max_current_a,
+            "core_model": core_model}
 
 
 def _row_problem(problem: CoilDesignProblem, height_m: float, current_a: float,
@@ -170,7 +181,7 @@ def evaluate_chunk(problem: CoilDesignProblem, base: dict, names: Sequence[str],
     for row_vals in values:
         row = dict(base)
         row.update(zip(names, map(float, row_vals)))
-        key = (row["height_m"], row["current_a"], row["wire_diameter_m"])
+        key = (row["height_m"], row["current_a"], row["wire_diameter_m"])  # core_model: shared
         p = problems.get(key)
         if p is None:
             p = problems[key] = _row_problem(problem, *key)
@@ -240,7 +251,7 @@ class SweepResult:
 
 
 def run_sweep(design: Design, ranges: Sequence[ParamRange], *, workers: int | None = None,
-              scheduler: str | None = None, core_model: str = "air", chunk_size: int = 250,
+              scheduler: str | None = None, core_model: str | None = None, chunk_size: int = 250,
               progress: bool = True) -> SweepResult:
     """Evaluate the grid; local processes by default, Dask when ``scheduler`` is an address.
 
@@ -252,10 +263,14 @@ def run_sweep(design: Design, ranges: Sequence[ParamRange], *, workers: int | No
         Local worker processes (default: the CPU count); 1 runs in this process.
     scheduler : str, optional
         Address of a dask.distributed scheduler (``tcp://host:8786``); the chunks run there.
-    core_model : {'air', 'thesis-uniform', 'surface-current'}
+    core_model : {'air', 'thesis-uniform', 'surface-current'}, optional
+        Default: the design's own (:func:`design_core_model`); a cheaper one is an explicit
+        choice, named in every row (``core_model``).
     chunk_size : int
         Designs per task.
     """
+    if core_model is None:
+        core_model = design_core_model(design)
     if core_model not in CORE_MODEL_NAMES:
         raise BadInputError("core_model", f"one of {CORE_MODEL_NAMES}", core_model)
     if workers is not None:
@@ -263,7 +278,7 @@ def run_sweep(design: Design, ranges: Sequence[ParamRange], *, workers: int | No
     chunk_size = v.positive_int("chunk_size", chunk_size)
     names, vals = grid(ranges)
     problem = CoilDesignProblem.from_design(design, core_model=core_model)
-    base = _base_row(design)
+    base = _base_row(design, core_model)
     chunks = [vals[i:i + chunk_size] for i in range(0, len(vals), chunk_size)]
     return _run_chunks(evaluate_chunk, (problem, base, names), names, chunks, workers=workers,
                        scheduler=scheduler, progress=progress, desc="sweep")
@@ -272,17 +287,19 @@ def run_sweep(design: Design, ranges: Sequence[ParamRange], *, workers: int | No
 def evaluate_array_chunk(design: Design, names: Sequence[str], values: np.ndarray) -> list[dict]:
     """Evaluate whole arrays (rows of ``values`` for ``names`` over ``design``); worker entry.
 
-    Each row: the design's array with the swept pitch, winding, wire and 1010-steel core (core
-    radius = inner radius, core top ``core_protrusion_m`` above the winding top), whole turns
+    Each row: the design's array with the swept pitch, winding, wire and 1010-steel core (the
+    design's core radius / inner radius kept, core top ``core_protrusion_m`` above the
+    winding top, the core's bottom where its length puts it), whole turns
     from the layered window, the device constraints of
     :class:`designkit.optimize.DeviceProblem` (fast slice core model) and the rendering
     objective (smallest upward force over the workspace region, LP per point). Invalid rows
-    (overlapping coils, no whole turn, core longer than winding + protrusion): valid = False.
-    ``reason``: why a row is invalid or which device constraints it breaks (empty if feasible).
+    (overlapping coils, no whole turn): valid = False. ``reason``: why a row is invalid or
+    which device constraints and rules (:mod:`designkit.rules`) it breaks (empty if feasible).
     """
     c = design.coil
     k = design.core
     ratio = design.wire.insulated_diameter_m / design.wire.diameter_m
+    fill = k.radius_m / c.inner_radius_m if k is not None else 1.0
     base = {"pitch_m": design.array.pitch_m, "inner_radius_m": c.inner_radius_m,
             "outer_radius_m": c.outer_radius_m, "length_m": c.length_m,
             "wire_diameter_m": design.wire.diameter_m,
@@ -295,18 +312,18 @@ def evaluate_array_chunk(design: Design, names: Sequence[str], values: np.ndarra
         row.update(zip(names, map(float, row_vals)))
         res = dict.fromkeys(ARRAY_COLUMNS)
         res.update({q: row[q] for q in base})
-        res["core_radius_m"] = row["inner_radius_m"]
+        res["core_model"] = ARRAY_CORE_MODEL
+        res["current_a"] = design.drive.max_current_a  # stated in the figure, not a column
         d_ins = row["wire_diameter_m"] * ratio
         ri, ro, ln = row["inner_radius_m"], row["outer_radius_m"], row["length_m"]
         prot, lc = row["core_protrusion_m"], row["core_length_m"]
-        x = [ri, ro, ln, ri, lc, prot, row["wire_diameter_m"]]  # core radius = inner radius
+        res["core_radius_m"] = ri * fill
+        x = [ri, ro, ln, ri * fill, lc, prot, row["wire_diameter_m"]]
         n = 0
         if ro > ri:
             n = el.turns_from_geometry(ri, ro, ln, d_ins, design.wire.packing)
         # no per-row numbers in a reason: equal reasons group in reason_summary
-        why = ("no whole turn fits the winding section" if n < 1 else
-               "core longer than winding + protrusion" if lc > ln + prot + 1e-12 else
-               "core protrusion < 0" if prot < 0 else "")
+        why = "no whole turn fits the winding section" if n < 1 else ""
         try:
             if why:
                 raise BadInputError("row", why, row)
@@ -323,8 +340,7 @@ def evaluate_array_chunk(design: Design, names: Sequence[str], values: np.ndarra
         ev = p.evaluate(x, turns=n)
         rend = rendering_force(d2, coil_x=x, turns=n)
         broken = [f"{name} limit" for name, g in zip(DEVICE_CONSTRAINTS, ev["g"]) if g > 0]
-        if prot > p.upper[5]:
-            broken.append("core protrusion above its bound")
+        broken += [f"rule {r.name}" for r in rules.violations(d2)]
         res.update(turns=n, force_n=rend["min_upward_force_n"],
                    force_design_point_n=ev["force_n"], resistance_ohm=ev["resistance_ohm"],
                    settling_time_s=ev["settling_time_s"],
@@ -485,6 +501,10 @@ def sweep_figure(result: SweepResult, *, objective: str = "force at the design p
     else:
         xs = [_shown(xn, r[xn]) for r in valid]
         ax.plot(xs, [r["force_n"] * 1e3 for r in valid], "-", color="0.6")
+        if any(not r["feasible"] for r in valid):
+            ax.scatter([x for x, r in zip(xs, valid) if not r["feasible"]],
+                       [r["force_n"] * 1e3 for r in valid if not r["feasible"]], c="0.5",
+                       marker="x", s=30, label="infeasible")
         ax.scatter([x for x, r in zip(xs, valid) if r["feasible"]],
                    [r["force_n"] * 1e3 for r in valid if r["feasible"]], s=12, label="feasible")
         ax.set_ylabel(f"{objective} (mN)")
@@ -494,14 +514,14 @@ def sweep_figure(result: SweepResult, *, objective: str = "force at the design p
                 label=f"best {anchor['force_n'] * 1e3:.0f} mN")
     ax.set_xlabel(_label(xn))
     feasible = sum(1 for r in rows if r["feasible"])
-    title = f"{len(rows)} designs, {feasible} feasible ({limits})"
+    title = f"{len(rows)} designs, {feasible} feasible ({limits})\n{_conditions(anchor, names)}"
     if fixed:
         where = ", ".join(f"{_label(k).split(' (')[0]} = {_shown(k, anchor[k]):.4g}"
                           f"{' mm' if k.endswith('_m') else (' A' if k.endswith('_a') else '')}"
                           for k in fixed)
         title += (f"\nslice at {where} ({len(shown)} of {len(rows)} designs; "
                   f"{'best design' if result.best_index is not None else 'first grid value'})")
-    ax.set_title(title, fontsize=9, pad=22 if len(fixed) == 0 else 24)
+    ax.set_title(title, fontsize=9, pad=22)
     if feasible == 0:
         why = [r["reason"] for r in rows if r.get("reason")]
         common = max(set(why), key=why.count) if why else "unknown"
@@ -518,6 +538,16 @@ def sweep_figure(result: SweepResult, *, objective: str = "force at the design p
                   frameon=False, borderaxespad=0.1)
     fig.tight_layout()
     return fig
+
+
+def _conditions(row: dict, swept: Sequence[str]) -> str:
+    """'model ..., current ... A, magnet at ... mm' of a figure (the unswept ones)."""
+    parts = [f"model: {row.get('core_model') or 'unknown'}"]
+    if row.get("current_a") is not None and "current_a" not in swept:
+        parts.append(f"current {row['current_a']:g} A")
+    if row.get("height_m") is not None and "height_m" not in swept:
+        parts.append(f"magnet at {row['height_m'] * 1e3:g} mm above the coil top")
+    return ", ".join(parts)
 
 
 def _label(name: str) -> str:

@@ -19,21 +19,28 @@ from pathlib import Path
 from ..design import load_design
 from ..errors import BadInputError
 from ..optimize import CORE_MODEL_NAMES
-from ..sweep import (ARRAY_COLUMNS, ARRAY_PARAMETERS, PARAMETERS, grid, parse_param, plot,
-                     reason_summary, run_array_sweep, run_sweep, write_csv)
+from ..sweep import (ARRAY_COLUMNS, ARRAY_CORE_MODEL, ARRAY_PARAMETERS, PARAMETERS,
+                     design_core_model, grid, parse_param, plot, reason_summary,
+                     run_array_sweep, run_sweep, write_csv)
 from ._common import add_progress_argument, check_output, show_progress
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--param", action="append", default=[], metavar="NAME=START:STOP:N",
                         help=f"swept parameter (repeat); NAME one of {sorted(PARAMETERS)}")
-    parser.add_argument("--design", type=Path, default=None)
-    parser.add_argument("--out", type=Path, default=Path("designkit-sweep"))
+    parser.add_argument("--design", type=Path, default=None,
+                        help="design TOML file or a shipped name (thesis, optimized); default: "
+                             "the thesis design")
+    parser.add_argument("--out", type=Path, default=Path("designkit-sweep"),
+                        help="output folder (default: ./designkit-sweep)")
     parser.add_argument("--workers", type=int, default=None,
                         help="local worker processes (default: CPU count)")
     parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
                         help="dask.distributed scheduler address: run the sweep there")
-    parser.add_argument("--core-model", choices=CORE_MODEL_NAMES, default="air")
+    parser.add_argument("--core-model", choices=CORE_MODEL_NAMES, default=None,
+                        help="force model of a coil sweep (default: the design's own: "
+                             "surface-current with a core, air without); a cheaper model is "
+                             "named in stdout, the CSV column core_model and the figure")
     parser.add_argument("--array", action="store_true",
                         help="sweep whole arrays with the rendering objective; NAME one of "
                              f"{sorted(ARRAY_PARAMETERS)}")
@@ -68,6 +75,11 @@ def run(args: argparse.Namespace) -> int:
         png_path = plot(result, out / "sweep.png")
     n = len(result.rows)
     feas = sum(1 for r in result.rows if r["feasible"])
+    model = ARRAY_CORE_MODEL if array else (args.core_model or design_core_model(design))
+    own = "" if array or args.core_model is None else (
+        " (the design's own)" if args.core_model == design_core_model(design) else
+        f" (not the design's own {design_core_model(design)}: --core-model)")
+    print(f"core model: {model}{own}")
     print(f"{n} {'arrays' if array else 'designs'} ({feas} feasible) in {result.seconds:.2f} s "
           f"on {result.workers} worker(s) [{result.backend}]: "
           f"{n / max(result.seconds, 1e-9):.2f} designs/s")
