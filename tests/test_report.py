@@ -125,6 +125,27 @@ def test_design_table_lists_every_field_in_mm(quick_report):
     assert design["design_hash"] == d.spec_hash()
 
 
+def test_report_puts_the_design_point_forces_side_by_side_with_their_assumptions(quick_report):
+    import re
+
+    md = (quick_report / "report.md").read_text()
+    rep = json.loads((quick_report / "report.json").read_text())
+    table = md.split("## Forces at the design point, side by side")[1].split("\n## ")[0]
+    rows = [r for r in table.splitlines() if r.startswith("| ") and not r.startswith("| case")]
+    assert len(rows) == 4  # single coil, array, saturating single coil, workspace minimum
+    assert "linear core (mu_r 1000)" in rows[0] and "| 6 A |" in rows[0]
+    assert "coupled" in rows[1] and "coil 5 at +6 A" in rows[1]
+    assert "saturating core (steel1010 B-H)" in rows[2]
+    ev = rep["designs"]["design"]
+    assert f"{ev['upward_force_design_point_n'] * 1e3:+.1f} mN" in rows[2]
+    assert "LP allocation" in rows[3] and "sum <= 54 A" in rows[3]
+    assert "Why they differ" in table
+    # round-off is printed as 0, never as 1e-16 mT
+    assert not re.search(r"[+-]\d\.\d+e-\d\d", table), table
+    # the design summary gives every derived quantity a unit (inductance in H)
+    assert re.search(r"\| inductance_h \| [0-9.]+ H \|", (quick_report / "design.md").read_text())
+
+
 @pytest.mark.slow
 def test_report_is_idempotent(tmp_path):
     args = ["report", "--quick", "--no-progress", "--out", str(tmp_path)]

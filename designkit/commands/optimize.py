@@ -53,7 +53,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="multistart local runs (default: 4 device, 8 coil)")
     parser.add_argument("--global", dest="global_method", choices=GLOBAL_METHODS,
                         default="multistart", help="coil problem only: global stage")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=int, default=0,
+                        help="seed of the multistart points (default 0)")
     add_progress_argument(parser)
 
 
@@ -155,7 +156,8 @@ def device_summary(data: dict) -> str:
     ver = data.get("verification")
     if ver:
         lines.append(
-            f"verified global: {ver['agree']} (multistart {ver['multistart']['feasible']}/"
+            f"verified global on the corrected fast model (its values, not the panel model's "
+            f"optimum above): {ver['agree']} (multistart {ver['multistart']['feasible']}/"
             f"{ver['multistart']['starts']} agree={ver['multistart_agree']}, ISRES polished "
             f"{ver['isres']['polished_value_n'] * 1e3:.1f} mN agree={ver['isres_agree']}, grid "
             f"{ver['grid']['designs']} designs best "

@@ -116,6 +116,7 @@ def coil_properties(design: Design) -> dict:
 
 _UNITS = [("_a_per_m", "A/m"), ("_a_m2", "A m^2"), ("_ohm_m", "ohm m"), ("_per_k", "1/K"),
           ("_n_per_m", "N/m"), ("_ohm", "ohm"), ("_m3", "m^3"), ("_hz", "Hz"), ("_c", "degC"),
+          ("_h", "H"), ("_w", "W"), ("_kg", "kg"),
           ("_v", "V"), ("_a", "A"), ("_t", "T"), ("_s", "s"), ("_n", "N"), ("_m", "m")]
 
 
@@ -158,12 +159,74 @@ def design_markdown(design: Design, derived: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+ROUND_OFF = 1e-9
+"""Components below this fraction of a vector's largest are round-off, printed as 0."""
+
+
+def _vec(v, scale: float, unit: str) -> str:
+    """A 3-vector in ``unit`` (SI x ``scale``), round-off printed as 0."""
+    big = max(abs(float(x)) for x in v)
+    shown = [0.0 if abs(float(x)) <= ROUND_OFF * big else float(x) * scale for x in v]
+    return "(" + ", ".join(f"{x:+.4g}" if x else "0" for x in shown) + f") {unit}"
+
+
 def _vec_mn(f) -> str:
-    return "(" + ", ".join(f"{x * 1e3:+.4g}" for x in f) + ") mN"
+    return _vec(f, 1e3, "mN")
 
 
 def _vec_mt(b) -> str:
-    return "(" + ", ".join(f"{x * 1e3:+.4g}" for x in b) + ") mT"
+    return _vec(b, 1e3, "mT")
+
+
+def _core_text(design: dict) -> str:
+    """'linear core (mu_r 1000)', 'saturating core (steel1010 B-H)' or 'no core'."""
+    core = design.get("core")
+    if not core:
+        return "no core"
+    if core["bh"] == "linear":
+        return f"linear core (mu_r {core['relative_permeability']:g})"
+    return f"saturating core ({core['bh']} B-H)"
+
+
+def forces_markdown(report: dict) -> list[str]:
+    """One table: every design-point force of the report with what it assumes."""
+    dp, d = report["design_point"], report["design"]
+    h = dp["point_m"][2] * 1e3
+    lines = ["## Forces at the design point, side by side", "",
+             f"Magnet centre {h:g} mm above the coil top (the array centre), moment "
+             f"{_vec(dp['magnet_moment_a_m2'], 1.0, 'A m^2')}. Each row is a different question; "
+             "the columns say what each assumes.", "",
+             "| case | coils | core, model | currents | B | dBz/dz | F |",
+             "| --- | --- | --- | --- | --- | --- | --- |",
+             f"| single coil | 1 (the others absent) | {_core_text(d)}, `{dp['core_model']}` | "
+             f"{dp['current_a']:g} A | {_vec_mt(dp['flux_density_t'])} | "
+             f"{dp['gradient_t_per_m'][2][2]:+.5g} T/m | {_vec_mn(dp['force_n'])} |"]
+    arr = report.get("array")
+    if arr:
+        lines.append(f"| array, figure currents | {d['array']['rows'] * d['array']['columns']} "
+                     f"(coupled: every core magnetised) | {_core_text(d)}, `{dp['core_model']}` | "
+                     f"{arr['currents_text']} | {_vec_mt(arr['flux_density_t'])} | "
+                     f"{arr['dbz_dz_t_per_m']:+.5g} T/m | {_vec_mn(arr['force_n'])} |")
+    ev = next((e for e in report.get("designs", {}).values()
+               if e.get("name") == report["design_name"] and "skipped" not in e), None)
+    if ev:
+        lines.append(f"| single coil, device problem | 1 | saturating core (steel1010 B-H), "
+                     f"`{ev['core_model']}` | {ev['current_a']:g} A | - | - | "
+                     f"Fz = {ev['upward_force_design_point_n'] * 1e3:+.1f} mN |")
+        dr = d["drive"]
+        lines.append(f"| smallest upward Fz over the workspace region | "
+                     f"{d['array']['rows'] * d['array']['columns']} | saturating core, fast "
+                     f"slice model scaled to the panel model | LP allocation, bipolar, <= "
+                     f"{dr['max_current_a']:g} A per coil, sum <= {dr['total_current_a']:g} A | "
+                     f"- | - | Fz >= {ev['min_upward_force_workspace_n'] * 1e3:.1f} mN |")
+        lines += ["", "Why they differ: a linear core does not saturate, so it overstates the "
+                  "force of the saturating 1010-steel core; the array rows drive several coils "
+                  "(and magnetise every core), so the smallest force the array can render over "
+                  "the workspace region may exceed the single coil's force at the design point "
+                  "even though that point is inside the region."]
+    lines += ["", "F = (grad B)^T m. Sign convention everywhere: z up (away from the coil "
+                  "tops); Fz > 0 pushes the magnet away from the coils."]
+    return lines
 
 
 _ROWS = [
@@ -232,20 +295,8 @@ def report_markdown(report: dict) -> str:
                   "comparison are not affected.", ""]
     lines += [
              f"designkit {report['designkit_version']}, spec hash `{report['design_hash']}`; "
-             f"the design is in [design.md](design.md) / [design.toml](design.toml).", "",
-             "## Force at the design point", "",
-             "| case | current | B | dBz/dz | F |", "| --- | --- | --- | --- | --- |",
-             f"| single coil | {dp['current_a']:g} A | {_vec_mt(dp['flux_density_t'])} | "
-             f"{dp['gradient_t_per_m'][2][2]:+.5g} T/m | {_vec_mn(dp['force_n'])} |"]
-    arr = report.get("array")
-    if arr:
-        lines.append(f"| array, figure currents | {arr['currents_text']} | "
-                     f"{_vec_mt(arr['flux_density_t'])} | {arr['dbz_dz_t_per_m']:+.5g} T/m | "
-                     f"{_vec_mn(arr['force_n'])} |")
-    lines += ["", f"Point {tuple(round(x * 1e3, 3) for x in dp['point_m'])} mm, magnet moment "
-                  f"{dp['magnet_moment_a_m2']} A m^2 (design.magnet.direction), core model "
-                  f"`{dp['core_model']}`. F = (grad B)^T m. Sign convention everywhere: z up "
-                  "(away from the coil tops); Fz > 0 pushes the magnet away from the coils."]
+             f"the design is in [design.md](design.md) / [design.toml](design.toml).", ""]
+    lines += forces_markdown(report)
     for w in dp.get("warnings", []):
         lines.append(f"\n> warning: {w}")
     sen = report.get("sensors")
