@@ -430,7 +430,8 @@ larger value is almost always millimetres written where metres are expected."""
 
 def _check_metres(name: str, value: Any) -> None:
     """Refuse a length that reads as millimetres (``coil.inner_radius_m = 12``), with the hint."""
-    if not name.endswith("_m") or name.endswith("_per_m") or isinstance(value, bool) or not isinstance(value, numbers.Real):
+    if (not name.endswith("_m") or name.endswith("_per_m") or isinstance(value, bool)
+            or not isinstance(value, numbers.Real)):
         return
     limit = MAX_LENGTH_M / 2 if "radius" in name else MAX_LENGTH_M
     if abs(value) > limit:

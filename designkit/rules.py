@@ -165,10 +165,11 @@ def _array_rules(d: Design, g: Layout) -> list[Rule]:
     keys = ("array.pitch_m", "coil.outer_radius_m")
     return [
         Rule("coils_overlap", 2 * d.coil.outer_radius_m, pitch, "m", "upper", keys,
-             "2 x winding outer radius at the pitch (windings overlap above it)", "increase array.pitch_m or reduce "
-             "coil.outer_radius_m"),
+             "2 x winding outer radius at the pitch (windings overlap above it)",
+             "increase array.pitch_m or reduce coil.outer_radius_m"),
         Rule("flanges_overlap", 2 * g.flange_radius_m, pitch, "m", "upper",
-             keys + ("cad.flange_lip_m",), "2 x bobbin flange radius at the pitch (flanges overlap above it)",
+             keys + ("cad.flange_lip_m",),
+             "2 x bobbin flange radius at the pitch (flanges overlap above it)",
              f"increase array.pitch_m to >= {2 * g.flange_radius_m:.4g} m or reduce "
              "cad.flange_lip_m / coil.outer_radius_m"),
         _wall("frame_web", "frame web between neighbouring flange pockets",
@@ -188,9 +189,10 @@ def _bobbin_rules(d: Design, g: Layout) -> list[Rule]:
     c = d.cad
     out = []
     if g.mandrel == "printed_tube":
+        most = d.coil.inner_radius_m - c.min_wall_m - c.core_clearance_m
         fix = ("increase cad.air_core_tube_wall_m" if d.core is None else
-               f"reduce core.radius_m to <= {d.coil.inner_radius_m - c.min_wall_m - c.core_clearance_m:.4g} m, "
-               "increase coil.inner_radius_m, or set cad.mandrel = 'core' (wind on the insulated core)")
+               f"reduce core.radius_m to <= {most:.4g} m, increase coil.inner_radius_m, or set "
+               "cad.mandrel = 'core' (wind on the insulated core)")
         out.append(_wall("bobbin_tube_wall", "bobbin tube wall (winding inner radius - bore)",
                          d.coil.inner_radius_m - g.bore_radius_m, d,
                          ("core.radius_m", "coil.inner_radius_m", "cad.mandrel"), fix))

@@ -1,9 +1,9 @@
 """The rendering region: where the finger magnet can be above the array (SI: m).
 
 The magnet's centre cannot go below the upper Hall-sensor board's top plus its half length
-(:func:`designkit.rules.reachable_height_m`); :func:`workspace_region` samples the region the rendering
-objective is judged on, and :func:`_fold_points` keeps one point of each set the array's mirror
-symmetries map onto each other.
+(:func:`designkit.rules.reachable_height_m`); :func:`workspace_region` samples the region the
+rendering objective is judged on, and :func:`_fold_points` keeps one point of each set the
+array's mirror symmetries map onto each other.
 """
 
 from __future__ import annotations
