@@ -486,19 +486,22 @@ def test_pitch_variable_needs_the_rendering_objective_and_bounds_the_overlap():
                                pitch_range_m=(0.04, 0.06))
     assert p.n_search == 8 and p.pitch_bounds_m == (0.04, 0.06)
     assert "coil_overlap_m" in p.constraint_names
-    # Ro's bound follows the largest pitch; the overlap is a constraint on each design
-    assert p.upper[1] == pytest.approx(min(0.5 * (0.06 - 1e-3), d.optimize.max_outer_radius_m))
+    # Ro's bound follows the largest pitch; the overlap is a constraint on each design. The
+    # clearance is the rule book's (the frame web between the flange pockets), by hand:
+    # 0.8 mm wall + 2 x (1.5 mm flange lip + 0.3 mm pocket clearance) = 4.4 mm
+    assert p.coil_clearance_m == pytest.approx(4.4e-3)
+    assert p.upper[1] == pytest.approx(min(0.5 * (0.06 - 4.4e-3), d.optimize.max_outer_radius_m))
     m = fast_model._FastModel(p)
     y = np.array(p.lower) + 0.5 * (np.array(p.upper) - np.array(p.lower))
-    y[1], y[7] = 0.02, 0.04  # 2 x 20 mm + 1 mm > 40 mm: overlap by 1 mm
-    assert m.values(y)[1 + len(opt.DEVICE_CONSTRAINTS)] == pytest.approx(1.0)
+    y[1], y[7] = 0.02, 0.04  # 2 x 20 mm + 4.4 mm > 40 mm: short by 4.4 mm
+    assert m.values(y)[1 + len(opt.DEVICE_CONSTRAINTS)] == pytest.approx(4.4)
     with pytest.raises(BadInputError, match="pitch_range_m"):
         opt.device_problem_for(d, objective="rendering", vary_pitch=True,
                                pitch_range_m=(0.005, 0.06))
     # a given design (7 variables, no pitch among them) is judged at its own pitch
     rep = opt.evaluate_device(d, p)
     od = rep["constraints"]["outer_diameter_m"]
-    assert od["limit"] == pytest.approx(d.array.pitch_m - 1e-3)
+    assert od["limit"] == pytest.approx(d.array.pitch_m - 4.4e-3)
     assert od["value"] == pytest.approx(2 * d.coil.outer_radius_m)
 
 

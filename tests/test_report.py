@@ -131,7 +131,8 @@ def test_report_puts_the_design_point_forces_side_by_side_with_their_assumptions
     md = (quick_report / "report.md").read_text()
     rep = json.loads((quick_report / "report.json").read_text())
     table = md.split("## Forces at the design point, side by side")[1].split("\n## ")[0]
-    rows = [r for r in table.splitlines() if r.startswith("| ") and not r.startswith("| case")]
+    rows = [r for r in table.splitlines()
+            if r.startswith("| ") and not r.startswith(("| case", "| ---"))]
     assert len(rows) == 4  # single coil, array, saturating single coil, workspace minimum
     assert "linear core (mu_r 1000)" in rows[0] and "| 6 A |" in rows[0]
     assert "coupled" in rows[1] and "coil 5 at +6 A" in rows[1]
