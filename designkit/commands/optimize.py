@@ -14,6 +14,7 @@ import argparse
 import time
 from pathlib import Path
 
+from .. import rules
 from .._io import write_json_atomic, write_text_atomic
 from ..design import design_to_toml, load_design
 from ..errors import BadInputError
@@ -83,6 +84,7 @@ def _run_device(args, design, starts: int) -> int:
             "problem": "device", **result.as_dict(problem)}
     optimum = device_design(design, result, problem)
     data["optimized_design_hash"] = optimum.spec_hash()
+    data["rules_violated"] = [r.name for r in rules.violations(optimum)]
     if args.verify:
         data["verification"] = verify_device(problem, result, seed=args.seed,
                                              progress=show_progress(args))
@@ -170,6 +172,9 @@ def device_summary(data: dict) -> str:
                      f"inductance {fem['inductance_fem_h'] * 1e3:.3f} mH "
                      f"({fem['inductance_rel_err'] * 100:+.2f} %); within 3 %: "
                      f"{fem['within_3_percent']}")
+    if "rules_violated" in data:
+        lines.append("rule book (designkit check; cad builds it when no cad rule is broken): "
+                     f"violates {', '.join(data['rules_violated']) or 'none'}")
     base = data.get("base_design")
     if base:
         bad = ", ".join(base["violated"]) or "none"
