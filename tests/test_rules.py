@@ -247,3 +247,14 @@ def test_cad_help_states_defaults_and_shipped_names(capsys):
     assert main(["cad", "--help"]) == 0
     text = " ".join(capsys.readouterr().out.split())
     assert "default: ./cad_out" in text and "optimized" in text and "thesis" in text
+
+
+def test_cad_keys_are_checked_and_left_out_of_the_spec_hash():
+    d = default_design()
+    for key, bad in (("cad.mandrel", "spool"), ("cad.flange_lip_m", -0.001),
+                     ("cad.min_wall_m", 0.0), ("cad.plate_thickness_m", "6")):
+        with pytest.raises(BadInputError, match=key.replace(".", r"\.")):
+            d.replace(**{key: bad})
+    # printing choices do not change the physics: a map built for the design stays valid
+    assert d.replace(**{"cad.flange_lip_m": 0.002}).spec_hash() == d.spec_hash()
+    assert d.replace(**{"coil.turns": 1000}).spec_hash() != d.spec_hash()
