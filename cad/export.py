@@ -357,7 +357,8 @@ def parts_markdown(report: dict) -> str:
              f"(solid volume / {report['printer']['flow_mm3_per_s']:g} mm^3/s); each mass is "
              "the part's volume times the density of its own material "
              f"({', '.join(f'{m} {d:g}' for m, d in report['printer']['density_g_cm3'])} "
-             "g/cm^3).", "",
+             "g/cm^3; the winding is drawn as a solid copper annulus, so its mass is an upper "
+             "bound on the wire's).", "",
              "| part | qty | material | kind | volume mm^3 | mass g | size mm "
              "| fits printer | print time proxy h |",
              "| --- | ---: | --- | --- | ---: | ---: | --- | --- | ---: |"]
