@@ -53,4 +53,7 @@ def run(args: argparse.Namespace) -> int:
     design = load_design(args.design)
     table = rule_table(design)
     print(table_text(design.name, table))
+    if design.core is None:
+        print("no core: the device constraints (R, I R, 5 L/R, heating) are those of the "
+              "iron-core device problem and were not evaluated")
     return 0 if all(r["met"] for r in table.values()) else 1
