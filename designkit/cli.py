@@ -67,6 +67,9 @@ def main(argv: list[str] | None = None) -> int:
         return int(exc.code or 0)
     try:
         return int(module.run(args) or 0)
+    except KeyboardInterrupt:  # Ctrl-C: staged and atomic outputs were removed on the way out
+        print(f"designkit {name}: interrupted; nothing written", file=sys.stderr)
+        return 130
     except DesignkitError as exc:
         print(f"designkit {name}: error: {exc}", file=sys.stderr)
         return 1
