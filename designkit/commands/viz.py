@@ -15,7 +15,7 @@ from .. import viz
 from ..design import load_design
 from ..errors import BadInputError
 from ._common import (add_currents_arguments, add_design_argument, check_current_limit,
-                      check_output, parse_currents)
+                      check_output, parse_currents, staged_folder)
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -53,13 +53,21 @@ def run(args: argparse.Namespace) -> int:
     currents = viz.resolve_currents(design, parse_currents(args.currents))
     check_current_limit(design, currents, allow=args.allow_over_limit)
     size = None if args.size is None else parse_size(args.size)
+    if args.vtk is None:
+        _png(args, design, currents, size, out)
+        return 0
+    # staged: a failure or Ctrl-C leaves neither a partial VTK folder nor the PNG
+    with staged_folder(args.vtk, param="--vtk") as stage:
+        files = viz.export_vtk(design, stage, currents, quality=args.quality)
+        _png(args, design, currents, size, out)
+    print(f"wrote {len(files)} VTK files to {args.vtk}")
+    return 0
+
+
+def _png(args, design, currents, size, out) -> None:
     plotter = viz.render(args.kind, design, currents, quality=args.quality, window_size=size)
     try:
         viz.save_png(plotter, out)
     finally:
         plotter.close()
     print(f"wrote {out}")
-    if args.vtk is not None:
-        files = viz.export_vtk(design, args.vtk, currents, quality=args.quality)
-        print(f"wrote {len(files)} VTK files to {args.vtk}")
-    return 0
