@@ -179,6 +179,20 @@ def bar_label_values(lo: float, hi: float, log: bool) -> list[float]:
     return [x for x in vals if lo - 1e-9 * step <= x <= hi + 1e-9 * step]
 
 
+def round_range(lo: float, hi: float, log: bool) -> tuple[float, float]:
+    """A colour range widened to round ends (1, 2, 5 x 10^k on a log bar, :func:`nice_ticks`
+    on a linear one), so that the bar has a labelled tick at its top and bottom."""
+    if not (hi > lo):
+        return lo, hi
+    if log and lo > 0:
+        steps = [m * 10.0 ** e for e in range(math.floor(math.log10(lo)) - 1,
+                                             math.ceil(math.log10(hi)) + 2) for m in (1, 2, 5)]
+        return (max(x for x in steps if x <= lo * (1 + 1e-9)),
+                min(x for x in steps if x >= hi * (1 - 1e-9)))
+    a, b, _ = nice_ticks(lo, hi)
+    return a, b
+
+
 def _clear_bar_titles(plotter) -> None:
     """Colour bars on round label values (:func:`bar_label_values`), their title lifted above
     the top label (VTK draws them overlapping)."""
