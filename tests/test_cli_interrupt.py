@@ -20,20 +20,22 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 DRIVER = """
-import importlib, pathlib, sys
-target, flag = sys.argv[1], sys.argv[2]
+import importlib, pathlib, sys, time
+target, flag, hold = sys.argv[1], sys.argv[2], float(sys.argv[3])
 mod, _, name = target.rpartition(".")
 module = importlib.import_module(mod)
 original = getattr(module, name)
 def started(*args, **kwargs):
     pathlib.Path(flag).write_text("started")
+    time.sleep(hold)  # a step that takes this long (its earlier outputs already staged)
     return original(*args, **kwargs)
 setattr(module, name, started)
 from designkit.cli import main
-sys.exit(main(sys.argv[3:]))
+sys.exit(main(sys.argv[4:]))
 """
 
-# command line, the computation the flag wraps, seconds of work before Ctrl-C
+# command line, the computation the flag wraps, seconds of work before Ctrl-C (a negative
+# number: the wrapped step holds that long before it starts, Ctrl-C comes within it)
 CASES = {
     "report": (["report", "--quick", "--out", "rep"], "designkit.commands.report._run", 3.0),
     "optimize": (["optimize", "--out", "opt"], "designkit.commands.optimize.solve_device", 2.0),
@@ -44,10 +46,12 @@ CASES = {
             "designkit.viz.export_vtk", 2.0),
     "fem": (["fem", "--level", "1", "--out", "fem"], "designkit.commands.fem.solve", 4.0),
     "cad": (["cad", "--out", "cad"], "cad.export.export_all", 4.0),
+    "sweep": (["sweep", "--param", "inner_radius_m=0.006:0.01:3", "--workers", "1", "--out",
+               "sw"], "designkit.commands.sweep.plot", -60.0),
 }
 
 
-FAST = ("map", "scene")
+FAST = ("map", "scene", "sweep")
 """In the default suite; the others take tens of seconds each (slow)."""
 
 
@@ -61,7 +65,8 @@ def test_ctrl_c_is_one_line_exit_130_and_leaves_nothing(tmp_path, command):
     work.mkdir()
     flag = tmp_path / "started"
     env = dict(os.environ, PYTHONPATH=str(ROOT), PYVISTA_OFF_SCREEN="true", MPLBACKEND="Agg")
-    proc = subprocess.Popen([sys.executable, "-c", DRIVER, target, str(flag), *args,
+    hold = max(-work_s, 0.0)
+    proc = subprocess.Popen([sys.executable, "-c", DRIVER, target, str(flag), str(hold), *args,
                              *(["--no-progress"] if command not in ("viz", "fem") else [])],
                             cwd=work, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
@@ -70,7 +75,7 @@ def test_ctrl_c_is_one_line_exit_130_and_leaves_nothing(tmp_path, command):
         while not flag.exists() and proc.poll() is None and time.monotonic() < deadline:
             time.sleep(0.05)
         assert flag.exists(), "the work never started"
-        time.sleep(work_s)
+        time.sleep(max(work_s, 1.0))
         assert proc.poll() is None, "the work ended before Ctrl-C"
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=300)
