@@ -314,3 +314,24 @@ def test_sweep_figure_takes_a_first_title_line():
         import matplotlib.pyplot as plt
 
         plt.close(fig)
+
+
+@pytest.mark.parametrize("kind", ["fieldlines", "forcemap", "slice-B", "slice-F"])
+def test_log_colour_bars_have_a_labelled_tick_at_their_top(rendered, kind):
+    p, _ = rendered[kind]
+    for bar in p.scalar_bars.values():
+        _, hi = bar.GetLookupTable().GetRange()
+        labels = bar.GetCustomLabels()
+        top = max(labels.GetValue(i) for i in range(labels.GetNumberOfValues()))
+        assert top == pytest.approx(hi, rel=1e-9), (kind, top, hi)
+
+
+def test_axis_labels_shrink_with_the_window_so_they_do_not_overlap():
+    from designkit.viz.style import axis_font_size
+
+    # VTK labels a 160 mm axis every 20 mm: 9 labels such as "-80"; at 0.6 font sizes per
+    # character they fit along the ~40 % of the width the oblique axis takes
+    for width in (640, 800, 1024):
+        size = axis_font_size(width)
+        assert 9 * (3 * 0.6 * size + 4) <= 0.4 * width, (width, size)
+    assert axis_font_size(1024) == 10 and axis_font_size(4000) == 10

@@ -163,7 +163,8 @@ def plot_slices(design: "Design", currents: Sequence[float] | None = None, *,
         _title(p, f"{head}\n{where}\n{scale}\n" + "; ".join(notes), font_size=10)
         bounds, counts = _nice_bounds(bounds)
         p.show_bounds(bounds=bounds, xtitle="x (mm)", ytitle="y (mm)", ztitle="z (mm)",
-                      color="black", font_size=9, grid=False, location="front",
+                      color="black", grid=False, location="front",
+                      font_size=max(6, min(9, round(9 * p.window_size[0] / 1500))),
                       ticks="outside", show_yaxis=(view == "xy"), show_zaxis=(view == "xz"),
                       fmt="%g", **counts)
         p.enable_parallel_projection()
