@@ -347,6 +347,10 @@ def test_scene_compile_says_where_a_mesh_outside_the_box_is(tmp_path):
     (["run", "--simulate", "--lambda", "-1", "--out", "r"], "--lambda", "lam_n_per_m"),
     (["run", "--simulate", "--period-ms", "100", "--out", "r"], "--period-ms", "period "),
     (["run", "--simulate", "--duration", "1000", "--out", "r"], "--duration", "duration "),
+    (["scene", "compile", "plane", "--lambda", "inf", "--out", "s.npz"], "--lambda",
+     "lam_n_per_m"),
+    (["scene", "compile", "plane", "--current-limit", "-1", "--out", "s.npz"],
+     "--current-limit", "current_limit_a"),
 ])
 def test_messages_name_the_option_not_the_internal_name(tmp_path, args, param, internal):
     res = designkit(*args, cwd=tmp_path)

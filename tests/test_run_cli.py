@@ -15,18 +15,9 @@ import numpy as np
 import pytest
 
 from conftest import ROOT
+from test_run_simulated import map_file  # noqa: F401  (the module's map, built once)
 
 pytestmark = pytest.mark.slow
-
-
-@pytest.fixture(scope="module")
-def map_file(tmp_path_factory):
-    from designkit import fieldmap
-    from designkit.design import default_design
-
-    path = tmp_path_factory.mktemp("map") / "map.npz"
-    fieldmap.write(path, fieldmap.build(default_design(), progress=False))
-    return path
 
 
 def _run(tmp_path, *args):

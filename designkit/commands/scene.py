@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import _validate as v
 from .. import fieldmap, render
 from ..design import load_design
 from ..errors import BadInputError
@@ -58,6 +59,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     check_output(args.out, folder=False)
+    _check_numbers(args)
     obj = _object(args)
     if args.map is not None:
         fm = fieldmap.load(args.map)
@@ -85,8 +87,6 @@ def run(args: argparse.Namespace) -> int:
         how = (f"computed (eq. 4.3, {len(fc.points_m)} surface points), limiting point "
                f"{_mm(fc.limiting_point_m)} mm")
     else:
-        if not args.lam >= 0:
-            raise BadInputError("--lambda", ">= 0 N/m", args.lam)
         lam, how = args.lam, "given"
     if args.law == "constraint":
         law = render.ConstraintLaw(lam)
@@ -100,6 +100,21 @@ def run(args: argparse.Namespace) -> int:
              f"{law.bound()[1]})" if args.law == "penetration" else "")
           + f", map design {source.design_sha256[:12]}...")
     return 0
+
+
+def _check_numbers(args) -> None:
+    """The numeric options, named as on the command line, before any work."""
+    if args.lam is not None:
+        v.nonnegative("--lambda", args.lam, "N/m")
+    for name, value, unit in (("--current-limit", args.current_limit, "A"),
+                              ("--total-current", args.total_current, "A")):
+        if value is not None:
+            v.nonnegative(name, value, unit)
+    v.positive("--stiffness", args.stiffness, "N/m")
+    v.in_range("--loop-period", args.loop_period, 0.1, 100.0, "ms")
+    v.in_range("--n-side", args.n_side, 3, 401)
+    v.in_range("--mesh-scale", args.mesh_scale, 1e-6, 1e3)
+    v.in_range("--mesh-spacing", args.mesh_spacing, 0.1, 50.0, "mm")
 
 
 def _mm(p) -> list:
