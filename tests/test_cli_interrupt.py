@@ -46,6 +46,7 @@ CASES = {
             "designkit.viz.export_vtk", 2.0),
     "fem": (["fem", "--level", "1", "--out", "fem"], "designkit.commands.fem.solve", 4.0),
     "cad": (["cad", "--out", "cad"], "cad.export.export_all", 4.0),
+    "run": (["run", "--simulate", "--out", "run"], "designkit.commands.run.run_simulation", 3.0),
     "sweep": (["sweep", "--param", "inner_radius_m=0.006:0.01:3", "--workers", "1", "--out",
                "sw"], "designkit.commands.sweep.plot", -60.0),
 }
