@@ -109,6 +109,8 @@ _SIGINT_SEEN = False
 def _watch_ctrl_c():
     """Python's own Ctrl-C handler, also noting that it fired (an extension module whose
     import is cut short raises a plain ImportError); returns the handler it replaced."""
+    global _SIGINT_SEEN
+    _SIGINT_SEEN = False
     if threading.current_thread() is not threading.main_thread():
         return None
 
@@ -131,6 +133,7 @@ def _caused_by_ctrl_c(exc: BaseException) -> bool:
         seen.add(id(exc))
         exc = exc.__cause__ or exc.__context__
     return False
+
 
 if __name__ == "__main__":  # pragma: no cover
     raise SystemExit(main())

@@ -111,7 +111,6 @@ def staged_folder(out: str | Path, param: str = "--out") -> Iterator[Path]:
                 dst = out / src.relative_to(stage)
                 if src.is_dir():
                     dst.mkdir(exist_ok=True)
-                    os.chmod(dst, 0o777 & ~_umask())
                 else:
                     dst.parent.mkdir(parents=True, exist_ok=True)
                     os.replace(src, dst)
