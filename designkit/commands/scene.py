@@ -81,7 +81,8 @@ def run(args: argparse.Namespace) -> int:
                                    unipolar=args.unipolar, rows=args.rows, n_side=args.n_side,
                                    progress=show_progress(args))
         lam = fc.lam_n_per_m
-        _check_renderable(args, fc)
+        if args.law == "constraint":  # lambda h n with lambda 0 renders nothing
+            _check_renderable(args, fc)
         extra["lambda_limiting_point_m"] = fc.limiting_point_m.tolist()
         extra["lambda_points"] = int(len(fc.points_m))
         how = (f"computed (eq. 4.3, {len(fc.points_m)} surface points), limiting point "
