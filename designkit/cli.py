@@ -8,8 +8,11 @@ so ``designkit map`` never pays for build123d or pyvista.
 from __future__ import annotations
 
 import argparse
+import gc
 import importlib
+import signal
 import sys
+import threading
 
 from .commands._common import join_negative_values
 from firmware_io.errors import FirmwareIOError
@@ -52,6 +55,28 @@ def main(argv: list[str] | None = None) -> int:
     if name not in COMMANDS:
         print(f"designkit: unknown command {name!r}\n\n{_usage()}", file=sys.stderr)
         return 2
+    interrupted = False
+    previous = _watch_ctrl_c()
+    try:
+        return _dispatch(name, rest)
+    except KeyboardInterrupt:
+        interrupted = True
+    except Exception as exc:  # an import or library call cut short by Ctrl-C
+        if not (_SIGINT_SEEN or _caused_by_ctrl_c(exc)):
+            raise
+        interrupted = True
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+        if interrupted:  # after the except block: progress bars closed, staged outputs gone
+            gc.collect()
+    # Ctrl-C: staged folders and atomic files were removed on the way out; one line, exit 130
+    print(f"designkit {name}: interrupted; nothing written", file=sys.stderr)
+    return 130
+
+
+def _dispatch(name: str, rest: list[str]) -> int:
+    """Import the sub-command, parse its options, run it; errors as one line, exit 1 or 2."""
     module_name, desc = COMMANDS[name]
     try:
         module = importlib.import_module(module_name)
@@ -77,6 +102,38 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:  # a disk or permission problem is a message, not a traceback
         print(f"designkit {name}: error: {exc}", file=sys.stderr)
         return 1
+
+
+_SIGINT_SEEN = False
+
+
+def _watch_ctrl_c():
+    """Python's own Ctrl-C handler, also noting that it fired (an extension module whose
+    import is cut short raises a plain ImportError); returns the handler it replaced."""
+    global _SIGINT_SEEN
+    _SIGINT_SEEN = False
+    if threading.current_thread() is not threading.main_thread():
+        return None
+
+    def handler(signum, frame):
+        global _SIGINT_SEEN
+        _SIGINT_SEEN = True
+        signal.default_int_handler(signum, frame)
+
+    if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        return None
+    return signal.signal(signal.SIGINT, handler)
+
+
+def _caused_by_ctrl_c(exc: BaseException) -> bool:
+    """True when a KeyboardInterrupt is in ``exc``'s chain of causes and contexts."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -446,12 +446,12 @@ def write_csv(result: SweepResult, path: str | Path,
 
 def plot(result: SweepResult, path: str | Path, *,
          objective: str = "force at the design point",
-         limits: str = "R and 5 L/R limits") -> Path:
+         limits: str = "R and 5 L/R limits", subtitle: str = "") -> Path:
     """PNG of the force over the (first two) swept parameters: feasible designs coloured by
     force, infeasible ones grey, the best feasible design starred (see :func:`sweep_figure`)."""
     import matplotlib.pyplot as plt
 
-    fig = sweep_figure(result, objective=objective, limits=limits)
+    fig = sweep_figure(result, objective=objective, limits=limits, subtitle=subtitle)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png")
     plt.close(fig)
@@ -463,13 +463,14 @@ def _shown(name: str, value: float) -> float:
 
 
 def sweep_figure(result: SweepResult, *, objective: str = "force at the design point",
-                 limits: str = "R and 5 L/R limits"):
+                 limits: str = "R and 5 L/R limits", subtitle: str = ""):
     """The matplotlib figure of :func:`plot`.
 
     With more than two swept parameters the plot is the slice through the best feasible design
     (the first grid values when none is feasible), and the title says so. The legend sits above
     the axes, where it cannot hide points; a sweep with no feasible design says why in the
-    axes instead of showing an empty plot.
+    axes instead of showing an empty plot. ``subtitle``: a first title line (e.g. the model,
+    current and height the forces assume).
     """
     import matplotlib
 
@@ -514,7 +515,8 @@ def sweep_figure(result: SweepResult, *, objective: str = "force at the design p
                 label=f"best {anchor['force_n'] * 1e3:.0f} mN")
     ax.set_xlabel(_label(xn))
     feasible = sum(1 for r in rows if r["feasible"])
-    title = f"{len(rows)} designs, {feasible} feasible ({limits})\n{_conditions(anchor, names)}"
+    title = (f"{subtitle}\n" if subtitle else "") + \
+        f"{len(rows)} designs, {feasible} feasible ({limits})\n{_conditions(anchor, names)}"
     if fixed:
         where = ", ".join(f"{_label(k).split(' (')[0]} = {_shown(k, anchor[k]):.4g}"
                           f"{' mm' if k.endswith('_m') else (' A' if k.endswith('_a') else '')}"

@@ -269,3 +269,111 @@ def test_staged_folder_moves_everything_into_place(tmp_path, monkeypatch):
     out = tmp_path / "a" / "out"
     assert (out / "sub" / "x.txt").read_text() == "y" and (out / "keep.txt").read_text() == "k"
     assert sorted(p.name for p in out.iterdir()) == ["keep.txt", "sub"]
+
+
+# ----------------------------------------------------------------------------- fem --out
+@pytest.mark.slow
+@pytest.mark.skipif(shutil.which("getdp") is None, reason="needs getdp")
+def test_fem_writes_its_default_relative_out(tmp_path):
+    res = designkit("fem", "--level", "0", cwd=tmp_path, timeout=900)
+    assert res.returncode == 0, res.stderr[-2000:]
+    out = tmp_path / "fem_out"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fem_out"]  # no staging folder left
+    assert out.stat().st_mode & 0o777 == 0o777 & ~_umask()
+    import json
+
+    data = json.loads((out / "fem_results.json").read_text())
+    assert all((out / name).is_file() for name in data["files"].values())
+    # the written comparison is the FEM's own: designkit's core model within 1 % of GetDP
+    err = data["comparison"]["axis"]["surface-current_bz_rel_err"]
+    assert max(abs(e) for e in err) < 0.01
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+# ----------------------------------------------------------------------------- map --out
+def _unwritable(tmp_path: Path) -> Path:
+    """A folder this process cannot create files in (for root: /proc)."""
+    if os.geteuid() == 0:
+        return Path("/proc")
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o555)
+    return ro
+
+
+@pytest.mark.parametrize("command", ["map", "scene", "viz"])
+def test_an_unwritable_out_is_refused_before_any_work(tmp_path, monkeypatch, capsys, command):
+    monkeypatch.setattr(importlib.import_module("designkit.fieldmap"), "build", _must_not_run)
+    monkeypatch.setattr(importlib.import_module("designkit.render"), "make_object",
+                        _must_not_run)
+    monkeypatch.setattr(importlib.import_module("designkit.viz"), "render", _must_not_run)
+    target = _unwritable(tmp_path) / ("x.png" if command == "viz" else "x.npz")
+    args = {"map": ["map"], "scene": ["scene", "compile", "plane"], "viz": ["viz", "scene"]}
+    assert main([*args[command], "--out", str(target)]) == 1
+    err = capsys.readouterr().err
+    assert "--out" in err and "writable" in err and len(err.strip().splitlines()) == 1
+
+
+# ----------------------------------------------------------------------------- scene compile
+@pytest.mark.slow
+def test_scene_compile_refuses_lambda_zero_and_says_why(tmp_path):
+    res = designkit("scene", "compile", "wedge", "--unipolar", "--n-side", "11", "--quiet",
+                    "--out", "w.npz", cwd=tmp_path, timeout=900)
+    line = _one_clear_line(res, "wedge", "lambda = 0 N/m", "--unipolar", "--lambda")
+    assert "lam_n_per_m" not in line
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_scene_compile_says_where_a_mesh_outside_the_box_is(tmp_path):
+    import pyvista as pv
+
+    pv.Sphere(radius=30.0, theta_resolution=16, phi_resolution=16).save(str(tmp_path / "b.stl"))
+    res = designkit("scene", "compile", "b.stl", "--mesh-at", "0,0,500", "--n-side", "7",
+                    "--out", "b.npz", cwd=tmp_path)
+    line = _one_clear_line(res, "box (x -75..75", "--mesh-at", "--mesh-scale")
+    assert "MeshSurface" not in line
+    # the sphere's top is at 500 mm + its 60 mm diameter
+    assert "z 5" in line and "560 mm" in line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b.stl"]
+
+
+@pytest.mark.parametrize("args,param,internal", [
+    (["viz", "scene", "--size", "8x8", "--out", "x.png"], "--size", "window_size"),
+    (["run", "--simulate", "--lambda", "-1", "--out", "r"], "--lambda", "lam_n_per_m"),
+    (["run", "--simulate", "--period-ms", "100", "--out", "r"], "--period-ms", "period "),
+    (["run", "--simulate", "--duration", "1000", "--out", "r"], "--duration", "duration "),
+    (["scene", "compile", "plane", "--lambda", "inf", "--out", "s.npz"], "--lambda",
+     "lam_n_per_m"),
+    (["scene", "compile", "plane", "--current-limit", "-1", "--out", "s.npz"],
+     "--current-limit", "current_limit_a"),
+])
+def test_messages_name_the_option_not_the_internal_name(tmp_path, args, param, internal):
+    res = designkit(*args, cwd=tmp_path)
+    line = _one_clear_line(res, param)
+    assert internal not in line.replace(param, "")
+    assert list(tmp_path.iterdir()) == []
+
+
+# ----------------------------------------------------------------------------- help texts
+@pytest.mark.parametrize("command,option,says", [
+    ("fem", "--level", "default 1"), ("fem", "--out", "default ./fem_out"),
+    ("run", "--out", "default ./run-out"), ("run", "--seed", "default 0"),
+    ("run", "--period-ms", "default 1"), ("run", "--duration", "cuts it"),
+    ("map", "--out", "default ./fieldmap.npz"), ("scene", "--out", "default ./scene.npz"),
+    ("fem", "--design", "optimized"), ("map", "--design", "optimized"),
+    ("run", "--design", "optimized"), ("scene", "--design", "optimized"),
+    ("viz", "--design", "optimized"), ("viz", "--size", "default 1024x768"),
+])
+def test_help_states_defaults_and_the_shipped_designs(capsys, command, option, says):
+    args = [command, "compile"] if command == "scene" else [command]
+    assert main([*args, "--help"]) == 0
+    text = capsys.readouterr().out
+    start = text.index("\n  " + option)  # its row in the options list, not the usage line
+    nxt = text.find("\n  -", start + 1)
+    row = " ".join(text[start:nxt if nxt > 0 else None].split())
+    assert says in row, row

@@ -141,7 +141,11 @@ def test_slice_colours_span_the_data_and_leave_out_solids(quantity):
     p = viz.plot_slices(DESIGN, quantity=quantity, data=(vert, horiz), window_size=(640, 300))
     try:
         name = viz.B_MT if quantity == "B" else viz.F_MN
-        air = np.r_[np.asarray(vert[name])[~inside], np.asarray(horiz[name])]
+        # the force only where the magnet's centre can be (issue 25: the range is not set by
+        # the region just above the cores)
+        keep = ~inside if quantity == "B" else \
+            ~inside & (np.asarray(vert.points)[:, 2] >= DESIGN.workspace.z_min_m - 1e-12)
+        air = np.r_[np.asarray(vert[name])[keep], np.asarray(horiz[name])]
         text = _texts(p)
         for view in ("xz", "xy"):
             actor = next(a for r in p.renderers for k, a in r.actors.items()
@@ -150,11 +154,10 @@ def test_slice_colours_span_the_data_and_leave_out_solids(quantity):
             # no point inside a core or a winding is drawn as field in air
             assert not viz.inside_solids(DESIGN, np.asarray(shown.points) * 1e-3).any()
             lo, hi = actor.mapper.scalar_range
-            assert hi == pytest.approx(air.max(), rel=1e-12)
-            if "clipped" in text:
-                assert lo == pytest.approx(hi * 1e-4, rel=1e-12)
-            else:
-                assert lo == pytest.approx(air.min(), rel=1e-12)
+            # the data range widened to round (1, 2, 5 x 10^k) ends: a tick at the bar's top
+            assert air.max() <= hi * (1 + 1e-12) and hi <= 2.5 * air.max()
+            floor = hi * 1e-4 if "clipped" in text else air.min()
+            assert lo <= floor * (1 + 1e-12) and floor <= 6.25 * lo
     finally:
         p.close()
 
@@ -192,8 +195,143 @@ def test_field_line_colours_span_the_data(rendered):
     _, lines = viz.field_line_data(DESIGN, quality="quick")
     values = np.asarray(lines[viz.B_MT])
     lo, hi = actor.mapper.scalar_range
-    assert hi == pytest.approx(values.max(), rel=1e-12)
-    if "clipped" in _texts(p):
-        assert lo == pytest.approx(hi * 1e-4, rel=1e-12)
-    else:
-        assert lo == pytest.approx(values.min(), rel=1e-12)
+    # the data range widened to round (1, 2, 5 x 10^k) ends: a tick at the bar's top
+    assert values.max() <= hi * (1 + 1e-12) and hi <= 2.5 * values.max()
+    floor = hi * 1e-4 if "clipped" in _texts(p) else values.min()
+    assert lo <= floor * (1 + 1e-12) and floor <= 6.25 * lo
+
+
+@pytest.mark.parametrize("kind", viz.KINDS)
+def test_every_figure_states_its_colour_scale(rendered, kind):
+    p, _ = rendered[kind]
+    text = " ".join(_texts(p).split())
+    assert "colour" in text, text
+    if kind in ("fieldlines", "forcemap", "slice-B", "slice-F"):
+        assert "log scale" in text
+
+
+# ----------------------------------------------------------------------------- issue: colour scales
+def test_slice_panels_state_their_scale_and_the_force_range_is_where_the_magnet_can_be(
+        tmp_path):
+    vert, horiz = viz.slice_data(DESIGN, quality="quick")
+    z_min = DESIGN.workspace.z_min_m
+    inside = viz.inside_solids(DESIGN, vert.points)
+    reachable = ~inside & (np.asarray(vert.points)[:, 2] >= z_min - 1e-12)
+    f_air = np.r_[np.asarray(vert[viz.F_MN])[~inside], np.asarray(horiz[viz.F_MN])]
+    f_reach = np.r_[np.asarray(vert[viz.F_MN])[reachable], np.asarray(horiz[viz.F_MN])]
+    # just above the cores the force is far larger than anywhere the magnet's centre can be
+    assert f_air.max() > 3 * f_reach.max()
+    p = viz.plot_slices(DESIGN, quantity="F", data=(vert, horiz), window_size=(640, 300))
+    try:
+        viz.save_png(p, tmp_path / "f.png")
+        actor = next(a for r in p.renderers for k, a in r.actors.items() if k == "slice-xz")
+        shown = np.asarray(actor.mapper.dataset.points) * 1e-3
+        assert shown[:, 2].min() >= z_min - 1e-9
+        lo, hi = actor.mapper.scalar_range
+        # the range's top: the largest reachable force rounded up to a 1, 2, 5 x 10^k value
+        assert f_reach.max() <= hi <= 2.5 * f_reach.max()
+        mant = hi / 10 ** math.floor(math.log10(hi) + 1e-12)
+        assert min(abs(mant - m) for m in (1, 2, 5, 10)) < 1e-9
+        # and the colour bar has a labelled tick there
+        bar = next(iter(p.scalar_bars.values()))
+        labels = bar.GetCustomLabels()
+        assert max(labels.GetValue(i) for i in range(labels.GetNumberOfValues())) == \
+            pytest.approx(hi, rel=1e-9)
+        text = " ".join(_texts(p).split())
+        assert text.count("one bar (right) for both panels") == 2
+        assert "log scale" in text and f"blank below z = {z_min * 1e3:g} mm" in text
+    finally:
+        p.close()
+
+
+def test_run_figure_names_the_off_spans_and_marks_each_injection():
+    from designkit.sim.loop import SimulationResult
+    from designkit.sim.plot import INJECTED_LABEL, OFF_LABEL, run_figure
+
+    t = np.arange(0.0, 1.0, 1e-3)
+    n = len(t)
+    state = np.where((t > 0.3) & (t < 0.5), "sensor_dead", "running")
+    cols = {"t_s": t, "state": state, "loop_s": np.full(n, 2e-4)}
+    for k in ("x_m", "y_m", "z_m", "xe_m", "ye_m", "ze_m", "fz_obj_n", "fz_n", "fz_ref_n"):
+        cols[k] = np.zeros(n)
+    for k in range(9):
+        cols[f"i{k + 1}_a"] = np.zeros(n)
+        cols[f"cmd{k + 1}_a"] = np.zeros(n)
+    res = SimulationResult(cols, [(0.3, "sensor_dead"), (0.7, "overrun")], [], 1e-3)
+    fig = run_figure(res)
+    try:
+        for ax in fig.axes[1:]:
+            names = [t.get_text() for t in ax.get_legend().get_texts()]
+            assert OFF_LABEL in names and INJECTED_LABEL in names
+            lines = [ln for ln in ax.get_lines() if ln.get_linestyle() == ":"]
+            assert sorted(ln.get_xdata()[0] for ln in lines) == [0.3, 0.7]
+            assert {"sensor_dead", "overrun"} <= {t.get_text().strip() for t in ax.texts}
+    finally:
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+
+
+def test_fem_comparison_has_a_residual_row_in_percent():
+    import dataclasses
+
+    from designkit.coil import Coil
+    from designkit.fem.compare import comparison_figure, model_field
+    from designkit.fem.runner import FemResult, LineResult
+
+    coil = dataclasses.replace(Coil.from_design(DESIGN), core=None)
+    top = coil.length / 2
+    z = np.linspace(top + 0.005, top + 0.11, 400)
+    lines = []
+    for r in (0.0, 0.01):
+        bz, _ = model_field(coil, 6.0, r, z, None)
+        # a stand-in FEM 0.2 % above the model: the residual row must show -0.2 %
+        lines.append(LineResult(r, z, np.zeros_like(z), bz * 1.002))
+    fem = FemResult(6.0, lines[0], lines[1], 1.0, 1.0, 0.0, 0.0, {})
+    fig = comparison_figure(coil, fem)
+    try:
+        row = fig.axes[4:6]
+        for ax in row:
+            assert "%" in fig.axes[4].get_ylabel() and ax.get_yscale() == "symlog"
+            bz_line = next(ln for ln in ax.get_lines() if ln.get_label().endswith(": Bz"))
+            y = np.asarray(bz_line.get_ydata())
+            np.testing.assert_allclose(y, (1 / 1.002 - 1) * 100, rtol=2e-3)
+    finally:
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+
+
+def test_sweep_figure_takes_a_first_title_line():
+    from designkit.sweep import parse_param, run_sweep, sweep_figure
+
+    result = run_sweep(DESIGN, [parse_param("inner_radius_m=0.008:0.012:3")], workers=1,
+                       progress=False)
+    fig = sweep_figure(result, subtitle="model surface-current, 6 A, 30 mm")
+    try:
+        assert fig.axes[0].get_title().split("\n")[0] == "model surface-current, 6 A, 30 mm"
+    finally:
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+
+
+@pytest.mark.parametrize("kind", ["fieldlines", "forcemap", "slice-B", "slice-F"])
+def test_log_colour_bars_have_a_labelled_tick_at_their_top(rendered, kind):
+    p, _ = rendered[kind]
+    for bar in p.scalar_bars.values():
+        _, hi = bar.GetLookupTable().GetRange()
+        labels = bar.GetCustomLabels()
+        top = max(labels.GetValue(i) for i in range(labels.GetNumberOfValues()))
+        assert top == pytest.approx(hi, rel=1e-9), (kind, top, hi)
+
+
+def test_axis_labels_shrink_with_the_window_so_they_do_not_overlap():
+    from designkit.viz.style import axis_font_size
+
+    # VTK labels a 160 mm axis every 20 mm: 9 labels such as "-80"; at 0.6 font sizes per
+    # character they fit along the ~40 % of the width the oblique axis takes
+    for width in (640, 800, 1024):
+        size = axis_font_size(width)
+        assert 9 * (3 * 0.6 * size + 4) <= 0.4 * width, (width, size)
+    assert axis_font_size(1024) == 10 and axis_font_size(4000) == 10

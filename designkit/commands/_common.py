@@ -21,6 +21,7 @@ import tempfile
 from pathlib import Path
 from typing import Iterator, Sequence
 
+from ..design import NAMED_DESIGNS
 from ..errors import BadInputError
 
 VALUE_OPTIONS = ("--currents", "--current")
@@ -64,11 +65,31 @@ def check_output(path: str | Path, *, folder: bool, param: str = "--out") -> Pat
             if not parent.is_dir():
                 raise BadInputError(param, f"a path under a folder ({parent} is a file)",
                                     str(path))
-            if not os.access(parent, os.W_OK | os.X_OK):
+            if not _writable(parent):
                 raise BadInputError(param, f"a path in a writable folder ({parent} is not)",
                                     str(path))
             break
     return path
+
+
+def _writable(folder: Path) -> bool:
+    """True when a file can be created in ``folder`` (tried: permission bits say nothing to
+    root, nor about read-only or virtual file systems)."""
+    if not os.access(folder, os.W_OK | os.X_OK):
+        return False
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".designkit-probe.", dir=folder)
+    except OSError:
+        return False
+    os.close(fd)
+    os.unlink(probe)
+    return True
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 @contextlib.contextmanager
@@ -79,6 +100,7 @@ def staged_folder(out: str | Path, param: str = "--out") -> Iterator[Path]:
     created = [p for p in reversed(out.parents) if not p.exists()]  # outermost first
     out.parent.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.staging.", dir=out.parent))
+    os.chmod(stage, 0o777 & ~_umask())  # mkdtemp makes 0700; a plain mkdir would not
     ok = False
     try:
         yield stage
@@ -99,6 +121,15 @@ def staged_folder(out: str | Path, param: str = "--out") -> Iterator[Path]:
             for folder in reversed(created):
                 with contextlib.suppress(OSError):
                     folder.rmdir()
+
+
+# ----------------------------------------------------------------------------- design
+def add_design_argument(parser: argparse.ArgumentParser, extra: str = "") -> None:
+    """``--design``: a TOML file or a shipped design's name (the names listed in the help)."""
+    names = ", ".join(n for n in NAMED_DESIGNS if n != "thesis-default")
+    parser.add_argument("--design", default=None, metavar="FILE.toml|NAME",
+                        help=f"design TOML file or a shipped design: {names} "
+                             f"(default: thesis, the embedded thesis device){extra}")
 
 
 # ----------------------------------------------------------------------------- progress

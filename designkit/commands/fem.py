@@ -8,6 +8,7 @@ fem_vs_designkit.png.
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 
@@ -17,12 +18,12 @@ from ..design import load_design
 from ..errors import BadInputError
 from ..fem.compare import air_inductance, comparison_table, plot_comparison
 from ..fem.runner import solve
-from ._common import check_output
+from ._common import add_design_argument, check_output, staged_folder
 
 
 def add_arguments(parser) -> None:
     """The options of ``designkit fem``."""
-    parser.add_argument("--design", default=None, help="design TOML (default: the thesis design)")
+    add_design_argument(parser)
     mat = parser.add_mutually_exclusive_group()
     mat.add_argument("--mu-r", type=float, default=None,
                      help="linear core relative permeability (default: the design's)")
@@ -30,8 +31,10 @@ def add_arguments(parser) -> None:
                      help="nonlinear core with this B-H curve (FEMM '1010 Steel')")
     parser.add_argument("--current", type=float, default=None,
                         help="coil current, A (default: the design's drive.max_current_a)")
-    parser.add_argument("--level", type=int, default=1, help="mesh refinement level 0..6")
-    parser.add_argument("--out", default="fem_out", help="output folder")
+    parser.add_argument("--level", type=int, default=1,
+                        help="mesh refinement level 0..6 (default 1)")
+    parser.add_argument("--out", default="fem_out",
+                        help="output folder, relative to the working folder (default ./fem_out)")
 
 
 def run(args) -> int:
@@ -48,7 +51,18 @@ def run(args) -> int:
     current = design.drive.max_current_a if args.current is None else args.current
     if not current > 0:
         raise BadInputError("--current", "> 0 A", current)
-    res = solve(coil, current, level=args.level, out_dir=out, export=True)
+    if not 0 <= args.level <= 6:
+        raise BadInputError("--level", "an integer 0..6", args.level)
+    # staged (absolute: GetDP runs inside it): a failure or Ctrl-C leaves no partial folder
+    with staged_folder(out) as stage:
+        res, summary = _solve_and_write(design, coil, current, args.level, stage)
+    _print_summary(res, summary, out)
+    return 0
+
+
+def _solve_and_write(design, coil, current: float, level: int, stage):
+    """Solve, compare and write fem_results.json and fem_vs_designkit.png into ``stage``."""
+    res = solve(coil, current, level=level, out_dir=stage, export=True)
     heights = np.array([0.014, 0.02, 0.03, 0.04, 0.06, 0.08, 0.10])
     table = comparison_table(coil, res, heights)
     l_air = air_inductance(coil)
@@ -62,18 +76,27 @@ def run(args) -> int:
         "model_inductance_h": l_air + extra,
         "air_inductance_quadrature_h": l_air,
         "comparison": table,
+        "heights_m": heights.tolist(),
     }
-    write_json_atomic(out / "fem_results.json", {**res.to_dict(), **summary})
-    plot_comparison(coil, res, out / "fem_vs_designkit.png")
+    data = res.to_dict()
+    data["files"] = {k: Path(v).name for k, v in data["files"].items()}  # names in --out
+    write_json_atomic(stage / "fem_results.json", {**data, **summary})
+    plot_comparison(coil, res, stage / "fem_vs_designkit.png")
+    return res, summary
+
+
+def _print_summary(res, summary: dict, out) -> None:
+    """The stdout lines: inductance and the axis comparison, and where it was written."""
+    heights = np.asarray(summary["heights_m"])
+    table = summary["comparison"]
+    key = "winding" if summary["core"] is None else "surface-current"
     lfem = res.inductance_linkage
     print(f"designkit fem: {res.mesh_stats['nodes']} nodes, GetDP {res.solve_seconds:.1f} s; "
           f"L_FEM = {lfem * 1e3:.4g} mH, designkit {summary['model_inductance_h'] * 1e3:.4g} mH "
           f"({(summary['model_inductance_h'] / lfem - 1) * 100:+.2f} %)")
-    key = "winding" if coil.core is None else "surface-current"
     ax = table["axis"]
     for i, h in enumerate(heights):
         print(f"  {h * 1e3:5.0f} mm: FEM Bz {ax['fem_bz_t'][i] * 1e3:9.4f} mT "
               f"dBz/dz {ax['fem_dbz_dz_t_per_m'][i]:9.4f} T/m | {key} "
               f"{ax[key + '_bz_rel_err'][i] * 100:+.3f} % {ax[key + '_dbz_dz_rel_err'][i] * 100:+.3f} %")
     print(f"  wrote {out}")
-    return 0

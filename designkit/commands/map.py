@@ -15,12 +15,11 @@ from pathlib import Path
 from .. import fieldmap
 from .._validate import in_range
 from ..design import load_design
-from ._common import add_progress_argument, show_progress
+from ._common import add_design_argument, add_progress_argument, check_output, show_progress
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--design", type=Path, default=None,
-                        help="design TOML file (default: the embedded thesis design)")
+    add_design_argument(parser)
     parser.add_argument("--spacing", type=float, default=10.0,
                         help="x, y step in mm of the grid over magnet positions that carries "
                              "the bias force beyond the per-core tables (default 10)")
@@ -32,6 +31,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     # everything that can be refused is refused before the (long) computation
     out = fieldmap.check_output(args.out)
+    check_output(out, folder=False)  # a folder that cannot be written: refused in < 1 s
     spacing = in_range("--spacing", args.spacing, 0.5, 100.0, "mm")
     design = load_design(args.design)
     t0 = time.perf_counter()

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from ..errors import BadInputError
 from ..sim import run_simulation
-from ._common import add_progress_argument, show_progress, staged_folder
+from ._common import add_design_argument, add_progress_argument, show_progress, staged_folder
 
 OBJECTS = ("plane", "hemisphere", "half-cylinder", "wedge")
 
@@ -29,22 +29,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--trajectory", default="slide",
                         help="slide | poke | FILE.csv with columns t_s,x_m,y_m,z_m (default slide)")
     parser.add_argument("--duration", type=float, default=None,
-                        help="simulated time, s (default: the trajectory's, 4 s for slide)")
+                        help="simulated time, s, up to 600 (default: the trajectory's own, 4 s "
+                             "slide, 3 s poke); the finger keeps the trajectory's speed: a "
+                             "shorter run cuts it, a longer one holds its last point")
     parser.add_argument("--faults", default="none",
                         help="none | default (each fault type once) | TYPE@S,TYPE@S,...")
-    parser.add_argument("--design", type=Path, default=None,
-                        help="design TOML file or a named design (default: the thesis device)")
+    add_design_argument(parser)
     parser.add_argument("--map", type=Path, default=None,
                         help="map file (default: build one for the design into --out)")
     parser.add_argument("--method", default="model", help="localization method (default model)")
-    parser.add_argument("--period-ms", type=float, default=1.0, help="control period, ms")
+    parser.add_argument("--period-ms", type=float, default=1.0,
+                        help="control period, ms, 0.1..50 (default 1)")
     parser.add_argument("--unipolar", action="store_true", help="unipolar drive (the thesis')")
     parser.add_argument("--rows", choices=["force", "fz"], default="force",
                         help="render the object's 3-D force (default) or only Fz (thesis eq. 4.6)")
     parser.add_argument("--lambda", dest="lam", type=float, default=None,
                         help="force constant, N/m (default: the design's render.stiffness)")
-    parser.add_argument("--seed", type=int, default=0, help="sensor-noise seed")
-    parser.add_argument("--out", type=Path, default=Path("run-out"), help="output folder")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="seed of the simulated sensor noise, an integer (default 0)")
+    parser.add_argument("--out", type=Path, default=Path("run-out"),
+                        help="output folder (default ./run-out)")
     add_progress_argument(parser)
 
 
@@ -66,7 +70,29 @@ def run(args: argparse.Namespace) -> int:
           f"{_mn(summary['force_error_rms_n'])} (p95 {_mn(summary['force_error_p95_n'])}), "
           f"localization MAE {_mm(summary['localization_mae_m'])}, loop p99 "
           f"{_us(summary['loop_p99_s'])}, faults {len(summary['faults'])}")
+    if summary["trajectory_played"] != "whole":
+        print(f"  simulated {summary['duration_s']:g} s of the "
+              f"{summary['trajectory_duration_s']:g} s trajectory at its own speed "
+              f"({summary['trajectory_played']})")
+    for f in summary["faults"]:
+        print("  fault " + _fault_line(f))
+    for f in summary.get("faults_not_injected", []):
+        print(f"  fault {f['fault']} @ {f['scheduled_s']:.3f} s: not injected ({f['why']})")
     return 0
+
+
+def _fault_line(f: dict) -> str:
+    """One fault's row: injected, its own detection, currents off, resumed (ms after it)."""
+    def ms(v):
+        return "-" if v is None else f"{v * 1e3:.0f} ms"
+
+    if f["state"] is None:
+        return (f"{f['fault']} @ {f['injected_s']:.3f} s: not detected in its own state "
+                f"(state then: {f['state_at_injection']})")
+    ended = ("still on at the end" if f["ended_s"] is None else
+             f"ended +{ms(f['ended_s'])} into {f['ended_into']}")
+    return (f"{f['fault']} @ {f['injected_s']:.3f} s: detected +{ms(f['time_to_safe_s'])}, "
+            f"currents off +{ms(f['currents_off_s'])}, {ended}")
 
 
 def _mn(v):

@@ -12,10 +12,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import numpy as np
+
+from .. import _validate as v
 from .. import fieldmap, render
 from ..design import load_design
 from ..errors import BadInputError
-from ._common import add_progress_argument, check_output, show_progress
+from ._common import add_design_argument, add_progress_argument, check_output, show_progress
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -23,9 +26,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("object", help="plane | hemisphere | half-cylinder | wedge | FILE.stl/ply")
     parser.add_argument("--map", type=Path, default=None,
                         help="force-current map (designkit map); default: the design's array")
-    parser.add_argument("--design", type=Path, default=None,
-                        help="design TOML (without --map; default: the embedded thesis design)")
-    parser.add_argument("--out", type=Path, default=Path("scene.npz"), help="output .npz")
+    add_design_argument(parser, "; with --map it must be the map's design")
+    parser.add_argument("--out", type=Path, default=Path("scene.npz"),
+                        help="output .npz (default ./scene.npz)")
     parser.add_argument("--lambda", dest="lam", type=float, default=None,
                         help="force constant in N/m (default: computed, eq. 4.3)")
     parser.add_argument("--unipolar", action="store_true",
@@ -48,23 +51,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="mesh file units to m (default 1e-3: mm)")
     parser.add_argument("--mesh-spacing", type=float, default=2.0,
                         help="signed-distance grid spacing, mm (default 2)")
+    parser.add_argument("--mesh-at", default="0,0,0", metavar="X,Y,Z",
+                        help="where the mesh's bounding-box bottom centre goes, mm above the "
+                             "coil tops' centre (default 0,0,0)")
     add_progress_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
     check_output(args.out, folder=False)
-    obj = render.make_object(args.object, scale=args.mesh_scale,
-                             spacing_m=args.mesh_spacing * 1e-3) \
-        if Path(args.object).suffix.lower() in (".stl", ".ply") \
-        else render.make_object(args.object)
+    _check_numbers(args)
+    obj = _object(args)
     if args.map is not None:
         fm = fieldmap.load(args.map)
         source = render.actuation_source(fm)
         u_default, t_default = fm.meta["max_current_a"], fm.meta["total_current_a"]
+        if args.design is not None:
+            _same_design(args.design, args.map, source.design_sha256)
     else:
         design = load_design(args.design)
         source = render.ArrayActuation.from_design(design)
         u_default, t_default = design.drive.max_current_a, design.drive.total_current_a
+    _check_inside(obj, source, args)
     u = u_default if args.current_limit is None else args.current_limit
     tl = t_default if args.total_current is None else args.total_current
     extra = {"object": args.object, "unipolar": bool(args.unipolar), "rows": args.rows,
@@ -74,13 +81,13 @@ def run(args: argparse.Namespace) -> int:
                                    unipolar=args.unipolar, rows=args.rows, n_side=args.n_side,
                                    progress=show_progress(args))
         lam = fc.lam_n_per_m
+        if args.law == "constraint":  # lambda h n with lambda 0 renders nothing
+            _check_renderable(args, fc)
         extra["lambda_limiting_point_m"] = fc.limiting_point_m.tolist()
         extra["lambda_points"] = int(len(fc.points_m))
         how = (f"computed (eq. 4.3, {len(fc.points_m)} surface points), limiting point "
-               f"{[round(float(c) * 1e3, 1) for c in fc.limiting_point_m]} mm")
+               f"{_mm(fc.limiting_point_m)} mm")
     else:
-        if not args.lam >= 0:
-            raise BadInputError("--lambda", ">= 0 N/m", args.lam)
         lam, how = args.lam, "given"
     if args.law == "constraint":
         law = render.ConstraintLaw(lam)
@@ -94,3 +101,76 @@ def run(args: argparse.Namespace) -> int:
              f"{law.bound()[1]})" if args.law == "penetration" else "")
           + f", map design {source.design_sha256[:12]}...")
     return 0
+
+
+def _check_numbers(args) -> None:
+    """The numeric options, named as on the command line, before any work."""
+    if args.lam is not None:
+        v.nonnegative("--lambda", args.lam, "N/m")
+    for name, value, unit in (("--current-limit", args.current_limit, "A"),
+                              ("--total-current", args.total_current, "A")):
+        if value is not None:
+            v.nonnegative(name, value, unit)
+    v.positive("--stiffness", args.stiffness, "N/m")
+    v.in_range("--loop-period", args.loop_period, 0.1, 100.0, "ms")
+    v.in_range("--n-side", args.n_side, 3, 401)
+    v.in_range("--mesh-scale", args.mesh_scale, 1e-6, 1e3)
+    v.in_range("--mesh-spacing", args.mesh_spacing, 0.1, 50.0, "mm")
+
+
+def _mm(p) -> list:
+    return [round(float(c) * 1e3, 1) for c in p]
+
+
+def _object(args):
+    """The virtual object: a named one, or a mesh file scaled and placed by the options."""
+    if Path(args.object).suffix.lower() not in (".stl", ".ply"):
+        return render.make_object(args.object)
+    try:
+        at = [float(c) * 1e-3 for c in args.mesh_at.split(",")]
+    except ValueError:
+        at = []
+    if len(at) != 3 or not np.all(np.isfinite(at)):
+        raise BadInputError("--mesh-at", "three numbers X,Y,Z in mm", args.mesh_at)
+    return render.make_object(args.object, scale=args.mesh_scale,
+                              spacing_m=args.mesh_spacing * 1e-3, position_m=tuple(at))
+
+
+def _same_design(design_arg, map_path, map_sha: str) -> None:
+    """--design next to --map: refused unless it is the map's design (it would be ignored)."""
+    sha = load_design(design_arg).spec_hash()
+    if sha != map_sha:
+        raise BadInputError("--design", f"the design of --map {map_path} (SHA-256 "
+                            f"{map_sha[:12]}...) or no --design", f"{design_arg} (SHA-256 "
+                            f"{sha[:12]}...)", "The scene uses the map's design; drop --design "
+                            "or build the map for this design with `designkit map`.")
+
+
+def _check_inside(obj, source, args) -> None:
+    """Refuse an object none of whose surface lies in the map's box, saying where each is."""
+    pts, _ = obj.surface_points(min(args.n_side, 61))
+    lo, hi = (np.asarray(b, float) for b in source.bounds)
+    if len(pts) and np.any(np.all((pts >= lo - 1e-12) & (pts <= hi + 1e-12), axis=1)):
+        return
+    span = ("no upward-facing surface" if not len(pts) else
+            "surface x {:.0f}..{:.0f}, y {:.0f}..{:.0f}, z {:.0f}..{:.0f} mm".format(
+                *np.ravel(np.c_[pts.min(0), pts.max(0)] * 1e3)))
+    box = "x {:.0f}..{:.0f}, y {:.0f}..{:.0f}, z {:.0f}..{:.0f} mm".format(
+        *np.ravel(np.c_[lo, hi] * 1e3))
+    mesh = Path(args.object).suffix.lower() in (".stl", ".ply")
+    raise BadInputError("OBJECT", f"an object with its top surface inside the map's box ({box})",
+                        f"{args.object} ({span})",
+                        "Place the mesh with --mesh-at X,Y,Z (mm, its bottom centre) and size "
+                        "it with --mesh-scale (file units to m)." if mesh else "")
+
+
+def _check_renderable(args, fc) -> None:
+    """lambda = 0: the drive cannot render the object at all; say where and what to change."""
+    if fc.lam_n_per_m > 0:
+        return
+    drive = "unipolar drive (0 <= I <= u)" if args.unipolar else "bipolar drive (|I| <= u)"
+    raise BadInputError("OBJECT", f"an object the {drive} can render (lambda > 0 N/m)",
+                        f"{args.object}: lambda = 0 N/m, limited at {_mm(fc.limiting_point_m)} "
+                        f"mm", "Drop --unipolar, use --rows fz, or give --lambda N/m to "
+                        "compile it anyway." if args.unipolar else
+                        "Use --rows fz or give --lambda N/m to compile it anyway.")

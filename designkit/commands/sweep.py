@@ -22,7 +22,7 @@ from ..optimize import CORE_MODEL_NAMES
 from ..sweep import (ARRAY_COLUMNS, ARRAY_CORE_MODEL, ARRAY_PARAMETERS, PARAMETERS,
                      design_core_model, grid, parse_param, plot, reason_summary,
                      run_array_sweep, run_sweep, write_csv)
-from ._common import add_progress_argument, check_output, show_progress
+from ._common import add_progress_argument, check_output, show_progress, staged_folder
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -64,15 +64,18 @@ def run(args: argparse.Namespace) -> int:
         result = run_sweep(design, ranges, workers=args.workers, scheduler=args.scheduler,
                            core_model=args.core_model, progress=show_progress(args))
     out = Path(args.out)
-    # the CSV and the PNG are written only after every design is evaluated (atomic renames)
-    if array:
-        csv_path = write_csv(result, out / "sweep.csv", ARRAY_COLUMNS)
-        png_path = plot(result, out / "sweep.png",
-                        objective="smallest upward force over the workspace",
-                        limits="device constraints")
-    else:
-        csv_path = write_csv(result, out / "sweep.csv")
-        png_path = plot(result, out / "sweep.png")
+    # the CSV and the PNG are written only after every design is evaluated, staged together
+    # (a failure or Ctrl-C while drawing leaves neither)
+    with staged_folder(out) as stage:
+        if array:
+            write_csv(result, stage / "sweep.csv", ARRAY_COLUMNS)
+            plot(result, stage / "sweep.png",
+                 objective="smallest upward force over the workspace",
+                 limits="device constraints")
+        else:
+            write_csv(result, stage / "sweep.csv")
+            plot(result, stage / "sweep.png")
+    csv_path, png_path = out / "sweep.csv", out / "sweep.png"
     n = len(result.rows)
     feas = sum(1 for r in result.rows if r["feasible"])
     model = ARRAY_CORE_MODEL if array else (args.core_model or design_core_model(design))

@@ -14,8 +14,8 @@ from pathlib import Path
 from .. import viz
 from ..design import load_design
 from ..errors import BadInputError
-from ._common import (add_currents_arguments, check_current_limit, check_output,
-                      parse_currents)
+from ._common import (add_currents_arguments, add_design_argument, check_current_limit,
+                      check_output, parse_currents, staged_folder)
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -23,18 +23,20 @@ def parse_size(text: str) -> tuple[int, int]:
         w, h = (int(x) for x in text.lower().split("x"))
     except ValueError:
         raise BadInputError("--size", "WIDTHxHEIGHT in pixels, e.g. 1024x768", text) from None
+    if not (16 <= w <= 8192 and 16 <= h <= 8192):
+        raise BadInputError("--size", "WIDTHxHEIGHT, each 16..8192 pixels", text)
     return w, h
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("kind", choices=viz.KINDS, help="which figure")
-    parser.add_argument("--design", type=Path, default=None,
-                        help="design TOML file (default: the embedded thesis design)")
+    add_design_argument(parser)
     add_currents_arguments(parser, "per-coil currents in A, comma-separated, row-major "
                                    "(default: the centre coil at drive.max_current_a, others 0)")
     parser.add_argument("--out", type=Path, default=None,
                         help="PNG file (default: ./designkit-viz-KIND.png)")
-    parser.add_argument("--size", default=None, help="image size WIDTHxHEIGHT in pixels")
+    parser.add_argument("--size", default=None,
+                        help="image size WIDTHxHEIGHT in pixels, each 16..8192 (default 1024x768)")
     parser.add_argument("--quality", choices=("quick", "full"), default="full",
                         help="grid resolution (quick: coarse grids, a few seconds)")
     parser.add_argument("--vtk", type=Path, default=None,
@@ -51,13 +53,21 @@ def run(args: argparse.Namespace) -> int:
     currents = viz.resolve_currents(design, parse_currents(args.currents))
     check_current_limit(design, currents, allow=args.allow_over_limit)
     size = None if args.size is None else parse_size(args.size)
+    if args.vtk is None:
+        _png(args, design, currents, size, out)
+        return 0
+    # staged: a failure or Ctrl-C leaves neither a partial VTK folder nor the PNG
+    with staged_folder(args.vtk, param="--vtk") as stage:
+        files = viz.export_vtk(design, stage, currents, quality=args.quality)
+        _png(args, design, currents, size, out)
+    print(f"wrote {len(files)} VTK files to {args.vtk}")
+    return 0
+
+
+def _png(args, design, currents, size, out) -> None:
     plotter = viz.render(args.kind, design, currents, quality=args.quality, window_size=size)
     try:
         viz.save_png(plotter, out)
     finally:
         plotter.close()
     print(f"wrote {out}")
-    if args.vtk is not None:
-        files = viz.export_vtk(design, args.vtk, currents, quality=args.quality)
-        print(f"wrote {len(files)} VTK files to {args.vtk}")
-    return 0

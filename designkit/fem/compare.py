@@ -105,14 +105,28 @@ def comparison_table(coil, fem: FemResult, heights: np.ndarray) -> dict:
 
 
 def plot_comparison(coil, fem: FemResult, path: str | Path, title: str = "") -> Path:
-    """PNG: Bz and dBz/dz along the axis and the off-axis line, FEM vs designkit's models."""
+    """PNG of :func:`comparison_figure`; returns the path."""
+    import matplotlib.pyplot as plt
+
+    fig = comparison_figure(coil, fem, title)
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+    return path
+
+
+def comparison_figure(coil, fem: FemResult, title: str = ""):
+    """Bz and dBz/dz along the axis and the off-axis line, FEM vs designkit's models (rows 1-2),
+    and their relative differences to the FEM in % (row 3, symmetric-log scale: the 0.1-1 %
+    of the default model next to the tens of % of the thesis' model)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     top = coil.length / 2
-    fig, axes = plt.subplots(2, 2, figsize=(11, 7), sharex=True)
+    fig, axes = plt.subplots(3, 2, figsize=(11, 9.5), sharex=True)
     models = [None] if coil.core is None else ["surface-current", "thesis-uniform"]
     for col, line in enumerate((fem.axis, fem.off_axis)):
         sel = (line.z > top + 0.012) & (line.z < top + 0.102)
@@ -121,24 +135,36 @@ def plot_comparison(coil, fem: FemResult, path: str | Path, title: str = "") -> 
         fit = line.fit(zz)
         axes[0, col].plot(hmm, fit["bz"] * 1e3, "k-", lw=3, alpha=0.4, label="GetDP FEM")
         axes[1, col].plot(hmm, fit["dbz_dz"], "k-", lw=3, alpha=0.4, label="GetDP FEM")
-        for m, style in zip(models, ("C0--", "C3:")):
+        for m, colour, style in zip(models, ("C0", "C3"), ("--", ":")):
             bz, dbz = model_field(coil, fem.current, line.r, zz, m)
-            axes[0, col].plot(hmm, bz * 1e3, style, label=m or "designkit winding")
-            axes[1, col].plot(hmm, dbz, style, label=m or "designkit winding")
+            name = m or "designkit winding"
+            axes[0, col].plot(hmm, bz * 1e3, colour + style, label=name)
+            axes[1, col].plot(hmm, dbz, colour + style, label=name)
+            axes[2, col].plot(hmm, _percent(bz, fit["bz"]), colour + "-", label=f"{name}: Bz")
+            axes[2, col].plot(hmm, _percent(dbz, fit["dbz_dz"]), colour + "--",
+                              label=f"{name}: dBz/dz")
         axes[0, col].set_title(f"r = {line.r * 1e3:.0f} mm")
-        axes[1, col].set_xlabel("height above the winding top, mm")
+        axes[2, col].set_xlabel("height above the winding top, mm")
+        axes[2, col].set_yscale("symlog", linthresh=0.1)
+        axes[2, col].axhline(0.0, color="k", lw=0.8)
     axes[0, 0].set_ylabel("Bz, mT")
     axes[1, 0].set_ylabel("dBz/dz, T/m")
+    axes[2, 0].set_ylabel("(model - FEM) / |FEM|, %\n(symlog, linear within 0.1 %)")
     for ax in axes.ravel():
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
     fig.suptitle(title or f"FEM vs designkit at {fem.current:g} A")
     fig.tight_layout()
-    path = Path(path)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
-    return path
+    return fig
+
+
+def _percent(model, fem) -> np.ndarray:
+    """(model - fem) / |fem| in %, 0 where the FEM value is 0."""
+    fem = np.asarray(fem, float)
+    out = np.zeros_like(fem)
+    nz = fem != 0
+    out[nz] = (np.asarray(model, float)[nz] - fem[nz]) / np.abs(fem[nz]) * 100
+    return out
 
 
 def model_rz(coil, current: float, r: np.ndarray, z_local: np.ndarray, *,

@@ -70,7 +70,7 @@ def gmsh_model(name: str):
     gmsh = require("gmsh", "gmsh", "designkit.fem")
     started_here = not gmsh.isInitialized()
     if started_here:
-        gmsh.initialize(["-noenv"])
+        gmsh.initialize(["-noenv"], interruptible=False)  # keep Python's Ctrl-C handler
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.option.setNumber("General.NumThreads", 1)

@@ -14,15 +14,25 @@ from .loop import SimulationResult
 def plot_run(result: SimulationResult, out_dir, *, surface_height=None, title: str = "") -> list:
     """Fig. 4.5-like figure (path vs object, desired vs rendered force, currents) and a
     loop-timing histogram; returns the PNG paths."""
+    import matplotlib.pyplot as plt
+
+    out_dir = Path(out_dir)
+    fig = run_figure(result, surface_height=surface_height, title=title)
+    p1 = out_dir / "run.png"
+    fig.savefig(p1, dpi=130)
+    plt.close(fig)
+    return [p1, _loop_timing(result, out_dir, plt)]
+
+
+def run_figure(result: SimulationResult, *, surface_height=None, title: str = ""):
+    """The matplotlib figure of run.png: the path against the object, then force and currents
+    against time with the runner's off spans shaded and the injected faults marked."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    out_dir = Path(out_dir)
     c = result.columns
-    t = c["t_s"]
-    running = c["state"] == "running"
     fig, ax = plt.subplots(3, 1, figsize=(8.5, 9.5), constrained_layout=True)
     ax[0].plot(c["x_m"] * 1e3, c["z_m"] * 1e3, color="tab:blue", lw=1.5, label="finger (true)")
     est = np.isfinite(c["xe_m"])
@@ -37,24 +47,36 @@ def plot_run(result: SimulationResult, out_dir, *, surface_height=None, title: s
     ax[0].set_ylabel("z above the coil tops (mm)")
     ax[0].legend(loc="upper right", fontsize=8)
     ax[0].set_title(title or "finger path against the object")
+    _time_panels(ax, result)
+    return fig
+
+
+def _time_panels(ax, result) -> None:
+    """Force and current against time, the runner's off spans shaded and the injected faults
+    marked, each named in the legend."""
+    c = result.columns
+    t = c["t_s"]
+    running = c["state"] == "running"
     ax[1].plot(t, c["fz_obj_n"] * 1e3, color="k", lw=1.2, label="object force at the true position")
     ax[1].plot(t, c["fz_n"] * 1e3, color="tab:red", lw=1.0, label="rendered (true force on magnet)")
     ax[1].plot(t, c["fz_ref_n"] * 1e3, color="tab:green", lw=0.8, ls="--",
                label="object force at the estimate")
-    _shade_faults(ax[1], t, running)
-    ax[1].set_xlabel("time (s)")
-    ax[1].set_ylabel("Fz (mN)")
-    ax[1].legend(loc="upper right", fontsize=8)
     for k in range(sum(1 for key in c if key.startswith("cmd"))):
         ax[2].plot(t, c[f"i{k + 1}_a"], lw=1.0, label=f"coil {k + 1}")
-    _shade_faults(ax[2], t, running)
-    ax[2].set_xlabel("time (s)")
+    for a in ax[1:]:
+        _shade_faults(a, t, running)
+        _mark_injections(a, result.faults)
+        a.set_xlabel("time (s)")
+    ax[1].set_ylabel("Fz (mN)")
+    ax[1].legend(loc="upper right", fontsize=8)
     ax[2].set_ylabel("coil current (A)")
     ax[2].legend(loc="upper right", fontsize=7, ncol=3)
-    p1 = out_dir / "run.png"
-    fig.savefig(p1, dpi=130)
-    plt.close(fig)
 
+
+def _loop_timing(result, out_dir: Path, plt) -> Path:
+    """loop_timing.png: the compute time of the running steps, p50, p99 and the period."""
+    c = result.columns
+    running = c["state"] == "running"
     fig, ax = plt.subplots(figsize=(6.5, 4), constrained_layout=True)
     loop_us = c["loop_s"][running] * 1e6
     if len(loop_us):
@@ -69,18 +91,31 @@ def plot_run(result: SimulationResult, out_dir, *, surface_height=None, title: s
     ax.set_xlabel("compute time per control step (us)")
     ax.set_ylabel("steps")
     ax.set_title("runner loop timing (running steps)")
-    p2 = out_dir / "loop_timing.png"
-    fig.savefig(p2, dpi=130)
+    path = out_dir / "loop_timing.png"
+    fig.savefig(path, dpi=130)
     plt.close(fig)
-    return [p1, p2]
+    return path
+
+
+OFF_LABEL = "runner not running (coils off: fault or no fix yet)"
+INJECTED_LABEL = "fault injected"
 
 
 def _shade_faults(ax, t, running) -> None:
+    """Shade the steps the runner was not running; one legend entry for them all."""
     off = ~running
     if not off.any():
         return
     edges = np.flatnonzero(np.diff(np.r_[0, off.astype(int), 0]))
-    for a, b in zip(edges[::2], edges[1::2]):
-        ax.axvspan(t[a], t[min(b, len(t) - 1)], color="tab:red", alpha=0.08, lw=0)
+    for k, (a, b) in enumerate(zip(edges[::2], edges[1::2])):
+        ax.axvspan(t[a], t[min(b, len(t) - 1)], color="tab:red", alpha=0.08, lw=0,
+                   label=OFF_LABEL if k == 0 else None)
 
 
+def _mark_injections(ax, faults) -> None:
+    """A dotted line at each injected fault, its type written at the top of the axes."""
+    for k, (te, name) in enumerate(faults):
+        ax.axvline(te, color="tab:purple", ls=":", lw=1.0,
+                   label=INJECTED_LABEL if k == 0 else None)
+        ax.text(te, 1.0, f" {name}", transform=ax.get_xaxis_transform(), rotation=90,
+                va="top", ha="left", fontsize=6, color="tab:purple")

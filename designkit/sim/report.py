@@ -17,18 +17,54 @@ from ..array import force_matrix
 from .device import SimulatedDevice
 from .loop import SimulationResult
 
+CURRENT_OFF_A = 0.01
+"""A coil counts as off once its true current is below this, A."""
+
+
 def time_to_safe(columns: dict, events, period_s: float) -> list[dict]:
-    """For each scheduled fault: the first step at or after it that is not 'running', s."""
-    t = columns["t_s"]
-    st = columns["state"]
+    """The fault table, counted from the run.csv columns (t_s, state, i<k>_a).
+
+    For each injected fault (time s, type): ``state_at_injection``; its own detection (the
+    first step at or after the injection, and before the same type is injected again, whose
+    state is this fault's: the coils are commanded off in that step) as ``detected_s`` and
+    ``time_to_safe_s`` / ``periods`` after the injection; ``currents_off_s``: injection to the
+    first step from the detection on with every true coil current below
+    :data:`CURRENT_OFF_A`; ``ended_s`` / ``ended_into``: injection to the first later step in
+    another state, and that state; ``resumed_s``: injection to the first running step after
+    the detection (None: not within the run). A fault another one masks is not detected.
+    """
+    t = np.asarray(columns["t_s"], float)
+    st = np.asarray(columns["state"])
+    amps = [np.asarray(v, float) for k, v in columns.items()
+            if k.startswith("i") and k.endswith("_a")]
+    off = np.max(np.abs(np.stack(amps, 1)), axis=1) < CURRENT_OFF_A if amps else \
+        np.ones(len(t), bool)
+    events = list(events)
     out = []
-    for te, name in events:
-        after = np.nonzero(t >= te - 1e-12)[0]
-        first = next((i for i in after if st[i] != "running"), None)
-        out.append({"fault": name, "injected_s": float(te),
-                    "state": None if first is None else str(st[first]),
-                    "time_to_safe_s": None if first is None else float(t[first] - te),
-                    "periods": None if first is None else float((t[first] - te) / period_s)})
+    for j, (te, name) in enumerate(events):
+        te = float(te)
+        again = [float(t2) for t2, n2 in events[j + 1:] if n2 == name]
+        window = (t >= te - 1e-12) & (t < (again[0] - 1e-12 if again else np.inf))
+        at = np.flatnonzero(t >= te - 1e-12)
+        own = np.flatnonzero(window & (st == name))
+        row = {"fault": name, "injected_s": te,
+               "state_at_injection": str(st[at[0]]) if len(at) else None,
+               "state": None, "detected_s": None, "time_to_safe_s": None, "periods": None,
+               "currents_off_s": None, "ended_s": None, "ended_into": None, "resumed_s": None}
+        if len(own):
+            k = int(own[0])
+            row.update(state=name, detected_s=float(t[k]), time_to_safe_s=float(t[k] - te),
+                       periods=float((t[k] - te) / period_s))
+            quiet = np.flatnonzero(off[k:])
+            if len(quiet):
+                row["currents_off_s"] = float(t[k + quiet[0]] - te)
+            other = np.flatnonzero(st[k:] != name)
+            if len(other):
+                row.update(ended_s=float(t[k + other[0]] - te), ended_into=str(st[k + other[0]]))
+            back = np.flatnonzero(st[k:] == "running")
+            if len(back):
+                row["resumed_s"] = float(t[k + back[0]] - te)
+        out.append(row)
     return out
 
 

@@ -37,6 +37,9 @@ from .trajectory import Trajectory, poke_trajectory, slide_trajectory
 MAX_DURATION_S = 600.0
 """Longest simulated run, s."""
 
+SCRIPTED_DURATION_S = {"slide": 4.0, "poke": 3.0}
+"""Length of the scripted trajectories at their own speed, s."""
+
 TOP_OF_BOX_M = 0.078
 """Highest finger position of a scripted trajectory, m (inside the map box)."""
 
@@ -68,12 +71,12 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
     """
     design = design if isinstance(design, Design) else load_design(design)
     virtual, path, duration, schedule = _checked_inputs(obj, trajectory, duration_s, faults,
-                                                        rows, period_s)
+                                                        rows, period_s, lam_n_per_m)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     array = array if array is not None else CoilArray.from_design(design)
     if path is None:
-        path = _scripted_path(design, array, virtual, trajectory, duration)
+        path = _scripted_path(design, array, virtual, trajectory)
     map_path, fmap = _map(design, array, map_path, out, progress)
     lam = design.render.stiffness_n_per_m if lam_n_per_m is None else float(lam_n_per_m)
     scene_path = scenefile.compile_scene(virtual, out / "scene.npz", lam_n_per_m=lam,
@@ -106,7 +109,8 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
     summary.update({"object": obj, "trajectory": str(trajectory), "design": design.name,
                     "rows": rows,
                     "lambda_n_per_m": lam, "method": method, "unipolar": unipolar,
-                    "drive": drive})
+                    "drive": drive, **_duration_note(path.duration_s, duration),
+                    "faults_not_injected": _not_injected(schedule, res.faults)})
     write_run_csv(out / "run.csv", res.columns)
     write_json_atomic(out / "summary.json", summary)
     plot_run(res, out, surface_height=lambda x, y: virtual.height(np.c_[x, y, np.zeros_like(x)]),
@@ -114,32 +118,59 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
     return summary
 
 
-def _checked_inputs(obj, trajectory, duration_s, faults, rows, period_s):
+def _checked_inputs(obj, trajectory, duration_s, faults, rows, period_s, lam_n_per_m=None):
     """The run's inputs, checked: (virtual object, trajectory from a file or None for a scripted
     one, duration s, fault schedule)."""
     if rows not in ("force", "fz"):
-        raise BadInputError("rows", "'force' (3-D) or 'fz' (the thesis' vertical force)", rows)
+        raise BadInputError("--rows", "'force' (3-D) or 'fz' (the thesis' vertical force)", rows)
     if not 1e-4 <= period_s <= 0.05:
-        raise BadInputError("period", "in [0.1, 50] ms", period_s * 1e3)
+        raise BadInputError("--period-ms", "in [0.1, 50] ms", period_s * 1e3)
+    if lam_n_per_m is not None and not 0 <= float(lam_n_per_m) < np.inf:
+        raise BadInputError("--lambda", ">= 0 and finite, N/m", lam_n_per_m)
     virtual = scenefile.make_object(obj)
-    scripted = trajectory in ("slide", "poke")
+    scripted = trajectory in SCRIPTED_DURATION_S
     path = None if scripted else Trajectory.from_csv(trajectory)
     duration = float(duration_s or (path.duration_s if path is not None
-                                     else 4.0 if trajectory == "slide" else 3.0))
+                                     else SCRIPTED_DURATION_S[trajectory]))
     if not 0 < duration <= MAX_DURATION_S:
-        raise BadInputError("duration", "in (0, 600] s", duration)
+        raise BadInputError("--duration", f"in (0, {MAX_DURATION_S:g}] s", duration)
     return virtual, path, duration, FaultSchedule.parse(faults, duration)
 
 
-def _scripted_path(design, array, virtual, trajectory: str, duration: float) -> Trajectory:
-    """``slide`` or ``poke`` over the virtual object, kept above the upper sensor board."""
+def _duration_note(trajectory_s: float, duration_s: float) -> dict:
+    """summary.json: how the simulated time relates to the trajectory's (which keeps its speed:
+    a shorter run cuts it, a longer one holds the finger at its last point)."""
+    how = ("whole" if abs(duration_s - trajectory_s) <= 1e-9 else
+           "cut" if duration_s < trajectory_s else "held at the end")
+    return {"duration_s": duration_s, "trajectory_duration_s": trajectory_s,
+            "trajectory_played": how}
+
+
+def _not_injected(schedule: FaultSchedule, injected) -> list:
+    """Scheduled faults the run ended before injecting (an overrun or an over-limit command
+    waits for a running step)."""
+    left = list(injected)
+    out = []
+    for te, name in schedule.events:
+        match = next((k for k, (_, n) in enumerate(left) if n == name), None)
+        if match is None:
+            out.append({"fault": name, "scheduled_s": float(te),
+                        "why": "it waits for a running step; none came before the end"})
+        else:
+            left.pop(match)
+    return out
+
+
+def _scripted_path(design, array, virtual, trajectory: str) -> Trajectory:
+    """``slide`` or ``poke`` over the virtual object at its own speed, kept above the upper
+    sensor board."""
     # the magnet cannot go below the upper sensor board: its centre stays half its length
     # and 1 mm (the board and the sensor package) above the highest sensor
     floor = (float(np.max(array.sensor_positions_m()[0, :, 2]))
              + design.magnet.length_m / 2 + 1e-3)
     make = slide_trajectory if trajectory == "slide" else poke_trajectory
     return make(lambda x, y: virtual.height(np.c_[x, y, np.zeros_like(x)]),
-                duration_s=duration, z_limits_m=(floor, TOP_OF_BOX_M))
+                duration_s=SCRIPTED_DURATION_S[trajectory], z_limits_m=(floor, TOP_OF_BOX_M))
 
 
 def _map(design, array, map_path, out: Path, progress: bool):

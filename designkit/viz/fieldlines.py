@@ -11,7 +11,7 @@ from .common import B_MT, B_T, Quality, _image, _pv, _quality
 from .physics import _add_field_arrays, _footprint_half_m, array_field, resolve_currents
 from .scene import scene_meshes
 from .style import (_add_device, _axes, _bar, currents_text, _fit_camera, _log_fmt, _mm,
-                    _plotter, _title)
+                    _plotter, _title, round_range)
 
 if TYPE_CHECKING:  # pragma: no cover
     import pyvista
@@ -77,6 +77,8 @@ def plot_field_lines(design: "Design", currents: Sequence[float] | None = None, 
         if lo < hi * 1e-4:
             lo = hi * 1e-4
             clip_note = f"; colours below {lo:.2g} mT clipped"
+        lo, hi = round_range(lo, hi, log=True)  # round ends: a labelled tick at the bar's top
+        clip_note = f"; colour: B (mT), log scale {lo:g}..{hi:g}" + clip_note
         p.add_mesh(_mm(lines).tube(radius=0.7), scalars=B_MT, cmap="viridis", log_scale=True,
                    clim=(lo, hi), name="streamlines",
                    scalar_bar_args=_bar("B (mT)", fmt=_log_fmt(lo, hi)))

@@ -13,7 +13,7 @@ from .common import F_MN, F_N, MIN_ARROW, Quality, _pv, _quality
 from .physics import _add_field_arrays, array_field, magnet_moment, resolve_currents
 from .scene import scene_meshes
 from .style import (_add_device, _axes, _bar, currents_text, _fit_camera, _log_fmt,
-                    _magnet_text, _mm, _plotter, _title)
+                    _magnet_text, _mm, _plotter, _title, round_range)
 
 if TYPE_CHECKING:  # pragma: no cover
     import pyvista
@@ -63,6 +63,7 @@ def plot_force_map(design: "Design", currents: Sequence[float] | None = None, *,
     f = np.asarray(cloud[F_N])
     fmag = np.linalg.norm(f, axis=1)
     fmax = float(fmag.max()) if fmag.size else 0.0
+    colour = "no force: all coils at 0 A"
     n = int(round(math.sqrt(cloud.n_points))) or 1
     spacing_mm = 2e3 * design.workspace.half_width_m / max(n - 1, 1)
     mm = _mm(cloud)
@@ -74,15 +75,17 @@ def plot_force_map(design: "Design", currents: Sequence[float] | None = None, *,
         mm["arrow"] = unit * np.maximum(np.sqrt(fmag / fmax), MIN_ARROW)[:, None]
         glyphs = mm.glyph(orient="arrow", scale="arrow", factor=0.95 * spacing_mm,
                           geom=pv.Arrow(tip_length=0.35, tip_radius=0.15, shaft_radius=0.05))
-        lo = max(fmax * 1e-3, float(fmag.min()) * 1e3, 1e-9)
+        lo, hi = round_range(max(fmax * 1e-3, float(fmag.min()) * 1e3, 1e-9), fmax * 1e3,
+                             log=True)  # round ends: a labelled tick at the bar's top
+        colour = f"colour: F (mN), log scale {lo:g}..{hi:g}"
         p.add_mesh(glyphs, scalars=F_MN, cmap="plasma", log_scale=True,
-                   clim=(lo, fmax * 1e3), name="force-arrows",
-                   scalar_bar_args=_bar("F (mN)", fmt=_log_fmt(lo, fmax * 1e3)))
+                   clim=(lo, hi), name="force-arrows",
+                   scalar_bar_args=_bar("F (mN)", fmt=_log_fmt(lo, hi)))
     plane = pv.Plane(center=(0, 0, h * 1e3), i_size=2e3 * design.workspace.half_width_m,
                      j_size=2e3 * design.workspace.half_width_m)
     p.add_mesh(plane, color="#dddddd", opacity=0.25)
     _title(p, f"Force on the magnet ({_magnet_text(design, moment)}) at z = {h * 1e3:.0f} mm\n"
-              f"largest: {fmax * 1e3:.4g} mN; {currents_text(cur)}\n"
+              f"largest: {fmax * 1e3:.4g} mN; {currents_text(cur)}; {colour}\n"
               f"arrow length ~ square root of the force (at least {MIN_ARROW:g} of the "
               f"largest)", font_size=11)
     _fit_camera(p, _axes(p), elevation_deg=50.0)

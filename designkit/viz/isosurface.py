@@ -100,7 +100,7 @@ def plot_force_isosurface(design: "Design", currents: Sequence[float] | None = N
              f"{float(vol.field_data[REACH_M][0]) * 1e3:.0f} mm" if REACH_M in vol.field_data
              else "")
     _title(p, f"Where the magnet ({_magnet_text(design, moment)}) feels Fz = +{lmn:g} mN "
-              f"(red, push up) and -{lmn:g} mN (blue, pull down); {currents_text(cur)}\n"
+              f"(colour red, push up) and -{lmn:g} mN (blue, pull down); {currents_text(cur)}\n"
               f"the force is larger between the surfaces and the coils{reach}\n"
               f"surfaces cut flat by the grey box: at z = {b[4]:.0f} mm (bottom of the "
               f"workspace), z = {b[5]:.0f} mm and x, y = +-{b[1]:.0f} mm", font_size=10)

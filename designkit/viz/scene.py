@@ -88,7 +88,8 @@ def plot_array_scene(design: "Design", currents: Sequence[float] | None = None, 
               f"{c.inner_radius_m * 1e3:.0f}/{c.outer_radius_m * 1e3:.0f}/"
               f"{c.length_m * 1e3:.0f} mm, {c.turns} turns\n"
               f"magnet ({_magnet_text(design, moment)}) at the design point "
-              f"z = {design.optimize.height_m * 1e3:.0f} mm; {currents_text(cur)}",
+              f"z = {design.optimize.height_m * 1e3:.0f} mm; {currents_text(cur)}; windings "
+              f"coloured by their current, linear scale {-imax:+.3g}..{imax:+.3g} A",
            font_size=10)
     _fit_camera(p, _axes(p), elevation_deg=22.0)
     return p

@@ -14,7 +14,7 @@ from .physics import (_add_field_arrays, _footprint_half_m, array_field, inside_
                       magnet_moment, resolve_currents)
 from .scene import scene_meshes
 from .style import (_bar, currents_text, _log_fmt, _magnet_text, _mm, _nice_bounds, _plotter,
-                    _title)
+                    _title, round_range)
 
 if TYPE_CHECKING:  # pragma: no cover
     import pyvista
@@ -76,13 +76,36 @@ def _drop_solids(mesh):
     return mesh.extract_points(~solid, adjacent_cells=False)
 
 
+def _above(mesh, z_min_m: float):
+    """The slice without the points below ``z_min_m``."""
+    keep = np.asarray(mesh.points)[:, 2] >= z_min_m - 1e-12
+    return mesh if keep.all() else mesh.extract_points(keep, adjacent_cells=False)
+
+
+def _colour_range(values, unit: str) -> tuple[float, float, str]:
+    """(lo, hi, note): the data range on round ends (a tick at the bar's top); a floor more
+    than 4 decades below the top is clipped, and the note says so."""
+    values = np.asarray(values, float)
+    values = values[np.isfinite(values)]
+    hi = float(values.max()) if values.size else 1.0
+    hi = hi if hi > 0 else 1.0
+    lo = max(float(values.min()), 1e-9) if values.size else hi * 1e-4
+    note = ""
+    if lo < hi * 1e-4:
+        lo = hi * 1e-4
+        note = f"; colours below {lo:.2g} {unit} clipped"
+    lo, hi = round_range(lo, hi, log=True)
+    return lo, hi, note
+
+
 def plot_slices(design: "Design", currents: Sequence[float] | None = None, *,
                 quantity: Literal["B", "F"] = "B", moment=None, height_m: float | None = None,
                 quality: Quality = "full", window_size=(1500, 640), data=None,
                 blocks=None) -> "pyvista.Plotter":
     """Magnitude of B (mT) or of the force on the magnet (mN) on the vertical slice y = 0 (left)
-    and on a horizontal slice at the design height (right); one log colour scale shared by both,
-    the coils' outlines and, for the force, the contour of the human threshold (0.8 mN)."""
+    and on a horizontal slice at the design height (right); one log colour scale shared by both
+    (each title says so), the coils' outlines and, for the force, the contour of the human
+    threshold (0.8 mN); the force only where the magnet's centre can be (z >= workspace z_min)."""
     pv = _pv()
     if quantity not in ("B", "F"):
         raise BadInputError("quantity", "'B' or 'F'", quantity)
@@ -94,16 +117,13 @@ def plot_slices(design: "Design", currents: Sequence[float] | None = None, *,
     name = B_MT if quantity == "B" else F_MN
     # points inside a core or a winding are not in air: they are left out of the picture
     vert, horiz = (_drop_solids(mesh) for mesh in (vert, horiz))
-    values = np.r_[np.asarray(vert[name]), np.asarray(horiz[name])]
-    # the colour range is the data range (log scale: the near-singular values over a core's
-    # rim stay visible); only a floor 4 decades down is clipped, and then the title says so
-    hi = float(values.max()) if values.size else 1.0
-    hi = hi if hi > 0 else 1.0
-    lo = max(float(values.min()), 1e-9)
-    clip_note = ""
-    if lo < hi * 1e-4:
-        lo = hi * 1e-4
-        clip_note = f"; colours below {lo:.2g} {'mT' if quantity == 'B' else 'mN'} clipped"
+    floor_note = ""
+    if quantity == "F":  # the force only where the magnet's centre can be
+        vert = _above(vert, design.workspace.z_min_m)
+        floor_note = (f"; blank below z = {design.workspace.z_min_m * 1e3:g} mm, where the "
+                      "magnet's centre cannot be")
+    lo, hi, clip_note = _colour_range(np.r_[np.asarray(vert[name]), np.asarray(horiz[name])],
+                                      "mT" if quantity == "B" else "mN")
     label = "B (mT)" if quantity == "B" else "F (mN)"
     threshold_mn = design.render.threshold_n * 1e3
     z_low_m = -0.25 * design.coil.length_m  # show the top quarter of the coils
@@ -118,6 +138,8 @@ def plot_slices(design: "Design", currents: Sequence[float] | None = None, *,
                    scalar_bar_args=_bar(label, fmt=_log_fmt(lo, hi), position_x=0.88,
                                         width=0.045))
         notes = [currents_text(cur), "cyan dot: design point" + clip_note]
+        scale = (f"colour: {label}, log scale {lo:g}..{hi:g}, one bar (right) for both "
+                 "panels")
         if quantity == "F" and lo < threshold_mn < hi:
             iso = mm.contour([threshold_mn], scalars=name)
             if iso.n_points:
@@ -131,16 +153,18 @@ def plot_slices(design: "Design", currents: Sequence[float] | None = None, *,
                    render_points_as_spheres=True)
         bounds = list(mm.bounds)
         if view == "xz":
-            where = "vertical slice y = 0 (coils in outline below; blank: inside iron)"
+            where = ("vertical slice y = 0 (coils in outline below; blank: inside iron"
+                     f"{floor_note})")
             bounds[4] = z_low_m * 1e3
             p.view_xz()
         else:
             where = f"horizontal slice z = {h * 1e3:.0f} mm"
             p.view_xy()
-        _title(p, f"{head}\n{where}\n" + "; ".join(notes), font_size=10)
+        _title(p, f"{head}\n{where}\n{scale}\n" + "; ".join(notes), font_size=10)
         bounds, counts = _nice_bounds(bounds)
         p.show_bounds(bounds=bounds, xtitle="x (mm)", ytitle="y (mm)", ztitle="z (mm)",
-                      color="black", font_size=9, grid=False, location="front",
+                      color="black", grid=False, location="front",
+                      font_size=max(6, min(9, round(9 * p.window_size[0] / 1500))),
                       ticks="outside", show_yaxis=(view == "xy"), show_zaxis=(view == "xz"),
                       fmt="%g", **counts)
         p.enable_parallel_projection()

@@ -97,12 +97,19 @@ def _nice_bounds(bounds) -> tuple[list[float], dict]:
     return b, counts
 
 
+def axis_font_size(window_width_px: int) -> int:
+    """Tick-label font size for a 3-D view this wide: 10 at 1024 px, smaller in proportion
+    (at least 6), so that VTK's 8-10 labels per axis do not run into each other."""
+    return int(max(6, min(10, round(10 * window_width_px / 1024))))
+
+
 def _axes(p, mesh_bounds=None, location="outer", **kw):
     """Axes in mm on round tick values (the bounds are widened to the nearest round ticks)."""
     b, counts = _nice_bounds(p.bounds if mesh_bounds is None else mesh_bounds)
     p.show_bounds(bounds=b, xtitle="x (mm)", ytitle="y (mm)", ztitle="z (mm)",
-                  color="black", font_size=10, grid=False, location=location, ticks="outside",
-                  minor_ticks=False, fmt="%g", **counts, **kw)
+                  color="black", font_size=axis_font_size(p.window_size[0] / p.shape[1]),
+                  grid=False, location=location, ticks="outside", minor_ticks=False, fmt="%g",
+                  **counts, **kw)
     return b
 
 
@@ -171,12 +178,34 @@ def bar_label_values(lo: float, hi: float, log: bool) -> list[float]:
             vals = [m * 10.0 ** e for e in range(math.floor(math.log10(lo)),
                                                 math.ceil(math.log10(hi)) + 1) for m in mants]
             vals = [x for x in vals if lo * (1 - 1e-9) <= x <= hi * (1 + 1e-9)]  # lo > 0 here
+            if vals and hi > vals[-1] * (1 + 1e-9) and _round_125(hi):
+                vals.append(hi)  # a round top (round_range) is labelled
             if len(vals) <= 7:
                 break
         return vals if len(vals) >= 2 else [lo, hi]
     a, b, step = nice_ticks(lo, hi)
     vals = [a + k * step for k in range(int(round((b - a) / step)) + 1)]
     return [x for x in vals if lo - 1e-9 * step <= x <= hi + 1e-9 * step]
+
+
+def round_range(lo: float, hi: float, log: bool) -> tuple[float, float]:
+    """A colour range widened to round ends (1, 2, 5 x 10^k on a log bar, :func:`nice_ticks`
+    on a linear one), so that the bar has a labelled tick at its top and bottom."""
+    if not (hi > lo):
+        return lo, hi
+    if log and lo > 0:
+        steps = [m * 10.0 ** e for e in range(math.floor(math.log10(lo)) - 1,
+                                             math.ceil(math.log10(hi)) + 2) for m in (1, 2, 5)]
+        return (max(x for x in steps if x <= lo * (1 + 1e-9)),
+                min(x for x in steps if x >= hi * (1 - 1e-9)))
+    a, b, _ = nice_ticks(lo, hi)
+    return a, b
+
+
+def _round_125(x: float) -> bool:
+    """True for 1, 2 or 5 x 10^k."""
+    mant = x / 10.0 ** math.floor(math.log10(x) + 1e-12)
+    return min(abs(mant - m) for m in (1, 2, 5, 10)) < 1e-9
 
 
 def _clear_bar_titles(plotter) -> None:

@@ -1,0 +1,89 @@
+"""Ctrl-C while a command works: one line on stderr, exit 130, nothing left behind.
+
+Each command runs in its own process; a wrapper around its main computation writes a flag file
+when the work starts, the test waits for it, lets the work run a little, sends SIGINT and
+checks the exit code, the single line and that the working folder is as empty as before.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+DRIVER = """
+import importlib, pathlib, sys, time
+target, flag, hold = sys.argv[1], sys.argv[2], float(sys.argv[3])
+mod, _, name = target.rpartition(".")
+module = importlib.import_module(mod)
+original = getattr(module, name)
+def started(*args, **kwargs):
+    pathlib.Path(flag).write_text("started")
+    time.sleep(hold)  # a step that takes this long (its earlier outputs already staged)
+    return original(*args, **kwargs)
+setattr(module, name, started)
+from designkit.cli import main
+sys.exit(main(sys.argv[4:]))
+"""
+
+# command line, the computation the flag wraps, seconds of work before Ctrl-C (a negative
+# number: the wrapped step holds that long before it starts, Ctrl-C comes within it)
+CASES = {
+    "report": (["report", "--quick", "--out", "rep"], "designkit.commands.report._run", 3.0),
+    "optimize": (["optimize", "--out", "opt"], "designkit.commands.optimize.solve_device", 2.0),
+    "map": (["map", "--out", "new/map.npz"], "designkit.fieldmap.build", 3.0),
+    "scene": (["scene", "compile", "wedge", "--out", "new/scene.npz"],
+              "designkit.render.force_constant", 2.0),
+    "viz": (["viz", "fieldlines", "--vtk", "vtk", "--out", "new/f.png"],
+            "designkit.viz.export_vtk", 2.0),
+    "fem": (["fem", "--level", "1", "--out", "fem"], "designkit.commands.fem.solve", 4.0),
+    "cad": (["cad", "--out", "cad"], "cad.export.export_all", 4.0),
+    "run": (["run", "--simulate", "--out", "run"], "designkit.commands.run.run_simulation", 3.0),
+    "sweep": (["sweep", "--param", "inner_radius_m=0.006:0.01:3", "--workers", "1", "--out",
+               "sw"], "designkit.commands.sweep.plot", -60.0),
+}
+
+
+FAST = ("map", "scene", "sweep")
+"""In the default suite; the others take tens of seconds each (slow)."""
+
+
+@pytest.mark.parametrize("command", [c if c in FAST else pytest.param(c, marks=pytest.mark.slow)
+                                     for c in sorted(CASES)])
+def test_ctrl_c_is_one_line_exit_130_and_leaves_nothing(tmp_path, command):
+    args, target, work_s = CASES[command]
+    if command == "fem" and shutil.which("getdp") is None:
+        pytest.skip("needs getdp")
+    work = tmp_path / "work"
+    work.mkdir()
+    flag = tmp_path / "started"
+    env = dict(os.environ, PYTHONPATH=str(ROOT), PYVISTA_OFF_SCREEN="true", MPLBACKEND="Agg")
+    hold = max(-work_s, 0.0)
+    proc = subprocess.Popen([sys.executable, "-c", DRIVER, target, str(flag), str(hold), *args,
+                             *(["--no-progress"] if command not in ("viz", "fem") else [])],
+                            cwd=work, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        deadline = time.monotonic() + 600
+        while not flag.exists() and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert flag.exists(), "the work never started"
+        time.sleep(max(work_s, 1.0))
+        assert proc.poll() is None, "the work ended before Ctrl-C"
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert proc.returncode == 130, err[-3000:]
+    assert lines == [f"designkit {command}: interrupted; nothing written"], err[-3000:]
+    assert sorted(p.name for p in work.rglob("*")) == []
