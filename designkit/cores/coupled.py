@@ -159,7 +159,10 @@ class ArraySystem:
         return self.factors[:, None] * np.concatenate(rows, axis=0)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
-        return lu_solve(self._lu, rhs)
+        if self.n_unknowns > 2000:
+            return lu_solve(self._lu, rhs)
+        with one_blas_thread():  # a single core's system: threads wait longer than compute
+            return lu_solve(self._lu, rhs)
 
     # ------------------------------------------------------------------ coil sources
     def coil_solution(self) -> np.ndarray:
