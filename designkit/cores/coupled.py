@@ -62,6 +62,47 @@ def _cylinder_magnet(moment, magnet_size_m):
     return a, length, u, mm / (math.pi * a * a * length)
 
 
+_D4 = [np.array(g, float) for g in (
+    [[0, -1], [1, 0]], [[-1, 0], [0, -1]], [[0, 1], [-1, 0]], [[-1, 0], [0, 1]],
+    [[1, 0], [0, -1]], [[0, 1], [1, 0]], [[0, -1], [-1, 0]])]
+"""The elements of the square's symmetry group but the identity (x, y part; z is kept)."""
+
+
+def mode_transform(model: CoreModel, g: np.ndarray) -> np.ndarray:
+    """T (n_unknowns, n_unknowns): the unknowns of ``model`` whose field is g H_u(g^-1 p), for
+    an orthogonal 2 x 2 ``g`` acting about the core's axis (rotation by a or reflection
+    R(a) diag(1, -1)). m = 0 fields are poloidal and axisymmetric (T = 1); a charge density
+    c cos(m phi) + s sin(m phi) becomes sigma(g^-1 phi): a rotation of (c, s) by m a, or with
+    the reflection (c, s) -> (c cos ma + s sin ma, c sin ma - s cos ma)."""
+    n0, n1 = model.n0, model.n1
+    t = np.eye(model.n_unknowns)
+    a = math.atan2(g[1, 0], g[0, 0])
+    flip = np.linalg.det(g) < 0
+    for m in range(1, model.m_max + 1):
+        c, s = math.cos(m * a), math.sin(m * a)
+        rot = np.array([[c, s], [s, -c]]) if flip else np.array([[c, -s], [s, c]])
+        i = n0 + 2 * (m - 1) * n1
+        for r in range(2):
+            for q in range(2):
+                t[i + r * n1:i + (r + 1) * n1, i + q * n1:i + (q + 1) * n1] = \
+                    rot[r, q] * np.eye(n1)
+    return t
+
+
+def _block_by_symmetry(cache: dict, mi: CoreModel, mj: CoreModel, rel: tuple):
+    """The cross block of upright cores at relative placement ``rel`` (a :func:`_rel_key`)
+    from a cached block at its image under the square's symmetries, or None: block(g d) =
+    T_j(g) block(d) T_i(g)^T (the rings' azimuths and the field rules are symmetric under the
+    group, :func:`mode_transform`)."""
+    d = np.array(rel[:3])
+    for g in _D4:
+        src = np.r_[g.T @ d[:2], d[2]]  # g^-1 d
+        key = (id(mi), id(mj), tuple(np.round(src, 9)) + rel[3:])
+        if key in cache:
+            return mode_transform(mj, g) @ cache[key] @ mode_transform(mi, g).T
+    return None
+
+
 class ArraySystem:
     """All cores of a :class:`~designkit.array.CoilArray` solved together (linear cores).
 
@@ -94,6 +135,7 @@ class ArraySystem:
         self._coil_solution = None
 
     def _assemble(self, mat, cache):
+        upright = all(p.is_identity_rotation for p in self.poses)
         for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
             sj = slice(self.offsets[jj], self.offsets[jj + 1])
             mat[sj, sj] = mj.self_block()
@@ -102,7 +144,8 @@ class ArraySystem:
                     continue
                 key = (id(mi), id(mj), _rel_key(pi, pj))
                 if key not in cache:
-                    cache[key] = self._cross_block(mi, pi, mj, pj)
+                    block = _block_by_symmetry(cache, mi, mj, key[2]) if upright else None
+                    cache[key] = self._cross_block(mi, pi, mj, pj) if block is None else block
                 si = slice(self.offsets[ii], self.offsets[ii + 1])
                 mat[sj, si] = -mj.factors()[:, None] * cache[key]
 
