@@ -44,7 +44,8 @@ def build(design, *, spacing: float = 0.01, log_step: float = 0.25,
           rz_rho_scale: float = 0.05, sensor_mode_rz_step: float = 2.5e-4,
           sensor_mode_rz_log_step: float = 0.04, magnet_rz_step: float = 5e-4,
           magnet_rz_log_step: float = 0.02, box=None, n_check: int = 400,
-          progress: bool = True, array: CoilArray | None = None) -> dict:
+          progress: bool = True, array: CoilArray | None = None,
+          region: dict | None = None) -> dict:
     """Compute the map v2 of ``design``: ``{"arrays": {...}, "meta": {...}}`` (not yet written).
 
     Parameters
@@ -77,6 +78,8 @@ def build(design, *, spacing: float = 0.01, log_step: float = 0.25,
     n_check : int
         Random points where the finished map is compared with direct evaluation of the coupled
         model (meta 'errors'; each costs a full coupled evaluation).
+    region : dict or None
+        What ``box`` was made for (a scene map: :mod:`.region`), stored as meta 'region'.
     """
     s = BuildSettings.checked(spacing, log_step, cell_ratio, layer_ratio, degree, fit_nodes,
                               sensor_mode_tolerance, rz_rho_scale, sensor_mode_rz_step,
@@ -90,6 +93,8 @@ def build(design, *, spacing: float = 0.01, log_step: float = 0.25,
     t0, c0 = time.perf_counter(), time.process_time()
     arrays, row_max = _arrays(phys, arr, plan, smp, s.fit_nodes)
     meta = _meta(design, arr, phys, plan, s, arrays, smp)
+    if region is not None:
+        meta["region"] = dict(region)
     meta["errors"] = _errors(mf.MapFile.from_arrays(arrays, meta), plan, smp, row_max)
     smp.seconds["fits and check"] = time.perf_counter() - t0
     smp.cpu_seconds["fits and check"] = time.process_time() - c0
