@@ -56,11 +56,13 @@ def run(args: argparse.Namespace) -> int:
     margin = in_range("--scene-margin", args.scene_margin, 0.0, 100.0, "mm")
     design = load_design(args.design)
     box = region = None
+    extra = {}
     if args.scene is not None:
         box, region = scene_box(args.scene, design, margin * 1e-3)
+        extra = fieldmap.SCENE_BUILD
     t0 = time.perf_counter()
     data = fieldmap.build(design, spacing=spacing * 1e-3, progress=show_progress(args),
-                          box=box, region=region)
+                          box=box, region=region, **extra)
     path = fieldmap.write(out, data)
     meta = data["meta"]
     err = meta["errors"]

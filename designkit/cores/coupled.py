@@ -28,6 +28,7 @@ from ..pose import Pose
 from ..winding_geometry import WindingGeometry
 from .charges import gauss
 from .core_model import M_MAX, CoreModel, core_model
+from .symmetric_solve import SymmetricLU
 
 N_PHI_RING = 12
 """Azimuthal samples per collocation ring when projecting another core's / a winding's field."""
@@ -68,6 +69,14 @@ _D4 = [np.array(g, float) for g in (
 """The elements of the square's symmetry group but the identity (x, y part; z is kept)."""
 
 
+def mode_rotation(m: int, g: np.ndarray) -> np.ndarray:
+    """(2, 2): how the (cos, sin) coefficients of mode order m >= 1 change under g (2, 2)
+    (:func:`mode_transform`)."""
+    a = math.atan2(g[1, 0], g[0, 0])
+    c, s = math.cos(m * a), math.sin(m * a)
+    return np.array([[c, s], [s, -c]]) if np.linalg.det(g) < 0 else np.array([[c, -s], [s, c]])
+
+
 def mode_transform(model: CoreModel, g: np.ndarray) -> np.ndarray:
     """T (n_unknowns, n_unknowns): the unknowns of ``model`` whose field is g H_u(g^-1 p), for
     an orthogonal 2 x 2 ``g`` acting about the core's axis (rotation by a or reflection
@@ -76,11 +85,8 @@ def mode_transform(model: CoreModel, g: np.ndarray) -> np.ndarray:
     the reflection (c, s) -> (c cos ma + s sin ma, c sin ma - s cos ma)."""
     n0, n1 = model.n0, model.n1
     t = np.eye(model.n_unknowns)
-    a = math.atan2(g[1, 0], g[0, 0])
-    flip = np.linalg.det(g) < 0
     for m in range(1, model.m_max + 1):
-        c, s = math.cos(m * a), math.sin(m * a)
-        rot = np.array([[c, s], [s, -c]]) if flip else np.array([[c, -s], [s, c]])
+        rot = mode_rotation(m, g)
         i = n0 + 2 * (m - 1) * n1
         for r in range(2):
             for q in range(2):
@@ -99,8 +105,22 @@ def _block_by_symmetry(cache: dict, mi: CoreModel, mj: CoreModel, rel: tuple):
         src = np.r_[g.T @ d[:2], d[2]]  # g^-1 d
         key = (id(mi), id(mj), tuple(np.round(src, 9)) + rel[3:])
         if key in cache:
-            return mode_transform(mj, g) @ cache[key] @ mode_transform(mi, g).T
+            return _turn(_turn(cache[key], mj, g).T, mi, g).T  # T_j B T_i^T
     return None
+
+
+def _turn(b: np.ndarray, model: CoreModel, g: np.ndarray) -> np.ndarray:
+    """T(g) @ b for T = :func:`mode_transform` (model, g), without forming T: each mode
+    order's (cos, sin) row blocks mixed by its 2 x 2 rotation."""
+    out = b.copy()
+    n0, n1 = model.n0, model.n1
+    for m in range(1, model.m_max + 1):
+        r = mode_rotation(m, g)
+        i = n0 + 2 * (m - 1) * n1
+        c, s = b[i:i + n1], b[i + n1:i + 2 * n1]
+        out[i:i + n1] = r[0, 0] * c + r[0, 1] * s
+        out[i + n1:i + 2 * n1] = r[1, 0] * c + r[1, 1] * s
+    return out
 
 
 class ArraySystem:
@@ -131,7 +151,9 @@ class ArraySystem:
             self._assemble(mat, cache)
         self.n_blocks = len(cache)
         self.n_unknowns = n
-        self._lu = lu_factor(mat) if n else None
+        # identical upright cores on a symmetric lattice: one LU per isotypic component
+        self._sym = SymmetricLU.build(mat, self, _D4, mode_rotation) if n else None
+        self._lu = lu_factor(mat) if n and self._sym is None else None
         self._coil_solution = None
 
     def _assemble(self, mat, cache):
@@ -202,6 +224,8 @@ class ArraySystem:
         return self.factors[:, None] * np.concatenate(rows, axis=0)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
+        if self._sym is not None:
+            return self._sym.solve(rhs)
         if self.n_unknowns > 2000:
             return lu_solve(self._lu, rhs)
         with one_blas_thread():  # a single core's system: threads wait longer than compute
