@@ -169,3 +169,20 @@ def test_cli_map_scene_refuses_a_scene_of_another_design(tmp_path, capsys):
                  str(tmp_path / "m.npz"), "--quiet"]) == 1
     assert "--scene-margin" in capsys.readouterr().err
     assert fieldmap.scene_band_m(Scene.load(other)) == 0.0
+
+
+def test_cli_scene_compile_builds_its_scene_map(tmp_path):
+    toml = tmp_path / "d.toml"
+    toml.write_text(design_to_toml(SMALL))
+    out, mp = tmp_path / "s.npz", tmp_path / "m.npz"
+    assert main(["scene", "compile", "hemisphere", "--design", str(toml), "--build-map",
+                 str(mp), "--n-side", "5", "--out", str(out), "--quiet"]) == 0
+    fm = fieldmap.load(mp, SMALL)
+    lo, hi = fieldmap.default_box(SMALL)
+    want = fieldmap.scene_region([Hemisphere()], 0.0, lo, hi)
+    np.testing.assert_allclose(fm.bounds[0], want[0])
+    np.testing.assert_allclose(fm.bounds[1], want[1])
+    assert fm.meta["region"]["objects"] == ["half_ball"]
+    assert Scene.load(out, fm.meta["design_sha256"]).lam_n_per_m > 0
+    assert main(["scene", "compile", "hemisphere", "--map", str(mp), "--build-map",
+                 str(tmp_path / "m2.npz"), "--out", str(out), "--quiet"]) == 1

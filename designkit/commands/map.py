@@ -38,15 +38,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_progress_argument(parser)
 
 
-def scene_box(path: Path, design, margin_m: float):
-    """(box, meta 'region') of the scene map for the scene file ``path`` (compiled for
-    ``design``: a scene of another design is refused like the runner does)."""
+def scene_args(path: Path, design, margin_m: float) -> dict:
+    """:func:`fieldmap.build` arguments of the scene map for the scene file ``path``
+    (compiled for ``design``: a scene of another design is refused like the runner does)."""
     sc = Scene.load(path, design.spec_hash())
-    box = fieldmap.scene_region(sc.objects, fieldmap.scene_band_m(sc),
-                                *fieldmap.default_box(design), margin_m=margin_m)
-    kinds = [o.kind for o in sc.objects]
-    return box, {"scene": Path(path).name, "objects": kinds, "margin_m": margin_m,
-                 "rows": sc.meta.get("rows", "force")}
+    return fieldmap.scene_build_args(design, sc.objects, fieldmap.scene_band_m(sc), margin_m,
+                                     {"scene": Path(path).name,
+                                      "objects": [o.kind for o in sc.objects],
+                                      "rows": sc.meta.get("rows", "force")})
 
 
 def run(args: argparse.Namespace) -> int:
@@ -55,14 +54,9 @@ def run(args: argparse.Namespace) -> int:
     spacing = in_range("--spacing", args.spacing, 0.5, 100.0, "mm")
     margin = in_range("--scene-margin", args.scene_margin, 0.0, 100.0, "mm")
     design = load_design(args.design)
-    box = region = None
-    extra = {}
-    if args.scene is not None:
-        box, region = scene_box(args.scene, design, margin * 1e-3)
-        extra = fieldmap.SCENE_BUILD
+    extra = {} if args.scene is None else scene_args(args.scene, design, margin * 1e-3)
     t0 = time.perf_counter()
-    data = fieldmap.build(design, spacing=spacing * 1e-3, progress=show_progress(args),
-                          box=box, region=region, **extra)
+    data = fieldmap.build(design, spacing=spacing * 1e-3, progress=show_progress(args), **extra)
     path = fieldmap.write(out, data)
     meta = data["meta"]
     err = meta["errors"]

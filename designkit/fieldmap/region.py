@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import BadInputError
-from .plan import _nodes, uniform_axis
+from .plan import _nodes, default_box, uniform_axis
 
 SPACING_M = 0.002
 """Grid step (m) on which the objects' signed distances are sampled."""
@@ -52,3 +52,13 @@ def scene_band_m(scene) -> float:
     """The contact band (m) of a loaded scene's law (0 for the penetration law)."""
     law = scene.meta.get("law", {})
     return float(law.get("contact_band_m", 0.0)) if law.get("name") == "constraint" else 0.0
+
+
+def scene_build_args(design, objects, band_m: float, margin_m: float = MARGIN_M,
+                     region: dict | None = None) -> dict:
+    """The keyword arguments of :func:`designkit.fieldmap.build` for the scene map of
+    ``objects`` on ``design``: its box (:func:`scene_region` in the design's box), meta
+    'region' (``region`` plus the margin) and :data:`SCENE_BUILD`."""
+    box = scene_region(objects, band_m, *default_box(design), margin_m=margin_m)
+    return {"box": box, "region": {**(region or {}), "margin_m": float(margin_m)},
+            **SCENE_BUILD}
