@@ -1,5 +1,5 @@
 """Question: does the map file v2 meet its targets on the default design -- file <= 5 MB, built in
-<= 30 s, actuation() <= 20 us for one point given as (3,) or (1, 3) and <= 5 ms for 1e4
+<= 5 s, actuation() <= 20 us for one point given as (3,) or (1, 3) and <= 5 ms for 1e4
 points with numpy alone, interpolation error <= 1e-3 of each row's largest |A| against direct
 evaluation of the coupled model -- and how fast are the localizer's per-iteration lookups
 (sensor_induced_field, bias_force) and the runner's row / coil subsets?

@@ -21,6 +21,8 @@ import numpy as np
 from scipy import sparse
 from scipy.linalg import lu_factor, lu_solve
 
+from .._blas import one_blas_thread
+
 TOL_M = 1e-9
 """Two core positions closer than this (m) are the same."""
 
@@ -114,18 +116,22 @@ class SymmetricLU:
                                                       np.concatenate(cc))), shape=(n, n))
         qt = q.T.tocsr()
         out = []
-        for sl in blocks:
-            qs = q[:, sl]
-            d = np.asarray(qt[sl] @ mat)  # Q_s^T M, (n_s, n)
-            b = np.ascontiguousarray(np.asarray(qs.T @ d.T).T)  # Q_s^T M Q_s
-            out.append((sl, lu_factor(b, overwrite_a=True)))
+        # the blocks are a fraction of the whole: on a busy machine BLAS threads would spin
+        # longer than they compute
+        with one_blas_thread():
+            for sl in blocks:
+                qs = q[:, sl]
+                d = np.asarray(qt[sl] @ mat)  # Q_s^T M, (n_s, n)
+                b = np.ascontiguousarray(np.asarray(qs.T @ d.T).T)  # Q_s^T M Q_s
+                out.append((sl, lu_factor(b, overwrite_a=True)))
         return cls(q, out)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         y = np.asarray(self.q.T @ rhs)
         x = np.empty_like(y)
-        for sl, lu in self.blocks:
-            x[sl] = lu_solve(lu, y[sl])
+        with one_blas_thread():
+            for sl, lu in self.blocks:
+                x[sl] = lu_solve(lu, y[sl])
         return np.asarray(self.q @ x)
 
 
