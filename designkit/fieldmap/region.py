@@ -22,8 +22,8 @@ MARGIN_M = 0.005
 first fixes before contact."""
 SCENE_BUILD = {"sensor_mode_rz_step": 1e-3, "sensor_mode_rz_log_step": 0.08}
 """Build settings of a scene map beyond its box: the sensor field's mode tables on 1 mm and
-8 % steps (a quarter of the full map's nodes; their error at the hemisphere's build check
-stays within the full map's, measured by ``studies/bench_map.py --scene``, docs/fieldmap.md)."""
+8 % steps, an eighth of the full map's nodes (the sensor field's error in the hemisphere's
+region, against the full map's: ``studies/bench_map.py --scene``, docs/fieldmap.md)."""
 
 
 def scene_region(objects, band_m: float, lower, upper, margin_m: float = MARGIN_M,
