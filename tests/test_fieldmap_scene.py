@@ -82,6 +82,19 @@ def test_cross_blocks_from_their_images_equal_the_computed_blocks():
         assert np.abs(got - want).max() < 1e-12 * np.abs(want).max()
 
 
+def test_mode_transform_is_an_orthogonal_representation_and_turn_applies_it():
+    model = cp._core_model_of(CoilArray.from_design(default_design()).coils[0], cp.M_MAX)
+    els = [np.eye(2)] + cp._D4
+    t = {k: cp.mode_transform(model, g) for k, g in enumerate(els)}
+    b = np.random.default_rng(2).random((model.n_unknowns, 7))
+    for a, ga in enumerate(els):
+        np.testing.assert_allclose(t[a] @ t[a].T, np.eye(model.n_unknowns), atol=1e-12)
+        np.testing.assert_allclose(cp._turn(b, model, ga), t[a] @ b, atol=1e-12)
+        for c, gc in enumerate(els):  # T(g h) = T(g) T(h)
+            np.testing.assert_allclose(cp.mode_transform(model, ga @ gc), t[a] @ t[c],
+                                       atol=1e-12)
+
+
 # ---------------------------------------------------------------------------- scene maps
 def test_scene_region_of_the_thesis_hemisphere_is_its_closed_form_reach():
     lo, hi = fieldmap.default_box(default_design())
