@@ -67,6 +67,29 @@ def test_bias_force_symmetry_of_the_coupled_array():
                                atol=1e-12 * np.abs(f).max())
 
 
+def test_split_lu_only_for_symmetric_arrays_and_it_solves_the_system():
+    coil = CoilArray.from_design(default_design()).coils[0]
+    pair = CoilArray(tuple(coil.replace(pose=Pose(position=(x, 0.0, -0.05)))
+                           for x in (-0.025, 0.025)))
+    odd = CoilArray(tuple(coil.replace(pose=Pose(position=(x, y, -0.05)))
+                          for x, y in ((0.0, 0.0), (0.05, 0.0), (0.02, 0.06))))
+    assert odd.coupled()._sym is None
+    system = pair.coupled()
+    assert system._sym is not None
+    # the coupled columns solve the assembled system: the single-core self blocks plus the
+    # cross block, rebuilt here directly
+    m, poses = system.models[0], system.poses
+    n = m.n_unknowns
+    mat = np.zeros((2 * n, 2 * n))
+    for j in range(2):
+        mat[j * n:(j + 1) * n, j * n:(j + 1) * n] = m.self_block()
+        i = 1 - j
+        mat[j * n:(j + 1) * n, i * n:(i + 1) * n] = -m.factors()[:, None] * \
+            cp.ArraySystem._cross_block(m, poses[i], m, poses[j])
+    b = np.random.default_rng(0).random((2 * n, 3))
+    np.testing.assert_allclose(mat @ system.solve(b), b, atol=1e-10)
+
+
 def test_cross_blocks_from_their_images_equal_the_computed_blocks():
     design = default_design()
     coil = CoilArray.from_design(design).coils[0]

@@ -124,7 +124,12 @@ class SymmetricLU:
                 d = np.asarray(qt[sl] @ mat)  # Q_s^T M, (n_s, n)
                 b = np.ascontiguousarray(np.asarray(qs.T @ d.T).T)  # Q_s^T M Q_s
                 out.append((sl, lu_factor(b, overwrite_a=True)))
-        return cls(q, out)
+        res = cls(q, out)
+        # the split is exact when the components are right: check it on a random vector
+        rhs = np.random.default_rng(1).standard_normal(n)
+        if not np.linalg.norm(mat @ res.solve(rhs) - rhs) <= 1e-9 * np.linalg.norm(rhs):
+            return None
+        return res
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         y = np.asarray(self.q.T @ rhs)
