@@ -212,7 +212,8 @@ class ArraySystem:
                 ring = mj.ring_points(nphi)
                 glob = ring.reshape(-1, 3) @ pj.matrix.T + np.asarray(pj.position)
                 h = field_fn(glob) if cols is None else field_fn(glob, cols)  # (n, 3, k)
-                h = np.einsum("ba,nbk->nak", pj.matrix, h)  # to local j
+                if not pj.is_identity_rotation:
+                    h = np.einsum("ba,nbk->nak", pj.matrix, h)  # to local j
                 proj = mj.project(h.reshape(ring.shape[:2] + h.shape[1:]))
                 if cols is None:
                     out = proj
@@ -310,11 +311,10 @@ class ArraySystem:
             def src(glob, cols):
                 # H of the point dipole (magnet outside every core: r > 0 at ring points)
                 d = glob[:, None, :] - pos[None, cols, :]  # (n, k, 3)
-                r2 = np.einsum("nki,nki->nk", d, d)
-                inv_r = 1.0 / np.sqrt(r2)
-                mr = d @ m
-                h = (3.0 * d * (mr * inv_r ** 5)[..., None] - m * (inv_r ** 3)[..., None])
-                return np.swapaxes(h, 1, 2) / (4.0 * math.pi)
+                inv_r2 = 1.0 / np.einsum("nki,nki->nk", d, d)
+                inv_r3 = inv_r2 * np.sqrt(inv_r2) / (4.0 * math.pi)
+                a = 3.0 * (d @ m) * inv_r3 * inv_r2
+                return np.stack([d[..., i] * a - m[i] * inv_r3 for i in range(3)], axis=1)
         else:
             a, length, u, mag = _cylinder_magnet(m, magnet_size_m)
 
