@@ -34,5 +34,6 @@ __all__ = [
     "MapPhysics", "map_physics", "box_axes", "cell_layers", "default_box", "graded_axis",
     "layer_nodes", "rz_table_spec", "sources_top", "table_specs", "uniform_axis", "FieldMap",
     "check_output", "load", "write", "compute_magnet_table", "compute_mode_tables",
-    "coupled_modes", "mode_table_entry", "SCENE_BUILD", "scene_band_m", "scene_build_args", "scene_region",
+    "coupled_modes", "mode_table_entry", "SCENE_BUILD", "scene_band_m", "scene_build_args",
+    "scene_region",
 ]
