@@ -22,9 +22,9 @@ budget, the measured errors and costs, and the commands that measure them: docs/
 from .builder import FORMAT, FORMAT_VERSION, UNITS, BuildSettings, build
 from .cells import fit_layer, fit_layers
 from .physics import MapPhysics, map_physics
-from .region import SCENE_BUILD, scene_band_m, scene_build_args, scene_region
 from .plan import (box_axes, cell_layers, default_box, graded_axis, layer_nodes, rz_table_spec,
                    sources_top, table_specs, uniform_axis)
+from .region import SCENE_BUILD, scene_band_m, scene_build_args, scene_region
 from .storage import FieldMap, check_output, load, write
 from .tables import (compute_magnet_table, compute_mode_tables, coupled_modes,
                      mode_table_entry)
