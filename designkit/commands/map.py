@@ -3,7 +3,8 @@
 Samples the coupled array model of a design over its workspace box -- A(p), the magnet's bias
 force F0(p), the magnet-induced core field at the Hall sensors, the coils' field at the sensors,
 the saturation correction -- and writes one ``.npz`` file atomically (format:
-:mod:`firmware_io.mapfile`; built by :mod:`designkit.fieldmap`).
+:mod:`firmware_io.mapfile`; built by :mod:`designkit.fieldmap`). With ``--scene`` only the
+region the scene's objects can push in, plus a margin (:func:`designkit.fieldmap.scene_region`).
 """
 
 from __future__ import annotations
@@ -11,6 +12,8 @@ from __future__ import annotations
 import argparse
 import time
 from pathlib import Path
+
+from firmware_io.scene import Scene
 
 from .. import fieldmap
 from .._validate import in_range
@@ -23,9 +26,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--spacing", type=float, default=10.0,
                         help="x, y step in mm of the grid over magnet positions that carries "
                              "the bias force beyond the per-core tables (default 10)")
+    parser.add_argument("--scene", type=Path, default=None,
+                        help="compiled scene (designkit scene compile): map only the region its "
+                             "objects can push in, plus --scene-margin (the runner fails safe "
+                             "outside it)")
+    parser.add_argument("--scene-margin", type=float, default=5.0,
+                        help="margin around the scene's objects, mm (default 5)")
     parser.add_argument("--out", type=Path, default=Path("fieldmap.npz"),
                         help="output file, .npz (default ./fieldmap.npz)")
     add_progress_argument(parser)
+
+
+def scene_args(path: Path, design, margin_m: float) -> dict:
+    """:func:`fieldmap.build` arguments of the scene map for the scene file ``path``
+    (compiled for ``design``: a scene of another design is refused like the runner does)."""
+    sc = Scene.load(path, design.spec_hash())
+    return fieldmap.scene_build_args(design, sc.objects, fieldmap.scene_band_m(sc), margin_m,
+                                     {"scene": Path(path).name,
+                                      "objects": [o.kind for o in sc.objects],
+                                      "rows": sc.meta.get("rows", "force")})
 
 
 def run(args: argparse.Namespace) -> int:
@@ -33,9 +52,11 @@ def run(args: argparse.Namespace) -> int:
     out = fieldmap.check_output(args.out)
     check_output(out, folder=False)  # a folder that cannot be written: refused in < 1 s
     spacing = in_range("--spacing", args.spacing, 0.5, 100.0, "mm")
+    margin = in_range("--scene-margin", args.scene_margin, 0.0, 100.0, "mm")
     design = load_design(args.design)
+    extra = {} if args.scene is None else scene_args(args.scene, design, margin * 1e-3)
     t0 = time.perf_counter()
-    data = fieldmap.build(design, spacing=spacing * 1e-3, progress=show_progress(args))
+    data = fieldmap.build(design, spacing=spacing * 1e-3, progress=show_progress(args), **extra)
     path = fieldmap.write(out, data)
     meta = data["meta"]
     err = meta["errors"]

@@ -2,9 +2,9 @@
 
 OBJECT is plane, hemisphere, half-cylinder, wedge (thesis sizes) or an STL/PLY file (closed
 mesh, millimetres unless --mesh-scale). Without --lambda the force constant (thesis eq. 4.3) is
-computed with the exact allocator against the map (--map) or, without a map, the design's coil
-array directly. The scene records the map's design SHA-256; the runner's loader refuses the
-scene with another map.
+computed with the exact allocator against the map (--map; --build-map builds the object's scene
+map first) or, without a map, the design's coil array directly. The scene records the map's
+design SHA-256; the runner's loader refuses the scene with another map.
 """
 
 from __future__ import annotations
@@ -26,6 +26,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("object", help="plane | hemisphere | half-cylinder | wedge | FILE.stl/ply")
     parser.add_argument("--map", type=Path, default=None,
                         help="force-current map (designkit map); default: the design's array")
+    parser.add_argument("--build-map", type=Path, default=None,
+                        help="build the scene map of the object (its region plus 5 mm; "
+                             "designkit map --scene) into this .npz and compute lambda on it")
     add_design_argument(parser, "; with --map it must be the map's design")
     parser.add_argument("--out", type=Path, default=Path("scene.npz"),
                         help="output .npz (default ./scene.npz)")
@@ -57,10 +60,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_progress_argument(parser)
 
 
+def _build_scene_map(args: argparse.Namespace, obj) -> Path:
+    """Write the scene map of ``obj`` to ``--build-map`` (the design's box cut to where the
+    object can push, plus 5 mm; :func:`designkit.fieldmap.scene_build_args`)."""
+    if args.map is not None:
+        raise BadInputError("--build-map", "without --map (one map source)", str(args.build_map))
+    out = fieldmap.check_output(args.build_map)
+    design = load_design(args.design)
+    kw = fieldmap.scene_build_args(design, [obj], 0.0, region={"objects": [obj.kind],
+                                                               "rows": args.rows})
+    fieldmap.write(out, fieldmap.build(design, progress=show_progress(args), **kw))
+    return out
+
+
 def run(args: argparse.Namespace) -> int:
     check_output(args.out, folder=False)
     _check_numbers(args)
     obj = _object(args)
+    if args.build_map is not None:
+        args.map = _build_scene_map(args, obj)
     if args.map is not None:
         fm = fieldmap.load(args.map)
         source = render.actuation_source(fm)

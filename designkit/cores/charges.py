@@ -73,14 +73,14 @@ def unit_charge_terms(p, src, gradient):
     Returns a list of (c, ns) arrays, A/m per A m: H_x, H_y, H_z, then with ``gradient``
     dH_i/dx_k for (i, k) in :data:`GRADIENT_PAIRS`, A/m^2 per A m.
     """
-    d = p[:, None, :] - src[None]  # (c, ns, 3)
-    r2 = np.einsum("cij,cij->ci", d, d)
+    d = [p[:, i, None] - src[None, :, i] for i in range(3)]  # contiguous (c, ns) each
+    r2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
     inv3 = 1.0 / (4.0 * math.pi) / (r2 * np.sqrt(r2))
-    comps = [d[..., i] * inv3 for i in range(3)]
+    comps = [di * inv3 for di in d]
     if gradient:
         inv5 = 3.0 * inv3 / r2
         for i, k in GRADIENT_PAIRS:
-            t = -d[..., i] * d[..., k] * inv5
+            t = -d[i] * d[k] * inv5
             comps.append(t + inv3 if i == k else t)
     return comps
 

@@ -231,11 +231,7 @@ class CoreModel(ChargeModes):
             # the column of the core's own winding (by far its largest): m = 0 through
             # the single-core field rules (CoreSolution), so one coil alone is exactly the single-core model;
             # the small remainder of the other columns by the compressed rules below
-            ns = len(self.side)
-            sol = CoreSolution(self.radius, self.side[:, 0], self.side[:, 1], x0[:ns, own_col],
-                               self.discs[:, 0], self.discs[:, 1], self.discs[:, 2],
-                               x0[ns:, own_col], 0.0)
-            res = sol.field(pts, gradient=gradient)
+            res = self._own_solution(x0[:, own_col]).field(pts, gradient=gradient)
             if gradient:
                 h[..., own_col] += res[0] / MU0
                 g[..., own_col] += res[1] / MU0
@@ -277,6 +273,25 @@ class CoreModel(ChargeModes):
                 else:
                     h[idx] += res
         return (h, g) if gradient else h
+
+    @functools.cached_property
+    def _own_solutions(self) -> dict:
+        return {}
+
+    def _own_solution(self, x0: np.ndarray) -> CoreSolution:
+        """The single-core solution of the m = 0 unknowns ``x0`` (n0,), cached by value (its
+        compressed rules are built on first use, per instance)."""
+        key = x0.tobytes()
+        cache = self._own_solutions
+        if key not in cache:
+            if len(cache) > 64:
+                cache.clear()
+            ns = len(self.side)
+            x0 = x0.copy()
+            cache[key] = CoreSolution(self.radius, self.side[:, 0], self.side[:, 1], x0[:ns],
+                                      self.discs[:, 0], self.discs[:, 1], self.discs[:, 2],
+                                      x0[ns:], 0.0)
+        return cache[key]
 
     def _m0_rz(self, pts, rho, gradient, far):
         """Cylindrical components per m = 0 unknown: list of (n, n0) arrays."""

@@ -28,6 +28,7 @@ from ..pose import Pose
 from ..winding_geometry import WindingGeometry
 from .charges import gauss
 from .core_model import M_MAX, CoreModel, core_model
+from .symmetric_solve import SymmetricLU
 
 N_PHI_RING = 12
 """Azimuthal samples per collocation ring when projecting another core's / a winding's field."""
@@ -62,6 +63,66 @@ def _cylinder_magnet(moment, magnet_size_m):
     return a, length, u, mm / (math.pi * a * a * length)
 
 
+_D4 = [np.array(g, float) for g in (
+    [[0, -1], [1, 0]], [[-1, 0], [0, -1]], [[0, 1], [-1, 0]], [[-1, 0], [0, 1]],
+    [[1, 0], [0, -1]], [[0, 1], [1, 0]], [[0, -1], [-1, 0]])]
+"""The elements of the square's symmetry group but the identity (x, y part; z is kept)."""
+
+
+def mode_rotation(m: int, g: np.ndarray) -> np.ndarray:
+    """(2, 2): how the (cos, sin) coefficients of mode order m >= 1 change under g (2, 2)
+    (:func:`mode_transform`)."""
+    a = math.atan2(g[1, 0], g[0, 0])
+    c, s = math.cos(m * a), math.sin(m * a)
+    return np.array([[c, s], [s, -c]]) if np.linalg.det(g) < 0 else np.array([[c, -s], [s, c]])
+
+
+def mode_transform(model: CoreModel, g: np.ndarray) -> np.ndarray:
+    """T (n_unknowns, n_unknowns): the unknowns of ``model`` whose field is g H_u(g^-1 p), for
+    an orthogonal 2 x 2 ``g`` acting about the core's axis (rotation by a or reflection
+    R(a) diag(1, -1)). m = 0 fields are poloidal and axisymmetric (T = 1); a charge density
+    c cos(m phi) + s sin(m phi) becomes sigma(g^-1 phi): a rotation of (c, s) by m a, or with
+    the reflection (c, s) -> (c cos ma + s sin ma, c sin ma - s cos ma)."""
+    n0, n1 = model.n0, model.n1
+    t = np.eye(model.n_unknowns)
+    for m in range(1, model.m_max + 1):
+        rot = mode_rotation(m, g)
+        i = n0 + 2 * (m - 1) * n1
+        for r in range(2):
+            for q in range(2):
+                t[i + r * n1:i + (r + 1) * n1, i + q * n1:i + (q + 1) * n1] = \
+                    rot[r, q] * np.eye(n1)
+    return t
+
+
+def _block_by_symmetry(cache: dict, mi: CoreModel, mj: CoreModel, rel: tuple):
+    """The cross block of upright cores at relative placement ``rel`` (a :func:`_rel_key`)
+    from a cached block at its image under the square's symmetries, or None: block(g d) =
+    T_j(g) block(d) T_i(g)^T (the rings' azimuths and the field rules are symmetric under the
+    group, :func:`mode_transform`)."""
+    d = np.array(rel[:3])
+    for g in _D4:
+        src = np.r_[g.T @ d[:2], d[2]]  # g^-1 d
+        key = (id(mi), id(mj), tuple(np.round(src, 9)) + rel[3:])
+        if key in cache:
+            return _turn(_turn(cache[key], mj, g).T, mi, g).T  # T_j B T_i^T
+    return None
+
+
+def _turn(b: np.ndarray, model: CoreModel, g: np.ndarray) -> np.ndarray:
+    """T(g) @ b for T = :func:`mode_transform` (model, g), without forming T: each mode
+    order's (cos, sin) row blocks mixed by its 2 x 2 rotation."""
+    out = b.copy()
+    n0, n1 = model.n0, model.n1
+    for m in range(1, model.m_max + 1):
+        r = mode_rotation(m, g)
+        i = n0 + 2 * (m - 1) * n1
+        c, s = b[i:i + n1], b[i + n1:i + 2 * n1]
+        out[i:i + n1] = r[0, 0] * c + r[0, 1] * s
+        out[i + n1:i + 2 * n1] = r[1, 0] * c + r[1, 1] * s
+    return out
+
+
 class ArraySystem:
     """All cores of a :class:`~designkit.array.CoilArray` solved together (linear cores).
 
@@ -90,10 +151,13 @@ class ArraySystem:
             self._assemble(mat, cache)
         self.n_blocks = len(cache)
         self.n_unknowns = n
-        self._lu = lu_factor(mat) if n else None
+        # identical upright cores on a symmetric lattice: one LU per isotypic component
+        self._sym = SymmetricLU.build(mat, self, _D4, mode_rotation) if n else None
+        self._lu = lu_factor(mat) if n and self._sym is None else None
         self._coil_solution = None
 
     def _assemble(self, mat, cache):
+        upright = all(p.is_identity_rotation for p in self.poses)
         for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
             sj = slice(self.offsets[jj], self.offsets[jj + 1])
             mat[sj, sj] = mj.self_block()
@@ -102,7 +166,8 @@ class ArraySystem:
                     continue
                 key = (id(mi), id(mj), _rel_key(pi, pj))
                 if key not in cache:
-                    cache[key] = self._cross_block(mi, pi, mj, pj)
+                    block = _block_by_symmetry(cache, mi, mj, key[2]) if upright else None
+                    cache[key] = self._cross_block(mi, pi, mj, pj) if block is None else block
                 si = slice(self.offsets[ii], self.offsets[ii + 1])
                 mat[sj, si] = -mj.factors()[:, None] * cache[key]
 
@@ -147,7 +212,8 @@ class ArraySystem:
                 ring = mj.ring_points(nphi)
                 glob = ring.reshape(-1, 3) @ pj.matrix.T + np.asarray(pj.position)
                 h = field_fn(glob) if cols is None else field_fn(glob, cols)  # (n, 3, k)
-                h = np.einsum("ba,nbk->nak", pj.matrix, h)  # to local j
+                if not pj.is_identity_rotation:
+                    h = np.einsum("ba,nbk->nak", pj.matrix, h)  # to local j
                 proj = mj.project(h.reshape(ring.shape[:2] + h.shape[1:]))
                 if cols is None:
                     out = proj
@@ -159,7 +225,12 @@ class ArraySystem:
         return self.factors[:, None] * np.concatenate(rows, axis=0)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
-        return lu_solve(self._lu, rhs)
+        if self._sym is not None:
+            return self._sym.solve(rhs)
+        if self.n_unknowns > 2000:
+            return lu_solve(self._lu, rhs)
+        with one_blas_thread():  # a single core's system: threads wait longer than compute
+            return lu_solve(self._lu, rhs)
 
     # ------------------------------------------------------------------ coil sources
     def coil_solution(self) -> np.ndarray:
@@ -240,11 +311,10 @@ class ArraySystem:
             def src(glob, cols):
                 # H of the point dipole (magnet outside every core: r > 0 at ring points)
                 d = glob[:, None, :] - pos[None, cols, :]  # (n, k, 3)
-                r2 = np.einsum("nki,nki->nk", d, d)
-                inv_r = 1.0 / np.sqrt(r2)
-                mr = d @ m
-                h = (3.0 * d * (mr * inv_r ** 5)[..., None] - m * (inv_r ** 3)[..., None])
-                return np.swapaxes(h, 1, 2) / (4.0 * math.pi)
+                inv_r2 = 1.0 / np.einsum("nki,nki->nk", d, d)
+                inv_r3 = inv_r2 * np.sqrt(inv_r2) / (4.0 * math.pi)
+                a = 3.0 * (d @ m) * inv_r3 * inv_r2
+                return np.stack([d[..., i] * a - m[i] * inv_r3 for i in range(3)], axis=1)
         else:
             a, length, u, mag = _cylinder_magnet(m, magnet_size_m)
 

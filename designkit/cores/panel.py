@@ -26,6 +26,7 @@ from typing import Literal
 import numpy as np
 
 from .. import _validate as v
+from .._blas import one_blas_thread
 from ..constants import MU0
 from ..errors import BadInputError
 from ..winding_geometry import WindingGeometry
@@ -222,6 +223,17 @@ def _solve_linear(radius, length, offset, mu_r, key) -> CoreSolution:
                         discs[:, 1].copy(), discs[:, 2].copy(), kd, peak)
 
 
+@functools.lru_cache(maxsize=8)
+def _nonlinear_setup(radius, length, offset, key, n_slices):
+    """What the slice iteration reuses for every current: panels, influence system, probes."""
+    lo, hi = offset - length / 2, offset + length / 2
+    slice_edges = np.linspace(lo, hi, n_slices + 1)
+    side, side_slice, discs = panel_geometry(radius, length, offset, slice_edges,
+                                             n_side=max(N_SIDE, 8 * n_slices))
+    a, h_t, _, _ = influence_system(radius, side, discs, key)
+    return side, side_slice, discs, a, h_t, _slice_probe(radius, side, discs, slice_edges, key)
+
+
 @functools.lru_cache(maxsize=256)
 def _solve_nonlinear(radius, length, offset, bh, key, current, n_slices=N_SLICES,
                      max_iter=100, tol=1e-5) -> CoreSolution:
@@ -231,28 +243,26 @@ def _solve_nonlinear(radius, length, offset, bh, key, current, n_slices=N_SLICES
     *per ampere* at ``current`` (A, > 0); ``key``: the driving :class:`WindingGeometry`.
     """
     key = WindingGeometry(*key)
-    lo, hi = offset - length / 2, offset + length / 2
-    slice_edges = np.linspace(lo, hi, n_slices + 1)
-    side, side_slice, discs = panel_geometry(radius, length, offset, slice_edges,
-                                             n_side=max(N_SIDE, 8 * n_slices))
-    a, h_t, _, _ = influence_system(radius, side, discs, key)
-    w, which, p_r, p_z, hr, hz = _slice_probe(radius, side, discs, slice_edges, key)
+    side, side_slice, discs, a, h_t, probe = _nonlinear_setup(radius, length, offset, key,
+                                                              n_slices)
+    w, which, p_r, p_z, hr, hz = probe
     wsum = np.bincount(which, weights=w, minlength=n_slices)
     current = max(current, 1e-6)
     mus = np.full(n_slices, float(steel1010_mu_r(np.array([0.3]))[0]))
     b = np.zeros(n_slices)
-    for _ in range(max_iter):
+    with one_blas_thread():  # small dense solves: threads wait longer than they compute
+        for _ in range(max_iter):
+            ks, kd = _solve_with_mu(side, side_slice, discs, mus, a, h_t * current)
+            k = np.concatenate([ks, kd])
+            bmag = MU0 * np.hypot(p_r @ k + hr * current, p_z @ k + hz * current)
+            b = np.bincount(which, weights=bmag * w, minlength=n_slices) / wsum
+            nu = 1.0 / mus
+            # damped update of the reluctivity: the undamped map overshoots past the knee
+            nu_new = 0.5 * nu + 0.5 / steel1010_mu_r(b)
+            mus = 1.0 / nu_new
+            if np.max(np.abs(nu_new - nu) / nu) < tol:
+                break
         ks, kd = _solve_with_mu(side, side_slice, discs, mus, a, h_t * current)
-        k = np.concatenate([ks, kd])
-        bmag = MU0 * np.hypot(p_r @ k + hr * current, p_z @ k + hz * current)
-        b = np.bincount(which, weights=bmag * w, minlength=n_slices) / wsum
-        nu = 1.0 / mus
-        # damped update of the reluctivity: the undamped map overshoots past the knee
-        nu_new = 0.5 * nu + 0.5 / steel1010_mu_r(b)
-        mus = 1.0 / nu_new
-        if np.max(np.abs(nu_new - nu) / nu) < tol:
-            break
-    ks, kd = _solve_with_mu(side, side_slice, discs, mus, a, h_t * current)
     return CoreSolution(radius, side[:, 0].copy(), side[:, 1].copy(), ks / current,
                         discs[:, 0].copy(), discs[:, 1].copy(), discs[:, 2].copy(), kd / current,
                         float(np.max(b)) / current, False)

@@ -11,7 +11,9 @@ comes through one function, :func:`map_physics`.
 * :mod:`.tables`: the per-core (rho, z) tables (magnet pull, sensor-field core modes);
 * :mod:`.cells`: the least-squares fit of A's harmonic cells;
 * :mod:`.builder`: :func:`build`, the build as named phases, checking itself;
-* :mod:`.storage`: :func:`write` (atomic), :func:`load`, :class:`FieldMap`.
+* :mod:`.storage`: :func:`write` (atomic), :func:`load`, :class:`FieldMap`;
+* :mod:`.symmetry`: the array's symmetries, one sample per orbit;
+* :mod:`.region`: :func:`scene_region`, the box of a scene map.
 
 Target: A within 1e-3 of each row's largest |A| over the box. The representation, its error
 budget, the measured errors and costs, and the commands that measure them: docs/fieldmap.md.
@@ -22,6 +24,7 @@ from .cells import fit_layer, fit_layers
 from .physics import MapPhysics, map_physics
 from .plan import (box_axes, cell_layers, default_box, graded_axis, layer_nodes, rz_table_spec,
                    sources_top, table_specs, uniform_axis)
+from .region import SCENE_BUILD, scene_band_m, scene_build_args, scene_region
 from .storage import FieldMap, check_output, load, write
 from .tables import (compute_magnet_table, compute_mode_tables, coupled_modes,
                      mode_table_entry)
@@ -31,5 +34,6 @@ __all__ = [
     "MapPhysics", "map_physics", "box_axes", "cell_layers", "default_box", "graded_axis",
     "layer_nodes", "rz_table_spec", "sources_top", "table_specs", "uniform_axis", "FieldMap",
     "check_output", "load", "write", "compute_magnet_table", "compute_mode_tables",
-    "coupled_modes", "mode_table_entry",
+    "coupled_modes", "mode_table_entry", "SCENE_BUILD", "scene_band_m", "scene_build_args",
+    "scene_region",
 ]

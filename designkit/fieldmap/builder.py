@@ -26,6 +26,7 @@ from ..errors import BadInputError
 from .cells import fit_layers
 from .physics import MapPhysics, map_physics
 from .plan import _nodes, box_axes, cell_layers, default_box, layer_nodes, sources_top, table_specs
+from .symmetry import Orbits, array_symmetries
 from .tables import compute_magnet_table, coupled_modes, mode_table_entry
 
 FORMAT, FORMAT_VERSION, UNITS = mf.FORMAT, mf.FORMAT_VERSION, mf.UNITS
@@ -43,7 +44,8 @@ def build(design, *, spacing: float = 0.01, log_step: float = 0.25,
           rz_rho_scale: float = 0.05, sensor_mode_rz_step: float = 2.5e-4,
           sensor_mode_rz_log_step: float = 0.04, magnet_rz_step: float = 5e-4,
           magnet_rz_log_step: float = 0.02, box=None, n_check: int = 400,
-          progress: bool = True, array: CoilArray | None = None) -> dict:
+          progress: bool = True, array: CoilArray | None = None,
+          region: dict | None = None) -> dict:
     """Compute the map v2 of ``design``: ``{"arrays": {...}, "meta": {...}}`` (not yet written).
 
     Parameters
@@ -76,6 +78,8 @@ def build(design, *, spacing: float = 0.01, log_step: float = 0.25,
     n_check : int
         Random points where the finished map is compared with direct evaluation of the coupled
         model (meta 'errors'; each costs a full coupled evaluation).
+    region : dict or None
+        What ``box`` was made for (a scene map: :mod:`.region`), stored as meta 'region'.
     """
     s = BuildSettings.checked(spacing, log_step, cell_ratio, layer_ratio, degree, fit_nodes,
                               sensor_mode_tolerance, rz_rho_scale, sensor_mode_rz_step,
@@ -84,14 +88,18 @@ def build(design, *, spacing: float = 0.01, log_step: float = 0.25,
     arr = array or CoilArray.from_design(design)
     lower, upper = _box(design, box)
     phys = map_physics(design)
-    plan = _plan(arr, lower, upper, s)
+    plan = _plan(arr, lower, upper, s, phys.moment_a_m2)
     smp = _sample(phys, arr, plan, s, progress)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     arrays, row_max = _arrays(phys, arr, plan, smp, s.fit_nodes)
     meta = _meta(design, arr, phys, plan, s, arrays, smp)
+    if region is not None:
+        meta["region"] = dict(region)
     meta["errors"] = _errors(mf.MapFile.from_arrays(arrays, meta), plan, smp, row_max)
     smp.seconds["fits and check"] = time.perf_counter() - t0
+    smp.cpu_seconds["fits and check"] = time.process_time() - c0
     meta["build_seconds"] = smp.seconds
+    meta["build_cpu_seconds"] = smp.cpu_seconds
     return {"arrays": arrays, "meta": meta}
 
 
@@ -186,10 +194,14 @@ class _Plan:
     n_mcheck: int          # how many of them check the bias force and the sensor field
     positions: np.ndarray  # (n_coils, 3) coil positions
     rotations: list        # per coil its rotation matrix, nested lists
+    fit_orbits: Orbits     # fit_pts by the array's symmetries: only fit_orbits.reps sampled
+    m_orbits: Orbits       # m_nodes likewise
 
 
-def _plan(arr: CoilArray, lower, upper, s: BuildSettings) -> _Plan:
-    """The layout of everything the build samples, from the box and the settings."""
+def _plan(arr: CoilArray, lower, upper, s: BuildSettings, moment=None) -> _Plan:
+    """The layout of everything the build samples, from the box and the settings; the
+    array's symmetries about the box's vertical axis (:mod:`.symmetry`) pick the points
+    sampled (the bias force's only with ``moment`` (3,) A m^2 along z)."""
     types = list(arr.coil_types().items())
     m_specs = table_specs(arr, [idx for _, idx in types], lower, upper, s.magnet_rz_step,
                           s.magnet_rz_log_step, s.rz_rho_scale, 2)
@@ -202,9 +214,15 @@ def _plan(arr: CoilArray, lower, upper, s: BuildSettings) -> _Plan:
     m_axes = box_axes(lower, upper, s.spacing, z_ref, s.log_step)
     rng = np.random.default_rng(CHECK_SEED)
     check = rng.uniform(lower, upper, (s.n_check, 3))
+    centre = 0.5 * (lower[:2] + upper[:2])
+    group = array_symmetries(arr, centre)
+    m_nodes = _nodes(m_axes)
+    upright = moment is not None and not np.any(np.asarray(moment, float)[:2])
     return _Plan(lower, upper, types, m_specs, z_top, layers, lattices, fit_pts, m_axes,
-                 _nodes(m_axes), check, min(s.n_check, 50), arr.positions(),
-                 [list(map(list, c.pose.rotation)) for c in arr.coils])
+                 m_nodes, check, min(s.n_check, 50), arr.positions(),
+                 [list(map(list, c.pose.rotation)) for c in arr.coils],
+                 Orbits.of(fit_pts, group, centre),
+                 Orbits.of(m_nodes, group if upright else group[:1], centre))
 
 
 # ============================================================================ samples
@@ -225,14 +243,15 @@ class _Samples:
     sat_i: np.ndarray | None = None
     sat_f: np.ndarray | None = None
     seconds: dict = field(default_factory=dict)
+    cpu_seconds: dict = field(default_factory=dict)  # process CPU time (all threads)
 
 
 def _steps(plan: _Plan, n_check: int) -> list:
     """The sampling phase's steps (kind, index), in order: one progress-bar tick each."""
     return ([("coupled solve", 0)]
-            + [("cell nodes", s) for s in range(0, len(plan.fit_pts), FIT_CHUNK)]
+            + [("cell nodes", s) for s in range(0, len(plan.fit_orbits.reps), FIT_CHUNK)]
             + [("magnet tables", k) for k in range(len(plan.types))] + [("mode tables", 0)]
-            + [("magnet", s) for s in range(0, len(plan.m_nodes), CHUNK)]
+            + [("magnet", s) for s in range(0, len(plan.m_orbits.reps), CHUNK)]
             + [("check", s) for s in range(0, n_check, CHUNK)]
             + [("magnet check", 0), ("saturation", 0)])
 
@@ -241,16 +260,20 @@ def _sample(phys: MapPhysics, arr: CoilArray, plan: _Plan, s: BuildSettings,
             progress: bool) -> _Samples:
     """Every evaluation of the coupled model the map needs, under one progress bar."""
     nc = arr.n_coils
-    smp = _Samples(np.empty((len(plan.fit_pts), 8, nc)), np.empty((s.n_check, 8, nc)),
-                   np.empty((len(plan.m_nodes), 3)))
+    # a_fit and f0 hold the orbits' representatives until the loop is done
+    smp = _Samples(np.empty((len(plan.fit_orbits.reps), 8, nc)), np.empty((s.n_check, 8, nc)),
+                   np.empty((len(plan.m_orbits.reps), 3)))
     bar = tqdm(_steps(plan, s.n_check), desc="map", unit="step", disable=not progress,
                leave=False)
     for kind, k in bar:
         bar.set_postfix_str(kind, refresh=False)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         _step(kind, k, smp, phys, arr, plan, s, bar)
         smp.seconds[kind] = smp.seconds.get(kind, 0.0) + time.perf_counter() - t0
+        smp.cpu_seconds[kind] = smp.cpu_seconds.get(kind, 0.0) + time.process_time() - c0
     bar.close()
+    smp.a_fit = plan.fit_orbits.expand_actuation(smp.a_fit)
+    smp.f0 = plan.m_orbits.expand_force(smp.f0)
     return smp
 
 
@@ -261,7 +284,8 @@ def _step(kind: str, k: int, smp: _Samples, phys: MapPhysics, arr: CoilArray, pl
         arr.actuation_matrix(plan.fit_pts[:1])  # the coupled solve, once
         smp.modes = coupled_modes(arr, s.sensor_mode_tolerance)
     elif kind == "cell nodes":
-        smp.a_fit[k:k + FIT_CHUNK] = phys.actuation(arr, plan.fit_pts[k:k + FIT_CHUNK])
+        reps = plan.fit_orbits.reps[k:k + FIT_CHUNK]
+        smp.a_fit[k:k + FIT_CHUNK] = phys.actuation(arr, plan.fit_pts[reps])
     elif kind == "magnet tables":
         proto, idx = plan.types[k]
         spec = plan.m_specs[k]
@@ -274,7 +298,8 @@ def _step(kind: str, k: int, smp: _Samples, phys: MapPhysics, arr: CoilArray, pl
             smp.tables[f"SM{j}"], entry = mode_table_entry(t, spec, j, _postfix(bar, j))
             smp.sm_meta.append(entry)
     elif kind == "magnet":
-        smp.f0[k:k + CHUNK] = phys.bias_force(arr, plan.m_nodes[k:k + CHUNK])
+        reps = plan.m_orbits.reps[k:k + CHUNK]
+        smp.f0[k:k + CHUNK] = phys.bias_force(arr, plan.m_nodes[reps])
     elif kind == "check":
         smp.a_check[k:k + CHUNK] = phys.actuation(arr, plan.check[k:k + CHUNK])
     elif kind == "magnet check":

@@ -12,6 +12,7 @@ import numpy as np
 
 from firmware_io import mapfile as mf
 
+from .._blas import one_blas_thread
 from .plan import _lobatto
 
 
@@ -30,7 +31,8 @@ def fit_layer(lay: dict, values: np.ndarray, row_max: np.ndarray, n: int) -> np.
     scale = np.array([r] * 3 + [r * r] * 5) * row_max
     g = np.einsum("mp,rmk->prk", mf.monomials(s.reshape(-1, 3), deg - 1), ops)
     g /= scale[None, :, None]
-    pinv = np.linalg.pinv(g.reshape(-1, g.shape[2]))  # (K, n^3 * 8)
+    with one_blas_thread():  # small: BLAS threads would wait longer than compute
+        pinv = np.linalg.pinv(g.reshape(-1, g.shape[2]))  # (K, n^3 * 8)
     nc = values.shape[-1]
     out = np.empty((nx * ny, g.shape[2], nc), np.float32)
     w = (1.0 / row_max)[:, None]

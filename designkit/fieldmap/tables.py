@@ -11,9 +11,11 @@ by the magnet m at p is m . B(p) of the cores magnetized by a unit dipole e_c at
 from __future__ import annotations
 
 import numpy as np
+from scipy.interpolate import RectBivariateSpline
 
 from firmware_io.mapfile import N_MODE_Q
 
+from .._blas import one_blas_thread
 from ..array import CoilArray
 from ..constants import MU0
 from ..pose import Pose
@@ -28,20 +30,43 @@ def _even_on_axis(out: np.ndarray, rho: np.ndarray, cols) -> None:
     out[0, :, cols] = ((r2 * out[1, :, cols] - r1 * out[2, :, cols]) / (r2 - r1))
 
 
-def compute_magnet_table(phys: "MapPhysics", coil, spec: dict) -> np.ndarray:
+def compute_magnet_table(phys: "MapPhysics", coil, spec: dict, stride: int = 2) -> np.ndarray:
     """The magnet table (n_rho, n_u, 2) float64 of one coil alone at the origin: F_rho/rho and
-    F_z of the magnet's pull on its core (N/m, N) for the magnet at (rho, 0, z)."""
+    F_z of the magnet's pull on its core (N/m, N) for the magnet at (rho, 0, z).
+
+    The coupled model is evaluated on every ``stride``-th node of both axes (and the last);
+    the other nodes come from a bicubic spline in the grid's (v, u) coordinates, in which the
+    pull is smooth: stride 2 is within 1e-4 of the largest value of each column of the table
+    computed at every node (docs/fieldmap.md), far below the reader's bilinear steps."""
     alone = CoilArray((coil.replace(pose=Pose()),))
     rho, z = _spec_nodes(spec)
-    R, Z = np.meshgrid(rho, z, indexing="ij")
+    i, j = _sub_nodes(len(rho), stride), _sub_nodes(len(z), stride)
+    R, Z = np.meshgrid(rho[i], z[j], indexing="ij")
     pts = np.c_[R.ravel(), np.zeros(R.size), Z.ravel()]
     f = phys.bias_force(alone, pts)
-    out = np.empty((len(rho), len(z), 2))
+    sub = np.empty((len(i), len(j), 2))
     with np.errstate(divide="ignore", invalid="ignore"):
-        out[..., 0] = (f[:, 0] / pts[:, 0]).reshape(R.shape)
-    out[..., 1] = f[:, 2].reshape(R.shape)
-    _even_on_axis(out, rho, [0])
-    return out
+        sub[..., 0] = (f[:, 0] / pts[:, 0]).reshape(R.shape)
+    sub[..., 1] = f[:, 2].reshape(R.shape)
+    _even_on_axis(sub, rho[i], [0])
+    return _to_full_grid(sub, i, j, len(rho), len(z))
+
+
+def _sub_nodes(n: int, stride: int) -> np.ndarray:
+    """Every ``stride``-th index of range(n) and the last."""
+    return np.unique(np.r_[np.arange(0, n, stride), n - 1])
+
+
+def _to_full_grid(sub: np.ndarray, i: np.ndarray, j: np.ndarray, n_rho: int,
+                  n_u: int) -> np.ndarray:
+    """A table (len(i), len(j), Q) known at the grid indices i x j, on the whole
+    (n_rho, n_u) grid: bicubic splines in the grid's index coordinates (uniform in v and u)."""
+    if len(i) == n_rho and len(j) == n_u:
+        return sub
+    k = (min(3, len(i) - 1), min(3, len(j) - 1))
+    ii, jj = np.arange(n_rho), np.arange(n_u)
+    return np.stack([RectBivariateSpline(i, j, sub[..., q], kx=k[0], ky=k[1])(ii, jj)
+                     for q in range(sub.shape[-1])], axis=-1)
 
 
 def coupled_modes(arr: CoilArray, sensor_tolerance: float = 1e-3) -> dict | None:
@@ -84,7 +109,8 @@ def coupled_modes(arr: CoilArray, sensor_tolerance: float = 1e-3) -> dict | None
         U = {}
         for m in parts:
             mat = np.concatenate([dx[k][sl] for k in dx for sl, _ in parts[m]], axis=1)
-            u, sv, _ = np.linalg.svd(mat, full_matrices=False)
+            with one_blas_thread():  # small: BLAS threads would wait longer than compute
+                u, sv, _ = np.linalg.svd(mat, full_matrices=False)
             if sv[0] > 0:
                 U[m] = u[:, :max(1, int(np.sum(sv > sensor_tolerance * sv[0])))]
         basis = [(m, r, c) for m in sorted(U) for r in range(U[m].shape[1])
@@ -102,13 +128,17 @@ def coupled_modes(arr: CoilArray, sensor_tolerance: float = 1e-3) -> dict | None
     return {"types": types, "sensor_coef": coef.reshape(nc, nb, 2, nc, 3)}
 
 
-def compute_mode_tables(t: dict, spec: dict, progress=None) -> list:
+def compute_mode_tables(t: dict, spec: dict, progress=None, stride: int = 2) -> list:
     """The mode tables (n_rho, n_u, Q) float64 of one core type, one per shape set of ``t``
     (the sensor field's): for each shape, the quantities of :data:`N_MODE_Q` from the core model's
-    basis fields at (rho, 0, z), local frame (one evaluation of the basis for all sets)."""
+    basis fields at (rho, 0, z), local frame (one evaluation of the basis for all sets), on
+    every ``stride``-th node of both axes and bicubic splines between them (as the magnet
+    table, :func:`compute_magnet_table`)."""
     model = t["model"]
     t_sets = t["sets"]
-    rho, z = _spec_nodes(spec)
+    rho_all, z_all = _spec_nodes(spec)
+    i_sub, j_sub = _sub_nodes(len(rho_all), stride), _sub_nodes(len(z_all), stride)
+    rho, z = rho_all[i_sub], z_all[j_sub]
     R, Z = np.meshgrid(rho, z, indexing="ij")
     pts = np.c_[R.ravel(), np.zeros(R.size), Z.ravel()]
     n0, n1 = model.n0, model.n1
@@ -168,6 +198,7 @@ def compute_mode_tables(t: dict, spec: dict, progress=None) -> list:
     out = out.reshape(len(rho), len(z), q_tot)
     # rho = 0: every quantity is even in rho -> Richardson from the next two nodes
     _even_on_axis(out, rho, slice(None))
+    out = _to_full_grid(out, i_sub, j_sub, len(rho_all), len(z_all))
     # split per set, in each set's own shape order (m ascending, r ascending)
     col = {}
     c0 = 0

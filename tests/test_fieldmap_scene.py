@@ -1,0 +1,224 @@
+"""Scene maps and the symmetric sampling of the map build.
+
+* the array's symmetries: A and F0 filled from one point per orbit equal direct evaluation at
+  the images (air coils: exact superposition; the coupled cores' cross blocks from their
+  images equal the directly computed blocks);
+* a scene map covers the closed-form reach of the thesis hemisphere plus the margin, matches
+  the direct model inside it, and the runner fails safe (out_of_box) outside it.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from designkit import default_design, fieldmap
+from designkit.array import CoilArray
+from designkit.cli import main
+from designkit.cores import coupled as cp
+from designkit.design import design_to_toml
+from designkit.errors import BadInputError
+from designkit.fieldmap.symmetry import Orbits, array_symmetries
+from designkit.pose import Pose
+from designkit.render import Hemisphere
+from designkit.sim import SimulatedDevice
+from firmware_io.runner import Runner, RunnerConfig, SensorFrame
+from firmware_io.scene import Scene
+
+from _runner_fakes import HoldTracker, PlaneScene, TruthLocalizer, clipped_lstsq
+
+AIR = default_design().replace(core=None)
+
+
+def test_square_array_has_the_eight_symmetries_and_an_off_centre_axis_fewer():
+    arr = CoilArray.from_design(AIR)
+    assert len(array_symmetries(arr, [0.0, 0.0])) == 8
+    # about an axis through x = 50 mm only the identity and the mirror y -> -y remain
+    got = array_symmetries(arr, [0.05, 0.0])
+    assert len(got) == 2 and np.allclose(got[1].g, np.diag([1.0, -1.0, 1.0]))
+
+
+def test_orbit_fill_equals_direct_evaluation_at_the_images():
+    arr = CoilArray.from_design(AIR)
+    group = array_symmetries(arr, [0.0, 0.0])
+    rng = np.random.default_rng(3)
+    p = rng.uniform([-0.07, -0.07, 0.02], [0.07, 0.07, 0.06], (4, 3))
+    pts = np.concatenate([p @ s.g.T for s in group])
+    orb = Orbits.of(pts, group, np.zeros(2))
+    assert len(orb.reps) == 4
+    a = arr.actuation_matrix(pts)
+    np.testing.assert_allclose(orb.expand_actuation(a[orb.reps]), a, rtol=0,
+                               atol=1e-12 * np.abs(a).max())
+    # a point set that is not closed under the group keeps only the elements that map it
+    half = Orbits.of(pts[:8], group, np.zeros(2))
+    assert len(half.reps) >= 4 and len(half.group) >= 1
+
+
+def test_bias_force_symmetry_of_the_coupled_array():
+    design = default_design().replace(**{"array.rows": 1, "array.columns": 2})
+    arr = CoilArray.from_design(design)
+    group = array_symmetries(arr, [0.0, 0.0])
+    assert len(group) == 4  # 1 x 2: the rectangle's group (180 degrees, two mirrors)
+    p = np.array([[0.012, 0.007, 0.03]])
+    pts = np.concatenate([p @ s.g.T for s in group])
+    orb = Orbits.of(pts, group, np.zeros(2))
+    f = arr.bias_force(pts, design.magnet.moment_vector_a_m2)
+    np.testing.assert_allclose(orb.expand_force(f[orb.reps]), f, rtol=1e-10,
+                               atol=1e-12 * np.abs(f).max())
+
+
+def test_split_lu_only_for_symmetric_arrays_and_it_solves_the_system():
+    coil = CoilArray.from_design(default_design()).coils[0]
+    pair = CoilArray(tuple(coil.replace(pose=Pose(position=(x, 0.0, -0.05)))
+                           for x in (-0.025, 0.025)))
+    odd = CoilArray(tuple(coil.replace(pose=Pose(position=(x, y, -0.05)))
+                          for x, y in ((0.0, 0.0), (0.05, 0.0), (0.02, 0.06))))
+    assert odd.coupled()._sym is None
+    system = pair.coupled()
+    assert system._sym is not None
+    # the coupled columns solve the assembled system: the single-core self blocks plus the
+    # cross block, rebuilt here directly
+    m, poses = system.models[0], system.poses
+    n = m.n_unknowns
+    mat = np.zeros((2 * n, 2 * n))
+    for j in range(2):
+        mat[j * n:(j + 1) * n, j * n:(j + 1) * n] = m.self_block()
+        i = 1 - j
+        mat[j * n:(j + 1) * n, i * n:(i + 1) * n] = -m.factors()[:, None] * \
+            cp.ArraySystem._cross_block(m, poses[i], m, poses[j])
+    b = np.random.default_rng(0).random((2 * n, 3))
+    np.testing.assert_allclose(mat @ system.solve(b), b, atol=1e-10)
+
+
+def test_cross_blocks_from_their_images_equal_the_computed_blocks():
+    design = default_design()
+    coil = CoilArray.from_design(design).coils[0]
+    model = cp._core_model_of(coil, cp.M_MAX)
+    pa = Pose()
+    d = np.array([0.05, 0.1, 0.0])
+    base = cp.ArraySystem._cross_block(model, pa, model, Pose(position=tuple(d)))
+    cache = {(id(model), id(model), cp._rel_key(pa, Pose(position=tuple(d)))): base}
+    for g in cp._D4:
+        pb = Pose(position=tuple(np.r_[g @ d[:2], 0.0]))
+        got = cp._block_by_symmetry(cache, model, model, cp._rel_key(pa, pb))
+        want = cp.ArraySystem._cross_block(model, pa, model, pb)
+        assert np.abs(got - want).max() < 1e-12 * np.abs(want).max()
+
+
+def test_mode_transform_is_an_orthogonal_representation_and_turn_applies_it():
+    model = cp._core_model_of(CoilArray.from_design(default_design()).coils[0], cp.M_MAX)
+    els = [np.eye(2)] + cp._D4
+    t = {k: cp.mode_transform(model, g) for k, g in enumerate(els)}
+    b = np.random.default_rng(2).random((model.n_unknowns, 7))
+    for a, ga in enumerate(els):
+        np.testing.assert_allclose(t[a] @ t[a].T, np.eye(model.n_unknowns), atol=1e-12)
+        np.testing.assert_allclose(cp._turn(b, model, ga), t[a] @ b, atol=1e-12)
+        for c, gc in enumerate(els):  # T(g h) = T(g) T(h)
+            np.testing.assert_allclose(cp.mode_transform(model, ga @ gc), t[a] @ t[c],
+                                       atol=1e-12)
+
+
+# ---------------------------------------------------------------------------- scene maps
+def test_scene_region_of_the_thesis_hemisphere_is_its_closed_form_reach():
+    lo, hi = fieldmap.default_box(default_design())
+    margin, step = 0.005, fieldmap.region.SPACING_M
+    r_lo, r_hi = fieldmap.scene_region([Hemisphere()], 0.0, lo, hi, margin_m=margin)
+    reach = math.sqrt(0.05 ** 2 - lo[2] ** 2)  # the ball's rim at the box's floor
+    for k in range(2):
+        assert reach + margin - step <= -r_lo[k] <= reach + margin + step + 1e-12
+        assert reach + margin - step <= r_hi[k] <= reach + margin + step + 1e-12
+    assert r_lo[2] == lo[2] and 0.05 + margin <= r_hi[2] <= 0.05 + margin + 2 * step
+
+
+def test_scene_region_refuses_objects_outside_the_box():
+    lo, hi = fieldmap.default_box(default_design())
+    with pytest.raises(BadInputError, match="reach into"):
+        fieldmap.scene_region([Hemisphere(diameter_m=0.02, centre_m=(0.3, 0, 0))], 0.0, lo, hi)
+
+
+SMALL = default_design().replace(**{"core": None, "workspace.half_width_m": 0.04,
+                                     "workspace.z_min_m": 0.01, "workspace.z_max_m": 0.04})
+
+
+@pytest.fixture(scope="module")
+def scene_map(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("scene")
+    lo, hi = fieldmap.default_box(SMALL)
+    obj = Hemisphere(diameter_m=0.04)
+    box = fieldmap.scene_region([obj], 0.0, lo, hi, margin_m=0.003)
+    path = folder / "scene_map.npz"
+    fieldmap.write(path, fieldmap.build(SMALL, box=box, n_check=20, progress=False,
+                                        region={"objects": ["half_ball"]}))
+    return fieldmap.load(path, SMALL), box
+
+
+def test_scene_map_covers_its_region_and_matches_the_direct_model(scene_map):
+    fm, (lo, hi) = scene_map
+    np.testing.assert_allclose(fm.bounds[0], lo)
+    np.testing.assert_allclose(fm.bounds[1], hi)
+    assert fm.meta["region"]["objects"] == ["half_ball"]
+    full_lo, full_hi = fieldmap.default_box(SMALL)
+    assert np.prod(hi - lo) < 0.5 * np.prod(full_hi - full_lo)
+    p = np.random.default_rng(5).uniform(lo, hi, (300, 3))
+    a = CoilArray.from_design(SMALL).actuation_matrix(p)
+    err = np.abs(fm.actuation(p) - a).max(axis=(0, 2)) / np.abs(a).max(axis=(0, 2))
+    assert np.all(err < 1e-3), err
+
+
+def test_runner_fails_safe_outside_a_scene_maps_region(scene_map):
+    fm, (lo, hi) = scene_map
+    arr = CoilArray.from_design(SMALL)
+    dev = SimulatedDevice(SMALL, arr)
+    cfg = RunnerConfig(resistance_ohm=(dev.resistance_ohm,) * 9,
+                       inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
+                       current_limit_a=4.8, total_current_a=20.0)
+    truth = {"p": 0.5 * (lo + hi)}
+
+    class Source:
+        def __call__(self, t):
+            return SensorFrame(np.zeros((9, 3)), np.zeros((9, 3)), ("ok",) * 18, t)
+
+    r = Runner(fm, PlaneScene(hi[2], 6.0), TruthLocalizer(lambda: truth["p"]), HoldTracker(),
+               clipped_lstsq, dev.coils, Source(), cfg, log=lambda line: None,
+               clock=lambda: 0.0)
+    r.start()
+    assert r.step(0.0).state == "running"
+    # inside the design's full box but beside the scene's region
+    truth["p"] = np.array([hi[0] + 0.004, 0.0, lo[2] + 0.002])
+    assert truth["p"][0] < fieldmap.default_box(SMALL)[1][0]
+    rec = r.step(1e-3)
+    assert rec.state == "out_of_box" and not np.any(rec.command_a)
+
+
+def test_cli_map_scene_refuses_a_scene_of_another_design(tmp_path, capsys):
+    other = tmp_path / "s.npz"
+    assert main(["scene", "compile", "hemisphere", "--lambda", "5", "--out", str(other),
+                 "--quiet"]) == 0
+    toml = tmp_path / "d.toml"
+    toml.write_text(design_to_toml(SMALL))
+    assert main(["map", "--design", str(toml), "--scene", str(other), "--out",
+                 str(tmp_path / "m.npz"), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert "scene file" in err and "Traceback" not in err
+    assert not (tmp_path / "m.npz").exists()
+    assert main(["map", "--scene", str(other), "--scene-margin", "-1", "--out",
+                 str(tmp_path / "m.npz"), "--quiet"]) == 1
+    assert "--scene-margin" in capsys.readouterr().err
+    assert fieldmap.scene_band_m(Scene.load(other)) == 0.0
+
+
+def test_cli_scene_compile_builds_its_scene_map(tmp_path):
+    toml = tmp_path / "d.toml"
+    toml.write_text(design_to_toml(SMALL))
+    out, mp = tmp_path / "s.npz", tmp_path / "m.npz"
+    assert main(["scene", "compile", "hemisphere", "--design", str(toml), "--build-map",
+                 str(mp), "--n-side", "5", "--out", str(out), "--quiet"]) == 0
+    fm = fieldmap.load(mp, SMALL)
+    lo, hi = fieldmap.default_box(SMALL)
+    want = fieldmap.scene_region([Hemisphere()], 0.0, lo, hi)
+    np.testing.assert_allclose(fm.bounds[0], want[0])
+    np.testing.assert_allclose(fm.bounds[1], want[1])
+    assert fm.meta["region"]["objects"] == ["half_ball"]
+    assert Scene.load(out, fm.meta["design_sha256"]).lam_n_per_m > 0
+    assert main(["scene", "compile", "hemisphere", "--map", str(mp), "--build-map",
+                 str(tmp_path / "m2.npz"), "--out", str(out), "--quiet"]) == 1
