@@ -34,7 +34,6 @@ _OK_TOL = 1e-7
 max(lambda |d|, |F0|)."""
 _RANK_TOL = 1e-6    # F's smallest / largest singular value: below, the faces may be incomplete
 _COND_TOL = 1e-6    # sin(plane angle) x cos(normal, d) of the minimizing normal: below, verify
-_POOL_STRIDE = 16   # with a binding budget, every pair of kink planes at every 16th point
 
 
 @dataclass(frozen=True, eq=False)
@@ -226,23 +225,14 @@ def _well_posed(fms, cond):
 def _faces_lambdas(fms, d_all, bias, u, tl, unipolar, rtol, progress):
     """Per-point lambda from the reachable set's faces (`firmware_io.allocation.reach`): the
     dual bound lambda_up, accepted when the candidate facets are complete and well posed, or
-    when one warm-started allocation renders lambda_up d - F0 (then lambda_up is exact: it
-    is also an upper bound). Anything else goes to the secant search `_point_lambda`."""
+    else when one warm-started allocation renders lambda_up d - F0 (then lambda_up is exact:
+    it is also an upper bound). Anything else goes to the secant search `_point_lambda`."""
     m, k, _ = fms.shape
     lam = np.full(m, np.inf)
     live = np.flatnonzero(np.linalg.norm(d_all, axis=1) > 0.0)
     fl, dl, bl = fms[live], d_all[live], bias[live]
-    binds = k == 3 and tl < float(u.sum())
-    kw = dict(unipolar=unipolar)
-    if binds:  # 3 plane families: every pair only where the pool of neighbours' faces fails
-        _, _, bp, _ = ray_limits(fl[::_POOL_STRIDE], dl[::_POOL_STRIDE], bl[::_POOL_STRIDE],
-                                 u, tl, **kw)
-        pool = np.unique(bp, axis=0)
-        up, sep, _, cond = ray_limits(fl, dl, bl, u, tl, pairs=pool, **kw)
-        proven = np.zeros(len(live), bool)
-    else:
-        up, sep, _, cond = ray_limits(fl, dl, bl, u, tl, **kw)
-        proven = _well_posed(fl, cond) if k == 3 else np.ones(len(live), bool)
+    up, sep, _, cond = ray_limits(fl, dl, bl, u, tl, unipolar=unipolar)
+    proven = _well_posed(fl, cond) if k == 3 else np.ones(len(live), bool)
     inside0 = _bias_renderable(fl, bl, u, tl, unipolar)
     tol0 = _OK_TOL * np.maximum(np.linalg.norm(bl, axis=1), 1e-300)
     x = np.maximum(up, 0.0)
@@ -256,10 +246,6 @@ def _faces_lambdas(fms, d_all, bias, u, tl, unipolar, rtol, progress):
         fm, d, f0, xi = fl[i], dl[i], bl[i], float(x[i])
         ok = inside[i] and math.isfinite(xi) and _renders(alloc, fm, xi, d, f0, u, tl,
                                                           unipolar)
-        if inside[i] and not ok and binds:  # outside the pool: every pair at this point
-            up1 = ray_limits(fm[None], d[None], f0[None], u, tl, **kw)
-            xi = max(float(up1[0][0]), 0.0)
-            ok = math.isfinite(xi) and _renders(alloc, fm, xi, d, f0, u, tl, unipolar)
         res[i] = xi if ok else _point_lambda(fm, d, f0, u, tl, unipolar, rtol,
                                              _upper_bound(fm, d, f0, u, tl, unipolar))
     lam[live] = res

@@ -20,6 +20,8 @@ target at lambda = 0, is not renderable; a lower bound of its distance to R).
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 
@@ -59,6 +61,13 @@ def all_pairs(p):
 
 
 def facet_pairs(n, u, tl, unipolar):
+    """See :func:`_facet_pairs` (cached per n, limits, budget and drive mode)."""
+    u = np.broadcast_to(np.asarray(u, float), (n,))
+    return _facet_pairs(n, tuple(u.tolist()), float(tl), bool(unipolar))
+
+
+@functools.lru_cache(maxsize=32)
+def _facet_pairs(n, u, tl, unipolar):
     """The pairs of :func:`kink_planes` that can meet in a facet normal, (q, 2) int.
 
     Without a binding budget: every pair of columns. With one and equal limits, h changes
@@ -84,7 +93,7 @@ def facet_pairs(n, u, tl, unipolar):
 
 
 def ray_limits(force_matrices, directions, bias, current_limit, total_limit, *,
-               unipolar=False, pairs=None, chunk=64):
+               unipolar=False, pairs=None, chunk=None):
     """(lambda_up (m,), separation (m,) N, best pair (m, 2), conditioning (m,)) for F (m, k, n),
     d (m, k), f0 (m, k).
 
@@ -106,13 +115,17 @@ def ray_limits(force_matrices, directions, bias, current_limit, total_limit, *,
     tl = float(total_limit)
     lam, sep, cond = np.empty(m), np.empty(m), np.ones(m)
     best = np.full((m, 2), -1)
+    if k == 3:
+        pr0 = facet_pairs(n, u, tl, unipolar) if pairs is None else np.asarray(pairs)
+    if chunk is None:  # about 2e5 candidate responses at a time
+        chunk = max(1, 200_000 // (n * (2 if k == 1 else 2 * len(pr0))))
     for s in range(0, m, chunk):
         sl = slice(s, s + chunk)
         if k == 1:
             w = np.broadcast_to(np.array([[1.0], [-1.0]]), (len(fm[sl]), 2, 1))
         else:
             p = kink_planes(fm[sl], u, tl, unipolar)
-            pr = facet_pairs(n, u, tl, unipolar) if pairs is None else np.asarray(pairs)
+            pr = pr0
             w = np.cross(p[:, pr[:, 0]], p[:, pr[:, 1]])
             w = np.concatenate([w, -w], axis=1)
         h = support(np.matmul(w, fm[sl]), u, tl, unipolar)
