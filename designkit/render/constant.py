@@ -3,10 +3,16 @@
 lambda* = min over surface points j of lambda_j, where lambda_j is the largest lambda whose
 required force at r_j is renderable within the current bounds (a max-min: the thesis solves it
 with fminimax on the mean squared error; here every point must be met exactly, which is what
-"renderable everywhere" means). Per point, lambda_j is found on the convex function
-phi(lambda) = dist(lambda d_j - F0_j, reachable set) (sqrt of the allocator's residual; zero on
-[0, lambda_j]) by secant steps from above (they never undershoot a convex phi) with a
-bisection safeguard, to 1e-6 relative.
+"renderable everywhere" means). Per point (default, ``method='faces'``) lambda_j is a ray
+leaving the reachable polytope R = F X: by LP duality lambda_j = min over R's facet normals w
+facing d_j of (h(w) + w.F0_j) / (w.d_j), h the support function of R (a closed-form knapsack),
+the facet normals cross products of pairs of the planes where h has a kink
+(firmware_io.allocation.reach, all points at once). It is accepted when that candidate set is
+complete (F of full rank, a well-conditioned minimizing normal), else when one allocation
+renders lambda_j d_j - F0_j; otherwise, and with ``method='secant'`` (the reference), lambda_j
+is found on the convex phi(lambda) = dist(lambda d_j - F0_j, R) (sqrt of the allocator's
+residual; zero on [0, lambda_j]) by secant steps from above with a bisection safeguard, to
+1e-6 relative. Method and timings: docs/rendering.md.
 
 Required force per point (``rows``): 'force' -- the 3-D force lambda h(x, y) n (eq. 4.1 with
 eq. 4.2's magnitude); 'fz' -- the thesis' eq. 4.2 literally: only F_z = lambda h(x, y).
