@@ -94,15 +94,18 @@ def main(argv=None):
     return finish(Path(out) / "bench_skip.json", res, _print)
 
 
+_COLS = ("skip force mN", "median us", "p99 us", "coils kept", "kept min", "dF p95 mN",
+         "dF max mN")
+
+
 def _print(r):
     print(f"{r['steps']} steps over the hemisphere; 2000 x 2000 matmul {r['matmul_2000_s']:.3f} "
           f"s; load average {r['load_average_1min']}; bound table {r['bound_table_s']:.2f} s")
-    print(f"{'skip force':>11}{'median us':>10}{'p99 us':>9}{'kept':>6}{'min':>5}"
-          f"{'dF p95 mN':>11}{'dF max mN':>11}")
+    print("".join(f"{c:>14}" for c in _COLS))
     for x in r["rows"]:
-        print(f"{x['skip_force_n'] * 1e3:>9.0f}mN{x['median_us']:>10.1f}{x['p99_us']:>9.1f}"
-              f"{x['coils_kept_mean']:>6.2f}{x['coils_kept_min']:>5d}"
-              f"{x['force_change_p95_n'] * 1e3:>11.3f}{x['force_change_max_n'] * 1e3:>11.3f}")
+        vals = (1e3 * x["skip_force_n"], x["median_us"], x["p99_us"], x["coils_kept_mean"],
+                x["coils_kept_min"], 1e3 * x["force_change_p95_n"], 1e3 * x["force_change_max_n"])
+        print("".join(f"{v:>14.4g}" for v in vals))
 
 
 if __name__ == "__main__":
