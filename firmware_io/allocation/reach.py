@@ -33,8 +33,11 @@ def support(c, u, tl, unipolar):
     n = a.shape[-1]
     if np.all(u == u[0]) and u[0] > 0.0:  # equal limits: the top floor(I_t / u) coils, and a
         full = min(int(tl // u[0]), n - 1)  # fraction of the next (I_t < sum u: full < n)
-        s = np.partition(a, n - full - 1, axis=-1)
-        return u[0] * s[..., n - full:].sum(axis=-1) + (tl - full * u[0]) * s[..., n - full - 1]
+        a.partition(n - full - 1, axis=-1)  # in place: a is ours
+        wv = np.zeros(n)
+        wv[n - full:] = u[0]
+        wv[n - full - 1] = tl - full * u[0]
+        return a.dot(wv)
     order = np.argsort(-a, axis=-1)
     s = np.take_along_axis(a, order, axis=-1)
     us = u[order]
