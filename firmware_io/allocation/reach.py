@@ -20,9 +20,9 @@ target at lambda = 0, is not renderable; a lower bound of its distance to R).
 
 from __future__ import annotations
 
-import functools
-
 import numpy as np
+
+_PAIRS = {}  # facet_pairs per (n, limits, budget, drive mode)
 
 
 def support(c, u, tl, unipolar):
@@ -66,10 +66,14 @@ def all_pairs(p):
 def facet_pairs(n, u, tl, unipolar):
     """See :func:`_facet_pairs` (cached per n, limits, budget and drive mode)."""
     u = np.broadcast_to(np.asarray(u, float), (n,))
-    return _facet_pairs(n, tuple(u.tolist()), float(tl), bool(unipolar))
+    key = (n, tuple(u.tolist()), float(tl), bool(unipolar))
+    if key not in _PAIRS:
+        if len(_PAIRS) > 32:
+            _PAIRS.clear()
+        _PAIRS[key] = _facet_pairs(*key)
+    return _PAIRS[key]
 
 
-@functools.lru_cache(maxsize=32)
 def _facet_pairs(n, u, tl, unipolar):
     """The pairs of :func:`kink_planes` that can meet in a facet normal, (q, 2) int.
 
