@@ -40,6 +40,7 @@ _OK_TOL = 1e-7
 max(lambda |d|, |F0|)."""
 _RANK_TOL = 1e-6    # F's smallest / largest singular value: below, the faces may be incomplete
 _COND_TOL = 1e-6    # sin(plane angle) x cos(normal, d) of the minimizing normal: below, verify
+_FLOAT_MAX = np.finfo(float).max  # ray_limits' "no bound found"
 
 
 @dataclass(frozen=True, eq=False)
@@ -245,12 +246,12 @@ def _faces_lambdas(fms, d_all, bias, u, tl, unipolar, rtol, progress):
     # -F0 outside the reachable set by more than the tolerance (what `_point_lambda` tests)
     out = sep > tol0
     inside = ~out & (inside0 | (proven & (sep < -tol0)))
-    res = np.where(out, 0.0, np.where(inside & proven, x, np.nan))
+    res = np.where(out, 0.0, np.where(inside & proven & (x < _FLOAT_MAX), x, np.nan))
     alloc = Allocator()
     for i in tqdm(np.flatnonzero(np.isnan(res)).tolist(), desc="force constant",
                   disable=not progress, mininterval=2):
         fm, d, f0, xi = fl[i], dl[i], bl[i], float(x[i])
-        ok = inside[i] and math.isfinite(xi) and _renders(alloc, fm, xi, d, f0, u, tl,
+        ok = inside[i] and xi < _FLOAT_MAX and _renders(alloc, fm, xi, d, f0, u, tl,
                                                           unipolar)
         res[i] = xi if ok else _point_lambda(fm, d, f0, u, tl, unipolar, rtol,
                                              _upper_bound(fm, d, f0, u, tl, unipolar))

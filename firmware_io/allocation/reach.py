@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 _PAIRS = {}  # facet_pairs per (n, limits, budget, drive mode)
+_BIG = np.finfo(float).max
 
 
 def support(c, u, tl, unipolar):
@@ -107,7 +108,8 @@ def ray_limits(force_matrices, directions, bias, current_limit, total_limit, *,
     lambda_up: min over the candidate facet normals with w.d > 0 of (h(w) + w.f0) / (w.d), an
     upper bound of the largest lambda with lambda d - f0 reachable, equal to it when the
     candidates hold the facet the ray leaves by (always for k = 1; for k = 3 with ``pairs``
-    None -- :func:`facet_pairs` -- and F of rank 3); inf if no candidate faces d.
+    None -- :func:`facet_pairs` -- and F of rank 3); the largest float if no candidate
+    faces d (no bound found; then -that as the separation if no candidate is non-zero).
     separation: max over the unit candidates of w.(-f0) - h(w) (> 0: -f0 is outside R by at
     least that). best pair: the kink planes (indices into :func:`kink_planes`) of the
     minimizing normal (-1 for k = 1). conditioning: sin(angle of the two planes) x cos(angle
@@ -147,8 +149,8 @@ def ray_limits(force_matrices, directions, bias, current_limit, total_limit, *,
             unit = np.where(wn > 0.0, -num / np.where(wn > 0.0, wn, 1.0), -np.inf)
         arg = ratio.argmin(axis=1)
         rows = np.arange(len(arg))
-        lam[sl] = ratio[rows, arg]
-        sep[sl] = unit.max(axis=1)
+        lam[sl] = np.minimum(ratio[rows, arg], _BIG)
+        sep[sl] = np.maximum(unit.max(axis=1), -_BIG)
         if k == 3:
             q = arg % len(pr)
             best[sl] = pr[q]
