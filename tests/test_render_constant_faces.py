@@ -11,7 +11,7 @@ from scipy.optimize import linprog
 
 from designkit.errors import BadInputError
 from designkit.render import Plane, force_constant
-from designkit.render.constant import _faces_lambdas, _secant_lambdas
+from designkit.render.constant import _faces_lambdas, _secant_lambdas, force_matrices
 from firmware_io.allocation.reach import facet_pairs, kink_planes, ray_limits
 
 CASES = [(k, uni, tl) for k in (3, 1) for uni in (False, True) for tl in (54.0, 20.0, 8.0)]
@@ -110,3 +110,26 @@ def test_method_argument():
     with pytest.raises(BadInputError, match="method"):
         force_constant(Plane(), object(), current_limit_a=6.0, total_current_a=54.0,
                        method="lp")
+
+
+@pytest.mark.slow
+def test_faces_equal_secant_on_the_device():
+    """The default design's coupled model (ArrayActuation) on the hemisphere: both paths, both
+    drives, the design's budget (not binding) and a binding one (slow: the coupled model's
+    solve; tests/test_render_constant.py checks the default path on it against HiGHS)."""
+    from designkit.design import default_design
+    from designkit.render import ArrayActuation, Hemisphere
+
+    src = ArrayActuation.from_design(default_design())
+    obj = Hemisphere()
+    pts, nrm = obj.surface_points(5)
+    fms = force_matrices(src, pts, "force")
+    bias = src.bias_force(pts)
+    d = obj.height(pts)[:, None] * nrm
+    u = np.full(fms.shape[2], 6.0)
+    for unipolar in (False, True):
+        for tl in (54.0, 15.0):
+            a = _faces_lambdas(fms, d, bias, u, tl, unipolar, 1e-6, False)
+            b = _secant_lambdas(fms, d, bias, u, tl, unipolar, 1e-6, False)
+            np.testing.assert_array_equal(a == 0.0, b == 0.0)
+            np.testing.assert_allclose(a, b, rtol=2e-6)
