@@ -288,7 +288,8 @@ def force_constant(obj, fieldmap, *, current_limit_a: float, total_current_a: fl
     unipolar : 0 <= I_i <= u_i (the thesis) instead of |I_i| <= u_i
     rows : 'force' (3-D lambda h n) or 'fz' (eq. 4.2: F_z = lambda h only)
     n_side : surface discretization (61 x 61 grid over the footprint, the thesis' 3721)
-
+    rtol : relative tolerance of the secant search (the reference, and the faces' fallback);
+        the faces' accepted values are exact to rounding
     method : 'faces' (default: the reachable set's facets, each point's lambda confirmed by
         the allocator or by the facets' completeness) or 'secant' (the secant search on the
         allocator's residual per point, the reference; both to ``rtol``)
