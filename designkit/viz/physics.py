@@ -112,11 +112,14 @@ def _skipping_field(array, p, cur, gradient, tolerance):
     skipping evaluator at ``tolerance`` and the coupled cores exactly."""
     system = array.coupled()
     coupled = set() if system is None else set(system.core_index)
-    # the coupled cores are added below, all together: their windings alone here
-    wind = CoilArray(tuple(dataclasses.replace(c, core=None) if k in coupled else c
-                           for k, c in enumerate(array.coils)))
+    # the coupled cores are added below, all together: their windings alone here, and only the
+    # powered ones
+    on = np.flatnonzero(cur)
+    wind = CoilArray(tuple(dataclasses.replace(array.coils[k], core=None) if k in coupled
+                           else array.coils[k] for k in on))
     outs = ("B", "gradient") if gradient else ("B",)
-    res = SkippingEvaluator(wind, p, outs, currents=tuple(cur), tolerance=tolerance).evaluate()
+    res = SkippingEvaluator(wind, p, outs, currents=tuple(cur[on]),
+                            tolerance=tolerance).evaluate()
     b = res["B"]
     g = gradient_from_g5(res["gradient"]) if gradient else np.zeros((len(p), 3, 3))
     if system is not None:
