@@ -131,16 +131,21 @@ def ray_limits(force_matrices, directions, bias, current_limit, total_limit, *,
     for s in range(0, m, chunk):
         sl = slice(s, s + chunk)
         if k == 1:
-            w = np.broadcast_to(np.array([[1.0], [-1.0]]), (len(fm[sl]), 2, 1))
+            w = np.ones((len(fm[sl]), 1, 1))
         else:
             p = kink_planes(fm[sl], u, tl, unipolar)
             pr = pr0
             w = np.cross(p[:, pr[:, 0]], p[:, pr[:, 1]])
-            w = np.concatenate([w, -w], axis=1)
-        h = support(np.matmul(w, fm[sl]), u, tl, unipolar)
+        # the candidates w and -w: bipolar h(-w) = h(w), and the rest changes sign
+        c = np.matmul(w, fm[sl])
+        hp = support(c, u, tl, unipolar)
+        h = np.concatenate([hp, support(-c, u, tl, True) if unipolar else hp], axis=1)
         wf = np.matmul(w, f0[sl, :, None])[..., 0]
+        wf = np.concatenate([wf, -wf], axis=1)
         wd = np.matmul(w, d[sl, :, None])[..., 0]
+        wd = np.concatenate([wd, -wd], axis=1)
         wn = np.sqrt((w * w).sum(axis=-1))
+        wn = np.concatenate([wn, wn], axis=1)
         dn = np.sqrt((d[sl] * d[sl]).sum(axis=-1))
         face = wd > 1e-12 * wn * dn[:, None]
         num = h + wf
