@@ -3,10 +3,16 @@
 lambda* = min over surface points j of lambda_j, where lambda_j is the largest lambda whose
 required force at r_j is renderable within the current bounds (a max-min: the thesis solves it
 with fminimax on the mean squared error; here every point must be met exactly, which is what
-"renderable everywhere" means). Per point, lambda_j is found on the convex function
-phi(lambda) = dist(lambda d_j - F0_j, reachable set) (sqrt of the allocator's residual; zero on
-[0, lambda_j]) by secant steps from above (they never undershoot a convex phi) with a
-bisection safeguard, to 1e-6 relative.
+"renderable everywhere" means). Per point (default, ``method='faces'``) lambda_j is a ray
+leaving the reachable polytope R = F X: by LP duality lambda_j = min over R's facet normals w
+facing d_j of (h(w) + w.F0_j) / (w.d_j), h the support function of R (a closed-form knapsack),
+the facet normals cross products of pairs of the planes where h has a kink
+(firmware_io.allocation.reach, all points at once). It is accepted when that candidate set is
+complete (F of full rank, a well-conditioned minimizing normal), else when one allocation
+renders lambda_j d_j - F0_j; otherwise, and with ``method='secant'`` (the reference), lambda_j
+is found on the convex phi(lambda) = dist(lambda d_j - F0_j, R) (sqrt of the allocator's
+residual; zero on [0, lambda_j]) by secant steps from above with a bisection safeguard, to
+1e-6 relative. Method and timings: docs/rendering.md.
 
 Required force per point (``rows``): 'force' -- the 3-D force lambda h(x, y) n (eq. 4.1 with
 eq. 4.2's magnitude); 'fz' -- the thesis' eq. 4.2 literally: only F_z = lambda h(x, y).
@@ -14,18 +20,27 @@ eq. 4.2's magnitude); 'fz' -- the thesis' eq. 4.2 literally: only F_z = lambda h
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from firmware_io.actuation import ActuationSource, selection
-from firmware_io.allocation import allocate
+from firmware_io.allocation import Allocator, allocate
+from firmware_io.allocation.reach import ray_limits
 
 from .. import _validate as v
 from .._progress import tqdm
 from ..array import CoilArray, force_matrix
 from ..errors import BadInputError
 from ..fieldmap import default_box
+
+_OK_TOL = 1e-7
+"""lambda d - F0 counts as renderable when the allocator's residual norm is <= this x
+max(lambda |d|, |F0|)."""
+_RANK_TOL = 1e-6    # F's smallest / largest singular value: below, the faces may be incomplete
+_COND_TOL = 1e-6    # sin(plane angle) x cos(normal, d) of the minimizing normal: below, verify
+_FLOAT_MAX = np.finfo(float).max  # ray_limits' "no bound found"
 
 
 @dataclass(frozen=True, eq=False)
@@ -133,7 +148,7 @@ def _point_lambda(fm, d, f0, u, tl, unipolar, rtol, ub):
         return float(np.sqrt(allocate(fm, lam * d - f0, u, tl, unipolar=unipolar)[1]))
 
     scale = float(np.linalg.norm(d))
-    tol = 1e-7
+    tol = _OK_TOL
 
     def ok(lam, ph):
         return ph <= tol * max(lam * scale, float(np.linalg.norm(f0)), 1e-300)
@@ -162,8 +177,9 @@ def _point_lambda(fm, d, f0, u, tl, unipolar, rtol, ub):
     return lo
 
 
-def _upper_bound(fm, d, u, tl, unipolar):
-    """lambda such that lambda |d| exceeds the largest force along d (closed-form knapsack)."""
+def _upper_bound(fm, d, f0, u, tl, unipolar):
+    """lambda such that lambda |d| exceeds the largest force along d plus F0's part along d
+    (closed-form knapsack: lambda d - F0 renderable needs d.(lambda d - F0) / |d| <= that)."""
     dn = d / np.linalg.norm(d)
     c = dn @ fm  # force along d per ampere, (n_coils,)
     c = np.maximum(c, 0.0) if unipolar else np.abs(c)
@@ -175,12 +191,92 @@ def _upper_bound(fm, d, u, tl, unipolar):
         left -= take
         if left <= 0:
             break
+    best += max(float(dn @ f0), 0.0)
     return 1.01 * best / np.linalg.norm(d) + 1e-300
+
+
+def _renders(alloc, fm, lam, d, f0, u, tl, unipolar):
+    """lambda d - f0 renderable by the allocator's criterion (`_point_lambda`'s ok)."""
+    res = alloc(fm, lam * d - f0, u, tl, unipolar=unipolar)[1]
+    return math.sqrt(res) <= _OK_TOL * max(lam * float(np.linalg.norm(d)),
+                                           float(np.linalg.norm(f0)), 1e-300)
+
+
+def _bias_renderable(fms, bias, u, tl, unipolar):
+    """(m,) bool, sufficient for -F0 reachable: the currents nearest to the middle of the
+    bounds c (c = 0 bipolar, min(u / 2, I_t / 2n) unipolar) with F I = -F0, I = c + F^T (F
+    F^T)^-1 (-F0 - F c), fit it and lie inside the bounds."""
+    m, k, n = fms.shape
+    c = np.minimum(u / 2, 0.5 * tl / n) if unipolar else np.zeros(n)
+    g = np.einsum("mkn,mln->mkl", fms, fms)
+    g = g + (1e-14 * np.trace(g, axis1=1, axis2=2))[:, None, None] * np.eye(k)
+    rhs = -bias - fms.dot(c)
+    try:
+        y = np.linalg.solve(g, rhs[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        return np.zeros(m, bool)
+    i0 = c + np.einsum("mkn,mk->mn", fms, y)
+    fit = np.linalg.norm(np.einsum("mkn,mn->mk", fms, i0) + bias, axis=1) \
+        <= 1e-9 * np.linalg.norm(bias, axis=1)
+    box = (np.abs(i0) <= u) if not unipolar else ((i0 >= 0.0) & (i0 <= u))
+    return fit & box.all(axis=1) & (np.abs(i0).sum(axis=1) <= tl)
+
+
+def _well_posed(fms, cond):
+    """(m,) bool: the candidate set is complete (F of full row rank) and the minimizing normal
+    is not a near-degenerate cross product (its rounding far below the tolerance)."""
+    sv = np.linalg.svd(fms, compute_uv=False)
+    return (sv[:, -1] > _RANK_TOL * sv[:, 0]) & (cond > _COND_TOL)
+
+
+def _faces_lambdas(fms, d_all, bias, u, tl, unipolar, rtol, progress):
+    """Per-point lambda from the reachable set's faces (`firmware_io.allocation.reach`): the
+    dual bound lambda_up, accepted when the candidate facets are complete and well posed, or
+    else when one warm-started allocation renders lambda_up d - F0 (then lambda_up is exact:
+    it is also an upper bound). Anything else goes to the secant search `_point_lambda`."""
+    m, k, _ = fms.shape
+    lam = np.full(m, np.inf)
+    live = np.flatnonzero(np.linalg.norm(d_all, axis=1) > 0.0)
+    fl, dl, bl = fms[live], d_all[live], bias[live]
+    up, sep, _, cond = ray_limits(fl, dl, bl, u, tl, unipolar=unipolar)
+    proven = _well_posed(fl, cond) if k == 3 else np.ones(len(live), bool)
+    inside0 = _bias_renderable(fl, bl, u, tl, unipolar)
+    tol0 = _OK_TOL * np.maximum(np.linalg.norm(bl, axis=1), 1e-300)
+    x = np.maximum(up, 0.0)
+    # -F0 outside the reachable set by more than the tolerance (what `_point_lambda` tests)
+    out = sep > tol0
+    inside = ~out & (inside0 | (proven & (sep < -tol0)))
+    res = np.where(out, 0.0, np.where(inside & proven & (x < _FLOAT_MAX), x, np.nan))
+    alloc = Allocator()
+    for i in tqdm(np.flatnonzero(np.isnan(res)).tolist(), desc="force constant",
+                  disable=not progress, mininterval=2):
+        fm, d, f0, xi = fl[i], dl[i], bl[i], float(x[i])
+        ok = inside[i] and xi < _FLOAT_MAX and _renders(alloc, fm, xi, d, f0, u, tl,
+                                                          unipolar)
+        res[i] = xi if ok else _point_lambda(fm, d, f0, u, tl, unipolar, rtol,
+                                             _upper_bound(fm, d, f0, u, tl, unipolar))
+    lam[live] = res
+    return lam
+
+
+def _secant_lambdas(fms, d_all, bias, u, tl, unipolar, rtol, progress):
+    """Per-point lambda by the secant search on the allocator's residual (the reference)."""
+    lam = np.empty(len(fms))
+    for j in tqdm(range(len(fms)), desc="force constant", disable=not progress,
+                  mininterval=2):
+        d = d_all[j]
+        if np.linalg.norm(d) == 0.0:
+            lam[j] = np.inf
+            continue
+        ub = _upper_bound(fms[j], d, bias[j], u, tl, unipolar)
+        lam[j] = _point_lambda(fms[j], d, bias[j], u, tl, unipolar, rtol, ub)
+    return lam
 
 
 def force_constant(obj, fieldmap, *, current_limit_a: float, total_current_a: float,
                    unipolar: bool = False, rows: str = "force", n_side: int = 61,
-                   rtol: float = 1e-6, progress: bool = True) -> ForceConstant:
+                   rtol: float = 1e-6, progress: bool = True,
+                   method: str = "faces") -> ForceConstant:
     """Largest lambda (N/m) with every surface point's required force renderable (eq. 4.3).
 
     Parameters
@@ -192,12 +288,19 @@ def force_constant(obj, fieldmap, *, current_limit_a: float, total_current_a: fl
     unipolar : 0 <= I_i <= u_i (the thesis) instead of |I_i| <= u_i
     rows : 'force' (3-D lambda h n) or 'fz' (eq. 4.2: F_z = lambda h only)
     n_side : surface discretization (61 x 61 grid over the footprint, the thesis' 3721)
+    rtol : relative tolerance of the secant search (the reference, and the faces' fallback);
+        the faces' accepted values are exact to rounding
+    method : 'faces' (default: the reachable set's facets, each point's lambda confirmed by
+        the allocator or by the facets' completeness) or 'secant' (the secant search on the
+        allocator's residual per point, the reference; both to ``rtol``)
 
     The magnet's pull on the cores at zero current, F0 (the source's ``bias_force``), is
     included: lambda d - F0 must be renderable.
     """
     if rows not in ("force", "fz"):
         raise BadInputError("rows", "'force' or 'fz'", rows)
+    if method not in ("faces", "secant"):
+        raise BadInputError("method", "'faces' or 'secant'", method)
     u = v.nonnegative("current_limit_a", current_limit_a, "A")
     tl = v.nonnegative("total_current_a", total_current_a, "A")
     src = actuation_source(fieldmap)
@@ -214,17 +317,10 @@ def force_constant(obj, fieldmap, *, current_limit_a: float, total_current_a: fl
     fms = force_matrices(src, pts, rows)
     bias = src.bias_force(pts)
     bias = bias if rows == "force" else bias[:, 2:3]
-    n_c = fms.shape[2]
-    uu = np.full(n_c, u)
-    lam = np.empty(len(pts))
-    for j in tqdm(range(len(pts)), desc="force constant", disable=not progress,
-                  mininterval=2):
-        d = d_all[j]
-        if np.linalg.norm(d) == 0.0:
-            lam[j] = np.inf
-            continue
-        ub = _upper_bound(fms[j], d, uu, tl, unipolar)
-        lam[j] = _point_lambda(fms[j], d, bias[j], uu, tl, unipolar, rtol, ub)
+    uu = np.full(fms.shape[2], u)
+    degenerate = u == 0.0 or tl == 0.0  # the reachable set is a point: no faces
+    run = _secant_lambdas if method == "secant" or degenerate else _faces_lambdas
+    lam = run(fms, d_all, bias, uu, tl, unipolar, rtol, progress)
     k = int(np.argmin(lam))
     return ForceConstant(float(lam[k]), pts[k].copy(), k, pts, nrm, heights, lam, excluded,
                          rows, bool(unipolar), float(u), float(tl))

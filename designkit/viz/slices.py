@@ -10,8 +10,8 @@ import numpy as np
 from .. import _validate as v
 from ..errors import BadInputError
 from .common import B_MT, F_MN, IN_SOLID, Quality, _image, _pv, _quality
-from .physics import (_add_field_arrays, _footprint_half_m, array_field, inside_solids,
-                      magnet_moment, resolve_currents)
+from .physics import (PICTURE_TOLERANCE, _add_field_arrays, _footprint_half_m, array_field,
+                      inside_solids, magnet_moment, resolve_currents)
 from .scene import scene_meshes
 from .style import (_bar, currents_text, _log_fmt, _magnet_text, _mm, _nice_bounds, _plotter,
                     _title, round_range)
@@ -45,7 +45,8 @@ def slice_data(design: "Design", currents: Sequence[float] | None = None, *,
     vert = _image(pv, (-half, 0.0, 0.002), (half, 0.0, design.workspace.z_max_m), (nx, 1, nz))
     horiz = _image(pv, (-half, -half, h), (half, half, h), (nx, nx, 1))
     for mesh in (vert, horiz):
-        b, g = array_field(design, mesh.points, cur, gradient=True)
+        b, g = array_field(design, mesh.points, cur, gradient=True,
+                           tolerance=PICTURE_TOLERANCE)
         _add_field_arrays(mesh, b, g, m)
         mesh.point_data[IN_SOLID] = inside_solids(design, mesh.points).astype(np.uint8)
     return vert, horiz

@@ -20,11 +20,15 @@ Usage::
     currents_a, residual = allocate(F, f_n, 6.0, 54.0, unipolar=True)
     alloc = Allocator()                                               # in a control loop:
     currents_a, residual = alloc(F, f_n, 6.0, 54.0, unipolar=True)   # same answer, warm start
+
+``ray_limits`` (reach.py): for many positions at once, how far a force reaches along a ray
+within the bounds (the force constant's per-point lambda; docs/allocation.md).
 """
 
 from __future__ import annotations
 
 from .problem import EPS_REL
+from .reach import ray_limits
 from .solve import Allocator, allocate
 
-__all__ = ["allocate", "Allocator", "EPS_REL"]
+__all__ = ["allocate", "Allocator", "EPS_REL", "ray_limits"]

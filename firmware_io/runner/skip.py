@@ -4,7 +4,8 @@ At start-up the force per ampere |F_k| (N/A) of every coil is tabulated on a gri
 map's box; a cell's bound is ``c_max + (c_max - c_min)`` of its eight corners. The runner
 skips coil k at p (current 0, not allocated) when bound_k(cell(p)) times its current limit is
 at most ``skip_force_n``: the force each skipped coil could have added is below that.
-studies/bench_runner.py checks the bound along a path and measures what skipping saves.
+studies/bench_runner.py checks the bound along a path; studies/bench_skip.py measures what
+skipping saves per step (docs/runner.md: no time; the step is per-call overhead).
 """
 
 from __future__ import annotations

@@ -1,0 +1,94 @@
+"""Question: what does a figure's slice cost with the windings at a picture's tolerance
+(designkit.viz.array_field(tolerance=PICTURE_TOLERANCE), the skipping evaluator) against the
+exact coupled model, and where does the time go?
+
+On the points of ``designkit.viz.slice_data``'s two slices (vertical y = 0 and horizontal at
+the design height) at the given quality: array_field exact and at the picture tolerance (min
+of ``--repeats``), the coupled cores' part alone, the largest difference relative to the
+largest value, and a 2000 x 2000 matmul of the same process (the machine may be shared).
+
+    python studies/bench_viz_slices.py [OUT_DIR] [--quality quick|full] [--repeats N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+if __package__ in (None, ""):
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import numpy as np
+
+from _common import finish, load_average
+from bench_constant import matmul_seconds
+from designkit import default_design
+from designkit.array import array_for_design
+from designkit.viz.common import _RES
+from designkit.viz.physics import (PICTURE_TOLERANCE, _footprint_half_m, array_field,
+                                   resolve_currents)
+
+DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "bench_viz_slices"
+"""Default output folder (git-ignored), whatever the working directory."""
+
+
+def slice_points(design, quality):
+    """The two slices' points (as slice_data lays them out), (n, 3) m."""
+    nx, nz = _RES[quality]["slice"]
+    half = _footprint_half_m(design)
+    x = np.linspace(-half, half, nx)
+    vert = np.stack(np.meshgrid(x, [0.0], np.linspace(0.002, design.workspace.z_max_m, nz),
+                                indexing="ij"), -1).reshape(-1, 3)
+    horiz = np.stack(np.meshgrid(x, x, [design.optimize.height_m], indexing="ij"),
+                     -1).reshape(-1, 3)
+    return np.concatenate([vert, horiz])
+
+
+def _best(fn, repeats):
+    ts = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        out = fn()
+        ts.append(time.perf_counter() - t)
+    return min(ts), out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("out", nargs="?", default=str(DEFAULT_OUT))
+    ap.add_argument("--quality", default="quick", choices=("quick", "full"))
+    ap.add_argument("--repeats", type=int, default=3)
+    args = ap.parse_args(argv)
+    design = default_design()
+    arr = array_for_design(design)
+    system = arr.coupled()
+    pts = slice_points(design, args.quality)
+    cur = resolve_currents(design)
+    mm = matmul_seconds()
+    t_exact, (b0, g0) = _best(lambda: array_field(design, pts, cur), args.repeats)
+    t_pic, (b1, g1) = _best(lambda: array_field(design, pts, cur,
+                                                tolerance=PICTURE_TOLERANCE), args.repeats)
+    t_core, _ = _best(lambda: system.core_field(pts, system.coil_solution(), gradient=True,
+                                                coil_columns=True), args.repeats)
+    res = {"quality": args.quality, "points": len(pts), "matmul_2000_s": mm,
+           "load_average_1min": load_average(), "exact_s": t_exact, "picture_s": t_pic,
+           "cores_s": t_core, "ratio_exact_over_picture": t_exact / t_pic,
+           "b_err_rel_max": float(np.max(np.abs(b1 - b0)) / np.max(np.abs(b0))),
+           "g_err_rel_max": float(np.max(np.abs(g1 - g0)) / np.max(np.abs(g0)))}
+    Path(args.out).mkdir(parents=True, exist_ok=True)
+    return finish(Path(args.out) / "bench_viz_slices.json", res, _print)
+
+
+def _print(r):
+    print(f"{r['points']} slice points ({r['quality']}); 2000 x 2000 matmul "
+          f"{r['matmul_2000_s']:.3f} s; load average {r['load_average_1min']}")
+    print(f"exact {r['exact_s']:.2f} s, picture tolerance {r['picture_s']:.2f} s (ratio "
+          f"{r['ratio_exact_over_picture']:.2f}); coupled cores alone {r['cores_s']:.2f} s; "
+          f"max error / max: B {r['b_err_rel_max']:.1e}, grad B {r['g_err_rel_max']:.1e}")
+
+
+if __name__ == "__main__":
+    main()
