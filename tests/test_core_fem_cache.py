@@ -7,7 +7,6 @@ claims the core model within 0.2 % of GetDP (``studies/core_vs_fem.py``): the te
 that, so a 1 % error anywhere in the core's self-interaction fails them.
 """
 
-import dataclasses
 import json
 
 import numpy as np
@@ -93,11 +92,3 @@ def test_linear_core_force_against_cached_fem():
     assert design_point_summary(D, 6.0)["force_n"][2] == pytest.approx(fem_fz,
                                                                        rel=CLAIMED_CORE_REL)
 
-
-def test_core_model_is_not_the_thesis_uniform_model(coil):
-    # the tolerance above must separate the validated model from the thesis' (44-48 % off)
-    thesis = dataclasses.replace(coil, core=dataclasses.replace(coil.core,
-                                                                model="thesis-uniform"))
-    z = REF["axi_axis_z_local_m"][2:3]
-    m = model_rz(thesis, 1.0, np.zeros(1), z, core_model="thesis-uniform")
-    assert abs(m["bz"][0] / REF["axi_axis_bz_t"][2] - 1) > 0.3
