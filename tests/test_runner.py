@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from designkit.array import CoilArray
 from designkit.design import default_design
 from designkit.errors import BadInputError
 from designkit.sim import (FAULT_TYPES, FaultSchedule, SimulatedDevice, Trajectory, simulate,
@@ -82,9 +81,9 @@ def test_thermal_guard_matches_the_closed_form_of_first_order_heating():
 
 
 @pytest.fixture(scope="module")
-def device_and_a():
+def device_and_a(thesis_array):
     design = default_design()
-    array = CoilArray.from_design(design)      # one coupled solve for the module
+    array = thesis_array                       # one coupled solve for the session
     a = array.actuation_matrix(np.array([0.0, 0.0, 0.04]))
     return design, array, a
 
