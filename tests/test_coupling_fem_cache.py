@@ -82,8 +82,12 @@ if "pull_fz_n" in FEM:
     def test_pull_against_cached_3d_fem(one):
         h, ref = FEM["pull_heights_m"], FEM["pull_fz_n"]
         fz = np.array([one.bias_force([0.0, 0.0, q], M, magnet_size_m=SIZE)[2] for q in h])
-        # measured against the cached level (fem_refs.json): see the message on failure
-        np.testing.assert_allclose(fz, ref, rtol=0.05)
+        # the FEM force is a difference of two solves and converges from above: the model is
+        # +5 / +6 / +7 % against level -2 (test_coupling.py, slow), +2.6 / +2.9 / +3.4 %
+        # against the cached level -1
+        assert FEM_META["pull"]["level"] >= -1
+        np.testing.assert_allclose(fz, ref, rtol=0.04)
+        assert np.all(fz / ref > 1)
 
 if "two_b_t" in FEM:
     def test_two_cores_against_cached_3d_fem(two):
