@@ -28,9 +28,10 @@ FEM_META = json.loads((DATA / "fem_refs.json").read_text())
 PIN_B, PIN_G = 2e-3, 3e-3
 """Per point: |dB| / |B| and ||dG||_F / ||G||_F allowed against the pin."""
 
-CENTRE_TOL = {1: (0.012, 0.018, 0.019, 0.028)}
+CENTRE_TOL = {1: (0.012, 0.018, 0.019, 0.028), -1: (0.025, 0.03, 0.035, 0.047)}
 """3 x 3 centre coil vs the cached 3-D FEM by its mesh level: max B, grad B error from 20 mm
-up, then at every height (README, level 1)."""
+up, then at every height (level 1: the README; level -1, 22k tetrahedra in the quarter model:
+measured 2.1 / 2.5 % from 20 mm up, 3.2 / 4.2 % at 12 mm, falling to 0.7 % at 80 mm)."""
 
 
 def _rel(a, b, axis):
