@@ -2,6 +2,7 @@
 divergence-free, curl-free outside sources, continuity across the axis."""
 
 import numpy as np
+import pytest
 from hypothesis import assume, given, settings, strategies as st
 from scipy.spatial.transform import Rotation
 
@@ -125,3 +126,15 @@ def test_continuity_across_the_axis(z, phi, eps):
             # B and G are smooth in x, y: the change is O(eps / size)
             assert np.linalg.norm(b - b0) <= 1e-13 * sb + 10 * eps / size * sb
             assert np.linalg.norm(g - g0) <= 1e-12 * sg + 10 * eps / size * sg
+
+
+def test_winding_far_field_is_the_dipole_of_its_moment():
+    # far away a winding is a point dipole of moment N pi (Ri^2 + Ri Ro + Ro^2) / 3 per ampere
+    # (the section-averaged loop area); on the axis Bz = mu0 m / (2 pi z^3) up to (L / z)^2
+    from designkit.constants import MU0
+
+    coil = Coil(RI, RO, L, N)
+    z = 20.0
+    bz = winding_field(np.array([0.0, 0.0, z]), RI, RO, L, N, 1.0)[2]
+    # measured 1.2e-5 (the quadrupole-order correction at L / z = 0.005)
+    assert coil.dipole_moment_per_amp == pytest.approx(bz * 2 * np.pi * z ** 3 / MU0, rel=1e-4)
