@@ -11,6 +11,37 @@ if str(ROOT) not in sys.path:
 os.environ.setdefault("PYVISTA_OFF_SCREEN", "true")
 os.environ.setdefault("MPLBACKEND", "Agg")
 
+DATA = Path(__file__).resolve().parent / "data"
+"""Cached references (tests/data/make_*.py regenerate them)."""
+
+
+def _hypothesis_profiles() -> None:
+    """Reproducible property tests: a fixed seed locally ('dev'), derandomized in CI ('ci',
+    chosen by DESIGNKIT_CI or CI); HYPOTHESIS_PROFILE=explore draws fresh examples."""
+    from hypothesis import HealthCheck, settings
+
+    settings.register_profile("dev", derandomize=True, deadline=None,
+                              suppress_health_check=[HealthCheck.too_slow])
+    settings.register_profile("ci", derandomize=True, deadline=None, print_blob=True,
+                              suppress_health_check=[HealthCheck.too_slow])
+    settings.register_profile("explore", derandomize=False, deadline=None)
+    ci = os.environ.get("DESIGNKIT_CI") or os.environ.get("CI")
+    settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci" if ci else "dev"))
+
+
+_hypothesis_profiles()
+
+
+@pytest.fixture(scope="session")
+def thesis_array():
+    """The default design's coupled 3 x 3 array (its one LU solve shared by every test)."""
+    from designkit.array import CoilArray
+    from designkit.design import default_design
+
+    arr = CoilArray.from_design(default_design())
+    arr.coupled()
+    return arr
+
 
 def load_study(name: str):
     """Import ``studies/<name>.py`` (the studies are scripts, not a package) for a smoke test."""

@@ -24,9 +24,8 @@ ROWS = {1: [2], 3: [0, 1, 2], 6: [0, 1, 2, 3, 4, 5]}
 
 
 @pytest.fixture(scope="module")
-def wrench_matrices():
+def wrench_matrices(thesis_array):
     """(m, 6, 9) force+torque per ampere of the default design at random workspace points."""
-    from designkit import CoilArray
     from designkit.array import force_matrix, skew_matrix
     from designkit.design import default_design
 
@@ -35,7 +34,7 @@ def wrench_matrices():
     ws = d.workspace
     h = ws.half_width_m
     pts = rng.uniform([-h, -h, ws.z_min_m], [h, h, ws.z_max_m], (24, 3))
-    a = CoilArray.from_design(d).actuation_matrix(pts, rtol=1e-8)
+    a = thesis_array.actuation_matrix(pts, rtol=1e-8)
     m = np.asarray(d.magnet.moment_vector_a_m2)
     return np.concatenate([force_matrix(m) @ a[:, 3:, :], skew_matrix(m) @ a[:, :3, :]], axis=1)
 

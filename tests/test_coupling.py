@@ -21,8 +21,8 @@ M_DESIGN = np.array([0.0, 0.0, D.magnet.moment_a_m2])
 
 
 @pytest.fixture(scope="module")
-def arr():
-    return CoilArray.from_design(D)
+def arr(thesis_array):
+    return thesis_array  # the default design's array: one coupled solve per session
 
 
 def _two(pitch=0.05, mu_r=1000.0):

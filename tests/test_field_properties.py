@@ -2,7 +2,8 @@
 divergence-free, curl-free outside sources, continuity across the axis."""
 
 import numpy as np
-from hypothesis import given, settings, strategies as st
+import pytest
+from hypothesis import assume, given, settings, strategies as st
 from scipy.spatial.transform import Rotation
 
 from designkit import Coil
@@ -21,14 +22,34 @@ def _outside_winding(p):
     return not (RI - 1e-3 <= rho <= RO + 1e-3 and abs(p[2]) <= L / 2 + 1e-3)
 
 
+def _winding_from_loops(p, i, n_r=8, n_z=64):
+    """The thick winding as a Gauss-Legendre sum of filament loops carrying J dr dz (an
+    independent path: the loop kernel, not the winding's closed form)."""
+    xr, wr = np.polynomial.legendre.leggauss(n_r)
+    xz, wz = np.polynomial.legendre.leggauss(n_z)
+    radii, wr = RI + (RO - RI) * (xr + 1) / 2, wr * (RO - RI) / 2
+    shifted = np.asarray(p)[None] - np.c_[np.zeros(n_z), np.zeros(n_z), L * xz / 2]
+    j = N * i / ((RO - RI) * L)
+    return sum(w_r * (wz * L / 2) @ loop_field(shifted, a, j) for a, w_r in zip(radii, wr))
+
+
+def _clear_of_winding(p, margin=5e-3):
+    rho = np.hypot(p[0], p[1])
+    d_rho = max(RI - rho, rho - RO, 0.0)
+    d_z = max(abs(p[2]) - L / 2, 0.0)
+    return np.hypot(d_rho, d_z) >= margin
+
+
 @FAST
-@given(point, current, current)
-def test_superposition_linearity(p, i1, i2):
-    b1, g1 = winding_field(p, RI, RO, L, N, i1, gradient=True)
-    b2, g2 = winding_field(p, RI, RO, L, N, i2, gradient=True)
-    b, g = winding_field(p, RI, RO, L, N, i1 + i2, gradient=True)
-    assert np.linalg.norm(b - b1 - b2) <= 1e-13 * (np.linalg.norm(b1) + np.linalg.norm(b2))
-    assert np.linalg.norm(g - g1 - g2) <= 1e-13 * (np.linalg.norm(g1) + np.linalg.norm(g2))
+@given(point, current)
+def test_winding_is_the_sum_of_its_loops(p, i):
+    # superposition with a content: the winding's closed form against 512 loops; measured
+    # <= 1.4e-9 5 mm from the winding (the quadrature's own error), ~1e-14 farther out
+    p = np.array(p)
+    assume(_clear_of_winding(p))
+    b = winding_field(p, RI, RO, L, N, i)
+    ref = _winding_from_loops(p, i)
+    assert np.linalg.norm(b - ref) <= 1e-7 * np.linalg.norm(ref)
 
 
 @FAST
@@ -105,3 +126,15 @@ def test_continuity_across_the_axis(z, phi, eps):
             # B and G are smooth in x, y: the change is O(eps / size)
             assert np.linalg.norm(b - b0) <= 1e-13 * sb + 10 * eps / size * sb
             assert np.linalg.norm(g - g0) <= 1e-12 * sg + 10 * eps / size * sg
+
+
+def test_winding_far_field_is_the_dipole_of_its_moment():
+    # far away a winding is a point dipole of moment N pi (Ri^2 + Ri Ro + Ro^2) / 3 per ampere
+    # (the section-averaged loop area); on the axis Bz = mu0 m / (2 pi z^3) up to (L / z)^2
+    from designkit.constants import MU0
+
+    coil = Coil(RI, RO, L, N)
+    z = 20.0
+    bz = winding_field(np.array([0.0, 0.0, z]), RI, RO, L, N, 1.0)[2]
+    # measured 1.2e-5 (the quadrupole-order correction at L / z = 0.005)
+    assert coil.dipole_moment_per_amp == pytest.approx(bz * 2 * np.pi * z ** 3 / MU0, rel=1e-4)

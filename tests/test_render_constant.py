@@ -13,8 +13,12 @@ from designkit.render.constant import force_matrices
 
 
 @pytest.fixture(scope="module")
-def source():
-    return ArrayActuation.from_design(default_design())
+def source(thesis_array):
+    from designkit.fieldmap import default_box
+
+    d = default_design()  # the session's coupled solve of the default array
+    return ArrayActuation(thesis_array, d.magnet.moment_vector_a_m2, d.spec_hash(),
+                          default_box(d))
 
 
 def _knapsack(c, u, tl):

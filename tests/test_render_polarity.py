@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from designkit import Coil
-from designkit.array import CoilArray, force_matrix
+from designkit.array import force_matrix
 from designkit.design import MU0, default_design, load_design
 from designkit.errors import BadInputError
 
@@ -40,9 +40,9 @@ def test_positive_current_repels_the_default_magnet():
     assert dbz < 0 and m[2] * dbz > 0
 
 
-def test_with_core_the_array_pushes_up_at_30_mm():
+def test_with_core_the_array_pushes_up_at_30_mm(thesis_array):
     d = default_design()
-    arr = CoilArray.from_design(d)
+    arr = thesis_array
     a = arr.actuation_matrix([0.0, 0.0, 0.03])
     cur = np.zeros(arr.n_coils)
     cur[arr.n_coils // 2] = 6.0
