@@ -154,8 +154,8 @@ def matched(rows, method, target, gradient):
 def run(out_dir, quick=False):
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    n = 600 if quick else 10000
-    n_mp = 40 if quick else 200
+    n = 300 if quick else 10000
+    n_mp = 20 if quick else 200
     repeat = 1 if quick else 3
     rtols = [1e-4, 1e-6, 1e-8] if quick else [1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-10, 1e-12]
     grids = ([(3, 5), (4, 7), (6, 12)] if quick else

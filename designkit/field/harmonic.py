@@ -168,26 +168,26 @@ def _recurrence(out, xt, t2, first, second, a, b, need):
 
 def _partial(coef, M, last, need):
     """sum over rows m <= last[i] of coef[m] M[m, i] (rows past last[i], up to need[i], are
-    filled by the recurrence and subtracted here; need - last <= 1)."""
+    filled by the recurrence and subtracted here)."""
     full = coef @ M
-    extra = np.nonzero(need > last)[0]
-    if extra.size:
-        r = last[extra] + 1
+    for d in range(1, int((need - last).max(initial=0)) + 1):
+        extra = np.nonzero(need - last >= d)[0]
+        r = last[extra] + d
         full[extra] -= coef[r] * M[r, extra]
     return full
 
 
-def _series(g, s, x, t, rho, sin, L, mode):
+def _series(g, s, x, t, rho, sin, L, gradient, spherical):
     """Truncated sums to degree L[i] (sorted ascending) per point: (br, bz) or (br, bz,
-    br_over_rho, dbr_dz, dbz_dz). mode: "spherical" (B from the P recurrence alone), "axis"
-    (B, Brho / rho from C), "gradient"."""
+    br_over_rho, dbr_dz, dbz_dz). ``spherical``: everything from the P recurrence (Brho and
+    dBz/drho through the spherical components, divided by sin theta); else Brho / rho and
+    dBrho/dz from the C recurrence (exact on the axis)."""
     xt = x * t
     t2 = t * t
     lm = int(L[-1])
-    grad = mode == "gradient"
     # P~_m = t^(m+1) P_m, rows 0 .. lm + 1 (+ 1 with the gradient); coefficient rows m = l + k
-    need_p = L + (2 if grad else 1)
-    P = np.empty((lm + (3 if grad else 2), x.shape[0]))
+    need_p = L + (2 if gradient else 1)
+    P = np.empty((lm + (3 if gradient else 2), x.shape[0]))
     kp = _recurrence(P, xt, t2, t, xt * t, lambda m: (2 * m + 1) / (m + 1),
                      lambda m: m / (m + 1), need_p)
 
@@ -198,22 +198,31 @@ def _series(g, s, x, t, rho, sin, L, mode):
 
     lv = np.arange(1, lm + 1)
     gl = g[1 : lm + 1]
-    bz = s * _partial(rows(gl * (lv + 1), 1, kp), P, L + 1, need_p)
-    if mode == "spherical":
-        b_r = (s * t) * _partial(rows(gl * (lv + 1), 0, kp), P, L, need_p)
-        return (b_r - x * bz) / sin, bz
+    g1 = gl * (lv + 1)
+    g2 = g1 * (lv + 2)
+    bz = s * _partial(rows(g1, 1, kp), P, L + 1, need_p)
+    if gradient:
+        dbz_dz = -_partial(rows(g2, 2, kp), P, L + 2, need_p)
+    if spherical:
+        b_r = (s * t) * _partial(rows(g1, 0, kp), P, L, need_p)
+        br = (b_r - x * bz) / sin
+        if not gradient:
+            return br, bz
+        # d/dr at fixed theta multiplies degree l's term by -(l + 2) / r
+        drbz = -t * _partial(rows(g2, 1, kp), P, L + 1, need_p)
+        return br, bz, br / rho, (drbz - x * dbz_dz) / sin, dbz_dz
     # C~_m = t^(m+3) C_m
-    need_c = L + (1 if grad else 0)
-    C = np.empty((lm + (2 if grad else 1), x.shape[0]))
+    need_c = L + (1 if gradient else 0)
+    C = np.empty((lm + (2 if gradient else 1), x.shape[0]))
     t3 = t2 * t
     kc = _recurrence(C, xt, t2, t3, 3.0 * xt * t3, lambda m: (2 * m + 3) / (m + 1),
                      lambda m: (m + 2) / (m + 1), need_c)
     brr = _partial(rows(gl, 0, kc), C, L, need_c)
-    if mode == "axis":
+    if not gradient:
         return rho * brr, bz
-    dbz_dz = -_partial(rows(gl * (lv + 1) * (lv + 2), 2, kp), P, L + 2, need_p)
-    dbr_dz = -(rho / s) * _partial(rows(gl * (lv + 1), 1, kc), C, L + 1, need_c)
+    dbr_dz = -(rho / s) * _partial(rows(g1, 1, kc), C, L + 1, need_c)
     return rho * brr, bz, brr, dbr_dz, dbz_dz
+
 
 def harmonic_rz(ri, ro, h, rho, z, gradient, rtol, tries=2):
     """Exterior expansion where its bound meets rtol.
@@ -243,9 +252,9 @@ def harmonic_rz(ri, ro, h, rho, z, gradient, rtol, tries=2):
     bucket = co["deg"][j, q.astype(np.intp)].astype(np.int16)
     lb = np.array(L_BUCKETS + (L_BUCKETS[-1],))
     sin = rho[cand] / rc
-    # B only: sin theta below this takes Brho / rho from the C recurrence ("axis")
-    axis = np.zeros(cand.size, dtype=np.int16) if gradient else (
-        (sin < min(0.2, SIN_SPHERICAL / rtol)).astype(np.int16))
+    # sin theta below this takes Brho / rho (and dBrho/dz) from the C recurrence
+    cut = SIN_SPHERICAL / rtol
+    axis = (sin < min(0.2, math.sqrt(cut) if gradient else cut)).astype(np.int16)
     nbk = len(L_BUCKETS)
     todo = np.nonzero(bucket < nbk)[0]
     for attempt in range(tries + 1):
@@ -260,20 +269,23 @@ def harmonic_rz(ri, ro, h, rho, z, gradient, rtol, tries=2):
         rs = rho[idx]
         Ls = lb[bi]
         res = np.empty((nout, todo.size))
+        k = todo.size - int(np.count_nonzero(axis[todo]))
+        for sph, sl in ((True, slice(0, k)), (False, slice(k, todo.size))):
+            if sl.stop > sl.start:
+                res[:, sl] = _series(g, s, xs[sl], ts[sl], rs[sl], ss[sl], Ls[sl], gradient,
+                                     sph)
         rnd = ROUND * (Ls + 2.0)
-        if gradient:
-            res[:] = _series(g, s, xs, ts, rs, ss, Ls, "gradient")
-        else:
-            k = todo.size - int(np.count_nonzero(axis[todo]))
-            for mode, sl in (("spherical", slice(0, k)), ("axis", slice(k, todo.size))):
-                if sl.stop > sl.start:
-                    res[:, sl] = _series(g, s, xs[sl], ts[sl], rs[sl], ss[sl], Ls[sl], mode)
-            rnd[:k] *= 1.0 + 2.0 / np.maximum(ss[:k], 1e-300)
+        rnd_g = rnd.copy()
+        # rounding through the spherical components: amplified by 1 / sin (Brho, dBrho/dz)
+        # and 1 / sin^2 (Brho / rho)
+        inv = 1.0 / np.maximum(ss[:k], 1e-300)
+        rnd[:k] *= 1.0 + 2.0 * inv
+        rnd_g[:k] *= 1.0 + 2.0 * inv * inv
         eb = (s * ts) * (tb[bi, js] + rnd * tb[-1, js])
         nb = np.sqrt(res[0] * res[0] + res[1] * res[1])
         ok = eb <= B_FRACTION * rtol * (nb - eb)
         if gradient:
-            eg = (G_FROB * ts * ts) * (tg[bi, js] + rnd * tg[-1, js])
+            eg = (G_FROB * ts * ts) * (tg[bi, js] + rnd_g * tg[-1, js])
             # |G|_F from the components (dbr_drho = -dbz_dz - br_over_rho, dbz_drho = dbr_dz)
             ng = np.sqrt((res[4] + res[2]) ** 2 + res[2] ** 2 + 2.0 * res[3] ** 2
                          + res[4] ** 2)
