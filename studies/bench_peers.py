@@ -2,12 +2,13 @@
 field cost against its peers, cfsem (Rust filament sums) and magpylib (numpy shells)?
 
 Winding: the thesis coil (Ri = 12 mm, Ro = 19 mm, L = 100 mm, 1429 turns, 1 A, uniform J).
-Point sets (local frame): workspace (rho <= 40 mm, 20..80 mm above the top face), near (1..10
-mm outside the top face or the outer side), far (0.3..1 m, any direction). Error = max over
-points of |B - B_ref| / |B_ref| (B+G rows: the larger of that and the same for G), B_ref from
+Point sets (local frame): workspace (10^4 points, rho <= 40 mm, 20..80 mm above the top face),
+near (2000, 1..10 mm outside the top face or the outer side), far (2000, 0.3..1 m, any way).
+Error = max over points of |B - B_ref| / |B_ref| (B+G rows: the larger of that and the same for
+G), B_ref from
 designkit's exact path at rtol 1e-13 (checked against mpmath in tests/test_field_winding*.py).
-Methods, same points, same process, one thread each (OMP/OPENBLAS/MKL/RAYON threads = 1, set
-before numpy loads), min of ``repeat`` wall-clock runs:
+Methods, same points, same process, one thread each (the thread-count variables of OpenMP,
+BLAS and Rayon set to 1 before numpy loads), min of ``repeat`` wall-clock runs:
 * designkit winding_field (Cartesian in and out), B and B + gradient, rtol 1e-4 .. 1e-12;
 * cfsem.flux_density_circular_filament on Gauss-Legendre (na x nz) filament grids of the same
   section (par=False), plus the cylindrical -> Cartesian step; cfsem has no gradient of the
@@ -17,7 +18,7 @@ before numpy loads), min of ``repeat`` wall-clock runs:
 Matched error E: each method's fastest configuration whose achieved error is <= E.
 Output: bench_peers.txt (table, ratios), bench_peers.json, bench_peers.png (log-log time per
 point against achieved error, one panel per point set). Run: ``python studies/bench_peers.py
-OUT [--quick]``; the load average and a same-process reference (2000 x 2000 matmul) are printed.
+OUT [--quick] [--repeat=K]``; the load average and a same-process reference (2000 x 2000 matmul) are printed.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ if __package__ in (None, ""):
 
 import numpy as np  # noqa: E402
 
-from designkit._io import write_json_atomic, write_text_atomic  # noqa: E402
+from designkit._io import atomic_path, write_json_atomic, write_text_atomic  # noqa: E402
 from designkit.constants import MU0  # noqa: E402
 from designkit.field import cylindrical_to_cartesian, winding_field  # noqa: E402
 from designkit.field import harmonic  # noqa: E402
@@ -49,13 +50,15 @@ CD_STEP = 1e-6
 """Central-difference step for the peers' gradients, m."""
 
 
-def point_sets(n, seed=0):
-    """{name: (n, 3) points, m} in the winding's local frame."""
+def point_sets(n, seed=0, n_other=None):
+    """{name: (n, 3) points, m} in the winding's local frame (near, far: ``n_other``)."""
     rng = np.random.default_rng(seed)
     phi = rng.uniform(0, 2 * np.pi, n)
     rho = 0.04 * np.sqrt(rng.uniform(0, 1, n))
     ws = np.stack([rho * np.cos(phi), rho * np.sin(phi), L / 2 + rng.uniform(0.02, 0.08, n)], 1)
     # near: offset 1..10 mm outward from a random spot of the top face or of the outer side
+    n = n if n_other is None else n_other
+    phi = phi[:n]
     d = rng.uniform(0.001, 0.01, n)
     top = rng.uniform(0, 1, n) < 0.5
     r_n = np.where(top, np.sqrt(rng.uniform(RI**2, RO**2, n)), RO + d)
@@ -151,17 +154,24 @@ def matched(rows, method, target, gradient):
     return min(ok, key=lambda r: r["us_per_point"]) if ok else None
 
 
-def run(out_dir, quick=False):
+CONFIG = {
+    False: dict(n=10000, n_mp=200, repeat=3, rtols=[1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-10, 1e-12],
+                grids=[(2, 3), (2, 4), (3, 5), (3, 6), (3, 7), (4, 7), (4, 8), (4, 9), (5, 9),
+                       (5, 10), (5, 12), (6, 12), (6, 14), (7, 16), (8, 20)],
+                shells=[8, 32, 128, 512]),
+    True: dict(n=300, n_mp=20, repeat=1, rtols=[1e-4, 1e-6, 1e-8], grids=[(3, 5), (4, 7), (6, 12)],
+               shells=[4, 16]),
+}
+"""Full and quick (smoke test) runs."""
+
+
+def run(out_dir, quick=False, repeat=None):
+    """Run the benchmark into ``out_dir``; ``repeat`` overrides the min-of count."""
+    cfg = CONFIG[bool(quick)]
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    n = 300 if quick else 10000
-    n_mp = 20 if quick else 200
-    repeat = 1 if quick else 3
-    rtols = [1e-4, 1e-6, 1e-8] if quick else [1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-10, 1e-12]
-    grids = ([(3, 5), (4, 7), (6, 12)] if quick else
-             [(2, 3), (2, 4), (3, 5), (3, 6), (3, 7), (4, 7), (4, 8), (4, 9), (5, 9), (5, 10),
-              (5, 12), (6, 12), (6, 14), (7, 16), (8, 20)])
-    shells = [4, 16] if quick else [8, 32, 128, 512]
+    n, n_mp, rtols, grids, shells = (cfg[k] for k in ("n", "n_mp", "rtols", "grids", "shells"))
+    repeat = cfg["repeat"] if repeat is None else int(repeat)
     try:
         import cfsem  # noqa: F401
         have_cfsem = True
@@ -176,8 +186,9 @@ def run(out_dir, quick=False):
     harmonic.coefficients(RI, RO, L / 2)  # cached: every later call reuses them
     coef_ms = 1e3 * (time.perf_counter() - t0)
     rows = []
-    for name, pts in point_sets(n).items():
+    for name, pts in point_sets(n, n_other=n if quick else 2000).items():
         b_ref, g_ref = reference(pts)
+        npt = len(pts)
 
         def add(method, config, gradient, npts, t, out):
             if gradient:
@@ -194,12 +205,12 @@ def run(out_dir, quick=False):
             for rtol in rtols:
                 t, out = _time(lambda: winding_field(pts, RI, RO, L, N, I, gradient=gradient,
                                                      rtol=rtol), repeat)
-                add("designkit", f"rtol {rtol:.0e}", gradient, n, t, out)
+                add("designkit", f"rtol {rtol:.0e}", gradient, npt, t, out)
             if have_cfsem:
                 for g in grids:
                     grid = _grid(*g)
                     t, out = _time(lambda: cfsem_field(pts, grid, gradient), repeat)
-                    add("cfsem", f"{g[0]}x{g[1]}", gradient, n, t, out)
+                    add("cfsem", f"{g[0]}x{g[1]}", gradient, npt, t, out)
             if have_mp:
                 for k in shells:
                     t, out = _time(lambda: magpylib_field(pts[:n_mp], k, gradient), 1)
@@ -250,7 +261,8 @@ def _ratios(rows, have_cfsem, have_mp):
 
 
 def _table(rows, ratios, coef_ms, mm, n, n_mp, repeat):
-    lines = [f"thesis winding, {n} points per set ({n_mp} for magpylib), one thread each, "
+    lines = [f"thesis winding, {n} workspace points (near, far: 2000; magpylib: the first "
+             f"{n_mp} of each set), one thread each, "
              f"min of {repeat}; load average {load_average()}; 2000x2000 matmul {mm:.3f} s "
              f"(same process); designkit's expansion coefficients (once per winding) "
              f"{coef_ms:.1f} ms",
@@ -296,15 +308,15 @@ def _figure(rows, out_dir):
     axes[0].legend(fontsize=7)
     fig.tight_layout()
     png = out_dir / "bench_peers.png"
-    tmp = out_dir / "bench_peers.tmp.png"
-    fig.savefig(tmp, dpi=110)
+    with atomic_path(png) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
-    tmp.replace(png)
     return png
 
 
 if __name__ == "__main__":
     args = [a for a in sys.argv[1:] if not a.startswith("--")]
+    rep = [a.split("=", 1)[1] for a in sys.argv[1:] if a.startswith("--repeat=")]
     res = run(Path(args[0]) if args else Path(__file__).resolve().parents[1] / "out"
-              / "bench_peers", quick="--quick" in sys.argv)
+              / "bench_peers", quick="--quick" in sys.argv, repeat=rep[0] if rep else None)
     print(res["table"])

@@ -23,6 +23,7 @@ docs/field_winding.md ("Exterior harmonic expansion").
 from __future__ import annotations
 
 import math
+import threading
 
 import numpy as np
 
@@ -49,6 +50,18 @@ components (rounding amplified by <= 1 + 2 / sin theta, in the bound)."""
 CHUNK = 4096
 _CACHE: dict = {}
 _CACHE_SIZE = 64
+_BUFFERS = threading.local()
+
+
+def _buffer(name, rows, n):
+    """A (rows, n) scratch array reused between calls of this thread (no page faults)."""
+    if rows * n > 1 << 22:  # > 32 MB: not kept
+        return np.empty((rows, n))
+    buf = getattr(_BUFFERS, name, None)
+    if buf is None or buf.size < rows * n:
+        buf = np.empty(max(rows * n, 1 << 16))
+        setattr(_BUFFERS, name, buf)
+    return buf[: rows * n].reshape(rows, n)
 
 
 def is_cached(ri, ro, h) -> bool:
@@ -187,7 +200,7 @@ def _series(g, s, x, t, rho, sin, L, gradient, spherical):
     lm = int(L[-1])
     # P~_m = t^(m+1) P_m, rows 0 .. lm + 1 (+ 1 with the gradient); coefficient rows m = l + k
     need_p = L + (2 if gradient else 1)
-    P = np.empty((lm + (3 if gradient else 2), x.shape[0]))
+    P = _buffer("P", lm + (3 if gradient else 2), x.shape[0])
     kp = _recurrence(P, xt, t2, t, xt * t, lambda m: (2 * m + 1) / (m + 1),
                      lambda m: m / (m + 1), need_p)
 
@@ -213,7 +226,7 @@ def _series(g, s, x, t, rho, sin, L, gradient, spherical):
         return br, bz, br / rho, (drbz - x * dbz_dz) / sin, dbz_dz
     # C~_m = t^(m+3) C_m
     need_c = L + (1 if gradient else 0)
-    C = np.empty((lm + (2 if gradient else 1), x.shape[0]))
+    C = _buffer("C", lm + (2 if gradient else 1), x.shape[0])
     t3 = t2 * t
     kc = _recurrence(C, xt, t2, t3, 3.0 * xt * t3, lambda m: (2 * m + 3) / (m + 1),
                      lambda m: (m + 2) / (m + 1), need_c)
@@ -234,7 +247,7 @@ def harmonic_rz(ri, ro, h, rho, z, gradient, rtol, tries=2):
     """
     n = rho.shape[0]
     nout = 5 if gradient else 2
-    out = np.zeros((nout, n))
+    out = np.empty((nout, n))
     done = np.zeros(n, dtype=bool)
     co = coefficients(ri, ro, h)
     s, g, tb, tg = co["s"], co["g"], co["tb"], co["tg"]
