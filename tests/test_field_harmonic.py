@@ -126,7 +126,7 @@ def test_mpmath_table_points_taken_meet_rtol():
 def test_public_function_takes_it_for_many_points_and_stays_within_rtol():
     ri, ro, length = 0.012, 0.019, 0.1
     rng = np.random.default_rng(0)
-    n = 4000
+    n = 6000
     rho = 0.04 * np.sqrt(rng.uniform(0, 1, n))
     phi = rng.uniform(0, 2 * np.pi, n)
     z = length / 2 + rng.uniform(0.003, 0.08, n)

@@ -29,9 +29,10 @@ import numpy as np
 
 T_MAX = 0.9
 """Largest s / r tried (beyond it the series needs hundreds of terms: the exact path wins)."""
-L_BUCKETS = (3, 5, 7, 9, 11, 13, 15, 18, 21, 25, 29, 34, 40, 47, 55, 65, 77, 91, 108, 128)
+L_BUCKETS = (3, 5, 7, 9, 11, 13, 15, 17, 21, 25, 29, 33, 39, 47, 55, 65, 77, 91, 107, 127)
+"""Truncation degrees (odd: the even coefficients of a winding centred at z = 0 vanish)."""
 L_MAX = L_BUCKETS[-1]
-LC = L_MAX + 41
+LC = L_MAX + 42
 """Degree up to which the coefficients are computed (odd: I_(LC+1) is a polynomial)."""
 NT = 1024
 """Grid of t for the tabulated tail bounds."""
@@ -104,6 +105,7 @@ def compute_coefficients(ri: float, ro: float, h: float, lc: int = LC):
     for n in range(2, lc):
         d_prev, d_cur = d_cur, ((2 * n + 1) * Z * d_cur - (n + 1) * R2 * d_prev) / n
         g[n + 1] = wa2 @ d_cur / (n + 2)
+    g[2::2] = 0.0  # odd in z0 over a section symmetric about z = 0: exactly zero
     # |g^_l| <= I_(l+1) / (2 sqrt 2) for l > lc; R0^(lc+1) is a polynomial, integrated exactly
     g_hi = (w @ R2 ** ((lc + 1) // 2)) / (2.0 * math.sqrt(2.0))
     # rounding of the sums: the recurrence's values reach C_n(1) ~ n^2 / 2 times the terms
@@ -184,9 +186,11 @@ def _partial(coef, M, last, need):
     filled by the recurrence and subtracted here)."""
     full = coef @ M
     for d in range(1, int((need - last).max(initial=0)) + 1):
-        extra = np.nonzero(need - last >= d)[0]
-        r = last[extra] + d
-        full[extra] -= coef[r] * M[r, extra]
+        r = last + d
+        c = np.where(need >= r, coef[np.minimum(r, coef.shape[0] - 1)], 0.0)
+        extra = np.flatnonzero(c)  # (rows of even degree have coefficient 0)
+        if extra.size:
+            full[extra] -= c[extra] * M[r[extra], extra]
     return full
 
 

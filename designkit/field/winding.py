@@ -57,7 +57,7 @@ COST_SHEET = 3.5
 _CENTRAL_NODES = 8
 HARMONIC_RTOL_MIN = 1e-11
 """Tighter requests skip the exterior expansion (its rounding bound rarely meets them)."""
-HARMONIC_MIN_POINTS = 2000
+HARMONIC_MIN_POINTS = 5000
 """Fewer points (and coefficients not cached for this winding) go the exact way: the
 expansion's coefficients cost about as much as this many exact points."""
 HARMONIC_CHUNK = 8192
