@@ -18,7 +18,7 @@ BLAS and Rayon set to 1 before numpy loads), min of ``repeat`` wall-clock runs:
 Matched error E: each method's fastest configuration whose achieved error is <= E.
 Output: bench_peers.txt (table, ratios), bench_peers.json, bench_peers.png (log-log time per
 point against achieved error, one panel per point set). Run: ``python studies/bench_peers.py
-OUT [--quick] [--repeat=K] [--sets=workspace,near,far]``; the load average and a same-process reference (2000 x 2000 matmul) are printed.
+OUT [--quick] [--repeat=K] [--sets=workspace,near,far] [--shells=8,32]``; the load average and a same-process reference (2000 x 2000 matmul) are printed.
 """
 
 from __future__ import annotations
@@ -155,7 +155,7 @@ def matched(rows, method, target, gradient):
 
 
 CONFIG = {
-    False: dict(n=10000, n_mp=60, repeat=3, rtols=[1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-10, 1e-12],
+    False: dict(n=10000, n_mp=20, repeat=3, rtols=[1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-10, 1e-12],
                 grids=[(2, 3), (2, 4), (3, 5), (3, 6), (3, 7), (4, 7), (4, 8), (4, 9), (5, 9),
                        (5, 10), (5, 12), (6, 12), (6, 14), (7, 16), (8, 20)],
                 shells=[8, 32, 128, 512]),
@@ -165,10 +165,12 @@ CONFIG = {
 """Full and quick (smoke test) runs."""
 
 
-def run(out_dir, quick=False, repeat=None, sets=("workspace", "near", "far")):
+def run(out_dir, quick=False, repeat=None, sets=("workspace", "near", "far"), shells=None):
     """Run the benchmark into ``out_dir``; ``repeat`` overrides the min-of count, ``sets``
-    chooses the point sets."""
-    cfg = CONFIG[bool(quick)]
+    chooses the point sets, ``shells`` magpylib's shell counts."""
+    cfg = dict(CONFIG[bool(quick)])
+    if shells is not None:
+        cfg["shells"] = list(shells)
     Path(out_dir).mkdir(parents=True, exist_ok=True)
     out_dir = Path(out_dir)
     n, n_mp, rtols, grids, shells = (cfg[k] for k in ("n", "n_mp", "rtols", "grids", "shells"))
@@ -332,6 +334,8 @@ if __name__ == "__main__":
     kw = dict(repeat=opt.get("repeat"))
     if "sets" in opt:
         kw["sets"] = tuple(opt["sets"].split(","))
+    if "shells" in opt:
+        kw["shells"] = [int(k) for k in opt["shells"].split(",")]
     res = run(Path(args[0]) if args else Path(__file__).resolve().parents[1] / "out"
               / "bench_peers", quick="--quick" in sys.argv, **kw)
     print(res["table"])
