@@ -292,12 +292,14 @@ def harmonic_rz(ri, ro, h, rho, z, gradient, rtol, tries=2):
                 res[:, sl] = _series(g, s, xs[sl], ts[sl], rs[sl], ss[sl], Ls[sl], gradient,
                                      sph)
         rnd = ROUND * (Ls + 2.0)
-        rnd_g = rnd.copy()
+        if gradient:
+            rnd_g = rnd.copy()
         # rounding through the spherical components: amplified by 1 / sin (Brho, dBrho/dz)
         # and 1 / sin^2 (Brho / rho)
         inv = 1.0 / np.maximum(ss[:k], 1e-300)
+        if gradient:
+            rnd_g[:k] *= 1.0 + 2.0 * inv * inv
         rnd[:k] *= 1.0 + 2.0 * inv
-        rnd_g[:k] *= 1.0 + 2.0 * inv * inv
         eb = (s * ts) * (tb[bi, js] + rnd * tb[-1, js])
         nb = np.sqrt(res[0] * res[0] + res[1] * res[1])
         ok = eb <= B_FRACTION * rtol * (nb - eb)

@@ -60,7 +60,8 @@ HARMONIC_RTOL_MIN = 1e-11
 HARMONIC_MIN_POINTS = 5000
 """Fewer points (and coefficients not cached for this winding) go the exact way: the
 expansion's coefficients cost about as much as this many exact points."""
-HARMONIC_CHUNK = 8192
+HARMONIC_CHUNK = 16384
+"""Most points per call of the expansion (its scratch rows are kept per thread)."""
 
 
 def _bernstein_rho(lo, hi, s):
@@ -433,14 +434,14 @@ def winding_rz(ri, ro, h, rho, z, *, gradient=False, rtol=1e-10):
     nout = 5 if gradient else 2
     acc = np.empty((nout, n))
     rest = np.arange(n)
-    if rtol >= HARMONIC_RTOL_MIN and (n >= HARMONIC_MIN_POINTS or is_cached(ri, ro, h)):
+    if n and rtol >= HARMONIC_RTOL_MIN and (n >= HARMONIC_MIN_POINTS or is_cached(ri, ro, h)):
         # exterior expansion where its bound holds (cost ~ degree, whatever the section)
         done = np.zeros(n, dtype=bool)
-        for k in range(0, n, HARMONIC_CHUNK):
-            d, v = harmonic_rz(ri, ro, h, rho[k:k + HARMONIC_CHUNK], z[k:k + HARMONIC_CHUNK],
-                               gradient, rtol)
-            done[k:k + HARMONIC_CHUNK] = d
-            acc[:, k:k + HARMONIC_CHUNK] = v
+        size = -(-n // -(-n // HARMONIC_CHUNK))  # equal chunks: no small last one
+        for k in range(0, n, size):
+            d, v = harmonic_rz(ri, ro, h, rho[k:k + size], z[k:k + size], gradient, rtol)
+            done[k:k + size] = d
+            acc[:, k:k + size] = v
         rest = np.nonzero(~done)[0]
     if rest.size == n:
         acc = _exact_rz(ri, ro, h, rho, z, gradient, rtol)
