@@ -14,7 +14,7 @@ addition theorem); beyond lc, |g^_l| <= I_(lc+1) / (2 sqrt 2), I_m = int int R0^
 in m). The tail sums are tabulated per degree on a grid of t (monotone: the next grid value is
 an upper bound). With a rounding bound (a few ulps per degree of the sum of all term bounds,
 times 1 / sin theta for Brho from the spherical components), a point takes this path only
-where bound <= rtol (|B_computed| - bound) (10 rtol for |G|): then the bound holds against the
+where bound <= rtol (|B_computed| - bound) (the same for |G|): then the bound holds against the
 exact value. Cost per point ~ L (a three-term recurrence and a matrix-vector product).
 Reference: Jackson, Classical Electrodynamics, 3rd ed., sections 3.3 and 5.5;
 docs/field_winding.md ("Exterior harmonic expansion").
@@ -44,7 +44,7 @@ EPS = float(np.finfo(float).eps)
 ROUND = 16.0 * EPS
 """Rounding of the recurrences and products, per degree, relative to the term bounds."""
 B_FRACTION = 1.0
-G_FRACTION = 10.0
+G_FRACTION = 1.0
 SIN_SPHERICAL = 1e-11
 """B-only points with sin theta >= min(0.2, this / rtol) take Brho from the spherical
 components (rounding amplified by <= 1 + 2 / sin theta, in the bound)."""

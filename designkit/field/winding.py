@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 
-from .harmonic import harmonic_rz, is_cached
+from .harmonic import harmonic_rz
 from .kernels import _loop_scaled, _sheet_scaled
 
 RTOL_MIN = 1e-12
@@ -57,9 +57,10 @@ COST_SHEET = 3.5
 _CENTRAL_NODES = 8
 HARMONIC_RTOL_MIN = 1e-11
 """Tighter requests skip the exterior expansion (its rounding bound rarely meets them)."""
-HARMONIC_MIN_POINTS = 5000
-"""Fewer points (and coefficients not cached for this winding) go the exact way: the
-expansion's coefficients cost about as much as this many exact points."""
+HARMONIC_MIN_POINTS = 2000
+"""Calls with fewer points go the exact way (the expansion's coefficients, computed once per
+winding, cost about as much as this many exact points; small calls stay independent of what
+was called before)."""
 HARMONIC_CHUNK = 16384
 """Most points per call of the expansion (its scratch rows are kept per thread)."""
 
@@ -434,7 +435,7 @@ def winding_rz(ri, ro, h, rho, z, *, gradient=False, rtol=1e-10):
     nout = 5 if gradient else 2
     acc = np.empty((nout, n))
     rest = np.arange(n)
-    if n and rtol >= HARMONIC_RTOL_MIN and (n >= HARMONIC_MIN_POINTS or is_cached(ri, ro, h)):
+    if n >= HARMONIC_MIN_POINTS and rtol >= HARMONIC_RTOL_MIN:
         # exterior expansion where its bound holds (cost ~ degree, whatever the section)
         done = np.zeros(n, dtype=bool)
         size = -(-n // -(-n // HARMONIC_CHUNK))  # equal chunks: no small last one
