@@ -127,9 +127,11 @@ def compute_coefficients(ri: float, ro: float, h: float, lc: int = LC):
     # degree lookup: first bucket whose B tail at t_j is <= y_q (conservative: y rounded down)
     yq = np.exp(np.arange(*LOG_Y))
     deg = np.zeros((NT + 1, yq.size), dtype=np.int8)
+    deg_g = np.zeros((NT + 1, yq.size), dtype=np.int8)
     for i in range(len(L_BUCKETS)):
         deg += (tb[i][:, None] > yq[None, :]).astype(np.int8)
-    return dict(s=s, g=g, tb=tb, tg=tg, deg=deg)
+        deg_g += (tg[i][:, None] > yq[None, :]).astype(np.int8)
+    return dict(s=s, g=g, tb=tb, tg=tg, deg=deg, deg_g=deg_g)
 
 
 def tail_k(m, t):
@@ -143,8 +145,9 @@ def tail_kk(m, t):
         1.0 - t) ** 3
 
 
-def _estimate(ri, ro, h, rho, z):
-    """|B| per mu0 J of the two end faces as point poles (chooses L only; not a bound)."""
+def _estimate(ri, ro, h, rho, z, gradient=False):
+    """|B| per mu0 J of the two end faces as point poles (chooses L only; not a bound); with
+    ``gradient`` also |G| ~ 2 |B| / (distance to the nearer pole)."""
     q = (ro**3 - 3 * ro * ri**2 + 2 * ri**3) / 6.0 + 0.5 * ri**2 * (ro - ri)  # int M r dr / J
     p2 = rho * rho
     d1 = (z - h) ** 2 + p2
@@ -153,7 +156,18 @@ def _estimate(ri, ro, h, rho, z):
     r2 = 1.0 / (d2 * np.sqrt(d2))
     br = rho * (r1 - r2)
     bz = (z - h) * r1 - (z + h) * r2
-    return 0.5 * q * np.sqrt(br * br + bz * bz)
+    est = 0.5 * q * np.sqrt(br * br + bz * bz)
+    if not gradient:
+        return est
+    return est, 2.0 * est / np.sqrt(np.minimum(d1, d2))
+
+
+def _lookup(table, j, y):
+    """Degree bucket of the tail table ``table`` at t-grid index j for tails <= y."""
+    with np.errstate(divide="ignore"):
+        q = (np.log(np.maximum(y, 1e-300)) - LOG_Y[0]) * (1.0 / LOG_Y[2])
+    q = np.clip(q, 0, table.shape[1] - 1)
+    return table[j, q.astype(np.intp)].astype(np.int16)
 
 
 def _recurrence(out, xt, t2, first, second, a, b, need):
@@ -262,11 +276,14 @@ def harmonic_rz(ri, ro, h, rho, z, gradient, rtol, tries=2):
     rc = np.sqrt(r2[cand])
     tc = s / rc
     j = np.minimum(np.ceil(tc * NT).astype(np.intp), NT)
-    est = np.maximum(_estimate(ri, ro, h, rho[cand], z[cand]), 1e-300)
+    est = _estimate(ri, ro, h, rho[cand], z[cand], gradient)
     # smallest degree whose tabulated B tail is within 0.7 of the allowed error (estimated |B|)
-    q = (np.log((0.7 * B_FRACTION * rtol / s) * est / tc) - LOG_Y[0]) * (1.0 / LOG_Y[2])
-    q = np.clip(q, 0, co["deg"].shape[1] - 1)
-    bucket = co["deg"][j, q.astype(np.intp)].astype(np.int16)
+    # (and G tail of |G|)
+    bucket = _lookup(co["deg"], j, (0.7 * B_FRACTION * rtol / s) * (
+        est[0] if gradient else est) / tc)
+    if gradient:
+        bucket = np.maximum(bucket, _lookup(co["deg_g"], j, (0.7 * G_FRACTION * rtol / G_FROB)
+                                            * est[1] / (tc * tc)))
     lb = np.array(L_BUCKETS + (L_BUCKETS[-1],))
     sin = rho[cand] / rc
     # sin theta below this takes Brho / rho (and dBrho/dz) from the C recurrence
