@@ -18,7 +18,8 @@ BLAS and Rayon set to 1 before numpy loads), min of ``repeat`` wall-clock runs:
 Matched error E: each method's fastest configuration whose achieved error is <= E.
 Output: bench_peers.txt (table, ratios), bench_peers.json, bench_peers.png (log-log time per
 point against achieved error, one panel per point set). Run: ``python studies/bench_peers.py
-OUT [--quick] [--repeat=K] [--sets=workspace,near,far] [--shells=8,32]``; the load average and a same-process reference (2000 x 2000 matmul) are printed.
+OUT [--quick] [--repeat=K] [--sets=workspace,near,far] [--shells=8,32]``; the load average
+and a same-process reference (2000 x 2000 matmul) are printed.
 """
 
 from __future__ import annotations

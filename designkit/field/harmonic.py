@@ -5,7 +5,8 @@ per unit mu0 J, Phi = sum_l g_l P_l(cos theta) / r^(l+1). With t = s / r < 1, x 
 g^_l = g_l / s^(l+3) and C_l = C_l^(3/2) = P'_(l+1) (on-axis generating functions):
   Bz = s t sum g^_l (l+1) t^(l+1) P_(l+1),   B_r(spherical) = s t sum g^_l (l+1) t^(l+1) P_l,
   Brho = (B_r - x Bz) / sin theta  (or Brho / rho = sum g^_l t^(l+3) C_l near the axis),
-  dBz/dz = -sum g^_l (l+1)(l+2) t^(l+3) P_(l+2),  dBrho/dz = -(rho/s) sum g^_l (l+1) t^(l+4) C_(l+1).
+  dBz/dz = -sum g^_l (l+1)(l+2) t^(l+3) P_(l+2),
+  dBrho/dz = (dBz/dr - x dBz/dz) / sin theta  (or -(rho/s) sum g^_l (l+1) t^(l+4) C_(l+1)).
 (l+1) g^_l = 1/2 int int a^2 R0^(l-1) C_(l-1)(z0 / R0) da dz0 over the section (lengths in s):
 polynomials, integrated exactly by Gauss-Legendre up to degree lc.
 Truncation after degree L, per term: |B_l| <= s |g^_l| (l+1) t^(l+2) and
@@ -13,9 +14,9 @@ Truncation after degree L, per term: |B_l| <= s |g^_l| (l+1) t^(l+2) and
 addition theorem); beyond lc, |g^_l| <= I_(lc+1) / (2 sqrt 2), I_m = int int R0^m (decreasing
 in m). The tail sums are tabulated per degree on a grid of t (monotone: the next grid value is
 an upper bound). With a rounding bound (a few ulps per degree of the sum of all term bounds,
-times 1 / sin theta for Brho from the spherical components), a point takes this path only
-where bound <= rtol (|B_computed| - bound) (the same for |G|): then the bound holds against the
-exact value. Cost per point ~ L (a three-term recurrence and a matrix-vector product).
+times 1 / sin theta, 1 / sin^2 theta for G, through the spherical components), a point is taken
+only where bound <= rtol (|B_computed| - bound) (the same for |G|): then the bound holds against
+the exact value. Cost per point ~ L (a three-term recurrence and a matrix-vector product).
 Reference: Jackson, Classical Electrodynamics, 3rd ed., sections 3.3 and 5.5;
 docs/field_winding.md ("Exterior harmonic expansion").
 """
@@ -46,9 +47,8 @@ ROUND = 16.0 * EPS
 B_FRACTION = 1.0
 G_FRACTION = 1.0
 SIN_SPHERICAL = 1e-11
-"""B-only points with sin theta >= min(0.2, this / rtol) take Brho from the spherical
-components (rounding amplified by <= 1 + 2 / sin theta, in the bound)."""
-CHUNK = 4096
+"""Points with sin theta >= min(0.2, this / rtol) (its square root with the gradient) take Brho
+from the spherical components (rounding amplified by 1 + 2 / sin theta, in the bound)."""
 _CACHE: dict = {}
 _CACHE_SIZE = 64
 _BUFFERS = threading.local()
