@@ -42,14 +42,17 @@ __all__ = [
 def _cyl(points):
     x, y, z = points[:, 0], points[:, 1], points[:, 2]
     rho = np.hypot(x, y)
-    # subnormal x, y: hypot rounds (e.g. hypot(5e-324, 5e-324) = 5e-324) and then c^2 + s^2 != 1;
-    # the direction is taken from the rescaled coordinates instead
-    up = np.where(rho < 1e-290, 2.0**600, 1.0)
-    xs, ys = x * up, y * up
-    rs = np.hypot(xs, ys)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        c = np.where(rs > 0, xs / rs, 1.0)
-        s = np.where(rs > 0, ys / rs, 0.0)
+    c = np.divide(x, rho, out=np.ones_like(x), where=rho > 0)
+    s = np.divide(y, rho, out=np.zeros_like(y), where=rho > 0)
+    tiny = np.flatnonzero(rho < 1e-290)
+    if tiny.size:
+        # subnormal x, y: hypot rounds (e.g. hypot(5e-324, 5e-324) = 5e-324) and then
+        # c^2 + s^2 != 1; the direction is taken from the rescaled coordinates instead
+        xs, ys = x[tiny] * 2.0**600, y[tiny] * 2.0**600
+        rs = np.hypot(xs, ys)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            c[tiny] = np.where(rs > 0, xs / rs, 1.0)
+            s[tiny] = np.where(rs > 0, ys / rs, 0.0)
     return rho, z, c, s
 
 
