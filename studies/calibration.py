@@ -6,7 +6,7 @@ Devices: :func:`designkit.asbuilt.random_asbuilt` with the default tolerances (0
 5 mrad tilt, 2 % turns, 0.5 mm core depth) times ``scale``, every core's steel at mu_r 450
 (nominal 1000). Readings from the device's exact coupled model: onboard arrays, each coil alone
 at +-2 A, 0.05 mT noise; probe, ``--probe`` random workspace points, each coil alone at 1 A,
-0.02 mT noise. Fit: :func:`designkit.calibration.fit` (one coupling round). Held out: 200
+0.02 mT noise. Fit: :func:`designkit.calibration.fit` (two coupling rounds). Held out: 200
 random workspace points; error of A(p) per point and row relative to the row's largest value
 over those points (:func:`designkit.calibration.actuation_error`), nominal and calibrated.
 Parameters: the fraction within 3 standard errors of the truth among those the fit calls

@@ -27,9 +27,9 @@ from .model import ForwardModel, coupling_term
 
 IDENTIFIABLE_RATIO = 0.5
 """Posterior / prior standard deviation below which the data identify a parameter."""
-CHI2_TOLERANCE = 0.05
-"""Converged when an accepted step lowers the whitened cost by less than this (x (1 + cost /
-1000): a mismatched model's cost is known less finely)."""
+CHI2_TOLERANCE = 0.1
+"""Converged when an accepted step lowers the whitened cost by less than this plus 1e-4 of
+the cost (a chi-square change far below 1 carries no information)."""
 MAX_ITERATIONS = 40
 """Levenberg-Marquardt iterations per coupling round before the fit counts as not converged."""
 LOGMU_SPAN = 0.8
@@ -122,7 +122,7 @@ def _levenberg_marquardt(prob: _Problem, z, bar):
         bar.set_postfix(cost=f"{cost_new:.4g}")
         if cost_new < cost:
             # a chi-square change far below 1 is no information
-            small = cost - cost_new < CHI2_TOLERANCE * (1.0 + 1e-3 * cost)
+            small = cost - cost_new < CHI2_TOLERANCE + 1e-4 * cost
             z, lam = z + step, max(lam / 3, 1e-9)
             cost = cost_new
             if small:
@@ -138,7 +138,7 @@ def _levenberg_marquardt(prob: _Problem, z, bar):
 
 
 def fit(nominal_array: CoilArray, meas: Measurements, tolerances: BuildTolerances, *,
-        coupling_rounds: int = 1, progress: bool = True) -> FitResult:
+        coupling_rounds: int = 2, progress: bool = True) -> FitResult:
     """Fit the as-built parameters of ``nominal_array``'s coils to ``meas``."""
     coils = nominal_array.coils
     mask = fitted_mask(coils, tolerances)

@@ -45,9 +45,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--magnet-moment", default=None, metavar="MX,MY,MZ",
                         help="measured magnet moment, A m^2 (e.g. from the localizer's fits), "
                              "recorded in asbuilt.toml's [magnet]")
-    parser.add_argument("--coupling-rounds", type=int, default=1,
+    parser.add_argument("--coupling-rounds", type=int, default=2,
                         help="refits after an exact coupled solve of the fitted device "
-                             "(default 1, 0..3)")
+                             "(default 2, 0..3)")
     add_progress_argument(parser)
 
 
