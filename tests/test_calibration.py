@@ -178,6 +178,9 @@ def test_plan_command_writes_probe_rows_and_what_the_arrays_see(tmp_path, capsys
     assert lines[0] == "x_m,y_m,z_m,i1_a,i2_a,i3_a,sigma_t" and len(lines) == 1 + 5 * 3
     summary = json.loads(out.with_suffix(".json").read_text())
     assert summary["onboard"]["n_parameters"] == 18
+    # added readings only add information: no posterior grows
+    on, plan = (summary[k]["posterior_over_prior"] for k in ("onboard", "with_plan"))
+    assert all(0 < plan[k] <= on[k] * (1 + 1e-9) <= 1 + 1e-9 for k in on)
     assert "onboard arrays alone identify" in capsys.readouterr().out
 
 
