@@ -10,8 +10,8 @@ at +-2 A, 0.05 mT noise; probe, ``--probe`` random workspace points, each coil a
 random workspace points; error of A(p) per point and row relative to the row's largest value
 over those points (:func:`designkit.calibration.actuation_error`), nominal and calibrated.
 Parameters: the fraction within 3 standard errors of the truth among those the fit calls
-identifiable. Benchmark: the fit's wall time on the onboard + probe rows (this machine,
-shared: the load average is printed with it).
+identifiable. Benchmark: the fit's wall and CPU time on the onboard + probe rows (this
+machine, shared: the load average is printed with it).
 
 ``--run``: the first device as the plant of ``designkit run --simulate`` (slide over the
 hemisphere, ``--duration`` s) with the runner on the map of the true device, the calibrated
@@ -55,9 +55,9 @@ def _one(design, nom, ab, tol, truth, plan_name, n_probe, rng, held_out, a_true)
         plan = plan.concat(cal.probe_plan(cal.workspace_points(design, n_probe, rng),
                                           nom.n_coils))
     meas = cal.simulate(truth, plan, rng)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     res = cal.fit(nom, meas, tol, progress=False)
-    fit_s = time.perf_counter() - t0
+    fit_s, fit_cpu_s = time.perf_counter() - t0, time.process_time() - c0
     calib = CoilArray.from_design(design.replace(
         asbuilt=AsBuilt.from_parameters(nom.coils, res.params, tol)))
     e_cal = cal.actuation_error(calib.actuation_matrix(held_out), a_true)
@@ -65,7 +65,7 @@ def _one(design, nom, ab, tol, truth, plan_name, n_probe, rng, held_out, a_true)
     true = ab.parameters(nom.coils)
     ident = res.identifiable
     z = np.abs(res.params - true)[ident] / res.std_error[ident]
-    return {"plan": plan_name, "rows": len(meas), "fit_s": fit_s,
+    return {"plan": plan_name, "rows": len(meas), "fit_s": fit_s, "fit_cpu_s": fit_cpu_s,
             "nominal_max": float(e_nom.max()), "nominal_median": float(np.median(e_nom)),
             "calibrated_max": float(e_cal.max()), "calibrated_median": float(np.median(e_cal)),
             "identifiable": int(ident.sum()), "parameters": int(res.fitted.sum()),
@@ -105,6 +105,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--devices", type=int, default=2)
     ap.add_argument("--probe", type=int, default=48)
     ap.add_argument("--scales", default="1,2", help="tolerance scales, comma-separated")
+    ap.add_argument("--plans", default="onboard,onboard+probe",
+                    help="measurement plans, comma-separated: onboard, onboard+probe")
     ap.add_argument("--quick", action="store_true", help="2 x 2 array, one device, scale 1")
     ap.add_argument("--run", action="store_true", help="also the run --simulate comparison")
     ap.add_argument("--duration", type=float, default=2.0, help="run duration, s")
@@ -127,7 +129,7 @@ def main(argv=None) -> dict:
         for dev in range(args.devices):
             ab, tol, truth = _device(design, nom, scale, rng)
             a_true = truth.actuation_matrix(held_out)
-            for plan_name in ("onboard", "onboard+probe"):
+            for plan_name in args.plans.split(","):
                 r = _one(design, nom, ab, tol, truth, plan_name, args.probe, rng, held_out,
                          a_true)
                 if first is None and plan_name != "onboard":
@@ -151,7 +153,7 @@ def main(argv=None) -> dict:
 
 def _row(r) -> str:
     return (f"scale {r['scale']:.1f} device {r['device']} {r['plan']:<14} rows {r['rows']:4d} "
-            f"fit {r['fit_s']:6.1f} s | A(p) error max/median: nominal {r['nominal_max']:.2%} / "
+            f"fit {r['fit_s']:6.1f} s (CPU {r['fit_cpu_s']:.1f} s) | A(p) error max/median: nominal {r['nominal_max']:.2%} / "
             f"{r['nominal_median']:.3%}, calibrated {r['calibrated_max']:.2%} / "
             f"{r['calibrated_median']:.3%} | identifiable {r['identifiable']}/"
             f"{r['parameters']}, within 3 SE {r['within_3se']:.0%} | at priors: "
