@@ -164,6 +164,8 @@ def fit(nominal_array: CoilArray, meas: Measurements, tolerances: BuildTolerance
                 bar.set_description("calibrate")
             z, it = _levenberg_marquardt(prob, z, bar)
             iterations += it
+        bar.total = bar.n  # converged: the bar ends full
+        bar.refresh()
     r, j = prob.residual(z, True)
     a = j.T @ j
     cov = np.linalg.inv(a)
