@@ -221,3 +221,14 @@ def test_run_simulate_as_built_uses_the_built_plant(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["as_built"]["plant"] == "true"
     assert summary["as_built"]["force_error_rms_n"] == summary["force_error_rms_n"] > 0
+
+
+@pytest.mark.slow
+def test_calibration_study_smoke(tmp_path):
+    from conftest import load_study
+
+    res = load_study("calibration").main(["--out", str(tmp_path), "--quick", "--plans",
+                                          "onboard"])
+    [row] = res["rows"]
+    assert row["rows"] == 64 and row["calibrated_max"] < row["nominal_max"] / 5
+    assert (tmp_path / "calibration.json").is_file()
