@@ -24,12 +24,16 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
 import time
 from pathlib import Path
 
+if __package__ in (None, ""):
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 import numpy as np
 
-from _common import finish, load_average
+from studies._common import finish, load_average
 
 
 def _device(design, nom, scale, rng):
