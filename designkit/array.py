@@ -99,6 +99,9 @@ def _cyl_overlap(pa: Pose, a, pb: Pose, b) -> bool:
         return False
     ua, ub = pa.matrix[:, 2], pb.matrix[:, 2]
     eps = 1e-12
+    # each cylinder lies inside the capsule of its radius about its axis segment
+    if _segment_distance(ca, ua * 0.5 * (za1 - za0), cb, ub * 0.5 * (zb1 - zb0)) >= ra + rb:
+        return False
     if abs(abs(ua @ ub) - 1.0) < 1e-9:
         d = cb - ca
         axial = d @ ua
@@ -113,8 +116,8 @@ def _cyl_overlap(pa: Pose, a, pb: Pose, b) -> bool:
         nr = max(2, int(r / step) + 1)
         phi = np.linspace(0, 2 * np.pi, nphi, endpoint=False)
         zz = np.linspace(z0, z1, nz)
-        pts = [np.c_[r * np.cos(P), r * np.sin(P), Z].reshape(-1, 3)
-               for P, Z in [np.meshgrid(phi, zz, indexing="ij")]]
+        P, Z = np.meshgrid(phi, zz, indexing="ij")
+        pts = [np.stack([r * np.cos(P), r * np.sin(P), Z], -1).reshape(-1, 3)]
         rr = np.linspace(0, r, nr)
         R, P = np.meshgrid(rr, phi, indexing="ij")
         for zc in (z0, z1):
@@ -130,6 +133,15 @@ def _cyl_overlap(pa: Pose, a, pb: Pose, b) -> bool:
 
     return bool(np.any(inside(pb, rb, zb0, zb1, surface(pa, ra, za0, za1)))
                 or np.any(inside(pa, ra, za0, za1, surface(pb, rb, zb0, zb1))))
+
+
+def _segment_distance(ca, ha, cb, hb) -> float:
+    """Shortest distance between the segments ca +- ha and cb +- hb (3-vectors, m)."""
+    s, t = np.meshgrid(np.linspace(-1.0, 1.0, 41), np.linspace(-1.0, 1.0, 41))
+    d = (ca + s.ravel()[:, None] * ha) - (cb + t.ravel()[:, None] * hb)
+    # sampled minimum, less the largest step between samples: a lower bound
+    step = 0.05 * (np.linalg.norm(ha) + np.linalg.norm(hb))
+    return float(np.sqrt(np.einsum("ij,ij->i", d, d).min()) - step)
 
 
 def check_overlap(coils) -> None:
@@ -207,10 +219,13 @@ class CoilArray:
 
     @classmethod
     def from_design(cls, design) -> "CoilArray":
-        """The design's planar array: rows x columns, pitch, top faces at z = 0, row-major."""
-        return cls(tuple(Coil.from_design(design, (x, y, None))
-                         for x, y, _ in design.coil_centres_m()),
-                   sensor_offset_m=design.sensors.offset_m)
+        """The design's planar array: rows x columns, pitch, top faces at z = 0, row-major;
+        as built (moved, tilted, rewound, other cores) when the design has ``[asbuilt]``."""
+        coils = tuple(Coil.from_design(design, (x, y, None))
+                      for x, y, _ in design.coil_centres_m())
+        if design.asbuilt is not None:
+            coils = design.asbuilt.apply(coils)
+        return cls(coils, sensor_offset_m=design.sensors.offset_m)
 
     @classmethod
     def default(cls) -> "CoilArray":

@@ -31,6 +31,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "viz": ("designkit.commands.viz", "off-screen pyvista figures"),
     "scene": ("designkit.commands.scene", "compile a virtual object for the runner (ch. 4)"),
     "run": ("designkit.commands.run", "the rendering runner on the simulated device"),
+    "calibrate": ("designkit.commands.calibrate", "fit the as-built device to field readings"),
 }
 
 

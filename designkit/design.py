@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from . import _validate as v
+from .asbuilt import AsBuilt, asbuilt_from_dict
 from .constants import MU0  # noqa: F401  (re-exported: designkit.design.MU0 is public)
 from .errors import BadInputError, DesignRuleError
 
@@ -252,9 +253,13 @@ class Design:
     optimize: OptimizeSpec = field(default_factory=OptimizeSpec)
     render: RenderSpec = field(default_factory=RenderSpec)
     cad: CadSpec = field(default_factory=CadSpec)
+    asbuilt: AsBuilt | None = None
+    """The device as built (designkit.asbuilt); None: the nominal design."""
 
     def __post_init__(self):
         check_design(self)
+        if self.asbuilt is not None:
+            self.asbuilt.check(self.array.rows * self.array.columns, self.core is not None)
 
     # -- derived quantities -------------------------------------------------------------
     @property
@@ -279,7 +284,10 @@ class Design:
         return replace_path(self, changes)
 
     def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
+        out = dataclasses.asdict(self)
+        if self.asbuilt is None:  # a nominal design keeps its hash
+            del out["asbuilt"]
+        return out
 
     def spec_hash(self) -> str:
         """SHA-256 of the canonical JSON of the physics spec (stable across runs and machines;
@@ -331,6 +339,8 @@ def design_from_dict(data: Mapping[str, Any], *, source: str = "design") -> Desi
     for key, value in data.items():
         if key == "name":
             kwargs["name"] = value  # type-checked in check_design: 5 is not silently "5"
+        elif key == "asbuilt":
+            kwargs["asbuilt"] = asbuilt_from_dict(value, source)
         elif key in _SECTIONS:
             if key == "core" and (value is False or value == {} and False):
                 kwargs["core"] = None
@@ -407,6 +417,8 @@ def design_to_toml(design: Design) -> str:
                 val = getattr(obj, f.name)
                 lines.append(f"{f.name} = {json.dumps(val)}")
         lines.append("")
+    if design.asbuilt is not None:
+        lines.append(design.asbuilt.to_toml())
     return "\n".join(lines)
 
 

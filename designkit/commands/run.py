@@ -10,8 +10,11 @@ and ``loop_timing.png`` into ``--out``. On the controller itself use
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 
+from .._io import write_json_atomic
+from ..design import load_design
 from ..errors import BadInputError
 from ..sim import run_simulation
 from ._common import add_design_argument, add_progress_argument, show_progress, staged_folder
@@ -45,6 +48,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="render the object's 3-D force (default) or only Fz (thesis eq. 4.6)")
     parser.add_argument("--lambda", dest="lam", type=float, default=None,
                         help="force constant, N/m (default: the design's render.stiffness)")
+    parser.add_argument("--as-built", dest="as_built", type=Path, default=None,
+                        help="design TOML of the device as built ([asbuilt]): the simulated "
+                             "plant; the runner uses the map of --design (nominal or "
+                             "calibrated) and, when --design is calibrated, the summary also "
+                             "gives the force error with the nominal map")
     parser.add_argument("--seed", type=int, default=0,
                         help="seed of the simulated sensor noise, an integer (default 0)")
     parser.add_argument("--out", type=Path, default=Path("run-out"),
@@ -65,7 +73,9 @@ def run(args: argparse.Namespace) -> int:
             duration_s=args.duration, faults=args.faults, map_path=args.map,
             method=args.method, period_s=args.period_ms * 1e-3, unipolar=args.unipolar,
             rows=args.rows, lam_n_per_m=args.lam, seed=args.seed, out=stage,
-            progress=show_progress(args))
+            progress=show_progress(args), plant=args.as_built)
+        if args.as_built is not None:
+            _as_built_comparison(args, summary, stage)
     print(f"wrote {args.out}/run.csv, summary.json, run.png, loop_timing.png: force error RMS "
           f"{_mn(summary['force_error_rms_n'])} (p95 {_mn(summary['force_error_p95_n'])}), "
           f"localization MAE {_mm(summary['localization_mae_m'])}, loop p99 "
@@ -93,6 +103,29 @@ def _fault_line(f: dict) -> str:
              f"ended +{ms(f['ended_s'])} into {f['ended_into']}")
     return (f"{f['fault']} @ {f['injected_s']:.3f} s: detected +{ms(f['time_to_safe_s'])}, "
             f"currents off +{ms(f['currents_off_s'])}, {ended}")
+
+
+def _as_built_comparison(args, summary, stage) -> None:
+    """With a calibrated --design, the same run with the nominal map (into nominal-map/); the
+    force error of both in summary.json's ``as_built``."""
+    design = load_design(args.design)
+    out = {"plant": summary.get("plant"), "map_design": design.name,
+           "force_error_rms_n": summary["force_error_rms_n"]}
+    if design.asbuilt is not None:
+        nominal = dataclasses.replace(design, asbuilt=None)
+        other = run_simulation(
+            design=nominal, obj=args.object, trajectory=args.trajectory,
+            duration_s=args.duration, faults=args.faults, method=args.method,
+            period_s=args.period_ms * 1e-3, unipolar=args.unipolar, rows=args.rows,
+            lam_n_per_m=args.lam, seed=args.seed, out=stage / "nominal-map",
+            progress=show_progress(args), plant=args.as_built)
+        out["nominal_map_force_error_rms_n"] = other["force_error_rms_n"]
+    summary["as_built"] = out
+    write_json_atomic(stage / "summary.json", summary)
+    print(f"as built ({out['plant']}): force error RMS {_mn(out['force_error_rms_n'])} with the "
+          f"map of {design.name}" + (f", {_mn(out['nominal_map_force_error_rms_n'])} with the "
+                                     "nominal map" if "nominal_map_force_error_rms_n" in out
+                                     else ""))
 
 
 def _mn(v):

@@ -56,7 +56,7 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
                    lam_n_per_m: float | None = None, rows: str = "force", seed: int = 0,
                    out=Path("run-out"), progress: bool = True, array=None,
                    calibrate: bool = True, profile: bool = False,
-                   skip_force_n: float = 0.0) -> dict:
+                   skip_force_n: float = 0.0, plant=None) -> dict:
     """Build (or load) the map, compile the scene, close the runner around the simulated device,
     and write run.csv, summary.json, run.png and loop_timing.png into ``out``. Returns the
     summary. Every input is checked before anything is computed.
@@ -68,6 +68,8 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
     before the run; the localizer then weighs the sensors with
     :data:`firmware_io.runner.CALIBRATED_RELATIVE_ERROR`. ``profile``: the runner times each
     stage of its step (summary ``loop_by_kind['stages']``). ``skip_force_n``: the runner's coil-skip force, N.
+    ``plant``: the device that was built (a design with ``[asbuilt]``, or its path): the
+    simulated device is it, while the runner uses the map of ``design``.
     """
     design = design if isinstance(design, Design) else load_design(design)
     virtual, path, duration, schedule = _checked_inputs(obj, trajectory, duration_s, faults,
@@ -85,7 +87,12 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
                                          extra_meta={"object": obj, "rows": rows})
     scene = Scene.load(scene_path, expected_design_sha256=fmap.design_sha256)
     drive = drive_data(design)
-    device = SimulatedDevice(design, array, seed=seed, resistance_ohm=drive["resistance_ohm"][0],
+    plant_design, plant_array = design, array
+    if plant is not None:  # the as-built device under the runner of ``design``'s map
+        plant_design = plant if isinstance(plant, Design) else load_design(plant)
+        plant_array = CoilArray.from_design(plant_design)
+    device = SimulatedDevice(plant_design, plant_array, seed=seed,
+                             resistance_ohm=drive["resistance_ohm"][0],
                              inductance_h=drive["inductance_h"][0])
     loc_kw = _localizer_options(device, map_path, method, calibrate)
 
@@ -111,6 +118,8 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
                     "lambda_n_per_m": lam, "method": method, "unipolar": unipolar,
                     "drive": drive, **_duration_note(path.duration_s, duration),
                     "faults_not_injected": _not_injected(schedule, res.faults)})
+    if plant is not None:
+        summary["plant"] = plant_design.name
     write_run_csv(out / "run.csv", res.columns)
     write_json_atomic(out / "summary.json", summary)
     plot_run(res, out, surface_height=lambda x, y: virtual.height(np.c_[x, y, np.zeros_like(x)]),

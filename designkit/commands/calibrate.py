@@ -1,0 +1,178 @@
+"""``designkit calibrate``: fit the as-built device to field measurements, or plan them.
+
+``--measurements M.csv --out DIR``: reads the readings (:mod:`designkit.calibration.
+measurements`), fits the as-built parameters by regularized nonlinear least squares (priors:
+the design's ``[asbuilt.tolerances]``, default :class:`designkit.asbuilt.BuildTolerances`) and
+writes DIR/asbuilt.toml (a design file) and DIR/calibration.json (parameters with standard
+errors, residuals before/after per group, condition, parameters the data cannot see).
+``--plan [--points N] --out plan.csv``: probe points and currents from the fit's Fisher
+information, and what the onboard arrays alone identify (also in plan.json next to it).
+A fit that does not converge writes nothing. Reference: docs/calibration.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .. import calibration as cal
+from .._io import write_json_atomic, write_text_atomic
+from ..array import array_for_design
+from ..asbuilt import PARAMETERS, AsBuilt, BuildTolerances
+from ..calibration.fit import IDENTIFIABLE_RATIO
+from ..calibration.plan import make_plan
+from ..design import design_to_toml, load_design
+from ..errors import BadInputError
+from ._common import add_progress_argument, check_output, show_progress, staged_folder
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--measurements", type=Path, default=None,
+                        help="CSV: x_m,y_m,z_m,i1_a..iN_a,bx_t,by_t,bz_t[,sigma_t] (m, A, T)")
+    parser.add_argument("--design", type=Path, default=None,
+                        help="nominal design TOML or name (default: the thesis device); its "
+                             "[asbuilt.tolerances] are the priors")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="output folder (fit) or plan CSV file (--plan)")
+    parser.add_argument("--plan", action="store_true",
+                        help="propose probe points and currents instead of fitting")
+    parser.add_argument("--points", type=int, default=48,
+                        help="probe points of the plan (default 48, each coil alone at 1 A)")
+    parser.add_argument("--magnet-moment", default=None, metavar="MX,MY,MZ",
+                        help="measured magnet moment, A m^2 (e.g. from the localizer's fits), "
+                             "recorded in asbuilt.toml's [magnet]")
+    parser.add_argument("--coupling-rounds", type=int, default=2,
+                        help="refits after an exact coupled solve of the fitted device "
+                             "(default 2, 0..3)")
+    add_progress_argument(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.out is None:
+        raise BadInputError("--out", "a folder (fit) or a CSV file (--plan)", None)
+    design = load_design(args.design)
+    nominal = dataclasses.replace(design, asbuilt=None)
+    tol = design.asbuilt.tolerances if design.asbuilt is not None else BuildTolerances()
+    if args.plan:
+        return _plan(args, nominal, tol)
+    if args.measurements is None:
+        raise BadInputError("--measurements", "a CSV file (or pass --plan)", None)
+    if not 0 <= args.coupling_rounds <= 3:
+        raise BadInputError("--coupling-rounds", "in 0..3", args.coupling_rounds)
+    moment = _moment(args.magnet_moment)
+    check_output(args.out, folder=True)
+    meas = cal.read_csv(args.measurements, nominal.array.rows * nominal.array.columns,
+                        nominal.sensors.range_t)
+    array = array_for_design(nominal)
+    res = cal.fit(array, meas, tol, coupling_rounds=args.coupling_rounds,
+                  progress=show_progress(args))
+    asbuilt = AsBuilt.from_parameters(array.coils, res.params, tol,
+                                      f"designkit calibrate --measurements "
+                                      f"{args.measurements.name}")
+    built = dataclasses.replace(nominal, name=f"{nominal.name}-asbuilt", asbuilt=asbuilt)
+    if moment is not None:
+        built = _with_moment(built, moment)
+    report = _report(res, meas, array, nominal)
+    with staged_folder(args.out) as stage:
+        write_text_atomic(stage / "asbuilt.toml", design_to_toml(built))
+        write_json_atomic(stage / "calibration.json", report)
+    print(f"wrote {args.out}/asbuilt.toml, calibration.json: {len(meas)} readings, residual RMS "
+          f"{report['residual_rms_t']['before'] * 1e3:.4f} -> "
+          f"{report['residual_rms_t']['after'] * 1e3:.4f} mT, condition "
+          f"{report['condition']:.3g}, {len(report['unidentifiable'])} of "
+          f"{report['n_parameters']} parameters stay at their priors")
+    return 0
+
+
+def _moment(text):
+    if text is None:
+        return None
+    try:
+        m = np.array([float(x) for x in text.split(",")])
+    except ValueError:
+        raise BadInputError("--magnet-moment", "three numbers MX,MY,MZ in A m^2", text) \
+            from None
+    if m.shape != (3,) or not np.all(np.isfinite(m)) or not np.any(m):
+        raise BadInputError("--magnet-moment", "three finite numbers in A m^2, not all 0", text)
+    return m
+
+
+def _with_moment(design, moment):
+    """The design with its magnet's moment set to ``moment`` (3,) A m^2."""
+    norm = float(np.linalg.norm(moment))
+    magnet = dataclasses.replace(design.magnet,
+                                 magnetization_a_per_m=norm / design.magnet.volume_m3,
+                                 direction=tuple(float(c) / norm for c in moment))
+    return dataclasses.replace(design, magnet=magnet)
+
+
+def _report(res, meas, array, nominal) -> dict:
+    groups = meas.groups(array.sensor_positions_m())
+    by_group = {}
+    for g in sorted(set(groups)):
+        sel = groups == g
+        by_group[g] = {"rows": int(sel.sum()),
+                       "rms_before_t": _rms(res.residual_before_t[sel]),
+                       "rms_after_t": _rms(res.residual_after_t[sel]),
+                       "chi2_per_reading_before": _chi(res.residual_before_t[sel], meas, sel),
+                       "chi2_per_reading_after": _chi(res.residual_after_t[sel], meas, sel)}
+    params, unident = [], []
+    for k in range(array.n_coils):
+        for j, name in enumerate(PARAMETERS):
+            if not res.fitted[k, j]:
+                continue
+            ident = bool(res.identifiable[k, j])
+            params.append({"coil": k + 1, "parameter": name, "value": float(res.params[k, j]),
+                           "std_error": float(res.std_error[k, j]),
+                           "prior": float(res.prior[k, j]), "identifiable": ident})
+            if not ident:
+                unident.append(f"coil {k + 1} {name}")
+    return {"design": nominal.name, "design_sha256": nominal.spec_hash(), "rows": len(meas),
+            "n_parameters": len(params), "iterations": res.iterations,
+            "condition": res.condition, "cost_before": res.cost_before,
+            "cost_after": res.cost_after,
+            "residual_rms_t": {"before": _rms(res.residual_before_t),
+                               "after": _rms(res.residual_after_t)},
+            "residual_by_group": by_group, "parameters": params, "unidentifiable": unident}
+
+
+def _rms(r) -> float:
+    return float(np.sqrt(np.mean(np.square(r)))) if len(r) else 0.0
+
+
+def _chi(r, meas, sel) -> float:
+    return float(np.mean(np.square(r / meas.sigma_t[sel, None])))
+
+
+def _plan(args, nominal, tol) -> int:
+    if not 1 <= args.points <= 500:
+        raise BadInputError("--points", "in 1..500", args.points)
+    out = check_output(args.out, folder=False)
+    array = array_for_design(nominal)
+    res = make_plan(nominal, array, args.points, tol)
+    summary = {"points": args.points, "onboard": _seen(res["onboard_ratio"], res["mask"]),
+               "with_plan": _seen(res["plan_ratio"], res["mask"])}
+    cal.write_csv(out, res["plan"], readings=False)
+    write_json_atomic(out.with_suffix(".json"), summary)
+    on = summary["onboard"]
+    print(f"wrote {out} ({len(res['plan'])} probe readings at {args.points} points, each coil "
+          f"alone at 1 A) and {out.with_suffix('.json').name}")
+    print(f"onboard arrays alone identify {len(on['identifiable'])} of {on['n_parameters']} "
+          f"parameters; they cannot identify: {', '.join(on['unidentifiable']) or 'none'}")
+    print(f"with the plan: {len(summary['with_plan']['unidentifiable'])} stay at their priors")
+    return 0
+
+
+def _seen(ratio, mask) -> dict:
+    ident, unident = [], []
+    for k, j in zip(*np.nonzero(mask)):
+        name = f"coil {k + 1} {PARAMETERS[j]}"
+        (ident if ratio[k, j] < IDENTIFIABLE_RATIO else unident).append(name)
+    return {"n_parameters": int(mask.sum()), "identifiable": ident, "unidentifiable": unident,
+            "posterior_over_prior": {f"coil {k + 1} {PARAMETERS[j]}": float(ratio[k, j])
+                                     for k, j in zip(*np.nonzero(mask))
+                                     if math.isfinite(ratio[k, j])}}

@@ -1,0 +1,184 @@
+"""Question: how close does the as-built calibration bring the model to a built device, for
+random devices within the build tolerances, by plan (onboard arrays only; onboard + a probe
+scan) and by tolerance scale -- and what does it cost?
+
+Devices: :func:`designkit.asbuilt.random_asbuilt` with the default tolerances (0.6 mm per axis,
+5 mrad tilt, 2 % turns, 0.5 mm core depth) times ``scale``, every core's steel at mu_r 450
+(nominal 1000). Readings from the device's exact coupled model: onboard arrays, each coil alone
+at +-2 A, 0.05 mT noise; probe, ``--probe`` random workspace points, each coil alone at 1 A,
+0.02 mT noise. Fit: :func:`designkit.calibration.fit` (two coupling rounds). Held out: 200
+random workspace points; error of A(p) per point and row relative to the row's largest value
+over those points (:func:`designkit.calibration.actuation_error`), nominal and calibrated.
+Parameters: the fraction within 3 standard errors of the truth among those the fit calls
+identifiable. Benchmark: the fit's wall and CPU time on the onboard + probe rows (this
+machine, shared: the load average is printed with it).
+
+``--run`` (3 x 3 only): the first device as the plant of ``designkit run --simulate`` (slide
+over the hemisphere, ``--duration`` s, no start-up sensor calibration) with the runner on the
+map of the true device, the calibrated and the nominal design: force error RMS of each (three
+maps, two of them of as-built devices: slow).
+
+Usage: python studies/calibration.py --out study-out/calibration [--quick | --run]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import time
+from pathlib import Path
+
+if __package__ in (None, ""):
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np
+
+from studies._common import finish, load_average
+
+
+def _device(design, nom, scale, rng):
+    from designkit.array import CoilArray
+    from designkit.asbuilt import BuildTolerances, random_asbuilt
+
+    base = BuildTolerances()
+    tol = dataclasses.replace(base, position_m=base.position_m * scale,
+                              tilt_rad=base.tilt_rad * scale,
+                              turns_relative=base.turns_relative * scale,
+                              core_offset_m=base.core_offset_m * scale)
+    ab = random_asbuilt(nom.coils, tol, rng, mu_r=450.0)
+    return ab, tol, CoilArray.from_design(design.replace(asbuilt=ab))
+
+
+def _one(design, nom, ab, tol, truth, plan_name, n_probe, rng, held_out, a_true):
+    from designkit import calibration as cal
+    from designkit.array import CoilArray
+    from designkit.asbuilt import AsBuilt
+
+    plan = cal.onboard_plan(nom.sensor_positions_m(), nom.n_coils)
+    if plan_name != "onboard":
+        plan = plan.concat(cal.probe_plan(cal.workspace_points(design, n_probe, rng),
+                                          nom.n_coils))
+    meas = cal.simulate(truth, plan, rng)
+    t0, c0 = time.perf_counter(), time.process_time()
+    res = cal.fit(nom, meas, tol, progress=False)
+    fit_s, fit_cpu_s = time.perf_counter() - t0, time.process_time() - c0
+    calib = CoilArray.from_design(design.replace(
+        asbuilt=AsBuilt.from_parameters(nom.coils, res.params, tol)))
+    e_cal = cal.actuation_error(calib.actuation_matrix(held_out), a_true)
+    e_nom = cal.actuation_error(nom.actuation_matrix(held_out), a_true)
+    true = ab.parameters(nom.coils)
+    ident = res.identifiable
+    z = np.abs(res.params - true)[ident] / res.std_error[ident]
+    return {"plan": plan_name, "rows": len(meas), "fit_s": fit_s, "fit_cpu_s": fit_cpu_s,
+            "nominal_max": float(e_nom.max()), "nominal_median": float(np.median(e_nom)),
+            "calibrated_max": float(e_cal.max()), "calibrated_median": float(np.median(e_cal)),
+            "identifiable": int(ident.sum()), "parameters": int(res.fitted.sum()),
+            "within_3se": float((z < 3).mean()) if len(z) else float("nan"),
+            "unidentifiable": sorted({n for (k, j), n in np.ndenumerate(_names(res))
+                                      if res.fitted[k, j] and not ident[k, j]}),
+            "calibrated": calib, "asbuilt": res.params}
+
+
+def _names(res):
+    from designkit.asbuilt import PARAMETERS
+
+    out = np.empty(res.params.shape, dtype=object)
+    for k in range(out.shape[0]):
+        for j, name in enumerate(PARAMETERS):
+            out[k, j] = name
+    return out
+
+
+def _run_part(design, truth_design, calibrated_design, out_dir, duration):
+    from designkit.sim import run_simulation
+
+    result = {}
+    for name, map_design in (("true", truth_design), ("calibrated", calibrated_design),
+                             ("nominal", design)):
+        # the maps are compared, not the sensor calibration
+        s = run_simulation(design=map_design, obj="hemisphere", trajectory="slide",
+                           duration_s=duration, out=out_dir / f"run-{name}", progress=False,
+                           plant=truth_design, calibrate=False)
+        result[name] = s["force_error_rms_n"]
+    result["calibrated_over_true"] = result["calibrated"] / result["true"]
+    return result
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=Path("study-out/calibration"))
+    ap.add_argument("--devices", type=int, default=2)
+    ap.add_argument("--probe", type=int, default=48)
+    ap.add_argument("--scales", default="1,2", help="tolerance scales, comma-separated")
+    ap.add_argument("--plans", default="onboard,onboard+probe",
+                    help="measurement plans, comma-separated: onboard, onboard+probe")
+    ap.add_argument("--quick", action="store_true", help="2 x 2 array, one device, scale 1")
+    ap.add_argument("--run", action="store_true", help="also the run --simulate comparison")
+    ap.add_argument("--duration", type=float, default=2.0, help="run duration, s")
+    args = ap.parse_args(argv)
+    from designkit import calibration as cal
+    from designkit.array import CoilArray
+    from designkit.design import default_design
+
+    design = default_design()
+    scales = [float(s) for s in args.scales.split(",")]
+    if args.quick:
+        if args.run:
+            ap.error("--run needs the 3 x 3 board (the runner's sensor pipeline reads 18 "
+                     "sensors): drop --quick")
+        design = design.replace(**{"array.rows": 2, "array.columns": 2})
+        args.devices, scales = 1, [1.0]
+    args.out.mkdir(parents=True, exist_ok=True)
+    nom = CoilArray.from_design(design)
+    rng = np.random.default_rng(0)
+    held_out = cal.workspace_points(design, 200, rng)
+    rows, first = [], None
+    for scale in scales:
+        for dev in range(args.devices):
+            ab, tol, truth = _device(design, nom, scale, rng)
+            a_true = truth.actuation_matrix(held_out)
+            for plan_name in args.plans.split(","):
+                r = _one(design, nom, ab, tol, truth, plan_name, args.probe, rng, held_out,
+                         a_true)
+                if first is None and plan_name != "onboard":
+                    first = (ab, r["calibrated"], r["asbuilt"], tol)
+                r.pop("calibrated")
+                r.pop("asbuilt")
+                rows.append({"scale": scale, "device": dev, **r})
+                print(_row(rows[-1]), flush=True)
+    result = {"design": f"{design.array.rows} x {design.array.columns}", "rows": rows,
+              "load_average": load_average()}
+    if args.run and first is not None:
+        from designkit.asbuilt import AsBuilt
+
+        ab, _, params, tol = first
+        truth_design = design.replace(asbuilt=ab, name="true-device")
+        calibrated = design.replace(asbuilt=AsBuilt.from_parameters(nom.coils, params, tol),
+                                    name="calibrated")
+        result["run"] = _run_part(design, truth_design, calibrated, args.out, args.duration)
+    return finish(args.out / "calibration.json", result, _print)
+
+
+def _row(r) -> str:
+    return (f"scale {r['scale']:.1f} device {r['device']} {r['plan']:<14} rows {r['rows']:4d} "
+            f"fit {r['fit_s']:6.1f} s (CPU {r['fit_cpu_s']:.1f} s) | A(p) error max/median: nominal {r['nominal_max']:.2%} / "
+            f"{r['nominal_median']:.3%}, calibrated {r['calibrated_max']:.2%} / "
+            f"{r['calibrated_median']:.3%} | identifiable {r['identifiable']}/"
+            f"{r['parameters']}, within 3 SE {r['within_3se']:.0%} | at priors: "
+            f"{', '.join(r['unidentifiable']) or '-'}")
+
+
+def _print(result) -> None:
+    print(f"\n{result['design']} array, load average {result['load_average']}")
+    for r in result["rows"]:
+        print(_row(r))
+    if "run" in result:
+        run = result["run"]
+        print("run --simulate --as-built, force error RMS: " + ", ".join(
+            f"{k} map {v * 1e3:.3f} mN" for k, v in run.items() if k != "calibrated_over_true")
+            + f"; calibrated / true = {run['calibrated_over_true']:.3f}")
+
+
+if __name__ == "__main__":
+    main()
