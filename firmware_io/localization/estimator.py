@@ -103,6 +103,8 @@ class Localizer:
     alert_limit_m : float, m -- largest protection level of an ok fix (default inf: none; the
         runner passes its scene's)
     reacquire_m : float, m -- a warm fit that moved farther is checked by the global search
+    model_bias_m : float, m -- bound on the fit's bias from what the noise model leaves out
+        (sensor poses, the map's core term), added to the protection level
     cores : bool or None, model the magnet-induced core field ('dipole'; default: if known)
     mount_position_m : float, m -- sensor position uncertainty, weighs near-field sensors
     calibration : SensorCalibration (see :func:`calibrate`), or (gain_inverse (2, n, 3, 3),
@@ -124,7 +126,8 @@ class Localizer:
                  kalman: ConstantVelocityKalman | None = None, frame_period_s: float = 0.01,
                  mount_position_m: float = 0.0, refresh_m: float = 1e-3,
                  integrity_risk: float = 1e-4, false_alarm: float = 1e-3,
-                 alert_limit_m: float = math.inf, reacquire_m: float = 5e-3):
+                 alert_limit_m: float = math.inf, reacquire_m: float = 5e-3,
+                 model_bias_m: float = 1e-3):
         if method not in METHODS:
             raise BadInputError("method", f"one of {METHODS}", method)
         if method == "learned":
@@ -154,6 +157,9 @@ class Localizer:
         for name, val in (("integrity_risk", integrity_risk), ("false_alarm", false_alarm)):
             if not (math.isfinite(val) and 0 < val < 0.5):
                 raise BadInputError(name, "a probability in (0, 0.5)", val)
+        if not (math.isfinite(model_bias_m) and model_bias_m >= 0):
+            raise BadInputError("model_bias_m", "a finite number >= 0, m", model_bias_m)
+        self.model_bias_m = float(model_bias_m)
         if not (alert_limit_m > 0):   # inf: no alert limit (the scene sets one)
             raise BadInputError("alert_limit_m", "a number > 0 (or inf), m", alert_limit_m)
         self.integrity_risk, self.false_alarm = float(integrity_risk), float(false_alarm)
@@ -571,6 +577,7 @@ class Localizer:
         p, cost, _, converged, gm = out
         dof = 3 * n_used - 3
         cov, pl = covariance_and_pl([row[:3] for row in gm[:3]], cost, dof, self._k2)
+        pl += self.model_bias_m
         rms = math.sqrt(cost / max(dof, 1))
         lo, hi = self._box_lo, self._box_hi
         if not converged:

@@ -8,7 +8,8 @@ fix passes the residual test when chi2 <= the (1 - p_fa) quantile. Its covarianc
 inverse Fisher information (J^T W J)^-1, m^2, inflated by chi2 / dof when the residual says the
 noise is larger than modelled. The protection level bounds the position error |e| with
 probability 1 - risk: for a Gaussian e ~ N(0, C), e^T C^-1 e follows chi-square(3) and
-|e|^2 <= lambda_max(C) e^T C^-1 e, so PL = sqrt(lambda_max(C) q3(1 - risk)) (m). A fix is
+|e|^2 <= lambda_max(C) e^T C^-1 e, so PL = sqrt(lambda_max(C) q3(1 - risk)) (m), plus the
+localizer's bound on the bias the noise model leaves out (sensor poses, core model). A fix is
 usable when it passes the test and PL <= the alert limit. Reference: Brown, "A baseline GPS
 RAIM scheme", Navigation 39 (1992); Walter & Enge, ION GPS 1995 (weighted RAIM).
 numpy only (runs on the controller).
