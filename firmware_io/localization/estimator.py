@@ -99,7 +99,9 @@ class Localizer:
         default 0.02, or 0.003 with a calibration
     residual_limit : float, largest normalized rms residual for ok (a cap beside the test)
     integrity_risk : float, probability per fix that the error exceeds the protection level
-    false_alarm : float, probability per fix that a correct fit fails the residual test
+    false_alarm : float, probability per fix that a correct fit fails the residual test (a
+        wrong basin leaves chi2 / dof >> 3, a correct fit ~1: a small false-alarm rate costs
+        no integrity and keeps the availability where the model errors exceed their terms)
     alert_limit_m : float, m -- largest protection level of an ok fix (default inf: none; the
         runner passes its scene's)
     reacquire_m : float, m -- a warm fit that moved farther is checked by the global search
@@ -125,7 +127,7 @@ class Localizer:
                  cores: bool | None = None, max_iterations: int = 30, calibration=None,
                  kalman: ConstantVelocityKalman | None = None, frame_period_s: float = 0.01,
                  mount_position_m: float = 0.0, refresh_m: float = 1e-3,
-                 integrity_risk: float = 1e-4, false_alarm: float = 1e-3,
+                 integrity_risk: float = 1e-4, false_alarm: float = 1e-6,
                  alert_limit_m: float = math.inf, reacquire_m: float = 5e-3,
                  model_bias_m: float = 1e-3):
         if method not in METHODS:
@@ -545,11 +547,19 @@ class Localizer:
             return out[0], out[1], it, out[3], out[4]
 
         def cold():
-            # the multipole alone from the grid's best candidates, then the full model
-            cands = [self._lm(residuals(None), q0)
-                     for q0 in self._global_starts(d, use, sig, subtract)]
-            first = min(cands, key=lambda o: o[1])
-            return solve(first[0], 0.25 * self.refresh_m) if has_extra else first
+            """The global search: the grid's best candidate polished on the multipole, then the
+            full model; the next candidates only while the result fails the integrity test
+            (a better cost wins). Returns (fit, its integrity check)."""
+            found = None
+            for q0 in self._global_starts(d, use, sig, subtract):
+                out = self._lm(residuals(None), q0)
+                if has_extra:
+                    out = solve(out[0], 0.25 * self.refresh_m)
+                if found is None or out[1] < found[0][1]:
+                    found = (out, self._integrity(out, n_used))
+                if found[1][0]:
+                    break
+            return found
 
         if self._last is not None:
             start = self._last
@@ -558,11 +568,10 @@ class Localizer:
             if not check[0] or _dist(best[0], start) > self.reacquire_m:
                 # suspicious (failed, or moved far from the warm start): the global search
                 other = cold()
-                if other[1] < best[1]:
-                    best, check = other, self._integrity(other, n_used)
+                if other[0][1] < best[1]:
+                    best, check = other
         else:
-            best = cold()
-            check = self._integrity(best, n_used)
+            best, check = cold()
         p, cost, iters = best[:3]
         ok, reason, cov, pl, dof = check
         self._last = p.copy() if ok else None

@@ -58,7 +58,11 @@ class RunnerConfig:
         Probability that a correct fix fails the tracker's innovation gate (Mahalanobis
         distance with the fix's and the prediction's covariances, chi-square with 3 dof).
     alert_limit_m : float
-        The largest protection level of a fix the runner renders with, m (the localizer's).
+        The largest protection level of a fix the runner renders with, m (the localizer's;
+        why 10 mm and what 5 mm costs in availability: docs/runner.md, "Integrity").
+    max_fix_age_s : float
+        The tracker's newest accepted fix may be at most this old (frame time), s; older: the
+        prediction is not supported by the sensors ('lost', coils off).
     drives : tuple of CoilDrive (derived)
         One per coil: R, L, the supply, and the current the supply can push through R.
     """
@@ -79,7 +83,8 @@ class RunnerConfig:
     max_pwm_retries: int = 3
     overrun_factor: float = 10.0
     gate_risk: float = 1e-4
-    alert_limit_m: float = 5e-3
+    alert_limit_m: float = 10e-3
+    max_fix_age_s: float = 0.025
 
     def __post_init__(self):
         self.drives  # noqa: B018  (checks R, L and the supply, names the field in the error)
@@ -95,6 +100,8 @@ class RunnerConfig:
             raise BadInputError("skip_force_n", "a finite force >= 0 N", self.skip_force_n)
         if not (0 < self.gate_risk < 0.5):
             raise BadInputError("gate_risk", "a probability in (0, 0.5)", self.gate_risk)
+        if not (self.max_fix_age_s > 0):
+            raise BadInputError("max_fix_age_s", "a time > 0 s", self.max_fix_age_s)
         if not (self.alert_limit_m > 0):
             raise BadInputError("alert_limit_m", "a length > 0 m (inf: none)", self.alert_limit_m)
 

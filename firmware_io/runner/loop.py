@@ -268,7 +268,9 @@ class Runner:
         frame time (Mahalanobis distance^2 with both covariances <= the chi-square(3) quantile
         at ``gate_risk``), else why not. A gated-out fix asks the sensor side to re-acquire
         (the next fit starts from the global search); a following fix consistent with it (both
-        fixes' covariances and the tracker's measurement noise) re-starts the tracker there."""
+        fixes' covariances and the tracker's measurement noise), itself from the global search,
+        re-starts the tracker there (a warm fit could repeat a wrong basin; a cold one would
+        not)."""
         if not self.have_fix or getattr(self.tracker, "x", None) is None \
                 or not hasattr(self.tracker, "innovation"):
             return ""
@@ -279,7 +281,7 @@ class Runner:
             self._candidate = None
             return ""
         c = self._candidate
-        if c is not None:
+        if c is not None and fix.reacquired:
             cc = c.covariance_m2 if c.covariance_m2 is not None else np.zeros((3, 3))
             dv = fix.position_m - c.position_m
             s = cov + cc + 2 * self.tracker.r * np.eye(3)
@@ -312,6 +314,11 @@ class Runner:
         p = np.asarray(self.tracker.predict(t_s), float)
         vel = np.asarray(self.tracker.x[1], float)
         self.position_m = p
+        age = t_s - getattr(self.tracker, "t", None) if getattr(self.tracker, "t", None) \
+            is not None else 0.0
+        if age > cfg.max_fix_age_s:
+            problems.append(("lost", f"newest accepted fix {age * 1e3:.0f} ms old > "
+                             f"{cfg.max_fix_age_s * 1e3:.0f} ms"))
         inside = bool(np.all(p >= self.lo) and np.all(p <= self.hi))
         if not inside:
             problems.append(("out_of_box", f"estimate {np.round(p * 1e3, 1).tolist()} mm outside "

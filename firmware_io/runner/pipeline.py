@@ -59,6 +59,7 @@ class Fix:
     covariance_m2 : ndarray (3, 3) m^2 or None -- the fit's covariance (None: unknown)
     protection_level_m : float, m -- bound on the error at the localizer's integrity risk (0
         when the localizer states none: its ``ok`` alone decides)
+    reacquired : bool -- the fit started from the global search at the loop's request
     """
 
     position_m: np.ndarray
@@ -69,6 +70,7 @@ class Fix:
     fit_s: float
     covariance_m2: np.ndarray | None = None
     protection_level_m: float = 0.0
+    reacquired: bool = False
 
 
 class CurrentHistory:
@@ -177,7 +179,8 @@ class SensorPipeline:
                              f"{s!r}; excluded"))
         top = np.where(self.excluded[:n, None], np.nan, frame.top_t)
         bottom = np.where(self.excluded[n:, None], np.nan, frame.bottom_t)
-        if self.reacquire:
+        cold = self.reacquire
+        if cold:
             self.reacquire = False
             getattr(self.localizer, "reset", lambda: None)()
         # a localizer's fix() never raises on a bad frame; locate() may (then: not ok)
@@ -199,4 +202,4 @@ class SensorPipeline:
         cov = getattr(est, "covariance_m2", None)
         return Fix(p, ok, float(frame.t_s), tuple(problems), self.excluded.copy(),
                    self.clock() - t0, None if cov is None else np.asarray(cov, float),
-                   float(getattr(est, "protection_level_m", 0.0)))
+                   float(getattr(est, "protection_level_m", 0.0)), cold)
