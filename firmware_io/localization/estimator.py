@@ -585,7 +585,7 @@ class Localizer:
         protection level within the alert limit."""
         p, cost, _, converged, gm = out
         dof = 3 * n_used - 3
-        cov, pl = covariance_and_pl([row[:3] for row in gm[:3]], cost, dof, self._k2)
+        cov, pl = covariance_and_pl(gm, cost, dof, self._k2)
         pl += self.model_bias_m
         rms = math.sqrt(cost / max(dof, 1))
         lo, hi = self._box_lo, self._box_hi
@@ -598,6 +598,8 @@ class Localizer:
                       f"false-alarm {self.false_alarm:g}): lost or model error")
         elif rms > self.residual_limit:
             reason = f"residual {rms:.3g} > {self.residual_limit:g} (lost or implausible)"
+        elif not math.isfinite(pl):
+            reason = "singular Fisher information: the position is not determined"
         elif not pl <= self.alert_limit_m:
             reason = (f"protection level {pl * 1e3:.3g} mm > alert limit "
                       f"{self.alert_limit_m * 1e3:.3g} mm")

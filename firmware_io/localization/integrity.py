@@ -64,19 +64,39 @@ def thresholds(p_fa: float, max_dof: int) -> list:
 
 
 def covariance_and_pl(fisher, chi2: float, dof: int, k2: float):
-    """(covariance (3, 3) m^2, protection level m) from the Fisher information (3 x 3, 1/m^2,
-    nested lists or array), the residual's chi2 and dof and k2 = the chi-square(3) quantile at
-    the integrity risk. Singular or non-finite information -> (None, inf)."""
-    f = np.array(fisher, dtype=float)
-    if not np.all(np.isfinite(f)):
+    """(covariance (3, 3) m^2, protection level m) from the Fisher information (the upper-left
+    3 x 3 block of ``fisher``, nested lists, 1/m^2: the fit's Gram matrix), the residual's chi2 and dof and k2 = the chi-square(3) quantile at the
+    integrity risk. Singular or non-finite information -> (None, inf). Closed forms on Python
+    floats (the inverse by the adjugate, the largest eigenvalue by the trigonometric formula
+    for a symmetric 3 x 3 matrix): this runs on every fix."""
+    (a, b, c), (d, e), f = fisher[0][:3], fisher[1][1:3], fisher[2][2]
+    c00, c01, c02 = d * f - e * e, c * e - b * f, b * e - c * d
+    det = a * c00 + b * c01 + c * c02
+    if not (math.isfinite(det) and det > 0.0):
         return None, math.inf
-    try:
-        cov = np.linalg.inv(f)
-    except np.linalg.LinAlgError:
-        return None, math.inf
-    if dof > 0 and chi2 > dof:
-        cov = cov * (chi2 / dof)
-    lam = float(np.linalg.eigvalsh(cov)[-1])
+    scale = (chi2 / dof if dof > 0 and chi2 > dof else 1.0) / det
+    m = [[c00 * scale, c01 * scale, c02 * scale], [0.0, (a * f - c * c) * scale,
+                                                   (b * c - a * e) * scale],
+         [0.0, 0.0, (a * d - b * b) * scale]]
+    m[1][0], m[2][0], m[2][1] = m[0][1], m[0][2], m[1][2]
+    lam = _largest_eigenvalue(m)
     if not (math.isfinite(lam) and lam > 0):
         return None, math.inf
-    return cov, math.sqrt(lam * k2)
+    return np.array(m), math.sqrt(lam * k2)
+
+
+def _largest_eigenvalue(m) -> float:
+    """Largest eigenvalue of a symmetric 3 x 3 matrix (nested lists): Smith, Comm. ACM 4, 168
+    (1961)."""
+    p1 = m[0][1] ** 2 + m[0][2] ** 2 + m[1][2] ** 2
+    q = (m[0][0] + m[1][1] + m[2][2]) / 3.0
+    p2 = (m[0][0] - q) ** 2 + (m[1][1] - q) ** 2 + (m[2][2] - q) ** 2 + 2.0 * p1
+    if p2 <= 1e-30 * q * q:
+        return max(m[0][0], m[1][1], m[2][2])
+    p = math.sqrt(p2 / 6.0)
+    b00, b11, b22 = (m[0][0] - q) / p, (m[1][1] - q) / p, (m[2][2] - q) / p
+    b01, b02, b12 = m[0][1] / p, m[0][2] / p, m[1][2] / p
+    r = 0.5 * (b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02)
+               + b02 * (b01 * b12 - b11 * b02))
+    phi = math.acos(min(max(r, -1.0), 1.0)) / 3.0
+    return q + 2.0 * p * math.cos(phi)
