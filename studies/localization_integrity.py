@@ -21,9 +21,7 @@ default), integrity risk 1e-4 per fix. Counts carry a
 two-sided 95 % Clopper-Pearson interval. Timings are on this (shared) machine: each is also
 given as a ratio to one multipole field evaluation in the same process.
 
-    python studies/localization_integrity.py OUT [--n 10000]
-
-Writes ``integrity.json`` and ``integrity_table.txt`` under OUT.
+    python studies/localization_integrity.py OUT [--n 10000]   # integrity.json, *_table.txt
 """
 
 from __future__ import annotations

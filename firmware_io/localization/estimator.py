@@ -210,16 +210,7 @@ class Localizer:
         self._mp_stack[-4:] = np.eye(4)
         self._mp_work = _multipole_work(2 * n, self._mp[0], c_)
         self._exact = model.magnet_size_m is not None
-        lo, hi = model.box_lower_m, model.box_upper_m
-        # ~1 cm apart: the dipole's field varies over the sensor spacing, a coarser grid can put
-        # every start in a wrong basin near the board
-        nx = max(int(round((hi[0] - lo[0]) / 0.012)), 5)
-        ny = max(int(round((hi[1] - lo[1]) / 0.012)), 5)
-        zs = lo[2] + np.array([0.004, 0.010, 0.018, 0.028, 0.042, 0.060, 0.085])
-        g = np.stack(np.meshgrid(np.linspace(lo[0] + 0.005, hi[0] - 0.005, nx),
-                                 np.linspace(lo[1] + 0.005, hi[1] - 0.005, ny),
-                                 zs[zs < hi[2] - 0.002], indexing="ij"), -1)
-        self._candidates = g.reshape(-1, 3)
+        self._candidates = self._grid_points(model.box_lower_m, model.box_upper_m)
         self._grid = self._grid_fields(self._candidates)
         self._last: np.ndarray | None = None
         self._box_lo = [float(x) for x in model.box_lower_m]
@@ -606,6 +597,19 @@ class Localizer:
         else:
             return True, "", cov, pl, dof
         return False, reason, cov, pl, dof
+
+    @staticmethod
+    def _grid_points(lo, hi) -> np.ndarray:
+        """The global search's candidates (C, 3) m in the plausible box [lo, hi]: ~1.2 cm apart
+        in x, y (the dipole's field varies over the sensor spacing, a coarser grid can put every
+        start in a wrong basin near the board), 7 heights denser near the board."""
+        nx = max(int(round((hi[0] - lo[0]) / 0.012)), 5)
+        ny = max(int(round((hi[1] - lo[1]) / 0.012)), 5)
+        zs = lo[2] + np.array([0.004, 0.010, 0.018, 0.028, 0.042, 0.060, 0.085])
+        g = np.stack(np.meshgrid(np.linspace(lo[0] + 0.005, hi[0] - 0.005, nx),
+                                 np.linspace(lo[1] + 0.005, hi[1] - 0.005, ny),
+                                 zs[zs < hi[2] - 0.002], indexing="ij"), -1)
+        return g.reshape(-1, 3)
 
     def _grid_fields(self, c):
         """The magnet's field at the 2n sensors for every grid candidate c (C, 3) m: the exact

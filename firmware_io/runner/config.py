@@ -84,7 +84,7 @@ class RunnerConfig:
     overrun_factor: float = 10.0
     gate_risk: float = 1e-4
     alert_limit_m: float = 10e-3
-    max_fix_age_s: float = 0.025
+    max_fix_age_s: float = 0.05
 
     def __post_init__(self):
         self.drives  # noqa: B018  (checks R, L and the supply, names the field in the error)
