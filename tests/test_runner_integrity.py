@@ -111,3 +111,42 @@ def test_gated_fixes_render_no_force_and_are_reacquired(device, tmp_path):
     after = running & (t > moved_t)
     assert after.sum() > 50
     assert np.abs(est[after, 0] - (true[after, 0] + JUMP[0])).max() < 0.015
+
+
+def test_bad_frames_reach_the_loop_as_not_ok_fixes_with_a_reason():
+    """The sensor side never raises on a bad frame: wrong shape, all sensors saturated -> a
+    not-ok Fix with a 'lost' problem naming the cause; an Inf reading is a saturated sensor,
+    excluded (the others still fix the position); then a good frame is fitted."""
+    import magpylib as magpy
+
+    from firmware_io.localization import Localizer, SensorModel
+    from firmware_io.runner import SensorFrame
+    from firmware_io.runner.pipeline import SensorPipeline
+
+    rng = np.random.default_rng(0)
+    xy = np.array([[x, y] for y in (0.05, 0.0, -0.05) for x in (-0.05, 0.0, 0.05)])
+    sp = np.stack([np.c_[xy, np.full(9, 0.014)], np.c_[xy, np.full(9, -0.114)]])
+    up = rng.normal(scale=5e-3, size=(9, 3, 9))
+    moment = np.array([0.0, 0.0, 0.909])
+    model = SensorModel(sp, np.stack([up, up * np.array([-1.0, -1.0, 1.0])[None, :, None]]),
+                        moment, "a" * 64, 0.0, None)
+    pipe = SensorPipeline(Localizer(model, "model", cores=False), object(), 9,
+                          lambda t: np.zeros(9), moment)
+    p = np.array([0.0, 0.01, 0.04])
+    good = magpy.misc.Dipole(moment=moment, position=p).getB(sp.reshape(-1, 3)).reshape(2, 9, 3)
+    ok9 = ("ok",) * 18
+    fix = pipe.process(SensorFrame(np.where(np.arange(9)[:, None] == 3, np.inf, good[0]),
+                                   good[1], ok9, 0.0))
+    assert fix.ok and fix.excluded[3] and fix.problems[0][0] == "sensor_saturated"
+    assert np.linalg.norm(fix.position_m - p) < 1e-4
+    bad = {"shape": SensorFrame(good[0][:8], good[1], ok9, 0.0),
+           "usable": SensorFrame(np.full((9, 3), np.nan), np.full((9, 3), np.nan),
+                                 ("saturated",) * 18, 0.0)}
+    for word, frame in bad.items():
+        fix = pipe.process(frame)
+        assert not fix.ok and np.all(np.isfinite(fix.position_m))
+        assert any(name == "lost" and word in detail for name, detail in fix.problems), \
+            (word, fix.problems)
+    fix = pipe.process(SensorFrame(good[0], good[1], ok9, 0.01))
+    assert fix.ok and np.linalg.norm(fix.position_m - p) < 1e-4
+    assert fix.covariance_m2.shape == (3, 3) and 0 < fix.protection_level_m < 5e-3

@@ -154,6 +154,14 @@ class SensorPipeline:
         """Health checks, exclusions and the fit of one frame."""
         t0 = self.clock()
         n = self.n
+        shapes = (np.shape(frame.top_t), np.shape(frame.bottom_t), len(frame.status))
+        if shapes != ((n, 3), (n, 3), 2 * n):
+            # a malformed frame is not fitted: not ok, with the reason, never an exception
+            p = np.zeros(3) if self.position_m is None else self.position_m.copy()
+            return Fix(p, False, float(frame.t_s),
+                       (("lost", f"bad frame: arrays of shape {shapes[0]}, {shapes[1]} and "
+                                 f"{shapes[2]} statuses (expected ({n}, 3) each, {2 * n})"),),
+                       self.excluded.copy(), self.clock() - t0)
         status = list(frame.status)
         values = np.concatenate([frame.top_t, frame.bottom_t])
         beyond = np.any(np.abs(values) > TLV493D_LINEAR_RANGE_T, axis=1)
