@@ -138,3 +138,14 @@ def test_alert_limit_and_bad_frames_give_not_ok_with_a_reason_never_an_exception
     # a good frame after the bad ones: found again
     est = loc.fix(f[0], f[1], np.zeros(9))
     assert est.ok and np.linalg.norm(est.position_m - p) < 1e-3
+
+
+@pytest.mark.slow
+def test_integrity_study_smoke(tmp_path):
+    from conftest import load_study
+
+    res = load_study("localization_integrity").run(tmp_path, n=4)
+    assert [r["condition"] for r in res["rows"]] == list(
+        ("cold", "jump", "sensor dead", "two saturated", "6 A", "uncalibrated"))
+    assert all(r["n"] == 4 and 0 <= r["availability"] <= 1 for r in res["rows"])
+    assert (tmp_path / "integrity.json").is_file() and (tmp_path / "integrity_table.txt").is_file()
