@@ -250,6 +250,7 @@ class Runner:
         if fix is not None:
             self.last_fix = fix
             problems.extend(fix.problems)
+            accepted = False
             if fix.ok and fix.protection_level_m > self.cfg.alert_limit_m:
                 problems.append(("lost", f"protection level {fix.protection_level_m * 1e3:.3g} "
                                  f"mm > alert limit {self.cfg.alert_limit_m * 1e3:.3g} mm"))
@@ -259,8 +260,8 @@ class Runner:
                     problems.append(("gated", gated))
                 else:
                     self.tracker.update(fix.position_m, fix.frame_t_s, True)
-                    self.have_fix = True
-            self.last_estimate_ok = fix.ok and not problems
+                    self.have_fix = accepted = True
+            self.last_estimate_ok = accepted      # taken into the tracker
         return fix is not None, problems
 
     def _gate(self, fix: Fix) -> str:
@@ -314,8 +315,8 @@ class Runner:
         p = np.asarray(self.tracker.predict(t_s), float)
         vel = np.asarray(self.tracker.x[1], float)
         self.position_m = p
-        age = t_s - getattr(self.tracker, "t", None) if getattr(self.tracker, "t", None) \
-            is not None else 0.0
+        t_fix = getattr(self.tracker, "t", None)    # frame time of the newest accepted fix
+        age = t_s - t_fix if t_fix is not None else 0.0
         if age > cfg.max_fix_age_s:
             problems.append(("lost", f"newest accepted fix {age * 1e3:.0f} ms old > "
                              f"{cfg.max_fix_age_s * 1e3:.0f} ms"))
