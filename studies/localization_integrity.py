@@ -162,7 +162,8 @@ def _reference_s(model) -> float:
     return (time.perf_counter() - t0) / 2000
 
 
-def run(out_dir, n: int = 10000, seed: int = 0) -> dict:
+def run(out_dir, n: int = 10000, seed: int = 0, conditions=CONDITIONS,
+        thesis_cases=("off", "static", "sinusoidal")) -> dict:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
@@ -176,11 +177,11 @@ def run(out_dir, n: int = 10000, seed: int = 0) -> dict:
     loc_cal = Localizer(model, "model", calibration=cal, **kw)
     loc_uncal = Localizer(model, "model", **kw)
     rows = []
-    for c in CONDITIONS:
+    for c in conditions:
         rows.append(run_condition(loc_uncal if c == "uncalibrated" else loc_cal, sim, c, n, rng))
         print(json.dumps(rows[-1]), flush=True)
     thesis = {}
-    for case in ("off", "static", "sinusoidal"):
+    for case in thesis_cases:
         m = max(n // 10, 50)
         pos = random_positions(m, rng, z_range_m=(0.020, 0.060))
         cur = case_currents(case, rng.uniform(0, 20, m), sim.array.n_coils)
@@ -236,9 +237,17 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", nargs="?", default="out/localization_integrity")
     ap.add_argument("--n", type=int, default=10000, help="fixes per condition")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=0, help="device (sensor errors) and noise seed")
+    ap.add_argument("--conditions", default=",".join(CONDITIONS),
+                    help="comma-separated subset of: " + ", ".join(CONDITIONS))
+    ap.add_argument("--no-thesis", action="store_true", help="skip the thesis-case availability")
     a = ap.parse_args(argv)
-    run(a.out, a.n, a.seed)
+    conds = tuple(c.strip() for c in a.conditions.split(",") if c.strip())
+    bad = [c for c in conds if c not in CONDITIONS]
+    if bad or a.n < 1:
+        print(f"error: --conditions {bad} / --n {a.n}: conditions from {CONDITIONS}, n >= 1")
+        return 2
+    run(a.out, a.n, a.seed, conds, () if a.no_thesis else ("off", "static", "sinusoidal"))
     return 0
 
 
