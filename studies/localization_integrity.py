@@ -21,7 +21,7 @@ default), integrity risk 1e-4 per fix. Counts carry a
 two-sided 95 % Clopper-Pearson interval. Timings are on this (shared) machine: each is also
 given as a ratio to one multipole field evaluation in the same process.
 
-    python studies/localization_integrity.py OUT [--n 10000]   # integrity.json, *_table.txt
+    python studies/localization_integrity.py OUT [--n 10000] [--bench]  # integrity.json, table
 """
 
 from __future__ import annotations
@@ -162,6 +162,45 @@ def _reference_s(model) -> float:
     return (time.perf_counter() - t0) / 2000
 
 
+def bench(n: int = 100, seed: int = 0, repeats: int = 3) -> dict:
+    """Cold (global search) and warm (a 0.5 mm-per-axis random walk) fix times, s: the median
+    and p99 of each of ``repeats`` runs over ``n`` frames (calibrated localizer, thesis case 3
+    currents), with the same-process multipole reference."""
+    rng = np.random.default_rng(seed)
+    design = default_design()
+    sim = SensorSimulator(design, errors="default", seed=seed, induced="rod")
+    mg = design.magnet
+    model = dataclasses.replace(SensorModel.from_operator(**forward_model(sim)),
+                                magnet_size_m=(mg.radius_m, mg.length_m))
+    cal, _ = _calibrate(sim, model, seed + 1000, 1000)
+    loc = Localizer(model, "model", calibration=cal)
+    cur = case_currents("sinusoidal", rng.uniform(0, 20, n), sim.array.n_coils)
+    cold = sim.read(random_positions(n, rng), cur, rng=rng)
+    walk = np.cumsum(rng.normal(scale=0.5e-3, size=(n, 3)), 0) + [0.0, 0.0, 0.04]
+    warm = sim.read(walk, cur, rng=rng)
+    out = []
+    for _ in range(repeats):
+        tc, tw = [], []
+        for k in range(n):
+            loc.reset()
+            t0 = time.perf_counter()
+            loc.fix(cold.top_t[k], cold.bottom_t[k], cur[k])
+            tc.append(time.perf_counter() - t0)
+        for k in range(n):
+            t0 = time.perf_counter()
+            loc.fix(warm.top_t[k], warm.bottom_t[k], cur[k])
+            tw.append(time.perf_counter() - t0)
+        ref = _reference_s(model)
+        out.append({"cold_ms_median": float(np.median(tc) * 1e3),
+                    "cold_ms_p99": float(np.percentile(tc, 99) * 1e3),
+                    "warm_us_median": float(np.median(tw[1:]) * 1e6),
+                    "reference_us": ref * 1e6})
+        print(f"cold {out[-1]['cold_ms_median']:.2f} ms median, {out[-1]['cold_ms_p99']:.2f} ms "
+              f"p99 ({np.median(tc) / ref:.0f}x ref); warm {out[-1]['warm_us_median']:.0f} us "
+              f"median ({np.median(tw[1:]) / ref:.1f}x ref); ref {ref * 1e6:.1f} us", flush=True)
+    return {"runs": out}
+
+
 def run(out_dir, n: int = 10000, seed: int = 0, conditions=CONDITIONS,
         thesis_cases=("off", "static", "sinusoidal")) -> dict:
     out = Path(out_dir)
@@ -241,7 +280,11 @@ def main(argv=None) -> int:
     ap.add_argument("--conditions", default=",".join(CONDITIONS),
                     help="comma-separated subset of: " + ", ".join(CONDITIONS))
     ap.add_argument("--no-thesis", action="store_true", help="skip the thesis-case availability")
+    ap.add_argument("--bench", action="store_true", help="only the cold / warm fix timing")
     a = ap.parse_args(argv)
+    if a.bench:
+        bench(seed=a.seed)
+        return 0
     conds = tuple(c.strip() for c in a.conditions.split(",") if c.strip())
     bad = [c for c in conds if c not in CONDITIONS]
     if bad or a.n < 1:
