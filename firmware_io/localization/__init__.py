@@ -8,6 +8,8 @@ controller).
 One concept a module: :mod:`.magnet` (the magnet's multipole and exact cylinder field),
 :mod:`.sensor_model` (what the estimators know about the sensors and coils),
 :mod:`.estimator` (:class:`Localizer`, methods 'learned', 'dipole', 'model', 'kalman'),
+:mod:`.lm` (its Levenberg-Marquardt), :mod:`.integrity` (residual test, covariance and
+protection level of a fix),
 :mod:`.calibration` (per-sensor gains, rotation, offset and position error from frames with
 the coils driven), :mod:`.learned` (the thesis' learned inverse, section 3.2.2) and
 :mod:`.filter` (the constant-velocity Kalman filter). The methods, the magnet model's

@@ -9,14 +9,17 @@ analytic Jacobian; the exact cylinder's and the cores' fields enter as correctio
 about a recent position. Sensors are weighted by sigma^2 = noise^2 + (relative_error |B|)^2.
 
 Inputs: readings (n, 3) T per array (NaN = missing or saturated), currents (n_coils,) A.
-Output: :class:`Estimate` (position m, normalized residual, ok). ``ok`` is False when the fit
-did not converge, the residual exceeds ``residual_limit``, fewer than 3 sensors are usable or
-the position leaves the plausible box -- the runner then fails safe. The models and their
-derivations: docs/localization.md.
+Output: :class:`Estimate` (position m, covariance m^2, protection level m, residual, ok).
+``ok`` is False when the fit did not converge, the residual fails the chi-square test
+(:mod:`.integrity`), the protection level exceeds ``alert_limit_m``, fewer than 3 sensors are
+usable or the position leaves the plausible box -- the runner then fails safe. A warm fit that
+fails the test or moved farther than ``reacquire_m`` is re-solved from the global search (a
+precomputed grid of the magnet's field). Models, derivations: docs/localization.md.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -26,7 +29,9 @@ from ..errors import BadInputError
 from ..mapfile import MapFile
 from .calibration import SensorCalibration
 from .filter import ConstantVelocityKalman
+from .integrity import chi2_quantile, covariance_and_pl, thresholds
 from .learned import LearnedInverse
+from .lm import levenberg_marquardt
 from .magnet import _EYE, MU0, _multipole_rows, _multipole_work, cylinder_field, multipole_field
 from .sensor_model import DEFAULT_NOISE_T, SensorModel
 
@@ -38,7 +43,10 @@ class Estimate:
     """position_m (3,) m; residual: normalized rms fit residual (1 ~ noise level; 0.0 when no
     fit was possible, then ok is False and ``reason`` says why); ok; n_used
     sensors (pairs for subtraction); iterations; method; velocity_m_s (3,) (Kalman only);
-    reason: why ok is False ('' when ok)."""
+    reason: why ok is False ('' when ok); covariance_m2 (3, 3) m^2 (the inverse Fisher
+    information, inflated by chi2 / dof when above 1; None without a fit);
+    protection_level_m: bound on |error| at the localizer's integrity risk (inf without a
+    fit); chi2, dof: the residual test's statistic and degrees of freedom."""
 
     position_m: np.ndarray
     residual: float
@@ -48,6 +56,10 @@ class Estimate:
     method: str
     velocity_m_s: np.ndarray | None = None
     reason: str = ""
+    covariance_m2: np.ndarray | None = None
+    protection_level_m: float = math.inf
+    chi2: float = 0.0
+    dof: int = 0
 
 
 
@@ -56,29 +68,6 @@ def _dist(a: np.ndarray, b: np.ndarray) -> float:
     d = a - b
     return math.sqrt(float(d @ d))
 
-
-
-def _solve3_damped(a, g, lam):
-    """Solve (A + lam diag(A)) x = g for a symmetric 3 x 3 A (nested lists) by the adjugate;
-    None when singular or not finite."""
-    m00, m11, m22 = (a[0][0] * (1 + lam) + 1e-30, a[1][1] * (1 + lam) + 1e-30,
-                     a[2][2] * (1 + lam) + 1e-30)
-    m01, m02, m12 = a[0][1], a[0][2], a[1][2]
-    c00 = m11 * m22 - m12 * m12
-    c01 = m02 * m12 - m01 * m22
-    c02 = m01 * m12 - m02 * m11
-    det = m00 * c00 + m01 * c01 + m02 * c02
-    if not (math.isfinite(det) and det != 0.0):
-        return None
-    c11 = m00 * m22 - m02 * m02
-    c12 = m01 * m02 - m00 * m12
-    c22 = m00 * m11 - m01 * m01
-    g0, g1, g2 = g
-    x = ((c00 * g0 + c01 * g1 + c02 * g2) / det, (c01 * g0 + c11 * g1 + c12 * g2) / det,
-         (c02 * g0 + c12 * g1 + c22 * g2) / det)
-    if not all(math.isfinite(v) for v in x):
-        return None
-    return x
 
 
 def _check_frame(name: str, a, n: int) -> np.ndarray:
@@ -108,7 +97,16 @@ class Localizer:
     noise_t : float, T rms per axis
     relative_error : float, relative model error of a sensor's reading (gain, mounting);
         default 0.02, or 0.003 with a calibration
-    residual_limit : float, largest normalized rms residual for ok
+    residual_limit : float, largest normalized rms residual for ok (a cap beside the test)
+    integrity_risk : float, probability per fix that the error exceeds the protection level
+    false_alarm : float, probability per fix that a correct fit fails the residual test (a
+        wrong basin leaves chi2 / dof >> 3, a correct fit ~1: a small false-alarm rate costs
+        no integrity and keeps the availability where the model errors exceed their terms)
+    alert_limit_m : float, m -- largest protection level of an ok fix (default inf: none; the
+        runner passes its scene's)
+    reacquire_m : float, m -- a warm fit that moved farther is checked by the global search
+    model_bias_m : float, m -- bound on the fit's bias from what the noise model leaves out
+        (sensor poses, the map's core term), added to the protection level
     cores : bool or None, model the magnet-induced core field ('dipole'; default: if known)
     mount_position_m : float, m -- sensor position uncertainty, weighs near-field sensors
     calibration : SensorCalibration (see :func:`calibrate`), or (gain_inverse (2, n, 3, 3),
@@ -128,7 +126,10 @@ class Localizer:
                  relative_error: float | None = None, residual_limit: float = 5.0,
                  cores: bool | None = None, max_iterations: int = 30, calibration=None,
                  kalman: ConstantVelocityKalman | None = None, frame_period_s: float = 0.01,
-                 mount_position_m: float = 0.0, refresh_m: float = 1e-3):
+                 mount_position_m: float = 0.0, refresh_m: float = 1e-3,
+                 integrity_risk: float = 1e-4, false_alarm: float = 1e-6,
+                 alert_limit_m: float = math.inf, reacquire_m: float = 5e-3,
+                 model_bias_m: float = 1e-3):
         if method not in METHODS:
             raise BadInputError("method", f"one of {METHODS}", method)
         if method == "learned":
@@ -142,7 +143,7 @@ class Localizer:
             relative_error = 0.02 if calibration is None else 0.003
         for name, val in (("noise_t", noise_t), ("relative_error", relative_error + 1e-300),
                           ("residual_limit", residual_limit), ("frame_period_s", frame_period_s),
-                          ("refresh_m", refresh_m)):
+                          ("refresh_m", refresh_m), ("reacquire_m", reacquire_m)):
             if not (math.isfinite(val) and val > 0):
                 raise BadInputError(name, "a finite number > 0", val)
         self.model = model
@@ -155,6 +156,18 @@ class Localizer:
         self.mount_position_m = float(mount_position_m)
         self._moment = float(np.linalg.norm(model.moment_a_m2))
         self.residual_limit = float(residual_limit)
+        for name, val in (("integrity_risk", integrity_risk), ("false_alarm", false_alarm)):
+            if not (math.isfinite(val) and 0 < val < 0.5):
+                raise BadInputError(name, "a probability in (0, 0.5)", val)
+        if not (math.isfinite(model_bias_m) and model_bias_m >= 0):
+            raise BadInputError("model_bias_m", "a finite number >= 0, m", model_bias_m)
+        self.model_bias_m = float(model_bias_m)
+        if not (alert_limit_m > 0):   # inf: no alert limit (the scene sets one)
+            raise BadInputError("alert_limit_m", "a number > 0 (or inf), m", alert_limit_m)
+        self.integrity_risk, self.false_alarm = float(integrity_risk), float(false_alarm)
+        self.alert_limit_m, self.reacquire_m = float(alert_limit_m), float(reacquire_m)
+        self._k2 = chi2_quantile(self.integrity_risk, 3)
+        self._chi2_max = thresholds(self.false_alarm, 6 * model.n_sensors)
         self.cores = (model.induced is not None) if cores is None else bool(cores)
         if self.cores and model.induced is None:
             raise BadInputError("cores", "False (the model carries no induced core field)", cores)
@@ -197,16 +210,8 @@ class Localizer:
         self._mp_stack[-4:] = np.eye(4)
         self._mp_work = _multipole_work(2 * n, self._mp[0], c_)
         self._exact = model.magnet_size_m is not None
-        lo, hi = model.box_lower_m, model.box_upper_m
-        # ~1 cm apart: the dipole's field varies over the sensor spacing, a coarser grid can put
-        # every start in a wrong basin near the board
-        nx = max(int(round((hi[0] - lo[0]) / 0.012)), 5)
-        ny = max(int(round((hi[1] - lo[1]) / 0.012)), 5)
-        zs = lo[2] + np.array([0.004, 0.010, 0.018, 0.028, 0.042, 0.060, 0.085])
-        g = np.stack(np.meshgrid(np.linspace(lo[0] + 0.005, hi[0] - 0.005, nx),
-                                 np.linspace(lo[1] + 0.005, hi[1] - 0.005, ny),
-                                 zs[zs < hi[2] - 0.002], indexing="ij"), -1)
-        self._candidates = g.reshape(-1, 3)
+        self._candidates = self._grid_points(model.box_lower_m, model.box_upper_m)
+        self._grid = self._grid_fields(self._candidates)
         self._last: np.ndarray | None = None
         self._box_lo = [float(x) for x in model.box_lower_m]
         self._box_hi = [float(x) for x in model.box_upper_m]
@@ -329,9 +334,22 @@ class Localizer:
             t = time_s if time_s is not None else (
                 (self.kalman.t + self.frame_period_s) if self.kalman.t is not None else 0.0)
             pos, vel = self.kalman.update(est.position_m, t, est.ok)
-            est = Estimate(pos, est.residual, est.ok, est.n_used, est.iterations, "kalman",
-                           vel, est.reason)
+            est = dataclasses.replace(est, position_m=pos, method="kalman", velocity_m_s=vel)
         return est
+
+    def fix(self, top, bottom, currents=None, *, time_s: float | None = None) -> Estimate:
+        """:meth:`locate` for the control step: never raises on a bad frame (wrong shape,
+        non-finite or out-of-range values, missing or non-finite currents) -- that frame's
+        estimate is not ok, its ``reason`` the check's message, its position the last ok one
+        (or the box's centre) -- and the next frame starts cold."""
+        try:
+            return self.locate(top, bottom, currents, time_s=time_s)
+        except BadInputError as exc:
+            p = self._last if self._last is not None else 0.5 * (self.model.box_lower_m
+                                                                 + self.model.box_upper_m)
+            self._last = None
+            return Estimate(np.array(p, float), 0.0, False, 0, 0, self.method,
+                            reason=f"bad frame: {exc}")
 
     # subtraction: d = top - P bottom; model-based: both arrays minus the coils' field
     def _mount_var(self, d):
@@ -517,61 +535,112 @@ class Localizer:
                 if lin is None or not out[3] or self._within(out[0], tol):
                     break
                 p0 = out[0]
-            return out[0], out[1], it, out[3]
+            return out[0], out[1], it, out[3], out[4]
 
         def cold():
-            # the multipole alone from the grid's best candidates, then the full model
-            cands = [self._lm(residuals(None), q0)
-                     for q0 in self._global_starts(d, use, sig, subtract)]
-            first = min(cands, key=lambda o: o[1])
-            return solve(first[0], 0.25 * self.refresh_m) if has_extra else first
+            """The global search: the grid's best candidate polished on the multipole, then the
+            full model; the next candidates only while the result fails the integrity test
+            (a better cost wins). Returns (fit, its integrity check)."""
+            found = None
+            for q0 in self._global_starts(d, use, sig, subtract):
+                out = self._lm(residuals(None), q0)
+                if has_extra:
+                    out = solve(out[0], 0.25 * self.refresh_m)
+                if found is None or out[1] < found[0][1]:
+                    found = (out, self._integrity(out, n_used))
+                if found[1][0]:
+                    break
+            return found
 
         if self._last is not None:
-            best = solve(self._last, None)
-            if not self._ok(best, n_used)[0]:
-                # lost from the warm start: the global search once
+            start = self._last
+            best = solve(start, None)
+            check = self._integrity(best, n_used)
+            if not check[0] or _dist(best[0], start) > self.reacquire_m:
+                # suspicious (failed, or moved far from the warm start): the global search
                 other = cold()
-                if other[1] < best[1]:
-                    best = other
+                if other[0][1] < best[1]:
+                    best, check = other
         else:
-            best = cold()
-        p, cost, iters, converged = best
-        dof = max(3 * n_used - 3, 1)
-        rms = math.sqrt(cost / dof)
-        ok, reason = self._ok(best, n_used)
+            best, check = cold()
+        p, cost, iters = best[:3]
+        ok, reason, cov, pl, dof = check
         self._last = p.copy() if ok else None
-        return Estimate(p, rms, ok, n_used, iters, method, reason=reason)
+        return Estimate(p, math.sqrt(cost / max(dof, 1)), ok, n_used, iters, method,
+                        reason=reason, covariance_m2=cov, protection_level_m=pl,
+                        chi2=float(cost), dof=dof)
 
-    def _ok(self, out, n_used):
-        p, cost, _, converged = out
-        dof = max(3 * n_used - 3, 1)
-        rms = math.sqrt(cost / dof)
-        if not converged:
-            return False, "fit did not converge"
+    def _integrity(self, out, n_used):
+        """(ok, reason, covariance, protection level, dof) of a fit ``out`` (see
+        :mod:`.integrity`): converged, inside the box, chi2 within the test's threshold, the
+        protection level within the alert limit."""
+        p, cost, _, converged, gm = out
+        dof = 3 * n_used - 3
+        cov, pl = covariance_and_pl(gm, cost, dof, self._k2)
+        pl += self.model_bias_m
+        rms = math.sqrt(cost / max(dof, 1))
         lo, hi = self._box_lo, self._box_hi
-        if not all(lo[k] + 1e-6 < p[k] < hi[k] - 1e-6 for k in range(3)):
-            return False, "position at or outside the plausible box's edge"
-        if rms > self.residual_limit:
-            return False, f"residual {rms:.3g} > {self.residual_limit:g} (lost or implausible)"
-        return True, ""
+        if not converged:
+            reason = "fit did not converge"
+        elif not all(lo[k] + 1e-6 < p[k] < hi[k] - 1e-6 for k in range(3)):
+            reason = "position at or outside the plausible box's edge"
+        elif not cost <= self._chi2_max[dof]:
+            reason = (f"residual chi2 {cost:.3g} > {self._chi2_max[dof]:.3g} ({dof} dof, "
+                      f"false-alarm {self.false_alarm:g}): lost or model error")
+        elif rms > self.residual_limit:
+            reason = f"residual {rms:.3g} > {self.residual_limit:g} (lost or implausible)"
+        elif not math.isfinite(pl):
+            reason = "singular Fisher information: the position is not determined"
+        elif not pl <= self.alert_limit_m:
+            reason = (f"protection level {pl * 1e3:.3g} mm > alert limit "
+                      f"{self.alert_limit_m * 1e3:.3g} mm")
+        else:
+            return True, "", cov, pl, dof
+        return False, reason, cov, pl, dof
+
+    @staticmethod
+    def _grid_points(lo, hi) -> np.ndarray:
+        """The global search's candidates (C, 3) m in the plausible box [lo, hi]: ~1.2 cm apart
+        in x, y (the dipole's field varies over the sensor spacing, a coarser grid can put every
+        start in a wrong basin near the board), 7 heights denser near the board."""
+        nx = max(int(round((hi[0] - lo[0]) / 0.012)), 5)
+        ny = max(int(round((hi[1] - lo[1]) / 0.012)), 5)
+        zs = lo[2] + np.array([0.004, 0.010, 0.018, 0.028, 0.042, 0.060, 0.085])
+        g = np.stack(np.meshgrid(np.linspace(lo[0] + 0.005, hi[0] - 0.005, nx),
+                                 np.linspace(lo[1] + 0.005, hi[1] - 0.005, ny),
+                                 zs[zs < hi[2] - 0.002], indexing="ij"), -1)
+        return g.reshape(-1, 3)
+
+    def _grid_fields(self, c):
+        """The magnet's field at the 2n sensors for every grid candidate c (C, 3) m: the exact
+        cylinder when its size is known, else the multipole; as (C, 6n) T for the model-based
+        fit and subtracted (C, 3n) T, each with its square (the search's weighted costs)."""
+        m = self.model
+        rel = (self._pts[None] - c[:, None]).reshape(-1, 3)
+        if self._exact:
+            b = cylinder_field(rel, np.zeros(3), m.moment_a_m2, *m.magnet_size_m)
+        else:
+            b = multipole_field(rel, np.zeros(3), m.moment_a_m2, m.octupole_m2)
+        b = np.ascontiguousarray(b.reshape(len(c), -1))
+        sub = b @ self._sub_op_all.T
+        return {False: (b, b * b), True: (sub, sub * sub)}
 
     def _global_starts(self, d, use, sig, subtract, keep: int = 3):
-        """The best ``keep`` points of a coarse grid over the plausible box (dipole term only,
-        all candidates in one vectorized pass)."""
-        m = self.model
-        c = self._candidates
-        r = self._pts[None] - c[:, None]                          # (C, 2n, 3)
-        rho = np.einsum("cij,cij->ci", r, r)
-        u = m.moment_a_m2
-        b = MU0 / (4 * math.pi) * (3 * r * (r @ u)[..., None] / rho[..., None] ** 2.5
-                                   - u / rho[..., None] ** 1.5)
-        n = m.n_sensors
-        if subtract:
-            b = b[:, :n] - np.einsum("sij,csj->csi", self._mirror, b[:, n:])
-        res = (d[None, use] - b[:, use]) / sig[None, use, None]
-        costs = np.einsum("cij,cij->c", res, res)
+        """The best ``keep`` grid candidates for the frame: weighted cost sum_s |d_s - B_cs|^2
+        / sigma_s^2 over the usable sensors, up to its candidate-independent part, from the
+        precomputed fields (two matrix-vector products)."""
+        b, b2 = self._grid[subtract]
+        w = np.where(use, 1.0 / np.where(use, sig, 1.0) ** 2, 0.0)
+        wd = (np.where(use[:, None], d, 0.0) * w[:, None]).reshape(-1)
+        costs = b2 @ w.repeat(3) - 2.0 * (b @ wd)
         costs[~np.isfinite(costs)] = np.inf
-        return [c[k] for k in np.argsort(costs)[:keep]]
+        k = min(keep, len(costs))
+        best = np.argpartition(costs, k - 1)[:k]
+        return [self._candidates[j] for j in best[np.argsort(costs[best])]]
+
+    def _lm(self, evaluate, p0):
+        return levenberg_marquardt(evaluate, p0, self._box_lo, self._box_hi,
+                                   self.max_iterations)
 
     def _make_eval(self, big):
         """p -> the Gram matrix of [J, -r] (4 x 4 nested lists) for :meth:`_lm`; big (3 m, 6 n + 4)
@@ -590,54 +659,6 @@ class Localizer:
             y = big @ stack
             return (y.T @ y).tolist()
         return evaluate
-
-    def _lm(self, evaluate, p0):
-        """Levenberg-Marquardt on the position (3 unknowns: the 3 x 3 normal equations are
-        solved in closed form on Python floats, the small-array numpy overhead dominates
-        here). ``evaluate(p)`` -> the Gram matrix of [J, -r] (4 x 4 nested lists)."""
-        p = np.array(p0, dtype=float)
-        gm = evaluate(p)
-        cost = gm[3][3]
-        lam = 1e-6
-        converged = False
-        it = 0
-        lo, hi = self._box_lo, self._box_hi
-        for it in range(1, self.max_iterations + 1):
-            a = gm
-            g = (-gm[0][3], -gm[1][3], -gm[2][3])
-            step = _solve3_damped(a, g, lam)
-            if step is None:
-                break
-            # a Gauss-Newton step below 1/20 of the estimate's own noise (1 / sqrt(diag(J^T J))
-            # per axis, <= the true standard deviation; 50 um at most): converged -- what it
-            # leaves is far below that noise (and ~(step)^2 / 10 mm for exact data)
-            xtol2 = min(0.0025 * (1.0 / (a[0][0] + 1e-300) + 1.0 / (a[1][1] + 1e-300)
-                                  + 1.0 / (a[2][2] + 1e-300)), 2.5e-9)
-            s2 = step[0] * step[0] + step[1] * step[1] + step[2] * step[2]
-            if lam < 1e-4 and s2 < xtol2:
-                p = p + step
-                converged = True
-                break
-            # the position stays in the plausible box: far outside it the magnet's field vanishes
-            # and a step could run away on the (bounded) induced term alone
-            pn = np.array([min(max(p[k] + step[k], lo[k]), hi[k]) for k in range(3)])
-            gn = evaluate(pn)
-            cn = gn[3][3]
-            if math.isfinite(cn) and cn <= cost:
-                p, gm = pn, gn
-                # 0.1 um or a negligible cost decrease: far below what the noise allows
-                small = s2 < 1e-14 or cost - cn <= 1e-7 * cost
-                cost = cn
-                lam = max(lam * 0.2, 1e-9)
-                if small:
-                    converged = True
-                    break
-            else:
-                lam *= 10.0
-                if lam > 1e8:
-                    converged = s2 < 1e-12
-                    break
-        return p, cost, it, converged
 
     def _learned(self, meas) -> Estimate:
         n = self.model.n_sensors

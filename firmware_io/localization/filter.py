@@ -65,6 +65,16 @@ class ConstantVelocityKalman:
         self.t = float(time_s)
         return x.copy(), v.copy()
 
+    def innovation(self, position_m, time_s: float) -> tuple[np.ndarray, float]:
+        """(position_m minus the prediction at ``time_s`` (3,) m, the prediction's variance per
+        axis plus the measurement noise, m^2): what a gate compares a new fix with."""
+        if self.x is None:
+            raise BadInputError("filter state", "at least one ok estimate before innovation", None)
+        dt = max(float(time_s) - self.t, 0.0)
+        p00, p01, p11 = self.p
+        var = p00 + 2 * dt * p01 + dt * dt * p11 + self.q * dt ** 4 / 4
+        return np.asarray(position_m, float) - self.predict(time_s), var + self.r
+
     def predict(self, time_s: float) -> np.ndarray:
         """Extrapolated position (3,) at ``time_s`` (between frames); NaN-free: raises if empty."""
         if self.x is None:

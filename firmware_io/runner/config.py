@@ -54,6 +54,15 @@ class RunnerConfig:
     overrun_factor : float
         A step is an overrun when its compute time exceeds ``overrun_factor * control_period_s``
         (why 10: docs/runner.md, "Overrun").
+    gate_risk : float
+        Probability that a correct fix fails the tracker's innovation gate (Mahalanobis
+        distance with the fix's and the prediction's covariances, chi-square with 3 dof).
+    alert_limit_m : float
+        The largest protection level of a fix the runner renders with, m (the localizer's;
+        why 10 mm and what 5 mm costs in availability: docs/runner.md, "Integrity").
+    max_fix_age_s : float
+        The tracker's newest accepted fix may be at most this old (frame time), s; older: the
+        prediction is not supported by the sensors ('lost', coils off).
     drives : tuple of CoilDrive (derived)
         One per coil: R, L, the supply, and the current the supply can push through R.
     """
@@ -73,6 +82,9 @@ class RunnerConfig:
     resume_after_s: float = 0.25
     max_pwm_retries: int = 3
     overrun_factor: float = 10.0
+    gate_risk: float = 1e-4
+    alert_limit_m: float = 10e-3
+    max_fix_age_s: float = 0.05
 
     def __post_init__(self):
         self.drives  # noqa: B018  (checks R, L and the supply, names the field in the error)
@@ -86,6 +98,12 @@ class RunnerConfig:
             raise BadInputError("force_axes", "'z' or 'xyz'", self.force_axes)
         if not (0 <= self.skip_force_n and math.isfinite(self.skip_force_n)):
             raise BadInputError("skip_force_n", "a finite force >= 0 N", self.skip_force_n)
+        if not (0 < self.gate_risk < 0.5):
+            raise BadInputError("gate_risk", "a probability in (0, 0.5)", self.gate_risk)
+        if not (self.max_fix_age_s > 0):
+            raise BadInputError("max_fix_age_s", "a time > 0 s", self.max_fix_age_s)
+        if not (self.alert_limit_m > 0):
+            raise BadInputError("alert_limit_m", "a length > 0 m (inf: none)", self.alert_limit_m)
 
     @functools.cached_property
     def drives(self) -> tuple[CoilDrive, ...]:

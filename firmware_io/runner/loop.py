@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import BadInputError, CoilWriteError
+from ..localization.integrity import chi2_quantile
 from .config import RunnerConfig
 from .drive import CurrentPath
 from .forcelaw import force_law_rows
@@ -28,8 +29,8 @@ from .pipeline import CurrentHistory, Fix, SensorFrame, SensorPipeline
 from .skip import CoilSkipBound
 from .thermal import ThermalGuard
 
-FAULTS = ("pwm_nack", "sensor_stuck", "sensor_dead", "sensor_saturated", "lost", "out_of_box",
-          "overrun", "thermal", "over_limit")
+FAULTS = ("pwm_nack", "sensor_stuck", "sensor_dead", "sensor_saturated", "lost", "gated",
+          "out_of_box", "overrun", "thermal", "over_limit")
 """The runner's fault states (docs/runner.md: cause and resume policy of each)."""
 
 HISTORY_S = 0.2
@@ -135,6 +136,8 @@ class Runner:
         self.history = CurrentHistory(n, max(16, int(HISTORY_S / config.control_period_s)))
         self.pipeline = SensorPipeline(localizer, fieldmap, n, self.history.at, m)
         self.last_fix: Fix | None = None
+        self.gate_d2 = chi2_quantile(config.gate_risk, 3)
+        self._candidate: Fix | None = None     # a gated-out fix awaiting confirmation
         # per-stage compute times of the last step (s), when ``profile`` is set
         self.profile = False
         self.stages: dict[str, float] = {}
@@ -247,11 +250,51 @@ class Runner:
         if fix is not None:
             self.last_fix = fix
             problems.extend(fix.problems)
-            self.last_estimate_ok = fix.ok
-            if fix.ok:
-                self.tracker.update(fix.position_m, fix.frame_t_s, True)
-                self.have_fix = True
+            accepted = False
+            if fix.ok and fix.protection_level_m > self.cfg.alert_limit_m:
+                problems.append(("lost", f"protection level {fix.protection_level_m * 1e3:.3g} "
+                                 f"mm > alert limit {self.cfg.alert_limit_m * 1e3:.3g} mm"))
+            elif fix.ok:
+                gated = self._gate(fix)
+                if gated:
+                    problems.append(("gated", gated))
+                else:
+                    self.tracker.update(fix.position_m, fix.frame_t_s, True)
+                    self.have_fix = accepted = True
+            self.last_estimate_ok = accepted      # taken into the tracker
         return fix is not None, problems
+
+    def _gate(self, fix: Fix) -> str:
+        """The innovation gate: '' when the fix agrees with the tracker's prediction at its
+        frame time (Mahalanobis distance^2 with both covariances <= the chi-square(3) quantile
+        at ``gate_risk``), else why not. A gated-out fix asks the sensor side to re-acquire
+        (the next fit starts from the global search); a following fix consistent with it (both
+        fixes' covariances and the tracker's measurement noise), itself from the global search,
+        re-starts the tracker there (a warm fit could repeat a wrong basin; a cold one would
+        not)."""
+        if not self.have_fix or getattr(self.tracker, "x", None) is None \
+                or not hasattr(self.tracker, "innovation"):
+            return ""
+        cov = fix.covariance_m2 if fix.covariance_m2 is not None else np.zeros((3, 3))
+        innov, var = self.tracker.innovation(fix.position_m, fix.frame_t_s)
+        d2 = float(innov @ np.linalg.solve(cov + var * np.eye(3), innov))
+        if d2 <= self.gate_d2:
+            self._candidate = None
+            return ""
+        c = self._candidate
+        if c is not None and fix.reacquired:
+            cc = c.covariance_m2 if c.covariance_m2 is not None else np.zeros((3, 3))
+            dv = fix.position_m - c.position_m
+            s = cov + cc + 2 * self.tracker.r * np.eye(3)
+            if float(dv @ np.linalg.solve(s, dv)) <= self.gate_d2:
+                # two consecutive re-acquired fixes agree: the tracker was wrong, not the fix
+                self.tracker.reset()
+                self._candidate = None
+                return ""
+        self._candidate = fix
+        self.pipeline.reacquire = True
+        return (f"fix {np.round(fix.position_m * 1e3, 1).tolist()} mm fails the tracker's gate "
+                f"(Mahalanobis^2 {d2:.3g} > {self.gate_d2:.3g}); re-acquiring")
 
     def step(self, t_s: float) -> StepRecord:
         """One control step at time ``t_s`` (s). Never raises for a device fault.
@@ -272,6 +315,11 @@ class Runner:
         p = np.asarray(self.tracker.predict(t_s), float)
         vel = np.asarray(self.tracker.x[1], float)
         self.position_m = p
+        t_fix = getattr(self.tracker, "t", None)    # frame time of the newest accepted fix
+        age = t_s - t_fix if t_fix is not None else 0.0
+        if age > cfg.max_fix_age_s:
+            problems.append(("lost", f"newest accepted fix {age * 1e3:.0f} ms old > "
+                             f"{cfg.max_fix_age_s * 1e3:.0f} ms"))
         inside = bool(np.all(p >= self.lo) and np.all(p <= self.hi))
         if not inside:
             problems.append(("out_of_box", f"estimate {np.round(p * 1e3, 1).tolist()} mm outside "

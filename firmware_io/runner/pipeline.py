@@ -56,6 +56,10 @@ class Fix:
     problems : tuple of (fault name, detail)
     excluded : ndarray, shape (2 n,), bool -- sensors left out of the fit
     fit_s : float, s -- compute time of the health checks and the fit
+    covariance_m2 : ndarray (3, 3) m^2 or None -- the fit's covariance (None: unknown)
+    protection_level_m : float, m -- bound on the error at the localizer's integrity risk (0
+        when the localizer states none: its ``ok`` alone decides)
+    reacquired : bool -- the fit started from the global search at the loop's request
     """
 
     position_m: np.ndarray
@@ -64,6 +68,9 @@ class Fix:
     problems: tuple
     excluded: np.ndarray
     fit_s: float
+    covariance_m2: np.ndarray | None = None
+    protection_level_m: float = 0.0
+    reacquired: bool = False
 
 
 class CurrentHistory:
@@ -123,6 +130,7 @@ class SensorPipeline:
         self.moment = np.asarray(moment_a_m2, float)
         self.excluded = np.zeros(2 * n_coils, dtype=bool)
         self.position_m: np.ndarray | None = None     # last ok estimate
+        self.reacquire = False     # set by the control loop: the next fit starts cold
         coil_field = getattr(fieldmap, "sensor_coil_field", None)
         self._coil_field = None
         if coil_field is not None:
@@ -146,6 +154,14 @@ class SensorPipeline:
         """Health checks, exclusions and the fit of one frame."""
         t0 = self.clock()
         n = self.n
+        shapes = (np.shape(frame.top_t), np.shape(frame.bottom_t), len(frame.status))
+        if shapes != ((n, 3), (n, 3), 2 * n):
+            # a malformed frame is not fitted: not ok, with the reason, never an exception
+            p = np.zeros(3) if self.position_m is None else self.position_m.copy()
+            return Fix(p, False, float(frame.t_s),
+                       (("lost", f"bad frame: arrays of shape {shapes[0]}, {shapes[1]} and "
+                                 f"{shapes[2]} statuses (expected ({n}, 3) each, {2 * n})"),),
+                       self.excluded.copy(), self.clock() - t0)
         status = list(frame.status)
         values = np.concatenate([frame.top_t, frame.bottom_t])
         beyond = np.any(np.abs(values) > TLV493D_LINEAR_RANGE_T, axis=1)
@@ -171,12 +187,27 @@ class SensorPipeline:
                              f"{s!r}; excluded"))
         top = np.where(self.excluded[:n, None], np.nan, frame.top_t)
         bottom = np.where(self.excluded[n:, None], np.nan, frame.bottom_t)
-        est = self.localizer.locate(top, bottom, currents=currents)
-        ok = bool(est.ok)
-        p = np.asarray(est.position_m, float).copy()
+        cold = self.reacquire
+        if cold:
+            self.reacquire = False
+            getattr(self.localizer, "reset", lambda: None)()
+        # a localizer's fix() never raises on a bad frame; locate() may (then: not ok)
+        locate = getattr(self.localizer, "fix", None) or self.localizer.locate
+        try:
+            est = locate(top, bottom, currents=currents)
+        except (ValueError, ArithmeticError) as exc:   # BadInputError is a ValueError
+            est = None
+            reason = f"bad frame: {exc}"
+        ok = est is not None and bool(est.ok)
+        p = (np.asarray(est.position_m, float).copy() if est is not None
+             else np.zeros(3) if self.position_m is None else self.position_m.copy())
         if ok:
             self.position_m = p
         else:
-            problems.append(("lost", "the localizer flagged its estimate (residual test)"))
+            if est is not None:
+                reason = getattr(est, "reason", "") or "the localizer flagged its estimate"
+            problems.append(("lost", reason))
+        cov = getattr(est, "covariance_m2", None)
         return Fix(p, ok, float(frame.t_s), tuple(problems), self.excluded.copy(),
-                   self.clock() - t0)
+                   self.clock() - t0, None if cov is None else np.asarray(cov, float),
+                   float(getattr(est, "protection_level_m", 0.0)), cold)

@@ -1,0 +1,151 @@
+"""Localization integrity: the residual test's thresholds, the covariance and protection level
+against the scatter of fits to magpylib's field with known noise, re-acquisition after jumps,
+and bad frames that never raise."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import magpylib as magpy  # noqa: E402  (a test dependency: no skip)
+from firmware_io.localization import Localizer, SensorModel
+from firmware_io.localization.integrity import chi2_quantile, chi2_sf
+
+MOMENT = np.array([0.0, 0.0, 0.909])
+NOISE = 1e-4
+
+
+def _model(seed=0):
+    """The thesis geometry: 3 x 3 coils at 50 mm pitch, sensors 14 mm above the tops and
+    below the bottoms; a random coil field per ampere with the array's mirror symmetry."""
+    rng = np.random.default_rng(seed)
+    xy = np.array([[x, y] for y in (0.05, 0.0, -0.05) for x in (-0.05, 0.0, 0.05)])
+    sp = np.stack([np.c_[xy, np.full(9, 0.014)], np.c_[xy, np.full(9, -0.114)]])
+    up = rng.normal(scale=5e-3, size=(9, 3, 9))
+    return SensorModel(sp, np.stack([up, up * np.array([-1.0, -1.0, 1.0])[None, :, None]]),
+                       MOMENT, "a" * 64, 0.0, None)
+
+
+def _frame(model, p, currents, rng):
+    """magpylib's dipole (independent of the code under test) + coils + Gaussian noise."""
+    b = magpy.misc.Dipole(moment=MOMENT, position=p).getB(
+        model.sensor_positions_m.reshape(-1, 3)).reshape(2, 9, 3)
+    b = b + np.einsum("asdc,c->asd", model.coil_field_t_per_a, currents)
+    return b + rng.normal(scale=NOISE, size=b.shape)
+
+
+def test_chi2_thresholds_match_scipy():
+    from scipy.stats import chi2
+
+    for dof in (1, 2, 3, 4, 7, 24, 51, 54):
+        assert chi2_sf(20.0, dof) == pytest.approx(chi2.sf(20.0, dof), rel=1e-10)
+        for p in (1e-2, 1e-3, 1e-4, 1e-6):
+            assert chi2_quantile(p, dof) == pytest.approx(chi2.isf(p, dof), rel=1e-9)
+
+
+def test_covariance_matches_the_scatter_and_the_protection_level_bounds_the_error():
+    """Known Gaussian noise, an exact model: the squared Mahalanobis error e^T C^-1 e
+    averages 3 (chi-square, 3 dof: a covariance off by 2x gives 1.5 or 6), no ok fix errs
+    beyond its protection level (risk 1e-4, no bias term), the residual test passes ~all
+    (false alarm 1e-3) and the normalized chi2 averages 1."""
+    rng = np.random.default_rng(1)
+    model = _model()
+    loc = Localizer(model, "model", cores=False, noise_t=NOISE, relative_error=0.0,
+                    model_bias_m=0.0, integrity_risk=1e-4, false_alarm=1e-3)
+    m2, over, oks, chi = [], 0, 0, []
+    for _ in range(300):
+        p = np.r_[rng.uniform(-0.025, 0.025, 2), rng.uniform(0.02, 0.07)]
+        i = rng.uniform(-1, 1, 9)
+        f = _frame(model, p, i, rng)
+        loc.reset()
+        est = loc.fix(f[0], f[1], i)
+        e = est.position_m - p
+        m2.append(float(e @ np.linalg.solve(est.covariance_m2, e)))
+        chi.append(est.chi2 / est.dof)
+        oks += est.ok
+        over += est.ok and np.linalg.norm(e) > est.protection_level_m
+    assert 2.5 < np.mean(m2) < 3.5
+    assert 0.9 < np.mean(chi) < 1.1
+    assert over == 0
+    assert oks >= 297
+
+
+def test_noise_larger_than_modelled_fails_the_residual_test():
+    """Readings 3x noisier than the localizer's noise model: chi2 / dof ~ 9, far beyond the
+    threshold at 51 dof (~1.7): not ok, the reason names the test."""
+    rng = np.random.default_rng(2)
+    model = _model()
+    loc = Localizer(model, "model", cores=False, noise_t=NOISE / 3, relative_error=0.0)
+    p = np.array([0.0, 0.01, 0.04])
+    f = _frame(model, p, np.zeros(9), rng)
+    est = loc.fix(f[0], f[1], np.zeros(9))
+    assert not est.ok and "chi2" in est.reason
+
+
+def test_jumps_between_frames_are_reacquired():
+    """Warm starts from the previous frame 10-60 mm away (a jump, a lost frame): the global
+    search finds the right basin (every estimate within 5 mm or its protection level, ok or
+    not: the not-ok ones high above the array, where the protection level exceeds the 5 mm
+    alert limit) and every fix flagged ok is within 5 mm."""
+    rng = np.random.default_rng(3)
+    model = _model()
+    loc = Localizer(model, "model", cores=False, noise_t=NOISE, relative_error=0.0,
+                    alert_limit_m=5e-3)
+    p = np.array([0.0, 0.0, 0.04])
+    bad, found, reasons = 0, 0, set()
+    for _ in range(60):
+        while True:
+            d = rng.normal(size=3)
+            q = p + d / np.linalg.norm(d) * rng.uniform(0.010, 0.060)
+            if np.all(np.abs(q[:2]) <= 0.025) and 0.02 <= q[2] <= 0.07:
+                break
+        p = q
+        i = rng.uniform(-2, 2, 9)
+        f = _frame(model, p, i, rng)
+        est = loc.fix(f[0], f[1], i)
+        err = np.linalg.norm(est.position_m - p)
+        found += err < max(5e-3, est.protection_level_m)
+        bad += est.ok and err > 5e-3
+        if not est.ok:
+            reasons.add(est.reason.split(" ")[0])
+    assert bad == 0
+    assert found == 60
+    assert reasons <= {"protection"}
+
+
+def test_alert_limit_and_bad_frames_give_not_ok_with_a_reason_never_an_exception():
+    rng = np.random.default_rng(4)
+    model = _model()
+    p = np.array([0.01, 0.0, 0.05])
+    f = _frame(model, p, np.zeros(9), rng)
+    est = Localizer(model, "model", cores=False, alert_limit_m=1e-5).fix(f[0], f[1], np.zeros(9))
+    assert not est.ok and "alert limit" in est.reason
+    assert est.protection_level_m > 1e-5 and math.isfinite(est.protection_level_m)
+    loc = Localizer(model, "model", cores=False)
+    nan = np.full((9, 3), np.nan)
+    frames = {"shape": (f[0][:8], f[1], np.zeros(9)),
+              "Inf": (f[0], np.where(np.arange(9)[:, None] == 2, np.inf, f[1]), np.zeros(9)),
+              "currents": (f[0], f[1], np.r_[np.zeros(8), np.nan]),
+              "currents ": (f[0], f[1], None),
+              "usable": (nan, nan, np.zeros(9)),
+              "usable ": (np.where(np.arange(9)[:, None] < 2, f[0], np.nan), nan, np.zeros(9))}
+    for word, (top, bot, i) in frames.items():
+        est = loc.fix(top, bot, i)
+        assert not est.ok and word.strip() in est.reason, (word, est.reason)
+        assert np.all(np.isfinite(est.position_m))
+    # a good frame after the bad ones: found again
+    est = loc.fix(f[0], f[1], np.zeros(9))
+    assert est.ok and np.linalg.norm(est.position_m - p) < 1e-3
+
+
+@pytest.mark.slow
+def test_integrity_study_smoke(tmp_path):
+    from conftest import load_study
+
+    res = load_study("localization_integrity").run(tmp_path, n=4)
+    assert [r["condition"] for r in res["rows"]] == list(
+        ("cold", "jump", "sensor dead", "two saturated", "6 A", "uncalibrated"))
+    assert all(r["n"] == 4 and 0 <= r["availability"] <= 1 for r in res["rows"])
+    assert (tmp_path / "integrity.json").is_file() and (tmp_path / "integrity_table.txt").is_file()

@@ -1,0 +1,152 @@
+"""The runner's innovation gate on the simulated device: a fix that jumps away from the
+tracker's prediction is gated out (state 'gated', every coil command zero in run.csv), the
+sensor side re-acquires, a confirmed jump re-starts the tracker, a dead sensor still fails
+safe, and no running step renders at a gated-out position."""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from designkit.array import CoilArray
+from designkit.design import default_design
+from designkit.sim import FaultSchedule, SimulatedDevice, simulate, slide_trajectory
+from designkit.sim.report import write_run_csv
+from firmware_io.runner import ConstantVelocityTracker, Runner, RunnerConfig
+
+from _runner_fakes import ConstantMap, PlaneScene, clipped_lstsq
+
+BOX = (np.array([-0.075, -0.075, 0.010]), np.array([0.075, 0.075, 0.080]))
+JUMP = np.array([0.030, 0.0, 0.0])
+
+
+@dataclass
+class Estimate:
+    position_m: np.ndarray
+    ok: bool
+    covariance_m2: np.ndarray
+    protection_level_m: float
+    reason: str = ""
+
+
+class JumpingLocalizer:
+    """The true position with a 0.3 mm covariance, except on the frames listed in ``spikes``
+    (one frame 30 mm off) and from frame ``moved`` on (30 mm off for good: the finger 'really'
+    moved, as after a lost stretch). Counts its resets (re-acquisition requests)."""
+
+    def __init__(self, truth, spikes, moved):
+        self.truth, self.spikes, self.moved = truth, set(spikes), moved
+        self.calls, self.resets = 0, 0
+
+    def reset(self):
+        self.resets += 1
+
+    def fix(self, top, bottom, currents=None):
+        k = self.calls
+        self.calls += 1
+        p = np.asarray(self.truth(), float)
+        if k in self.spikes or k >= self.moved:
+            p = p + JUMP
+        ok = bool(np.isfinite(top).any() or np.isfinite(bottom).any())
+        return Estimate(p, ok, (0.3e-3) ** 2 * np.eye(3), 1e-3)
+
+
+@pytest.fixture(scope="module")
+def device():
+    design = default_design()
+    array = CoilArray.from_design(design)
+    return design, array, array.actuation_matrix(np.array([0.0, 0.0, 0.04]))
+
+
+def test_gated_fixes_render_no_force_and_are_reacquired(device, tmp_path):
+    design, array, a = device
+    dev = SimulatedDevice(design, array, seed=4)
+    duration = 0.7
+    traj = slide_trajectory(lambda x, y: np.full_like(x, 0.05), duration_s=duration,
+                            samples=401)
+    holder = {}
+
+    def factory(source, clock, hook):
+        cfg = RunnerConfig(resistance_ohm=(dev.resistance_ohm,) * 9,
+                           inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
+                           current_limit_a=4.8, total_current_a=20.0, resume_after_s=0.02)
+        loc = JumpingLocalizer(lambda: source.frame_truth_m, spikes=(30, 31, 60), moved=95)
+        r = Runner(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0), loc,
+                   ConstantVelocityTracker(), hook(clipped_lstsq), dev.coils, source, cfg,
+                   clock=clock, log=lambda line: None)
+        r.start()
+        holder["runner"], holder["loc"] = r, loc
+        return r
+
+    res = simulate(dev, factory, traj, duration_s=duration, period_s=1e-3,
+                   faults=FaultSchedule.parse("sensor_dead@0.4", duration), progress=False)
+    write_run_csv(tmp_path / "run.csv", res.columns)
+    with (tmp_path / "run.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    state = np.array([r["state"] for r in rows])
+    cmd = np.array([[float(r[k]) for k in r if k.startswith("cmd")] for r in rows])
+    loc, runner = holder["loc"], holder["runner"]
+    assert loc.calls > 105, "too few frames for the scripted jumps"
+    gated = state == "gated"
+    assert gated.sum() >= 2
+    assert np.all(cmd[gated] == 0.0)
+    assert np.all(cmd[state == "sensor_dead"] == 0.0) and (state == "sensor_dead").any()
+    assert np.all(cmd[state == "lost"] == 0.0)
+    # each gated fix asked the sensor side to re-acquire (the next fit starts cold)
+    assert loc.resets >= 2
+    assert sum(name == "gated" for _, name, _ in runner.fault_log) >= 2
+    # no running step renders at a gated-out spike (30 mm off): the rendered position follows
+    # the truth within what the tracker's extrapolation over a fix's age allows this fast slide
+    running = state == "running"
+    est = np.array([[float(r[k]) for k in ("xe_m", "ye_m", "ze_m")] for r in rows])
+    true = np.array([[float(r[k]) for k in ("x_m", "y_m", "z_m")] for r in rows])
+    t = np.array([float(r["t_s"]) for r in rows])
+    moved_t = t[np.flatnonzero(gated)[-1]]
+    before = running & (t < moved_t)
+    assert np.abs(est[before, 0] - true[before, 0]).max() < 0.015
+    # the lasting jump is confirmed by the next (cold) fix: the loop runs again, there
+    after = running & (t > moved_t)
+    assert after.sum() > 50
+    assert np.abs(est[after, 0] - (true[after, 0] + JUMP[0])).max() < 0.015
+
+
+def test_bad_frames_reach_the_loop_as_not_ok_fixes_with_a_reason():
+    """The sensor side never raises on a bad frame: wrong shape, all sensors saturated -> a
+    not-ok Fix with a 'lost' problem naming the cause; an Inf reading is a saturated sensor,
+    excluded (the others still fix the position); then a good frame is fitted."""
+    import magpylib as magpy
+
+    from firmware_io.localization import Localizer, SensorModel
+    from firmware_io.runner import SensorFrame
+    from firmware_io.runner.pipeline import SensorPipeline
+
+    rng = np.random.default_rng(0)
+    xy = np.array([[x, y] for y in (0.05, 0.0, -0.05) for x in (-0.05, 0.0, 0.05)])
+    sp = np.stack([np.c_[xy, np.full(9, 0.014)], np.c_[xy, np.full(9, -0.114)]])
+    up = rng.normal(scale=5e-3, size=(9, 3, 9))
+    moment = np.array([0.0, 0.0, 0.909])
+    model = SensorModel(sp, np.stack([up, up * np.array([-1.0, -1.0, 1.0])[None, :, None]]),
+                        moment, "a" * 64, 0.0, None)
+    pipe = SensorPipeline(Localizer(model, "model", cores=False), object(), 9,
+                          lambda t: np.zeros(9), moment)
+    p = np.array([0.0, 0.01, 0.04])
+    good = magpy.misc.Dipole(moment=moment, position=p).getB(sp.reshape(-1, 3)).reshape(2, 9, 3)
+    ok9 = ("ok",) * 18
+    fix = pipe.process(SensorFrame(np.where(np.arange(9)[:, None] == 3, np.inf, good[0]),
+                                   good[1], ok9, 0.0))
+    assert fix.ok and fix.excluded[3] and fix.problems[0][0] == "sensor_saturated"
+    assert np.linalg.norm(fix.position_m - p) < 1e-4
+    bad = {"shape": SensorFrame(good[0][:8], good[1], ok9, 0.0),
+           "usable": SensorFrame(np.full((9, 3), np.nan), np.full((9, 3), np.nan),
+                                 ("saturated",) * 18, 0.0)}
+    for word, frame in bad.items():
+        fix = pipe.process(frame)
+        assert not fix.ok and np.all(np.isfinite(fix.position_m))
+        assert any(name == "lost" and word in detail for name, detail in fix.problems), \
+            (word, fix.problems)
+    fix = pipe.process(SensorFrame(good[0], good[1], ok9, 0.01))
+    assert fix.ok and np.linalg.norm(fix.position_m - p) < 1e-4
+    assert fix.covariance_m2.shape == (3, 3) and 0 < fix.protection_level_m < 5e-3
