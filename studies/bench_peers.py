@@ -337,6 +337,6 @@ if __name__ == "__main__":
         kw["sets"] = tuple(opt["sets"].split(","))
     if "shells" in opt:
         kw["shells"] = [int(k) for k in opt["shells"].split(",")]
-    res = run(Path(args[0]) if args else Path(__file__).resolve().parents[1] / "out"
-              / "bench_peers", quick="--quick" in sys.argv, **kw)
+    out = Path(args[0]) if args else Path(__file__).resolve().parents[1] / "out" / "bench_peers"
+    res = run(out, quick="--quick" in sys.argv, **kw)
     print(res["table"])

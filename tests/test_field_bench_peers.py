@@ -1,12 +1,7 @@
 """Smoke test of studies/bench_peers.py (quick mode): it runs, writes its table and figure, and
 its accuracy columns make sense (no timing asserts)."""
 
-import pytest
-
 from studies import bench_peers
-
-pytest.importorskip("cfsem")
-pytest.importorskip("magpylib")
 
 
 def test_bench_peers_quick(tmp_path):
