@@ -25,7 +25,7 @@ from ..electrical import drive_data
 from ..errors import BadInputError
 from .cells import fit_layers
 from .physics import MapPhysics, map_physics
-from .plan import _nodes, box_axes, cell_layers, default_box, layer_nodes, sources_top, table_specs
+from .plan import N_CHECK, _nodes, box_axes, cell_layers, default_box, layer_nodes, sources_top, table_specs
 from .symmetry import Orbits, array_symmetries
 from .tables import compute_magnet_table, coupled_modes, mode_table_entry
 
@@ -43,7 +43,7 @@ def build(design, *, spacing: float = 0.01, log_step: float = 0.25,
           fit_nodes: int = 4, sensor_mode_tolerance: float = 1e-3,
           rz_rho_scale: float = 0.05, sensor_mode_rz_step: float = 2.5e-4,
           sensor_mode_rz_log_step: float = 0.04, magnet_rz_step: float = 5e-4,
-          magnet_rz_log_step: float = 0.02, box=None, n_check: int = 400,
+          magnet_rz_log_step: float = 0.02, box=None, n_check: int = N_CHECK,
           progress: bool = True, array: CoilArray | None = None,
           region: dict | None = None) -> dict:
     """Compute the map v2 of ``design``: ``{"arrays": {...}, "meta": {...}}`` (not yet written).
