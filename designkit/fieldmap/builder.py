@@ -76,8 +76,9 @@ def build(design, *, spacing: float = 0.01, log_step: float = 0.25,
     box : (lower, upper) or None
         Corners, m; default :func:`~designkit.fieldmap.plan.default_box`.
     n_check : int
-        Random points where the finished map is compared with direct evaluation of the coupled
-        model (meta 'errors'; each costs a full coupled evaluation).
+        Random points where the finished map is compared with the coupled model (meta
+        'errors'): n_check / |G| uniform points evaluated directly and their images under the
+        box's symmetries G filled exactly (:func:`.symmetry.random_orbits`).
     region : dict or None
         What ``box`` was made for (a scene map: :mod:`.region`), stored as meta 'region'.
     """
