@@ -427,7 +427,9 @@ def drive_data(design, coils) -> dict:
     map's array, plant the design's coil."""
     w = design.wire
     r_all = [float(c.resistance(w)) for c in coils]
-    ind = [float(c.inductance(w)) for c in coils]
+    once = {id(c): c for c in coils}  # the same coil object: one inductance solve
+    ind_of = {k: float(c.inductance(w)) for k, c in once.items()}
+    ind = [ind_of[id(c)] for c in coils]
     r = max(r_all)  # the bounds must hold for every channel
     mass = copper_mass(design.coil.inner_radius_m, design.coil.outer_radius_m,
                        design.coil.turns, w.diameter_m)

@@ -182,7 +182,7 @@ def scene_vs_full(out_dir=DEFAULT_OUT, n_points: int = 2000) -> dict:
     f_ref = arr.bias_force(mp, moment)
     sens = arr.sensor_positions_m().reshape(-1, 3)
     s_ref = np.array([arr.magnet_core_field(sens, q, moment).reshape(2, -1, 3) for q in mp[:10]])
-    scene = {"box": box, "region": {"objects": ["half_ball"]}, **fieldmap.SCENE_BUILD}
+    scene = fieldmap.scene_build_args(d, [Hemisphere()], 0.0, region={"objects": ["half_ball"]})
     for name, kw in (("full", {}), ("scene", scene)):
         data, wall, cpu = _timed_build(d, **kw)
         path = fieldmap.write(out_dir / f"{name}.npz", data)

@@ -18,7 +18,7 @@ from designkit.cli import main
 from designkit.cores import coupled as cp
 from designkit.design import design_to_toml
 from designkit.errors import BadInputError
-from designkit.fieldmap.symmetry import Orbits, array_symmetries
+from designkit.fieldmap.symmetry import Orbits, array_symmetries, random_orbits
 from designkit.pose import Pose
 from designkit.render import Hemisphere
 from designkit.sim import SimulatedDevice
@@ -52,6 +52,28 @@ def test_orbit_fill_equals_direct_evaluation_at_the_images():
     # a point set that is not closed under the group keeps only the elements that map it
     half = Orbits.of(pts[:8], group, np.zeros(2))
     assert len(half.reps) >= 4 and len(half.group) >= 1
+
+
+def test_random_check_points_are_images_in_the_box_and_their_fill_is_direct():
+    arr = CoilArray.from_design(AIR)
+    group = array_symmetries(arr, [0.0, 0.0])
+    lo, hi = np.array([-0.07, -0.07, 0.02]), np.array([0.07, 0.07, 0.06])
+    pts, orb = random_orbits(lo, hi, 20, group, np.zeros(2), np.random.default_rng(5))
+    assert pts.shape == (20, 3) and np.all((pts >= lo) & (pts <= hi))
+    assert len(orb.reps) == 3 and np.array_equal(orb.reps, [0, 1, 2])  # ceil(20 / 8)
+    assert len(np.unique(np.round(pts, 12), axis=0)) == 20
+    a = arr.actuation_matrix(pts)
+    np.testing.assert_allclose(orb.expand_actuation(a[orb.reps]), a, rtol=0,
+                               atol=1e-12 * np.abs(a).max())
+    # a box 140 x 100 mm: the quarter turns do not map it onto itself, the mirrors do
+    hi2 = np.array([0.07, 0.05, 0.06])
+    pts2, orb2 = random_orbits(-hi2 * [1, 1, -0.5], hi2, 8, group, np.zeros(2),
+                               np.random.default_rng(5))
+    assert len(orb2.group) == 4 and len(orb2.reps) == 2
+    assert np.all(np.abs(pts2[:, :2]) <= hi2[:2])
+    a2 = arr.actuation_matrix(pts2)
+    np.testing.assert_allclose(orb2.expand_actuation(a2[orb2.reps]), a2, rtol=0,
+                               atol=1e-12 * np.abs(a2).max())
 
 
 def test_bias_force_symmetry_of_the_coupled_array():

@@ -25,8 +25,8 @@ from ..electrical import drive_data
 from ..errors import BadInputError
 from .cells import fit_layers
 from .physics import MapPhysics, map_physics
-from .plan import _nodes, box_axes, cell_layers, default_box, layer_nodes, sources_top, table_specs
-from .symmetry import Orbits, array_symmetries
+from .plan import N_CHECK, _nodes, box_axes, cell_layers, default_box, layer_nodes, sources_top, table_specs
+from .symmetry import Orbits, array_symmetries, random_orbits
 from .tables import compute_magnet_table, coupled_modes, mode_table_entry
 
 FORMAT, FORMAT_VERSION, UNITS = mf.FORMAT, mf.FORMAT_VERSION, mf.UNITS
@@ -43,7 +43,7 @@ def build(design, *, spacing: float = 0.01, log_step: float = 0.25,
           fit_nodes: int = 4, sensor_mode_tolerance: float = 1e-3,
           rz_rho_scale: float = 0.05, sensor_mode_rz_step: float = 2.5e-4,
           sensor_mode_rz_log_step: float = 0.04, magnet_rz_step: float = 5e-4,
-          magnet_rz_log_step: float = 0.02, box=None, n_check: int = 400,
+          magnet_rz_log_step: float = 0.02, box=None, n_check: int = N_CHECK,
           progress: bool = True, array: CoilArray | None = None,
           region: dict | None = None) -> dict:
     """Compute the map v2 of ``design``: ``{"arrays": {...}, "meta": {...}}`` (not yet written).
@@ -76,8 +76,9 @@ def build(design, *, spacing: float = 0.01, log_step: float = 0.25,
     box : (lower, upper) or None
         Corners, m; default :func:`~designkit.fieldmap.plan.default_box`.
     n_check : int
-        Random points where the finished map is compared with direct evaluation of the coupled
-        model (meta 'errors'; each costs a full coupled evaluation).
+        Random points where the finished map is compared with the coupled model (meta
+        'errors'): n_check / |G| uniform points evaluated directly and their images under the
+        box's symmetries G filled exactly (:func:`.symmetry.random_orbits`).
     region : dict or None
         What ``box`` was made for (a scene map: :mod:`.region`), stored as meta 'region'.
     """
@@ -196,6 +197,7 @@ class _Plan:
     rotations: list        # per coil its rotation matrix, nested lists
     fit_orbits: Orbits     # fit_pts by the array's symmetries: only fit_orbits.reps sampled
     m_orbits: Orbits       # m_nodes likewise
+    check_orbits: Orbits   # check likewise (images of random points: :func:`random_orbits`)
 
 
 def _plan(arr: CoilArray, lower, upper, s: BuildSettings, moment=None) -> _Plan:
@@ -212,17 +214,17 @@ def _plan(arr: CoilArray, lower, upper, s: BuildSettings, moment=None) -> _Plan:
     z_ref = max(arr.coils[k].pose.position[2] + sp["z_ref_m"]
                 for (_, idx), sp in zip(types, m_specs) for k in idx)
     m_axes = box_axes(lower, upper, s.spacing, z_ref, s.log_step)
-    rng = np.random.default_rng(CHECK_SEED)
-    check = rng.uniform(lower, upper, (s.n_check, 3))
     centre = 0.5 * (lower[:2] + upper[:2])
     group = array_symmetries(arr, centre)
+    check, check_orbits = random_orbits(lower, upper, s.n_check, group, centre,
+                                        np.random.default_rng(CHECK_SEED))
     m_nodes = _nodes(m_axes)
     upright = moment is not None and not np.any(np.asarray(moment, float)[:2])
     return _Plan(lower, upper, types, m_specs, z_top, layers, lattices, fit_pts, m_axes,
-                 m_nodes, check, min(s.n_check, 50), arr.positions(),
+                 m_nodes, check, min(s.n_check, max(10, s.n_check // 8)), arr.positions(),
                  [list(map(list, c.pose.rotation)) for c in arr.coils],
                  Orbits.of(fit_pts, group, centre),
-                 Orbits.of(m_nodes, group if upright else group[:1], centre))
+                 Orbits.of(m_nodes, group if upright else group[:1], centre), check_orbits)
 
 
 # ============================================================================ samples
@@ -252,7 +254,7 @@ def _steps(plan: _Plan, n_check: int) -> list:
             + [("cell nodes", s) for s in range(0, len(plan.fit_orbits.reps), FIT_CHUNK)]
             + [("magnet tables", k) for k in range(len(plan.types))] + [("mode tables", 0)]
             + [("magnet", s) for s in range(0, len(plan.m_orbits.reps), CHUNK)]
-            + [("check", s) for s in range(0, n_check, CHUNK)]
+            + [("check", s) for s in range(0, len(plan.check_orbits.reps), CHUNK)]
             + [("magnet check", 0), ("saturation", 0)])
 
 
@@ -260,8 +262,9 @@ def _sample(phys: MapPhysics, arr: CoilArray, plan: _Plan, s: BuildSettings,
             progress: bool) -> _Samples:
     """Every evaluation of the coupled model the map needs, under one progress bar."""
     nc = arr.n_coils
-    # a_fit and f0 hold the orbits' representatives until the loop is done
-    smp = _Samples(np.empty((len(plan.fit_orbits.reps), 8, nc)), np.empty((s.n_check, 8, nc)),
+    # a_fit, a_check and f0 hold the orbits' representatives until the loop is done
+    smp = _Samples(np.empty((len(plan.fit_orbits.reps), 8, nc)),
+                   np.empty((len(plan.check_orbits.reps), 8, nc)),
                    np.empty((len(plan.m_orbits.reps), 3)))
     bar = tqdm(_steps(plan, s.n_check), desc="map", unit="step", disable=not progress,
                leave=False)
@@ -273,6 +276,7 @@ def _sample(phys: MapPhysics, arr: CoilArray, plan: _Plan, s: BuildSettings,
         smp.cpu_seconds[kind] = smp.cpu_seconds.get(kind, 0.0) + time.process_time() - c0
     bar.close()
     smp.a_fit = plan.fit_orbits.expand_actuation(smp.a_fit)
+    smp.a_check = plan.check_orbits.expand_actuation(smp.a_check)
     smp.f0 = plan.m_orbits.expand_force(smp.f0)
     return smp
 
@@ -301,7 +305,8 @@ def _step(kind: str, k: int, smp: _Samples, phys: MapPhysics, arr: CoilArray, pl
         reps = plan.m_orbits.reps[k:k + CHUNK]
         smp.f0[k:k + CHUNK] = phys.bias_force(arr, plan.m_nodes[reps])
     elif kind == "check":
-        smp.a_check[k:k + CHUNK] = phys.actuation(arr, plan.check[k:k + CHUNK])
+        reps = plan.check_orbits.reps[k:k + CHUNK]
+        smp.a_check[k:k + CHUNK] = phys.actuation(arr, plan.check[reps])
     elif kind == "magnet check":
         smp.f0_check = phys.bias_force(arr, plan.check[:plan.n_mcheck])
         smp.sind_check = phys.sensor_induced(arr, plan.check[:plan.n_mcheck])

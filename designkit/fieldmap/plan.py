@@ -17,6 +17,9 @@ from ..array import CoilArray
 from ..errors import BadInputError
 from ..skipping import source_box
 
+N_CHECK = 400
+"""Random check points of a map over the design's whole box (its build's self-check)."""
+
 
 def default_box(design) -> tuple[np.ndarray, np.ndarray]:
     """Workspace box (lower, upper corners, m): the footprint, z_min..z_max above the tops."""

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import BadInputError
-from .plan import _nodes, default_box, uniform_axis
+from .plan import N_CHECK, _nodes, default_box, uniform_axis
 
 SPACING_M = 0.002
 """Grid step (m) on which the objects' signed distances are sampled."""
@@ -24,6 +24,8 @@ SCENE_BUILD = {"sensor_mode_rz_step": 1e-3, "sensor_mode_rz_log_step": 0.08}
 """Build settings of a scene map beyond its box: the sensor field's mode tables on 1 mm and
 8 % steps, an eighth of the full map's nodes (the sensor field's error in the hemisphere's
 region, against the full map's: ``studies/bench_map.py --scene``, docs/fieldmap.md)."""
+MIN_CHECK = 100
+"""Fewest random check points of a scene map (its build's self-check, meta 'errors')."""
 
 
 def scene_region(objects, band_m: float, lower, upper, margin_m: float = MARGIN_M,
@@ -58,7 +60,18 @@ def scene_build_args(design, objects, band_m: float, margin_m: float = MARGIN_M,
                      region: dict | None = None) -> dict:
     """The keyword arguments of :func:`designkit.fieldmap.build` for the scene map of
     ``objects`` on ``design``: its box (:func:`scene_region` in the design's box), meta
-    'region' (``region`` plus the margin) and :data:`SCENE_BUILD`."""
-    box = scene_region(objects, band_m, *default_box(design), margin_m=margin_m)
+    'region' (``region`` plus the margin), its check points (:func:`scene_check_points`) and
+    :data:`SCENE_BUILD`."""
+    full = default_box(design)
+    box = scene_region(objects, band_m, *full, margin_m=margin_m)
     return {"box": box, "region": {**(region or {}), "margin_m": float(margin_m)},
-            **SCENE_BUILD}
+            "n_check": scene_check_points(box, full), **SCENE_BUILD}
+
+
+def scene_check_points(box, full_box) -> int:
+    """The check points of a map over ``box`` (lower, upper) m: the full map's
+    :data:`~designkit.fieldmap.plan.N_CHECK` over ``full_box`` at the same density, at least
+    :data:`MIN_CHECK`."""
+    vol = float(np.prod(np.subtract(box[1], box[0])))
+    full = float(np.prod(np.subtract(full_box[1], full_box[0])))
+    return int(min(N_CHECK, max(MIN_CHECK, np.ceil(N_CHECK * vol / full))))

@@ -69,6 +69,25 @@ def array_symmetries(arr: CoilArray, centre) -> list[Symmetry]:
     return out
 
 
+def random_orbits(lower, upper, n: int, group, centre, rng) -> tuple[np.ndarray, "Orbits"]:
+    """``n`` random points (n, 3) m of the box [lower, upper] and their :class:`Orbits`:
+    uniform base points (the first ones, the representatives) followed by their images under
+    each element of ``group`` that maps the box onto itself about ``centre`` (2,) m, so that
+    only about n / |group| of them need evaluating (uniform images of a uniform sample)."""
+    lower, upper, centre = (np.asarray(a, float) for a in (lower, upper, centre))
+    half = 0.5 * (upper[:2] - lower[:2])
+    keep = [s for s in group if np.allclose(centre, 0.5 * (lower[:2] + upper[:2]), rtol=0,
+                                            atol=TOL_M)
+            and np.allclose(np.abs(s.g[:2, :2]) @ half, half, rtol=0, atol=TOL_M)] or \
+        [group[0]]
+    nb = -(-n // len(keep))
+    base = rng.uniform(lower, upper, (nb, 3))
+    pts = np.concatenate([_apply(s.g, centre, base) for s in keep])[:n]
+    orbits = Orbits(np.arange(min(nb, n)), np.tile(np.arange(nb), len(keep))[:n],
+                    np.repeat(np.arange(len(keep)), nb)[:n], tuple(keep))
+    return np.clip(pts, lower, upper), orbits
+
+
 @dataclass(frozen=True)
 class Orbits:
     """A point set split into orbits of a group: ``reps`` (r,) the indices evaluated; every
