@@ -274,7 +274,8 @@ def _table(res) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("out", nargs="?", default="out/localization_integrity")
+    ap.add_argument("out", nargs="?",
+                    default=Path(__file__).resolve().parents[1] / "out" / "localization_integrity")
     ap.add_argument("--n", type=int, default=10000, help="fixes per condition")
     ap.add_argument("--seed", type=int, default=0, help="device (sensor errors) and noise seed")
     ap.add_argument("--conditions", default=",".join(CONDITIONS),

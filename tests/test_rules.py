@@ -14,6 +14,8 @@ import math
 import numpy as np
 import pytest
 
+import cad.params as cad_params
+import cad.rules as cad_rules
 from designkit import rules
 from designkit.cli import main
 from designkit.design import default_design, design_to_toml, load_design
@@ -21,9 +23,6 @@ from designkit.errors import BadInputError, DesignRuleError
 from designkit.optimize import DeviceProblem, device_problem_for, rule_table
 from designkit.optimize.candidate import device_candidate
 from designkit.optimize.device_solve import round_design
-
-cad_params = pytest.importorskip("cad.params")
-cad_rules = pytest.importorskip("cad.rules")
 
 
 def _cad_refuses(design) -> bool:
