@@ -72,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
                  limits="device constraints")
         else:
             write_csv(result, stage / "sweep.csv")
-            plot(result, stage / "sweep.png")
+            plot(result, stage / "sweep.png", limits="R, 5 L/R and the rule table")
     csv_path, png_path = out / "sweep.csv", out / "sweep.png"
     n = len(result.rows)
     feas = sum(1 for r in result.rows if r["feasible"])
