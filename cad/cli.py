@@ -11,8 +11,8 @@ import dataclasses
 from pathlib import Path
 
 from designkit import _validate as v
-from designkit.commands._common import add_progress_argument, check_output, show_progress
-from designkit.design import NAMED_DESIGNS, load_design
+from designkit.commands._common import add_design_argument, add_progress_argument, check_output, show_progress
+from designkit.design import load_design
 
 from . import export
 from .params import PrinterParams, from_design
@@ -30,9 +30,7 @@ def _triple(text: str) -> tuple[float, float, float]:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``designkit cad``."""
-    parser.add_argument("--design", default=None,
-                        help="design TOML file or a shipped name "
-                             f"({', '.join(sorted(NAMED_DESIGNS))}); default: the thesis design")
+    add_design_argument(parser)
     parser.add_argument("--out", type=Path, default=Path("cad_out"),
                         help="output folder (default: ./cad_out)")
     parser.add_argument("--format", default="stl,step,3mf",

@@ -5,9 +5,10 @@ processes or on a Dask distributed cluster.
 A sweep is the Cartesian product of parameter ranges (:func:`parse_param` reads
 ``NAME=START:STOP:N``) applied to the design's coil problem
 (:class:`designkit.optimize.CoilDesignProblem`); parameters not swept keep the design's values.
-Each design is rounded to whole turns (floor of the fully packed section, as the optimizer's
-reported designs) and evaluated with the optimizer's model (closed-form on-axis force, Bessel
-inductance). Throughput: docs/optimize.md.
+Each design is rounded to whole turns (floor of the packed section, at most the rule book's
+winding fit) and evaluated with the optimizer's model (closed-form on-axis force, Bessel
+inductance); feasible means the coil limits and the whole rule table (as ``designkit check``)
+are met. Throughput: docs/optimize.md.
 """
 
 from __future__ import annotations
@@ -173,8 +174,9 @@ def evaluate_chunk(problem: CoilDesignProblem, base: dict, names: Sequence[str],
     """Evaluate designs (rows of ``values`` for ``names`` over ``base``); worker entry point.
 
     Invalid geometry (outer radius not one insulated wire above the inner one, no whole turn):
-    ``valid = False`` and empty numbers (None). Feasible = valid and R <= Rmax and
-    5 tau <= T.
+    ``valid = False`` and empty numbers (None). Feasible = valid, R <= Rmax, 5 tau <= T and
+    every row of the rule table (:func:`book_violations`: the rule book and, with a core, the
+    device constraints) met; ``reason`` names what is not.
     """
     problems: dict = {}  # rows that differ only in the geometry share one problem
     out = []
@@ -182,11 +184,15 @@ def evaluate_chunk(problem: CoilDesignProblem, base: dict, names: Sequence[str],
         row = dict(base)
         row.update(zip(names, map(float, row_vals)))
         key = (row["height_m"], row["current_a"], row["wire_diameter_m"])  # core_model: shared
-        p = problems.get(key)
-        if p is None:
-            p = problems[key] = _row_problem(problem, *key)
+        if key not in problems:
+            p = _row_problem(problem, *key)
+            problems[key] = (p, _device_problem(p.design))
+        p, dev = problems[key]
         x = (row["inner_radius_m"], row["outer_radius_m"], row["length_m"])
-        n = math.floor(p.turns(x) + 1e-9) if x[1] > x[0] else 0
+        n = 0
+        if x[1] > x[0]:  # whole turns: the packed section, at most what the rule book fits
+            n = min(math.floor(p.turns(x) + 1e-9), el.turns_from_geometry(
+                *x, p.insulated_diameter_m, p.design.wire.packing))
         res = dict.fromkeys(COLUMNS)
         res.update(row)
         if x[1] < x[0] + p.insulated_diameter_m or n < 1:
@@ -197,11 +203,71 @@ def evaluate_chunk(problem: CoilDesignProblem, base: dict, names: Sequence[str],
         ev = p.evaluate(x, turns=n)
         res.update(turns=n, force_n=ev.force_n, resistance_ohm=ev.resistance_ohm,
                    inductance_h=ev.inductance_h, time_constant_s=ev.time_constant_s,
-                   power_w=ev.power_w, valid=True,
-                   feasible=bool(ev.constraints[0] <= 0 and ev.constraints[1] <= 0))
-        res["reason"] = "" if res["feasible"] else infeasible_reason(p, res)
+                   power_w=ev.power_w, valid=True)
+        broken = book_violations(p.design, dev, res, p.insulated_diameter_m)
+        res["feasible"] = bool(ev.constraints[0] <= 0 and ev.constraints[1] <= 0 and not broken)
+        res["reason"] = "; ".join(q for q in [infeasible_reason(p, res)] + broken if q)
         out.append(res)
     return out
+
+
+def _device_problem(design: Design):
+    """The device problem of a cored design (its constraint formulas), None without a core."""
+    if design.core is None:
+        return None
+    try:
+        return device_problem_for(design)
+    except DesignkitError:
+        return None
+
+
+def row_design(design: Design, row: dict, insulated_m: float) -> Design:
+    """The design of a coil sweep row (SI): the winding, turns and wire of ``row``; a core
+    follows the winding as in the force model (the design's core/bore radius ratio, the
+    design's protrusions above and below the winding kept). Raises what the design's own
+    checks raise (e.g. coils overlapping at the pitch)."""
+    c, k = design.coil, design.core
+    ri, ro, ln = row["inner_radius_m"], row["outer_radius_m"], row["length_m"]
+    if k is None:
+        return dataclasses.replace(
+            design, coil=dataclasses.replace(c, inner_radius_m=ri, outer_radius_m=ro,
+                                             length_m=ln, turns=row["turns"]),
+            wire=dataclasses.replace(design.wire, diameter_m=row["wire_diameter_m"],
+                                     insulated_diameter_m=insulated_m))
+    top = k.offset_m + k.length_m / 2 - c.length_m / 2
+    x = [ri, ro, ln, min(ri, ri * k.radius_m / c.inner_radius_m), ln + k.length_m - c.length_m, top,
+         row["wire_diameter_m"]]
+    d2 = device_candidate(design, x, row["turns"], insulated_m)
+    return dataclasses.replace(d2, core=dataclasses.replace(d2.core, bh=k.bh))
+
+
+def book_violations(design: Design, device, row: dict, insulated_m: float) -> list[str]:
+    """The rows of the rule table (as ``designkit check``) a valid coil sweep row breaks:
+    'rule NAME' for the rule book (:mod:`designkit.rules`, what ``cad`` refuses included) and,
+    with a core, 'NAME limit' for the device constraints of ``device`` (a
+    :class:`designkit.optimize.DeviceProblem`) evaluated with the row's own inductance (no
+    field solve); 'invalid design (...)' when the design's checks refuse the row."""
+    try:
+        d2 = row_design(design, row, insulated_m)
+    except (DesignkitError, ValueError) as exc:
+        if isinstance(exc, DesignRuleError):
+            return ["invalid design (coils overlap: 2 x outer radius > pitch)"]
+        return [f"invalid design ({getattr(exc, 'name', type(exc).__name__)})"]
+    broken = []
+    if device is not None and d2.core is not None:
+        k = d2.core
+        x = [row["inner_radius_m"], row["outer_radius_m"], row["length_m"], k.radius_m,
+             k.length_m, k.offset_m + k.length_m / 2 - row["length_m"] / 2,
+             row["wire_diameter_m"]]
+        zero = np.zeros(1)
+        # the device formulas with the sweep model's inductance as the secant inductance
+        many = device._assemble(np.array([x]), np.array([float(row["turns"])]), zero, zero,
+                                zero, zero, np.array([row["inductance_h"]]))
+        ev = {q: float(val[0]) for q, val in many.items() if q != "g"}
+        table = device.constraint_table(x, ev)
+        broken += [f"{name} limit" for name, r in table.items() if not r["met"]]
+    broken += [f"rule {r.name}" for r in rules.violations(d2)]
+    return broken
 
 
 def infeasible_reason(problem: CoilDesignProblem, row: dict) -> str:

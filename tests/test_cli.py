@@ -377,3 +377,16 @@ def test_help_states_defaults_and_the_shipped_designs(capsys, command, option, s
     nxt = text.find("\n  -", start + 1)
     row = " ".join(text[start:nxt if nxt > 0 else None].split())
     assert says in row, row
+
+
+@pytest.mark.parametrize("command", ["report", "optimize", "sweep", "cad"])
+def test_design_help_lists_the_shipped_designs_and_the_default(command, tmp_path):
+    # the same --design help as check/map/...: every shipped name and what the default is
+    from designkit.design import NAMED_DESIGNS
+    res = designkit(command, "--help", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    text = " ".join(res.stdout.split())
+    for name in NAMED_DESIGNS:
+        if name != "thesis-default":
+            assert name in text
+    assert "(default: thesis, the embedded thesis device)" in text

@@ -335,3 +335,36 @@ def test_axis_labels_shrink_with_the_window_so_they_do_not_overlap():
         size = axis_font_size(width)
         assert 9 * (3 * 0.6 * size + 4) <= 0.4 * width, (width, size)
     assert axis_font_size(1024) == 10 and axis_font_size(4000) == 10
+
+
+def _scene_in_title_box(p) -> int:
+    """Dark pixels of everything but the title inside the title's box (2 px around it): the
+    title box is where the picture changes when the title is hidden."""
+    corner = [a for a in p.renderer.actors.values() if hasattr(a, "GetText")
+              and hasattr(a, "GetMaximumFontSize") and (a.GetText(2) or "").strip()]
+    assert len(corner) == 1
+    full = np.asarray(p.screenshot(None, return_img=True), dtype=float)
+    corner[0].SetVisibility(False)
+    p.render()
+    scene = np.asarray(p.screenshot(None, return_img=True), dtype=float)
+    corner[0].SetVisibility(True)
+    p.render()
+    rows, cols = np.nonzero(np.abs(full - scene).max(axis=2) > 30)
+    r0, r1 = max(rows.min() - 2, 0), rows.max() + 3
+    c0, c1 = max(cols.min() - 2, 0), cols.max() + 3
+    return int((scene[r0:r1, c0:c1].min(axis=2) < 150).sum())
+
+
+@pytest.mark.parametrize("size", [(640, 480), (800, 600)])
+@pytest.mark.parametrize("kind", ["forcemap", "isosurface"])
+def test_3d_axis_labels_clear_of_the_title_and_of_each_other(kind, size):
+    # at the default sizes the top y-axis labels ran into the title and, at the corner where
+    # the y axis starts, its first label touched the last label of the x or z axis
+    p = viz.render(kind, DESIGN, quality="quick", window_size=size)
+    try:
+        assert _scene_in_title_box(p) == 0, (kind, size)
+        labels = p.renderer.cube_axes_actor.GetAxisLabels(1)
+        assert labels.GetValue(0) == "" and all(
+            labels.GetValue(i).strip() for i in range(1, labels.GetNumberOfValues()))
+    finally:
+        p.close()

@@ -45,13 +45,18 @@ def test_sweep_cli_serial_writes_csv_and_png(tmp_path, capsys):
         coil = Coil(float(r["inner_radius_m"]), float(r["outer_radius_m"]),
                     float(r["length_m"]), int(r["turns"]))
         # independent path: turns from the section, R from the electrical module
-        assert int(r["turns"]) == math.floor(el.turns_continuous(
-            coil.inner_radius, coil.outer_radius, coil.length, 0.7e-3) + 1e-9)
+        # (at most the layered winding fit of the rule book)
+        assert int(r["turns"]) == min(math.floor(el.turns_continuous(
+            coil.inner_radius, coil.outer_radius, coil.length, 0.7e-3) + 1e-9),
+            el.turns_from_geometry(coil.inner_radius, coil.outer_radius, coil.length, 0.7e-3,
+                                   d.wire.packing))
         assert float(r["resistance_ohm"]) == pytest.approx(el.resistance(coil, d.wire), rel=1e-12)
-        feasible = (float(r["resistance_ohm"]) <= 6.0
-                    and 5 * float(r["time_constant_s"]) <= 0.1)
-        assert bool(int(r["feasible"])) == feasible
-    assert "best feasible" in capsys.readouterr().out
+        # the thesis supply (36 V) is above the MD10C's 30 V rating: a rule-book violation of
+        # every row, so no row is feasible however R and 5 L/R come out
+        assert "rule design_supply_voltage_v" in r["reason"] and r["feasible"] == "0"
+        if float(r["resistance_ohm"]) > 6.0:
+            assert "R > 6 ohm" in r["reason"]
+    assert "no feasible design" in capsys.readouterr().out
 
 
 def test_sweep_cli_processes_match_serial(tmp_path):

@@ -53,3 +53,25 @@ def test_array_sweep_evaluates_the_default_device(tmp_path, capsys):
     # what report says the thesis device misses, the sweep says too (same rule book)
     assert "rule design_supply_voltage_v" in row["reason"]
     assert "core model: steel1010 fast slice model" in capsys.readouterr().out
+
+
+def test_coil_sweep_feasibility_is_the_rule_book_cad_refuses():
+    # flanges 2 (Ro + lip) > pitch: cad refuses the assembly, so the sweep must not call the
+    # row feasible (before: only R and 5 L/R decided); the other row is within every rule
+    import dataclasses
+
+    from designkit import default_design, rules
+    from designkit.sweep import parse_param, row_design, run_sweep
+    d = default_design()
+    d = dataclasses.replace(d, drive=dataclasses.replace(
+        d.drive, supply_voltage_v=d.drive.driver_max_voltage_v))
+    res = run_sweep(d, [parse_param("outer_radius_m=0.0175:0.0245:2"),
+                        parse_param("length_m=0.035:0.035:1")], workers=1, progress=False)
+    small, big = res.rows
+    lip, pitch = d.cad.flange_lip_m, d.array.pitch_m
+    assert 2 * (big["outer_radius_m"] + lip) > pitch > 2 * big["outer_radius_m"]
+    assert not big["feasible"] and "rule flanges_overlap" in big["reason"]
+    assert "flanges_overlap" in [r.name for r in rules.violations(
+        row_design(d, big, d.wire.insulated_diameter_m), "cad")]
+    assert 2 * (small["outer_radius_m"] + lip) <= pitch
+    assert small["feasible"] and small["reason"] == ""

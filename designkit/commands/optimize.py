@@ -21,13 +21,11 @@ from ..errors import BadInputError
 from ..optimize import (CORE_MODEL_NAMES, GLOBAL_METHODS, CoilDesignProblem, device_design,
                         device_problem_for, evaluate_device, getdp_check, solve, solve_device,
                         verify_device)
-from ._common import add_progress_argument, check_output, show_progress
+from ._common import add_design_argument, add_progress_argument, check_output, show_progress
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--design", default=None,
-                        help="design TOML file or a shipped name (thesis, optimized); "
-                             "default: the embedded thesis design")
+    add_design_argument(parser)
     parser.add_argument("--out", type=Path, default=Path("designkit-optimize"),
                         help="output folder (default: ./designkit-optimize)")
     parser.add_argument("--problem", choices=("device", "coil"), default="device",

@@ -39,7 +39,7 @@ from ..coil import Coil
 from ..design import Design, default_design, design_to_toml, load_design, named_design
 from ..optimize import device_problem_for, evaluate_device, rendering_force
 from ..sensor_headroom import sensor_headroom
-from ._common import (add_currents_arguments, add_progress_argument, check_current_limit,
+from ._common import (add_currents_arguments, add_design_argument, add_progress_argument, check_current_limit,
                       check_output, parse_currents, show_progress, staged_folder)
 
 MAP_SPACING_M = {"quick": 0.025, "full": 0.01}
@@ -58,8 +58,7 @@ FIGURE_TITLES = {
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--design", type=Path, default=None,
-                        help="design TOML file (default: the embedded thesis design)")
+    add_design_argument(parser)
     parser.add_argument("--out", type=Path, default=Path("designkit-report"),
                         help="output folder (default: ./designkit-report)")
     parser.add_argument("--current", type=float, default=None,

@@ -22,15 +22,13 @@ from ..optimize import CORE_MODEL_NAMES
 from ..sweep import (ARRAY_COLUMNS, ARRAY_CORE_MODEL, ARRAY_PARAMETERS, PARAMETERS,
                      design_core_model, grid, parse_param, plot, reason_summary,
                      run_array_sweep, run_sweep, write_csv)
-from ._common import add_progress_argument, check_output, show_progress, staged_folder
+from ._common import add_design_argument, add_progress_argument, check_output, show_progress, staged_folder
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--param", action="append", default=[], metavar="NAME=START:STOP:N",
                         help=f"swept parameter (repeat); NAME one of {sorted(PARAMETERS)}")
-    parser.add_argument("--design", type=Path, default=None,
-                        help="design TOML file or a shipped name (thesis, optimized); default: "
-                             "the thesis design")
+    add_design_argument(parser)
     parser.add_argument("--out", type=Path, default=Path("designkit-sweep"),
                         help="output folder (default: ./designkit-sweep)")
     parser.add_argument("--workers", type=int, default=None,
@@ -74,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
                  limits="device constraints")
         else:
             write_csv(result, stage / "sweep.csv")
-            plot(result, stage / "sweep.png")
+            plot(result, stage / "sweep.png", limits="R, 5 L/R and the rule table")
     csv_path, png_path = out / "sweep.csv", out / "sweep.png"
     n = len(result.rows)
     feas = sum(1 for r in result.rows if r["feasible"])

@@ -44,6 +44,13 @@ def _title(p, text, font_size=12):
     chars = max(20, int(0.92 * width / (0.6 * font_size)))
     lines = [w for line in text.split("\n") for w in (textwrap.wrap(line, chars) or [""])]
     p.add_text("\n".join(lines), position="upper_left", font_size=font_size, color="black")
+    # the band the title takes, px: _fit_camera keeps the scene and its axis labels below it
+    p._title_band_px = len(lines) * TITLE_LINE_PX_PER_PT * font_size + 6
+
+
+TITLE_LINE_PX_PER_PT = 1.5
+"""Height of a line of VTK's default font, pixels per point of font size (measured on the
+rendered PNGs: 14-15 px a line at 10-11 pt)."""
 
 
 def _vtk_tick_spacing(span: float) -> float:
@@ -110,6 +117,14 @@ def _axes(p, mesh_bounds=None, location="outer", **kw):
                   color="black", font_size=axis_font_size(p.window_size[0] / p.shape[1]),
                   grid=False, location=location, ticks="outside", minor_ticks=False, fmt="%g",
                   **counts, **kw)
+    # from the oblique views (azimuth -58 deg) the y axis starts at the corner where the x or
+    # the z axis ends: its first label would touch theirs, so it is left blank
+    cube = p.renderer.cube_axes_actor
+    labels = cube.GetAxisLabels(1)
+    if labels is not None and labels.GetNumberOfValues() > 2:
+        labels.SetValue(0, "")
+        cube.SetAxisLabels(1, labels)
+        cube.Modified()
     return b
 
 
@@ -122,8 +137,17 @@ def _fit_camera(p, bounds_mm, elevation_deg=25.0, azimuth_deg=-58.0, margin=1.22
     centre = (b[0::2] + b[1::2]) / 2
     radius = 0.5 * float(np.linalg.norm(b[1::2] - b[0::2]))
     half_angle = math.radians(p.camera.view_angle / 2)
-    _iso_camera(p, tuple(centre), margin * radius / math.sin(half_angle), elevation_deg,
-                azimuth_deg)
+    # the title's band at the top: the margin leaves room for half of it; the view is fitted
+    # in the rest and moved down by that much (the top axis labels stay clear of the title)
+    band = 0.5 * min(getattr(p, "_title_band_px", 0.0) / (p.window_size[1] / p.shape[0]), 0.5)
+    distance = margin * radius / math.sin(half_angle) / (1.0 - band)
+    _iso_camera(p, tuple(centre), distance, elevation_deg, azimuth_deg)
+    if band > 0:
+        pos, focus = (np.asarray(q, dtype=float) for q in p.camera_position[:2])
+        view = (pos - focus) / np.linalg.norm(pos - focus)
+        up = np.array([0.0, 0.0, 1.0]) - view[2] * view  # the screen's up direction
+        shift = up / np.linalg.norm(up) * band * distance * math.tan(half_angle)
+        p.camera_position = [tuple(pos + shift), tuple(focus + shift), (0.0, 0.0, 1.0)]
 
 
 def _add_device(p, design, blocks, *, opacity=1.0, magnet=True, workspace=True):
