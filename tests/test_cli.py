@@ -379,7 +379,7 @@ def test_help_states_defaults_and_the_shipped_designs(capsys, command, option, s
     assert says in row, row
 
 
-@pytest.mark.parametrize("command", ["report", "optimize", "sweep", "cad"])
+@pytest.mark.parametrize("command", ["report", "optimize", "sweep", "cad", "check"])
 def test_design_help_lists_the_shipped_designs_and_the_default(command, tmp_path):
     # the same --design help as check/map/...: every shipped name and what the default is
     from designkit.design import NAMED_DESIGNS

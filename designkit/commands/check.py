@@ -11,15 +11,13 @@ from __future__ import annotations
 
 import argparse
 
-from ..design import NAMED_DESIGNS, load_design
+from ..design import load_design
 from ..optimize import rule_table
-from ._common import add_progress_argument
+from ._common import add_design_argument, add_progress_argument
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--design", default=None,
-                        help="design TOML file or a shipped name "
-                             f"({', '.join(sorted(NAMED_DESIGNS))}); default: the thesis design")
+    add_design_argument(parser)
     add_progress_argument(parser)
 
 
