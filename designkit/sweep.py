@@ -582,7 +582,8 @@ def sweep_figure(result: SweepResult, *, objective: str = "force at the design p
     ax.set_xlabel(_label(xn))
     feasible = sum(1 for r in rows if r["feasible"])
     title = (f"{subtitle}\n" if subtitle else "") + \
-        f"{len(rows)} designs, {feasible} feasible ({limits})\n{_conditions(anchor, names)}"
+        f"{len(rows)} design{'' if len(rows) == 1 else 's'}, {feasible} feasible ({limits})\n" \
+        f"{_conditions(anchor, names)}"
     if fixed:
         where = ", ".join(f"{_label(k).split(' (')[0]} = {_shown(k, anchor[k]):.4g}"
                           f"{' mm' if k.endswith('_m') else (' A' if k.endswith('_a') else '')}"
@@ -593,10 +594,12 @@ def sweep_figure(result: SweepResult, *, objective: str = "force at the design p
     if feasible == 0:
         why = [r["reason"] for r in rows if r.get("reason")]
         common = max(set(why), key=why.count) if why else "unknown"
-        ax.text(0.5, 0.5, "no feasible design\n" + textwrap.fill(f"most common reason: {common}",
-                                                                  48),
-                transform=ax.transAxes, ha="center", va="center", fontsize=10,
-                bbox=dict(boxstyle="round", facecolor="white", edgecolor="0.5"))
+        # at the top of the axes when points are drawn: centred it would hide the middle one
+        ax.text(0.5, 0.97 if valid else 0.5,
+                "no feasible design\n" + textwrap.fill(f"most common reason: {common}", 48),
+                transform=ax.transAxes, ha="center", va="top" if valid else "center",
+                fontsize=9, bbox=dict(boxstyle="round", facecolor="white", edgecolor="0.5",
+                                      alpha=0.9))
         if not valid:
             ax.set_xticks([])
             ax.set_yticks([])
