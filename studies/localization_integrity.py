@@ -5,7 +5,7 @@ and what do a cold and a warm fix cost?
 Data the model did not produce: the magnet's field from magpylib's exact cylinder (10 x 10 mm,
 moment from the design) at the sensors' true, displaced poses; the coils' coupled field at the
 currents; the cores' field induced by the magnet (designkit.sensor_sim, each core solved at the
-true sensor poses); the TLV493D chain (0.1 mT rms noise, 0.098 mT LSB, NaN beyond +-130 mT) with
+true sensor poses); the TLV493D chain (--noise-mt rms noise, default 0.05 mT, 0.098 mT LSB, NaN beyond +-130 mT) with
 the device's sensor errors (offset, 1 % gain, 1 degree and 0.5 mm mounting). The localizer
 knows the nominal poses, the map's (the forward model's) coil field and core operator, and --
 except in 'uncalibrated' -- the start-up calibration (1000 coil-only frames).
@@ -48,6 +48,8 @@ from localization import _calibrate  # the start-up calibration as the localizat
 ALERT_LIMIT_M = 5e-3
 ALERT_LIMIT_RUNNER_M = 10e-3
 RISK = 1e-4
+NOISE_T = 0.05e-3
+"""Sensor noise of the issue's independent check, T rms per axis (plus the 0.098 mT LSB)."""
 CONDITIONS = ("cold", "jump", "sensor dead", "two saturated", "6 A", "uncalibrated")
 
 
@@ -202,17 +204,20 @@ def bench(n: int = 100, seed: int = 0, repeats: int = 3) -> dict:
 
 
 def run(out_dir, n: int = 10000, seed: int = 0, conditions=CONDITIONS,
-        thesis_cases=("off", "static", "sinusoidal")) -> dict:
+        thesis_cases=("off", "static", "sinusoidal"), noise_t: float = NOISE_T,
+        model_bias_m: float | None = None) -> dict:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     design = default_design()
-    sim = SensorSimulator(design, errors="default", seed=seed, induced="rod")
+    sim = SensorSimulator(design, errors="default", seed=seed, induced="rod", noise_t=noise_t)
     mg = design.magnet
     model = dataclasses.replace(SensorModel.from_operator(**forward_model(sim)),
                                 magnet_size_m=(mg.radius_m, mg.length_m))
     cal, _ = _calibrate(sim, model, seed + 1000, 1000)
-    kw = dict(integrity_risk=RISK)
+    kw = dict(integrity_risk=RISK, noise_t=noise_t)
+    if model_bias_m is not None:
+        kw["model_bias_m"] = model_bias_m
     loc_cal = Localizer(model, "model", calibration=cal, **kw)
     loc_uncal = Localizer(model, "model", **kw)
     rows = []
@@ -236,6 +241,7 @@ def run(out_dir, n: int = 10000, seed: int = 0, conditions=CONDITIONS,
         thesis[case] = {"n": m, "availability": float(a5), "availability_al10": float(a10)}
     ref = _reference_s(model)
     res = {"n_per_condition": n, "alert_limit_m": ALERT_LIMIT_M, "integrity_risk": RISK,
+           "noise_t": noise_t, "model_bias_m": loc_cal.model_bias_m,
            "rows": rows, "thesis_availability_20_60mm": thesis,
            "reference_multipole_us": ref * 1e6,
            "total_ok_error_above_5mm": sum(r["ok_error_above_5mm"] for r in rows),
@@ -281,16 +287,23 @@ def main(argv=None) -> int:
                     help="comma-separated subset of: " + ", ".join(CONDITIONS))
     ap.add_argument("--no-thesis", action="store_true", help="skip the thesis-case availability")
     ap.add_argument("--bench", action="store_true", help="only the cold / warm fix timing")
+    ap.add_argument("--noise-mt", type=float, default=NOISE_T * 1e3,
+                    help="sensor noise, mT rms per axis, simulated and assumed by the localizer "
+                         "(default: the issue's independent check)")
+    ap.add_argument("--model-bias-mm", type=float, default=None,
+                    help="the localizer's model-bias bound, mm (default: the localizer's)")
     a = ap.parse_args(argv)
     if a.bench:
         bench(seed=a.seed)
         return 0
     conds = tuple(c.strip() for c in a.conditions.split(",") if c.strip())
     bad = [c for c in conds if c not in CONDITIONS]
-    if bad or a.n < 1:
-        print(f"error: --conditions {bad} / --n {a.n}: conditions from {CONDITIONS}, n >= 1")
+    if bad or a.n < 1 or not 0 <= a.noise_mt < 10:
+        print(f"error: --conditions {bad} / --n {a.n} / --noise-mt {a.noise_mt}: conditions "
+              f"from {CONDITIONS}, n >= 1, noise in [0, 10) mT")
         return 2
-    run(a.out, a.n, a.seed, conds, () if a.no_thesis else ("off", "static", "sinusoidal"))
+    run(a.out, a.n, a.seed, conds, () if a.no_thesis else ("off", "static", "sinusoidal"),
+        a.noise_mt * 1e-3, None if a.model_bias_mm is None else a.model_bias_mm * 1e-3)
     return 0
 
 
