@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import BadInputError, CoilWriteError
-from ..localization.integrity import chi2_quantile
+from ..localization.integrity import chi2_quantile, fused_protection_level
 from .config import RunnerConfig
 from .drive import CurrentPath
 from .forcelaw import force_law_rows
@@ -251,18 +251,31 @@ class Runner:
             self.last_fix = fix
             problems.extend(fix.problems)
             accepted = False
-            if fix.ok and fix.protection_level_m > self.cfg.alert_limit_m:
-                problems.append(("lost", f"protection level {fix.protection_level_m * 1e3:.3g} "
-                                 f"mm > alert limit {self.cfg.alert_limit_m * 1e3:.3g} mm"))
+            gated = self._gate(fix) if fix.ok else ""
+            pl = self._protection_level(fix) if fix.ok and not gated else math.inf
+            if gated:
+                problems.append(("gated", gated))
+            elif fix.ok and pl > self.cfg.alert_limit_m:
+                problems.append(("lost", f"protection level {pl * 1e3:.3g} mm > alert limit "
+                                 f"{self.cfg.alert_limit_m * 1e3:.3g} mm"))
             elif fix.ok:
-                gated = self._gate(fix)
-                if gated:
-                    problems.append(("gated", gated))
-                else:
-                    self.tracker.update(fix.position_m, fix.frame_t_s, True)
-                    self.have_fix = accepted = True
+                self.tracker.update(fix.position_m, fix.frame_t_s, True)
+                self.have_fix = accepted = True
             self.last_estimate_ok = accepted      # taken into the tracker
         return fix is not None, problems
+
+    def _protection_level(self, fix: Fix) -> float:
+        """The protection level (m) of a fix that passed the gate, over several frames: the
+        fix's covariance fused with the tracker's prediction from the fixes before it
+        (:func:`firmware_io.localization.integrity.fused_protection_level`, the localizer's
+        ``model_bias_m`` kept whole). Without a tracked state: the fix's own."""
+        if not self.have_fix or getattr(self.tracker, "x", None) is None \
+                or not hasattr(self.tracker, "innovation"):
+            return fix.protection_level_m
+        _, var = self.tracker.innovation(fix.position_m, fix.frame_t_s)
+        return fused_protection_level(fix.protection_level_m, fix.covariance_m2,
+                                      var - self.tracker.r,
+                                      float(getattr(self.localizer, "model_bias_m", 0.0)))
 
     def _gate(self, fix: Fix) -> str:
         """The innovation gate: '' when the fix agrees with the tracker's prediction at its
