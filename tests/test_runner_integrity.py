@@ -152,21 +152,24 @@ def test_bad_frames_reach_the_loop_as_not_ok_fixes_with_a_reason():
     assert fix.covariance_m2.shape == (3, 3) and 0 < fix.protection_level_m < 5e-3
 
 
-def test_multi_frame_protection_level_fuses_the_prediction():
-    """Isotropic fix covariance s^2 I and prediction variance p: the fused variance is the
-    harmonic combination s^2 p / (s^2 + p), so the noise part scales by sqrt(p / (s^2 + p));
-    the bias part is not filtered."""
+def test_multi_frame_protection_level_of_the_filtered_position():
+    """The filtered position (1 - K) x_pred + K x_fix has the error covariance
+    (1 - K)^2 p I + K^2 C: with C = s^2 I its noise part scales by
+    sqrt(((1 - K)^2 p + K^2 s^2) / s^2) (the bias part is not filtered); K = p / (p + s^2), the
+    optimal gain, gives the harmonic combination s^2 p / (s^2 + p)."""
     from firmware_io.localization.integrity import fused_protection_level
 
     s2, p, bias, pl = (0.8e-3) ** 2, (0.4e-3) ** 2, 1e-3, 6e-3
-    got = fused_protection_level(pl, s2 * np.eye(3), p, bias)
+    k = p / (p + s2)
+    got = fused_protection_level(pl, s2 * np.eye(3), p, bias, k)
     assert got == pytest.approx(bias + (pl - bias) * np.sqrt(p / (s2 + p)), rel=1e-12)
-    # anisotropic: the largest fused eigenvalue, not the largest of each
+    # anisotropic C, a tracker gain: the worst direction is C's largest eigenvalue
     cov = np.diag([0.2e-3, 0.5e-3, 2e-3]) ** 2
-    lam = 1 / (1 / np.diag(cov) + 1 / p)
-    assert fused_protection_level(pl, cov, p, bias) == pytest.approx(
-        bias + (pl - bias) * np.sqrt(lam.max() / np.diag(cov).max()), rel=1e-12)
-    # no prediction, no covariance, or an infinite PL: the fix's own
-    assert fused_protection_level(pl, s2 * np.eye(3), 0.0, bias) == pl
-    assert fused_protection_level(pl, None, p, bias) == pl
-    assert fused_protection_level(np.inf, s2 * np.eye(3), p, bias) == np.inf
+    want = (0.7 ** 2 * p + 0.3 ** 2 * (2e-3) ** 2) / (2e-3) ** 2
+    assert fused_protection_level(pl, cov, p, bias, 0.3) == pytest.approx(
+        bias + (pl - bias) * np.sqrt(want), rel=1e-12)
+    # gain 1: the fix alone; no prediction, no covariance, or an infinite PL: the fix's own
+    assert fused_protection_level(pl, cov, p, bias, 1.0) == pytest.approx(pl, rel=1e-12)
+    assert fused_protection_level(pl, s2 * np.eye(3), 0.0, bias, k) == pl
+    assert fused_protection_level(pl, None, p, bias, k) == pl
+    assert fused_protection_level(np.inf, s2 * np.eye(3), p, bias, k) == np.inf

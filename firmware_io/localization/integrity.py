@@ -85,19 +85,22 @@ def covariance_and_pl(fisher, chi2: float, dof: int, k2: float):
     return np.array(m), math.sqrt(lam * k2)
 
 
-def fused_protection_level(pl: float, cov, var_pred: float, bias: float) -> float:
-    """Protection level (m) of a fix fused with a tracker's prediction: the fix's covariance
-    ``cov`` (3, 3) m^2 combined with the prediction's variance ``var_pred`` m^2 per axis,
-    C_f = (C^-1 + I / var_pred)^-1; the fix's own noise part ``pl - bias`` scales by
-    sqrt(lambda_max(C_f) / lambda_max(C)), the model-bias part ``bias`` (m, common to every
-    frame: filtering does not shrink it) stays. Degenerate inputs: ``pl`` unchanged."""
-    if cov is None or not (math.isfinite(pl) and var_pred > 0):
+def fused_protection_level(pl: float, cov, var_pred: float, bias: float,
+                           gain: float) -> float:
+    """Protection level (m) of a tracker's filtered position (1 - K) x_pred + K x_fix, K =
+    ``gain``, from the fix's covariance ``cov`` (3, 3) m^2 and the prediction's variance
+    ``var_pred`` m^2 per axis (from the earlier fixes, independent noise): the filtered error's
+    covariance is (1 - K)^2 var_pred I + K^2 C, so the fix's own noise part ``pl - bias`` scales
+    by sqrt(((1 - K)^2 var_pred + K^2 lambda_max(C)) / lambda_max(C)); the model-bias part
+    ``bias`` (m, common to every frame: filtering does not shrink it) stays. Degenerate inputs:
+    ``pl`` unchanged."""
+    if cov is None or not (math.isfinite(pl) and var_pred > 0 and 0 <= gain <= 1):
         return pl
-    lam = np.linalg.eigvalsh(cov)
-    if not (np.all(np.isfinite(lam)) and lam[0] > 0):
+    lam = float(np.linalg.eigvalsh(cov)[-1])
+    if not (math.isfinite(lam) and lam > 0):
         return pl
-    fused = np.linalg.eigvalsh(np.linalg.inv(np.linalg.inv(cov) + np.eye(3) / var_pred))
-    return bias + max(pl - bias, 0.0) * math.sqrt(fused[-1] / lam[-1])
+    filtered = (1 - gain) ** 2 * var_pred + gain ** 2 * lam
+    return bias + max(pl - bias, 0.0) * math.sqrt(filtered / lam)
 
 
 def _largest_eigenvalue(m) -> float:

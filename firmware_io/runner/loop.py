@@ -265,17 +265,19 @@ class Runner:
         return fix is not None, problems
 
     def _protection_level(self, fix: Fix) -> float:
-        """The protection level (m) of a fix that passed the gate, over several frames: the
-        fix's covariance fused with the tracker's prediction from the fixes before it
-        (:func:`firmware_io.localization.integrity.fused_protection_level`, the localizer's
-        ``model_bias_m`` kept whole). Without a tracked state: the fix's own."""
+        """The protection level (m) of the position the runner renders at once this fix (past
+        the gate) is in the tracker: its filtered position, from the fix's covariance and the
+        tracker's prediction (:func:`firmware_io.localization.integrity.
+        fused_protection_level`, the localizer's ``model_bias_m`` kept whole). Without a
+        tracked state: the fix's own."""
         if not self.have_fix or getattr(self.tracker, "x", None) is None \
                 or not hasattr(self.tracker, "innovation"):
             return fix.protection_level_m
         _, var = self.tracker.innovation(fix.position_m, fix.frame_t_s)
-        return fused_protection_level(fix.protection_level_m, fix.covariance_m2,
-                                      var - self.tracker.r,
-                                      float(getattr(self.localizer, "model_bias_m", 0.0)))
+        p = var - self.tracker.r
+        return fused_protection_level(fix.protection_level_m, fix.covariance_m2, p,
+                                      float(getattr(self.localizer, "model_bias_m", 0.0)),
+                                      p / var)
 
     def _gate(self, fix: Fix) -> str:
         """The innovation gate: '' when the fix agrees with the tracker's prediction at its
