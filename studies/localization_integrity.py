@@ -178,7 +178,7 @@ def thesis_tracked(loc, sim, case, m, rng) -> dict:
     rd = sim.read(pos, cur, parts=(magnet_field_magpylib(sim, pos), sim.induced_part(pos)),
                   rng=rng)
     loc.reset()
-    trk = ConstantVelocityTracker()
+    trk, acquired = ConstantVelocityTracker(), False
     ok = np.zeros(m, bool)
     err, pls = np.empty(m), np.empty(m)
     for k in range(m):
@@ -189,8 +189,9 @@ def thesis_tracked(loc, sim, case, m, rng) -> dict:
             pl = fused_protection_level(pl, e.covariance_m2, var - trk.r, loc.model_bias_m,
                                         (var - trk.r) / var)
         ok[k], pls[k] = e.ok and pl <= ALERT_LIMIT_M, pl
-        if ok[k]:
+        if ok[k] or e.ok and not acquired:   # acquisition: the runner's tracker takes it
             trk.update(e.position_m, k * FRAME_S, True)
+        acquired |= ok[k]
         err[k] = np.linalg.norm((trk.x[0] if ok[k] and tracked else e.position_m) - pos[k])
     return {"n": m, "availability": float(ok.mean()),
             "ok_error_above_5mm": int(np.sum(ok & (err > 5e-3))),

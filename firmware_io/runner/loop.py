@@ -258,6 +258,10 @@ class Runner:
             elif fix.ok and pl > self.cfg.alert_limit_m:
                 problems.append(("lost", f"protection level {pl * 1e3:.3g} mm > alert limit "
                                  f"{self.cfg.alert_limit_m * 1e3:.3g} mm"))
+                if not self.have_fix:
+                    # acquisition: the tracker takes the fix (it passed the localizer's tests
+                    # and the gate), nothing renders until a filtered PL is within the limit
+                    self.tracker.update(fix.position_m, fix.frame_t_s, True)
             elif fix.ok:
                 self.tracker.update(fix.position_m, fix.frame_t_s, True)
                 self.have_fix = accepted = True
@@ -269,9 +273,8 @@ class Runner:
         the gate) is in the tracker: its filtered position, from the fix's covariance and the
         tracker's prediction (:func:`firmware_io.localization.integrity.
         fused_protection_level`, the localizer's ``model_bias_m`` kept whole). Without a
-        tracked state: the fix's own."""
-        if not self.have_fix or getattr(self.tracker, "x", None) is None \
-                or not hasattr(self.tracker, "innovation"):
+        tracked state (the tracker also holds the fixes of an acquisition): the fix's own."""
+        if getattr(self.tracker, "x", None) is None or not hasattr(self.tracker, "innovation"):
             return fix.protection_level_m
         _, var = self.tracker.innovation(fix.position_m, fix.frame_t_s)
         p = var - self.tracker.r
@@ -287,8 +290,7 @@ class Runner:
         fixes' covariances and the tracker's measurement noise), itself from the global search,
         re-starts the tracker there (a warm fit could repeat a wrong basin; a cold one would
         not)."""
-        if not self.have_fix or getattr(self.tracker, "x", None) is None \
-                or not hasattr(self.tracker, "innovation"):
+        if getattr(self.tracker, "x", None) is None or not hasattr(self.tracker, "innovation"):
             return ""
         cov = fix.covariance_m2 if fix.covariance_m2 is not None else np.zeros((3, 3))
         innov, var = self.tracker.innovation(fix.position_m, fix.frame_t_s)
