@@ -211,17 +211,24 @@ def _reference_s(model) -> float:
     return (time.perf_counter() - t0) / 2000
 
 
-def bench(n: int = 100, seed: int = 0, repeats: int = 3, noise_t: float = NOISE_T) -> dict:
-    """Cold (global search) and warm (a 0.5 mm-per-axis random walk) fix times, s: the median
-    and p99 of each of ``repeats`` runs over ``n`` frames (calibrated localizer, thesis case 3
-    currents), with the same-process multipole reference."""
-    rng = np.random.default_rng(seed)
+def _device(seed: int, noise_t: float):
+    """(simulator with the device's sensor errors, the localizer's model with the exact
+    cylinder, the start-up calibration from 1000 coil-only frames)."""
     design = default_design()
     sim = SensorSimulator(design, errors="default", seed=seed, induced="rod", noise_t=noise_t)
     mg = design.magnet
     model = dataclasses.replace(SensorModel.from_operator(**forward_model(sim)),
                                 magnet_size_m=(mg.radius_m, mg.length_m))
     cal, _ = _calibrate(sim, model, seed + 1000, 1000)
+    return sim, model, cal
+
+
+def bench(n: int = 100, seed: int = 0, repeats: int = 3, noise_t: float = NOISE_T) -> dict:
+    """Cold (global search) and warm (a 0.5 mm-per-axis random walk) fix times, s: the median
+    and p99 of each of ``repeats`` runs over ``n`` frames (calibrated localizer, thesis case 3
+    currents), with the same-process multipole reference."""
+    rng = np.random.default_rng(seed)
+    sim, model, cal = _device(seed, noise_t)
     loc = Localizer(model, "model", calibration=cal, noise_t=noise_t)
     cur = case_currents("sinusoidal", rng.uniform(0, 20, n), sim.array.n_coils)
     cold = sim.read(random_positions(n, rng), cur, rng=rng)
@@ -261,12 +268,7 @@ def run(out_dir, n: int = 10000, seed: int = 0, conditions=CONDITIONS,
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
-    design = default_design()
-    sim = SensorSimulator(design, errors="default", seed=seed, induced="rod", noise_t=noise_t)
-    mg = design.magnet
-    model = dataclasses.replace(SensorModel.from_operator(**forward_model(sim)),
-                                magnet_size_m=(mg.radius_m, mg.length_m))
-    cal, _ = _calibrate(sim, model, seed + 1000, 1000)
+    sim, model, cal = _device(seed, noise_t)
     kw = dict(integrity_risk=RISK, noise_t=noise_t)
     if model_bias_m is not None:
         kw["model_bias_m"] = model_bias_m
