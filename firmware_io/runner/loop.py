@@ -306,6 +306,7 @@ class Runner:
             if float(dv @ np.linalg.solve(s, dv)) <= self.gate_d2:
                 # two consecutive re-acquired fixes agree: the tracker was wrong, not the fix
                 self.tracker.reset()
+                self.have_fix = False     # renders again from the next accepted fix
                 self._candidate = None
                 return ""
         self._candidate = fix
