@@ -150,3 +150,71 @@ def test_bad_frames_reach_the_loop_as_not_ok_fixes_with_a_reason():
     fix = pipe.process(SensorFrame(good[0], good[1], ok9, 0.01))
     assert fix.ok and np.linalg.norm(fix.position_m - p) < 1e-4
     assert fix.covariance_m2.shape == (3, 3) and 0 < fix.protection_level_m < 5e-3
+
+
+def test_multi_frame_protection_level_of_the_filtered_position():
+    """The filtered position (1 - K) x_pred + K x_fix has the error covariance
+    (1 - K)^2 p I + K^2 C: with C = s^2 I its noise part scales by
+    sqrt(((1 - K)^2 p + K^2 s^2) / s^2) (the bias part is not filtered); K = p / (p + s^2), the
+    optimal gain, gives the harmonic combination s^2 p / (s^2 + p)."""
+    from firmware_io.localization.integrity import fused_protection_level
+
+    s2, p, bias, pl = (0.8e-3) ** 2, (0.4e-3) ** 2, 1e-3, 6e-3
+    k = p / (p + s2)
+    got = fused_protection_level(pl, s2 * np.eye(3), p, bias, k)
+    assert got == pytest.approx(bias + (pl - bias) * np.sqrt(p / (s2 + p)), rel=1e-12)
+    # anisotropic C, a tracker gain: the worst direction is C's largest eigenvalue
+    cov = np.diag([0.2e-3, 0.5e-3, 2e-3]) ** 2
+    want = (0.7 ** 2 * p + 0.3 ** 2 * (2e-3) ** 2) / (2e-3) ** 2
+    assert fused_protection_level(pl, cov, p, bias, 0.3) == pytest.approx(
+        bias + (pl - bias) * np.sqrt(want), rel=1e-12)
+    # gain 1: the fix alone; no prediction, no covariance, or an infinite PL: the fix's own
+    assert fused_protection_level(pl, cov, p, bias, 1.0) == pytest.approx(pl, rel=1e-12)
+    assert fused_protection_level(pl, s2 * np.eye(3), 0.0, bias, k) == pl
+    assert fused_protection_level(pl, None, p, bias, k) == pl
+    assert fused_protection_level(np.inf, s2 * np.eye(3), p, bias, k) == np.inf
+
+
+class NoisyLocalizer:
+    """The true position, ok, with covariance sigma^2 I and the PL a single frame gives it
+    (1 mm bias + 4.6 sigma): over the 5 mm alert limit for sigma = 1.5 mm."""
+
+    model_bias_m = 1e-3
+
+    def __init__(self, truth, sigma_m):
+        self.truth, self.sigma = truth, sigma_m
+
+    def fix(self, top, bottom, currents=None):
+        pl = self.model_bias_m + 4.6 * self.sigma
+        return Estimate(np.asarray(self.truth(), float), True, self.sigma ** 2 * np.eye(3), pl)
+
+
+@pytest.mark.parametrize("sigma_m, renders", [(1.5e-3, True), (20e-3, False)])
+def test_multi_frame_pl_lets_the_runner_acquire_and_render(device, sigma_m, renders, tmp_path):
+    """Alert limit 5 mm, every fix's own PL above it: with sigma 1.5 mm the tracker's filtered
+    position gets a PL within the limit after a few frames (acquisition, then rendering);
+    with sigma 20 mm it never does, and nothing renders."""
+    design, array, a = device
+    dev = SimulatedDevice(design, array, seed=5)
+    traj = slide_trajectory(lambda x, y: np.full_like(x, 0.05), duration_s=0.3, samples=201)
+
+    def factory(source, clock, hook):
+        cfg = RunnerConfig(resistance_ohm=(dev.resistance_ohm,) * 9,
+                           inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
+                           current_limit_a=4.8, total_current_a=20.0, resume_after_s=0.02,
+                           alert_limit_m=5e-3)
+        loc = NoisyLocalizer(lambda: source.frame_truth_m, sigma_m)
+        r = Runner(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0), loc,
+                   ConstantVelocityTracker(), hook(clipped_lstsq), dev.coils, source, cfg,
+                   clock=clock, log=lambda line: None)
+        r.start()
+        return r
+
+    res = simulate(dev, factory, traj, duration_s=0.3, period_s=1e-3, progress=False)
+    write_run_csv(tmp_path / "run.csv", res.columns)
+    with (tmp_path / "run.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    state = np.array([r["state"] for r in rows])
+    cmd = np.array([[float(r[k]) for k in r if k.startswith("cmd")] for r in rows])
+    assert bool((state == "running").sum() > 100) is renders, np.unique(state, return_counts=True)
+    assert np.all(cmd[state != "running"] == 0.0)

@@ -18,7 +18,7 @@ from firmware_io.hw.pca9685 import PCA9685
 from firmware_io.hw.md10c import CoilDrive
 from firmware_io.runner import (CALIBRATION_CURRENT_A, calibrate_sensors, calibration_currents,
                                 record_calibration, rl_step)
-from firmware_io.hw.sensors import SensorArrays
+from firmware_io.hw.sensors import SensorArrays, default_sensor_layout
 from firmware_io.hw.sim import SimBus, SimClock, SimPCA9685, SimTCA9548A, SimTLV493D
 
 from ..array import CoilArray, force_matrix
@@ -83,10 +83,11 @@ class SimulatedDevice:
 
         self.sensor_clock = SimClock()
         self.sensor_bus = SimBus(scl_hz=400e3, clock=self.sensor_clock)
-        n_sensors = 2 * n
+        n_sensors = 2 * self.sensor_sim.n     # both arrays, any board size
         muxes = [self.sensor_bus.attach(SimTCA9548A(0x71 + k)) for k in range((n_sensors + 7) // 8)]
         self.tlv = [muxes[i // 8].attach(i % 8, SimTLV493D()) for i in range(n_sensors)]
-        self.sensors = SensorArrays(self.sensor_bus, sleep=self.sensor_clock.sleep)
+        self.sensors = SensorArrays(self.sensor_bus, default_sensor_layout(n_sensors),
+                                    sleep=self.sensor_clock.sleep)
         self.sensors.configure()
 
         self.current_a = np.zeros(n)

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import BadInputError
+from ..hw.tlv493d import TLV493D_LSB_T
 from ..mapfile import MapFile
 from .calibration import SensorCalibration
 from .filter import ConstantVelocityKalman
@@ -94,7 +95,9 @@ class Localizer:
     model : SensorModel
     method : {'learned', 'dipole', 'model', 'kalman'}
     learned : LearnedInverse, needed for 'learned'
-    noise_t : float, T rms per axis
+    noise_t : float, T rms per axis (the analog noise)
+    lsb_t : float, T -- the readout's quantization step; the fit's per-axis variance is
+        noise_t^2 + lsb_t^2 / 12 (uniform rounding error), plus the model-error terms
     relative_error : float, relative model error of a sensor's reading (gain, mounting);
         default 0.02, or 0.003 with a calibration
     residual_limit : float, largest normalized rms residual for ok (a cap beside the test)
@@ -129,7 +132,7 @@ class Localizer:
                  mount_position_m: float = 0.0, refresh_m: float = 1e-3,
                  integrity_risk: float = 1e-4, false_alarm: float = 1e-6,
                  alert_limit_m: float = math.inf, reacquire_m: float = 5e-3,
-                 model_bias_m: float = 1e-3):
+                 model_bias_m: float = 1e-3, lsb_t: float = TLV493D_LSB_T):
         if method not in METHODS:
             raise BadInputError("method", f"one of {METHODS}", method)
         if method == "learned":
@@ -159,13 +162,14 @@ class Localizer:
         for name, val in (("integrity_risk", integrity_risk), ("false_alarm", false_alarm)):
             if not (math.isfinite(val) and 0 < val < 0.5):
                 raise BadInputError(name, "a probability in (0, 0.5)", val)
-        if not (math.isfinite(model_bias_m) and model_bias_m >= 0):
-            raise BadInputError("model_bias_m", "a finite number >= 0, m", model_bias_m)
-        self.model_bias_m = float(model_bias_m)
+        for name, val in (("model_bias_m", model_bias_m), ("lsb_t", lsb_t)):
+            if not (math.isfinite(val) and val >= 0):
+                raise BadInputError(name, "a finite number >= 0 (m, T)", val)
+        self.model_bias_m, self._sig2n = float(model_bias_m), self.noise_t**2 + lsb_t**2 / 12.0
         if not (alert_limit_m > 0):   # inf: no alert limit (the scene sets one)
             raise BadInputError("alert_limit_m", "a number > 0 (or inf), m", alert_limit_m)
-        self.integrity_risk, self.false_alarm = float(integrity_risk), float(false_alarm)
-        self.alert_limit_m, self.reacquire_m = float(alert_limit_m), float(reacquire_m)
+        self.integrity_risk, self.false_alarm, self.alert_limit_m, self.reacquire_m = map(
+            float, (integrity_risk, false_alarm, alert_limit_m, reacquire_m))
         self._k2 = chi2_quantile(self.integrity_risk, 3)
         self._chi2_max = thresholds(self.false_alarm, 6 * model.n_sensors)
         self.cores = (model.induced is not None) if cores is None else bool(cores)
@@ -362,7 +366,7 @@ class Localizer:
         return (3 * self.mount_position_m * b / r) ** 2
 
     def _data(self, meas, currents):
-        sig2n = self.noise_t**2
+        sig2n = self._sig2n
         mag2 = np.einsum("asi,asi->as", meas, meas)
         if currents is None:
             d = meas[0] - np.matmul(self._mirror, meas[1][..., None])[..., 0]

@@ -85,6 +85,24 @@ def covariance_and_pl(fisher, chi2: float, dof: int, k2: float):
     return np.array(m), math.sqrt(lam * k2)
 
 
+def fused_protection_level(pl: float, cov, var_pred: float, bias: float,
+                           gain: float) -> float:
+    """Protection level (m) of a tracker's filtered position (1 - K) x_pred + K x_fix, K =
+    ``gain``, from the fix's covariance ``cov`` (3, 3) m^2 and the prediction's variance
+    ``var_pred`` m^2 per axis (from the earlier fixes, independent noise): the filtered error's
+    covariance is (1 - K)^2 var_pred I + K^2 C, so the fix's own noise part ``pl - bias`` scales
+    by sqrt(((1 - K)^2 var_pred + K^2 lambda_max(C)) / lambda_max(C)); the model-bias part
+    ``bias`` (m, common to every frame: filtering does not shrink it) stays. Degenerate inputs:
+    ``pl`` unchanged."""
+    if cov is None or not (math.isfinite(pl) and var_pred > 0 and 0 <= gain <= 1):
+        return pl
+    lam = float(np.linalg.eigvalsh(cov)[-1])
+    if not (math.isfinite(lam) and lam > 0):
+        return pl
+    filtered = (1 - gain) ** 2 * var_pred + gain ** 2 * lam
+    return bias + max(pl - bias, 0.0) * math.sqrt(filtered / lam)
+
+
 def _largest_eigenvalue(m) -> float:
     """Largest eigenvalue of a symmetric 3 x 3 matrix (nested lists): Smith, Comm. ACM 4, 168
     (1961)."""

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import BadInputError, CoilWriteError
-from ..localization.integrity import chi2_quantile
+from ..localization.integrity import chi2_quantile, fused_protection_level
 from .config import RunnerConfig
 from .drive import CurrentPath
 from .forcelaw import force_law_rows
@@ -251,18 +251,36 @@ class Runner:
             self.last_fix = fix
             problems.extend(fix.problems)
             accepted = False
-            if fix.ok and fix.protection_level_m > self.cfg.alert_limit_m:
-                problems.append(("lost", f"protection level {fix.protection_level_m * 1e3:.3g} "
-                                 f"mm > alert limit {self.cfg.alert_limit_m * 1e3:.3g} mm"))
-            elif fix.ok:
-                gated = self._gate(fix)
-                if gated:
-                    problems.append(("gated", gated))
-                else:
+            gated = self._gate(fix) if fix.ok else ""
+            pl = self._protection_level(fix) if fix.ok and not gated else math.inf
+            if gated:
+                problems.append(("gated", gated))
+            elif fix.ok and pl > self.cfg.alert_limit_m:
+                problems.append(("lost", f"protection level {pl * 1e3:.3g} mm > alert limit "
+                                 f"{self.cfg.alert_limit_m * 1e3:.3g} mm"))
+                if not self.have_fix:
+                    # acquisition: the tracker takes the fix (it passed the localizer's tests
+                    # and the gate), nothing renders until a filtered PL is within the limit
                     self.tracker.update(fix.position_m, fix.frame_t_s, True)
-                    self.have_fix = accepted = True
+            elif fix.ok:
+                self.tracker.update(fix.position_m, fix.frame_t_s, True)
+                self.have_fix = accepted = True
             self.last_estimate_ok = accepted      # taken into the tracker
         return fix is not None, problems
+
+    def _protection_level(self, fix: Fix) -> float:
+        """The protection level (m) of the position the runner renders at once this fix (past
+        the gate) is in the tracker: its filtered position, from the fix's covariance and the
+        tracker's prediction (:func:`firmware_io.localization.integrity.
+        fused_protection_level`, the localizer's ``model_bias_m`` kept whole). Without a
+        tracked state (the tracker also holds the fixes of an acquisition): the fix's own."""
+        if getattr(self.tracker, "x", None) is None or not hasattr(self.tracker, "innovation"):
+            return fix.protection_level_m
+        _, var = self.tracker.innovation(fix.position_m, fix.frame_t_s)
+        p = var - self.tracker.r
+        return fused_protection_level(fix.protection_level_m, fix.covariance_m2, p,
+                                      float(getattr(self.localizer, "model_bias_m", 0.0)),
+                                      p / var)
 
     def _gate(self, fix: Fix) -> str:
         """The innovation gate: '' when the fix agrees with the tracker's prediction at its
@@ -272,8 +290,7 @@ class Runner:
         fixes' covariances and the tracker's measurement noise), itself from the global search,
         re-starts the tracker there (a warm fit could repeat a wrong basin; a cold one would
         not)."""
-        if not self.have_fix or getattr(self.tracker, "x", None) is None \
-                or not hasattr(self.tracker, "innovation"):
+        if getattr(self.tracker, "x", None) is None or not hasattr(self.tracker, "innovation"):
             return ""
         cov = fix.covariance_m2 if fix.covariance_m2 is not None else np.zeros((3, 3))
         innov, var = self.tracker.innovation(fix.position_m, fix.frame_t_s)
@@ -289,6 +306,7 @@ class Runner:
             if float(dv @ np.linalg.solve(s, dv)) <= self.gate_d2:
                 # two consecutive re-acquired fixes agree: the tracker was wrong, not the fix
                 self.tracker.reset()
+                self.have_fix = False     # renders again from the next accepted fix
                 self._candidate = None
                 return ""
         self._candidate = fix

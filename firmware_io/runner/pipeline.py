@@ -117,6 +117,8 @@ class SensorPipeline:
         Optionally ``sensor_coil_field() -> (2, n, 3, n)`` T/A and ``sensor_positions_m``
         (2, n, 3) m: the expected-saturation test (:data:`EXPECTED_SATURATION`).
     n_coils : int
+    n_sensors : int or None -- sensors per array (default: the map's sensor positions, else the
+        localizer model's, else one per coil)
     currents_at : callable
         ``currents_at(t_s) -> (n,)`` A: the modelled currents when the frame was sampled.
     moment_a_m2 : ndarray, shape (3,), A m^2
@@ -124,19 +126,22 @@ class SensorPipeline:
     """
 
     def __init__(self, localizer, fieldmap, n_coils: int, currents_at: Callable,
-                 moment_a_m2, clock: Callable[[], float] = time.perf_counter):
-        self.localizer, self.map, self.n = localizer, fieldmap, n_coils
+                 moment_a_m2, clock: Callable[[], float] = time.perf_counter,
+                 n_sensors: int | None = None):
+        self.localizer, self.map = localizer, fieldmap
+        self.n = _sensors_per_array(fieldmap, localizer, n_coils) if n_sensors is None \
+            else int(n_sensors)
         self.currents_at, self.clock = currents_at, clock
         self.moment = np.asarray(moment_a_m2, float)
-        self.excluded = np.zeros(2 * n_coils, dtype=bool)
+        self.excluded = np.zeros(2 * self.n, dtype=bool)
         self.position_m: np.ndarray | None = None     # last ok estimate
         self.reacquire = False     # set by the control loop: the next fit starts cold
         coil_field = getattr(fieldmap, "sensor_coil_field", None)
         self._coil_field = None
         if coil_field is not None:
             g = np.asarray(coil_field(), float) if callable(coil_field) else None
-            if g is not None and g.shape == (2, n_coils, 3, n_coils):
-                self._coil_field = g.reshape(2 * n_coils * 3, n_coils)
+            if g is not None and g.shape == (2, self.n, 3, n_coils):
+                self._coil_field = g.reshape(2 * self.n * 3, n_coils)
                 self._sensor_pts = np.asarray(fieldmap.sensor_positions_m,
                                               float).reshape(-1, 3)
 
@@ -211,3 +216,13 @@ class SensorPipeline:
         return Fix(p, ok, float(frame.t_s), tuple(problems), self.excluded.copy(),
                    self.clock() - t0, None if cov is None else np.asarray(cov, float),
                    float(getattr(est, "protection_level_m", 0.0)), cold)
+
+
+def _sensors_per_array(fieldmap, localizer, n_coils: int) -> int:
+    """Sensors per array: the map's sensor positions (2, n, 3), else the localizer model's,
+    else one per coil."""
+    for owner in (fieldmap, getattr(localizer, "model", None)):
+        pts = getattr(owner, "sensor_positions_m", None)
+        if pts is not None and np.ndim(pts) == 3 and np.shape(pts)[0] == 2:
+            return int(np.shape(pts)[1])
+    return int(n_coils)
