@@ -93,6 +93,39 @@ def test_jacobian_matches_central_differences():
                                    err_msg=PARAMETERS[j])
 
 
+@pytest.mark.parametrize("own", [False, True])
+def test_coupling_slope_jacobian_matches_central_differences(own):
+    """The coupling's ln(mu_r) slope: each core's share in the Jacobian (all cores alike, or
+    each column to its own core) is the derivative of the model's value; a wrong share or a
+    missing turns factor fails."""
+    d = default_design().replace(**{"array.rows": 1, "array.columns": 2})
+    nom = CoilArray.from_design(d)
+    pts = np.array([[0.01, 0.02, 0.03], [-0.03, 0.01, 0.02]])
+    rng = np.random.default_rng(1)
+    c, slope = rng.normal(size=(2, 2, 3, 2)) * 1e-4
+    th = np.zeros((2, 8))
+    th[:, 5], th[:, 6] = [0.01, -0.02], [-0.3, -0.5]
+    models = [ForwardModel(nom.coils, pts, c, s_, -0.2, own_slope=own) for s_ in (None, slope)]
+    for m in models:  # the cores' own differences cancel in the comparison: reuse them
+        m._core_jac = np.zeros((2, 3, 2, 2))
+    (_, j0, _), (_, j1, shared) = (m.columns(th, True) for m in models)
+    h = 1e-4
+    up, dn = th.copy(), th.copy()
+    up[0, 6] += h
+    dn[0, 6] -= h
+    fd = ((models[1].columns(up) - models[1].columns(dn))
+          - (models[0].columns(up) - models[0].columns(dn))) / (2 * h)
+    scale = 1 + th[:, 5]
+    if own:
+        assert shared is None
+        np.testing.assert_allclose(j1[:, :, 0, 6] - j0[:, :, 0, 6], fd[:, :, 0], rtol=1e-6)
+        np.testing.assert_allclose(fd[:, :, 0], slope[:, :, 0] * scale[0], rtol=1e-6)
+        np.testing.assert_allclose(fd[:, :, 1], 0.0, atol=1e-12)
+    else:
+        np.testing.assert_allclose(shared, fd, rtol=1e-6)
+        np.testing.assert_allclose(fd, slope * scale / 2, rtol=1e-6)
+
+
 def test_fit_finds_an_air_array_within_three_standard_errors():
     nom, ab, meas = _measured(_air())
     res = cal.fit(nom, meas, BuildTolerances(), progress=False)

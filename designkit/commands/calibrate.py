@@ -45,9 +45,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--magnet-moment", default=None, metavar="MX,MY,MZ",
                         help="measured magnet moment, A m^2 (e.g. from the localizer's fits), "
                              "recorded in asbuilt.toml's [magnet]")
-    parser.add_argument("--coupling-rounds", type=int, default=2,
-                        help="refits after an exact coupled solve of the fitted device "
-                             "(default 2, 0..3)")
+    parser.add_argument("--coupling-rounds", type=int, default=3,
+                        help="at most this many refits after an exact coupled solve of the "
+                             "fitted device (fewer once the coupling converges; default 3, "
+                             "0..3)")
     add_progress_argument(parser)
 
 
@@ -137,7 +138,12 @@ def _report(res, meas, array, nominal) -> dict:
             "cost_after": res.cost_after,
             "residual_rms_t": {"before": _rms(res.residual_before_t),
                                "after": _rms(res.residual_after_t)},
-            "residual_by_group": by_group, "parameters": params, "unidentifiable": unident}
+            "residual_by_group": by_group, "parameters": params, "unidentifiable": unident,
+            "combined": [{"parameters": [f"coil {k + 1} {PARAMETERS[j]}" for k, j in
+                                         c["parameters"]],
+                          **{key: c[key] for key in ("correlation", "coefficients", "value",
+                                                     "std_error", "identifiable")}}
+                         for c in res.combined]}
 
 
 def _rms(r) -> float:
