@@ -8,7 +8,7 @@ coupling term is recomputed from an exact coupled solve of the fitted device (it
 ln(mu_r) the secant between solves) and the fit repeated until the coupling stops moving the
 cost. Standard errors: the whitened Gauss-Newton covariance (times the reduced chi-square when
 above 1) plus, for the model's own error, the parameter shifts of the last coupling update and
-of a refit with the coupling's permeability slope split the other way (each column's to its
+of a Gauss-Newton refit with the coupling's permeability slope split the other way (each column's to its
 own core instead of all cores alike). A
 parameter is identifiable when the data shrink its standard error below
 :data:`IDENTIFIABLE_RATIO` of its tolerance and its posterior correlation with every other
@@ -163,7 +163,7 @@ def _levenberg_marquardt(prob: _Problem, z, bar):
 
 
 def fit(nominal_array: CoilArray, meas: Measurements, tolerances: BuildTolerances, *,
-        coupling_rounds: int = 3, progress: bool = True) -> FitResult:
+        coupling_rounds: int = 2, progress: bool = True) -> FitResult:
     """Fit the as-built parameters of ``nominal_array``'s coils to ``meas``.
 
     ``coupling_rounds``: at most this many exact coupled solves of the fitted device after the
@@ -198,10 +198,13 @@ def fit(nominal_array: CoilArray, meas: Measurements, tolerances: BuildTolerance
                     break
             z, it = _levenberg_marquardt(prob, z, bar)
             iterations += it
-        # the model-error check: the other split of the coupling's permeability slope
-        prob.model = dataclasses.replace(prob.model, own_slope=True, _core_jac=None)
-        z_alt, _ = _levenberg_marquardt(prob, z, bar)
-        prob.model = dataclasses.replace(prob.model, own_slope=False, _core_jac=None)
+        # the model-error check: a Gauss-Newton step with the coupling's permeability slope
+        # split the other way
+        shared_split = prob.model
+        prob.model = dataclasses.replace(shared_split, own_slope=True)
+        r_alt, j_alt = prob.residual(z, True)
+        prob.model = shared_split
+        z_alt = z - np.linalg.lstsq(j_alt, r_alt, rcond=None)[0]
         bar.total = bar.n  # converged: the bar ends full
         bar.refresh()
     shift = np.hypot(shift, z_alt - z)

@@ -45,9 +45,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--magnet-moment", default=None, metavar="MX,MY,MZ",
                         help="measured magnet moment, A m^2 (e.g. from the localizer's fits), "
                              "recorded in asbuilt.toml's [magnet]")
-    parser.add_argument("--coupling-rounds", type=int, default=3,
+    parser.add_argument("--coupling-rounds", type=int, default=2,
                         help="at most this many refits after an exact coupled solve of the "
-                             "fitted device (fewer once the coupling converges; default 3, "
+                             "fitted device (fewer once the coupling converges; default 2, "
                              "0..3)")
     add_progress_argument(parser)
 
