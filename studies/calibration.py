@@ -10,8 +10,9 @@ at +-2 A, 0.05 mT noise; probe, ``--probe`` random workspace points, each coil a
 random workspace points; error of A(p) per point and row relative to the row's largest value
 over those points (:func:`designkit.calibration.actuation_error`), nominal and calibrated.
 Parameters: the fraction within 3 standard errors of the truth among those the fit calls
-identifiable. Benchmark: the fit's wall and CPU time on the onboard + probe rows (this
-machine, shared: the load average is printed with it).
+identifiable, and of the identifiable combined pairs (nearly collinear parameters) the count
+within 3 standard errors; "at priors" names what is neither. Benchmark: the fit's wall and
+CPU time on the onboard + probe rows (this machine, shared: the load average is printed).
 
 ``--run`` (3 x 3 only): the first device as the plant of ``designkit run --simulate`` (slide
 over the hemisphere, ``--duration`` s, no start-up sensor calibration) with the runner on the
@@ -70,6 +71,7 @@ def _one(design, nom, ab, tol, truth, plan_name, n_probe, rng, held_out, a_true)
     true = ab.parameters(nom.coils)
     ident = res.identifiable
     z = np.abs(res.params - true)[ident] / res.std_error[ident]
+    paired = {kj for c in res.combined if c["identifiable"] for kj in c["parameters"]}
     zc = [abs(c["value"] - sum(w * true[kj] for w, kj in zip(c["coefficients"],
                                                             c["parameters"]))) / c["std_error"]
           for c in res.combined if c["identifiable"]]
@@ -81,7 +83,8 @@ def _one(design, nom, ab, tol, truth, plan_name, n_probe, rng, held_out, a_true)
             "combined": len(zc), "combined_within_3se": int(np.sum(np.array(zc) < 3)),
             "worst_z": float(max(z.max() if len(z) else 0.0, max(zc, default=0.0))),
             "unidentifiable": sorted({n for (k, j), n in np.ndenumerate(_names(res))
-                                      if res.fitted[k, j] and not ident[k, j]}),
+                                      if res.fitted[k, j] and not ident[k, j]
+                                      and (k, j) not in paired}),
             "calibrated": calib, "asbuilt": res.params}
 
 

@@ -122,6 +122,7 @@ def _report(res, meas, array, nominal) -> dict:
                        "chi2_per_reading_before": _chi(res.residual_before_t[sel], meas, sel),
                        "chi2_per_reading_after": _chi(res.residual_after_t[sel], meas, sel)}
     params, unident = [], []
+    paired = {kj for c in res.combined if c["identifiable"] for kj in c["parameters"]}
     for k in range(array.n_coils):
         for j, name in enumerate(PARAMETERS):
             if not res.fitted[k, j]:
@@ -130,7 +131,7 @@ def _report(res, meas, array, nominal) -> dict:
             params.append({"coil": k + 1, "parameter": name, "value": float(res.params[k, j]),
                            "std_error": float(res.std_error[k, j]),
                            "prior": float(res.prior[k, j]), "identifiable": ident})
-            if not ident:
+            if not ident and (k, j) not in paired:
                 unident.append(f"coil {k + 1} {name}")
     return {"design": nominal.name, "design_sha256": nominal.spec_hash(), "rows": len(meas),
             "n_parameters": len(params), "iterations": res.iterations,
