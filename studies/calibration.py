@@ -6,12 +6,13 @@ Devices: :func:`designkit.asbuilt.random_asbuilt` with the default tolerances (0
 5 mrad tilt, 2 % turns, 0.5 mm core depth) times ``scale``, every core's steel at mu_r 450
 (nominal 1000). Readings from the device's exact coupled model: onboard arrays, each coil alone
 at +-2 A, 0.05 mT noise; probe, ``--probe`` random workspace points, each coil alone at 1 A,
-0.02 mT noise. Fit: :func:`designkit.calibration.fit` (two coupling rounds). Held out: 200
+0.02 mT noise. Fit: :func:`designkit.calibration.fit`. Held out: 200
 random workspace points; error of A(p) per point and row relative to the row's largest value
 over those points (:func:`designkit.calibration.actuation_error`), nominal and calibrated.
 Parameters: the fraction within 3 standard errors of the truth among those the fit calls
-identifiable. Benchmark: the fit's wall and CPU time on the onboard + probe rows (this
-machine, shared: the load average is printed with it).
+identifiable, and of the identifiable combined pairs (nearly collinear parameters) the count
+within 3 standard errors; "at priors" names what is neither. Benchmark: the fit's wall and
+CPU time on the onboard + probe rows (this machine, shared: the load average is printed).
 
 ``--run`` (3 x 3 only): the first device as the plant of ``designkit run --simulate`` (slide
 over the hemisphere, ``--duration`` s, no start-up sensor calibration) with the runner on the
@@ -70,13 +71,20 @@ def _one(design, nom, ab, tol, truth, plan_name, n_probe, rng, held_out, a_true)
     true = ab.parameters(nom.coils)
     ident = res.identifiable
     z = np.abs(res.params - true)[ident] / res.std_error[ident]
+    paired = {kj for c in res.combined if c["identifiable"] for kj in c["parameters"]}
+    zc = [abs(c["value"] - sum(w * true[kj] for w, kj in zip(c["coefficients"],
+                                                            c["parameters"]))) / c["std_error"]
+          for c in res.combined if c["identifiable"]]
     return {"plan": plan_name, "rows": len(meas), "fit_s": fit_s, "fit_cpu_s": fit_cpu_s,
             "nominal_max": float(e_nom.max()), "nominal_median": float(np.median(e_nom)),
             "calibrated_max": float(e_cal.max()), "calibrated_median": float(np.median(e_cal)),
             "identifiable": int(ident.sum()), "parameters": int(res.fitted.sum()),
             "within_3se": float((z < 3).mean()) if len(z) else float("nan"),
+            "combined": len(zc), "combined_within_3se": int(np.sum(np.array(zc) < 3)),
+            "worst_z": float(max(z.max() if len(z) else 0.0, max(zc, default=0.0))),
             "unidentifiable": sorted({n for (k, j), n in np.ndenumerate(_names(res))
-                                      if res.fitted[k, j] and not ident[k, j]}),
+                                      if res.fitted[k, j] and not ident[k, j]
+                                      and (k, j) not in paired}),
             "calibrated": calib, "asbuilt": res.params}
 
 
@@ -165,7 +173,9 @@ def _row(r) -> str:
             f"fit {r['fit_s']:6.1f} s (CPU {r['fit_cpu_s']:.1f} s) | A(p) error max/median: nominal {r['nominal_max']:.2%} / "
             f"{r['nominal_median']:.3%}, calibrated {r['calibrated_max']:.2%} / "
             f"{r['calibrated_median']:.3%} | identifiable {r['identifiable']}/"
-            f"{r['parameters']}, within 3 SE {r['within_3se']:.0%} | at priors: "
+            f"{r['parameters']}, within 3 SE {r['within_3se']:.0%}, identifiable pairs "
+            f"{r['combined_within_3se']}/{r['combined']} within 3 SE, worst "
+            f"{r['worst_z']:.1f} SE | at priors: "
             f"{', '.join(r['unidentifiable']) or '-'}")
 
 

@@ -93,6 +93,64 @@ def test_jacobian_matches_central_differences():
                                    err_msg=PARAMETERS[j])
 
 
+@pytest.mark.parametrize("own", [False, True])
+def test_coupling_slope_jacobian_matches_central_differences(own):
+    """The coupling's ln(mu_r) slope: each core's share in the Jacobian (all cores alike, or
+    each column to its own core) is the derivative of the model's value; a wrong share or a
+    missing turns factor fails."""
+    d = default_design().replace(**{"array.rows": 1, "array.columns": 2})
+    nom = CoilArray.from_design(d)
+    pts = np.array([[0.01, 0.02, 0.03], [-0.03, 0.01, 0.02]])
+    rng = np.random.default_rng(1)
+    c, slope = rng.normal(size=(2, 2, 3, 2)) * 1e-4
+    th = np.zeros((2, 8))
+    th[:, 5], th[:, 6] = [0.01, -0.02], [-0.3, -0.5]
+    models = [ForwardModel(nom.coils, pts, c, s_, -0.2, own_slope=own) for s_ in (None, slope)]
+    for m in models:  # the cores' own differences cancel in the comparison: reuse them
+        m._core_jac = np.zeros((2, 3, 2, 2))
+    (_, j0, _), (_, j1, shared) = (m.columns(th, True) for m in models)
+    h = 1e-4
+    up, dn = th.copy(), th.copy()
+    up[0, 6] += h
+    dn[0, 6] -= h
+    fd = ((models[1].columns(up) - models[1].columns(dn))
+          - (models[0].columns(up) - models[0].columns(dn))) / (2 * h)
+    scale = 1 + th[:, 5]
+    if own:
+        assert shared is None
+        np.testing.assert_allclose(j1[:, :, 0, 6] - j0[:, :, 0, 6], fd[:, :, 0], rtol=1e-6)
+        np.testing.assert_allclose(fd[:, :, 0], slope[:, :, 0] * scale[0], rtol=1e-6)
+        np.testing.assert_allclose(fd[:, :, 1], 0.0, atol=1e-12)
+    else:
+        np.testing.assert_allclose(shared, fd, rtol=1e-6)
+        np.testing.assert_allclose(fd, slope * scale / 2, rtol=1e-6)
+
+
+def test_a_nearly_collinear_pair_is_one_combined_quantity():
+    """Whitened covariance [[1, -0.98], [-0.98, 1]] * v: the best-determined combination is the
+    sum (eigenvalue v (1 - 0.98), closed form), its standard error adds the model-error shift
+    along it; the pair is not separately identifiable."""
+    from designkit.calibration.fit import CORRELATION_LIMIT, _combined
+
+    mask = np.zeros((1, 8), bool)
+    mask[0, 5:7] = True
+    sig = np.array([[1, 1, 1, 1, 1, 0.02, 1.0, 1]])
+    v, rho = 0.5, -0.98
+    cov = v * np.array([[1.0, rho], [rho, 1.0]])
+    corr = np.array([[0.0, rho], [rho, 0.0]])
+    theta = np.zeros((1, 8))
+    theta[0, 5:7] = [0.01, -0.3]
+    shift = np.array([0.03, 0.04])
+    [c] = _combined(theta, cov, shift, mask, sig, np.array([5, 6]), corr)
+    assert abs(rho) >= CORRELATION_LIMIT and c["correlation"] == rho
+    vec = np.array(c["coefficients"]) * [0.02, 1.0]
+    assert abs(vec @ vec - 1) < 1e-12 and abs(abs(vec @ [1, 1]) - np.sqrt(2)) < 1e-9
+    model_err = (vec @ shift) ** 2
+    assert c["std_error"] == pytest.approx(np.sqrt(v * (1 + rho) + model_err), rel=1e-9)
+    assert c["value"] == pytest.approx(np.dot(c["coefficients"], [0.01, -0.3]), rel=1e-12)
+    assert c["identifiable"] == (c["std_error"] < 0.5)
+
+
 def test_fit_finds_an_air_array_within_three_standard_errors():
     nom, ab, meas = _measured(_air())
     res = cal.fit(nom, meas, BuildTolerances(), progress=False)
@@ -116,7 +174,7 @@ def test_calibrate_command_writes_a_design_and_the_report(tmp_path):
     built = load_design(out / "asbuilt.toml")
     assert built.magnet.moment_vector_a_m2 == pytest.approx((0.0, 0.0, -0.88))
     rep = json.loads((out / "calibration.json").read_text())
-    assert rep["n_parameters"] == 18 and rep["unidentifiable"] == []
+    assert rep["n_parameters"] == 18 and rep["unidentifiable"] == [] and rep["combined"] == []
     assert set(rep["residual_by_group"]) == {"onboard-upper", "onboard-lower", "probe"}
     up = rep["residual_by_group"]["onboard-upper"]
     assert up["chi2_per_reading_after"] < 1.5 < up["chi2_per_reading_before"]

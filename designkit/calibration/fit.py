@@ -4,16 +4,23 @@ Minimizes ``sum_rows |(b_model - b_read) / sigma|^2 + sum_params (theta / tol)^2
 readings weighted by their noise, the priors the build tolerances
 (:class:`designkit.asbuilt.BuildTolerances`, mean = nominal). Levenberg-Marquardt in the
 whitened parameters ``z = theta / tol`` on :class:`ForwardModel`; after it converges the
-coupling term is recomputed from an exact coupled solve of the fitted device and the fit
-repeated (``coupling_rounds``). Standard errors from the inverse of the whitened normal matrix
-(Gauss-Newton, at the solution); a parameter is identifiable when the data shrink its
-standard error below :data:`IDENTIFIABLE_RATIO` of its tolerance. Reference: Petruska et al.,
+coupling term is recomputed from an exact coupled solve of the fitted device (its slope in
+ln(mu_r) the secant between solves) and the fit repeated until the coupling stops moving the
+cost. Standard errors: the whitened Gauss-Newton covariance (times the reduced chi-square when
+above 1) plus, for the model's own error, the parameter shifts of the last coupling update and
+of a Gauss-Newton refit with the coupling's permeability slope split the other way (each column's to its
+own core instead of all cores alike). A
+parameter is identifiable when the data shrink its standard error below
+:data:`IDENTIFIABLE_RATIO` of its tolerance and its posterior correlation with every other
+stays below :data:`CORRELATION_LIMIT`; nearly collinear pairs are reported as one combined
+quantity. Reference: Petruska et al.,
 "Model-based calibration for magnetic manipulation", IEEE Trans. Magn. 53 (2017);
 docs/calibration.md.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -33,7 +40,14 @@ the cost (a chi-square change far below 1 carries no information)."""
 MAX_ITERATIONS = 40
 """Levenberg-Marquardt iterations per coupling round before the fit counts as not converged."""
 LOGMU_SPAN = 0.8
-"""ln(mu_r) span of the two coupled solves that give the coupling's permeability slope."""
+"""ln(mu_r) span of the two coupled solves that give the coupling's permeability slope when no
+earlier solve is far enough (:data:`MIN_SECANT`)."""
+MIN_SECANT = 0.2
+"""Smallest ln(mu_r) span between two coupled solves whose secant gives the slope."""
+COUPLING_CHI2 = 1.0
+"""The coupling has converged when a new exact solve moves the whitened cost by less than this."""
+CORRELATION_LIMIT = 0.9
+"""|Posterior correlation| from which two parameters count as one combined quantity."""
 
 
 class FitNotConverged(RuntimeError, DesignkitError):
@@ -54,12 +68,23 @@ class FitResult:
     iterations: int
     residual_before_t: np.ndarray = field(repr=False)
     residual_after_t: np.ndarray = field(repr=False)
+    correlation: np.ndarray = field(default=None, repr=False)
+    """(n_coils, 8) each parameter's largest posterior correlation with another (signed)."""
+    partner: np.ndarray = field(default=None, repr=False)
+    """(n_coils, 8) flat index (coil * 8 + parameter) of that other parameter, -1 if unfitted."""
+    combined: list = field(default_factory=list, repr=False)
+    """Pairs with |correlation| >= CORRELATION_LIMIT, identifiable only together
+    (:func:`_combined`)."""
 
     @property
     def identifiable(self) -> np.ndarray:
-        """(n_coils, 8) bool: fitted and the data shrink the error below the ratio."""
+        """(n_coils, 8) bool: fitted, the data shrink the error below the ratio, and not
+        nearly one quantity with another parameter (those are in :attr:`combined`)."""
         with np.errstate(invalid="ignore", divide="ignore"):
-            return self.fitted & (self.std_error < IDENTIFIABLE_RATIO * self.prior)
+            ok = self.fitted & (self.std_error < IDENTIFIABLE_RATIO * self.prior)
+        if self.correlation is not None:
+            ok &= np.abs(self.correlation) < CORRELATION_LIMIT
+        return ok
 
 
 def fitted_mask(nominal_coils, tolerances: BuildTolerances) -> np.ndarray:
@@ -139,7 +164,10 @@ def _levenberg_marquardt(prob: _Problem, z, bar):
 
 def fit(nominal_array: CoilArray, meas: Measurements, tolerances: BuildTolerances, *,
         coupling_rounds: int = 2, progress: bool = True) -> FitResult:
-    """Fit the as-built parameters of ``nominal_array``'s coils to ``meas``."""
+    """Fit the as-built parameters of ``nominal_array``'s coils to ``meas``.
+
+    ``coupling_rounds``: at most this many exact coupled solves of the fitted device after the
+    first fit (fewer when the coupling has converged, :data:`COUPLING_CHI2`)."""
     coils = nominal_array.coils
     mask = fitted_mask(coils, tolerances)
     check_enough(meas, int(mask.sum()))
@@ -151,7 +179,7 @@ def fit(nominal_array: CoilArray, meas: Measurements, tolerances: BuildTolerance
     z = np.zeros(int(mask.sum()))
     r0 = prob.residual(z)
     before = r0[:-len(z)].reshape(-1, 3) / prob.w
-    iterations = 0
+    iterations, shift = 0, np.zeros_like(z)
     with tqdm(total=MAX_ITERATIONS * (coupling_rounds + 1), desc="calibrate", unit="step",
               disable=not progress) as bar:
         for rnd in range(coupling_rounds + 1):
@@ -160,33 +188,97 @@ def fit(nominal_array: CoilArray, meas: Measurements, tolerances: BuildTolerance
                 built = CoilArray(AsBuilt.from_parameters(coils, th).apply(coils),
                                   sensor_offset_m=nominal_array.sensor_offset_m)
                 bar.set_description("calibrate (exact coupled solve)")
+                r_old = prob.residual(z)
                 prob.model = _coupled_model(coils, built, th, uniq, prob.model)
+                r_new, j = prob.residual(z, True)
+                # the new coupling's pull on the parameters: what the last one got wrong
+                shift = np.linalg.lstsq(j, r_old - r_new, rcond=None)[0]
                 bar.set_description("calibrate")
+                if np.sum(np.square(r_new - r_old)) < COUPLING_CHI2:
+                    break
             z, it = _levenberg_marquardt(prob, z, bar)
             iterations += it
+        # the model-error check: a Gauss-Newton step with the coupling's permeability slope
+        # split the other way
+        shared_split = prob.model
+        prob.model = dataclasses.replace(shared_split, own_slope=True)
+        r_alt, j_alt = prob.residual(z, True)
+        prob.model = shared_split
+        z_alt = z - np.linalg.lstsq(j_alt, r_alt, rcond=None)[0]
         bar.total = bar.n  # converged: the bar ends full
         bar.refresh()
+    shift = np.hypot(shift, z_alt - z)
+    return _result(prob, z, r0, before, shift, iterations)
+
+
+def _result(prob, z, r0, before, shift, iterations) -> FitResult:
+    """Standard errors: Gauss-Newton covariance, scaled by the reduced chi-square when the
+    residuals exceed the noise, plus the last coupling update's shift (model error)."""
+    mask, sig = prob.mask, prob.sig
     r, j = prob.residual(z, True)
     a = j.T @ j
     cov = np.linalg.inv(a)
+    n_data = len(r) - len(z)
+    chi2 = float(np.sum(np.square(r[:n_data])))
+    cov = cov * max(1.0, chi2 / max(n_data - len(z), 1))
+    var = np.diag(cov) + np.square(shift)
     se = np.zeros(mask.shape)
-    se[mask] = np.sqrt(np.diag(cov)) * sig[mask]
+    se[mask] = np.sqrt(var) * sig[mask]
+    sd = np.sqrt(np.diag(cov))
+    corr = cov / np.outer(sd, sd)
+    np.fill_diagonal(corr, 0.0)
+    partner = np.full(mask.shape, -1)
+    rho = np.zeros(mask.shape)
+    best = np.argmax(np.abs(corr), axis=1)
+    flat = np.flatnonzero(mask.ravel())
+    partner[mask] = flat[best]
+    rho[mask] = corr[np.arange(len(z)), best]
     eig = np.linalg.eigvalsh(a)
     return FitResult(prob.theta(z), se, np.array(sig), mask, float(r0 @ r0), float(r @ r),
                      float(eig[-1] / eig[0]), iterations, before,
-                     r[:-len(z)].reshape(-1, 3) / prob.w)
+                     r[:n_data].reshape(-1, 3) / prob.w, rho, partner, _combined(
+                         prob.theta(z), cov, shift, mask, sig, flat, corr))
+
+
+def _combined(theta, cov, shift, mask, sig, flat, corr) -> list:
+    """The parameter pairs with |posterior correlation| >= CORRELATION_LIMIT: each pair's
+    best-determined combination ``sum c_i theta_i`` (c in 1/parameter unit, unit norm in
+    tolerances, so its prior standard deviation is 1), its value and standard error (model
+    error included), identifiable when that is below IDENTIFIABLE_RATIO."""
+    out = []
+    for a, b in zip(*np.nonzero(np.triu(np.abs(corr) >= CORRELATION_LIMIT))):
+        sub = cov[np.ix_([a, b], [a, b])]
+        w, v = np.linalg.eigh(sub)
+        vec = v[:, 0]
+        ka, ja = np.unravel_index(flat[a], mask.shape)
+        kb, jb = np.unravel_index(flat[b], mask.shape)
+        coef = vec / np.array([sig[ka, ja], sig[kb, jb]])
+        se = float(np.sqrt(w[0] + (vec @ shift[[a, b]]) ** 2))
+        out.append({"parameters": ((int(ka), int(ja)), (int(kb), int(jb))),
+                    "correlation": float(corr[a, b]), "coefficients": coef.tolist(),
+                    "value": float(coef @ [theta[ka, ja], theta[kb, jb]]),
+                    "std_error": se,
+                    "identifiable": bool(se < IDENTIFIABLE_RATIO * np.hypot(*vec))})
+    return out
 
 
 def _coupled_model(coils, array: CoilArray, params, points, previous=None) -> ForwardModel:
     """The forward model with the coupling of ``array`` (built with ``params``) and its
-    derivative by the cores' mean ln(mu_r) (from ``previous``, else two solves of ``array``'s
-    geometry at its permeabilities and e^-LOGMU_SPAN times them)."""
+    derivative by the cores' mean ln(mu_r): the secant from ``previous`` when their mean
+    ln(mu_r) differ by at least MIN_SECANT, else ``previous``'s, else from a second solve of
+    ``array``'s geometry at e^-LOGMU_SPAN times its permeabilities)."""
     cores = [k for k, c in enumerate(coils) if c.core is not None]
     ref = float(np.mean(params[cores, 6])) if cores else 0.0
     c0 = coupling_term(coils, array, params, points)
-    if previous is not None or not cores:
-        return ForwardModel(coils, points, c0, None if previous is None
-                            else previous.coupling_dlogmu, ref)
+    if not cores:
+        return ForwardModel(coils, points, c0, None, ref)
+    if previous is not None:
+        prev_c = previous.coupling
+        span = ref - previous.logmu_ref
+        if abs(span) >= MIN_SECANT:
+            return ForwardModel(coils, points, c0, (c0 - prev_c) / span, ref)
+        if previous.coupling_dlogmu is not None:
+            return ForwardModel(coils, points, c0, previous.coupling_dlogmu, ref)
     p2 = np.array(params, dtype=float)
     p2[cores, 6] -= LOGMU_SPAN
     other = CoilArray(AsBuilt.from_parameters(coils, p2).apply(coils),
@@ -210,4 +302,5 @@ def posterior_std(jac_data: np.ndarray, prior: np.ndarray) -> np.ndarray:
 
 
 __all__ = ["FitNotConverged", "actuation_error", "FitResult", "IDENTIFIABLE_RATIO", "PARAMETERS", "check_enough",
+           "CORRELATION_LIMIT",
            "fit", "fitted_mask", "posterior_std"]

@@ -93,6 +93,9 @@ class ForwardModel:
     """d coupling / d mean ln(mu_r) of the cores (n, 3, n_coils) T/A, or None."""
     logmu_ref: float = 0.0
     """Mean ln(mu_r / nominal) of the cores at which ``coupling`` was computed."""
+    own_slope: bool = False
+    """Attribute column k's permeability slope to core k's ln(mu_r) alone instead of spreading
+    it over every core's (the other extreme of the unknown split: the model-error check)."""
     refresh_every: int = 4
     """New mu_r / core-offset differences every this many Jacobians."""
     _core_jac: np.ndarray | None = dataclasses.field(default=None, repr=False)
@@ -112,7 +115,11 @@ class ForwardModel:
             self._core_jac, self._age = jac[:, :, :, 6:].copy(), 1
         cores = np.array([c.core is not None for c in self.nominal_coils])
         coupling = self.coupling
-        if self.coupling_dlogmu is not None and cores.any():
+        own = self.own_slope and self.coupling_dlogmu is not None and cores.any()
+        if own:
+            coupling = coupling + np.where(cores, params[:, 6] - self.logmu_ref, 0.0) * \
+                self.coupling_dlogmu
+        elif self.coupling_dlogmu is not None and cores.any():
             coupling = coupling + (params[cores, 6].mean() - self.logmu_ref) * \
                 self.coupling_dlogmu
         base = b0 + coupling
@@ -123,7 +130,9 @@ class ForwardModel:
         jac *= scale[None, None, :, None]
         jac[:, :, :, 5] = base
         shared = None
-        if self.coupling_dlogmu is not None and cores.any():
+        if own:
+            jac[:, :, cores, 6] += (self.coupling_dlogmu * scale)[:, :, cores]
+        elif self.coupling_dlogmu is not None and cores.any():
             # every column's coupling moves with each core's ln(mu_r) / n_cores
             shared = self.coupling_dlogmu * scale / cores.sum()
         return b, jac, shared

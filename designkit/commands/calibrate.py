@@ -46,8 +46,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="measured magnet moment, A m^2 (e.g. from the localizer's fits), "
                              "recorded in asbuilt.toml's [magnet]")
     parser.add_argument("--coupling-rounds", type=int, default=2,
-                        help="refits after an exact coupled solve of the fitted device "
-                             "(default 2, 0..3)")
+                        help="at most this many refits after an exact coupled solve of the "
+                             "fitted device (fewer once the coupling converges; default 2, "
+                             "0..3)")
     add_progress_argument(parser)
 
 
@@ -121,6 +122,7 @@ def _report(res, meas, array, nominal) -> dict:
                        "chi2_per_reading_before": _chi(res.residual_before_t[sel], meas, sel),
                        "chi2_per_reading_after": _chi(res.residual_after_t[sel], meas, sel)}
     params, unident = [], []
+    paired = {kj for c in res.combined if c["identifiable"] for kj in c["parameters"]}
     for k in range(array.n_coils):
         for j, name in enumerate(PARAMETERS):
             if not res.fitted[k, j]:
@@ -129,7 +131,7 @@ def _report(res, meas, array, nominal) -> dict:
             params.append({"coil": k + 1, "parameter": name, "value": float(res.params[k, j]),
                            "std_error": float(res.std_error[k, j]),
                            "prior": float(res.prior[k, j]), "identifiable": ident})
-            if not ident:
+            if not ident and (k, j) not in paired:
                 unident.append(f"coil {k + 1} {name}")
     return {"design": nominal.name, "design_sha256": nominal.spec_hash(), "rows": len(meas),
             "n_parameters": len(params), "iterations": res.iterations,
@@ -137,7 +139,12 @@ def _report(res, meas, array, nominal) -> dict:
             "cost_after": res.cost_after,
             "residual_rms_t": {"before": _rms(res.residual_before_t),
                                "after": _rms(res.residual_after_t)},
-            "residual_by_group": by_group, "parameters": params, "unidentifiable": unident}
+            "residual_by_group": by_group, "parameters": params, "unidentifiable": unident,
+            "combined": [{"parameters": [f"coil {k + 1} {PARAMETERS[j]}" for k, j in
+                                         c["parameters"]],
+                          **{key: c[key] for key in ("correlation", "coefficients", "value",
+                                                     "std_error", "identifiable")}}
+                         for c in res.combined]}
 
 
 def _rms(r) -> float:
