@@ -52,6 +52,13 @@ CASES = {
 }
 
 
+def _as_from_a_terminal() -> None:
+    """SIGINT at its default, as a shell leaves it for a program run in the foreground: a test
+    run started in the background (``cmd &`` without job control) ignores SIGINT, and Python
+    then installs no KeyboardInterrupt handler, so Ctrl-C could not be tested at all."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 FAST = ("map", "scene", "sweep")
 """In the default suite; the others take tens of seconds each (slow)."""
 
@@ -70,7 +77,7 @@ def test_ctrl_c_is_one_line_exit_130_and_leaves_nothing(tmp_path, command):
     proc = subprocess.Popen([sys.executable, "-c", DRIVER, target, str(flag), str(hold), *args,
                              *(["--no-progress"] if command not in ("viz", "fem") else [])],
                             cwd=work, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+                            text=True, preexec_fn=_as_from_a_terminal)
     try:
         deadline = time.monotonic() + 600
         while not flag.exists() and proc.poll() is None and time.monotonic() < deadline:
