@@ -259,12 +259,8 @@ def book_violations(design: Design, device, row: dict, insulated_m: float) -> li
         x = [row["inner_radius_m"], row["outer_radius_m"], row["length_m"], k.radius_m,
              k.length_m, k.offset_m + k.length_m / 2 - row["length_m"] / 2,
              row["wire_diameter_m"]]
-        zero = np.zeros(1)
         # the device formulas with the sweep model's inductance as the secant inductance
-        many = device._assemble(np.array([x]), np.array([float(row["turns"])]), zero, zero,
-                                zero, zero, np.array([row["inductance_h"]]))
-        ev = {q: float(val[0]) for q, val in many.items() if q != "g"}
-        table = device.constraint_table(x, ev)
+        table = device.table_with_inductance(x, row["turns"], row["inductance_h"])
         broken += [f"{name} limit" for name, r in table.items() if not r["met"]]
     broken += [f"rule {r.name}" for r in rules.violations(d2)]
     return broken

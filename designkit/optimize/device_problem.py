@@ -420,6 +420,14 @@ class DeviceProblem(DesignView):
                 "time_to_max_temperature_s": t_hot, "copper_mass_kg": mass,
                 "peak_core_flux_density_t": peak, "g": g}
 
+    def table_with_inductance(self, x, turns: float, inductance_h: float) -> dict:
+        """:meth:`constraint_table` of one design from a given secant inductance (H), with no
+        field solve: for callers (the coil sweep) that already have the coil's inductance."""
+        zero = np.zeros(1)
+        many = self._assemble(np.array([x], dtype=float), np.array([float(turns)]), zero, zero,
+                              zero, zero, np.array([float(inductance_h)]))
+        return self.constraint_table(x, {q: float(v[0]) for q, v in many.items() if q != "g"})
+
     def constraint_table(self, x, ev: dict, turns_fit: int | None = None) -> dict:
         """Each constraint: value, limit, kind, margin (>= 0 when met; in the value's unit)."""
         ri, ro, ln, a, lc, prot, d = [float(q) for q in x[:7]]
