@@ -68,12 +68,8 @@ def run(args: argparse.Namespace) -> int:
     # staged: a run that fails (bad trajectory file, a fault, Ctrl-C) leaves no half-written
     # folder (map and scene without a summary) behind
     with staged_folder(args.out) as stage:
-        summary = run_simulation(
-            design=args.design, obj=args.object, trajectory=args.trajectory,
-            duration_s=args.duration, faults=args.faults, map_path=args.map,
-            method=args.method, period_s=args.period_ms * 1e-3, unipolar=args.unipolar,
-            rows=args.rows, lam_n_per_m=args.lam, seed=args.seed, out=stage,
-            progress=show_progress(args), plant=args.as_built)
+        summary = run_simulation(design=args.design, map_path=args.map, out=stage,
+                                 **_run_options(args))
         if args.as_built is not None:
             _as_built_comparison(args, summary, stage)
     print(f"wrote {args.out}/run.csv, summary.json, run.png, loop_timing.png: force error RMS "
@@ -89,6 +85,14 @@ def run(args: argparse.Namespace) -> int:
     for f in summary.get("faults_not_injected", []):
         print(f"  fault {f['fault']} @ {f['scheduled_s']:.3f} s: not injected ({f['why']})")
     return 0
+
+
+def _run_options(args: argparse.Namespace) -> dict:
+    """The options of :func:`designkit.sim.run_simulation` every run of this command shares."""
+    return dict(obj=args.object, trajectory=args.trajectory, duration_s=args.duration,
+                faults=args.faults, method=args.method, period_s=args.period_ms * 1e-3,
+                unipolar=args.unipolar, rows=args.rows, lam_n_per_m=args.lam, seed=args.seed,
+                progress=show_progress(args), plant=args.as_built)
 
 
 def _fault_line(f: dict) -> str:
@@ -113,12 +117,7 @@ def _as_built_comparison(args, summary, stage) -> None:
            "force_error_rms_n": summary["force_error_rms_n"]}
     if design.asbuilt is not None:
         nominal = dataclasses.replace(design, asbuilt=None)
-        other = run_simulation(
-            design=nominal, obj=args.object, trajectory=args.trajectory,
-            duration_s=args.duration, faults=args.faults, method=args.method,
-            period_s=args.period_ms * 1e-3, unipolar=args.unipolar, rows=args.rows,
-            lam_n_per_m=args.lam, seed=args.seed, out=stage / "nominal-map",
-            progress=show_progress(args), plant=args.as_built)
+        other = run_simulation(design=nominal, out=stage / "nominal-map", **_run_options(args))
         out["nominal_map_force_error_rms_n"] = other["force_error_rms_n"]
     summary["as_built"] = out
     write_json_atomic(stage / "summary.json", summary)
