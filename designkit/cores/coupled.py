@@ -28,7 +28,7 @@ from ..pose import Pose
 from ..winding_geometry import WindingGeometry
 from .charges import gauss
 from .core_model import M_MAX, CoreModel, core_model
-from .symmetric_solve import SymmetricLU
+from .symmetric_solve import SQUARE_GROUP, SymmetricLU
 
 N_PHI_RING = 12
 """Azimuthal samples per collocation ring when projecting another core's / a winding's field."""
@@ -63,9 +63,7 @@ def _cylinder_magnet(moment, magnet_size_m):
     return a, length, u, mm / (math.pi * a * a * length)
 
 
-_D4 = [np.array(g, float) for g in (
-    [[0, -1], [1, 0]], [[-1, 0], [0, -1]], [[0, 1], [-1, 0]], [[-1, 0], [0, 1]],
-    [[1, 0], [0, -1]], [[0, 1], [1, 0]], [[0, -1], [-1, 0]])]
+_D4 = SQUARE_GROUP[1:]
 """The elements of the square's symmetry group but the identity (x, y part; z is kept)."""
 
 

@@ -24,7 +24,12 @@ from scipy.linalg import lu_factor, lu_solve
 from .._blas import one_blas_thread
 
 TOL_M = 1e-9
-"""Two core positions closer than this (m) are the same."""
+"""Two positions (cores, map points) closer than this (m) are the same."""
+
+SQUARE_GROUP = [np.array(g, float) for g in (
+    [[1, 0], [0, 1]], [[0, -1], [1, 0]], [[-1, 0], [0, -1]], [[0, 1], [-1, 0]],
+    [[-1, 0], [0, 1]], [[1, 0], [0, -1]], [[0, 1], [1, 0]], [[0, -1], [-1, 0]])]
+"""The symmetry group of the square (D4), identity first: (2, 2) x, y parts; z is kept."""
 
 
 def _group(system, d4) -> list:

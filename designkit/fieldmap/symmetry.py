@@ -26,13 +26,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..array import CoilArray, g5_from_gradient, gradient_from_g5
+from ..cores.symmetric_solve import SQUARE_GROUP, TOL_M
 from ..pose import Pose
 
-TOL_M = 1e-9
-"""Two positions closer than this (m) are the same point."""
-_CANDIDATES = [np.array(g, float) for g in (
-    [[1, 0], [0, 1]], [[0, -1], [1, 0]], [[-1, 0], [0, -1]], [[0, 1], [-1, 0]],
-    [[-1, 0], [0, 1]], [[1, 0], [0, -1]], [[0, 1], [1, 0]], [[0, -1], [-1, 0]])]
 
 
 @dataclass(frozen=True)
@@ -59,7 +55,7 @@ def array_symmetries(arr: CoilArray, centre) -> list[Symmetry]:
     kinds = [dataclasses.replace(c, pose=Pose()) for c in arr.coils]
     tree = cKDTree(pos)
     out = []
-    for g2 in _CANDIDATES:
+    for g2 in SQUARE_GROUP:
         g = np.eye(3)
         g[:2, :2] = g2
         dist, idx = tree.query(_apply(g, centre, pos))
