@@ -257,3 +257,27 @@ def test_cad_keys_are_checked_and_left_out_of_the_spec_hash():
     # printing choices do not change the physics: a map built for the design stays valid
     assert d.replace(**{"cad.flange_lip_m": 0.002}).spec_hash() == d.spec_hash()
     assert d.replace(**{"coil.turns": 1000}).spec_hash() != d.spec_hash()
+
+
+def test_every_device_row_names_design_keys_that_move_it():
+    # "fixed by" of `designkit check`: each listed key is a design key, and changing it (by 5 %
+    # up or down) moves that row's value or limit; a key that does not is a wrong hint
+    from designkit.optimize import rule_table
+    d = load_design("optimized")
+    table = rule_table(d)
+    device = {n: r for n, r in table.items() if r.get("group", "device") == "device"}
+    assert len(device) >= 8
+    for name, row in device.items():
+        assert row["keys"], name
+        for key in row["keys"]:
+            section, field = key.split(".")
+            old = getattr(getattr(d, section), field)
+            for factor in (1.05, 0.95):  # a step the design accepts (the core fits the bore)
+                new = round(old * factor) if isinstance(old, int) else old * factor
+                try:
+                    moved = rule_table(d.replace(**{key: new}))[name]
+                    break
+                except BadInputError:
+                    continue
+            assert (moved["value"], moved["limit"]) != pytest.approx(
+                (row["value"], row["limit"]), rel=1e-9), (name, key)

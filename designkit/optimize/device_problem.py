@@ -460,8 +460,26 @@ class DeviceProblem(DesignView):
             margin = (lim - val) * sense
             out[name] = {"value": float(val), "limit": float(lim), "unit": _unit_of(name),
                          "kind": "upper" if sense > 0 else "lower", "margin": float(margin),
-                         "met": bool(margin >= -1e-9 * max(abs(lim), 1e-12)), "note": note}
+                         "met": bool(margin >= -1e-9 * max(abs(lim), 1e-12)), "note": note,
+                         "keys": list(_FIXED_BY.get(name, ()))}
         return out
+
+
+_FIXED_BY = {
+    "resistance_ohm": ("coil.turns", "wire.diameter_m", "coil.inner_radius_m",
+                       "coil.outer_radius_m", "optimize.max_resistance_ohm"),
+    "supply_voltage_v": ("drive.max_current_a", "coil.turns", "wire.diameter_m",
+                         "drive.driver_max_voltage_v"),
+    "settling_time_s": ("coil.turns", "coil.length_m", "core.radius_m", "core.length_m",
+                        "wire.diameter_m", "optimize.max_settling_time_s"),
+    "time_to_max_temperature_s": ("drive.max_current_a", "wire.diameter_m"),
+    "core_radius_m": ("core.radius_m", "coil.inner_radius_m"),
+    "outer_diameter_m": ("coil.outer_radius_m", "array.pitch_m"),
+    "core_protrusion_m": ("core.length_m", "core.offset_m", "sensors.offset_m"),
+    "magnet_bottom_m": ("optimize.height_m", "sensors.offset_m"),
+    "turns": ("coil.turns", "wire.insulated_diameter_m"),
+}
+"""The design keys that move each device constraint (``designkit check``'s "fixed by")."""
 
 
 def _unit_of(name: str) -> str:
