@@ -1,4 +1,4 @@
-"""The array as one magnetic system (issue 12): how much do coupled cores, the magnet's pull on
+"""The array as one magnetic system: how much do coupled cores, the magnet's pull on
 the iron and saturation change what the controller must know?
 
 Question: over the workspace of the default 3x3 array (linear mu_r 1000 cores), how different
@@ -234,27 +234,10 @@ def cross_terms(arr, moment):
     return out
 
 
-def run(out_dir=DEFAULT_OUT, quick: bool = False, fem: bool = False,
-        saturation_fem: bool = False, design=None) -> dict:
-    """The study (module docs); ``design`` defaults to the default 3x3 design (the FEM table
-    models the default array, so ``fem`` needs it)."""
-    from designkit._progress import tqdm
-
-    from designkit import default_design
-    from designkit._io import write_json_atomic
-    from designkit.array import CoilArray
-    from designkit.cores import M_MAX, ArraySystem
-
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    design = default_design() if design is None else design
-    moment = np.array([0.0, 0.0, design.magnet.moment_a_m2])
-    res: dict = {"machine_note": "timings on the machine that ran this (state if loaded)"}
-    steps = ["solve", "table", "workspace", "f0", "sensors", "saturation", "convergence"]
-    bar = tqdm(steps, desc="array_coupling", mininterval=1.0)
-
-    bar.set_postfix_str("solve")
-    arr = CoilArray.from_design(design)
+def _costs(arr, moment, quick: bool):
+    """(costs, the coupled system): seconds to build the coupled system and its coil columns,
+    microseconds per point of the coupled and uncoupled actuation matrix and of the bias force
+    (random workspace points)."""
     t0 = time.perf_counter()
     system = arr.coupled()
     t_build = time.perf_counter() - t0
@@ -274,12 +257,58 @@ def run(out_dir=DEFAULT_OUT, quick: bool = False, fem: bool = False,
     t0 = time.perf_counter()
     arr.bias_force(pts[:nb], moment)
     t_f0 = time.perf_counter() - t0
-    res["cost"] = {"n_unknowns": system.n_unknowns, "cross_blocks": system.n_blocks,
-                   "build_s": t_build, "coil_columns_s": t_coils,
-                   "actuation_per_point_coupled_us": t_c / npts * 1e6,
-                   "actuation_per_point_uncoupled_us": t_u / npts * 1e6,
-                   "coupled_over_uncoupled": t_c / t_u,
-                   "bias_force_per_point_us": t_f0 / nb * 1e6}
+    return {"n_unknowns": system.n_unknowns, "cross_blocks": system.n_blocks,
+            "build_s": t_build, "coil_columns_s": t_coils,
+            "actuation_per_point_coupled_us": t_c / npts * 1e6,
+            "actuation_per_point_uncoupled_us": t_u / npts * 1e6,
+            "coupled_over_uncoupled": t_c / t_u,
+            "bias_force_per_point_us": t_f0 / nb * 1e6}, system
+
+
+def _convergence(arr, system, quick: bool) -> dict:
+    """dBz/dz at the design point and Bz above a neighbour (centre coil at 1 A) for a few
+    (m_max, refine) of the core model: how converged the modes and panels are."""
+    from designkit.cores import M_MAX, ArraySystem
+
+    p = np.array([[0.0, 0.0, 0.03], [0.05, 0.0, 0.03]])
+    conv = {}
+    variants = [(M_MAX, 1)] if quick else [(1, 1), (2, 1), (M_MAX, 1), (M_MAX + 1, 1),
+                                          (M_MAX, 2)]
+    for m_max, refine in variants:
+        s = system if (m_max, refine) == (M_MAX, 1) else ArraySystem(arr, m_max=m_max,
+                                                                     refine=refine)
+        b, g = s.core_field(p, s.coil_solution(), gradient=True)
+        bw = np.stack([c.field(p, 1.0, include="winding") for c in arr.coils], -1)
+        gw = np.stack([c.field(p, 1.0, gradient=True, include="winding")[1] for c in arr.coils],
+                      -1)
+        kc = arr.n_coils // 2
+        conv[f"m_max={m_max},refine={refine}"] = {
+            "dbz_dz_design_point_t_per_m": float(g[0, 2, 2, kc] + gw[0, 2, 2, kc]),
+            "bz_above_neighbour_t": float(b[1, 2, kc] + bw[1, 2, kc])}
+    return conv
+
+
+def run(out_dir=DEFAULT_OUT, quick: bool = False, fem: bool = False,
+        saturation_fem: bool = False, design=None) -> dict:
+    """The study (module docs); ``design`` defaults to the default 3x3 design (the FEM table
+    models the default array, so ``fem`` needs it)."""
+    from designkit._progress import tqdm
+
+    from designkit import default_design
+    from designkit._io import write_json_atomic
+    from designkit.array import CoilArray
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    design = default_design() if design is None else design
+    moment = np.array([0.0, 0.0, design.magnet.moment_a_m2])
+    res: dict = {"machine_note": "timings on the machine that ran this (state if loaded)"}
+    steps = ["solve", "table", "workspace", "f0", "sensors", "saturation", "convergence"]
+    bar = tqdm(steps, desc="array_coupling", mininterval=1.0)
+
+    bar.set_postfix_str("solve")
+    arr = CoilArray.from_design(design)
+    res["cost"], system = _costs(arr, moment, quick)
     bar.update()
 
     bar.set_postfix_str("table")
@@ -335,22 +364,7 @@ def run(out_dir=DEFAULT_OUT, quick: bool = False, fem: bool = False,
     bar.update()
 
     bar.set_postfix_str("convergence")
-    p = np.array([[0.0, 0.0, 0.03], [0.05, 0.0, 0.03]])
-    conv = {}
-    variants = [(M_MAX, 1)] if quick else [(1, 1), (2, 1), (M_MAX, 1), (M_MAX + 1, 1),
-                                          (M_MAX, 2)]
-    for m_max, refine in variants:
-        s = system if (m_max, refine) == (M_MAX, 1) else ArraySystem(arr, m_max=m_max,
-                                                                     refine=refine)
-        b, g = s.core_field(p, s.coil_solution(), gradient=True)
-        bw = np.stack([c.field(p, 1.0, include="winding") for c in arr.coils], -1)
-        gw = np.stack([c.field(p, 1.0, gradient=True, include="winding")[1] for c in arr.coils],
-                      -1)
-        kc = arr.n_coils // 2
-        conv[f"m_max={m_max},refine={refine}"] = {
-            "dbz_dz_design_point_t_per_m": float(g[0, 2, 2, kc] + gw[0, 2, 2, kc]),
-            "bz_above_neighbour_t": float(b[1, 2, kc] + bw[1, 2, kc])}
-    res["convergence"] = conv
+    res["convergence"] = _convergence(arr, system, quick)
     bar.update()
     bar.close()
     write_json_atomic(out / "array_coupling.json", res)
