@@ -83,6 +83,39 @@ def _winding_ref(p, dps=20):
     return MU0 * J * b, MU0 * J * g
 
 
+def _scaled_coils(p):
+    """Worst relative error of the exact 1/s (B) and 1/s^2 (G) scaling of the winding and its
+    points by s = 1e-6, 1e-3 and 1e3 / RO, and the count of non-finite values."""
+    b1, g1 = winding_field(p, RI, RO, L, N, I, gradient=True)
+    worst, bad = {}, 0
+    for s in (1e-6, 1e-3, 1e3 / RO):
+        bs, gs = winding_field(p * s, RI * s, RO * s, L * s, N, I, gradient=True)
+        bad += int(np.count_nonzero(~np.isfinite(bs)) + np.count_nonzero(~np.isfinite(gs)))
+        worst[f"s={s:.3g}: B*s"] = float(np.max(_rel(bs * s, b1)))
+        worst[f"s={s:.3g}: G*s^2"] = float(np.max(_rel(gs * s * s, g1)))
+    return worst, bad
+
+
+def _table_text(table: dict, total: int, nonfinite: int) -> str:
+    """The printed table: totals, the slowest region for the winding, each region's worst."""
+    slow = sorted((r for r in table.values() if "winding_bg_us_per_point" in r),
+                  key=lambda r: -r["winding_bg_us_per_point"])
+    slowest = [n for n, r in table.items() if r is slow[0]][0]
+    lines = [f"total points evaluated: {total}", f"non-finite values: {nonfinite}",
+             f"slowest region for the winding (B+G, rtol 1e-10): {slowest} "
+             f"({slow[0]['winding_bg_us_per_point']:.0f} us/point: log-graded radius quadrature "
+             "on and within 1e-15..1e-4 m of the faces, edges and corners, ~40-60 pieces "
+             "x 8-24 nodes; exact-surface points stop at the rtol-set depth, except G at "
+             "exact corners)", ""]
+    for name, row in table.items():
+        us = row.get("winding_bg_us_per_point")
+        lines.append(f"{name}: {row['points']} points, {row['nonfinite']} non-finite"
+                     + (f", winding B+G {us:.0f} us/point" if us is not None else ""))
+        for k, v in row["worst"].items():
+            lines.append(f"    worst {k}: {v:.2e}")
+    return "\n".join(lines)
+
+
 def run(out_dir, quick=False):
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -158,34 +191,12 @@ def run(out_dir, quick=False):
         table[name] = dict(points=int(p.shape[0]), nonfinite=bad, worst=worst,
                            winding_bg_us_per_point=us_winding)
 
-    # scaled coils: exact 1/s and 1/s^2 scaling
-    p = regs["generic near"][: n // 4]
-    b1, g1 = winding_field(p, RI, RO, L, N, I, gradient=True)
-    worst_s = {}
-    for s in (1e-6, 1e-3, 1e3 / RO):
-        bs, gs = winding_field(p * s, RI * s, RO * s, L * s, N, I, gradient=True)
-        nonfinite += int(np.count_nonzero(~np.isfinite(bs)) + np.count_nonzero(~np.isfinite(gs)))
-        total += p.shape[0]
-        worst_s[f"s={s:.3g}: B*s"] = float(np.max(_rel(bs * s, b1)))
-        worst_s[f"s={s:.3g}: G*s^2"] = float(np.max(_rel(gs * s * s, g1)))
-    table["scaled coils"] = dict(points=int(3 * p.shape[0]), nonfinite=0, worst=worst_s)
-
-    slow = sorted((r for r in table.values() if "winding_bg_us_per_point" in r),
-                  key=lambda r: -r["winding_bg_us_per_point"])
-    slowest = [n for n, r in table.items() if r is slow[0]][0]
-    lines = [f"total points evaluated: {total}", f"non-finite values: {nonfinite}",
-             f"slowest region for the winding (B+G, rtol 1e-10): {slowest} "
-             f"({slow[0]['winding_bg_us_per_point']:.0f} us/point: log-graded radius quadrature "
-             "on and within 1e-15..1e-4 m of the faces, edges and corners, ~40-60 pieces "
-             "x 8-24 nodes; exact-surface points stop at the rtol-set depth, except G at "
-             "exact corners)", ""]
-    for name, row in table.items():
-        us = row.get("winding_bg_us_per_point")
-        lines.append(f"{name}: {row['points']} points, {row['nonfinite']} non-finite"
-                     + (f", winding B+G {us:.0f} us/point" if us is not None else ""))
-        for k, v in row["worst"].items():
-            lines.append(f"    worst {k}: {v:.2e}")
-    text = "\n".join(lines)
+    scaled = regs["generic near"][: n // 4]
+    worst_s, bad_s = _scaled_coils(scaled)
+    nonfinite += bad_s
+    total += 3 * scaled.shape[0]
+    table["scaled coils"] = dict(points=3 * scaled.shape[0], nonfinite=bad_s, worst=worst_s)
+    text = _table_text(table, total, nonfinite)
     write_text_atomic(out_dir / "stress_field.txt", text + "\n")
     result = dict(total_points=total, nonfinite=nonfinite, regions=table, table=text)
     write_json_atomic(out_dir / "stress_field.json", result)
