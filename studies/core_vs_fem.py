@@ -155,12 +155,68 @@ def _around_convergence():
     return conv
 
 
+def _linear_cores(level, quick, l_air, heights, h_design, m_z, out) -> dict:
+    """Linear cores (mu_r 200 / 1000 / 5000) at 6 A: each model's worst error against the FEM,
+    the inductances and the force at the design height; the mu_r 1000 comparison figure."""
+    from designkit.cores import Core
+    from designkit.fem import solve
+    from designkit.fem.compare import plot_comparison
+
+    lin = {}
+    for mu in ((1000.0,) if quick else (200.0, 1000.0, 5000.0)):
+        coil = _coil(Core(0.012, 0.110, mu))
+        r = solve(coil, 6.0, level=level)
+        entry = {m: _max_errors(coil, r, heights, m) for m in ("surface-current",
+                                                               "thesis-uniform")}
+        l_model = l_air + coil.core.extra_inductance(coil)
+        l_uniform = l_air + dataclasses.replace(coil.core, model="thesis-uniform") \
+            .extra_inductance(coil)
+        entry["l_fem_h"] = r.inductance_energy
+        entry["l_model_h"] = l_model
+        entry["l_uniform_h"] = l_uniform
+        f = r.axis.fit(np.array([coil.length / 2 + h_design]))
+        entry["fz_fem_n"] = float(m_z * f["dbz_dz"][0])
+        lin[mu] = entry
+        if mu == 1000.0:
+            plot_comparison(coil, r, out / "linear_mu1000_6A.png",
+                            "thesis coil + 24 x 110 mm core, mu_r 1000, 6 A")
+    return lin
+
+
+def _nonlinear_core(coil_nl, level, quick, l_air, zd, out) -> list:
+    """The 1010 steel core at 1..6 A: dBz/dz at the design point (FEM, model, linear mu_r 1000),
+    peak B, the inductances; the 6 A comparison figure."""
+    from designkit.cores import Core
+    from designkit.fem import solve
+    from designkit.fem.compare import model_field, plot_comparison
+
+    nl = []
+    for current in ((6.0,) if quick else (1.0, 2.0, 3.0, 4.0, 5.0, 6.0)):
+        r = solve(coil_nl, current, level=level)
+        f = r.axis.fit(zd)
+        _, d_model = model_field(coil_nl, current, 0.0, zd, "surface-current")
+        lin_coil = _coil(Core(0.012, 0.110, 1000.0))
+        _, d_lin = model_field(lin_coil, current, 0.0, zd, "surface-current")
+        nl.append({"current_a": current, "dbz_fem": float(f["dbz_dz"][0]),
+                   "dbz_model": float(d_model[0]), "dbz_linear1000": float(d_lin[0]),
+                   "peak_b_t": coil_nl.core.peak_flux_density(coil_nl, current),
+                   "l_fem_h": r.inductance_linkage,
+                   "l_model_h": l_air + coil_nl.core.extra_inductance(coil_nl, current),
+                   "getdp_s": r.solve_seconds})
+        if current == 6.0:
+            plot_comparison(coil_nl, r, out / "steel1010_6A.png",
+                            "thesis coil + 1010 steel core (B-H curve), 6 A")
+    return nl
+
+
 def run(out_dir, quick: bool = False) -> dict:
+    """The study (module docs) at FEM level 1 (0 with ``quick``); writes core_vs_fem.json and
+    the two comparison figures under ``out_dir``; returns the results dict."""
     from designkit.cores import Core, SaturationWarning
     from designkit.design import default_design
     from designkit.electrical import resistance
     from designkit.fem import solve
-    from designkit.fem.compare import air_inductance, model_field, plot_comparison
+    from designkit.fem.compare import air_inductance, model_field
 
     warnings.simplefilter("ignore", SaturationWarning)
     out = Path(out_dir)
@@ -196,46 +252,11 @@ def run(out_dir, quick: bool = False) -> dict:
                        "getdp_s": r.solve_seconds})
     results["refinement"] = refine
 
-    # ---- linear cores
-    lin = {}
-    for mu in ((1000.0,) if quick else (200.0, 1000.0, 5000.0)):
-        coil = _coil(Core(0.012, 0.110, mu))
-        r = solve(coil, 6.0, level=level)
-        entry = {m: _max_errors(coil, r, heights, m) for m in ("surface-current",
-                                                               "thesis-uniform")}
-        l_model = l_air + coil.core.extra_inductance(coil)
-        l_uniform = l_air + dataclasses.replace(coil.core, model="thesis-uniform") \
-            .extra_inductance(coil)
-        entry["l_fem_h"] = r.inductance_energy
-        entry["l_model_h"] = l_model
-        entry["l_uniform_h"] = l_uniform
-        f = r.axis.fit(np.array([coil.length / 2 + h_design]))
-        entry["fz_fem_n"] = float(m_z * f["dbz_dz"][0])
-        lin[mu] = entry
-        if mu == 1000.0:
-            plot_comparison(coil, r, out / "linear_mu1000_6A.png",
-                            "thesis coil + 24 x 110 mm core, mu_r 1000, 6 A")
-    results["linear"] = lin
+    results["linear"] = _linear_cores(level, quick, l_air, heights, h_design, m_z, out)
 
-    # ---- nonlinear
-    nl = []
     coil_nl = _coil(Core(0.012, 0.110, bh="steel1010"))
     zd = np.array([coil_nl.length / 2 + h_design])
-    for current in ((6.0,) if quick else (1.0, 2.0, 3.0, 4.0, 5.0, 6.0)):
-        r = solve(coil_nl, current, level=level)
-        f = r.axis.fit(zd)
-        _, d_model = model_field(coil_nl, current, 0.0, zd, "surface-current")
-        lin_coil = _coil(Core(0.012, 0.110, 1000.0))
-        _, d_lin = model_field(lin_coil, current, 0.0, zd, "surface-current")
-        nl.append({"current_a": current, "dbz_fem": float(f["dbz_dz"][0]),
-                   "dbz_model": float(d_model[0]), "dbz_linear1000": float(d_lin[0]),
-                   "peak_b_t": coil_nl.core.peak_flux_density(coil_nl, current),
-                   "l_fem_h": r.inductance_linkage,
-                   "l_model_h": l_air + coil_nl.core.extra_inductance(coil_nl, current),
-                   "getdp_s": r.solve_seconds})
-        if current == 6.0:
-            plot_comparison(coil_nl, r, out / "steel1010_6A.png",
-                            "thesis coil + 1010 steel core (B-H curve), 6 A")
+    nl = _nonlinear_core(coil_nl, level, quick, l_air, zd, out)
     results["nonlinear"] = nl
 
     # ---- inductance, time constant, force
@@ -254,7 +275,7 @@ def run(out_dir, quick: bool = False) -> dict:
         "fz_core_steel1010_model_n": float(m_z * nl[-1]["dbz_model"]),
         "fz_core_steel1010_fem_n": float(m_z * nl[-1]["dbz_fem"]),
         "thesis_n": THESIS_FORCE_N}
-    # ---- all around the coil: 3 core geometries x 4 materials (issue 11)
+    # ---- all around the coil: 3 core geometries x 4 materials
     results["around"] = _around(level, quick)
     if not quick:
         results["around_convergence"] = _around_convergence()
