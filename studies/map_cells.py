@@ -3,12 +3,11 @@ lookups: one small matmul per cell) within the map file's targets -- interpolati
 <= 1e-3 of each row's largest |A| over the box, file <= 5 MB, build <= 30 s -- and how large
 may a cell be at each height?
 
-Two per-cell representations of all 8 rows x n_coils outputs are compared on cells placed at
-chosen heights and lateral sites (above a core's axis, above its rim, between cores, at the box
-corner), against direct evaluation of the coupled model (``CoilArray.actuation_matrix``):
+Two per-cell forms of all 8 rows x n_coils outputs, on cells above a core's axis, its rim,
+between cores and at the box corner, against the coupled model (``CoilArray.actuation_matrix``):
 
-* ``tensor``: tensor-product Chebyshev interpolation of degree d per axis of every output,
-  (d + 1)^3 coefficients per output (the lookup: a (d + 1)^3 basis row @ (.., 8 n_coils));
+* ``tensor``: tensor-product Chebyshev interpolation of degree d per axis of every output
+  ((d + 1)^3 coefficients per output; the lookup a basis row @ (.., 8 n_coils));
 * ``harmonic``: the magnetic scalar potential of each coil (the box is current-free, so
   B = grad phi with phi harmonic) as a harmonic polynomial of degree L ((L + 1)^2 - 1
   coefficients per coil, constant dropped), least squares on Chebyshev nodes of all 8 rows
@@ -20,9 +19,8 @@ row's largest |A| over a box sample (the map's acceptance measure), the bytes pe
 (what the file would hold), how many such cells tile one layer of the box, and the
 multiply-adds per point of a batch lookup in monomial form (float32 matmul). References, in
 the same process: the direct model's cost per point (which sets what a build can afford to fit
-against within 30 s), and one (1e4, K) @ (K, 8 n_coils) float32 matmul against the same
-arithmetic split over 50 .. 1400 occupied cells (the per-cell loop of a batch lookup); one
-8 x n_coils @ n_coils matvec against a one-point harmonic-cell lookup.
+against within 30 s), one (1e4, K) @ (K, 8 n_coils) float32 matmul against the per-cell
+loop of a batch lookup (50 .. 1400 cells), one 8 x n_coils matvec against a harmonic lookup.
 
     python studies/map_cells.py [OUT_DIR]        (default out/map_cells)
 """
