@@ -17,13 +17,13 @@ import numpy as np
 
 from .._progress import tqdm
 from .device import SimulatedDevice
-from .faults import FaultSchedule, inject
+from .faults import FAULT_CLEARS_S, FaultSchedule, inject
 from .trajectory import Trajectory
 
 OUT_OF_BOX_LIFT_M = 0.06
 """An injected ``out_of_box`` lifts the finger this far (above the map box), m."""
 
-OUT_OF_BOX_S = 0.3
+OUT_OF_BOX_S = FAULT_CLEARS_S["out_of_box"]
 """How long an injected ``out_of_box`` keeps the finger lifted, s."""
 
 COLUMNS = ("t_s", "x_m", "y_m", "z_m", "xe_m", "ye_m", "ze_m", "fx_ref_n", "fy_ref_n",
