@@ -29,8 +29,8 @@ def time_to_safe(columns: dict, events, period_s: float) -> list[dict]:
     first step at or after the injection, and before the same type is injected again, whose
     state is this fault's: the coils are commanded off in that step) as ``detected_s`` and
     ``time_to_safe_s`` / ``periods`` after the injection; ``currents_off_s``: injection to the
-    first step from the detection on with every true coil current below
-    :data:`CURRENT_OFF_A`; ``ended_s`` / ``ended_into``: injection to the first later step in
+    first step from the detection on, before the runner runs again, with every true coil
+    current below :data:`CURRENT_OFF_A` (None: it ran again first); ``ended_s`` / ``ended_into``: injection to the first later step in
     another state, and that state; ``resumed_s``: injection to the first running step after
     the detection (None: not within the run); ``recovered_s``: from when the fault's cause is
     gone (:data:`designkit.sim.faults.FAULT_CLEARS_S` after the injection, or the detection
@@ -60,13 +60,14 @@ def time_to_safe(columns: dict, events, period_s: float) -> list[dict]:
             k = int(own[0])
             row.update(state=name, detected_s=float(t[k]), time_to_safe_s=float(t[k] - te),
                        periods=float((t[k] - te) / period_s))
-            quiet = np.flatnonzero(off[k:])
+            back = np.flatnonzero(st[k:] == "running")
+            stop = k + back[0] if len(back) else len(t)
+            quiet = np.flatnonzero(off[k:stop])
             if len(quiet):
                 row["currents_off_s"] = float(t[k + quiet[0]] - te)
             other = np.flatnonzero(st[k:] != name)
             if len(other):
                 row.update(ended_s=float(t[k + other[0]] - te), ended_into=str(st[k + other[0]]))
-            back = np.flatnonzero(st[k:] == "running")
             if len(back):
                 row["resumed_s"] = float(t[k + back[0]] - te)
             clears = FAULT_CLEARS_S.get(name)
