@@ -9,7 +9,7 @@ boards' own time subtracted) of 'fix' (taking the sensor side's result, Kalman u
 'predict', 'object_force', 'force_matrix' (A(p) rows the law uses + the bias force, the map),
 'allocation' and 'drive' (voltage feed-forward, MD10C duty/direction, PCA9685 bytes, the block
 writes). Split by step kind (with / without a new sensor result) as median and p99, and the fit's
-time on the sensor side separately. Target: p99 <= 1 ms for every step (a 1 kHz loop in Python).
+time on the sensor side separately. Target: p99 <= one control period for every step.
 Per runner state (running = tracking, gated, lost = the sensor side re-acquiring, the fault
 states) from a run with every fault injected once: median, p99 and max of the step, next to a
 same-process reference (a fixed numpy workload on the same clock) and their ratio.

@@ -1,8 +1,9 @@
 """Faults the simulated device can suffer, on a schedule: which, when, and how each is injected.
 
 A :class:`FaultSchedule` lists (time s, fault type); :func:`inject` puts one on the simulated
-PWM boards and sensors (or on the runner's environment: an overrun or an over-limit command is
-a defect of a running loop, injected at its next running step). The runner's response to each
+PWM boards and sensors (or on the runner's environment). A PWM NACK, an overrun or an
+over-limit command shows only in a running loop: the plant injects it at the next running
+step (designkit.sim.loop.RUNNING_FAULTS). The runner's response to each
 (safe state, resume policy) is described in docs/runner.md.
 """
 
