@@ -63,34 +63,40 @@ def device():
     return design, array, array.actuation_matrix(np.array([0.0, 0.0, 0.04]))
 
 
-def test_gated_fixes_render_no_force_and_are_reacquired(device, tmp_path):
+def _jumping_run(device, seed, duration, faults, spikes, moved, **cfg):
+    """The closed loop on the simulated device with a :class:`JumpingLocalizer`, the
+    constant-velocity tracker and a slide at 50 mm: (result, runner, localizer)."""
     design, array, a = device
-    dev = SimulatedDevice(design, array, seed=4)
-    duration = 0.7
+    dev = SimulatedDevice(design, array, seed=seed)
     traj = slide_trajectory(lambda x, y: np.full_like(x, 0.05), duration_s=duration,
                             samples=401)
     holder = {}
 
     def factory(source, clock, hook):
-        cfg = RunnerConfig(resistance_ohm=(dev.resistance_ohm,) * 9,
-                           inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
-                           current_limit_a=4.8, total_current_a=20.0, resume_after_s=0.02)
-        loc = JumpingLocalizer(lambda: source.frame_truth_m, spikes=(30, 31, 60), moved=95)
+        conf = RunnerConfig(resistance_ohm=(dev.resistance_ohm,) * 9,
+                            inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
+                            current_limit_a=4.8, total_current_a=20.0, **cfg)
+        loc = JumpingLocalizer(lambda: source.frame_truth_m, spikes=spikes, moved=moved)
         r = Runner(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0), loc,
-                   ConstantVelocityTracker(), hook(clipped_lstsq), dev.coils, source, cfg,
+                   ConstantVelocityTracker(), hook(clipped_lstsq), dev.coils, source, conf,
                    clock=clock, log=lambda line: None)
         r.start()
         holder["runner"], holder["loc"] = r, loc
         return r
 
     res = simulate(dev, factory, traj, duration_s=duration, period_s=1e-3,
-                   faults=FaultSchedule.parse("sensor_dead@0.4", duration), progress=False)
+                   faults=FaultSchedule.parse(faults, duration), progress=False)
+    return res, holder["runner"], holder["loc"]
+
+
+def test_gated_fixes_render_no_force_and_are_reacquired(device, tmp_path):
+    res, runner, loc = _jumping_run(device, 4, 0.7, "sensor_dead@0.4", (30, 31, 60), 95,
+                                    resume_after_s=0.02)
     write_run_csv(tmp_path / "run.csv", res.columns)
     with (tmp_path / "run.csv").open() as fh:
         rows = list(csv.DictReader(fh))
     state = np.array([r["state"] for r in rows])
     cmd = np.array([[float(r[k]) for k in r if k.startswith("cmd")] for r in rows])
-    loc, runner = holder["loc"], holder["runner"]
     assert loc.calls > 105, "too few frames for the scripted jumps"
     gated = state == "gated"
     assert gated.sum() >= 2
@@ -231,34 +237,15 @@ def test_recovery_takes_a_few_frames_once_the_fault_is_gone(device):
     ``resume_fixes`` accepted fixes; plus one frame interval for the fit's compute time on the
     sensor side (measured CPU time). While the sensor is still dead the runner runs with it
     excluded; nothing renders in between."""
-    design, array, a = device
-    dev = SimulatedDevice(design, array, seed=6)
-    duration, dead_at, box_at = 0.9, 0.15, 0.5
-    traj = slide_trajectory(lambda x, y: np.full_like(x, 0.05), duration_s=duration,
-                            samples=401)
-    holder = {}
-
-    def factory(source, clock, hook):
-        cfg = RunnerConfig(resistance_ohm=(dev.resistance_ohm,) * 9,
-                           inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
-                           current_limit_a=4.8, total_current_a=20.0)
-        loc = JumpingLocalizer(lambda: source.frame_truth_m, spikes=(), moved=10 ** 9)
-        r = Runner(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0), loc,
-                   ConstantVelocityTracker(), hook(clipped_lstsq), dev.coils, source, cfg,
-                   clock=clock, log=lambda line: None)
-        r.start()
-        holder["runner"] = r
-        return r
-
-    res = simulate(dev, factory, traj, duration_s=duration, period_s=1e-3,
-                   faults=FaultSchedule.parse(f"sensor_dead@{dead_at},out_of_box@{box_at}",
-                                              duration), progress=False)
+    dead_at, box_at = 0.15, 0.5
+    res, runner, _ = _jumping_run(device, 6, 0.9, f"sensor_dead@{dead_at},out_of_box@{box_at}",
+                                  (), 10 ** 9)
     c = res.columns
     t, st, fresh = c["t_s"], np.asarray(c["state"]), np.asarray(c["new_frame"], bool)
     cmd = np.stack([c[f"cmd{j + 1}_a"] for j in range(9)], 1)
     assert np.all(cmd[st != "running"] == 0.0)
     frames = t[fresh]
-    n_fix = holder["runner"].cfg.resume_fixes
+    n_fix = runner.cfg.resume_fixes
     rows = {f["fault"]: f for f in time_to_safe(c, res.faults, 1e-3)}
 
     def frame_intervals(t0, t1):
