@@ -223,6 +223,8 @@ class Runner:
             return False
         if self.accepted_in_row < self.cfg.resume_fixes:
             return False
+        if self.pwm_reinit_needed and not self._reinit_pwm(t_s):
+            return False      # a NACK this fault superseded: the boards first
         self.log(f"[{t_s:9.4f} s] resume after {self.fault} ({self.accepted_in_row} fixes)")
         self.fault = None
         self.clear_since_s = None
