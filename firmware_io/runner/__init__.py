@@ -33,6 +33,7 @@ __all__ = [
     "CALIBRATED_RELATIVE_ERROR", "CALIBRATION_CURRENT_A", "calibrate_sensors",
     "calibration_currents", "record_calibration", "RunnerConfig", "config_from_map",
     "CurrentPath", "feedforward_voltage", "rl_step", "force_law_rows", "FAULTS",
-    "LOCALIZATION_FAULTS", "Runner", "SceneForce", "StepRecord", "EXPECTED_SATURATION", "SENSOR_FAULTS", "CurrentHistory", "Fix",
-    "SensorFrame", "SensorPipeline", "CoilSkipBound", "ThermalGuard", "ConstantVelocityTracker",
+    "LOCALIZATION_FAULTS", "Runner", "SceneForce", "StepRecord", "EXPECTED_SATURATION",
+    "SENSOR_FAULTS", "CurrentHistory", "Fix", "SensorFrame", "SensorPipeline", "CoilSkipBound",
+    "ThermalGuard", "ConstantVelocityTracker",
 ]
