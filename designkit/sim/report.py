@@ -30,12 +30,14 @@ def time_to_safe(columns: dict, events, period_s: float) -> list[dict]:
     state is this fault's: the coils are commanded off in that step) as ``detected_s`` and
     ``time_to_safe_s`` / ``periods`` after the injection; ``currents_off_s``: injection to the
     first step from the detection on, before the runner runs again, with every true coil
-    current below :data:`CURRENT_OFF_A` (None: it ran again first); ``ended_s`` / ``ended_into``: injection to the first later step in
-    another state, and that state; ``resumed_s``: injection to the first running step after
-    the detection (None: not within the run); ``recovered_s``: from when the fault's cause is
-    gone (:data:`designkit.sim.faults.FAULT_CLEARS_S` after the injection, or the detection
-    if later) to the first running step from then on (None: not within the run, or a fault
-    that does not clear, thermal). A fault another one masks is not detected.
+    current below :data:`CURRENT_OFF_A` (None: it ran again first); ``ended_s`` /
+    ``ended_into``: injection to the first later step in another state, and that state;
+    ``resumed_s``: injection to the first running step after the detection (None: not within
+    the run); ``recovered_s``: from when the fault's cause is gone
+    (:data:`designkit.sim.faults.FAULT_CLEARS_S` after the injection, or the detection if
+    later) to the first running step from then on, also when another state masked the fault
+    (None: not within the run, or a fault that does not clear, thermal). A fault another one
+    masks is not detected.
     """
     t = np.asarray(columns["t_s"], float)
     st = np.asarray(columns["state"])
@@ -70,12 +72,12 @@ def time_to_safe(columns: dict, events, period_s: float) -> list[dict]:
                 row.update(ended_s=float(t[k + other[0]] - te), ended_into=str(st[k + other[0]]))
             if len(back):
                 row["resumed_s"] = float(t[k + back[0]] - te)
-            clears = FAULT_CLEARS_S.get(name)
-            if clears is not None:
-                tc = max(te + clears, float(t[k]))
-                again = np.flatnonzero((t >= tc - 1e-12) & (st == "running"))
-                if len(again):
-                    row["recovered_s"] = float(t[again[0]] - tc)
+        clears = FAULT_CLEARS_S.get(name)
+        if clears is not None:      # also when another state (e.g. gated) masked the fault's
+            tc = max(te + clears, float(t[own[0]]) if len(own) else -np.inf)
+            again = np.flatnonzero((t >= tc - 1e-12) & (st == "running"))
+            if len(again):
+                row["recovered_s"] = float(t[again[0]] - tc)
         out.append(row)
     return out
 
