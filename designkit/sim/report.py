@@ -77,7 +77,7 @@ def time_to_safe(columns: dict, events, period_s: float) -> list[dict]:
             tc = max(te + clears, float(t[own[0]]) if len(own) else -np.inf)
             again = np.flatnonzero((t >= tc - 1e-12) & (st == "running"))
             if len(again):
-                row["recovered_s"] = float(t[again[0]] - tc)
+                row["recovered_s"] = max(float(t[again[0]] - tc), 0.0)
         out.append(row)
     return out
 
