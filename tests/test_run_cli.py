@@ -14,6 +14,7 @@ import sys
 import numpy as np
 import pytest
 
+from designkit.sim.faults import FAULT_CLEARS_S
 from conftest import ROOT
 from test_run_simulated import map_file  # noqa: F401  (the module's map, built once)
 
@@ -80,6 +81,11 @@ def test_fault_table_is_each_faults_own_from_run_csv(map_file, tmp_path):
         if f["resumed_s"] is not None:
             j = int(np.argmin(np.abs(t - (te + f["resumed_s"]))))
             assert state[j] == "running" and not np.any(state[k:j] == "running")
+        if f["recovered_s"] is not None:    # from when the cause is gone (or the detection)
+            tc = max(te + FAULT_CLEARS_S[f["fault"]], t[k])
+            j = int(np.argmin(np.abs(t - (tc + f["recovered_s"]))))
+            assert state[j] == "running" and not np.any((t >= tc - 1e-9) & (t < t[j] - 1e-9)
+                                                        & (state == "running"))
         assert f["currents_off_s"] is None or f["currents_off_s"] >= f["time_to_safe_s"]
     # every scheduled fault is accounted for: injected (in the table) or said not to be
     assert len(table) + len(summary["faults_not_injected"]) == 8

@@ -82,6 +82,9 @@ def test_bench_runner_smoke(map_file, tmp_path):
     skip = res["skip"]
     assert skip["bound_holds"] and skip["rows_used_3d"] == [3, 5, 6, 7]
     assert skip["rows_used_fz"] == [3, 6]
+    # the step per runner state, from the run with every fault injected
+    assert res["by_state"]["running"]["n"] > 0 and res["reference"]["median_us"] > 0
+    assert len(res["recovery"]) >= 4
 
 
 def test_render_runner_study_smoke(map_file, tmp_path):

@@ -16,7 +16,8 @@ from designkit.errors import BadInputError
 from designkit.sim import (FAULT_TYPES, FaultSchedule, SimulatedDevice, Trajectory, simulate,
                            slide_trajectory, time_to_safe)
 from firmware_io.errors import FirmwareIOError
-from firmware_io.runner import (Runner, RunnerConfig, ThermalGuard, feedforward_voltage,
+from firmware_io.localization import ConstantVelocityKalman
+from firmware_io.runner import (Fix, Runner, RunnerConfig, ThermalGuard, feedforward_voltage,
                                 rl_step)
 
 from _runner_fakes import ConstantMap, HoldTracker, PlaneScene, TruthLocalizer, clipped_lstsq
@@ -350,3 +351,53 @@ def test_start_up_calibration_through_the_firmware_recovers_the_sensor_errors(de
         # 1 % gains, 1 degree mountings of fields up to ~50 mT: ~1 mT before; the 0.1 mT noise
         # and 0.1 mT quantization of 40 calibration frames leave ~0.1 mT
         assert before > 3e-4 and after < 0.25 * before
+
+
+def _scripted_runner(device_and_a, script):
+    """A runner on the simulated PWM boards whose sensor side hands over one fix per 1 ms step
+    at a fixed position: ok without problems, except the steps in ``script`` (step -> (ok,
+    problems)). Returns (runner, device)."""
+    design, array, a = device_and_a
+    dev = SimulatedDevice(design, array)
+    cfg = RunnerConfig(resistance_ohm=(dev.resistance_ohm,) * 9,
+                       inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
+                       current_limit_a=4.8, total_current_a=20.0, resume_fixes=3)
+    p = np.array([0.0, 0.0, 0.04])
+
+    def source(t):
+        ok, problems = script.get(int(round(t / 1e-3)), (True, ()))
+        return Fix(p.copy(), ok, t, problems, np.zeros(18, bool), 0.0,
+                   (0.3e-3) ** 2 * np.eye(3), 1e-3)
+
+    r = Runner(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0),
+               TruthLocalizer(lambda: p), ConstantVelocityKalman(), clipped_lstsq, dev.coils,
+               source, cfg, log=lambda line: None, clock=lambda: 0.0)
+    r.start()
+    return r, dev
+
+
+def test_localization_faults_resume_after_resume_fixes_accepted_fixes_in_a_row(device_and_a):
+    """A sensor fault, then a not-ok fix: the runner runs again at exactly the
+    ``resume_fixes``-th accepted fix after the last problem (the count restarts at each
+    problem), not after a hold time."""
+    script = {5: (True, (("sensor_dead", "sensor 3 reports 'nack'; excluded"),)),
+              8: (False, (("lost", "the localizer flagged its estimate"),))}
+    r, _ = _scripted_runner(device_and_a, script)
+    states = [r.step(k * 1e-3).state for k in range(14)]
+    assert states == ["running"] * 5 + ["sensor_dead"] * 3 + ["lost"] * 3 + ["running"] * 3
+    assert r.cfg.resume_after_s > 0.1        # a hold time would have kept them off far longer
+
+
+def test_a_nack_superseded_by_a_localization_fault_still_reinitialises_the_boards(
+        device_and_a):
+    """A PWM NACK, then a lost fix before the NACK's hold time is over: the runner resumes
+    only through a re-initialisation of the boards (the NACK is not forgotten)."""
+    r, dev = _scripted_runner(device_and_a, {3: (False, (("lost", "flagged"),))})
+    calls = []
+    init = dev.coils.initialize
+    dev.coils.initialize = lambda *a, **k: (calls.append(1), init(*a, **k))[1]
+    assert r.step(0.0).state == "running"
+    dev.sim_boards[0].inject_nack(count=1)
+    states = [r.step(k * 1e-3).state for k in range(1, 8)]
+    assert states[:3] == ["pwm_nack", "pwm_nack", "lost"]
+    assert calls and states[-1] == "running" and r.pwm_reinit_needed is False

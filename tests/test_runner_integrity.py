@@ -13,7 +13,9 @@ import pytest
 
 from designkit.array import CoilArray
 from designkit.design import default_design
-from designkit.sim import FaultSchedule, SimulatedDevice, simulate, slide_trajectory
+from designkit.sim import (FaultSchedule, SimulatedDevice, simulate, slide_trajectory,
+                           time_to_safe)
+from designkit.sim.faults import FAULT_CLEARS_S
 from designkit.sim.report import write_run_csv
 from firmware_io.runner import ConstantVelocityTracker, Runner, RunnerConfig
 
@@ -61,34 +63,40 @@ def device():
     return design, array, array.actuation_matrix(np.array([0.0, 0.0, 0.04]))
 
 
-def test_gated_fixes_render_no_force_and_are_reacquired(device, tmp_path):
+def _jumping_run(device, seed, duration, faults, spikes, moved, **cfg):
+    """The closed loop on the simulated device with a :class:`JumpingLocalizer`, the
+    constant-velocity tracker and a slide at 50 mm: (result, runner, localizer)."""
     design, array, a = device
-    dev = SimulatedDevice(design, array, seed=4)
-    duration = 0.7
+    dev = SimulatedDevice(design, array, seed=seed)
     traj = slide_trajectory(lambda x, y: np.full_like(x, 0.05), duration_s=duration,
                             samples=401)
     holder = {}
 
     def factory(source, clock, hook):
-        cfg = RunnerConfig(resistance_ohm=(dev.resistance_ohm,) * 9,
-                           inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
-                           current_limit_a=4.8, total_current_a=20.0, resume_after_s=0.02)
-        loc = JumpingLocalizer(lambda: source.frame_truth_m, spikes=(30, 31, 60), moved=95)
+        conf = RunnerConfig(resistance_ohm=(dev.resistance_ohm,) * 9,
+                            inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
+                            current_limit_a=4.8, total_current_a=20.0, **cfg)
+        loc = JumpingLocalizer(lambda: source.frame_truth_m, spikes=spikes, moved=moved)
         r = Runner(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0), loc,
-                   ConstantVelocityTracker(), hook(clipped_lstsq), dev.coils, source, cfg,
+                   ConstantVelocityTracker(), hook(clipped_lstsq), dev.coils, source, conf,
                    clock=clock, log=lambda line: None)
         r.start()
         holder["runner"], holder["loc"] = r, loc
         return r
 
     res = simulate(dev, factory, traj, duration_s=duration, period_s=1e-3,
-                   faults=FaultSchedule.parse("sensor_dead@0.4", duration), progress=False)
+                   faults=FaultSchedule.parse(faults, duration), progress=False)
+    return res, holder["runner"], holder["loc"]
+
+
+def test_gated_fixes_render_no_force_and_are_reacquired(device, tmp_path):
+    res, runner, loc = _jumping_run(device, 4, 0.7, "sensor_dead@0.4", (30, 31, 60), 95,
+                                    resume_after_s=0.02)
     write_run_csv(tmp_path / "run.csv", res.columns)
     with (tmp_path / "run.csv").open() as fh:
         rows = list(csv.DictReader(fh))
     state = np.array([r["state"] for r in rows])
     cmd = np.array([[float(r[k]) for k in r if k.startswith("cmd")] for r in rows])
-    loc, runner = holder["loc"], holder["runner"]
     assert loc.calls > 105, "too few frames for the scripted jumps"
     gated = state == "gated"
     assert gated.sum() >= 2
@@ -218,3 +226,45 @@ def test_multi_frame_pl_lets_the_runner_acquire_and_render(device, sigma_m, rend
     cmd = np.array([[float(r[k]) for k in r if k.startswith("cmd")] for r in rows])
     assert bool((state == "running").sum() > 100) is renders, np.unique(state, return_counts=True)
     assert np.all(cmd[state != "running"] == 0.0)
+
+
+def test_recovery_takes_a_few_frames_once_the_fault_is_gone(device):
+    """A dead sensor (excluded) and an out-of-box excursion: the runner is running again within
+    the frames the design needs, not after a fixed hold time. A frame holds the field of the
+    previous pass's start, so after the fault is gone 2 frames still show it (after the bus's
+    gap while the dead sensor is reset they are older than ``max_fix_age_s``); back from the
+    excursion one fix is gated and the re-acquired one confirms the jump; then
+    ``resume_fixes`` accepted fixes; plus one frame interval for the fit's compute time on the
+    sensor side (measured CPU time). While the sensor is still dead the runner runs with it
+    excluded; nothing renders in between."""
+    dead_at, box_at = 0.15, 0.5
+    res, runner, _ = _jumping_run(device, 6, 0.9, f"sensor_dead@{dead_at},out_of_box@{box_at}",
+                                  (), 10 ** 9)
+    c = res.columns
+    t, st, fresh = c["t_s"], np.asarray(c["state"]), np.asarray(c["new_frame"], bool)
+    cmd = np.stack([c[f"cmd{j + 1}_a"] for j in range(9)], 1)
+    assert np.all(cmd[st != "running"] == 0.0)
+    frames = t[fresh]
+    n_fix = runner.cfg.resume_fixes
+    rows = {f["fault"]: f for f in time_to_safe(c, res.faults, 1e-3)}
+
+    def frame_intervals(t0, t1):
+        """The gaps between the frames handed over in [t0, t1] (and the one before t0), s."""
+        inside = frames[(frames >= t0 - 1e-9) & (frames <= t1 + 1e-9)]
+        before = frames[frames < t0 - 1e-9][-1:]
+        return np.diff(np.r_[before, inside])
+
+    # the dead sensor: running again with it excluded before it answers again
+    dead = rows["sensor_dead"]
+    assert dead["state"] == "sensor_dead" and dead["resumed_s"] is not None
+    t_det, t_run = dead_at + dead["time_to_safe_s"], dead_at + dead["resumed_s"]
+    d = frame_intervals(t_det, t_run)
+    bound = d.max() + (2 + n_fix) * np.sort(d)[-2] + 1e-3
+    assert t_run - t_det <= bound, (dead, d)
+    assert dead["resumed_s"] < FAULT_CLEARS_S["sensor_dead"]
+    # the excursion: running again within the frames that confirm the finger is back
+    out = rows["out_of_box"]
+    assert out["state"] == "out_of_box" and out["recovered_s"] is not None
+    t_clear = box_at + FAULT_CLEARS_S["out_of_box"]
+    d = frame_intervals(t_clear, t_clear + out["recovered_s"])
+    assert out["recovered_s"] <= (2 + 2 + n_fix + 1) * d.max() + 1e-3, (out, d)

@@ -96,17 +96,20 @@ def _run_options(args: argparse.Namespace) -> dict:
 
 
 def _fault_line(f: dict) -> str:
-    """One fault's row: injected, its own detection, currents off, resumed (ms after it)."""
+    """One fault's row: injected, its own detection, currents off, resumed (ms after it), and
+    the time to run again once the fault's cause is gone."""
     def ms(v):
         return "-" if v is None else f"{v * 1e3:.0f} ms"
 
+    back = ("" if f.get("recovered_s") is None else
+            f", running again {ms(f['recovered_s'])} after it cleared")
     if f["state"] is None:
         return (f"{f['fault']} @ {f['injected_s']:.3f} s: not detected in its own state "
-                f"(state then: {f['state_at_injection']})")
+                f"(state then: {f['state_at_injection']}){back}")
     ended = ("still on at the end" if f["ended_s"] is None else
              f"ended +{ms(f['ended_s'])} into {f['ended_into']}")
     return (f"{f['fault']} @ {f['injected_s']:.3f} s: detected +{ms(f['time_to_safe_s'])}, "
-            f"currents off +{ms(f['currents_off_s'])}, {ended}")
+            f"currents off +{ms(f['currents_off_s'])}, {ended}{back}")
 
 
 def _as_built_comparison(args, summary, stage) -> None:

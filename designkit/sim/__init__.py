@@ -21,8 +21,8 @@ from .device import SimulatedDevice
 from .faults import FAULT_TYPES, FaultSchedule, inject
 from .loop import SimulationResult, simulate
 from .plot import plot_run
-from .report import (force_error_causes, force_lag_s, loop_by_kind, summarize, time_to_safe,
-                     write_run_csv)
+from .report import (force_error_causes, force_lag_s, loop_by_kind, loop_by_state, summarize,
+                     time_to_safe, write_run_csv)
 from .run import drive_data, run_simulation
 from .sensors import SimSensorSource
 from .trajectory import TRAJECTORY_COLUMNS, Trajectory, poke_trajectory, slide_trajectory
@@ -30,7 +30,7 @@ from .trajectory import TRAJECTORY_COLUMNS, Trajectory, poke_trajectory, slide_t
 __all__ = [
     "SimulatedDevice", "FAULT_TYPES", "FaultSchedule", "inject",
     "SimulationResult", "simulate", "plot_run", "force_error_causes", "force_lag_s",
-    "loop_by_kind", "summarize", "time_to_safe", "write_run_csv", "drive_data",
+    "loop_by_kind", "loop_by_state", "summarize", "time_to_safe", "write_run_csv", "drive_data",
     "run_simulation", "SimSensorSource", "TRAJECTORY_COLUMNS", "Trajectory", "poke_trajectory",
     "slide_trajectory",
 ]

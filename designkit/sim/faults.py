@@ -1,8 +1,9 @@
 """Faults the simulated device can suffer, on a schedule: which, when, and how each is injected.
 
 A :class:`FaultSchedule` lists (time s, fault type); :func:`inject` puts one on the simulated
-PWM boards and sensors (or on the runner's environment: an overrun or an over-limit command is
-a defect of a running loop, injected at its next running step). The runner's response to each
+PWM boards and sensors (or on the runner's environment). A PWM NACK, an overrun or an
+over-limit command shows only in a running loop: the plant injects it at the next running
+step (designkit.sim.loop.RUNNING_FAULTS). The runner's response to each
 (safe state, resume policy) is described in docs/runner.md.
 """
 
@@ -18,6 +19,15 @@ FAULT_TYPES = ("pwm_nack", "sensor_stuck", "sensor_dead", "sensor_saturated", "o
                "overrun", "over_limit", "thermal")
 """Fault types the plant can inject (``--faults default`` injects each once, in this order;
 thermal last because a coil over its I^2 t budget stays off until it has cooled, minutes)."""
+
+FAULT_CLEARS_S = {"pwm_nack": 0.0, "sensor_stuck": 0.0, "sensor_dead": 0.3,
+                  "sensor_saturated": 0.2, "out_of_box": 0.3, "overrun": 0.0,
+                  "over_limit": 0.0, "thermal": None}
+"""How long after its injection each fault's cause is gone, s: a dead sensor answers again, a
+saturated one reads in range, the finger is back in the box; 0 for a one-step defect (one NACK,
+one slow step, one over-limit command) and for the stuck sensor, which stays stuck (the runner
+recovers with it excluded); None: the coil must cool (minutes). Time to recover is counted from
+there (:func:`designkit.sim.report.time_to_safe`)."""
 
 
 @dataclass(frozen=True)
@@ -61,10 +71,10 @@ def inject(device, runner, name: str, t_s: float, state: dict) -> None:
         device.tlv[n // 2].stuck_frame = True          # the top sensor above the centre coil
     elif name == "sensor_dead":
         device.tlv[n + 1].nack_always = True           # a bottom sensor stops answering
-        state["dead_until"] = t_s + 0.3
+        state["dead_until"] = t_s + FAULT_CLEARS_S[name]
     elif name == "sensor_saturated":
         device.field_offset_t[0] = (0.0, 0.0, 0.3)     # past the 12-bit code range (+-200 mT)
-        state["saturated_until"] = t_s + 0.2
+        state["saturated_until"] = t_s + FAULT_CLEARS_S[name]
     elif name == "out_of_box":
         pass  # the trajectory itself leaves the box (see simulate)
     elif name == "overrun":

@@ -17,14 +17,20 @@ import numpy as np
 
 from .._progress import tqdm
 from .device import SimulatedDevice
-from .faults import FaultSchedule, inject
+from .faults import FAULT_CLEARS_S, FaultSchedule, inject
 from .trajectory import Trajectory
 
 OUT_OF_BOX_LIFT_M = 0.06
 """An injected ``out_of_box`` lifts the finger this far (above the map box), m."""
 
-OUT_OF_BOX_S = 0.3
+OUT_OF_BOX_S = FAULT_CLEARS_S["out_of_box"]
 """How long an injected ``out_of_box`` keeps the finger lifted, s."""
+
+RUNNING_FAULTS = ("pwm_nack", "overrun", "over_limit")
+"""Faults injected at the next running step, not at their scheduled time: a NACK answers the
+next PWM write, a slow step or an over-limit command is a defect of a running loop; while
+another fault holds the coils off none of them can act (their time to safe would count the
+other fault's hold time)."""
 
 COLUMNS = ("t_s", "x_m", "y_m", "z_m", "xe_m", "ye_m", "ze_m", "fx_ref_n", "fy_ref_n",
            "fz_ref_n", "fx_n", "fy_n", "fz_n", "fx_obj_n", "fy_obj_n", "fz_obj_n", "loop_s")
@@ -35,8 +41,8 @@ COLUMNS = ("t_s", "x_m", "y_m", "z_m", "xe_m", "ye_m", "ze_m", "fx_ref_n", "fy_r
 class SimulationResult:
     """Per-step columns (SI; the run.csv columns, plus ``new_frame`` (bool: the step took in a
     new sensor result) and, when the runner profiles, ``stage_<name>_s``), the faults as
-    injected (time s, type; overrun and over-limit wait for a running step), the runner's fault
-    log and the sensor side's fit times (s, one per frame)."""
+    injected (time s, type; those in :data:`RUNNING_FAULTS` wait for a running step), the
+    runner's fault log and the sensor side's fit times (s, one per frame)."""
 
     columns: dict
     faults: list
@@ -80,8 +86,8 @@ class _Injector:
         n = device.array.n_coils
         while self.events and self.events[0][0] <= ts + 1e-12:
             _, name = self.events.pop(0)
-            if name in ("overrun", "over_limit"):
-                self.pending.append(name)     # a defect of a running loop: wait for one
+            if name in RUNNING_FAULTS:
+                self.pending.append(name)     # shows only in a running loop: wait for one
             else:
                 self._inject(runner, name, ts)
         if self.pending and runner.state == "running":

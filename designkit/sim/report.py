@@ -15,6 +15,7 @@ import numpy as np
 from .._io import atomic_path
 from ..array import force_matrix
 from .device import SimulatedDevice
+from .faults import FAULT_CLEARS_S
 from .loop import SimulationResult
 
 CURRENT_OFF_A = 0.01
@@ -28,10 +29,15 @@ def time_to_safe(columns: dict, events, period_s: float) -> list[dict]:
     first step at or after the injection, and before the same type is injected again, whose
     state is this fault's: the coils are commanded off in that step) as ``detected_s`` and
     ``time_to_safe_s`` / ``periods`` after the injection; ``currents_off_s``: injection to the
-    first step from the detection on with every true coil current below
-    :data:`CURRENT_OFF_A`; ``ended_s`` / ``ended_into``: injection to the first later step in
-    another state, and that state; ``resumed_s``: injection to the first running step after
-    the detection (None: not within the run). A fault another one masks is not detected.
+    first step from the detection on, before the runner runs again, with every true coil
+    current below :data:`CURRENT_OFF_A` (None: it ran again first); ``ended_s`` /
+    ``ended_into``: injection to the first later step in another state, and that state;
+    ``resumed_s``: injection to the first running step after the detection (None: not within
+    the run); ``recovered_s``: from when the fault's cause is gone
+    (:data:`designkit.sim.faults.FAULT_CLEARS_S` after the injection, or the detection if
+    later) to the first running step from then on, also when another state masked the fault
+    (None: not within the run, or a fault that does not clear, thermal). A fault another one
+    masks is not detected.
     """
     t = np.asarray(columns["t_s"], float)
     st = np.asarray(columns["state"])
@@ -50,20 +56,28 @@ def time_to_safe(columns: dict, events, period_s: float) -> list[dict]:
         row = {"fault": name, "injected_s": te,
                "state_at_injection": str(st[at[0]]) if len(at) else None,
                "state": None, "detected_s": None, "time_to_safe_s": None, "periods": None,
-               "currents_off_s": None, "ended_s": None, "ended_into": None, "resumed_s": None}
+               "currents_off_s": None, "ended_s": None, "ended_into": None, "resumed_s": None,
+               "recovered_s": None}
         if len(own):
             k = int(own[0])
             row.update(state=name, detected_s=float(t[k]), time_to_safe_s=float(t[k] - te),
                        periods=float((t[k] - te) / period_s))
-            quiet = np.flatnonzero(off[k:])
+            back = np.flatnonzero(st[k:] == "running")
+            stop = k + back[0] if len(back) else len(t)
+            quiet = np.flatnonzero(off[k:stop])
             if len(quiet):
                 row["currents_off_s"] = float(t[k + quiet[0]] - te)
             other = np.flatnonzero(st[k:] != name)
             if len(other):
                 row.update(ended_s=float(t[k + other[0]] - te), ended_into=str(st[k + other[0]]))
-            back = np.flatnonzero(st[k:] == "running")
             if len(back):
                 row["resumed_s"] = float(t[k + back[0]] - te)
+        clears = FAULT_CLEARS_S.get(name)
+        if clears is not None:      # also when another state (e.g. gated) masked the fault's
+            tc = max(te + clears, float(t[own[0]]) if len(own) else -np.inf)
+            again = np.flatnonzero((t >= tc - 1e-12) & (st == "running"))
+            if len(again):
+                row["recovered_s"] = max(float(t[again[0]] - tc), 0.0)
         out.append(row)
     return out
 
@@ -105,6 +119,18 @@ def loop_by_kind(result: SimulationResult) -> dict:
     return out
 
 
+def loop_by_state(result: SimulationResult) -> dict:
+    """Compute time of the control step per runner state (running, gated, lost, ...): n, p50,
+    p99 and max, s (the fit on the sensor side is not in it: :func:`loop_by_kind`)."""
+    c = result.columns
+    st = np.asarray(c["state"])
+    out = {}
+    for name in dict.fromkeys(st.tolist()):
+        x = np.asarray(c["loop_s"], float)[st == name]
+        out[name] = {**_p50_p99(x), "max_s": float(np.max(x))}
+    return out
+
+
 def summarize(result: SimulationResult, causes: dict | None = None) -> dict:
     """summary.json: force error RMS/p95, localization MAE, loop p50/p99, faults, time to safe."""
     c = result.columns
@@ -135,6 +161,7 @@ def summarize(result: SimulationResult, causes: dict | None = None) -> dict:
         "loop_p50_s": float(np.percentile(loop, 50)) if len(loop) else None,
         "loop_p99_s": float(np.percentile(loop, 99)) if len(loop) else None,
         "loop_by_kind": loop_by_kind(result),
+        "loop_by_state": loop_by_state(result),
         "max_command_a": float(np.abs(currents).max()),
         "max_total_command_a": float(np.abs(currents).sum(axis=1).max()),
         "faults": time_to_safe(c, result.faults, result.period_s),

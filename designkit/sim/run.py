@@ -156,8 +156,8 @@ def _duration_note(trajectory_s: float, duration_s: float) -> dict:
 
 
 def _not_injected(schedule: FaultSchedule, injected) -> list:
-    """Scheduled faults the run ended before injecting (an overrun or an over-limit command
-    waits for a running step)."""
+    """Scheduled faults the run ended before injecting (a PWM NACK, an overrun or an over-limit
+    command waits for a running step: designkit.sim.loop.RUNNING_FAULTS)."""
     left = list(injected)
     out = []
     for te, name in schedule.events:

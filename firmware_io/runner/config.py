@@ -48,7 +48,12 @@ class RunnerConfig:
     thermal_continuous_current_a, thermal_time_constant_s : float
         :class:`firmware_io.runner.thermal.ThermalGuard` parameters, A and s.
     resume_after_s : float
-        Fault-free time before a transient fault is cleared, s.
+        Fault-free time before a transient device fault (pwm_nack, overrun, over_limit) is
+        cleared, s.
+    resume_fixes : int
+        A localization fault (lost, gated, out_of_box, sensor_*) is cleared once this many
+        fixes in a row were taken into the tracker with no fault in between: a few frames,
+        each passing the localizer's tests, the gate and the alert limit.
     max_pwm_retries : int
         PCA9685 re-initialisations before a ``pwm_nack`` is latched.
     overrun_factor : float
@@ -80,6 +85,7 @@ class RunnerConfig:
     thermal_continuous_current_a: float = 3.0
     thermal_time_constant_s: float = 300.0
     resume_after_s: float = 0.25
+    resume_fixes: int = 3
     max_pwm_retries: int = 3
     overrun_factor: float = 10.0
     gate_risk: float = 1e-4
@@ -100,6 +106,8 @@ class RunnerConfig:
             raise BadInputError("skip_force_n", "a finite force >= 0 N", self.skip_force_n)
         if not (0 < self.gate_risk < 0.5):
             raise BadInputError("gate_risk", "a probability in (0, 0.5)", self.gate_risk)
+        if not (int(self.resume_fixes) == self.resume_fixes and self.resume_fixes >= 1):
+            raise BadInputError("resume_fixes", "an integer >= 1 (fixes)", self.resume_fixes)
         if not (self.max_fix_age_s > 0):
             raise BadInputError("max_fix_age_s", "a time > 0 s", self.max_fix_age_s)
         if not (self.alert_limit_m > 0):

@@ -33,6 +33,11 @@ FAULTS = ("pwm_nack", "sensor_stuck", "sensor_dead", "sensor_saturated", "lost",
           "out_of_box", "overrun", "thermal", "over_limit")
 """The runner's fault states (docs/runner.md: cause and resume policy of each)."""
 
+LOCALIZATION_FAULTS = ("sensor_stuck", "sensor_dead", "sensor_saturated", "lost", "gated",
+                       "out_of_box")
+"""Faults cleared by ``RunnerConfig.resume_fixes`` accepted fixes in a row (the frames that
+show the position is supported again), not by ``resume_after_s``."""
+
 HISTORY_S = 0.2
 """How far back the modelled currents are kept for the sensor side, s (frames arrive late)."""
 
@@ -129,6 +134,7 @@ class Runner:
         self.pwm_failures = 0
         self.pwm_reinit_needed = False
         self.last_estimate_ok = False
+        self.accepted_in_row = 0      # fixes taken into the tracker since the last fault
         self.have_fix = False
         self.position_m = np.full(3, np.nan)
         self.fault_log: list[tuple[float, str, str]] = []
@@ -181,6 +187,7 @@ class Runner:
         self.fault = name
         self.fault_since_s = t_s
         self.clear_since_s = None
+        self.accepted_in_row = 0
         unconfirmed = self.coils.all_off()
         if unconfirmed:
             self.latched = True
@@ -206,6 +213,23 @@ class Runner:
             return True
         return False
 
+    def _confirmed(self, t_s: float, clear: bool) -> bool:
+        """A localization fault: True once ``resume_fixes`` fixes in a row were accepted with
+        no fault in between (the count restarts at any problem)."""
+        if self.latched:
+            return False
+        if not clear:
+            self.accepted_in_row = 0
+            return False
+        if self.accepted_in_row < self.cfg.resume_fixes:
+            return False
+        if self.pwm_reinit_needed and not self._reinit_pwm(t_s):
+            return False      # a NACK this fault superseded: the boards first
+        self.log(f"[{t_s:9.4f} s] resume after {self.fault} ({self.accepted_in_row} fixes)")
+        self.fault = None
+        self.clear_since_s = None
+        return True
+
     def _reinit_pwm(self, t_s: float) -> bool:
         """Re-initialise the PWM boards after a NACK; latch after ``max_pwm_retries`` failures."""
         try:
@@ -230,7 +254,8 @@ class Runner:
             self._enter_fault(t_s, name, detail)
         elif self.fault is not None:
             ok_now = self.thermal.cooled() if self.fault == "thermal" else not problems
-            if not self._may_resume(t_s, ok_now):
+            resume = self._confirmed if self.fault in LOCALIZATION_FAULTS else self._may_resume
+            if not resume(t_s, ok_now):
                 return True
         return self.fault is not None
 
@@ -266,6 +291,7 @@ class Runner:
                 self.tracker.update(fix.position_m, fix.frame_t_s, True)
                 self.have_fix = accepted = True
             self.last_estimate_ok = accepted      # taken into the tracker
+            self.accepted_in_row = self.accepted_in_row + 1 if accepted else 0
         return fix is not None, problems
 
     def _protection_level(self, fix: Fix) -> float:
