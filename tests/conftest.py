@@ -43,6 +43,27 @@ def thesis_array():
     return arr
 
 
+def small_box_design():
+    """The default design with a small map box: 60 x 60 mm, 20-45 mm above the coils (the
+    lower half of the thesis' 50 mm cube and the closed-loop path)."""
+    from designkit.design import default_design
+
+    return default_design().replace(**{"workspace.half_width_m": 0.03,
+                                       "workspace.z_min_m": 0.020,
+                                       "workspace.z_max_m": 0.045})
+
+
+@pytest.fixture(scope="session")
+def small_map(tmp_path_factory, thesis_array):
+    """The coupled iron-core map (v2 file) of :func:`small_box_design`, built once per run."""
+    from designkit import fieldmap
+
+    path = tmp_path_factory.mktemp("small_map") / "map.npz"
+    fieldmap.write(path, fieldmap.build(small_box_design(), array=thesis_array, n_check=10,
+                                        progress=False))
+    return path
+
+
 def load_study(name: str):
     """Import ``studies/<name>.py`` (the studies are scripts, not a package) for a smoke test."""
     import importlib.util
