@@ -4,8 +4,16 @@ import shutil
 
 import pytest
 
+from conftest import shared_fem_solves
+
 pytestmark = pytest.mark.skipif(shutil.which("getdp") is None,
                                 reason="GetDP not installed (apt-get install getdp)")
+
+
+@pytest.fixture(autouse=True)
+def _shared_fem_solves(monkeypatch, fem_solve_memo):
+    """Identical FEM models solved once per run (conftest.fem_solve_memo)."""
+    shared_fem_solves(monkeypatch, fem_solve_memo)
 
 
 def test_core_vs_fem_quick(tmp_path):
