@@ -75,11 +75,10 @@ def _mesh(boxes: dict, level: int, lines_box, msh: Path, h_fine=None) -> dict:
     rint, rext = SHELL_M
     with gmsh_model("designkit_axisym_refs") as gmsh:
         occ = gmsh.model.occ
-        half_ext = occ.intersect([(2, occ.addDisk(0, 0, 0, rext, rext))],
-                                 [(2, occ.addRectangle(0, -rext, 0, rext, 2 * rext))])[0]
-        half_int = occ.intersect([(2, occ.addDisk(0, 0, 0, rint, rint))],
-                                 [(2, occ.addRectangle(0, -rint, 0, rint, 2 * rint))])[0]
-        tools = list(half_int)
+        half_ext, tools = (occ.intersect([(2, occ.addDisk(0, 0, 0, r, r))],
+                                         [(2, occ.addRectangle(0, -r, 0, r, 2 * r))])[0]
+                           for r in (rext, rint))
+        tools = list(tools)
         for tag, bb in boxes.items():
             for x0, y0, x1, y1 in bb:
                 tools.append((2, occ.addRectangle(x0, y0, 0, x1 - x0, y1 - y0)))
@@ -99,13 +98,10 @@ def _mesh(boxes: dict, level: int, lines_box, msh: Path, h_fine=None) -> dict:
             groups[kind].append(tag)
         for tag, ents in groups.items():
             gmsh.model.addPhysicalGroup(2, ents, tag)
-        axis, outer = [], []
-        for _, cv in gmsh.model.getEntities(1):
-            x0, y0, _, x1, y1, _ = gmsh.model.getBoundingBox(1, cv)
-            if x1 < 1e-6:
-                axis.append(cv)
-            elif abs(math.hypot(x1, max(abs(y0), abs(y1))) - rext) < 1e-6 * rext and x1 > rint:
-                outer.append(cv)
+        boxes1 = {cv: gmsh.model.getBoundingBox(1, cv) for _, cv in gmsh.model.getEntities(1)}
+        axis = [cv for cv, b in boxes1.items() if b[3] < 1e-6]
+        outer = [cv for cv, b in boxes1.items() if b[3] > rint
+                 and abs(math.hypot(b[3], max(abs(b[1]), abs(b[4]))) - rext) < 1e-6 * rext]
         gmsh.model.addPhysicalGroup(1, axis, AXIS)
         gmsh.model.addPhysicalGroup(1, outer, OUTER)
         f = gmsh.model.mesh.field
@@ -113,8 +109,8 @@ def _mesh(boxes: dict, level: int, lines_box, msh: Path, h_fine=None) -> dict:
         fields = []
         for r1, z0, z1 in lines_box:
             box = f.add("Box")
-            for k, val in (("VIn", (h_fine or 0.6e-3) * s), ("VOut", h_far), ("XMin", 0.0), ("XMax", r1),
-                           ("YMin", z0), ("YMax", z1), ("Thickness", 0.02)):
+            for k, val in (("VIn", (h_fine or 0.6e-3) * s), ("VOut", h_far), ("XMin", 0.0),
+                           ("XMax", r1), ("YMin", z0), ("YMax", z1), ("Thickness", 0.02)):
                 f.setNumber(box, k, val)
             fields.append(box)
         curves, corners = set(), set()
