@@ -16,8 +16,12 @@ def _shared_fem_solves(monkeypatch, fem_solve_memo):
     shared_fem_solves(monkeypatch, fem_solve_memo)
 
 
-def test_core_vs_fem_quick(tmp_path):
+def test_core_vs_fem_quick(tmp_path, monkeypatch):
+    import designkit.fem.compare as compare
     from studies.core_vs_fem import print_table, run
+
+    # the comparison figure is drawn and checked by test_fem.py::test_cli_fem_writes_everything
+    monkeypatch.setattr(compare, "plot_comparison", lambda *a, **k: None)
 
     res = run(tmp_path, quick=True)
     print_table(res)
