@@ -2,6 +2,7 @@ import os
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -41,6 +42,57 @@ def thesis_array():
     arr = CoilArray.from_design(default_design())
     arr.coupled()
     return arr
+
+
+@pytest.fixture(scope="session")
+def fem_solve_memo():
+    """designkit.fem.solve memoized over the run: the FEM studies' smoke tests and
+    tests/test_fem.py solve the same models (same coil, current, level, probes); a repeat
+    returns the first result. Calls writing files (out_dir, export) always solve. Tests patch
+    it in with :func:`shared_fem_solves`."""
+    from designkit.fem import runner
+
+    memo = {}
+
+    def memo_solve(coil, current, **kw):
+        if kw.get("out_dir") is not None or kw.get("export"):
+            return runner.solve(coil, current, **kw)
+        probes = kw.pop("probes", None)
+        key = (coil, float(current), tuple(sorted((k, repr(v)) for k, v in kw.items())),
+               None if probes is None else np.asarray(probes, float).tobytes())
+        if key not in memo:
+            memo[key] = runner.solve(coil, current, probes=probes, **kw)
+        return memo[key]
+
+    return memo_solve
+
+
+def shared_fem_solves(monkeypatch, memo_solve) -> None:
+    """designkit.fem.solve -> the run's memo for one test (undone after it)."""
+    import designkit.fem as fem
+
+    monkeypatch.setattr(fem, "solve", memo_solve)
+
+
+def small_box_design():
+    """The default design with a small map box: 60 x 60 mm, 20-45 mm above the coils (the
+    lower half of the thesis' 50 mm cube and the closed-loop path)."""
+    from designkit.design import default_design
+
+    return default_design().replace(**{"workspace.half_width_m": 0.03,
+                                       "workspace.z_min_m": 0.020,
+                                       "workspace.z_max_m": 0.045})
+
+
+@pytest.fixture(scope="session")
+def small_map(tmp_path_factory, thesis_array):
+    """The coupled iron-core map (v2 file) of :func:`small_box_design`, built once per run."""
+    from designkit import fieldmap
+
+    path = tmp_path_factory.mktemp("small_map") / "map.npz"
+    fieldmap.write(path, fieldmap.build(small_box_design(), array=thesis_array, n_check=10,
+                                        progress=False))
+    return path
 
 
 def load_study(name: str):

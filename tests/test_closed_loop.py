@@ -5,8 +5,8 @@ coupled iron-core map of the thesis array and ``Localizer.from_map``.
 The true force comes from the exact coupled array model at the true position with the R-L
 currents the PWM registers produced (designkit.sim), independent of the map and of the runner's
 arithmetic: a runner that renders the opposite force, adds F0 or ignores the cores' field in
-the fit fails here. A small box (60 x 60 mm, 25-45 mm high) keeps the map cheap; the path
-slides 50 mm across the hemisphere (thesis object, lambda 6 N/m) 28-30 mm above the coils,
+the fit fails here. A small box (60 x 60 mm, 20-45 mm high; conftest.small_map, shared with
+tests/test_readme_numbers.py) keeps the map cheap; the path slides 50 mm across the hemisphere (thesis object, lambda 6 N/m) 28-30 mm above the coils,
 where F0 is 15-65 mN. Longer runs and the fault paths: tests/test_run_simulated.py (slow).
 """
 
@@ -15,26 +15,15 @@ import csv
 import numpy as np
 import pytest
 
-from designkit import fieldmap
-from designkit.design import default_design
+from conftest import small_box_design
 from designkit.sim import run as sim_run
 from firmware_io.localization import Localizer
 from firmware_io.mapfile import MapFile
 
-SMALL_BOX = default_design().replace(**{"workspace.half_width_m": 0.03,
-                                         "workspace.z_min_m": 0.025,
-                                         "workspace.z_max_m": 0.045})
+SMALL_BOX = small_box_design()
 DURATION_S = 0.4
 SETTLE_S = 0.05
 """Steps before this (the first fix, the coils' rise from zero) are not judged, s."""
-
-
-@pytest.fixture(scope="module")
-def small_map(tmp_path_factory, thesis_array):
-    path = tmp_path_factory.mktemp("loop") / "map.npz"
-    fieldmap.write(path, fieldmap.build(SMALL_BOX, array=thesis_array, n_check=10,
-                                        progress=False))
-    return path
 
 
 @pytest.fixture(scope="module")

@@ -4,12 +4,24 @@ import shutil
 
 import pytest
 
+from conftest import shared_fem_solves
+
 pytestmark = pytest.mark.skipif(shutil.which("getdp") is None,
                                 reason="GetDP not installed (apt-get install getdp)")
 
 
-def test_core_vs_fem_quick(tmp_path):
+@pytest.fixture(autouse=True)
+def _shared_fem_solves(monkeypatch, fem_solve_memo):
+    """Identical FEM models solved once per run (conftest.fem_solve_memo)."""
+    shared_fem_solves(monkeypatch, fem_solve_memo)
+
+
+def test_core_vs_fem_quick(tmp_path, monkeypatch):
+    import designkit.fem.compare as compare
     from studies.core_vs_fem import print_table, run
+
+    # the comparison figure is drawn and checked by test_fem.py::test_cli_fem_writes_everything
+    monkeypatch.setattr(compare, "plot_comparison", lambda *a, **k: None)
 
     res = run(tmp_path, quick=True)
     print_table(res)

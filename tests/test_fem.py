@@ -6,6 +6,7 @@ import shutil
 import numpy as np
 import pytest
 
+from conftest import shared_fem_solves
 from designkit.coil import Coil
 from designkit.cores.panel import Core
 from designkit.fem.compare import air_inductance, model_field
@@ -16,11 +17,15 @@ pytestmark = pytest.mark.skipif(shutil.which("getdp") is None,
 THESIS = dict(inner_radius=0.012, outer_radius=0.019, length=0.100, turns=1429)
 
 
-@pytest.fixture(scope="module")
-def air_result():
-    from designkit.fem import solve
+@pytest.fixture(autouse=True)
+def _shared_fem_solves(monkeypatch, fem_solve_memo):
+    """Identical FEM models solved once per run (conftest.fem_solve_memo)."""
+    shared_fem_solves(monkeypatch, fem_solve_memo)
 
-    return solve(Coil(**THESIS), 1.0, level=0)
+
+@pytest.fixture(scope="module")
+def air_result(fem_solve_memo):
+    return fem_solve_memo(Coil(**THESIS), 1.0, level=0)
 
 
 def test_air_core_fem_matches_quadrature(air_result):

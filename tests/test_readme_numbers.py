@@ -2,18 +2,24 @@
 prints, each next to the command that prints it.
 
 Single-coil numbers (299 / 3154 mN, 185 mH): tests/test_core_fem_cache.py. Against the FEM:
-tests/test_coupling_fem_cache.py.
+tests/test_coupling_fem_cache.py. Localization MAEs: a sample of the README's positions, held to
+the README's numbers within the sample's standard error.
 """
 
 import numpy as np
 import pytest
 
+from conftest import load_study
 from designkit.design import default_design
 from designkit.fieldmap import default_box
 from designkit.render import ArrayActuation, Plane, force_constant
+from designkit.sensor_sim import SensorSimulator, case_currents, random_positions
+from firmware_io.localization import Localizer
 
 D = default_design()
 M = np.asarray(D.magnet.moment_vector_a_m2, float)
+N_LOC = 100
+"""Positions per localization case (the README's runs use 1000)."""
 
 
 def _gzz(a5):
@@ -73,3 +79,51 @@ def test_force_constant_of_the_flat_surface(thesis_array, unipolar, rows, readme
     # the minimum lies inside the window, not on its rim (else the grid beyond could be lower)
     lp = fc.limiting_point_m
     assert 0.02 < lp[0] < 0.033 and 0.023 < lp[1] < 0.043
+
+
+@pytest.fixture(scope="module")
+def lower_half_errors(small_map):
+    """Position errors (m) of 'model-cal' and of the noise-limited fit over N_LOC uniform
+    positions of the lower half of the thesis' cube, per field case: the pipeline of
+    studies/localization.py (its functions, the same seeds and calibration), on the small map."""
+    study = load_study("localization")
+    sim = SensorSimulator(D, errors="default", seed=0, induced="coupled")
+    size = (D.magnet.radius_m, D.magnet.length_m)
+    model = Localizer.from_map(small_map, "dipole", magnet_size_m=size).model
+    cal, _ = study._calibrate(sim, model, 1000, 1000)
+    loc = Localizer.from_map(small_map, "model", magnet_size_m=size, calibration=cal)
+    rng = np.random.default_rng(0)
+    pos = random_positions(N_LOC, rng, z_range_m=(0.020, 0.045), half_width_m=0.025)
+    mag = sim.magnet_part(pos)
+    ind = np.stack([sim.induced_part(pos[k:k + 1])[0] for k in range(N_LOC)])
+    h = 0.5e-3
+    jac = np.stack([np.stack([(model.induced(p + h * e) - model.induced(p - h * e)) / (2 * h)
+                              for e in np.eye(3)], axis=-1) for p in pos])
+    out = {}
+    for case in ("off", "static"):
+        cur = case_currents(case, rng.uniform(0, 20, N_LOC), model.n_coils, seed=7)
+        rd = sim.read(pos, cur, parts=(mag, ind))
+        fit, limit = np.empty(N_LOC), np.empty(N_LOC)
+        for k in range(N_LOC):
+            loc.reset()
+            fit[k] = np.linalg.norm(loc.locate(rd.top_t[k], rd.bottom_t[k], cur[k]).position_m
+                                    - pos[k])
+            limit[k] = np.linalg.norm(study._noise_limited(sim, rd, k, pos[k], cur[k], ind[k],
+                                                           jac[k]) - pos[k])
+        out[case] = fit, limit
+    return out
+
+
+@pytest.mark.parametrize("case", ["off", "static"])
+def test_localization_mae_in_the_lower_half_of_the_cube(lower_half_errors, case):
+    # README (Localization; python studies/localization.py OUT --map MAP, 1000 positions per
+    # case): 'model-cal' MAE 0.54 mm in the lower half of the cube (0.53-0.55 over the thesis'
+    # four cases), noise limit 0.52 mm, 'model-cal' within 1.01-1.16x of the noise limit.
+    # Here N_LOC positions: each MAE within 3 standard errors (std / sqrt(N_LOC), ~0.045 mm)
+    # of the README's, the paired ratio within 3 of its standard errors of 1.16.
+    fit, limit = lower_half_errors[case]
+    for e, readme in ((fit, 0.54e-3), (limit, 0.52e-3)):
+        se = e.std(ddof=1) / np.sqrt(N_LOC)
+        assert abs(e.mean() - readme) < 3 * se, (case, e.mean(), readme, se)
+    ratio_se = (fit - limit).std(ddof=1) / np.sqrt(N_LOC) / limit.mean()
+    assert 1.0 - 3 * ratio_se < fit.mean() / limit.mean() < 1.16 + 3 * ratio_se

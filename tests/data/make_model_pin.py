@@ -7,8 +7,9 @@ cores at the array pitch, and for the pull (N) of one core and of the array on t
 magnet at 20, 30, 50 mm?
 
 The pin is not a reference: it records the model as validated against designkit's 3-D GetDP
-FEM (``studies/fem3d_array.py``; README: within 1.2 % in B and 1.8 % in grad B) so that a
-coupling or core change of a few per cent cannot pass the default suite unnoticed. After a
+FEM (``studies/fem3d_array.py``; README: within 1.2 % in B and 1.8 % in grad B). The coupling
+and the pull are held to independent references (tests/data/make_axisym_refs.py); the pin
+guards what those cannot excite: the transverse (m >= 1) terms between side-by-side cores. After a
 deliberate model change: re-validate with the FEM study, then regenerate with
 ``PYTHONPATH=$PWD python tests/data/make_model_pin.py``.
 """
