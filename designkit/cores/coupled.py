@@ -307,12 +307,20 @@ class ArraySystem:
         m = np.asarray(moment, dtype=float)
         if magnet_size_m is None:
             def src(glob, cols):
-                # H of the point dipole (magnet outside every core: r > 0 at ring points)
-                d = glob[:, None, :] - pos[None, cols, :]  # (n, k, 3)
-                inv_r2 = 1.0 / np.einsum("nki,nki->nk", d, d)
-                inv_r3 = inv_r2 * np.sqrt(inv_r2) / (4.0 * math.pi)
-                a = 3.0 * (d @ m) * inv_r3 * inv_r2
-                return np.stack([d[..., i] * a - m[i] * inv_r3 for i in range(3)], axis=1)
+                # H of the point dipole (magnet outside every core: r > 0 at ring points),
+                # per component on contiguous (n, k) differences
+                pc = pos[cols]
+                d = [glob[:, i, None] - pc[None, :, i] for i in range(3)]  # 3 x (n, k)
+                inv_r3 = 1.0 / (d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+                a = sum(di * mi for di, mi in zip(d, m) if mi != 0.0) * inv_r3
+                inv_r3 *= np.sqrt(inv_r3) * (1.0 / (4.0 * math.pi))
+                a *= 3.0 * inv_r3
+                out = np.empty((len(glob), 3, len(pc)))
+                for i in range(3):
+                    np.multiply(d[i], a, out=out[:, i])
+                    if m[i] != 0.0:
+                        out[:, i] -= m[i] * inv_r3
+                return out
         else:
             a, length, u, mag = _cylinder_magnet(m, magnet_size_m)
 
