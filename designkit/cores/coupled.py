@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from contextlib import nullcontext
 
 import numpy as np
 from scipy.linalg import lu_factor, lu_solve
@@ -151,7 +152,10 @@ class ArraySystem:
         self.n_unknowns = n
         # identical upright cores on a symmetric lattice: one LU per isotypic component
         self._sym = SymmetricLU.build(mat, self, _D4, mode_rotation) if n else None
-        self._lu = lu_factor(mat) if n and self._sym is None else None
+        self._lu = None
+        if n and self._sym is None:
+            with one_blas_thread() if n <= 2000 else nullcontext():  # as in :meth:`solve`
+                self._lu = lu_factor(mat)
         self._coil_solution = None
 
     def _assemble(self, mat, cache):
