@@ -226,13 +226,28 @@ class ArraySystem:
             rows.append(out)
         return self.factors[:, None] * np.concatenate(rows, axis=0)
 
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
+    def solve(self, rhs: np.ndarray, transpose: bool = False) -> np.ndarray:
+        """M^-1 rhs, or M^-T rhs with ``transpose`` (the adjoint system, :meth:`adjoint`)."""
         if self._sym is not None:
-            return self._sym.solve(rhs)
-        if self.n_unknowns > 2000:
-            return lu_solve(self._lu, rhs)
-        with one_blas_thread():  # a single core's system: threads wait longer than compute
-            return lu_solve(self._lu, rhs)
+            return self._sym.solve(rhs, transpose)
+        with one_blas_thread() if self.n_unknowns <= 2000 else nullcontext():
+            # a single core's system: threads wait longer than compute
+            return lu_solve(self._lu, rhs, trans=int(transpose))
+
+    def adjoint(self, points: np.ndarray) -> np.ndarray:
+        """Y = M^-T E^T (n_unknowns, 3 n): E the cores' B (T) at global ``points`` (n, 3) per
+        unit unknown, column (point, component). The cores' field there for the source
+        columns X is E X = Y^T X: for a magnet, Y^T (F * projection of its field) -- the
+        discrete system's own answer, where a unit dipole at the point and reciprocity
+        would add the collocation's error for that near source."""
+        pts = np.asarray(points, float)
+        e = np.zeros((len(pts), 3, self.n_unknowns))
+        with one_blas_thread():
+            for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
+                h = mj.basis_field(pj.to_local(pts))  # (n, 3, nu_j), frame j
+                e[:, :, self.offsets[jj]:self.offsets[jj + 1]] = \
+                    MU0 * np.einsum("ab,nbu->nau", pj.matrix, h)
+        return self.solve(e.reshape(-1, self.n_unknowns).T, transpose=True)
 
     # ------------------------------------------------------------------ coil sources
     def coil_solution(self) -> np.ndarray:

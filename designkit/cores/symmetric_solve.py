@@ -131,7 +131,8 @@ class SymmetricLU:
             return None
         return res
 
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
+    def solve(self, rhs: np.ndarray, transpose: bool = False) -> np.ndarray:
+        """M^-1 rhs (M^-T rhs with ``transpose``: Q is orthogonal, so M^T = Q B^T Q^T)."""
         b = np.asarray(rhs, float).reshape(self.n, -1)
         k = b.shape[1]
         out = np.empty_like(b)
@@ -140,7 +141,8 @@ class SymmetricLU:
                  for r, v in self.parts]  # Q^T b per part, (r_m, n_p, k)
             x = [np.empty_like(a) for a in y]
             for sel, lu in self.blocks:
-                xs = lu_solve(lu, np.concatenate([a[s].reshape(-1, k) for a, s in zip(y, sel)]))
+                xs = lu_solve(lu, np.concatenate([a[s].reshape(-1, k) for a, s in zip(y, sel)]),
+                              trans=int(transpose))
                 start = 0
                 for a, s in zip(x, sel):
                     size = len(s) * a.shape[1]
