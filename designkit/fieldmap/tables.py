@@ -176,7 +176,15 @@ def adjoint_basis_field(model, pts: np.ndarray, n_phi: int = 12, m_top: int | No
 def _dipole_rings(p, rr, zz, phi, radial: bool, w):
     """Per ring (radius rr, height zz, m) of unit point dipoles at the azimuths ``phi``, along
     rho-hat (``radial``) or z: H (n, 3, R, W) and G (n, 3, 3, R, W) at ``p`` (n, 3) m, summed
-    over the azimuths with the weights ``w`` (P, W)."""
+    over the azimuths with the weights ``w`` (P, W): the weights' columns are even or odd in
+    phi (1, cos, sin). Points on the x axis (y = 0, the tables' nodes) see the dipoles at -phi
+    as the mirror images (y -> -y) of those at phi: half the azimuths, doubled, and the
+    components odd under the mirror dropped for even weights, the even ones for odd weights."""
+    mirror = len(phi) % 2 == 0 and not np.any(p[:, 1])
+    if mirror:
+        half = len(phi) // 2
+        phi = phi[:half + 1]
+        w = w[:half + 1] * np.where(np.isin(np.arange(half + 1), (0, half)), 1.0, 2.0)[:, None]
     c, s = np.cos(phi), np.sin(phi)
     d = [p[:, None, None, 0] - rr[None, :, None] * c, p[:, None, None, 1] - rr[None, :, None] * s,
          np.broadcast_to(p[:, None, None, 2] - zz[None, :, None], (len(p), len(rr), len(phi)))]
@@ -201,7 +209,15 @@ def _dipole_rings(p, rr, zz, phi, radial: bool, w):
                 if t[x] is not None:
                     gij += 3.0 * t[x] * d[y] * inv_r5
             g[i][j] = g[j][i] = gij @ w
-    return (np.stack(h, 1), np.stack([np.stack(row, 1) for row in g], 1))
+    h, g = np.stack(h, 1), np.stack([np.stack(row, 1) for row in g], 1)
+    if mirror:
+        odd = (np.arange(w.shape[1]) % 2 == 0) & (np.arange(w.shape[1]) > 0)  # the sin columns
+        flip = np.array([1.0, -1.0, 1.0])  # the mirror y -> -y
+        for comp in range(3):
+            h[:, comp, ..., odd if flip[comp] > 0 else ~odd] = 0.0
+            for k in range(3):
+                g[:, comp, k, ..., odd if flip[comp] * flip[k] > 0 else ~odd] = 0.0
+    return h, g
 
 
 def compute_mode_tables(t: dict, spec: dict, progress=None, stride: int = 2) -> list:
