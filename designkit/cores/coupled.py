@@ -160,9 +160,12 @@ class ArraySystem:
 
     def _assemble(self, mat, cache):
         upright = all(p.is_identity_rotation for p in self.poses)
+        selfs = {}
         for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
             sj = slice(self.offsets[jj], self.offsets[jj + 1])
-            mat[sj, sj] = mj.self_block()
+            if id(mj) not in selfs:  # one self block and row factor per core type
+                selfs[id(mj)] = (mj.self_block(), -mj.factors()[:, None])
+            mat[sj, sj], neg_f = selfs[id(mj)]
             for ii, (mi, pi) in enumerate(zip(self.models, self.poses)):
                 if ii == jj:
                     continue
@@ -171,7 +174,7 @@ class ArraySystem:
                     block = _block_by_symmetry(cache, mi, mj, key[2]) if upright else None
                     cache[key] = self._cross_block(mi, pi, mj, pj) if block is None else block
                 si = slice(self.offsets[ii], self.offsets[ii + 1])
-                mat[sj, si] = -mj.factors()[:, None] * cache[key]
+                np.multiply(neg_f, cache[key], out=mat[sj, si])
 
     # ------------------------------------------------------------------ assembly
     @staticmethod
