@@ -101,30 +101,49 @@ class SymmetricLU:
         label = _classes(group)
         w = np.random.default_rng(20261127).uniform(1.0, 2.0, len(group))[label]
         mirror = next((k for k, (g, _) in enumerate(group) if np.linalg.det(g) < 0), None)
+        quarter = next((k for k, (g, _) in enumerate(group)
+                        if np.linalg.det(g) > 0 and abs(g[0, 0]) < 0.5), None)
         reps = [(0, _small_rep(group, lambda g: np.eye(1)))]
         reps += [(m, _small_rep(group, lambda g, m=m: rotation_of(m, g)))
                  for m in range(1, model.m_max + 1)]
-        parts, keys = [], []
+        parts, keys, unpaired = [], [], set()
         for m, mats in reps:
-            vec, key = _adapted_basis(sum(wi * d for wi, d in zip(w, mats)),
-                                      None if mirror is None else mats[mirror])
+            vec, key, bad = _adapted_basis(sum(wi * d for wi, d in zip(w, mats)),
+                                           None if mirror is None else mats[mirror],
+                                           None if quarter is None else mats[quarter])
             parts.append((_rows(system, model, m), vec))
             keys.append(key)
+            unpaired |= bad
         names = sorted(set(k for key in keys for k in key))
         sels = [[np.flatnonzero([k == name for k in key]) for key in keys] for name in names]
         if sum(len(r) for r, _ in parts) != mat.shape[0]:
             return None
+        # the reflection's -1 half of the 2-dimensional type's component is the quarter turn
+        # of its +1 half, vector by vector: the same block (M commutes with the turn)
+        twin = {i: names.index((lam, 1.0)) for i, (lam, sgn) in enumerate(names)
+                if sgn < 0 and quarter is not None and lam not in unpaired
+                and (lam, 1.0) in names}
         res = cls(parts, [], mat.shape[0])
         # the blocks are a fraction of the whole: on a busy machine BLAS threads would spin
         # longer than they compute
         with one_blas_thread():
-            left = [(v.T @ mat[r].reshape(len(v), -1)).reshape(len(v), -1, mat.shape[1])
-                    for r, v in parts]  # Q^T M per part, (r_m, n_p, n)
-            for sel in sels:
-                ls = np.concatenate([y[s].reshape(-1, mat.shape[1]) for y, s in zip(left, sel)])
-                b = np.concatenate([_right(ls, r, v[:, s]) for (r, v), s in zip(parts, sel)],
-                                   axis=1)  # Q_s^T M Q_s
-                res.blocks.append((sel, lu_factor(b, overwrite_a=True)))
+            own = [np.unique(np.concatenate([sel[i] for b, sel in enumerate(sels)
+                                             if b not in twin])) for i in range(len(parts))]
+            at = [np.full(len(v), -1) for _, v in parts]
+            for a, o in zip(at, own):
+                a[o] = np.arange(len(o))
+            left = [(v[:, o].T @ mat[r].reshape(len(v), -1)).reshape(len(o), -1, mat.shape[1])
+                    for (r, v), o in zip(parts, own)]  # Q^T M per part, (r_m, n_p, n)
+            lus = {}
+            for b, sel in enumerate(sels):
+                if b in twin:
+                    continue
+                ls = np.concatenate([y[a[s]].reshape(-1, mat.shape[1])
+                                     for y, a, s in zip(left, at, sel)])
+                blk = np.concatenate([_right(ls, r, v[:, s]) for (r, v), s in zip(parts, sel)],
+                                     axis=1)  # Q_s^T M Q_s
+                lus[b] = lu_factor(blk, overwrite_a=True)
+            res.blocks = [(sel, lus[twin.get(b, b)]) for b, sel in enumerate(sels)]
         # the split is exact when the components are right: check it on a random vector
         rhs = np.random.default_rng(1).standard_normal(mat.shape[0])
         if not np.linalg.norm(mat @ res.solve(rhs) - rhs) <= 1e-9 * np.linalg.norm(rhs):
@@ -153,14 +172,16 @@ class SymmetricLU:
         return out.reshape(np.shape(rhs))
 
 
-def _adapted_basis(z: np.ndarray, mirror) -> tuple[np.ndarray, list]:
+def _adapted_basis(z: np.ndarray, mirror, quarter=None) -> tuple[np.ndarray, list, set]:
     """Orthonormal eigenvectors (r, r) of the central element ``z`` (a different scalar on each
     isotypic component), each component split further by the eigenvalue +-1 of the
     reflection ``mirror`` (r, r) (commuting with M, it halves the 2-dimensional irreducible
-    type's component), and each vector's block key (eigenvalue, reflection sign)."""
+    type's component), each vector's block key (eigenvalue, reflection sign), and the
+    eigenvalues whose -1 half could not be made the quarter turn ``quarter`` (r, r) of the +1
+    half (where both halves exist and a quarter turn is given, it is made so)."""
     lam, vec = np.linalg.eigh(0.5 * (z + z.T))
     lam = np.round(lam, 6)
-    cols, keys = [], []
+    cols, keys, bad = [], [], set()
     for value in np.unique(lam):
         u = vec[:, lam == value]
         if mirror is None:
@@ -168,9 +189,18 @@ def _adapted_basis(z: np.ndarray, mirror) -> tuple[np.ndarray, list]:
             keys += [(float(value), 0.0)] * u.shape[1]
             continue
         sgn, w = np.linalg.eigh(u.T @ (0.5 * (mirror + mirror.T)) @ u)
-        cols.append(u @ w)
-        keys += [(float(value), float(np.round(x))) for x in sgn]
-    return np.concatenate(cols, axis=1), keys
+        u = u @ w
+        sgn = np.round(sgn)
+        plus, minus = u[:, sgn > 0], u[:, sgn < 0]
+        if quarter is not None and plus.shape[1] and plus.shape[1] == minus.shape[1]:
+            turned = quarter @ plus
+            if np.abs(mirror @ turned + turned).max() < 1e-10:
+                minus = turned
+            else:
+                bad.add(float(value))
+        cols += [plus, minus]
+        keys += [(float(value), 1.0)] * plus.shape[1] + [(float(value), -1.0)] * minus.shape[1]
+    return np.concatenate(cols, axis=1), keys, bad
 
 
 def _right(ls: np.ndarray, rows: np.ndarray, v: np.ndarray) -> np.ndarray:
