@@ -14,6 +14,12 @@ The reference is CoilArray.actuation_matrix (direct, rtol 1e-10), from which for
 follow by F(m) (thesis eq. 2.5). Errors are the largest |error| per output row divided by that
 row's largest |value| over the grid. Speed-ups are against the direct evaluation of the same
 output set and against the reference full A, measured in this process.
+
+``--map``: the scene map instead -- the full map against the scene map of the thesis hemisphere
+(build time wall and CPU, file size, A, bias-force and sensor-field errors in the scene's region,
+the same-process 2000 x 2000 matmul): :func:`studies.bench_map.scene_vs_full`.
+
+    python studies/bench_scene.py [OUT_DIR] [--map [N_POINTS]]
 """
 
 from __future__ import annotations
@@ -31,6 +37,7 @@ from designkit import default_design
 from designkit._io import write_json_atomic
 from designkit.array import CoilArray, force_matrix
 from designkit.skipping import SkippingEvaluator as Scene
+from studies.bench_map import report_scene, scene_vs_full  # noqa: E402
 
 VARIANTS = {"direct": ("never", "never"), "skip": ("never", "bound"),
             "tables": ("always", "never"), "tables+skip": ("always", "bound"),
@@ -106,8 +113,11 @@ def _print(res):
 
 
 if __name__ == "__main__":
-    
-    out = (Path(sys.argv[1]) if len(sys.argv) > 1
+    args = [a for a in sys.argv[1:] if a != "--map"]
+    out = (Path(args[0]) if args
            else Path(__file__).resolve().parents[1] / "out" / "bench_scene")
-    _print(run(out))
+    if "--map" in sys.argv[1:]:
+        report_scene(scene_vs_full(out, int(args[1]) if len(args) > 1 else 2000))
+    else:
+        _print(run(out))
     print(f"written to {out}")

@@ -492,8 +492,9 @@ def test_coupled_map_against_direct_coupled_model(coupled):
     np.testing.assert_allclose(fm.sensor_coil_field(), direct, rtol=1e-12)
     b = np.array([arr.magnet_core_field(s.reshape(-1, 3), q, m).reshape(2, 2, 3)
                   for q in p[:10]])
-    # reciprocity through the modes: measured ~2-3 % of the largest induced field
-    assert np.abs(fm.sensor_induced_field(p[:10]) - b).max() < 0.05 * np.abs(b).max()
+    # the adjoint through the modes: measured 5.0e-4 of the largest induced field (reciprocity
+    # with unit dipoles at the sensors, the former path: ~2-3 %)
+    assert np.abs(fm.sensor_induced_field(p[:10]) - b).max() < 5e-3 * np.abs(b).max()
     np.testing.assert_allclose(fm.sensor_induced_field(p[3]), fm.sensor_induced_field(p[:10])[3])
     sat = arr.saturation_correction(currents_a=np.linspace(0, 6, 7))
     np.testing.assert_allclose(fm.saturation_factor([6.0, -3.0]),

@@ -244,3 +244,21 @@ def test_cli_scene_compile_builds_its_scene_map(tmp_path):
     assert Scene.load(out, fm.meta["design_sha256"]).lam_n_per_m > 0
     assert main(["scene", "compile", "hemisphere", "--map", str(mp), "--build-map",
                  str(tmp_path / "m2.npz"), "--out", str(out), "--quiet"]) == 1
+
+
+def test_split_lu_of_the_square_array_pairs_the_two_dimensional_blocks():
+    arr = CoilArray.from_design(default_design())
+    system = arr.coupled()
+    sizes = sorted(lu[0].shape[0] for _, lu in system._sym.blocks)
+    # D4 on 4176 unknowns: the 2-dimensional type's 2112 split by a reflection into two
+    # blocks of 1056 whose matrices are equal (one the quarter turn of the other): one LU
+    assert sizes == [384, 528, 528, 624, 1056, 1056]
+    big = [lu for _, lu in system._sym.blocks if lu[0].shape[0] == 1056]
+    assert big[0] is big[1]
+    n = system.n_unknowns
+    mat = np.zeros((n, n))
+    system._assemble(mat, {})
+    r = np.random.default_rng(5).standard_normal((n, 3))
+    np.testing.assert_allclose(mat @ system.solve(r), r, atol=1e-10 * np.abs(r).max())
+    np.testing.assert_allclose(mat.T @ system.solve(r, transpose=True), r,
+                               atol=1e-10 * np.abs(r).max())

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from contextlib import nullcontext
 
 import numpy as np
 from scipy.linalg import lu_factor, lu_solve
@@ -151,14 +152,20 @@ class ArraySystem:
         self.n_unknowns = n
         # identical upright cores on a symmetric lattice: one LU per isotypic component
         self._sym = SymmetricLU.build(mat, self, _D4, mode_rotation) if n else None
-        self._lu = lu_factor(mat) if n and self._sym is None else None
+        self._lu = None
+        if n and self._sym is None:
+            with one_blas_thread() if n <= 2000 else nullcontext():  # as in :meth:`solve`
+                self._lu = lu_factor(mat)
         self._coil_solution = None
 
     def _assemble(self, mat, cache):
         upright = all(p.is_identity_rotation for p in self.poses)
+        selfs = {}
         for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
             sj = slice(self.offsets[jj], self.offsets[jj + 1])
-            mat[sj, sj] = mj.self_block()
+            if id(mj) not in selfs:  # one self block and row factor per core type
+                selfs[id(mj)] = (mj.self_block(), -mj.factors()[:, None])
+            mat[sj, sj], neg_f = selfs[id(mj)]
             for ii, (mi, pi) in enumerate(zip(self.models, self.poses)):
                 if ii == jj:
                     continue
@@ -167,7 +174,7 @@ class ArraySystem:
                     block = _block_by_symmetry(cache, mi, mj, key[2]) if upright else None
                     cache[key] = self._cross_block(mi, pi, mj, pj) if block is None else block
                 si = slice(self.offsets[ii], self.offsets[ii + 1])
-                mat[sj, si] = -mj.factors()[:, None] * cache[key]
+                np.multiply(neg_f, cache[key], out=mat[sj, si])
 
     # ------------------------------------------------------------------ assembly
     @staticmethod
@@ -222,13 +229,28 @@ class ArraySystem:
             rows.append(out)
         return self.factors[:, None] * np.concatenate(rows, axis=0)
 
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
+    def solve(self, rhs: np.ndarray, transpose: bool = False) -> np.ndarray:
+        """M^-1 rhs, or M^-T rhs with ``transpose`` (the adjoint system, :meth:`adjoint`)."""
         if self._sym is not None:
-            return self._sym.solve(rhs)
-        if self.n_unknowns > 2000:
-            return lu_solve(self._lu, rhs)
-        with one_blas_thread():  # a single core's system: threads wait longer than compute
-            return lu_solve(self._lu, rhs)
+            return self._sym.solve(rhs, transpose)
+        with one_blas_thread() if self.n_unknowns <= 2000 else nullcontext():
+            # a single core's system: threads wait longer than compute
+            return lu_solve(self._lu, rhs, trans=int(transpose))
+
+    def adjoint(self, points: np.ndarray) -> np.ndarray:
+        """Y = M^-T E^T (n_unknowns, 3 n): E the cores' B (T) at global ``points`` (n, 3) per
+        unit unknown, column (point, component). The cores' field there for the source
+        columns X is E X = Y^T X: for a magnet, Y^T (F * projection of its field) -- the
+        discrete system's own answer, where a unit dipole at the point and reciprocity
+        would add the collocation's error for that near source."""
+        pts = np.asarray(points, float)
+        e = np.zeros((len(pts), 3, self.n_unknowns))
+        with one_blas_thread():
+            for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
+                h = mj.basis_field(pj.to_local(pts))  # (n, 3, nu_j), frame j
+                e[:, :, self.offsets[jj]:self.offsets[jj + 1]] = \
+                    MU0 * np.einsum("ab,nbu->nau", pj.matrix, h)
+        return self.solve(e.reshape(-1, self.n_unknowns).T, transpose=True)
 
     # ------------------------------------------------------------------ coil sources
     def coil_solution(self) -> np.ndarray:
@@ -307,12 +329,20 @@ class ArraySystem:
         m = np.asarray(moment, dtype=float)
         if magnet_size_m is None:
             def src(glob, cols):
-                # H of the point dipole (magnet outside every core: r > 0 at ring points)
-                d = glob[:, None, :] - pos[None, cols, :]  # (n, k, 3)
-                inv_r2 = 1.0 / np.einsum("nki,nki->nk", d, d)
-                inv_r3 = inv_r2 * np.sqrt(inv_r2) / (4.0 * math.pi)
-                a = 3.0 * (d @ m) * inv_r3 * inv_r2
-                return np.stack([d[..., i] * a - m[i] * inv_r3 for i in range(3)], axis=1)
+                # H of the point dipole (magnet outside every core: r > 0 at ring points),
+                # per component on contiguous (n, k) differences
+                pc = pos[cols]
+                d = [glob[:, i, None] - pc[None, :, i] for i in range(3)]  # 3 x (n, k)
+                inv_r3 = 1.0 / (d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+                a = sum(di * mi for di, mi in zip(d, m) if mi != 0.0) * inv_r3
+                inv_r3 *= np.sqrt(inv_r3) * (1.0 / (4.0 * math.pi))
+                a *= 3.0 * inv_r3
+                out = np.empty((len(glob), 3, len(pc)))
+                for i in range(3):
+                    np.multiply(d[i], a, out=out[:, i])
+                    if m[i] != 0.0:
+                        out[:, i] -= m[i] * inv_r3
+                return out
         else:
             a, length, u, mag = _cylinder_magnet(m, magnet_size_m)
 

@@ -18,7 +18,6 @@ Linear Representations of Finite Groups, section 2.6 (the canonical decompositio
 from __future__ import annotations
 
 import numpy as np
-from scipy import sparse
 from scipy.linalg import lu_factor, lu_solve
 
 from .._blas import one_blas_thread
@@ -73,11 +72,17 @@ def _small_rep(group, t_small) -> list:
 
 
 class SymmetricLU:
-    """LU factors of M per isotypic component; :meth:`solve` as ``lu_solve`` of M."""
+    """LU factors of M per symmetry block; :meth:`solve` as ``lu_solve`` of M.
 
-    def __init__(self, q: sparse.csr_matrix, blocks: list):
-        self.q = q
-        self.blocks = blocks  # [(column slice of Q, LU factors)]
+    Per mode order m the unknowns are (core, cos / sin, panel) and the group acts on the
+    first two alone, so the adapted basis is V_m (x) I_panels with V_m (r_m, r_m) orthogonal
+    on the small space: every change of basis is a few dense products, never a sparse one.
+    """
+
+    def __init__(self, parts: list, blocks: list, n: int):
+        self.parts = parts    # [(rows (r_m n_p,) in (small, panel) order, V_m (r_m, r_m))]
+        self.blocks = blocks  # [([columns of V_m in the block, per part], LU factors)]
+        self.n = n
 
     @classmethod
     def build(cls, mat: np.ndarray, system, d4, rotation_of) -> "SymmetricLU | None":
@@ -95,72 +100,121 @@ class SymmetricLU:
         model = models[0]
         label = _classes(group)
         w = np.random.default_rng(20261127).uniform(1.0, 2.0, len(group))[label]
-        parts = [(0, _small_rep(group, lambda g: np.eye(1)))]
-        parts += [(m, _small_rep(group, lambda g, m=m: rotation_of(m, g)))
-                  for m in range(1, model.m_max + 1)]
-        cols = {}  # eigenvalue key -> list of (global row indices, values) per column
-        for m, mats in parts:
-            z = sum(wi * d for wi, d in zip(w, mats))
-            lam, vec = np.linalg.eigh(0.5 * (z + z.T))
-            for lam_k, v in zip(lam, vec.T):
-                key = round(float(lam_k), 6)
-                cols.setdefault(key, []).extend(_embed(system, model, m, v))
-        keys = sorted(cols)
-        rows, cc, vals, blocks, start = [], [], [], [], 0
-        for key in keys:
-            for r, v in cols[key]:
-                rows.append(r)
-                cc.append(np.full(len(r), start))
-                vals.append(v)
-                start += 1
-            blocks.append(slice(start - len(cols[key]), start))
-        n = mat.shape[0]
-        if start != n:
+        mirror = next((k for k, (g, _) in enumerate(group) if np.linalg.det(g) < 0), None)
+        quarter = next((k for k, (g, _) in enumerate(group)
+                        if np.linalg.det(g) > 0 and abs(g[0, 0]) < 0.5), None)
+        reps = [(0, _small_rep(group, lambda g: np.eye(1)))]
+        reps += [(m, _small_rep(group, lambda g, m=m: rotation_of(m, g)))
+                 for m in range(1, model.m_max + 1)]
+        parts, keys, unpaired = [], [], set()
+        for m, mats in reps:
+            vec, key, bad = _adapted_basis(sum(wi * d for wi, d in zip(w, mats)),
+                                           None if mirror is None else mats[mirror],
+                                           None if quarter is None else mats[quarter])
+            parts.append((_rows(system, model, m), vec))
+            keys.append(key)
+            unpaired |= bad
+        names = sorted(set(k for key in keys for k in key))
+        sels = [[np.flatnonzero([k == name for k in key]) for key in keys] for name in names]
+        if sum(len(r) for r, _ in parts) != mat.shape[0]:
             return None
-        q = sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows),
-                                                      np.concatenate(cc))), shape=(n, n))
-        qt = q.T.tocsr()
-        out = []
+        # the reflection's -1 half of the 2-dimensional type's component is the quarter turn
+        # of its +1 half, vector by vector: the same block (M commutes with the turn)
+        twin = {i: names.index((lam, 1.0)) for i, (lam, sgn) in enumerate(names)
+                if sgn < 0 and quarter is not None and lam not in unpaired
+                and (lam, 1.0) in names}
+        res = cls(parts, [], mat.shape[0])
         # the blocks are a fraction of the whole: on a busy machine BLAS threads would spin
         # longer than they compute
         with one_blas_thread():
-            for sl in blocks:
-                qs = q[:, sl]
-                d = np.asarray(qt[sl] @ mat)  # Q_s^T M, (n_s, n)
-                b = np.ascontiguousarray(np.asarray(qs.T @ d.T).T)  # Q_s^T M Q_s
-                out.append((sl, lu_factor(b, overwrite_a=True)))
-        res = cls(q, out)
+            own = [np.unique(np.concatenate([sel[i] for b, sel in enumerate(sels)
+                                             if b not in twin])) for i in range(len(parts))]
+            at = [np.full(len(v), -1) for _, v in parts]
+            for a, o in zip(at, own):
+                a[o] = np.arange(len(o))
+            left = [(v[:, o].T @ mat[r].reshape(len(v), -1)).reshape(len(o), -1, mat.shape[1])
+                    for (r, v), o in zip(parts, own)]  # Q^T M per part, (r_m, n_p, n)
+            lus = {}
+            for b, sel in enumerate(sels):
+                if b in twin:
+                    continue
+                ls = np.concatenate([y[a[s]].reshape(-1, mat.shape[1])
+                                     for y, a, s in zip(left, at, sel)])
+                blk = np.concatenate([_right(ls, r, v[:, s]) for (r, v), s in zip(parts, sel)],
+                                     axis=1)  # Q_s^T M Q_s
+                lus[b] = lu_factor(blk, overwrite_a=True)
+            res.blocks = [(sel, lus[twin.get(b, b)]) for b, sel in enumerate(sels)]
         # the split is exact when the components are right: check it on a random vector
-        rhs = np.random.default_rng(1).standard_normal(n)
+        rhs = np.random.default_rng(1).standard_normal(mat.shape[0])
         if not np.linalg.norm(mat @ res.solve(rhs) - rhs) <= 1e-9 * np.linalg.norm(rhs):
             return None
         return res
 
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
-        y = np.asarray(self.q.T @ rhs)
-        x = np.empty_like(y)
+    def solve(self, rhs: np.ndarray, transpose: bool = False) -> np.ndarray:
+        """M^-1 rhs (M^-T rhs with ``transpose``: Q is orthogonal, so M^T = Q B^T Q^T)."""
+        b = np.asarray(rhs, float).reshape(self.n, -1)
+        k = b.shape[1]
+        out = np.empty_like(b)
         with one_blas_thread():
-            for sl, lu in self.blocks:
-                x[sl] = lu_solve(lu, y[sl])
-        return np.asarray(self.q @ x)
+            y = [(v.T @ b[r].reshape(len(v), -1)).reshape(len(v), -1, k)
+                 for r, v in self.parts]  # Q^T b per part, (r_m, n_p, k)
+            x = [np.empty_like(a) for a in y]
+            for sel, lu in self.blocks:
+                xs = lu_solve(lu, np.concatenate([a[s].reshape(-1, k) for a, s in zip(y, sel)]),
+                              trans=int(transpose))
+                start = 0
+                for a, s in zip(x, sel):
+                    size = len(s) * a.shape[1]
+                    a[s] = xs[start:start + size].reshape(len(s), a.shape[1], k)
+                    start += size
+            for (r, v), a in zip(self.parts, x):
+                out[r] = (v @ a.reshape(len(v), -1)).reshape(-1, k)
+        return out.reshape(np.shape(rhs))
 
 
-def _embed(system, model, m: int, v: np.ndarray) -> list:
-    """One basis vector of the small space (core, component) of mode order ``m`` on every
-    panel: [(global indices, values)] (one column per panel)."""
-    n_cores = len(system.models)
-    r = len(v) // n_cores
-    vv = v.reshape(n_cores, r)
-    keep = np.abs(vv) > 1e-14
+def _adapted_basis(z: np.ndarray, mirror, quarter=None) -> tuple[np.ndarray, list, set]:
+    """Orthonormal eigenvectors (r, r) of the central element ``z`` (a different scalar on each
+    isotypic component), each component split further by the eigenvalue +-1 of the
+    reflection ``mirror`` (r, r) (commuting with M, it halves the 2-dimensional irreducible
+    type's component), each vector's block key (eigenvalue, reflection sign), and the
+    eigenvalues whose -1 half could not be made the quarter turn ``quarter`` (r, r) of the +1
+    half (where both halves exist and a quarter turn is given, it is made so)."""
+    lam, vec = np.linalg.eigh(0.5 * (z + z.T))
+    lam = np.round(lam, 6)
+    cols, keys, bad = [], [], set()
+    for value in np.unique(lam):
+        u = vec[:, lam == value]
+        if mirror is None:
+            cols.append(u)
+            keys += [(float(value), 0.0)] * u.shape[1]
+            continue
+        sgn, w = np.linalg.eigh(u.T @ (0.5 * (mirror + mirror.T)) @ u)
+        u = u @ w
+        sgn = np.round(sgn)
+        plus, minus = u[:, sgn > 0], u[:, sgn < 0]
+        if quarter is not None and plus.shape[1] and plus.shape[1] == minus.shape[1]:
+            turned = quarter @ plus
+            if np.abs(mirror @ turned + turned).max() < 1e-10:
+                minus = turned
+            else:
+                bad.add(float(value))
+        cols += [plus, minus]
+        keys += [(float(value), 1.0)] * plus.shape[1] + [(float(value), -1.0)] * minus.shape[1]
+    return np.concatenate(cols, axis=1), keys, bad
+
+
+def _right(ls: np.ndarray, rows: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(L Q)_part: the columns ``rows`` (r n_p,) of ``ls`` (n_s, n) times V (r, k) (x) I."""
+    a = ls[:, rows].reshape(len(ls), v.shape[0], -1)  # (n_s, r, n_p)
+    return np.einsum("srp,rk->skp", a, v, optimize=True).reshape(len(ls), -1)
+
+
+def _rows(system, model, m: int) -> np.ndarray:
+    """The unknowns of mode order ``m`` of every core, (r n_p,) in (core, cos / sin, panel)
+    order: the rows the small space's matrices act on, panel by panel."""
     off = system.offsets[:-1]
-    out = []
     if m == 0:
-        for p in range(model.n0):
-            idx = off + p
-            out.append((idx[keep[:, 0]], vv[keep[:, 0], 0]))
-        return out
+        return (off[:, None] + np.arange(model.n0)[None]).ravel()
     base = model.n0 + 2 * (m - 1) * model.n1
-    for p in range(model.n1):
-        idx = np.stack([off + base + c * model.n1 + p for c in range(2)], axis=1)
-        out.append((idx[keep], vv[keep]))
-    return out
+    c = np.arange(2)[None, :, None] * model.n1 + np.arange(model.n1)[None, None]
+    return (off[:, None, None] + base + c).ravel()

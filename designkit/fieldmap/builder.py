@@ -19,6 +19,7 @@ from firmware_io import mapfile as mf
 
 from .. import __version__
 from .. import _validate as v
+from .._blas import one_blas_thread
 from .._progress import tqdm
 from ..array import ROWS, CoilArray
 from ..electrical import drive_data
@@ -96,7 +97,8 @@ def build(design, *, spacing: float = 0.01, log_step: float = 0.25,
     meta = _meta(design, arr, phys, plan, s, arrays, smp)
     if region is not None:
         meta["region"] = dict(region)
-    meta["errors"] = _errors(mf.MapFile.from_arrays(arrays, meta), plan, smp, row_max)
+    with one_blas_thread():  # the reader's small pseudo-inverses: threads would only spin
+        meta["errors"] = _errors(mf.MapFile.from_arrays(arrays, meta), plan, smp, row_max)
     smp.seconds["fits and check"] = time.perf_counter() - t0
     smp.cpu_seconds["fits and check"] = time.process_time() - c0
     meta["build_seconds"] = smp.seconds

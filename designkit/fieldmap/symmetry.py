@@ -107,9 +107,10 @@ class Orbits:
                 keep.append(s)
                 images.append(idx)
         n = len(pts)
-        rep = np.full(n, -1)
-        elem = np.zeros(n, int)
+        rep = [-1] * n
+        elem = [0] * n
         reps = []
+        images = [img.tolist() for img in images]  # Python lists: the loop indexes scalars
         for i in range(n):  # plain loop: n ~ 1e4, cheap next to one evaluation
             if rep[i] >= 0:
                 continue
@@ -120,7 +121,8 @@ class Orbits:
                 j = img[i]
                 if rep[j] < 0:
                     rep[j], elem[j] = r, e
-        return cls(np.asarray(reps, int), rep, elem, tuple(keep))
+        return cls(np.asarray(reps, int), np.asarray(rep, int), np.asarray(elem, int),
+                   tuple(keep))
 
     def expand_actuation(self, a_reps: np.ndarray) -> np.ndarray:
         """A at every point (n, 8, n_coils) from A at the representatives (r, 8, n_coils)."""

@@ -4,8 +4,12 @@ modes of the sensor field (``SM<k>``, with their coefficients ``SCOEF``).
 Each table is computed for one coil alone at the origin (local frame) on the grid of a spec
 (:func:`designkit.fieldmap.plan.rz_table_spec`); the reader (:mod:`firmware_io.mapfile.modes`)
 evaluates it for every coil of its type. Forces in N, fields in T, lengths in m. The sensor
-field uses reciprocity (linear cores): the field at sensor s along e_c of the cores magnetized
-by the magnet m at p is m . B(p) of the cores magnetized by a unit dipole e_c at s.
+field is the discrete system's adjoint (linear cores): the field at sensor s along e_c of the
+cores magnetized by the magnet m at p is Y_sc^T (F * projection of the magnet's field), Y =
+M^-T E^T (:meth:`designkit.cores.coupled.ArraySystem.adjoint`), and that projection is m . the
+field at p of the rows' adjoint dipole rings (:func:`adjoint_basis_field`): the same value as
+the coupled model's direct evaluation, where a unit dipole at the sensor and reciprocity
+differed from it by ~1 % (the collocation's error for a source that near a core).
 """
 
 from __future__ import annotations
@@ -17,7 +21,6 @@ from firmware_io.mapfile import N_MODE_Q
 
 from .._blas import one_blas_thread
 from ..array import CoilArray
-from ..constants import MU0
 from ..pose import Pose
 from .physics import MapPhysics
 from .plan import _spec_nodes
@@ -73,10 +76,10 @@ def coupled_modes(arr: CoilArray, sensor_tolerance: float = 1e-3) -> dict | None
     """The field the magnet-magnetized cores give at the sensors, as a few core modes per core
     type (None without coupled cores).
 
-    By reciprocity (linear cores) the field at sensor s along e_c of the cores magnetized by
-    the magnet m at p is m . B(p) of the cores magnetized by a unit dipole e_c at s: fixed
-    sources, 3 x 2 x n_coils columns of core unknowns X_j (m = 0 surface currents, m = 1, 2
-    cos and sin charges; :mod:`designkit.cores.coupled`). Per core type and mode order m, the SVD of
+    The field at sensor s along e_c of the cores magnetized by the magnet m at p is m . the
+    field at p of the adjoint columns X = M^-T E^T (module docstring; 3 x 2 x n_coils columns,
+    X_j core j's rows: m = 0 rings, m = 1, 2 cos and sin rings; the adjoint sources' fields:
+    :func:`adjoint_basis_field`). Per core type and mode order m, the SVD of
     all X blocks gives the shapes U_m (kept while the singular values are above
     ``sensor_tolerance`` x the largest of their order); the coefficients C[j, b, (s, c)] =
     U_m^T X_j[:, (s, c)].
@@ -90,8 +93,7 @@ def coupled_modes(arr: CoilArray, sensor_tolerance: float = 1e-3) -> dict | None
         return None
     nc = arr.n_coils
     sens = arr.sensor_positions_m().reshape(-1, 3)
-    x = np.stack([system.magnet_solution(sens, e) for e in np.eye(3)], axis=-1)  # (nu, ns, 3)
-    x = x.reshape(len(x), -1)  # columns (sensor, component)
+    x = system.adjoint(sens)  # (nu, ns * 3), columns (sensor, component)
     blocks = {}
     for jj, k in enumerate(system.core_index):
         model = system.models[jj]
@@ -128,6 +130,96 @@ def coupled_modes(arr: CoilArray, sensor_tolerance: float = 1e-3) -> dict | None
     return {"types": types, "sensor_coef": coef.reshape(nc, nb, 2, nc, 3)}
 
 
+def adjoint_basis_field(model, pts: np.ndarray, n_phi: int = 12, m_top: int | None = None):
+    """H (n, 3, n_unknowns) 1/m^3 and G (n, 3, 3, n_unknowns) 1/m^4 at local ``pts`` of each
+    row's adjoint source: a magnet m at p drives row u by F_u proj_u(H_m) (the projection of
+    its field on the row's collocation ring, :meth:`CoreModel.project`), and t . H_m(x) =
+    m . H_t(p) for point dipoles, so that drive is m . (this field of row u at p): the row's
+    ring of unit dipoles along the projected direction t (side rings: +z for m = 0, rho-hat
+    for m >= 1; end faces: -rho-hat for m = 0, the outward normal +-z for m >= 1), weighted
+    1 / n_phi (m = 0) or 2 cos(m phi) / n_phi, 2 sin(m phi) / n_phi, times F_u. ``n_phi``
+    dipoles per ring (12: within 2e-4 of 32 at 15 mm above a core's top); rows of mode order
+    above ``m_top`` (default all) are left zero."""
+    p = np.asarray(pts, float)
+    m_top = model.m_max if m_top is None else min(m_top, model.m_max)
+    phi = 2.0 * np.pi * np.arange(n_phi) / n_phi
+    rr, zz = np.r_[model.rho0, model.rho1], np.r_[model.z0, model.z1]
+    n0, n1, ns = model.n0, model.n1, len(model.side)
+    kind = model.kind1
+    # weights per azimuth: 1 / n_phi, then 2 cos(m phi) / n_phi, 2 sin(m phi) / n_phi
+    w = np.stack([np.full(n_phi, 0.5)] + [f(m * phi) for m in range(1, m_top + 1)
+                                          for f in (np.cos, np.sin)], axis=1) * (2.0 / n_phi)
+    h = np.zeros((len(p), 3, model.n_unknowns))
+    g = np.zeros((len(p), 3, 3, model.n_unknowns))
+    # the rings of each direction: m = 0 side rings and m >= 1 face rings point along z (the
+    # bottom faces' -z by a sign), m = 0 face rings (-rho-hat) and m >= 1 side rings rho-hat
+    up = np.r_[np.arange(ns), n0 + np.flatnonzero(kind != 0)]
+    out = np.r_[np.arange(ns, n0), n0 + np.flatnonzero(kind == 0)]
+    for rings, radial in ((up, False), (out, True)):
+        hw, gw = _dipole_rings(p, rr[rings], zz[rings], phi, radial, w)  # (n, 3[, 3], R, W)
+        m0 = rings < n0
+        sign = np.where(rings < n0, -1.0 if radial else 1.0,
+                        np.where(kind[np.maximum(rings - n0, 0)] == 2, -1.0, 1.0))
+        hw *= sign[:, None]
+        gw *= sign[:, None]
+        h[:, :, rings[m0]] = hw[:, :, m0, 0]
+        g[:, :, :, rings[m0]] = gw[:, :, :, m0, 0]
+        q = rings[~m0] - n0
+        for col in range(1, w.shape[1]):
+            rows = n0 + (col - 1) * n1 + q
+            h[:, :, rows] = hw[:, :, ~m0, col]
+            g[:, :, :, rows] = gw[:, :, :, ~m0, col]
+    f = model.factors()
+    return h * f, g * f
+
+
+def _dipole_rings(p, rr, zz, phi, radial: bool, w):
+    """Per ring (radius rr, height zz, m) of unit point dipoles at the azimuths ``phi``, along
+    rho-hat (``radial``) or z: H (n, 3, R, W) and G (n, 3, 3, R, W) at ``p`` (n, 3) m, summed
+    over the azimuths with the weights ``w`` (P, W): the weights' columns are even or odd in
+    phi (1, cos, sin). Points on the x axis (y = 0, the tables' nodes) see the dipoles at -phi
+    as the mirror images (y -> -y) of those at phi: half the azimuths, doubled, and the
+    components odd under the mirror dropped for even weights, the even ones for odd weights."""
+    mirror = len(phi) % 2 == 0 and not np.any(p[:, 1])
+    if mirror:
+        half = len(phi) // 2
+        phi = phi[:half + 1]
+        w = w[:half + 1] * np.where(np.isin(np.arange(half + 1), (0, half)), 1.0, 2.0)[:, None]
+    c, s = np.cos(phi), np.sin(phi)
+    d = [p[:, None, None, 0] - rr[None, :, None] * c, p[:, None, None, 1] - rr[None, :, None] * s,
+         np.broadcast_to(p[:, None, None, 2] - zz[None, :, None], (len(p), len(rr), len(phi)))]
+    inv_r2 = 1.0 / (d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    inv_r5 = inv_r2 * inv_r2 * np.sqrt(inv_r2) * (1.0 / (4.0 * np.pi))
+    t = (c, s, None) if radial else (None, None, 1.0)
+    dt = d[0] * c + d[1] * s if radial else d[2]
+    a = 3.0 * dt * inv_r5  # H_i = a d_i - t_i inv_r3;  G_ij = (3 (t_i d_j + t_j d_i + dt
+    b = 5.0 * a * inv_r2   # delta_ij) - 15 dt d_i d_j / r^2) inv_r5
+    h = [None] * 3
+    g = [[None] * 3 for _ in range(3)]
+    for i in range(3):
+        hi = a * d[i]
+        if t[i] is not None:
+            hi = hi - t[i] * inv_r5 / inv_r2
+        h[i] = hi @ w
+        for j in range(i, 3):
+            gij = -b * d[i] * d[j]
+            if i == j:
+                gij += a
+            for x, y in ((i, j), (j, i)):
+                if t[x] is not None:
+                    gij += 3.0 * t[x] * d[y] * inv_r5
+            g[i][j] = g[j][i] = gij @ w
+    h, g = np.stack(h, 1), np.stack([np.stack(row, 1) for row in g], 1)
+    if mirror:
+        odd = (np.arange(w.shape[1]) % 2 == 0) & (np.arange(w.shape[1]) > 0)  # the sin columns
+        flip = np.array([1.0, -1.0, 1.0])  # the mirror y -> -y
+        for comp in range(3):
+            h[:, comp, ..., odd if flip[comp] > 0 else ~odd] = 0.0
+            for k in range(3):
+                g[:, comp, k, ..., odd if flip[comp] * flip[k] > 0 else ~odd] = 0.0
+    return h, g
+
+
 def compute_mode_tables(t: dict, spec: dict, progress=None, stride: int = 2) -> list:
     """The mode tables (n_rho, n_u, Q) float64 of one core type, one per shape set of ``t``
     (the sensor field's): for each shape, the quantities of :data:`N_MODE_Q` from the core model's
@@ -156,21 +248,14 @@ def compute_mode_tables(t: dict, spec: dict, progress=None, stride: int = 2) -> 
         if progress is not None:  # the longest step of a build: show how far it is
             progress(s / len(pts))
         p = pts[s:s + chunk]
-        # the fine charge quadrature where the compressed rules are not accurate (near the
-        # core), as the coupled model's own field evaluation does
-        near = ~model.far_mask(np.hypot(p[:, 0], p[:, 1]), p[:, 2])
-        h = np.zeros((len(p), 3, model.n_unknowns))
-        g = np.zeros((len(p), 3, 3, model.n_unknowns))
-        for sel, fine in ((near, True), (~near, False)):
-            if np.any(sel):
-                h[sel], g[sel] = model.basis_field(p[sel], gradient=True, fine=fine)
+        h, g = adjoint_basis_field(model, p, m_top=max(N_MODE_Q))  # T per adjoint unit
         r_ = p[:, 0]
         col = 0
         for m, r in shapes:
             u = t["U"][m][:, r]
             if m == 0:
-                b = MU0 * h[:, :, :n0] @ u
-                gg = MU0 * g[:, :, :, :n0] @ u
+                b = h[:, :, :n0] @ u
+                gg = g[:, :, :, :n0] @ u
                 with np.errstate(divide="ignore", invalid="ignore"):
                     bb = gg[:, 1, 1]  # Br/rho = dBy/dy on the x axis
                     out[s:s + chunk, col:col + 4] = np.c_[
@@ -178,8 +263,8 @@ def compute_mode_tables(t: dict, spec: dict, progress=None, stride: int = 2) -> 
             else:
                 cs = [slice(n0 + (2 * (m - 1) + c) * n1, n0 + (2 * (m - 1) + c + 1) * n1)
                       for c in range(2)]
-                bc, gc = MU0 * h[:, :, cs[0]] @ u, MU0 * g[:, :, :, cs[0]] @ u
-                bs, gs = MU0 * h[:, :, cs[1]] @ u, MU0 * g[:, :, :, cs[1]] @ u
+                bc, gc = h[:, :, cs[0]] @ u, g[:, :, :, cs[0]] @ u
+                bs, gs = h[:, :, cs[1]] @ u, g[:, :, :, cs[1]] @ u
                 with np.errstate(divide="ignore", invalid="ignore"):
                     if m == 1:  # cos: x G, sin: y G (formulas in firmware_io.mapfile)
                         a = bs[:, 1]
