@@ -73,9 +73,10 @@ def array_field(design: "Design", points, currents: Sequence[float] | None = Non
     tolerance : float in [1e-9, 0.1], or None
         None: the coupled model to the field engine's 1e-10. A float (a picture's accuracy,
         e.g. :data:`PICTURE_TOLERANCE`): the windings through
-        :class:`designkit.skipping.SkippingEvaluator` at that tolerance (relative to the
+        :class:`designkit.skipping.SkippingEvaluator` at half that tolerance (relative to the
         largest |B| and |grad B| over the points; unpowered and negligible windings skipped),
-        the coupled cores exactly as with None.
+        the coupled cores at the other half of it, relative to their own field
+        (:meth:`designkit.cores.core_model.CoreModel.field` with ``rtol``).
 
     Returns
     -------
@@ -105,11 +106,16 @@ def array_field(design: "Design", points, currents: Sequence[float] | None = Non
 PICTURE_TOLERANCE = 1e-5
 """The windings' tolerance of the slices (relative to the largest value over a slice): 1 %
 down to 1e-3 of the largest value, three decades of a logarithmic colour scale."""
+FIELDLINE_TOLERANCE = 1e-3
+"""The tolerance of the field lines' volume (relative to its largest |B|): a streamline's
+step follows the direction of B, which an error of 1e-3 of the largest value turns by less
+than a degree wherever |B| is above 6 % of it."""
 
 
 def _skipping_field(array, p, cur, gradient, tolerance):
     """B (n, 3) T and G (n, 3, 3) T/m (zeros if not ``gradient``): the windings through the
-    skipping evaluator at ``tolerance`` and the coupled cores exactly."""
+    skipping evaluator and the coupled cores at ``rtol``, each at half of ``tolerance`` (the
+    cores at their reference rules where nothing is left for them)."""
     system = array.coupled()
     coupled = set() if system is None else set(system.core_index)
     # the coupled cores are added below, all together: their windings alone here, and only the
@@ -119,11 +125,13 @@ def _skipping_field(array, p, cur, gradient, tolerance):
                            else array.coils[k] for k in on))
     outs = ("B", "gradient") if gradient else ("B",)
     res = SkippingEvaluator(wind, p, outs, currents=tuple(cur[on]),
-                            tolerance=tolerance).evaluate()
+                            tolerance=max(0.5 * tolerance, 1e-9)).evaluate()
     b = res["B"]
     g = gradient_from_g5(res["gradient"]) if gradient else np.zeros((len(p), 3, 3))
     if system is not None:
-        cb = system.core_field(p, system.coil_solution(), gradient=gradient, coil_columns=True)
+        rest = tolerance - max(0.5 * tolerance, 1e-9)  # the skipping evaluator's floor
+        cb = system.core_field(p, system.coil_solution(), gradient=gradient, coil_columns=True,
+                               rtol=rest if rest > 0 else None)
         if gradient:
             b = b + cb[0] @ cur
             g = g + cb[1] @ cur
