@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from designkit.cores.core_model import RTOL_RINGS_MIN, core_model
+from designkit.cores.core_model import RINGS_MIN_POINTS, RTOL_RINGS_MIN, core_model
 
 RTOLS = (1e-2, 1e-3, 1e-4)
 
@@ -92,7 +92,7 @@ def test_ring_rules_meet_rtol_against_the_reference_rules(seed):
 def test_ring_rules_against_the_fine_panel_rules(seed):
     """An independent reference: every unknown's field by the fine panel and charge rules."""
     rng, model, xs = _case(seed)
-    pts = _points(rng, model, n=60)
+    pts = _points(rng, model, n=200)
     length = model.z_hi - model.z_lo
     mid = 0.5 * (model.z_lo + model.z_hi)
     # outside the core by a radius (the fine rules' own accuracy holds there)
@@ -106,7 +106,7 @@ def test_ring_rules_against_the_fine_panel_rules(seed):
 
 def test_pointwise_columns_and_own_column():
     rng, model, xs = _case(6)
-    pts = _points(rng, model, n=30)
+    pts = _points(rng, model, n=60)
     cols = xs[:, rng.integers(0, 2, len(pts))]
     h, g = model.field(pts, cols, gradient=True, pointwise=True, rtol=1e-3)
     h0, g0 = model.field(pts, cols, gradient=True, pointwise=True)
@@ -120,8 +120,10 @@ def test_pointwise_columns_and_own_column():
     assert _ratio(ho, h0, 1e-3) <= 1.0
 
 
-def test_tighter_requests_take_the_reference_rules():
+def test_tighter_requests_and_small_calls_take_the_reference_rules():
     rng, model, xs = _case(7)
-    pts = _points(rng, model, n=20)
+    pts = _points(rng, model, n=60)
     np.testing.assert_array_equal(model.field(pts, xs, rtol=0.5 * RTOL_RINGS_MIN),
                                   model.field(pts, xs))
+    few = pts[:RINGS_MIN_POINTS - 1]
+    np.testing.assert_array_equal(model.field(few, xs, rtol=1e-2), model.field(few, xs))

@@ -46,6 +46,10 @@ RTOL_RINGS_MIN = 1e-4
 """Tightest rtol given to the bound-chosen ring rules; tighter requests take the reference
 rules (accurate to ~1e-5 of each group, and cheaper than rules whose bounds reach that:
 studies/bench_viz_slices.py)."""
+RINGS_MIN_POINTS = 200
+"""Smaller calls take the reference rules (the ring rules' per-segment grouping costs more
+than it saves on a few points: 18 sensor points x 64 columns, 0.03 s reference, 0.2-0.3 s
+by the ring rules)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -222,14 +226,14 @@ class CoreModel(ChargeModes):
         Contracts the unknowns before the kernels (far rings for m = 0, charges for m >= 1).
         Returns H (n, 3, k) A/m [, G (n, 3, 3, k) A/m^2]; with ``pointwise`` point i uses
         column i (k = n) and the shapes are (n, 3) [, (n, 3, 3)]. ``rtol``: None, the
-        reference rules below; a float >= RTOL_RINGS_MIN, each point takes the cheapest ring
-        rule whose error bounds are <= rtol of each segment's contribution
-        (:mod:`designkit.cores.tolerance`), the others the reference rules (as do tighter
-        requests).
+        reference rules below; a float >= RTOL_RINGS_MIN (calls of >= RINGS_MIN_POINTS
+        points), each point takes the cheapest ring rule whose error bounds are <= rtol of
+        each segment's contribution (:mod:`designkit.cores.tolerance`), the others the
+        reference rules (as do tighter requests and smaller calls).
         """
         pts = np.asarray(pts, dtype=float)
         n = len(pts)
-        if rtol is not None and rtol >= RTOL_RINGS_MIN and n:
+        if rtol is not None and rtol >= RTOL_RINGS_MIN and n >= RINGS_MIN_POINTS:
             return self._field_at_rtol(pts, xs, gradient, pointwise, own_col, rtol)
         k = xs.shape[1]
         shp = (n,) if pointwise else (n, k)
