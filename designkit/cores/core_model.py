@@ -46,6 +46,10 @@ RTOL_RINGS_MIN = 1e-4
 """Tightest rtol given to the bound-chosen ring rules; tighter requests take the reference
 rules (accurate to ~1e-5 of each group, and cheaper than rules whose bounds reach that:
 studies/bench_viz_slices.py)."""
+PARTS_MARGIN = 0.1
+"""The ring rules are chosen for rtol x PARTS_MARGIN: a point keeps them while its segments'
+and parts' magnitudes sum to at most 1 / PARTS_MARGIN times its |H| (else it is computed
+again by the reference rules)."""
 RINGS_MIN_POINTS = 200
 """Smaller calls take the reference rules (the ring rules' per-segment grouping costs more
 than it saves on a few points: 18 sensor points x 64 columns, 0.03 s reference, 0.2-0.3 s
@@ -298,7 +302,8 @@ class CoreModel(ChargeModes):
         rho = np.hypot(pts[:, 0], pts[:, 1])
         cancel = self._cancellation(xs)  # (nseg, k)
         cancel = cancel if pointwise else cancel.max(axis=1)
-        nodes, bound = meridian_nodes(self.far_segments, cancel, rho, pts[:, 2], rtol)
+        want = rtol * PARTS_MARGIN  # room for the parts' cancellation (checked below)
+        nodes, bound = meridian_nodes(self.far_segments, cancel, rho, pts[:, 2], want)
         naz = np.where(nodes > 0, 1, 0)  # (nseg, n)
         az_bound = np.zeros(n)
         if self.m_max:
@@ -308,7 +313,7 @@ class CoreModel(ChargeModes):
                 r1, z1, _ = self._ring_rule(nn, 1)
                 rows = slice(seg * nn, (seg + 1) * nn)
                 naz[seg, sel], b = azimuth_count(r1[rows], z1[rows], rho[sel], pts[sel, 2],
-                                                 self.m_max, rtol)
+                                                 self.m_max, want)
                 az_bound[sel] = np.maximum(az_bound[sel], b)
         fast = np.all(naz > 0, axis=0)
         if np.any(fast):

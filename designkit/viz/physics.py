@@ -73,10 +73,10 @@ def array_field(design: "Design", points, currents: Sequence[float] | None = Non
     tolerance : float in [1e-9, 0.1], or None
         None: the coupled model to the field engine's 1e-10. A float (a picture's accuracy,
         e.g. :data:`PICTURE_TOLERANCE`): the windings through
-        :class:`designkit.skipping.SkippingEvaluator` at half that tolerance (relative to the
+        :class:`designkit.skipping.SkippingEvaluator` at that tolerance (relative to the
         largest |B| and |grad B| over the points; unpowered and negligible windings skipped),
-        the coupled cores at the other half of it, relative to their own field
-        (:meth:`designkit.cores.core_model.CoreModel.field` with ``rtol``).
+        the coupled cores by their reference rules as with None (their bound-chosen rules,
+        ``core_field(..., rtol=)``, cost more: docs/coupling.md).
 
     Returns
     -------
@@ -114,8 +114,7 @@ than a degree wherever |B| is above 6 % of it."""
 
 def _skipping_field(array, p, cur, gradient, tolerance):
     """B (n, 3) T and G (n, 3, 3) T/m (zeros if not ``gradient``): the windings through the
-    skipping evaluator and the coupled cores at ``rtol``, each at half of ``tolerance`` (the
-    cores at their reference rules where nothing is left for them)."""
+    skipping evaluator at ``tolerance`` and the coupled cores by their reference rules."""
     system = array.coupled()
     coupled = set() if system is None else set(system.core_index)
     # the coupled cores are added below, all together: their windings alone here, and only the
@@ -125,13 +124,11 @@ def _skipping_field(array, p, cur, gradient, tolerance):
                            else array.coils[k] for k in on))
     outs = ("B", "gradient") if gradient else ("B",)
     res = SkippingEvaluator(wind, p, outs, currents=tuple(cur[on]),
-                            tolerance=max(0.5 * tolerance, 1e-9)).evaluate()
+                            tolerance=tolerance).evaluate()
     b = res["B"]
     g = gradient_from_g5(res["gradient"]) if gradient else np.zeros((len(p), 3, 3))
     if system is not None:
-        rest = tolerance - max(0.5 * tolerance, 1e-9)  # the skipping evaluator's floor
-        cb = system.core_field(p, system.coil_solution(), gradient=gradient, coil_columns=True,
-                               rtol=rest if rest > 0 else None)
+        cb = system.core_field(p, system.coil_solution(), gradient=gradient, coil_columns=True)
         if gradient:
             b = b + cb[0] @ cur
             g = g + cb[1] @ cur
