@@ -1,11 +1,18 @@
 """Question: what does a figure's slice cost with the windings at a picture's tolerance
 (designkit.viz.array_field(tolerance=PICTURE_TOLERANCE), the skipping evaluator) against the
-exact coupled model, and where does the time go?
+exact coupled model, and where does the time go?  The coupled cores: their reference rules
+against their bound-chosen ring rules at rtol 1e-4, 1e-3, 1e-2 (CoreModel.field with rtol;
+CPU time of this process, min of ``--repeats``: less noisy than the wall clock on a shared
+machine).
 
 On the points of ``designkit.viz.slice_data``'s two slices (vertical y = 0 and horizontal at
 the design height) at the given quality: array_field exact and at the picture tolerance (min
-of ``--repeats``), the coupled cores' part alone, the largest difference relative to the
+of ``--repeats``), the coupled cores' part alone (reference rules and ring rules, with their
+largest error relative to the cores' largest value), the largest difference relative to the
 largest value, and a 2000 x 2000 matmul of the same process (the machine may be shared).
+
+The field lines' volume (``designkit.viz.field_line_data``'s grid) likewise: array_field
+exact against FIELDLINE_TOLERANCE, B only.
 
     python studies/bench_viz_slices.py [OUT_DIR] [--quality quick|full] [--repeats N]
 """
@@ -28,8 +35,8 @@ from bench_constant import matmul_seconds
 from designkit import default_design
 from designkit.array import array_for_design
 from designkit.viz.common import _RES
-from designkit.viz.physics import (PICTURE_TOLERANCE, _footprint_half_m, array_field,
-                                   resolve_currents)
+from designkit.viz.physics import (FIELDLINE_TOLERANCE, PICTURE_TOLERANCE, _footprint_half_m,
+                                   array_field, resolve_currents)
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "bench_viz_slices"
 """Default output folder (git-ignored), whatever the working directory."""
@@ -47,12 +54,21 @@ def slice_points(design, quality):
     return np.concatenate([vert, horiz])
 
 
-def _best(fn, repeats):
+def volume_points(design, quality):
+    """The field lines' volume grid (as field_line_data lays it out), (n, 3) m."""
+    half = _footprint_half_m(design) + 0.02
+    lo = (-half, -half, -design.coil.length_m - 0.03)
+    hi = (half, half, design.workspace.z_max_m + 0.03)
+    axes = [np.linspace(a, b, d) for a, b, d in zip(lo, hi, _RES[quality]["volume"])]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+
+
+def _best(fn, repeats, clock=time.perf_counter):
     ts = []
     for _ in range(repeats):
-        t = time.perf_counter()
+        t = clock()
         out = fn()
-        ts.append(time.perf_counter() - t)
+        ts.append(clock() - t)
     return min(ts), out
 
 
@@ -71,11 +87,31 @@ def main(argv=None):
     t_exact, (b0, g0) = _best(lambda: array_field(design, pts, cur), args.repeats)
     t_pic, (b1, g1) = _best(lambda: array_field(design, pts, cur,
                                                 tolerance=PICTURE_TOLERANCE), args.repeats)
-    t_core, _ = _best(lambda: system.core_field(pts, system.coil_solution(), gradient=True,
-                                                coil_columns=True), args.repeats)
+    x = system.coil_solution()
+    cores = {}
+    for rtol in (None, 1e-4, 1e-3, 1e-2):
+        t, (cb, cg) = _best(lambda: system.core_field(pts, x, gradient=True, coil_columns=True,
+                                                      rtol=rtol), args.repeats, time.process_time)
+        cores[str(rtol)] = {"cpu_s": t, "b": cb, "g": cg}
+    cb0, cg0 = cores["None"]["b"], cores["None"]["g"]
+    t_core = cores["None"]["cpu_s"]
+    vol = volume_points(design, args.quality)
+    t_vol, v0 = _best(lambda: array_field(design, vol, cur, gradient=False), args.repeats)
+    t_vol_tol, v1 = _best(lambda: array_field(design, vol, cur, gradient=False,
+                                              tolerance=FIELDLINE_TOLERANCE), args.repeats)
     res = {"quality": args.quality, "points": len(pts), "matmul_2000_s": mm,
+           "volume_points": len(vol), "volume_exact_s": t_vol, "volume_tolerance_s": t_vol_tol,
+           "volume_tolerance": FIELDLINE_TOLERANCE,
+           "volume_err_rel_max": float(np.max(np.abs(v1 - v0)) / np.max(np.abs(v0))),
            "load_average_1min": load_average(), "exact_s": t_exact, "picture_s": t_pic,
-           "cores_s": t_core, "ratio_exact_over_picture": t_exact / t_pic,
+           "cores_cpu_s": t_core,
+           "cores_rtol": {k: {"cpu_s": v["cpu_s"],
+                              "b_err_rel_max": float(np.max(np.abs(v["b"] - cb0))
+                                                     / np.max(np.abs(cb0))),
+                              "g_err_rel_max": float(np.max(np.abs(v["g"] - cg0))
+                                                     / np.max(np.abs(cg0)))}
+                          for k, v in cores.items() if k != "None"},
+           "ratio_exact_over_picture": t_exact / t_pic,
            "b_err_rel_max": float(np.max(np.abs(b1 - b0)) / np.max(np.abs(b0))),
            "g_err_rel_max": float(np.max(np.abs(g1 - g0)) / np.max(np.abs(g0)))}
     Path(args.out).mkdir(parents=True, exist_ok=True)
@@ -86,8 +122,17 @@ def _print(r):
     print(f"{r['points']} slice points ({r['quality']}); 2000 x 2000 matmul "
           f"{r['matmul_2000_s']:.3f} s; load average {r['load_average_1min']}")
     print(f"exact {r['exact_s']:.2f} s, picture tolerance {r['picture_s']:.2f} s (ratio "
-          f"{r['ratio_exact_over_picture']:.2f}); coupled cores alone {r['cores_s']:.2f} s; "
-          f"max error / max: B {r['b_err_rel_max']:.1e}, grad B {r['g_err_rel_max']:.1e}")
+          f"{r['ratio_exact_over_picture']:.2f}); max error / max: B {r['b_err_rel_max']:.1e}, "
+          f"grad B {r['g_err_rel_max']:.1e}")
+    print(f"coupled cores alone (B + G, CPU s): reference rules {r['cores_cpu_s']:.2f}")
+    for k, v in r["cores_rtol"].items():
+        print(f"  ring rules at rtol {float(k):.0e}: {v['cpu_s']:.2f} (reference / this "
+              f"{r['cores_cpu_s'] / v['cpu_s']:.2f}); max error / max: B "
+              f"{v['b_err_rel_max']:.1e}, grad B {v['g_err_rel_max']:.1e}")
+    print(f"field lines' volume, {r['volume_points']} points, B: exact {r['volume_exact_s']:.2f} s, "
+          f"at tolerance {r['volume_tolerance']:.0e} {r['volume_tolerance_s']:.2f} s (ratio "
+          f"{r['volume_exact_s'] / r['volume_tolerance_s']:.2f}); max error / max "
+          f"{r['volume_err_rel_max']:.1e}")
 
 
 if __name__ == "__main__":

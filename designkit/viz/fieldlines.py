@@ -8,7 +8,8 @@ from typing import TYPE_CHECKING, Sequence
 import numpy as np
 
 from .common import B_MT, B_T, Quality, _image, _pv, _quality
-from .physics import _add_field_arrays, _footprint_half_m, array_field, resolve_currents
+from .physics import (FIELDLINE_TOLERANCE, _add_field_arrays, _footprint_half_m, array_field,
+                      resolve_currents)
 from .scene import scene_meshes
 from .style import (_add_device, _axes, _bar, currents_text, _fit_camera, _log_fmt, _mm,
                     _plotter, _title, round_range)
@@ -37,7 +38,7 @@ def field_line_data(design: "Design", currents: Sequence[float] | None = None, *
     zlo = -design.coil.length_m - 0.03
     zhi = design.workspace.z_max_m + 0.03
     vol = _image(pv, (-half, -half, zlo), (half, half, zhi), res["volume"])
-    b = array_field(design, vol.points, cur, gradient=False)
+    b = array_field(design, vol.points, cur, gradient=False, tolerance=FIELDLINE_TOLERANCE)
     _add_field_arrays(vol, b)
     seeds = []
     nring = 16 if quality == "full" else 10

@@ -75,7 +75,8 @@ def array_field(design: "Design", points, currents: Sequence[float] | None = Non
         e.g. :data:`PICTURE_TOLERANCE`): the windings through
         :class:`designkit.skipping.SkippingEvaluator` at that tolerance (relative to the
         largest |B| and |grad B| over the points; unpowered and negligible windings skipped),
-        the coupled cores exactly as with None.
+        the coupled cores by their reference rules as with None (their bound-chosen rules,
+        ``core_field(..., rtol=)``, cost more: docs/coupling.md).
 
     Returns
     -------
@@ -105,11 +106,15 @@ def array_field(design: "Design", points, currents: Sequence[float] | None = Non
 PICTURE_TOLERANCE = 1e-5
 """The windings' tolerance of the slices (relative to the largest value over a slice): 1 %
 down to 1e-3 of the largest value, three decades of a logarithmic colour scale."""
+FIELDLINE_TOLERANCE = 1e-3
+"""The tolerance of the field lines' volume (relative to its largest |B|): a streamline's
+step follows the direction of B, which an error of 1e-3 of the largest value turns by less
+than a degree wherever |B| is above 6 % of it."""
 
 
 def _skipping_field(array, p, cur, gradient, tolerance):
     """B (n, 3) T and G (n, 3, 3) T/m (zeros if not ``gradient``): the windings through the
-    skipping evaluator at ``tolerance`` and the coupled cores exactly."""
+    skipping evaluator at ``tolerance`` and the coupled cores by their reference rules."""
     system = array.coupled()
     coupled = set() if system is None else set(system.core_index)
     # the coupled cores are added below, all together: their windings alone here, and only the
