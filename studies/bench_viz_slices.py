@@ -1,14 +1,11 @@
 """Question: what does a figure's slice cost with the windings at a picture's tolerance
 (designkit.viz.array_field(tolerance=PICTURE_TOLERANCE), the skipping evaluator) against the
-exact coupled model, and where does the time go?  The coupled cores: their reference rules
-against their bound-chosen ring rules at rtol 1e-4, 1e-3, 1e-2 (CoreModel.field with rtol;
-CPU time of this process, min of ``--repeats``: less noisy than the wall clock on a shared
-machine).
+exact coupled model, and where does the time go?  The coupled cores' part alone in CPU time
+of this process (min of ``--repeats``: less noisy than the wall clock on a shared machine).
 
 On the points of ``designkit.viz.slice_data``'s two slices (vertical y = 0 and horizontal at
 the design height) at the given quality: array_field exact and at the picture tolerance (min
-of ``--repeats``), the coupled cores' part alone (reference rules and ring rules, with their
-largest error relative to the cores' largest value), the largest difference relative to the
+of ``--repeats``), the coupled cores' part alone, the largest difference relative to the
 largest value, and a 2000 x 2000 matmul of the same process (the machine may be shared).
 
 The field lines' volume (``designkit.viz.field_line_data``'s grid) likewise: array_field
@@ -88,13 +85,8 @@ def main(argv=None):
     t_pic, (b1, g1) = _best(lambda: array_field(design, pts, cur,
                                                 tolerance=PICTURE_TOLERANCE), args.repeats)
     x = system.coil_solution()
-    cores = {}
-    for rtol in (None, 1e-4, 1e-3, 1e-2):
-        t, (cb, cg) = _best(lambda: system.core_field(pts, x, gradient=True, coil_columns=True,
-                                                      rtol=rtol), args.repeats, time.process_time)
-        cores[str(rtol)] = {"cpu_s": t, "b": cb, "g": cg}
-    cb0, cg0 = cores["None"]["b"], cores["None"]["g"]
-    t_core = cores["None"]["cpu_s"]
+    t_core, _ = _best(lambda: system.core_field(pts, x, gradient=True, coil_columns=True),
+                      args.repeats, time.process_time)
     vol = volume_points(design, args.quality)
     t_vol, v0 = _best(lambda: array_field(design, vol, cur, gradient=False), args.repeats)
     t_vol_tol, v1 = _best(lambda: array_field(design, vol, cur, gradient=False,
@@ -105,12 +97,6 @@ def main(argv=None):
            "volume_err_rel_max": float(np.max(np.abs(v1 - v0)) / np.max(np.abs(v0))),
            "load_average_1min": load_average(), "exact_s": t_exact, "picture_s": t_pic,
            "cores_cpu_s": t_core,
-           "cores_rtol": {k: {"cpu_s": v["cpu_s"],
-                              "b_err_rel_max": float(np.max(np.abs(v["b"] - cb0))
-                                                     / np.max(np.abs(cb0))),
-                              "g_err_rel_max": float(np.max(np.abs(v["g"] - cg0))
-                                                     / np.max(np.abs(cg0)))}
-                          for k, v in cores.items() if k != "None"},
            "ratio_exact_over_picture": t_exact / t_pic,
            "b_err_rel_max": float(np.max(np.abs(b1 - b0)) / np.max(np.abs(b0))),
            "g_err_rel_max": float(np.max(np.abs(g1 - g0)) / np.max(np.abs(g0)))}
@@ -124,11 +110,7 @@ def _print(r):
     print(f"exact {r['exact_s']:.2f} s, picture tolerance {r['picture_s']:.2f} s (ratio "
           f"{r['ratio_exact_over_picture']:.2f}); max error / max: B {r['b_err_rel_max']:.1e}, "
           f"grad B {r['g_err_rel_max']:.1e}")
-    print(f"coupled cores alone (B + G, CPU s): reference rules {r['cores_cpu_s']:.2f}")
-    for k, v in r["cores_rtol"].items():
-        print(f"  ring rules at rtol {float(k):.0e}: {v['cpu_s']:.2f} (reference / this "
-              f"{r['cores_cpu_s'] / v['cpu_s']:.2f}); max error / max: B "
-              f"{v['b_err_rel_max']:.1e}, grad B {v['g_err_rel_max']:.1e}")
+    print(f"coupled cores alone (B + G, CPU s): {r['cores_cpu_s']:.2f}")
     print(f"field lines' volume, {r['volume_points']} points, B: exact {r['volume_exact_s']:.2f} s, "
           f"at tolerance {r['volume_tolerance']:.0e} {r['volume_tolerance_s']:.2f} s (ratio "
           f"{r['volume_exact_s'] / r['volume_tolerance_s']:.2f}); max error / max "

@@ -162,7 +162,16 @@ class ChargeModes:
         k = x1.shape[1]
         if rule == "far":
             pos, phi, arc = self._far_charge_nodes
-            return self._ring_charges(x1, pos, phi, arc, self.far1_w)
+            nphi = len(phi)
+            dens = np.zeros((len(arc), nphi, k))
+            for m in range(1, self.m_max + 1):
+                a = (2 * (m - 1)) * self.n1
+                wc = self.far1_w @ x1[a:a + self.n1]
+                ws = self.far1_w @ x1[a + self.n1:a + 2 * self.n1]
+                dens += wc[:, None, :] * np.cos(m * phi)[None, :, None]
+                dens += ws[:, None, :] * np.sin(m * phi)[None, :, None]
+            q = dens * arc[:, None, None]
+            return pos.reshape(-1, 3), q.reshape(-1, k)
         ng, nphi = rule
         pos, wt, phi = self._charge_nodes(ng, nphi)
         dens = np.zeros((self.n1, nphi, k))
@@ -171,21 +180,6 @@ class ChargeModes:
             dens += x1[a:a + self.n1, None, :] * np.cos(m * phi)[None, :, None]
             dens += x1[a + self.n1:a + 2 * self.n1, None, :] * np.sin(m * phi)[None, :, None]
         q = wt[:, :, None, None] * dens[:, None, :, :]  # (n1, ng, nphi, k)
-        return pos.reshape(-1, 3), q.reshape(-1, k)
-
-    def _ring_charges(self, x1, pos, phi, arc, ring_w):
-        """Point charges of the m >= 1 unknowns x1 (2 m_max n1, k) on compressed rings:
-        ``pos`` (n_rings, nphi, 3) m at azimuths ``phi`` (nphi,), arc weights r dphi
-        (n_rings,) m, ring line density = ring_w @ sigma. Returns (nc, 3) m, (nc, k) A m."""
-        k = x1.shape[1]
-        dens = np.zeros((len(arc), len(phi), k))
-        for m in range(1, self.m_max + 1):
-            a = (2 * (m - 1)) * self.n1
-            wc = ring_w @ x1[a:a + self.n1]
-            ws = ring_w @ x1[a + self.n1:a + 2 * self.n1]
-            dens += wc[:, None, :] * np.cos(m * phi)[None, :, None]
-            dens += ws[:, None, :] * np.sin(m * phi)[None, :, None]
-        q = dens * arc[:, None, None]
         return pos.reshape(-1, 3), q.reshape(-1, k)
 
     @staticmethod

@@ -29,7 +29,6 @@ from .discretization import (N_CAP, N_SIDE, influence_system, interface_factor,
                              panel_basis_rz, panel_geometry)
 from .quadrature import azimuth_cos_sin, product_matrix
 from .solution import CoreSolution
-from .tolerance import azimuth_count, meridian_nodes, segment_cancellation
 
 M_MAX = 3
 """Highest azimuthal mode kept (convergence in m_max against the 3-D FEM: docs/coupling.md)."""
@@ -41,19 +40,6 @@ field evaluation, here linear in the panel values)."""
 FAR_RHO = 2.6
 """Bernstein-ellipse parameter a point needs w.r.t. every interval of the compressed rules
 (error ~ FAR_RHO^-12 ~ 1e-5 with 6 nodes)."""
-
-RTOL_RINGS_MIN = 1e-4
-"""Tightest rtol given to the bound-chosen ring rules; tighter requests take the reference
-rules (accurate to ~1e-5 of each group, and cheaper than rules whose bounds reach that:
-studies/bench_viz_slices.py)."""
-PARTS_MARGIN = 0.1
-"""The ring rules are chosen for rtol x PARTS_MARGIN: a point keeps them while its segments'
-and parts' magnitudes sum to at most 1 / PARTS_MARGIN times its |H| (else it is computed
-again by the reference rules)."""
-RINGS_MIN_POINTS = 200
-"""Smaller calls take the reference rules (the ring rules' per-segment grouping costs more
-than it saves on a few points: 18 sensor points x 64 columns, 0.03 s reference, 0.2-0.3 s
-by the ring rules)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -223,22 +209,15 @@ class CoreModel(ChargeModes):
         return (h, g) if gradient else h
 
     def field(self, pts: np.ndarray, xs: np.ndarray, gradient: bool = False,
-              pointwise: bool = False, own_col: int | None = None,
-              rtol: float | None = None):
+              pointwise: bool = False, own_col: int | None = None):
         """H of the core for unknown columns ``xs`` (n_unknowns, k) at local points.
 
         Contracts the unknowns before the kernels (far rings for m = 0, charges for m >= 1).
         Returns H (n, 3, k) A/m [, G (n, 3, 3, k) A/m^2]; with ``pointwise`` point i uses
-        column i (k = n) and the shapes are (n, 3) [, (n, 3, 3)]. ``rtol``: None, the
-        reference rules below; a float >= RTOL_RINGS_MIN (calls of >= RINGS_MIN_POINTS
-        points), each point takes the cheapest ring rule whose error bounds are <= rtol of
-        each segment's contribution (:mod:`designkit.cores.tolerance`), the others the
-        reference rules (as do tighter requests and smaller calls).
+        column i (k = n) and the shapes are (n, 3) [, (n, 3, 3)].
         """
         pts = np.asarray(pts, dtype=float)
         n = len(pts)
-        if rtol is not None and rtol >= RTOL_RINGS_MIN and n >= RINGS_MIN_POINTS:
-            return self._field_at_rtol(pts, xs, gradient, pointwise, own_col, rtol)
         k = xs.shape[1]
         shp = (n,) if pointwise else (n, k)
         h = np.zeros((n, 3) + shp[1:])
@@ -295,161 +274,6 @@ class CoreModel(ChargeModes):
                     h[idx] += res
         return (h, g) if gradient else h
 
-    def _field_at_rtol(self, pts, xs, gradient, pointwise, own_col, rtol):
-        """:meth:`field` with the ring rules of :mod:`designkit.cores.tolerance` where their
-        bounds meet ``rtol`` for every segment, the reference rules elsewhere."""
-        n, k = len(pts), xs.shape[1]
-        rho = np.hypot(pts[:, 0], pts[:, 1])
-        cancel = self._cancellation(xs)  # (nseg, k)
-        cancel = cancel if pointwise else cancel.max(axis=1)
-        want = rtol * PARTS_MARGIN  # room for the parts' cancellation (checked below)
-        nodes, bound = meridian_nodes(self.far_segments, cancel, rho, pts[:, 2], want)
-        naz = np.where(nodes > 0, 1, 0)  # (nseg, n)
-        az_bound = np.zeros(n)
-        if self.m_max:
-            for seg, nn in [(sg, int(v)) for sg in range(len(nodes))
-                            for v in np.unique(nodes[sg]) if v > 0]:
-                sel = np.flatnonzero(nodes[seg] == nn)
-                r1, z1, _ = self._ring_rule(nn, 1)
-                rows = slice(seg * nn, (seg + 1) * nn)
-                naz[seg, sel], b = azimuth_count(r1[rows], z1[rows], rho[sel], pts[sel, 2],
-                                                 self.m_max, want)
-                az_bound[sel] = np.maximum(az_bound[sel], b)
-        fast = np.all(naz > 0, axis=0)
-        if np.any(fast):
-            idx = np.flatnonzero(fast)
-            res = self._ring_field(pts[idx], rho[idx], xs[:, idx] if pointwise else xs,
-                                   gradient, pointwise, nodes[:, idx], naz[:, idx])
-            # the bounds hold for each part's (m = 0, m >= 1) contribution: keep the points
-            # where they hold for the sum too (no cancellation between the parts)
-            ok = self._parts_ok(res, (bound + az_bound)[idx], rtol, gradient, pointwise)
-            fast[idx[~ok]] = False
-        shp = (n, 3) if pointwise else (n, 3, k)
-        h = np.zeros(shp)
-        g = np.zeros(shp[:2] + (3,) + shp[2:]) if gradient else None
-        if np.any(fast):
-            sel = idx[ok]
-            if gradient:
-                h[sel], g[sel] = res[0][0][ok], res[0][1][ok]
-            else:
-                h[sel] = res[0][ok]
-        idx = np.flatnonzero(~fast)
-        if len(idx):
-            res = self.field(pts[idx], xs[:, idx] if pointwise else xs, gradient, pointwise,
-                             own_col)
-            if gradient:
-                h[idx], g[idx] = res
-            else:
-                h[idx] = res
-        return (h, g) if gradient else h
-
-    @staticmethod
-    def _parts_ok(res, bound, rtol, gradient, pointwise):
-        """Points (n,) bool where ``bound`` (n,) times the sum of the parts' magnitudes is
-        <= rtol |H| (and <= 10 rtol |G|) for every column; ``res``: (field, parts) of
-        :meth:`_ring_field`."""
-        field, parts = res
-        ok = np.ones(len(bound), dtype=bool)
-        outs = zip(field, parts) if gradient else [(field, parts[0])]
-        for (val, mag), f in zip(outs, (1.0, 10.0)):
-            n = len(val)
-            size = np.linalg.norm(val.reshape((n, -1) + (() if pointwise else val.shape[-1:])),
-                                  axis=1)
-            b = bound if pointwise else bound[:, None]
-            good = b * mag <= f * rtol * size
-            ok &= good if pointwise else np.all(good, axis=1)
-        return ok
-
-    def _ring_field(self, pts, rho, xs, gradient, pointwise, nodes, n_az):
-        """H [, G] of the columns ``xs`` by the ring rules: ``nodes`` (nseg, n) rings per
-        segment, ``n_az`` (nseg, n) azimuths per m >= 1 ring (shapes as :meth:`field`), and
-        the sums of the m = 0 and m >= 1 parts' magnitudes (norms over the components): a
-        list, H's then G's, of (n, k) (or (n,) with ``pointwise``), summed over the segments
-        (their bounds hold for each segment's contribution)."""
-        n = len(pts)
-        k = xs.shape[1]
-        kk = 1 if pointwise else k
-        cz = [np.zeros((n, kk)) for _ in range(7 if gradient else 2)]
-        mags = [np.zeros((n, kk)) for _ in range(2 if gradient else 1)]
-        shp = (n, 3) if pointwise else (n, 3, k)
-        h1 = np.zeros(shp)
-        g1 = np.zeros(shp[:2] + (3,) + shp[2:]) if gradient else None
-        keys = np.stack([nodes, n_az], -1)  # (nseg, n, 2)
-        for seg in range(len(nodes)):
-            for nn, na in np.unique(keys[seg], axis=0):
-                idx = np.flatnonzero((nodes[seg] == nn) & (n_az[seg] == na))
-                rows = slice(seg * nn, (seg + 1) * nn)
-                cols = xs[:, idx] if pointwise else xs
-                r0, z0, w0 = self._ring_rule(int(nn), 0)
-                res = loop_rz(np.tile(r0[rows], len(idx)), np.repeat(rho[idx], nn),
-                              np.repeat(pts[idx, 2], nn) - np.tile(z0[rows], len(idx)),
-                              gradient=gradient)
-                cur = w0[rows] @ cols[:self.n0]  # ring currents (nn, k)
-                part = [np.einsum("nq,qn->n", q.reshape(len(idx), nn), cur)[:, None]
-                        if pointwise else q.reshape(len(idx), nn) @ cur for q in res]
-                for c, q in zip(cz, part):
-                    c[idx] += q
-                # |B| from (br, bz); |G|_F <= sqrt(2) |derivative components|
-                mags[0][idx] += np.sqrt(part[0] ** 2 + part[1] ** 2)
-                if gradient:
-                    mags[1][idx] += np.sqrt(2.0 * sum(q * q for q in part[2:]))
-                if not self.m_max:
-                    continue
-                r1, z1, w1 = self._ring_rule(int(nn), 1)
-                phi = 2.0 * math.pi * (np.arange(na) + 0.5) / na
-                r1, z1 = r1[rows], z1[rows]
-                pos = np.stack([r1[:, None] * np.cos(phi), r1[:, None] * np.sin(phi),
-                                np.repeat(z1[:, None], na, axis=1)], axis=-1)
-                src, q = self._ring_charges(cols[self.n0:], pos, phi,
-                                            r1 * (2.0 * math.pi / na), w1[rows])
-                res = self._charge_kernel(pts[idx], src, gradient, q, pointwise)
-                for j, r in enumerate(res if gradient else (res,)):
-                    (h1, g1)[j][idx] += r
-                    mags[j][idx] += np.linalg.norm(r.reshape((len(idx), -1, kk)), axis=1)
-        out = self._rz_basis_to_xyz(pts, rho, cz, gradient)
-        if pointwise:
-            out = (out[0][..., 0], out[1][..., 0]) if gradient else out[..., 0]
-        if pointwise:
-            mags = [m[:, 0] for m in mags]
-        if gradient:
-            return (out[0] + h1, out[1] + g1), mags
-        return out + h1, mags
-
-    @functools.cached_property
-    def _ring_rules(self) -> dict:
-        return {}
-
-    def _ring_rule(self, nodes: int, part: int):
-        """Compressed rings of the m = 0 (part 0) or m >= 1 (part 1) unknowns with ``nodes``
-        rings per segment: ring r, z (m) and W (n_rings, n0 or n1), cached."""
-        key = (nodes, part)
-        if key not in self._ring_rules:
-            stretches = [(a[1], b[1]) for a, b in self.far_segments if a[0] == b[0]]
-            if part == 0:
-                args = (self.side[:, 0], self.side[:, 1], _faces0(self.discs, len(self.side)),
-                        self.n0)
-            else:
-                n1s = int(np.sum(self.kind1 == 0))
-                args = (self.lo1[:n1s], self.hi1[:n1s],
-                        _faces1(self.kind1, self.lo1, self.hi1, self.z_lo, self.z_hi), self.n1)
-            self._ring_rules[key] = _far_rings(self.radius, stretches, *args, nodes=nodes)
-        return self._ring_rules[key]
-
-    def _cancellation(self, xs):
-        """Cancellation factor of the m = 0 currents of each segment of ``far_segments`` for
-        every column of ``xs``, (nseg, k)."""
-        groups = []
-        mid = self.side.mean(axis=1)
-        for (r0, za), (r1, zb) in self.far_segments:
-            if r0 == r1:
-                groups.append((np.flatnonzero((mid > min(za, zb)) & (mid < max(za, zb))), False))
-            else:
-                groups.append((len(self.side) + np.flatnonzero(self.discs[:, 0] == za), True))
-        widths = np.r_[self.side[:, 1] - self.side[:, 0], self.discs[:, 2] - self.discs[:, 1]]
-        moments = np.r_[np.zeros(len(self.side)),
-                        (self.discs[:, 2] ** 3 - self.discs[:, 1] ** 3) / 3.0]
-        return segment_cancellation(xs[:self.n0], widths, moments, groups)
-
     @functools.cached_property
     def _own_solutions(self) -> dict:
         return {}
@@ -500,30 +324,17 @@ class CoreModel(ChargeModes):
         return self._rz_basis_to_xyz(pts, rho, self._m0_rz(pts, rho, gradient, False), gradient)
 
 
-def _faces0(discs, ns):
-    """The m = 0 faces for :func:`_far_rings`: (z, r_lo, r_hi, columns) per face plane."""
-    return [(zp, discs[sel, 1], discs[sel, 2], ns + sel) for zp in np.unique(discs[:, 0])
-            for sel in [np.flatnonzero(discs[:, 0] == zp)]]
-
-
-def _faces1(kind, lo1, hi1, lo, hi):
-    """The m >= 1 end faces for :func:`_far_rings` (bottom, then top, as far_segments)."""
-    return [(zp, lo1[sel], hi1[sel], sel) for kk, zp in ((2, lo), (1, hi))
-            for sel in [np.flatnonzero(kind == kk)]]
-
-
-def _far_rings(radius, side_intervals, side_lo, side_hi, faces, n_cols, nodes=FAR_NODES):
-    """Compressed ring rule of a core's panel values (:func:`product_matrix` with ``nodes``
+def _far_rings(radius, side_intervals, side_lo, side_hi, faces, n_cols):
+    """Compressed ring rule of a core's panel values (:func:`product_matrix` with FAR_NODES
     nodes): rings on the side at r = radius over ``side_intervals`` (the side panels are
     columns 0 .. len(side_lo) - 1), then on each face ``(z, r_lo, r_hi, columns)`` over
     [0, radius]. Returns ring r, ring z (m) and W (n_rings, n_cols): ring density = W @ x."""
-    n_nodes = nodes
-    nodes, w = product_matrix(side_lo, side_hi, side_intervals, n_nodes)
+    nodes, w = product_matrix(side_lo, side_hi, side_intervals, FAR_NODES)
     full = np.zeros((len(nodes), n_cols))
     full[:, :len(side_lo)] = w
     rr, zz, ww = [np.full_like(nodes, radius)], [nodes], [full]
     for zp, r_lo, r_hi, cols in faces:
-        nodes, w = product_matrix(r_lo, r_hi, [(0.0, radius)], n_nodes)
+        nodes, w = product_matrix(r_lo, r_hi, [(0.0, radius)], FAR_NODES)
         full = np.zeros((len(nodes), n_cols))
         full[:, cols] = w
         rr.append(nodes)
@@ -577,10 +388,13 @@ def core_model(radius: float, length: float, offset: float, mu_r: float, key: tu
     end = min(0.15 * (hi - lo), 2 * radius)
     stretches = [(lo, lo + end), (lo + end, hi - end), (hi - end, hi)]
     ns = len(side)
-    far0 = _far_rings(radius, stretches, side[:, 0], side[:, 1], _faces0(discs, ns), len(f0))
+    faces0 = [(zp, discs[sel, 1], discs[sel, 2], ns + sel) for zp in np.unique(discs[:, 0])
+              for sel in [np.flatnonzero(discs[:, 0] == zp)]]
+    far0 = _far_rings(radius, stretches, side[:, 0], side[:, 1], faces0, len(f0))
     n1s = int(np.sum(kind == 0))
-    far1 = _far_rings(radius, stretches, lo1[:n1s], hi1[:n1s],
-                      _faces1(kind, lo1, hi1, lo, hi), len(kind))
+    faces1 = [(zp, lo1[sel], hi1[sel], sel) for kk, zp in ((1, hi), (2, lo))
+              for sel in [np.flatnonzero(kind == kk)]]
+    far1 = _far_rings(radius, stretches, lo1[:n1s], hi1[:n1s], faces1, len(kind))
     segs = np.array([[[radius, a], [radius, b]] for a, b in stretches]
                     + [[[0.0, zp], [radius, zp]] for zp in (lo, hi)])
     return CoreModel(radius, lo, hi, mu_r, m_max, side, discs, f0, self0, rho0, z0, *far0,

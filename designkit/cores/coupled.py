@@ -277,24 +277,24 @@ class ArraySystem:
 
     # ------------------------------------------------------------------ evaluation
     def core_field(self, points: np.ndarray, x: np.ndarray, gradient: bool = False, *,
-                   coil_columns: bool = False, rtol: float | None = None):
+                   coil_columns: bool = False):
         """B of all cores for the unknown columns x (n_unknowns, k) at global points.
 
         ``coil_columns``: x is :meth:`coil_solution` (column k = coil k), and each core's own
         column is evaluated by the single-core field rules. Returns B (n, 3, k) T [, G (n, 3, 3, k)
-        T/m]. ``rtol``: see :meth:`designkit.cores.core_model.CoreModel.field`.
+        T/m].
         """
-        return self._field(points, x, gradient, False, coil_columns, rtol)
+        return self._field(points, x, gradient, False, coil_columns)
 
     def core_field_pointwise(self, points: np.ndarray, x: np.ndarray, gradient: bool = False):
         """Like :meth:`core_field` but point i uses its own column x[:, i]: B (n, 3) [, G]."""
         return self._field(points, x, gradient, True)
 
-    def _field(self, points, x, gradient, pointwise, coil_columns=False, rtol=None):
+    def _field(self, points, x, gradient, pointwise, coil_columns=False):
         with one_blas_thread():
-            return self._field_impl(points, x, gradient, pointwise, coil_columns, rtol)
+            return self._field_impl(points, x, gradient, pointwise, coil_columns)
 
-    def _field_impl(self, points, x, gradient, pointwise, coil_columns=False, rtol=None):
+    def _field_impl(self, points, x, gradient, pointwise, coil_columns=False):
         pts = np.asarray(points, dtype=float)
         tail = () if pointwise else (x.shape[1],)
         b = np.zeros((len(pts), 3) + tail)
@@ -302,7 +302,7 @@ class ArraySystem:
         for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
             xs = x[self.offsets[jj]:self.offsets[jj + 1]]
             res = mj.field(pj.to_local(pts), xs, gradient, pointwise,
-                           self.core_index[jj] if coil_columns else None, rtol=rtol)
+                           self.core_index[jj] if coil_columns else None)
             rot = pj.matrix
             h = res[0] if gradient else res
             if pj.is_identity_rotation:

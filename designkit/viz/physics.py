@@ -75,8 +75,8 @@ def array_field(design: "Design", points, currents: Sequence[float] | None = Non
         e.g. :data:`PICTURE_TOLERANCE`): the windings through
         :class:`designkit.skipping.SkippingEvaluator` at that tolerance (relative to the
         largest |B| and |grad B| over the points; unpowered and negligible windings skipped),
-        the coupled cores by their reference rules as with None (their bound-chosen rules,
-        ``core_field(..., rtol=)``, cost more: docs/coupling.md).
+        the coupled cores by their reference rules as with None (docs/coupling.md: why the
+        cores have no cheaper rule at a picture's tolerance).
 
     Returns
     -------
