@@ -7,7 +7,8 @@ N) of the magnet's pull on one core alone (:func:`magnet_terms` sums them). Mode
 (``SM<k>``) hold the quantities of the cores' basis fields (:data:`N_MODE_Q` per shape; the
 formulas in :func:`_poly`); :func:`mode_rows` gives the 8 rows per basis field, and the
 one-point and batch kernels :func:`modes_one`, :func:`kernel_rows_many` give m . B per basis
-field for the sensor field (by reciprocity, linear cores). Points in m, global frame.
+field for the sensor field (the coupled system's adjoint sources, linear cores; docs/
+mapfile_format.md). Points in m, global frame.
 """
 
 from __future__ import annotations

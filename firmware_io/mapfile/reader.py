@@ -250,8 +250,9 @@ class MapFile:
         """Field of the cores magnetized by the magnet at the Hall sensors, T:
         (3,) -> (2, n_coils, 3) (upper array then lower), (n, 3) -> (n, 2, n_coils, 3).
 
-        By reciprocity (linear cores): component c at sensor s is m . B(p) of the cores
-        magnetized by a unit dipole along c at s -- a mode sum like A (``SCOEF``)."""
+        Linear cores: component c at sensor s is m . B(p) of the coupled system's adjoint
+        sources for that component (in the continuum, the cores magnetized by a unit dipole
+        along c at s: reciprocity) -- a mode sum like A (``SCOEF``)."""
         nc = self.n_coils
         q = self._one_point(magnet_position_m, extrapolate, "magnet_position_m")
         one = self.kernels["sensor_one"]
