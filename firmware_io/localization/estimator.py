@@ -30,7 +30,7 @@ from ..hw.tlv493d import TLV493D_LSB_T
 from ..mapfile import MapFile
 from .calibration import SensorCalibration
 from .filter import ConstantVelocityKalman
-from .integrity import chi2_quantile, covariance_and_pl, thresholds
+from .integrity import covariance_and_pl, ratio_quantiles, thresholds
 from .learned import LearnedInverse
 from .lm import levenberg_marquardt
 from .magnet import _EYE, MU0, _multipole_rows, _multipole_work, cylinder_field, multipole_field
@@ -99,7 +99,8 @@ class Localizer:
     lsb_t : float, T -- the readout's quantization step; the fit's per-axis variance is
         noise_t^2 + lsb_t^2 / 12 (uniform rounding error), plus the model-error terms
     relative_error : float, relative model error of a sensor's reading (gain, mounting);
-        default 0.02, or 0.003 with a calibration
+        default 0.02, or 0.001 with a calibration (what it leaves of the gain and mounting
+        errors: docs/localization_integrity.md)
     residual_limit : float, largest normalized rms residual for ok (a cap beside the test)
     integrity_risk : float, probability per fix that the error exceeds the protection level
     false_alarm : float, probability per fix that a correct fit fails the residual test (a
@@ -109,7 +110,9 @@ class Localizer:
         runner passes its scene's)
     reacquire_m : float, m -- a warm fit that moved farther is checked by the global search
     model_bias_m : float, m -- bound on the fit's bias from what the noise model leaves out
-        (sensor poses, the map's core term), added to the protection level
+        (sensor poses, the map's core term), added to the protection level; default 1 mm, or
+        0.5 mm with a calibration (noise-free bias measured <= 0.25 mm:
+        docs/localization_integrity.md)
     cores : bool or None, model the magnet-induced core field ('dipole'; default: if known)
     mount_position_m : float, m -- sensor position uncertainty, weighs near-field sensors
     calibration : SensorCalibration (see :func:`calibrate`), or (gain_inverse (2, n, 3, 3),
@@ -132,7 +135,7 @@ class Localizer:
                  mount_position_m: float = 0.0, refresh_m: float = 1e-3,
                  integrity_risk: float = 1e-4, false_alarm: float = 1e-6,
                  alert_limit_m: float = math.inf, reacquire_m: float = 5e-3,
-                 model_bias_m: float = 1e-3, lsb_t: float = TLV493D_LSB_T):
+                 model_bias_m: float | None = None, lsb_t: float = TLV493D_LSB_T):
         if method not in METHODS:
             raise BadInputError("method", f"one of {METHODS}", method)
         if method == "learned":
@@ -143,7 +146,9 @@ class Localizer:
                                     f"design {learned.design_sha256[:12]}...",
                                     "Retrain: designkit.learned_inverse.train_learned_inverse.")
         if relative_error is None:
-            relative_error = 0.02 if calibration is None else 0.003
+            relative_error = 0.02 if calibration is None else 0.001
+        if model_bias_m is None:
+            model_bias_m = 1e-3 if calibration is None else 0.5e-3
         for name, val in (("noise_t", noise_t), ("relative_error", relative_error + 1e-300),
                           ("residual_limit", residual_limit), ("frame_period_s", frame_period_s),
                           ("refresh_m", refresh_m), ("reacquire_m", reacquire_m)):
@@ -170,7 +175,7 @@ class Localizer:
             raise BadInputError("alert_limit_m", "a number > 0 (or inf), m", alert_limit_m)
         self.integrity_risk, self.false_alarm, self.alert_limit_m, self.reacquire_m = map(
             float, (integrity_risk, false_alarm, alert_limit_m, reacquire_m))
-        self._k2 = chi2_quantile(self.integrity_risk, 3)
+        self._k2 = ratio_quantiles(self.integrity_risk)
         self._chi2_max = thresholds(self.false_alarm, 6 * model.n_sensors)
         self.cores = (model.induced is not None) if cores is None else bool(cores)
         if self.cores and model.induced is None:
