@@ -45,9 +45,8 @@ from designkit.sensor_sim import SensorSimulator, case_currents, forward_model, 
 from firmware_io.constants import MU0
 from firmware_io.localization import Localizer, SensorModel, multipole_field
 from firmware_io.localization.integrity import fused_protection_level
-from firmware_io.mapfile import gradient_tensor
 from firmware_io.runner import ConstantVelocityTracker
-from localization import _calibrate  # the start-up calibration as the localization study runs it
+from localization import _calibrate, with_coil_gradient  # the start-up calibration as the localization study runs it
 
 ALERT_LIMIT_M = 5e-3
 ALERT_LIMIT_RUNNER_M = 10e-3
@@ -218,13 +217,8 @@ def _device(seed: int, noise_t: float):
     design = default_design()
     sim = SensorSimulator(design, errors="default", seed=seed, induced="rod", noise_t=noise_t)
     mg = design.magnet
-    # the coils' field gradient at the nominal sensor poses, as the v2 map carries it
-    # (from_map): the calibration recovers the sensors' position errors from it
-    rows = sim.array.actuation_matrix(sim.nominal_m.reshape(-1, 3))[:, 3:8]
-    grad = np.moveaxis(gradient_tensor(np.moveaxis(rows, 1, -1)), 1, -1)
-    model = dataclasses.replace(SensorModel.from_operator(**forward_model(sim)),
-                                magnet_size_m=(mg.radius_m, mg.length_m),
-                                coil_gradient_t_per_a_m=grad.reshape(2, sim.n, 3, 3, -1))
+    model = dataclasses.replace(with_coil_gradient(sim, SensorModel.from_operator(
+        **forward_model(sim))), magnet_size_m=(mg.radius_m, mg.length_m))
     cal, _ = _calibrate(sim, model, seed + 1000, 1000)
     return sim, model, cal
 
