@@ -130,7 +130,14 @@ def test_alert_limit_and_bad_frames_give_not_ok_with_a_reason_never_an_exception
               "currents": (f[0], f[1], np.r_[np.zeros(8), np.nan]),
               "currents ": (f[0], f[1], None),
               "usable": (nan, nan, np.zeros(9)),
-              "usable ": (np.where(np.arange(9)[:, None] < 2, f[0], np.nan), nan, np.zeros(9))}
+              "usable ": (np.where(np.arange(9)[:, None] < 2, f[0], np.nan), nan, np.zeros(9)),
+              "top": ("not a frame", f[1], np.zeros(9)),
+              "bottom": (f[0], [[0.0, 0.0], [0.0]], np.zeros(9)),
+              "bottom ": (f[0], f[1][:, :2], np.zeros(9)),
+              "tesla": (f[0] * 1e3, f[1], np.zeros(9)),
+              "currents  ": (f[0], f[1], ["a"] * 9),
+              "currents   ": (f[0], f[1], np.zeros(8)),
+              "currents    ": (f[0], f[1], np.r_[np.zeros(8), np.inf])}
     for word, (top, bot, i) in frames.items():
         est = loc.fix(top, bot, i)
         assert not est.ok and word.strip() in est.reason, (word, est.reason)
@@ -138,6 +145,27 @@ def test_alert_limit_and_bad_frames_give_not_ok_with_a_reason_never_an_exception
     # a good frame after the bad ones: found again
     est = loc.fix(f[0], f[1], np.zeros(9))
     assert est.ok and np.linalg.norm(est.position_m - p) < 1e-3
+
+
+def test_ratio_quantiles_match_the_closed_forms_and_a_monte_carlo():
+    """k(r) with P(z1^2 + r (z2^2 + z3^2) > k) = risk: chi-square(1) at r = 0, chi-square(3)
+    at r = 1 (z1^2 + chi-square(2)), rising in between; at r = 0.5 and risk 1e-2 against the
+    empirical quantile of 4e6 draws (its sampling error ~0.3 %: a tail off by 2x in the
+    conditional integral moves k by ~10 %). The protection level uses the bound, never below
+    the exact generalized chi-square quantile."""
+    from scipy.stats import chi2
+
+    from firmware_io.localization.integrity import RATIO_STEPS, ratio_quantiles
+
+    for risk in (1e-2, 1e-4, 1e-6):
+        k = ratio_quantiles(risk)
+        assert len(k) == RATIO_STEPS + 1
+        assert k[0] == pytest.approx(chi2.isf(risk, 1), rel=1e-9)
+        assert k[-1] == pytest.approx(chi2.isf(risk, 3), rel=1e-6)
+        assert np.all(np.diff(k) > 0)
+    z = np.random.default_rng(0).normal(size=(4_000_000, 3)) ** 2
+    want = np.quantile(z[:, 0] + 0.5 * (z[:, 1] + z[:, 2]), 1 - 1e-2)
+    assert ratio_quantiles(1e-2)[RATIO_STEPS // 2] == pytest.approx(want, rel=0.01)
 
 
 @pytest.mark.slow

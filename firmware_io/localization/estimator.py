@@ -71,8 +71,16 @@ def _dist(a: np.ndarray, b: np.ndarray) -> float:
 
 
 
+def _as_float_array(name: str, a, valid: str) -> np.ndarray:
+    """``a`` as a float array, or BadInputError (not numbers, ragged) naming ``name``."""
+    try:
+        return np.asarray(a, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise BadInputError(name, valid, f"not an array of numbers ({exc})") from None
+
+
 def _check_frame(name: str, a, n: int) -> np.ndarray:
-    arr = np.asarray(a, dtype=float)
+    arr = _as_float_array(name, a, f"an array of shape ({n}, 3), T")
     if arr.shape != (n, 3):
         raise BadInputError(name, f"an array of shape ({n}, 3), T", f"shape {arr.shape}")
     if (np.abs(arr) <= 1.0).all():  # the usual frame: one test (False with NaN, Inf, > 1 T)
@@ -194,6 +202,10 @@ class Localizer:
             if self.calibration.coil_field_t_per_a is not None:
                 cf = self.calibration.coil_field_t_per_a
         self._coil = cf
+        # the calibration's own uncertainty: sigma^2 x^T D x per sensor at x = (I, 1)
+        d_inv = getattr(self.calibration, "response_design_inverse", None)
+        self._resp = None if d_inv is None else self._sig2n * d_inv.reshape(
+            2 * n, model.n_coils + 1, model.n_coils + 1)
         # subtraction: the lower sensor's coil field mapped onto the upper one's (for the
         # symmetric array diag(-1, -1, 1): Br is odd about the coil's mid-plane)
         self._mirror = np.stack([cf[0, i] @ np.linalg.pinv(cf[1, i]) for i in range(n)])
@@ -320,7 +332,7 @@ class Localizer:
         bottom = _check_frame("bottom", bottom, n)
         i = None
         if currents is not None:
-            i = np.asarray(currents, dtype=float)
+            i = _as_float_array("currents", currents, f"{self.model.n_coils} finite values, A")
             if i.shape != (self.model.n_coils,) or not np.all(np.isfinite(i)):
                 raise BadInputError("currents", f"{self.model.n_coils} finite values, A",
                                     f"shape {i.shape}" if i.shape != (self.model.n_coils,)
@@ -382,6 +394,9 @@ class Localizer:
             d = (meas - self._coil @ currents).reshape(-1, 3)
             use = np.isfinite(d.sum(1))
             s2 = sig2n + self.rel**2 * mag2.reshape(-1)
+            if self._resp is not None:
+                x = np.append(currents, 1.0)
+                s2 = s2 + (self._resp @ x) @ x
         if self.mount_position_m:
             s2 = s2 + self._mount_var(d)
         return d, use, np.sqrt(s2)
