@@ -177,3 +177,26 @@ def test_integrity_study_smoke(tmp_path):
         ("cold", "jump", "sensor dead", "two saturated", "6 A", "uncalibrated"))
     assert all(r["n"] == 4 and 0 <= r["availability"] <= 1 for r in res["rows"])
     assert (tmp_path / "integrity.json").is_file() and (tmp_path / "integrity_table.txt").is_file()
+
+
+def test_calibrated_response_variance_matches_the_scatter_over_calibrations():
+    """The measured coils' field plus offset at currents I (one sensor, least squares over
+    noisy frames) scatters over repeated calibrations with the variance sigma^2 x^T D x, x =
+    (I, 1), D = (X^T X)^-1 -- the term the localizer adds to each reading's variance; at 6 A
+    per coil the coils' part dominates. A wrong scale (sigma instead of sigma^2, a missing
+    factor of the frame count) moves the ratio far outside 0.85-1.15 (600 samples: the
+    ratio's own scatter ~6 %)."""
+    from firmware_io.localization.calibration import _measured_response
+
+    rng = np.random.default_rng(7)
+    k_true, off_true, noise = rng.normal(scale=5e-3, size=(3, 9)), rng.normal(size=3) * 1e-4, 1e-4
+    cur = np.r_[np.kron(np.eye(9), [[3.0], [-3.0]]), rng.uniform(-1.5, 1.5, (100, 9))]
+    x = np.r_[np.full(9, 6.0) * rng.choice([-1, 1], 9), 1.0]
+    pred = []
+    for _ in range(200):
+        reads = cur @ k_true.T + off_true + rng.normal(scale=noise, size=(len(cur), 3))
+        kk, off, _, d_inv = _measured_response(reads, cur, noise, "0:0")
+        pred.append(kk @ x[:9] + off)
+    err = np.array(pred) - (k_true @ x[:9] + off_true)
+    want = noise ** 2 * x @ d_inv @ x
+    assert np.mean(err ** 2) / want == pytest.approx(1.0, abs=0.15)

@@ -30,6 +30,7 @@ from ..hw.tlv493d import TLV493D_LSB_T
 from ..mapfile import MapFile
 from .calibration import SensorCalibration
 from .filter import ConstantVelocityKalman
+from .frame import as_float_array, check_frame
 from .integrity import covariance_and_pl, ratio_quantiles, thresholds
 from .learned import LearnedInverse
 from .lm import levenberg_marquardt
@@ -69,29 +70,6 @@ def _dist(a: np.ndarray, b: np.ndarray) -> float:
     d = a - b
     return math.sqrt(float(d @ d))
 
-
-
-def _as_float_array(name: str, a, valid: str) -> np.ndarray:
-    """``a`` as a float array, or BadInputError (not numbers, ragged) naming ``name``."""
-    try:
-        return np.asarray(a, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise BadInputError(name, valid, f"not an array of numbers ({exc})") from None
-
-
-def _check_frame(name: str, a, n: int) -> np.ndarray:
-    arr = _as_float_array(name, a, f"an array of shape ({n}, 3), T")
-    if arr.shape != (n, 3):
-        raise BadInputError(name, f"an array of shape ({n}, 3), T", f"shape {arr.shape}")
-    if (np.abs(arr) <= 1.0).all():  # the usual frame: one test (False with NaN, Inf, > 1 T)
-        return arr
-    if np.any(np.isinf(arr)):  # NaN compares False
-        raise BadInputError(name, "finite values or NaN (missing/saturated), T",
-                            f"Inf at {np.argwhere(np.isinf(arr))[0].tolist()}")
-    if np.any(np.abs(arr) > 1.0):
-        raise BadInputError(name, "fields in tesla (|B| <= 1 T; a TLV493D reads <= 0.2 T)",
-                            f"{np.nanmax(np.abs(arr))!r} -- millitesla passed as tesla?")
-    return arr
 
 
 class Localizer:
@@ -193,19 +171,7 @@ class Localizer:
         self.kalman = kalman or (ConstantVelocityKalman() if method == "kalman" else None)
         n = model.n_sensors
         self.refresh_m = float(refresh_m)
-        self._pts = model.sensor_positions_m.reshape(-1, 3)
-        cf = model.coil_field_t_per_a
-        self.calibration = None
-        if calibration is not None:
-            self.calibration = SensorCalibration.coerce(calibration, n, model.n_coils)
-            self._pts = (model.sensor_positions_m + self.calibration.shift_m).reshape(-1, 3)
-            if self.calibration.coil_field_t_per_a is not None:
-                cf = self.calibration.coil_field_t_per_a
-        self._coil = cf
-        # the calibration's own uncertainty: sigma^2 x^T D x per sensor at x = (I, 1)
-        d_inv = getattr(self.calibration, "response_design_inverse", None)
-        self._resp = None if d_inv is None else self._sig2n * d_inv.reshape(
-            2 * n, model.n_coils + 1, model.n_coils + 1)
+        cf = self._use_calibration(calibration)
         # subtraction: the lower sensor's coil field mapped onto the upper one's (for the
         # symmetric array diag(-1, -1, 1): Br is odd about the coil's mid-plane)
         self._mirror = np.stack([cf[0, i] @ np.linalg.pinv(cf[1, i]) for i in range(n)])
@@ -241,6 +207,24 @@ class Localizer:
         self._lin = {}
         self._pj = None  # where the core term's Jacobian was last differenced
         self._radius = self.refresh_m  # reuse radius of the linearization, adapted
+
+    def _use_calibration(self, calibration):
+        """Set the sensors' positions, the calibration and the coils' field at the sensors
+        (the measured one when the calibration has it) and the calibration's own variance
+        sigma^2 x^T D x per sensor at x = (I, 1); returns that coils' field."""
+        model, n = self.model, self.model.n_sensors
+        self._pts = model.sensor_positions_m.reshape(-1, 3)
+        cf, self.calibration, self._resp = model.coil_field_t_per_a, None, None
+        if calibration is not None:
+            self.calibration = SensorCalibration.coerce(calibration, n, model.n_coils)
+            self._pts = (model.sensor_positions_m + self.calibration.shift_m).reshape(-1, 3)
+            if self.calibration.coil_field_t_per_a is not None:
+                cf = self.calibration.coil_field_t_per_a
+            d_inv = self.calibration.response_design_inverse
+            if d_inv is not None:
+                self._resp = self._sig2n * d_inv.reshape(2 * n, model.n_coils + 1, -1)
+        self._coil = cf
+        return cf
 
     # -- construction from files -----------------------------------------------------------
     @classmethod
@@ -328,11 +312,11 @@ class Localizer:
         time_s : float, frame time for 'kalman' (default: one ``frame_period_s`` per call)
         """
         n = self.model.n_sensors
-        top = _check_frame("top", top, n)
-        bottom = _check_frame("bottom", bottom, n)
+        top = check_frame("top", top, n)
+        bottom = check_frame("bottom", bottom, n)
         i = None
         if currents is not None:
-            i = _as_float_array("currents", currents, f"{self.model.n_coils} finite values, A")
+            i = as_float_array("currents", currents, f"{self.model.n_coils} finite values, A")
             if i.shape != (self.model.n_coils,) or not np.all(np.isfinite(i)):
                 raise BadInputError("currents", f"{self.model.n_coils} finite values, A",
                                     f"shape {i.shape}" if i.shape != (self.model.n_coils,)
