@@ -7,8 +7,9 @@ moment from the design) at the sensors' true, displaced poses; the coils' couple
 currents; the cores' field induced by the magnet (designkit.sensor_sim, each core solved at the
 true sensor poses); the TLV493D chain (--noise-mt rms noise, default 0.05 mT, 0.098 mT LSB, NaN beyond +-130 mT) with
 the device's sensor errors (offset, 1 % gain, 1 degree and 0.5 mm mounting). The localizer
-knows the nominal poses, the map's (the forward model's) coil field and core operator, and --
-except in 'uncalibrated' -- the start-up calibration (1000 coil-only frames).
+knows the nominal poses, the map's (the forward model's) coil field, its gradient at the
+sensors and core operator, and -- except in 'uncalibrated' -- the start-up calibration (1000
+coil-only frames).
 
 Conditions (``n`` fixes each, positions 20-70 mm above the coils, |x|, |y| <= 25 mm unless
 stated; currents of the thesis cases 1-3 drawn per frame unless stated; the localizer without

@@ -200,3 +200,25 @@ def test_calibrated_response_variance_matches_the_scatter_over_calibrations():
     err = np.array(pred) - (k_true @ x[:9] + off_true)
     want = noise ** 2 * x @ d_inv @ x
     assert np.mean(err ** 2) / want == pytest.approx(1.0, abs=0.15)
+
+
+def test_fused_protection_level_holds_its_risk_for_a_rounder_filtered_covariance():
+    """A fix with a needle-like covariance (l2 / l1 = 0.1) and its PL from the ratio table at
+    risk 1e-2; filtered with a prediction of isotropic variance p, the error covariance is
+    (1 - K)^2 p I + K^2 C (rounder). Drawn from it (4e5 samples), the share beyond the fused
+    PL's noise part stays <= 1e-2 (a fused PL that kept the fix's needle quantile misses
+    1.6 %) and above 0.5e-2 (the table, not the loose r' / r bound, sets it)."""
+    from firmware_io.localization.integrity import covariance_and_pl, fused_protection_level
+    from firmware_io.localization.integrity import ratio_quantiles
+
+    table, bias, risk = ratio_quantiles(1e-2), 0.5e-3, 1e-2
+    c = np.diag([0.1, 0.1, 1.0]) * (1e-3) ** 2
+    fisher = np.linalg.inv(c).tolist()
+    cov, pl = covariance_and_pl(fisher, 0.0, 10, table)
+    assert pl == pytest.approx(np.sqrt(1e-6 * table[2]), rel=1e-9)
+    p, gain = (0.7e-3) ** 2, 0.5
+    fused = fused_protection_level(pl + bias, cov, p, bias, gain) - bias
+    f = (1 - gain) ** 2 * p * np.eye(3) + gain ** 2 * cov
+    e = np.random.default_rng(5).multivariate_normal(np.zeros(3), f, size=400_000)
+    beyond = np.mean(np.linalg.norm(e, axis=1) > fused)
+    assert 0.5 * risk < beyond <= risk * 1.05

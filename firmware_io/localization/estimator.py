@@ -86,7 +86,7 @@ class Localizer:
         noise_t^2 + lsb_t^2 / 12 (uniform rounding error), plus the model-error terms
     relative_error : float, relative model error of a sensor's reading (gain, mounting);
         default 0.02, or 0.001 with a calibration (what it leaves of the gain and mounting
-        errors: docs/localization_integrity.md)
+        errors: docs/localization.md "Integrity")
     residual_limit : float, largest normalized rms residual for ok (a cap beside the test)
     integrity_risk : float, probability per fix that the error exceeds the protection level
     false_alarm : float, probability per fix that a correct fit fails the residual test (a
@@ -97,14 +97,15 @@ class Localizer:
     reacquire_m : float, m -- a warm fit that moved farther is checked by the global search
     model_bias_m : float, m -- bound on the fit's bias from what the noise model leaves out
         (sensor poses, the map's core term), added to the protection level; default 1 mm, or
-        0.5 mm with a calibration (noise-free bias measured <= 0.25 mm:
-        docs/localization_integrity.md)
+        0.5 mm with a calibration (its measured noise-free bias:
+        docs/localization.md "Integrity")
     cores : bool or None, model the magnet-induced core field ('dipole'; default: if known)
     mount_position_m : float, m -- sensor position uncertainty, weighs near-field sensors
     calibration : SensorCalibration (see :func:`calibrate`), or (gain_inverse (2, n, 3, 3),
         offsets_t (2, n, 3)), or None: corrected reading = gain_inverse @ (reading - offset); a
-        SensorCalibration also moves the sensors by its ``shift_m`` and replaces the map's coil
-        field at the sensors by the measured one.
+        SensorCalibration also moves the sensors by its ``shift_m``, replaces the map's coil
+        field at the sensors by the measured one and adds that one's variance at the frame's
+        currents (``response_design_inverse``) to each reading's.
     refresh_m : float, m -- the exact-magnet and core corrections are re-evaluated when the
         position moved farther than this from where they were last evaluated (linear in between);
         their Jacobian (central differences, 6 more evaluations) when it moved 10x farther. A
