@@ -303,7 +303,8 @@ class Localizer:
         return self.kalman.predict(time_s)
 
     # -- the estimate ------------------------------------------------------------------------
-    def locate(self, top, bottom, currents=None, *, time_s: float | None = None) -> Estimate:
+    def locate(self, top, bottom, currents=None, *, time_s: float | None = None,
+               search: bool = True) -> Estimate:
         """Estimate the magnet's position from one frame.
 
         Parameters
@@ -311,6 +312,9 @@ class Localizer:
         top, bottom : array-like, shape (n, 3), T; NaN marks a missing or saturated sensor
         currents : array-like, shape (n_coils,), A -- commanded currents ('model'; optional else)
         time_s : float, frame time for 'kalman' (default: one ``frame_period_s`` per call)
+        search : bool -- False: no global search (bounded cost: a warm fit only); without a warm
+            start or with a suspicious warm fit: not ok, the reason ending "re-acquisition
+            needed" (a later call with search=True, e.g. outside the control step, re-acquires)
         """
         n = self.model.n_sensors
         top = check_frame("top", top, n)
@@ -335,7 +339,7 @@ class Localizer:
         if method == "learned":
             est = self._learned(meas)
         else:
-            est = self._fit(meas, i if method == "model" else None, method)
+            est = self._fit(meas, i if method == "model" else None, method, search)
         if self.kalman is not None:
             t = time_s if time_s is not None else (
                 (self.kalman.t + self.frame_period_s) if self.kalman.t is not None else 0.0)
@@ -343,19 +347,22 @@ class Localizer:
             est = dataclasses.replace(est, position_m=pos, method="kalman", velocity_m_s=vel)
         return est
 
-    def fix(self, top, bottom, currents=None, *, time_s: float | None = None) -> Estimate:
+    def fix(self, top, bottom, currents=None, *, time_s: float | None = None,
+            search: bool = True) -> Estimate:
         """:meth:`locate` for the control step: never raises on a bad frame (wrong shape,
         non-finite or out-of-range values, missing or non-finite currents) -- that frame's
         estimate is not ok, its ``reason`` the check's message, its position the last ok one
-        (or the box's centre) -- and the next frame starts cold."""
+        (or the box's centre) -- and the next frame starts cold. ``search``: as in locate."""
         try:
-            return self.locate(top, bottom, currents, time_s=time_s)
+            return self.locate(top, bottom, currents, time_s=time_s, search=search)
         except BadInputError as exc:
-            p = self._last if self._last is not None else 0.5 * (self.model.box_lower_m
-                                                                 + self.model.box_upper_m)
+            p = self._last if self._last is not None else self._box_centre()
             self._last = None
             return Estimate(np.array(p, float), 0.0, False, 0, 0, self.method,
                             reason=f"bad frame: {exc}")
+
+    def _box_centre(self) -> np.ndarray:
+        return 0.5 * (self.model.box_lower_m + self.model.box_upper_m)
 
     # subtraction: d = top - P bottom; model-based: both arrays minus the coils' field
     def _mount_var(self, d):
@@ -497,13 +504,12 @@ class Localizer:
             b = b + extra
         return (self._sub_op_all @ b.reshape(-1)).reshape(-1, 3)
 
-    def _fit(self, meas, currents, method) -> Estimate:
+    def _fit(self, meas, currents, method, search=True) -> Estimate:
         subtract = currents is None
         d, use, sig = self._data(meas, np.asarray(currents) if currents is not None else None)
         n_used = int(use.sum())
         if n_used < 3:
-            p = self._last if self._last is not None else 0.5 * (self.model.box_lower_m
-                                                                 + self.model.box_upper_m)
+            p = self._last if self._last is not None else self._box_centre()
             return Estimate(p.copy(), 0.0, False, n_used, 0, method,
                             reason=f"only {n_used} usable sensors (need 3)")
         # the whole weighted (and, for subtraction, mirrored) residual is one linear map of the
@@ -567,9 +573,14 @@ class Localizer:
             check = self._integrity(best, n_used)
             if not check[0] or _dist(best[0], start) > self.reacquire_m:
                 # suspicious (failed, or moved far from the warm start): the global search
-                other = cold()
-                if other[0][1] < best[1]:
+                other = cold() if search else None
+                if other is None:
+                    check = (False, f"{check[1] or 'moved far'}: re-acquisition needed", *check[2:])
+                elif other[0][1] < best[1]:
                     best, check = other
+        elif not search:
+            return Estimate(self._box_centre(), 0.0, False, n_used, 0, method,
+                            reason="no warm start: re-acquisition needed")
         else:
             best, check = cold()
         p, cost, iters = best[:3]
