@@ -74,7 +74,7 @@ def _ratio_step(r: float) -> int:
     return min(max(math.ceil(r * RATIO_STEPS - 1e-12), 1), RATIO_STEPS)
 
 
-def _tail(k: np.ndarray, r: np.ndarray, nodes: int = 8001) -> np.ndarray:
+def _tail(k: np.ndarray, r: np.ndarray, nodes: int = 4001) -> np.ndarray:
     """P(z1^2 + r X > k), z1 ~ N(0, 1), X ~ chi-square(2) (exponential, mean 2), for arrays k
     and r in (0, 1]: P(z1^2 > k) + int_0^sqrt(k) 2 phi(u) exp(-(k - u^2) / (2 r)) du
     (conditioning on z1 = u; trapezoid rule)."""
@@ -98,7 +98,7 @@ def ratio_quantiles(risk: float) -> tuple:
     r = np.arange(1, RATIO_STEPS + 1) / RATIO_STEPS
     lo = np.full(RATIO_STEPS, chi2_quantile(risk, 1))
     hi = np.full(RATIO_STEPS, chi2_quantile(risk, 3) * 1.01)
-    for _ in range(40):
+    for _ in range(30):
         mid = 0.5 * (lo + hi)
         above = _tail(mid, r) > risk
         lo, hi = np.where(above, mid, lo), np.where(above, hi, mid)
