@@ -71,6 +71,7 @@ from designkit.sensor_sim import (THESIS_MAE_MM, SensorErrors, SensorSimulator, 
                                   case_currents, forward_model, random_positions)
 from firmware_io.localization import (ConstantVelocityKalman, LearnedInverse, Localizer,
                                       SensorModel, calibrate, cylinder_field)
+from firmware_io.mapfile import gradient_tensor
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "localization"
 """Default output folder (git-ignored), whatever the working directory."""
@@ -132,7 +133,7 @@ def run(out_dir=DEFAULT_OUT, n: int = 1000, seed: int = 0, *, map_path=None,
         model = make("dipole", magnet_size_m=size).model
         source = f"map {map_path}"
     else:
-        base = SensorModel.from_operator(**forward_model(sim))
+        base = with_coil_gradient(sim, SensorModel.from_operator(**forward_model(sim)))
 
         def make(method, magnet_size_m=None, **kw):
             m = dataclasses.replace(base, magnet_size_m=magnet_size_m)
@@ -248,6 +249,16 @@ def run(out_dir=DEFAULT_OUT, n: int = 1000, seed: int = 0, *, map_path=None,
     results["total_s"] = time.perf_counter() - t_all
     _write(out, results, errors_store)
     return results
+
+
+def with_coil_gradient(sim, model):
+    """``model`` with the coils' field gradient at the nominal sensor poses, as the v2 map
+    carries it (``Localizer.from_map``): the calibration recovers the sensors' position errors
+    from it."""
+    rows = sim.array.actuation_matrix(sim.nominal_m.reshape(-1, 3))[:, 3:8]
+    grad = np.moveaxis(gradient_tensor(np.moveaxis(rows, 1, -1)), 1, -1)
+    return dataclasses.replace(model, coil_gradient_t_per_a_m=grad.reshape(
+        2, sim.n, 3, 3, sim.array.n_coils))
 
 
 def _calibration_frames(sim, seed, n_frames):

@@ -7,8 +7,9 @@ moment from the design) at the sensors' true, displaced poses; the coils' couple
 currents; the cores' field induced by the magnet (designkit.sensor_sim, each core solved at the
 true sensor poses); the TLV493D chain (--noise-mt rms noise, default 0.05 mT, 0.098 mT LSB, NaN beyond +-130 mT) with
 the device's sensor errors (offset, 1 % gain, 1 degree and 0.5 mm mounting). The localizer
-knows the nominal poses, the map's (the forward model's) coil field and core operator, and --
-except in 'uncalibrated' -- the start-up calibration (1000 coil-only frames).
+knows the nominal poses, the map's (the forward model's) coil field, its gradient at the
+sensors and core operator, and -- except in 'uncalibrated' -- the start-up calibration (1000
+coil-only frames).
 
 Conditions (``n`` fixes each, positions 20-70 mm above the coils, |x|, |y| <= 25 mm unless
 stated; currents of the thesis cases 1-3 drawn per frame unless stated; the localizer without
@@ -46,7 +47,7 @@ from firmware_io.constants import MU0
 from firmware_io.localization import Localizer, SensorModel, multipole_field
 from firmware_io.localization.integrity import fused_protection_level
 from firmware_io.runner import ConstantVelocityTracker
-from localization import _calibrate  # the start-up calibration as the localization study runs it
+from localization import _calibrate, with_coil_gradient  # the start-up calibration as the localization study runs it
 
 ALERT_LIMIT_M = 5e-3
 ALERT_LIMIT_RUNNER_M = 10e-3
@@ -217,8 +218,8 @@ def _device(seed: int, noise_t: float):
     design = default_design()
     sim = SensorSimulator(design, errors="default", seed=seed, induced="rod", noise_t=noise_t)
     mg = design.magnet
-    model = dataclasses.replace(SensorModel.from_operator(**forward_model(sim)),
-                                magnet_size_m=(mg.radius_m, mg.length_m))
+    model = dataclasses.replace(with_coil_gradient(sim, SensorModel.from_operator(
+        **forward_model(sim))), magnet_size_m=(mg.radius_m, mg.length_m))
     cal, _ = _calibrate(sim, model, seed + 1000, 1000)
     return sim, model, cal
 

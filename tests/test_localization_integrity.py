@@ -130,7 +130,14 @@ def test_alert_limit_and_bad_frames_give_not_ok_with_a_reason_never_an_exception
               "currents": (f[0], f[1], np.r_[np.zeros(8), np.nan]),
               "currents ": (f[0], f[1], None),
               "usable": (nan, nan, np.zeros(9)),
-              "usable ": (np.where(np.arange(9)[:, None] < 2, f[0], np.nan), nan, np.zeros(9))}
+              "usable ": (np.where(np.arange(9)[:, None] < 2, f[0], np.nan), nan, np.zeros(9)),
+              "top": ("not a frame", f[1], np.zeros(9)),
+              "bottom": (f[0], [[0.0, 0.0], [0.0]], np.zeros(9)),
+              "bottom ": (f[0], f[1][:, :2], np.zeros(9)),
+              "tesla": (f[0] * 1e3, f[1], np.zeros(9)),
+              "currents  ": (f[0], f[1], ["a"] * 9),
+              "currents   ": (f[0], f[1], np.zeros(8)),
+              "currents    ": (f[0], f[1], np.r_[np.zeros(8), np.inf])}
     for word, (top, bot, i) in frames.items():
         est = loc.fix(top, bot, i)
         assert not est.ok and word.strip() in est.reason, (word, est.reason)
@@ -138,6 +145,27 @@ def test_alert_limit_and_bad_frames_give_not_ok_with_a_reason_never_an_exception
     # a good frame after the bad ones: found again
     est = loc.fix(f[0], f[1], np.zeros(9))
     assert est.ok and np.linalg.norm(est.position_m - p) < 1e-3
+
+
+def test_ratio_quantiles_match_the_closed_forms_and_a_monte_carlo():
+    """k(r) with P(z1^2 + r (z2^2 + z3^2) > k) = risk: chi-square(1) at r = 0, chi-square(3)
+    at r = 1 (z1^2 + chi-square(2)), rising in between; at r = 0.5 and risk 1e-2 against the
+    empirical quantile of 4e6 draws (its sampling error ~0.3 %: a tail off by 2x in the
+    conditional integral moves k by ~10 %). The protection level uses the bound, never below
+    the exact generalized chi-square quantile."""
+    from scipy.stats import chi2
+
+    from firmware_io.localization.integrity import RATIO_STEPS, ratio_quantiles
+
+    for risk in (1e-2, 1e-4, 1e-6):
+        k = ratio_quantiles(risk)
+        assert len(k) == RATIO_STEPS + 1
+        assert k[0] == pytest.approx(chi2.isf(risk, 1), rel=1e-9)
+        assert k[-1] == pytest.approx(chi2.isf(risk, 3), rel=1e-6)
+        assert np.all(np.diff(k) > 0)
+    z = np.random.default_rng(0).normal(size=(4_000_000, 3)) ** 2
+    want = np.quantile(z[:, 0] + 0.5 * (z[:, 1] + z[:, 2]), 1 - 1e-2)
+    assert ratio_quantiles(1e-2)[RATIO_STEPS // 2] == pytest.approx(want, rel=0.01)
 
 
 @pytest.mark.slow
@@ -149,3 +177,76 @@ def test_integrity_study_smoke(tmp_path):
         ("cold", "jump", "sensor dead", "two saturated", "6 A", "uncalibrated"))
     assert all(r["n"] == 4 and 0 <= r["availability"] <= 1 for r in res["rows"])
     assert (tmp_path / "integrity.json").is_file() and (tmp_path / "integrity_table.txt").is_file()
+
+
+def test_calibrated_response_variance_matches_the_scatter_over_calibrations():
+    """The measured coils' field plus offset at currents I (one sensor, least squares over
+    noisy frames) scatters over repeated calibrations with the variance sigma^2 x^T D x, x =
+    (I, 1), D = (X^T X)^-1 -- the term the localizer adds to each reading's variance; at 6 A
+    per coil the coils' part dominates. A wrong scale (sigma instead of sigma^2, a missing
+    factor of the frame count) moves the ratio far outside 0.85-1.15 (600 samples: the
+    ratio's own scatter ~6 %)."""
+    from firmware_io.localization.calibration import _measured_response
+
+    rng = np.random.default_rng(7)
+    k_true, off_true, noise = rng.normal(scale=5e-3, size=(3, 9)), rng.normal(size=3) * 1e-4, 1e-4
+    cur = np.r_[np.kron(np.eye(9), [[3.0], [-3.0]]), rng.uniform(-1.5, 1.5, (100, 9))]
+    x = np.r_[np.full(9, 6.0) * rng.choice([-1, 1], 9), 1.0]
+    pred = []
+    for _ in range(200):
+        reads = cur @ k_true.T + off_true + rng.normal(scale=noise, size=(len(cur), 3))
+        kk, off, _, d_inv = _measured_response(reads, cur, noise, "0:0")
+        pred.append(kk @ x[:9] + off)
+    err = np.array(pred) - (k_true @ x[:9] + off_true)
+    want = noise ** 2 * x @ d_inv @ x
+    assert np.mean(err ** 2) / want == pytest.approx(1.0, abs=0.15)
+
+
+def test_fused_protection_level_holds_its_risk_for_a_rounder_filtered_covariance():
+    """A fix with a needle-like covariance (l2 / l1 = 0.1) and its PL from the ratio table at
+    risk 1e-2; filtered with a prediction of isotropic variance p, the error covariance is
+    (1 - K)^2 p I + K^2 C (rounder). Drawn from it (4e5 samples), the share beyond the fused
+    PL's noise part stays <= 1e-2 (a fused PL that kept the fix's needle quantile misses
+    1.6 %) and above 0.5e-2 (the table, not the loose r' / r bound, sets it)."""
+    from firmware_io.localization.integrity import covariance_and_pl, fused_protection_level
+    from firmware_io.localization.integrity import ratio_quantiles
+
+    table, bias, risk = ratio_quantiles(1e-2), 0.5e-3, 1e-2
+    c = np.diag([0.1, 0.1, 1.0]) * (1e-3) ** 2
+    fisher = np.linalg.inv(c).tolist()
+    cov, pl = covariance_and_pl(fisher, 0.0, 10, table)
+    assert pl == pytest.approx(np.sqrt(1e-6 * table[2]), rel=1e-9)
+    p, gain = (0.7e-3) ** 2, 0.5
+    fused = fused_protection_level(pl + bias, cov, p, bias, gain) - bias
+    f = (1 - gain) ** 2 * p * np.eye(3) + gain ** 2 * cov
+    e = np.random.default_rng(5).multivariate_normal(np.zeros(3), f, size=400_000)
+    beyond = np.mean(np.linalg.norm(e, axis=1) > fused)
+    assert 0.5 * risk < beyond <= risk * 1.05
+
+
+def test_search_false_never_runs_the_global_search_and_says_so():
+    """fix(..., search=False): no warm start -> not ok, 're-acquisition needed'; after an ok
+    fix, a small move is tracked warm (ok, within 1 mm); a 30 mm jump -> not ok with the same
+    reason, without the grid search (spied); the next search=True fix re-acquires."""
+    rng = np.random.default_rng(8)
+    model = _model()
+    loc = Localizer(model, "model", cores=False, noise_t=NOISE, relative_error=0.0)
+    calls = []
+    grid = loc._global_starts
+    loc._global_starts = lambda *a, **k: calls.append(1) or grid(*a, **k)
+    p = np.array([0.0, 0.01, 0.04])
+    f = _frame(model, p, np.zeros(9), rng)
+    est = loc.fix(f[0], f[1], np.zeros(9), search=False)
+    assert not est.ok and est.reason.endswith("re-acquisition needed") and not calls
+    assert loc.fix(f[0], f[1], np.zeros(9)).ok and calls
+    calls.clear()
+    q = p + [0.0005, 0.0, 0.0]
+    f = _frame(model, q, np.zeros(9), rng)
+    est = loc.fix(f[0], f[1], np.zeros(9), search=False)
+    assert est.ok and np.linalg.norm(est.position_m - q) < 1e-3 and not calls
+    far = q + [0.0, -0.03, 0.0]
+    f = _frame(model, far, np.zeros(9), rng)
+    est = loc.fix(f[0], f[1], np.zeros(9), search=False)
+    assert not est.ok and est.reason.endswith("re-acquisition needed") and not calls
+    est = loc.fix(f[0], f[1], np.zeros(9))
+    assert est.ok and np.linalg.norm(est.position_m - far) < est.protection_level_m and calls

@@ -33,12 +33,18 @@ class SensorCalibration:
         no field gradient at the sensor)
     coil_field_t_per_a : (2, n, 3, n_coils) T/A -- the coils' field at the sensors as measured
         (after the gain correction); the estimators use it instead of the map's
+    response_design_inverse : (2, n, n_coils + 1, n_coils + 1), or None -- (X^T X)^-1 of the
+        frames' currents and the offset column (1/A^2, 1/A, 1): the measured coils' field plus
+        offset at currents I has the variance sigma^2 x^T D x, x = (I, 1), sigma the reading's
+        noise per axis (the estimators add it to each reading's variance: the response is
+        estimated from noisy frames once, its error is common to every later frame)
     """
 
     gain_inverse: np.ndarray
     offsets_t: np.ndarray
     shift_m: np.ndarray
     coil_field_t_per_a: np.ndarray | None = None
+    response_design_inverse: np.ndarray | None = None
 
     @classmethod
     def coerce(cls, value, n: int, n_coils: int) -> "SensorCalibration":
@@ -55,6 +61,8 @@ class SensorCalibration:
         shapes = {"gain_inverse": (2, n, 3, 3), "offsets_t": (2, n, 3), "shift_m": (2, n, 3)}
         if cal.coil_field_t_per_a is not None:
             shapes["coil_field_t_per_a"] = (2, n, 3, n_coils)
+        if cal.response_design_inverse is not None:
+            shapes["response_design_inverse"] = (2, n, n_coils + 1, n_coils + 1)
         for name, shape in shapes.items():
             a = np.asarray(getattr(cal, name), float)
             if a.shape != shape or not np.all(np.isfinite(a)):
@@ -65,8 +73,9 @@ class SensorCalibration:
     def save(self, path) -> None:
         arrays = {"gain_inverse": self.gain_inverse, "offsets_t": self.offsets_t,
                   "shift_m": self.shift_m}
-        if self.coil_field_t_per_a is not None:
-            arrays["coil_field_t_per_a"] = self.coil_field_t_per_a
+        for name in ("coil_field_t_per_a", "response_design_inverse"):
+            if getattr(self, name) is not None:
+                arrays[name] = getattr(self, name)
         np.savez(path, format=np.array("designkit-sensor-calibration"), **arrays)
 
     @classmethod
@@ -78,8 +87,8 @@ class SensorCalibration:
                     raise ValueError(f"format {str(z['format'])!r}")
                 return cls(z["gain_inverse"].astype(float), z["offsets_t"].astype(float),
                            z["shift_m"].astype(float),
-                           z["coil_field_t_per_a"].astype(float)
-                           if "coil_field_t_per_a" in z.files else None)
+                           *(z[name].astype(float) if name in z.files else None
+                             for name in ("coil_field_t_per_a", "response_design_inverse")))
         except (KeyError, ValueError, OSError, EOFError) as exc:
             raise BadInputError("calibration", "a sensor calibration .npz written by "
                                 f"SensorCalibration.save ({type(exc).__name__}: {exc})",
@@ -150,9 +159,11 @@ def calibrate(frames_top, frames_bottom, currents, model: SensorModel, *,
     off = np.empty((2, n, 3))
     shift = np.zeros((2, n, 3))
     coil = np.empty((2, n, 3, nc))
+    cov = np.empty((2, n, nc + 1, nc + 1))
     for a in range(2):
         for s in range(n):
-            kk, off[a, s], w = _measured_response(meas[:, a, s], i, noise_t, f"{a}:{s}")
+            kk, off[a, s], w, cov[a, s] = _measured_response(meas[:, a, s], i, noise_t,
+                                                             f"{a}:{s}")
             shifts = (fit_shift and model.gradient_known is not None
                       and bool(model.gradient_known[a, s]))
             theta = _fit_sensor_pose(model, a, s, kk, w, prior_all[:9 if shifts else 6],
@@ -162,7 +173,7 @@ def calibrate(frames_top, frames_bottom, currents, model: SensorModel, *,
             if shifts:
                 shift[a, s] = theta[6:]
             coil[a, s] = gi[a, s] @ kk
-    return SensorCalibration(gi, off, shift, coil)
+    return SensorCalibration(gi, off, shift, coil, cov)
 
 
 def _measured_response(readings, currents, noise_t: float, label: str):
@@ -180,6 +191,8 @@ def _measured_response(readings, currents, noise_t: float, label: str):
     kk : (3, n_coils) T/A, the measured response
     offset : (3,) T
     w : (n_coils,) A/T, the inverse noise of K's entries (the same for the 3 rows)
+    design_inverse : (n_coils + 1, n_coils + 1), (X^T X)^-1 (the covariance of one row of (K,
+        offset) is noise^2 times it)
     """
     nc = currents.shape[1]
     ok = np.all(np.isfinite(readings), axis=1)
@@ -189,8 +202,9 @@ def _measured_response(readings, currents, noise_t: float, label: str):
                             "coil independently (rank n_coils + 1)", f"{ok.sum()} frames")
     coef, *_ = np.linalg.lstsq(x, readings[ok], rcond=None)
     # noise of K's entries: sigma sqrt(diag((X^T X)^-1)), the same for the 3 rows
-    w = 1.0 / (noise_t * np.sqrt(np.diag(np.linalg.inv(x.T @ x))[:nc]))
-    return coef[:nc].T, coef[nc], w
+    d_inv = np.linalg.inv(x.T @ x)
+    w = 1.0 / (noise_t * np.sqrt(np.diag(d_inv)[:nc]))
+    return coef[:nc].T, coef[nc], w, d_inv
 
 
 def _fit_sensor_pose(model: SensorModel, a: int, s: int, kk, w, prior, iterations: int):

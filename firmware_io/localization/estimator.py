@@ -30,7 +30,8 @@ from ..hw.tlv493d import TLV493D_LSB_T
 from ..mapfile import MapFile
 from .calibration import SensorCalibration
 from .filter import ConstantVelocityKalman
-from .integrity import chi2_quantile, covariance_and_pl, thresholds
+from .frame import as_float_array, check_frame
+from .integrity import covariance_and_pl, ratio_quantiles, thresholds
 from .learned import LearnedInverse
 from .lm import levenberg_marquardt
 from .magnet import _EYE, MU0, _multipole_rows, _multipole_work, cylinder_field, multipole_field
@@ -71,21 +72,6 @@ def _dist(a: np.ndarray, b: np.ndarray) -> float:
 
 
 
-def _check_frame(name: str, a, n: int) -> np.ndarray:
-    arr = np.asarray(a, dtype=float)
-    if arr.shape != (n, 3):
-        raise BadInputError(name, f"an array of shape ({n}, 3), T", f"shape {arr.shape}")
-    if (np.abs(arr) <= 1.0).all():  # the usual frame: one test (False with NaN, Inf, > 1 T)
-        return arr
-    if np.any(np.isinf(arr)):  # NaN compares False
-        raise BadInputError(name, "finite values or NaN (missing/saturated), T",
-                            f"Inf at {np.argwhere(np.isinf(arr))[0].tolist()}")
-    if np.any(np.abs(arr) > 1.0):
-        raise BadInputError(name, "fields in tesla (|B| <= 1 T; a TLV493D reads <= 0.2 T)",
-                            f"{np.nanmax(np.abs(arr))!r} -- millitesla passed as tesla?")
-    return arr
-
-
 class Localizer:
     """Magnet position from the two arrays' readings (methods: the module docstring and
     docs/localization.md).
@@ -99,7 +85,8 @@ class Localizer:
     lsb_t : float, T -- the readout's quantization step; the fit's per-axis variance is
         noise_t^2 + lsb_t^2 / 12 (uniform rounding error), plus the model-error terms
     relative_error : float, relative model error of a sensor's reading (gain, mounting);
-        default 0.02, or 0.003 with a calibration
+        default 0.02, or 0.001 with a calibration (what it leaves of the gain and mounting
+        errors: docs/localization.md "Integrity")
     residual_limit : float, largest normalized rms residual for ok (a cap beside the test)
     integrity_risk : float, probability per fix that the error exceeds the protection level
     false_alarm : float, probability per fix that a correct fit fails the residual test (a
@@ -109,13 +96,16 @@ class Localizer:
         runner passes its scene's)
     reacquire_m : float, m -- a warm fit that moved farther is checked by the global search
     model_bias_m : float, m -- bound on the fit's bias from what the noise model leaves out
-        (sensor poses, the map's core term), added to the protection level
+        (sensor poses, the map's core term), added to the protection level; default 1 mm, or
+        0.5 mm with a calibration (its measured noise-free bias:
+        docs/localization.md "Integrity")
     cores : bool or None, model the magnet-induced core field ('dipole'; default: if known)
     mount_position_m : float, m -- sensor position uncertainty, weighs near-field sensors
     calibration : SensorCalibration (see :func:`calibrate`), or (gain_inverse (2, n, 3, 3),
         offsets_t (2, n, 3)), or None: corrected reading = gain_inverse @ (reading - offset); a
-        SensorCalibration also moves the sensors by its ``shift_m`` and replaces the map's coil
-        field at the sensors by the measured one.
+        SensorCalibration also moves the sensors by its ``shift_m``, replaces the map's coil
+        field at the sensors by the measured one and adds that one's variance at the frame's
+        currents (``response_design_inverse``) to each reading's.
     refresh_m : float, m -- the exact-magnet and core corrections are re-evaluated when the
         position moved farther than this from where they were last evaluated (linear in between);
         their Jacobian (central differences, 6 more evaluations) when it moved 10x farther. A
@@ -132,7 +122,7 @@ class Localizer:
                  mount_position_m: float = 0.0, refresh_m: float = 1e-3,
                  integrity_risk: float = 1e-4, false_alarm: float = 1e-6,
                  alert_limit_m: float = math.inf, reacquire_m: float = 5e-3,
-                 model_bias_m: float = 1e-3, lsb_t: float = TLV493D_LSB_T):
+                 model_bias_m: float | None = None, lsb_t: float = TLV493D_LSB_T):
         if method not in METHODS:
             raise BadInputError("method", f"one of {METHODS}", method)
         if method == "learned":
@@ -143,7 +133,9 @@ class Localizer:
                                     f"design {learned.design_sha256[:12]}...",
                                     "Retrain: designkit.learned_inverse.train_learned_inverse.")
         if relative_error is None:
-            relative_error = 0.02 if calibration is None else 0.003
+            relative_error = 0.02 if calibration is None else 0.001
+        if model_bias_m is None:
+            model_bias_m = 1e-3 if calibration is None else 0.5e-3
         for name, val in (("noise_t", noise_t), ("relative_error", relative_error + 1e-300),
                           ("residual_limit", residual_limit), ("frame_period_s", frame_period_s),
                           ("refresh_m", refresh_m), ("reacquire_m", reacquire_m)):
@@ -170,7 +162,7 @@ class Localizer:
             raise BadInputError("alert_limit_m", "a number > 0 (or inf), m", alert_limit_m)
         self.integrity_risk, self.false_alarm, self.alert_limit_m, self.reacquire_m = map(
             float, (integrity_risk, false_alarm, alert_limit_m, reacquire_m))
-        self._k2 = chi2_quantile(self.integrity_risk, 3)
+        self._k2 = ratio_quantiles(self.integrity_risk)
         self._chi2_max = thresholds(self.false_alarm, 6 * model.n_sensors)
         self.cores = (model.induced is not None) if cores is None else bool(cores)
         if self.cores and model.induced is None:
@@ -180,15 +172,7 @@ class Localizer:
         self.kalman = kalman or (ConstantVelocityKalman() if method == "kalman" else None)
         n = model.n_sensors
         self.refresh_m = float(refresh_m)
-        self._pts = model.sensor_positions_m.reshape(-1, 3)
-        cf = model.coil_field_t_per_a
-        self.calibration = None
-        if calibration is not None:
-            self.calibration = SensorCalibration.coerce(calibration, n, model.n_coils)
-            self._pts = (model.sensor_positions_m + self.calibration.shift_m).reshape(-1, 3)
-            if self.calibration.coil_field_t_per_a is not None:
-                cf = self.calibration.coil_field_t_per_a
-        self._coil = cf
+        cf = self._use_calibration(calibration)
         # subtraction: the lower sensor's coil field mapped onto the upper one's (for the
         # symmetric array diag(-1, -1, 1): Br is odd about the coil's mid-plane)
         self._mirror = np.stack([cf[0, i] @ np.linalg.pinv(cf[1, i]) for i in range(n)])
@@ -224,6 +208,24 @@ class Localizer:
         self._lin = {}
         self._pj = None  # where the core term's Jacobian was last differenced
         self._radius = self.refresh_m  # reuse radius of the linearization, adapted
+
+    def _use_calibration(self, calibration):
+        """Set the sensors' positions, the calibration and the coils' field at the sensors
+        (the measured one when the calibration has it) and the calibration's own variance
+        sigma^2 x^T D x per sensor at x = (I, 1); returns that coils' field."""
+        model, n = self.model, self.model.n_sensors
+        self._pts = model.sensor_positions_m.reshape(-1, 3)
+        cf, self.calibration, self._resp = model.coil_field_t_per_a, None, None
+        if calibration is not None:
+            self.calibration = SensorCalibration.coerce(calibration, n, model.n_coils)
+            self._pts = (model.sensor_positions_m + self.calibration.shift_m).reshape(-1, 3)
+            if self.calibration.coil_field_t_per_a is not None:
+                cf = self.calibration.coil_field_t_per_a
+            d_inv = self.calibration.response_design_inverse
+            if d_inv is not None:
+                self._resp = self._sig2n * d_inv.reshape(2 * n, model.n_coils + 1, -1)
+        self._coil = cf
+        return cf
 
     # -- construction from files -----------------------------------------------------------
     @classmethod
@@ -301,7 +303,8 @@ class Localizer:
         return self.kalman.predict(time_s)
 
     # -- the estimate ------------------------------------------------------------------------
-    def locate(self, top, bottom, currents=None, *, time_s: float | None = None) -> Estimate:
+    def locate(self, top, bottom, currents=None, *, time_s: float | None = None,
+               search: bool = True) -> Estimate:
         """Estimate the magnet's position from one frame.
 
         Parameters
@@ -309,13 +312,16 @@ class Localizer:
         top, bottom : array-like, shape (n, 3), T; NaN marks a missing or saturated sensor
         currents : array-like, shape (n_coils,), A -- commanded currents ('model'; optional else)
         time_s : float, frame time for 'kalman' (default: one ``frame_period_s`` per call)
+        search : bool -- False: no global search (bounded cost: a warm fit only); without a warm
+            start or with a suspicious warm fit: not ok, the reason ending "re-acquisition
+            needed" (a later call with search=True, e.g. outside the control step, re-acquires)
         """
         n = self.model.n_sensors
-        top = _check_frame("top", top, n)
-        bottom = _check_frame("bottom", bottom, n)
+        top = check_frame("top", top, n)
+        bottom = check_frame("bottom", bottom, n)
         i = None
         if currents is not None:
-            i = np.asarray(currents, dtype=float)
+            i = as_float_array("currents", currents, f"{self.model.n_coils} finite values, A")
             if i.shape != (self.model.n_coils,) or not np.all(np.isfinite(i)):
                 raise BadInputError("currents", f"{self.model.n_coils} finite values, A",
                                     f"shape {i.shape}" if i.shape != (self.model.n_coils,)
@@ -333,7 +339,7 @@ class Localizer:
         if method == "learned":
             est = self._learned(meas)
         else:
-            est = self._fit(meas, i if method == "model" else None, method)
+            est = self._fit(meas, i if method == "model" else None, method, search)
         if self.kalman is not None:
             t = time_s if time_s is not None else (
                 (self.kalman.t + self.frame_period_s) if self.kalman.t is not None else 0.0)
@@ -341,19 +347,22 @@ class Localizer:
             est = dataclasses.replace(est, position_m=pos, method="kalman", velocity_m_s=vel)
         return est
 
-    def fix(self, top, bottom, currents=None, *, time_s: float | None = None) -> Estimate:
+    def fix(self, top, bottom, currents=None, *, time_s: float | None = None,
+            search: bool = True) -> Estimate:
         """:meth:`locate` for the control step: never raises on a bad frame (wrong shape,
         non-finite or out-of-range values, missing or non-finite currents) -- that frame's
         estimate is not ok, its ``reason`` the check's message, its position the last ok one
-        (or the box's centre) -- and the next frame starts cold."""
+        (or the box's centre) -- and the next frame starts cold. ``search``: as in locate."""
         try:
-            return self.locate(top, bottom, currents, time_s=time_s)
+            return self.locate(top, bottom, currents, time_s=time_s, search=search)
         except BadInputError as exc:
-            p = self._last if self._last is not None else 0.5 * (self.model.box_lower_m
-                                                                 + self.model.box_upper_m)
+            p = self._last if self._last is not None else self._box_centre()
             self._last = None
             return Estimate(np.array(p, float), 0.0, False, 0, 0, self.method,
                             reason=f"bad frame: {exc}")
+
+    def _box_centre(self) -> np.ndarray:
+        return 0.5 * (self.model.box_lower_m + self.model.box_upper_m)
 
     # subtraction: d = top - P bottom; model-based: both arrays minus the coils' field
     def _mount_var(self, d):
@@ -377,6 +386,9 @@ class Localizer:
             d = (meas - self._coil @ currents).reshape(-1, 3)
             use = np.isfinite(d.sum(1))
             s2 = sig2n + self.rel**2 * mag2.reshape(-1)
+            if self._resp is not None:
+                x = np.append(currents, 1.0)
+                s2 = s2 + (self._resp @ x) @ x
         if self.mount_position_m:
             s2 = s2 + self._mount_var(d)
         return d, use, np.sqrt(s2)
@@ -492,13 +504,12 @@ class Localizer:
             b = b + extra
         return (self._sub_op_all @ b.reshape(-1)).reshape(-1, 3)
 
-    def _fit(self, meas, currents, method) -> Estimate:
+    def _fit(self, meas, currents, method, search=True) -> Estimate:
         subtract = currents is None
         d, use, sig = self._data(meas, np.asarray(currents) if currents is not None else None)
         n_used = int(use.sum())
         if n_used < 3:
-            p = self._last if self._last is not None else 0.5 * (self.model.box_lower_m
-                                                                 + self.model.box_upper_m)
+            p = self._last if self._last is not None else self._box_centre()
             return Estimate(p.copy(), 0.0, False, n_used, 0, method,
                             reason=f"only {n_used} usable sensors (need 3)")
         # the whole weighted (and, for subtraction, mirrored) residual is one linear map of the
@@ -562,9 +573,14 @@ class Localizer:
             check = self._integrity(best, n_used)
             if not check[0] or _dist(best[0], start) > self.reacquire_m:
                 # suspicious (failed, or moved far from the warm start): the global search
-                other = cold()
-                if other[0][1] < best[1]:
+                other = cold() if search else None
+                if other is None:
+                    check = (False, f"{check[1] or 'moved far'}: re-acquisition needed", *check[2:])
+                elif other[0][1] < best[1]:
                     best, check = other
+        elif not search:
+            return Estimate(self._box_centre(), 0.0, False, n_used, 0, method,
+                            reason="no warm start: re-acquisition needed")
         else:
             best, check = cold()
         p, cost, iters = best[:3]

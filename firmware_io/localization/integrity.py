@@ -7,9 +7,10 @@ chi2 at the solution follows a chi-square law with dof = 3 m - 3 (m sensors, 3 u
 fix passes the residual test when chi2 <= the (1 - p_fa) quantile. Its covariance is the
 inverse Fisher information (J^T W J)^-1, m^2, inflated by chi2 / dof when the residual says the
 noise is larger than modelled. The protection level bounds the position error |e| with
-probability 1 - risk: for a Gaussian e ~ N(0, C), e^T C^-1 e follows chi-square(3) and
-|e|^2 <= lambda_max(C) e^T C^-1 e, so PL = sqrt(lambda_max(C) q3(1 - risk)) (m), plus the
-localizer's bound on the bias the noise model leaves out (sensor poses, core model). A fix is
+probability 1 - risk: for a Gaussian e ~ N(0, C) with eigenvalues l1 >= l2 >= l3,
+|e|^2 = l1 z1^2 + l2 z2^2 + l3 z3^2 <= l1 (z1^2 + r (z2^2 + z3^2)), r = l2 / l1, so PL =
+sqrt(l1 k(r)) with k(r) that quantile (chi-square(1) at r = 0, chi-square(3) at r = 1; r rounded
+up on a table), plus the localizer's bound on the bias the noise model leaves out. A fix is
 usable when it passes the test and PL <= the alert limit. Reference: Brown, "A baseline GPS
 RAIM scheme", Navigation 39 (1992); Walter & Enge, ION GPS 1995 (weighted RAIM).
 numpy only (runs on the controller).
@@ -63,12 +64,64 @@ def thresholds(p_fa: float, max_dof: int) -> list:
     return [math.inf] + [chi2_quantile(p_fa, k) for k in range(1, max_dof + 1)]
 
 
-def covariance_and_pl(fisher, chi2: float, dof: int, k2: float):
+RATIO_STEPS = 20
+"""Steps of the table of k(r) over r = l2 / l1 in [0, 1] (r rounded up to a step)."""
+
+
+def _ratio_step(r: float) -> int:
+    """Table index of r = l2 / l1 rounded up (at least 1: the bound of
+    :func:`fused_protection_level` divides by the tabulated ratio)."""
+    return min(max(math.ceil(r * RATIO_STEPS - 1e-12), 1), RATIO_STEPS)
+
+
+def _tail(k: np.ndarray, r: np.ndarray, nodes: int = 4001) -> np.ndarray:
+    """P(z1^2 + r X > k), z1 ~ N(0, 1), X ~ chi-square(2) (exponential, mean 2), for arrays k
+    and r in (0, 1]: P(z1^2 > k) + int_0^sqrt(k) 2 phi(u) exp(-(k - u^2) / (2 r)) du
+    (conditioning on z1 = u; trapezoid rule)."""
+    t = np.linspace(0.0, 1.0, nodes)
+    u = np.sqrt(k)[:, None] * t
+    f = 2.0 * np.exp(-0.5 * u * u - (k[:, None] - u * u) / (2.0 * r[:, None])) / math.sqrt(
+        2.0 * math.pi)
+    integral = (f.sum(1) - 0.5 * (f[:, 0] + f[:, -1])) * np.sqrt(k) / (nodes - 1)
+    return np.array([math.erfc(math.sqrt(0.5 * x)) for x in k]) + integral
+
+
+_TABLES: dict = {}
+"""The tables :func:`ratio_quantiles` made, by risk (for :func:`fused_protection_level`)."""
+
+
+@functools.lru_cache(maxsize=None)
+def ratio_quantiles(risk: float) -> tuple:
+    """k_j, j = 0 .. RATIO_STEPS: P(z1^2 + r_j (z2^2 + z3^2) > k_j) = risk at r_j = j /
+    RATIO_STEPS (k_0: chi-square(1), k_RATIO_STEPS: chi-square(3) quantile). Bisection on
+    :func:`_tail`, all ratios at once."""
+    r = np.arange(1, RATIO_STEPS + 1) / RATIO_STEPS
+    lo = np.full(RATIO_STEPS, chi2_quantile(risk, 1))
+    hi = np.full(RATIO_STEPS, chi2_quantile(risk, 3) * 1.01)
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        above = _tail(mid, r) > risk
+        lo, hi = np.where(above, mid, lo), np.where(above, hi, mid)
+    _TABLES[risk] = (chi2_quantile(risk, 1),) + tuple(float(x) for x in hi)
+    return _TABLES[risk]
+
+
+def _table_entry(k: float):
+    """(table, index) of the tabulated quantile equal to k (to 1e-6), or None."""
+    for table in _TABLES.values():
+        for j, kj in enumerate(table):
+            if abs(kj - k) <= 1e-6 * k:
+                return table, j
+    return None
+
+
+def covariance_and_pl(fisher, chi2: float, dof: int, k2):
     """(covariance (3, 3) m^2, protection level m) from the Fisher information (the upper-left
-    3 x 3 block of ``fisher``, nested lists, 1/m^2: the fit's Gram matrix), the residual's chi2 and dof and k2 = the chi-square(3) quantile at the
-    integrity risk. Singular or non-finite information -> (None, inf). Closed forms on Python
-    floats (the inverse by the adjugate, the largest eigenvalue by the trigonometric formula
-    for a symmetric 3 x 3 matrix): this runs on every fix."""
+    3 x 3 block of ``fisher``, nested lists, 1/m^2: the fit's Gram matrix), the residual's chi2
+    and dof and k2: the table :func:`ratio_quantiles` at the integrity risk (or one number, the
+    chi-square(3) quantile: the isotropic bound). Singular or non-finite information -> (None,
+    inf). Closed forms on Python floats (the inverse by the adjugate, the eigenvalues by the
+    trigonometric formula for a symmetric 3 x 3 matrix): this runs on every fix."""
     (a, b, c), (d, e), f = fisher[0][:3], fisher[1][1:3], fisher[2][2]
     c00, c01, c02 = d * f - e * e, c * e - b * f, b * e - c * d
     det = a * c00 + b * c01 + c * c02
@@ -79,10 +132,11 @@ def covariance_and_pl(fisher, chi2: float, dof: int, k2: float):
                                                    (b * c - a * e) * scale],
          [0.0, 0.0, (a * d - b * b) * scale]]
     m[1][0], m[2][0], m[2][1] = m[0][1], m[0][2], m[1][2]
-    lam = _largest_eigenvalue(m)
+    lam, lam2 = _eigenvalues(m)[:2]
     if not (math.isfinite(lam) and lam > 0):
         return None, math.inf
-    return np.array(m), math.sqrt(lam * k2)
+    k = k2 if isinstance(k2, float) else k2[_ratio_step(max(lam2, 0.0) / lam)]
+    return np.array(m), math.sqrt(lam * k)
 
 
 def fused_protection_level(pl: float, cov, var_pred: float, bias: float,
@@ -91,30 +145,43 @@ def fused_protection_level(pl: float, cov, var_pred: float, bias: float,
     ``gain``, from the fix's covariance ``cov`` (3, 3) m^2 and the prediction's variance
     ``var_pred`` m^2 per axis (from the earlier fixes, independent noise): the filtered error's
     covariance is (1 - K)^2 var_pred I + K^2 C, so the fix's own noise part ``pl - bias`` scales
-    by sqrt(((1 - K)^2 var_pred + K^2 lambda_max(C)) / lambda_max(C)); the model-bias part
-    ``bias`` (m, common to every frame: filtering does not shrink it) stays. Degenerate inputs:
-    ``pl`` unchanged."""
+    by sqrt(((1 - K)^2 var_pred + K^2 l1) / l1) (l1 >= l2: C's largest eigenvalues); the
+    model-bias part ``bias`` (m, common to every frame: filtering does not shrink it) stays.
+    The filtered covariance is rounder (ratio r' = l2' / l1' >= the fix's r): when the fix's
+    quantile k = (pl - bias)^2 / l1 is an entry of a :func:`ratio_quantiles` table, the noise
+    part is sqrt(l1' k(r')) from that table; else (an isotropic or unknown quantile, r rounded
+    up to r_j) k(r') <= k r' / r_j (z1^2 + r' X <= (r' / r_j)(z1^2 + r_j X)) scales it by
+    sqrt(r' / r_j) more. Degenerate inputs: ``pl`` unchanged."""
     if cov is None or not (math.isfinite(pl) and var_pred > 0 and 0 <= gain <= 1):
         return pl
-    lam = float(np.linalg.eigvalsh(cov)[-1])
+    lam2, lam = (max(float(x), 0.0) for x in np.linalg.eigvalsh(cov)[1:])
     if not (math.isfinite(lam) and lam > 0):
         return pl
-    filtered = (1 - gain) ** 2 * var_pred + gain ** 2 * lam
-    return bias + max(pl - bias, 0.0) * math.sqrt(filtered / lam)
+    a = (1 - gain) ** 2 * var_pred
+    filtered = a + gain ** 2 * lam
+    ratio = (a + gain ** 2 * lam2) / filtered
+    noise = max(pl - bias, 0.0)
+    found = _table_entry(noise * noise / lam) if noise > 0 else None
+    if found is not None:
+        return bias + math.sqrt(filtered * found[0][max(_ratio_step(ratio), found[1])])
+    rounder = max(ratio / (_ratio_step(lam2 / lam) / RATIO_STEPS), 1.0)
+    return bias + noise * math.sqrt(filtered / lam * rounder)
 
 
-def _largest_eigenvalue(m) -> float:
-    """Largest eigenvalue of a symmetric 3 x 3 matrix (nested lists): Smith, Comm. ACM 4, 168
-    (1961)."""
+def _eigenvalues(m) -> tuple:
+    """Eigenvalues, largest first, of a symmetric 3 x 3 matrix (nested lists): Smith, Comm. ACM
+    4, 168 (1961)."""
     p1 = m[0][1] ** 2 + m[0][2] ** 2 + m[1][2] ** 2
     q = (m[0][0] + m[1][1] + m[2][2]) / 3.0
     p2 = (m[0][0] - q) ** 2 + (m[1][1] - q) ** 2 + (m[2][2] - q) ** 2 + 2.0 * p1
     if p2 <= 1e-30 * q * q:
-        return max(m[0][0], m[1][1], m[2][2])
+        return tuple(sorted((m[0][0], m[1][1], m[2][2]), reverse=True))
     p = math.sqrt(p2 / 6.0)
     b00, b11, b22 = (m[0][0] - q) / p, (m[1][1] - q) / p, (m[2][2] - q) / p
     b01, b02, b12 = m[0][1] / p, m[0][2] / p, m[1][2] / p
     r = 0.5 * (b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02)
                + b02 * (b01 * b12 - b11 * b02))
     phi = math.acos(min(max(r, -1.0), 1.0)) / 3.0
-    return q + 2.0 * p * math.cos(phi)
+    big = q + 2.0 * p * math.cos(phi)
+    small = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)
+    return big, 3.0 * q - big - small, small
