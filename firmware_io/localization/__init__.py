@@ -17,13 +17,15 @@ derivation and the measured accuracy: docs/localization.md.
 """
 
 from .calibration import SensorCalibration, calibrate
-from .estimator import METHODS, Estimate, Localizer
+from .estimator import (CALIBRATED_RELATIVE_ERROR, METHODS, UNCALIBRATED_RELATIVE_ERROR,
+                        Estimate, Localizer)
 from .filter import ConstantVelocityKalman
 from .learned import LearnedInverse
 from .magnet import MU0, cylinder_field, multipole_field
 from .sensor_model import DEFAULT_NOISE_T, SensorModel
 
 __all__ = [
+    "CALIBRATED_RELATIVE_ERROR", "UNCALIBRATED_RELATIVE_ERROR",
     "SensorCalibration", "calibrate", "METHODS", "Estimate", "Localizer",
     "ConstantVelocityKalman", "LearnedInverse", "MU0", "cylinder_field", "multipole_field",
     "DEFAULT_NOISE_T", "SensorModel",

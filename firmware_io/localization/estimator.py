@@ -40,6 +40,15 @@ from .sensor_model import DEFAULT_NOISE_T, SensorModel
 METHODS = ("learned", "dipole", "model", "kalman")
 
 
+UNCALIBRATED_RELATIVE_ERROR = 0.02
+"""Relative model error of an uncalibrated sensor's reading: the TLV493D's gain spread and a
+degree of mounting error (docs/localization.md "Integrity")."""
+
+CALIBRATED_RELATIVE_ERROR = 0.001
+"""Relative model error of a calibrated sensor's reading: what the start-up calibration (with
+the coils' field gradient at the sensors) leaves of the gain, mounting and position errors
+(docs/localization.md "Integrity")."""
+
 @dataclass(frozen=True)
 class Estimate:
     """position_m (3,) m; residual: normalized rms fit residual (1 ~ noise level; 0.0 when no
@@ -85,8 +94,8 @@ class Localizer:
     lsb_t : float, T -- the readout's quantization step; the fit's per-axis variance is
         noise_t^2 + lsb_t^2 / 12 (uniform rounding error), plus the model-error terms
     relative_error : float, relative model error of a sensor's reading (gain, mounting);
-        default 0.02, or 0.001 with a calibration (what it leaves of the gain and mounting
-        errors: docs/localization.md "Integrity")
+        default :data:`UNCALIBRATED_RELATIVE_ERROR`, or :data:`CALIBRATED_RELATIVE_ERROR`
+        with a calibration
     residual_limit : float, largest normalized rms residual for ok (a cap beside the test)
     integrity_risk : float, probability per fix that the error exceeds the protection level
     false_alarm : float, probability per fix that a correct fit fails the residual test (a
@@ -133,7 +142,8 @@ class Localizer:
                                     f"design {learned.design_sha256[:12]}...",
                                     "Retrain: designkit.learned_inverse.train_learned_inverse.")
         if relative_error is None:
-            relative_error = 0.02 if calibration is None else 0.001
+            relative_error = (UNCALIBRATED_RELATIVE_ERROR if calibration is None
+                              else CALIBRATED_RELATIVE_ERROR)
         if model_bias_m is None:
             model_bias_m = 1e-3 if calibration is None else 0.5e-3
         for name, val in (("noise_t", noise_t), ("relative_error", relative_error + 1e-300),

@@ -13,18 +13,12 @@ from collections.abc import Callable
 import numpy as np
 
 from ..errors import BadInputError, FirmwareIOError
-from ..localization import calibrate
+from ..localization import CALIBRATED_RELATIVE_ERROR, calibrate
 
 CALIBRATION_CURRENT_A = 2.0
 """Largest calibration current per coil, A: the iron cores stay near their linear range and the
 sensors above them below the TLV493D's linear range, while every sensor sees a coil field many
 times its noise along three independent directions."""
-
-
-CALIBRATED_RELATIVE_ERROR = 0.005
-"""Relative model error of a calibrated sensor's reading (the localizer's sensor weights): what
-the affine calibration leaves of the 1 % gain and 1 degree mounting errors is the mounting shift
-and the coils' nonlinearity, a fraction of a percent (studies/localization.py's 'model-cal')."""
 
 
 def calibration_currents(n_coils: int, amplitude_a: float = CALIBRATION_CURRENT_A,
