@@ -16,11 +16,11 @@ within 3 standard errors; "at priors" names what is neither. Benchmark: the fit'
 CPU time on the onboard + probe rows (``--probe 53``: 801 rows) with the same-process
 2000 x 2000 matmul time as the machine's speed reference and the load average.
 
-``--run`` (3 x 3 only): each device of the first tolerance scale as the plant of ``designkit
-run --simulate`` (slide over the hemisphere, ``--duration`` s, no start-up sensor calibration)
-with the runner on the map of the true device, the calibrated and the nominal design: force
-error RMS of each and the calibrated / true ratio per device, and their median (three maps per
-device, two of them of as-built devices: slow). ``--seed`` draws other devices.
+``--run`` (3 x 3 only): each device of the first scale as the plant of ``designkit run
+--simulate`` (slide over the hemisphere, ``--duration`` s, no start-up sensor calibration), the
+runner on the map of the true device, the calibrated and the nominal design (slow; true.toml,
+calibrated.toml): force error RMS, calibrated / true per run and the median; ``--repeats``:
+each map again with other sensor noise. ``--seed`` draws other devices.
 
 Usage: python studies/calibration.py --out study-out/calibration [--quick | --run]
 """
@@ -103,23 +103,32 @@ def _names(res):
     return out
 
 
-def _run_part(design, truth_design, calibrated_design, out_dir, duration):
+def _run_part(design, truth_design, calibrated_design, out_dir, duration, repeats=1):
     from designkit.sim import run_simulation
 
-    result, dirs = {}, {}
-    for name, map_design in (("true", truth_design), ("calibrated", calibrated_design),
-                             ("nominal", design)):
-        # the maps are compared, not the sensor calibration
-        dirs[name] = out_dir / f"run-{name}"
-        s = run_simulation(design=map_design, obj="hemisphere", trajectory="slide",
-                           duration_s=duration, out=dirs[name], progress=False,
-                           plant=truth_design, calibrate=False)
-        result[name] = s["force_error_rms_n"]
-        result[f"{name}_running_fraction"] = s["running_fraction"]
-    result["calibrated_over_true"] = result["calibrated"] / result["true"]
-    common = _common_steps({k: dirs[k] for k in ("true", "calibrated")})
-    result.update({f"{k}_common": v for k, v in common.items()})
-    result["calibrated_over_true_common"] = common["calibrated"] / common["true"]
+    result, maps = {"repeats": []}, {}
+    for seed in range(repeats):
+        dirs, rms = {}, {}
+        for name, map_design in (("true", truth_design), ("calibrated", calibrated_design),
+                                 ("nominal", design)):
+            # the maps are compared, not the sensor calibration; a repeat reuses the map and
+            # draws other sensor noise (and meets other loop timing)
+            dirs[name] = out_dir / (f"run-{name}" + (f"-seed{seed}" if seed else ""))
+            s = run_simulation(design=map_design, obj="hemisphere", trajectory="slide",
+                               duration_s=duration, out=dirs[name], progress=False,
+                               plant=truth_design, calibrate=False, seed=seed,
+                               map_path=maps.get(name))
+            maps.setdefault(name, dirs[name] / "map.npz")
+            rms[name] = s["force_error_rms_n"]
+            rms[f"{name}_running_fraction"] = s["running_fraction"]
+        rms["calibrated_over_true"] = rms["calibrated"] / rms["true"]
+        common = _common_steps({k: dirs[k] for k in ("true", "calibrated")})
+        rms.update({f"{k}_common": v for k, v in common.items()})
+        rms["calibrated_over_true_common"] = common["calibrated"] / common["true"]
+        result["repeats"].append(rms)
+    result.update(result["repeats"][0])
+    for key in ("calibrated_over_true", "calibrated_over_true_common"):
+        result[f"{key}_median"] = float(np.median([r[key] for r in result["repeats"]]))
     return result
 
 
@@ -158,6 +167,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--run", action="store_true", help="also the run --simulate comparison")
     ap.add_argument("--duration", type=float, default=2.0, help="run duration, s")
     ap.add_argument("--seed", type=int, default=0, help="seed of the devices and readings")
+    ap.add_argument("--repeats", type=int, default=1,
+                    help="runs per map (other sensor-noise seeds), with --run")
     ap.add_argument("--coupling-rounds", type=int, default=2,
                     help="at most this many exact coupled solves of the fitted device")
     args = ap.parse_args(argv)
@@ -196,6 +207,7 @@ def main(argv=None) -> dict:
               "matmul_2000_s": matmul_s()}
     if args.run:
         from designkit.asbuilt import AsBuilt
+        from designkit.design import design_to_toml
 
         result["run"] = []
         for dev, (ab, params, tol) in enumerate(runs):
@@ -203,13 +215,17 @@ def main(argv=None) -> dict:
             calibrated = design.replace(asbuilt=AsBuilt.from_parameters(nom.coils, params,
                                                                         tol),
                                         name="calibrated")
+            (args.out / f"device{dev}").mkdir(parents=True, exist_ok=True)
+            for name, d in (("true", truth_design), ("calibrated", calibrated)):
+                (args.out / f"device{dev}" / f"{name}.toml").write_text(design_to_toml(d))
             result["run"].append(_run_part(design, truth_design, calibrated,
-                                           args.out / f"device{dev}", args.duration))
+                                           args.out / f"device{dev}", args.duration,
+                                           args.repeats))
             print(_run_row(dev, result["run"][-1]), flush=True)
         if runs:
             for key in ("calibrated_over_true", "calibrated_over_true_common"):
-                result[f"run_median_{key}"] = float(np.median([r[key] for r in
-                                                               result["run"]]))
+                result[f"run_median_{key}"] = float(np.median(
+                    [x[key] for r in result["run"] for x in r["repeats"]]))
     return finish(args.out / "calibration.json", result, _print)
 
 
@@ -233,21 +249,24 @@ def _print(result) -> None:
     for dev, run in enumerate(result.get("run", [])):
         print(_run_row(dev, run))
     if result.get("run"):
-        print(f"run: median calibrated / true = "
+        print(f"run: median over devices and runs calibrated / true = "
               f"{result['run_median_calibrated_over_true']:.3f}, on the common running steps "
               f"{result['run_median_calibrated_over_true_common']:.3f}")
 
 
 def _run_row(dev: int, run: dict) -> str:
     maps = ("true", "calibrated", "nominal")
-    return (f"run --simulate --as-built, device {dev}, force error RMS (running fraction): "
-            + ", ".join(f"{k} map {run[k] * 1e3:.1f} mN ({run[k + '_running_fraction']:.0%})"
-                        for k in maps)
-            + f"; calibrated / true = {run['calibrated_over_true']:.3f} | on the "
-            f"{run['steps_common']} steps both render: "
-            + ", ".join(f"{k} {run[k + '_common'] * 1e3:.1f} mN" for k in maps[:2])
-            + f"; calibrated / true = {run['calibrated_over_true_common']:.3f}")
-
-
-if __name__ == "__main__":
-    main()
+    lines = []
+    for seed, r in enumerate(run["repeats"]):
+        lines.append(
+            f"run --simulate --as-built, device {dev} seed {seed}, force error RMS (running "
+            "fraction): " + ", ".join(f"{k} map {r[k] * 1e3:.1f} mN "
+                                      f"({r[k + '_running_fraction']:.0%})" for k in maps)
+            + f"; calibrated / true = {r['calibrated_over_true']:.3f} | on the "
+            f"{r['steps_common']} steps both render: "
+            + ", ".join(f"{k} {r[k + '_common'] * 1e3:.1f} mN" for k in maps[:2])
+            + f"; calibrated / true = {r['calibrated_over_true_common']:.3f}")
+    lines.append(f"device {dev}: median over {len(run['repeats'])} runs calibrated / true = "
+                 f"{run['calibrated_over_true_median']:.3f}, on the common steps "
+                 f"{run['calibrated_over_true_common_median']:.3f}")
+    return "\n".join(lines)
