@@ -204,6 +204,9 @@ class CoilArray:
     coils: tuple[Coil, ...]
     sensor_offset_m: float = 0.014
     """Hall sensors: this far above each coil's top face and below its bottom face, m."""
+    sensor_coils: tuple[Coil, ...] | None = None
+    """The coils that place the sensors (None: ``coils``); an as-built array's are the nominal
+    coils: the Hall arrays are boards, they do not move with a displaced coil."""
 
     def __post_init__(self):
         coils = tuple(self.coils)
@@ -213,6 +216,11 @@ class CoilArray:
             if not isinstance(c, Coil):
                 raise BadInputError(f"coils[{k}]", "a designkit.Coil", type(c).__name__)
         object.__setattr__(self, "coils", coils)
+        if self.sensor_coils is not None:
+            object.__setattr__(self, "sensor_coils", tuple(self.sensor_coils))
+            if len(self.sensor_coils) != len(coils):
+                raise BadInputError("sensor_coils", f"None or {len(coils)} coils",
+                                    len(self.sensor_coils))
         v.nonnegative("sensor_offset_m", self.sensor_offset_m)
         check_overlap(coils)
         check_separation(coils)
@@ -223,9 +231,10 @@ class CoilArray:
         as built (moved, tilted, rewound, other cores) when the design has ``[asbuilt]``."""
         coils = tuple(Coil.from_design(design, (x, y, None))
                       for x, y, _ in design.coil_centres_m())
+        nominal = None
         if design.asbuilt is not None:
-            coils = design.asbuilt.apply(coils)
-        return cls(coils, sensor_offset_m=design.sensors.offset_m)
+            nominal, coils = coils, design.asbuilt.apply(coils)
+        return cls(coils, sensor_offset_m=design.sensors.offset_m, sensor_coils=nominal)
 
     @classmethod
     def default(cls) -> "CoilArray":
@@ -400,7 +409,7 @@ class CoilArray:
         """Hall sensor positions, (2, n_coils, 3) m: [0] upper array (``sensor_offset_m`` above
         each coil's top face, on its axis), [1] lower array (as far below its bottom face)."""
         out = np.empty((2, self.n_coils, 3))
-        for k, c in enumerate(self.coils):
+        for k, c in enumerate(self.sensor_coils or self.coils):
             axis = c.pose.matrix[:, 2]
             pos = np.asarray(c.pose.position, dtype=float)
             d = c.length / 2 + self.sensor_offset_m

@@ -13,7 +13,8 @@ A design's ``[asbuilt]`` table (TOML) describes the device that was actually bui
 
 The measured magnet moment is the design's ``[magnet]`` (magnetization and direction).
 Every field is SI. :meth:`AsBuilt.apply` turns nominal coils (:class:`designkit.Coil`) into the
-as-built ones; ``CoilArray.from_design`` calls it. Parameter vector order of the fit:
+as-built ones; ``CoilArray.from_design`` calls it and keeps the Hall sensors where the nominal
+coils place them (the sensor arrays are boards). Parameter vector order of the fit:
 :data:`PARAMETERS` per coil. Reference: docs/calibration.md.
 """
 

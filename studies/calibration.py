@@ -6,18 +6,21 @@ Devices: :func:`designkit.asbuilt.random_asbuilt` with the default tolerances (0
 5 mrad tilt, 2 % turns, 0.5 mm core depth) times ``scale``, every core's steel at mu_r 450
 (nominal 1000). Readings from the device's exact coupled model: onboard arrays, each coil alone
 at +-2 A, 0.05 mT noise; probe, ``--probe`` random workspace points, each coil alone at 1 A,
-0.02 mT noise. Fit: :func:`designkit.calibration.fit`. Held out: 200
-random workspace points; error of A(p) per point and row relative to the row's largest value
+0.02 mT noise. Fit: :func:`designkit.calibration.fit` (``--coupling-rounds``; its whitened
+cost per reading axis is printed: about 1 when the model fits the readings to their noise).
+Held out: 200 random workspace points; error of A(p) per point and row relative to the row's largest value
 over those points (:func:`designkit.calibration.actuation_error`), nominal and calibrated.
 Parameters: the fraction within 3 standard errors of the truth among those the fit calls
 identifiable, and of the identifiable combined pairs (nearly collinear parameters) the count
 within 3 standard errors; "at priors" names what is neither. Benchmark: the fit's wall and
-CPU time on the onboard + probe rows (this machine, shared: the load average is printed).
+CPU time on the onboard + probe rows (``--probe 53``: 801 rows) with the same-process
+2000 x 2000 matmul time as the machine's speed reference and the load average.
 
-``--run`` (3 x 3 only): the first device as the plant of ``designkit run --simulate`` (slide
-over the hemisphere, ``--duration`` s, no start-up sensor calibration) with the runner on the
-map of the true device, the calibrated and the nominal design: force error RMS of each (three
-maps, two of them of as-built devices: slow).
+``--run`` (3 x 3 only): each device of the first scale as the plant of ``designkit run
+--simulate`` (slide over the hemisphere, ``--duration`` s, no start-up sensor calibration), the
+runner on the map of the true device, the calibrated and the nominal design (slow; true.toml,
+calibrated.toml): force error RMS, calibrated / true per run and the median; ``--repeats``:
+each map again with other sensor noise. ``--seed`` draws other devices.
 
 Usage: python studies/calibration.py --out study-out/calibration [--quick | --run]
 """
@@ -36,6 +39,7 @@ if __package__ in (None, ""):
 import numpy as np
 
 from studies._common import finish, load_average
+from studies.bench_map import matmul_s
 
 
 def _device(design, nom, scale, rng):
@@ -51,7 +55,7 @@ def _device(design, nom, scale, rng):
     return ab, tol, CoilArray.from_design(design.replace(asbuilt=ab))
 
 
-def _one(design, nom, ab, tol, truth, plan_name, n_probe, rng, held_out, a_true):
+def _one(design, nom, ab, tol, truth, plan_name, n_probe, rng, held_out, a_true, rounds=2):
     from designkit import calibration as cal
     from designkit.array import CoilArray
     from designkit.asbuilt import AsBuilt
@@ -62,7 +66,7 @@ def _one(design, nom, ab, tol, truth, plan_name, n_probe, rng, held_out, a_true)
                                           nom.n_coils))
     meas = cal.simulate(truth, plan, rng)
     t0, c0 = time.perf_counter(), time.process_time()
-    res = cal.fit(nom, meas, tol, progress=False)
+    res = cal.fit(nom, meas, tol, progress=False, coupling_rounds=rounds)
     fit_s, fit_cpu_s = time.perf_counter() - t0, time.process_time() - c0
     calib = CoilArray.from_design(design.replace(
         asbuilt=AsBuilt.from_parameters(nom.coils, res.params, tol)))
@@ -81,6 +85,7 @@ def _one(design, nom, ab, tol, truth, plan_name, n_probe, rng, held_out, a_true)
             "identifiable": int(ident.sum()), "parameters": int(res.fitted.sum()),
             "within_3se": float((z < 3).mean()) if len(z) else float("nan"),
             "combined": len(zc), "combined_within_3se": int(np.sum(np.array(zc) < 3)),
+            "cost_per_reading_axis": res.cost_after / (3 * len(meas)),
             "worst_z": float(max(z.max() if len(z) else 0.0, max(zc, default=0.0))),
             "unidentifiable": sorted({n for (k, j), n in np.ndenumerate(_names(res))
                                       if res.fitted[k, j] and not ident[k, j]
@@ -98,19 +103,56 @@ def _names(res):
     return out
 
 
-def _run_part(design, truth_design, calibrated_design, out_dir, duration):
+def _run_part(design, truth_design, calibrated_design, out_dir, duration, repeats=1):
     from designkit.sim import run_simulation
 
-    result = {}
-    for name, map_design in (("true", truth_design), ("calibrated", calibrated_design),
-                             ("nominal", design)):
-        # the maps are compared, not the sensor calibration
-        s = run_simulation(design=map_design, obj="hemisphere", trajectory="slide",
-                           duration_s=duration, out=out_dir / f"run-{name}", progress=False,
-                           plant=truth_design, calibrate=False)
-        result[name] = s["force_error_rms_n"]
-    result["calibrated_over_true"] = result["calibrated"] / result["true"]
+    result, maps = {"repeats": []}, {}
+    for seed in range(repeats):
+        dirs, rms = {}, {}
+        for name, map_design in (("true", truth_design), ("calibrated", calibrated_design),
+                                 ("nominal", design)):
+            # the maps are compared, not the sensor calibration; a repeat reuses the map and
+            # draws other sensor noise (and meets other loop timing)
+            dirs[name] = out_dir / (f"run-{name}" + (f"-seed{seed}" if seed else ""))
+            s = run_simulation(design=map_design, obj="hemisphere", trajectory="slide",
+                               duration_s=duration, out=dirs[name], progress=False,
+                               plant=truth_design, calibrate=False, seed=seed,
+                               map_path=maps.get(name))
+            maps.setdefault(name, dirs[name] / "map.npz")
+            rms[name] = s["force_error_rms_n"]
+            rms[f"{name}_running_fraction"] = s["running_fraction"]
+        rms["calibrated_over_true"] = rms["calibrated"] / rms["true"]
+        common = _common_steps({k: dirs[k] for k in ("true", "calibrated")})
+        rms.update({f"{k}_common": v for k, v in common.items()})
+        rms["calibrated_over_true_common"] = common["calibrated"] / common["true"]
+        result["repeats"].append(rms)
+    result.update(result["repeats"][0])
+    for key in ("calibrated_over_true", "calibrated_over_true_common"):
+        result[f"{key}_median"] = float(np.median([r[key] for r in result["repeats"]]))
     return result
+
+
+def _common_steps(dirs: dict) -> dict:
+    """Force error RMS (N) of each run over the steps where every run renders (state
+    'running'): a localizer that declares itself lost (protection level over the alert limit)
+    drops those steps from its own RMS, so the maps are compared on the same steps."""
+    from firmware_io.scene import Scene
+
+    cols = {k: np.genfromtxt(d / "run.csv", delimiter=",", names=True, dtype=None,
+                             encoding=None) for k, d in dirs.items()}
+    first = next(iter(dirs))
+    c0 = cols[first]
+    p = np.c_[c0["x_m"], c0["y_m"], c0["z_m"]]
+    period = float(np.median(np.diff(c0["t_s"])))
+    f_obj = Scene.load(dirs[first] / "scene.npz").force(p, np.gradient(p, period, axis=0))
+    both = np.logical_and.reduce([c["state"] == "running" for c in cols.values()])
+    out = {}
+    for k, c in cols.items():
+        err = np.c_[c["fx_n"], c["fy_n"], c["fz_n"]] - f_obj
+        out[k] = float(np.sqrt(np.mean(np.sum(err[both] ** 2, axis=1)))) if both.any() \
+            else float("nan")
+    out["steps"] = int(both.sum())
+    return out
 
 
 def main(argv=None) -> dict:
@@ -124,6 +166,11 @@ def main(argv=None) -> dict:
     ap.add_argument("--quick", action="store_true", help="2 x 2 array, one device, scale 1")
     ap.add_argument("--run", action="store_true", help="also the run --simulate comparison")
     ap.add_argument("--duration", type=float, default=2.0, help="run duration, s")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the devices and readings")
+    ap.add_argument("--repeats", type=int, default=1,
+                    help="runs per map (other sensor-noise seeds), with --run")
+    ap.add_argument("--coupling-rounds", type=int, default=2,
+                    help="at most this many exact coupled solves of the fitted device")
     args = ap.parse_args(argv)
     from designkit import calibration as cal
     from designkit.array import CoilArray
@@ -139,38 +186,53 @@ def main(argv=None) -> dict:
         args.devices, scales = 1, [1.0]
     args.out.mkdir(parents=True, exist_ok=True)
     nom = CoilArray.from_design(design)
-    rng = np.random.default_rng(0)
+    rng = np.random.default_rng(args.seed)
     held_out = cal.workspace_points(design, 200, rng)
-    rows, first = [], None
+    rows, runs = [], []
     for scale in scales:
         for dev in range(args.devices):
             ab, tol, truth = _device(design, nom, scale, rng)
             a_true = truth.actuation_matrix(held_out)
             for plan_name in args.plans.split(","):
                 r = _one(design, nom, ab, tol, truth, plan_name, args.probe, rng, held_out,
-                         a_true)
-                if first is None and plan_name != "onboard":
-                    first = (ab, r["calibrated"], r["asbuilt"], tol)
+                         a_true, args.coupling_rounds)
+                if scale == scales[0] and plan_name != "onboard" and len(runs) == dev:
+                    runs.append((ab, r["asbuilt"], tol))
                 r.pop("calibrated")
                 r.pop("asbuilt")
                 rows.append({"scale": scale, "device": dev, **r})
                 print(_row(rows[-1]), flush=True)
     result = {"design": f"{design.array.rows} x {design.array.columns}", "rows": rows,
-              "load_average": load_average()}
-    if args.run and first is not None:
+              "load_average": load_average(),
+              "matmul_2000_s": matmul_s()}
+    if args.run:
         from designkit.asbuilt import AsBuilt
+        from designkit.design import design_to_toml
 
-        ab, _, params, tol = first
-        truth_design = design.replace(asbuilt=ab, name="true-device")
-        calibrated = design.replace(asbuilt=AsBuilt.from_parameters(nom.coils, params, tol),
-                                    name="calibrated")
-        result["run"] = _run_part(design, truth_design, calibrated, args.out, args.duration)
+        result["run"] = []
+        for dev, (ab, params, tol) in enumerate(runs):
+            truth_design = design.replace(asbuilt=ab, name="true-device")
+            calibrated = design.replace(asbuilt=AsBuilt.from_parameters(nom.coils, params,
+                                                                        tol),
+                                        name="calibrated")
+            (args.out / f"device{dev}").mkdir(parents=True, exist_ok=True)
+            for name, d in (("true", truth_design), ("calibrated", calibrated)):
+                (args.out / f"device{dev}" / f"{name}.toml").write_text(design_to_toml(d))
+            result["run"].append(_run_part(design, truth_design, calibrated,
+                                           args.out / f"device{dev}", args.duration,
+                                           args.repeats))
+            print(_run_row(dev, result["run"][-1]), flush=True)
+        if runs:
+            for key in ("calibrated_over_true", "calibrated_over_true_common"):
+                result[f"run_median_{key}"] = float(np.median(
+                    [x[key] for r in result["run"] for x in r["repeats"]]))
     return finish(args.out / "calibration.json", result, _print)
 
 
 def _row(r) -> str:
     return (f"scale {r['scale']:.1f} device {r['device']} {r['plan']:<14} rows {r['rows']:4d} "
-            f"fit {r['fit_s']:6.1f} s (CPU {r['fit_cpu_s']:.1f} s) | A(p) error max/median: nominal {r['nominal_max']:.2%} / "
+            f"fit {r['fit_s']:6.1f} s (CPU {r['fit_cpu_s']:.1f} s, cost/reading axis "
+            f"{r['cost_per_reading_axis']:.2f}) | A(p) error max/median: nominal {r['nominal_max']:.2%} / "
             f"{r['nominal_median']:.3%}, calibrated {r['calibrated_max']:.2%} / "
             f"{r['calibrated_median']:.3%} | identifiable {r['identifiable']}/"
             f"{r['parameters']}, within 3 SE {r['within_3se']:.0%}, identifiable pairs "
@@ -180,15 +242,31 @@ def _row(r) -> str:
 
 
 def _print(result) -> None:
-    print(f"\n{result['design']} array, load average {result['load_average']}")
+    print(f"\n{result['design']} array, load average {result['load_average']}, same-process "
+          f"2000 x 2000 matmul {result['matmul_2000_s'] * 1e3:.0f} ms")
     for r in result["rows"]:
         print(_row(r))
-    if "run" in result:
-        run = result["run"]
-        print("run --simulate --as-built, force error RMS: " + ", ".join(
-            f"{k} map {v * 1e3:.3f} mN" for k, v in run.items() if k != "calibrated_over_true")
-            + f"; calibrated / true = {run['calibrated_over_true']:.3f}")
+    for dev, run in enumerate(result.get("run", [])):
+        print(_run_row(dev, run))
+    if result.get("run"):
+        print(f"run: median over devices and runs calibrated / true = "
+              f"{result['run_median_calibrated_over_true']:.3f}, on the common running steps "
+              f"{result['run_median_calibrated_over_true_common']:.3f}")
 
 
-if __name__ == "__main__":
-    main()
+def _run_row(dev: int, run: dict) -> str:
+    maps = ("true", "calibrated", "nominal")
+    lines = []
+    for seed, r in enumerate(run["repeats"]):
+        lines.append(
+            f"run --simulate --as-built, device {dev} seed {seed}, force error RMS (running "
+            "fraction): " + ", ".join(f"{k} map {r[k] * 1e3:.1f} mN "
+                                      f"({r[k + '_running_fraction']:.0%})" for k in maps)
+            + f"; calibrated / true = {r['calibrated_over_true']:.3f} | on the "
+            f"{r['steps_common']} steps both render: "
+            + ", ".join(f"{k} {r[k + '_common'] * 1e3:.1f} mN" for k in maps[:2])
+            + f"; calibrated / true = {r['calibrated_over_true_common']:.3f}")
+    lines.append(f"device {dev}: median over {len(run['repeats'])} runs calibrated / true = "
+                 f"{run['calibrated_over_true_median']:.3f}, on the common steps "
+                 f"{run['calibrated_over_true_common_median']:.3f}")
+    return "\n".join(lines)

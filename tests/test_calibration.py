@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from designkit import calibration as cal
-from designkit.array import CoilArray
+from designkit.array import CoilArray, force_matrix
 from designkit.asbuilt import PARAMETERS, AsBuilt, BuildTolerances, CoilDeviation, random_asbuilt
 from designkit.calibration.model import ForwardModel
 from designkit.cli import main
@@ -160,6 +160,31 @@ def test_fit_finds_an_air_array_within_three_standard_errors():
     assert res.identifiable[res.fitted].all()
     # the readings are fitted to their noise
     assert res.cost_after / (3 * len(meas)) < 1.3 < res.cost_before / (3 * len(meas))
+
+
+def test_a_calibrated_device_gives_the_runner_what_the_true_device_would():
+    """What a run takes from the map besides A(p): where the Hall boards' sensors are and the
+    coils' field there (the localizer subtracts it). The boards do not move with a displaced
+    coil (the onboard readings are taken at their nominal places), and the calibrated model's
+    coil field at its sensors and force per ampere along a path are within 1/5 of the nominal
+    model's error of the true device's."""
+    d = _air()
+    nom, ab, meas = _measured(d)
+    truth = CoilArray.from_design(d.replace(asbuilt=ab))
+    np.testing.assert_array_equal(truth.sensor_positions_m(), nom.sensor_positions_m())
+    res = cal.fit(nom, meas, BuildTolerances(), progress=False)
+    calib = CoilArray.from_design(d.replace(asbuilt=AsBuilt.from_parameters(nom.coils,
+                                                                           res.params)))
+    path = np.c_[np.linspace(-0.04, 0.04, 9), np.zeros(9), np.linspace(0.03, 0.06, 9)]
+    moment = np.array([0.0, 0.0, 1.0])
+
+    def runtime(arr):  # coils' field at the sensors (T/A), force per ampere on the path (N/A)
+        s = arr.actuation_matrix(arr.sensor_positions_m().reshape(-1, 3))[:, :3, :]
+        f = np.einsum("ij,kjl->kil", force_matrix(moment), arr.actuation_matrix(path)[:, 3:])
+        return s, f
+
+    for true, got, base in zip(runtime(truth), runtime(calib), runtime(nom)):
+        assert np.abs(got - true).max() <= np.abs(base - true).max() / 5
 
 
 def test_calibrate_command_writes_a_design_and_the_report(tmp_path):
