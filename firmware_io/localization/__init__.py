@@ -16,9 +16,9 @@ the coils driven), :mod:`.learned` (the thesis' learned inverse, section 3.2.2) 
 derivation and the measured accuracy: docs/localization.md.
 """
 
-from .calibration import SensorCalibration, calibrate
-from .estimator import (CALIBRATED_RELATIVE_ERROR, METHODS, UNCALIBRATED_RELATIVE_ERROR,
-                        Estimate, Localizer)
+from .calibration import (CALIBRATED_RELATIVE_ERROR, UNCALIBRATED_RELATIVE_ERROR,
+                          SensorCalibration, calibrate)
+from .estimator import METHODS, Estimate, Localizer
 from .filter import ConstantVelocityKalman
 from .learned import LearnedInverse
 from .magnet import MU0, cylinder_field, multipole_field

@@ -22,6 +22,16 @@ from ..mapfile import gradient_tensor
 from .sensor_model import DEFAULT_NOISE_T, SensorModel
 
 
+
+UNCALIBRATED_RELATIVE_ERROR = 0.02
+"""Relative model error of an uncalibrated sensor's reading: the TLV493D's gain spread and a
+degree of mounting error (docs/localization.md "Integrity")."""
+
+CALIBRATED_RELATIVE_ERROR = 0.001
+"""Relative model error of a calibrated sensor's reading: what the start-up calibration (with
+the coils' field gradient at the sensors) leaves of the gain, mounting and position errors
+(docs/localization.md "Integrity")."""
+
 @dataclass(frozen=True)
 class SensorCalibration:
     """What :func:`calibrate` recovers for each sensor (upper array, then lower).

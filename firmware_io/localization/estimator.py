@@ -28,7 +28,8 @@ import numpy as np
 from ..errors import BadInputError
 from ..hw.tlv493d import TLV493D_LSB_T
 from ..mapfile import MapFile
-from .calibration import SensorCalibration
+from .calibration import (CALIBRATED_RELATIVE_ERROR, UNCALIBRATED_RELATIVE_ERROR,
+                          SensorCalibration)
 from .filter import ConstantVelocityKalman
 from .frame import as_float_array, check_frame
 from .integrity import covariance_and_pl, ratio_quantiles, thresholds
@@ -39,15 +40,6 @@ from .sensor_model import DEFAULT_NOISE_T, SensorModel
 
 METHODS = ("learned", "dipole", "model", "kalman")
 
-
-UNCALIBRATED_RELATIVE_ERROR = 0.02
-"""Relative model error of an uncalibrated sensor's reading: the TLV493D's gain spread and a
-degree of mounting error (docs/localization.md "Integrity")."""
-
-CALIBRATED_RELATIVE_ERROR = 0.001
-"""Relative model error of a calibrated sensor's reading: what the start-up calibration (with
-the coils' field gradient at the sensors) leaves of the gain, mounting and position errors
-(docs/localization.md "Integrity")."""
 
 @dataclass(frozen=True)
 class Estimate:
@@ -73,12 +65,10 @@ class Estimate:
     dof: int = 0
 
 
-
 def _dist(a: np.ndarray, b: np.ndarray) -> float:
     """|a - b| of two (3,) vectors (cheaper than np.linalg.norm on the fit's hot path)."""
     d = a - b
     return math.sqrt(float(d @ d))
-
 
 
 class Localizer:
@@ -93,9 +83,8 @@ class Localizer:
     noise_t : float, T rms per axis (the analog noise)
     lsb_t : float, T -- the readout's quantization step; the fit's per-axis variance is
         noise_t^2 + lsb_t^2 / 12 (uniform rounding error), plus the model-error terms
-    relative_error : float, relative model error of a sensor's reading (gain, mounting);
-        default :data:`UNCALIBRATED_RELATIVE_ERROR`, or :data:`CALIBRATED_RELATIVE_ERROR`
-        with a calibration
+    relative_error : float, relative model error of a sensor's reading (default
+        UNCALIBRATED_RELATIVE_ERROR, with a calibration CALIBRATED_RELATIVE_ERROR)
     residual_limit : float, largest normalized rms residual for ok (a cap beside the test)
     integrity_risk : float, probability per fix that the error exceeds the protection level
     false_alarm : float, probability per fix that a correct fit fails the residual test (a
