@@ -10,7 +10,7 @@ to 5x the reachable scale (inside and outside the reachable set), random per-coi
   against scipy.optimize.lsq_linear on the box-only version of the same problems, same process.
   Each problem is timed 3 times: the first pass is the one-run figure; the per-problem minimum
   of the 3 is also given, because on a shared machine a solve preempted by another process
-  shows up as a 4-10 ms outlier that is not the allocator's.
+  shows up as an outlier of several milliseconds that is not the allocator's.
 * Speed, warm (the control loop): a smooth 1 kHz path of the magnet (about 0.1 m/s) with smooth
   targets, solved cold by ``allocate`` and warm by ``Allocator`` (the last final face as the
   start); the answers must agree (max difference reported).

@@ -1,24 +1,21 @@
-"""3-D GetDP reference for the coupled array (issue 12): how close is the 3-D FEM to known
-answers, and what does it say about coupled cores and the magnet's pull on the iron?
+"""3-D GetDP reference for the coupled array: how close is the 3-D FEM to known answers, and
+what does it say about coupled cores and the magnet's pull on the iron?
 
 Question: with the 3-D GetDP model of designkit.fem.fem3d (vector potential, Whitney +
 second-order face functions, tree gauge, shell to infinity, symmetry where it exists), how
-accurate are B and grad B (single coil with its core vs the axisymmetric model, which agrees
-with the axisymmetric GetDP to ~1 %), and the magnet force (vs the image method), at two
-mesh levels; and what are the reference values for (1) two cores at the 50 mm pitch with one
-coil energized, (2) the 3x3 array with the centre (and, unless quick, the corner) coil
-energized, (3) the magnet's pull on one core at 20, 30, 50 mm (magnet centre above the winding
-top)? The uncoupled single-coil model is set beside (1) and (2) to show the coupling effect,
-and designkit's coupled model (designkit.cores.coupled via CoilArray) is checked against (1)-(3):
-per point |dB|/|B| and ||dG||_F/||G||_F over the workspace points (12, 20, 30, 50, 80 mm, the
-rows above the default workspace's floor reported separately) and the pull at each height.
-B and grad B come from the cores' FEM magnetization plus the windings' exact field
-(designkit.fem.fem3d, ``outputs='iron'``): single coil within 0.4 % of the axisymmetric model
-at level -1. Default level 0 for the reference cases (~50k tetrahedra in the quarter / half
-models, ~1.5 min each on this machine), one level coarser for the corner case (full model, no
-symmetry); the centre case is solved at the level below too and the largest per-point change
-is reported (the FEM's own convergence: level 0 -> 1 changes B by <= 0.6 %, grad B by
-<= 1.3 % per point).
+accurate are B and grad B (single coil with its core vs the axisymmetric model) and the magnet
+force (vs the image method), at two mesh levels; and what are the reference values for (1) two
+cores at the 50 mm pitch with one coil energized, (2) the 3x3 array with the centre (and,
+unless quick, the corner) coil energized, (3) the magnet's pull on one core at 20, 30, 50 mm
+(magnet centre above the winding top)? The uncoupled single-coil model is set beside (1) and
+(2) to show the coupling effect, and designkit's coupled model (designkit.cores.coupled via
+CoilArray) is checked against (1)-(3): per point |dB|/|B| and ||dG||_F/||G||_F over the
+workspace points (12, 20, 30, 50, 80 mm, the rows above the default workspace's floor reported
+separately) and the pull at each height. B and grad B come from the cores' FEM magnetization
+plus the windings' exact field (``outputs='iron'``). Default level 0 for the reference cases,
+one level coarser for the corner case (full model, no symmetry); the centre case is also solved
+at the level below and its largest per-point change is reported (the FEM's own convergence).
+Measured accuracy and convergence: docs/fem.md, docs/coupling.md.
 
 Writes ``fem3d_array.npz`` (every case's points, B, G, forces) and ``fem3d_array.json``
 (summary) under the output folder (default out/fem3d_array/); returns the summary dict.
