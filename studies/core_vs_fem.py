@@ -10,9 +10,9 @@ models cost?
 Table sections: air core (FEM vs quadrature); mesh refinement (the FEM digits are converged);
 linear cores mu_r 200/1000/5000 at 6 A (max error on the axis 14-100 mm above the winding and on
 r = 10 mm); nonlinear core 1-6 A at the design point; inductance, tau and 5 tau against
-``SETTLING_S``; force at 6 A vs the thesis' 780 mN; all around the coil (above, below, beside, in the bore
-beyond the core's ends, at the neighbours' positions) for three core geometries and mu_r
-200/1000/5000/1010 steel, with the FEM's mesh convergence at those points; costs.
+``SETTLING_S``; force at 6 A vs the thesis' 780 mN; all around the coil (above, below, beside,
+in the bore beyond the core's ends, at the neighbours' positions) for three core geometries and
+mu_r 200/1000/5000/1010 steel, with the FEM's mesh convergence at those points; costs.
 """
 
 from __future__ import annotations
