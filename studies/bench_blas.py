@@ -19,6 +19,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
@@ -61,8 +63,6 @@ def _seconds(mode: str, case: str, quick: bool) -> float:
 
 
 def run(out_dir, quick: bool = False, repeats: int = 3) -> dict:
-    import numpy as np
-
     cases = CASES[:1] if quick else CASES
     repeats = 1 if quick else repeats
     load = os.getloadavg()[0]

@@ -33,7 +33,9 @@ import numpy as np
 
 from designkit._io import write_json_atomic, write_text_atomic
 from designkit.design import MU0
-from designkit.field import loop_field, winding_field
+from designkit.field import cylindrical_to_cartesian, loop_field, reference as ref, winding_field
+from designkit.field.winding import winding_rz
+from studies import winding_accuracy as wa
 
 RI, RO, L, N, I = 0.012, 0.019, 0.100, 1429, 1.0
 J = N * I / ((RO - RI) * L)
@@ -115,9 +117,6 @@ def magpylib_shells(pts, k, ri=RI, ro=RO, length=L, j=J):
 def _kernel_reference(pts):
     """B, G of the raw kernel at rtol = 1e-13 (below the public 1e-12 floor: a reference for
     the thesis workspace only, checked against mpmath on a few points in the full run)."""
-    from designkit.field import cylindrical_to_cartesian
-    from designkit.field.winding import winding_rz
-
     rho = np.hypot(pts[:, 0], pts[:, 1])
     c = np.where(rho > 0, pts[:, 0] / np.where(rho > 0, rho, 1), 1.0)
     s = np.where(rho > 0, pts[:, 1] / np.where(rho > 0, rho, 1), 0.0)
@@ -142,11 +141,6 @@ def random_geometries(quick=False, have_magpylib=True, magpylib_random=False):
     other windings from the same sampler with ``per`` points per (winding, region), one call
     each (so per-call overhead is amortized). magpylib: nested CylinderSegment shells (B only)
     on the same points."""
-    import time as _t
-
-    from designkit.field import reference as ref
-    from studies import winding_accuracy as wa
-
     data = Path(__file__).resolve().parents[1] / "tests" / "data"
     cases, refs = wa.load_or_compute(data, wa.TABLE_SEED, wa.TABLE_GEOMETRIES)
     per = 10 if quick else 100
@@ -158,9 +152,9 @@ def random_geometries(quick=False, have_magpylib=True, magpylib_random=False):
     for rtol in REGION_RTOLS:
         for (region, ri, ro, length), pts in groups.items():
             pts = np.array(pts)
-            t = _t.perf_counter()
+            t = time.perf_counter()
             winding_field(pts, ri, ro, length, 1.0, 1.0, gradient=True, rtol=rtol)
-            dt = _t.perf_counter() - t
+            dt = time.perf_counter() - t
             o = out.setdefault((region, rtol), dict(time=0.0, n=0, err_b=0.0, err_g=0.0))
             o["time"] += dt
             o["n"] += len(pts)
@@ -185,10 +179,10 @@ def random_geometries(quick=False, have_magpylib=True, magpylib_random=False):
                     if reg != region:
                         continue
                     pts = np.array(pts)[:10]
-                    t = _t.perf_counter()
+                    t = time.perf_counter()
                     with np.errstate(all="ignore"):
                         magpylib_shells(pts, k, ri, ro, length, 1.0 / ((ro - ri) * length))
-                    tot += _t.perf_counter() - t
+                    tot += time.perf_counter() - t
                     n += len(pts)
                 for case, (b_ref, _g) in zip(cases, refs):
                     if case["region"] != region:
@@ -230,8 +224,6 @@ def random_geometries(quick=False, have_magpylib=True, magpylib_random=False):
 
 def _reference_check(pts, b_ref, g_ref):
     """Largest relative error of the rtol = 1e-13 reference against mpmath on 4 points."""
-    from designkit.field import reference as ref
-
     worst = 0.0
     for p in pts[:4]:
         r = ref.winding_textbook(RI, RO, L, float(np.hypot(p[0], p[1])), p[2], gradient=True)

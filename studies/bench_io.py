@@ -31,6 +31,7 @@ if __package__ in (None, ""):
 
 import numpy as np
 
+from designkit._io import write_json_atomic, write_text_atomic
 from firmware_io import CoilDrive, CoilDriver, SensorArrays
 from firmware_io.hw.pca9685 import PCA9685
 from firmware_io.hw.sim import SimBus, SimClock, SimPCA9685, SimTCA9548A, SimTLV493D
@@ -67,8 +68,6 @@ def _classify(tr) -> str:
 
 def run(out_dir, quick: bool = False) -> dict:
     """Run the study; write ``bench_io.json`` and ``bench_io.txt`` under ``out_dir``."""
-    from designkit._io import write_json_atomic, write_text_atomic
-
     out_dir = Path(out_dir)
     clock = SimClock()
     bus, sim_boards, coils, arrays = build_system(clock)

@@ -27,6 +27,8 @@ time of a 2000 x 2000 float64 matmul in the same process (to scale to another ma
 
 from __future__ import annotations
 
+import functools
+import importlib
 import sys
 import time
 from pathlib import Path
@@ -40,6 +42,7 @@ import numpy as np
 from designkit import default_design, fieldmap
 from designkit._io import write_json_atomic
 from designkit.array import ROWS, CoilArray
+from designkit.render import Hemisphere
 from firmware_io.mapfile import MapFile
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "bench_map"
@@ -151,9 +154,6 @@ def matmul_s() -> float:
 def _cold_caches() -> None:
     """Empty the per-process caches of the core models (core types, saturation, linear and
     nonlinear solves) so that a build pays for everything it needs."""
-    import functools
-    import importlib
-
     for name in ("core_model", "saturation", "panel", "discretization"):
         mod = importlib.import_module(f"designkit.cores.{name}")
         for obj in vars(mod).values():
@@ -170,8 +170,6 @@ def _timed_build(design, **kw) -> tuple[dict, float, float]:
 
 def scene_vs_full(out_dir=DEFAULT_OUT, n_points: int = 2000) -> dict:
     """Full map vs the scene map of the thesis hemisphere: time, size, errors in the region."""
-    from designkit.render import Hemisphere
-
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     d = default_design()

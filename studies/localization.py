@@ -35,13 +35,15 @@ if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np
+from scipy.optimize import least_squares
 
+from designkit._progress import tqdm
 from designkit.design import default_design
 from designkit.learned_inverse import train_learned_inverse
 from designkit.sensor_sim import (THESIS_MAE_MM, SensorErrors, SensorSimulator, analog_reading,
                                   case_currents, forward_model, random_positions)
 from firmware_io.localization import (ConstantVelocityKalman, LearnedInverse, Localizer,
-                                      SensorModel, calibrate, cylinder_field)
+                                      SensorModel, calibrate, cylinder_field, multipole_field)
 from firmware_io.mapfile import gradient_tensor
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "localization"
@@ -53,15 +55,11 @@ METHODS = ("learned", "dipole-naive", "dipole", "model", "model-cal", "noise-lim
 
 
 def _progress(it, desc):
-    from designkit._progress import tqdm
-
     return tqdm(it, desc=desc, mininterval=2.0, file=sys.stderr)
 
 
 def _noise_limited(sim, readings, k, p_true, currents, ind_true, ind_jac):
     """Fit with the exact forward model to frame k; returns the position (3,)."""
-    from scipy.optimize import least_squares
-
     e = sim.errors
     meas = np.stack([readings.top_t[k], readings.bottom_t[k]])
     use = np.all(np.isfinite(meas), axis=-1)
@@ -485,7 +483,6 @@ def _benchmark(sim, model, locs, rng, quick):
                      "cpu_median_us": float(np.median(cpu)),
                      "cpu_p99_us": float(np.percentile(cpu, 99))}
     # reference in the same process: one numpy 18 x 3 dipole field evaluation
-    from firmware_io.localization import multipole_field
 
     pts = model.sensor_positions_m.reshape(-1, 3)
     dt = []

@@ -39,6 +39,7 @@ if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np
+from scipy.stats import beta
 
 from designkit.design import default_design
 from designkit.sensor_sim import SensorSimulator, case_currents, forward_model, random_positions
@@ -60,8 +61,6 @@ CONDITIONS = ("cold", "jump", "sensor dead", "two saturated", "6 A", "uncalibrat
 
 def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple:
     """Two-sided exact binomial interval of k / n."""
-    from scipy.stats import beta
-
     a = 1 - level
     lo = 0.0 if k == 0 else float(beta.ppf(a / 2, k, n - k + 1))
     hi = 1.0 if k == n else float(beta.ppf(1 - a / 2, k + 1, n - k))

@@ -1,6 +1,7 @@
-"""The library keeps the house rules of its layout (tests/layout.py measures them): modules of
-one concept (<= 700 lines), functions in named phases (<= 100 lines), short module docstrings
-without run logs, imports at the top except heavy optional ones, and no import cycle."""
+"""The library and the studies keep the house rules of their layout (tests/layout.py measures
+them): modules of one concept (<= 700 lines), functions in named phases (<= 100 lines), short
+module docstrings without run logs, imports at the top except heavy optional ones, and no import
+cycle."""
 
 import pytest
 
@@ -26,3 +27,13 @@ def test_the_checker_sees_a_cycle_and_a_long_function():
     import ast
     fn = ast.parse(src).body[0]
     assert fn.end_lineno - fn.lineno + 1 > layout.MAX_FUNCTION_LINES
+
+
+def test_the_checker_covers_the_studies_and_knows_heavy_modules():
+    # the default report reads studies/ too, and one study file is found in it
+    assert "studies" in layout.CHECKED
+    assert layout.ROOT / "studies" / "bench_field.py" in layout.modules(layout.CHECKED)
+    # a module importing a heavy optional dependency at its top is heavy, and so is one that
+    # imports it; a light one is not
+    eager = {"a": {"pyvista", "numpy"}, "b": {"a", "numpy"}, "c": {"numpy"}}
+    assert layout.heavy(eager) == {"a", "b"}
