@@ -3,6 +3,8 @@ them): modules of one concept (<= 700 lines), functions in named phases (<= 100 
 module docstrings without run logs, imports at the top except heavy optional ones, and no import
 cycle."""
 
+import re
+
 import pytest
 
 import layout
@@ -37,3 +39,22 @@ def test_the_checker_covers_the_studies_and_knows_heavy_modules():
     # imports it; a light one is not
     eager = {"a": {"pyvista", "numpy"}, "b": {"a", "numpy"}, "c": {"numpy"}}
     assert layout.heavy(eager) == {"a", "b"}
+
+
+def test_the_readme_module_table_names_every_module_of_a_package_it_lists():
+    # a row of README.md's module table for one package that names its modules (`name`)
+    # names all of them (private ones aside): a new module is not left out of the map
+    rows = 0
+    for line in (layout.ROOT / "README.md").read_text().splitlines():
+        m = re.match(r"\| `([a-z_/]+)/` \| (.*) \|$", line)
+        if not m:
+            continue
+        named = set(re.findall(r"`([a-z_0-9]+)/?`", m.group(2)))
+        if not named:
+            continue
+        pkg = layout.ROOT / m.group(1)
+        have = {p.stem for p in pkg.glob("*.py") if not p.stem.startswith("_")}
+        have |= {p.name for p in pkg.iterdir() if (p / "__init__.py").is_file()}
+        assert have <= named, f"README row {m.group(1)}/ leaves out {sorted(have - named)}"
+        rows += 1
+    assert rows >= 10
