@@ -1,10 +1,10 @@
 """The house rules for the library's layout, measured from the source (no import is executed).
 
 Run as a script for a report (``python tests/layout.py [PATH ...]``, default: designkit,
-firmware_io, cad and studies); ``tests/test_layout.py`` asserts the same rules. The limits are the house
-style's: one concept a file (<= 700 lines), named phases (<= 100 lines a
-function), short timeless module docstrings, top-level imports except heavy optional ones,
-imports that point one way.
+firmware_io, cad and studies); ``tests/test_layout.py`` asserts the same rules. The limits are
+the house style's: one concept a file (<= 700 lines), named phases (<= 100 lines a function),
+short timeless module docstrings, top-level imports except heavy optional ones, imports that
+point one way.
 """
 
 from __future__ import annotations
@@ -89,6 +89,8 @@ def _imports(path: Path, known: set[str]) -> tuple[set[str], list[str], set[str]
     tree = ast.parse(path.read_text())
     name, is_pkg = module_name(path), path.name == "__init__.py"
     inner = _inside_functions(tree)
+    typing_only = {id(s) for b in ast.walk(tree) if isinstance(b, ast.If)
+                   and "TYPE_CHECKING" in ast.unparse(b.test) for s in ast.walk(b)}
     top, lazy, eager = set(), [], set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
@@ -101,7 +103,7 @@ def _imports(path: Path, known: set[str]) -> tuple[set[str], list[str], set[str]
             continue
         if id(node) in inner:
             lazy += targets
-        else:
+        elif id(node) not in typing_only:
             eager |= {t.split(".")[0] for t in targets} | {t for t in targets if t in known}
         # a lazy or type-checking import hides a cycle, it does not break it
         top |= {t for t in targets if t in known and t != name}
