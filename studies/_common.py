@@ -5,14 +5,15 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from designkit import default_design, fieldmap
+from designkit._io import write_json_atomic
+from designkit.array import CoilArray
+
 
 def design_and_map(out_dir, map_path=None, *, progress: bool = True):
     """Create ``out_dir``; the default design, its CoilArray (one coupled solve) and a map file
     (``map_path``, or one built into ``out_dir/map.npz``). Returns (out_dir, design, array,
     map_path)."""
-    from designkit import default_design, fieldmap
-    from designkit.array import CoilArray
-
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     design = default_design()
@@ -35,8 +36,6 @@ def load_average() -> float | None:
 def finish(path, result: dict, printer) -> dict:
     """Write ``result`` as JSON to ``path`` (atomically), print it with ``printer`` and return
     it: the last three lines of every study."""
-    from designkit._io import write_json_atomic
-
     write_json_atomic(path, result)
     printer(result)
     return result

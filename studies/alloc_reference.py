@@ -6,6 +6,9 @@ Nothing here imports firmware_io.allocation: the checker only reads (F, f, u, I_
 from __future__ import annotations
 
 import numpy as np
+from scipy.optimize import minimize
+
+from designkit._blas import one_blas_thread
 
 
 def kkt_violation(fm, f, u, tl, x, unipolar=False, *, zero_tol=None):
@@ -59,8 +62,6 @@ def kkt_violation(fm, f, u, tl, x, unipolar=False, *, zero_tol=None):
 def slsqp_reference(fm, f, u, tl, unipolar=False, *, starts=2, ftol=1e-16, maxiter=1000):
     """min ||F x - f||^2 with SLSQP on the split x = P - N (scaled to O(1)); the objective.
     ``ftol`` is SLSQP's (absolute) precision goal on the scaled objective, ``maxiter`` its cap."""
-    from designkit._blas import one_blas_thread
-
     fm = np.atleast_2d(np.asarray(fm, float))
     k, n = fm.shape
     u = np.broadcast_to(np.asarray(u, float), (n,))
@@ -88,8 +89,6 @@ def slsqp_reference(fm, f, u, tl, unipolar=False, *, starts=2, ftol=1e-16, maxit
 
 
 def _slsqp_runs(fun, d, b, us, ts, unipolar, bounds, cons, starts, ftol, maxiter):
-    from scipy.optimize import minimize
-
     best = None
     for z0 in (np.zeros(d.shape[1]), np.clip(np.linalg.lstsq(d, b, rcond=None)[0], 0, None))[:starts]:
         z0 = np.minimum(z0, np.concatenate([us] * (1 if unipolar else 2)))

@@ -29,6 +29,7 @@ import argparse
 import sys
 import time
 import warnings
+from multiprocessing import get_context
 from pathlib import Path
 
 if __package__ in (None, ""):
@@ -36,8 +37,14 @@ if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np
+from scipy.optimize import Bounds, LinearConstraint, minimize
 
+from alloc_reference import kkt_violation, slsqp_reference
 from bench_allocation import wrenches  # (n_pos, 6, 9) force and torque per ampere, the design's A(p)
+from designkit._blas import one_blas_thread
+from designkit._io import write_json_atomic
+from designkit._progress import tqdm
+from firmware_io.allocation import allocate
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "allocation_check"
 """Default output folder (git-ignored), whatever the working directory."""
@@ -76,8 +83,6 @@ def problem(w: np.ndarray, seed: int):
 
 def _second_references(fm, f, u, tl, uni, x_ours):
     """SLSQP from the clipped least-squares start and trust-constr: the lower objective."""
-    from alloc_reference import slsqp_reference
-
     vals = [slsqp_reference(fm, f, u, tl, uni, starts=2)]
     try:
         vals.append(_trust_constr_reference(fm, f, u, tl, uni, x_ours))
@@ -89,8 +94,6 @@ def _second_references(fm, f, u, tl, uni, x_ours):
 def _trust_constr_reference(fm, f, u, tl, uni, x_start):
     """min ||F x - f||^2 with scipy trust-constr on the split x = P - N (its own formulation and
     solver; the start is the allocator's answer pulled 1e-3 inside the box, only a start)."""
-    from scipy.optimize import Bounds, LinearConstraint, minimize
-
     n = fm.shape[1]
     umax = u.max()
     fsc = max(np.abs(fm).max() * umax, np.abs(f).max(), 1e-300)
@@ -124,10 +127,6 @@ def _trust_constr(minimize, Bounds, LinearConstraint, d, b, z0, hess, ub, ts):
 
 def check_one(w, seed):
     """Allocator vs reference on one problem: a dict of the numbers the table sums."""
-    from alloc_reference import kkt_violation, slsqp_reference
-
-    from firmware_io.allocation import allocate
-
     fm, f, u, tl, uni, rows, kind = problem(w, seed)
     x, res = allocate(fm, f, u, tl, unipolar=uni)
     kv, infeas = kkt_violation(fm, f, u, tl, x, uni)
@@ -160,8 +159,6 @@ def _init(w):
 
 
 def _chunk(seeds):
-    from designkit._blas import one_blas_thread
-
     # one BLAS thread: SLSQP's tiny products on a multithreaded BLAS of a busy machine spend
     # far more time synchronizing than computing (measured 15x)
     with one_blas_thread():
@@ -170,11 +167,6 @@ def _chunk(seeds):
 
 def run(out_dir=DEFAULT_OUT, *, n: int = 100_000, workers: int = 2, n_pos: int = 500,
         seed: int = 2026, quick: bool = False, progress: bool = True) -> dict:
-    from designkit._progress import tqdm
-
-    from designkit._io import write_json_atomic
-    from designkit._blas import one_blas_thread
-
     if quick:
         n, n_pos = min(n, 200), 12
     out_dir = Path(out_dir)
@@ -187,8 +179,6 @@ def run(out_dir=DEFAULT_OUT, *, n: int = 100_000, workers: int = 2, n_pos: int =
     rows = []
     bar = tqdm(total=n, desc="problems", disable=not progress, mininterval=5)
     if workers > 1 and len(chunks) > 1:
-        from multiprocessing import get_context
-
         with get_context("spawn").Pool(workers, initializer=_init, initargs=(w,)) as pool:
             for part in pool.imap_unordered(_chunk, chunks):
                 rows.extend(part)

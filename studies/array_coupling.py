@@ -20,11 +20,22 @@ Usage: ``PYTHONPATH=$PWD python studies/array_coupling.py [out_dir] [--quick] [-
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from designkit import default_design
+from designkit._io import write_json_atomic
+from designkit._progress import tqdm
+from designkit.array import CoilArray, gradient_from_g5
+from designkit.coil import Coil
+from designkit.cores import ArraySystem, M_MAX, saturation_table
+from designkit.fem import fem3d
+from designkit.fem.runner import solve
+from designkit.field import dipole_field
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "array_coupling"
 """Default output folder (git-ignored), whatever the working directory."""
@@ -47,8 +58,6 @@ def _table_points(quick):
 def coupling_table(arr, pts, fem=None, coil=4):
     """Rows per point for ``coil``'s column: |B| and dBz/dz uncoupled, coupled, FEM (with the
     FEM: |dB| / |B|, ||dG||_F / ||G||_F and the relative dBz/dz difference, FEM reference)."""
-    from designkit.array import gradient_from_g5
-
     a = arr.actuation_matrix(pts)
     au = arr.uncoupled_actuation_matrix(pts)
     rows = []
@@ -160,8 +169,6 @@ def sensor_subtraction(arr, moment, magnet_points):
     Returns per magnet point: the magnet's own field difference (the signal), the induced
     field difference (the error), at the sensor with the largest error.
     """
-    from designkit.field import dipole_field
-
     s = arr.sensor_positions_m().reshape(-1, 3)
     n = arr.n_coils
     rows = []
@@ -184,18 +191,13 @@ def sensor_subtraction(arr, moment, magnet_points):
 def saturation(design, fem_run=False, currents=(1.0, 2.0, 3.0, 4.0, 5.0, 6.0), level=1):
     """designkit's per-coil factor vs the nonlinear axisymmetric GetDP FEM (ratio of dBz/dz at
     the design point, nonlinear at I over I x linear mu_r at 1 A)."""
-    from designkit.coil import Coil
-    from designkit.cores import saturation_table
-
     coil = Coil.from_design(design)
     tab = saturation_table(coil, design.optimize.height_m, np.r_[0.0, currents])
     out = {"current_a": tab["current_a"].tolist(), "factor_designkit": tab["factor"].tolist()}
     if not fem_run:
         out["fem"] = FEM_NOT_RUN
         return out
-    import dataclasses
 
-    from designkit.fem.runner import solve
 
     z = coil.length / 2 + design.optimize.height_m
     lin = solve(dataclasses.replace(coil, core=dataclasses.replace(coil.core, bh="linear")),
@@ -268,8 +270,6 @@ def _costs(arr, moment, quick: bool):
 def _convergence(arr, system, quick: bool) -> dict:
     """dBz/dz at the design point and Bz above a neighbour (centre coil at 1 A) for a few
     (m_max, refine) of the core model: how converged the modes and panels are."""
-    from designkit.cores import M_MAX, ArraySystem
-
     p = np.array([[0.0, 0.0, 0.03], [0.05, 0.0, 0.03]])
     conv = {}
     variants = [(M_MAX, 1)] if quick else [(1, 1), (2, 1), (M_MAX, 1), (M_MAX + 1, 1),
@@ -292,12 +292,6 @@ def run(out_dir=DEFAULT_OUT, quick: bool = False, fem: bool = False,
         saturation_fem: bool = False, design=None) -> dict:
     """The study (module docs); ``design`` defaults to the default 3x3 design (the FEM table
     models the default array, so ``fem`` needs it)."""
-    from designkit._progress import tqdm
-
-    from designkit import default_design
-    from designkit._io import write_json_atomic
-    from designkit.array import CoilArray
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     design = default_design() if design is None else design
@@ -315,8 +309,6 @@ def run(out_dir=DEFAULT_OUT, quick: bool = False, fem: bool = False,
     tp = _table_points(quick)
     fem_res = None
     if fem:
-        from designkit.fem import fem3d
-
         t0 = time.perf_counter()
         bf, gf, _ = fem3d.array_case(tp, energized="centre", level=-2 if quick else 0)
         fem_res = (bf, gf)

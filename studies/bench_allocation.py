@@ -10,7 +10,7 @@ to 5x the reachable scale (inside and outside the reachable set), random per-coi
   against scipy.optimize.lsq_linear on the box-only version of the same problems, same process.
   Each problem is timed 3 times: the first pass is the one-run figure; the per-problem minimum
   of the 3 is also given, because on a shared machine a solve preempted by another process
-  shows up as a 4-10 ms outlier that is not the allocator's.
+  shows up as an outlier of several milliseconds that is not the allocator's.
 * Speed, warm (the control loop): a smooth 1 kHz path of the magnet (about 0.1 m/s) with smooth
   targets, solved cold by ``allocate`` and warm by ``Allocator`` (the last final face as the
   start); the answers must agree (max difference reported).
@@ -33,10 +33,12 @@ if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np
+from scipy.optimize import lsq_linear
 
 from alloc_reference import kkt_violation, slsqp_reference
 from designkit import default_design
 from designkit._io import write_json_atomic
+from designkit._progress import tqdm
 from designkit.array import CoilArray, force_matrix, skew_matrix
 from designkit._blas import one_blas_thread  # the control loop's setting; fair to lsq_linear
 from firmware_io.allocation import Allocator, allocate
@@ -152,8 +154,6 @@ def warm_vs_cold(paths, repeats: int = 3) -> dict:
 
 
 def _times_lsq(probs):
-    from scipy.optimize import lsq_linear
-
     t = np.empty(len(probs))
     for i, (fm, f, u, tl, uni) in enumerate(probs):
         ub = np.broadcast_to(np.asarray(u, float), (fm.shape[1],)) + 1e-12
@@ -167,8 +167,6 @@ def _times_lsq(probs):
 def verify(probs, progress: bool = True, checkpoint=None) -> dict:
     """KKT + bounds + SLSQP objective on every problem. SLSQP starts from 0; only when it is
     worse than ours does it get a second, independent start (the clipped least squares)."""
-    from designkit._progress import tqdm
-
     worst_kkt, worst_viol, n_mis, n_lower, worst_rel = 0.0, 0.0, 0, 0, 0.0
     for i, (fm, f, u, tl, uni) in enumerate(tqdm(probs, desc="verify", disable=not progress,
                                                  mininterval=5)):
@@ -197,8 +195,6 @@ def verify(probs, progress: bool = True, checkpoint=None) -> dict:
 def certify(probs, progress: bool = True) -> dict:
     """KKT certificate (sufficient for global optimality of this convex QP) and bounds only:
     cheap enough for 1e5 problems."""
-    from designkit._progress import tqdm
-
     worst_kkt, worst_viol = 0.0, 0.0
     for fm, f, u, tl, uni in tqdm(probs, desc="certify", disable=not progress, mininterval=5):
         x, res = allocate(fm, f, u, tl, unipolar=uni)

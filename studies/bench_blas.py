@@ -1,9 +1,9 @@
 """Bench: does one BLAS thread speed up designkit's hot paths (designkit._blas)?
 
 The coupled core solve and the device optimizer are built of many small dense products;
-OpenBLAS wakes its threads for each, and on a busy machine they wait for a core longer than
+a threaded BLAS wakes its threads for each, and on a busy machine they wait for a core longer than
 they compute. Each case runs with the limit (designkit as shipped) and without it (the limit
-replaced by a no-op, OpenBLAS' default threads), alternating, ``repeats`` times; every run in
+replaced by a no-op, the BLAS library's default threads), alternating, ``repeats`` times; every run in
 a fresh process, because the core models are cached in-process and a second run in one process
 would be faster for that reason alone. Prints the median seconds and the ratio default / one
 thread with the load average (the machine is shared: say so with the numbers).
@@ -18,6 +18,8 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
@@ -61,8 +63,6 @@ def _seconds(mode: str, case: str, quick: bool) -> float:
 
 
 def run(out_dir, quick: bool = False, repeats: int = 3) -> dict:
-    import numpy as np
-
     cases = CASES[:1] if quick else CASES
     repeats = 1 if quick else repeats
     load = os.getloadavg()[0]

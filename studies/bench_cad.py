@@ -25,14 +25,15 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from cad.export import export_all  # noqa: E402
+from cad.params import from_design  # noqa: E402
+from designkit._io import write_json_atomic  # noqa: E402
+from designkit.design import default_design  # noqa: E402
+
 
 def run(out_dir, quick: bool = False) -> dict:
-    from designkit.design import default_design
-    from designkit._io import write_json_atomic
-
+    # late: the first build below times the one-off build123d import
     from cad.assembly import build_parts
-    from cad.export import export_all
-    from cad.params import from_design
 
     out = Path(out_dir)
     params = from_design(default_design())

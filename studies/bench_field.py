@@ -4,29 +4,20 @@ cost, at what accuracy -- and is designkit's quadrature faster than magpylib's c
 Winding: Ri = 12 mm, Ro = 19 mm, L = 100 mm, 1429 turns, 1 A (the thesis coil). Points: the
 haptic workspace above the coil (rho <= 40 mm, 3..80 mm above the top face), local frame.
 Error = max over points of |B - B_ref| / |B_ref| (and |G - G_ref| / |G_ref| for gradients), B_ref
-the uniform-current-density model from designkit at rtol = 1e-13 (itself checked against mpmath
-in tests/test_field_winding.py and, here, on a few points).
+the uniform-current-density model from designkit at rtol = 1e-13 (checked against mpmath).
 
-Methods timed in the same process:
-* designkit winding_field, B only and B + gradient, for rtol = 1e-4 .. 1e-12;
-* designkit discrete-turn model: 1429 filament loops (10 layers x 143 turns, one missing), a
-  different physical model (~1.7e-4 from the uniform density even far away);
-* the on-axis closed form (float64) at on-axis points (a closed form exists only there);
-* magpylib 1429 Circle loops (same discrete model) and magpylib's nested-shell construction
-  (K CylinderSegment shells with M_z = J (Ro - r_mid) plus a bore Cylinder, whose curl is the
-  uniform J at trapezoid-rule accuracy) for several K, B only (magpylib has no gradients).
+Methods timed in the same process: designkit winding_field (B, and B + gradient) for rtol
+1e-4 .. 1e-12; designkit's 1429 filament loops (a different physical model, ~1.7e-4 from the
+uniform density); the on-axis closed form at on-axis points; magpylib's 1429 Circle loops and
+its nested-shell construction (K CylinderSegment shells with M_z = J (Ro - r_mid) plus a bore
+Cylinder) for several K, B only. Second part: randomized windings (Ri/Ro 1e-4..0.99, L/Ro
+1e-3..1e3) and points in every region: designkit B+G time per point and error against the
+30-digit mpmath table tests/data/winding_refs.json, per region and rtol.
 
-Targets (issue 2): at equal error 1e-6 designkit B + G >= 30x faster per point than magpylib's
-cheapest construction that reaches 1e-6 (B only); designkit B + G at rtol = 1e-10 faster than
-magpylib's 16-shell B only; gradient cost <= 3x B alone. Issue 11: these ratios still hold
-(earlier run: 5660x vs 512 shells at 1e-6 with B+G rtol 1e-5, 169x vs 16 shells at 1e-10,
-gradient <= 1.82x B).
+Outputs (OUT_DIR): bench_field.txt (the tables and speed-up ratios), bench_field.json,
+bench_field.png (time per point against error). Targets and measured ratios: docs/field_winding.md.
 
-Second part (issue 11): randomized windings (Ri/Ro 1e-4..0.99, L/Ro 1e-3..1e3, the domain's
-corners included) and points in every region (axis, bore, body, faces, corners, ulp-near,
-near, far): designkit B+G run time per point and achieved error (vs 30-digit mpmath, the table
-of tests/data/winding_refs.json) per region and rtol, magpylib's nested shells (B only) on the
-same points side by side, and the slowest regions named.
+    python studies/bench_field.py [OUT_DIR]   (default out/bench_field)
 """
 
 from __future__ import annotations
@@ -42,7 +33,9 @@ import numpy as np
 
 from designkit._io import write_json_atomic, write_text_atomic
 from designkit.design import MU0
-from designkit.field import loop_field, winding_field
+from designkit.field import cylindrical_to_cartesian, loop_field, reference as ref, winding_field
+from designkit.field.winding import winding_rz
+from studies import winding_accuracy as wa
 
 RI, RO, L, N, I = 0.012, 0.019, 0.100, 1429, 1.0
 J = N * I / ((RO - RI) * L)
@@ -124,9 +117,6 @@ def magpylib_shells(pts, k, ri=RI, ro=RO, length=L, j=J):
 def _kernel_reference(pts):
     """B, G of the raw kernel at rtol = 1e-13 (below the public 1e-12 floor: a reference for
     the thesis workspace only, checked against mpmath on a few points in the full run)."""
-    from designkit.field import cylindrical_to_cartesian
-    from designkit.field.winding import winding_rz
-
     rho = np.hypot(pts[:, 0], pts[:, 1])
     c = np.where(rho > 0, pts[:, 0] / np.where(rho > 0, rho, 1), 1.0)
     s = np.where(rho > 0, pts[:, 1] / np.where(rho > 0, rho, 1), 0.0)
@@ -151,11 +141,6 @@ def random_geometries(quick=False, have_magpylib=True, magpylib_random=False):
     other windings from the same sampler with ``per`` points per (winding, region), one call
     each (so per-call overhead is amortized). magpylib: nested CylinderSegment shells (B only)
     on the same points."""
-    import time as _t
-
-    from designkit.field import reference as ref
-    from studies import winding_accuracy as wa
-
     data = Path(__file__).resolve().parents[1] / "tests" / "data"
     cases, refs = wa.load_or_compute(data, wa.TABLE_SEED, wa.TABLE_GEOMETRIES)
     per = 10 if quick else 100
@@ -167,9 +152,9 @@ def random_geometries(quick=False, have_magpylib=True, magpylib_random=False):
     for rtol in REGION_RTOLS:
         for (region, ri, ro, length), pts in groups.items():
             pts = np.array(pts)
-            t = _t.perf_counter()
+            t = time.perf_counter()
             winding_field(pts, ri, ro, length, 1.0, 1.0, gradient=True, rtol=rtol)
-            dt = _t.perf_counter() - t
+            dt = time.perf_counter() - t
             o = out.setdefault((region, rtol), dict(time=0.0, n=0, err_b=0.0, err_g=0.0))
             o["time"] += dt
             o["n"] += len(pts)
@@ -194,10 +179,10 @@ def random_geometries(quick=False, have_magpylib=True, magpylib_random=False):
                     if reg != region:
                         continue
                     pts = np.array(pts)[:10]
-                    t = _t.perf_counter()
+                    t = time.perf_counter()
                     with np.errstate(all="ignore"):
                         magpylib_shells(pts, k, ri, ro, length, 1.0 / ((ro - ri) * length))
-                    tot += _t.perf_counter() - t
+                    tot += time.perf_counter() - t
                     n += len(pts)
                 for case, (b_ref, _g) in zip(cases, refs):
                     if case["region"] != region:
@@ -237,37 +222,35 @@ def random_geometries(quick=False, have_magpylib=True, magpylib_random=False):
     return rows, mrows, lines
 
 
-def run(out_dir, quick=False):
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    n_dk = 400 if quick else 4000
-    n_mp = 40 if quick else 300
-    repeat = 1 if quick else 3
-    rtols = [1e-4, 1e-6, 1e-10] if quick else [1e-4, 1e-5, 1e-6, 1e-8, 1e-10, 1e-12]
-    shells = [4, 16, 64] if quick else [4, 16, 64, 128, 256, 512]
+def _reference_check(pts, b_ref, g_ref):
+    """Largest relative error of the rtol = 1e-13 reference against mpmath on 4 points."""
+    worst = 0.0
+    for p in pts[:4]:
+        r = ref.winding_textbook(RI, RO, L, float(np.hypot(p[0], p[1])), p[2], gradient=True)
+        b, g = ref.rz_to_cartesian(p, r[0], r[1], r[2:])
+        i = int(np.nonzero((pts == p).all(axis=1))[0][0])
+        worst = max(worst, np.linalg.norm(b_ref[i] - MU0 * J * b) / np.linalg.norm(b_ref[i]),
+                    np.linalg.norm(g_ref[i] - MU0 * J * g) / np.linalg.norm(g_ref[i]))
+    return worst
 
-    pts = workspace_points(n_dk)
+
+def _have_magpylib():
+    try:
+        import magpylib  # noqa: F401
+        return True
+    except ImportError:  # pragma: no cover
+        return False
+
+
+def _time_methods(pts, n_mp, b_ref, g_ref, rtols, shells, repeat, have_magpylib):
+    """One row per method (and rtol): run time per point and error against the reference."""
+    n_dk = len(pts)
     pts_mp = pts[:n_mp]
-    b_ref, g_ref = _kernel_reference(pts)
     rows = []
 
     def add(method, rtol, t, npts, err_b, err_g=None):
         rows.append(dict(method=method, rtol=rtol, us_per_point=1e6 * t / npts, err_b=err_b,
                          err_g=err_g))
-
-    if not quick:  # the reference itself against mpmath on a few points
-        from designkit.field import reference as ref
-
-        worst = 0.0
-        for p in pts[:4]:
-            r = ref.winding_textbook(RI, RO, L, float(np.hypot(p[0], p[1])), p[2], gradient=True)
-            b, g = ref.rz_to_cartesian(p, r[0], r[1], r[2:])
-            i = int(np.nonzero((pts == p).all(axis=1))[0][0])
-            worst = max(worst, np.linalg.norm(b_ref[i] - MU0 * J * b) / np.linalg.norm(b_ref[i]),
-                        np.linalg.norm(g_ref[i] - MU0 * J * g) / np.linalg.norm(g_ref[i]))
-        ref_check = worst
-    else:
-        ref_check = None
 
     for rtol in rtols:
         t, b = _time(lambda: winding_field(pts, RI, RO, L, N, I, rtol=rtol), repeat)
@@ -282,19 +265,17 @@ def run(out_dir, quick=False):
     bz_dk = _kernel_reference(np.stack([0 * z_ax, 0 * z_ax, z_ax], 1))[0]
     add("axis closed form (float64, on-axis points)", None, t, n_dk,
         float(np.max(np.abs(bz / bz_dk[:, 2] - 1))))
-
-    try:
-        import magpylib  # noqa: F401
-        have_magpylib = True
-    except ImportError:  # pragma: no cover
-        have_magpylib = False
     if have_magpylib:
         t, b = _time(lambda: magpylib_circles(pts_mp), 1)
         add("magpylib 1429 Circle (discrete)", None, t, n_mp, _err(b, b_ref[:n_mp]))
         for k in shells:
             t, b = _time(lambda: magpylib_shells(pts_mp, k), 1)
             add(f"magpylib {k} shells", None, t, n_mp, _err(b, b_ref[:n_mp]))
+    return rows
 
+
+def _ratios(rows, rtols, have_magpylib):
+    """Gradient cost and designkit's speed-ups over magpylib at equal error."""
     def row(method, rtol=None):
         for r in rows:
             if r["method"] == method and (rtol is None or r["rtol"] == rtol):
@@ -327,7 +308,10 @@ def run(out_dir, quick=False):
         ratios["magpylib16_error"] = r16["err_b"]
         ratios["speedup_vs_16_shells_at_rtol_1e-10"] = (
             r16["us_per_point"] / row("designkit B+G", 1e-10)["us_per_point"])
+    return ratios
 
+
+def _table_lines(rows, ratios, ref_check):
     lines = [f"{'method':45s} {'rtol':>8s} {'us/point':>10s} {'err B':>10s} {'err G':>10s}"]
     for r in rows:
         lines.append(f"{r['method']:45s} {'' if r['rtol'] is None else format(r['rtol'], '.0e'):>8s}"
@@ -338,11 +322,11 @@ def run(out_dir, quick=False):
         lines.append(f"{k}: {val:.3g}" if isinstance(val, float) else f"{k}: {val}")
     if ref_check is not None:
         lines.append(f"reference (rtol=1e-13) vs mpmath on 4 points: {ref_check:.2e}")
-    rand_rows, mag_rows, rand_lines = random_geometries(quick, have_magpylib)
-    lines += ["", *rand_lines]
-    table = "\n".join(lines)
-    write_text_atomic(out_dir / "bench_field.txt", table + "\n")
+    return lines
 
+
+def _plot(rows, out_dir):
+    """Time per point against error, written to out_dir/bench_field.png; returns its path."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -374,6 +358,31 @@ def run(out_dir, quick=False):
     fig.savefig(tmp, dpi=110)
     plt.close(fig)
     tmp.replace(png)
+    return png
+
+
+def run(out_dir, quick=False):
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    n_dk = 400 if quick else 4000
+    n_mp = 40 if quick else 300
+    repeat = 1 if quick else 3
+    rtols = [1e-4, 1e-6, 1e-10] if quick else [1e-4, 1e-5, 1e-6, 1e-8, 1e-10, 1e-12]
+    shells = [4, 16, 64] if quick else [4, 16, 64, 128, 256, 512]
+
+    pts = workspace_points(n_dk)
+    b_ref, g_ref = _kernel_reference(pts)
+    # the reference itself against mpmath on a few points
+    ref_check = None if quick else _reference_check(pts, b_ref, g_ref)
+    have_magpylib = _have_magpylib()
+    rows = _time_methods(pts, n_mp, b_ref, g_ref, rtols, shells, repeat, have_magpylib)
+    ratios = _ratios(rows, rtols, have_magpylib)
+    lines = _table_lines(rows, ratios, ref_check)
+    rand_rows, mag_rows, rand_lines = random_geometries(quick, have_magpylib)
+    lines += ["", *rand_lines]
+    table = "\n".join(lines)
+    write_text_atomic(out_dir / "bench_field.txt", table + "\n")
+    png = _plot(rows, out_dir)
     result = dict(rows=rows, ratios=ratios, reference_vs_mpmath=ref_check, table=table,
                   png=str(png), random_rows=rand_rows, random_magpylib_rows=mag_rows)
     write_json_atomic(out_dir / "bench_field.json", {k: v for k, v in result.items()})

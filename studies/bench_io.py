@@ -8,9 +8,9 @@ need) and writes one coil command to the two PCA9685 boards. This study
    (9 clocks per byte including the address byte, + START/STOP, + 1 per repeated START);
 2. measures the Python cost per loop of the firmware_io drivers on this host, subtracting the
    time spent inside the simulated device models (reference run in the same process);
-3. adds a per-ioctl kernel overhead, which cannot be measured without hardware: 0.05 ms
-   (optimistic) and 0.3 ms (pessimistic) per transaction, bracketing the ~0.15 ms inferred from
-   published Raspberry Pi I2C measurements (not repeatable here);
+3. adds a per-ioctl kernel overhead, which cannot be measured without hardware: the
+   optimistic and pessimistic values of ``IOCTL_OVERHEAD_S`` per transaction, bracketing the
+   overhead inferred from published Raspberry Pi I2C measurements (not repeatable here);
 
 and reports the achievable loop rate = 1 / (wire + ioctls x overhead + Python). The TCA9548A is
 specified up to 400 kHz only, so the 1 MHz row is out of spec for the sensor segment; the 'split'
@@ -31,11 +31,14 @@ if __package__ in (None, ""):
 
 import numpy as np
 
+from designkit._io import write_json_atomic, write_text_atomic
 from firmware_io import CoilDrive, CoilDriver, SensorArrays
 from firmware_io.hw.pca9685 import PCA9685
 from firmware_io.hw.sim import SimBus, SimClock, SimPCA9685, SimTCA9548A, SimTLV493D
 
 SCL_HZ = (100e3, 400e3, 1e6)
+# per-ioctl kernel overhead, s: brackets the ~0.15 ms inferred from published Raspberry Pi I2C
+# measurements
 IOCTL_OVERHEAD_S = {"optimistic": 0.05e-3, "pessimistic": 0.3e-3}
 TCA9548A_MAX_SCL_HZ = 400e3
 
@@ -65,8 +68,6 @@ def _classify(tr) -> str:
 
 def run(out_dir, quick: bool = False) -> dict:
     """Run the study; write ``bench_io.json`` and ``bench_io.txt`` under ``out_dir``."""
-    from designkit._io import write_json_atomic, write_text_atomic
-
     out_dir = Path(out_dir)
     clock = SimClock()
     bus, sim_boards, coils, arrays = build_system(clock)

@@ -37,6 +37,12 @@ if __package__ in (None, ""):
 
 import numpy as np
 
+from designkit.render.scenefile import make_object
+from designkit.sim import drive_data, run_simulation, slide_trajectory
+from firmware_io.allocation import allocate
+from firmware_io.mapfile import MapFile
+from firmware_io.runner import CoilSkipBound, force_law_rows
+from firmware_io.scene import Scene
 from studies._common import design_and_map, finish, load_average
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "bench_runner"
@@ -105,13 +111,6 @@ def _loop(summary: dict) -> dict:
 
 def run(out_dir=DEFAULT_OUT, *, map_path=None, duration_s: float = 2.0,
         quick: bool = False) -> dict:
-    from designkit.sim import drive_data, run_simulation, slide_trajectory
-    from designkit.render.scenefile import make_object
-    from firmware_io.allocation import allocate
-    from firmware_io.mapfile import MapFile
-    from firmware_io.runner import CoilSkipBound, force_law_rows
-    from firmware_io.scene import Scene
-
     out_dir, design, array, map_path = design_and_map(out_dir, map_path, progress=not quick)
     duration_s = min(duration_s, 0.4) if quick else duration_s
     res: dict = {"load_average_1min": load_average(), "duration_s": duration_s,

@@ -1,24 +1,21 @@
-"""3-D GetDP reference for the coupled array (issue 12): how close is the 3-D FEM to known
-answers, and what does it say about coupled cores and the magnet's pull on the iron?
+"""3-D GetDP reference for the coupled array: how close is the 3-D FEM to known answers, and
+what does it say about coupled cores and the magnet's pull on the iron?
 
 Question: with the 3-D GetDP model of designkit.fem.fem3d (vector potential, Whitney +
 second-order face functions, tree gauge, shell to infinity, symmetry where it exists), how
-accurate are B and grad B (single coil with its core vs the axisymmetric model, which agrees
-with the axisymmetric GetDP to ~1 %), and the magnet force (vs the image method), at two
-mesh levels; and what are the reference values for (1) two cores at the 50 mm pitch with one
-coil energized, (2) the 3x3 array with the centre (and, unless quick, the corner) coil
-energized, (3) the magnet's pull on one core at 20, 30, 50 mm (magnet centre above the winding
-top)? The uncoupled single-coil model is set beside (1) and (2) to show the coupling effect,
-and designkit's coupled model (designkit.cores.coupled via CoilArray) is checked against (1)-(3):
-per point |dB|/|B| and ||dG||_F/||G||_F over the workspace points (12, 20, 30, 50, 80 mm, the
-rows above the default workspace's floor reported separately) and the pull at each height.
-B and grad B come from the cores' FEM magnetization plus the windings' exact field
-(designkit.fem.fem3d, ``outputs='iron'``): single coil within 0.4 % of the axisymmetric model
-at level -1. Default level 0 for the reference cases (~50k tetrahedra in the quarter / half
-models, ~1.5 min each on this machine), one level coarser for the corner case (full model, no
-symmetry); the centre case is solved at the level below too and the largest per-point change
-is reported (the FEM's own convergence: level 0 -> 1 changes B by <= 0.6 %, grad B by
-<= 1.3 % per point).
+accurate are B and grad B (single coil with its core vs the axisymmetric model) and the magnet
+force (vs the image method), at two mesh levels; and what are the reference values for (1) two
+cores at the 50 mm pitch with one coil energized, (2) the 3x3 array with the centre (and,
+unless quick, the corner) coil energized, (3) the magnet's pull on one core at 20, 30, 50 mm
+(magnet centre above the winding top)? The uncoupled single-coil model is set beside (1) and
+(2) to show the coupling effect, and designkit's coupled model (designkit.cores.coupled via
+CoilArray) is checked against (1)-(3): per point |dB|/|B| and ||dG||_F/||G||_F over the
+workspace points (12, 20, 30, 50, 80 mm, the rows above the default workspace's floor reported
+separately) and the pull at each height. B and grad B come from the cores' FEM magnetization
+plus the windings' exact field (``outputs='iron'``). Default level 0 for the reference cases,
+one level coarser for the corner case (full model, no symmetry); the centre case is also solved
+at the level below and its largest per-point change is reported (the FEM's own convergence).
+Measured accuracy and convergence: docs/fem.md, docs/coupling.md.
 
 Writes ``fem3d_array.npz`` (every case's points, B, G, forces) and ``fem3d_array.json``
 (summary) under the output folder (default out/fem3d_array/); returns the summary dict.
@@ -33,6 +30,15 @@ from pathlib import Path
 
 import numpy as np
 
+from designkit._io import write_json_atomic
+from designkit._progress import tqdm
+from designkit.array import CoilArray, gradient_from_g5
+from designkit.coil import Coil
+from designkit.cores.panel import Core
+from designkit.design import default_design
+from designkit.fem import fem3d
+from designkit.field import winding_field
+
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "fem3d_array"
 """Default output folder (git-ignored), whatever the working directory."""
@@ -45,11 +51,6 @@ def _rel(a, b, axis):
 def _uncoupled(points, centre_xy=(0.0, 0.0)):
     """designkit's single-coil model (winding + its own core, mu_r 1000, 1 A) at array-frame
     points for a coil centred at ``centre_xy``: the uncoupled reference."""
-    from designkit.coil import Coil
-    from designkit.cores.panel import Core
-    from designkit.fem import fem3d
-    from designkit.field import winding_field
-
     geo = fem3d.thesis_geometry()
     coil = Coil(geo["ri"], geo["ro"], geo["length"], geo["turns"],
                 Core(geo["core_radius"], geo["core_length"], 1000.0))
@@ -65,16 +66,12 @@ def _coupled(points, case):
     solved together, linear mu_r 1000, 1 A) at the case's points (its frame): B (n, 3) T,
     G (n, 3, 3) T/m. Cases: 'two' (fem3d puts coil 0 at the origin, the design's 1 x 2 array
     has it at x = -pitch / 2), 'centre', 'corner' (the 3 x 3 array, coil 4 resp. 0)."""
-    from designkit.array import CoilArray
-    from designkit.design import default_design
-
     d = default_design()
     if case == "two":
         arr = CoilArray.from_design(d.replace(**{"array.rows": 1, "array.columns": 2}))
         p, k = points - np.array([d.array.pitch_m / 2, 0.0, 0.0]), 0
     else:
         arr, p, k = CoilArray.from_design(d), points, 4 if case == "centre" else 0
-    from designkit.array import gradient_from_g5
 
     a = arr.actuation_matrix(p)
     return a[:, :3, k], gradient_from_g5(a[:, 3:, k])
@@ -84,8 +81,6 @@ def model_vs_fem(points, b, g, case) -> dict:
     """The coupled model against the FEM at the case's points: per point |dB| / |B| and
     ||dG||_F / ||G||_F (FEM as reference), max and median overall, max per height, and max
     over the points inside the default workspace (z >= its floor)."""
-    from designkit.design import default_design
-
     bm, gm = _coupled(points, case)
     eb, eg = _rel(bm, b, 1), _rel(gm, g, (1, 2))
     z_min = default_design().workspace.z_min_m
@@ -105,9 +100,6 @@ def model_pull(heights) -> np.ndarray:
     """designkit's pull of one core on the exact 10 x 10 mm magnet (coupling solve, face
     charges; designkit.array.CoilArray.bias_force with ``magnet_size_m``) at the heights of
     the magnet's centre above the winding's top (m): Fz (k,) N."""
-    from designkit.array import CoilArray
-    from designkit.design import default_design
-
     d = default_design()
     a1 = CoilArray.from_design(d.replace(**{"array.rows": 1, "array.columns": 1}))
     m = np.asarray(d.magnet.moment_vector_a_m2, float)
@@ -121,11 +113,6 @@ def run(out_dir=DEFAULT_OUT, quick: bool = False, level: int | None = None,
     all) and write the result files; returns the summary dict. ``timeout_s`` bounds each GetDP
     run of the 3 x 3 array cases (the full corner model at level 0 needs more than 1800 s on
     a loaded 2-core machine)."""
-    from designkit._progress import tqdm
-
-    from designkit._io import write_json_atomic
-    from designkit.fem import fem3d
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     lv = (-2 if quick else 0) if level is None else level

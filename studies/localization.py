@@ -1,55 +1,26 @@
 """Question: how well do the estimators of firmware_io.localization locate the finger magnet from
-the two simulated Hall arrays, against the thesis (0.80 / 1.26 / 0.91 / 0.86 mm MAE in its field
+the two simulated Hall arrays, against the thesis (designkit.sensor_sim.THESIS_MAE_MM, its field
 cases 1-4) and against the noise limit -- and how much does the cores' magnetization by the magnet
 spoil the thesis' subtraction?
 
-Simulation (designkit.sensor_sim): exact 10 x 10 mm cylinder magnet (moment from the design),
-coupled coil field at the currents (at the sensors' true, displaced positions), field of the
-cores magnetized by the magnet (coupled solve), TLV493D chain (0.1 mT rms noise, 0.098 mT LSB,
-flagged beyond +-130 mT), per-sensor errors drawn once (the device): offset 0.01 mT rms, gain
-1 % rms per axis, mounting 0.5 mm in a random direction and 1 degree about a random axis.
+Inputs: the default design; the v2 map (``--map``) or the same numbers from designkit; readings
+from designkit.sensor_sim (exact cylinder magnet, coupled coil and core fields, TLV493D chain,
+per-sensor errors drawn once), calibrated with firmware_io.localization.calibrate on coil-only
+frames. Positions: ``n`` uniform random in the thesis' 50 mm cube and ``n`` in the rendering
+workspace; field cases: the thesis' four and full rendering currents (``CASES``).
 
-Calibration (firmware_io.localization.calibrate, what the device runs at start-up with the
-magnet away): 1000 coil-only frames, each coil alone at +-3 A, then random patterns within
-+-1.5 A, read through the same sensor chain with an independent noise stream (seed + 1000);
-it recovers each sensor's offset, gains, mounting rotation and (upper array, inside the map's
-box) position error, and the coils' field as the sensors read it. The table reports what it
-recovered against the drawn truth.
+Methods (``METHODS``): 'learned' (thesis: subtraction + MLP), 'dipole-naive' (subtraction +
+multipole fit ignoring the cores), 'dipole' (exact magnet + the map's core term, calibrated),
+'model' / 'model-cal' (model-based cancellation, uncalibrated / calibrated) and 'noise-limit'
+(the exact forward model: only noise and quantization limit it). Every fit starts cold.
+Also: an error budget (one error source at a time), a Kalman-filtered trajectory, the static
+hold and the warm-started per-estimate cost (``--bench-only``).
 
-Positions: ``n`` uniform random in the thesis' 50 mm cube (|x|, |y| <= 25 mm, 20-70 mm above the
-coil tops) and ``n`` in the rendering workspace (|x|, |y| <= 75 mm, 20-80 mm: the magnet cannot
-go below the upper sensor board at 14 mm). Field cases: the thesis' four (off, static 0.65 A,
-sinusoidal 0.65 A, time-varying 1 A peak) and full rendering currents (6 A peak, time-varying);
-each frame takes the currents at a random time.
+Outputs (metres, tesla in JSON; mm in tables): ``localization.json``,
+``localization_table.txt``, ``localization.png`` and ``subtraction_error.png`` under
+``out_dir``. Measured results and their commands: docs/localization.md.
 
-Methods: 'learned' (thesis: subtraction + nearest-sensor MLP), 'dipole-naive' (subtraction +
-dipole/octupole fit ignoring the cores, uncalibrated), 'dipole' (subtraction + fit with the exact
-cylinder magnet and the map's core term, calibrated), 'model' (model-based cancellation, exact
-magnet + cores, uncalibrated), 'model-cal' (the same, calibrated), and 'noise-limit': the same
-readings fitted with the exact forward model (true sensor poses, gains and offsets; exact
-cylinder field; coupled induced field linearized about the truth), which only noise and
-quantization limit. Every fit starts cold (global search), as when lost.
-
-Error budget (noise-free readings, one error source at a time, 'model' and 'dipole' fits,
-positions in the lower half of the cube): what each source adds to the position error. Kalman: one smooth finger trajectory per case
-(100 Hz), error of 'model' alone and filtered. Benchmark: the per-estimate cost of the warm-started
-subtraction + dipole fit (median, p99) on this machine (shared, loaded: relative numbers).
-
-Findings (run of 2026-11-23, 1000 positions per case and region, map of the default design):
-the calibrated model-based fit ('model-cal') is within 1.01-1.16x of the noise-limited error in
-every case and region, full rendering currents included; in the lower half of the cube its MAE
-is 0.53-0.55 mm in the four thesis cases where the noise limit itself is 0.52 mm (0.1 mT
-datasheet noise: the 0.5 mm target is below what one frame allows; the Kalman filter over a
-100 Hz trajectory gets 0.57 mm over the whole cube). Error budget: mounting shift 0.5 mm ->
-0.50 mm of bias uncalibrated, 0.06 mm calibrated; multipole instead of the exact magnet 0.14 mm;
-the map's core term against the coupled truth 0.05 mm; ignoring the cores 3.6 mm.
-Benchmark (--bench-only, 2026-11-23, 2-core machine at load ~0.5-1): a warm-started locate takes
-a median 107-130 us (p99 290-470 us) over 'dipole-naive', 'dipole', 'model' and 'model-cal', 3.2-3.9
-multipole field + Jacobian evaluations' worth; the same harness on the previous fit code 172-214 us
-(5.7-7.1 evaluations' worth), with every estimate equal to 1e-8 um.
-
-Writes ``localization.json``, ``localization_table.txt``, ``localization.png`` (errors) and
-``subtraction_error.png`` under ``out_dir``.
+    python studies/localization.py [OUT] [--n N] [--quick] [--map MAP] [--bench-only]
 """
 
 from __future__ import annotations
@@ -64,13 +35,15 @@ if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np
+from scipy.optimize import least_squares
 
+from designkit._progress import tqdm
 from designkit.design import default_design
 from designkit.learned_inverse import train_learned_inverse
 from designkit.sensor_sim import (THESIS_MAE_MM, SensorErrors, SensorSimulator, analog_reading,
                                   case_currents, forward_model, random_positions)
 from firmware_io.localization import (ConstantVelocityKalman, LearnedInverse, Localizer,
-                                      SensorModel, calibrate, cylinder_field)
+                                      SensorModel, calibrate, cylinder_field, multipole_field)
 from firmware_io.mapfile import gradient_tensor
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "localization"
@@ -82,15 +55,11 @@ METHODS = ("learned", "dipole-naive", "dipole", "model", "model-cal", "noise-lim
 
 
 def _progress(it, desc):
-    from designkit._progress import tqdm
-
     return tqdm(it, desc=desc, mininterval=2.0, file=sys.stderr)
 
 
 def _noise_limited(sim, readings, k, p_true, currents, ind_true, ind_jac):
     """Fit with the exact forward model to frame k; returns the position (3,)."""
-    from scipy.optimize import least_squares
-
     e = sim.errors
     meas = np.stack([readings.top_t[k], readings.bottom_t[k]])
     use = np.all(np.isfinite(meas), axis=-1)
@@ -111,22 +80,11 @@ def _noise_limited(sim, readings, k, p_true, currents, ind_true, ind_jac):
     return least_squares(res, p_true, x_scale=1e-3, method="lm").x
 
 
-def run(out_dir=DEFAULT_OUT, n: int = 1000, seed: int = 0, *, map_path=None,
-        quick: bool = False, n_workspace: int | None = None, bench_only: bool = False,
-        static_only: bool = False) -> dict:
-    """Run the study; returns a dict of numbers (also written as JSON). ``bench_only``: only
-    the warm-start timing benchmark (printed and returned, nothing written); ``static_only``:
-    only the static-hold table (printed, written as ``static_hold.json``)."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    design = default_design()
-    rng = np.random.default_rng(seed)
-    t_all = time.perf_counter()
-    sim = SensorSimulator(design, errors="default", seed=seed,
-                          induced="rod" if quick else "coupled")
-    mg = design.magnet
+def _estimators(sim, out, map_path, quick, seed):
+    """The table's estimators, from the v2 map if given, else the same numbers from designkit;
+    returns (make, model, source, train_s, calibration report, {name: Localizer})."""
+    mg = sim.design.magnet
     size = (mg.radius_m, mg.length_m)
-    # the estimators' knowledge: the v2 map if given, else the same numbers from designkit
     if map_path is not None and Path(map_path).is_file():
         def make(method, **kw):
             return Localizer.from_map(map_path, method, **kw)
@@ -148,12 +106,109 @@ def run(out_dir=DEFAULT_OUT, n: int = 1000, seed: int = 0, *, map_path=None,
     t_train = time.perf_counter() - t0
     calibration, cal_report = _calibrate(sim, model, seed + 1000, 200 if quick else 1000)
     calibration.save(out / "calibration.npz")
-
     locs = {"learned": make("learned", magnet_size_m=size, learned=learned),
             "dipole-naive": make("dipole", cores=False),
             "dipole": make("dipole", magnet_size_m=size, calibration=calibration),
             "model": make("model", magnet_size_m=size),
             "model-cal": make("model", magnet_size_m=size, calibration=calibration)}
+    return make, model, source, t_train, cal_report, locs
+
+
+def _induced(sim, model, pos, region):
+    """The cores' field magnetized by the magnet at ``pos`` (the simulator's truth) and the
+    model's Jacobian of it (central differences, for the noise-limited reference)."""
+    n = len(pos)
+    ind = np.empty((n, 2, sim.n, 3))
+    for k in _progress(range(n), f"induced field ({region})"):
+        ind[k] = sim.induced_part(pos[k:k + 1])[0]
+    h = 0.5e-3
+    ind_jac = np.zeros((n, 2, sim.n, 3, 3))
+    if model.induced is not None:
+        for k in range(n):
+            for j in range(3):
+                dp = np.eye(3)[j] * h
+                ind_jac[k, ..., j] = (model.induced(pos[k] + dp)
+                                      - model.induced(pos[k] - dp)) / (2 * h)
+    return ind, ind_jac
+
+
+def _subtraction_error(make, size, locs, pos, mag, ind):
+    """The thesis subtraction's error from the cores' magnetization by the magnet, per position,
+    and what it does to the position on noise-free readings; returns (numbers, plot data)."""
+    n = len(pos)
+    sub = ind[:, 0] - np.einsum("sij,ksj->ksi", locs["dipole-naive"]._mirror, ind[:, 1])
+    res = {"max_over_sensors_median": float(np.median(np.abs(sub).max(axis=(1, 2)))),
+           "max_over_sensors_max": float(np.abs(sub).max())}
+    # noise-free readings (coils off, ideal chain)
+    clean = mag + ind
+    clean[np.any(np.abs(clean) > 0.130, axis=-1)] = np.nan  # saturated, as read
+    e_naive, e_cores = np.empty(n), np.empty(n)
+    uncal_dipole = make("dipole", magnet_size_m=size)
+    for k in range(n):
+        for loc, out_e in ((locs["dipole-naive"], e_naive), (uncal_dipole, e_cores)):
+            loc.reset()
+            est = loc.locate(clean[k, 0], clean[k, 1])
+            out_e[k] = np.linalg.norm(est.position_m - pos[k])
+    res["position_error_naive_mae_mm"] = float(e_naive.mean() * 1e3)
+    res["position_error_with_cores_mae_mm"] = float(e_cores.mean() * 1e3)
+    return res, (pos, np.linalg.norm(sub, axis=-1).max(axis=1), e_naive, e_cores)
+
+
+def _case_rows(sim, locs, region, case, cur, pos, mag, ind, ind_jac):
+    """Every method's errors on one (region, field case); returns (table rows, errors)."""
+    n = len(pos)
+    rd = sim.read(pos, cur, parts=(mag, ind))
+    errs = {m: np.empty(n) for m in METHODS}
+    oks = {m: np.empty(n, bool) for m in METHODS}
+    for k in _progress(range(n), f"{region} {case}"):
+        for name, loc in locs.items():
+            loc.reset()
+            e = loc.locate(rd.top_t[k], rd.bottom_t[k], cur[k])
+            errs[name][k] = np.linalg.norm(e.position_m - pos[k])
+            oks[name][k] = e.ok
+        p = _noise_limited(sim, rd, k, pos[k], cur[k], ind[k], ind_jac[k])
+        errs["noise-limit"][k] = np.linalg.norm(p - pos[k])
+        oks["noise-limit"][k] = True
+    low = pos[:, 2] <= 0.045
+    nl = errs["noise-limit"] * 1e3
+    rows = []
+    for m in METHODS:
+        e_mm = errs[m] * 1e3
+        rows.append({
+            "region": region, "case": case, "method": m,
+            "mae_mm": float(e_mm.mean()), "p95_mm": float(np.percentile(e_mm, 95)),
+            "median_mm": float(np.median(e_mm)),
+            "mae_lower_half_ok_mm": float(e_mm[low & oks[m]].mean())
+            if (low & oks[m]).any() else float("nan"),
+            "mae_lower_half_mm": float(e_mm[low].mean()),
+            "mae_upper_half_mm": float(e_mm[~low].mean()),
+            "ok_fraction": float(oks[m].mean()),
+            "mae_ok_mm": float(e_mm[oks[m]].mean()) if oks[m].any() else float("nan"),
+            "saturated_sensor_fraction": float(rd.saturated.mean()),
+            "noise_limit_mae_mm": float(nl.mean()),
+            "noise_limit_p95_mm": float(np.percentile(nl, 95)),
+            "noise_limit_mae_lower_half_mm": float(nl[low].mean()),
+            "noise_limit_mae_upper_half_mm": float(nl[~low].mean()),
+            "thesis_mae_mm": THESIS_MAE_MM.get(case)})
+    return rows, errs
+
+
+def run(out_dir=DEFAULT_OUT, n: int = 1000, seed: int = 0, *, map_path=None,
+        quick: bool = False, n_workspace: int | None = None, bench_only: bool = False,
+        static_only: bool = False) -> dict:
+    """Run the study; returns a dict of numbers (also written as JSON). ``bench_only``: only
+    the warm-start timing benchmark (printed and returned, nothing written); ``static_only``:
+    only the static-hold table (printed, written as ``static_hold.json``)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    design = default_design()
+    rng = np.random.default_rng(seed)
+    t_all = time.perf_counter()
+    sim = SensorSimulator(design, errors="default", seed=seed,
+                          induced="rod" if quick else "coupled")
+    mg = design.magnet
+    size = (mg.radius_m, mg.length_m)
+    make, model, source, t_train, cal_report, locs = _estimators(sim, out, map_path, quick, seed)
     if bench_only:
         bench = _benchmark(sim, model, locs, rng, quick)
         print("\n".join(_print_bench(bench)))
@@ -171,77 +226,16 @@ def run(out_dir=DEFAULT_OUT, n: int = 1000, seed: int = 0, *, map_path=None,
                      "calibration": cal_report, "budget": results_budget}
     errors_store = {}
     for region, box in regions.items():
-        n = counts[region]
-        pos = random_positions(n, rng, **box)
+        pos = random_positions(counts[region], rng, **box)
         mag = sim.magnet_part(pos)
-        ind = np.empty_like(mag)
-        for k in _progress(range(n), f"induced field ({region})"):
-            ind[k] = sim.induced_part(pos[k:k + 1])[0]
-        # Jacobian of the induced term (for the noise-limited reference), from the model
-        h = 0.5e-3
-        ind_jac = np.zeros((n, 2, sim.n, 3, 3))
-        if model.induced is not None:
-            for k in range(n):
-                for j in range(3):
-                    dp = np.eye(3)[j] * h
-                    ind_jac[k, ..., j] = (model.induced(pos[k] + dp)
-                                          - model.induced(pos[k] - dp)) / (2 * h)
+        ind, ind_jac = _induced(sim, model, pos, region)
         if region == "cube":
-            # subtraction error from the cores' magnetization by the magnet, per position
-            sub = ind[:, 0] - np.einsum("sij,ksj->ksi", locs["dipole-naive"]._mirror,
-                                        ind[:, 1])
-            results["subtraction_core_error_t"] = {
-                "max_over_sensors_median": float(np.median(np.abs(sub).max(axis=(1, 2)))),
-                "max_over_sensors_max": float(np.abs(sub).max())}
-            # what that error does to the position: noise-free readings (coils off, ideal chain)
-            clean = mag + ind
-            clean[np.any(np.abs(clean) > 0.130, axis=-1)] = np.nan  # saturated, as read
-            e_naive, e_cores = np.empty(n), np.empty(n)
-            uncal_dipole = make("dipole", magnet_size_m=size)
-            for k in range(n):
-                for loc, out_e in ((locs["dipole-naive"], e_naive), (uncal_dipole, e_cores)):
-                    loc.reset()
-                    est = loc.locate(clean[k, 0], clean[k, 1])
-                    out_e[k] = np.linalg.norm(est.position_m - pos[k])
-            results["subtraction_core_error_t"]["position_error_naive_mae_mm"] = float(
-                e_naive.mean() * 1e3)
-            results["subtraction_core_error_t"]["position_error_with_cores_mae_mm"] = float(
-                e_cores.mean() * 1e3)
-            errors_store["sub"] = (pos, np.linalg.norm(sub, axis=-1).max(axis=1), e_naive, e_cores)
+            results["subtraction_core_error_t"], errors_store["sub"] = _subtraction_error(
+                make, size, locs, pos, mag, ind)
         for case in CASES:
-            cur = case_currents(case, rng.uniform(0, 20, n), model.n_coils, seed=seed + 7)
-            rd = sim.read(pos, cur, parts=(mag, ind))
-            errs = {m: np.empty(n) for m in METHODS}
-            oks = {m: np.empty(n, bool) for m in METHODS}
-            for k in _progress(range(n), f"{region} {case}"):
-                for name, loc in locs.items():
-                    loc.reset()
-                    e = loc.locate(rd.top_t[k], rd.bottom_t[k], cur[k])
-                    errs[name][k] = np.linalg.norm(e.position_m - pos[k])
-                    oks[name][k] = e.ok
-                p = _noise_limited(sim, rd, k, pos[k], cur[k], ind[k], ind_jac[k])
-                errs["noise-limit"][k] = np.linalg.norm(p - pos[k])
-                oks["noise-limit"][k] = True
-            low = pos[:, 2] <= 0.045
-            nl = errs["noise-limit"] * 1e3
-            for m in METHODS:
-                e_mm = errs[m] * 1e3
-                results["rows"].append({
-                    "region": region, "case": case, "method": m,
-                    "mae_mm": float(e_mm.mean()), "p95_mm": float(np.percentile(e_mm, 95)),
-                    "median_mm": float(np.median(e_mm)),
-                    "mae_lower_half_ok_mm": float(e_mm[low & oks[m]].mean())
-                    if (low & oks[m]).any() else float("nan"),
-                    "mae_lower_half_mm": float(e_mm[low].mean()),
-                    "mae_upper_half_mm": float(e_mm[~low].mean()),
-                    "ok_fraction": float(oks[m].mean()),
-                    "mae_ok_mm": float(e_mm[oks[m]].mean()) if oks[m].any() else float("nan"),
-                    "saturated_sensor_fraction": float(rd.saturated.mean()),
-                    "noise_limit_mae_mm": float(nl.mean()),
-                    "noise_limit_p95_mm": float(np.percentile(nl, 95)),
-                    "noise_limit_mae_lower_half_mm": float(nl[low].mean()),
-                    "noise_limit_mae_upper_half_mm": float(nl[~low].mean()),
-                    "thesis_mae_mm": THESIS_MAE_MM.get(case)})
+            cur = case_currents(case, rng.uniform(0, 20, len(pos)), model.n_coils, seed=seed + 7)
+            rows, errs = _case_rows(sim, locs, region, case, cur, pos, mag, ind, ind_jac)
+            results["rows"] += rows
             errors_store[(region, case)] = (pos, errs)
     results["kalman"] = _kalman(sim, model, rng, quick, locs)
     results["static_hold"] = _static_hold(sim, locs, rng, 12 if quick else counts["cube"])
@@ -489,7 +483,6 @@ def _benchmark(sim, model, locs, rng, quick):
                      "cpu_median_us": float(np.median(cpu)),
                      "cpu_p99_us": float(np.percentile(cpu, 99))}
     # reference in the same process: one numpy 18 x 3 dipole field evaluation
-    from firmware_io.localization import multipole_field
 
     pts = model.sensor_positions_m.reshape(-1, 3)
     dt = []

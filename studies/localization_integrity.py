@@ -1,26 +1,25 @@
-"""Question: does the localizer's integrity hold -- how often is a fix flagged ok while its error
-exceeds its protection level (PL) or 5 mm, how available are ok fixes, how large are the PLs,
-and what do a cold and a warm fix cost?
+"""Question: does the localizer's integrity hold -- how often is a fix flagged ok while its
+error exceeds its protection level (PL) or 5 mm, how available are ok fixes, how large are the
+PLs, and what do a cold and a warm fix cost?
 
 Data the model did not produce: the magnet's field from magpylib's exact cylinder (10 x 10 mm,
 moment from the design) at the sensors' true, displaced poses; the coils' coupled field at the
 currents; the cores' field induced by the magnet (designkit.sensor_sim, each core solved at the
-true sensor poses); the TLV493D chain (--noise-mt rms noise, default 0.05 mT, 0.098 mT LSB, NaN beyond +-130 mT) with
-the device's sensor errors (offset, 1 % gain, 1 degree and 0.5 mm mounting). The localizer
-knows the nominal poses, the map's (the forward model's) coil field, its gradient at the
-sensors and core operator, and -- except in 'uncalibrated' -- the start-up calibration (1000
+true sensor poses); the TLV493D chain (``--noise-mt`` rms noise, 0.098 mT LSB, NaN beyond
++-130 mT) with the device's sensor errors (offset, 1 % gain, 1 degree and 0.5 mm mounting). The
+localizer knows the nominal poses, the map's (the forward model's) coil field, its gradient at
+the sensors and core operator, and -- except in 'uncalibrated' -- the start-up calibration (1000
 coil-only frames).
 
 Conditions (``n`` fixes each, positions 20-70 mm above the coils, |x|, |y| <= 25 mm unless
-stated; currents of the thesis cases 1-3 drawn per frame unless stated; the localizer without
-an alert limit, as under the runner, ok at an alert limit = passed its tests and PL within it): 'cold' (no warm
-start), 'jump' (warm start from the previous fix, 10-60 mm away), 'sensor dead' (one random
-sensor NaN per frame, tracking), 'two saturated' (the two strongest sensors NaN, 20-35 mm),
-'6 A' (random currents of 6 A peak), 'uncalibrated' (mounting errors left). Thesis cases 1-3 at
-20-60 mm, cold: availability. Alert limits 5 mm (the acceptance) and 10 mm (the runner's
-default), integrity risk 1e-4 per fix. Counts carry a
-two-sided 95 % Clopper-Pearson interval. Timings are on this (shared) machine: each is also
-given as a ratio to one multipole field evaluation in the same process.
+stated; currents of the thesis cases 1-3 drawn per frame unless stated; the localizer without an
+alert limit, as under the runner; ok at an alert limit = passed its tests and PL within it):
+'cold' (no warm start), 'jump' (warm start from the previous fix, 10-60 mm away), 'sensor dead'
+(one random sensor NaN per frame, tracking), 'two saturated' (the two strongest sensors NaN,
+20-35 mm), '6 A' (random currents of 6 A peak), 'uncalibrated' (mounting errors left). Thesis
+cases 1-3 at 20-60 mm, cold: availability. Alert limits 5 mm (the acceptance) and 10 mm (the
+runner's default), integrity risk 1e-4 per fix. Counts carry a two-sided 95 % Clopper-Pearson
+interval; timings also as a ratio to one multipole field evaluation in the same process.
 
     python studies/localization_integrity.py OUT [--n 10000] [--noise-mt 0.05]  # json, table
     python studies/localization_integrity.py --bench   # cold / warm fix time, median of 3
@@ -40,6 +39,7 @@ if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np
+from scipy.stats import beta
 
 from designkit.design import default_design
 from designkit.sensor_sim import SensorSimulator, case_currents, forward_model, random_positions
@@ -61,8 +61,6 @@ CONDITIONS = ("cold", "jump", "sensor dead", "two saturated", "6 A", "uncalibrat
 
 def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple:
     """Two-sided exact binomial interval of k / n."""
-    from scipy.stats import beta
-
     a = 1 - level
     lo = 0.0 if k == 0 else float(beta.ppf(a / 2, k, n - k + 1))
     hi = 1.0 if k == n else float(beta.ppf(1 - a / 2, k + 1, n - k))

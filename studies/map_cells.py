@@ -32,6 +32,7 @@ import math
 import sys
 import time
 from pathlib import Path
+from timeit import repeat
 
 if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -140,8 +141,6 @@ def batch_cost(n_points: int, cells, widths, nc: int) -> list:
     float32 (n_c, K) @ (K, 8 n_coils) matmul per occupied cell -- for ``n_points`` points
     spread evenly over ``cells`` cells, against one (n_points, K) @ (K, 8 n_coils) matmul
     (the same arithmetic without the per-cell loop)."""
-    from timeit import repeat
-
     rng = np.random.default_rng(1)
     out = []
     print(f"{'cells':>6} {'K':>4} {'loop ms':>8} {'one matmul ms':>13} {'ratio':>6}")
@@ -173,8 +172,6 @@ def one_point_cost(degrees, nc: int, n_cells: int = 900) -> list:
     the C(L + 2, 3) monomials of degree <= L - 1 from the per-axis powers, one
     (K,) @ (K, 8 n_coils) product; against one 8 x n_coils @ n_coils numpy matvec (the cost of
     a single numpy call)."""
-    from timeit import repeat
-
     rng = np.random.default_rng(2)
     a, v = rng.random((8, nc)), rng.random(nc)
     ref = min(repeat(lambda: a @ v, number=2000, repeat=7)) / 2000

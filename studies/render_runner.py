@@ -32,6 +32,7 @@ if __package__ in (None, ""):
 
 import numpy as np
 
+from designkit.sim import run_simulation
 from studies._common import design_and_map, finish, load_average
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "render_runner"
@@ -81,8 +82,6 @@ def check_run_csv(path, summary: dict) -> dict:
 
 def run(out_dir=DEFAULT_OUT, *, map_path=None, duration_s: float = 4.0,
         quick: bool = False, objects=OBJECTS, rows=("force", "fz")) -> dict:
-    from designkit.sim import run_simulation
-
     out_dir, design, array, map_path = design_and_map(out_dir, map_path, progress=not quick)
     if quick:
         objects, rows, duration_s = objects[:1], rows[:1], min(duration_s, 0.5)

@@ -23,6 +23,7 @@ coupled CoilArray directly, through ArrayActuation (the map v2 carries the same 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -122,8 +123,6 @@ def figure(name, obj, pts, nrm, stats_u, stats_b, lam, out_png, source):
     ax = fig.add_subplot(2, 2, 3)
     ax4 = fig.add_subplot(2, 2, 4)
     if len(line):
-        from firmware_io.scene import SceneObject  # noqa: F401  (numpy-side evaluation)
-
         ln = obj._obj().top_normal(line)
         fm = force_matrices(source, line, "force")
         want = lam * line[:, 2:3] * ln
@@ -327,8 +326,6 @@ def main(argv=None):
                     help="rewrite the table and the lambda figure from render_thesis.json")
     a = ap.parse_args(argv)
     if a.from_json:
-        import json
-
         res = json.loads((Path(a.out_dir) / "render_thesis.json").read_text())
         write_text_atomic(Path(a.out_dir) / "render_thesis.md", table(res))
         _lambda_figure(res, Path(a.out_dir) / "render_lambda.png")

@@ -20,6 +20,7 @@ reference:
 from __future__ import annotations
 
 import sys
+import time
 from pathlib import Path
 
 if __package__ in (None, ""):
@@ -28,6 +29,7 @@ if __package__ in (None, ""):
 import numpy as np
 
 from designkit._io import write_json_atomic, write_text_atomic
+from designkit._progress import tqdm
 from designkit.design import MU0
 from designkit.field import dipole_field, loop_field, magnetized_cylinder_field, winding_field
 from designkit.field import reference as ref
@@ -126,9 +128,7 @@ def run(out_dir, quick=False):
     total = 0
     nonfinite = 0
     table = {}
-    import time
 
-    from designkit._progress import tqdm
 
     for name, p in tqdm(list(regs.items()), desc="regions", disable=quick):
         t0 = time.perf_counter()

@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from multiprocessing import get_context
 from pathlib import Path
 
 if __package__ in (None, ""):
@@ -28,6 +29,7 @@ if __package__ in (None, ""):
 import numpy as np
 
 from designkit._io import write_json_atomic, write_text_atomic
+from designkit._progress import tqdm
 from designkit.design import MU0
 from designkit.field import reference as ref
 from designkit.field import winding_field
@@ -45,11 +47,7 @@ def _one(case):
 
 def compute_refs(cases, processes=2, progress=True):
     """mpmath references (B per mu0 J in m, G per mu0 J) for each case, in parallel."""
-    from designkit._progress import tqdm
-
     if processes > 1:
-        from multiprocessing import get_context
-
         with get_context("spawn").Pool(processes) as pool:
             it = pool.imap(_one, cases)
             res = list(tqdm(it, total=len(cases), desc="mpmath references", disable=not progress,

@@ -1,10 +1,10 @@
 """The house rules for the library's layout, measured from the source (no import is executed).
 
 Run as a script for a report (``python tests/layout.py [PATH ...]``, default: designkit,
-firmware_io, cad); ``tests/test_layout.py`` asserts the same rules. The limits are the house
-style's: one concept a file (<= 700 lines), named phases (<= 100 lines a
-function), short timeless module docstrings, top-level imports except heavy optional ones,
-imports that point one way.
+firmware_io, cad and studies); ``tests/test_layout.py`` asserts the same rules. The limits are
+the house style's: one concept a file (<= 700 lines), named phases (<= 100 lines a function),
+short timeless module docstrings, top-level imports except heavy optional ones, imports that
+point one way.
 """
 
 from __future__ import annotations
@@ -16,13 +16,24 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("designkit", "firmware_io", "cad")
+# checked by the same rules, outside the library (the import budget MAX_INNER_IMPORTS is the
+# library's)
+STUDIES = ("studies",)
+CHECKED = PACKAGES + STUDIES
 MAX_MODULE_LINES = 700
 MAX_FUNCTION_LINES = 100
 MAX_DOCSTRING_LINES = 25
 MAX_INNER_IMPORTS = 60
 # heavy or optional dependencies whose import inside a function saves start-up time
 LAZY_OK = ("pyvista", "vtkmodules", "build123d", "OCP", "gmsh", "dask", "distributed",
-           "matplotlib", "smbus2", "meshio")
+           "matplotlib", "smbus2", "meshio", "magpylib", "cfsem", "psutil")
+# (magpylib, cfsem: the test extra's peers; psutil: comes with dask[distributed]). A library
+# module that imports one of these at its top is as heavy: importing it late is allowed too.
+# modules whose imports inside functions are not moved to the top yet: "module" -> why. Only
+# a module that someone else was changing when the rest moved; remove the entry once it moves.
+LAZY_PENDING: dict[str, str] = {
+    "studies.calibration": "its 12 late designkit imports; the module was being rewritten "
+                           "in parallel when the other studies' imports moved to the top"}
 # functions allowed past MAX_FUNCTION_LINES: "module:function" -> the benchmark that shows a
 # split costs time
 LONG_FUNCTIONS: dict[str, str] = {}
@@ -69,10 +80,18 @@ def _inside_functions(tree) -> set[int]:
 
 def imports(path: Path, known: set[str]) -> tuple[set[str], list[str]]:
     """(library modules imported anywhere, every import made inside a function)."""
+    top, lazy, _ = _imports(path, known)
+    return top, lazy
+
+
+def _imports(path: Path, known: set[str]) -> tuple[set[str], list[str], set[str]]:
+    """imports() and the top-level names of what the module imports outside functions."""
     tree = ast.parse(path.read_text())
     name, is_pkg = module_name(path), path.name == "__init__.py"
     inner = _inside_functions(tree)
-    top, lazy = set(), []
+    typing_only = {id(s) for b in ast.walk(tree) if isinstance(b, ast.If)
+                   and "TYPE_CHECKING" in ast.unparse(b.test) for s in ast.walk(b)}
+    top, lazy, eager = set(), [], set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             targets = [a.name for a in node.names]
@@ -84,9 +103,23 @@ def imports(path: Path, known: set[str]) -> tuple[set[str], list[str]]:
             continue
         if id(node) in inner:
             lazy += targets
+        elif id(node) not in typing_only:
+            eager |= {t.split(".")[0] for t in targets} | {t for t in targets if t in known}
         # a lazy or type-checking import hides a cycle, it does not break it
         top |= {t for t in targets if t in known and t != name}
-    return top, lazy
+    return top, lazy, eager
+
+
+def heavy(eager: dict[str, set[str]]) -> set[str]:
+    """Library modules that load a LAZY_OK dependency when imported (directly or through the
+    library modules they import outside functions)."""
+    out = {m for m, e in eager.items() if set(LAZY_OK) & e}
+    grown = True
+    while grown:
+        new = {m for m, e in eager.items() if m not in out and e & out}
+        grown = bool(new)
+        out |= new
+    return out
 
 
 def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -123,20 +156,25 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 
 
 def report(paths=None) -> dict[str, list[str]]:
-    """Every breach of the rules, by rule."""
-    files = modules(paths)
-    every = modules()
+    """Every breach of the rules, by rule (default: the library and the studies)."""
+    files = modules(paths or CHECKED)
+    library = modules()
+    every = library + modules(STUDIES)
     known = {module_name(f) for f in every}
     out = {"module lines": [], "function lines": [], "docstring lines": [],
            "stale docstring": [], "lazy import": [], "cycle": []}
-    graph, n_lazy = {}, 0
+    graph, eager, inner, n_lazy = {}, {}, {}, 0
     for f in every:
-        top, lazy = imports(f, known)
+        top, inner[f], eager[module_name(f)] = _imports(f, known)
         # a package's __init__ is loaded before its children: that edge is implicit, not a cycle
         graph[module_name(f)] = {t for t in top if not module_name(f).startswith(t + ".")}
-        if f in files:
-            n_lazy += len(lazy)
-            bad = [m for m in lazy if m.split(".")[0] not in LAZY_OK]
+        if f in files and f in library:
+            n_lazy += len(inner[f])
+    slow = heavy(eager)
+    for f in files:
+        lazy = inner[f] if f in inner else imports(f, known)[1]
+        bad = [m for m in lazy if m.split(".")[0] not in LAZY_OK and m not in slow]
+        if module_name(f) not in LAZY_PENDING:
             out["lazy import"] += [f"{module_name(f)}: {m}" for m in bad]
     for f in files:
         src = f.read_text()
