@@ -38,13 +38,17 @@ if __package__ in (None, ""):
 
 import numpy as np
 
+from designkit import calibration as cal
+from designkit.array import CoilArray
+from designkit.asbuilt import AsBuilt, BuildTolerances, PARAMETERS, random_asbuilt
+from designkit.design import default_design, design_to_toml
+from designkit.sim import run_simulation
+from firmware_io.scene import Scene
 from studies._common import finish, load_average
 from studies.bench_map import matmul_s
 
 
 def _device(design, nom, scale, rng):
-    from designkit.array import CoilArray
-    from designkit.asbuilt import BuildTolerances, random_asbuilt
 
     base = BuildTolerances()
     tol = dataclasses.replace(base, position_m=base.position_m * scale,
@@ -56,9 +60,6 @@ def _device(design, nom, scale, rng):
 
 
 def _one(design, nom, ab, tol, truth, plan_name, n_probe, rng, held_out, a_true, rounds=2):
-    from designkit import calibration as cal
-    from designkit.array import CoilArray
-    from designkit.asbuilt import AsBuilt
 
     plan = cal.onboard_plan(nom.sensor_positions_m(), nom.n_coils)
     if plan_name != "onboard":
@@ -94,7 +95,6 @@ def _one(design, nom, ab, tol, truth, plan_name, n_probe, rng, held_out, a_true,
 
 
 def _names(res):
-    from designkit.asbuilt import PARAMETERS
 
     out = np.empty(res.params.shape, dtype=object)
     for k in range(out.shape[0]):
@@ -104,7 +104,6 @@ def _names(res):
 
 
 def _run_part(design, truth_design, calibrated_design, out_dir, duration, repeats=1):
-    from designkit.sim import run_simulation
 
     result, maps = {"repeats": []}, {}
     for seed in range(repeats):
@@ -136,7 +135,6 @@ def _common_steps(dirs: dict) -> dict:
     """Force error RMS (N) of each run over the steps where every run renders (state
     'running'): a localizer that declares itself lost (protection level over the alert limit)
     drops those steps from its own RMS, so the maps are compared on the same steps."""
-    from firmware_io.scene import Scene
 
     cols = {k: np.genfromtxt(d / "run.csv", delimiter=",", names=True, dtype=None,
                              encoding=None) for k, d in dirs.items()}
@@ -172,9 +170,6 @@ def main(argv=None) -> dict:
     ap.add_argument("--coupling-rounds", type=int, default=2,
                     help="at most this many exact coupled solves of the fitted device")
     args = ap.parse_args(argv)
-    from designkit import calibration as cal
-    from designkit.array import CoilArray
-    from designkit.design import default_design
 
     design = default_design()
     scales = [float(s) for s in args.scales.split(",")]
@@ -206,8 +201,6 @@ def main(argv=None) -> dict:
               "load_average": load_average(),
               "matmul_2000_s": matmul_s()}
     if args.run:
-        from designkit.asbuilt import AsBuilt
-        from designkit.design import design_to_toml
 
         result["run"] = []
         for dev, (ab, params, tol) in enumerate(runs):

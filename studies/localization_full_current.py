@@ -9,9 +9,10 @@ with the exact forward model (true poses, gains, offsets; localization._noise_li
 estimator: Localizer 'model' with the exact magnet and the start-up calibration (1000 coil-only
 frames), its forward model with and without the coils' field gradient at the sensors (the v2
 map carries it; without it the calibration cannot recover the sensors' position errors).
-Cold fixes. Prints one table row per variant: MAE, ratio to the noise limit, ok share.
+Cold fixes. Prints one table row per variant (MAE, ratio to the noise limit, ok share) and
+writes them to OUT_DIR/localization_full_current.json.
 
-    python studies/localization_full_current.py [--n 200] [--noise-mt 0.1] [--seed 0]
+    python studies/localization_full_current.py [OUT_DIR] [--n 200] [--noise-mt 0.1] [--seed 0]
 """
 
 from __future__ import annotations
@@ -30,7 +31,10 @@ import numpy as np
 from designkit.design import default_design
 from designkit.sensor_sim import SensorSimulator, case_currents, forward_model, random_positions
 from firmware_io.localization import Localizer, SensorModel
+from _common import finish
 from localization import _calibrate, _noise_limited, with_coil_gradient
+
+DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "localization_full_current"
 
 
 def _induced_jacobian(model, pos, h=0.5e-3):
@@ -44,7 +48,8 @@ def _induced_jacobian(model, pos, h=0.5e-3):
     return out
 
 
-def run(n: int = 200, seed: int = 0, noise_t: float = 0.1e-3) -> list:
+def run(n: int = 200, seed: int = 0, noise_t: float = 0.1e-3, out_dir=DEFAULT_OUT) -> dict:
+    """The table (module docs); writes ``localization_full_current.json`` under ``out_dir``."""
     design = default_design()
     sim = SensorSimulator(design, errors="default", seed=seed, induced="rod", noise_t=noise_t)
     size = (design.magnet.radius_m, design.magnet.length_m)
@@ -70,16 +75,26 @@ def run(n: int = 200, seed: int = 0, noise_t: float = 0.1e-3) -> list:
             e = loc.fix(rd.top_t[k], rd.bottom_t[k], cur[k])
             err[k], ok[k] = np.linalg.norm(e.position_m - pos[k]), e.ok
         rows.append((label, err.mean(), err.mean() / limit.mean(), ok.mean()))
-    print(f"+-6 A random currents, 20-45 mm, n = {n}, noise {noise_t * 1e3:.3g} mT, saturated "
-          f"sensors {rd.saturated.mean():.3f}")
+    res = {"n": n, "seed": seed, "noise_t": noise_t,
+           "saturated_fraction": float(rd.saturated.mean()),
+           "rows": [{"estimator": label, "mae_m": float(mae), "over_limit": float(ratio),
+                     "ok_fraction": float(ok)} for label, mae, ratio, ok in rows]}
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    return finish(Path(out_dir) / "localization_full_current.json", res, _print)
+
+
+def _print(res: dict) -> None:
+    print(f"+-6 A random currents, 20-45 mm, n = {res['n']}, noise {res['noise_t'] * 1e3:.3g} mT, "
+          f"saturated sensors {res['saturated_fraction']:.3f}")
     print(f"{'estimator':40s} {'MAE mm':>7s} {'/ limit':>8s} {'ok':>6s}")
-    for label, mae, ratio, ok in rows:
-        print(f"{label:40s} {mae * 1e3:7.3f} {ratio:8.2f} {ok:6.3f}")
-    return rows
+    for r in res["rows"]:
+        print(f"{r['estimator']:40s} {r['mae_m'] * 1e3:7.3f} {r['over_limit']:8.2f} "
+              f"{r['ok_fraction']:6.3f}")
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("out", nargs="?", default=str(DEFAULT_OUT), help="output folder")
     ap.add_argument("--n", type=int, default=200, help="positions (lower half of the cube)")
     ap.add_argument("--seed", type=int, default=0, help="device (sensor errors) and noise seed")
     ap.add_argument("--noise-mt", type=float, default=0.1,
@@ -88,7 +103,7 @@ def main(argv=None) -> int:
     if a.n < 1 or not 0 < a.noise_mt < 10:
         print(f"error: --n {a.n} / --noise-mt {a.noise_mt}: n >= 1, noise in (0, 10) mT")
         return 2
-    run(a.n, a.seed, a.noise_mt * 1e-3)
+    run(a.n, a.seed, a.noise_mt * 1e-3, a.out)
     return 0
 
 

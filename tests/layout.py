@@ -29,11 +29,6 @@ LAZY_OK = ("pyvista", "vtkmodules", "build123d", "OCP", "gmsh", "dask", "distrib
            "matplotlib", "smbus2", "meshio", "magpylib", "cfsem", "psutil")
 # (magpylib, cfsem: the test extra's peers; psutil: comes with dask[distributed]). A library
 # module that imports one of these at its top is as heavy: importing it late is allowed too.
-# modules whose imports inside functions are not moved to the top yet: "module" -> why. Only
-# a module that someone else was changing when the rest moved; remove the entry once it moves.
-LAZY_PENDING: dict[str, str] = {
-    "studies.calibration": "its 12 late designkit imports; the module was being rewritten "
-                           "in parallel when the other studies' imports moved to the top"}
 # functions allowed past MAX_FUNCTION_LINES: "module:function" -> the benchmark that shows a
 # split costs time
 LONG_FUNCTIONS: dict[str, str] = {}
@@ -174,8 +169,7 @@ def report(paths=None) -> dict[str, list[str]]:
     for f in files:
         lazy = inner[f] if f in inner else imports(f, known)[1]
         bad = [m for m in lazy if m.split(".")[0] not in LAZY_OK and m not in slow]
-        if module_name(f) not in LAZY_PENDING:
-            out["lazy import"] += [f"{module_name(f)}: {m}" for m in bad]
+        out["lazy import"] += [f"{module_name(f)}: {m}" for m in bad]
     for f in files:
         src = f.read_text()
         tree = ast.parse(src)
