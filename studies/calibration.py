@@ -263,3 +263,7 @@ def _run_row(dev: int, run: dict) -> str:
                  f"{run['calibrated_over_true_median']:.3f}, on the common steps "
                  f"{run['calibrated_over_true_common_median']:.3f}")
     return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    main()
