@@ -157,6 +157,16 @@ def _imports(path: Path, package: str) -> list[str]:
     return out
 
 
+def test_every_study_with_a_main_runs_as_a_script():
+    # a study's command line (`python studies/X.py ...`) is what the docs and the README give
+    missing = []
+    for study in sorted((ROOT / "studies").glob("*.py")):
+        text = study.read_text()
+        if "\ndef main(" in text and 'if __name__ == "__main__":' not in text:
+            missing.append(study.name)
+    assert missing == []
+
+
 def test_imports_point_one_way():
     """constants/errors <- field, design <- electrical, core <- coil <- array <- everything
     else, even inside functions."""
