@@ -43,7 +43,9 @@ sys.exit(main(sys.argv[4:]))
 """
 
 # command line, the computation the flag wraps, seconds of work before Ctrl-C (a negative
-# number: the wrapped step holds that long before it starts, Ctrl-C comes within it)
+# number: the wrapped step holds that long before it starts, Ctrl-C comes within it). The
+# wrapped step is one that leaves its output staged (repeating it must not publish anything):
+# for cad the writing of the parts into the staging folder, not the whole export.
 CASES = {
     "report": (["report", "--quick", "--out", "rep"], "designkit.commands.report._run", 3.0),
     "optimize": (["optimize", "--out", "opt"], "designkit.commands.optimize.solve_device", 2.0),
@@ -53,7 +55,7 @@ CASES = {
     "viz": (["viz", "fieldlines", "--vtk", "vtk", "--out", "new/f.png"],
             "designkit.viz.export_vtk", 2.0),
     "fem": (["fem", "--level", "1", "--out", "fem"], "designkit.commands.fem.solve", 4.0),
-    "cad": (["cad", "--out", "cad"], "cad.export.export_all", 4.0),
+    "cad": (["cad", "--out", "cad"], "cad.export._write_parts", 4.0),
     "run": (["run", "--simulate", "--out", "run"], "designkit.commands.run.run_simulation", 3.0),
     "sweep": (["sweep", "--param", "inner_radius_m=0.006:0.01:3", "--workers", "1", "--out",
                "sw"], "designkit.commands.sweep.plot", -60.0),
