@@ -196,36 +196,28 @@ class Runner:
         self.state = name
 
     def _may_resume(self, t_s: float, clear: bool) -> bool:
-        """True once the fault condition has been clear for ``resume_after_s``."""
+        """True once the fault is over: a localization fault after ``resume_fixes`` fixes in a
+        row accepted with no problem in between, any other once its condition has been clear
+        for ``resume_after_s`` (either count restarts at any problem)."""
         if self.latched:
             return False
         if not clear:
             self.clear_since_s = None
+            self.accepted_in_row = 0
             return False
         if self.clear_since_s is None:
             self.clear_since_s = t_s
-        if t_s - self.clear_since_s + 1e-12 >= self.cfg.resume_after_s:
-            if self.pwm_reinit_needed and not self._reinit_pwm(t_s):
-                return False
-            self.log(f"[{t_s:9.4f} s] resume after {self.fault}")
-            self.fault = None
-            self.clear_since_s = None
-            return True
-        return False
-
-    def _confirmed(self, t_s: float, clear: bool) -> bool:
-        """A localization fault: True once ``resume_fixes`` fixes in a row were accepted with
-        no fault in between (the count restarts at any problem)."""
-        if self.latched:
-            return False
-        if not clear:
-            self.accepted_in_row = 0
-            return False
-        if self.accepted_in_row < self.cfg.resume_fixes:
+        by_fixes = self.fault in LOCALIZATION_FAULTS
+        if by_fixes:
+            done = self.accepted_in_row >= self.cfg.resume_fixes
+        else:
+            done = t_s - self.clear_since_s + 1e-12 >= self.cfg.resume_after_s
+        if not done:
             return False
         if self.pwm_reinit_needed and not self._reinit_pwm(t_s):
             return False      # a NACK this fault superseded: the boards first
-        self.log(f"[{t_s:9.4f} s] resume after {self.fault} ({self.accepted_in_row} fixes)")
+        self.log(f"[{t_s:9.4f} s] resume after {self.fault}"
+                 + (f" ({self.accepted_in_row} fixes)" if by_fixes else ""))
         self.fault = None
         self.clear_since_s = None
         return True
@@ -254,8 +246,7 @@ class Runner:
             self._enter_fault(t_s, name, detail)
         elif self.fault is not None:
             ok_now = self.thermal.cooled() if self.fault == "thermal" else not problems
-            resume = self._confirmed if self.fault in LOCALIZATION_FAULTS else self._may_resume
-            if not resume(t_s, ok_now):
+            if not self._may_resume(t_s, ok_now):
                 return True
         return self.fault is not None
 
