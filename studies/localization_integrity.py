@@ -45,7 +45,7 @@ from designkit.design import default_design
 from designkit.sensor_sim import SensorSimulator, case_currents, forward_model, random_positions
 from firmware_io.constants import MU0
 from firmware_io.localization import Localizer, SensorModel, multipole_field
-from firmware_io.localization.integrity import fused_protection_level
+from firmware_io.localization.integrity import fused_protection_level, ratio_quantiles
 from firmware_io.runner import ConstantVelocityTracker
 from localization import _calibrate, with_coil_gradient  # the start-up calibration as the localization study runs it
 
@@ -187,7 +187,7 @@ def thesis_tracked(loc, sim, case, m, rng) -> dict:
         if e.ok and tracked:
             _, var = trk.innovation(e.position_m, k * FRAME_S)
             pl = fused_protection_level(pl, e.covariance_m2, var - trk.r, loc.model_bias_m,
-                                        (var - trk.r) / var)
+                                        (var - trk.r) / var, ratio_quantiles(loc.integrity_risk))
         ok[k], pls[k] = e.ok and pl <= ALERT_LIMIT_M, pl
         if ok[k] or e.ok and not acquired:   # acquisition: the runner's tracker takes it
             trk.update(e.position_m, k * FRAME_S, True)

@@ -11,7 +11,8 @@ import pytest
 
 import magpylib as magpy  # noqa: E402  (a test dependency: no skip)
 from firmware_io.localization import Localizer, SensorModel
-from firmware_io.localization.integrity import chi2_quantile, chi2_sf
+from firmware_io.localization.integrity import chi2_quantile, chi2_sf, covariance_and_pl
+from firmware_io.localization.integrity import fused_protection_level, ratio_quantiles
 
 MOMENT = np.array([0.0, 0.0, 0.909])
 NOISE = 1e-4
@@ -217,11 +218,33 @@ def test_fused_protection_level_holds_its_risk_for_a_rounder_filtered_covariance
     cov, pl = covariance_and_pl(fisher, 0.0, 10, table)
     assert pl == pytest.approx(np.sqrt(1e-6 * table[2]), rel=1e-9)
     p, gain = (0.7e-3) ** 2, 0.5
-    fused = fused_protection_level(pl + bias, cov, p, bias, gain) - bias
+    fused = fused_protection_level(pl + bias, cov, p, bias, gain, table) - bias
     f = (1 - gain) ** 2 * p * np.eye(3) + gain ** 2 * cov
     e = np.random.default_rng(5).multivariate_normal(np.zeros(3), f, size=400_000)
     beyond = np.mean(np.linalg.norm(e, axis=1) > fused)
     assert 0.5 * risk < beyond <= risk * 1.05
+
+
+def test_fused_protection_level_reads_the_fix_s_own_table():
+    """The fix's quantile comes from the table it is given (the localizer's risk), at the
+    index of its own covariance's ratio, whatever other tables exist: a fix at risk 1e-4 with
+    l2 / l1 = 0.1 (index 2), filtered to r' = 0.55 (index 11): noise part sqrt(l1' k_11) of
+    the 1e-4 table, not of the 1e-2 table; tighter than the table-free bound r' / r_j
+    (k(r') <= k(r_j) r' / r_j), which applies without a table."""
+    c = np.diag([0.1, 0.1, 1.0]) * (1e-3) ** 2
+    p, gain, bias = 1e-6, 0.5, 0.5e-3          # filtered: 0.25 p + 0.25 c -> 0.275, 0.5 (um^2)
+    want_l1, want_r = 0.25 * 1e-6 + 0.25 * 1e-6, (0.25 + 0.025) / 0.5
+    assert math.ceil(want_r * 20) == 11
+    for risk, other in ((1e-4, 1e-2), (1e-2, 1e-4)):
+        table = ratio_quantiles(risk)
+        ratio_quantiles(other)
+        cov, pl = covariance_and_pl(np.linalg.inv(c).tolist(), 0.0, 10, table)
+        got = fused_protection_level(pl + bias, cov, p, bias, gain, table)
+        assert got == pytest.approx(bias + math.sqrt(want_l1 * table[11]), rel=1e-9)
+        loose = fused_protection_level(pl + bias, cov, p, bias, gain)
+        assert loose == pytest.approx(
+            bias + math.sqrt(want_l1 * table[2] * want_r / 0.1), rel=1e-9)
+        assert got < loose
 
 
 def test_search_false_never_runs_the_global_search_and_says_so():

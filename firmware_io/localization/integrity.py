@@ -86,10 +86,6 @@ def _tail(k: np.ndarray, r: np.ndarray, nodes: int = 4001) -> np.ndarray:
     return np.array([math.erfc(math.sqrt(0.5 * x)) for x in k]) + integral
 
 
-_TABLES: dict = {}
-"""The tables :func:`ratio_quantiles` made, by risk (for :func:`fused_protection_level`)."""
-
-
 @functools.lru_cache(maxsize=None)
 def ratio_quantiles(risk: float) -> tuple:
     """k_j, j = 0 .. RATIO_STEPS: P(z1^2 + r_j (z2^2 + z3^2) > k_j) = risk at r_j = j /
@@ -102,17 +98,7 @@ def ratio_quantiles(risk: float) -> tuple:
         mid = 0.5 * (lo + hi)
         above = _tail(mid, r) > risk
         lo, hi = np.where(above, mid, lo), np.where(above, hi, mid)
-    _TABLES[risk] = (chi2_quantile(risk, 1),) + tuple(float(x) for x in hi)
-    return _TABLES[risk]
-
-
-def _table_entry(k: float):
-    """(table, index) of the tabulated quantile equal to k (to 1e-6), or None."""
-    for table in _TABLES.values():
-        for j, kj in enumerate(table):
-            if abs(kj - k) <= 1e-6 * k:
-                return table, j
-    return None
+    return (chi2_quantile(risk, 1),) + tuple(float(x) for x in hi)
 
 
 def covariance_and_pl(fisher, chi2: float, dof: int, k2):
@@ -139,33 +125,33 @@ def covariance_and_pl(fisher, chi2: float, dof: int, k2):
     return np.array(m), math.sqrt(lam * k)
 
 
-def fused_protection_level(pl: float, cov, var_pred: float, bias: float,
-                           gain: float) -> float:
+def fused_protection_level(pl: float, cov, var_pred: float, bias: float, gain: float,
+                           table=None) -> float:
     """Protection level (m) of a tracker's filtered position (1 - K) x_pred + K x_fix, K =
     ``gain``, from the fix's covariance ``cov`` (3, 3) m^2 and the prediction's variance
     ``var_pred`` m^2 per axis (from the earlier fixes, independent noise): the filtered error's
     covariance is (1 - K)^2 var_pred I + K^2 C, so the fix's own noise part ``pl - bias`` scales
     by sqrt(((1 - K)^2 var_pred + K^2 l1) / l1) (l1 >= l2: C's largest eigenvalues); the
     model-bias part ``bias`` (m, common to every frame: filtering does not shrink it) stays.
-    The filtered covariance is rounder (ratio r' = l2' / l1' >= the fix's r): when the fix's
-    quantile k = (pl - bias)^2 / l1 is an entry of a :func:`ratio_quantiles` table, the noise
-    part is sqrt(l1' k(r')) from that table; else (an isotropic or unknown quantile, r rounded
-    up to r_j) k(r') <= k r' / r_j (z1^2 + r' X <= (r' / r_j)(z1^2 + r_j X)) scales it by
-    sqrt(r' / r_j) more. Degenerate inputs: ``pl`` unchanged."""
+    The filtered covariance is rounder (ratio r' = l2' / l1' >= the fix's r), so its quantile
+    grows too: by k(r'_j) / k(r_j) from ``table``, the :func:`ratio_quantiles` table the fix's
+    PL came from (:func:`covariance_and_pl`: r rounded up to r_j); without one (an isotropic or
+    unknown quantile) by the bound r' / r_j (z1^2 + r' X <= (r' / r_j)(z1^2 + r_j X)).
+    Degenerate inputs: ``pl`` unchanged."""
     if cov is None or not (math.isfinite(pl) and var_pred > 0 and 0 <= gain <= 1):
         return pl
-    lam2, lam = (max(float(x), 0.0) for x in np.linalg.eigvalsh(cov)[1:])
+    lam, lam2 = _eigenvalues(np.asarray(cov, float).tolist())[:2]
     if not (math.isfinite(lam) and lam > 0):
         return pl
     a = (1 - gain) ** 2 * var_pred
     filtered = a + gain ** 2 * lam
-    ratio = (a + gain ** 2 * lam2) / filtered
-    noise = max(pl - bias, 0.0)
-    found = _table_entry(noise * noise / lam) if noise > 0 else None
-    if found is not None:
-        return bias + math.sqrt(filtered * found[0][max(_ratio_step(ratio), found[1])])
-    rounder = max(ratio / (_ratio_step(lam2 / lam) / RATIO_STEPS), 1.0)
-    return bias + noise * math.sqrt(filtered / lam * rounder)
+    ratio = (a + gain ** 2 * max(lam2, 0.0)) / filtered
+    j = _ratio_step(max(lam2, 0.0) / lam)
+    if table is None:
+        growth = max(ratio / (j / RATIO_STEPS), 1.0)
+    else:
+        growth = table[max(_ratio_step(ratio), j)] / table[j]
+    return bias + max(pl - bias, 0.0) * math.sqrt(filtered / lam * growth)
 
 
 def _eigenvalues(m) -> tuple:

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import BadInputError, CoilWriteError
-from ..localization.integrity import chi2_quantile, fused_protection_level
+from ..localization.integrity import chi2_quantile, fused_protection_level, ratio_quantiles
 from .config import RunnerConfig
 from .drive import CurrentPath
 from .forcelaw import force_law_rows
@@ -289,15 +289,17 @@ class Runner:
         """The protection level (m) of the position the runner renders at once this fix (past
         the gate) is in the tracker: its filtered position, from the fix's covariance and the
         tracker's prediction (:func:`firmware_io.localization.integrity.
-        fused_protection_level`, the localizer's ``model_bias_m`` kept whole). Without a
-        tracked state (the tracker also holds the fixes of an acquisition): the fix's own."""
+        fused_protection_level`, the localizer's ``model_bias_m`` kept whole, its quantile
+        table from the localizer's ``integrity_risk``). Without a tracked state (the tracker
+        also holds the fixes of an acquisition): the fix's own."""
         if getattr(self.tracker, "x", None) is None or not hasattr(self.tracker, "innovation"):
             return fix.protection_level_m
         _, var = self.tracker.innovation(fix.position_m, fix.frame_t_s)
         p = var - self.tracker.r
+        risk = getattr(self.localizer, "integrity_risk", None)
         return fused_protection_level(fix.protection_level_m, fix.covariance_m2, p,
                                       float(getattr(self.localizer, "model_bias_m", 0.0)),
-                                      p / var)
+                                      p / var, None if risk is None else ratio_quantiles(risk))
 
     def _gate(self, fix: Fix) -> str:
         """The innovation gate: '' when the fix agrees with the tracker's prediction at its
