@@ -24,15 +24,14 @@ from pathlib import Path
 
 if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np
 
 from designkit.design import default_design
 from designkit.sensor_sim import SensorSimulator, case_currents, forward_model, random_positions
 from firmware_io.localization import Localizer, SensorModel
-from _common import finish
-from localization import _calibrate, _noise_limited, with_coil_gradient
+from studies._common import finish
+from studies.localization import _calibrate, _noise_limited, with_coil_gradient
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "localization_full_current"
 

@@ -36,7 +36,6 @@ from pathlib import Path
 
 if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np
 from scipy.stats import beta
@@ -47,7 +46,7 @@ from firmware_io.constants import MU0
 from firmware_io.localization import Localizer, SensorModel, multipole_field
 from firmware_io.localization.integrity import fused_protection_level, ratio_quantiles
 from firmware_io.runner import ConstantVelocityTracker
-from localization import _calibrate, with_coil_gradient  # the start-up calibration as the localization study runs it
+from studies.localization import _calibrate, with_coil_gradient
 
 ALERT_LIMIT_M = 5e-3
 ALERT_LIMIT_RUNNER_M = 10e-3

@@ -8,13 +8,7 @@ cannot see the sensors' position errors (no coil-field gradient) lands at 1.5-1.
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "studies"))
-
-import localization_full_current as study  # noqa: E402
+from studies import localization_full_current as study
 
 
 def test_full_current_fit_within_1_5x_of_the_noise_limit(tmp_path, capsys):
