@@ -87,7 +87,7 @@ class SimulatedDevice:
         muxes = [self.sensor_bus.attach(SimTCA9548A(0x71 + k)) for k in range((n_sensors + 7) // 8)]
         self.tlv = [muxes[i // 8].attach(i % 8, SimTLV493D()) for i in range(n_sensors)]
         self.sensors = SensorArrays(self.sensor_bus, default_sensor_layout(n_sensors),
-                                    sleep=self.sensor_clock.sleep)
+                                    sleep=self.sensor_clock.sleep, clock=self.sensor_clock.now)
         self.sensors.configure()
 
         self.current_a = np.zeros(n)

@@ -8,7 +8,10 @@ coil order. Only one mux has a channel enabled at any time.
 
 A runner calls :meth:`SensorArrays.read` once per loop; a sensor that fails keeps its last good
 value, is marked unhealthy, and is reset and reconfigured after ``hang_threshold`` bad reads in
-a row (a hung ADC, a NACK), at most once every ``retry_interval`` reads once it has failed.
+a row (a hung ADC, a NACK), at most once every ``retry_interval`` reads once it has failed. The
+reset's wake-up wait (``TLV493D.reset_wait_s``, tens of ms) is not spent inside a read: the pass
+sends the reset and goes on, a later pass configures the sensor once the wait is over (up to
+``TLV493D.config_attempts`` resets), so the other sensors' frames keep their rate.
 """
 
 from __future__ import annotations
@@ -75,11 +78,16 @@ class SensorArrays:
     retry_interval : int
         Reads between configuration attempts of a sensor that failed.
     sleep : callable
+        Waits s seconds (the reset's wake-up wait of :meth:`configure`).
+    clock : callable
+        Now, s (when a sensor reset during :meth:`read` may be configured); the clock ``sleep``
+        advances.
     """
 
     def __init__(self, bus: I2CBus, layout: Sequence[SensorSlot] | None = None, *,
                  temperature: Literal["off", "on"] = "off", hang_threshold: int = 3,
-                 retry_interval: int = 100, sleep: Callable[[float], None] = time.sleep):
+                 retry_interval: int = 100, sleep: Callable[[float], None] = time.sleep,
+                 clock: Callable[[], float] = time.monotonic):
         self.layout = tuple(layout) if layout is not None else default_sensor_layout()
         n = len(self.layout)
         if n == 0 or n % 2:
@@ -101,6 +109,10 @@ class SensorArrays:
         self._last_good = np.zeros((n, 3))
         self._bad_in_row = [0] * n
         self._retry_countdown = [0] * n
+        self.clock = clock
+        self._resetting: list[tuple[float, int, str] | None] = [None] * n
+        """Per sensor in recovery: (time of its reset s, resets so far, status once configured:
+        'recovered' after bad reads, 'ok' after a failure, then read in the same pass)."""
         self.status: list[str] = ["unconfigured"] * n
 
     def _route(self, i: int) -> None:
@@ -126,25 +138,67 @@ class SensorArrays:
         return tuple(self.status)
 
     def _configure_one(self, i: int) -> None:
+        self._resetting[i] = None
         try:
             self._route(i)
             self.sensors[i].configure()
             self.status[i] = "ok"
             self._bad_in_row[i] = 0
         except FirmwareIOError:
-            self.status[i] = "failed"
-            self._retry_countdown[i] = self.retry_interval
+            self._failed(i)
+
+    def _failed(self, i: int) -> None:
+        self.status[i] = "failed"
+        self._retry_countdown[i] = self.retry_interval
+
+    def _start_reset(self, i: int, tries: int, then: str) -> None:
+        """Send sensor i's reset; a later :meth:`_recover` configures it after the wake-up."""
+        try:
+            self._route(i)
+        except FirmwareIOError:
+            pass  # the mux did not answer: the configuration after the wait fails and says so
+        else:
+            self.sensors[i].start_reset()
+        self._resetting[i] = (self.clock(), tries + 1, then)
+
+    def _recover(self, i: int, status: str) -> str:
+        """Sensor i's status in this pass while it recovers: ``status`` until its reset's
+        wake-up is over, then one configuration attempt; a failed attempt resets it again, up
+        to the sensor's ``config_attempts``, then 'failed' (retried after ``retry_interval``)."""
+        sensor = self.sensors[i]
+        reset_s, tries, then = self._resetting[i]
+        if self.clock() - reset_s < sensor.reset_wait_s:
+            return status
+        try:
+            self._route(i)
+            took = not sensor.configure_after_reset()
+        except FirmwareIOError:
+            took = False
+        if took:
+            self._resetting[i] = None
+            self._bad_in_row[i] = 0
+            return then
+        if tries < sensor.config_attempts:
+            self._start_reset(i, tries, then)
+            return status
+        self._resetting[i] = None
+        sensor.status = "failed"
+        self._failed(i)
+        return "failed"
 
     def read(self) -> ArraysReading:
         """Read every sensor once (one mux select, when it changes, and one frame read each)."""
         n = len(self.sensors)
         for i in range(n):
-            if self.status[i] in ("failed", "unconfigured"):
-                self._retry_countdown[i] -= 1
-                if self._retry_countdown[i] <= 0:
-                    self._configure_one(i)
+            if self._resetting[i] is not None:
+                self.status[i] = self._recover(i, self.status[i])
                 if self.status[i] != "ok":
                     continue
+            elif self.status[i] in ("failed", "unconfigured"):
+                self._retry_countdown[i] -= 1
+                if self._retry_countdown[i] <= 0:
+                    self._start_reset(i, 0, "ok")
+                continue
             sensor = self.sensors[i]
             try:
                 self._route(i)
@@ -164,8 +218,7 @@ class SensorArrays:
             elif status not in ("stale", "recovered"):  # the sensor itself debounces stale frames
                 self._bad_in_row[i] += 1
                 if self._bad_in_row[i] >= self.hang_threshold:
-                    self._configure_one(i)
-                    status = "recovered" if self.status[i] == "ok" else "failed"
+                    self._start_reset(i, 0, "recovered")
                     self._bad_in_row[i] = 0
             self.status[i] = status
         status = tuple(self.status)

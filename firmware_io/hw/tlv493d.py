@@ -190,7 +190,13 @@ class TLV493D:
         return f"TLV493D at 0x{self.address:02X}"
 
     def reset(self) -> None:
+        """General-call reset (:meth:`start_reset`), then wait ``reset_wait_s``."""
+        self.start_reset()
+        self.sleep(self.reset_wait_s)
+
+    def start_reset(self) -> None:
         """General-call reset; SDA held at the level that selects this sensor's base address.
+        The sensor takes ``reset_wait_s`` to wake up before :meth:`configure_after_reset`.
 
         The sensor does not acknowledge the data byte, so the NACK error is expected and ignored.
         """
@@ -199,7 +205,6 @@ class TLV493D:
             self.bus.write_byte(0x00, level_byte)
         except OSError:
             pass
-        self.sleep(self.reset_wait_s)
 
     def _read_raw(self, address: int, length: int) -> bytes:
         try:
@@ -218,34 +223,41 @@ class TLV493D:
         last_problem = ""
         for _ in range(self.config_attempts):
             self.reset()
-            try:
-                frame = self._read_raw(self.base_address, 10)
-                self.factory = frame[7:10]
-                cfg = tlv493d_write_frame(self.factory, iic_addr_code=self.iic_addr_code,
-                                          temperature=self.temperature)
-                try:
-                    raw_write(self.bus, self.base_address, cfg)
-                except OSError as exc:
-                    raise wrap_os_error(exc, f"TLV493D at 0x{self.base_address:02X}: write configuration") from exc
-                first = tlv493d_decode(self._read_raw(self.address, self.read_length))
-                second = tlv493d_decode(self._read_raw(self.address, self.read_length))
-            except I2CError as exc:
-                last_problem = str(exc)
-                continue
-            if second.power_down_flag == 1 and second.frame_counter == (first.frame_counter + 1) % 4:
-                self._last_frm = second.frame_counter
-                self._stuck = 0
-                self.last_frame = second
-                self.status = "ok"
+            last_problem = self.configure_after_reset()
+            if not last_problem:
                 return
-            last_problem = ("no conversion after configuration (frame counter "
-                            f"{first.frame_counter} -> {second.frame_counter}, PD={second.power_down_flag}):"
-                            " configuration rejected, e.g. parity")
         self.status = "failed"
         raise SensorConfigError(
             f"{self._name()} did not take its configuration after {self.config_attempts} attempts: "
             f"{last_problem}. Check the sensor's supply (power-cycle it) and that only its mux "
             "channel is enabled.")
+
+    def configure_after_reset(self) -> str:
+        """One configuration attempt of a sensor reset ``reset_wait_s`` ago (read the factory
+        bytes, write, verify as :meth:`configure` says): '' and status 'ok' when it took, else
+        the problem (status unchanged)."""
+        try:
+            frame = self._read_raw(self.base_address, 10)
+            self.factory = frame[7:10]
+            cfg = tlv493d_write_frame(self.factory, iic_addr_code=self.iic_addr_code,
+                                      temperature=self.temperature)
+            try:
+                raw_write(self.bus, self.base_address, cfg)
+            except OSError as exc:
+                raise wrap_os_error(exc, f"TLV493D at 0x{self.base_address:02X}: write configuration") from exc
+            first = tlv493d_decode(self._read_raw(self.address, self.read_length))
+            second = tlv493d_decode(self._read_raw(self.address, self.read_length))
+        except I2CError as exc:
+            return str(exc)
+        if second.power_down_flag == 1 and second.frame_counter == (first.frame_counter + 1) % 4:
+            self._last_frm = second.frame_counter
+            self._stuck = 0
+            self.last_frame = second
+            self.status = "ok"
+            return ""
+        return ("no conversion after configuration (frame counter "
+                f"{first.frame_counter} -> {second.frame_counter}, PD={second.power_down_flag}):"
+                " configuration rejected, e.g. parity")
 
     def read_frame(self) -> TLVFrame:
         """Read and check one frame; updates :attr:`status` (see :meth:`read`)."""
