@@ -9,14 +9,38 @@ import numpy as np
 import pytest
 
 from designkit import Coil, default_design
+from designkit.array import array_for_design
 from designkit.cli import main
+from designkit.cores import ArraySystem
 
 
 @pytest.fixture(scope="module")
-def quick_report(tmp_path_factory):
+def quick_run(tmp_path_factory):
+    """A quick report, and the coil count of every coupled core solve it built."""
     out = tmp_path_factory.mktemp("report")
-    assert main(["report", "--quick", "--no-progress", "--out", str(out)]) == 0
-    return out
+    built, build = [], ArraySystem.__init__
+
+    def counting(self, array, *args, **kwargs):
+        built.append(array.n_coils)
+        build(self, array, *args, **kwargs)
+
+    array_for_design.cache_clear()     # the report's own solves, not an earlier test's
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(ArraySystem, "__init__", counting)
+        assert main(["report", "--quick", "--no-progress", "--out", str(out)]) == 0
+    return out, built
+
+
+@pytest.fixture(scope="module")
+def quick_report(quick_run):
+    return quick_run[0]
+
+
+def test_report_solves_the_design_s_coupled_cores_once(quick_run):
+    # figures, array force and map all use one array; the map's magnet tables solve one coil
+    built = quick_run[1]
+    n = default_design().array.rows * default_design().array.columns
+    assert built.count(n) == 1 and set(built) <= {1, n}, built
 
 
 def test_report_folder_is_complete(quick_report):

@@ -34,7 +34,7 @@ import numpy as np
 from .. import __version__, fieldmap, viz
 from .._io import write_json_atomic, write_text_atomic
 from .._progress import tqdm
-from ..array import force_matrix, g5_from_gradient
+from ..array import array_for_design, force_matrix, g5_from_gradient
 from ..coil import Coil
 from ..design import Design, default_design, design_to_toml, load_design, named_design
 from ..optimize import device_problem_for, evaluate_device, rendering_force
@@ -361,9 +361,12 @@ def designs_side_by_side(design: Design) -> dict:
 
 
 def _field_map(design: Design, out: Path, quality: str) -> Path:
-    """A coarse force-current map (the controller's map: ``designkit map``, 2 mm grid)."""
+    """A coarse force-current map (the controller's map: ``designkit map``, 2 mm grid), from
+    the array the figures used (:func:`designkit.array.array_for_design`: its coupled solve
+    is made once)."""
     spacing = MAP_SPACING_M[quality]
-    data = fieldmap.build(design, spacing=spacing, progress=False)
+    data = fieldmap.build(design, spacing=spacing, progress=False,
+                          array=array_for_design(design))
     return fieldmap.write(out / "map" / "forcemap.npz", data)
 
 
