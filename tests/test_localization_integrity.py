@@ -245,31 +245,3 @@ def test_fused_protection_level_reads_the_fix_s_own_table():
         assert loose == pytest.approx(
             bias + math.sqrt(want_l1 * table[2] * want_r / 0.1), rel=1e-9)
         assert got < loose
-
-
-def test_search_false_never_runs_the_global_search_and_says_so():
-    """fix(..., search=False): no warm start -> not ok, 're-acquisition needed'; after an ok
-    fix, a small move is tracked warm (ok, within 1 mm); a 30 mm jump -> not ok with the same
-    reason, without the grid search (spied); the next search=True fix re-acquires."""
-    rng = np.random.default_rng(8)
-    model = _model()
-    loc = Localizer(model, "model", cores=False, noise_t=NOISE, relative_error=0.0)
-    calls = []
-    grid = loc._global_starts
-    loc._global_starts = lambda *a, **k: calls.append(1) or grid(*a, **k)
-    p = np.array([0.0, 0.01, 0.04])
-    f = _frame(model, p, np.zeros(9), rng)
-    est = loc.fix(f[0], f[1], np.zeros(9), search=False)
-    assert not est.ok and est.reason.endswith("re-acquisition needed") and not calls
-    assert loc.fix(f[0], f[1], np.zeros(9)).ok and calls
-    calls.clear()
-    q = p + [0.0005, 0.0, 0.0]
-    f = _frame(model, q, np.zeros(9), rng)
-    est = loc.fix(f[0], f[1], np.zeros(9), search=False)
-    assert est.ok and np.linalg.norm(est.position_m - q) < 1e-3 and not calls
-    far = q + [0.0, -0.03, 0.0]
-    f = _frame(model, far, np.zeros(9), rng)
-    est = loc.fix(f[0], f[1], np.zeros(9), search=False)
-    assert not est.ok and est.reason.endswith("re-acquisition needed") and not calls
-    est = loc.fix(f[0], f[1], np.zeros(9))
-    assert est.ok and np.linalg.norm(est.position_m - far) < est.protection_level_m and calls

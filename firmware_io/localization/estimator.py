@@ -302,8 +302,7 @@ class Localizer:
         return self.kalman.predict(time_s)
 
     # -- the estimate ------------------------------------------------------------------------
-    def locate(self, top, bottom, currents=None, *, time_s: float | None = None,
-               search: bool = True) -> Estimate:
+    def locate(self, top, bottom, currents=None, *, time_s: float | None = None) -> Estimate:
         """Estimate the magnet's position from one frame.
 
         Parameters
@@ -311,9 +310,6 @@ class Localizer:
         top, bottom : array-like, shape (n, 3), T; NaN marks a missing or saturated sensor
         currents : array-like, shape (n_coils,), A -- commanded currents ('model'; optional else)
         time_s : float, frame time for 'kalman' (default: one ``frame_period_s`` per call)
-        search : bool -- False: no global search (bounded cost: a warm fit only); without a warm
-            start or with a suspicious warm fit: not ok, the reason ending "re-acquisition
-            needed" (a later call with search=True, e.g. outside the control step, re-acquires)
         """
         n = self.model.n_sensors
         top = check_frame("top", top, n)
@@ -338,7 +334,7 @@ class Localizer:
         if method == "learned":
             est = self._learned(meas)
         else:
-            est = self._fit(meas, i if method == "model" else None, method, search)
+            est = self._fit(meas, i if method == "model" else None, method)
         if self.kalman is not None:
             t = time_s if time_s is not None else (
                 (self.kalman.t + self.frame_period_s) if self.kalman.t is not None else 0.0)
@@ -346,14 +342,13 @@ class Localizer:
             est = dataclasses.replace(est, position_m=pos, method="kalman", velocity_m_s=vel)
         return est
 
-    def fix(self, top, bottom, currents=None, *, time_s: float | None = None,
-            search: bool = True) -> Estimate:
+    def fix(self, top, bottom, currents=None, *, time_s: float | None = None) -> Estimate:
         """:meth:`locate` for the control step: never raises on a bad frame (wrong shape,
         non-finite or out-of-range values, missing or non-finite currents) -- that frame's
         estimate is not ok, its ``reason`` the check's message, its position the last ok one
-        (or the box's centre) -- and the next frame starts cold. ``search``: as in locate."""
+        (or the box's centre) -- and the next frame starts cold."""
         try:
-            return self.locate(top, bottom, currents, time_s=time_s, search=search)
+            return self.locate(top, bottom, currents, time_s=time_s)
         except BadInputError as exc:
             p = self._last if self._last is not None else self._box_centre()
             self._last = None
@@ -503,7 +498,7 @@ class Localizer:
             b = b + extra
         return (self._sub_op_all @ b.reshape(-1)).reshape(-1, 3)
 
-    def _fit(self, meas, currents, method, search=True) -> Estimate:
+    def _fit(self, meas, currents, method) -> Estimate:
         subtract = currents is None
         d, use, sig = self._data(meas, np.asarray(currents) if currents is not None else None)
         n_used = int(use.sum())
@@ -572,14 +567,9 @@ class Localizer:
             check = self._integrity(best, n_used)
             if not check[0] or _dist(best[0], start) > self.reacquire_m:
                 # suspicious (failed, or moved far from the warm start): the global search
-                other = cold() if search else None
-                if other is None:
-                    check = (False, f"{check[1] or 'moved far'}: re-acquisition needed", *check[2:])
-                elif other[0][1] < best[1]:
+                other = cold()
+                if other[0][1] < best[1]:
                     best, check = other
-        elif not search:
-            return Estimate(self._box_centre(), 0.0, False, n_used, 0, method,
-                            reason="no warm start: re-acquisition needed")
         else:
             best, check = cold()
         p, cost, iters = best[:3]
