@@ -4,13 +4,12 @@ Per control period T (s): scheduled faults are injected, the sensor source ticks
 runner's timed section, as the sensor thread runs beside the loop on hardware), the runner
 steps, the true force on the magnet (N) is taken at the true position with the true coil
 currents (A), and the coils advance one R-L step under the voltages the PWM registers hold.
-The runner's compute time is this thread's CPU time less the time spent inside the simulated
-PWM boards (the plant's work, not the runner's). Output: :class:`SimulationResult`.
+The runner's compute time is this thread's CPU time less the CPU time spent inside the
+simulated PWM boards (the plant's work, not the runner's). Output: :class:`SimulationResult`.
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -180,12 +179,9 @@ def simulate(device: SimulatedDevice, runner_factory, trajectory: Trajectory, *,
     source = device.sensor_source(position_at, period_s)
 
     # compute time = this thread's CPU time (the plant shares the host with the runner; other
-    # processes would otherwise show up as overruns) less the time spent inside the simulated
-    # PWM boards (the plant's, not the runner's)
-    def clock() -> float:
-        return time.thread_time() - device.coil_bus.model_time_s
-
-    runner = runner_factory(source, clock, injector.allocate_hook)
+    # processes would otherwise show up as overruns) less the CPU time spent inside the
+    # simulated PWM boards (the plant's, not the runner's)
+    runner = runner_factory(source, device.coil_bus.cpu_outside_s, injector.allocate_hook)
     rec_all = _Recorder(n_steps, device.array.n_coils)
     bar = tqdm(total=n_steps, desc="simulate", unit="step", disable=not progress,
                mininterval=0.5)
