@@ -46,6 +46,19 @@ def force_map_data(design: "Design", currents: Sequence[float] | None = None, *,
     return cloud
 
 
+DEVICE_DEPTH_M = 0.02
+"""How far below the coil tops the force map draws the device, m."""
+
+
+def _top_of(blocks, z_min_m: float):
+    """The device's solids above z_min_m (m), cut flat there; other blocks unchanged."""
+    out = blocks.copy()
+    for key in ("windings", "cores"):
+        if key in out.keys() and out[key].n_points:
+            out[key] = out[key].clip(normal="z", origin=(0.0, 0.0, z_min_m), invert=False)
+    return out
+
+
 def plot_force_map(design: "Design", currents: Sequence[float] | None = None, *,
                    moment=None, height_m: float | None = None, quality: Quality = "full",
                    window_size=(1024, 768), data=None, blocks=None) -> "pyvista.Plotter":
@@ -58,8 +71,10 @@ def plot_force_map(design: "Design", currents: Sequence[float] | None = None, *,
              if data is None else data)
     blocks = scene_meshes(design, cur) if blocks is None else blocks
     p = _plotter(pv, window_size)
-    # see-through coils: opaque ones hide the arrows behind them in the oblique view
-    _add_device(p, design, blocks, opacity=0.25, magnet=False, workspace=True)
+    # see-through coils, cut DEVICE_DEPTH_M below their tops: the arrows are the subject, and the
+    # whole length of the coils would shrink the workspace to a third of the picture
+    _add_device(p, design, _top_of(blocks, -DEVICE_DEPTH_M), opacity=0.25, magnet=False,
+                workspace=True)
     f = np.asarray(cloud[F_N])
     fmag = np.linalg.norm(f, axis=1)
     fmax = float(fmag.max()) if fmag.size else 0.0

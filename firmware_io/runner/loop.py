@@ -378,7 +378,7 @@ class Runner:
                 or (cfg.unipolar and np.any(command < -1e-9)):
             self._enter_fault(t_s, "over_limit",
                               f"command max |I| {np.abs(command).max():.3f} A, sum {total:.3f} A "
-                              f"(limits {cfg.current_limit_a} A, {cfg.total_current_a} A)")
+                              f"(limits {cfg.current_limit_a:.3f} A, {cfg.total_current_a:.3f} A)")
             return self._record(t_s, t0, p, f_ref, new_frame, off=True)
         return self._drive(t_s, t0, p, f_ref, command, new_frame)
 
