@@ -9,7 +9,9 @@ here by hand in mm for the shipped designs; agreement between the commands on ra
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -281,3 +283,19 @@ def test_every_device_row_names_design_keys_that_move_it():
                     continue
             assert (moved["value"], moved["limit"]) != pytest.approx(
                 (row["value"], row["limit"]), rel=1e-9), (name, key)
+
+
+def test_active_constraints_print_a_zero_margin_not_round_off(tmp_path, capsys):
+    """The optimum sits on several constraints (core fits the bore, protrusion, turns): their
+    margins are 0 up to round-off, and `optimize` and `check` print 0, never +1e-16."""
+    assert main(["optimize", "--out", str(tmp_path / "opt"), "--no-progress"]) == 0
+    assert main(["check", "--design", str(tmp_path / "opt" / "design.toml")]) == 0
+    out = capsys.readouterr().out
+    data = json.loads((tmp_path / "opt" / "optimize.json").read_text())
+    active = [n for n, c in data["constraints"].items()
+              if 0 < abs(c["margin"]) < 1e-9 * abs(c["limit"])]
+    assert active, "the optimum has no constraint active to round-off: the test sees nothing"
+    for n in active:
+        line = next(x for x in out.splitlines() if x.strip().startswith(n))
+        assert "margin +0 " in line or " 0 mm " in line, line
+    assert not re.search(r"margin [+-]\d(\.\d+)?e-1\d", out)

@@ -182,3 +182,15 @@ def check_current_limit(design, currents, *, allow: bool, param: str = "--curren
                                    f"(drive.total_current_a)",
                             ",".join(f"{x:g}" for x in currents),
                             "Pass --allow-over-limit to go above the design's budget.")
+
+
+ROUND_OFF = 1e-9
+"""A constraint margin smaller than this fraction of its limit (or value) is round-off: an active
+constraint met exactly, printed as 0."""
+
+
+def shown_margin(constraint: dict) -> float:
+    """A rule's margin (its own unit) with round-off of an active constraint set to 0."""
+    m = float(constraint["margin"])
+    scale = max(abs(float(constraint["limit"])), abs(float(constraint["value"])))
+    return 0.0 if abs(m) <= ROUND_OFF * scale else m

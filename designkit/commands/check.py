@@ -13,7 +13,7 @@ import argparse
 
 from ..design import load_design
 from ..optimize import rule_table
-from ._common import add_design_argument, add_progress_argument
+from ._common import add_design_argument, add_progress_argument, shown_margin
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -34,7 +34,7 @@ def table_text(name: str, table: dict) -> str:
     for rule, r in table.items():
         sign = "<=" if r["kind"] == "upper" else ">="
         rows.append((rule, r.get("group", "device"), _number(r["value"], r["unit"]),
-                     f"{sign} {_number(r['limit'], r['unit'])}", _number(r["margin"], r["unit"]),
+                     f"{sign} {_number(r['limit'], r['unit'])}", _number(shown_margin(r), r["unit"]),
                      "ok" if r["met"] else "VIOLATED", ", ".join(r.get("keys", [])) or "-"))
     widths = [max(len(row[k]) for row in rows) for k in range(6)]
     lines = [f"design '{name}': {len(table)} rules (margin >= 0 is met)"]

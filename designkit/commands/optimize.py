@@ -21,7 +21,8 @@ from ..errors import BadInputError
 from ..optimize import (CORE_MODEL_NAMES, GLOBAL_METHODS, CoilDesignProblem, device_design,
                         device_problem_for, evaluate_device, getdp_check, solve, solve_device,
                         verify_device)
-from ._common import add_design_argument, add_progress_argument, check_output, show_progress
+from ._common import (add_design_argument, add_progress_argument, check_output, show_progress,
+                      shown_margin)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -142,7 +143,7 @@ def device_summary(data: dict) -> str:
     lines.append("constraints (margin >= 0 is met):")
     for name, c in data["constraints"].items():
         lines.append(f"  {name:<28} value {c['value']:.5g}  limit {c['limit']:.5g}  "
-                     f"margin {c['margin']:+.4g}  {'ok' if c['met'] else 'VIOLATED'}  ({c['note']})")
+                     f"margin {shown_margin(c):+.4g}  {'ok' if c['met'] else 'VIOLATED'}  ({c['note']})")
     lines.append(f"core model: {data['core_model']}; {data['fast_evaluations']} fast + "
                  f"{data['panel_evaluations']} panel evaluations in {data['seconds']:.2f} s")
     chk = data.get("fast_model_check")

@@ -40,7 +40,7 @@ from ..design import Design, default_design, design_to_toml, load_design, named_
 from ..optimize import device_problem_for, evaluate_device, rendering_force
 from ..sensor_headroom import sensor_headroom
 from ._common import (add_currents_arguments, add_design_argument, add_progress_argument, check_current_limit,
-                      check_output, parse_currents, show_progress, staged_folder)
+                      check_output, parse_currents, show_progress, shown_margin, staged_folder)
 
 MAP_SPACING_M = {"quick": 0.025, "full": 0.01}
 """Step of the report map's grid of magnet positions (bias force), m: coarse, quick."""
@@ -276,7 +276,7 @@ def designs_markdown(designs: dict) -> list[str]:
                 continue
             flag = "ok" if c["met"] else "**VIOLATED**"
             cells.append(f"{c['value']:.4g} vs {c['kind']} limit {c['limit']:.4g} {c['unit']}"
-                         f", margin {c['margin']:+.3g}: {flag}")
+                         f", margin {shown_margin(c):+.3g}: {flag}")
         note = ents[-1]["constraints"].get(n, ents[0]["constraints"].get(n, {})).get("note", "")
         lines.append(f"| {n} ({note}) | " + " | ".join(cells) + " |")
     for e in ents:
