@@ -34,13 +34,12 @@ from pathlib import Path
 
 if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np
 from scipy.optimize import Bounds, LinearConstraint, minimize
 
-from alloc_reference import kkt_violation, slsqp_reference
-from bench_allocation import wrenches  # (n_pos, 6, 9) force and torque per ampere, the design's A(p)
+from studies.alloc_reference import kkt_violation, slsqp_reference
+from studies.bench_allocation import wrenches  # (n_pos, 6, 9) force and torque per ampere, the design's A(p)
 from designkit._blas import one_blas_thread
 from designkit._io import write_json_atomic
 from designkit._progress import tqdm

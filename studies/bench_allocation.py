@@ -30,12 +30,11 @@ from pathlib import Path
 
 if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np
 from scipy.optimize import lsq_linear
 
-from alloc_reference import kkt_violation, slsqp_reference
+from studies.alloc_reference import kkt_violation, slsqp_reference
 from designkit import default_design
 from designkit._io import write_json_atomic
 from designkit._progress import tqdm

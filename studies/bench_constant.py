@@ -26,11 +26,10 @@ from pathlib import Path
 
 if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np
 
-from _common import design_and_map, finish, load_average
+from studies._common import design_and_map, finish, load_average
 from designkit import fieldmap
 from designkit.render import Hemisphere, Plane, force_constant
 from designkit.render.constant import _faces_lambdas, _secant_lambdas, force_matrices

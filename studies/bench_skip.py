@@ -22,12 +22,11 @@ from pathlib import Path
 
 if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np
 
-from _common import design_and_map, finish, load_average
-from bench_constant import matmul_seconds
+from studies._common import design_and_map, finish, load_average
+from studies.bench_constant import matmul_seconds
 from designkit.render import Hemisphere
 from firmware_io.allocation import Allocator
 from firmware_io.mapfile import MapFile

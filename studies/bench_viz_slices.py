@@ -23,12 +23,11 @@ from pathlib import Path
 
 if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np
 
-from _common import finish, load_average
-from bench_constant import matmul_seconds
+from studies._common import finish, load_average
+from studies.bench_constant import matmul_seconds
 from designkit import default_design
 from designkit.array import array_for_design
 from designkit.viz.common import _RES
