@@ -108,6 +108,20 @@ def _block_by_symmetry(cache: dict, mi: CoreModel, mj: CoreModel, rel: tuple):
     return None
 
 
+def _column_by_symmetry(cache: dict, key: tuple, model: CoreModel):
+    """The projected field (n_unknowns,) of an axisymmetric upright winding on an upright
+    core at relative placement ``key[2]`` (a :func:`_rel_key`) from a cached column at its
+    image under the square's symmetries, or None: column(g d) = T(g) column(d)
+    (:func:`mode_transform`; the rings' azimuths are symmetric under the group)."""
+    rel = key[2]
+    d = np.array(rel[:3])
+    for g in _D4:
+        src = key[:2] + (tuple(np.round(np.r_[g.T @ d[:2], d[2]], 9)) + rel[3:],)
+        if src in cache:
+            return _turn(cache[src][:, None], model, g)[:, 0]
+    return None
+
+
 def _turn(b: np.ndarray, model: CoreModel, g: np.ndarray) -> np.ndarray:
     """T(g) @ b for T = :func:`mode_transform` (model, g), without forming T: each mode
     order's (cos, sin) row blocks mixed by its 2 x 2 rotation."""
@@ -256,24 +270,36 @@ class ArraySystem:
     def coil_solution(self) -> np.ndarray:
         """Unknowns of all cores per ampere in each coil, (n_unknowns, n_coils) (cached)."""
         if self._coil_solution is None:
-            coils = self.array.coils
+            self._coil_solution = self.solve(self.factors[:, None] * self.coil_columns())
+        return self._coil_solution
 
-            rhs = np.zeros((self.n_unknowns, len(coils)))
-            cache = {}
-            for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
-                ring = mj.ring_points(N_PHI_RING)
-                glob = ring.reshape(-1, 3) @ pj.matrix.T + np.asarray(pj.position)
-                for k, c in enumerate(coils):
-                    # identical windings at the same relative placement: one evaluation
-                    key = (dataclasses.replace(c, core=None, pose=Pose()), id(mj),
-                           _rel_key(c.pose, pj))
-                    if key not in cache:
+    def coil_columns(self) -> np.ndarray:
+        """Projection of each coil's winding field per ampere onto every core's modes,
+        (n_unknowns, n_coils) A/m per A (the right-hand side of :meth:`coil_solution` without
+        the row factors)."""
+        coils = self.array.coils
+        rhs = np.zeros((self.n_unknowns, len(coils)))
+        cache = {}
+        upright = all(p.is_identity_rotation for p in self.poses)
+        for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
+            ring = mj.ring_points(N_PHI_RING)
+            glob = ring.reshape(-1, 3) @ pj.matrix.T + np.asarray(pj.position)
+            for k, c in enumerate(coils):
+                # identical windings at the same relative placement: one evaluation; upright
+                # ones at a placement turned by the square's symmetries: its image (an
+                # axisymmetric winding's field turns with the placement)
+                key = (dataclasses.replace(c, core=None, pose=Pose()), id(mj),
+                       _rel_key(c.pose, pj))
+                if key not in cache:
+                    col = (_column_by_symmetry(cache, key, mj)
+                           if upright and c.pose.is_identity_rotation else None)
+                    if col is None:
                         h = c.field(glob, 1.0, include="winding", rtol=1e-9) / MU0
                         h = h @ pj.matrix  # to local j
-                        cache[key] = mj.project(h.reshape(ring.shape[:2] + (3,)))
-                    rhs[self.offsets[jj]:self.offsets[jj + 1], k] = cache[key]
-            self._coil_solution = self.solve(self.factors[:, None] * rhs)
-        return self._coil_solution
+                        col = mj.project(h.reshape(ring.shape[:2] + (3,)))
+                    cache[key] = col
+                rhs[self.offsets[jj]:self.offsets[jj + 1], k] = cache[key]
+        return rhs
 
     # ------------------------------------------------------------------ evaluation
     def core_field(self, points: np.ndarray, x: np.ndarray, gradient: bool = False, *,
