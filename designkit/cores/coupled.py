@@ -158,37 +158,73 @@ class ArraySystem:
         self.offsets = np.r_[0, np.cumsum(sizes)].astype(int)
         n = int(self.offsets[-1])
         self.factors = np.concatenate([m.factors() for m in self.models]) if n else np.zeros(0)
-        mat = np.zeros((n, n))
-        cache = {}
-        with one_blas_thread():
-            self._assemble(mat, cache)
-        self.n_blocks = len(cache)
         self.n_unknowns = n
-        # identical upright cores on a symmetric lattice: one LU per isotypic component
-        self._sym = SymmetricLU.build(mat, self, _D4, mode_rotation) if n else None
         self._lu = None
+        # identical upright cores on a symmetric lattice: one LU per isotypic component, each
+        # block summed from the distinct placements' cross blocks (M itself is never formed)
+        self._sym = self._split_by_symmetry() if n else None
         if n and self._sym is None:
+            mat = np.zeros((n, n))
+            cache = {}
+            with one_blas_thread():
+                self._assemble(mat, cache)
+            self.n_blocks = len(cache)
             with one_blas_thread() if n <= 2000 else nullcontext():  # as in :meth:`solve`
                 self._lu = lu_factor(mat)
         self._coil_solution = None
 
+    def _split_by_symmetry(self):
+        """:meth:`SymmetricLU.from_orbits` of the system: one cross block per orbit of the
+        relative placements under the square's symmetries, or None (cores not identical and
+        upright, no symmetry, or the split fails its check)."""
+        model = self.models[0]
+        if SymmetricLU.layout(self, _D4, mode_rotation, self.n_unknowns) is None:
+            return None
+        reps, pairs = {}, []
+        with one_blas_thread():
+            for jj, pj in enumerate(self.poses):
+                for ii, pi in enumerate(self.poses):
+                    if ii == jj:
+                        continue
+                    d = np.array(_rel_key(pi, pj)[:3])
+                    for k, g in enumerate([np.eye(2)] + _D4):  # d = g d0, d0 a known placement
+                        key = tuple(np.round(np.r_[g.T @ d[:2], d[2]], 9))
+                        if key in reps:
+                            break
+                    else:
+                        k, key = 0, tuple(np.round(d, 9))
+                        reps[key] = self._coupling_block(model, pi, model, pj)
+                    pairs.append((jj, ii, key, k))
+        self.n_blocks = len({tuple(np.round(_rel_key(self.poses[i], self.poses[j])[:3], 9))
+                             for j, i, _, _ in pairs})
+        return SymmetricLU.from_orbits(self, _D4, mode_rotation, model.self_block(), reps,
+                                       pairs)
+
     def _assemble(self, mat, cache):
+        """Fill the dense system ``mat`` (n, n): self blocks and :meth:`_coupling_block` s,
+        one per distinct relative placement in ``cache`` (upright cores: from an image under
+        the square's symmetries where one is known, :func:`_block_by_symmetry`)."""
         upright = all(p.is_identity_rotation for p in self.poses)
         selfs = {}
         for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
             sj = slice(self.offsets[jj], self.offsets[jj + 1])
-            if id(mj) not in selfs:  # one self block and row factor per core type
-                selfs[id(mj)] = (mj.self_block(), -mj.factors()[:, None])
-            mat[sj, sj], neg_f = selfs[id(mj)]
+            if id(mj) not in selfs:  # one self block per core type
+                selfs[id(mj)] = mj.self_block()
+            mat[sj, sj] = selfs[id(mj)]
             for ii, (mi, pi) in enumerate(zip(self.models, self.poses)):
                 if ii == jj:
                     continue
                 key = (id(mi), id(mj), _rel_key(pi, pj))
                 if key not in cache:
                     block = _block_by_symmetry(cache, mi, mj, key[2]) if upright else None
-                    cache[key] = self._cross_block(mi, pi, mj, pj) if block is None else block
-                si = slice(self.offsets[ii], self.offsets[ii + 1])
-                np.multiply(neg_f, cache[key], out=mat[sj, si])
+                    cache[key] = (self._coupling_block(mi, pi, mj, pj) if block is None
+                                  else block)
+                mat[sj, self.offsets[ii]:self.offsets[ii + 1]] = cache[key]
+
+    def _coupling_block(self, mi, pi, mj, pj):
+        """M's block of rows core j, columns core i: -F_j times :meth:`_cross_block` (the
+        row factors F commute with the symmetries' mode turns)."""
+        return np.multiply(-mj.factors()[:, None], self._cross_block(mi, pi, mj, pj))
 
     # ------------------------------------------------------------------ assembly
     @staticmethod
