@@ -17,12 +17,9 @@ beside it. References run in the same process: ``ref_call_us``, one 8 x 9 @ 9 nu
 copy of a (1e4, 72) float64 array (the memory traffic of writing A for 1e4 points), and
 ``direct_per_point_ms``, the coupled model itself (what the map replaces).
 
-``--scene``: the full map against the scene map of the thesis hemisphere (``designkit map
---scene``: its region plus 5 mm) -- build time (wall and CPU), file size, and the errors of
-both against the coupled model at the same points inside the scene's region -- next to the
-time of a 2000 x 2000 float64 matmul in the same process (to scale to another machine), and the
-build's CPU split into the stages that do not depend on the box and the rest (whose scene /
-full ratio is the floor of the time ratio) with the fit nodes of both.
+``--scene``: full map vs the thesis hemisphere's scene map: build wall and CPU, size, errors of
+both at the same points in the region, the same process's 2000 x 2000 matmul, and the CPU of
+the box-independent stages vs the rest (whose ratio is the time ratio's floor), fit nodes.
 
     python studies/bench_map.py [OUT_DIR] [N_POINTS] [--scene]  (default out/bench_map, 10000)
 """
