@@ -281,3 +281,21 @@ def test_split_lu_of_the_square_array_pairs_the_two_dimensional_blocks():
     np.testing.assert_allclose(mat @ system.solve(r), r, atol=1e-10 * np.abs(r).max())
     np.testing.assert_allclose(mat.T @ system.solve(r, transpose=True), r,
                                atol=1e-10 * np.abs(r).max())
+
+
+def test_split_of_a_rectangular_array_solves_the_assembled_system():
+    # 2 x 3 cores on unequal pitches (group D2: the two reflections and the half turn): the
+    # blocks summed from the distinct placements' coupling blocks, without M, against M
+    # assembled block by block (a wrong coefficient, turn or placement fails by O(1))
+    coil = CoilArray.from_design(default_design()).coils[0]
+    arr = CoilArray(tuple(coil.replace(pose=Pose(position=(x, y, -0.05)))
+                          for x in (-0.05, 0.0, 0.05) for y in (-0.021, 0.021)))
+    system = arr.coupled()
+    assert system._sym is not None and system._lu is None
+    n = system.n_unknowns
+    mat = np.zeros((n, n))
+    system._assemble(mat, {})
+    r = np.random.default_rng(6).standard_normal((n, 2))
+    np.testing.assert_allclose(mat @ system.solve(r), r, atol=1e-10 * np.abs(r).max())
+    np.testing.assert_allclose(mat.T @ system.solve(r, transpose=True), r,
+                               atol=1e-10 * np.abs(r).max())
