@@ -11,8 +11,10 @@ Q^T M Q is block-diagonal, so one LU per component replaces the LU of M: for the
 U acts alike on every panel of a mode order m, so the components are found once per m on the
 small space of (core, cos / sin): they are the eigenspaces of a random class-weighted sum of
 the group's matrices (a central element of the group algebra, a different scalar on each
-component; the same scalar for the same irreducible type at every m). Reference: J.-P. Serre,
-Linear Representations of Finite Groups, section 2.6 (the canonical decomposition).
+component; the same scalar for the same irreducible type at every m). Each block Q_s^T M Q_s
+is summed from the coupling blocks of the few distinct core placements (M is never formed).
+Reference: J.-P. Serre, Linear Representations of Finite Groups, section 2.6 (the canonical
+decomposition).
 """
 
 from __future__ import annotations
@@ -126,37 +128,6 @@ class SymmetricLU:
                 if sgn < 0 and quarter is not None and lam not in unpaired
                 and (lam, 1.0) in names}
         return parts, sels, twin
-
-    @classmethod
-    def build(cls, mat: np.ndarray, system, d4, rotation_of) -> "SymmetricLU | None":
-        """The split factorization of the assembled ``mat`` for ``system``, or None (see
-        :meth:`layout`)."""
-        lay = cls.layout(system, d4, rotation_of, mat.shape[0])
-        if lay is None:
-            return None
-        parts, sels, twin = lay
-        res = cls(parts, [], mat.shape[0])
-        # the blocks are a fraction of the whole: on a busy machine BLAS threads would spin
-        # longer than they compute
-        with one_blas_thread():
-            own = [np.unique(np.concatenate([sel[i] for b, sel in enumerate(sels)
-                                             if b not in twin])) for i in range(len(parts))]
-            at = [np.full(len(v), -1) for _, v in parts]
-            for a, o in zip(at, own):
-                a[o] = np.arange(len(o))
-            left = [(v[:, o].T @ mat[r].reshape(len(v), -1)).reshape(len(o), -1, mat.shape[1])
-                    for (r, v), o in zip(parts, own)]  # Q^T M per part, (r_m, n_p, n)
-            lus = {}
-            for b, sel in enumerate(sels):
-                if b in twin:
-                    continue
-                ls = np.concatenate([y[a[s]].reshape(-1, mat.shape[1])
-                                     for y, a, s in zip(left, at, sel)])
-                blk = np.concatenate([_right(ls, r, v[:, s]) for (r, v), s in zip(parts, sel)],
-                                     axis=1)  # Q_s^T M Q_s
-                lus[b] = lu_factor(blk, overwrite_a=True)
-            res.blocks = [(sel, lus[twin.get(b, b)]) for b, sel in enumerate(sels)]
-        return res if res.solves(lambda x: mat @ x) else None
 
     @classmethod
     def from_orbits(cls, system, d4, rotation_of, self_block: np.ndarray, reps: dict,
@@ -289,12 +260,6 @@ def _adapted_basis(z: np.ndarray, mirror, quarter=None) -> tuple[np.ndarray, lis
         cols += [plus, minus]
         keys += [(float(value), 1.0)] * plus.shape[1] + [(float(value), -1.0)] * minus.shape[1]
     return np.concatenate(cols, axis=1), keys, bad
-
-
-def _right(ls: np.ndarray, rows: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """(L Q)_part: the columns ``rows`` (r n_p,) of ``ls`` (n_s, n) times V (r, k) (x) I."""
-    a = ls[:, rows].reshape(len(ls), v.shape[0], -1)  # (n_s, r, n_p)
-    return np.einsum("srp,rk->skp", a, v, optimize=True).reshape(len(ls), -1)
 
 
 def _rows(system, model, m: int) -> np.ndarray:
