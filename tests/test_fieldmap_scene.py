@@ -127,6 +127,25 @@ def test_cross_blocks_from_their_images_equal_the_computed_blocks():
         assert np.abs(got - want).max() < 1e-12 * np.abs(want).max()
 
 
+def test_coil_columns_from_their_images_equal_the_computed_columns():
+    # the projected winding field of each coil on each core: the columns the coupled solve
+    # takes from an image under the square's symmetries against every column computed
+    # directly (a wrong turn, or a ring not symmetric under the group, moves them by O(1))
+    arr = CoilArray.from_design(default_design())
+    system = arr.coupled()
+    rhs = system.factors[:, None] * system.coil_columns()
+    want = np.zeros_like(rhs)
+    for jj, (mj, pj) in enumerate(zip(system.models, system.poses)):
+        ring = mj.ring_points(cp.N_PHI_RING)
+        glob = ring.reshape(-1, 3) @ pj.matrix.T + np.asarray(pj.position)
+        for k, c in enumerate(arr.coils):
+            h = c.field(glob, 1.0, include="winding", rtol=1e-9) / cp.MU0 @ pj.matrix
+            want[system.offsets[jj]:system.offsets[jj + 1], k] = \
+                system.factors[system.offsets[jj]:system.offsets[jj + 1]] * \
+                mj.project(h.reshape(ring.shape[:2] + (3,)))
+    assert np.abs(rhs - want).max() < 1e-12 * np.abs(want).max()
+
+
 def test_mode_transform_is_an_orthogonal_representation_and_turn_applies_it():
     model = cp._core_model_of(CoilArray.from_design(default_design()).coils[0], cp.M_MAX)
     els = [np.eye(2)] + cp._D4
@@ -259,6 +278,24 @@ def test_split_lu_of_the_square_array_pairs_the_two_dimensional_blocks():
     mat = np.zeros((n, n))
     system._assemble(mat, {})
     r = np.random.default_rng(5).standard_normal((n, 3))
+    np.testing.assert_allclose(mat @ system.solve(r), r, atol=1e-10 * np.abs(r).max())
+    np.testing.assert_allclose(mat.T @ system.solve(r, transpose=True), r,
+                               atol=1e-10 * np.abs(r).max())
+
+
+def test_split_of_a_rectangular_array_solves_the_assembled_system():
+    # 2 x 3 cores on unequal pitches (group D2: the two reflections and the half turn): the
+    # blocks summed from the distinct placements' coupling blocks, without M, against M
+    # assembled block by block (a wrong coefficient, turn or placement fails by O(1))
+    coil = CoilArray.from_design(default_design()).coils[0]
+    arr = CoilArray(tuple(coil.replace(pose=Pose(position=(x, y, -0.05)))
+                          for x in (-0.05, 0.0, 0.05) for y in (-0.021, 0.021)))
+    system = arr.coupled()
+    assert system._sym is not None and system._lu is None
+    n = system.n_unknowns
+    mat = np.zeros((n, n))
+    system._assemble(mat, {})
+    r = np.random.default_rng(6).standard_normal((n, 2))
     np.testing.assert_allclose(mat @ system.solve(r), r, atol=1e-10 * np.abs(r).max())
     np.testing.assert_allclose(mat.T @ system.solve(r, transpose=True), r,
                                atol=1e-10 * np.abs(r).max())

@@ -101,54 +101,49 @@ def self_charge_matrices(radius, z_lo, z_hi, kind, lo, hi, rho_c, z_c, m_max):
     phi' = 0 (the integrand is weakly singular there on the panel itself). Integrands are even
     in phi' for the cos modes, so [0, pi] is doubled. The principal value on a panel's own
     surface is what the on-surface integral gives (the +-sigma/2 jump is added by the equation).
+    Every source panel of a kind at once: (source, collocation, phi') arrays.
     """
     n1 = len(kind)
     ph, wph = _phi_nodes_graded()
     cph, sph = np.cos(ph), np.sin(ph)
-    nrm = np.where(kind[:, None] == 0, [[1.0, 0.0, 0.0]], np.where(kind[:, None] == 1,
-                                                                   [[0, 0, 1.0]], [[0, 0, -1.0]]))
-    out = np.zeros((m_max, n1, n1))
+    # the collocation points sit at phi = 0: normal (1, 0, 0) on the side, (0, 0, +-1) on the
+    # faces, so H_n = n_x H_x + n_z H_z
+    nx = (kind == 0).astype(float)[None, :, None]
+    nz = np.where(kind == 1, 1.0, np.where(kind == 2, -1.0, 0.0))[None, :, None]
     mw = np.array([np.cos(m * ph) for m in range(1, m_max + 1)]) * wph[None] * 2.0
+    hn = np.zeros((n1, n1, len(ph)))  # (source j, collocation i, phi')
+    side = np.flatnonzero(kind == 0)
+    if len(side):
+        # line charges at (R cos phi', R sin phi') from z = lo to hi, unit density per area:
+        # lambda = R dphi'
+        dx = rho_c[:, None] - radius * cph[None]  # (n1, nph)
+        dy = -radius * sph[None]
+        b2 = dx * dx + dy * dy
+        ua = (z_c[None, :] - lo[side, None])[..., None]  # (ns, n1, 1)
+        ub = (z_c[None, :] - hi[side, None])[..., None]
+        sa, sb = np.sqrt(b2 + ua * ua), np.sqrt(b2 + ub * ub)
+        # (1/b^2) [u/sqrt(b^2+u^2)]_b^a, without 0/0 where b = 0
+        with np.errstate(invalid="ignore", divide="ignore"):
+            brk = (ua / sa - ub / sb) / b2
+        brk = np.where(b2 > 0, brk, 0.0)
+        c = radius / (4 * math.pi)
+        hn[side] = c * brk * dx * nx + c * (1.0 / sb - 1.0 / sa) * nz
     xg, wg = gauss(8)
-    for j in range(n1):
-        if kind[j] == 0:
-            # line charges at (R cos phi', R sin phi') from z = lo to hi, unit density per area:
-            # lambda = R dphi'
-            dx = rho_c[:, None] - radius * cph[None]  # (n1, nph)
-            dy = -radius * sph[None] * np.ones((n1, 1))
-            b2 = dx * dx + dy * dy
-            ua = (z_c - lo[j])[:, None]
-            ub = (z_c - hi[j])[:, None]
-            sa, sb = np.sqrt(b2 + ua * ua), np.sqrt(b2 + ub * ub)
-            # (1/b^2) [u/sqrt(b^2+u^2)] written without 0/0: u / (b^2 sqrt(b^2+u^2)) ... use
-            # the identity ua/sa - ub/sb = (ua sb - ub sa) / (sa sb)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                brk = (ua / sa - ub / sb) / b2
-            brk = np.where(b2 > 0, brk, 0.0)
-            hp = radius / (4 * math.pi) * brk  # per unit dphi'
-            hx, hy = hp * dx, hp * dy
-            hz = radius / (4 * math.pi) * (1.0 / sb - 1.0 / sa)
-        else:
-            zc = z_hi if kind[j] == 1 else z_lo
-            pieces = np.linspace(lo[j], hi[j], 5)
-            rr = np.concatenate([0.5 * (a + b) + 0.5 * (b - a) * xg for a, b in
-                                 zip(pieces[:-1], pieces[1:])])
-            wr = np.concatenate([0.5 * (b - a) * wg for a, b in zip(pieces[:-1], pieces[1:])])
-            # (n1, nr, nph)
-            dx = rho_c[:, None, None] - rr[None, :, None] * cph[None, None]
-            dy = -rr[None, :, None] * sph[None, None] * np.ones((n1, 1, 1))
-            dz = (z_c - zc)[:, None, None] * np.ones((1, len(rr), 1))
-            r3 = (dx * dx + dy * dy + dz * dz) ** -1.5 / (4 * math.pi)
-            ww = (wr * rr)[None, :, None]
-            hx = (dx * r3 * ww).sum(axis=1)
-            hy = (dy * r3 * ww).sum(axis=1)
-            hz = (dz * r3 * ww).sum(axis=1)
-        hn = hx * nrm[:, 0:1] + hy * nrm[:, 1:2] + hz * nrm[:, 2:3]  # (n1, nph)
-        if kind[j] != 0:
-            same = kind == kind[j]
-            hn[same] = 0.0  # a flat face's charges have no normal field in its own plane
-        out[:, :, j] = (hn @ mw.T).T
-    return out
+    for j in np.flatnonzero(kind != 0):
+        zc = z_hi if kind[j] == 1 else z_lo
+        pieces = np.linspace(lo[j], hi[j], 5)
+        rr = np.concatenate([0.5 * (a + b) + 0.5 * (b - a) * xg for a, b in
+                             zip(pieces[:-1], pieces[1:])])
+        wr = np.concatenate([0.5 * (b - a) * wg for a, b in zip(pieces[:-1], pieces[1:])])
+        # (n1, nr, nph)
+        dx = rho_c[:, None, None] - rr[None, :, None] * cph[None, None]
+        dy = rr[:, None] * sph[None]  # (nr, nph): only its square enters
+        dz = (z_c - zc)[:, None, None]
+        r2 = dx * dx + dy * dy + dz * dz
+        inv = 1.0 / (4 * math.pi) / (r2 * np.sqrt(r2))
+        hn[j] = np.einsum("ikl,k->il", (dx * nx.reshape(-1, 1, 1) + dz * nz.reshape(-1, 1, 1)) * inv, wr * rr)
+        hn[j, kind == kind[j]] = 0.0  # a flat face's charges have no normal field in its plane
+    return np.einsum("jil,ml->mij", hn, mw)
 
 
 class ChargeModes:

@@ -108,6 +108,20 @@ def _block_by_symmetry(cache: dict, mi: CoreModel, mj: CoreModel, rel: tuple):
     return None
 
 
+def _column_by_symmetry(cache: dict, key: tuple, model: CoreModel):
+    """The projected field (n_unknowns,) of an axisymmetric upright winding on an upright
+    core at relative placement ``key[2]`` (a :func:`_rel_key`) from a cached column at its
+    image under the square's symmetries, or None: column(g d) = T(g) column(d)
+    (:func:`mode_transform`; the rings' azimuths are symmetric under the group)."""
+    rel = key[2]
+    d = np.array(rel[:3])
+    for g in _D4:
+        src = key[:2] + (tuple(np.round(np.r_[g.T @ d[:2], d[2]], 9)) + rel[3:],)
+        if src in cache:
+            return _turn(cache[src][:, None], model, g)[:, 0]
+    return None
+
+
 def _turn(b: np.ndarray, model: CoreModel, g: np.ndarray) -> np.ndarray:
     """T(g) @ b for T = :func:`mode_transform` (model, g), without forming T: each mode
     order's (cos, sin) row blocks mixed by its 2 x 2 rotation."""
@@ -144,37 +158,73 @@ class ArraySystem:
         self.offsets = np.r_[0, np.cumsum(sizes)].astype(int)
         n = int(self.offsets[-1])
         self.factors = np.concatenate([m.factors() for m in self.models]) if n else np.zeros(0)
-        mat = np.zeros((n, n))
-        cache = {}
-        with one_blas_thread():
-            self._assemble(mat, cache)
-        self.n_blocks = len(cache)
         self.n_unknowns = n
-        # identical upright cores on a symmetric lattice: one LU per isotypic component
-        self._sym = SymmetricLU.build(mat, self, _D4, mode_rotation) if n else None
         self._lu = None
+        # identical upright cores on a symmetric lattice: one LU per isotypic component, each
+        # block summed from the distinct placements' cross blocks (M itself is never formed)
+        self._sym = self._split_by_symmetry() if n else None
         if n and self._sym is None:
+            mat = np.zeros((n, n))
+            cache = {}
+            with one_blas_thread():
+                self._assemble(mat, cache)
+            self.n_blocks = len(cache)
             with one_blas_thread() if n <= 2000 else nullcontext():  # as in :meth:`solve`
                 self._lu = lu_factor(mat)
         self._coil_solution = None
 
+    def _split_by_symmetry(self):
+        """:meth:`SymmetricLU.from_orbits` of the system: one cross block per orbit of the
+        relative placements under the square's symmetries, or None (cores not identical and
+        upright, no symmetry, or the split fails its check)."""
+        model = self.models[0]
+        if SymmetricLU.layout(self, _D4, mode_rotation, self.n_unknowns) is None:
+            return None
+        reps, pairs = {}, []
+        with one_blas_thread():
+            for jj, pj in enumerate(self.poses):
+                for ii, pi in enumerate(self.poses):
+                    if ii == jj:
+                        continue
+                    d = np.array(_rel_key(pi, pj)[:3])
+                    for k, g in enumerate([np.eye(2)] + _D4):  # d = g d0, d0 a known placement
+                        key = tuple(np.round(np.r_[g.T @ d[:2], d[2]], 9))
+                        if key in reps:
+                            break
+                    else:
+                        k, key = 0, tuple(np.round(d, 9))
+                        reps[key] = self._coupling_block(model, pi, model, pj)
+                    pairs.append((jj, ii, key, k))
+        self.n_blocks = len({tuple(np.round(_rel_key(self.poses[i], self.poses[j])[:3], 9))
+                             for j, i, _, _ in pairs})
+        return SymmetricLU.from_orbits(self, _D4, mode_rotation, model.self_block(), reps,
+                                       pairs)
+
     def _assemble(self, mat, cache):
+        """Fill the dense system ``mat`` (n, n): self blocks and :meth:`_coupling_block` s,
+        one per distinct relative placement in ``cache`` (upright cores: from an image under
+        the square's symmetries where one is known, :func:`_block_by_symmetry`)."""
         upright = all(p.is_identity_rotation for p in self.poses)
         selfs = {}
         for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
             sj = slice(self.offsets[jj], self.offsets[jj + 1])
-            if id(mj) not in selfs:  # one self block and row factor per core type
-                selfs[id(mj)] = (mj.self_block(), -mj.factors()[:, None])
-            mat[sj, sj], neg_f = selfs[id(mj)]
+            if id(mj) not in selfs:  # one self block per core type
+                selfs[id(mj)] = mj.self_block()
+            mat[sj, sj] = selfs[id(mj)]
             for ii, (mi, pi) in enumerate(zip(self.models, self.poses)):
                 if ii == jj:
                     continue
                 key = (id(mi), id(mj), _rel_key(pi, pj))
                 if key not in cache:
                     block = _block_by_symmetry(cache, mi, mj, key[2]) if upright else None
-                    cache[key] = self._cross_block(mi, pi, mj, pj) if block is None else block
-                si = slice(self.offsets[ii], self.offsets[ii + 1])
-                np.multiply(neg_f, cache[key], out=mat[sj, si])
+                    cache[key] = (self._coupling_block(mi, pi, mj, pj) if block is None
+                                  else block)
+                mat[sj, self.offsets[ii]:self.offsets[ii + 1]] = cache[key]
+
+    def _coupling_block(self, mi, pi, mj, pj):
+        """M's block of rows core j, columns core i: -F_j times :meth:`_cross_block` (the
+        row factors F commute with the symmetries' mode turns)."""
+        return np.multiply(-mj.factors()[:, None], self._cross_block(mi, pi, mj, pj))
 
     # ------------------------------------------------------------------ assembly
     @staticmethod
@@ -256,24 +306,36 @@ class ArraySystem:
     def coil_solution(self) -> np.ndarray:
         """Unknowns of all cores per ampere in each coil, (n_unknowns, n_coils) (cached)."""
         if self._coil_solution is None:
-            coils = self.array.coils
+            self._coil_solution = self.solve(self.factors[:, None] * self.coil_columns())
+        return self._coil_solution
 
-            rhs = np.zeros((self.n_unknowns, len(coils)))
-            cache = {}
-            for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
-                ring = mj.ring_points(N_PHI_RING)
-                glob = ring.reshape(-1, 3) @ pj.matrix.T + np.asarray(pj.position)
-                for k, c in enumerate(coils):
-                    # identical windings at the same relative placement: one evaluation
-                    key = (dataclasses.replace(c, core=None, pose=Pose()), id(mj),
-                           _rel_key(c.pose, pj))
-                    if key not in cache:
+    def coil_columns(self) -> np.ndarray:
+        """Projection of each coil's winding field per ampere onto every core's modes,
+        (n_unknowns, n_coils) A/m per A (the right-hand side of :meth:`coil_solution` without
+        the row factors)."""
+        coils = self.array.coils
+        rhs = np.zeros((self.n_unknowns, len(coils)))
+        cache = {}
+        upright = all(p.is_identity_rotation for p in self.poses)
+        for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
+            ring = mj.ring_points(N_PHI_RING)
+            glob = ring.reshape(-1, 3) @ pj.matrix.T + np.asarray(pj.position)
+            for k, c in enumerate(coils):
+                # identical windings at the same relative placement: one evaluation; upright
+                # ones at a placement turned by the square's symmetries: its image (an
+                # axisymmetric winding's field turns with the placement)
+                key = (dataclasses.replace(c, core=None, pose=Pose()), id(mj),
+                       _rel_key(c.pose, pj))
+                if key not in cache:
+                    col = (_column_by_symmetry(cache, key, mj)
+                           if upright and c.pose.is_identity_rotation else None)
+                    if col is None:
                         h = c.field(glob, 1.0, include="winding", rtol=1e-9) / MU0
                         h = h @ pj.matrix  # to local j
-                        cache[key] = mj.project(h.reshape(ring.shape[:2] + (3,)))
-                    rhs[self.offsets[jj]:self.offsets[jj + 1], k] = cache[key]
-            self._coil_solution = self.solve(self.factors[:, None] * rhs)
-        return self._coil_solution
+                        col = mj.project(h.reshape(ring.shape[:2] + (3,)))
+                    cache[key] = col
+                rhs[self.offsets[jj]:self.offsets[jj + 1], k] = cache[key]
+        return rhs
 
     # ------------------------------------------------------------------ evaluation
     def core_field(self, points: np.ndarray, x: np.ndarray, gradient: bool = False, *,

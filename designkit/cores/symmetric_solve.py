@@ -11,8 +11,10 @@ Q^T M Q is block-diagonal, so one LU per component replaces the LU of M: for the
 U acts alike on every panel of a mode order m, so the components are found once per m on the
 small space of (core, cos / sin): they are the eigenspaces of a random class-weighted sum of
 the group's matrices (a central element of the group algebra, a different scalar on each
-component; the same scalar for the same irreducible type at every m). Reference: J.-P. Serre,
-Linear Representations of Finite Groups, section 2.6 (the canonical decomposition).
+component; the same scalar for the same irreducible type at every m). Each block Q_s^T M Q_s
+is summed from the coupling blocks of the few distinct core placements (M is never formed).
+Reference: J.-P. Serre, Linear Representations of Finite Groups, section 2.6 (the canonical
+decomposition).
 """
 
 from __future__ import annotations
@@ -84,12 +86,14 @@ class SymmetricLU:
         self.blocks = blocks  # [([columns of V_m in the block, per part], LU factors)]
         self.n = n
 
-    @classmethod
-    def build(cls, mat: np.ndarray, system, d4, rotation_of) -> "SymmetricLU | None":
-        """The split factorization of ``mat`` for ``system`` (an ArraySystem), or None when
-        the cores are not identical and upright or the group is trivial. ``d4``: the
-        candidate 2 x 2 matrices; ``rotation_of(m, g)``: the (2, 2) action on (cos, sin) of
-        mode order m >= 1."""
+    @staticmethod
+    def layout(system, d4, rotation_of, n: int):
+        """The split of ``system``'s n unknowns (an ArraySystem), or None when the cores are
+        not identical and upright or the group is trivial: (parts, sels, twin) -- per mode
+        order its rows and V_m, per block the columns of each V_m it takes, and the blocks
+        whose matrix is another's (``twin``: block -> that block). ``d4``: the candidate
+        2 x 2 matrices; ``rotation_of(m, g)``: the (2, 2) action on (cos, sin) of mode order
+        m >= 1."""
         models = system.models
         if len(models) < 2 or any(m is not models[0] for m in models) or \
                 not all(p.is_identity_rotation for p in system.poses):
@@ -116,39 +120,94 @@ class SymmetricLU:
             unpaired |= bad
         names = sorted(set(k for key in keys for k in key))
         sels = [[np.flatnonzero([k == name for k in key]) for key in keys] for name in names]
-        if sum(len(r) for r, _ in parts) != mat.shape[0]:
+        if sum(len(r) for r, _ in parts) != n:
             return None
         # the reflection's -1 half of the 2-dimensional type's component is the quarter turn
         # of its +1 half, vector by vector: the same block (M commutes with the turn)
         twin = {i: names.index((lam, 1.0)) for i, (lam, sgn) in enumerate(names)
                 if sgn < 0 and quarter is not None and lam not in unpaired
                 and (lam, 1.0) in names}
-        res = cls(parts, [], mat.shape[0])
-        # the blocks are a fraction of the whole: on a busy machine BLAS threads would spin
-        # longer than they compute
+        return parts, sels, twin
+
+    @classmethod
+    def from_orbits(cls, system, d4, rotation_of, self_block: np.ndarray, reps: dict,
+                    pairs: list) -> "SymmetricLU | None":
+        """The split factorization without assembling M: its core blocks are ``self_block``
+        on the diagonal and, for the cores j != i, T(g) reps[key] T(g)^T with (j, i, key, k)
+        in ``pairs``, g = ([identity] + ``d4``)[k] (T(g) = R_m(g) (x) I per mode order m,
+        ``rotation_of``). Each block
+        Q_s^T M Q_s is summed over the few distinct placements ``reps`` with coefficients on
+        the small space, never over the n^2 entries of M. None as :meth:`layout`."""
+        n = system.n_unknowns
+        lay = cls.layout(system, d4, rotation_of, n)
+        if lay is None:
+            return None
+        parts, sels, twin = lay
+        model = system.models[0]
+        n_cores = len(system.models)
+        local = [np.arange(model.n0)] + [model.n0 + 2 * (m - 1) * model.n1
+                                         + np.arange(2 * model.n1)
+                                         for m in range(1, model.m_max + 1)]
+        gs = [np.eye(2)] + [g for g in d4]
+        rot = [[np.eye(1) if m == 0 else rotation_of(m, g) for g in gs]
+               for m in range(len(parts))]
+        # R_m(g)^T V_m seen from each core: (n_g, cores, n_s, r_m) per mode order
+        w = [np.einsum("gts,kta->gksa", np.array(rot[m]), v.reshape(n_cores, -1, v.shape[1]))
+             for m, (_, v) in enumerate(parts)]
+        terms = {None: (np.arange(n_cores), np.arange(n_cores), np.zeros(n_cores, int))}
+        for key in reps:
+            terms[key] = tuple(np.array(t) for t in zip(*[(j, i, k) for j, i, kk, k in pairs
+                                                           if kk == key]))
+        mats = {**reps, None: self_block}
+        lus = {}
         with one_blas_thread():
-            own = [np.unique(np.concatenate([sel[i] for b, sel in enumerate(sels)
-                                             if b not in twin])) for i in range(len(parts))]
-            at = [np.full(len(v), -1) for _, v in parts]
-            for a, o in zip(at, own):
-                a[o] = np.arange(len(o))
-            left = [(v[:, o].T @ mat[r].reshape(len(v), -1)).reshape(len(o), -1, mat.shape[1])
-                    for (r, v), o in zip(parts, own)]  # Q^T M per part, (r_m, n_p, n)
-            lus = {}
             for b, sel in enumerate(sels):
                 if b in twin:
                     continue
-                ls = np.concatenate([y[a[s]].reshape(-1, mat.shape[1])
-                                     for y, a, s in zip(left, at, sel)])
-                blk = np.concatenate([_right(ls, r, v[:, s]) for (r, v), s in zip(parts, sel)],
-                                     axis=1)  # Q_s^T M Q_s
+                sizes = [len(s) * len(loc) // w[m].shape[2]
+                         for m, (s, loc) in enumerate(zip(sel, local))]
+                edges = np.r_[0, np.cumsum(sizes)]
+                blk = np.zeros((edges[-1], edges[-1]))
+                for mr, mc in np.ndindex(len(parts), len(parts)):
+                    if not sizes[mr] or not sizes[mc]:
+                        continue
+                    acc = 0.0
+                    for key, (jj, ii, gg) in terms.items():
+                        if key is None and mr != mc:
+                            continue  # the self blocks are mode-diagonal
+                        c = np.einsum("psa,ptb->satb", w[mr][gg, jj][..., sel[mr]],
+                                      w[mc][gg, ii][..., sel[mc]])
+                        sub = mats[key][np.ix_(local[mr], local[mc])]
+                        sub = sub.reshape(c.shape[0], -1, c.shape[2], sub.shape[1] // c.shape[2])
+                        acc = acc + np.einsum("satb,sptq->apbq", c, sub, optimize=True)
+                    blk[edges[mr]:edges[mr + 1], edges[mc]:edges[mc + 1]] = \
+                        acc.reshape(sizes[mr], sizes[mc])
                 lus[b] = lu_factor(blk, overwrite_a=True)
-            res.blocks = [(sel, lus[twin.get(b, b)]) for b, sel in enumerate(sels)]
-        # the split is exact when the components are right: check it on a random vector
-        rhs = np.random.default_rng(1).standard_normal(mat.shape[0])
-        if not np.linalg.norm(mat @ res.solve(rhs) - rhs) <= 1e-9 * np.linalg.norm(rhs):
-            return None
-        return res
+        res = cls(parts, [(sel, lus[twin.get(b, b)]) for b, sel in enumerate(sels)], n)
+
+        def turn(x, g):  # T(g) x on one core's unknowns
+            out = x.copy()
+            for m in range(1, len(parts)):
+                out[local[m]] = (rotation_of(m, g) @ x[local[m]].reshape(2, -1)).ravel()
+            return out
+
+        def matvec(x):
+            y = np.zeros_like(x)
+            off = system.offsets
+            for j in range(n_cores):
+                y[off[j]:off[j + 1]] = self_block @ x[off[j]:off[j + 1]]
+            for j, i, key, k in pairs:
+                g = gs[k]
+                y[off[j]:off[j + 1]] += turn(mats[key] @ turn(x[off[i]:off[i + 1]], g.T), g)
+            return y
+
+        return res if res.solves(matvec) else None
+
+    def solves(self, matvec) -> bool:
+        """Whether the split solves M (``matvec``: x -> M x) on a random vector: exact when
+        the components are right."""
+        rhs = np.random.default_rng(1).standard_normal(self.n)
+        return bool(np.linalg.norm(matvec(self.solve(rhs)) - rhs) <= 1e-9 * np.linalg.norm(rhs))
 
     def solve(self, rhs: np.ndarray, transpose: bool = False) -> np.ndarray:
         """M^-1 rhs (M^-T rhs with ``transpose``: Q is orthogonal, so M^T = Q B^T Q^T)."""
@@ -201,12 +260,6 @@ def _adapted_basis(z: np.ndarray, mirror, quarter=None) -> tuple[np.ndarray, lis
         cols += [plus, minus]
         keys += [(float(value), 1.0)] * plus.shape[1] + [(float(value), -1.0)] * minus.shape[1]
     return np.concatenate(cols, axis=1), keys, bad
-
-
-def _right(ls: np.ndarray, rows: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """(L Q)_part: the columns ``rows`` (r n_p,) of ``ls`` (n_s, n) times V (r, k) (x) I."""
-    a = ls[:, rows].reshape(len(ls), v.shape[0], -1)  # (n_s, r, n_p)
-    return np.einsum("srp,rk->skp", a, v, optimize=True).reshape(len(ls), -1)
 
 
 def _rows(system, model, m: int) -> np.ndarray:

@@ -24,7 +24,7 @@ from .cells import fit_layer, fit_layers
 from .physics import MapPhysics, map_physics
 from .plan import (box_axes, cell_layers, default_box, graded_axis, layer_nodes, rz_table_spec,
                    sources_top, table_specs, uniform_axis)
-from .region import SCENE_BUILD, scene_band_m, scene_build_args, scene_region
+from .region import scene_band_m, scene_build_args, scene_region
 from .storage import FieldMap, check_output, load, write
 from .tables import (compute_magnet_table, compute_mode_tables, coupled_modes,
                      mode_table_entry)
@@ -34,6 +34,6 @@ __all__ = [
     "MapPhysics", "map_physics", "box_axes", "cell_layers", "default_box", "graded_axis",
     "layer_nodes", "rz_table_spec", "sources_top", "table_specs", "uniform_axis", "FieldMap",
     "check_output", "load", "write", "compute_magnet_table", "compute_mode_tables",
-    "coupled_modes", "mode_table_entry", "SCENE_BUILD", "scene_band_m", "scene_build_args",
+    "coupled_modes", "mode_table_entry", "scene_band_m", "scene_build_args",
     "scene_region",
 ]

@@ -20,11 +20,6 @@ SPACING_M = 0.002
 MARGIN_M = 0.005
 """Default margin (m) around the objects' reach: the finger's approach and the localizer's
 first fixes before contact."""
-SCENE_BUILD = {"sensor_mode_rz_step": 7e-4, "sensor_mode_rz_log_step": 0.08}
-"""Build settings of a scene map beyond its box: the sensor field's mode tables on 0.7 mm and
-8 % steps, about a sixth of the full map's nodes, so the file stays under a third of the full
-map's (the sensor field's error in the hemisphere's region, against the full map's:
-``studies/bench_map.py --scene``, docs/fieldmap.md)."""
 MIN_CHECK = 100
 """Fewest random check points of a scene map (its build's self-check, meta 'errors')."""
 
@@ -61,12 +56,13 @@ def scene_build_args(design, objects, band_m: float, margin_m: float = MARGIN_M,
                      region: dict | None = None) -> dict:
     """The keyword arguments of :func:`designkit.fieldmap.build` for the scene map of
     ``objects`` on ``design``: its box (:func:`scene_region` in the design's box), meta
-    'region' (``region`` plus the margin), its check points (:func:`scene_check_points`) and
-    :data:`SCENE_BUILD`."""
+    'region' (``region`` plus the margin) and its check points (:func:`scene_check_points`).
+    Every other setting is the full map's: the sensor field's mode tables on the same steps
+    give the same error in the region (docs/fieldmap.md, "Scene maps")."""
     full = default_box(design)
     box = scene_region(objects, band_m, *full, margin_m=margin_m)
     return {"box": box, "region": {**(region or {}), "margin_m": float(margin_m)},
-            "n_check": scene_check_points(box, full), **SCENE_BUILD}
+            "n_check": scene_check_points(box, full)}
 
 
 def scene_check_points(box, full_box) -> int:
