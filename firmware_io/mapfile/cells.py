@@ -40,7 +40,8 @@ def prepare_cells(layers: list, tables: list, nc: int) -> dict:
         scale = np.array([r] * 3 + [r * r] * 5)[:, None, None]
         h = ops.shape[1]
         # (n_cells, K, nc) -> (n_cells, H, 8, nc): every row of every coil per harmonic
-        rows = np.einsum("rhk,ckn->chrn", ops / scale, tab.astype(np.float64))
+        rows = np.einsum("rhk,ckn->chrn", ops / scale, tab.astype(np.float64),
+                         optimize=True)
         cells += list(rows.reshape(len(tab), h, 8 * nc).astype(np.float32))
         ix, iy = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
         centres.append(np.c_[lay["x0_m"] + (ix.ravel() + 0.5) * hx,
