@@ -21,7 +21,6 @@ Usage: ``PYTHONPATH=$PWD python tests/data/make_transverse_refs.py [--cases sphe
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import time
 from pathlib import Path
@@ -31,10 +30,10 @@ import numpy as np
 from designkit.array import CoilArray
 from designkit.constants import MU0
 from designkit.design import default_design
-from designkit.fem.mesh import AIR, AXIS, CORE, OUTER, _size_near, gmsh_model, mesh_to_file
+from designkit.fem.mesh import AIR, AXIS, CORE, OUTER, gmsh_model, mesh_to_file
 from designkit.fem.runner import LineResult, find_getdp, run_getdp, work_folder
+from make_axisym_refs import load_refs, size_fields  # tests/data, the script's own folder
 
-HERE = Path(__file__).resolve().parent
 R_OUT = 0.72
 """Radius of the truncated half-disc, m (exterior dipole condition on it)."""
 PULL_HEIGHTS_M = (0.020, 0.030, 0.050)
@@ -139,23 +138,7 @@ def _mesh(body: tuple, level: int, boxes: list, msh: Path, r_out: float = R_OUT)
         outer = [cv for cv, b in curves.items() if b[3] > 0.5 * r_out]
         gmsh.model.addPhysicalGroup(1, axis, AXIS)
         gmsh.model.addPhysicalGroup(1, outer, OUTER)
-        f = gmsh.model.mesh.field
-        h_far = 12e-3 * s
-        fields = []
-        for r1, z0, z1 in boxes:
-            box = f.add("Box")
-            for k, val in (("VIn", 0.5e-3 * s), ("VOut", h_far), ("XMin", 0.0), ("XMax", r1),
-                           ("YMin", z0), ("YMax", z1), ("Thickness", 0.02)):
-                f.setNumber(box, k, val)
-            fields.append(box)
-        outline = {abs(e[1]) for e in gmsh.model.getBoundary([(2, t) for t in groups[CORE]],
-                                                             oriented=False)} - set(axis)
-        corners = {p for dd, p in gmsh.model.getBoundary([(2, t) for t in groups[CORE]],
-                                                          recursive=True) if dd == 0}
-        fields.append(_size_near(f, "CurvesList", sorted(outline), 1.0e-3 * s, h_far, 2e-3,
-                                 0.08, sampling=200))
-        fields.append(_size_near(f, "PointsList", sorted(corners), 0.15e-3 * s, h_far, 0.3e-3,
-                                 0.01))
+        fields = size_fields(gmsh, s, boxes, 0.5e-3, groups[CORE], axis)
         mesh_to_file(gmsh, fields, 2, msh)
         _, etags, _ = gmsh.model.mesh.getElements(2)
         return {"triangles": int(sum(len(t) for t in etags))}
@@ -301,9 +284,7 @@ def main(argv=None) -> int:
                     help="also solve the core with the outer radius doubled (finest level)")
     a = ap.parse_args(argv)
     levels = [int(v) for v in a.levels.split(",")]
-    npz, js = HERE / "transverse_refs.npz", HERE / "transverse_refs.json"
-    arrays = dict(np.load(npz)) if npz.exists() else {}
-    meta = json.loads(js.read_text()) if js.exists() else {}
+    npz, js, arrays, meta = load_refs("transverse_refs")
     for case in a.cases.split(","):
         if case == "sphere":
             meta["sphere"] = _sphere_case(levels)
