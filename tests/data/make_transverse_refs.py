@@ -9,18 +9,21 @@ with the exterior dipole's condition df/dn = -2 f / R on the outer half-circle (
 a 2-D GetDP problem (second-order nodes, ``VolAxi``). Induced field at theta = 0: B_x = -mu0
 df/dr, B_z = -mu0 df/dz (T); on the axis B_x(z) and Fz = m dB_x/dz on the dipole (N).
 'sphere' validates it: a sphere of mu_r 1000 beside the dipole against the Legendre series
-(sphere response l (mu_r - 1) / (mu_r l + l + 1) per order l) and, in a uniform field, the
-moment 4 pi a^3 (mu_r - 1) / (mu_r + 2) H0 (A m^2). 'core': the thesis core (linear mu_r, the
-model's) below the design's magnet turned horizontal at PULL_HEIGHTS_M, B at points beside and
-above it and the force. Frame of the stored points: the 1 x 1 array's (winding top at z = 0).
+(sphere response l (mu_r - 1) / (mu_r l + l + 1) per order l) and, in a uniform field, against
+the dipole of moment 4 pi a^3 (mu_r - 1) / (mu_r + 2) H0 (A m^2). 'core': the thesis core
+(linear mu_r, the model's) below the design's magnet turned horizontal at PULL_HEIGHTS_M, B at
+points beside and above it and the force. 'stack': a second core STACK_GAP_M below it,
+magnetized mostly through the m = 1 coupling. Frame of the stored points: the 1 x 1 array's
+(winding top at z = 0).
 
-Usage: ``PYTHONPATH=$PWD python tests/data/make_transverse_refs.py [--cases sphere,core]
+Usage: ``PYTHONPATH=$PWD python tests/data/make_transverse_refs.py [--cases sphere,core,stack]
 [--levels 0,1] [--domain-check]`` (needs GetDP and gmsh; minutes per level).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import time
 from pathlib import Path
@@ -41,6 +44,9 @@ PULL_HEIGHTS_M = (0.020, 0.030, 0.050)
 AXIS_Z_M = (0.008, 0.012, 0.020, 0.030, 0.050, 0.080)
 SIDE_R_M = 0.030
 SIDE_Z_M = tuple(np.round(np.linspace(-0.12, 0.04, 9), 6))
+STACK_GAP_M = 0.010
+"""Gap between the two cores of the 'stack' case, m."""
+STACK_SIDE_Z_M = tuple(np.round(np.linspace(-0.24, 0.04, 13), 6))
 SPHERE = (0.02, 1000.0, 0.035)
 """Validation sphere: radius (m), mu_r, dipole distance from its centre (m)."""
 STEP_M = 0.1e-3
@@ -105,7 +111,7 @@ def _pro(mu_r: float, source: tuple, lines: list, r_out: float = R_OUT) -> str:
 
 
 def _mesh(body: tuple, level: int, boxes: list, msh: Path, r_out: float = R_OUT) -> dict:
-    """Half-disc of radius ``r_out`` with the body ("rect", r1, z0, z1) or ("sphere", a), sizes
+    """Half-disc of radius ``r_out`` with the body ("rects", r1, ((z0, z1), ...)) or ("sphere", a), sizes
     1 mm on its outline, 0.15 mm at its corners, 0.5 mm in ``boxes`` (r1, z0, z1), 12 mm far,
     each times 2^(-level/2). Writes ``msh``; returns the number of triangles."""
     s = 2.0 ** (-level / 2.0)
@@ -116,20 +122,20 @@ def _mesh(body: tuple, level: int, boxes: list, msh: Path, r_out: float = R_OUT)
             return occ.intersect([(2, occ.addDisk(0, 0, 0, r, r))],
                                  [(2, occ.addRectangle(0, -r, 0, r, 2 * r))])[0]
 
-        if body[0] == "rect":
-            _, r1, z0, z1 = body
-            tool = [(2, occ.addRectangle(0, z0, 0, r1, z1 - z0))]
-            bb = (0.0, z0, r1, z1)
+        if body[0] == "rects":
+            tool = [(2, occ.addRectangle(0, z0, 0, body[1], z1 - z0)) for z0, z1 in body[2]]
+            bbs = [(0.0, z0, body[1], z1) for z0, z1 in body[2]]
         else:
             tool = half_disc(body[1])
-            bb = (0.0, -body[1], body[1], body[1])
+            bbs = [(0.0, -body[1], body[1], body[1])]
         occ.fragment(half_disc(r_out), tool)
         occ.synchronize()
         groups = {CORE: [], AIR: []}
         for _, tag in gmsh.model.getEntities(2):
             x0, y0, _, x1, y1, _ = gmsh.model.getBoundingBox(2, tag)
             e = 1e-6
-            inside = x0 >= bb[0] - e and y0 >= bb[1] - e and x1 <= bb[2] + e and y1 <= bb[3] + e
+            inside = any(x0 >= bb[0] - e and y0 >= bb[1] - e and x1 <= bb[2] + e
+                         and y1 <= bb[3] + e for bb in bbs)
             groups[CORE if inside else AIR].append(tag)
         for tag, ents in groups.items():
             gmsh.model.addPhysicalGroup(2, ents, tag)
@@ -230,22 +236,29 @@ def _sphere_case(levels) -> dict:
     return meta
 
 
-def _core_case(levels, domain_check=False) -> tuple[dict, dict]:
+def _core_case(levels, domain_check=False, stack=False) -> tuple[dict, dict]:
+    """The thesis core ('core') or two stacked on one axis, STACK_GAP_M apart, the second
+    below the first ('stack'): B at the points, Fz on the dipole, per height and level."""
     design = default_design()
     one = CoilArray.from_design(design.replace(**{"array.rows": 1, "array.columns": 1}))
     coil = one.coils[0]
     c = coil.core
-    zc = float(coil.pose.position[2]) + c.offset  # core centre, array frame
+    centres = float(coil.pose.position[2]) + c.offset - np.arange(1 + stack) * (c.length
+                                                                              + STACK_GAP_M)
+    zc = float(centres.mean())  # FEM origin, array frame
     m = float(np.linalg.norm(design.magnet.moment_vector_a_m2))
     axis_z = np.r_[AXIS_Z_M, PULL_HEIGHTS_M]
-    side = np.c_[np.full(len(SIDE_Z_M), SIDE_R_M), SIDE_Z_M]
-    body = ("rect", c.radius, -c.length / 2, c.length / 2)
+    side_z = STACK_SIDE_Z_M if stack else SIDE_Z_M
+    side = np.c_[np.full(len(side_z), SIDE_R_M), side_z]
+    body = ("rects", c.radius, tuple((q - zc - c.length / 2, q - zc + c.length / 2)
+                                     for q in centres))
     sources = [("dipole", m, h - zc) for h in PULL_HEIGHTS_M]
     arrays = {"heights_m": np.array(PULL_HEIGHTS_M), "moment_a_m2": np.array([m, 0.0, 0.0]),
               "points_m": np.r_[np.c_[np.zeros(len(AXIS_Z_M)), np.zeros(len(AXIS_Z_M)),
                                       AXIS_Z_M],
                                 np.c_[side[:, 0], np.zeros(len(side)), side[:, 1]]]}
-    meta = {"mu_r": float(c.relative_permeability), "r_out_m": R_OUT, "levels": {}}
+    meta = {"mu_r": float(c.relative_permeability), "r_out_m": R_OUT, "levels": {},
+            "core_centres_m": centres.tolist()}
     res = {}
     for lv in levels:
         t0 = time.perf_counter()
@@ -258,7 +271,7 @@ def _core_case(levels, domain_check=False) -> tuple[dict, dict]:
         res[lv] = (b, fz)
         arrays[f"level{lv}_b_t"], arrays[f"level{lv}_fz_n"] = b, fz
         meta["levels"][str(lv)] = {**stats, "seconds": round(time.perf_counter() - t0, 1)}
-        print(f"core level {lv}: Fz {fz} N, {meta['levels'][str(lv)]}", flush=True)
+        print(f"{'stack' if stack else 'core'} level {lv}: Fz {fz} N, {meta['levels'][str(lv)]}", flush=True)
     if domain_check:  # the outer radius doubled at the finest level
         out, _ = _solve(body, float(c.relative_permeability), sources, axis_z - zc,
                         side - np.array([0.0, zc]), levels[-1], 2 * R_OUT)
@@ -279,7 +292,7 @@ def _core_case(levels, domain_check=False) -> tuple[dict, dict]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--levels", default="0,1", help="mesh levels, comma-separated")
-    ap.add_argument("--cases", default="sphere,core", help="sphere and/or core")
+    ap.add_argument("--cases", default="sphere,core,stack", help="sphere, core and/or stack")
     ap.add_argument("--domain-check", action="store_true",
                     help="also solve the core with the outer radius doubled (finest level)")
     a = ap.parse_args(argv)
@@ -289,8 +302,9 @@ def main(argv=None) -> int:
         if case == "sphere":
             meta["sphere"] = _sphere_case(levels)
         else:
-            arr, meta["core"] = _core_case(levels, a.domain_check)
-            arrays.update(arr)
+            arr, meta[case] = _core_case(levels, a.domain_check and case == "core",
+                                         case == "stack")
+            arrays.update({(f"{case}_{k}" if case == "stack" else k): v for k, v in arr.items()})
             np.savez_compressed(npz, **arrays)
         js.write_text(json.dumps(meta, indent=1, sort_keys=True) + "\n")
     return 0
