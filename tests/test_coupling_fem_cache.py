@@ -11,8 +11,11 @@ than the README's (its level in fem_refs.json), compared at the accuracy measure
 The pin (tests/data/model_pin.npz, ``tests/data/make_model_pin.py``) records the model as
 validated against the 3-D FEM (README: 1.2 % in B, 1.8 % in grad B on the workspace grid,
 ``studies/fem3d_array.py``); it is not a reference. It stays as the regression guard of what
-the axisymmetric references cannot excite (the transverse m >= 1 self and cross terms between
-side-by-side cores, the array's pull), at 0.2 % / 0.3 %, far inside a 1 % term error.
+no cached reference resolves at 1 % (the m >= 1 cross terms between side-by-side cores, the
+array's pull), at 0.2 % / 0.3 %, far inside a 1 % term error. A core's m >= 1 self terms and
+the m = 1 coupling of coaxial cores are held to the meridian m = 1 FEM in
+tests/test_core_transverse.py; of the curated mutants (tools/mutants.toml) the pin kills none
+that an independent reference does not.
 """
 
 import json

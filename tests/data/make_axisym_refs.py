@@ -67,6 +67,30 @@ def _core_rect(coil, zc: float) -> tuple:
     return (0.0, zc + c.offset - c.length / 2, c.radius, zc + c.offset + c.length / 2)
 
 
+def size_fields(gmsh, s: float, boxes, h_box: float, bodies, axis) -> list:
+    """gmsh size fields: ``h_box`` (m) in the boxes (r1, z0, z1), 1 mm on the outlines of the
+    surfaces ``bodies`` (but the axis curves ``axis``), 0.15 mm at their corners, 12 mm far;
+    each size times ``s``. Returns the field tags."""
+    f = gmsh.model.mesh.field
+    h_far = 12e-3 * s
+    fields = []
+    for r1, z0, z1 in boxes:
+        box = f.add("Box")
+        for k, val in (("VIn", h_box * s), ("VOut", h_far), ("XMin", 0.0), ("XMax", r1),
+                       ("YMin", z0), ("YMax", z1), ("Thickness", 0.02)):
+            f.setNumber(box, k, val)
+        fields.append(box)
+    curves, corners = set(), set()
+    for tag in bodies:
+        curves |= {abs(e[1]) for e in gmsh.model.getBoundary([(2, tag)], oriented=False)}
+        corners |= {p for dd, p in gmsh.model.getBoundary([(2, tag)], recursive=True) if dd == 0}
+    fields.append(_size_near(f, "CurvesList", sorted(curves - set(axis)), 1.0e-3 * s, h_far,
+                             2e-3, 0.08, sampling=200))
+    fields.append(_size_near(f, "PointsList", sorted(corners), 0.15e-3 * s, h_far, 0.3e-3,
+                             0.01))
+    return fields
+
+
 def _mesh(boxes: dict, level: int, lines_box, msh: Path, h_fine=None) -> dict:
     """gmsh model of the rectangles ``boxes`` {WINDING: [...], CORE: [...]} ((r0, z0, r1, z1)
     m, FEM frame), refined in the boxes ``lines_box`` (r1, z0, z1) to 0.6 mm (or ``h_fine``)
@@ -104,24 +128,8 @@ def _mesh(boxes: dict, level: int, lines_box, msh: Path, h_fine=None) -> dict:
                  and abs(math.hypot(b[3], max(abs(b[1]), abs(b[4]))) - rext) < 1e-6 * rext]
         gmsh.model.addPhysicalGroup(1, axis, AXIS)
         gmsh.model.addPhysicalGroup(1, outer, OUTER)
-        f = gmsh.model.mesh.field
-        h_far = 12e-3 * s
-        fields = []
-        for r1, z0, z1 in lines_box:
-            box = f.add("Box")
-            for k, val in (("VIn", (h_fine or 0.6e-3) * s), ("VOut", h_far), ("XMin", 0.0),
-                           ("XMax", r1), ("YMin", z0), ("YMax", z1), ("Thickness", 0.02)):
-                f.setNumber(box, k, val)
-            fields.append(box)
-        curves, corners = set(), set()
-        for tag in groups[CORE] + groups[WINDING]:
-            curves |= {abs(e[1]) for e in gmsh.model.getBoundary([(2, tag)], oriented=False)}
-            corners |= {p for dd, p in gmsh.model.getBoundary([(2, tag)], recursive=True)
-                        if dd == 0}
-        fields.append(_size_near(f, "CurvesList", sorted(curves - set(axis)), 1.0e-3 * s, h_far,
-                                 2e-3, 0.08, sampling=200))
-        fields.append(_size_near(f, "PointsList", sorted(corners), 0.15e-3 * s, h_far, 0.3e-3,
-                                 0.01))
+        fields = size_fields(gmsh, s, lines_box, h_fine or 0.6e-3, groups[CORE] + groups[WINDING],
+                             axis)
         mesh_to_file(gmsh, fields, 2, msh)
         _, etags, _ = gmsh.model.mesh.getElements(2)
         return {"triangles": int(sum(len(t) for t in etags))}
@@ -232,6 +240,15 @@ def _pull_case(levels) -> tuple[dict, dict]:
     return arrays, meta
 
 
+def load_refs(stem: str) -> tuple:
+    """Paths of tests/data/``stem``.npz and .json and their contents (empty when absent): the
+    cases not regenerated are kept."""
+    npz, js = HERE / f"{stem}.npz", HERE / f"{stem}.json"
+    arrays = dict(np.load(npz)) if npz.exists() else {}
+    meta = json.loads(js.read_text()) if js.exists() else {}
+    return npz, js, arrays, meta
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--levels", default="0,1", help="mesh levels, comma-separated")
@@ -239,9 +256,7 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", default="coaxial,pull", help="coaxial and/or pull")
     a = ap.parse_args(argv)
     levels = [int(v) for v in a.levels.split(",")]
-    npz, js = HERE / "axisym_refs.npz", HERE / "axisym_refs.json"
-    arrays = dict(np.load(npz)) if npz.exists() else {}
-    meta = json.loads(js.read_text()) if js.exists() else {}
+    npz, js, arrays, meta = load_refs("axisym_refs")
     for case in a.cases.split(","):
         if case == "coaxial":
             arr, meta["coaxial"] = _coaxial_case(levels, a.gap)
