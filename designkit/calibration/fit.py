@@ -249,11 +249,11 @@ def _coupled_model(coils, array: CoilArray, params, points) -> ForwardModel:
     """The forward model with the exact coupling of ``array`` (built with ``params``) and its
     slope in each core's ln(mu_r) (:func:`coupled_dlogmu` less each core's own single-core
     difference, so that the model's Jacobian is the coupled model's at ``params``)."""
-    c0 = coupling_term(coils, array, params, points)
     slope = coupled_dlogmu(coils, array, points)
     if slope is None:
-        return ForwardModel(coils, points, c0)
-    _, jac = single_columns(coils, points, params, jacobian=True)
+        return ForwardModel(coils, points, coupling_term(coils, array, params, points))
+    single, jac = single_columns(coils, points, params, jacobian=True)
+    c0 = coupling_term(coils, array, params, points, single)
     for k in range(len(coils)):
         slope[:, :, k, k] -= jac[:, :, k, 6]
     model = ForwardModel(coils, points, c0, slope, np.array(params[:, 6], dtype=float))

@@ -129,12 +129,15 @@ class ForwardModel:
         return b, jac, cross
 
 
-def coupling_term(nominal_coils, array: CoilArray, params, points) -> np.ndarray:
+def coupling_term(nominal_coils, array: CoilArray, params, points, single=None) -> np.ndarray:
     """c_k of the module docstring at ``points`` (n, 3) m for the device ``array`` (built with
-    ``params``): its exact coupled columns / its turns ratio less each coil alone, T/A."""
+    ``params``): its exact coupled columns / its turns ratio less each coil alone, T/A
+    (``single``: :func:`single_columns` at ``params`` if already at hand)."""
     a = array.actuation_matrix(points)[:, :3, :]
     turns = np.array([c.turns / c0.turns for c, c0 in zip(array.coils, nominal_coils)])
-    return a / turns - single_columns(nominal_coils, points, np.asarray(params, dtype=float))
+    if single is None:
+        single = single_columns(nominal_coils, points, np.asarray(params, dtype=float))
+    return a / turns - single
 
 
 def coupled_dlogmu(nominal_coils, array: CoilArray, points) -> np.ndarray | None:
