@@ -180,7 +180,7 @@ def fit(nominal_array: CoilArray, meas: Measurements, tolerances: BuildTolerance
                                   sensor_offset_m=nominal_array.sensor_offset_m)
                 bar.set_description("calibrate (exact coupled solve)")
                 r_old = prob.residual(z)
-                prob.model = _coupled_model(coils, built, th, uniq)
+                prob.model = _coupled_model(coils, built, th, uniq, prob.model)
                 r_new, j = prob.residual(z, True)
                 # the new coupling's pull on the parameters: what the last one got wrong
                 shift = np.linalg.lstsq(j, r_old - r_new, rcond=None)[0]
@@ -245,19 +245,26 @@ def _combined(theta, cov, shift, mask, sig, flat, corr) -> list:
     return out
 
 
-def _coupled_model(coils, array: CoilArray, params, points) -> ForwardModel:
+def _coupled_model(coils, array: CoilArray, params, points, previous=None) -> ForwardModel:
     """The forward model with the exact coupling of ``array`` (built with ``params``) and its
-    slope in each core's ln(mu_r) (:func:`coupled_dlogmu` less each core's own single-core
-    difference, so that the model's Jacobian is the coupled model's at ``params``)."""
+    slope in each core's ln(mu_r): :func:`coupled_dlogmu` less the own core's single-core
+    difference that the model adds back (``previous``'s while it is fresh), so that the
+    model's Jacobian by ln(mu_r) is the coupled model's at ``params``."""
     slope = coupled_dlogmu(coils, array, points)
     if slope is None:
         return ForwardModel(coils, points, coupling_term(coils, array, params, points))
-    single, jac = single_columns(coils, points, params, jacobian=True)
+    if previous is not None and previous._core_jac is not None and \
+            previous._age < previous.refresh_every:
+        core_jac, age = previous._core_jac, previous._age
+        single = single_columns(coils, points, params)
+    else:
+        single, jac = single_columns(coils, points, params, jacobian=True)
+        core_jac, age = jac[:, :, :, 6:].copy(), 1
     c0 = coupling_term(coils, array, params, points, single)
     for k in range(len(coils)):
-        slope[:, :, k, k] -= jac[:, :, k, 6]
+        slope[:, :, k, k] -= core_jac[:, :, k, 0]
     model = ForwardModel(coils, points, c0, slope, np.array(params[:, 6], dtype=float))
-    model._core_jac, model._age = jac[:, :, :, 6:].copy(), 1
+    model._core_jac, model._age = core_jac, age
     return model
 
 
