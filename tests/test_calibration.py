@@ -154,7 +154,7 @@ def test_a_cored_fit_has_calibrated_standard_errors():
     """1 x 2 cored device (mu_r 450), onboard arrays + 12 probe points, readings from the exact
     coupled model: the 16 parameters' z = (fit - truth) / standard error have rms within
     [0.5, 1.6] (16 unit normals: 95 % within [0.66, 1.3]) and none beyond 3.5. Without the
-    coupling's slope in the Jacobian a coil's turns come out ~20 standard errors off (rms ~7)."""
+    coupling's slope in the Jacobian a coil's turns come out ~23 standard errors off (rms ~8)."""
     d, _ = _cored_pair()
     nom, ab, truth, plan, tol, _ = _cored_device(d, 5, 12)
     res = cal.fit(nom, cal.simulate(truth, plan, np.random.default_rng(100)), tol,
