@@ -3,13 +3,12 @@
 Minimizes ``sum_rows |(b_model - b_read) / sigma|^2 + sum_params (theta / tol)^2``: the
 readings weighted by their noise, the priors the build tolerances
 (:class:`designkit.asbuilt.BuildTolerances`, mean = nominal). Levenberg-Marquardt in the
-whitened parameters ``z = theta / tol`` on :class:`ForwardModel`; after it converges the
-coupling term is recomputed from an exact coupled solve of the fitted device (its slope in
-ln(mu_r) the secant between solves) and the fit repeated until the coupling stops moving the
-cost. Standard errors: the whitened Gauss-Newton covariance (times the reduced chi-square when
-above 1) plus, for the model's own error, the parameter shifts of the last coupling update and
-of a Gauss-Newton refit with the coupling's permeability slope split the other way (each column's to its
-own core instead of all cores alike). A
+whitened parameters ``z = theta / tol`` on :class:`ForwardModel`, whose coupling term is exact
+at the last coupled solve and linear in each core's ln(mu_r) about it (exact slope, one adjoint
+solve); after it converges the fitted device is solved exactly again and the fit repeated until
+a new solve stops moving the cost. Standard errors: the whitened Gauss-Newton covariance of the
+full Jacobian at the solution (times the reduced chi-square when above 1) plus, for the
+model's own error, the parameter shift of the last coupling update. A
 parameter is identifiable when the data shrink its standard error below
 :data:`IDENTIFIABLE_RATIO` of its tolerance and its posterior correlation with every other
 stays below :data:`CORRELATION_LIMIT`; nearly collinear pairs are reported as one combined
@@ -20,7 +19,6 @@ docs/calibration.md.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -30,7 +28,7 @@ from ..array import CoilArray
 from ..asbuilt import PARAMETERS, AsBuilt, BuildTolerances
 from ..errors import BadInputError, DesignkitError
 from .measurements import Measurements
-from .model import ForwardModel, coupling_term
+from .model import ForwardModel, coupled_dlogmu, coupling_term, single_columns
 
 IDENTIFIABLE_RATIO = 0.5
 """Posterior / prior standard deviation below which the data identify a parameter."""
@@ -39,11 +37,6 @@ CHI2_TOLERANCE = 0.1
 the cost (a chi-square change far below 1 carries no information)."""
 MAX_ITERATIONS = 40
 """Levenberg-Marquardt iterations per coupling round before the fit counts as not converged."""
-LOGMU_SPAN = 0.8
-"""ln(mu_r) span of the two coupled solves that give the coupling's permeability slope when no
-earlier solve is far enough (:data:`MIN_SECANT`)."""
-MIN_SECANT = 0.2
-"""Smallest ln(mu_r) span between two coupled solves whose secant gives the slope."""
 COUPLING_CHI2 = 1.0
 """The coupling has converged when a new exact solve moves the whitened cost by less than this."""
 CORRELATION_LIMIT = 0.9
@@ -121,16 +114,14 @@ class _Problem:
 
     def residual(self, z, jacobian=False):
         res = self.model.columns(self.theta(z), jacobian)
-        cols, jac, shared = res if jacobian else (res, None, None)
+        cols, jac, cross = res if jacobian else (res, None, None)
         pred = np.einsum("nik,nk->ni", cols[self.inv], self.meas.currents_a)
         r = np.concatenate([((pred - self.meas.b_t) * self.w).ravel(), z])
         if not jacobian:
             return r
         jd = np.einsum("nikp,nk->nikp", jac[self.inv], self.meas.currents_a)
-        if shared is not None:
-            cores = np.array([c.core is not None for c in self.model.nominal_coils])
-            jd[:, :, cores, 6] += np.einsum("nik,nk->ni", shared[self.inv],
-                                            self.meas.currents_a)[:, :, None]
+        if cross is not None:  # every column's coupling by each core's ln(mu_r)
+            jd[:, :, :, 6] += np.einsum("nikj,nk->nij", cross[self.inv], self.meas.currents_a)
         jd = jd[:, :, self.mask] * self.sig[self.mask] * self.w[:, :, None]
         return r, np.vstack([jd.reshape(-1, jd.shape[-1]), np.eye(len(z))])
 
@@ -198,16 +189,8 @@ def fit(nominal_array: CoilArray, meas: Measurements, tolerances: BuildTolerance
                     break
             z, it = _levenberg_marquardt(prob, z, bar)
             iterations += it
-        # the model-error check: a Gauss-Newton step with the coupling's permeability slope
-        # split the other way
-        shared_split = prob.model
-        prob.model = dataclasses.replace(shared_split, own_slope=True)
-        r_alt, j_alt = prob.residual(z, True)
-        prob.model = shared_split
-        z_alt = z - np.linalg.lstsq(j_alt, r_alt, rcond=None)[0]
         bar.total = bar.n  # converged: the bar ends full
         bar.refresh()
-    shift = np.hypot(shift, z_alt - z)
     return _result(prob, z, r0, before, shift, iterations)
 
 
@@ -263,28 +246,26 @@ def _combined(theta, cov, shift, mask, sig, flat, corr) -> list:
 
 
 def _coupled_model(coils, array: CoilArray, params, points, previous=None) -> ForwardModel:
-    """The forward model with the coupling of ``array`` (built with ``params``) and its
-    derivative by the cores' mean ln(mu_r): the secant from ``previous`` when their mean
-    ln(mu_r) differ by at least MIN_SECANT, else ``previous``'s, else from a second solve of
-    ``array``'s geometry at e^-LOGMU_SPAN times its permeabilities)."""
-    cores = [k for k, c in enumerate(coils) if c.core is not None]
-    ref = float(np.mean(params[cores, 6])) if cores else 0.0
-    c0 = coupling_term(coils, array, params, points)
-    if not cores:
-        return ForwardModel(coils, points, c0, None, ref)
-    if previous is not None:
-        prev_c = previous.coupling
-        span = ref - previous.logmu_ref
-        if abs(span) >= MIN_SECANT:
-            return ForwardModel(coils, points, c0, (c0 - prev_c) / span, ref)
-        if previous.coupling_dlogmu is not None:
-            return ForwardModel(coils, points, c0, previous.coupling_dlogmu, ref)
-    p2 = np.array(params, dtype=float)
-    p2[cores, 6] -= LOGMU_SPAN
-    other = CoilArray(AsBuilt.from_parameters(coils, p2).apply(coils),
-                      sensor_offset_m=array.sensor_offset_m)
-    return ForwardModel(coils, points, c0, (c0 - coupling_term(coils, other, p2, points))
-                        / LOGMU_SPAN, ref)
+    """The forward model with the exact coupling of ``array`` (built with ``params``) and its
+    slope in each core's ln(mu_r): :func:`coupled_dlogmu` less the own core's single-core
+    difference that the model adds back (``previous``'s while it is fresh), so that the
+    model's Jacobian by ln(mu_r) is the coupled model's at ``params``."""
+    slope = coupled_dlogmu(coils, array, points)
+    if slope is None:
+        return ForwardModel(coils, points, coupling_term(coils, array, params, points))
+    if previous is not None and previous._core_jac is not None and \
+            previous._age < previous.refresh_every:
+        core_jac, age = previous._core_jac, previous._age
+        single = single_columns(coils, points, params)
+    else:
+        single, jac = single_columns(coils, points, params, jacobian=True)
+        core_jac, age = jac[:, :, :, 6:].copy(), 1
+    c0 = coupling_term(coils, array, params, points, single)
+    for k in range(len(coils)):
+        slope[:, :, k, k] -= core_jac[:, :, k, 0]
+    model = ForwardModel(coils, points, c0, slope, np.array(params[:, 6], dtype=float))
+    model._core_jac, model._age = core_jac, age
+    return model
 
 
 def actuation_error(a_model: np.ndarray, a_true: np.ndarray) -> np.ndarray:

@@ -3,17 +3,20 @@ parameters, with its Jacobian.
 
 Column k of the field (T/A) at points p (n, 3) m is
 
-    b_k(p; theta_k) = (1 + turns_rel_k) [ b_single_k(p; pose_k, mu_r_k, core offset_k) + c_k(p) ],
+    b_k(p; theta) = (1 + turns_rel_k) [ b_single_k(p; pose_k, mu_r_k, core offset_k) + c_k(p) ],
 
 ``b_single_k`` the coil with its own core alone (exact single-coil model), ``c_k`` the coupling
 term (the field of the other cores magnetized by coil k, and the feedback on its own core),
-taken from an exact coupled solve (:meth:`designkit.array.CoilArray.actuation_matrix`) of the
-nominal or of the last fitted device and held fixed while the fit runs. The field is linear in
-the currents, so a reading is ``sum_k b_k(p) I_k``. Jacobian: translations and tilts exactly
-from the field gradient (dB/dd = -G d; a small rotation w about the winding centre c gives
-dB = w x B - G (w x (p - c))), turns exactly (the field is proportional to them), the core's
-mu_r and axial offset by one-sided differences of the core's field alone.
-Parameters: :data:`designkit.asbuilt.PARAMETERS`. Reference: docs/calibration.md.
+from an exact coupled solve (:meth:`designkit.array.CoilArray.actuation_matrix`) at theta_0 and
+linear in every core's ln(mu_r) about it. Its slope is exact: the cores' interface factors
+F_j = 2 (mu_j - 1) / (mu_j + 1) scale core j's rows of the system M x = F P s, so
+dx / d ln mu_j = (d ln F_j / d ln mu_j) M^-1 (x restricted to core j) and the field's derivative
+at the points is that with the adjoint Y = M^-T E^T (:meth:`designkit.cores.ArraySystem.adjoint`),
+one solve for all cores. The field is linear in the currents: a reading is ``sum_k b_k(p) I_k``.
+Jacobian: translations and tilts exactly from the field gradient (dB/dd = -G d; a small rotation
+w about the winding centre c gives dB = w x B - G (w x (p - c))), turns exactly, the own core's
+mu_r and axial offset by one-sided differences of the core's field alone, plus the coupling's
+slope. Parameters: :data:`designkit.asbuilt.PARAMETERS`. Reference: docs/calibration.md.
 """
 
 from __future__ import annotations
@@ -83,19 +86,16 @@ class ForwardModel:
     """Field per ampere of every coil at fixed points, for parameters (n_coils, 8).
 
     nominal_coils : the design's nominal coils; points : (n, 3) m; coupling : (n, 3, n_coils)
-    T/A, the fixed coupling term per unit turns scale (:func:`coupling_term`).
+    T/A, the coupling term per unit turns scale at ``logmu_ref`` (:func:`coupling_term`).
     """
 
     nominal_coils: tuple
     points: np.ndarray
     coupling: np.ndarray
     coupling_dlogmu: np.ndarray | None = None
-    """d coupling / d mean ln(mu_r) of the cores (n, 3, n_coils) T/A, or None."""
-    logmu_ref: float = 0.0
-    """Mean ln(mu_r / nominal) of the cores at which ``coupling`` was computed."""
-    own_slope: bool = False
-    """Attribute column k's permeability slope to core k's ln(mu_r) alone instead of spreading
-    it over every core's (the other extreme of the unknown split: the model-error check)."""
+    """d coupling[:, :, k] / d ln(mu_r) of core j, (n, 3, n_coils k, n_coils j) T/A, or None."""
+    logmu_ref: np.ndarray | float = 0.0
+    """Each coil's ln(mu_r / nominal) (n_coils,) at which ``coupling`` was computed."""
     refresh_every: int = 4
     """New mu_r / core-offset differences every this many Jacobians."""
     _core_jac: np.ndarray | None = dataclasses.field(default=None, repr=False)
@@ -103,8 +103,8 @@ class ForwardModel:
 
     def columns(self, params, jacobian: bool = False):
         """B (n, 3, n_coils) T/A [, Jacobian (n, 3, n_coils, 8) of column k by coil k's
-        parameters, and the columns' derivative by any one core's ln(mu_r) through the
-        coupling (n, 3, n_coils) or None]."""
+        parameters, and the columns' derivative by each core's ln(mu_r) through the coupling
+        (n, 3, n_coils k, n_coils j) or None]."""
         params = np.asarray(params, dtype=float)
         reuse = None
         if jacobian and self._core_jac is not None and self._age < self.refresh_every:
@@ -113,34 +113,47 @@ class ForwardModel:
         b0, jac = res if jacobian else (res, None)
         if jacobian and reuse is None:
             self._core_jac, self._age = jac[:, :, :, 6:].copy(), 1
-        cores = np.array([c.core is not None for c in self.nominal_coils])
         coupling = self.coupling
-        own = self.own_slope and self.coupling_dlogmu is not None and cores.any()
-        if own:
-            coupling = coupling + np.where(cores, params[:, 6] - self.logmu_ref, 0.0) * \
-                self.coupling_dlogmu
-        elif self.coupling_dlogmu is not None and cores.any():
-            coupling = coupling + (params[cores, 6].mean() - self.logmu_ref) * \
-                self.coupling_dlogmu
-        base = b0 + coupling
+        if self.coupling_dlogmu is not None:
+            coupling = coupling + self.coupling_dlogmu @ (params[:, 6] - self.logmu_ref)
         scale = 1.0 + params[:, 5]
+        base = b0 + coupling
         b = base * scale
         if not jacobian:
             return b
         jac *= scale[None, None, :, None]
         jac[:, :, :, 5] = base
-        shared = None
-        if own:
-            jac[:, :, cores, 6] += (self.coupling_dlogmu * scale)[:, :, cores]
-        elif self.coupling_dlogmu is not None and cores.any():
-            # every column's coupling moves with each core's ln(mu_r) / n_cores
-            shared = self.coupling_dlogmu * scale / cores.sum()
-        return b, jac, shared
+        cross = None
+        if self.coupling_dlogmu is not None:
+            cross = self.coupling_dlogmu * scale[:, None]
+        return b, jac, cross
 
 
-def coupling_term(nominal_coils, array: CoilArray, params, points) -> np.ndarray:
+def coupling_term(nominal_coils, array: CoilArray, params, points, single=None) -> np.ndarray:
     """c_k of the module docstring at ``points`` (n, 3) m for the device ``array`` (built with
-    ``params``): its exact coupled columns / its turns ratio less each coil alone, T/A."""
+    ``params``): its exact coupled columns / its turns ratio less each coil alone, T/A
+    (``single``: :func:`single_columns` at ``params`` if already at hand)."""
     a = array.actuation_matrix(points)[:, :3, :]
     turns = np.array([c.turns / c0.turns for c, c0 in zip(array.coils, nominal_coils)])
-    return a / turns - single_columns(nominal_coils, points, np.asarray(params, dtype=float))
+    if single is None:
+        single = single_columns(nominal_coils, points, np.asarray(params, dtype=float))
+    return a / turns - single
+
+
+def coupled_dlogmu(nominal_coils, array: CoilArray, points) -> np.ndarray | None:
+    """d b_k / d ln(mu_j) of the exact coupled columns per unit turns scale, (n, 3, n_coils k,
+    n_coils j) T/A, at ``points`` (n, 3) m, or None without coupled cores (module docstring:
+    d ln F_j / d ln mu_j = 2 mu_j / (mu_j^2 - 1), one adjoint solve)."""
+    system = array.coupled()
+    if system is None:
+        return None
+    n, nc = len(points), len(array.coils)
+    y = system.adjoint(points)  # (n_unknowns, 3 n)
+    x = system.coil_solution()  # (n_unknowns, n_coils)
+    out = np.zeros((n, 3, nc, nc))
+    for jj, j in enumerate(system.core_index):
+        rows = slice(system.offsets[jj], system.offsets[jj + 1])
+        mu = float(array.coils[j].core.relative_permeability)
+        out[:, :, :, j] = (2.0 * mu / (mu * mu - 1.0)) * (y[rows].T @ x[rows]).reshape(n, 3, nc)
+    turns = np.array([c.turns / c0.turns for c, c0 in zip(array.coils, nominal_coils)])
+    return out / turns[None, None, :, None]

@@ -14,9 +14,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..asbuilt import BuildTolerances
-from .fit import _Problem, fitted_mask
+from .fit import _coupled_model, _Problem, fitted_mask
 from .measurements import Measurements, onboard_plan, probe_plan
-from .model import ForwardModel, coupling_term
 
 
 def candidate_points(design, per_axis: int = 7, heights: int = 3) -> np.ndarray:
@@ -31,8 +30,7 @@ def candidate_points(design, per_axis: int = 7, heights: int = 3) -> np.ndarray:
 def _jacobian(array, meas: Measurements, tol: BuildTolerances, mask) -> np.ndarray:
     coils = array.coils
     uniq, inv = meas.unique_points()
-    zero = np.zeros(mask.shape)
-    model = ForwardModel(coils, uniq, coupling_term(coils, array, zero, uniq))
+    model = _coupled_model(coils, array, np.zeros(mask.shape), uniq)
     sig = np.broadcast_to(tol.sigmas(), mask.shape)
     _, j = _Problem(model, meas, inv, sig, mask).residual(np.zeros(int(mask.sum())), True)
     return j[:-int(mask.sum())]
