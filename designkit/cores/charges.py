@@ -17,6 +17,8 @@ import math
 
 import numpy as np
 
+from .discretization import gauss
+
 N1_SIDE = 40
 N1_CAP = 12
 """m >= 1 charge panels on the side and on each end face (n1 = 64), graded towards the rims
@@ -27,11 +29,6 @@ N1_GRADING = 3.0
 the rim), q = N1_GRADING (the choice among q = 1 .. 5: docs/coupling.md)."""
 FAR_AZIMUTHS = 24
 """Azimuths of the compressed m >= 1 ring rules (the choice: docs/coupling.md)."""
-
-
-def gauss(n):
-    """Gauss-Legendre nodes and weights on [-1, 1]."""
-    return np.polynomial.legendre.leggauss(n)
 
 
 def _phi_nodes_graded(levels=22, n=8):

@@ -27,7 +27,7 @@ from ..constants import MU0
 from ..field.kernels import sheet_rz
 from ..pose import Pose
 from ..winding_geometry import WindingGeometry
-from .charges import gauss
+from .discretization import gauss
 from .core_model import M_MAX, CoreModel, core_model
 from .symmetric_solve import SQUARE_GROUP, SymmetricLU
 

@@ -13,6 +13,8 @@ docs/core_model.md.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from ..field.kernels import loop_rz, sheet_rz
@@ -21,6 +23,16 @@ N_SIDE = 48
 """Side panels of the m = 0 contour (split among axial slices for a nonlinear core)."""
 N_CAP = 16
 """Annular panels per end face or slice interface."""
+
+
+@functools.lru_cache(maxsize=64)
+def gauss(n: int):
+    """Gauss-Legendre nodes and weights on [-1, 1] (cached, read-only: the core rules ask for
+    the same few orders many times)."""
+    x, w = np.polynomial.legendre.leggauss(n)
+    x.flags.writeable = False
+    w.flags.writeable = False
+    return x, w
 
 
 def graded_edges(lo, hi, n, ends="both"):
@@ -38,7 +50,7 @@ def graded_edges(lo, hi, n, ends="both"):
 
 def disc_nodes(r_lo, r_hi, n):
     """Gauss-Legendre radii and weights of annular panels [r_lo, r_hi] (nd,): (nd, n) each."""
-    x, w = np.polynomial.legendre.leggauss(n)
+    x, w = gauss(n)
     h = 0.5 * (r_hi - r_lo)
     c = 0.5 * (r_hi + r_lo)
     return c[:, None] + h[:, None] * x[None, :], h[:, None] * w[None, :]

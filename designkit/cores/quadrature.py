@@ -17,7 +17,7 @@ import numpy as np
 
 from ..field import cylindrical_to_cartesian
 from ..field.kernels import loop_rz, sheet_rz
-from .discretization import disc_nodes
+from .discretization import disc_nodes, gauss
 
 EVAL_RTOL = 1e-5
 """Quadrature error bound of the field evaluation, relative to the size of each source group's
@@ -69,8 +69,8 @@ def quad_bound(rho, n):
 def _lagrange_on_panels(lo_e, hi_e, a, b, n):
     """The n Gauss nodes of [a, b], the parts [p0, p1] of the panels [lo_e, hi_e] inside it,
     their (n + 2)-node Gauss rules and the Lagrange basis of the nodes at those points."""
-    x, _ = np.polynomial.legendre.leggauss(n)
-    xf, wf = np.polynomial.legendre.leggauss(n + 2)  # exact for K * (degree n-1) per panel
+    x, _ = gauss(n)
+    xf, wf = gauss(n + 2)  # exact for K * (degree n-1) per panel
     nodes = 0.5 * (a + b) + 0.5 * (b - a) * x
     p0 = np.maximum(lo_e, a)
     p1 = np.minimum(hi_e, b)
@@ -118,7 +118,7 @@ def near_rule(lo, hi, s_re, delta, n=NEAR_NODES):
     """Gauss rule on [lo, hi] graded geometrically towards x0 = clip(s_re): pieces of length
     delta, 2 delta, 4 delta, ... on each side, so every piece sees the singularity (at distance
     >= delta from x0) through an ellipse of parameter >= 3.7. Returns (x, w)."""
-    x, w = np.polynomial.legendre.leggauss(n)
+    x, w = gauss(n)
     x0 = min(max(s_re, lo), hi)
     edges = [x0]
     step = delta
