@@ -265,6 +265,17 @@ def test_cli_scene_compile_builds_its_scene_map(tmp_path):
                  str(tmp_path / "m2.npz"), "--out", str(out), "--quiet"]) == 1
 
 
+def _solves_the_assembled_system(system, seed, columns):
+    """The split solve (and its transpose) against M assembled block by block."""
+    n = system.n_unknowns
+    mat = np.zeros((n, n))
+    system._assemble(mat, {})
+    r = np.random.default_rng(seed).standard_normal((n, columns))
+    np.testing.assert_allclose(mat @ system.solve(r), r, atol=1e-10 * np.abs(r).max())
+    np.testing.assert_allclose(mat.T @ system.solve(r, transpose=True), r,
+                               atol=1e-10 * np.abs(r).max())
+
+
 def test_split_lu_of_the_square_array_pairs_the_two_dimensional_blocks():
     arr = CoilArray.from_design(default_design())
     system = arr.coupled()
@@ -274,13 +285,7 @@ def test_split_lu_of_the_square_array_pairs_the_two_dimensional_blocks():
     assert sizes == [384, 528, 528, 624, 1056, 1056]
     big = [lu for _, lu in system._sym.blocks if lu[0].shape[0] == 1056]
     assert big[0] is big[1]
-    n = system.n_unknowns
-    mat = np.zeros((n, n))
-    system._assemble(mat, {})
-    r = np.random.default_rng(5).standard_normal((n, 3))
-    np.testing.assert_allclose(mat @ system.solve(r), r, atol=1e-10 * np.abs(r).max())
-    np.testing.assert_allclose(mat.T @ system.solve(r, transpose=True), r,
-                               atol=1e-10 * np.abs(r).max())
+    _solves_the_assembled_system(system, seed=5, columns=3)
 
 
 def test_split_of_a_rectangular_array_solves_the_assembled_system():
@@ -292,10 +297,4 @@ def test_split_of_a_rectangular_array_solves_the_assembled_system():
                           for x in (-0.05, 0.0, 0.05) for y in (-0.021, 0.021)))
     system = arr.coupled()
     assert system._sym is not None and system._lu is None
-    n = system.n_unknowns
-    mat = np.zeros((n, n))
-    system._assemble(mat, {})
-    r = np.random.default_rng(6).standard_normal((n, 2))
-    np.testing.assert_allclose(mat @ system.solve(r), r, atol=1e-10 * np.abs(r).max())
-    np.testing.assert_allclose(mat.T @ system.solve(r, transpose=True), r,
-                               atol=1e-10 * np.abs(r).max())
+    _solves_the_assembled_system(system, seed=6, columns=2)
