@@ -33,7 +33,7 @@ def run_figure(result: SimulationResult, *, surface_height=None, title: str = ""
     import matplotlib.pyplot as plt
 
     c = result.columns
-    fig, ax = plt.subplots(3, 1, figsize=(8.5, 9.5), constrained_layout=True)
+    fig, ax = plt.subplots(3, 1, figsize=(11.0, 9.5), constrained_layout=True)
     ax[0].plot(c["x_m"] * 1e3, c["z_m"] * 1e3, color="tab:blue", lw=1.5, label="finger (true)")
     est = np.isfinite(c["xe_m"])
     ax[0].plot(c["xe_m"][est] * 1e3, c["ze_m"][est] * 1e3, ".", ms=1.5, color="tab:orange",
@@ -45,7 +45,7 @@ def run_figure(result: SimulationResult, *, surface_height=None, title: str = ""
                            label="object")
     ax[0].set_xlabel("x (mm)")
     ax[0].set_ylabel("z above the coil tops (mm)")
-    ax[0].legend(loc="upper right", fontsize=8)
+    ax[0].legend(**OUTSIDE, fontsize=8)
     ax[0].set_title(title or "finger path against the object")
     _time_panels(ax, result)
     return fig
@@ -68,9 +68,9 @@ def _time_panels(ax, result) -> None:
         _mark_injections(a, result.faults)
         a.set_xlabel("time (s)")
     ax[1].set_ylabel("Fz (mN)")
-    ax[1].legend(loc="upper right", fontsize=8)
+    ax[1].legend(**OUTSIDE, fontsize=8)
     ax[2].set_ylabel("coil current (A)")
-    ax[2].legend(loc="upper right", fontsize=7, ncol=3)
+    ax[2].legend(**OUTSIDE, fontsize=7, ncol=2)
 
 
 def _loop_timing(result, out_dir: Path, plt) -> Path:
@@ -98,6 +98,8 @@ def _loop_timing(result, out_dir: Path, plt) -> Path:
 
 
 OFF_LABEL = "runner not running (coils off: fault or no fix yet)"
+OUTSIDE = {"loc": "upper left", "bbox_to_anchor": (1.01, 1.0), "borderaxespad": 0.0}
+"""Legends right of their panel: inside, they covered the curves and the fault labels."""
 INJECTED_LABEL = "fault injected"
 
 
