@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import time
 
-from designkit.sim.device import CpuTimedBus
+from firmware_io.hw.sim import SimBus
 from firmware_io.hw.sim.device import SimDevice
 
 WAIT_S = 0.02
@@ -33,7 +33,7 @@ def test_the_clock_takes_off_the_models_cpu_time_not_their_wall_time():
     """A step that burns 5 ms of CPU and writes once to a model that waits 20 ms: the clock
     moves by ~5 ms (the step's own CPU), where taking off the models' wall time would move
     it by ~5 - 20 ms (backwards)."""
-    bus = CpuTimedBus()
+    bus = SimBus()
     bus.attach(WaitingDevice())
     before, wall_before = bus.cpu_outside_s(), time.thread_time() - bus.model_time_s
     _busy(0.005)

@@ -11,8 +11,6 @@ errors and noise (designkit.sensor_sim.SensorSimulator).
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from firmware_io.hw.coils import CoilDriver
@@ -27,28 +25,6 @@ from ..array import CoilArray, force_matrix
 from ..coil import Coil
 from ..sensor_sim import SensorSimulator, analog_reading
 from .sensors import SimSensorSource
-
-
-class CpuTimedBus(SimBus):
-    """A :class:`SimBus` that also sums the calling thread's CPU time spent inside it,
-    ``model_cpu_s`` (s): the device models' share of that thread's CPU time, taken off by
-    :meth:`cpu_outside_s` in the same clock (wall time inside the models grows with the host's
-    load, CPU time does not)."""
-
-    def __init__(self, *args, **kwargs):
-        super().__init__(*args, **kwargs)
-        self.model_cpu_s = 0.0
-
-    def transfer(self, msgs, api: str = "i2c_rdwr") -> list[bytes]:
-        c0 = time.thread_time()
-        try:
-            return super().transfer(msgs, api)
-        finally:
-            self.model_cpu_s += time.thread_time() - c0
-
-    def cpu_outside_s(self) -> float:
-        """This thread's CPU time (s) less the part spent inside the device models."""
-        return time.thread_time() - self.model_cpu_s
 
 
 class SimulatedDevice:
@@ -96,7 +72,7 @@ class SimulatedDevice:
         self.sensor_positions_m = self.sensor_sim.nominal_m
 
         self.coil_clock = SimClock()
-        self.coil_bus = CpuTimedBus(scl_hz=1e6, clock=self.coil_clock)
+        self.coil_bus = SimBus(scl_hz=1e6, clock=self.coil_clock)
         n_boards = (n + 7) // 8
         self.sim_boards = [self.coil_bus.attach(SimPCA9685(0x40 + b)) for b in range(n_boards)]
         boards = [PCA9685(self.coil_bus, 0x40 + b, sleep=self.coil_clock.sleep)

@@ -84,7 +84,8 @@ class SimBus:
         self.scl_hz = float(scl_hz)
         self.clock = clock
         self.log: list[Transaction] = []
-        self.model_time_s = 0.0  # host time spent inside the device models (bench_io)
+        self.model_time_s = 0.0  # host wall time spent inside the device models (bench_io)
+        self.model_cpu_s = 0.0  # the calling thread's CPU time spent inside them
         self.closed = False
         for d in devices:
             self.attach(d)
@@ -138,6 +139,12 @@ class SimBus:
         return [m.data for t in self.log for m in t.messages if m.op == "w" and m.addr == addr]
 
     # -- core ------------------------------------------------------------------------------
+    def cpu_outside_s(self) -> float:
+        """This thread's CPU time (s) less the part spent inside the device models: a step
+        clock for code that drives the bus (wall time inside the models grows with the host's
+        load, CPU time does not)."""
+        return time.thread_time() - self.model_cpu_s
+
     def transfer(self, msgs: Sequence[tuple[str, int, bytes | int]], api: str = "i2c_rdwr") -> list[bytes]:
         """Run one STOP-terminated transaction.
 
@@ -153,7 +160,7 @@ class SimBus:
         """
         if self.closed:
             raise OSError(9, "Bad file descriptor (bus closed)")
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         start_s = self.clock.now() if self.clock is not None else None
         reach = self.reachable()  # routing changes only at STOP
         touched: list[SimDevice] = []
@@ -208,6 +215,7 @@ class SimBus:
             if self.clock is not None:
                 self.clock.t += tr.wire_time_s(self.scl_hz)
             self.model_time_s += time.perf_counter() - t0
+            self.model_cpu_s += time.thread_time() - c0
         if conflict is not None:
             raise SimAddressConflict(conflict)
         if error is not None:
