@@ -94,15 +94,21 @@ def mode_transform(model: CoreModel, g: np.ndarray) -> np.ndarray:
     return t
 
 
+def _images(rel: tuple):
+    """(g, g^-1 rel) for g in :data:`_D4`: the relative placements (:func:`_rel_key`, upright
+    cores) whose image under g is ``rel``, rounded as :func:`_rel_key` rounds."""
+    d = np.array(rel[:3])
+    for g in _D4:
+        yield g, tuple(np.round(np.r_[g.T @ d[:2], d[2]], 9)) + rel[3:]
+
+
 def _block_by_symmetry(cache: dict, mi: CoreModel, mj: CoreModel, rel: tuple):
     """The cross block of upright cores at relative placement ``rel`` (a :func:`_rel_key`)
     from a cached block at its image under the square's symmetries, or None: block(g d) =
     T_j(g) block(d) T_i(g)^T (the rings' azimuths and the field rules are symmetric under the
     group, :func:`mode_transform`)."""
-    d = np.array(rel[:3])
-    for g in _D4:
-        src = np.r_[g.T @ d[:2], d[2]]  # g^-1 d
-        key = (id(mi), id(mj), tuple(np.round(src, 9)) + rel[3:])
+    for g, src in _images(rel):
+        key = (id(mi), id(mj), src)
         if key in cache:
             return _turn(_turn(cache[key], mj, g).T, mi, g).T  # T_j B T_i^T
     return None
@@ -113,12 +119,9 @@ def _column_by_symmetry(cache: dict, key: tuple, model: CoreModel):
     core at relative placement ``key[2]`` (a :func:`_rel_key`) from a cached column at its
     image under the square's symmetries, or None: column(g d) = T(g) column(d)
     (:func:`mode_transform`; the rings' azimuths are symmetric under the group)."""
-    rel = key[2]
-    d = np.array(rel[:3])
-    for g in _D4:
-        src = key[:2] + (tuple(np.round(np.r_[g.T @ d[:2], d[2]], 9)) + rel[3:],)
-        if src in cache:
-            return _turn(cache[src][:, None], model, g)[:, 0]
+    for g, src in _images(key[2]):
+        if key[:2] + (src,) in cache:
+            return _turn(cache[key[:2] + (src,)][:, None], model, g)[:, 0]
     return None
 
 
@@ -180,23 +183,21 @@ class ArraySystem:
         model = self.models[0]
         if SymmetricLU.layout(self, _D4, mode_rotation, self.n_unknowns) is None:
             return None
-        reps, pairs = {}, []
+        reps, pairs, seen = {}, [], set()
         with one_blas_thread():
             for jj, pj in enumerate(self.poses):
                 for ii, pi in enumerate(self.poses):
                     if ii == jj:
                         continue
-                    d = np.array(_rel_key(pi, pj)[:3])
-                    for k, g in enumerate([np.eye(2)] + _D4):  # d = g d0, d0 a known placement
-                        key = tuple(np.round(np.r_[g.T @ d[:2], d[2]], 9))
-                        if key in reps:
-                            break
-                    else:
-                        k, key = 0, tuple(np.round(d, 9))
-                        reps[key] = self._coupling_block(model, pi, model, pj)
+                    rel = _rel_key(pi, pj)
+                    seen.add(rel)
+                    # rel = g rel0 for a known placement rel0 (k: g's index in [1] + _D4)
+                    k, key = next(((k, src) for k, (_, src) in enumerate(_images(rel), 1)
+                                   if rel not in reps and src in reps), (0, rel))
+                    if key not in reps:
+                        reps[rel] = self._coupling_block(model, pi, model, pj)
                     pairs.append((jj, ii, key, k))
-        self.n_blocks = len({tuple(np.round(_rel_key(self.poses[i], self.poses[j])[:3], 9))
-                             for j, i, _, _ in pairs})
+        self.n_blocks = len(seen)
         return SymmetricLU.from_orbits(self, _D4, mode_rotation, model.self_block(), reps,
                                        pairs)
 
