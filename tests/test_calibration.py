@@ -109,7 +109,7 @@ def test_the_coupling_slope_is_the_exact_coupled_models_derivative():
     (an independent route: two more coupled solves per core). Dropping the coupling's slope
     (the single-core difference alone) misses more than 10 % of it, the neighbour's column
     entirely."""
-    from designkit.calibration.fit import _coupled_model
+    from designkit.calibration.model import coupled_forward_model
 
     d, nom = _cored_pair()
     pts = np.array([[0.01, 0.02, 0.03], [-0.03, 0.01, 0.02], [0.025, 0.0, -0.01],
@@ -119,7 +119,7 @@ def test_the_coupling_slope_is_the_exact_coupled_models_derivative():
     th[0, 7], th[1, 0] = 3e-4, 4e-4
     th[0, 5] = round(nom.coils[0].turns * 1.01) / nom.coils[0].turns - 1  # whole turns
     built = _built(nom, th)
-    model = _coupled_model(nom.coils, built, th, pts)
+    model = coupled_forward_model(nom.coils, built, th, pts)
     b, jac, cross = model.columns(th, True)
     exact = built.actuation_matrix(pts)[:, :3]
     np.testing.assert_allclose(b, exact, rtol=0, atol=1e-9 * np.abs(exact).max())

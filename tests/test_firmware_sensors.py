@@ -64,19 +64,61 @@ def test_health_stuck_nack_and_saturation():
         r = arrays.read()
         statuses4.append(r.status[4])
         statuses10.append(r.status[10])
-    assert statuses4 == ["ok", "stale", "stale", "recovered", "ok"]
+    # the frozen counter, debounced by the sensor: 'hung' until its reset's wake-up is over
+    # (test_a_hung_sensor_is_reset_between_passes: when it recovers)
+    assert statuses4 == ["ok", "stale", "stale", "hung", "hung"]
     # the NACKing sensor is reset after hang_threshold NACKs and configured in later passes,
     # after the reset's wake-up: missing meanwhile (test_a_nacking_sensor_...: when it fails)
     assert statuses10 == ["nack"] * 5
     np.testing.assert_allclose(r.bottom_t[1], first.bottom_t[1])  # last good value kept
     assert r.status[15] == "saturated" and r.bottom_t[6][2] == pytest.approx(2047 * LSB)
-    assert not r.healthy[10] and not r.healthy[15] and r.healthy[4]
+    assert not r.healthy[10] and not r.healthy[15] and not r.healthy[4]
     assert np.isfinite(r.top_t).all() and np.isfinite(r.bottom_t).all()
     # failed sensor comes back when it answers again (retry interval, then the reset's wait)
     sims[10].nack_always = False
     for _ in range(arrays.retry_interval + 50):
         r = arrays.read()
     assert r.status[10] == "ok"
+
+
+def test_a_hung_sensor_is_reset_between_passes():
+    """Sensor 4's frame counter freezes (ADC hang-up): 'stale' for hang_threshold - 1 reads,
+    'hung' from the hang_threshold-th, then one general-call reset sent in that pass and the
+    configuration in the first pass at least reset_wait_s later ('recovered'), then fresh
+    values ('ok'). No pass waits the reset's wake-up, the other 17 keep reading fresh values,
+    and the sensor counts one recovery."""
+    bus, muxes, sims, arrays, fields = make(hang_threshold=3)
+    clock = bus.clock
+    arrays.configure()
+    arrays.read()
+    t0 = clock.now()
+    arrays.read()
+    healthy_pass_s = clock.now() - t0
+    wait_s = arrays.sensors[4].reset_wait_s
+    sims[4].stuck_frame = True
+    resets0, statuses, longest = sims[4].resets, [], 0.0
+    for k in range(100):
+        for s in sims:
+            s.field_t = (1e-3 * k, 0.0, 0.01)
+        t0 = clock.now()
+        r = arrays.read()
+        longest = max(longest, clock.now() - t0)
+        statuses.append(r.status[4])
+        if k > 0:   # a read returns the conversion the previous read started
+            others = np.delete(np.r_[r.top_t, r.bottom_t], 4, axis=0)
+            np.testing.assert_allclose(others[:, 0], np.round(1e-3 * (k - 1) / LSB) * LSB,
+                                       atol=1e-12)
+        if statuses[-1] == "ok" and "recovered" in statuses:
+            break
+    n_hung = statuses.count("hung")
+    assert statuses == ["ok", "stale", "stale"] + ["hung"] * n_hung + ["recovered", "ok"]
+    assert sims[4].resets - resets0 == 1 and not sims[4].stuck_frame
+    assert longest < 1.5 * healthy_pass_s < wait_s
+    # the configuration came in the first pass after the wake-up, not earlier
+    assert (n_hung - 1) * healthy_pass_s < wait_s * 1.01 <= (n_hung + 1) * 1.5 * healthy_pass_s
+    assert arrays.sensors[4].recoveries == 1
+    np.testing.assert_allclose(r.top_t[4, 0], np.round(1e-3 * (len(statuses) - 2) / LSB) * LSB,
+                               atol=1e-12)
 
 
 def test_a_nacking_sensor_is_reset_between_passes_and_the_others_keep_their_rate():

@@ -28,7 +28,7 @@ from ..array import CoilArray
 from ..asbuilt import PARAMETERS, AsBuilt, BuildTolerances
 from ..errors import BadInputError, DesignkitError
 from .measurements import Measurements
-from .model import ForwardModel, coupled_dlogmu, coupling_term, single_columns
+from .model import ForwardModel, coupled_forward_model
 
 IDENTIFIABLE_RATIO = 0.5
 """Posterior / prior standard deviation below which the data identify a parameter."""
@@ -99,8 +99,10 @@ def check_enough(meas: Measurements, n_params: int) -> None:
                             len(rows))
 
 
-class _Problem:
-    """Whitened residuals and Jacobian of one coupling round."""
+class WhitenedProblem:
+    """Whitened residuals and Jacobian of one coupling round: the fields' misfit divided by
+    their noise sigma (T / T) and the prior z = theta / tolerance, in the fitted parameters
+    ``mask`` (n_coils, 8) bool; ``inverse`` maps each measurement to its point."""
 
     def __init__(self, model: ForwardModel, meas: Measurements, inverse, sig, mask):
         self.model, self.meas, self.inv = model, meas, inverse
@@ -126,7 +128,7 @@ class _Problem:
         return r, np.vstack([jd.reshape(-1, jd.shape[-1]), np.eye(len(z))])
 
 
-def _levenberg_marquardt(prob: _Problem, z, bar):
+def _levenberg_marquardt(prob: WhitenedProblem, z, bar):
     r, j = prob.residual(z, True)
     cost, lam = r @ r, 1e-3
     for it in range(1, MAX_ITERATIONS + 1):
@@ -165,8 +167,8 @@ def fit(nominal_array: CoilArray, meas: Measurements, tolerances: BuildTolerance
     sig = np.broadcast_to(tolerances.sigmas(), mask.shape)
     uniq, inv = meas.unique_points()
     zero = np.zeros(mask.shape)
-    model = _coupled_model(coils, nominal_array, zero, uniq)
-    prob = _Problem(model, meas, inv, sig, mask)
+    model = coupled_forward_model(coils, nominal_array, zero, uniq)
+    prob = WhitenedProblem(model, meas, inv, sig, mask)
     z = np.zeros(int(mask.sum()))
     r0 = prob.residual(z)
     before = r0[:-len(z)].reshape(-1, 3) / prob.w
@@ -180,7 +182,7 @@ def fit(nominal_array: CoilArray, meas: Measurements, tolerances: BuildTolerance
                                   sensor_offset_m=nominal_array.sensor_offset_m)
                 bar.set_description("calibrate (exact coupled solve)")
                 r_old = prob.residual(z)
-                prob.model = _coupled_model(coils, built, th, uniq, prob.model)
+                prob.model = coupled_forward_model(coils, built, th, uniq, prob.model)
                 r_new, j = prob.residual(z, True)
                 # the new coupling's pull on the parameters: what the last one got wrong
                 shift = np.linalg.lstsq(j, r_old - r_new, rcond=None)[0]
@@ -243,29 +245,6 @@ def _combined(theta, cov, shift, mask, sig, flat, corr) -> list:
                     "std_error": se,
                     "identifiable": bool(se < IDENTIFIABLE_RATIO * np.hypot(*vec))})
     return out
-
-
-def _coupled_model(coils, array: CoilArray, params, points, previous=None) -> ForwardModel:
-    """The forward model with the exact coupling of ``array`` (built with ``params``) and its
-    slope in each core's ln(mu_r): :func:`coupled_dlogmu` less the own core's single-core
-    difference that the model adds back (``previous``'s while it is fresh), so that the
-    model's Jacobian by ln(mu_r) is the coupled model's at ``params``."""
-    slope = coupled_dlogmu(coils, array, points)
-    if slope is None:
-        return ForwardModel(coils, points, coupling_term(coils, array, params, points))
-    if previous is not None and previous._core_jac is not None and \
-            previous._age < previous.refresh_every:
-        core_jac, age = previous._core_jac, previous._age
-        single = single_columns(coils, points, params)
-    else:
-        single, jac = single_columns(coils, points, params, jacobian=True)
-        core_jac, age = jac[:, :, :, 6:].copy(), 1
-    c0 = coupling_term(coils, array, params, points, single)
-    for k in range(len(coils)):
-        slope[:, :, k, k] -= core_jac[:, :, k, 0]
-    model = ForwardModel(coils, points, c0, slope, np.array(params[:, 6], dtype=float))
-    model._core_jac, model._age = core_jac, age
-    return model
 
 
 def actuation_error(a_model: np.ndarray, a_true: np.ndarray) -> np.ndarray:

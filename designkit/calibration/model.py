@@ -157,3 +157,26 @@ def coupled_dlogmu(nominal_coils, array: CoilArray, points) -> np.ndarray | None
         out[:, :, :, j] = (2.0 * mu / (mu * mu - 1.0)) * (y[rows].T @ x[rows]).reshape(n, 3, nc)
     turns = np.array([c.turns / c0.turns for c, c0 in zip(array.coils, nominal_coils)])
     return out / turns[None, None, :, None]
+
+
+def coupled_forward_model(coils, array: CoilArray, params, points, previous=None) -> ForwardModel:
+    """The forward model with the exact coupling of ``array`` (built with ``params``) and its
+    slope in each core's ln(mu_r): :func:`coupled_dlogmu` less the own core's single-core
+    difference that the model adds back (``previous``'s while it is fresh), so that the
+    model's Jacobian by ln(mu_r) is the coupled model's at ``params``."""
+    slope = coupled_dlogmu(coils, array, points)
+    if slope is None:
+        return ForwardModel(coils, points, coupling_term(coils, array, params, points))
+    if previous is not None and previous._core_jac is not None and \
+            previous._age < previous.refresh_every:
+        core_jac, age = previous._core_jac, previous._age
+        single = single_columns(coils, points, params)
+    else:
+        single, jac = single_columns(coils, points, params, jacobian=True)
+        core_jac, age = jac[:, :, :, 6:].copy(), 1
+    c0 = coupling_term(coils, array, params, points, single)
+    for k in range(len(coils)):
+        slope[:, :, k, k] -= core_jac[:, :, k, 0]
+    model = ForwardModel(coils, points, c0, slope, np.array(params[:, 6], dtype=float))
+    model._core_jac, model._age = core_jac, age
+    return model

@@ -14,7 +14,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..asbuilt import BuildTolerances
-from .fit import _coupled_model, _Problem, fitted_mask
+from .fit import WhitenedProblem, fitted_mask
+from .model import coupled_forward_model
 from .measurements import Measurements, onboard_plan, probe_plan
 
 
@@ -30,9 +31,9 @@ def candidate_points(design, per_axis: int = 7, heights: int = 3) -> np.ndarray:
 def _jacobian(array, meas: Measurements, tol: BuildTolerances, mask) -> np.ndarray:
     coils = array.coils
     uniq, inv = meas.unique_points()
-    model = _coupled_model(coils, array, np.zeros(mask.shape), uniq)
+    model = coupled_forward_model(coils, array, np.zeros(mask.shape), uniq)
     sig = np.broadcast_to(tol.sigmas(), mask.shape)
-    _, j = _Problem(model, meas, inv, sig, mask).residual(np.zeros(int(mask.sum())), True)
+    _, j = WhitenedProblem(model, meas, inv, sig, mask).residual(np.zeros(int(mask.sum())), True)
     return j[:-int(mask.sum())]
 
 

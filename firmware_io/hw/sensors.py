@@ -8,7 +8,8 @@ coil order. Only one mux has a channel enabled at any time.
 
 A runner calls :meth:`SensorArrays.read` once per loop; a sensor that fails keeps its last good
 value, is marked unhealthy, and is reset and reconfigured after ``hang_threshold`` bad reads in
-a row (a hung ADC, a NACK), at most once every ``retry_interval`` reads once it has failed. The
+a row (a NACK; a hung ADC after the sensor's own ``hang_threshold`` frozen frame counters),
+at most once every ``retry_interval`` reads once it has failed. The
 reset's wake-up wait (``TLV493D.reset_wait_s``, tens of ms) is not spent inside a read: the pass
 sends the reset and goes on, a later pass configures the sensor once the wait is over (up to
 ``TLV493D.config_attempts`` resets), so the other sensors' frames keep their rate.
@@ -102,7 +103,8 @@ class SensorArrays:
         self.bus = bus
         self.muxes = {a: TCA9548A(bus, a) for a in sorted({s.mux_address for s in self.layout})}
         self.sensors = [TLV493D(bus, s.sensor_address, temperature=temperature,
-                                hang_threshold=hang_threshold, sleep=sleep) for s in self.layout]
+                                hang_threshold=hang_threshold, recover_in_read=False,
+                                sleep=sleep) for s in self.layout]
         self.hang_threshold = hang_threshold
         self.retry_interval = int(retry_interval)
         self.n_per_array = n // 2
@@ -177,6 +179,7 @@ class SensorArrays:
         if took:
             self._resetting[i] = None
             self._bad_in_row[i] = 0
+            sensor.recoveries += then == "recovered"
             return then
         if tries < sensor.config_attempts:
             self._start_reset(i, tries, then)
@@ -215,6 +218,8 @@ class SensorArrays:
                 self._bad_in_row[i] = 0
             elif status == "failed":
                 self._retry_countdown[i] = self.retry_interval
+            elif status == "hung":  # the sensor debounced its frozen frame counter
+                self._start_reset(i, 0, "recovered")
             elif status not in ("stale", "recovered"):  # the sensor itself debounces stale frames
                 self._bad_in_row[i] += 1
                 if self._bad_in_row[i] >= self.hang_threshold:

@@ -134,7 +134,7 @@ def tlv493d_decode(frame: bytes) -> TLVFrame:
 
 
 SensorStatus = Literal["ok", "saturated", "stale", "not_ready", "test_mode", "recovered",
-                       "nack", "failed", "unconfigured"]
+                       "hung", "nack", "failed", "unconfigured"]
 
 
 class TLV493D:
@@ -154,6 +154,11 @@ class TLV493D:
     reset_wait_s : float
         Wait after the general-call reset, s (default 40e-3: the wake-up time of [INF] and
         [RS]; see docs/hardware.md).
+    recover_in_read : bool
+        True: a read that finds the ADC hung resets and reconfigures the sensor at once (status
+        'recovered'; the read waits ``reset_wait_s``). False: it reports 'hung' and leaves the
+        recovery to the caller (:class:`~firmware_io.hw.sensors.SensorArrays` resets it between
+        passes, so no read waits).
 
     Notes
     -----
@@ -164,7 +169,7 @@ class TLV493D:
     def __init__(self, bus: I2CBus, address: int = 0x5E, *,
                  temperature: Literal["off", "on"] = "off", hang_threshold: int = 3,
                  reset_wait_s: float = 40e-3, config_attempts: int = 3,
-                 sleep: Callable[[float], None] = time.sleep):
+                 recover_in_read: bool = True, sleep: Callable[[float], None] = time.sleep):
         self.base_address, self.iic_addr_code = _split_address(address)
         if temperature not in ("off", "on"):
             raise BadInputError("temperature", "'off' or 'on'", temperature)
@@ -177,6 +182,7 @@ class TLV493D:
         self.hang_threshold = hang_threshold
         self.reset_wait_s = float(reset_wait_s)
         self.config_attempts = int(config_attempts)
+        self.recover_in_read = bool(recover_in_read)
         self.sleep = sleep
         self.factory: bytes | None = None
         self.status: SensorStatus = "unconfigured"
@@ -275,7 +281,9 @@ class TLV493D:
             return frame
         if self._last_frm is not None and frame.frame_counter == self._last_frm:
             self._stuck += 1
-            if self._stuck >= self.hang_threshold:
+            if self._stuck >= self.hang_threshold and not self.recover_in_read:
+                self.status = "hung"  # the caller resets it (its wake-up wait outside a read)
+            elif self._stuck >= self.hang_threshold:
                 # ADC hang-up [UM 5.6]: a frozen frame counter; reset + reconfigure fixes it
                 self.configure()
                 self.recoveries += 1
@@ -295,7 +303,9 @@ class TLV493D:
 
         :attr:`status` tells whether the value is fresh: 'ok'; 'saturated' (an axis at the
         12-bit limit, |B| is at least the value); 'stale' (frame counter did not advance);
-        'recovered' (the sensor hung and was reset, the value is stale); 'not_ready' (PD=0 or
+        'recovered' (the sensor hung and was reset, the value is stale); 'hung' (the frame
+        counter stood still ``hang_threshold`` reads in a row and ``recover_in_read`` is False:
+        the caller must reset it, the value is stale); 'not_ready' (PD=0 or
         CH!=0); 'test_mode' (T flag set). A NACK raises :class:`I2CError` (status 'nack').
         """
         return self.read_frame().field_t

@@ -20,7 +20,7 @@ import numpy as np
 from ..hw.tlv493d import TLV493D_LINEAR_RANGE_T
 from ..localization import multipole_field
 
-SENSOR_FAULTS = {"stale": "sensor_stuck", "recovered": "sensor_stuck",
+SENSOR_FAULTS = {"stale": "sensor_stuck", "recovered": "sensor_stuck", "hung": "sensor_stuck",
                  "saturated": "sensor_saturated", "nack": "sensor_dead", "failed": "sensor_dead",
                  "unconfigured": "sensor_dead", "not_ready": "sensor_dead",
                  "test_mode": "sensor_dead"}
