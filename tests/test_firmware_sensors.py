@@ -81,19 +81,25 @@ def test_health_stuck_nack_and_saturation():
     assert r.status[10] == "ok"
 
 
+def _configured_and_timed():
+    """(bus, sims, arrays, seconds of one healthy pass on the simulated clock) after one
+    configuration and one read, hang_threshold 3."""
+    bus, _, sims, arrays, _ = make(hang_threshold=3)
+    arrays.configure()
+    arrays.read()
+    t0 = bus.clock.now()
+    arrays.read()
+    return bus, sims, arrays, bus.clock.now() - t0
+
+
 def test_a_hung_sensor_is_reset_between_passes():
     """Sensor 4's frame counter freezes (ADC hang-up): 'stale' for hang_threshold - 1 reads,
     'hung' from the hang_threshold-th, then one general-call reset sent in that pass and the
     configuration in the first pass at least reset_wait_s later ('recovered'), then fresh
     values ('ok'). No pass waits the reset's wake-up, the other 17 keep reading fresh values,
     and the sensor counts one recovery."""
-    bus, muxes, sims, arrays, fields = make(hang_threshold=3)
+    bus, sims, arrays, healthy_pass_s = _configured_and_timed()
     clock = bus.clock
-    arrays.configure()
-    arrays.read()
-    t0 = clock.now()
-    arrays.read()
-    healthy_pass_s = clock.now() - t0
     wait_s = arrays.sensors[4].reset_wait_s
     sims[4].stuck_frame = True
     resets0, statuses, longest = sims[4].resets, [], 0.0
@@ -128,13 +134,8 @@ def test_a_nacking_sensor_is_reset_between_passes_and_the_others_keep_their_rate
     a read), the other 17 sensors read fresh values in every pass, and the sensor reports
     'nack' until its last attempt failed, then 'failed' (as a blocking reset did); when it
     answers again it is configured after the retry interval, again without a stalled pass."""
-    bus, muxes, sims, arrays, fields = make(hang_threshold=3)
+    bus, sims, arrays, healthy_pass_s = _configured_and_timed()
     clock = bus.clock
-    arrays.configure()
-    arrays.read()
-    t0 = clock.now()
-    arrays.read()
-    healthy_pass_s = clock.now() - t0
     wait_s, attempts = arrays.sensors[10].reset_wait_s, arrays.sensors[10].config_attempts
     sims[10].nack_always = True
     bus.clear_log()
