@@ -4,6 +4,7 @@ run leaves nothing behind."""
 
 from __future__ import annotations
 
+import functools
 import importlib
 import io
 import os
@@ -14,6 +15,7 @@ from pathlib import Path
 
 import pytest
 
+from designkit import __version__ as designkit_version
 from designkit._progress import LineWriter, tqdm
 from designkit.cli import COMMANDS, main
 from designkit.commands._common import join_negative_values
@@ -390,3 +392,18 @@ def test_design_help_lists_the_shipped_designs_and_the_default(command, tmp_path
         if name != "thesis-default":
             assert name in text
     assert "(default: thesis, the embedded thesis device)" in text
+
+
+def test_python_dash_m_designkit_is_the_same_command_line(tmp_path):
+    """``python -m designkit`` (documented beside the script): the version, and bad input as
+    one clear line with the script's exit code, nothing written."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    run = functools.partial(subprocess.run, cwd=tmp_path, env=env, capture_output=True,
+                            text=True, timeout=120)
+    res = run([sys.executable, "-m", "designkit", "--version"])
+    assert res.returncode == 0 and res.stdout.strip() == designkit_version
+    res = run([sys.executable, "-m", "designkit", "map", "--scene-margin", "-5", "--out",
+               "m.npz"])
+    assert res.returncode == 1  # a value the library refuses (argparse's own errors: 2)
+    _one_clear_line(res, "--scene-margin", "-5")
+    assert not list(tmp_path.iterdir())
