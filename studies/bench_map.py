@@ -41,7 +41,7 @@ import numpy as np
 from designkit import default_design, fieldmap
 from designkit._io import write_json_atomic
 from designkit.array import ROWS, CoilArray
-from designkit.fieldmap.region import MARGIN_M
+from designkit.fieldmap.region import MARGIN_M, within_reach
 from designkit.render import Hemisphere
 from firmware_io.mapfile import MapFile
 
@@ -179,20 +179,18 @@ def density_floor(objects, band_m: float, margin_m: float, lower, upper, z_top: 
     reach alone: the integral of (z - z_top)^-3 over the points of the box [lower, upper] (m)
     within ``band_m`` + ``margin_m`` of some object (signed distance), over the same integral
     on the whole box (midpoint rule, ``step_m``). A harmonic field's local scale is its
-    distance to the sources, so any layout of the same accuracy (the map's cells grow in
-    proportion to z - z_top) samples with density ~ (z - z_top)^-3; the region's exact shape
-    with no cell overhang and no region-independent work, so no scene map can do better."""
+    distance to the sources, so a map that samples locally at a given accuracy (the map's
+    cells grow in proportion to z - z_top) needs density ~ (z - z_top)^-3; over the region's
+    exact shape, with no cell overhang and no region-independent work, no such scene map
+    does better."""
     lower, upper = np.asarray(lower, float), np.asarray(upper, float)
     ax = [np.arange(lower[i] + step_m / 2, upper[i], step_m) for i in range(3)]
     x, y = np.meshgrid(ax[0], ax[1], indexing="ij")
     inside = total = 0.0
     for z in ax[2]:
         pts = np.c_[x.ravel(), y.ravel(), np.full(x.size, z)]
-        near = np.zeros(len(pts), bool)
-        for obj in objects:
-            near |= np.asarray(obj.signed_distance(pts)) <= band_m + margin_m
         w = (z - z_top) ** -3
-        inside += w * near.sum()
+        inside += w * within_reach(objects, pts, band_m + margin_m).sum()
         total += w * len(pts)
     return float(inside / total)
 
@@ -206,12 +204,12 @@ def scene_vs_full(out_dir=DEFAULT_OUT, n_points: int = 2000) -> dict:
     box = fieldmap.scene_region([Hemisphere()], 0.0, lo, hi)
     res = {"matmul_2000_s": matmul_s(), "region_m": [box[0].tolist(), box[1].tolist()],
            "margin_m": MARGIN_M}
-    z_top = fieldmap.sources_top(CoilArray.from_design(d))
+    arr = CoilArray.from_design(d)
+    z_top = fieldmap.sources_top(arr)
     res["density_floor"] = {"margin": density_floor([Hemisphere()], 0.0, MARGIN_M, lo,
                                                     hi, z_top),
                             "no margin": density_floor([Hemisphere()], 0.0, 0.0, lo, hi, z_top)}
     pts = sample_points(box[0], box[1], n_points, 11)
-    arr = CoilArray.from_design(d)
     ref = arr.actuation_matrix(pts)
     mp = pts[:50]
     moment = d.magnet.moment_vector_a_m2

@@ -15,8 +15,8 @@ import numpy as np
 
 from ..asbuilt import BuildTolerances
 from .fit import WhitenedProblem, fitted_mask
-from .model import coupled_forward_model
 from .measurements import Measurements, onboard_plan, probe_plan
+from .model import coupled_forward_model
 
 
 def candidate_points(design, per_axis: int = 7, heights: int = 3) -> np.ndarray:

@@ -33,9 +33,7 @@ def scene_region(objects, band_m: float, lower, upper, margin_m: float = MARGIN_
     BadInputError when no object reaches into the box."""
     lower, upper = np.asarray(lower, float), np.asarray(upper, float)
     pts = _nodes([uniform_axis(lower[i], upper[i], spacing_m) for i in range(3)])
-    near = np.zeros(len(pts), bool)
-    for obj in objects:
-        near |= np.asarray(obj.signed_distance(pts)) <= band_m
+    near = within_reach(objects, pts, band_m)
     if not near.any():
         raise BadInputError("scene", "objects that reach into the map's box "
                             f"{np.round(lower * 1e3, 1).tolist()} .. "
@@ -44,6 +42,14 @@ def scene_region(objects, band_m: float, lower, upper, margin_m: float = MARGIN_
     lo = np.maximum(pts[near].min(axis=0) - grow, lower)
     hi = np.minimum(pts[near].max(axis=0) + grow, upper)
     return lo, hi
+
+
+def within_reach(objects, points, reach_m: float) -> np.ndarray:
+    """(n,) bool: the points (n, 3) m where some object's signed distance is <= ``reach_m``."""
+    near = np.zeros(len(points), bool)
+    for obj in objects:
+        near |= np.asarray(obj.signed_distance(points)) <= reach_m
+    return near
 
 
 def scene_band_m(scene) -> float:

@@ -179,7 +179,8 @@ class SensorArrays:
         if took:
             self._resetting[i] = None
             self._bad_in_row[i] = 0
-            sensor.recoveries += then == "recovered"
+            if then == "recovered":
+                sensor.recoveries += 1
             return then
         if tries < sensor.config_attempts:
             self._start_reset(i, tries, then)

@@ -281,15 +281,15 @@ class TLV493D:
             return frame
         if self._last_frm is not None and frame.frame_counter == self._last_frm:
             self._stuck += 1
-            if self._stuck >= self.hang_threshold and not self.recover_in_read:
+            if self._stuck < self.hang_threshold:
+                self.status = "stale"
+            elif not self.recover_in_read:
                 self.status = "hung"  # the caller resets it (its wake-up wait outside a read)
-            elif self._stuck >= self.hang_threshold:
+            else:
                 # ADC hang-up [UM 5.6]: a frozen frame counter; reset + reconfigure fixes it
                 self.configure()
                 self.recoveries += 1
                 self.status = "recovered"
-            else:
-                self.status = "stale"
             return frame
         self._stuck = 0
         self._last_frm = frame.frame_counter
