@@ -1,6 +1,10 @@
-"""Smoke test of studies/bench_map.py (quick mode: air coils, small box)."""
+"""studies/bench_map.py: its quick run (air coils, small box); the scene floor vs a closed form."""
 
+import numpy as np
 from conftest import load_study
+from scipy.integrate import quad
+
+from designkit.render import Hemisphere
 
 
 def test_bench_map_quick(tmp_path):
@@ -18,11 +22,6 @@ def test_density_floor_of_a_centred_hemisphere_is_the_closed_form_integral():
     int pi (R^2 - z^2) (z - z_top)^-3 dz over int A_box (z - z_top)^-3 dz, R the radius plus
     the margin (the box holds every disc); a floor that dropped the weight, the margin or the
     dome's shape fails."""
-    import numpy as np
-    from scipy.integrate import quad
-
-    from designkit.render import Hemisphere
-
     floor = load_study("bench_map").density_floor
     lo, hi, z_top = np.array([-0.065, -0.058, 0.02]), np.array([0.065, 0.058, 0.07]), 0.004
     for diameter, margin in ((0.1, 0.005), (0.08, 0.0)):
