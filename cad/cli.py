@@ -10,8 +10,9 @@ import argparse
 import dataclasses
 from pathlib import Path
 
-from designkit import _validate as v
-from designkit.commands._common import add_design_argument, add_progress_argument, check_output, show_progress
+from designkit.support import validate as v
+from designkit.commands.common import (add_design_argument, add_progress_argument, check_output,
+                                       show_progress)
 from designkit.design import load_design
 
 from . import export

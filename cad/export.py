@@ -24,8 +24,8 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from designkit._io import atomic_path
-from designkit._progress import tqdm
+from designkit.support.atomic import atomic_path
+from designkit.support.progress import tqdm
 from designkit.errors import BadInputError, DesignRuleError
 
 from . import meshcheck

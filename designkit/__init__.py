@@ -4,13 +4,13 @@ SI units throughout (m, A, T, N). Light to import: heavy optional libraries (bui
 gmsh, smbus2) are imported only by the modules that need them.
 """
 
-from .array import CoilArray
-from .coil import Coil
 from .constants import MU0
 from .cores import Core
 from .design import Design, default_design, load_design
 from .errors import BadInputError, DesignkitError, DesignRuleError, MissingDependencyError
-from .pose import Pose
+from .geometry.pose import Pose
+from .model.array import CoilArray
+from .model.coil import Coil
 
 __version__ = "0.1.0"
 

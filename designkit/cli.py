@@ -14,7 +14,7 @@ import signal
 import sys
 import threading
 
-from .commands._common import join_negative_values
+from .commands.common import join_negative_values
 from firmware_io.errors import FirmwareIOError
 
 from . import __version__

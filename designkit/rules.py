@@ -18,8 +18,8 @@ import itertools
 import math
 from dataclasses import dataclass
 
-from . import electrical as el
 from .design import Design
+from .model import electrical as el
 
 TOLERANCE_M = 1e-9
 """Round-off allowed on a geometric rule, m (a rule met with equality holds)."""

@@ -6,8 +6,8 @@ import os
 from pathlib import Path
 
 from designkit import default_design, fieldmap
-from designkit._io import write_json_atomic
-from designkit.array import CoilArray
+from designkit.support.atomic import write_json_atomic
+from designkit.model.array import CoilArray
 
 
 def design_and_map(out_dir, map_path=None, *, progress: bool = True):

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import minimize
 
-from designkit._blas import one_blas_thread
+from designkit.support.blas import one_blas_thread
 
 
 def kkt_violation(fm, f, u, tl, x, unipolar=False, *, zero_tol=None):

@@ -40,9 +40,9 @@ from scipy.optimize import Bounds, LinearConstraint, minimize
 
 from studies.alloc_reference import kkt_violation, slsqp_reference
 from studies.bench_allocation import wrenches  # (n_pos, 6, 9) force and torque per ampere, the design's A(p)
-from designkit._blas import one_blas_thread
-from designkit._io import write_json_atomic
-from designkit._progress import tqdm
+from designkit.support.blas import one_blas_thread
+from designkit.support.atomic import write_json_atomic
+from designkit.support.progress import tqdm
 from firmware_io.allocation import allocate
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "allocation_check"

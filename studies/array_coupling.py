@@ -28,10 +28,10 @@ from pathlib import Path
 import numpy as np
 
 from designkit import default_design
-from designkit._io import write_json_atomic
-from designkit._progress import tqdm
-from designkit.array import CoilArray, gradient_from_g5
-from designkit.coil import Coil
+from designkit.support.atomic import write_json_atomic
+from designkit.support.progress import tqdm
+from designkit.model.array import CoilArray, gradient_from_g5
+from designkit.model.coil import Coil
 from designkit.cores import ArraySystem, M_MAX, saturation_table
 from designkit.fem import fem3d
 from designkit.fem.runner import solve

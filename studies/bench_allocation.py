@@ -36,10 +36,10 @@ from scipy.optimize import lsq_linear
 
 from studies.alloc_reference import kkt_violation, slsqp_reference
 from designkit import default_design
-from designkit._io import write_json_atomic
-from designkit._progress import tqdm
-from designkit.array import CoilArray, force_matrix, skew_matrix
-from designkit._blas import one_blas_thread  # the control loop's setting; fair to lsq_linear
+from designkit.support.atomic import write_json_atomic
+from designkit.support.progress import tqdm
+from designkit.model.array import CoilArray, force_matrix, skew_matrix
+from designkit.support.blas import one_blas_thread  # the control loop's setting; fair to lsq_linear
 from firmware_io.allocation import Allocator, allocate
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "bench_allocation"

@@ -1,4 +1,4 @@
-"""Bench: does one BLAS thread speed up designkit's hot paths (designkit._blas)?
+"""Bench: does one BLAS thread speed up designkit's hot paths (designkit.support.blas)?
 
 The coupled core solve and the device optimizer are built of many small dense products;
 a threaded BLAS wakes its threads for each, and on a busy machine they wait for a core longer than
@@ -25,18 +25,18 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from designkit._io import write_json_atomic  # noqa: E402
+from designkit.support.atomic import write_json_atomic  # noqa: E402
 
 _CHILD = """
 import contextlib, json, sys, time
 import numpy as np
-import designkit._blas as blas, designkit.cores.coupled, designkit.optimize as op
+import designkit.support.blas as blas, designkit.cores.coupled, designkit.optimize as op
 if sys.argv[1] == "default":
     # every module that took the limit by name gets the no-op instead
     for mod in list(sys.modules.values()):
         if getattr(mod, "one_blas_thread", None) is blas.one_blas_thread:
             mod.one_blas_thread = contextlib.nullcontext
-from designkit.array import CoilArray
+from designkit.model.array import CoilArray
 from designkit.design import default_design
 d = default_design()
 if sys.argv[3] == "quick":

@@ -27,7 +27,7 @@ if str(ROOT) not in sys.path:
 
 from cad.export import export_all  # noqa: E402
 from cad.params import from_design  # noqa: E402
-from designkit._io import write_json_atomic  # noqa: E402
+from designkit.support.atomic import write_json_atomic  # noqa: E402
 from designkit.design import default_design  # noqa: E402
 
 

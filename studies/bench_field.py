@@ -31,7 +31,7 @@ if __package__ in (None, ""):
 
 import numpy as np
 
-from designkit._io import write_json_atomic, write_text_atomic
+from designkit.support.atomic import write_json_atomic, write_text_atomic
 from designkit.design import MU0
 from designkit.field import cylindrical_to_cartesian, loop_field, reference as ref, winding_field
 from designkit.field.winding import winding_rz

@@ -31,7 +31,7 @@ if __package__ in (None, ""):
 
 import numpy as np
 
-from designkit._io import write_json_atomic, write_text_atomic
+from designkit.support.atomic import write_json_atomic, write_text_atomic
 from firmware_io import CoilDrive, CoilDriver, SensorArrays
 from firmware_io.hw.pca9685 import PCA9685
 from firmware_io.hw.sim import SimBus, SimClock, SimPCA9685, SimTCA9548A, SimTLV493D

@@ -39,8 +39,8 @@ if __package__ in (None, ""):
 import numpy as np
 
 from designkit import default_design, fieldmap
-from designkit._io import write_json_atomic
-from designkit.array import ROWS, CoilArray
+from designkit.support.atomic import write_json_atomic
+from designkit.model.array import ROWS, CoilArray
 from designkit.fieldmap.region import MARGIN_M, within_reach
 from designkit.render import Hemisphere
 from firmware_io.mapfile import MapFile

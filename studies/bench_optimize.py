@@ -27,7 +27,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from designkit import default_design  # noqa: E402
-from designkit._blas import one_blas_thread  # noqa: E402
+from designkit.support.blas import one_blas_thread  # noqa: E402
 from designkit.cores import panel  # noqa: E402
 from designkit.optimize import (CoilDesignProblem, device_problem_for, solve,  # noqa: E402
                                 solve_device, verify_device)

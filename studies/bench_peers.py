@@ -41,7 +41,7 @@ if __package__ in (None, ""):
 
 import numpy as np  # noqa: E402
 
-from designkit._io import atomic_path, write_json_atomic, write_text_atomic  # noqa: E402
+from designkit.support.atomic import atomic_path, write_json_atomic, write_text_atomic  # noqa: E402
 from designkit.constants import MU0  # noqa: E402
 from designkit.field import cylindrical_to_cartesian, winding_field  # noqa: E402
 from designkit.field import harmonic, winding  # noqa: E402

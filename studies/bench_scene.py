@@ -34,9 +34,9 @@ if __package__ in (None, ""):
 import numpy as np
 
 from designkit import default_design
-from designkit._io import write_json_atomic
-from designkit.array import CoilArray, force_matrix
-from designkit.skipping import SkippingEvaluator as Scene
+from designkit.support.atomic import write_json_atomic
+from designkit.model.array import CoilArray, force_matrix
+from designkit.model.skipping import SkippingEvaluator as Scene
 from studies.bench_map import report_scene, scene_vs_full  # noqa: E402
 
 VARIANTS = {"direct": ("never", "never"), "skip": ("never", "bound"),

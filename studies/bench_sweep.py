@@ -22,9 +22,9 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from designkit._io import write_json_atomic  # noqa: E402
+from designkit.support.atomic import write_json_atomic  # noqa: E402
 from designkit.design import load_design  # noqa: E402
-from designkit.sweep import ARRAY_PARAMETERS, parse_param, run_array_sweep  # noqa: E402
+from designkit.optimize.sweep import ARRAY_PARAMETERS, parse_param, run_array_sweep  # noqa: E402
 
 ONE_THREAD = {k: "1" for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
 

@@ -29,7 +29,7 @@ import numpy as np
 from studies._common import finish, load_average
 from studies.bench_constant import matmul_seconds
 from designkit import default_design
-from designkit.array import array_for_design
+from designkit.model.array import array_for_design
 from designkit.viz.common import _RES
 from designkit.viz.physics import (FIELDLINE_TOLERANCE, PICTURE_TOLERANCE, _footprint_half_m,
                                    array_field, resolve_currents)

@@ -2,7 +2,7 @@
 random devices within the build tolerances, by plan (onboard arrays only; onboard + a probe
 scan) and by tolerance scale -- and what does it cost?
 
-Devices: :func:`designkit.asbuilt.random_asbuilt` with the default tolerances (0.6 mm per axis,
+Devices: :func:`designkit.design.asbuilt.random_asbuilt` with the default tolerances (0.6 mm per axis,
 5 mrad tilt, 2 % turns, 0.5 mm core depth) times ``scale``, every core's steel at mu_r 450
 (nominal 1000). Readings from the device's exact coupled model: onboard arrays, each coil alone
 at +-2 A, 0.05 mT noise; probe, ``--probe`` random workspace points, each coil alone at 1 A,
@@ -39,8 +39,8 @@ if __package__ in (None, ""):
 import numpy as np
 
 from designkit import calibration as cal
-from designkit.array import CoilArray
-from designkit.asbuilt import AsBuilt, BuildTolerances, PARAMETERS, random_asbuilt
+from designkit.model.array import CoilArray
+from designkit.design.asbuilt import AsBuilt, BuildTolerances, PARAMETERS, random_asbuilt
 from designkit.design import default_design, design_to_toml
 from designkit.sim import run_simulation
 from firmware_io.scene import Scene

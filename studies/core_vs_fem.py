@@ -25,12 +25,12 @@ from pathlib import Path
 import numpy as np
 
 import designkit.cores.panel as core_mod
-from designkit._io import write_json_atomic
-from designkit._progress import tqdm
-from designkit.coil import Coil
+from designkit.support.atomic import write_json_atomic
+from designkit.support.progress import tqdm
+from designkit.model.coil import Coil
 from designkit.cores import Core, SaturationWarning
 from designkit.design import OptimizeSpec, default_design
-from designkit.electrical import resistance
+from designkit.model.electrical import resistance
 from designkit.fem import solve
 from designkit.fem.compare import (air_inductance, model_field, plot_comparison, probe_errors,
                                    probe_set)

@@ -30,10 +30,10 @@ from pathlib import Path
 
 import numpy as np
 
-from designkit._io import write_json_atomic
-from designkit._progress import tqdm
-from designkit.array import CoilArray, gradient_from_g5
-from designkit.coil import Coil
+from designkit.support.atomic import write_json_atomic
+from designkit.support.progress import tqdm
+from designkit.model.array import CoilArray, gradient_from_g5
+from designkit.model.coil import Coil
 from designkit.cores.panel import Core
 from designkit.design import default_design
 from designkit.fem import fem3d
@@ -98,7 +98,7 @@ def model_vs_fem(points, b, g, case) -> dict:
 
 def model_pull(heights) -> np.ndarray:
     """designkit's pull of one core on the exact 10 x 10 mm magnet (coupling solve, face
-    charges; designkit.array.CoilArray.bias_force with ``magnet_size_m``) at the heights of
+    charges; designkit.model.array.CoilArray.bias_force with ``magnet_size_m``) at the heights of
     the magnet's centre above the winding's top (m): Fz (k,) N."""
     d = default_design()
     a1 = CoilArray.from_design(d.replace(**{"array.rows": 1, "array.columns": 1}))

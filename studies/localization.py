@@ -1,10 +1,10 @@
 """Question: how well do the estimators of firmware_io.localization locate the finger magnet from
-the two simulated Hall arrays, against the thesis (designkit.sensor_sim.THESIS_MAE_MM, its field
+the two simulated Hall arrays, against the thesis (designkit.sim.readings.THESIS_MAE_MM, its field
 cases 1-4) and against the noise limit -- and how much does the cores' magnetization by the magnet
 spoil the thesis' subtraction?
 
 Inputs: the default design; the v2 map (``--map``) or the same numbers from designkit; readings
-from designkit.sensor_sim (exact cylinder magnet, coupled coil and core fields, TLV493D chain,
+from designkit.sim.readings (exact cylinder magnet, coupled coil and core fields, TLV493D chain,
 per-sensor errors drawn once), calibrated with firmware_io.localization.calibrate on coil-only
 frames. Positions: ``n`` uniform random in the thesis' 50 mm cube and ``n`` in the rendering
 workspace; field cases: the thesis' four and full rendering currents (``CASES``).
@@ -37,11 +37,11 @@ if __package__ in (None, ""):
 import numpy as np
 from scipy.optimize import least_squares
 
-from designkit._progress import tqdm
+from designkit.support.progress import tqdm
 from designkit.design import default_design
-from designkit.learned_inverse import train_learned_inverse
-from designkit.sensor_sim import (THESIS_MAE_MM, SensorErrors, SensorSimulator, analog_reading,
-                                  case_currents, forward_model, random_positions)
+from designkit.calibration.learned_inverse import train_learned_inverse
+from designkit.sim.readings import (THESIS_MAE_MM, SensorErrors, SensorSimulator, analog_reading,
+                                    case_currents, forward_model, random_positions)
 from firmware_io.localization import (ConstantVelocityKalman, LearnedInverse, Localizer,
                                       SensorModel, calibrate, cylinder_field, multipole_field)
 from firmware_io.mapfile import gradient_tensor
@@ -97,7 +97,7 @@ def _estimators(sim, out, map_path, quick, seed):
             m = dataclasses.replace(base, magnet_size_m=magnet_size_m)
             return Localizer(m, method, **kw)
         model = make("dipole", magnet_size_m=size).model
-        source = "designkit.sensor_sim.forward_model (rod induced model)"
+        source = "designkit.sim.readings.forward_model (rod induced model)"
     t0 = time.perf_counter()
     learned = train_learned_inverse(model, n_samples=800 if quick else 4000, hidden=16,
                                     max_iterations=100 if quick else 600, seed=seed)

@@ -1,7 +1,7 @@
 """Question: at full rendering currents (random +-6 A per coil, time-varying), how close does the
 calibrated model-based fit come to the noise-limited error, and what limits it?
 
-Simulation as in studies/localization.py (designkit.sensor_sim: exact 10 x 10 mm cylinder,
+Simulation as in studies/localization.py (designkit.sim.readings: exact 10 x 10 mm cylinder,
 coils' field at the sensors' true, displaced poses, the cores' induced field ('rod' model), the
 TLV493D chain with the device's sensor errors, --noise-mt rms noise); positions in the lower half
 of the thesis cube (|x|, |y| <= 25 mm, 20-45 mm). The noise limit: the same readings fitted
@@ -28,7 +28,7 @@ if __package__ in (None, ""):
 import numpy as np
 
 from designkit.design import default_design
-from designkit.sensor_sim import SensorSimulator, case_currents, forward_model, random_positions
+from designkit.sim.readings import SensorSimulator, case_currents, forward_model, random_positions
 from firmware_io.localization import Localizer, SensorModel
 from studies._common import finish
 from studies.localization import _calibrate, _noise_limited, with_coil_gradient

@@ -4,7 +4,7 @@ PLs, and what do a cold and a warm fix cost?
 
 Data the model did not produce: the magnet's field from magpylib's exact cylinder (10 x 10 mm,
 moment from the design) at the sensors' true, displaced poses; the coils' coupled field at the
-currents; the cores' field induced by the magnet (designkit.sensor_sim, each core solved at the
+currents; the cores' field induced by the magnet (designkit.sim.readings, each core solved at the
 true sensor poses); the TLV493D chain (``--noise-mt`` rms noise, 0.098 mT LSB, NaN beyond
 +-130 mT) with the device's sensor errors (offset, 1 % gain, 1 degree and 0.5 mm mounting). The
 localizer knows the nominal poses, the map's (the forward model's) coil field, its gradient at
@@ -41,7 +41,7 @@ import numpy as np
 from scipy.stats import beta
 
 from designkit.design import default_design
-from designkit.sensor_sim import SensorSimulator, case_currents, forward_model, random_positions
+from designkit.sim.readings import SensorSimulator, case_currents, forward_model, random_positions
 from firmware_io.constants import MU0
 from firmware_io.localization import Localizer, SensorModel, multipole_field
 from firmware_io.localization.integrity import fused_protection_level, ratio_quantiles

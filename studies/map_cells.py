@@ -41,8 +41,8 @@ import numpy as np
 from numpy.polynomial import chebyshev as cheb
 
 from designkit import default_design, fieldmap
-from designkit._io import write_json_atomic
-from designkit.array import CoilArray
+from designkit.support.atomic import write_json_atomic
+from designkit.model.array import CoilArray
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "map_cells"
 """Default output folder (git-ignored), whatever the working directory."""

@@ -34,7 +34,7 @@ if __package__ in (None, ""):
 import numpy as np
 
 from designkit import default_design
-from designkit._io import atomic_path, write_json_atomic, write_text_atomic
+from designkit.support.atomic import atomic_path, write_json_atomic, write_text_atomic
 from designkit.render import (ArrayActuation, HalfCylinder, Hemisphere, MeshSurface, Plane,
                               Wedge, force_constant)
 from designkit.render.constant import force_matrices

@@ -28,8 +28,8 @@ if __package__ in (None, ""):
 
 import numpy as np
 
-from designkit._io import write_json_atomic, write_text_atomic
-from designkit._progress import tqdm
+from designkit.support.atomic import write_json_atomic, write_text_atomic
+from designkit.support.progress import tqdm
 from designkit.design import MU0
 from designkit.field import dipole_field, loop_field, magnetized_cylinder_field, winding_field
 from designkit.field import reference as ref

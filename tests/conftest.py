@@ -36,7 +36,7 @@ _hypothesis_profiles()
 @pytest.fixture(scope="session")
 def thesis_array():
     """The default design's coupled 3 x 3 array (its one LU solve shared by every test)."""
-    from designkit.array import CoilArray
+    from designkit.model.array import CoilArray
     from designkit.design import default_design
 
     arr = CoilArray.from_design(default_design())

@@ -26,7 +26,7 @@ ROWS = {1: [2], 3: [0, 1, 2], 6: [0, 1, 2, 3, 4, 5]}
 @pytest.fixture(scope="module")
 def wrench_matrices(thesis_array):
     """(m, 6, 9) force+torque per ampere of the default design at random workspace points."""
-    from designkit.array import force_matrix, skew_matrix
+    from designkit.model.array import force_matrix, skew_matrix
     from designkit.design import default_design
 
     d = default_design()

@@ -6,7 +6,7 @@ import numpy as np
 import scipy.linalg  # noqa: F401  (loads scipy's own BLAS, which must be limited too)
 from threadpoolctl import threadpool_info, threadpool_limits
 
-from designkit._blas import one_blas_thread
+from designkit.support.blas import one_blas_thread
 
 
 def _blas_threads() -> list[int]:

@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 
 from designkit import calibration as cal
-from designkit.array import CoilArray, force_matrix
-from designkit.asbuilt import PARAMETERS, AsBuilt, BuildTolerances, CoilDeviation, random_asbuilt
+from designkit.model.array import CoilArray, force_matrix
+from designkit.design.asbuilt import (PARAMETERS, AsBuilt, BuildTolerances, CoilDeviation,
+                                      random_asbuilt)
 from designkit.calibration.model import ForwardModel
 from designkit.cli import main
 from designkit.design import default_design, design_to_toml, load_design

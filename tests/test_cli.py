@@ -16,9 +16,9 @@ from pathlib import Path
 import pytest
 
 from designkit import __version__ as designkit_version
-from designkit._progress import LineWriter, tqdm
+from designkit.support.progress import LineWriter, tqdm
 from designkit.cli import COMMANDS, main
-from designkit.commands._common import join_negative_values
+from designkit.commands.common import join_negative_values
 from designkit.errors import BadInputError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -255,7 +255,7 @@ def test_design_file_type_errors(tmp_path, text, param):
 
 
 def test_staged_folder_moves_everything_into_place(tmp_path, monkeypatch):
-    from designkit.commands._common import staged_folder
+    from designkit.commands.common import staged_folder
 
     with staged_folder(tmp_path / "a" / "out") as stage:
         (stage / "sub").mkdir()

@@ -119,7 +119,7 @@ def test_iron_core_map_against_the_coupled_model(small_map, thesis_array):
 def test_localizer_from_map_recovers_a_position(small_map, thesis_array):
     # noise-free readings of the exact coupled model (cylinder magnet + the cores it
     # magnetizes + coils at known currents) -> the fit with the map's sensor section
-    from designkit.sensor_sim import SensorSimulator
+    from designkit.sim.readings import SensorSimulator
 
     loc = Localizer.from_map(small_map)
     sim = SensorSimulator(SMALL_BOX, array=thesis_array, errors="ideal", noise_t=0.0)

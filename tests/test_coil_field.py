@@ -7,7 +7,7 @@ from scipy.spatial.transform import Rotation
 from designkit import Coil
 from designkit.design import default_design
 from designkit.field import dipole_field, winding_field
-from designkit.pose import Pose
+from designkit.geometry.pose import Pose
 
 RI, RO, L, N = 0.012, 0.019, 0.100, 1429
 

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from designkit.coil import Coil
+from designkit.model.coil import Coil
 from designkit.cores import (EVAL_RTOL, Core, SaturationWarning, demagnetizing_factor,
                              steel1010_h)
 from designkit.design import MU0

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from conftest import DATA
-from designkit.coil import Coil
+from designkit.model.coil import Coil
 from designkit.commands.report import coil_properties, design_point_summary
 from designkit.design import default_design
 from designkit.fem.compare import model_rz

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from conftest import DATA
-from designkit.array import CoilArray
+from designkit.model.array import CoilArray
 from designkit.cores.coupled import ArraySystem
 from designkit.design import default_design
 

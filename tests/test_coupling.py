@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from designkit import Coil, Pose, default_design
-from designkit.array import CoilArray, g5_from_gradient
+from designkit.model.array import CoilArray, g5_from_gradient
 from designkit.cores import ArraySystem, Core
 from designkit.design import MU0, ArraySpec
 from designkit.errors import DesignRuleError

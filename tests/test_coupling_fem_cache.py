@@ -24,8 +24,8 @@ import numpy as np
 import pytest
 
 from conftest import DATA
-from designkit.array import CoilArray, gradient_from_g5
-from designkit.coil import Coil
+from designkit.model.array import CoilArray, gradient_from_g5
+from designkit.model.coil import Coil
 from designkit.design import default_design
 
 D = default_design()

@@ -8,7 +8,7 @@ from scipy.integrate import solve_ivp
 from scipy.special import ellipe, ellipk
 
 from designkit import Coil, default_design
-from designkit import electrical as el
+from designkit.model import electrical as el
 from designkit.design import MU0, WireSpec
 from designkit.errors import BadInputError
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from conftest import shared_fem_solves
-from designkit.coil import Coil
+from designkit.model.coil import Coil
 from designkit.cores.panel import Core
 from designkit.fem.compare import air_inductance, model_field
 

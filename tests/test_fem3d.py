@@ -14,7 +14,7 @@ pytestmark = pytest.mark.skipif(shutil.which("getdp") is None,
 
 
 def _model_single(points, mu_r=1000.0):
-    from designkit.coil import Coil
+    from designkit.model.coil import Coil
     from designkit.cores.panel import Core
     from designkit.fem import fem3d
     from designkit.field import winding_field

@@ -8,7 +8,7 @@ from scipy.spatial.transform import Rotation
 
 from designkit import Coil
 from designkit.field import loop_field, magnetized_cylinder_field, winding_field
-from designkit.pose import Pose
+from designkit.geometry.pose import Pose
 
 RI, RO, L, N = 0.012, 0.019, 0.100, 1429
 coord = st.floats(-0.3, 0.3, allow_nan=False)

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from designkit import default_design, fieldmap
-from designkit.array import CoilArray
+from designkit.model.array import CoilArray
 from designkit.cli import main
 from designkit.design import design_to_toml
 from designkit.errors import BadInputError

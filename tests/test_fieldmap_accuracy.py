@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from designkit import default_design, fieldmap
-from designkit.array import ROWS, CoilArray
+from designkit.model.array import ROWS, CoilArray
 
 
 def _geometry(shape, seed):

@@ -13,13 +13,13 @@ import numpy as np
 import pytest
 
 from designkit import default_design, fieldmap
-from designkit.array import CoilArray
+from designkit.model.array import CoilArray
 from designkit.cli import main
 from designkit.cores import coupled as cp
 from designkit.design import design_to_toml
 from designkit.errors import BadInputError
 from designkit.fieldmap.symmetry import Orbits, array_symmetries, random_orbits
-from designkit.pose import Pose
+from designkit.geometry.pose import Pose
 from designkit.render import Hemisphere
 from designkit.sim import SimulatedDevice
 from firmware_io.runner import Runner, RunnerConfig, SensorFrame

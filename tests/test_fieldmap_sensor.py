@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from designkit import default_design
-from designkit.array import CoilArray
+from designkit.model.array import CoilArray
 from designkit.fieldmap.tables import adjoint_basis_field
-from designkit.pose import Pose
+from designkit.geometry.pose import Pose
 
 
 def _adjoint_sensor_field(arr, p, moment):

@@ -275,7 +275,7 @@ def test_run_figure_names_the_off_spans_and_marks_each_injection():
 def test_fem_comparison_has_a_residual_row_in_percent():
     import dataclasses
 
-    from designkit.coil import Coil
+    from designkit.model.coil import Coil
     from designkit.fem.compare import comparison_figure, model_field
     from designkit.fem.runner import FemResult, LineResult
 
@@ -303,7 +303,7 @@ def test_fem_comparison_has_a_residual_row_in_percent():
 
 
 def test_sweep_figure_takes_a_first_title_line():
-    from designkit.sweep import parse_param, run_sweep, sweep_figure
+    from designkit.optimize.sweep import parse_param, run_sweep, sweep_figure
 
     result = run_sweep(DESIGN, [parse_param("inner_radius_m=0.008:0.012:3")], workers=1,
                        progress=False)

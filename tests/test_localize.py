@@ -1,4 +1,4 @@
-"""designkit.sensor_sim: simulated Hall arrays, checked against magpylib, the TLV493D datasheet and
+"""designkit.sim.readings: simulated Hall arrays, checked against magpylib, the TLV493D datasheet and
 an independent 3-D solve."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from designkit.errors import BadInputError
-from designkit.sensor_sim import (TLV_LSB_T, SensorErrors, case_currents, magnet_field,
-                                  random_positions, sensor_positions_m, tlv_readout)
+from designkit.sim.readings import (TLV_LSB_T, SensorErrors, case_currents, magnet_field,
+                                    random_positions, sensor_positions_m, tlv_readout)
 
 import magpylib as magpy  # noqa: E402  (a test dependency: no skip)
 
@@ -112,7 +112,7 @@ def test_induced_core_field_matches_the_independent_3d_solve():
     """Issue 14: an independent 3-D solve of the default array (linear mu_r
     1000) gives 4.0 mT at the upper and 0.74 mT at the lower centre sensor for the magnet 30 mm
     above the centre coil, where the magnet's own field at the lower sensor is 0.06 mT."""
-    from designkit.sensor_sim import SensorSimulator
+    from designkit.sim.readings import SensorSimulator
 
     # the issue's figures are for the moment along +z (the default design points it down)
     sim = SensorSimulator(errors="ideal", noise_t=0.0, moment_direction=(0.0, 0.0, 1.0))

@@ -1,11 +1,11 @@
-"""The simulated TLV493D reads its field from designkit.sensor_sim; the study's smoke test."""
+"""The simulated TLV493D reads its field from designkit.sim.readings; the study's smoke test."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from designkit.sensor_sim import TLV_LSB_T, magnet_field
+from designkit.sim.readings import TLV_LSB_T, magnet_field
 from firmware_io.hw.tlv493d import TLV493D
 from firmware_io.hw.sim import SimBus, SimClock, SimTLV493D
 
@@ -69,7 +69,7 @@ def test_from_map_end_to_end_and_design_check(tmp_path):
     interpolation, the multipole magnet) stays below the noise-limited error at 30-60 mm (~1-2
     mm); it refuses another design's map."""
     from designkit import default_design, fieldmap
-    from designkit.sensor_sim import SensorSimulator
+    from designkit.sim.readings import SensorSimulator
     from firmware_io.errors import BadInputError
     from firmware_io.localization import Localizer
 
@@ -104,7 +104,7 @@ def test_calibration_removes_the_mounting_bias(tmp_path):
     the exact coil field at the shifted sensors, 0.150 mm with the map's linearization since
     the sensors left the box of A; uncalibrated 0.6-0.9 mm)."""
     from designkit import default_design, fieldmap
-    from designkit.sensor_sim import SensorSimulator, random_positions
+    from designkit.sim.readings import SensorSimulator, random_positions
     from firmware_io.localization import Localizer, calibrate
 
     d = default_design()

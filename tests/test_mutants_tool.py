@@ -44,7 +44,7 @@ def test_a_snippet_that_does_not_match_is_reported_and_nothing_is_written(tmp_pa
 
 
 def test_a_dirty_tree_is_refused(monkeypatch, capsys):
-    monkeypatch.setattr(mutants, "git", lambda *a, **k: " M designkit/array.py\n")
+    monkeypatch.setattr(mutants, "git", lambda *a, **k: " M designkit/model/array.py\n")
     monkeypatch.setattr(mutants, "export_head", lambda dest: (_ for _ in ()).throw(
         AssertionError("exported a dirty tree")))
     assert mutants.main(["--only", "runner-f0-added"]) == 2

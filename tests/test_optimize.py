@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 
 from designkit import Coil, default_design
-from designkit import electrical as el
+from designkit.model import electrical as el
 from designkit import optimize as opt
-from designkit._blas import one_blas_thread
+from designkit.support.blas import one_blas_thread
 from designkit.optimize import fast_model
 from designkit.errors import BadInputError
 from designkit.field import loop_field, winding_field
-from designkit.pose import Pose
+from designkit.geometry.pose import Pose
 
 
 def test_axial_closed_form_matches_the_field_engine():
@@ -288,7 +288,7 @@ def test_fast_rod_saturates_and_its_incremental_inductance_is_the_derivative():
 
 
 def test_device_constraints_match_the_electrical_module_on_the_thesis_coil():
-    """R, supply, 5 tau and heating of the device problem vs designkit.electrical (separate
+    """R, supply, 5 tau and heating of the device problem vs designkit.model.electrical (separate
     code): the thesis coil at 100 C and 20 C."""
     import dataclasses
 

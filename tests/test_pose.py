@@ -5,7 +5,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from designkit.errors import BadInputError
-from designkit.pose import Pose
+from designkit.geometry.pose import Pose
 
 
 def test_round_trip_and_transforms():

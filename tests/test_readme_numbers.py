@@ -13,7 +13,7 @@ from conftest import load_study
 from designkit.design import default_design
 from designkit.fieldmap import default_box
 from designkit.render import ArrayActuation, Plane, force_constant
-from designkit.sensor_sim import SensorSimulator, case_currents, random_positions
+from designkit.sim.readings import SensorSimulator, case_currents, random_positions
 from firmware_io.localization import Localizer
 
 D = default_design()

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from designkit import Coil
-from designkit.array import force_matrix
+from designkit.model.array import force_matrix
 from designkit.design import MU0, default_design, load_design
 from designkit.errors import BadInputError
 

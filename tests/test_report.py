@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from designkit import Coil, default_design
-from designkit.array import array_for_design
+from designkit.model.array import array_for_design
 from designkit.cli import main
 from designkit.cores import ArraySystem
 
@@ -97,7 +97,7 @@ def test_report_files_have_the_right_content(quick_report):
 
 
 def test_report_shows_the_thesis_and_the_optimized_device_side_by_side(quick_report):
-    from designkit import electrical as el
+    from designkit.model import electrical as el
 
     rep = json.loads((quick_report / "report.json").read_text())
     assert rep["quick"] is True
@@ -130,7 +130,7 @@ def test_report_force_matches_the_field_engine(quick_report):
     np.testing.assert_allclose(dp["force_n"], g.T @ m, rtol=1e-9, atol=1e-12)
     # default figure currents (centre coil only): the array is the coupled engine (all nine
     # cores iron, issue 12), which pushes ~12 % harder than the single coil at the design point
-    from designkit.array import CoilArray
+    from designkit.model.array import CoilArray
 
     cur = np.zeros(9)
     cur[4] = d.drive.max_current_a

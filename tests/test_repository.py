@@ -111,12 +111,11 @@ def test_no_generated_output_is_tracked_and_study_output_is_ignored():
 
 # ----------------------------------------------------------------------------- import direction
 LAYERS = {  # a module may import only from the same or a lower layer
-    "designkit.constants": 0, "designkit.errors": 0, "designkit._validate": 1,
-    "designkit._io": 1, "designkit._progress": 1, "designkit._blas": 1,
-    "designkit.pose": 1, "designkit.fourier_bessel": 1,
-    "designkit.field": 2, "designkit.design": 2, "designkit.winding_geometry": 2,
-    "designkit.electrical": 3,
-    "designkit.cores": 3, "designkit.coil": 4, "designkit.array": 5,
+    "designkit.constants": 0, "designkit.errors": 0, "designkit.support": 1,
+    "designkit.geometry": 2, "designkit.field": 2, "designkit.field.fourier_bessel": 1,
+    "designkit.design": 2, "designkit.geometry.winding": 2,
+    "designkit.model.electrical": 3,
+    "designkit.cores": 3, "designkit.model.coil": 4, "designkit.model": 5,
 }
 
 
@@ -205,7 +204,7 @@ def test_firmware_io_imports_numpy_smbus2_and_the_standard_library_only():
 
 def test_progress_bars_go_through_the_line_wise_wrapper():
     """Every progress bar writes plain lines when its stream is not a terminal: nothing but
-    designkit._progress imports tqdm itself."""
+    designkit.support.progress imports tqdm itself."""
     raw = set()
     for folder in ("designkit", "cad", "studies"):
         for path in (ROOT / folder).rglob("*.py"):
@@ -214,7 +213,7 @@ def test_progress_bars_go_through_the_line_wise_wrapper():
                    or isinstance(n, ast.Import) and any(a.name == "tqdm" for a in n.names)
                    for n in ast.walk(tree)):
                 raw.add(path.relative_to(ROOT).as_posix())
-    assert raw == {"designkit/_progress.py"}
+    assert raw == {"designkit/support/progress.py"}
 
 
 def test_field_kernels_do_not_import_the_design_spec():

@@ -325,7 +325,7 @@ def test_runner_imports_numpy_only():
 
 
 def test_start_up_calibration_through_the_firmware_recovers_the_sensor_errors(device_and_a):
-    from designkit.sensor_sim import analog_reading
+    from designkit.sim.readings import analog_reading
     from firmware_io.localization import SensorModel
 
     design, array, a = device_and_a

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from designkit.array import CoilArray
+from designkit.model.array import CoilArray
 from designkit.design import default_design
 from designkit.sim import (FaultSchedule, SimulatedDevice, simulate, slide_trajectory,
                            time_to_safe)

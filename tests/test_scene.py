@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from designkit import Coil, default_design
-from designkit.array import CoilArray, force_matrix
+from designkit.model.array import CoilArray, force_matrix
 from designkit.errors import BadInputError
-from designkit.skipping import SkippingEvaluator as Scene, _bound_at, build_table, _COMP
+from designkit.model.skipping import SkippingEvaluator as Scene, _bound_at, build_table, _COMP
 
 AIR = default_design().replace(core=None)
 M = (0.0, 0.0, 0.909)

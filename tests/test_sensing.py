@@ -8,7 +8,7 @@ import pytest
 
 from designkit import default_design
 from designkit.constants import MU0
-from designkit.sensor_headroom import sensor_headroom
+from designkit.model.sensor_headroom import sensor_headroom
 
 
 def _thick_solenoid_axis_bz(ri, ro, length, turns, current, z):

@@ -11,7 +11,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from designkit import Coil, default_design
-from designkit import electrical as el
+from designkit.model import electrical as el
 from designkit.cores.material import KNEE_T
 from designkit.cores.saturation import SaturationWarning
 

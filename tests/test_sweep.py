@@ -9,10 +9,10 @@ from pathlib import Path
 import pytest
 
 from designkit import Coil, default_design
-from designkit import electrical as el
+from designkit.model import electrical as el
 from designkit.cli import main
 from designkit.errors import BadInputError
-from designkit.sweep import parse_param
+from designkit.optimize.sweep import parse_param
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -192,7 +192,7 @@ def test_rendering_lp_is_bracketed_by_two_independent_allocations():
     only raise it."""
     import numpy as np
 
-    from designkit.array import max_vertical_force
+    from designkit.model.array import max_vertical_force
     from designkit.design import load_design
     from designkit.optimize import array_force_per_amp, rendering_force
 
@@ -218,7 +218,7 @@ def test_rendering_winding_part_matches_the_coil_array_field_engine():
     air coils (independent assembly: poses, frames, F = G^T m)."""
     import numpy as np
 
-    from designkit.array import CoilArray, force_matrix
+    from designkit.model.array import CoilArray, force_matrix
     from designkit.optimize import array_force_per_amp
 
     d = default_design().replace(core=None)

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from designkit import Coil, default_design
-from designkit import electrical as el
-from designkit.sweep import parse_param, run_sweep, sweep_figure
+from designkit.model import electrical as el
+from designkit.optimize.sweep import parse_param, run_sweep, sweep_figure
 
 from test_cli import designkit
 
@@ -136,7 +136,7 @@ def test_figure_names_the_objective_and_limits_it_was_given():
 
 def test_array_sweep_says_why_a_row_is_infeasible():
     from designkit.design import named_design
-    from designkit.sweep import ARRAY_PARAMETERS, reason_summary, run_array_sweep
+    from designkit.optimize.sweep import ARRAY_PARAMETERS, reason_summary, run_array_sweep
 
     d = named_design("optimized")
     result = run_array_sweep(d, [parse_param("pitch_m=0.03:0.05:2", ARRAY_PARAMETERS),

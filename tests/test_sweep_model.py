@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from designkit.cli import main
-from designkit.coil import Coil
+from designkit.model.coil import Coil
 from designkit.design import default_design
 
 
@@ -61,7 +61,7 @@ def test_coil_sweep_feasibility_is_the_rule_book_cad_refuses():
     import dataclasses
 
     from designkit import default_design, rules
-    from designkit.sweep import parse_param, row_design, run_sweep
+    from designkit.optimize.sweep import parse_param, row_design, run_sweep
     d = default_design()
     d = dataclasses.replace(d, drive=dataclasses.replace(
         d.drive, supply_voltage_v=d.drive.driver_max_voltage_v))

@@ -1,6 +1,6 @@
 """designkit.viz: off-screen figures are not blank and their data equal the field engine's.
 
-Reference: :meth:`designkit.array.CoilArray.field` of the whole (coupled) array evaluated
+Reference: :meth:`designkit.model.array.CoilArray.field` of the whole (coupled) array evaluated
 directly (not through viz), with all cores solved together;
 the force is F_j = sum_i m_i dB_i/dx_j.
 """
@@ -12,7 +12,7 @@ import pyvista as pv  # a required dependency: no skip
 
 from designkit import Coil, default_design  # noqa: E402
 from designkit import viz  # noqa: E402
-from designkit.array import array_for_design  # noqa: E402
+from designkit.model.array import array_for_design  # noqa: E402
 from designkit.cli import main  # noqa: E402
 from designkit.errors import BadInputError  # noqa: E402
 from designkit.viz.physics import FIELDLINE_TOLERANCE  # noqa: E402

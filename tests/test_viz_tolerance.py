@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from designkit.array import array_for_design
+from designkit.model.array import array_for_design
 from designkit.design import default_design
 from designkit.errors import BadInputError
 from designkit.viz.physics import PICTURE_TOLERANCE, array_field, resolve_currents

@@ -5,7 +5,7 @@
 - :mod:`.fit`: the regularized Levenberg-Marquardt fit, standard errors, identifiability;
 - :mod:`.plan`: a probe plan from the Fisher information, what the onboard arrays identify.
 
-The as-built description itself: :mod:`designkit.asbuilt`. Reference: docs/calibration.md.
+The as-built description itself: :mod:`designkit.design.asbuilt`. Reference: docs/calibration.md.
 """
 
 from .fit import FitNotConverged, FitResult, actuation_error, fit, fitted_mask

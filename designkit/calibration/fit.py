@@ -2,7 +2,7 @@
 
 Minimizes ``sum_rows |(b_model - b_read) / sigma|^2 + sum_params (theta / tol)^2``: the
 readings weighted by their noise, the priors the build tolerances
-(:class:`designkit.asbuilt.BuildTolerances`, mean = nominal). Levenberg-Marquardt in the
+(:class:`designkit.design.asbuilt.BuildTolerances`, mean = nominal). Levenberg-Marquardt in the
 whitened parameters ``z = theta / tol`` on :class:`ForwardModel`, whose coupling term is exact
 at the last coupled solve and linear in each core's ln(mu_r) about it (exact slope, one adjoint
 solve); after it converges the fitted device is solved exactly again and the fit repeated until
@@ -23,10 +23,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .._progress import tqdm
-from ..array import CoilArray
-from ..asbuilt import PARAMETERS, AsBuilt, BuildTolerances
+from ..design.asbuilt import PARAMETERS, AsBuilt, BuildTolerances
 from ..errors import BadInputError, DesignkitError
+from ..model.array import CoilArray
+from ..support.progress import tqdm
 from .measurements import Measurements
 from .model import ForwardModel, coupled_forward_model
 

@@ -7,7 +7,7 @@ Column k of the field (T/A) at points p (n, 3) m is
 
 ``b_single_k`` the coil with its own core alone (exact single-coil model), ``c_k`` the coupling
 term (the field of the other cores magnetized by coil k, and the feedback on its own core),
-from an exact coupled solve (:meth:`designkit.array.CoilArray.actuation_matrix`) at theta_0 and
+from an exact coupled solve (:meth:`designkit.model.array.CoilArray.actuation_matrix`) at theta_0 and
 linear in every core's ln(mu_r) about it. Its slope is exact: the cores' interface factors
 F_j = 2 (mu_j - 1) / (mu_j + 1) scale core j's rows of the system M x = F P s, so
 dx / d ln mu_j = (d ln F_j / d ln mu_j) M^-1 (x restricted to core j) and the field's derivative
@@ -16,7 +16,7 @@ one solve for all cores. The field is linear in the currents: a reading is ``sum
 Jacobian: translations and tilts exactly from the field gradient (dB/dd = -G d; a small rotation
 w about the winding centre c gives dB = w x B - G (w x (p - c))), turns exactly, the own core's
 mu_r and axial offset by one-sided differences of the core's field alone, plus the coupling's
-slope. Parameters: :data:`designkit.asbuilt.PARAMETERS`. Reference: docs/calibration.md.
+slope. Parameters: :data:`designkit.design.asbuilt.PARAMETERS`. Reference: docs/calibration.md.
 """
 
 from __future__ import annotations
@@ -25,8 +25,8 @@ import dataclasses
 
 import numpy as np
 
-from ..asbuilt import AsBuilt, CoilDeviation
-from ..array import CoilArray
+from ..design.asbuilt import AsBuilt, CoilDeviation
+from ..model.array import CoilArray
 
 LOG_MU_STEP = 0.05
 """Difference step of ln(mu_r)."""

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..asbuilt import BuildTolerances
+from ..design.asbuilt import BuildTolerances
 from .fit import WhitenedProblem, fitted_mask
 from .measurements import Measurements, onboard_plan, probe_plan
 from .model import coupled_forward_model

@@ -2,7 +2,7 @@
 
 ``--measurements M.csv --out DIR``: reads the readings (:mod:`designkit.calibration.
 measurements`), fits the as-built parameters by regularized nonlinear least squares (priors:
-the design's ``[asbuilt.tolerances]``, default :class:`designkit.asbuilt.BuildTolerances`) and
+the design's ``[asbuilt.tolerances]``, default :class:`designkit.design.asbuilt.BuildTolerances`) and
 writes DIR/asbuilt.toml (a design file) and DIR/calibration.json (parameters with standard
 errors, residuals before/after per group, condition, parameters the data cannot see).
 ``--plan [--points N] --out plan.csv``: probe points and currents from the fit's Fisher
@@ -20,14 +20,14 @@ from pathlib import Path
 import numpy as np
 
 from .. import calibration as cal
-from .._io import write_json_atomic, write_text_atomic
-from ..array import array_for_design
-from ..asbuilt import PARAMETERS, AsBuilt, BuildTolerances
 from ..calibration.fit import IDENTIFIABLE_RATIO
 from ..calibration.plan import make_plan
 from ..design import design_to_toml, load_design
+from ..design.asbuilt import PARAMETERS, AsBuilt, BuildTolerances
 from ..errors import BadInputError
-from ._common import add_progress_argument, check_output, show_progress, staged_folder
+from ..model.array import array_for_design
+from ..support.atomic import write_json_atomic, write_text_atomic
+from .common import add_progress_argument, check_output, show_progress, staged_folder
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -13,7 +13,7 @@ import argparse
 
 from ..design import load_design
 from ..optimize import rule_table
-from ._common import add_design_argument, add_progress_argument, shown_margin
+from .common import add_design_argument, add_progress_argument, shown_margin
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -12,13 +12,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .._io import write_json_atomic
-from ..coil import Coil
 from ..design import load_design
 from ..errors import BadInputError
 from ..fem.compare import air_inductance, comparison_table, plot_comparison
 from ..fem.runner import solve
-from ._common import add_design_argument, check_output, staged_folder
+from ..model.coil import Coil
+from ..support.atomic import write_json_atomic
+from .common import add_design_argument, check_output, staged_folder
 
 
 def add_arguments(parser) -> None:

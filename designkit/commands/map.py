@@ -16,9 +16,9 @@ from pathlib import Path
 from firmware_io.scene import Scene
 
 from .. import fieldmap
-from .._validate import in_range
 from ..design import load_design
-from ._common import add_design_argument, add_progress_argument, check_output, show_progress
+from ..support.validate import in_range
+from .common import add_design_argument, add_progress_argument, check_output, show_progress
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -15,14 +15,14 @@ import time
 from pathlib import Path
 
 from .. import rules
-from .._io import write_json_atomic, write_text_atomic
 from ..design import design_to_toml, load_design
 from ..errors import BadInputError
 from ..optimize import (CORE_MODEL_NAMES, GLOBAL_METHODS, CoilDesignProblem, device_design,
                         device_problem_for, evaluate_device, getdp_check, solve, solve_device,
                         verify_device)
-from ._common import (add_design_argument, add_progress_argument, check_output, show_progress,
-                      shown_margin)
+from ..support.atomic import write_json_atomic, write_text_atomic
+from .common import (add_design_argument, add_progress_argument, check_output, show_progress,
+                     shown_margin)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -32,15 +32,16 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__, fieldmap, viz
-from .._io import write_json_atomic, write_text_atomic
-from .._progress import tqdm
-from ..array import array_for_design, force_matrix, g5_from_gradient
-from ..coil import Coil
 from ..design import Design, default_design, design_to_toml, load_design, named_design
+from ..model.array import array_for_design, force_matrix, g5_from_gradient
+from ..model.coil import Coil
+from ..model.sensor_headroom import sensor_headroom
 from ..optimize import device_problem_for, evaluate_device, rendering_force
-from ..sensor_headroom import sensor_headroom
-from ._common import (add_currents_arguments, add_design_argument, add_progress_argument, check_current_limit,
-                      check_output, parse_currents, show_progress, shown_margin, staged_folder)
+from ..support.atomic import write_json_atomic, write_text_atomic
+from ..support.progress import tqdm
+from .common import (add_currents_arguments, add_design_argument, add_progress_argument,
+                     check_current_limit, check_output, parse_currents, show_progress,
+                     shown_margin, staged_folder)
 
 MAP_SPACING_M = {"quick": 0.025, "full": 0.01}
 """Step of the report map's grid of magnet positions (bias force), m: coarse, quick."""
@@ -362,7 +363,7 @@ def designs_side_by_side(design: Design) -> dict:
 
 def _field_map(design: Design, out: Path, quality: str) -> Path:
     """A coarse force-current map (the controller's map: ``designkit map``, 2 mm grid), from
-    the array the figures used (:func:`designkit.array.array_for_design`: its coupled solve
+    the array the figures used (:func:`designkit.model.array.array_for_design`: its coupled solve
     is made once)."""
     spacing = MAP_SPACING_M[quality]
     data = fieldmap.build(design, spacing=spacing, progress=False,

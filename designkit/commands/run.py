@@ -13,11 +13,11 @@ import argparse
 import dataclasses
 from pathlib import Path
 
-from .._io import write_json_atomic
 from ..design import load_design
 from ..errors import BadInputError
 from ..sim import run_simulation
-from ._common import add_design_argument, add_progress_argument, show_progress, staged_folder
+from ..support.atomic import write_json_atomic
+from .common import add_design_argument, add_progress_argument, show_progress, staged_folder
 
 OBJECTS = ("plane", "hemisphere", "half-cylinder", "wedge")
 

@@ -14,11 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import _validate as v
 from .. import fieldmap, render
 from ..design import load_design
 from ..errors import BadInputError
-from ._common import add_design_argument, add_progress_argument, check_output, show_progress
+from ..support import validate as v
+from .common import add_design_argument, add_progress_argument, check_output, show_progress
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

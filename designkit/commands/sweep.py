@@ -8,7 +8,7 @@ on a Dask cluster with ``--scheduler tcp://host:8786``; writes ``OUT/sweep.csv``
 ``designkit sweep --array --param pitch_m=0.05:0.06:3 --param core_length_m=...`` sweeps whole
 arrays (pitch x core length x coil size x wire) with the rendering objective: the smallest
 upward force the array renders over the workspace region (LP per point), the 1010-steel core
-by the fast slice model, every device constraint (designkit.sweep.evaluate_array_chunk).
+by the fast slice model, every device constraint (designkit.optimize.sweep.evaluate_array_chunk).
 """
 
 from __future__ import annotations
@@ -19,10 +19,11 @@ from pathlib import Path
 from ..design import load_design
 from ..errors import BadInputError
 from ..optimize import CORE_MODEL_NAMES
-from ..sweep import (ARRAY_COLUMNS, ARRAY_CORE_MODEL, ARRAY_PARAMETERS, PARAMETERS,
-                     design_core_model, grid, parse_param, plot, reason_summary,
-                     run_array_sweep, run_sweep, write_csv)
-from ._common import add_design_argument, add_progress_argument, check_output, show_progress, staged_folder
+from ..optimize.sweep import (ARRAY_COLUMNS, ARRAY_CORE_MODEL, ARRAY_PARAMETERS, PARAMETERS,
+                              design_core_model, grid, parse_param, plot, reason_summary,
+                              run_array_sweep, run_sweep, write_csv)
+from .common import (add_design_argument, add_progress_argument, check_output, show_progress,
+                     staged_folder)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -14,8 +14,8 @@ from pathlib import Path
 from .. import viz
 from ..design import load_design
 from ..errors import BadInputError
-from ._common import (add_currents_arguments, add_design_argument, check_current_limit,
-                      check_output, parse_currents, staged_folder)
+from .common import (add_currents_arguments, add_design_argument, check_current_limit,
+                     check_output, parse_currents, staged_folder)
 
 
 def parse_size(text: str) -> tuple[int, int]:

@@ -22,7 +22,7 @@ import numpy as np
 from ..constants import MU0
 from ..field import cylindrical_to_cartesian
 from ..field.kernels import loop_rz
-from ..winding_geometry import WindingGeometry
+from ..geometry.winding import WindingGeometry
 from .charges import (N1_CAP, N1_SIDE, ChargeModes, graded_both, graded_hi,
                       self_charge_matrices)
 from .discretization import (N_CAP, N_SIDE, influence_system, interface_factor,
@@ -363,7 +363,7 @@ def core_model(radius: float, length: float, offset: float, mu_r: float, key: tu
                m_max: int = M_MAX, refine: int = 1) -> CoreModel:
     """Discretization and self blocks of a linear core (cached per core type).
 
-    ``key``: the driving winding (a :class:`designkit.winding_geometry.WindingGeometry` or the tuple
+    ``key``: the driving winding (a :class:`designkit.geometry.winding.WindingGeometry` or the tuple
     of its four numbers); ``refine`` multiplies every panel count (convergence studies, wide
     cores).
     """

@@ -8,7 +8,7 @@ unknowns -> core j's projected field) are built once per distinct relative place
 dense LU per array, reused for every source: each coil's winding per ampere, the finger
 magnet at each position (point dipole or uniformly magnetized cylinder).
 
-Inputs: a :class:`designkit.array.CoilArray` (m, A); outputs: unknowns per source and the
+Inputs: a :class:`designkit.model.array.CoilArray` (m, A); outputs: unknowns per source and the
 cores' B (T) and grad B (T/m) at global points, force (N) and torque (N m) on the magnet.
 Derivation, costs and the measured accuracy against the 3-D GetDP FEM: docs/coupling.md.
 """
@@ -22,13 +22,13 @@ from contextlib import nullcontext
 import numpy as np
 from scipy.linalg import lu_factor, lu_solve
 
-from .._blas import one_blas_thread
 from ..constants import MU0
 from ..field.kernels import sheet_rz
-from ..pose import Pose
-from ..winding_geometry import WindingGeometry
-from .discretization import gauss
+from ..geometry.pose import Pose
+from ..geometry.winding import WindingGeometry
+from ..support.blas import one_blas_thread
 from .core_model import M_MAX, CoreModel, core_model
+from .discretization import gauss
 from .symmetric_solve import SQUARE_GROUP, SymmetricLU
 
 N_PHI_RING = 12
@@ -140,9 +140,9 @@ def _turn(b: np.ndarray, model: CoreModel, g: np.ndarray) -> np.ndarray:
 
 
 class ArraySystem:
-    """All cores of a :class:`~designkit.array.CoilArray` solved together (linear cores).
+    """All cores of a :class:`~designkit.model.array.CoilArray` solved together (linear cores).
 
-    Built once per array (:meth:`designkit.array.CoilArray.coupled`). Sources are projected
+    Built once per array (:meth:`designkit.model.array.CoilArray.coupled`). Sources are projected
     onto the cores' modes, the block system is solved by a stored LU factorization, and the
     cores' fields are evaluated from the solved unknowns.
     """

@@ -12,7 +12,7 @@ centre and N the magnetometric demagnetizing factor (:mod:`designkit.cores.nagao
 estimate only, linear, warning past the knee.
 
 Inputs: the core (m, relative mu_r) and the driving winding's geometry
-(:class:`designkit.winding_geometry.WindingGeometry`; a Coil works too), currents in A. Outputs: a
+(:class:`designkit.geometry.winding.WindingGeometry`; a Coil works too), currents in A. Outputs: a
 :class:`designkit.cores.solution.CoreSolution` (K in A/m, local frame), fields in T, H.
 Derivations and measured accuracy: docs/core_model.md.
 """
@@ -25,11 +25,11 @@ from typing import Literal
 
 import numpy as np
 
-from .. import _validate as v
-from .._blas import one_blas_thread
 from ..constants import MU0
 from ..errors import BadInputError
-from ..winding_geometry import WindingGeometry
+from ..geometry.winding import WindingGeometry
+from ..support import validate as v
+from ..support.blas import one_blas_thread
 from .discretization import (N_SIDE, influence_system, interface_factor, panel_basis_rz,
                              panel_geometry)
 from .material import BH_CURVES, KNEE_T, BHCurveName, steel1010_mu_r
@@ -62,7 +62,7 @@ class Core:
         A linear model warns (:class:`SaturationWarning`) when the core's flux density passes it.
 
     The methods take the driving winding as ``winding``: a
-    :class:`designkit.winding_geometry.WindingGeometry` or anything with its four attributes (a Coil).
+    :class:`designkit.geometry.winding.WindingGeometry` or anything with its four attributes (a Coil).
     """
 
     radius: float

@@ -26,8 +26,8 @@ from scipy.special import j1
 
 from ..constants import MU0
 from ..errors import BadInputError
-from ..fourier_bessel import int_x_j1, quarter_period_panels
-from ..winding_geometry import WindingGeometry
+from ..field.fourier_bessel import int_x_j1, quarter_period_panels
+from ..geometry.winding import WindingGeometry
 from .material import STEEL1010_B, STEEL1010_H, steel1010_h_smooth
 from .nagaoka import nagaoka_self
 
@@ -55,7 +55,7 @@ class RodSolution:
     edges_m : (n + 1,) slice boundaries along z; b_t : (n,) slice-averaged B; m_a_per_m : (n,)
     magnetization; b0_t : (n,) the winding's share of b_t; linkage_wb : flux linkage of the
     winding with the core's field; dlinkage_di_wb_per_a : its derivative in the current;
-    air_inductance_h: not included (add :func:`designkit.electrical.air_inductance_from_geometry`).
+    air_inductance_h: not included (add :func:`designkit.model.electrical.air_inductance_from_geometry`).
     """
 
     radius_m: float

@@ -15,7 +15,7 @@ import functools
 
 import numpy as np
 
-from ..pose import Pose
+from ..geometry.pose import Pose
 
 
 class SaturationWarning(UserWarning):
@@ -50,7 +50,7 @@ def saturation_table(coil, height_m: float = 0.03, currents_a=None) -> dict:
 
     How the runner applies it (per coil from its own current; per state from the equivalent
     own current ``I_eq,k = |sum_j C[k, j] I_j| / C[k, k]`` with C =
-    :meth:`designkit.array.CoilArray.saturation_correction` ``core_flux_t_per_a``), and what
+    :meth:`designkit.model.array.CoilArray.saturation_correction` ``core_flux_t_per_a``), and what
     that assumes: docs/coupling.md, "Saturation correction".
 
     Returns

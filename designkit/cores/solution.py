@@ -20,7 +20,7 @@ import numpy as np
 from ..constants import MU0
 from ..errors import BadInputError
 from ..field.kernels import loop_rz
-from ..winding_geometry import WindingGeometry
+from ..geometry.winding import WindingGeometry
 from . import quadrature as q
 from .material import KNEE_T
 from .saturation import SaturationWarning
@@ -207,7 +207,7 @@ class CoreSolution:
     def flux_linkage(self, winding) -> float:
         """Flux linkage of these currents with the winding, Wb (per the winding's turns).
 
-        ``winding``: a :class:`designkit.winding_geometry.WindingGeometry` (or a Coil)."""
+        ``winding``: a :class:`designkit.geometry.winding.WindingGeometry` (or a Coil)."""
         geo = WindingGeometry.of(winding)
         total = 0.0
         xg, wg = np.polynomial.legendre.leggauss(4)

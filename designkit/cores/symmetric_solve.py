@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import lu_factor, lu_solve
 
-from .._blas import one_blas_thread
+from ..support.blas import one_blas_thread
 
 TOL_M = 1e-9
 """Two positions (cores, map points) closer than this (m) are the same."""

@@ -13,11 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .._io import atomic_path
 from ..constants import MU0
 from ..cores.saturation import SaturationWarning
 from ..errors import BadInputError
 from ..field.winding import winding_rz
+from ..support.atomic import atomic_path
 from .runner import FemResult
 
 

@@ -13,8 +13,8 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from .._io import atomic_path
 from ..errors import require
+from ..support.atomic import atomic_path
 
 CORE, WINDING, AIR, SHELL, AXIS, OUTER = 1, 2, 3, 4, 11, 12
 

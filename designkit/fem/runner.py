@@ -20,10 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .._io import write_json_atomic
 from ..constants import MU0
 from ..cores.material import STEEL1010_B, STEEL1010_H
 from ..errors import BadInputError, MissingDependencyError
+from ..support.atomic import write_json_atomic
 from .mesh import MeshSpec, build_mesh, export_meshio
 from .problem import problem_text
 

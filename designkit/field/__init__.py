@@ -23,9 +23,9 @@ import math
 
 import numpy as np
 
-from .. import _validate as v
 from ..constants import MU0
 from ..errors import BadInputError
+from ..support import validate as v
 from .kernels import loop_rz, sheet_rz
 from .winding import ASPECT_RANGE, RATIO_RANGE, RTOL_MAX, RTOL_MIN, winding_rz
 

@@ -2,7 +2,7 @@
 
 The format -- array names, shapes, validation, interpolation -- is defined once, in the
 numpy-only reader :mod:`firmware_io.mapfile`; this package computes the arrays from a
-:class:`~designkit.array.CoilArray`, writes them atomically, and :class:`FieldMap` wraps
+:class:`~designkit.model.array.CoilArray`, writes them atomically, and :class:`FieldMap` wraps
 :class:`firmware_io.mapfile.MapFile` with designkit's errors. All the physics the map samples
 comes through one function, :func:`map_physics`.
 

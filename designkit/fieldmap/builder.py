@@ -18,12 +18,12 @@ import numpy as np
 from firmware_io import mapfile as mf
 
 from .. import __version__
-from .. import _validate as v
-from .._blas import one_blas_thread
-from .._progress import tqdm
-from ..array import ROWS, CoilArray
-from ..electrical import drive_data
 from ..errors import BadInputError
+from ..model.array import ROWS, CoilArray
+from ..model.electrical import drive_data
+from ..support import validate as v
+from ..support.blas import one_blas_thread
+from ..support.progress import tqdm
 from .cells import fit_layers
 from .physics import MapPhysics, map_physics
 from .plan import N_CHECK, _nodes, box_axes, cell_layers, default_box, layer_nodes, sources_top, table_specs

@@ -12,7 +12,7 @@ import numpy as np
 
 from firmware_io import mapfile as mf
 
-from .._blas import one_blas_thread
+from ..support.blas import one_blas_thread
 from .plan import _lobatto
 
 

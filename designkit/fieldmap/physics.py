@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..array import CoilArray
+from ..model.array import CoilArray
 
 
 @dataclass(frozen=True)
@@ -49,7 +49,7 @@ class MapPhysics:
 
     def sensor_coil_rows(self, array: CoilArray) -> np.ndarray:
         """(2, n_coils, 8, n_coils): the coupled field (T/A) and gradient rows (T/(m A),
-        :data:`~designkit.array.ROWS`) of each coil at the sensors."""
+        :data:`~designkit.model.array.ROWS`) of each coil at the sensors."""
         s = self.sensor_positions(array).reshape(-1, 3)
         nc = array.n_coils
         return self.actuation(array, s).reshape(2, nc, 8, nc)

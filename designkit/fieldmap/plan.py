@@ -13,9 +13,9 @@ import math
 
 import numpy as np
 
-from ..array import CoilArray
 from ..errors import BadInputError
-from ..skipping import source_box
+from ..model.array import CoilArray
+from ..model.skipping import source_box
 
 N_CHECK = 400
 """Random check points of a map over the design's whole box (its build's self-check)."""

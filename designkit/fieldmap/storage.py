@@ -11,8 +11,8 @@ import numpy as np
 from firmware_io import mapfile as mf
 from firmware_io.errors import BadInputError as _FirmwareBadInput
 
-from .._io import atomic_path
 from ..errors import BadInputError
+from ..support.atomic import atomic_path
 
 
 def check_output(path) -> Path:

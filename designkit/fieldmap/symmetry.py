@@ -13,7 +13,7 @@ under a reflection B is a pseudovector (-G B) and the mirrored winding circulate
 way (-1 A): the two signs cancel. A point set
 closed under the group is evaluated at one representative per orbit (:class:`Orbits`) and the
 other points filled by these relations: up to 8x fewer evaluations for a square array.
-Lengths in m; A rows as :data:`designkit.array.ROWS`. Reference: the group D4, e.g.
+Lengths in m; A rows as :data:`designkit.model.array.ROWS`. Reference: the group D4, e.g.
 M. Tinkham, Group Theory and Quantum Mechanics, ch. 4.
 """
 
@@ -25,9 +25,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..array import CoilArray, g5_from_gradient, gradient_from_g5
 from ..cores.symmetric_solve import SQUARE_GROUP, TOL_M
-from ..pose import Pose
+from ..geometry.pose import Pose
+from ..model.array import CoilArray, g5_from_gradient, gradient_from_g5
 
 
 

@@ -19,9 +19,9 @@ from scipy.interpolate import RectBivariateSpline
 
 from firmware_io.mapfile import N_MODE_Q
 
-from .._blas import one_blas_thread
-from ..array import CoilArray
-from ..pose import Pose
+from ..geometry.pose import Pose
+from ..model.array import CoilArray
+from ..support.blas import one_blas_thread
 from .physics import MapPhysics
 from .plan import _spec_nodes
 

@@ -8,7 +8,7 @@ continuous in the search and rounded down in the reported design. The force is e
 ``drive.max_current_a``: on the axis in closed form (:mod:`.axial_kernel`), with an iron core
 through :class:`designkit.Core`. Constraints in nlopt form c(x) <= 0, scaled to O(1):
 R / Rmax - 1, 5 tau / T - 1 and (Ri + d_ins - Ro) / d_ins. Inductance: the exact Bessel
-integral of :mod:`designkit.electrical`. Model and derivation: docs/optimize.md.
+integral of :mod:`designkit.model.electrical`. Model and derivation: docs/optimize.md.
 """
 
 from __future__ import annotations
@@ -22,14 +22,14 @@ from typing import Literal, Sequence
 
 import numpy as np
 
-from .. import _validate as v
-from .. import electrical as el
-from ..coil import Coil
 from ..cores.panel import Core
 from ..cores.saturation import SaturationWarning
 from ..design import CoreSpec, Design
 from ..errors import BadInputError
-from ..pose import Pose
+from ..geometry.pose import Pose
+from ..model import electrical as el
+from ..model.coil import Coil
+from ..support import validate as v
 from .axial_kernel import axial_gradient_per_current_density
 from .design_view import DesignView
 from .wire_table import insulated_diameter_for
@@ -83,7 +83,7 @@ class CoilDesignProblem(DesignView):
     core_model: str = "air"
     variables: tuple[str, ...] = VARIABLES
     inductance_t_max: float = 100.0
-    """``t_max`` of :func:`designkit.electrical.air_inductance_from_geometry`."""
+    """``t_max`` of :func:`designkit.model.electrical.air_inductance_from_geometry`."""
 
     def __post_init__(self):
         w = self.design.wire

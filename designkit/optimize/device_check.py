@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import dataclasses
 
-from .. import electrical as el
 from .. import rules
-from .._blas import one_blas_thread
 from ..design import Design
 from ..errors import BadInputError
+from ..model import electrical as el
+from ..support.blas import one_blas_thread
 from .device_problem import DeviceProblem, device_problem_for
 
 

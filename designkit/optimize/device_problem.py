@@ -21,14 +21,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import _validate as v
-from .. import electrical as el
 from .. import rules
-from ..coil import Coil
 from ..cores.panel import Core
 from ..cores.rod import solve_rods
 from ..design import Design
 from ..errors import BadInputError
+from ..model import electrical as el
+from ..model.coil import Coil
+from ..support import validate as v
 from .axial_kernel import axial_gradient_per_current_density
 from .design_view import DesignView
 from .rendering import array_render_forces

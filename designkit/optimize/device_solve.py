@@ -22,18 +22,18 @@ import nlopt
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from .. import _validate as v
-from .. import electrical as el
-from .._blas import one_blas_thread
-from .._progress import tqdm
 from ..design import Design
 from ..errors import BadInputError
+from ..model import electrical as el
+from ..rules import reachable_height_m
+from ..support import validate as v
+from ..support.blas import one_blas_thread
+from ..support.progress import tqdm
 from .candidate import device_candidate
 from .device_problem import (DEVICE_CONSTRAINTS, DEVICE_VARIABLES, PITCH_VARIABLE,
                              SEARCH_VARIABLES, DeviceProblem)
 from .fast_model import FAST_MODEL_ENVELOPE, RESIDUAL_BOUND, _FastModel, _local
 from .nlopt_driver import LocalRun, _sobol
-from ..rules import reachable_height_m
 
 
 def _device_starts(problem: DeviceProblem, n: int, seed: int) -> np.ndarray:

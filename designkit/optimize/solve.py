@@ -21,9 +21,9 @@ import nlopt
 import numpy as np
 from scipy.stats import qmc
 
-from .. import _validate as v
-from .._progress import tqdm
 from ..errors import BadInputError
+from ..support import validate as v
+from ..support.progress import tqdm
 from .coil_problem import CoilDesignProblem, DesignResult, evaluate_design, force_field_engine
 from .nlopt_driver import LocalRun, maximize
 from .wire_table import METRIC_DIAMETERS_M

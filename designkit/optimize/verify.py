@@ -16,11 +16,11 @@ import time
 import nlopt
 import numpy as np
 
-from .._blas import one_blas_thread
-from .._progress import tqdm
-from ..coil import Coil
 from ..design import Design
 from ..fem.runner import solve as fem_solve
+from ..model.coil import Coil
+from ..support.blas import one_blas_thread
+from ..support.progress import tqdm
 from .device_problem import DEVICE_VARIABLES, DeviceProblem
 from .device_solve import DeviceResult, _correct_for_wire
 from .fast_model import _FastModel, _local

@@ -29,11 +29,11 @@ from firmware_io.actuation import ActuationSource, selection
 from firmware_io.allocation import Allocator, allocate
 from firmware_io.allocation.reach import ray_limits
 
-from .. import _validate as v
-from .._progress import tqdm
-from ..array import CoilArray, force_matrix
 from ..errors import BadInputError
 from ..fieldmap import default_box
+from ..model.array import CoilArray, force_matrix
+from ..support import validate as v
+from ..support.progress import tqdm
 
 _OK_TOL = 1e-7
 """lambda d - F0 counts as renderable when the allocator's residual norm is <= this x

@@ -12,7 +12,7 @@ import numpy as np
 
 from firmware_io import scene as fs
 
-from .. import _validate as v
+from ..support import validate as v
 
 
 @dataclass(frozen=True)

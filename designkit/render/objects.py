@@ -16,8 +16,8 @@ import numpy as np
 
 from firmware_io.scene import SceneObject
 
-from .. import _validate as v
 from ..errors import BadInputError, require
+from ..support import validate as v
 
 
 class VirtualObject:

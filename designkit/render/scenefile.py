@@ -9,8 +9,8 @@ import numpy as np
 
 from firmware_io.scene import scene_arrays
 
-from .._io import atomic_path
 from ..errors import BadInputError
+from ..support.atomic import atomic_path
 from .objects import OBJECTS, MeshSurface, VirtualObject
 
 

@@ -6,7 +6,7 @@ PCA9685 registers (PWM duty, DIR level), so the bytes the runner wrote are what 
 current. The true force on the magnet (N) comes from designkit's array model at the true
 position (``CoilArray.force`` + the magnet's pull on the cores), never the map, so that the
 map's and the allocator's errors show up in a run. The sensors see that field through their
-errors and noise (designkit.sensor_sim.SensorSimulator).
+errors and noise (designkit.sim.readings.SensorSimulator).
 """
 
 from __future__ import annotations
@@ -21,9 +21,9 @@ from firmware_io.runner import (CALIBRATION_CURRENT_A, calibrate_sensors, calibr
 from firmware_io.hw.sensors import SensorArrays, default_sensor_layout
 from firmware_io.hw.sim import SimBus, SimClock, SimPCA9685, SimTCA9548A, SimTLV493D
 
-from ..array import CoilArray, force_matrix
-from ..coil import Coil
-from ..sensor_sim import SensorSimulator, analog_reading
+from ..model.array import CoilArray, force_matrix
+from ..model.coil import Coil
+from .readings import SensorSimulator, analog_reading
 from .sensors import SimSensorSource
 
 
@@ -37,8 +37,8 @@ class SimulatedDevice:
         The physics (default ``CoilArray.from_design(design)``).
     noise_t : float
         Sensor noise, T rms per axis (TLV493D datasheet: 0.1 mT), added before quantization.
-    sensor_errors : {'default', 'ideal'} or designkit.sensor_sim.SensorErrors
-        Offsets, gains and mounting errors of the sensors (designkit.sensor_sim's stated defaults:
+    sensor_errors : {'default', 'ideal'} or designkit.sim.readings.SensorErrors
+        Offsets, gains and mounting errors of the sensors (designkit.sim.readings's stated defaults:
         0.5 mm, 1 degree, 1 % gain, 0.01 mT offset after calibration).
     seed : int
     resistance_ohm, inductance_h : float, optional

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .._progress import tqdm
+from ..support.progress import tqdm
 from .device import SimulatedDevice
 from .faults import FAULT_CLEARS_S, FaultSchedule, inject
 from .trajectory import Trajectory

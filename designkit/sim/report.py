@@ -12,8 +12,8 @@ import csv
 
 import numpy as np
 
-from .._io import atomic_path
-from ..array import force_matrix
+from ..model.array import force_matrix
+from ..support.atomic import atomic_path
 from .device import SimulatedDevice
 from .faults import FAULT_CLEARS_S
 from .loop import SimulationResult

@@ -19,14 +19,15 @@ from firmware_io.runner import (CALIBRATED_RELATIVE_ERROR, ConstantVelocityTrack
                                 RunnerConfig, SceneForce)
 from firmware_io.scene import Scene
 
-from .. import electrical, fieldmap
-from .._io import write_json_atomic
-from ..array import CoilArray
-from ..coil import Coil
+from .. import fieldmap
 from ..design import Design, load_design
 from ..errors import BadInputError
-from ..render.laws import ConstraintLaw
+from ..model import electrical
+from ..model.array import CoilArray
+from ..model.coil import Coil
 from ..render import scenefile  # called through the module: tests substitute its functions
+from ..render.laws import ConstraintLaw
+from ..support.atomic import write_json_atomic
 from .device import SimulatedDevice
 from .faults import FaultSchedule
 from .loop import simulate
@@ -45,7 +46,7 @@ TOP_OF_BOX_M = 0.078
 
 
 def drive_data(design) -> dict:
-    """:func:`designkit.electrical.drive_data` for the design's own (identical) coils."""
+    """:func:`designkit.model.electrical.drive_data` for the design's own (identical) coils."""
     return electrical.drive_data(design, [Coil.from_design(design)]
                                  * (design.array.rows * design.array.columns))
 

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
-from .. import _validate as v
+from ..support import validate as v
 from .common import F_MN, F_N, MIN_ARROW, Quality, _pv, _quality
 from .physics import _add_field_arrays, array_field, magnet_moment, resolve_currents
 from .scene import scene_meshes

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
-from .. import _validate as v
+from ..support import validate as v
 from .common import FZ_MN, REACH_M, Quality, _image, _pv, _quality
 from .physics import (_add_field_arrays, _footprint_half_m, array_field, force_from_gradient,
                       magnet_moment, resolve_currents)

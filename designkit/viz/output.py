@@ -7,8 +7,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
 
-from .._io import atomic_path
 from ..errors import BadInputError
+from ..support.atomic import atomic_path
 from .common import KINDS, Kind, Quality, _pv
 from .fieldlines import field_line_data, plot_field_lines
 from .forcemap import force_map_data, plot_force_map

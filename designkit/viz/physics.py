@@ -1,6 +1,6 @@
 """The array's field and the force on the magnet at the points of a figure (design frame, m).
 
-The force on the finger magnet is ``F = (grad B)^T m`` (:func:`designkit.array.force_matrix`,
+The force on the finger magnet is ``F = (grad B)^T m`` (:func:`designkit.model.array.force_matrix`,
 thesis eq. 2.5) with ``m`` the design's magnet moment (MagnetSpec.direction, default -z) unless
 another moment is given. Default currents (``currents=None``): the coil nearest the array
 centre at the design's ``drive.max_current_a`` and every other coil at 0 A -- the situation of
@@ -15,11 +15,11 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
-from .. import _validate as v
-from ..array import (CoilArray, array_for_design, force_matrix, g5_from_gradient,
-                     gradient_from_g5)
 from ..errors import BadInputError
-from ..skipping import SkippingEvaluator
+from ..model.array import (CoilArray, array_for_design, force_matrix, g5_from_gradient,
+                           gradient_from_g5)
+from ..model.skipping import SkippingEvaluator
+from ..support import validate as v
 from .common import B_MT, B_T, F_MN, F_N, FZ_MN, GRAD_T_M
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -60,7 +60,7 @@ def array_field(design: "Design", points, currents: Sequence[float] | None = Non
                 gradient: bool = True, tolerance: float | None = None):
     """Flux density (and gradient) of the design's whole coil array at points.
 
-    :class:`designkit.array.CoilArray` of the whole array (its cores solved together, so the
+    :class:`designkit.model.array.CoilArray` of the whole array (its cores solved together, so the
     unpowered coils' cores count too): the one place where the coils' fields are summed.
 
     Parameters
@@ -73,7 +73,7 @@ def array_field(design: "Design", points, currents: Sequence[float] | None = Non
     tolerance : float in [1e-9, 0.1], or None
         None: the coupled model to the field engine's 1e-10. A float (a picture's accuracy,
         e.g. :data:`PICTURE_TOLERANCE`): the windings through
-        :class:`designkit.skipping.SkippingEvaluator` at that tolerance (relative to the
+        :class:`designkit.model.skipping.SkippingEvaluator` at that tolerance (relative to the
         largest |B| and |grad B| over the points; unpowered and negligible windings skipped),
         the coupled cores by their reference rules as with None (docs/coupling.md: why the
         cores have no cheaper rule at a picture's tolerance).
@@ -138,7 +138,7 @@ def _skipping_field(array, p, cur, gradient, tolerance):
 
 
 def force_from_gradient(gradient_t_per_m: np.ndarray, moment_a_m2: np.ndarray) -> np.ndarray:
-    """Force on a point dipole in air, ``F = F(m) G5`` (:func:`designkit.array.force_matrix`),
+    """Force on a point dipole in air, ``F = F(m) G5`` (:func:`designkit.model.array.force_matrix`),
     N, shape (n, 3), from the gradient (n, 3, 3), T/m."""
     return g5_from_gradient(np.asarray(gradient_t_per_m)) @ force_matrix(moment_a_m2).T
 

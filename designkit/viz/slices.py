@@ -7,8 +7,8 @@ from typing import TYPE_CHECKING, Literal, Sequence
 
 import numpy as np
 
-from .. import _validate as v
 from ..errors import BadInputError
+from ..support import validate as v
 from .common import B_MT, F_MN, IN_SOLID, Quality, _image, _pv, _quality
 from .physics import (PICTURE_TOLERANCE, _add_field_arrays, _footprint_half_m, array_field,
                       inside_solids, magnet_moment, resolve_currents)

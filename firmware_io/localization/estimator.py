@@ -129,7 +129,7 @@ class Localizer:
             if learned.design_sha256 != model.design_sha256:
                 raise BadInputError("weights", f"trained for design {model.design_sha256[:12]}...",
                                     f"design {learned.design_sha256[:12]}...",
-                                    "Retrain: designkit.learned_inverse.train_learned_inverse.")
+                                    "Retrain: designkit.calibration.learned_inverse.train_learned_inverse.")
         if relative_error is None:
             relative_error = (UNCALIBRATED_RELATIVE_ERROR if calibration is None
                               else CALIBRATED_RELATIVE_ERROR)

@@ -2,7 +2,7 @@
 position relative to that sensor.
 
 Features: the field's direction (3) and log10 |B| (B in T); two tanh layers; outputs scaled to
-the training box, m. Trained offline (designkit.learned_inverse.train_learned_inverse) and
+the training box, m. Trained offline (designkit.calibration.learned_inverse.train_learned_inverse) and
 stored in an .npz weights file; inference here is numpy only.
 """
 
@@ -45,7 +45,7 @@ class LearnedInverse:
                           tuple(meta["log_b_range"]), meta["design_sha256"])
         except (KeyError, ValueError, OSError, EOFError) as exc:
             raise BadInputError("weights", "a learned-inverse file written by "
-                                "designkit.learned_inverse"
+                                "designkit.calibration.learned_inverse"
                                 f" ({type(exc).__name__}: {exc})", str(p)) from None
         return out
 

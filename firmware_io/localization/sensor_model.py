@@ -96,7 +96,7 @@ class SensorModel:
     @classmethod
     def from_operator(cls, *, induced_samples_m, induced_operator, **kw) -> "SensorModel":
         """Induced field as a linear operator on the magnet's applied H_z at sample points
-        (designkit.sensor_sim.InducedCoreModel), evaluated with the multipole magnet model."""
+        (designkit.sim.readings.InducedCoreModel), evaluated with the multipole magnet model."""
         samples = np.asarray(induced_samples_m, float)
         op = np.asarray(induced_operator, float)
         model = cls(**kw)

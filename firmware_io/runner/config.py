@@ -3,7 +3,7 @@
 R, L and the MD10C supply voltage are stored once, in the configuration; its
 ``drives`` (one :class:`firmware_io.hw.md10c.CoilDrive` per coil, derived from them) is what
 the runner's current path and the PWM driver both read. A map file
-carries the drive data (``meta['drive']``, written by designkit.electrical.drive_data):
+carries the drive data (``meta['drive']``, written by designkit.model.electrical.drive_data):
 :func:`config_from_map`. SI units throughout; the fault and resume policy the fields tune is
 described in docs/runner.md.
 """

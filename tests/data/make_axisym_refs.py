@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from designkit.coil import Coil
+from designkit.model.coil import Coil
 from designkit.design import default_design
 from designkit.fem.mesh import AIR, AXIS, CORE, OUTER, SHELL, WINDING, _size_near, gmsh_model
 from designkit.fem.mesh import mesh_to_file

@@ -52,7 +52,7 @@ def _save(arrays: dict, meta: dict) -> None:
 
 def axisymmetric(level: int, arrays: dict, meta: dict) -> None:
     """The thesis coil with its linear core, 1 A: axis, probes, inductance."""
-    from designkit.coil import Coil
+    from designkit.model.coil import Coil
     from designkit.design import default_design
     from designkit.fem import solve
     from designkit.fem.compare import probe_set

@@ -33,7 +33,7 @@ def grid_points() -> np.ndarray:
 
 def pin(array3, array2, array1, moment, magnet_size) -> dict:
     """The pinned arrays (see the module docstring) from the three arrays' coupled models."""
-    from designkit.array import gradient_from_g5
+    from designkit.model.array import gradient_from_g5
 
     pts = grid_points()
     a = array3.actuation_matrix(pts)
@@ -51,7 +51,7 @@ def pin(array3, array2, array1, moment, magnet_size) -> dict:
 
 
 def main() -> int:
-    from designkit.array import CoilArray
+    from designkit.model.array import CoilArray
     from designkit.design import default_design
 
     d = default_design()

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from designkit.array import CoilArray
+from designkit.model.array import CoilArray
 from designkit.constants import MU0
 from designkit.design import default_design
 from designkit.fem.mesh import AIR, AXIS, CORE, OUTER, gmsh_model, mesh_to_file

@@ -43,7 +43,7 @@ class SimTLV493D(SimDevice):
         self.field_t = tuple(float(v) for v in field_t)
         self.field_source: Callable[[], Sequence[float]] | None = None
         """Optional callable returning the field (3,) T at each conversion (e.g. a
-        designkit.sensor_sim simulator); overrides ``field_t``."""
+        designkit.sim.readings simulator); overrides ``field_t``."""
         self.temperature_raw = int(temperature_raw)
         self.factory_bytes = bytes(factory_bytes)
         self.stuck_frame = False

@@ -28,15 +28,15 @@ from typing import Sequence
 
 import numpy as np
 
-from . import _validate as v
-from . import electrical as el
-from . import rules
-from ._io import atomic_path
-from ._progress import tqdm
-from .design import Design
-from .errors import BadInputError, DesignkitError, DesignRuleError, require
-from .optimize import (CORE_MODEL_NAMES, DEVICE_CONSTRAINTS, CoilDesignProblem, device_candidate,
-                       device_problem_for, rendering_force)
+from .. import rules
+from ..design import Design
+from ..errors import BadInputError, DesignkitError, DesignRuleError, require
+from ..model import electrical as el
+from ..support import validate as v
+from ..support.atomic import atomic_path
+from ..support.progress import tqdm
+from . import (CORE_MODEL_NAMES, DEVICE_CONSTRAINTS, CoilDesignProblem, device_candidate,
+               device_problem_for, rendering_force)
 
 PARAMETERS: dict[str, str] = {
     "inner_radius_m": "winding inner radius, m",

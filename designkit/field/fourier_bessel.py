@@ -4,7 +4,7 @@ The mutual inductance of coaxial loops, mu0 pi a b int_0^inf J1(k a) J1(k b) exp
 integrated over a winding's radial extent gives the factor
 ``S(x) = int_0^x t J1(t) dt = int_0^x J0 - x J0(x)`` evaluated at k ro and k ri (Dodd & Deeds
 1968; Conway, IEEE Trans. Magn. 46, 75 (2010)). Both the air-core inductance
-(:mod:`designkit.electrical`) and the fast rod core's applied flux
+(:mod:`designkit.model.electrical`) and the fast rod core's applied flux
 (:mod:`designkit.cores.rod`) integrate such kernels on the same fixed panels.
 """
 

@@ -3,7 +3,7 @@
 The winding is modelled with uniform current density ``turns * current / ((Ro - Ri) * L)`` over
 its rectangular (r, z) section (see :func:`designkit.field.winding_field`); the core's field is
 added by :class:`designkit.cores.Core`, which sees only the winding's geometry
-(:attr:`Coil.winding`, a :class:`designkit.winding_geometry.WindingGeometry`).
+(:attr:`Coil.winding`, a :class:`designkit.geometry.winding.WindingGeometry`).
 """
 
 from __future__ import annotations
@@ -13,14 +13,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import _validate as v
+from ..cores import Core
+from ..design import Design, WireSpec
+from ..errors import BadInputError
+from ..field import winding_field
+from ..geometry.pose import Pose
+from ..geometry.winding import WindingGeometry
+from ..support import validate as v
 from . import electrical
-from .cores import Core
-from .design import Design, WireSpec
-from .errors import BadInputError
-from .field import winding_field
-from .pose import Pose
-from .winding_geometry import WindingGeometry
 
 
 @dataclass(frozen=True)
@@ -163,9 +163,9 @@ class Coil:
 
     # ------------------------------------------------------------------ electrical
     def resistance(self, wire: WireSpec | None = None) -> float:
-        """DC resistance of the winding, ohm (see :mod:`designkit.electrical`)."""
+        """DC resistance of the winding, ohm (see :mod:`designkit.model.electrical`)."""
         return electrical.resistance(self, wire)
 
     def inductance(self, wire: WireSpec | None = None) -> float:
-        """Self-inductance including the core, H (see :mod:`designkit.electrical`)."""
+        """Self-inductance including the core, H (see :mod:`designkit.model.electrical`)."""
         return electrical.inductance(self, wire)

@@ -14,8 +14,8 @@ from scipy.optimize import minimize
 
 from firmware_io.localization import LearnedInverse, multipole_field
 
-from . import _validate as v
-from .sensor_sim import random_positions
+from ..sim.readings import random_positions
+from ..support import validate as v
 
 
 def train_learned_inverse(model, *, n_samples: int = 20000, hidden: int = 24, seed: int = 0,

@@ -13,8 +13,8 @@ import warnings
 
 import numpy as np
 
+from ..field import dipole_field
 from .coil import Coil
-from .field import dipole_field
 
 
 def sensor_headroom(design, current_a: float | None = None) -> dict:

@@ -1,7 +1,7 @@
 """Electrical and thermal model of a coil: turns, wire length, resistance, inductance, heating.
 
 Pure functions of SI numbers (the ``*_from_geometry`` kernels) and, one layer up, functions of
-a coil (:class:`designkit.winding_geometry.CoilLike`: a :class:`designkit.Coil`) and a
+a coil (:class:`designkit.geometry.winding.CoilLike`: a :class:`designkit.Coil`) and a
 :class:`designkit.design.WireSpec` / :class:`Design`. Inputs in m, A, V, deg C; outputs in ohm,
 H, s, kg, W.
 
@@ -27,12 +27,12 @@ from typing import Literal
 import numpy as np
 from scipy.special import j1, sici
 
-from . import _validate as v
-from .constants import MU0
-from .design import Design, DriveSpec, OptimizeSpec, WireSpec
-from .errors import BadInputError
-from .fourier_bessel import int_x_j1, quarter_period_panels
-from .winding_geometry import CoilLike, WindingGeometry
+from ..constants import MU0
+from ..design import Design, DriveSpec, OptimizeSpec, WireSpec
+from ..errors import BadInputError
+from ..field.fourier_bessel import int_x_j1, quarter_period_panels
+from ..geometry.winding import CoilLike, WindingGeometry
+from ..support import validate as v
 
 Packing = Literal["layered", "orthocyclic"]
 PACKINGS: tuple[str, ...] = ("layered", "orthocyclic")
@@ -375,7 +375,7 @@ def design_rule_violations(*, resistance_ohm: float, settling_time_s: float, tur
 def electrical_report(design: Design, coil: CoilLike, *,
                       max_temperature_c: float = DEFAULT_MAX_TEMPERATURE_C) -> ElectricalReport:
     """Everything electrical and thermal about ``coil`` (``Coil.from_design(design)`` for the
-    design's own: this module sits below designkit.coil and does not build coils).
+    design's own: this module sits below designkit.model.coil and does not build coils).
 
     Resistance at the wire's operating temperature; current = V/R capped by the driver's
     continuous rating; thermal estimate at that current from the operating temperature.
@@ -423,7 +423,7 @@ def drive_data(design, coils) -> dict:
     budget (adiabatic heating from the operating temperature to 100 C at the current limit,
     cooled with the time constant m c / (h A)), from the winding in ``design``.
 
-    The coils come from the caller (this layer sits below designkit.coil): fieldmap passes the
+    The coils come from the caller (this layer sits below designkit.model.coil): fieldmap passes the
     map's array, plant the design's coil."""
     w = design.wire
     r_all = [float(c.resistance(w)) for c in coils]

@@ -29,9 +29,9 @@ from typing import Any, Mapping
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from . import _validate as v
-from .errors import BadInputError
-from .pose import Pose
+from ..errors import BadInputError
+from ..geometry.pose import Pose
+from ..support import validate as v
 
 PARAMETERS = ("dx_m", "dy_m", "dz_m", "tilt_x_rad", "tilt_y_rad", "turns_rel", "log_mu_r",
               "core_dz_m")

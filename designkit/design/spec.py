@@ -18,16 +18,13 @@ import hashlib
 import json
 import math
 import numbers
-import tomllib
 from dataclasses import dataclass, field, fields
-from importlib import resources
-from pathlib import Path
 from typing import Any, Mapping
 
-from . import _validate as v
-from .asbuilt import AsBuilt, asbuilt_from_dict
-from .constants import MU0  # noqa: F401  (re-exported: designkit.design.MU0 is public)
-from .errors import BadInputError, DesignRuleError
+from ..constants import MU0  # noqa: F401  (re-exported: designkit.design.MU0 is public)
+from ..errors import BadInputError, DesignRuleError
+from ..support import validate as v
+from .asbuilt import AsBuilt
 
 
 
@@ -254,7 +251,7 @@ class Design:
     render: RenderSpec = field(default_factory=RenderSpec)
     cad: CadSpec = field(default_factory=CadSpec)
     asbuilt: AsBuilt | None = None
-    """The device as built (designkit.asbuilt); None: the nominal design."""
+    """The device as built (designkit.design.asbuilt); None: the nominal design."""
 
     def __post_init__(self):
         check_design(self)
@@ -297,7 +294,7 @@ class Design:
         return hashlib.sha256(blob.encode()).hexdigest()
 
 
-_SECTIONS = {
+SECTIONS = {
     "magnet": MagnetSpec, "wire": WireSpec, "coil": CoilSpec, "core": CoreSpec,
     "array": ArraySpec, "drive": DriveSpec, "sensors": SensorSpec,
     "workspace": WorkspaceSpec, "optimize": OptimizeSpec, "render": RenderSpec,
@@ -317,9 +314,9 @@ def replace_path(design: Design, changes: Mapping[str, Any]) -> Design:
     for key, value in changes.items():
         if "." in key:
             sec, _, name = key.partition(".")
-            if sec not in _SECTIONS:
-                raise BadInputError("parameter", f"one of {sorted(_SECTIONS)} before the dot", key)
-            allowed = {f.name for f in fields(_SECTIONS[sec])}
+            if sec not in SECTIONS:
+                raise BadInputError("parameter", f"one of {sorted(SECTIONS)} before the dot", key)
+            allowed = {f.name for f in fields(SECTIONS[sec])}
             if name not in allowed:
                 raise BadInputError("parameter", f"a field of [{sec}]: {sorted(allowed)}", key)
             per_section.setdefault(sec, {})[name] = value
@@ -328,98 +325,9 @@ def replace_path(design: Design, changes: Mapping[str, Any]) -> Design:
     for sec, vals in per_section.items():
         current = getattr(design, sec)
         if current is None:
-            current = _SECTIONS[sec]()
+            current = SECTIONS[sec]()
         top[sec] = dataclasses.replace(current, **vals)
     return dataclasses.replace(design, **top)
-
-
-def design_from_dict(data: Mapping[str, Any], *, source: str = "design") -> Design:
-    """Build a Design from a nested mapping (the TOML layout); unknown keys are errors."""
-    kwargs: dict[str, Any] = {}
-    for key, value in data.items():
-        if key == "name":
-            kwargs["name"] = value  # type-checked in check_design: 5 is not silently "5"
-        elif key == "asbuilt":
-            kwargs["asbuilt"] = asbuilt_from_dict(value, source)
-        elif key in _SECTIONS:
-            if key == "core" and (value is False or value == {} and False):
-                kwargs["core"] = None
-                continue
-            if not isinstance(value, Mapping):
-                raise BadInputError(f"{source}: [{key}]", "a table", value)
-            if key == "core" and value.get("enabled", True) is False:
-                kwargs["core"] = None
-                continue
-            cls = _SECTIONS[key]
-            allowed = {f.name for f in fields(cls)}
-            unknown = set(value) - allowed - ({"enabled"} if key == "core" else set())
-            if unknown:
-                raise BadInputError(f"{source}: [{key}] key", f"one of {sorted(allowed)}",
-                                    sorted(unknown)[0])
-            kwargs[key] = cls(**{k: val for k, val in value.items() if k != "enabled"})
-        else:
-            raise BadInputError(f"{source}: top-level key",
-                                f"'name' or one of the tables {sorted(_SECTIONS)}", key)
-    return Design(**kwargs)
-
-
-NAMED_DESIGNS: dict[str, str | None] = {"thesis": None, "thesis-default": None,
-                                          "optimized": "optimized.toml"}
-"""Designs loadable by name (``--design optimized``): None = the embedded thesis default;
-otherwise a TOML file shipped in ``designkit/data`` (``optimized``: the device of
-``designkit optimize`` meeting every constraint, see designkit.optimize)."""
-
-
-def named_design(name: str) -> Design:
-    """A shipped design by name (:data:`NAMED_DESIGNS`)."""
-    if name not in NAMED_DESIGNS:
-        raise BadInputError("design", f"a TOML path or one of the names {sorted(NAMED_DESIGNS)}",
-                            name)
-    fname = NAMED_DESIGNS[name]
-    if fname is None:
-        return default_design()
-    text = resources.files("designkit").joinpath("data", fname).read_text()
-    return design_from_dict(tomllib.loads(text), source=f"designkit/data/{fname}")
-
-
-def load_design(path: str | Path | None) -> Design:
-    """Load a TOML design file, or a shipped design by name; ``None`` gives
-    :func:`default_design`.
-
-    Names (:data:`NAMED_DESIGNS`) are used only when no file of that name exists. Missing
-    tables and keys take the default design's values.
-    """
-    if path is None:
-        return default_design()
-    p = Path(path)
-    if not p.is_file() and str(path) in NAMED_DESIGNS:
-        return named_design(str(path))
-    if not p.is_file():
-        raise BadInputError("design", "a path to an existing TOML file or one of the names "
-                            f"{sorted(NAMED_DESIGNS)}", str(p))
-    try:
-        data = tomllib.loads(p.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise BadInputError("design", f"valid TOML ({exc})", str(p)) from None
-    return design_from_dict(data, source=str(p))
-
-
-def design_to_toml(design: Design) -> str:
-    """Serialize a design as TOML (round-trips through :func:`load_design`)."""
-    lines = [f'name = "{design.name}"', ""]
-    for sec in _SECTIONS:
-        obj = getattr(design, sec)
-        lines.append(f"[{sec}]")
-        if obj is None:
-            lines.append("enabled = false")
-        else:
-            for f in fields(obj):
-                val = getattr(obj, f.name)
-                lines.append(f"{f.name} = {json.dumps(val)}")
-        lines.append("")
-    if design.asbuilt is not None:
-        lines.append(design.asbuilt.to_toml())
-    return "\n".join(lines)
 
 
 def _check_type(name: str, value: Any, default: Any) -> None:
@@ -457,7 +365,7 @@ def check_design(d: Design) -> None:
     _check_type("name", d.name, "")
     if not d.name.strip():
         raise BadInputError("name", "a non-empty string", d.name)
-    for sec in _SECTIONS:
+    for sec in SECTIONS:
         obj = getattr(d, sec)
         if obj is None:
             continue

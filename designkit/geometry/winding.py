@@ -16,8 +16,8 @@ from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
-from .constants import MU0
-from .field.winding import winding_rz
+from ..constants import MU0
+from ..field.winding import winding_rz
 
 
 class WindingGeometry(NamedTuple):

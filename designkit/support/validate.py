@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import BadInputError
+from ..errors import BadInputError
 
 
 def _number(name: str, value: Any, unit: str, what: str, ok) -> float:

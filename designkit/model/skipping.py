@@ -1,7 +1,7 @@
 """Tolerance-driven field evaluation of a coil array: compute only the outputs asked, skip a coil
 where a rigorous bound says it cannot matter, share one (rho, z) table per coil type.
 
-A :class:`SkippingEvaluator` names the sources (a :class:`~designkit.array.CoilArray`, optionally
+A :class:`SkippingEvaluator` names the sources (a :class:`~designkit.model.array.CoilArray`, optionally
 with currents), the points (m), the outputs wanted and a relative tolerance.
 :meth:`SkippingEvaluator.evaluate`
 
@@ -35,12 +35,12 @@ from typing import Literal
 import numpy as np
 from scipy.interpolate import RectBivariateSpline
 
-from . import _validate as v
+from ..errors import BadInputError
+from ..field import cylindrical_to_cartesian
+from ..geometry.pose import Pose
+from ..support import validate as v
 from .array import CoilArray, force_matrix, g5_from_gradient
 from .coil import Coil
-from .errors import BadInputError
-from .field import cylindrical_to_cartesian
-from .pose import Pose
 
 Output = Literal["B", "gradient", "force", "fz", "torque"]
 OUTPUTS = ("B", "gradient", "force", "fz", "torque")
@@ -255,7 +255,7 @@ class SkippingEvaluator:
 
     def __post_init__(self):
         if not isinstance(self.array, CoilArray):
-            raise BadInputError("array", "a designkit.array.CoilArray", type(self.array).__name__)
+            raise BadInputError("array", "a designkit.model.array.CoilArray", type(self.array).__name__)
         p, _ = v.points(self.points)
         object.__setattr__(self, "points", p)
         outs = (self.outputs,) if isinstance(self.outputs, str) else tuple(self.outputs)

@@ -28,12 +28,12 @@ import numpy as np
 from firmware_io.hw.tlv493d import TLV493D_LINEAR_RANGE_T, TLV493D_LSB_T
 from firmware_io.localization import DEFAULT_NOISE_T
 
-from . import _validate as v
-from .array import CoilArray
-from .constants import MU0
-from .design import Design, default_design
-from .errors import BadInputError
-from .field import magnetized_cylinder_field
+from ..constants import MU0
+from ..design import Design, default_design
+from ..errors import BadInputError
+from ..field import magnetized_cylinder_field
+from ..model.array import CoilArray
+from ..support import validate as v
 
 TLV_LSB_T = TLV493D_LSB_T
 """Field per LSB of the TLV493D 12-bit values, T (datasheet)."""

@@ -1,0 +1,21 @@
+"""The design spec: one frozen, SI-unit description of the whole device, and its files.
+
+:mod:`.spec` (the dataclasses, :class:`Design`, the range checks), :mod:`.files` (TOML in and
+out, shipped designs by name), :mod:`.asbuilt` (the device as built). Frame and polarity
+conventions: :mod:`.spec`.
+"""
+
+from ..constants import MU0
+from .asbuilt import AsBuilt, BuildTolerances, CoilDeviation, asbuilt_from_dict, random_asbuilt
+from .files import NAMED_DESIGNS, design_from_dict, design_to_toml, load_design, named_design
+from .spec import (MAX_LENGTH_M, SECTIONS, ArraySpec, CadSpec, CoilSpec, CoreSpec, Design,
+                   DriveSpec, MagnetSpec, OptimizeSpec, RenderSpec, SensorSpec, WireSpec,
+                   WorkspaceSpec, check_design, default_design, replace_path)
+
+__all__ = [
+    "MU0", "AsBuilt", "BuildTolerances", "CoilDeviation", "asbuilt_from_dict", "random_asbuilt",
+    "NAMED_DESIGNS", "design_from_dict", "design_to_toml", "load_design", "named_design",
+    "MAX_LENGTH_M", "SECTIONS", "ArraySpec", "CadSpec", "CoilSpec", "CoreSpec", "Design",
+    "DriveSpec", "MagnetSpec", "OptimizeSpec", "RenderSpec", "SensorSpec", "WireSpec",
+    "WorkspaceSpec", "check_design", "default_design", "replace_path",
+]
