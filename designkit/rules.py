@@ -18,6 +18,8 @@ import itertools
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from .design import Design
 from .model import electrical as el
 
@@ -132,8 +134,10 @@ def layout(design: Design) -> Layout:
     # standoffs (on the diagonal) would not clear the corner pockets by the minimum wall
     corner = (pocket + c.min_wall_m + c.standoff_outer_radius_m) / math.sqrt(2) + c.fixing_inset_m
     edge = max(pocket + c.min_wall_m, corner)
-    fx = max(arr.columns * arr.pitch_m, (arr.columns - 1) * arr.pitch_m + 2 * edge)
-    fy = max(arr.rows * arr.pitch_m, (arr.rows - 1) * arr.pitch_m + 2 * edge)
+    # (a grid's footprint is rows x pitch: the old rule, for any layout its own outline)
+    tops, outline = arr.top_centres_m(), arr.footprint_m()
+    fx = max(float(np.ptp(outline[:, 0])), float(np.ptp(tops[:, 0])) + 2 * edge)
+    fy = max(float(np.ptp(outline[:, 1])), float(np.ptp(tops[:, 1])) + 2 * edge)
     hx, hy = fx / 2 - c.fixing_inset_m, fy / 2 - c.fixing_inset_m
     up = (c.flange_thickness_m, "top bobbin flange")
     down = (c.flange_thickness_m, "bottom bobbin flange")

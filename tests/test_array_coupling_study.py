@@ -14,11 +14,11 @@ def test_array_coupling_study_quick(tmp_path):
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     from designkit import default_design
-    from designkit.design import ArraySpec
+    from designkit.design import GridLayout
 
     # two coils: every code path of the study at a fraction of the 3x3 solve
     d = default_design()
-    res = mod.run(tmp_path, quick=True, design=d.replace(array=ArraySpec(rows=1, columns=2)))
+    res = mod.run(tmp_path, quick=True, design=d.replace(array=GridLayout(rows=1, columns=2)))
     assert (tmp_path / "array_coupling.json").exists()
     assert (tmp_path / "array_coupling_f0.png").stat().st_size > 10_000
     assert res["table_centre_coil"][0]["fem"] == mod.FEM_NOT_RUN

@@ -12,7 +12,7 @@ import pytest
 from designkit import Coil, Pose, default_design
 from designkit.model.array import CoilArray, g5_from_gradient
 from designkit.cores import ArraySystem, Core
-from designkit.design import MU0, ArraySpec
+from designkit.design import MU0, GridLayout
 from designkit.errors import DesignRuleError
 from designkit.field import dipole_field
 
@@ -26,7 +26,7 @@ def arr(thesis_array):
 
 
 def _two(pitch=0.05, mu_r=1000.0):
-    d = D.replace(array=ArraySpec(rows=1, columns=2, pitch_m=pitch),
+    d = D.replace(array=GridLayout(rows=1, columns=2, pitch_m=pitch),
                   core=D.core.__class__(relative_permeability=mu_r))
     return CoilArray.from_design(d)
 
@@ -289,7 +289,7 @@ def test_magnet_pull_on_one_core_against_3d_fem():
     from designkit.fem import fem3d
 
     h, fz = fem3d.magnet_pull_case(level=-2)
-    a1 = CoilArray.from_design(D.replace(array=ArraySpec(rows=1, columns=1)))
+    a1 = CoilArray.from_design(D.replace(array=GridLayout(rows=1, columns=1)))
     size = (D.magnet.radius_m, D.magnet.length_m)
     got = np.array([a1.bias_force([0.0, 0.0, q], M_DESIGN, magnet_size_m=size)[2] for q in h])
     # measured +5 %, +6 %, +7 % against this coarse mesh (the FEM force is a difference of

@@ -39,7 +39,7 @@ def quick_report(quick_run):
 def test_report_solves_the_design_s_coupled_cores_once(quick_run):
     # figures, array force and map all use one array; the map's magnet tables solve one coil
     built = quick_run[1]
-    n = default_design().array.rows * default_design().array.columns
+    n = default_design().n_coils
     assert built.count(n) == 1 and set(built) <= {1, n}, built
 
 

@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
         raise BadInputError("--coupling-rounds", "in 0..3", args.coupling_rounds)
     moment = _moment(args.magnet_moment)
     check_output(args.out, folder=True)
-    meas = cal.read_csv(args.measurements, nominal.array.rows * nominal.array.columns,
+    meas = cal.read_csv(args.measurements, nominal.n_coils,
                         nominal.sensors.range_t)
     array = array_for_design(nominal)
     res = cal.fit(array, meas, tol, coupling_rounds=args.coupling_rounds,

@@ -130,6 +130,10 @@ def _unit(name: str) -> str:
 def _human(value, unit: str) -> str:
     if isinstance(value, bool) or value is None or isinstance(value, str):
         return str(value)
+    if isinstance(value, (tuple, list)):
+        if unit == "m":
+            return f"{np.round(np.asarray(value, dtype=float) * 1e3, 6).tolist()} mm"
+        return str(list(value))
     if unit == "m":
         return f"{value * 1e3:.6g} mm"
     if unit == "N":
@@ -137,6 +141,18 @@ def _human(value, unit: str) -> str:
     if isinstance(value, float):
         return f"{value:.6g} {unit}".strip()
     return f"{value} {unit}".strip()
+
+
+def _flat(prefix: str, values):
+    """(dotted key, value) pairs of a design table, of its groups' tables too."""
+    if isinstance(values, dict):
+        for key, value in values.items():
+            yield from _flat(f"{prefix}.{key}", value)
+    elif isinstance(values, (list, tuple)) and values and isinstance(values[0], dict):
+        for k, value in enumerate(values):
+            yield from _flat(f"{prefix}[{k}]", value)
+    else:
+        yield prefix, values
 
 
 def design_markdown(design: Design, derived: dict) -> str:
@@ -149,10 +165,10 @@ def design_markdown(design: Design, derived: dict) -> str:
         if values is None:
             lines.append(f"| {section} | none | |")
             continue
-        for key, value in values.items():
+        for key, value in _flat(section, values):
             unit = _unit(key)
             si = f"{value} {unit}".strip()
-            lines.append(f"| {section}.{key} | {_human(value, unit)} | {si} |")
+            lines.append(f"| {key} | {_human(value, unit)} | {si} |")
     lines += ["", "## Derived coil quantities", "", "| quantity | value |", "| --- | --- |"]
     for key, value in derived.items():
         lines.append(f"| {key} | {_human(value, _unit(key))} |")

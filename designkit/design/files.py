@@ -6,6 +6,7 @@ A design file holds the tables of :class:`designkit.design.Design` (``[coil]``, 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import tomllib
 from dataclasses import fields
@@ -15,37 +16,85 @@ from typing import Any, Mapping
 
 from ..errors import BadInputError
 from .asbuilt import asbuilt_from_dict
-from .spec import SECTIONS, Design, default_design
+from .layouts import layout_from_table, layout_to_table
+from .spec import SECTIONS, CoilGroup, CoilSpec, CoreSpec, Design, default_design
 
 
 def design_from_dict(data: Mapping[str, Any], *, source: str = "design") -> Design:
     """Build a Design from a nested mapping (the TOML layout); unknown keys are errors."""
     kwargs: dict[str, Any] = {}
+    groups = None
     for key, value in data.items():
         if key == "name":
             kwargs["name"] = value  # type-checked in check_design: 5 is not silently "5"
         elif key == "asbuilt":
             kwargs["asbuilt"] = asbuilt_from_dict(value, source)
+        elif key == "groups":
+            groups = value
         elif key in SECTIONS:
-            if key == "core" and (value is False or value == {} and False):
-                kwargs["core"] = None
-                continue
             if not isinstance(value, Mapping):
                 raise BadInputError(f"{source}: [{key}]", "a table", value)
-            if key == "core" and value.get("enabled", True) is False:
+            if key == "array":
+                kwargs["array"] = layout_from_table(dict(value), source)
+            elif key == "core" and value.get("enabled", True) is False:
                 kwargs["core"] = None
-                continue
-            cls = SECTIONS[key]
-            allowed = {f.name for f in fields(cls)}
-            unknown = set(value) - allowed - ({"enabled"} if key == "core" else set())
-            if unknown:
-                raise BadInputError(f"{source}: [{key}] key", f"one of {sorted(allowed)}",
-                                    sorted(unknown)[0])
-            kwargs[key] = cls(**{k: val for k, val in value.items() if k != "enabled"})
+            else:
+                kwargs[key] = _section(key, SECTIONS[key], value, source)
         else:
             raise BadInputError(f"{source}: top-level key",
-                                f"'name' or one of the tables {sorted(SECTIONS)}", key)
+                                f"'name', 'groups' or one of the tables {sorted(SECTIONS)}", key)
+    if groups is not None:
+        kwargs["groups"] = _groups(groups, kwargs.get("coil", CoilSpec()),
+                                   kwargs.get("core", CoreSpec()), source)
     return Design(**kwargs)
+
+
+def _section(key: str, cls: type, value: Mapping[str, Any], source: str,
+             base: Any = None) -> Any:
+    """One table as its dataclass; missing keys from ``base`` (default: the class's)."""
+    allowed = {f.name for f in fields(cls)}
+    unknown = set(value) - allowed - ({"enabled"} if key.endswith("core") else set())
+    if unknown:
+        raise BadInputError(f"{source}: [{key}] key", f"one of {sorted(allowed)}",
+                            sorted(unknown)[0])
+    values = {k: _tuples(val) for k, val in value.items() if k != "enabled"}
+    if key == "workspace" and "half_width_m" in values and "shape" not in values:
+        values["shape"] = "box"  # a design that gives the box's half width means the box
+    if base is not None:
+        return dataclasses.replace(base, **values)
+    return cls(**values)
+
+
+def _tuples(value: Any) -> Any:
+    """TOML arrays (lists, nested) as tuples: the spec is immutable and hashable."""
+    return tuple(_tuples(v) for v in value) if isinstance(value, list) else value
+
+
+def _groups(tables: Any, coil: CoilSpec, core: CoreSpec | None, source: str) -> tuple:
+    """``[[groups]]``: each a coil list with partial ``coil`` / ``core`` tables over the
+    design's own."""
+    if not isinstance(tables, list) or not all(isinstance(t, Mapping) for t in tables):
+        raise BadInputError(f"{source}: groups", "an array of tables ([[groups]])", tables)
+    out = []
+    for g, t in enumerate(tables):
+        where = f"{source}: groups[{g}]"
+        unknown = set(t) - {"coils", "coil", "core"}
+        if unknown:
+            raise BadInputError(f"{where} key", "one of ['coils', 'coil', 'core']",
+                                sorted(unknown)[0])
+        coils = t.get("coils")
+        if not isinstance(coils, list) or not coils:
+            raise BadInputError(f"{where}.coils", "a non-empty list of coil indices", coils)
+        g_core = core
+        core_table = t.get("core", {})
+        if core_table.get("enabled", True) is False:
+            g_core = None
+        elif core_table:
+            g_core = _section(f"groups[{g}].core", CoreSpec, core_table, source,
+                              core if core is not None else CoreSpec())
+        g_coil = _section(f"groups[{g}].coil", CoilSpec, t.get("coil", {}), source, coil)
+        out.append(CoilGroup(tuple(coils), g_coil, g_core))
+    return tuple(out)
 
 
 NAMED_DESIGNS: dict[str, str | None] = {"thesis": None, "thesis-default": None,
@@ -95,12 +144,19 @@ def design_to_toml(design: Design) -> str:
     for sec in SECTIONS:
         obj = getattr(design, sec)
         lines.append(f"[{sec}]")
-        if obj is None:
-            lines.append("enabled = false")
-        else:
-            for f in fields(obj):
-                val = getattr(obj, f.name)
-                lines.append(f"{f.name} = {json.dumps(val)}")
+        table = (layout_to_table(obj) if sec == "array" else
+                 {"enabled": False} if obj is None else
+                 {f.name: getattr(obj, f.name) for f in fields(obj)})
+        lines += [f"{k} = {json.dumps(val)}" for k, val in table.items()]
+        lines.append("")
+    for group in design.groups:
+        lines += ["[[groups]]", f"coils = {json.dumps(list(group.coils))}", "[groups.coil]"]
+        lines += [f"{f.name} = {json.dumps(getattr(group.coil, f.name))}"
+                  for f in fields(group.coil)]
+        lines.append("[groups.core]")
+        lines += (["enabled = false"] if group.core is None else
+                  [f"{f.name} = {json.dumps(getattr(group.core, f.name))}"
+                   for f in fields(group.core)])
         lines.append("")
     if design.asbuilt is not None:
         lines.append(design.asbuilt.to_toml())

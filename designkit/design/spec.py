@@ -21,10 +21,15 @@ import numbers
 from dataclasses import dataclass, field, fields
 from typing import Any, Mapping
 
+import numpy as np
+
 from ..constants import MU0  # noqa: F401  (re-exported: designkit.design.MU0 is public)
 from ..errors import BadInputError, DesignRuleError
+from ..geometry.pose import Pose
 from ..support import validate as v
 from .asbuilt import AsBuilt
+from .layouts import GridLayout, HexLayout, Layout, check_layout, pose_on_axis
+from .workspace import Workspace
 
 
 
@@ -122,16 +127,6 @@ class CoreSpec:
 
 
 @dataclass(frozen=True)
-class ArraySpec:
-    """Planar array of identical coils with parallel axes (+z), top faces at z = 0."""
-
-    rows: int = 3
-    columns: int = 3
-    pitch_m: float = 0.050
-    """Centre-to-centre spacing, m (assumed from the 150 mm x 150 mm footprint)."""
-
-
-@dataclass(frozen=True)
 class DriveSpec:
     supply_voltage_v: float = 36.0
     max_current_a: float = 6.0
@@ -147,19 +142,41 @@ class DriveSpec:
     ripple (``electrical.pwm_ripple``)."""
 
 
+SENSOR_LAYOUTS = ("coils", "free")
+"""Sensor layouts: 'coils' (one sensor on each coil's axis above its top face and one below its
+bottom face) or 'free' (``positions_m`` and ``rotations``)."""
+
+
 @dataclass(frozen=True)
 class SensorSpec:
-    """Two arrays of TLV493D-A1B6 Hall sensors, one at each coil centre."""
+    """The 3-axis Hall sensors (TLV493D-A1B6): where they sit and what they read.
 
+    ``layout = 'coils'`` (default, the thesis): an upper array, one sensor ``offset_m`` above
+    each coil's top face on its axis, in coil order, then a lower array, ``offset_m`` below each
+    bottom face; each chip's frame is its coil's. ``layout = 'free'``: one sensor at each of
+    ``positions_m`` (m, array frame), its frame ``rotations[k]`` (3 x 3, columns = the chip's
+    x, y, z axes in the array frame; empty: every chip aligned with the array frame).
+    """
+
+    layout: str = "coils"
     offset_m: float = 0.014
     """Distance above the coil tops (upper array) and below the coil bottoms (lower array), m."""
     range_t: float = 0.130
     lsb_t: float = 0.098e-3
+    positions_m: tuple[tuple[float, float, float], ...] = ()
+    rotations: tuple[tuple[tuple[float, float, float], ...], ...] = ()
+
+
+WORKSPACE_SHAPES = ("layout", "box", "disc")
+"""Workspace outlines: 'layout' (the layout's own footprint, :mod:`.layouts`), 'box' (the square
+of ``half_width_m`` about the array's axis) or 'disc' (``radius_m``)."""
 
 
 @dataclass(frozen=True)
 class WorkspaceSpec:
-    """Box in which the finger magnet moves, m, in the array frame."""
+    """The region the finger magnet moves in (:class:`designkit.design.workspace.Workspace`):
+    an outline in x, y from ``shape`` and heights ``z_min_m`` to ``z_max_m`` above the coil
+    tops, m, array frame."""
 
     z_min_m: float = 0.020
     """Lowest magnet-centre height above the coil tops, m. The magnet's centre cannot go lower:
@@ -167,8 +184,11 @@ class WorkspaceSpec:
     magnet is 10 mm long, so its centre is >= 19 mm up plus the board's thickness
     (docs/optimize.md, "Workspace floor")."""
     z_max_m: float = 0.080
+    shape: str = "layout"
     half_width_m: float = 0.075
-    """Half the side of the square footprint the box covers in x and y, m."""
+    """Half the side of the square outline of ``shape = 'box'``, m."""
+    radius_m: float = 0.075
+    """Radius of the outline of ``shape = 'disc'``, m."""
 
 
 @dataclass(frozen=True)
@@ -235,6 +255,17 @@ class CadSpec:
 
 
 @dataclass(frozen=True)
+class CoilGroup:
+    """Coils of a layout (indices in the layout's order) with a winding and core of their own;
+    in a design file ``[[groups]]`` with ``coils = [...]`` and partial ``coil`` / ``core``
+    tables whose missing keys take the design's ``[coil]`` / ``[core]`` values."""
+
+    coils: tuple[int, ...]
+    coil: CoilSpec
+    core: CoreSpec | None
+
+
+@dataclass(frozen=True)
 class Design:
     """The whole device. Immutable; sweeps use :func:`dataclasses.replace`."""
 
@@ -243,7 +274,8 @@ class Design:
     wire: WireSpec = field(default_factory=WireSpec)
     coil: CoilSpec = field(default_factory=CoilSpec)
     core: CoreSpec | None = field(default_factory=CoreSpec)
-    array: ArraySpec = field(default_factory=ArraySpec)
+    array: Layout = field(default_factory=GridLayout)
+    """Where the coils sit (:mod:`designkit.design.layouts`): grid, hex, ring or free."""
     drive: DriveSpec = field(default_factory=DriveSpec)
     sensors: SensorSpec = field(default_factory=SensorSpec)
     workspace: WorkspaceSpec = field(default_factory=WorkspaceSpec)
@@ -252,11 +284,13 @@ class Design:
     cad: CadSpec = field(default_factory=CadSpec)
     asbuilt: AsBuilt | None = None
     """The device as built (designkit.design.asbuilt); None: the nominal design."""
+    groups: tuple[CoilGroup, ...] = ()
+    """Coils whose winding or core differ from ``coil`` / ``core`` (none: all alike)."""
 
     def __post_init__(self):
         check_design(self)
         if self.asbuilt is not None:
-            self.asbuilt.check(self.array.rows * self.array.columns, self.core is not None)
+            self.asbuilt.check(self.n_coils, self.core is not None)
 
     # -- derived quantities -------------------------------------------------------------
     @property
@@ -264,26 +298,77 @@ class Design:
         """Magnet centre at the design height above the top face of a single coil, m."""
         return (0.0, 0.0, self.optimize.height_m)
 
+    @property
+    def n_coils(self) -> int:
+        """Number of coils of the layout."""
+        return len(self.array.top_centres_m())
+
+    def coil_spec(self, k: int) -> CoilSpec:
+        """The winding of coil k (its group's, else ``coil``)."""
+        for g in self.groups:
+            if k in g.coils:
+                return g.coil
+        return self.coil
+
+    def core_spec(self, k: int) -> CoreSpec | None:
+        """The core of coil k (its group's, else ``core``; None: an air coil)."""
+        for g in self.groups:
+            if k in g.coils:
+                return g.core
+        return self.core
+
+    def coil_poses(self) -> list[Pose]:
+        """Each coil's pose: its winding centre (``length_m / 2`` below its top face along its
+        axis), its local +z the layout's axis (the identity rotation for an upright coil), m."""
+        tops, axes = self.array.top_centres_m(), self.array.axes()
+        return [pose_on_axis(top - axis * self.coil_spec(k).length_m / 2, axis)
+                for k, (top, axis) in enumerate(zip(tops, axes))]
+
     def coil_centres_m(self) -> list[tuple[float, float, float]]:
-        """Centres of the array's windings, row-major, m (top faces at z = 0)."""
-        a = self.array
-        zc = -self.coil.length_m / 2
-        out = []
-        for i in range(a.rows):
-            for j in range(a.columns):
-                x = (j - (a.columns - 1) / 2) * a.pitch_m
-                y = ((a.rows - 1) / 2 - i) * a.pitch_m
-                out.append((x, y, zc))
-        return out
+        """Centres of the windings, m, in the layout's coil order."""
+        return [p.position for p in self.coil_poses()]
+
+    def workspace_region(self) -> Workspace:
+        """The region the magnet moves in (:class:`designkit.design.workspace.Workspace`)."""
+        ws = self.workspace
+        if ws.shape == "box":
+            return Workspace.box(ws.half_width_m, ws.z_min_m, ws.z_max_m)
+        if ws.shape == "disc":
+            return Workspace.disc(ws.radius_m, ws.z_min_m, ws.z_max_m)
+        return Workspace.from_polygon(self.array.footprint_m(), ws.z_min_m, ws.z_max_m)
+
+    def sensor_poses(self) -> tuple[np.ndarray, np.ndarray]:
+        """Sensor positions (n_sensors, 3) m and frames (n_sensors, 3, 3) (columns: each chip's
+        x, y, z axes in the array frame), in :class:`SensorSpec`'s order."""
+        s = self.sensors
+        if s.layout == "free":
+            pos = np.array(s.positions_m, dtype=float).reshape(-1, 3)
+            rot = (np.array(s.rotations, dtype=float).reshape(-1, 3, 3) if s.rotations
+                   else np.tile(np.eye(3), (len(pos), 1, 1)))
+            return pos, rot
+        poses = self.coil_poses()
+        up, down, frames = [], [], []
+        for k, p in enumerate(poses):
+            axis = p.matrix[:, 2]
+            reach = self.coil_spec(k).length_m / 2 + s.offset_m
+            up.append(np.asarray(p.position) + reach * axis)
+            down.append(np.asarray(p.position) - reach * axis)
+            frames.append(p.matrix)
+        return np.array(up + down), np.array(frames + frames)
 
     def replace(self, **changes) -> "Design":
         """A copy with top-level or dotted-path changes: ``d.replace(**{"coil.turns": 1000})``."""
         return replace_path(self, changes)
 
     def to_dict(self) -> dict[str, Any]:
+        """The spec as nested dicts (``array`` with its ``layout``; ``groups`` and ``asbuilt``
+        only when present, so that a design without them keeps its hash)."""
         out = dataclasses.asdict(self)
-        if self.asbuilt is None:  # a nominal design keeps its hash
+        out["array"] = {"layout": self.array.kind, **out["array"]}
+        if self.asbuilt is None:
             del out["asbuilt"]
+        if not self.groups:
+            del out["groups"]
         return out
 
     def spec_hash(self) -> str:
@@ -294,12 +379,14 @@ class Design:
         return hashlib.sha256(blob.encode()).hexdigest()
 
 
-SECTIONS = {
+SECTIONS: dict[str, type] = {
     "magnet": MagnetSpec, "wire": WireSpec, "coil": CoilSpec, "core": CoreSpec,
-    "array": ArraySpec, "drive": DriveSpec, "sensors": SensorSpec,
+    "array": GridLayout, "drive": DriveSpec, "sensors": SensorSpec,
     "workspace": WorkspaceSpec, "optimize": OptimizeSpec, "render": RenderSpec,
     "cad": CadSpec,
 }
+"""The tables of a design file and their classes (``array``: the grid's; the ``layout`` key
+chooses another, :data:`designkit.design.layouts.LAYOUTS`)."""
 
 
 def default_design() -> Design:
@@ -316,7 +403,8 @@ def replace_path(design: Design, changes: Mapping[str, Any]) -> Design:
             sec, _, name = key.partition(".")
             if sec not in SECTIONS:
                 raise BadInputError("parameter", f"one of {sorted(SECTIONS)} before the dot", key)
-            allowed = {f.name for f in fields(SECTIONS[sec])}
+            current = getattr(design, sec)
+            allowed = {f.name for f in fields(SECTIONS[sec] if current is None else current)}
             if name not in allowed:
                 raise BadInputError("parameter", f"a field of [{sec}]: {sorted(allowed)}", key)
             per_section.setdefault(sec, {})[name] = value
@@ -360,57 +448,118 @@ def _check_metres(name: str, value: Any) -> None:
                             f"{value / 1000:g} m: design files are in SI units.")
 
 
+def _check_section(sec: str, obj: Any) -> None:
+    """Type and range checks of one table's fields, each named ``sec.field``."""
+    for f in fields(obj):
+        val = getattr(obj, f.name)
+        name = f"{sec}.{f.name}"
+        if f.name == "direction":
+            if not (isinstance(val, tuple) and len(val) == 3
+                    and all(isinstance(c, float) and math.isfinite(c) for c in val)
+                    and any(c != 0.0 for c in val)):
+                raise BadInputError(name, "3 finite numbers, not all 0 (the moment's "
+                                    "direction; default [0, 0, -1])", val)
+            continue
+        if f.name in ("positions_m", "rotations"):
+            continue  # the sensor layout's lists: _check_sensors
+        _check_type(name, val, f.default)
+        _check_metres(name, val)
+        if f.name in CHOICES:
+            if val not in CHOICES[f.name]:
+                raise BadInputError(name, " or ".join(repr(c) for c in CHOICES[f.name]), val)
+        elif f.name == "turns":
+            v.positive_int(name, val)
+        elif f.name in ("offset_m", "reference_temperature_c", "operating_temperature_c",
+                        "core_clearance_m", "press_fit_clearance_m"):
+            v.finite(name, val)
+        elif f.name == "z_min_m":
+            v.nonnegative(name, val)
+        else:
+            v.positive(name, val, "")
+
+
+CHOICES = {"bh": ("linear", "steel1010"), "packing": ("layered", "orthocyclic"),
+           "mandrel": ("auto", "printed_tube", "core"), "layout": SENSOR_LAYOUTS,
+           "shape": WORKSPACE_SHAPES}
+"""The fields that name a choice, and their choices."""
+
+
+def _check_winding(where: str, c: CoilSpec, core: CoreSpec | None) -> None:
+    if c.outer_radius_m <= c.inner_radius_m:
+        raise BadInputError(f"{where}coil.outer_radius_m",
+                            f"> {where}coil.inner_radius_m ({c.inner_radius_m} m)",
+                            c.outer_radius_m)
+    if core is not None and core.radius_m > c.inner_radius_m:
+        raise BadInputError(f"{where}core.radius_m",
+                            f"<= {where}coil.inner_radius_m ({c.inner_radius_m} m)",
+                            core.radius_m, "The core must fit in the bore.")
+
+
+def _check_groups(d: Design) -> None:
+    seen: dict[int, int] = {}
+    n = d.n_coils
+    for g, group in enumerate(d.groups):
+        where = f"groups[{g}]."
+        if not group.coils:
+            raise BadInputError(f"{where}coils", "a non-empty list of coil indices", [])
+        for k in group.coils:
+            if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k < n:
+                raise BadInputError(f"{where}coils", f"coil indices in [0, {n - 1}] (the "
+                                    f"layout has {n} coils)", k)
+            if k in seen:
+                raise BadInputError(f"{where}coils", f"indices not in another group (coil {k}"
+                                    f" is in groups[{seen[k]}])", k)
+            seen[k] = g
+        _check_section(f"{where}coil", group.coil)
+        if group.core is not None:
+            _check_section(f"{where}core", group.core)
+        _check_winding(where, group.coil, group.core)
+
+
+def _check_sensors(d: Design) -> None:
+    s = d.sensors
+    if s.layout != "free":
+        for key in ("positions_m", "rotations"):
+            if getattr(s, key):
+                raise BadInputError(f"sensors.{key}", "given only with sensors.layout = 'free'",
+                                    f"layout {s.layout!r}")
+        return
+    pos = np.asarray(s.positions_m, dtype=float) if s.positions_m else np.zeros((0, 3))
+    if pos.ndim != 2 or pos.shape[1] != 3 or len(pos) == 0 or not np.all(np.isfinite(pos)):
+        raise BadInputError("sensors.positions_m", "a non-empty list of [x, y, z] in m",
+                            s.positions_m)
+    if s.rotations:
+        rot = np.asarray(s.rotations, dtype=float)
+        if rot.shape != (len(pos), 3, 3) or not np.all(np.isfinite(rot)):
+            raise BadInputError("sensors.rotations", f"{len(pos)} 3x3 matrices (one a sensor)",
+                                f"shape {rot.shape}")
+        for k, r in enumerate(rot):
+            if not (np.allclose(r.T @ r, np.eye(3), atol=1e-6) and np.linalg.det(r) > 0):
+                raise BadInputError(f"sensors.rotations[{k}]", "a proper rotation (columns: "
+                                    "the chip's x, y, z axes, orthonormal, right-handed)",
+                                    r.tolist())
+
+
 def check_design(d: Design) -> None:
     """Type and range checks of every field; raises BadInputError naming the dotted parameter."""
     _check_type("name", d.name, "")
     if not d.name.strip():
         raise BadInputError("name", "a non-empty string", d.name)
+    check_layout(d.array)
     for sec in SECTIONS:
         obj = getattr(d, sec)
-        if obj is None:
-            continue
-        for f in fields(obj):
-            val = getattr(obj, f.name)
-            name = f"{sec}.{f.name}"
-            if f.name == "direction":
-                if not (isinstance(val, tuple) and len(val) == 3
-                        and all(isinstance(c, float) and math.isfinite(c) for c in val)
-                        and any(c != 0.0 for c in val)):
-                    raise BadInputError(name, "3 finite numbers, not all 0 (the moment's "
-                                        "direction; default [0, 0, -1])", val)
-                continue
-            _check_type(name, val, f.default)
-            _check_metres(name, val)
-            if f.name == "bh":
-                if val not in ("linear", "steel1010"):
-                    raise BadInputError(name, "'linear' or 'steel1010'", val)
-            elif f.name == "packing":
-                if val not in ("layered", "orthocyclic"):
-                    raise BadInputError(name, "'layered' or 'orthocyclic'", val)
-            elif f.name == "mandrel":
-                if val not in ("auto", "printed_tube", "core"):
-                    raise BadInputError(name, "'auto', 'printed_tube' or 'core'", val)
-            elif f.name in ("turns", "rows", "columns"):
-                v.positive_int(name, val)
-            elif f.name in ("offset_m", "reference_temperature_c", "operating_temperature_c",
-                            "core_clearance_m", "press_fit_clearance_m"):
-                v.finite(name, val)
-            elif f.name == "z_min_m":
-                v.nonnegative(name, val)
-            else:
-                v.positive(name, val, "")
-    c = d.coil
-    if c.outer_radius_m <= c.inner_radius_m:
-        raise BadInputError("coil.outer_radius_m", f"> coil.inner_radius_m ({c.inner_radius_m} m)",
-                            c.outer_radius_m)
-    if d.core is not None and d.core.radius_m > c.inner_radius_m:
-        raise BadInputError("core.radius_m", f"<= coil.inner_radius_m ({c.inner_radius_m} m)",
-                            d.core.radius_m, "The core must fit in the bore.")
+        if obj is not None and sec != "array":
+            _check_section(sec, obj)
+    _check_winding("", d.coil, d.core)
     if d.workspace.z_max_m <= d.workspace.z_min_m:
         raise BadInputError("workspace.z_max_m", f"> workspace.z_min_m ({d.workspace.z_min_m} m)",
                             d.workspace.z_max_m)
-    if d.array.rows * d.array.columns > 1 and 2 * c.outer_radius_m > d.array.pitch_m:
-        raise DesignRuleError(
-            f"Coils overlap: 2 x coil.outer_radius_m = {2 * c.outer_radius_m:.4g} m exceeds "
-            f"array.pitch_m = {d.array.pitch_m:.4g} m; neighbouring coils (e.g. 0 and 1) intersect."
-        )
+    _check_groups(d)
+    _check_sensors(d)
+    if isinstance(d.array, (GridLayout, HexLayout)) and d.n_coils > 1:
+        widest = max(2 * d.coil_spec(k).outer_radius_m for k in range(d.n_coils))
+        if widest > d.array.pitch_m:
+            raise DesignRuleError(
+                f"Coils overlap: 2 x coil.outer_radius_m = {widest:.4g} m exceeds "
+                f"array.pitch_m = {d.array.pitch_m:.4g} m; neighbouring coils (e.g. 0 and 1) "
+                "intersect.")

@@ -22,10 +22,9 @@ N_CHECK = 400
 
 
 def default_box(design) -> tuple[np.ndarray, np.ndarray]:
-    """Workspace box (lower, upper corners, m): the footprint, z_min..z_max above the tops."""
-    ws = design.workspace
-    h = ws.half_width_m
-    return np.array([-h, -h, ws.z_min_m]), np.array([h, h, ws.z_max_m])
+    """Workspace box (lower, upper corners, m): the bounding box of the design's workspace
+    (:meth:`designkit.design.Design.workspace_region`), z_min..z_max above the tops."""
+    return design.workspace_region().bounds_m()
 
 
 def uniform_axis(lo: float, hi: float, spacing: float) -> np.ndarray:

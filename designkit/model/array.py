@@ -190,6 +190,11 @@ def _grow(cyl, eps=1e-9):
     return (name, r + eps, z0 - eps, z1 + eps)
 
 
+def _nested(a: np.ndarray) -> tuple:
+    """An array as nested tuples of floats (hashable, immutable)."""
+    return tuple(_nested(x) for x in a) if a.ndim > 1 else tuple(float(x) for x in a)
+
+
 # ---------------------------------------------------------------------------- the array
 @dataclass(frozen=True)
 class CoilArray:
@@ -203,10 +208,15 @@ class CoilArray:
 
     coils: tuple[Coil, ...]
     sensor_offset_m: float = 0.014
-    """Hall sensors: this far above each coil's top face and below its bottom face, m."""
+    """Hall sensors, when ``sensors`` is None: this far above each coil's top face and below its
+    bottom face, on its axis, m."""
     sensor_coils: tuple[Coil, ...] | None = None
-    """The coils that place the sensors (None: ``coils``); an as-built array's are the nominal
-    coils: the Hall arrays are boards, they do not move with a displaced coil."""
+    """The coils that place the sensors when ``sensors`` is None (None: ``coils``); an as-built
+    array's are the nominal coils: the Hall arrays are boards, they do not move with a
+    displaced coil."""
+    sensors: tuple | None = None
+    """Sensor poses: (positions (n_sensors, 3) m, frames (n_sensors, 3, 3)) as nested tuples,
+    e.g. :meth:`designkit.design.Design.sensor_poses`; None: from the coils (above)."""
 
     def __post_init__(self):
         coils = tuple(self.coils)
@@ -222,19 +232,26 @@ class CoilArray:
                 raise BadInputError("sensor_coils", f"None or {len(coils)} coils",
                                     len(self.sensor_coils))
         v.nonnegative("sensor_offset_m", self.sensor_offset_m)
+        if self.sensors is not None:
+            pos, rot = (np.asarray(a, dtype=float) for a in self.sensors)
+            if pos.ndim != 2 or pos.shape[1] != 3 or rot.shape != (len(pos), 3, 3):
+                raise BadInputError("sensors", "(positions (n, 3) m, frames (n, 3, 3))",
+                                    f"shapes {pos.shape}, {rot.shape}")
+            object.__setattr__(self, "sensors", (_nested(pos), _nested(rot)))
         check_overlap(coils)
         check_separation(coils)
 
     @classmethod
     def from_design(cls, design) -> "CoilArray":
-        """The design's planar array: rows x columns, pitch, top faces at z = 0, row-major;
-        as built (moved, tilted, rewound, other cores) when the design has ``[asbuilt]``."""
-        coils = tuple(Coil.from_design(design, (x, y, None))
-                      for x, y, _ in design.coil_centres_m())
-        nominal = None
+        """The design's array: its layout's coils (each with its own winding and core), its
+        sensors; as built (moved, tilted, rewound, other cores) when the design has
+        ``[asbuilt]``, with the sensors where the nominal design puts them."""
+        coils = tuple(Coil.of_design(design, k) for k in range(design.n_coils))
         if design.asbuilt is not None:
-            nominal, coils = coils, design.asbuilt.apply(coils)
-        return cls(coils, sensor_offset_m=design.sensors.offset_m, sensor_coils=nominal)
+            coils = design.asbuilt.apply(coils)
+        pos, rot = design.sensor_poses()
+        return cls(coils, sensor_offset_m=design.sensors.offset_m,
+                   sensors=(_nested(pos), _nested(rot)))
 
     @classmethod
     def default(cls) -> "CoilArray":
@@ -405,17 +422,32 @@ class CoilArray:
         _, t, single = self._bias(magnet_positions_m, moment_a_m2, magnet_size_m)
         return t[0] if single else t
 
-    def sensor_positions_m(self) -> np.ndarray:
-        """Hall sensor positions, (2, n_coils, 3) m: [0] upper array (``sensor_offset_m`` above
-        each coil's top face, on its axis), [1] lower array (as far below its bottom face)."""
-        out = np.empty((2, self.n_coils, 3))
-        for k, c in enumerate(self.sensor_coils or self.coils):
+    def sensor_poses(self) -> tuple[np.ndarray, np.ndarray]:
+        """Sensor positions (n_sensors, 3) m and frames (n_sensors, 3, 3) (columns: each chip's
+        x, y, z axes in the array frame). Without ``sensors``: the upper array (``sensor_offset_m``
+        above each coil's top face, on its axis) then the lower array (as far below its bottom
+        face), each chip in its coil's frame."""
+        if self.sensors is not None:
+            return np.array(self.sensors[0]), np.array(self.sensors[1])
+        up, down, frames = [], [], []
+        for c in self.sensor_coils or self.coils:
             axis = c.pose.matrix[:, 2]
             pos = np.asarray(c.pose.position, dtype=float)
             d = c.length / 2 + self.sensor_offset_m
-            out[0, k] = pos + d * axis
-            out[1, k] = pos - d * axis
-        return out
+            up.append(pos + d * axis)
+            down.append(pos - d * axis)
+            frames.append(c.pose.matrix)
+        return np.array(up + down), np.array(frames + frames)
+
+    def sensor_positions_m(self) -> np.ndarray:
+        """Hall sensor positions of the default layout, (2, n_coils, 3) m: [0] upper array,
+        [1] lower array (:meth:`sensor_poses` in two halves). Any other sensor layout:
+        :meth:`sensor_poses`."""
+        pos = self.sensor_poses()[0]
+        if len(pos) != 2 * self.n_coils:
+            raise BadInputError("sensor layout", f"two sensors a coil ({2 * self.n_coils}) for "
+                                "sensor_positions_m(); use sensor_poses()", len(pos))
+        return pos.reshape(2, self.n_coils, 3)
 
     def saturation_correction(self, height_m: float = 0.03, currents_a=None) -> dict:
         """Saturation correction of the 1010-steel cores (form: :func:`designkit.cores.

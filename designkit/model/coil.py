@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..cores import Core
-from ..design import Design, WireSpec
+from ..design import CoilSpec, CoreSpec, Design, WireSpec
 from ..errors import BadInputError
 from ..field import winding_field
 from ..geometry.pose import Pose
@@ -67,19 +67,28 @@ class Coil:
     # ------------------------------------------------------------------ constructors
     @classmethod
     def from_design(cls, design: Design, position=(0.0, 0.0, None)) -> "Coil":
-        """The design's coil; by default its top face at z = 0 (centre at -length/2)."""
-        c = design.coil
+        """The design's (base) coil, upright; by default its top face at z = 0 (centre at
+        -length/2)."""
         x, y, z = position
         if z is None:
-            z = -c.length_m / 2
-        core = None
-        if design.core is not None:
-            core = Core(radius=design.core.radius_m, length=design.core.length_m,
-                        relative_permeability=design.core.relative_permeability,
-                        offset=design.core.offset_m, bh=design.core.bh,
-                        knee_t=design.core.saturation_t)
-        return cls(c.inner_radius_m, c.outer_radius_m, c.length_m, c.turns, core,
-                   Pose((float(x), float(y), float(z))))
+            z = -design.coil.length_m / 2
+        return cls.from_specs(design.coil, design.core, Pose((float(x), float(y), float(z))))
+
+    @classmethod
+    def of_design(cls, design: Design, k: int) -> "Coil":
+        """Coil k of the design's layout: its own winding and core (its group's), in its pose."""
+        return cls.from_specs(design.coil_spec(k), design.core_spec(k), design.coil_poses()[k])
+
+    @classmethod
+    def from_specs(cls, coil: CoilSpec, core: CoreSpec | None, pose: Pose) -> "Coil":
+        """A coil from a design's winding and core tables, in a pose."""
+        model = None
+        if core is not None:
+            model = Core(radius=core.radius_m, length=core.length_m,
+                         relative_permeability=core.relative_permeability,
+                         offset=core.offset_m, bh=core.bh, knee_t=core.saturation_t)
+        return cls(coil.inner_radius_m, coil.outer_radius_m, coil.length_m, coil.turns, model,
+                   pose)
 
     def replace(self, **changes) -> "Coil":
         return dataclasses.replace(self, **changes)

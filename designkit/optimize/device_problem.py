@@ -81,16 +81,16 @@ MIN_PITCH_WINDING_DEPTH_M = 0.5e-3
 
 def _array_pitch(design: Design) -> float:
     """The design's pitch, m (1 m for a single coil: no neighbour to overlap)."""
-    return design.array.pitch_m if design.array.rows * design.array.columns > 1 else 1.0
+    return design.array.pitch_m if design.n_coils > 1 else 1.0
 
 
 def _pitch_bounds(design: Design, coil_clearance_m: float,
                   pitch_range_m: tuple[float, float] | None) -> tuple[float, float]:
     """Checked (lo, hi) of a varying pitch, m (default: :meth:`DeviceProblem.from_design`)."""
     o, pitch = design.optimize, _array_pitch(design)
-    if design.array.rows * design.array.columns < 2:
+    if design.n_coils < 2:
         raise BadInputError("array", "at least 2 coils when the pitch varies",
-                            (design.array.rows, design.array.columns))
+                            design.n_coils)
     if pitch_range_m is None:
         pitch_range_m = (max(PITCH_RANGE_FACTOR * pitch, 2 * o.min_inner_radius_m
                              + 2 * MIN_PITCH_WINDING_DEPTH_M + coil_clearance_m),
@@ -213,7 +213,7 @@ class DeviceProblem(DesignView):
         pitch_bounds = (_pitch_bounds(design, coil_clearance_m, pitch_range_m) if vary_pitch
                         else None)
         lower, upper = _search_bounds(design, pitch_bounds, coil_clearance_m, board_clearance_m)
-        n_coils = design.array.rows * design.array.columns
+        n_coils = design.n_coils
         cen = np.array([[x, y] for x, y, _ in design.coil_centres_m()]) / (
             _array_pitch(design) if n_coils > 1 else 1.0)
         pts = ()

@@ -48,7 +48,7 @@ TOP_OF_BOX_M = 0.078
 def drive_data(design) -> dict:
     """:func:`designkit.model.electrical.drive_data` for the design's own (identical) coils."""
     return electrical.drive_data(design, [Coil.from_design(design)]
-                                 * (design.array.rows * design.array.columns))
+                                 * design.n_coils)
 
 
 def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "slide",

@@ -157,22 +157,23 @@ def _add_field_arrays(mesh, b, g=None, moment=None):
 
 def _footprint_half_m(design: "Design") -> float:
     """Half side of a square that covers the coils and the workspace, m."""
-    a = design.array
-    coils = max(a.rows, a.columns) - 1
-    return max(design.workspace.half_width_m, coils * a.pitch_m / 2 + design.coil.outer_radius_m)
+    tops = design.array.top_centres_m()
+    reach = max(float(np.abs(tops[k, :2]).max()) + design.coil_spec(k).outer_radius_m
+                for k in range(len(tops)))
+    return max(design.workspace_region().half_width_m(), reach)
 
 
 def inside_solids(design: "Design", points) -> np.ndarray:
     """Boolean mask (n,): the points (m) that lie inside a core or a winding of the array."""
     p, _ = v.points(points)
-    c = design.coil
     inside = np.zeros(len(p), dtype=bool)
-    for x, y, zc in design.coil_centres_m():
-        rho = np.hypot(p[:, 0] - x, p[:, 1] - y)
-        dz = p[:, 2] - zc
+    for k, pose in enumerate(design.coil_poses()):
+        c, core = design.coil_spec(k), design.core_spec(k)
+        local = pose.to_local(p)
+        rho = np.hypot(local[:, 0], local[:, 1])
+        dz = local[:, 2]
         inside |= (rho >= c.inner_radius_m) & (rho <= c.outer_radius_m) & \
             (np.abs(dz) <= c.length_m / 2)
-        if design.core is not None:
-            k = design.core
-            inside |= (rho <= k.radius_m) & (np.abs(dz - k.offset_m) <= k.length_m / 2)
+        if core is not None:
+            inside |= (rho <= core.radius_m) & (np.abs(dz - core.offset_m) <= core.length_m / 2)
     return inside

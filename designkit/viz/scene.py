@@ -83,8 +83,7 @@ def plot_array_scene(design: "Design", currents: Sequence[float] | None = None, 
                        ["workspace"], font_size=12, text_color="#1f4e9c", shape=None,
                        show_points=False, always_visible=True)
     c = design.coil
-    _title(p, f"{design.name}: {design.array.rows} x {design.array.columns} coils, pitch "
-              f"{design.array.pitch_m * 1e3:.0f} mm; winding Ri/Ro/L = "
+    _title(p, f"{design.name}: {design.array.describe()}; winding Ri/Ro/L = "
               f"{c.inner_radius_m * 1e3:.0f}/{c.outer_radius_m * 1e3:.0f}/"
               f"{c.length_m * 1e3:.0f} mm, {c.turns} turns\n"
               f"magnet ({_magnet_text(design, moment)}) at the design point "
