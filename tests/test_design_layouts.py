@@ -172,6 +172,9 @@ def test_workspace_follows_the_layout():
     assert not ws.contains([[0.0, 0.044 * 1.5 + 0.005, 0.03]])[0]
     box = _design('[workspace]\nhalf_width_m = 0.05\n')
     assert box.workspace.shape == "box" and box.workspace_region().half_width_m() == 0.05
+    # in Python too: a half width given means the box
+    assert Design().replace(**{"workspace.half_width_m": 0.03}).workspace_region().bounds_m()[
+        1].tolist() == [0.03, 0.03, 0.08]
     grid = Design(array=GridLayout(rows=4, columns=4, pitch_m=0.05))
     assert grid.workspace_region().half_width_m() == pytest.approx(0.1)
     one = Design(array=FreeLayout(positions_m=((0.0, 0.0, 0.0),)))

@@ -17,7 +17,7 @@ from typing import Any, Mapping
 from ..errors import BadInputError
 from .asbuilt import asbuilt_from_dict
 from .layouts import layout_from_table, layout_to_table
-from .spec import SECTIONS, CoilGroup, CoilSpec, CoreSpec, Design, default_design
+from .spec import SECTIONS, CoilGroup, CoilSpec, CoreSpec, Design, default_design, implied_shape
 
 
 def design_from_dict(data: Mapping[str, Any], *, source: str = "design") -> Design:
@@ -58,8 +58,8 @@ def _section(key: str, cls: type, value: Mapping[str, Any], source: str,
         raise BadInputError(f"{source}: [{key}] key", f"one of {sorted(allowed)}",
                             sorted(unknown)[0])
     values = {k: _tuples(val) for k, val in value.items() if k != "enabled"}
-    if key == "workspace" and "half_width_m" in values and "shape" not in values:
-        values["shape"] = "box"  # a design that gives the box's half width means the box
+    if key == "workspace":
+        values = implied_shape(values)
     if base is not None:
         return dataclasses.replace(base, **values)
     return cls(**values)

@@ -172,6 +172,18 @@ WORKSPACE_SHAPES = ("layout", "box", "disc")
 of ``half_width_m`` about the array's axis) or 'disc' (``radius_m``)."""
 
 
+def implied_shape(values: Mapping[str, Any]) -> dict[str, Any]:
+    """Workspace keys with the shape their size implies: ``half_width_m`` without ``shape``
+    means the box, ``radius_m`` the disc (a design that gives a size means that outline)."""
+    out = dict(values)
+    if "shape" not in out:
+        if "half_width_m" in out:
+            out["shape"] = "box"
+        elif "radius_m" in out:
+            out["shape"] = "disc"
+    return out
+
+
 @dataclass(frozen=True)
 class WorkspaceSpec:
     """The region the finger magnet moves in (:class:`designkit.design.workspace.Workspace`):
@@ -414,6 +426,8 @@ def replace_path(design: Design, changes: Mapping[str, Any]) -> Design:
         current = getattr(design, sec)
         if current is None:
             current = SECTIONS[sec]()
+        if sec == "workspace":
+            vals = implied_shape(vals)
         top[sec] = dataclasses.replace(current, **vals)
     return dataclasses.replace(design, **top)
 
