@@ -17,7 +17,8 @@ from typing import Any, Mapping
 from ..errors import BadInputError
 from .asbuilt import asbuilt_from_dict
 from .layouts import layout_from_table, layout_to_table
-from .spec import SECTIONS, CoilGroup, CoilSpec, CoreSpec, Design, default_design, implied_shape
+from .spec import (SECTIONS, CoilGroup, CoilSpec, CoreSpec, Design, MagnetSpec, default_design,
+                   implied_shape)
 
 
 def design_from_dict(data: Mapping[str, Any], *, source: str = "design") -> Design:
@@ -31,6 +32,12 @@ def design_from_dict(data: Mapping[str, Any], *, source: str = "design") -> Desi
             kwargs["asbuilt"] = asbuilt_from_dict(value, source)
         elif key == "groups":
             groups = value
+        elif key == "magnets":
+            if "magnet" in data:
+                raise BadInputError(f"{source}: [magnet] and [[magnets]]", "one of the two "
+                                    "([[magnets]] lists every magnet, the first is [magnet])",
+                                    "both")
+            kwargs.update(_magnets(value, source))
         elif key in SECTIONS:
             if not isinstance(value, Mapping):
                 raise BadInputError(f"{source}: [{key}]", "a table", value)
@@ -42,7 +49,8 @@ def design_from_dict(data: Mapping[str, Any], *, source: str = "design") -> Desi
                 kwargs[key] = _section(key, SECTIONS[key], value, source)
         else:
             raise BadInputError(f"{source}: top-level key",
-                                f"'name', 'groups' or one of the tables {sorted(SECTIONS)}", key)
+                                f"'name', 'groups', 'magnets' or one of the tables "
+                                f"{sorted(SECTIONS)}", key)
     if groups is not None:
         kwargs["groups"] = _groups(groups, kwargs.get("coil", CoilSpec()),
                                    kwargs.get("core", CoreSpec()), source)
@@ -63,6 +71,16 @@ def _section(key: str, cls: type, value: Mapping[str, Any], source: str,
     if base is not None:
         return dataclasses.replace(base, **values)
     return cls(**values)
+
+
+def _magnets(tables: Any, source: str) -> dict[str, Any]:
+    """``[[magnets]]``: the first is ``magnet``, the rest ``other_magnets``."""
+    if not isinstance(tables, list) or not tables or not all(
+            isinstance(t, Mapping) for t in tables):
+        raise BadInputError(f"{source}: magnets", "a non-empty array of tables ([[magnets]])",
+                            tables)
+    specs = [_section(f"magnets[{k}]", MagnetSpec, t, source) for k, t in enumerate(tables)]
+    return {"magnet": specs[0], "other_magnets": tuple(specs[1:])}
 
 
 def _tuples(value: Any) -> Any:
@@ -143,6 +161,13 @@ def design_to_toml(design: Design) -> str:
     lines = [f'name = "{design.name}"', ""]
     for sec in SECTIONS:
         obj = getattr(design, sec)
+        if sec == "magnet" and design.other_magnets:
+            for magnet in design.magnets:
+                lines.append("[[magnets]]")
+                lines += [f"{f.name} = {json.dumps(getattr(magnet, f.name))}"
+                          for f in fields(magnet)]
+                lines.append("")
+            continue
         lines.append(f"[{sec}]")
         table = (layout_to_table(obj) if sec == "array" else
                  {"enabled": False} if obj is None else

@@ -45,6 +45,8 @@ class MagnetSpec:
     thesis' unipolar drive does (F_z = m . dB/dz = -|m| dBz/dz > 0 above a coil).
     """
 
+    name: str = "finger"
+    """What the runner, logs and summaries call this magnet (unique among a design's magnets)."""
     radius_m: float = 0.005
     length_m: float = 0.010
     magnetization_a_per_m: float = 1.1579e6
@@ -298,6 +300,9 @@ class Design:
     """The device as built (designkit.design.asbuilt); None: the nominal design."""
     groups: tuple[CoilGroup, ...] = ()
     """Coils whose winding or core differ from ``coil`` / ``core`` (none: all alike)."""
+    other_magnets: tuple[MagnetSpec, ...] = ()
+    """Magnets beyond ``magnet`` (several fingers: ``[[magnets]]`` in a design file, the first
+    of which is ``magnet``); :attr:`magnets` lists them all."""
 
     def __post_init__(self):
         check_design(self)
@@ -309,6 +314,11 @@ class Design:
     def design_point_m(self) -> tuple[float, float, float]:
         """Magnet centre at the design height above the top face of a single coil, m."""
         return (0.0, 0.0, self.optimize.height_m)
+
+    @property
+    def magnets(self) -> tuple[MagnetSpec, ...]:
+        """Every finger magnet, ``magnet`` first."""
+        return (self.magnet,) + self.other_magnets
 
     @property
     def n_coils(self) -> int:
@@ -381,6 +391,8 @@ class Design:
             del out["asbuilt"]
         if not self.groups:
             del out["groups"]
+        if not self.other_magnets:
+            del out["other_magnets"]
         return out
 
     def spec_hash(self) -> str:
@@ -481,6 +493,8 @@ def _check_section(sec: str, obj: Any) -> None:
         if f.name in CHOICES:
             if val not in CHOICES[f.name]:
                 raise BadInputError(name, " or ".join(repr(c) for c in CHOICES[f.name]), val)
+        elif isinstance(f.default, str):
+            continue  # free text (a name)
         elif f.name == "turns":
             v.positive_int(name, val)
         elif f.name in ("offset_m", "reference_temperature_c", "operating_temperature_c",
@@ -554,6 +568,27 @@ def _check_sensors(d: Design) -> None:
                                     r.tolist())
 
 
+def _check_magnets(d: Design) -> None:
+    names: dict[str, int] = {}
+    for k, magnet in enumerate(d.magnets):
+        if not isinstance(magnet, MagnetSpec):
+            raise BadInputError(f"magnets[{k}]", "a MagnetSpec", type(magnet).__name__)
+        if k:
+            _check_section(f"magnets[{k}]", magnet)
+        if not magnet.name.strip():
+            raise BadInputError(f"magnets[{k}].name", "a non-empty string", magnet.name)
+        if magnet.name in names:
+            raise BadInputError(f"magnets[{k}].name", "a name no other magnet has (magnets["
+                                f"{names[magnet.name]}] is {magnet.name!r})", magnet.name)
+        names[magnet.name] = k
+    most = d.n_coils // 3
+    if len(d.magnets) > max(most, 1):
+        raise BadInputError(
+            "magnets", f"at most {max(most, 1)} magnet(s) for {d.n_coils} coils", len(d.magnets),
+            "Each magnet's force has 3 components to control: n magnets need at least 3 n "
+            "independent coil currents.")
+
+
 def check_design(d: Design) -> None:
     """Type and range checks of every field; raises BadInputError naming the dotted parameter."""
     _check_type("name", d.name, "")
@@ -570,6 +605,7 @@ def check_design(d: Design) -> None:
                             d.workspace.z_max_m)
     _check_groups(d)
     _check_sensors(d)
+    _check_magnets(d)
     if isinstance(d.array, (GridLayout, HexLayout)) and d.n_coils > 1:
         widest = max(2 * d.coil_spec(k).outer_radius_m for k in range(d.n_coils))
         if widest > d.array.pitch_m:
