@@ -9,7 +9,8 @@ interpolation -- is defined here and nowhere else:
 * :mod:`.cells`: A(p), the cell of a point and the per-cell products;
 * :mod:`.modes`: the per-core (rho, z) tables (magnet pull, sensor-field modes) and kernels;
 * :mod:`.grid`: trilinear interpolation on the bias force's residual grid;
-* :mod:`.reader`: :class:`MapFile`, the loaded map (an ``ActuationSource``).
+* :mod:`.reader`: :class:`MapFile`, the loaded map;
+* :mod:`.source`: :class:`ActuationSource`, the one interface of a map or a direct model.
 
 What each array means, the layout's choices and the measured errors and costs:
 docs/mapfile_format.md and docs/fieldmap.md.
@@ -26,6 +27,7 @@ from .harmonics import (harmonic_potential, harmonic_rows, harmonic_terms, monom
 from .modes import (BATCH_CHUNK, gradient_tensor, kernel_rows_many, magnet_terms, mode_rows,
                     modes_one, prepare_magnet, prepare_modes, prepare_one)
 from .reader import MapFile, check_currents
+from .source import ActuationSource, selection
 
 __all__ = [
     "CELL_CHUNK", "GATHER_BLOCK", "GEMM_CAP", "cell_index", "cell_local", "cells_many",
@@ -35,4 +37,5 @@ __all__ = [
     "solid_harmonic_betas", "solid_harmonic_coefficients", "solid_harmonics", "BATCH_CHUNK",
     "gradient_tensor", "kernel_rows_many", "magnet_terms", "mode_rows", "modes_one",
     "prepare_magnet", "prepare_modes", "prepare_one", "MapFile", "check_currents",
+    "ActuationSource", "selection",
 ]

@@ -26,6 +26,8 @@ FORMAT_VERSION = 4
 file of any other version is refused with the command that rebuilds it (docs/mapfile_format.md
 lists the versions)."""
 ROWS = ("Bx", "By", "Bz", "dBx/dx", "dBx/dy", "dBx/dz", "dBy/dy", "dBy/dz")
+"""The eight rows of A(p) (thesis eq. 2.13), defined here once: B (T/A), then the five
+independent entries of the symmetric, traceless gradient (T/(m A))."""
 UNITS = {"A_rows_0_2": "T/A", "A_rows_3_7": "T/(m A)", "grid": "m", "moment": "A m^2",
          "current": "A", "force": "N", "field": "T", "sensor_coil_field": "T/A"}
 REBUILD = ("Rebuild it for this version: designkit map --out <file.npz> (with --design "

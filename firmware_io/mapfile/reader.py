@@ -24,7 +24,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..actuation import selection
 from ..errors import BadInputError
 from .cells import CELL_CHUNK, cells_many, cells_one, prepare_cells
 from .format import REBUILD, _bad, read
@@ -32,6 +31,7 @@ from .grid import _trilinear, _trilinear_one
 from .modes import (BATCH_CHUNK, _interp_one, _lookup, gradient_tensor, kernel_rows_many,
                     magnet_terms, mode_rows, modes_one, prepare_magnet, prepare_modes,
                     prepare_one)
+from .source import selection
 
 def check_currents(currents, n_coils: int, error=BadInputError) -> np.ndarray:
     """``currents`` as a float array (n_coils,) A, or ``error`` (an InputRangeError class: the
