@@ -52,7 +52,7 @@ def test_bounds_and_meta(fm):
     assert fm.max_current_a == SMALL.drive.max_current_a
     assert fm.total_current_a == SMALL.drive.total_current_a
     np.testing.assert_allclose(fm.moment_a_m2, SMALL.magnet.moment_vector_a_m2)
-    assert fm.meta["version"] == 4 and fm.n_coils == 9
+    assert fm.meta["version"] == 5 and fm.n_coils == 9 and fm.meta["n_sensors"] == 18
 
 
 def test_interpolation_error_against_direct(fm, sample):
@@ -247,28 +247,34 @@ def test_air_coils_have_no_bias_and_no_induced_field(fm, sample):
     p, _ = sample
     assert np.all(fm.bias_force(p[:50]) == 0)
     assert np.all(fm.sensor_induced_field(p[0]) == 0)
-    assert fm.sensor_induced_field(p[0]).shape == (2, 9, 3)
+    assert fm.sensor_induced_field(p[0]).shape == (18, 3)
 
 
 def test_sensor_positions_and_coil_field_against_direct(fm):
     arr = CoilArray.from_design(SMALL)
     s = fm.sensor_positions_m
-    np.testing.assert_allclose(s, arr.sensor_positions_m())
-    np.testing.assert_allclose(s[0, :, 2], SMALL.sensors.offset_m)  # above the tops (z = 0)
-    direct = arr.actuation_matrix(s.reshape(-1, 3))[:, :3, :].reshape(2, 9, 3, 9)
+    # the flat list: the upper array in coil order, then the lower array
+    assert fm.n_sensors == 18 and s.shape == (18, 3)
+    np.testing.assert_allclose(s, arr.sensor_positions_m().reshape(-1, 3))
+    np.testing.assert_allclose(s[:9, :2], arr.positions()[:, :2], atol=1e-15)
+    np.testing.assert_allclose(s[:9, 2], SMALL.sensors.offset_m)  # above the tops (z = 0)
+    assert np.all(s[9:, 2] < -SMALL.coil.length_m)                # below the bottoms
+    np.testing.assert_array_equal(fm.sensor_rotations, np.broadcast_to(np.eye(3), (18, 3, 3)))
+    direct = arr.actuation_matrix(s)[:, :3, :]
     np.testing.assert_allclose(fm.sensor_coil_field(), direct, rtol=1e-12, atol=0)
     i = np.linspace(-3, 3, 9)
     np.testing.assert_allclose(fm.sensor_coil_field(i), direct @ i, rtol=1e-12,
                                atol=1e-15)
     np.testing.assert_array_equal(fm.saturation_factor(i), np.ones(9))
     # the gradient at the sensors (below the box of A) against central differences of the
-    # direct model's field (h = 1 um): [a, s, i, j, k] = dB_i/dx_j of coil k
-    h, pts = 1e-6, s.reshape(-1, 3)
+    # direct model's field (h = 1 um): [s, i, j, k] = dB_i/dx_j of coil k
+    h, pts = 1e-6, s
     fd = np.stack([(arr.actuation_matrix(pts + h * e)[:, :3] - arr.actuation_matrix(pts - h * e)
-                    [:, :3]) / (2 * h) for e in np.eye(3)], axis=2).reshape(2, 9, 3, 3, 9)
+                    [:, :3]) / (2 * h) for e in np.eye(3)], axis=2)
     g = fm.sensor_coil_gradient()
+    assert g.shape == (18, 3, 3, 9)
     np.testing.assert_allclose(g, fd, rtol=0, atol=1e-6 * np.abs(fd).max())
-    np.testing.assert_allclose(g, np.swapaxes(g, 2, 3), atol=1e-12 * np.abs(g).max())
+    np.testing.assert_allclose(g, np.swapaxes(g, 1, 2), atol=1e-12 * np.abs(g).max())
 
 
 def test_outside_points(fm):
@@ -487,11 +493,10 @@ def test_coupled_map_against_direct_coupled_model(coupled):
     err = np.abs(fm.bias_force(p[:20]) - f).max() / np.abs(f).max()
     assert err < 0.01, err
     s = fm.sensor_positions_m
-    np.testing.assert_allclose(s, arr.sensor_positions_m())
-    direct = arr.actuation_matrix(s.reshape(-1, 3))[:, :3, :].reshape(2, 2, 3, 2)
+    np.testing.assert_allclose(s, arr.sensor_positions_m().reshape(-1, 3))
+    direct = arr.actuation_matrix(s)[:, :3, :]
     np.testing.assert_allclose(fm.sensor_coil_field(), direct, rtol=1e-12)
-    b = np.array([arr.magnet_core_field(s.reshape(-1, 3), q, m).reshape(2, 2, 3)
-                  for q in p[:10]])
+    b = np.array([arr.magnet_core_field(s, q, m) for q in p[:10]])
     # the adjoint through the modes: measured 5.0e-4 of the largest induced field (reciprocity
     # with unit dipoles at the sensors, the former path: ~2-3 %)
     assert np.abs(fm.sensor_induced_field(p[:10]) - b).max() < 5e-3 * np.abs(b).max()

@@ -2,8 +2,9 @@
 
 A map file is one ``.npz`` archive: the arrays of :func:`array_names` plus ``meta``, a JSON
 string (format, version, units, rows, box, the harmonic-cell layers ``a_layers``, the mode and
-magnet table descriptions, coil poses, design name and SHA-256, drive data, build settings and
-errors). Every array is hashed into ``meta.data_sha256``; :func:`read` refuses anything that is
+magnet table descriptions, coil poses, the sensor count, design name and SHA-256, drive data,
+build settings and errors). Sensors are a flat list (``n_sensors`` poses, independent of the
+coil count). Every array is hashed into ``meta.data_sha256``; :func:`read` refuses anything that is
 not a complete, finite, uncorrupted map of this :data:`FORMAT_VERSION`, naming the problem and
 how to rebuild. The arrays' meaning: docs/mapfile_format.md.
 """
@@ -21,10 +22,10 @@ import numpy as np
 from ..errors import BadInputError
 
 FORMAT = "designkit-fieldmap"
-FORMAT_VERSION = 4
-"""Format version of map v2 with A as harmonic cells (coupled A, bias force, sensor fields); a
-file of any other version is refused with the command that rebuilds it (docs/mapfile_format.md
-lists the versions)."""
+FORMAT_VERSION = 5
+"""Format version: A as harmonic cells (coupled A, bias force), the sensors as a flat list of
+poses with their fields; a file of any other version is refused with the command that rebuilds
+it (docs/mapfile_format.md lists the versions)."""
 ROWS = ("Bx", "By", "Bz", "dBx/dx", "dBx/dy", "dBx/dz", "dBy/dy", "dBy/dz")
 """The eight rows of A(p) (thesis eq. 2.13), defined here once: B (T/A), then the five
 independent entries of the symmetric, traceless gradient (T/(m A))."""
@@ -34,22 +35,27 @@ REBUILD = ("Rebuild it for this version: designkit map --out <file.npz> (with --
            "<design.toml> for a design of your own)")
 
 # name -> (dtype, shape as a function of the sizes); the single list of arrays in a map file
-_FIXED = ("SCOEF", "F0_RES", "M_X", "M_Y", "M_Z", "SENSOR_POS", "SENSOR_COIL",
+_FIXED = ("SCOEF", "F0_RES", "M_X", "M_Y", "M_Z", "SENSOR_POS", "SENSOR_ROT", "SENSOR_COIL",
           "SENSOR_COIL_GRAD", "MOMENT", "SAT_I", "SAT_FACTOR")
+MAX_SENSORS = 4096
+"""Most sensors a map describes (a sanity bound on ``meta.n_sensors``)."""
 
 
 def _shapes(meta: dict, arrays: dict) -> dict:
     nc = int(meta["n_coils"])
+    nsen = int(meta["n_sensors"])
+    if not 1 <= nsen <= MAX_SENSORS:
+        raise ValueError(f"n_sensors {nsen} outside 1..{MAX_SENSORS}")
     mx, my, mz = (len(arrays[k]) for k in ("M_X", "M_Y", "M_Z"))
-    ns = len(arrays["SAT_I"])
+    nsat = len(arrays["SAT_I"])
     f32, f64 = np.float32, np.float64
     nbs = int(meta["n_sensor_basis"])
-    return {"SCOEF": (f64, (nc, nbs, 2, nc, 3)),
+    return {"SCOEF": (f64, (nc, nbs, nsen, 3)),
             "F0_RES": (f32, (mx, my, mz, 3)),
             "M_X": (f64, (mx,)), "M_Y": (f64, (my,)), "M_Z": (f64, (mz,)),
-            "SENSOR_POS": (f64, (2, nc, 3)), "SENSOR_COIL": (f64, (2, nc, 3, nc)),
-            "SENSOR_COIL_GRAD": (f64, (2, nc, 5, nc)),
-            "MOMENT": (f64, (3,)), "SAT_I": (f64, (ns,)), "SAT_FACTOR": (f64, (ns, nc))}
+            "SENSOR_POS": (f64, (nsen, 3)), "SENSOR_ROT": (f64, (nsen, 3, 3)),
+            "SENSOR_COIL": (f64, (nsen, 3, nc)), "SENSOR_COIL_GRAD": (f64, (nsen, 5, nc)),
+            "MOMENT": (f64, (3,)), "SAT_I": (f64, (nsat,)), "SAT_FACTOR": (f64, (nsat, nc))}
 
 
 def array_names(keys) -> list:
@@ -118,10 +124,13 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
     """Check everything :func:`read` checks on arrays and meta in memory (BadInputError)."""
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise _bad(p, f"meta.format == {FORMAT!r} -- a foreign file")
-    if meta.get("version") != FORMAT_VERSION:
-        raise _bad(p, f"format version {FORMAT_VERSION} (map v2, A as harmonic cells); this "
-                   f"file is version {meta.get('version')!r}, written by an older designkit",
-                   REBUILD)
+    version = meta.get("version")
+    if version != FORMAT_VERSION:
+        when = ("an older" if isinstance(version, int) and version < FORMAT_VERSION
+                else "another")
+        raise _bad(p, f"format version {FORMAT_VERSION} (A as harmonic cells, sensors as a "
+                   f"list of poses); this file is version {version!r}, written by {when} "
+                   "designkit", REBUILD)
     if meta.get("units") != UNITS or meta.get("rows") != list(ROWS):
         raise _bad(p, f"units {UNITS} and rows {ROWS}")
     try:
@@ -184,6 +193,11 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
     for name in ("M_X", "M_Y", "M_Z", "SAT_I"):
         if len(arrays[name]) < 2 or not np.all(np.diff(arrays[name]) > 0):
             raise _bad(p, f"{name} strictly increasing with at least 2 nodes")
+    rot = arrays["SENSOR_ROT"]
+    if (np.abs(rot @ np.swapaxes(rot, 1, 2) - np.eye(3)).max() > 1e-9
+            or np.any(np.linalg.det(rot) < 0)):
+        raise _bad(p, "SENSOR_ROT proper rotations (orthonormal, det +1: sensor frame -> array "
+                   "frame)")
     if data_hash(arrays) != meta.get("data_sha256"):
         raise _bad(p, "data matching its recorded SHA-256 (corrupted)")
 

@@ -12,7 +12,7 @@ Usage::
     m = MapFile.load("fieldmap.npz")
     a = m.actuation((0.0, 0.0, 0.03))            # (8, n_coils)
     f0 = m.bias_force((0.0, 0.0, 0.03))          # (3,) N
-    b = m.sensor_induced_field((0.0, 0.0, 0.03))  # (2, n_coils, 3) T
+    b = m.sensor_induced_field((0.0, 0.0, 0.03))  # (n_sensors, 3) T
     a = m.actuation(points, rows=(3, 6), coils=(0, 4))  # (n, 2, 2): only those entries
 """
 
@@ -53,8 +53,11 @@ class MapFile:
     """A validated map file (what each part means: docs/mapfile_format.md).
 
     Attributes: ``meta`` (dict), ``bounds`` ((lower, upper) corners of the box, m), ``n_coils``,
-    ``sensor_positions_m`` (2, n_coils, 3), ``moment_a_m2`` (3,), ``design_sha256``,
-    ``max_current_a`` (per coil), ``total_current_a`` (sum of |I|), ``arrays`` (the raw arrays).
+    ``n_sensors``, ``sensor_positions_m`` (n_sensors, 3), ``sensor_rotations`` (n_sensors, 3,
+    3), ``moment_a_m2`` (3,), ``design_sha256``, ``max_current_a`` (per coil),
+    ``total_current_a`` (sum of |I|), ``arrays`` (the raw arrays). The sensors are a flat list
+    in the map's order (the default layout: the upper array's sensors in coil order, then the
+    lower array's); every field at a sensor is in the array frame.
     """
 
     arrays: dict
@@ -87,8 +90,9 @@ class MapFile:
         smodes = prepare_modes([arrays[t["name"]] for t in stabs], stabs,
                                meta["coil_positions_m"], meta["coil_rotations"])
         sc = arrays["SCOEF"]
+        n3 = 3 * int(meta["n_sensors"])
         scoefs = tuple((t, np.ascontiguousarray(sc[t["idx"]][:, t["order"]]
-                                                .reshape(-1, 6 * nc))) for t in smodes)
+                                                .reshape(-1, n3))) for t in smodes)
         maxes = tuple(np.asarray(arrays[k], float) for k in ("M_X", "M_Y", "M_Z"))
         f0 = arrays["F0_RES"]
         mt = meta["magnet_tables"]
@@ -107,9 +111,20 @@ class MapFile:
 
     # ------------------------------------------------------------------ plain attributes
     @property
+    def n_sensors(self) -> int:
+        """Number of Hall sensors the map describes (independent of the coil count)."""
+        return len(self.arrays["SENSOR_POS"])
+
+    @property
     def sensor_positions_m(self) -> np.ndarray:
-        """(2, n_coils, 3) m: upper array then lower array, one sensor per coil centre."""
+        """(n_sensors, 3) m: the sensors' centres in the map's sensor order."""
         return self.arrays["SENSOR_POS"].copy()
+
+    @property
+    def sensor_rotations(self) -> np.ndarray:
+        """(n_sensors, 3, 3): each sensor's rotation, sensor frame -> array frame (a field b
+        in the array frame reads ``R.T @ b`` on the sensor's axes)."""
+        return self.arrays["SENSOR_ROT"].copy()
 
     @property
     def moment_a_m2(self) -> np.ndarray:
@@ -247,48 +262,49 @@ class MapFile:
         return f[0] if single else f
 
     def sensor_induced_field(self, magnet_position_m, extrapolate: bool = False) -> np.ndarray:
-        """Field of the cores magnetized by the magnet at the Hall sensors, T:
-        (3,) -> (2, n_coils, 3) (upper array then lower), (n, 3) -> (n, 2, n_coils, 3).
+        """Field of the cores magnetized by the magnet at the Hall sensors, T (array frame):
+        (3,) -> (n_sensors, 3), (n, 3) -> (n, n_sensors, 3).
 
         Linear cores: component c at sensor s is m . B(p) of the coupled system's adjoint
         sources for that component (in the continuum, the cores magnetized by a unit dipole
         along c at s: reciprocity) -- a mode sum like A (``SCOEF``)."""
-        nc = self.n_coils
+        ns = self.n_sensors
         q = self._one_point(magnet_position_m, extrapolate, "magnet_position_m")
         one = self.kernels["sensor_one"]
         if q is not None and one is not None:
-            b = (modes_one(one, q) @ one["coef"]).reshape(2, nc, 3)
+            b = (modes_one(one, q) @ one["coef"]).reshape(ns, 3)
             return b if np.ndim(magnet_position_m) == 1 else b[None]
         p, single = self._points(magnet_position_m, extrapolate, "magnet_position_m")
-        out = np.zeros((len(p), 6 * nc))
+        out = np.zeros((len(p), 3 * ns))
         if one is not None:
             for s in range(0, len(p), BATCH_CHUNK):
                 f = kernel_rows_many(one, p[s:s + BATCH_CHUNK])  # (m, K): m . B per basis
                 out[s:s + BATCH_CHUNK] = f @ one["coef"]
-            b = out.reshape(-1, 2, nc, 3)
+            b = out.reshape(-1, ns, 3)
             return b[0] if single else b
         one = q is not None
         m = self.arrays["MOMENT"]
         for t, c in self.kernels["scoef"]:
             rows = mode_rows(t, p)[..., :3]  # (n, k, nb, 3): B per unit coefficient
             out += (rows @ m).reshape(len(p), -1) @ c
-        b = out.reshape(-1, 2, nc, 3)
+        b = out.reshape(-1, ns, 3)
         return b[0] if (single or (one and np.ndim(magnet_position_m) == 1)) else b
 
     def sensor_coil_field(self, currents=None) -> np.ndarray:
-        """The coils' field at the sensors: per ampere (2, n_coils, 3, n_coils) T/A, or with
-        ``currents`` (n_coils,) A the field (2, n_coils, 3) T (saturation not applied)."""
+        """The coils' field at the sensors (array frame): per ampere (n_sensors, 3, n_coils)
+        T/A, or with ``currents`` (n_coils,) A the field (n_sensors, 3) T (saturation not
+        applied)."""
         g = self.arrays["SENSOR_COIL"]
         if currents is None:
             return g.copy()
         return g @ self._currents(currents)
 
     def sensor_coil_gradient(self) -> np.ndarray:
-        """The coils' field gradient at the sensors per ampere, (2, n_coils, 3, 3, n_coils)
-        T/(m A), entry [a, s, i, j, k] = dB_i/dx_j of coil k (:func:`gradient_tensor` of the
-        stored rows)."""
-        g = gradient_tensor(np.moveaxis(self.arrays["SENSOR_COIL_GRAD"], 2, -1))
-        return np.moveaxis(g, (-2, -1), (2, 3))
+        """The coils' field gradient at the sensors per ampere (array frame), (n_sensors, 3,
+        3, n_coils) T/(m A), entry [s, i, j, k] = dB_i/dx_j of coil k (:func:`gradient_tensor`
+        of the stored rows)."""
+        g = gradient_tensor(np.moveaxis(self.arrays["SENSOR_COIL_GRAD"], 1, -1))
+        return np.moveaxis(g, (-2, -1), (1, 2))
 
     def saturation_factor(self, currents) -> np.ndarray:
         """Per-coil factors (n_coils,) on the columns of A at these currents (A): the
