@@ -26,8 +26,8 @@ from .errors import FirmwareIOError
 from .localization import Localizer
 from .mapfile import MapFile
 from .runner import (CALIBRATED_RELATIVE_ERROR, CALIBRATION_CURRENT_A, ConstantVelocityTracker,
-                     Runner, SceneForce, SensorFrame, calibrate_sensors, calibration_currents,
-                     config_from_map, record_calibration)
+                     Runner, RunnerParts, SceneForce, SensorFrame, calibrate_sensors,
+                     calibration_currents, config_from_map, record_calibration)
 from .scene import Scene
 from .hw.sensors import SensorArrays
 
@@ -198,8 +198,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     source = ThreadedSensorSource(arrays)
-    runner = Runner(fmap, SceneForce(scene), localizer, ConstantVelocityTracker(), Allocator(),
-                    coils, source, cfg)
+    runner = Runner(RunnerParts(fmap, SceneForce(scene), localizer, ConstantVelocityTracker(),
+                                Allocator(), coils, source), cfg)
     runner.start()
     source.start()
     t0 = time.monotonic()

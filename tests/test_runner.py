@@ -17,8 +17,8 @@ from designkit.sim import (FAULT_TYPES, FaultSchedule, SimulatedDevice, Trajecto
                            slide_trajectory, time_to_safe)
 from firmware_io.errors import FirmwareIOError
 from firmware_io.localization import ConstantVelocityKalman
-from firmware_io.runner import (Fix, Runner, RunnerConfig, ThermalGuard, feedforward_voltage,
-                                rl_step)
+from firmware_io.runner import (Fix, Runner, RunnerConfig, RunnerParts, ThermalGuard,
+                                feedforward_voltage, rl_step)
 
 from _runner_fakes import ConstantMap, HoldTracker, PlaneScene, TruthLocalizer, clipped_lstsq
 
@@ -104,9 +104,10 @@ def _run(device_and_a, faults: str, duration_s: float, *, limit=4.8, total=20.0,
                            inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
                            current_limit_a=limit, total_current_a=total,
                            resume_after_s=resume_after_s, thermal_time_constant_s=300.0)
-        r = Runner(fmap, PlaneScene(0.05, 6.0), TruthLocalizer(lambda: source.frame_truth_m),
-                   HoldTracker(), hook(clipped_lstsq), dev.coils, source, cfg, clock=clock,
-                   log=lambda line: None)
+        parts = RunnerParts(fmap, PlaneScene(0.05, 6.0),
+                            TruthLocalizer(lambda: source.frame_truth_m), HoldTracker(),
+                            hook(clipped_lstsq), dev.coils, source)
+        r = Runner(parts, cfg, clock=clock, log=lambda line: None)
         r.start()
         holder["runner"] = r
         return r
@@ -165,9 +166,10 @@ def test_safe_state_is_one_all_off_write_per_board(device_and_a):
             from firmware_io.runner import SensorFrame
             return SensorFrame(np.zeros((9, 3)), np.zeros((9, 3)), ("ok",) * 18, t)
 
-    r = Runner(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0),
-               TruthLocalizer(lambda: truth["p"]), HoldTracker(), clipped_lstsq, dev.coils,
-               Source(), cfg, log=lambda line: None, clock=lambda: 0.0)
+    r = Runner(RunnerParts(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0),
+                           TruthLocalizer(lambda: truth["p"]), HoldTracker(), clipped_lstsq,
+                           dev.coils, Source()),
+               cfg, log=lambda line: None, clock=lambda: 0.0)
     r.start()
     rec = r.step(0.0)
     assert rec.state == "running" and np.any(rec.command_a != 0)
@@ -226,9 +228,10 @@ def test_pwm_nack_is_latched_after_repeated_failures(device_and_a):
             from firmware_io.runner import SensorFrame
             return SensorFrame(np.zeros((9, 3)), np.zeros((9, 3)), ("ok",) * 18, t)
 
-    r = Runner(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0),
-               TruthLocalizer(lambda: np.array([0.0, 0.0, 0.03])), HoldTracker(), clipped_lstsq,
-               dev.coils, Source(), cfg, log=lambda line: None, clock=lambda: 0.0)
+    r = Runner(RunnerParts(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0),
+                           TruthLocalizer(lambda: np.array([0.0, 0.0, 0.03])), HoldTracker(),
+                           clipped_lstsq, dev.coils, Source()),
+               cfg, log=lambda line: None, clock=lambda: 0.0)
     r.start()
     assert r.step(0.0).state == "running"
     dev.sim_boards[0].nack_always = True
@@ -369,9 +372,10 @@ def _scripted_runner(device_and_a, script):
         return Fix(p.copy(), ok, t, problems, np.zeros(18, bool), 0.0,
                    (0.3e-3) ** 2 * np.eye(3), 1e-3)
 
-    r = Runner(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0),
-               TruthLocalizer(lambda: p), ConstantVelocityKalman(), clipped_lstsq, dev.coils,
-               source, cfg, log=lambda line: None, clock=lambda: 0.0)
+    r = Runner(RunnerParts(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0),
+                           TruthLocalizer(lambda: p), ConstantVelocityKalman(), clipped_lstsq,
+                           dev.coils, source),
+               cfg, log=lambda line: None, clock=lambda: 0.0)
     r.start()
     return r, dev
 

@@ -17,7 +17,7 @@ from designkit.sim import (FaultSchedule, SimulatedDevice, simulate, slide_traje
                            time_to_safe)
 from designkit.sim.faults import FAULT_CLEARS_S
 from designkit.sim.report import write_run_csv
-from firmware_io.runner import ConstantVelocityTracker, Runner, RunnerConfig
+from firmware_io.runner import ConstantVelocityTracker, Runner, RunnerConfig, RunnerParts
 
 from _runner_fakes import ConstantMap, PlaneScene, clipped_lstsq
 
@@ -77,9 +77,9 @@ def _jumping_run(device, seed, duration, faults, spikes, moved, **cfg):
                             inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
                             current_limit_a=4.8, total_current_a=20.0, **cfg)
         loc = JumpingLocalizer(lambda: source.frame_truth_m, spikes=spikes, moved=moved)
-        r = Runner(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0), loc,
-                   ConstantVelocityTracker(), hook(clipped_lstsq), dev.coils, source, conf,
-                   clock=clock, log=lambda line: None)
+        parts = RunnerParts(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0), loc,
+                            ConstantVelocityTracker(), hook(clipped_lstsq), dev.coils, source)
+        r = Runner(parts, conf, clock=clock, log=lambda line: None)
         r.start()
         holder["runner"], holder["loc"] = r, loc
         return r
@@ -215,9 +215,9 @@ def test_multi_frame_pl_lets_the_runner_acquire_and_render(device, sigma_m, rend
                            current_limit_a=4.8, total_current_a=20.0, resume_after_s=0.02,
                            alert_limit_m=5e-3)
         loc = NoisyLocalizer(lambda: source.frame_truth_m, sigma_m)
-        r = Runner(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0), loc,
-                   ConstantVelocityTracker(), hook(clipped_lstsq), dev.coils, source, cfg,
-                   clock=clock, log=lambda line: None)
+        parts = RunnerParts(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0), loc,
+                            ConstantVelocityTracker(), hook(clipped_lstsq), dev.coils, source)
+        r = Runner(parts, cfg, clock=clock, log=lambda line: None)
         r.start()
         return r
 

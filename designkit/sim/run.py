@@ -16,7 +16,7 @@ from firmware_io.allocation import Allocator
 from firmware_io.localization import Localizer
 from firmware_io.mapfile import MapFile
 from firmware_io.runner import (CALIBRATED_RELATIVE_ERROR, ConstantVelocityTracker, Runner,
-                                RunnerConfig, SceneForce)
+                                RunnerConfig, RunnerParts, SceneForce)
 from firmware_io.scene import Scene
 
 from .. import electrical, fieldmap
@@ -103,8 +103,9 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
                            force_axes="z" if rows == "fz" else "xyz",
                            skip_force_n=skip_force_n)
         localizer = Localizer.from_map(map_path, method=method, **loc_kw)
-        runner = Runner(fmap, SceneForce(scene), localizer, ConstantVelocityTracker(),
-                        hook(Allocator()), device.coils, source, cfg, clock=clock,
+        parts = RunnerParts(fmap, SceneForce(scene), localizer, ConstantVelocityTracker(),
+                            hook(Allocator()), device.coils, source)
+        runner = Runner(parts, cfg, clock=clock,
                         log=lambda line: print(line) if progress else None)
         runner.profile = profile
         runner.start()

@@ -20,12 +20,13 @@ from .cells import (CELL_CHUNK, GATHER_BLOCK, GEMM_CAP, cell_index, cell_local, 
                     cells_one, prepare_cells)
 from .format import (FORMAT, FORMAT_VERSION, N_MODE_Q, NQ_MAGNET, REBUILD, ROWS, UNITS,
                      array_names, data_hash, read, validate, write)
-from .grid import grid_lists
+from .grid import grid_lists, trilinear, trilinear_one
 from .harmonics import (harmonic_potential, harmonic_rows, harmonic_terms, monomial_exponents,
                         monomials, solid_harmonic_betas, solid_harmonic_coefficients,
                         solid_harmonics)
-from .modes import (BATCH_CHUNK, gradient_tensor, kernel_rows_many, magnet_terms, mode_rows,
-                    modes_one, prepare_magnet, prepare_modes, prepare_one)
+from .modes import (BATCH_CHUNK, gradient_tensor, kernel_rows_many, magnet_terms,
+                    magnet_terms_one, mode_rows, modes_one, prepare_magnet, prepare_magnet_one,
+                    prepare_modes, prepare_one)
 from .reader import MapFile, check_currents
 from .source import ActuationSource, selection
 
@@ -33,9 +34,9 @@ __all__ = [
     "CELL_CHUNK", "GATHER_BLOCK", "GEMM_CAP", "cell_index", "cell_local", "cells_many",
     "cells_one", "prepare_cells", "FORMAT", "FORMAT_VERSION", "N_MODE_Q", "NQ_MAGNET", "REBUILD",
     "ROWS", "UNITS", "array_names", "data_hash", "read", "validate", "write", "grid_lists",
-    "harmonic_potential", "harmonic_rows", "harmonic_terms", "monomial_exponents", "monomials",
-    "solid_harmonic_betas", "solid_harmonic_coefficients", "solid_harmonics", "BATCH_CHUNK",
-    "gradient_tensor", "kernel_rows_many", "magnet_terms", "mode_rows", "modes_one",
-    "prepare_magnet", "prepare_modes", "prepare_one", "MapFile", "check_currents",
-    "ActuationSource", "selection",
+    "trilinear", "trilinear_one", "harmonic_potential", "harmonic_rows", "harmonic_terms",
+    "monomial_exponents", "monomials", "solid_harmonic_betas", "solid_harmonic_coefficients",
+    "solid_harmonics", "BATCH_CHUNK", "gradient_tensor", "kernel_rows_many", "magnet_terms",
+    "magnet_terms_one", "mode_rows", "modes_one", "prepare_magnet", "prepare_magnet_one",
+    "prepare_modes", "prepare_one", "MapFile", "check_currents", "ActuationSource", "selection",
 ]

@@ -90,7 +90,8 @@ def write(path, arrays: dict, meta: dict) -> Path:
     return Path(path)
 
 
-def _bad(path, what: str, hint: str = "") -> BadInputError:
+def map_error(path, what: str, hint: str = "") -> BadInputError:
+    """The one error of a file that is not a valid map: what it must be, its path, the fix."""
     return BadInputError("map file", f"a designkit map file ({what})", str(path), hint)
 
 
@@ -102,20 +103,20 @@ def read(path) -> tuple[dict, dict]:
     with open(p, "rb") as fh:
         magic = fh.read(4)
     if magic != b"PK\x03\x04":  # every .npz is a zip archive; anything else is not a map
-        raise _bad(p, "a .npz archive; this file is not one, so it is not a map file",
+        raise map_error(p, "a .npz archive; this file is not one, so it is not a map file",
                    "Make one with: designkit map --design <design.toml> --out <file.npz>")
     try:
         with np.load(p, allow_pickle=False) as z:
             keys = set(z.files)
             if "meta" not in keys:
-                raise _bad(p, f"an array 'meta'; found {sorted(keys)} -- a foreign .npz, "
+                raise map_error(p, f"an array 'meta'; found {sorted(keys)} -- a foreign .npz, "
                            "not a map file")
             meta = json.loads(str(z["meta"]))
             arrays = {k: z[k] for k in array_names(keys)}
     except BadInputError:
         raise
     except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError) as exc:
-        raise _bad(p, f"readable npz; {type(exc).__name__}: {exc} -- truncated or foreign")
+        raise map_error(p, f"readable npz; {type(exc).__name__}: {exc} -- truncated or foreign")
     validate(arrays, meta, p)
     return arrays, meta
 
@@ -123,30 +124,30 @@ def read(path) -> tuple[dict, dict]:
 def validate(arrays: dict, meta: dict, p="<map data>") -> None:
     """Check everything :func:`read` checks on arrays and meta in memory (BadInputError)."""
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-        raise _bad(p, f"meta.format == {FORMAT!r} -- a foreign file")
+        raise map_error(p, f"meta.format == {FORMAT!r} -- a foreign file")
     version = meta.get("version")
     if version != FORMAT_VERSION:
         when = ("an older" if isinstance(version, int) and version < FORMAT_VERSION
                 else "another")
-        raise _bad(p, f"format version {FORMAT_VERSION} (A as harmonic cells, sensors as a "
+        raise map_error(p, f"format version {FORMAT_VERSION} (A as harmonic cells, sensors as a "
                    f"list of poses); this file is version {version!r}, written by {when} "
                    "designkit", REBUILD)
     if meta.get("units") != UNITS or meta.get("rows") != list(ROWS):
-        raise _bad(p, f"units {UNITS} and rows {ROWS}")
+        raise map_error(p, f"units {UNITS} and rows {ROWS}")
     try:
         nc = int(meta["n_coils"])
         missing = [k for k in _FIXED if k not in arrays]
         if missing:
-            raise _bad(p, f"arrays {list(_FIXED)}; missing {missing}", REBUILD)
+            raise map_error(p, f"arrays {list(_FIXED)}; missing {missing}", REBUILD)
         shapes = _shapes(meta, arrays)
     except (KeyError, TypeError, ValueError) as exc:
         if isinstance(exc, BadInputError):
             raise
-        raise _bad(p, f"complete metadata; {type(exc).__name__}: {exc}")
+        raise map_error(p, f"complete metadata; {type(exc).__name__}: {exc}")
     for name, (dtype, shape) in shapes.items():
         a = arrays[name]
         if a.shape != shape or a.dtype != dtype:
-            raise _bad(p, f"{name} of shape {shape} {np.dtype(dtype).name}; got {a.shape} "
+            raise map_error(p, f"{name} of shape {shape} {np.dtype(dtype).name}; got {a.shape} "
                        f"{a.dtype}")
     _validate_layers(arrays, meta, nc, p)
     for key, prefix, nq in (("magnet_tables", "MRZ", NQ_MAGNET),
@@ -154,7 +155,7 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
         tabs = meta.get(key)
         n_basis = int(meta["n_sensor_basis"])
         if not isinstance(tabs, list) or (not tabs and nq is not None):
-            raise _bad(p, f"meta.{key} (a list, non-empty for the magnet tables)")
+            raise map_error(p, f"meta.{key} (a list, non-empty for the magnet tables)")
         covered = []
         for k, t in enumerate(tabs):
             try:
@@ -181,25 +182,25 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
             except (KeyError, TypeError):
                 ok = False
             if not ok:
-                raise _bad(p, f"{key}[{k}] describing a float32 array {prefix}{k} (n_rho, n_u, "
+                raise map_error(p, f"{key}[{k}] describing a float32 array {prefix}{k} (n_rho, n_u, "
                            f"{nq}) for coil indices < {nc}")
             covered += list(t["coils"])
         if nq is not None and sorted(covered) != list(range(nc)):
-            raise _bad(p, f"{key}: one table for every coil 0..{nc - 1}; got coils "
+            raise map_error(p, f"{key}: one table for every coil 0..{nc - 1}; got coils "
                        f"{sorted(covered)}")
     for name in array_names(arrays):
         if not np.all(np.isfinite(arrays[name])):
-            raise _bad(p, f"finite values only (found NaN or Inf in {name})")
+            raise map_error(p, f"finite values only (found NaN or Inf in {name})")
     for name in ("M_X", "M_Y", "M_Z", "SAT_I"):
         if len(arrays[name]) < 2 or not np.all(np.diff(arrays[name]) > 0):
-            raise _bad(p, f"{name} strictly increasing with at least 2 nodes")
+            raise map_error(p, f"{name} strictly increasing with at least 2 nodes")
     rot = arrays["SENSOR_ROT"]
     if (np.abs(rot @ np.swapaxes(rot, 1, 2) - np.eye(3)).max() > 1e-9
             or np.any(np.linalg.det(rot) < 0)):
-        raise _bad(p, "SENSOR_ROT proper rotations (orthonormal, det +1: sensor frame -> array "
+        raise map_error(p, "SENSOR_ROT proper rotations (orthonormal, det +1: sensor frame -> array "
                    "frame)")
     if data_hash(arrays) != meta.get("data_sha256"):
-        raise _bad(p, "data matching its recorded SHA-256 (corrupted)")
+        raise map_error(p, "data matching its recorded SHA-256 (corrupted)")
 
 
 def _validate_layers(arrays: dict, meta: dict, nc: int, p) -> None:
@@ -231,7 +232,7 @@ def _validate_layers(arrays: dict, meta: dict, nc: int, p) -> None:
     except (KeyError, TypeError, ValueError):
         ok = False
     if not ok:
-        raise _bad(p, "meta.a_layers: harmonic-cell layers stacked over the box's z range, each "
+        raise map_error(p, "meta.a_layers: harmonic-cell layers stacked over the box's z range, each "
                    "with a float32 table AH<k> (nx * ny, (degree + 1)^2 - 1, n_coils)")
 
 

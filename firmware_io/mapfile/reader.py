@@ -26,11 +26,11 @@ import numpy as np
 
 from ..errors import BadInputError
 from .cells import CELL_CHUNK, cells_many, cells_one, prepare_cells
-from .format import REBUILD, _bad, read
-from .grid import _trilinear, _trilinear_one
-from .modes import (BATCH_CHUNK, _interp_one, _lookup, gradient_tensor, kernel_rows_many,
-                    magnet_terms, mode_rows, modes_one, prepare_magnet, prepare_modes,
-                    prepare_one)
+from .format import REBUILD, map_error, read
+from .grid import trilinear, trilinear_one
+from .modes import (BATCH_CHUNK, gradient_tensor, kernel_rows_many, magnet_terms,
+                    magnet_terms_one, mode_rows, modes_one, prepare_magnet, prepare_magnet_one,
+                    prepare_modes, prepare_one)
 from .source import selection
 
 def check_currents(currents, n_coils: int, error=BadInputError) -> np.ndarray:
@@ -75,7 +75,7 @@ class MapFile:
         design's map."""
         arrays, meta = read(path)
         if expected_design_sha256 is not None and meta["design_sha256"] != expected_design_sha256:
-            raise _bad(path, f"built from the design with SHA-256 {expected_design_sha256[:12]}"
+            raise map_error(path, f"built from the design with SHA-256 {expected_design_sha256[:12]}"
                        f"...; this one is from design {meta.get('design_name')!r} "
                        f"({meta['design_sha256'][:12]}...)", REBUILD)
         return cls.from_arrays(arrays, meta)
@@ -105,7 +105,7 @@ class MapFile:
             "magnet_f0": (maxes, np.ascontiguousarray(f0.reshape(-1, 3)), f0.shape[:3]),
             "sensor_one": (prepare_one(smodes, tuple(c for _, c in scoefs), arrays["MOMENT"])
                            if smodes else None),
-            "magnet_one": _lookup(magnet[0], magnet[0]["flat"]) if len(magnet) == 1 else None}
+            "magnet_one": prepare_magnet_one(magnet)}
         return cls(arrays, meta, (np.asarray(g[0], float), np.asarray(g[1], float)), nc,
                    kernels)
 
@@ -247,18 +247,11 @@ class MapFile:
         (3,) -> (3,), (n, 3) -> (n, 3)."""
         q = self._one_point(points, extrapolate)
         if q is not None:
-            L = self.kernels["magnet_one"]
-            if L is None:
-                f = magnet_terms(self.kernels["magnet"], np.array([q]))[0]
-            else:
-                d = np.subtract(q, self.kernels["magnet"][0]["pos"])
-                x, y = d[:, 0], d[:, 1]
-                val = _interp_one(L, np.sqrt(x * x + y * y), q[2])  # F_rho/rho, F_z per core
-                f = np.array([val[:, 0] @ x, val[:, 0] @ y, val[:, 1].sum()])
-            f += _trilinear_one(self.kernels["magnet_f0"], q)
+            f = magnet_terms_one(self.kernels["magnet"], self.kernels["magnet_one"], q)
+            f += trilinear_one(self.kernels["magnet_f0"], q)
             return f if np.ndim(points) == 1 else f[None]
         p, single = self._points(points, extrapolate)
-        f = magnet_terms(self.kernels["magnet"], p) + _trilinear(self.kernels["magnet_f0"], p)
+        f = magnet_terms(self.kernels["magnet"], p) + trilinear(self.kernels["magnet_f0"], p)
         return f[0] if single else f
 
     def sensor_induced_field(self, magnet_position_m, extrapolate: bool = False) -> np.ndarray:

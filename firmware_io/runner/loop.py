@@ -68,15 +68,15 @@ class SceneForce:
         return self.scene.force(np.asarray(p, float)[None], np.asarray(v, float)[None])[0]
 
 
-class Runner:
-    """Compose map, scene, localizer, allocator and drivers into the fail-safe control loop.
+@dataclass(frozen=True)
+class RunnerParts:
+    """What the control loop is made of besides its configuration.
 
-    Parameters
+    Attributes
     ----------
     fieldmap : firmware_io.actuation.ActuationSource
-        ``actuation(point, rows=..., coils=...)`` (rows Bx, By, Bz, dBx/dx, dBx/dy, dBx/dz,
-        dBy/dy, dBy/dz, per ampere), ``bounds`` (lower (3,), upper (3,)) m, ``moment_a_m2``
-        (3,), and optionally ``bias_force(point) -> (3,)`` N.
+        A(p) (rows Bx, By, Bz, dBx/dx, dBx/dy, dBx/dz, dBy/dy, dBy/dz, per ampere), F0(p) N,
+        ``bounds`` (lower (3,), upper (3,)) m and ``moment_a_m2`` (3,) A m^2.
     scene : object
         ``force(position_m, velocity_m_s) -> (3,)`` N, the object's force on the finger.
     localizer : object
@@ -93,9 +93,27 @@ class Runner:
         state.
     sensors : callable
         ``sensors(t_s) -> Fix | SensorFrame | None``: the newest result not yet handed out, or
-        None. A source with ``attach(pipeline)`` is given this runner's
+        None. A source with ``attach(pipeline)`` is given the runner's
         :class:`SensorPipeline` and runs it on its side (the sensor thread); a raw
         :class:`SensorFrame` is processed inside the step.
+    """
+
+    fieldmap: object
+    scene: object
+    localizer: object
+    tracker: object
+    allocate: Callable
+    coils: object
+    sensors: Callable
+
+
+class Runner:
+    """Compose map, scene, localizer, allocator and drivers into the fail-safe control loop.
+
+    Parameters
+    ----------
+    parts : RunnerParts
+        The map, scene, localizer, tracker, allocator, coil driver and sensor source.
     config : RunnerConfig
     log : callable
         ``log(line)`` for one line per fault/resume.
@@ -103,14 +121,16 @@ class Runner:
         ``clock() -> s`` for the compute time of a step (default ``time.perf_counter``).
     """
 
-    def __init__(self, fieldmap, scene, localizer, tracker, allocate: Callable, coils,
-                 sensors: Callable, config: RunnerConfig, *, log: Callable[[str], None] = print,
+    def __init__(self, parts: RunnerParts, config: RunnerConfig, *,
+                 log: Callable[[str], None] = print,
                  clock: Callable[[], float] = time.perf_counter):
+        fieldmap, coils, sensors = parts.fieldmap, parts.coils, parts.sensors
         if coils.n_coils != config.n_coils:
             raise BadInputError("config.resistance_ohm", f"{coils.n_coils} coils (the driver's)",
                                 config.n_coils)
-        self.map, self.scene, self.localizer, self.tracker = fieldmap, scene, localizer, tracker
-        self.allocate, self.coils, self.sensors, self.cfg = allocate, coils, sensors, config
+        self.map, self.scene = fieldmap, parts.scene
+        self.localizer, self.tracker = parts.localizer, parts.tracker
+        self.allocate, self.coils, self.sensors, self.cfg = parts.allocate, coils, sensors, config
         self.log, self.clock = log, clock
         n = config.n_coils
         self.path = CurrentPath(config.drives, config.control_period_s, config.feedforward)
@@ -140,7 +160,7 @@ class Runner:
         self.fault_log: list[tuple[float, str, str]] = []
         # modelled currents at the start of each step of the last HISTORY_S (frames arrive late)
         self.history = CurrentHistory(n, max(16, int(HISTORY_S / config.control_period_s)))
-        self.pipeline = SensorPipeline(localizer, fieldmap, n, self.history.at, m)
+        self.pipeline = SensorPipeline(self.localizer, fieldmap, n, self.history.at, m)
         self.last_fix: Fix | None = None
         self.gate_d2 = chi2_quantile(config.gate_risk, 3)
         self._candidate: Fix | None = None     # a gated-out fix awaiting confirmation

@@ -11,9 +11,8 @@ import time
 from collections.abc import Callable
 
 
-class _Nack(Exception):
-    pass
-
+class Nack(Exception):
+    """A simulated device did not acknowledge (the bus turns it into errno 121, as Linux does)."""
 
 
 class SimDevice:
@@ -33,13 +32,13 @@ class SimDevice:
 
     def _check_nack(self) -> None:
         if self.nack_always:
-            raise _Nack
+            raise Nack
         if self._nack_remaining > 0:
             if self._nack_skip > 0:
                 self._nack_skip -= 1
                 return
             self._nack_remaining -= 1
-            raise _Nack
+            raise Nack
 
     def responds_to(self, addr: int) -> bool:
         raise NotImplementedError
