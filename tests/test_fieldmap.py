@@ -428,6 +428,15 @@ def test_map_file_and_field_map_are_actuation_sources(mapfile, fm, sample):
         np.testing.assert_array_equal(src.actuation(p[3], rows=rows, coils=coils),
                                       src.actuation(p[3])[rows, :][:, coils])
         assert src.bias_force(p[:4]).shape == (4, 3) and src.bias_force(p[0]).shape == (3,)
+        # every member of the interface, so callers never probe one
+        assert src.n_sensors == 18 and src.sensor_positions_m.shape == (18, 3)
+        assert src.sensor_coil_field().shape == (18, 3, 9)
+        i = np.linspace(-2.0, 2.0, 9)
+        np.testing.assert_allclose(src.sensor_coil_field(i), src.sensor_coil_field() @ i)
+    members = [k for k in vars(ActuationSource) if not k.startswith("_")]
+    members += list(ActuationSource.__annotations__)
+    for src in (m, fm):
+        assert all(hasattr(src, k) for k in members), members
 
 
 def test_cli_map_writes_one_file(tmp_path):

@@ -82,6 +82,15 @@ class FieldMap:
     def design_sha256(self) -> str:
         return self.file.design_sha256
 
+    @property
+    def n_sensors(self) -> int:
+        return self.file.n_sensors
+
+    @property
+    def sensor_positions_m(self) -> np.ndarray:
+        """(n_sensors, 3) m, the map's flat sensor list."""
+        return self.file.sensor_positions_m
+
     def _call(self, fn, *args):
         try:
             return fn(*args)

@@ -141,9 +141,7 @@ class SimulatedDevice:
         idx = np.asarray(idx)
         a = self.array.actuation_matrix(p[idx])
         f_s = np.einsum("ij,kjl->kil", force_matrix(self.moment), a[:, 3:, :])
-        bias = getattr(self.array, "bias_force", None)
-        b_s = (np.asarray(bias(p[idx], self.moment), float).reshape(-1, 3) if bias is not None
-               else np.zeros((len(idx), 3)))
+        b_s = np.asarray(self.array.bias_force(p[idx], self.moment), float).reshape(-1, 3)
         steps = np.arange(len(p))
         self.force_per_amp = _interp_rows(steps, idx, f_s)
         self.bias_n = _interp_rows(steps, idx, b_s)

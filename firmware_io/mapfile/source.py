@@ -5,9 +5,11 @@ A(p) maps the coil currents I (A, one per coil in the design's coil order) to th
 gradient at a point p (m): [B; G5] = A(p) I, rows :data:`firmware_io.mapfile.format.ROWS`
 (T/A and T/(m A), thesis eq. 2.13).
 The force on the finger magnet is F(p, I) = F(m) G5(p) I + F0(p), with F0 the magnet's pull on
-the iron at zero current. Implemented by ``firmware_io.mapfile.MapFile`` (the file the device
-runs on), ``designkit.fieldmap.FieldMap`` and the direct coupled model of designkit; callers
-type against this protocol and never probe an implementation by calling it.
+the iron at zero current; the coils' field at the Hall sensors tells the sensor side which
+readings the currents will saturate. Implemented by ``firmware_io.mapfile.MapFile`` (the file
+the device runs on), ``designkit.fieldmap.FieldMap`` and the direct coupled model of designkit
+(``designkit.render.ArrayActuation``); each implements every member, so callers use them
+without probing (no getattr / hasattr).
 """
 
 from __future__ import annotations
@@ -21,7 +23,8 @@ from ..errors import BadInputError
 
 @runtime_checkable
 class ActuationSource(Protocol):
-    """A(p) and F0(p) of one design's array, with what identifies it.
+    """A(p), F0(p) and the coils' field at the sensors of one design's array, with what
+    identifies it.
 
     Attributes
     ----------
@@ -29,12 +32,17 @@ class ActuationSource(Protocol):
     bounds : (lower (3,), upper (3,)), m -- the box where ``actuation`` is valid
     moment_a_m2 : ndarray, shape (3,), A m^2 -- the finger magnet's moment F0 is computed for
     design_sha256 : str -- the design spec's hash (a scene or map of another design is refused)
+    n_sensors : int -- the Hall sensors of the device (independent of n_coils)
+    sensor_positions_m : ndarray, shape (n_sensors, 3), m -- the sensors' centres in the map's
+        flat sensor order (the default layout: the upper array in coil order, then the lower)
     """
 
     n_coils: int
     bounds: tuple
     moment_a_m2: np.ndarray
     design_sha256: str
+    n_sensors: int
+    sensor_positions_m: np.ndarray
 
     def actuation(self, points, *, rows: Sequence[int] | None = None,
                   coils: Sequence[int] | None = None) -> np.ndarray:
@@ -43,6 +51,10 @@ class ActuationSource(Protocol):
 
     def bias_force(self, points) -> np.ndarray:
         """F0, the force on the magnet at zero current, N: (3,) -> (3,), (n, 3) -> (n, 3)."""
+
+    def sensor_coil_field(self, currents=None) -> np.ndarray:
+        """The coils' field at the sensors, array frame: per ampere (n_sensors, 3, n_coils)
+        T/A, or with ``currents`` (n_coils,) A the field (n_sensors, 3) T."""
 
 
 def selection(name: str, sel, n: int, error: type[ValueError] = BadInputError):

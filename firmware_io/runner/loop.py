@@ -417,11 +417,8 @@ class Runner:
             if len(k) < cfg.n_coils:
                 keep = k
         fm = self.force_matrix(p, keep)
-        target = f_ref[2:3] if self.z_only else f_ref
-        bias = getattr(self.map, "bias_force", None)
-        if bias is not None:
-            b = np.asarray(bias(p), float)
-            target = target - (b[2:3] if self.z_only else b)
+        b = np.asarray(self.map.bias_force(p), float)
+        target = (f_ref - b)[2:3] if self.z_only else f_ref - b
         if prof:
             tm = self._mark("force_matrix", tm)
         if keep is None:
