@@ -52,7 +52,7 @@ def test_bounds_and_meta(fm):
     assert fm.max_current_a == SMALL.drive.max_current_a
     assert fm.total_current_a == SMALL.drive.total_current_a
     np.testing.assert_allclose(fm.moment_a_m2, SMALL.magnet.moment_vector_a_m2)
-    assert fm.meta["version"] == 5 and fm.n_coils == 9 and fm.meta["n_sensors"] == 18
+    assert fm.meta["version"] == 6 and fm.n_coils == 9 and fm.meta["n_sensors"] == 18
 
 
 def test_interpolation_error_against_direct(fm, sample):
@@ -212,17 +212,29 @@ def test_map_carries_the_drive_data_the_runner_reads(fm):
     r_mean = (d.coil.inner_radius_m + d.coil.outer_radius_m) / 2
     r = d.wire.resistivity_ohm_m * d.coil.turns * 2 * math.pi * r_mean / (
         math.pi * d.wire.diameter_m ** 2 / 4)
-    np.testing.assert_allclose(cfg.resistance_ohm, [r] * 9, rtol=1e-9)
+    drive = cfg.drive
+    np.testing.assert_allclose(drive.resistance_ohm, [r] * 9, rtol=1e-9)
+    np.testing.assert_allclose(drive.resistance_ref_ohm, [r] * 9, rtol=1e-9)
+    # the resistance model: copper's alpha, R at the hot limit (100 C) 1.31 x R(20 C)
+    np.testing.assert_allclose(drive.resistance_at(100.0), [r * (1 + 0.00393 * 80)] * 9,
+                               rtol=1e-9)
     depth = d.coil.outer_radius_m - d.coil.inner_radius_m
     wheeler = 31.6e-6 * d.coil.turns ** 2 * r_mean ** 2 / (6 * r_mean + 9 * d.coil.length_m
                                                            + 10 * depth)
-    np.testing.assert_allclose(cfg.inductance_h, [wheeler] * 9, rtol=0.03)
-    volts = min(d.drive.supply_voltage_v, d.drive.driver_max_voltage_v)
-    assert cfg.supply_voltage_v == volts
-    assert cfg.current_limit_a == pytest.approx(min(d.drive.max_current_a, volts / r))
-    assert cfg.total_current_a == d.drive.total_current_a
-    assert 0 < cfg.thermal_continuous_current_a < cfg.current_limit_a
-    assert cfg.thermal_time_constant_s > 0
+    np.testing.assert_allclose(drive.inductance_h, [wheeler] * 9, rtol=0.03)
+    np.testing.assert_allclose(drive.time_constant_s, np.array(drive.inductance_h) / r,
+                               rtol=1e-9)
+    # the coils get the design's supply (36 V), not the driver's 30 V rating; the rating is a
+    # rule the record reports (the hardware runner refuses it)
+    assert drive.supply_voltage_v == d.drive.supply_voltage_v == 36.0
+    assert drive.current_limit_a == pytest.approx(min(d.drive.max_current_a, 36.0 / r))
+    assert drive.driver.max_voltage_v == d.drive.driver_max_voltage_v == 30.0
+    assert drive.driver.name == d.drive.driver and drive.pwm_frequency_hz == 1526.0
+    [bad] = drive.violations()
+    assert "drive.supply_voltage_v = 36 V" in bad and "drive.driver_max_voltage_v" in bad
+    assert drive.total_current_a == d.drive.total_current_a
+    assert 0 < drive.thermal_continuous_current_a < drive.current_limit_a
+    assert drive.thermal_time_constant_s > 0
 
 
 def test_interpolated_gradient_is_the_derivative_of_interpolated_b(fm):

@@ -25,7 +25,7 @@ from designkit.sim import SimulatedDevice
 from firmware_io.runner import Runner, RunnerConfig, RunnerParts, SensorFrame
 from firmware_io.scene import Scene
 
-from _runner_fakes import HoldTracker, PlaneScene, TruthLocalizer, clipped_lstsq
+from _runner_fakes import HoldTracker, PlaneScene, TruthLocalizer, clipped_lstsq, md10c_drive
 
 AIR = default_design().replace(core=None)
 
@@ -209,10 +209,8 @@ def test_scene_map_covers_its_region_and_matches_the_direct_model(scene_map):
 def test_runner_fails_safe_outside_a_scene_maps_region(scene_map):
     fm, (lo, hi) = scene_map
     arr = CoilArray.from_design(SMALL)
-    dev = SimulatedDevice(SMALL, arr)
-    cfg = RunnerConfig(resistance_ohm=(dev.resistance_ohm,) * 9,
-                       inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
-                       current_limit_a=4.8, total_current_a=20.0)
+    dev = SimulatedDevice(SMALL, arr, drive=md10c_drive(SMALL))
+    cfg = RunnerConfig(dev.drive)
     truth = {"p": 0.5 * (lo + hi)}
 
     class Source:

@@ -373,8 +373,8 @@ def _meta(design, arr: CoilArray, phys: MapPhysics, plan: _Plan, s: BuildSetting
         # the finger magnet's cylinder (the localizer's exact magnet field; MOMENT is its moment)
         "magnet_radius_m": design.magnet.radius_m, "magnet_length_m": design.magnet.length_m,
         "total_current_a": design.drive.total_current_a,
-        # what firmware_io.runner.config_from_map needs (R, L, supply, limits, I^2 t guard)
-        "drive": drive_data(design, _drive_coils(arr)),
+        # the drive record firmware_io.runner.config_from_map reads (firmware_io.mapfile.drive)
+        "drive": drive_data(design, _drive_coils(arr)).to_dict(),
         "physics": phys.source,
         "settings": s.meta(len(plan.fit_pts)),
     }

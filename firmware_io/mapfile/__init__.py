@@ -5,6 +5,7 @@ with this package alone. Everything about the format -- array names, shapes, val
 interpolation -- is defined here and nowhere else:
 
 * :mod:`.format`: the file's layout, writing, reading, validation, version refusal;
+* :mod:`.drive`: :class:`DriveRecord`, the coils' drive (R model, L, supply, driver, bounds);
 * :mod:`.harmonics`: the solid-harmonic maths of A's harmonic cells;
 * :mod:`.cells`: A(p), the cell of a point and the per-cell products;
 * :mod:`.modes`: the per-core (rho, z) tables (magnet pull, sensor-field modes) and kernels;
@@ -18,6 +19,7 @@ docs/mapfile_format.md and docs/fieldmap.md.
 
 from .cells import (CELL_CHUNK, GATHER_BLOCK, GEMM_CAP, cell_index, cell_local, cells_many,
                     cells_one, prepare_cells)
+from .drive import DriveRecord
 from .format import (FORMAT, FORMAT_VERSION, N_MODE_Q, NQ_MAGNET, REBUILD, ROWS, UNITS,
                      array_names, data_hash, read, validate, write)
 from .grid import grid_lists, trilinear, trilinear_one
@@ -39,4 +41,5 @@ __all__ = [
     "solid_harmonics", "BATCH_CHUNK", "gradient_tensor", "kernel_rows_many", "magnet_terms",
     "magnet_terms_one", "mode_rows", "modes_one", "prepare_magnet", "prepare_magnet_one",
     "prepare_modes", "prepare_one", "MapFile", "check_currents", "ActuationSource", "selection",
+    "DriveRecord",
 ]

@@ -20,12 +20,14 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import BadInputError
+from .drive import DriveRecord
 
 FORMAT = "designkit-fieldmap"
-FORMAT_VERSION = 5
+FORMAT_VERSION = 6
 """Format version: A as harmonic cells (coupled A, bias force), the sensors as a flat list of
-poses with their fields; a file of any other version is refused with the command that rebuilds
-it (docs/mapfile_format.md lists the versions)."""
+poses with their fields, the typed drive record (:class:`firmware_io.mapfile.drive.DriveRecord`);
+a file of any other version is refused with the command that rebuilds it
+(docs/mapfile_format.md lists the versions)."""
 ROWS = ("Bx", "By", "Bz", "dBx/dx", "dBx/dy", "dBx/dz", "dBy/dy", "dBy/dz")
 """The eight rows of A(p) (thesis eq. 2.13), defined here once: B (T/A), then the five
 independent entries of the symmetric, traceless gradient (T/(m A))."""
@@ -130,8 +132,8 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
         when = ("an older" if isinstance(version, int) and version < FORMAT_VERSION
                 else "another")
         raise map_error(p, f"format version {FORMAT_VERSION} (A as harmonic cells, sensors as a "
-                   f"list of poses); this file is version {version!r}, written by {when} "
-                   "designkit", REBUILD)
+                        f"list of poses, a typed drive record); this file is version "
+                        f"{version!r}, written by {when} designkit", REBUILD)
     if meta.get("units") != UNITS or meta.get("rows") != list(ROWS):
         raise map_error(p, f"units {UNITS} and rows {ROWS}")
     try:
@@ -149,6 +151,10 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
         if a.shape != shape or a.dtype != dtype:
             raise map_error(p, f"{name} of shape {shape} {np.dtype(dtype).name}; got {a.shape} "
                        f"{a.dtype}")
+    try:
+        DriveRecord.from_dict(meta.get("drive"), nc)
+    except BadInputError as exc:
+        raise map_error(p, f"a valid drive record in meta.drive ({exc})", REBUILD) from None
     _validate_layers(arrays, meta, nc, p)
     for key, prefix, nq in (("magnet_tables", "MRZ", NQ_MAGNET),
                             ("sensor_mode_tables", "SM", None)):

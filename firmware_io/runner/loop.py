@@ -133,10 +133,11 @@ class Runner:
         self.allocate, self.coils, self.sensors, self.cfg = parts.allocate, coils, sensors, config
         self.log, self.clock = log, clock
         n = config.n_coils
-        self.path = CurrentPath(config.drives, config.control_period_s, config.feedforward)
-        self.limit = np.full(n, config.current_limit_a)
-        self.thermal = ThermalGuard(n, config.thermal_continuous_current_a,
-                                    config.thermal_time_constant_s)
+        drive = config.drive
+        self.path = CurrentPath(drive.drives, config.control_period_s, config.feedforward)
+        self.limit = np.full(n, drive.current_limit_a)
+        self.thermal = ThermalGuard(n, drive.thermal_continuous_current_a,
+                                    drive.thermal_time_constant_s)
         m = np.asarray(fieldmap.moment_a_m2, float)
         self.moment = m
         mx, my, mz = m
@@ -177,11 +178,11 @@ class Runner:
         return self.path.current_a
 
     # -- life cycle ----------------------------------------------------------------------------
-    def start(self, pwm_frequency_hz: float = 1526.0) -> None:
-        """Initialise every PWM board into the safe state (all coils off), then run the step's
-        computations once at the box centre so that the first real step is not slowed by
-        first-call costs (an overrun)."""
-        self.coils.initialize(pwm_frequency_hz)
+    def start(self) -> None:
+        """Initialise every PWM board at the drive record's PWM frequency into the safe state
+        (all coils off), then run the step's computations once at the box centre so that the
+        first real step is not slowed by first-call costs (an overrun)."""
+        self.coils.initialize(self.cfg.drive.pwm_frequency_hz)
         self.coils.all_off()
         self.path.current_a[:] = 0.0
         self.state = "safe"
@@ -394,11 +395,12 @@ class Runner:
             tm = self._mark("object_force", tm)
         command = self._allocate(p, f_ref)
         total = float(np.sum(np.abs(command)))
-        if np.any(np.abs(command) > self.limit + 1e-9) or total > cfg.total_current_a + 1e-9 \
+        budget = cfg.drive.total_current_a
+        if np.any(np.abs(command) > self.limit + 1e-9) or total > budget + 1e-9 \
                 or (cfg.unipolar and np.any(command < -1e-9)):
             self._enter_fault(t_s, "over_limit",
                               f"command max |I| {np.abs(command).max():.3f} A, sum {total:.3f} A "
-                              f"(limits {cfg.current_limit_a:.3f} A, {cfg.total_current_a:.3f} A)")
+                              f"(limits {cfg.drive.current_limit_a:.3f} A, {budget:.3f} A)")
             return self._record(t_s, t0, p, f_ref, new_frame, off=True)
         return self._drive(t_s, t0, p, f_ref, command, new_frame)
 
@@ -422,13 +424,13 @@ class Runner:
         if prof:
             tm = self._mark("force_matrix", tm)
         if keep is None:
-            command, _ = self.allocate(fm, target, self.limit, cfg.total_current_a,
+            command, _ = self.allocate(fm, target, self.limit, cfg.drive.total_current_a,
                                        unipolar=cfg.unipolar)
             command = np.asarray(command, float)
         else:
             command = np.zeros(cfg.n_coils)
             if len(keep):
-                i, _ = self.allocate(fm, target, self.limit[keep], cfg.total_current_a,
+                i, _ = self.allocate(fm, target, self.limit[keep], cfg.drive.total_current_a,
                                      unipolar=cfg.unipolar)
                 command[keep] = i
         if prof:
