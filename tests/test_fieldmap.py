@@ -306,8 +306,31 @@ def _resave(path, arrays, meta):
     np.savez(path, **arrays, meta=np.array(json.dumps(meta)))
 
 
+def test_map_check_command_summarizes_a_good_map_and_refuses_a_bad_one(mapfile, tmp_path,
+                                                                       capsys):
+    # python -m firmware_io.mapfile: a labelled summary (exit 0); a truncated or foreign file
+    # one error line (exit 1), no traceback
+    from firmware_io.mapfile.__main__ import main as check_map
+
+    assert check_map([str(mapfile)]) == 0
+    out = capsys.readouterr().out
+    assert SMALL.name in out and "coils / sensors" in out
+    assert "9 / 18" in out and "supply / driver" in out and "36 V / Cytron MD10C" in out
+    assert "drive.supply_voltage_v = 36 V is above" in out and "format version" in out
+    trunc = tmp_path / "corrupt.npz"
+    trunc.write_bytes(mapfile.read_bytes()[:3000])
+    for bad in (trunc, tmp_path / "missing.npz"):
+        assert check_map([str(bad)]) == 1
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and err.count("\n") == 1 and "Traceback" not in err
+    res = subprocess.run([sys.executable, "-m", "firmware_io.mapfile", str(trunc)],
+                         capture_output=True, text=True)
+    assert res.returncode == 1 and res.stdout == "" and "Traceback" not in res.stderr
+    assert "truncated" in res.stderr
+
+
 def test_bad_files(mapfile, tmp_path):
-    from firmware_io.mapfile import read
+    from firmware_io.mapfile import data_hash, read
 
     trunc = tmp_path / "trunc.npz"
     trunc.write_bytes(mapfile.read_bytes()[: mapfile.stat().st_size // 2])
@@ -340,6 +363,17 @@ def test_bad_files(mapfile, tmp_path):
             fieldmap.load(bad)
     _resave(bad, {k: v for k, v in arrays.items() if k != "SCOEF"}, meta)
     with pytest.raises(BadInputError, match="SCOEF"):
+        fieldmap.load(bad)
+    # a sensor orientation that is not a rotation (a mirror), a drive record that lost a field
+    rot = arrays["SENSOR_ROT"].copy()
+    rot[3] = np.diag([1.0, 1.0, -1.0])
+    write = dict(arrays, SENSOR_ROT=rot)
+    _resave(bad, write, dict(meta, data_sha256=data_hash(write)))
+    with pytest.raises(BadInputError, match="SENSOR_ROT"):
+        fieldmap.load(bad)
+    drive = {k: v for k, v in meta["drive"].items() if k != "hot_temperature_c"}
+    _resave(bad, arrays, dict(meta, drive=drive))
+    with pytest.raises(BadInputError, match="hot_temperature_c"):
         fieldmap.load(bad)
     _resave(bad, {**arrays, "AH0": arrays["AH0"][:-1]}, meta)
     with pytest.raises(BadInputError, match="a_layers"):

@@ -19,7 +19,6 @@ Usage::
 from __future__ import annotations
 
 import math
-import sys
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -313,9 +312,3 @@ class MapFile:
         a = self.actuation(point)[rows]
         return np.linalg.lstsq(a, np.asarray(wanted, float), rcond=None)[0]
 
-
-def _self_check():  # pragma: no cover - manual use on the target host
-    """``python -m firmware_io.mapfile MAP.npz``: load a map and evaluate it at the box centre."""
-    m = MapFile.load(sys.argv[1])
-    lo, hi = m.bounds
-    print(m.meta["design_name"], m.actuation((lo + hi) / 2).shape, m.bias_force((lo + hi) / 2))
