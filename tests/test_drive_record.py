@@ -248,3 +248,38 @@ def test_hardware_entry_refuses_a_map_over_its_driver_rating(tmp_path, monkeypat
     err = capsys.readouterr().err
     assert rc == 2 and "Traceback" not in err
     assert "drive.supply_voltage_v = 36 V" in err and "drive.driver_max_voltage_v" in err
+
+
+# ---------------------------------------------------------------------------------------------
+# end to end: a 48 V driver named in the design runs in the simulator
+BOX = (np.array([-0.07, -0.03, 0.015]), np.array([0.07, 0.03, 0.06]))
+
+
+@pytest.fixture(scope="module")
+def small48(tmp_path_factory):
+    """A 1 x 2 air-core board on a 48 V supply with a driver rated 50 V (a small, quick map)."""
+    from designkit import fieldmap
+
+    design = D48.replace(**{"array.rows": 1, "array.columns": 2, "core": None})
+    path = tmp_path_factory.mktemp("map48") / "map.npz"
+    fieldmap.write(path, fieldmap.build(design, box=BOX, spacing=0.02, n_check=20,
+                                        progress=False))
+    return design, path
+
+
+def test_a_48_v_design_runs_in_the_simulator_at_48_v(small48, tmp_path):
+    from designkit.sim.run import run_simulation
+    from firmware_io.mapfile import MapFile
+    from firmware_io.runner import config_from_map
+
+    design, path = small48
+    cfg = config_from_map(MapFile.load(path))
+    assert cfg.drive.supply_voltage_v == 48.0 and cfg.drive.driver.max_voltage_v == 50.0
+    assert all(d.supply_voltage_v == 48.0 for d in cfg.drive.drives)
+    s = run_simulation(design=design, obj="plane", duration_s=0.3, map_path=path,
+                       out=tmp_path / "run", progress=False)
+    assert s["drive"]["supply_voltage_v"] == 48.0 and s["drive_violations"] == []
+    assert s["drive"] == cfg.drive.to_dict()
+    # and check passes the supply against the driver it names
+    table = rule_table(design)
+    assert table["design_supply_voltage_v"]["met"] and table["supply_voltage_v"]["limit"] == 48.0
