@@ -98,7 +98,7 @@ class SimBus:
     def _give_clock(self, device: SimDevice) -> None:
         if self.clock is not None:
             device.clock = self.clock.now
-        for ch in getattr(device, "channels", []):
+        for ch in device.channels:
             for d in ch:
                 self._give_clock(d)
 
@@ -108,7 +108,7 @@ class SimBus:
 
         def walk(d: SimDevice) -> None:
             out.append(d)
-            for ch in getattr(d, "channels", []):
+            for ch in d.channels:
                 for sub in ch:
                     walk(sub)
         for d in self.devices:

@@ -16,9 +16,13 @@ class Nack(Exception):
 
 
 class SimDevice:
-    """Base of the device models: address matching, NACK injection, rule violations."""
+    """Base of the device models: address matching, NACK injection, rule violations.
+
+    ``channels``: the devices behind this one, one list per downstream channel (a switch's; an
+    end device has none)."""
 
     def __init__(self) -> None:
+        self.channels: list[list[SimDevice]] = []
         self.violations: list[str] = []
         self._nack_remaining = 0
         self._nack_skip = 0
