@@ -126,7 +126,8 @@ class Runner:
                  clock: Callable[[], float] = time.perf_counter):
         fieldmap, coils, sensors = parts.fieldmap, parts.coils, parts.sensors
         if coils.n_coils != config.n_coils:
-            raise BadInputError("config.resistance_ohm", f"{coils.n_coils} coils (the driver's)",
+            raise BadInputError("config.drive.resistance_ref_ohm",
+                                f"{coils.n_coils} values (one per coil of the driver)",
                                 config.n_coils)
         self.map, self.scene = fieldmap, parts.scene
         self.localizer, self.tracker = parts.localizer, parts.tracker
