@@ -289,6 +289,35 @@ def test_sensor_positions_and_coil_field_against_direct(fm):
     np.testing.assert_allclose(g, np.swapaxes(g, 1, 2), atol=1e-12 * np.abs(g).max())
 
 
+def test_the_format_holds_any_number_of_sensors(mapfile, tmp_path):
+    # the sensors are a flat list independent of the coil count: the map's first 5 sensors
+    # (and a tilted orientation) make a valid map whose reader gives those 5, unchanged
+    from firmware_io.mapfile import MapFile, data_hash, read
+    from firmware_io.localization.sensor_model import upper_lower
+
+    arrays, meta = read(mapfile)
+    keep = slice(0, 5)
+    c, s_ = math.cos(0.3), math.sin(0.3)
+    rot = arrays["SENSOR_ROT"][keep].copy()
+    rot[2] = [[c, 0.0, s_], [0.0, 1.0, 0.0], [-s_, 0.0, c]]
+    sub = dict(arrays, SENSOR_POS=arrays["SENSOR_POS"][keep], SENSOR_ROT=rot,
+               SENSOR_COIL=arrays["SENSOR_COIL"][keep],
+               SENSOR_COIL_GRAD=arrays["SENSOR_COIL_GRAD"][keep],
+               SCOEF=np.ascontiguousarray(arrays["SCOEF"][:, :, keep]))
+    path = tmp_path / "five.npz"
+    _resave(path, sub, dict(meta, n_sensors=5, data_sha256=data_hash(sub)))
+    m = MapFile.load(path)
+    full = MapFile.load(mapfile)
+    assert m.n_sensors == 5 and m.n_coils == 9
+    np.testing.assert_array_equal(m.sensor_positions_m, full.sensor_positions_m[keep])
+    np.testing.assert_array_equal(m.sensor_coil_field(), full.sensor_coil_field()[keep])
+    np.testing.assert_array_equal(m.sensor_rotations[2], rot[2])
+    assert m.sensor_induced_field(np.mean(m.bounds, axis=0)).shape == (5, 3)
+    # the localizer's estimators still need an upper and a lower array of equal size
+    with pytest.raises(ValueError, match="even number of sensors"):
+        upper_lower(m.sensor_positions_m)
+
+
 def test_outside_points(fm):
     lo, hi = fm.bounds
     out = hi + [0, 0, 0.002]
