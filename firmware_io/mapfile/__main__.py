@@ -13,6 +13,7 @@ import sys
 import numpy as np
 
 from ..errors import FirmwareIOError
+from .drive import DriveRecord
 from .reader import MapFile
 
 EXIT_BAD_MAP = 1
@@ -21,8 +22,6 @@ EXIT_BAD_MAP = 1
 def summary(m: MapFile) -> str:
     """The map's labelled summary: what it is for, its box, its drive, its values at the box
     centre and the errors measured when it was built."""
-    from .drive import DriveRecord
-
     lo, hi = m.bounds
     centre = (lo + hi) / 2
     a = m.actuation(centre)
