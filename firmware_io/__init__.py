@@ -1,7 +1,8 @@
 """firmware_io: the I2C layer between a rendering runner and the EHI hardware.
 
-PCA9685 PWM boards drive nine Cytron MD10C coil drivers (PWM + DIR, sign-magnitude); two arrays
-of nine TLV493D-A1B6 Hall sensors sit behind TCA9548A muxes. Needs only numpy, plus smbus2 for a
+PCA9685 PWM boards drive one sign-magnitude coil driver per coil (PWM + DIR; the design names
+it by its ratings, the Cytron MD10C by default); two arrays of TLV493D-A1B6 Hall sensors sit
+behind TCA9548A muxes. Needs only numpy, plus smbus2 for a
 real bus (imported lazily). Nothing here imports designkit.
 
 Main entry points::

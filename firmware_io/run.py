@@ -26,8 +26,8 @@ from .errors import FirmwareIOError
 from .localization import Localizer
 from .mapfile import MapFile
 from .runner import (CALIBRATED_RELATIVE_ERROR, CALIBRATION_CURRENT_A, ConstantVelocityTracker,
-                     Runner, SceneForce, SensorFrame, calibrate_sensors, calibration_currents,
-                     config_from_map, record_calibration)
+                     Runner, RunnerParts, SceneForce, SensorFrame, calibrate_sensors,
+                     calibration_currents, config_from_map, record_calibration)
 from .scene import Scene
 from .hw.sensors import SensorArrays
 
@@ -158,8 +158,8 @@ def load_inputs(map_path: str, scene_path: str, method: str):
 
 
 def open_device(bus_number: int, sensor_bus_number: int | None, drives):
-    """Open the bus(es) and build the PWM boards (one :class:`firmware_io.hw.md10c.CoilDrive` per
-    coil: the runner configuration's ``drives``) and sensor arrays (default wiring)."""
+    """Open the bus(es) and build the PWM boards (one :class:`firmware_io.hw.driver.CoilDrive`
+    per coil: the drive record's ``drives``) and sensor arrays (default wiring)."""
     bus = open_bus(bus_number)
     sbus = bus if sensor_bus_number is None else open_bus(sensor_bus_number)
     boards = [PCA9685(bus, 0x40 + b) for b in range((len(drives) + 7) // 8)]
@@ -170,8 +170,8 @@ def calibrated_localizer(map_path: str, method: str, localizer, coils, arrays, c
                          sleep=time.sleep):
     """The start-up sensor calibration (firmware_io.runner.record_calibration: coils alone,
     each pattern held for 7 L/R), then a localizer that uses it."""
-    tau = max(d.inductance_h / d.resistance_ohm for d in cfg.drives)
-    amp = min(CALIBRATION_CURRENT_A, cfg.current_limit_a)
+    tau = max(cfg.drive.time_constant_s)
+    amp = min(CALIBRATION_CURRENT_A, cfg.drive.current_limit_a)
     print(f"calibrating the sensors ({amp:.1f} A patterns, keep the magnet away)...",
           file=sys.stderr)
     top, bottom, applied = record_calibration(coils, arrays, calibration_currents(cfg.n_coils, amp),
@@ -190,7 +190,8 @@ def main(argv: list[str] | None = None) -> int:
         rows = scene.meta.get("rows", "force")
         cfg = config_from_map(fmap, control_period_s=args.period_ms * 1e-3,
                               unipolar=args.unipolar, force_axes="z" if rows == "fz" else "xyz")
-        coils, arrays = open_device(bus_n, sbus_n, cfg.drives)
+        cfg.drive.check_ratings()    # a supply or PWM the driver is not rated for: refused
+        coils, arrays = open_device(bus_n, sbus_n, cfg.drive.drives)
         check_sensor_arrays(arrays.configure(), cfg.n_coils)
         if args.calibrate:
             localizer = calibrated_localizer(args.map, args.method, localizer, coils, arrays, cfg)
@@ -198,8 +199,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     source = ThreadedSensorSource(arrays)
-    runner = Runner(fmap, SceneForce(scene), localizer, ConstantVelocityTracker(), Allocator(),
-                    coils, source, cfg)
+    runner = Runner(RunnerParts(fmap, SceneForce(scene), localizer, ConstantVelocityTracker(),
+                                Allocator(), coils, source), cfg)
     runner.start()
     source.start()
     t0 = time.monotonic()

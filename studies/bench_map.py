@@ -119,7 +119,7 @@ def _case(design, out_dir: Path, name: str, n_points: int, n_magnet: int, **buil
     f_err = np.abs(m.bias_force(mp) - f_ref).max() / max(np.abs(f_ref).max(), 1e-300)
     sens = m.sensor_positions_m.reshape(-1, 3)
     nm = min(n_magnet, 20)
-    s_ref = np.array([arr.magnet_core_field(sens, p, moment).reshape(2, -1, 3) for p in mp[:nm]])
+    s_ref = np.array([arr.magnet_core_field(sens, p, moment) for p in mp[:nm]])
     s_err = np.abs(m.sensor_induced_field(mp[:nm]) - s_ref).max() / max(np.abs(s_ref).max(),
                                                                          1e-300)
     out = {
@@ -215,7 +215,7 @@ def scene_vs_full(out_dir=DEFAULT_OUT, n_points: int = 2000) -> dict:
     moment = d.magnet.moment_vector_a_m2
     f_ref = arr.bias_force(mp, moment)
     sens = arr.sensor_positions_m().reshape(-1, 3)
-    s_ref = np.array([arr.magnet_core_field(sens, q, moment).reshape(2, -1, 3) for q in mp[:10]])
+    s_ref = np.array([arr.magnet_core_field(sens, q, moment) for q in mp[:10]])
     scene = fieldmap.scene_build_args(d, [Hemisphere()], 0.0, region={"objects": ["half_ball"]})
     for name, kw in (("full", {}), ("scene", scene)):
         data, wall, cpu = _timed_build(d, **kw)

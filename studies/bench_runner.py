@@ -145,8 +145,8 @@ def run(out_dir=DEFAULT_OUT, *, map_path=None, duration_s: float = 2.0,
     bias = fmap.bias_force(path)
     m = fmap.moment_a_m2
     drive = drive_data(design)
-    limit = np.full(fmap.n_coils, drive["current_limit_a"])
-    total = drive["total_current_a"]
+    limit = np.full(fmap.n_coils, drive.current_limit_a)
+    total = drive.total_current_a
     rows3, mat3 = force_law_rows(m, "xyz")
     full_mat = np.zeros((3, 8))           # the same force from all 8 rows
     full_mat[:, rows3] = mat3

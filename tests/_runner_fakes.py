@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -78,3 +79,15 @@ def clipped_lstsq(fm, target, limit, total, unipolar=False):
     if s > total:
         i *= total / s
     return i, float(np.sum((fm @ i - target) ** 2))
+
+
+def md10c_drive(design, limit=4.8, total=20.0, **changes):
+    """The design's drive record (designkit.sim.drive_data) at the MD10C's rated 30 V supply,
+    with the runner tests' bounds (per coil ``limit``, sum ``total``, A) and the I^2 t guard at
+    3 A, 300 s unless ``changes`` say otherwise."""
+    from designkit.sim import drive_data
+
+    rec = drive_data(design.replace(**{"drive.supply_voltage_v": 30.0}))
+    return dataclasses.replace(rec, current_limit_a=limit, total_current_a=total,
+                               **{"thermal_continuous_current_a": 3.0,
+                                  "thermal_time_constant_s": 300.0, **changes})

@@ -133,7 +133,8 @@ def test_design_rules_are_reported_in_words_for_the_thesis_device():
     air = design.replace(core=None)
     rep = el.electrical_report(air, Coil.from_design(air))
     text = " ".join(rep.violations)
-    assert "36 V exceeds the driver's rating of 30 V" in text
+    assert ("drive.supply_voltage_v = 36 V is above the rating of the driver 'Cytron MD10C'"
+            in text and "drive.driver_max_voltage_v" in text)
     assert "6.235 ohm exceeds" in text
     assert "do not fit" in text and "1420" in text
     assert rep.copper_mass_kg == pytest.approx(8960 * 139.169 * math.pi * 0.35e-3 ** 2, rel=1e-4)

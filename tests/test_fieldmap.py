@@ -52,7 +52,7 @@ def test_bounds_and_meta(fm):
     assert fm.max_current_a == SMALL.drive.max_current_a
     assert fm.total_current_a == SMALL.drive.total_current_a
     np.testing.assert_allclose(fm.moment_a_m2, SMALL.magnet.moment_vector_a_m2)
-    assert fm.meta["version"] == 4 and fm.n_coils == 9
+    assert fm.meta["version"] == 6 and fm.n_coils == 9 and fm.meta["n_sensors"] == 18
 
 
 def test_interpolation_error_against_direct(fm, sample):
@@ -212,17 +212,29 @@ def test_map_carries_the_drive_data_the_runner_reads(fm):
     r_mean = (d.coil.inner_radius_m + d.coil.outer_radius_m) / 2
     r = d.wire.resistivity_ohm_m * d.coil.turns * 2 * math.pi * r_mean / (
         math.pi * d.wire.diameter_m ** 2 / 4)
-    np.testing.assert_allclose(cfg.resistance_ohm, [r] * 9, rtol=1e-9)
+    drive = cfg.drive
+    np.testing.assert_allclose(drive.resistance_ohm, [r] * 9, rtol=1e-9)
+    np.testing.assert_allclose(drive.resistance_ref_ohm, [r] * 9, rtol=1e-9)
+    # the resistance model: copper's alpha, R at the hot limit (100 C) 1.31 x R(20 C)
+    np.testing.assert_allclose(drive.resistance_at(100.0), [r * (1 + 0.00393 * 80)] * 9,
+                               rtol=1e-9)
     depth = d.coil.outer_radius_m - d.coil.inner_radius_m
     wheeler = 31.6e-6 * d.coil.turns ** 2 * r_mean ** 2 / (6 * r_mean + 9 * d.coil.length_m
                                                            + 10 * depth)
-    np.testing.assert_allclose(cfg.inductance_h, [wheeler] * 9, rtol=0.03)
-    volts = min(d.drive.supply_voltage_v, d.drive.driver_max_voltage_v)
-    assert cfg.supply_voltage_v == volts
-    assert cfg.current_limit_a == pytest.approx(min(d.drive.max_current_a, volts / r))
-    assert cfg.total_current_a == d.drive.total_current_a
-    assert 0 < cfg.thermal_continuous_current_a < cfg.current_limit_a
-    assert cfg.thermal_time_constant_s > 0
+    np.testing.assert_allclose(drive.inductance_h, [wheeler] * 9, rtol=0.03)
+    np.testing.assert_allclose(drive.time_constant_s, np.array(drive.inductance_h) / r,
+                               rtol=1e-9)
+    # the coils get the design's supply (36 V), not the driver's 30 V rating; the rating is a
+    # rule the record reports (the hardware runner refuses it)
+    assert drive.supply_voltage_v == d.drive.supply_voltage_v == 36.0
+    assert drive.current_limit_a == pytest.approx(min(d.drive.max_current_a, 36.0 / r))
+    assert drive.driver.max_voltage_v == d.drive.driver_max_voltage_v == 30.0
+    assert drive.driver.name == d.drive.driver and drive.pwm_frequency_hz == 1526.0
+    [bad] = drive.violations()
+    assert "drive.supply_voltage_v = 36 V" in bad and "drive.driver_max_voltage_v" in bad
+    assert drive.total_current_a == d.drive.total_current_a
+    assert 0 < drive.thermal_continuous_current_a < drive.current_limit_a
+    assert drive.thermal_time_constant_s > 0
 
 
 def test_interpolated_gradient_is_the_derivative_of_interpolated_b(fm):
@@ -247,28 +259,63 @@ def test_air_coils_have_no_bias_and_no_induced_field(fm, sample):
     p, _ = sample
     assert np.all(fm.bias_force(p[:50]) == 0)
     assert np.all(fm.sensor_induced_field(p[0]) == 0)
-    assert fm.sensor_induced_field(p[0]).shape == (2, 9, 3)
+    assert fm.sensor_induced_field(p[0]).shape == (18, 3)
 
 
 def test_sensor_positions_and_coil_field_against_direct(fm):
     arr = CoilArray.from_design(SMALL)
     s = fm.sensor_positions_m
-    np.testing.assert_allclose(s, arr.sensor_positions_m())
-    np.testing.assert_allclose(s[0, :, 2], SMALL.sensors.offset_m)  # above the tops (z = 0)
-    direct = arr.actuation_matrix(s.reshape(-1, 3))[:, :3, :].reshape(2, 9, 3, 9)
+    # the flat list: the upper array in coil order, then the lower array
+    assert fm.n_sensors == 18 and s.shape == (18, 3)
+    np.testing.assert_allclose(s, arr.sensor_positions_m().reshape(-1, 3))
+    np.testing.assert_allclose(s[:9, :2], arr.positions()[:, :2], atol=1e-15)
+    np.testing.assert_allclose(s[:9, 2], SMALL.sensors.offset_m)  # above the tops (z = 0)
+    assert np.all(s[9:, 2] < -SMALL.coil.length_m)                # below the bottoms
+    np.testing.assert_array_equal(fm.sensor_rotations, np.broadcast_to(np.eye(3), (18, 3, 3)))
+    direct = arr.actuation_matrix(s)[:, :3, :]
     np.testing.assert_allclose(fm.sensor_coil_field(), direct, rtol=1e-12, atol=0)
     i = np.linspace(-3, 3, 9)
     np.testing.assert_allclose(fm.sensor_coil_field(i), direct @ i, rtol=1e-12,
                                atol=1e-15)
     np.testing.assert_array_equal(fm.saturation_factor(i), np.ones(9))
     # the gradient at the sensors (below the box of A) against central differences of the
-    # direct model's field (h = 1 um): [a, s, i, j, k] = dB_i/dx_j of coil k
-    h, pts = 1e-6, s.reshape(-1, 3)
+    # direct model's field (h = 1 um): [s, i, j, k] = dB_i/dx_j of coil k
+    h, pts = 1e-6, s
     fd = np.stack([(arr.actuation_matrix(pts + h * e)[:, :3] - arr.actuation_matrix(pts - h * e)
-                    [:, :3]) / (2 * h) for e in np.eye(3)], axis=2).reshape(2, 9, 3, 3, 9)
+                    [:, :3]) / (2 * h) for e in np.eye(3)], axis=2)
     g = fm.sensor_coil_gradient()
+    assert g.shape == (18, 3, 3, 9)
     np.testing.assert_allclose(g, fd, rtol=0, atol=1e-6 * np.abs(fd).max())
-    np.testing.assert_allclose(g, np.swapaxes(g, 2, 3), atol=1e-12 * np.abs(g).max())
+    np.testing.assert_allclose(g, np.swapaxes(g, 1, 2), atol=1e-12 * np.abs(g).max())
+
+
+def test_the_format_holds_any_number_of_sensors(mapfile, tmp_path):
+    # the sensors are a flat list independent of the coil count: the map's first 5 sensors
+    # (and a tilted orientation) make a valid map whose reader gives those 5, unchanged
+    from firmware_io.mapfile import MapFile, data_hash, read
+    from firmware_io.localization.sensor_model import upper_lower
+
+    arrays, meta = read(mapfile)
+    keep = slice(0, 5)
+    c, s_ = math.cos(0.3), math.sin(0.3)
+    rot = arrays["SENSOR_ROT"][keep].copy()
+    rot[2] = [[c, 0.0, s_], [0.0, 1.0, 0.0], [-s_, 0.0, c]]
+    sub = dict(arrays, SENSOR_POS=arrays["SENSOR_POS"][keep], SENSOR_ROT=rot,
+               SENSOR_COIL=arrays["SENSOR_COIL"][keep],
+               SENSOR_COIL_GRAD=arrays["SENSOR_COIL_GRAD"][keep],
+               SCOEF=np.ascontiguousarray(arrays["SCOEF"][:, :, keep]))
+    path = tmp_path / "five.npz"
+    _resave(path, sub, dict(meta, n_sensors=5, data_sha256=data_hash(sub)))
+    m = MapFile.load(path)
+    full = MapFile.load(mapfile)
+    assert m.n_sensors == 5 and m.n_coils == 9
+    np.testing.assert_array_equal(m.sensor_positions_m, full.sensor_positions_m[keep])
+    np.testing.assert_array_equal(m.sensor_coil_field(), full.sensor_coil_field()[keep])
+    np.testing.assert_array_equal(m.sensor_rotations[2], rot[2])
+    assert m.sensor_induced_field(np.mean(m.bounds, axis=0)).shape == (5, 3)
+    # the localizer's estimators still need an upper and a lower array of equal size
+    with pytest.raises(ValueError, match="even number of sensors"):
+        upper_lower(m.sensor_positions_m)
 
 
 def test_outside_points(fm):
@@ -288,8 +335,31 @@ def _resave(path, arrays, meta):
     np.savez(path, **arrays, meta=np.array(json.dumps(meta)))
 
 
+def test_map_check_command_summarizes_a_good_map_and_refuses_a_bad_one(mapfile, tmp_path,
+                                                                       capsys):
+    # python -m firmware_io.mapfile: a labelled summary (exit 0); a truncated or foreign file
+    # one error line (exit 1), no traceback
+    from firmware_io.mapfile.__main__ import main as check_map
+
+    assert check_map([str(mapfile)]) == 0
+    out = capsys.readouterr().out
+    assert SMALL.name in out and "coils / sensors" in out
+    assert "9 / 18" in out and "supply / driver" in out and "36 V / Cytron MD10C" in out
+    assert "drive.supply_voltage_v = 36 V is above" in out and "format version" in out
+    trunc = tmp_path / "corrupt.npz"
+    trunc.write_bytes(mapfile.read_bytes()[:3000])
+    for bad in (trunc, tmp_path / "missing.npz"):
+        assert check_map([str(bad)]) == 1
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and err.count("\n") == 1 and "Traceback" not in err
+    res = subprocess.run([sys.executable, "-m", "firmware_io.mapfile", str(trunc)],
+                         capture_output=True, text=True)
+    assert res.returncode == 1 and res.stdout == "" and "Traceback" not in res.stderr
+    assert "truncated" in res.stderr
+
+
 def test_bad_files(mapfile, tmp_path):
-    from firmware_io.mapfile import read
+    from firmware_io.mapfile import data_hash, read
 
     trunc = tmp_path / "trunc.npz"
     trunc.write_bytes(mapfile.read_bytes()[: mapfile.stat().st_size // 2])
@@ -322,6 +392,17 @@ def test_bad_files(mapfile, tmp_path):
             fieldmap.load(bad)
     _resave(bad, {k: v for k, v in arrays.items() if k != "SCOEF"}, meta)
     with pytest.raises(BadInputError, match="SCOEF"):
+        fieldmap.load(bad)
+    # a sensor orientation that is not a rotation (a mirror), a drive record that lost a field
+    rot = arrays["SENSOR_ROT"].copy()
+    rot[3] = np.diag([1.0, 1.0, -1.0])
+    write = dict(arrays, SENSOR_ROT=rot)
+    _resave(bad, write, dict(meta, data_sha256=data_hash(write)))
+    with pytest.raises(BadInputError, match="SENSOR_ROT"):
+        fieldmap.load(bad)
+    drive = {k: v for k, v in meta["drive"].items() if k != "hot_temperature_c"}
+    _resave(bad, arrays, dict(meta, drive=drive))
+    with pytest.raises(BadInputError, match="hot_temperature_c"):
         fieldmap.load(bad)
     _resave(bad, {**arrays, "AH0": arrays["AH0"][:-1]}, meta)
     with pytest.raises(BadInputError, match="a_layers"):
@@ -422,6 +503,15 @@ def test_map_file_and_field_map_are_actuation_sources(mapfile, fm, sample):
         np.testing.assert_array_equal(src.actuation(p[3], rows=rows, coils=coils),
                                       src.actuation(p[3])[rows, :][:, coils])
         assert src.bias_force(p[:4]).shape == (4, 3) and src.bias_force(p[0]).shape == (3,)
+        # every member of the interface, so callers never probe one
+        assert src.n_sensors == 18 and src.sensor_positions_m.shape == (18, 3)
+        assert src.sensor_coil_field().shape == (18, 3, 9)
+        i = np.linspace(-2.0, 2.0, 9)
+        np.testing.assert_allclose(src.sensor_coil_field(i), src.sensor_coil_field() @ i)
+    members = [k for k in vars(ActuationSource) if not k.startswith("_")]
+    members += list(ActuationSource.__annotations__)
+    for src in (m, fm):
+        assert all(hasattr(src, k) for k in members), members
 
 
 def test_cli_map_writes_one_file(tmp_path):
@@ -487,11 +577,10 @@ def test_coupled_map_against_direct_coupled_model(coupled):
     err = np.abs(fm.bias_force(p[:20]) - f).max() / np.abs(f).max()
     assert err < 0.01, err
     s = fm.sensor_positions_m
-    np.testing.assert_allclose(s, arr.sensor_positions_m())
-    direct = arr.actuation_matrix(s.reshape(-1, 3))[:, :3, :].reshape(2, 2, 3, 2)
+    np.testing.assert_allclose(s, arr.sensor_positions_m().reshape(-1, 3))
+    direct = arr.actuation_matrix(s)[:, :3, :]
     np.testing.assert_allclose(fm.sensor_coil_field(), direct, rtol=1e-12)
-    b = np.array([arr.magnet_core_field(s.reshape(-1, 3), q, m).reshape(2, 2, 3)
-                  for q in p[:10]])
+    b = np.array([arr.magnet_core_field(s, q, m) for q in p[:10]])
     # the adjoint through the modes: measured 5.0e-4 of the largest induced field (reciprocity
     # with unit dipoles at the sensors, the former path: ~2-3 %)
     assert np.abs(fm.sensor_induced_field(p[:10]) - b).max() < 5e-3 * np.abs(b).max()

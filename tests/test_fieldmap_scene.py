@@ -22,10 +22,10 @@ from designkit.fieldmap.symmetry import Orbits, array_symmetries, random_orbits
 from designkit.geometry.pose import Pose
 from designkit.render import Hemisphere
 from designkit.sim import SimulatedDevice
-from firmware_io.runner import Runner, RunnerConfig, SensorFrame
+from firmware_io.runner import Runner, RunnerConfig, RunnerParts, SensorFrame
 from firmware_io.scene import Scene
 
-from _runner_fakes import HoldTracker, PlaneScene, TruthLocalizer, clipped_lstsq
+from _runner_fakes import HoldTracker, PlaneScene, TruthLocalizer, clipped_lstsq, md10c_drive
 
 AIR = default_design().replace(core=None)
 
@@ -209,19 +209,17 @@ def test_scene_map_covers_its_region_and_matches_the_direct_model(scene_map):
 def test_runner_fails_safe_outside_a_scene_maps_region(scene_map):
     fm, (lo, hi) = scene_map
     arr = CoilArray.from_design(SMALL)
-    dev = SimulatedDevice(SMALL, arr)
-    cfg = RunnerConfig(resistance_ohm=(dev.resistance_ohm,) * 9,
-                       inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
-                       current_limit_a=4.8, total_current_a=20.0)
+    dev = SimulatedDevice(SMALL, arr, drive=md10c_drive(SMALL))
+    cfg = RunnerConfig(dev.drive)
     truth = {"p": 0.5 * (lo + hi)}
 
     class Source:
         def __call__(self, t):
             return SensorFrame(np.zeros((9, 3)), np.zeros((9, 3)), ("ok",) * 18, t)
 
-    r = Runner(fm, PlaneScene(hi[2], 6.0), TruthLocalizer(lambda: truth["p"]), HoldTracker(),
-               clipped_lstsq, dev.coils, Source(), cfg, log=lambda line: None,
-               clock=lambda: 0.0)
+    r = Runner(RunnerParts(fm, PlaneScene(hi[2], 6.0), TruthLocalizer(lambda: truth["p"]),
+                           HoldTracker(), clipped_lstsq, dev.coils, Source()),
+               cfg, log=lambda line: None, clock=lambda: 0.0)
     r.start()
     assert r.step(0.0).state == "running"
     # inside the design's full box but beside the scene's region

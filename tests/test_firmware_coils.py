@@ -45,7 +45,7 @@ def test_current_to_command_by_hand():
 
 
 @pytest.mark.parametrize("kwargs", [
-    {"supply_voltage_v": 36.0, "resistance_ohm": 5.0, "current_limit_a": 6.0},   # > 30 V rating
+    {"supply_voltage_v": -5.0, "resistance_ohm": 5.0, "current_limit_a": 6.0},
     {"supply_voltage_v": 24.0, "resistance_ohm": 0.0, "current_limit_a": 6.0},
     {"supply_voltage_v": 24.0, "resistance_ohm": 5.0, "current_limit_a": 14.0},  # > 13 A
     {"supply_voltage_v": float("nan"), "resistance_ohm": 5.0, "current_limit_a": 6.0},

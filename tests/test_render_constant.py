@@ -130,6 +130,16 @@ def test_direct_model_is_an_actuation_source(source):
     np.testing.assert_allclose(source.bias_force(p[0]), f0, rtol=0, atol=1e-12 * np.abs(f0).max())
     with pytest.raises(BadInputError, match="coils"):
         source.actuation(p, coils=(source.n_coils,))
+    # the coils' field at the sensors: the direct model's A at the map's flat sensor list
+    s = source.sensor_positions_m
+    assert source.n_sensors == 18 and s.shape == (18, 3)
+    np.testing.assert_allclose(s[:9, :2], source.array.positions()[:, :2], atol=1e-15)
+    assert np.all(s[:9, 2] > 0) and np.all(s[9:, 2] < 0)   # upper array first, then the lower
+    g = source.sensor_coil_field()
+    assert g.shape == (18, 3, source.n_coils)
+    np.testing.assert_array_equal(g, source.actuation(s)[:, :3])
+    i = np.linspace(-1.0, 1.0, source.n_coils)
+    np.testing.assert_allclose(source.sensor_coil_field(i), g @ i)
     with pytest.raises(BadInputError, match="fieldmap"):
         force_constant(Plane(), object(), current_limit_a=6.0, total_current_a=54.0,
                        progress=False)

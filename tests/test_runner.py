@@ -17,10 +17,12 @@ from designkit.sim import (FAULT_TYPES, FaultSchedule, SimulatedDevice, Trajecto
                            slide_trajectory, time_to_safe)
 from firmware_io.errors import FirmwareIOError
 from firmware_io.localization import ConstantVelocityKalman
-from firmware_io.runner import (Fix, Runner, RunnerConfig, ThermalGuard, feedforward_voltage,
-                                rl_step)
+from firmware_io.mapfile.drive import DriveRecord
+from firmware_io.runner import (Fix, Runner, RunnerConfig, RunnerParts, ThermalGuard,
+                                feedforward_voltage, rl_step)
 
-from _runner_fakes import ConstantMap, HoldTracker, PlaneScene, TruthLocalizer, clipped_lstsq
+from _runner_fakes import (ConstantMap, HoldTracker, PlaneScene, TruthLocalizer, clipped_lstsq,
+                           md10c_drive)
 
 BOX = (np.array([-0.075, -0.075, 0.010]), np.array([0.075, 0.075, 0.080]))
 
@@ -92,7 +94,8 @@ def device_and_a(thesis_array):
 def _run(device_and_a, faults: str, duration_s: float, *, limit=4.8, total=20.0,
          resume_after_s=0.1):
     design, array, a = device_and_a
-    dev = SimulatedDevice(design, array, seed=4)
+    drive = md10c_drive(design, limit, total)
+    dev = SimulatedDevice(design, array, seed=4, drive=drive)
     traj = slide_trajectory(lambda x, y: np.full_like(x, 0.05), duration_s=duration_s,
                             samples=401)
     moment = dev.moment
@@ -100,13 +103,11 @@ def _run(device_and_a, faults: str, duration_s: float, *, limit=4.8, total=20.0,
     holder = {}
 
     def factory(source, clock, hook):
-        cfg = RunnerConfig(resistance_ohm=(dev.resistance_ohm,) * 9,
-                           inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
-                           current_limit_a=limit, total_current_a=total,
-                           resume_after_s=resume_after_s, thermal_time_constant_s=300.0)
-        r = Runner(fmap, PlaneScene(0.05, 6.0), TruthLocalizer(lambda: source.frame_truth_m),
-                   HoldTracker(), hook(clipped_lstsq), dev.coils, source, cfg, clock=clock,
-                   log=lambda line: None)
+        cfg = RunnerConfig(drive, resume_after_s=resume_after_s)
+        parts = RunnerParts(fmap, PlaneScene(0.05, 6.0),
+                            TruthLocalizer(lambda: source.frame_truth_m), HoldTracker(),
+                            hook(clipped_lstsq), dev.coils, source)
+        r = Runner(parts, cfg, clock=clock, log=lambda line: None)
         r.start()
         holder["runner"] = r
         return r
@@ -154,10 +155,9 @@ def test_three_faults_in_one_short_run_each_end_in_the_safe_state(device_and_a):
 
 def test_safe_state_is_one_all_off_write_per_board(device_and_a):
     design, array, a = device_and_a
-    dev = SimulatedDevice(design, array)
-    cfg = RunnerConfig(resistance_ohm=(dev.resistance_ohm,) * 9,
-                       inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
-                       current_limit_a=4.8, total_current_a=20.0)
+    drive = md10c_drive(design)
+    dev = SimulatedDevice(design, array, drive=drive)
+    cfg = RunnerConfig(drive)
     truth = {"p": np.array([0.0, 0.0, 0.03])}
 
     class Source:
@@ -165,9 +165,10 @@ def test_safe_state_is_one_all_off_write_per_board(device_and_a):
             from firmware_io.runner import SensorFrame
             return SensorFrame(np.zeros((9, 3)), np.zeros((9, 3)), ("ok",) * 18, t)
 
-    r = Runner(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0),
-               TruthLocalizer(lambda: truth["p"]), HoldTracker(), clipped_lstsq, dev.coils,
-               Source(), cfg, log=lambda line: None, clock=lambda: 0.0)
+    r = Runner(RunnerParts(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0),
+                           TruthLocalizer(lambda: truth["p"]), HoldTracker(), clipped_lstsq,
+                           dev.coils, Source()),
+               cfg, log=lambda line: None, clock=lambda: 0.0)
     r.start()
     rec = r.step(0.0)
     assert rec.state == "running" and np.any(rec.command_a != 0)
@@ -215,20 +216,19 @@ def test_thermal_fault_stays_off_until_cooled(device_and_a):
 
 def test_pwm_nack_is_latched_after_repeated_failures(device_and_a):
     design, array, a = device_and_a
-    dev = SimulatedDevice(design, array)
-    cfg = RunnerConfig(resistance_ohm=(dev.resistance_ohm,) * 9,
-                       inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
-                       current_limit_a=4.8, total_current_a=20.0, resume_after_s=0.01,
-                       max_pwm_retries=2)
+    drive = md10c_drive(design)
+    dev = SimulatedDevice(design, array, drive=drive)
+    cfg = RunnerConfig(drive, resume_after_s=0.01, max_pwm_retries=2)
 
     class Source:
         def __call__(self, t):
             from firmware_io.runner import SensorFrame
             return SensorFrame(np.zeros((9, 3)), np.zeros((9, 3)), ("ok",) * 18, t)
 
-    r = Runner(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0),
-               TruthLocalizer(lambda: np.array([0.0, 0.0, 0.03])), HoldTracker(), clipped_lstsq,
-               dev.coils, Source(), cfg, log=lambda line: None, clock=lambda: 0.0)
+    r = Runner(RunnerParts(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0),
+                           TruthLocalizer(lambda: np.array([0.0, 0.0, 0.03])), HoldTracker(),
+                           clipped_lstsq, dev.coils, Source()),
+               cfg, log=lambda line: None, clock=lambda: 0.0)
     r.start()
     assert r.step(0.0).state == "running"
     dev.sim_boards[0].nack_always = True
@@ -303,17 +303,20 @@ def test_default_schedule_has_every_fault_once_inside_the_run():
 
 
 @pytest.mark.parametrize("kw, name", [
-    ({"supply_voltage_v": 36.0}, "supply_voltage_v"),
+    ({"supply_voltage_v": -1.0}, "supply_voltage_v"),
     ({"current_limit_a": -1.0}, "current_limit_a"),
-    ({"resistance_ohm": (0.0,) * 9}, "resistance_ohm"),
+    ({"current_limit_a": 14.0}, "current_limit_a"),          # above the MD10C's 13 A
+    ({"resistance_ref_ohm": (0.0,) * 9}, "resistance_ref_ohm"),
+    ({"inductance_h": (0.18,) * 8}, "inductance_h"),
     ({"force_axes": "q"}, "force_axes"),
 ])
 def test_runner_config_errors_name_the_value(kw, name):
-    base = dict(resistance_ohm=(6.0,) * 9, inductance_h=(0.18,) * 9, supply_voltage_v=30.0,
+    base = dict(resistance_ref_ohm=(6.0,) * 9, inductance_h=(0.18,) * 9, supply_voltage_v=30.0,
                 current_limit_a=4.8, total_current_a=20.0)
     base.update(kw)
     with pytest.raises(ValueError, match=name):
-        RunnerConfig(**base)
+        axes = base.pop("force_axes", "z")
+        RunnerConfig(DriveRecord(**base), force_axes=axes)
 
 
 def test_runner_imports_numpy_only():
@@ -358,10 +361,9 @@ def _scripted_runner(device_and_a, script):
     at a fixed position: ok without problems, except the steps in ``script`` (step -> (ok,
     problems)). Returns (runner, device)."""
     design, array, a = device_and_a
-    dev = SimulatedDevice(design, array)
-    cfg = RunnerConfig(resistance_ohm=(dev.resistance_ohm,) * 9,
-                       inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
-                       current_limit_a=4.8, total_current_a=20.0, resume_fixes=3)
+    drive = md10c_drive(design)
+    dev = SimulatedDevice(design, array, drive=drive)
+    cfg = RunnerConfig(drive, resume_fixes=3)
     p = np.array([0.0, 0.0, 0.04])
 
     def source(t):
@@ -369,9 +371,10 @@ def _scripted_runner(device_and_a, script):
         return Fix(p.copy(), ok, t, problems, np.zeros(18, bool), 0.0,
                    (0.3e-3) ** 2 * np.eye(3), 1e-3)
 
-    r = Runner(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0),
-               TruthLocalizer(lambda: p), ConstantVelocityKalman(), clipped_lstsq, dev.coils,
-               source, cfg, log=lambda line: None, clock=lambda: 0.0)
+    r = Runner(RunnerParts(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0),
+                           TruthLocalizer(lambda: p), ConstantVelocityKalman(), clipped_lstsq,
+                           dev.coils, source),
+               cfg, log=lambda line: None, clock=lambda: 0.0)
     r.start()
     return r, dev
 

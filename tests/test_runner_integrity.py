@@ -17,9 +17,9 @@ from designkit.sim import (FaultSchedule, SimulatedDevice, simulate, slide_traje
                            time_to_safe)
 from designkit.sim.faults import FAULT_CLEARS_S
 from designkit.sim.report import write_run_csv
-from firmware_io.runner import ConstantVelocityTracker, Runner, RunnerConfig
+from firmware_io.runner import ConstantVelocityTracker, Runner, RunnerConfig, RunnerParts
 
-from _runner_fakes import ConstantMap, PlaneScene, clipped_lstsq
+from _runner_fakes import ConstantMap, PlaneScene, clipped_lstsq, md10c_drive
 
 BOX = (np.array([-0.075, -0.075, 0.010]), np.array([0.075, 0.075, 0.080]))
 JUMP = np.array([0.030, 0.0, 0.0])
@@ -67,19 +67,17 @@ def _jumping_run(device, seed, duration, faults, spikes, moved, **cfg):
     """The closed loop on the simulated device with a :class:`JumpingLocalizer`, the
     constant-velocity tracker and a slide at 50 mm: (result, runner, localizer)."""
     design, array, a = device
-    dev = SimulatedDevice(design, array, seed=seed)
+    dev = SimulatedDevice(design, array, seed=seed, drive=md10c_drive(design))
     traj = slide_trajectory(lambda x, y: np.full_like(x, 0.05), duration_s=duration,
                             samples=401)
     holder = {}
 
     def factory(source, clock, hook):
-        conf = RunnerConfig(resistance_ohm=(dev.resistance_ohm,) * 9,
-                            inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
-                            current_limit_a=4.8, total_current_a=20.0, **cfg)
+        conf = RunnerConfig(dev.drive, **cfg)
         loc = JumpingLocalizer(lambda: source.frame_truth_m, spikes=spikes, moved=moved)
-        r = Runner(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0), loc,
-                   ConstantVelocityTracker(), hook(clipped_lstsq), dev.coils, source, conf,
-                   clock=clock, log=lambda line: None)
+        parts = RunnerParts(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0), loc,
+                            ConstantVelocityTracker(), hook(clipped_lstsq), dev.coils, source)
+        r = Runner(parts, conf, clock=clock, log=lambda line: None)
         r.start()
         holder["runner"], holder["loc"] = r, loc
         return r
@@ -206,18 +204,15 @@ def test_multi_frame_pl_lets_the_runner_acquire_and_render(device, sigma_m, rend
     position gets a PL within the limit after a few frames (acquisition, then rendering);
     with sigma 20 mm it never does, and nothing renders."""
     design, array, a = device
-    dev = SimulatedDevice(design, array, seed=5)
+    dev = SimulatedDevice(design, array, seed=5, drive=md10c_drive(design))
     traj = slide_trajectory(lambda x, y: np.full_like(x, 0.05), duration_s=0.3, samples=201)
 
     def factory(source, clock, hook):
-        cfg = RunnerConfig(resistance_ohm=(dev.resistance_ohm,) * 9,
-                           inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
-                           current_limit_a=4.8, total_current_a=20.0, resume_after_s=0.02,
-                           alert_limit_m=5e-3)
+        cfg = RunnerConfig(dev.drive, resume_after_s=0.02, alert_limit_m=5e-3)
         loc = NoisyLocalizer(lambda: source.frame_truth_m, sigma_m)
-        r = Runner(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0), loc,
-                   ConstantVelocityTracker(), hook(clipped_lstsq), dev.coils, source, cfg,
-                   clock=clock, log=lambda line: None)
+        parts = RunnerParts(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0), loc,
+                            ConstantVelocityTracker(), hook(clipped_lstsq), dev.coils, source)
+        r = Runner(parts, cfg, clock=clock, log=lambda line: None)
         r.start()
         return r
 

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from firmware_io.errors import BadInputError
+from firmware_io.mapfile.drive import DriveRecord
 from firmware_io.runner import (CoilSkipBound, ConstantVelocityTracker, CurrentHistory, Fix,
                                 RunnerConfig, SensorFrame, SensorPipeline, force_law_rows)
 
@@ -138,7 +139,7 @@ def test_coil_skip_bound_holds_at_random_points():
 
 def test_runner_config_refuses_a_negative_skip_force():
     with pytest.raises(BadInputError, match="skip_force_n"):
-        RunnerConfig((2.0,) * 9, (0.03,) * 9, 30.0, 4.8, 20.0, skip_force_n=-1.0)
+        RunnerConfig(DriveRecord((2.0,) * 9, (0.03,) * 9, 30.0, 4.8, 20.0), skip_force_n=-1.0)
 
 
 # ---------------------------------------------------------------------------------------------

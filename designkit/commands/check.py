@@ -1,8 +1,9 @@
 """``designkit check``: the whole rule table of a design, and whether it can be built.
 
-Prints every rule of the rule book (:mod:`designkit.rules`) and, for a cored design, every
-device constraint under the saturating panel model (:func:`designkit.optimize.rule_table`):
-value, limit, margin (>= 0 is met), the design keys that fix it. The same table decides
+Prints every rule of the rule book (:mod:`designkit.rules`) and every device constraint
+(:func:`designkit.optimize.rule_table`: a cored design's under the saturating panel model, an
+air-core design's R, I R, 5 L/R and heating with the closed-form air-core inductance): value,
+limit, margin (>= 0 is met), the design keys that fix it. The same table decides
 ``optimize`` (its bounds), ``report`` (its "violates" line) and ``cad`` (its refusal: the
 rules of group 'cad'). Exit 0 when every row is met, 1 when one is violated.
 """
@@ -51,7 +52,4 @@ def run(args: argparse.Namespace) -> int:
     design = load_design(args.design)
     table = rule_table(design)
     print(table_text(design.name, table))
-    if design.core is None:
-        print("no core: the device constraints (R, I R, 5 L/R, heating) are those of the "
-              "iron-core device problem and were not evaluated")
     return 0 if all(r["met"] for r in table.values()) else 1

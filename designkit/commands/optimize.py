@@ -77,6 +77,10 @@ def _run_device(args, design, starts: int) -> int:
     objective = args.objective or ("rendering" if args.vary_pitch else "design-point")
     problem = device_problem_for(design, objective=objective, vary_pitch=args.vary_pitch,
                                  pitch_range_m=_pitch_range(args.pitch_range))
+    if problem.supply_voltage_v < design.drive.supply_voltage_v:
+        print(f"note: drive.supply_voltage_v = {design.drive.supply_voltage_v:g} V is above "
+              f"drive.driver_max_voltage_v = {problem.supply_voltage_v:g} V (the driver "
+              f"{design.drive.driver!r}); optimizing for {problem.supply_voltage_v:g} V")
     result = solve_device(problem, starts=starts, seed=args.seed,
                           progress=show_progress(args))
     data = {"design_name": design.name, "design_hash": design.spec_hash(),

@@ -274,7 +274,8 @@ def designs_markdown(designs: dict) -> list[str]:
     head = " | ".join(f"`{e['name']}`" for e in ents)
     lines = ["", "## Design vs the optimized device", "",
              "Saturating 1010-steel core (surface-current panel model, checked against GetDP); "
-             "R at the hot limit, 5 L/R with cold copper, supply = the MD10C's 30 V. "
+             "R at the hot limit, 5 L/R with cold copper, I R against the design's supply (at "
+             "most its driver's rating). "
              "Workspace region: the inner array footprint at the lowest reachable height and "
              "the design height; allocation |I| <= per-coil limit, sum |I| <= budget, "
              "Fx = Fy = 0 (LP per point).", "",

@@ -80,6 +80,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"  simulated {summary['duration_s']:g} s of the "
               f"{summary['trajectory_duration_s']:g} s trajectory at its own speed "
               f"({summary['trajectory_played']})")
+    for line in summary["drive_violations"]:
+        print(f"  drive: {line} -- simulated as designed; python -m firmware_io.run refuses it")
     for f in summary["faults"]:
         print("  fault " + _fault_line(f))
     for f in summary.get("faults_not_injected", []):

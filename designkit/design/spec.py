@@ -135,10 +135,17 @@ class DriveSpec:
     """Per-coil current limit used by the map and the controller, A."""
     total_current_a: float = 54.0
     """Budget for the sum of |I| over all coils, A (assumed: 9 x 6 A)."""
+    driver: str = "Cytron MD10C"
+    """The coil driver's name; its ratings are the ``driver_*`` keys (defaults: the MD10C's)."""
+    driver_min_voltage_v: float = 5.0
+    """Lowest motor supply the driver is rated for, V (MD10C: 5 V)."""
     driver_max_voltage_v: float = 30.0
-    """Motor supply rating of the Cytron MD10C driver, V (datasheet: 30 V; the thesis' 36 V
+    """Highest motor supply the driver is rated for, V (MD10C datasheet: 30 V; the thesis' 36 V
     exceeds it)."""
     driver_continuous_current_a: float = 13.0
+    """The driver's continuous output current, A (MD10C: 13 A)."""
+    driver_max_pwm_frequency_hz: float = 20e3
+    """Highest PWM input frequency the driver follows, Hz (MD10C: 20 kHz)."""
     pwm_frequency_hz: float = 1526.0
     """PWM frequency of the drivers, Hz (datasheet: the PCA9685's maximum); sets the current
     ripple (``electrical.pwm_ripple``)."""
@@ -494,7 +501,8 @@ def _check_section(sec: str, obj: Any) -> None:
             if val not in CHOICES[f.name]:
                 raise BadInputError(name, " or ".join(repr(c) for c in CHOICES[f.name]), val)
         elif isinstance(f.default, str):
-            continue  # free text (a name)
+            if not val.strip():  # free text: a name
+                raise BadInputError(name, "a non-empty name", val)
         elif f.name == "turns":
             v.positive_int(name, val)
         elif f.name in ("offset_m", "reference_temperature_c", "operating_temperature_c",
@@ -600,6 +608,10 @@ def check_design(d: Design) -> None:
         if obj is not None and sec != "array":
             _check_section(sec, obj)
     _check_winding("", d.coil, d.core)
+    if d.drive.driver_max_voltage_v <= d.drive.driver_min_voltage_v:
+        raise BadInputError("drive.driver_max_voltage_v",
+                            f"> drive.driver_min_voltage_v ({d.drive.driver_min_voltage_v} V)",
+                            d.drive.driver_max_voltage_v)
     if d.workspace.z_max_m <= d.workspace.z_min_m:
         raise BadInputError("workspace.z_max_m", f"> workspace.z_min_m ({d.workspace.z_min_m} m)",
                             d.workspace.z_max_m)

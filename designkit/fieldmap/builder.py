@@ -342,12 +342,14 @@ def _arrays(phys: MapPhysics, arr: CoilArray, plan: _Plan, smp: _Samples,
     m_shape = tuple(len(a) for a in plan.m_axes)
     sensor_rows = phys.sensor_coil_rows(arr)
     arrays.update({
-        "SCOEF": smp.modes["sensor_coef"] if smp.modes else np.zeros((nc, 0, 2, nc, 3)),
+        "SCOEF": (smp.modes["sensor_coef"] if smp.modes
+                  else np.zeros((nc, 0, len(sensor_rows), 3))),
         "F0_RES": (smp.f0 - f_pair).reshape(m_shape + (3,)).astype(np.float32),
         "M_X": plan.m_axes[0], "M_Y": plan.m_axes[1], "M_Z": plan.m_axes[2],
         "SENSOR_POS": phys.sensor_positions(arr).astype(np.float64),
-        "SENSOR_COIL": sensor_rows[:, :, :3].astype(np.float64),
-        "SENSOR_COIL_GRAD": sensor_rows[:, :, 3:].astype(np.float64),
+        "SENSOR_ROT": phys.sensor_rotations(arr).astype(np.float64),
+        "SENSOR_COIL": sensor_rows[:, :3].astype(np.float64),
+        "SENSOR_COIL_GRAD": sensor_rows[:, 3:].astype(np.float64),
         "MOMENT": phys.moment_a_m2.astype(np.float64),
         "SAT_I": smp.sat_i.astype(np.float64), "SAT_FACTOR": smp.sat_f.astype(np.float64),
     })
@@ -361,6 +363,7 @@ def _meta(design, arr: CoilArray, phys: MapPhysics, plan: _Plan, s: BuildSetting
         "format": FORMAT, "version": FORMAT_VERSION, "designkit_version": __version__,
         "design_name": design.name, "design_sha256": design.spec_hash(),
         "rows": list(ROWS), "units": UNITS, "n_coils": arr.n_coils,
+        "n_sensors": int(len(arrays["SENSOR_POS"])),
         "n_sensor_basis": int(arrays["SCOEF"].shape[1]),
         "box_m": [plan.lower.tolist(), plan.upper.tolist()],
         "a_layers": plan.layers, "sources_top_m": plan.z_top,
@@ -370,8 +373,8 @@ def _meta(design, arr: CoilArray, phys: MapPhysics, plan: _Plan, s: BuildSetting
         # the finger magnet's cylinder (the localizer's exact magnet field; MOMENT is its moment)
         "magnet_radius_m": design.magnet.radius_m, "magnet_length_m": design.magnet.length_m,
         "total_current_a": design.drive.total_current_a,
-        # what firmware_io.runner.config_from_map needs (R, L, supply, limits, I^2 t guard)
-        "drive": drive_data(design, _drive_coils(arr)),
+        # the drive record firmware_io.runner.config_from_map reads (firmware_io.mapfile.drive)
+        "drive": drive_data(design, _drive_coils(arr)).to_dict(),
         "physics": phys.source,
         "settings": s.meta(len(plan.fit_pts)),
     }

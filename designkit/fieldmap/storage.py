@@ -51,9 +51,10 @@ class FieldMap:
 
     Attributes and methods are the MapFile's (``actuation``, ``bias_force``,
     ``sensor_induced_field``, ``sensor_coil_field``, ``sensor_coil_gradient``,
-    ``saturation_factor``, ``bounds``, ``meta``,
-    ``n_coils``, ``sensor_positions_m``, ``moment_a_m2``, ``design_sha256``, ``max_current_a``,
-    ``total_current_a``); ``outside='extrapolate'`` is the MapFile's ``extrapolate=True``.
+    ``saturation_factor``, ``bounds``, ``meta``, ``n_coils``, ``n_sensors``,
+    ``sensor_positions_m``, ``sensor_rotations``, ``moment_a_m2``, ``design_sha256``,
+    ``max_current_a``, ``total_current_a``); ``outside='extrapolate'`` is the MapFile's
+    ``extrapolate=True``. The sensors are the map's flat list (n_sensors, ...).
     """
 
     def __init__(self, mapfile: "mf.MapFile"):
@@ -80,6 +81,15 @@ class FieldMap:
     @property
     def design_sha256(self) -> str:
         return self.file.design_sha256
+
+    @property
+    def n_sensors(self) -> int:
+        return self.file.n_sensors
+
+    @property
+    def sensor_positions_m(self) -> np.ndarray:
+        """(n_sensors, 3) m, the map's flat sensor list."""
+        return self.file.sensor_positions_m
 
     def _call(self, fn, *args):
         try:
@@ -108,12 +118,12 @@ class FieldMap:
         return self._call(self.file.bias_force, points, self._outside(outside))
 
     def sensor_induced_field(self, magnet_position_m, *, outside: str = "error") -> np.ndarray:
-        """Magnet-induced core field at the sensors, T: (3,) -> (2, n_coils, 3)."""
+        """Magnet-induced core field at the sensors, T: (3,) -> (n_sensors, 3)."""
         return self._call(self.file.sensor_induced_field, magnet_position_m,
                           self._outside(outside))
 
     def sensor_coil_field(self, currents=None) -> np.ndarray:
-        """(2, n_coils, 3, n_coils) T/A, or (2, n_coils, 3) T for ``currents`` (A)."""
+        """(n_sensors, 3, n_coils) T/A, or (n_sensors, 3) T for ``currents`` (A)."""
         return self._call(self.file.sensor_coil_field, currents)
 
     def saturation_factor(self, currents) -> np.ndarray:

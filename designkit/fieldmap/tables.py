@@ -85,7 +85,7 @@ def coupled_modes(arr: CoilArray, sensor_tolerance: float = 1e-3) -> dict | None
     U_m^T X_j[:, (s, c)].
 
     Returns {"types": [{"model", "coils", "sets": [sensors] ({"U": {m: (n_m, R_m)},
-    "basis": [(m, r, c)]})}], "sensor_coef": (n_coils, n_basis_max, 2, n_coils, 3)}; basis
+    "basis": [(m, r, c)]})}], "sensor_coef": (n_coils, n_basis_max, n_sensors, 3)}; basis
     entries (m, r, c): mode order, shape index, c = 0 cos / 1 sin (m = 0: c = 0).
     """
     system = arr.coupled()
@@ -127,7 +127,7 @@ def coupled_modes(arr: CoilArray, sensor_tolerance: float = 1e-3) -> dict | None
             for b, (m, r, c) in enumerate(st["basis"]):
                 sl = [s for s, cc in t["parts"][m] if cc == c][0]
                 coef[k, b] = st["U"][m][:, r] @ d[sl]
-    return {"types": types, "sensor_coef": coef.reshape(nc, nb, 2, nc, 3)}
+    return {"types": types, "sensor_coef": coef.reshape(nc, nb, len(sens), 3)}
 
 
 def adjoint_basis_field(model, pts: np.ndarray, n_phi: int = 12, m_top: int | None = None):

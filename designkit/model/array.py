@@ -38,9 +38,7 @@ from ..support import validate as v
 from ..support.atomic import atomic_path
 from .coil import Coil
 from firmware_io.mapfile import check_currents
-
-ROWS = ("Bx", "By", "Bz", "dBx/dx", "dBx/dy", "dBx/dz", "dBy/dy", "dBy/dz")
-"""Row order of the actuation matrix (thesis eq. 2.13). Units: T/A for rows 0-2, T/(m A) 3-7."""
+from firmware_io.mapfile.format import ROWS  # the row order of A(p), defined once (re-exported)
 
 
 # ---------------------------------------------------------------------------- small matrices

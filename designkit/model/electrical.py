@@ -27,6 +27,9 @@ from typing import Literal
 import numpy as np
 from scipy.special import j1, sici
 
+from firmware_io.hw.driver import DriverRating
+from firmware_io.mapfile.drive import DriveRecord
+
 from ..constants import MU0
 from ..design import Design, DriveSpec, OptimizeSpec, WireSpec
 from ..errors import BadInputError
@@ -353,9 +356,9 @@ def design_rule_violations(*, resistance_ohm: float, settling_time_s: float, tur
                            limits: OptimizeSpec) -> list[str]:
     """The design rules of the thesis' device, as sentences (empty list = all pass)."""
     out = []
-    if drive.supply_voltage_v > drive.driver_max_voltage_v:
-        out.append(f"supply {drive.supply_voltage_v:g} V exceeds the driver's rating of "
-                   f"{drive.driver_max_voltage_v:g} V (MD10C)")
+    supply = driver_rating(drive).supply_violation(drive.supply_voltage_v)
+    if supply:
+        out.append(supply)
     i_free = drive.supply_voltage_v / resistance_ohm
     if i_free > drive.driver_continuous_current_a:
         out.append(f"V/R = {i_free:.3g} A exceeds the driver's continuous "
@@ -409,23 +412,35 @@ def electrical_report(design: Design, coil: CoilLike, *,
 
 
 # ---------------------------------------------------------------------------------------------
-# the runner's drive data (written into the map file, read by firmware_io.runner.config_from_map)
+# the runner's drive record (firmware_io.mapfile.drive: written into the map file, read by
+# firmware_io.runner.config_from_map)
 
 COIL_SURFACE_HEAT_TRANSFER_W_M2_K = 10.0
 """Natural convection from the winding's outer surface and end faces (assumed), W/(m^2 K): sets
 the winding's cooling time constant m c / (h A) of the runner's I^2 t guard."""
 
 
-def drive_data(design, coils) -> dict:
-    """The runner's drive data (SI) for ``design``'s coils ``coils`` (designkit Coil objects,
-    one per channel, in the array's order): per coil R at the operating temperature and L
-    (with the core); the supply (at most the MD10C's 30 V), the current bounds and the I^2 t
-    budget (adiabatic heating from the operating temperature to 100 C at the current limit,
-    cooled with the time constant m c / (h A)), from the winding in ``design``.
+def driver_rating(drive: DriveSpec) -> DriverRating:
+    """The driver the design names, by its ratings (``drive.driver*`` keys)."""
+    return DriverRating(drive.driver, float(drive.driver_min_voltage_v),
+                        float(drive.driver_max_voltage_v),
+                        float(drive.driver_continuous_current_a),
+                        float(drive.driver_max_pwm_frequency_hz))
+
+
+def drive_data(design, coils) -> DriveRecord:
+    """The runner's drive record (SI) for ``design``'s coils ``coils`` (designkit Coil objects,
+    one per channel, in the array's order): per coil R at the wire's reference temperature (the
+    resistance model: alpha, the operating and the hot temperature) and L (with the core); the
+    design's supply and driver; the current bounds (the per-coil limit at most what the supply
+    pushes through the largest R and the driver's continuous rating) and the I^2 t budget
+    (adiabatic heating from the operating temperature to 100 C at the current limit, cooled
+    with the time constant m c / (h A)), from the winding in ``design``.
 
     The coils come from the caller (this layer sits below designkit.model.coil): fieldmap passes the
     map's array, plant the design's coil."""
-    w = design.wire
+    w, dr = design.wire, design.drive
+    r_ref = [float(resistance(c, w, w.reference_temperature_c)) for c in coils]
     r_all = [float(c.resistance(w)) for c in coils]
     once = {id(c): c for c in coils}  # the same coil object: one inductance solve
     ind_of = {k: float(c.inductance(w)) for k, c in once.items()}
@@ -433,8 +448,8 @@ def drive_data(design, coils) -> dict:
     r = max(r_all)  # the bounds must hold for every channel
     mass = copper_mass(design.coil.inner_radius_m, design.coil.outer_radius_m,
                        design.coil.turns, w.diameter_m)
-    limit = min(design.drive.max_current_a, design.drive.driver_max_voltage_v / r,
-                design.drive.supply_voltage_v / r)
+    driver = driver_rating(dr)
+    limit = min(dr.max_current_a, driver.max_current_a(dr.supply_voltage_v, r))
     t_max = time_to_temperature(mass, limit, r, w, w.operating_temperature_c,
                                 DEFAULT_MAX_TEMPERATURE_C)
     budget = limit ** 2 * t_max
@@ -442,9 +457,13 @@ def drive_data(design, coils) -> dict:
     area = 2 * math.pi * c.outer_radius_m * c.length_m + 2 * math.pi * (
         c.outer_radius_m ** 2 - c.inner_radius_m ** 2)
     tau = mass * COPPER_SPECIFIC_HEAT_J_KG_K / (COIL_SURFACE_HEAT_TRANSFER_W_M2_K * area)
-    return {"resistance_ohm": r_all, "inductance_h": ind,
-            "supply_voltage_v": float(min(design.drive.supply_voltage_v,
-                                          design.drive.driver_max_voltage_v)),
-            "current_limit_a": float(limit), "total_current_a": float(design.drive.total_current_a),
-            "thermal_continuous_current_a": math.sqrt(budget / tau),
-            "thermal_time_constant_s": tau}
+    return DriveRecord(
+        resistance_ref_ohm=tuple(r_ref), inductance_h=tuple(ind),
+        supply_voltage_v=float(dr.supply_voltage_v), current_limit_a=float(limit),
+        total_current_a=float(dr.total_current_a), driver=driver,
+        pwm_frequency_hz=float(dr.pwm_frequency_hz),
+        reference_temperature_c=float(w.reference_temperature_c),
+        temperature_coefficient_per_k=float(w.temperature_coefficient_per_k),
+        operating_temperature_c=float(w.operating_temperature_c),
+        hot_temperature_c=DEFAULT_MAX_TEMPERATURE_C,
+        thermal_continuous_current_a=math.sqrt(budget / tau), thermal_time_constant_s=tau)

@@ -55,13 +55,36 @@ def evaluate_device(design: Design, problem: DeviceProblem | None = None) -> dic
 
 
 
+AIR_CORE_CONSTRAINTS = ("resistance_ohm", "supply_voltage_v", "settling_time_s",
+                        "time_to_max_temperature_s")
+"""The device constraints an air-core coil has (the others are the core's)."""
+
+
+def air_core_constraints(design: Design) -> dict:
+    """The electrical device constraints of an air-core design (no core): R at the hot limit,
+    I R there vs the supply, 5 L / R(cold), adiabatic heating time -- the device problem's own
+    formulas (:meth:`DeviceProblem.table_with_inductance`) with the winding's closed-form
+    air-core inductance (:func:`designkit.model.electrical.air_inductance_from_geometry`)."""
+    c, w = design.coil, design.wire
+    problem = DeviceProblem(design=design, lower=(0.0,) * 7, upper=(1.0,) * 7,
+                            insulation_ratio=w.insulated_diameter_m / w.diameter_m)
+    x = [c.inner_radius_m, c.outer_radius_m, c.length_m, 0.0, 0.0, 0.0, w.diameter_m]
+    inductance = el.air_inductance_from_geometry(c.inner_radius_m, c.outer_radius_m,
+                                                 c.length_m, c.turns)
+    table = problem.table_with_inductance(x, c.turns, inductance)
+    return {name: table[name] for name in AIR_CORE_CONSTRAINTS}
+
+
 def rule_table(design: Design) -> dict:
     """Every rule and constraint of a design, by name -> :meth:`designkit.rules.Rule.as_dict`
-    rows: the device constraints under the panel model (:func:`evaluate_device`, a cored
-    design) and the rule book (:func:`designkit.rules.rules`, any design)."""
+    rows: the device constraints (a cored design's under the panel model,
+    :func:`evaluate_device`; an air-core design's electrical ones, :func:`air_core_constraints`)
+    and the rule book (:func:`designkit.rules.rules`, any design)."""
     if design.core is None:
-        return {r.name: r.as_dict() for r in rules.rules(design)}
-    table = evaluate_device(design)["constraints"]
+        table = air_core_constraints(design)
+        table.update({r.name: r.as_dict() for r in rules.rules(design)})
+    else:
+        table = evaluate_device(design)["constraints"]
     for row in table.values():
         row.setdefault("group", "device")
         row.setdefault("keys", [])

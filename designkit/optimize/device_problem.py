@@ -196,7 +196,8 @@ class DeviceProblem(DesignView):
         coil_clearance_m, or the design's pitch if larger); needs the rendering objective (at
         one point the pitch does not matter).
 
-        Supply: the driver's rating (``drive.driver_max_voltage_v``). Bounds: inner radius
+        Supply: the design's (:attr:`supply_voltage_v`, at most the driver's rating). Bounds:
+        inner radius
         [optimize.min_inner_radius_m, Ro bound - 0.3 mm]; outer radius up to
         (pitch - coil_clearance_m)/2 (no overlap at the pitch); winding length
         [10 mm, optimize.max_length_m]; core fill [0.25, 1]; core depth fraction [0.1, 1];
@@ -251,8 +252,11 @@ class DeviceProblem(DesignView):
 
     @property
     def supply_voltage_v(self) -> float:
-        """The driver's rating, V (``drive.driver_max_voltage_v``)."""
-        return self.design.drive.driver_max_voltage_v
+        """The supply the coils are designed for, V: the design's ``drive.supply_voltage_v``,
+        at most the named driver's rating (a supply above it is the rule
+        ``design_supply_voltage_v``; :meth:`firmware_io.hw.driver.DriverRating.usable_supply_v`)."""
+        d = self.design.drive
+        return el.driver_rating(d).usable_supply_v(d.supply_voltage_v)
 
     @property
     def resistivity_ref_ohm_m(self) -> float:
@@ -435,7 +439,7 @@ class DeviceProblem(DesignView):
             "resistance_ohm": (ev["resistance_ohm"], self.max_resistance_ohm, 1,
                                f"R at {self.hot_temperature_c:g} C"),
             "supply_voltage_v": (ev["voltage_needed_v"], self.supply_voltage_v, 1,
-                                 f"I R at {self.hot_temperature_c:g} C vs the MD10C rating"),
+                                 f"I R at {self.hot_temperature_c:g} C vs the supply"),
             "settling_time_s": (ev["settling_time_s"], self.max_settling_time_s, 1,
                                 f"5 L_secant({self.current_a:g} A) / "
                                 f"R({self.cold_temperature_c:g} C)"),
@@ -469,7 +473,7 @@ _FIXED_BY = {
     "resistance_ohm": ("coil.turns", "wire.diameter_m", "coil.inner_radius_m",
                        "coil.outer_radius_m", "optimize.max_resistance_ohm"),
     "supply_voltage_v": ("drive.max_current_a", "coil.turns", "wire.diameter_m",
-                         "drive.driver_max_voltage_v"),
+                         "drive.supply_voltage_v", "drive.driver_max_voltage_v"),
     "settling_time_s": ("coil.turns", "coil.length_m", "core.radius_m", "core.length_m",
                         "wire.diameter_m", "optimize.max_settling_time_s"),
     "time_to_max_temperature_s": ("drive.max_current_a", "wire.diameter_m"),

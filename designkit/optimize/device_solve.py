@@ -391,7 +391,8 @@ def device_design(base: Design, result: DeviceResult, problem: DeviceProblem, *,
     """The optimum as a complete :class:`Design` (everything not optimized from ``base``).
 
     Coil, wire (bare and insulated diameter), core (radius, length, offset, 1010 steel B-H),
-    drive (supply = the driver's rating, current = the operating current) and, when it was a
+    drive (supply = the problem's: the design's, at most the driver's rating; current = the
+    operating current) and, when it was a
     variable, the array's pitch come from the result.
     """
     pitch = problem.pitch_of(result.x) if problem.pitch_bounds_m is not None else None

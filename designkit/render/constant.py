@@ -95,6 +95,27 @@ class ArrayActuation:
         """F0, the magnet's pull on the cores at zero current, N: (3,) -> (3,), (n, 3) -> (n, 3)."""
         return self.array.bias_force(points, self.moment_a_m2)
 
+    @property
+    def sensor_positions_m(self) -> np.ndarray:
+        """(n_sensors, 3) m: the upper array's sensors in coil order, then the lower array's
+        (the map's flat order)."""
+        return np.asarray(self.array.sensor_positions_m(), float).reshape(-1, 3)
+
+    @property
+    def n_sensors(self) -> int:
+        return len(self.sensor_positions_m)
+
+    def sensor_coil_field(self, currents=None) -> np.ndarray:
+        """The coils' coupled field at the sensors: (n_sensors, 3, n_coils) T/A, or (n_sensors,
+        3) T at ``currents`` (n_coils,) A (the direct model, as the map stores it)."""
+        g = self.array.actuation_matrix(self.sensor_positions_m, rtol=self.rtol)[:, :3, :]
+        if currents is None:
+            return g
+        i = np.asarray(currents, float)
+        if i.shape != (self.n_coils,) or not np.all(np.isfinite(i)):
+            raise BadInputError("currents", f"{self.n_coils} finite values, A", i.tolist())
+        return g @ i
+
 
 def actuation_source(fieldmap) -> ActuationSource:
     """``fieldmap`` itself once it is an :class:`~firmware_io.actuation.ActuationSource` (a

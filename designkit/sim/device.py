@@ -1,9 +1,9 @@
 """The simulated device: register-level PWM boards and Hall sensors on two simulated I2C buses,
 driven by exact array physics and R-L coil currents.
 
-The coil currents (A) follow the voltage each MD10C applies, read back from the simulated
-PCA9685 registers (PWM duty, DIR level), so the bytes the runner wrote are what moves the
-current. The true force on the magnet (N) comes from designkit's array model at the true
+The coil currents (A) follow the voltage each coil driver applies from the drive record's
+supply (the design's: what the coils see), read back from the simulated PCA9685 registers (PWM
+duty, DIR level), so the bytes the runner wrote are what moves the current. The true force on the magnet (N) comes from designkit's array model at the true
 position (``CoilArray.force`` + the magnet's pull on the cores), never the map, so that the
 map's and the allocator's errors show up in a run. The sensors see that field through their
 errors and noise (designkit.sim.readings.SensorSimulator).
@@ -15,14 +15,15 @@ import numpy as np
 
 from firmware_io.hw.coils import CoilDriver
 from firmware_io.hw.pca9685 import PCA9685
-from firmware_io.hw.md10c import CoilDrive
 from firmware_io.runner import (CALIBRATION_CURRENT_A, calibrate_sensors, calibration_currents,
                                 record_calibration, rl_step)
 from firmware_io.hw.sensors import SensorArrays, default_sensor_layout
 from firmware_io.hw.sim import SimBus, SimClock, SimPCA9685, SimTCA9548A, SimTLV493D
+from firmware_io.mapfile.drive import DriveRecord
 
 from ..model.array import CoilArray, force_matrix
 from ..model.coil import Coil
+from ..model.electrical import drive_data
 from .readings import SensorSimulator, analog_reading
 from .sensors import SimSensorSource
 
@@ -41,8 +42,10 @@ class SimulatedDevice:
         Offsets, gains and mounting errors of the sensors (designkit.sim.readings's stated defaults:
         0.5 mm, 1 degree, 1 % gain, 0.01 mT offset after calibration).
     seed : int
-    resistance_ohm, inductance_h : float, optional
-        The coils' true R and L (default: from the design's coil model).
+    drive : firmware_io.mapfile.drive.DriveRecord, optional
+        The coils' drive (default: :func:`designkit.model.electrical.drive_data` of the design's
+        coil): its supply, driver, and the first coil's R (at the operating temperature) and L
+        are the simulated coils'.
 
     The coil bus runs at 1 MHz (the PCA9685s on their own adapter: Fm+, per the PCA9685
     datasheet), the sensor bus at 400 kHz (the TCA9548A's limit); each has its own simulated
@@ -50,17 +53,15 @@ class SimulatedDevice:
     """
 
     def __init__(self, design, array=None, *, noise_t: float = 1e-4, seed: int = 0,
-                 sensor_errors="default", resistance_ohm: float | None = None,
-                 inductance_h: float | None = None):
+                 sensor_errors="default", drive: DriveRecord | None = None):
         self.design = design
         self.array = array if array is not None else CoilArray.from_design(design)
         n = self.array.n_coils
-        coil = Coil.from_design(design)
-        self.resistance_ohm = float(resistance_ohm if resistance_ohm is not None
-                                    else coil.resistance(design.wire))
-        self.inductance_h = float(inductance_h if inductance_h is not None
-                                  else coil.inductance(design.wire))
-        self.supply_v = min(design.drive.supply_voltage_v, design.drive.driver_max_voltage_v)
+        self.drive = (drive if drive is not None
+                      else drive_data(design, [Coil.from_design(design)] * n))
+        self.resistance_ohm = self.drive.resistance_ohm[0]
+        self.inductance_h = self.drive.inductance_h[0]
+        self.supply_v = self.drive.supply_voltage_v
         self.noise_t = float(noise_t)
         self.rng = np.random.default_rng(seed)
         self.moment = np.asarray(design.magnet.moment_vector_a_m2, float)
@@ -78,8 +79,7 @@ class SimulatedDevice:
         boards = [PCA9685(self.coil_bus, 0x40 + b, sleep=self.coil_clock.sleep)
                   for b in range(n_boards)]
         # the runner commands voltages: the drive may apply any voltage within the supply
-        drive = CoilDrive.supply_limited(self.supply_v, self.resistance_ohm, self.inductance_h)
-        self.coils = CoilDriver(boards, [drive] * n, sleep=self.coil_clock.sleep)
+        self.coils = CoilDriver(boards, [self.drive.drives[0]] * n, sleep=self.coil_clock.sleep)
 
         self.sensor_clock = SimClock()
         self.sensor_bus = SimBus(scl_hz=400e3, clock=self.sensor_clock)
@@ -97,7 +97,7 @@ class SimulatedDevice:
 
     # -- coils ----------------------------------------------------------------------------------
     def applied_voltage_v(self) -> np.ndarray:
-        """Voltage each MD10C applies now, from the PCA9685 registers (PWM duty, DIR level)."""
+        """Voltage each driver applies now, from the PCA9685 registers (PWM duty, DIR level)."""
         v = np.zeros(self.array.n_coils)
         for k, w in enumerate(self.coils.wiring):
             board = self.sim_boards[w.board]
@@ -141,9 +141,7 @@ class SimulatedDevice:
         idx = np.asarray(idx)
         a = self.array.actuation_matrix(p[idx])
         f_s = np.einsum("ij,kjl->kil", force_matrix(self.moment), a[:, 3:, :])
-        bias = getattr(self.array, "bias_force", None)
-        b_s = (np.asarray(bias(p[idx], self.moment), float).reshape(-1, 3) if bias is not None
-               else np.zeros((len(idx), 3)))
+        b_s = np.asarray(self.array.bias_force(p[idx], self.moment), float).reshape(-1, 3)
         steps = np.arange(len(p))
         self.force_per_amp = _interp_rows(steps, idx, f_s)
         self.bias_n = _interp_rows(steps, idx, b_s)

@@ -199,7 +199,7 @@ def simulate(device: SimulatedDevice, runner_factory, trajectory: Trajectory, *,
     bar.close()
     runner.stop()
     return SimulationResult(rec_all.columns(), injector.injected, list(runner.fault_log),
-                            period_s, list(getattr(source, "fit_s", [])))
+                            period_s, list(source.fit_s))
 
 
 def _step(runner, ts: float, overrun: bool):

@@ -220,14 +220,12 @@ def force_error_causes(device: SimulatedDevice, fieldmap, result: SimulationResu
     f_obj = np.stack([c["fx_obj_n"], c["fy_obj_n"], c["fz_obj_n"]], 1)[run]
     fm = force_matrix(m)
     f_exact_q = np.einsum("ij,kjl->kil", fm, device.array.actuation_matrix(q)[:, 3:, :])
-    bias = getattr(device.array, "bias_force", None)
-    f0_exact_q = (np.asarray(bias(q, m), float).reshape(-1, 3) if bias is not None
-                  else np.zeros_like(q))
+    f0_exact_q = np.asarray(device.array.bias_force(q, m), float).reshape(-1, 3)
     inside = _inside(fieldmap, q)
     f_map_q = np.zeros_like(f_exact_q)
     f_map_q[inside] = np.einsum("ij,kjl->kil", fm, fieldmap.actuation(q[inside])[:, 3:, :])
     f0_map_q = np.zeros_like(q)
-    if hasattr(fieldmap, "bias_force") and inside.any():
+    if inside.any():
         f0_map_q[inside] = np.asarray(fieldmap.bias_force(q[inside]), float).reshape(-1, 3)
     f_p = device.force_per_amp[run]
     f0_p = device.bias_n[run]

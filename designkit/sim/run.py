@@ -15,8 +15,9 @@ import numpy as np
 from firmware_io.allocation import Allocator
 from firmware_io.localization import Localizer
 from firmware_io.mapfile import MapFile
+from firmware_io.mapfile.drive import DriveRecord
 from firmware_io.runner import (CALIBRATED_RELATIVE_ERROR, ConstantVelocityTracker, Runner,
-                                RunnerConfig, SceneForce)
+                                RunnerParts, SceneForce, config_from_map)
 from firmware_io.scene import Scene
 
 from .. import fieldmap
@@ -45,10 +46,10 @@ TOP_OF_BOX_M = 0.078
 """Highest finger position of a scripted trajectory, m (inside the map box)."""
 
 
-def drive_data(design) -> dict:
-    """:func:`designkit.model.electrical.drive_data` for the design's own (identical) coils."""
-    return electrical.drive_data(design, [Coil.from_design(design)]
-                                 * design.n_coils)
+def drive_data(design) -> DriveRecord:
+    """:func:`designkit.model.electrical.drive_data` for the design's own coils."""
+    return electrical.drive_data(design, [Coil.of_design(design, k)
+                                         for k in range(design.n_coils)])
 
 
 def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "slide",
@@ -87,25 +88,22 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
                                          map_design_sha256=fmap.design_sha256,
                                          extra_meta={"object": obj, "rows": rows})
     scene = Scene.load(scene_path, expected_design_sha256=fmap.design_sha256)
-    drive = drive_data(design)
+    # the runner's configuration from the map's drive record, as on the controller
+    cfg = config_from_map(fmap, control_period_s=period_s, unipolar=unipolar,
+                          force_axes="z" if rows == "fz" else "xyz", skip_force_n=skip_force_n)
+    drive = cfg.drive     # its rating violations are simulated and listed, not refused
     plant_design, plant_array = design, array
     if plant is not None:  # the as-built device under the runner of ``design``'s map
         plant_design = plant if isinstance(plant, Design) else load_design(plant)
         plant_array = CoilArray.from_design(plant_design)
-    device = SimulatedDevice(plant_design, plant_array, seed=seed,
-                             resistance_ohm=drive["resistance_ohm"][0],
-                             inductance_h=drive["inductance_h"][0])
+    device = SimulatedDevice(plant_design, plant_array, seed=seed, drive=drive)
     loc_kw = _localizer_options(device, map_path, method, calibrate)
 
     def factory(source, clock, hook):
-        cfg = RunnerConfig(**{k: tuple(v) if isinstance(v, list) else v
-                              for k, v in drive.items()},
-                           control_period_s=period_s, unipolar=unipolar,
-                           force_axes="z" if rows == "fz" else "xyz",
-                           skip_force_n=skip_force_n)
         localizer = Localizer.from_map(map_path, method=method, **loc_kw)
-        runner = Runner(fmap, SceneForce(scene), localizer, ConstantVelocityTracker(),
-                        hook(Allocator()), device.coils, source, cfg, clock=clock,
+        parts = RunnerParts(fmap, SceneForce(scene), localizer, ConstantVelocityTracker(),
+                            hook(Allocator()), device.coils, source)
+        runner = Runner(parts, cfg, clock=clock,
                         log=lambda line: print(line) if progress else None)
         runner.profile = profile
         runner.start()
@@ -117,7 +115,8 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
     summary.update({"object": obj, "trajectory": str(trajectory), "design": design.name,
                     "rows": rows,
                     "lambda_n_per_m": lam, "method": method, "unipolar": unipolar,
-                    "drive": drive, **_duration_note(path.duration_s, duration),
+                    "drive": drive.to_dict(), "drive_violations": drive.violations(),
+                    **_duration_note(path.duration_s, duration),
                     "faults_not_injected": _not_injected(schedule, res.faults)})
     if plant is not None:
         summary["plant"] = plant_design.name

@@ -21,7 +21,7 @@ import numpy as np
 
 from .pca9685 import PCA9685, ChannelValue
 from ..errors import BadInputError, CoilWriteError
-from .md10c import CoilDrive, DriveCommand, current_to_command, voltage_to_command
+from .driver import CoilDrive, DriveCommand, current_to_command, voltage_to_command
 
 
 Plan = tuple[list[DriveCommand], list[dict[int, ChannelValue]], list[dict[int, ChannelValue]],

@@ -36,7 +36,7 @@ from .integrity import covariance_and_pl, ratio_quantiles, thresholds
 from .learned import LearnedInverse
 from .lm import levenberg_marquardt
 from .magnet import _EYE, MU0, _multipole_rows, _multipole_work, cylinder_field, multipole_field
-from .sensor_model import DEFAULT_NOISE_T, SensorModel
+from .sensor_model import DEFAULT_NOISE_T, SensorModel, upper_lower
 
 METHODS = ("learned", "dipole", "model", "kalman")
 
@@ -249,9 +249,10 @@ class Localizer:
         if missing:
             raise BadInputError("map file", "a v2 map with the sensor section (missing "
                                 f"{', '.join(missing)})", str(path))
-        sp = np.asarray(m.sensor_positions_m() if callable(m.sensor_positions_m)
-                        else m.sensor_positions_m, float)
-        scf = m.sensor_coil_field() if callable(m.sensor_coil_field) else m.sensor_coil_field
+        sp = upper_lower(m.sensor_positions_m() if callable(m.sensor_positions_m)
+                         else m.sensor_positions_m)
+        scf = upper_lower(m.sensor_coil_field() if callable(m.sensor_coil_field)
+                          else m.sensor_coil_field)
         mom = m.moment_a_m2() if callable(m.moment_a_m2) else m.moment_a_m2
         sha = m.design_sha256() if callable(m.design_sha256) else m.design_sha256
         lo, hi = (np.asarray(b, float) for b in m.bounds)
@@ -270,13 +271,14 @@ class Localizer:
                 octupole_m2 = float(m.meta.get("magnet_octupole_m2", 0.0))
         # the coils' field gradient at every sensor (the map's SENSOR_COIL_GRAD: the sensors sit
         # below the box of A) for calibrate() to recover their position errors
-        grad = np.asarray(m.sensor_coil_gradient(), float)
+        grad = upper_lower(m.sensor_coil_gradient())
         known = np.ones(sp.shape[:2], bool)
         model = SensorModel(sp, np.asarray(scf, float), np.asarray(mom, float), str(sha),
                             float(octupole_m2),
                             # the induced term is a small correction: outside the map's box the
                             # nearest box point is safer than extrapolating its polynomials
-                            lambda p: m.sensor_induced_field(np.clip(p, lo, hi)),
+                            lambda p: upper_lower(m.sensor_induced_field(np.clip(p, lo, hi)),
+                                                  -2),
                             box_lo, box_hi, magnet_size_m, grad, known)
         learned = (LearnedInverse.load(weights) if weights is not None
                    else kw.pop("learned", None))

@@ -22,6 +22,18 @@ DEFAULT_NOISE_T = 0.1e-3
 """TLV493D noise per axis, T rms (datasheet)."""
 
 
+def upper_lower(values, axis: int = 0) -> np.ndarray:
+    """A map's flat sensor axis (n_sensors at ``axis``) split into the (2, n) the estimators
+    use: the default layout's upper array, then its lower array (the map's sensor order)."""
+    a = np.asarray(values, dtype=float)
+    ax = axis % a.ndim
+    n = a.shape[ax]
+    if n % 2:
+        raise BadInputError("map sensors", "an upper and a lower array of equal size (an even "
+                            "number of sensors)", n)
+    return a.reshape(a.shape[:ax] + (2, n // 2) + a.shape[ax + 1:])
+
+
 @dataclass
 class SensorModel:
     """What the estimators know (the v2 map's sensor section).

@@ -18,11 +18,11 @@ import threading
 
 import numpy as np
 
-from .harmonics import _rows_on_harmonics, monomial_exponents, solid_harmonics
+from .harmonics import monomial_exponents, rows_on_harmonics, solid_harmonics
 
 def prepare_cells(layers: list, tables: list, nc: int) -> dict:
     """What the A lookups need: per cell its rows on the solid harmonics of degree <= L - 1,
-    (L^2, 8 nc) float32 (coefficients x :func:`_rows_on_harmonics`, in T/A and T/(m A) per
+    (L^2, 8 nc) float32 (coefficients x :func:`rows_on_harmonics`, in T/A and T/(m A) per
     unit :func:`solid_harmonics`), its centre and 1 / r, per layer the grid constants (lists
     for the one-point path) and per degree the harmonics' monomial coefficients (M, L^2)
     float32 (one point: its monomials @ those, then @ the cell's)."""
@@ -36,7 +36,7 @@ def prepare_cells(layers: list, tables: list, nc: int) -> dict:
         hx, hy = float(lay["cell_x_m"]), float(lay["cell_y_m"])
         z0, z1 = float(lay["z_lo_m"]), float(lay["z_hi_m"])
         r = max(hx, hy, z1 - z0) / 2
-        ops, hc = _rows_on_harmonics(deg)  # (8, H, K), (M, H)
+        ops, hc = rows_on_harmonics(deg)  # (8, H, K), (M, H)
         scale = np.array([r] * 3 + [r * r] * 5)[:, None, None]
         h = ops.shape[1]
         # (n_cells, K, nc) -> (n_cells, H, 8, nc): every row of every coil per harmonic

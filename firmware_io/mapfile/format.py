@@ -2,8 +2,9 @@
 
 A map file is one ``.npz`` archive: the arrays of :func:`array_names` plus ``meta``, a JSON
 string (format, version, units, rows, box, the harmonic-cell layers ``a_layers``, the mode and
-magnet table descriptions, coil poses, design name and SHA-256, drive data, build settings and
-errors). Every array is hashed into ``meta.data_sha256``; :func:`read` refuses anything that is
+magnet table descriptions, coil poses, the sensor count, design name and SHA-256, drive data,
+build settings and errors). Sensors are a flat list (``n_sensors`` poses, independent of the
+coil count). Every array is hashed into ``meta.data_sha256``; :func:`read` refuses anything that is
 not a complete, finite, uncorrupted map of this :data:`FORMAT_VERSION`, naming the problem and
 how to rebuild. The arrays' meaning: docs/mapfile_format.md.
 """
@@ -19,35 +20,44 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import BadInputError
+from .drive import DriveRecord
 
 FORMAT = "designkit-fieldmap"
-FORMAT_VERSION = 4
-"""Format version of map v2 with A as harmonic cells (coupled A, bias force, sensor fields); a
-file of any other version is refused with the command that rebuilds it (docs/mapfile_format.md
-lists the versions)."""
+FORMAT_VERSION = 6
+"""Format version: A as harmonic cells (coupled A, bias force), the sensors as a flat list of
+poses with their fields, the typed drive record (:class:`firmware_io.mapfile.drive.DriveRecord`);
+a file of any other version is refused with the command that rebuilds it
+(docs/mapfile_format.md lists the versions)."""
 ROWS = ("Bx", "By", "Bz", "dBx/dx", "dBx/dy", "dBx/dz", "dBy/dy", "dBy/dz")
+"""The eight rows of A(p) (thesis eq. 2.13), defined here once: B (T/A), then the five
+independent entries of the symmetric, traceless gradient (T/(m A))."""
 UNITS = {"A_rows_0_2": "T/A", "A_rows_3_7": "T/(m A)", "grid": "m", "moment": "A m^2",
          "current": "A", "force": "N", "field": "T", "sensor_coil_field": "T/A"}
 REBUILD = ("Rebuild it for this version: designkit map --out <file.npz> (with --design "
            "<design.toml> for a design of your own)")
 
 # name -> (dtype, shape as a function of the sizes); the single list of arrays in a map file
-_FIXED = ("SCOEF", "F0_RES", "M_X", "M_Y", "M_Z", "SENSOR_POS", "SENSOR_COIL",
+_FIXED = ("SCOEF", "F0_RES", "M_X", "M_Y", "M_Z", "SENSOR_POS", "SENSOR_ROT", "SENSOR_COIL",
           "SENSOR_COIL_GRAD", "MOMENT", "SAT_I", "SAT_FACTOR")
+MAX_SENSORS = 4096
+"""Most sensors a map describes (a sanity bound on ``meta.n_sensors``)."""
 
 
 def _shapes(meta: dict, arrays: dict) -> dict:
     nc = int(meta["n_coils"])
+    nsen = int(meta["n_sensors"])
+    if not 1 <= nsen <= MAX_SENSORS:
+        raise ValueError(f"n_sensors {nsen} outside 1..{MAX_SENSORS}")
     mx, my, mz = (len(arrays[k]) for k in ("M_X", "M_Y", "M_Z"))
-    ns = len(arrays["SAT_I"])
+    nsat = len(arrays["SAT_I"])
     f32, f64 = np.float32, np.float64
     nbs = int(meta["n_sensor_basis"])
-    return {"SCOEF": (f64, (nc, nbs, 2, nc, 3)),
+    return {"SCOEF": (f64, (nc, nbs, nsen, 3)),
             "F0_RES": (f32, (mx, my, mz, 3)),
             "M_X": (f64, (mx,)), "M_Y": (f64, (my,)), "M_Z": (f64, (mz,)),
-            "SENSOR_POS": (f64, (2, nc, 3)), "SENSOR_COIL": (f64, (2, nc, 3, nc)),
-            "SENSOR_COIL_GRAD": (f64, (2, nc, 5, nc)),
-            "MOMENT": (f64, (3,)), "SAT_I": (f64, (ns,)), "SAT_FACTOR": (f64, (ns, nc))}
+            "SENSOR_POS": (f64, (nsen, 3)), "SENSOR_ROT": (f64, (nsen, 3, 3)),
+            "SENSOR_COIL": (f64, (nsen, 3, nc)), "SENSOR_COIL_GRAD": (f64, (nsen, 5, nc)),
+            "MOMENT": (f64, (3,)), "SAT_I": (f64, (nsat,)), "SAT_FACTOR": (f64, (nsat, nc))}
 
 
 def array_names(keys) -> list:
@@ -82,7 +92,8 @@ def write(path, arrays: dict, meta: dict) -> Path:
     return Path(path)
 
 
-def _bad(path, what: str, hint: str = "") -> BadInputError:
+def map_error(path, what: str, hint: str = "") -> BadInputError:
+    """The one error of a file that is not a valid map: what it must be, its path, the fix."""
     return BadInputError("map file", f"a designkit map file ({what})", str(path), hint)
 
 
@@ -94,20 +105,20 @@ def read(path) -> tuple[dict, dict]:
     with open(p, "rb") as fh:
         magic = fh.read(4)
     if magic != b"PK\x03\x04":  # every .npz is a zip archive; anything else is not a map
-        raise _bad(p, "a .npz archive; this file is not one, so it is not a map file",
+        raise map_error(p, "a .npz archive; this file is not one, so it is not a map file",
                    "Make one with: designkit map --design <design.toml> --out <file.npz>")
     try:
         with np.load(p, allow_pickle=False) as z:
             keys = set(z.files)
             if "meta" not in keys:
-                raise _bad(p, f"an array 'meta'; found {sorted(keys)} -- a foreign .npz, "
+                raise map_error(p, f"an array 'meta'; found {sorted(keys)} -- a foreign .npz, "
                            "not a map file")
             meta = json.loads(str(z["meta"]))
             arrays = {k: z[k] for k in array_names(keys)}
     except BadInputError:
         raise
     except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError) as exc:
-        raise _bad(p, f"readable npz; {type(exc).__name__}: {exc} -- truncated or foreign")
+        raise map_error(p, f"readable npz; {type(exc).__name__}: {exc} -- truncated or foreign")
     validate(arrays, meta, p)
     return arrays, meta
 
@@ -115,35 +126,42 @@ def read(path) -> tuple[dict, dict]:
 def validate(arrays: dict, meta: dict, p="<map data>") -> None:
     """Check everything :func:`read` checks on arrays and meta in memory (BadInputError)."""
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-        raise _bad(p, f"meta.format == {FORMAT!r} -- a foreign file")
-    if meta.get("version") != FORMAT_VERSION:
-        raise _bad(p, f"format version {FORMAT_VERSION} (map v2, A as harmonic cells); this "
-                   f"file is version {meta.get('version')!r}, written by an older designkit",
-                   REBUILD)
+        raise map_error(p, f"meta.format == {FORMAT!r} -- a foreign file")
+    version = meta.get("version")
+    if version != FORMAT_VERSION:
+        when = ("an older" if isinstance(version, int) and version < FORMAT_VERSION
+                else "another")
+        raise map_error(p, f"format version {FORMAT_VERSION} (A as harmonic cells, sensors as a "
+                        f"list of poses, a typed drive record); this file is version "
+                        f"{version!r}, written by {when} designkit", REBUILD)
     if meta.get("units") != UNITS or meta.get("rows") != list(ROWS):
-        raise _bad(p, f"units {UNITS} and rows {ROWS}")
+        raise map_error(p, f"units {UNITS} and rows {ROWS}")
     try:
         nc = int(meta["n_coils"])
         missing = [k for k in _FIXED if k not in arrays]
         if missing:
-            raise _bad(p, f"arrays {list(_FIXED)}; missing {missing}", REBUILD)
+            raise map_error(p, f"arrays {list(_FIXED)}; missing {missing}", REBUILD)
         shapes = _shapes(meta, arrays)
     except (KeyError, TypeError, ValueError) as exc:
         if isinstance(exc, BadInputError):
             raise
-        raise _bad(p, f"complete metadata; {type(exc).__name__}: {exc}")
+        raise map_error(p, f"complete metadata; {type(exc).__name__}: {exc}")
     for name, (dtype, shape) in shapes.items():
         a = arrays[name]
         if a.shape != shape or a.dtype != dtype:
-            raise _bad(p, f"{name} of shape {shape} {np.dtype(dtype).name}; got {a.shape} "
+            raise map_error(p, f"{name} of shape {shape} {np.dtype(dtype).name}; got {a.shape} "
                        f"{a.dtype}")
+    try:
+        DriveRecord.from_dict(meta.get("drive"), nc)
+    except BadInputError as exc:
+        raise map_error(p, f"a valid drive record in meta.drive ({exc})", REBUILD) from None
     _validate_layers(arrays, meta, nc, p)
     for key, prefix, nq in (("magnet_tables", "MRZ", NQ_MAGNET),
                             ("sensor_mode_tables", "SM", None)):
         tabs = meta.get(key)
         n_basis = int(meta["n_sensor_basis"])
         if not isinstance(tabs, list) or (not tabs and nq is not None):
-            raise _bad(p, f"meta.{key} (a list, non-empty for the magnet tables)")
+            raise map_error(p, f"meta.{key} (a list, non-empty for the magnet tables)")
         covered = []
         for k, t in enumerate(tabs):
             try:
@@ -170,20 +188,25 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
             except (KeyError, TypeError):
                 ok = False
             if not ok:
-                raise _bad(p, f"{key}[{k}] describing a float32 array {prefix}{k} (n_rho, n_u, "
+                raise map_error(p, f"{key}[{k}] describing a float32 array {prefix}{k} (n_rho, n_u, "
                            f"{nq}) for coil indices < {nc}")
             covered += list(t["coils"])
         if nq is not None and sorted(covered) != list(range(nc)):
-            raise _bad(p, f"{key}: one table for every coil 0..{nc - 1}; got coils "
+            raise map_error(p, f"{key}: one table for every coil 0..{nc - 1}; got coils "
                        f"{sorted(covered)}")
     for name in array_names(arrays):
         if not np.all(np.isfinite(arrays[name])):
-            raise _bad(p, f"finite values only (found NaN or Inf in {name})")
+            raise map_error(p, f"finite values only (found NaN or Inf in {name})")
     for name in ("M_X", "M_Y", "M_Z", "SAT_I"):
         if len(arrays[name]) < 2 or not np.all(np.diff(arrays[name]) > 0):
-            raise _bad(p, f"{name} strictly increasing with at least 2 nodes")
+            raise map_error(p, f"{name} strictly increasing with at least 2 nodes")
+    rot = arrays["SENSOR_ROT"]
+    if (np.abs(rot @ np.swapaxes(rot, 1, 2) - np.eye(3)).max() > 1e-9
+            or np.any(np.linalg.det(rot) < 0)):
+        raise map_error(p, "SENSOR_ROT proper rotations (orthonormal, det +1: sensor frame -> array "
+                   "frame)")
     if data_hash(arrays) != meta.get("data_sha256"):
-        raise _bad(p, "data matching its recorded SHA-256 (corrupted)")
+        raise map_error(p, "data matching its recorded SHA-256 (corrupted)")
 
 
 def _validate_layers(arrays: dict, meta: dict, nc: int, p) -> None:
@@ -215,7 +238,7 @@ def _validate_layers(arrays: dict, meta: dict, nc: int, p) -> None:
     except (KeyError, TypeError, ValueError):
         ok = False
     if not ok:
-        raise _bad(p, "meta.a_layers: harmonic-cell layers stacked over the box's z range, each "
+        raise map_error(p, "meta.a_layers: harmonic-cell layers stacked over the box's z range, each "
                    "with a float32 table AH<k> (nx * ny, (degree + 1)^2 - 1, n_coils)")
 
 

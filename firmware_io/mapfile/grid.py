@@ -7,6 +7,7 @@ import bisect
 
 import numpy as np
 
+
 def _cells(axis: np.ndarray, x: np.ndarray):
     """Cell index (n,) and local coordinate t (n,) of ``x`` on a strictly increasing axis;
     outside, the end cell with t < 0 or > 1 (linear extrapolation)."""
@@ -14,7 +15,7 @@ def _cells(axis: np.ndarray, x: np.ndarray):
     return i, (x - axis[i]) / (axis[i + 1] - axis[i])
 
 
-def _trilinear(grid: tuple, p: np.ndarray) -> np.ndarray:
+def trilinear(grid: tuple, p: np.ndarray) -> np.ndarray:
     """Trilinear interpolation of ``values`` (nx * ny * nz, q) at points (n, 3) -> (n, q)."""
     axes, values, shape = grid
     ny, nz = shape[1], shape[2]
@@ -33,7 +34,7 @@ def _trilinear(grid: tuple, p: np.ndarray) -> np.ndarray:
     return out
 
 
-def _trilinear_one(grid: tuple, q) -> np.ndarray:
+def trilinear_one(grid: tuple, q) -> np.ndarray:
     """The same for one point (3 floats) -> (q,), with Python scalars for the index work."""
     axes, values, shape = grid
     xs, ys, zs = grid_lists(grid)
@@ -54,6 +55,8 @@ _LISTS: dict = {}
 
 
 def grid_lists(grid: tuple) -> tuple:
+    """The grid's axes as tuples of Python floats (cached per axes object), for
+    :func:`trilinear_one`'s scalar index work."""
     key = id(grid[0])
     got = _LISTS.get(key)
     if got is None or got[0] is not grid[0]:

@@ -201,7 +201,7 @@ def solid_harmonics(s: np.ndarray, degree: int, out: np.ndarray | None = None,
     return out
 
 
-def _rows_on_harmonics(degree: int) -> tuple[np.ndarray, np.ndarray]:
+def rows_on_harmonics(degree: int) -> tuple[np.ndarray, np.ndarray]:
     """(8, H, K) float64: :func:`harmonic_rows` of a potential of degree ``degree`` on the
     H = degree^2 :func:`solid_harmonics` of degree <= degree - 1 (every row is harmonic, so it
     lies in their span: checked to rounding), and (M, H) their monomial coefficients."""

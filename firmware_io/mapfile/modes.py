@@ -280,6 +280,23 @@ def _interp_one(L: dict, rho: np.ndarray, zq: float) -> np.ndarray:
     return np.matmul(w[:, None, :], corners)[:, 0]
 
 
+def prepare_magnet_one(prepared: list) -> dict | None:
+    """The one-point bias-force kernel's table (:func:`magnet_terms_one`): None unless the map
+    has one coil type, unrotated at one height (the general path runs then)."""
+    return _lookup(prepared[0], prepared[0]["flat"]) if len(prepared) == 1 else None
+
+
+def magnet_terms_one(prepared: list, table: dict | None, q) -> np.ndarray:
+    """:func:`magnet_terms` at one point ``q`` (3 floats, m) -> (3,) N, through the one-point
+    table of :func:`prepare_magnet_one` when there is one."""
+    if table is None:
+        return magnet_terms(prepared, np.array([q], float))[0]
+    d = np.subtract(q, prepared[0]["pos"])
+    x, y = d[:, 0], d[:, 1]
+    val = _interp_one(table, np.sqrt(x * x + y * y), q[2])  # F_rho/rho, F_z per core
+    return np.array([val[:, 0] @ x, val[:, 0] @ y, val[:, 1].sum()])
+
+
 def prepare_one(modes: tuple, coefs: tuple, moment) -> dict | None:
     """The one-point kernel's constants for a sum of mode tables with coefficients ``coefs``
     ((k * n_basis, n_out) per type, MapFile's layout), giving m . B per basis field for the

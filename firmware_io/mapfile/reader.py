@@ -12,26 +12,25 @@ Usage::
     m = MapFile.load("fieldmap.npz")
     a = m.actuation((0.0, 0.0, 0.03))            # (8, n_coils)
     f0 = m.bias_force((0.0, 0.0, 0.03))          # (3,) N
-    b = m.sensor_induced_field((0.0, 0.0, 0.03))  # (2, n_coils, 3) T
+    b = m.sensor_induced_field((0.0, 0.0, 0.03))  # (n_sensors, 3) T
     a = m.actuation(points, rows=(3, 6), coils=(0, 4))  # (n, 2, 2): only those entries
 """
 
 from __future__ import annotations
 
 import math
-import sys
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..actuation import selection
 from ..errors import BadInputError
 from .cells import CELL_CHUNK, cells_many, cells_one, prepare_cells
-from .format import REBUILD, _bad, read
-from .grid import _trilinear, _trilinear_one
-from .modes import (BATCH_CHUNK, _interp_one, _lookup, gradient_tensor, kernel_rows_many,
-                    magnet_terms, mode_rows, modes_one, prepare_magnet, prepare_modes,
-                    prepare_one)
+from .format import REBUILD, map_error, read
+from .grid import trilinear, trilinear_one
+from .modes import (BATCH_CHUNK, gradient_tensor, kernel_rows_many, magnet_terms,
+                    magnet_terms_one, mode_rows, modes_one, prepare_magnet, prepare_magnet_one,
+                    prepare_modes, prepare_one)
+from .source import selection
 
 def check_currents(currents, n_coils: int, error=BadInputError) -> np.ndarray:
     """``currents`` as a float array (n_coils,) A, or ``error`` (an InputRangeError class: the
@@ -53,8 +52,11 @@ class MapFile:
     """A validated map file (what each part means: docs/mapfile_format.md).
 
     Attributes: ``meta`` (dict), ``bounds`` ((lower, upper) corners of the box, m), ``n_coils``,
-    ``sensor_positions_m`` (2, n_coils, 3), ``moment_a_m2`` (3,), ``design_sha256``,
-    ``max_current_a`` (per coil), ``total_current_a`` (sum of |I|), ``arrays`` (the raw arrays).
+    ``n_sensors``, ``sensor_positions_m`` (n_sensors, 3), ``sensor_rotations`` (n_sensors, 3,
+    3), ``moment_a_m2`` (3,), ``design_sha256``, ``max_current_a`` (per coil),
+    ``total_current_a`` (sum of |I|), ``arrays`` (the raw arrays). The sensors are a flat list
+    in the map's order (the default layout: the upper array's sensors in coil order, then the
+    lower array's); every field at a sensor is in the array frame.
     """
 
     arrays: dict
@@ -72,7 +74,7 @@ class MapFile:
         design's map."""
         arrays, meta = read(path)
         if expected_design_sha256 is not None and meta["design_sha256"] != expected_design_sha256:
-            raise _bad(path, f"built from the design with SHA-256 {expected_design_sha256[:12]}"
+            raise map_error(path, f"built from the design with SHA-256 {expected_design_sha256[:12]}"
                        f"...; this one is from design {meta.get('design_name')!r} "
                        f"({meta['design_sha256'][:12]}...)", REBUILD)
         return cls.from_arrays(arrays, meta)
@@ -87,8 +89,9 @@ class MapFile:
         smodes = prepare_modes([arrays[t["name"]] for t in stabs], stabs,
                                meta["coil_positions_m"], meta["coil_rotations"])
         sc = arrays["SCOEF"]
+        n3 = 3 * int(meta["n_sensors"])
         scoefs = tuple((t, np.ascontiguousarray(sc[t["idx"]][:, t["order"]]
-                                                .reshape(-1, 6 * nc))) for t in smodes)
+                                                .reshape(-1, n3))) for t in smodes)
         maxes = tuple(np.asarray(arrays[k], float) for k in ("M_X", "M_Y", "M_Z"))
         f0 = arrays["F0_RES"]
         mt = meta["magnet_tables"]
@@ -101,15 +104,26 @@ class MapFile:
             "magnet_f0": (maxes, np.ascontiguousarray(f0.reshape(-1, 3)), f0.shape[:3]),
             "sensor_one": (prepare_one(smodes, tuple(c for _, c in scoefs), arrays["MOMENT"])
                            if smodes else None),
-            "magnet_one": _lookup(magnet[0], magnet[0]["flat"]) if len(magnet) == 1 else None}
+            "magnet_one": prepare_magnet_one(magnet)}
         return cls(arrays, meta, (np.asarray(g[0], float), np.asarray(g[1], float)), nc,
                    kernels)
 
     # ------------------------------------------------------------------ plain attributes
     @property
+    def n_sensors(self) -> int:
+        """Number of Hall sensors the map describes (independent of the coil count)."""
+        return len(self.arrays["SENSOR_POS"])
+
+    @property
     def sensor_positions_m(self) -> np.ndarray:
-        """(2, n_coils, 3) m: upper array then lower array, one sensor per coil centre."""
+        """(n_sensors, 3) m: the sensors' centres in the map's sensor order."""
         return self.arrays["SENSOR_POS"].copy()
+
+    @property
+    def sensor_rotations(self) -> np.ndarray:
+        """(n_sensors, 3, 3): each sensor's rotation, sensor frame -> array frame (a field b
+        in the array frame reads ``R.T @ b`` on the sensor's axes)."""
+        return self.arrays["SENSOR_ROT"].copy()
 
     @property
     def moment_a_m2(self) -> np.ndarray:
@@ -232,63 +246,57 @@ class MapFile:
         (3,) -> (3,), (n, 3) -> (n, 3)."""
         q = self._one_point(points, extrapolate)
         if q is not None:
-            L = self.kernels["magnet_one"]
-            if L is None:
-                f = magnet_terms(self.kernels["magnet"], np.array([q]))[0]
-            else:
-                d = np.subtract(q, self.kernels["magnet"][0]["pos"])
-                x, y = d[:, 0], d[:, 1]
-                val = _interp_one(L, np.sqrt(x * x + y * y), q[2])  # F_rho/rho, F_z per core
-                f = np.array([val[:, 0] @ x, val[:, 0] @ y, val[:, 1].sum()])
-            f += _trilinear_one(self.kernels["magnet_f0"], q)
+            f = magnet_terms_one(self.kernels["magnet"], self.kernels["magnet_one"], q)
+            f += trilinear_one(self.kernels["magnet_f0"], q)
             return f if np.ndim(points) == 1 else f[None]
         p, single = self._points(points, extrapolate)
-        f = magnet_terms(self.kernels["magnet"], p) + _trilinear(self.kernels["magnet_f0"], p)
+        f = magnet_terms(self.kernels["magnet"], p) + trilinear(self.kernels["magnet_f0"], p)
         return f[0] if single else f
 
     def sensor_induced_field(self, magnet_position_m, extrapolate: bool = False) -> np.ndarray:
-        """Field of the cores magnetized by the magnet at the Hall sensors, T:
-        (3,) -> (2, n_coils, 3) (upper array then lower), (n, 3) -> (n, 2, n_coils, 3).
+        """Field of the cores magnetized by the magnet at the Hall sensors, T (array frame):
+        (3,) -> (n_sensors, 3), (n, 3) -> (n, n_sensors, 3).
 
         Linear cores: component c at sensor s is m . B(p) of the coupled system's adjoint
         sources for that component (in the continuum, the cores magnetized by a unit dipole
         along c at s: reciprocity) -- a mode sum like A (``SCOEF``)."""
-        nc = self.n_coils
+        ns = self.n_sensors
         q = self._one_point(magnet_position_m, extrapolate, "magnet_position_m")
         one = self.kernels["sensor_one"]
         if q is not None and one is not None:
-            b = (modes_one(one, q) @ one["coef"]).reshape(2, nc, 3)
+            b = (modes_one(one, q) @ one["coef"]).reshape(ns, 3)
             return b if np.ndim(magnet_position_m) == 1 else b[None]
         p, single = self._points(magnet_position_m, extrapolate, "magnet_position_m")
-        out = np.zeros((len(p), 6 * nc))
+        out = np.zeros((len(p), 3 * ns))
         if one is not None:
             for s in range(0, len(p), BATCH_CHUNK):
                 f = kernel_rows_many(one, p[s:s + BATCH_CHUNK])  # (m, K): m . B per basis
                 out[s:s + BATCH_CHUNK] = f @ one["coef"]
-            b = out.reshape(-1, 2, nc, 3)
+            b = out.reshape(-1, ns, 3)
             return b[0] if single else b
         one = q is not None
         m = self.arrays["MOMENT"]
         for t, c in self.kernels["scoef"]:
             rows = mode_rows(t, p)[..., :3]  # (n, k, nb, 3): B per unit coefficient
             out += (rows @ m).reshape(len(p), -1) @ c
-        b = out.reshape(-1, 2, nc, 3)
+        b = out.reshape(-1, ns, 3)
         return b[0] if (single or (one and np.ndim(magnet_position_m) == 1)) else b
 
     def sensor_coil_field(self, currents=None) -> np.ndarray:
-        """The coils' field at the sensors: per ampere (2, n_coils, 3, n_coils) T/A, or with
-        ``currents`` (n_coils,) A the field (2, n_coils, 3) T (saturation not applied)."""
+        """The coils' field at the sensors (array frame): per ampere (n_sensors, 3, n_coils)
+        T/A, or with ``currents`` (n_coils,) A the field (n_sensors, 3) T (saturation not
+        applied)."""
         g = self.arrays["SENSOR_COIL"]
         if currents is None:
             return g.copy()
         return g @ self._currents(currents)
 
     def sensor_coil_gradient(self) -> np.ndarray:
-        """The coils' field gradient at the sensors per ampere, (2, n_coils, 3, 3, n_coils)
-        T/(m A), entry [a, s, i, j, k] = dB_i/dx_j of coil k (:func:`gradient_tensor` of the
-        stored rows)."""
-        g = gradient_tensor(np.moveaxis(self.arrays["SENSOR_COIL_GRAD"], 2, -1))
-        return np.moveaxis(g, (-2, -1), (2, 3))
+        """The coils' field gradient at the sensors per ampere (array frame), (n_sensors, 3,
+        3, n_coils) T/(m A), entry [s, i, j, k] = dB_i/dx_j of coil k (:func:`gradient_tensor`
+        of the stored rows)."""
+        g = gradient_tensor(np.moveaxis(self.arrays["SENSOR_COIL_GRAD"], 1, -1))
+        return np.moveaxis(g, (-2, -1), (1, 2))
 
     def saturation_factor(self, currents) -> np.ndarray:
         """Per-coil factors (n_coils,) on the columns of A at these currents (A): the
@@ -304,9 +312,3 @@ class MapFile:
         a = self.actuation(point)[rows]
         return np.linalg.lstsq(a, np.asarray(wanted, float), rcond=None)[0]
 
-
-def _self_check():  # pragma: no cover - manual use on the target host
-    """``python -m firmware_io.mapfile MAP.npz``: load a map and evaluate it at the box centre."""
-    m = MapFile.load(sys.argv[1])
-    lo, hi = m.bounds
-    print(m.meta["design_name"], m.actuation((lo + hi) / 2).shape, m.bias_force((lo + hi) / 2))

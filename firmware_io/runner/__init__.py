@@ -22,7 +22,7 @@ from .calibration import (CALIBRATED_RELATIVE_ERROR, CALIBRATION_CURRENT_A, cali
 from .config import RunnerConfig, config_from_map
 from .drive import CurrentPath, feedforward_voltage, rl_step
 from .forcelaw import force_law_rows
-from .loop import FAULTS, LOCALIZATION_FAULTS, Runner, SceneForce, StepRecord
+from .loop import FAULTS, LOCALIZATION_FAULTS, Runner, RunnerParts, SceneForce, StepRecord
 from .pipeline import (EXPECTED_SATURATION, SENSOR_FAULTS, CurrentHistory, Fix, SensorFrame,
                        SensorPipeline)
 from .skip import CoilSkipBound
@@ -33,7 +33,7 @@ __all__ = [
     "CALIBRATED_RELATIVE_ERROR", "CALIBRATION_CURRENT_A", "calibrate_sensors",
     "calibration_currents", "record_calibration", "RunnerConfig", "config_from_map",
     "CurrentPath", "feedforward_voltage", "rl_step", "force_law_rows", "FAULTS",
-    "LOCALIZATION_FAULTS", "Runner", "SceneForce", "StepRecord", "EXPECTED_SATURATION",
+    "LOCALIZATION_FAULTS", "Runner", "RunnerParts", "SceneForce", "StepRecord", "EXPECTED_SATURATION",
     "SENSOR_FAULTS", "CurrentHistory", "Fix", "SensorFrame", "SensorPipeline", "CoilSkipBound",
     "ThermalGuard", "ConstantVelocityTracker",
 ]

@@ -1,23 +1,20 @@
-"""The runner's configuration: bounds, period, rendered axes, fault policy, and the coil drives.
+"""The runner's configuration: the drive record, period, rendered axes and fault policy.
 
-R, L and the MD10C supply voltage are stored once, in the configuration; its
-``drives`` (one :class:`firmware_io.hw.md10c.CoilDrive` per coil, derived from them) is what
-the runner's current path and the PWM driver both read. A map file
-carries the drive data (``meta['drive']``, written by designkit.model.electrical.drive_data):
-:func:`config_from_map`. SI units throughout; the fault and resume policy the fields tune is
-described in docs/runner.md.
+The coils' R, L, supply, driver and current bounds are the map's drive record
+(:class:`firmware_io.mapfile.drive.DriveRecord`, ``meta['drive']``, written by
+designkit.model.electrical.drive_data), held whole in :attr:`RunnerConfig.drive`; its ``drives`` (one
+:class:`firmware_io.hw.driver.CoilDrive` per coil) is what the runner's current path and the
+PWM driver both read. :func:`config_from_map` builds the configuration from a map. SI units
+throughout; the fault and resume policy the fields tune is described in docs/runner.md.
 """
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 
-import numpy as np
-
-from ..errors import BadInputError, FirmwareIOError
-from ..hw.md10c import MD10C_CONTINUOUS_A, MD10C_SUPPLY_MAX_V, MD10C_SUPPLY_MIN_V, CoilDrive
+from ..errors import BadInputError
+from ..mapfile.drive import DriveRecord
 
 
 @dataclass(frozen=True)
@@ -26,15 +23,12 @@ class RunnerConfig:
 
     Attributes
     ----------
-    resistance_ohm, inductance_h : tuple of float, one per coil
-        Coil resistance at the operating temperature and inductance (secant, at the operating
-        current) -> the L/R lag the feed-forward compensates.
-    supply_voltage_v : float
-        MD10C motor supply, V (<= 30 V).
-    current_limit_a, total_current_a : float
-        Per-coil bound |I_k| <= u and the budget sum |I_k| <= I_t, A.
+    drive : DriveRecord
+        The coils' R (at the operating temperature) and L -> the L/R lag the feed-forward
+        compensates; the supply and the driver; the per-coil bound |I_k| <= u and the budget
+        sum |I_k| <= I_t (A); the I^2 t guard's parameters; the PWM frequency.
     unipolar : bool
-        0 <= I_k (the thesis' drive) instead of the MD10C's bipolar drive.
+        0 <= I_k (the thesis' drive) instead of the driver's bipolar drive.
     control_period_s : float
         Step period T, s.
     force_axes : {'z', 'xyz'}
@@ -45,8 +39,6 @@ class RunnerConfig:
         is at most this, N (0: never skip; see :class:`firmware_io.runner.skip.CoilSkipBound`).
     feedforward : bool
         Voltage feed-forward through the L/R model (off: the duty is the steady-state one).
-    thermal_continuous_current_a, thermal_time_constant_s : float
-        :class:`firmware_io.runner.thermal.ThermalGuard` parameters, A and s.
     resume_after_s : float
         Fault-free time before a transient device fault (pwm_nack, overrun, over_limit) is
         cleared, s.
@@ -68,22 +60,14 @@ class RunnerConfig:
     max_fix_age_s : float
         The tracker's newest accepted fix may be at most this old (frame time), s; older: the
         prediction is not supported by the sensors ('lost', coils off).
-    drives : tuple of CoilDrive (derived)
-        One per coil: R, L, the supply, and the current the supply can push through R.
     """
 
-    resistance_ohm: tuple
-    inductance_h: tuple
-    supply_voltage_v: float
-    current_limit_a: float
-    total_current_a: float
+    drive: DriveRecord
     unipolar: bool = False
     control_period_s: float = 1e-3
     force_axes: str = "z"
     skip_force_n: float = 0.0
     feedforward: bool = True
-    thermal_continuous_current_a: float = 3.0
-    thermal_time_constant_s: float = 300.0
     resume_after_s: float = 0.25
     resume_fixes: int = 3
     max_pwm_retries: int = 3
@@ -93,11 +77,9 @@ class RunnerConfig:
     max_fix_age_s: float = 0.05
 
     def __post_init__(self):
-        self.drives  # noqa: B018  (checks R, L and the supply, names the field in the error)
-        if not (0 < self.current_limit_a <= MD10C_CONTINUOUS_A):
-            raise BadInputError("current_limit_a", "in (0, 13] A", self.current_limit_a)
-        if not (self.total_current_a >= 0 and math.isfinite(self.total_current_a)):
-            raise BadInputError("total_current_a", "a finite value >= 0 A", self.total_current_a)
+        if not isinstance(self.drive, DriveRecord):
+            raise BadInputError("drive", "a firmware_io.mapfile.drive.DriveRecord",
+                                type(self.drive).__name__)
         if not (0 < self.control_period_s <= 0.1):
             raise BadInputError("control_period_s", "in (0, 0.1] s", self.control_period_s)
         if self.force_axes not in ("z", "xyz"):
@@ -113,47 +95,13 @@ class RunnerConfig:
         if not (self.alert_limit_m > 0):
             raise BadInputError("alert_limit_m", "a length > 0 m (inf: none)", self.alert_limit_m)
 
-    @functools.cached_property
-    def drives(self) -> tuple[CoilDrive, ...]:
-        """One :class:`CoilDrive` per coil from R, L and the supply."""
-        return _coil_drives(self.resistance_ohm, self.inductance_h, self.supply_voltage_v)
-
     @property
     def n_coils(self) -> int:
-        return len(self.drives)
-
-
-def _coil_drives(resistance_ohm, inductance_h, supply_voltage_v) -> tuple[CoilDrive, ...]:
-    """Checked per-coil drives (errors name the configuration's field, its value and range)."""
-    n = len(resistance_ohm)
-    r = np.asarray(resistance_ohm, float)
-    ind = np.asarray(inductance_h, float)
-    if n == 0 or not np.all(np.isfinite(r)) or np.any(r <= 0):
-        raise BadInputError("resistance_ohm", "one finite value > 0 ohm per coil", resistance_ohm)
-    if ind.shape != (n,) or not np.all(np.isfinite(ind)) or np.any(ind <= 0):
-        raise BadInputError("inductance_h", f"{n} finite values > 0 H", inductance_h)
-    if not MD10C_SUPPLY_MIN_V <= supply_voltage_v <= MD10C_SUPPLY_MAX_V:
-        raise BadInputError("supply_voltage_v", "in [5, 30] V (MD10C rating)", supply_voltage_v)
-    return tuple(CoilDrive.supply_limited(supply_voltage_v, float(rk), float(lk))
-                 for rk, lk in zip(resistance_ohm, inductance_h))
+        return self.drive.n_coils
 
 
 def config_from_map(fieldmap, **overrides) -> RunnerConfig:
-    """RunnerConfig from the drive data a map file carries (``meta['drive']``, SI keys)."""
-    d = dict(fieldmap.meta.get("drive") or {})
-    need = ("resistance_ohm", "inductance_h", "supply_voltage_v", "current_limit_a",
-            "total_current_a")
-    missing = [k for k in need if k not in d]
-    if missing:
-        raise FirmwareIOError(f"the map file carries no drive data {missing}: rebuild it with "
-                              "`designkit map` (map format v2)")
-    n = fieldmap.n_coils
-    kw = {k: d[k] for k in need}
-    for k in ("resistance_ohm", "inductance_h"):
-        v = kw[k]
-        kw[k] = tuple(float(x) for x in (v if isinstance(v, (list, tuple)) else [v] * n))
-    for k in ("thermal_continuous_current_a", "thermal_time_constant_s"):
-        if k in d:
-            kw[k] = float(d[k])
-    kw.update(overrides)
-    return RunnerConfig(**kw)
+    """RunnerConfig from the drive record a map file carries (``meta['drive']``, checked by
+    :meth:`DriveRecord.from_dict`); ``overrides``: the other fields."""
+    drive = DriveRecord.from_dict(fieldmap.meta.get("drive"), fieldmap.n_coils)
+    return RunnerConfig(drive, **overrides)

@@ -1,12 +1,12 @@
-"""The current path of one control step: allocator amperes -> the voltage the MD10C should apply
--> its duty and direction, and the R-L model of the currents that results.
+"""The current path of one control step: allocator amperes -> the voltage the driver should
+apply -> its duty and direction, and the R-L model of the currents that results.
 
 One unit change per hop: the allocator's currents (A) become, through the exact R-L step
 response, the average voltage (V, within the supply) that brings each coil to its command at
 the end of the period; :meth:`firmware_io.hw.coils.CoilDriver.command_voltage` turns that voltage
 into the PCA9685 duty (``|V| / Vs``); the model advances by the voltage the quantised duty
-really applies. R, L and Vs are read from the coils' :class:`firmware_io.hw.md10c.CoilDrive`
-records (the configuration's ``drives``), the one place they are stored.
+really applies. R, L and Vs are read from the coils' :class:`firmware_io.hw.driver.CoilDrive`
+records (the drive record's ``drives``), the one place they are stored.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..hw.md10c import CoilDrive
+from ..hw.driver import CoilDrive
 
 
 def feedforward_voltage(target_a, current_a, resistance_ohm, inductance_h, period_s,
@@ -25,7 +25,7 @@ def feedforward_voltage(target_a, current_a, resistance_ohm, inductance_h, perio
     With a constant voltage V over the period T the current of an R-L coil is
     ``I(T) = V/R + (I0 - V/R) exp(-T R / L)`` exactly, so
     ``V = R (I* - I0 e) / (1 - e)`` with ``e = exp(-T R / L)``. The result is clipped to
-    ``[-supply_v, supply_v]`` (the MD10C's sign-magnitude output); then the target is reached
+    ``[-supply_v, supply_v]`` (the driver's sign-magnitude output); then the target is reached
     later, never overshot, because I(t) is monotone under a constant V.
 
     Parameters

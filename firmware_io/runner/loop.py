@@ -68,15 +68,15 @@ class SceneForce:
         return self.scene.force(np.asarray(p, float)[None], np.asarray(v, float)[None])[0]
 
 
-class Runner:
-    """Compose map, scene, localizer, allocator and drivers into the fail-safe control loop.
+@dataclass(frozen=True)
+class RunnerParts:
+    """What the control loop is made of besides its configuration.
 
-    Parameters
+    Attributes
     ----------
     fieldmap : firmware_io.actuation.ActuationSource
-        ``actuation(point, rows=..., coils=...)`` (rows Bx, By, Bz, dBx/dx, dBx/dy, dBx/dz,
-        dBy/dy, dBy/dz, per ampere), ``bounds`` (lower (3,), upper (3,)) m, ``moment_a_m2``
-        (3,), and optionally ``bias_force(point) -> (3,)`` N.
+        A(p) (rows Bx, By, Bz, dBx/dx, dBx/dy, dBx/dz, dBy/dy, dBy/dz, per ampere), F0(p) N,
+        ``bounds`` (lower (3,), upper (3,)) m and ``moment_a_m2`` (3,) A m^2.
     scene : object
         ``force(position_m, velocity_m_s) -> (3,)`` N, the object's force on the finger.
     localizer : object
@@ -93,9 +93,27 @@ class Runner:
         state.
     sensors : callable
         ``sensors(t_s) -> Fix | SensorFrame | None``: the newest result not yet handed out, or
-        None. A source with ``attach(pipeline)`` is given this runner's
+        None. A source with ``attach(pipeline)`` is given the runner's
         :class:`SensorPipeline` and runs it on its side (the sensor thread); a raw
         :class:`SensorFrame` is processed inside the step.
+    """
+
+    fieldmap: object
+    scene: object
+    localizer: object
+    tracker: object
+    allocate: Callable
+    coils: object
+    sensors: Callable
+
+
+class Runner:
+    """Compose map, scene, localizer, allocator and drivers into the fail-safe control loop.
+
+    Parameters
+    ----------
+    parts : RunnerParts
+        The map, scene, localizer, tracker, allocator, coil driver and sensor source.
     config : RunnerConfig
     log : callable
         ``log(line)`` for one line per fault/resume.
@@ -103,20 +121,24 @@ class Runner:
         ``clock() -> s`` for the compute time of a step (default ``time.perf_counter``).
     """
 
-    def __init__(self, fieldmap, scene, localizer, tracker, allocate: Callable, coils,
-                 sensors: Callable, config: RunnerConfig, *, log: Callable[[str], None] = print,
+    def __init__(self, parts: RunnerParts, config: RunnerConfig, *,
+                 log: Callable[[str], None] = print,
                  clock: Callable[[], float] = time.perf_counter):
+        fieldmap, coils, sensors = parts.fieldmap, parts.coils, parts.sensors
         if coils.n_coils != config.n_coils:
-            raise BadInputError("config.resistance_ohm", f"{coils.n_coils} coils (the driver's)",
+            raise BadInputError("config.drive.resistance_ref_ohm",
+                                f"{coils.n_coils} values (one per coil of the driver)",
                                 config.n_coils)
-        self.map, self.scene, self.localizer, self.tracker = fieldmap, scene, localizer, tracker
-        self.allocate, self.coils, self.sensors, self.cfg = allocate, coils, sensors, config
+        self.map, self.scene = fieldmap, parts.scene
+        self.localizer, self.tracker = parts.localizer, parts.tracker
+        self.allocate, self.coils, self.sensors, self.cfg = parts.allocate, coils, sensors, config
         self.log, self.clock = log, clock
         n = config.n_coils
-        self.path = CurrentPath(config.drives, config.control_period_s, config.feedforward)
-        self.limit = np.full(n, config.current_limit_a)
-        self.thermal = ThermalGuard(n, config.thermal_continuous_current_a,
-                                    config.thermal_time_constant_s)
+        drive = config.drive
+        self.path = CurrentPath(drive.drives, config.control_period_s, config.feedforward)
+        self.limit = np.full(n, drive.current_limit_a)
+        self.thermal = ThermalGuard(n, drive.thermal_continuous_current_a,
+                                    drive.thermal_time_constant_s)
         m = np.asarray(fieldmap.moment_a_m2, float)
         self.moment = m
         mx, my, mz = m
@@ -140,7 +162,7 @@ class Runner:
         self.fault_log: list[tuple[float, str, str]] = []
         # modelled currents at the start of each step of the last HISTORY_S (frames arrive late)
         self.history = CurrentHistory(n, max(16, int(HISTORY_S / config.control_period_s)))
-        self.pipeline = SensorPipeline(localizer, fieldmap, n, self.history.at, m)
+        self.pipeline = SensorPipeline(self.localizer, fieldmap, n, self.history.at, m)
         self.last_fix: Fix | None = None
         self.gate_d2 = chi2_quantile(config.gate_risk, 3)
         self._candidate: Fix | None = None     # a gated-out fix awaiting confirmation
@@ -157,11 +179,11 @@ class Runner:
         return self.path.current_a
 
     # -- life cycle ----------------------------------------------------------------------------
-    def start(self, pwm_frequency_hz: float = 1526.0) -> None:
-        """Initialise every PWM board into the safe state (all coils off), then run the step's
-        computations once at the box centre so that the first real step is not slowed by
-        first-call costs (an overrun)."""
-        self.coils.initialize(pwm_frequency_hz)
+    def start(self) -> None:
+        """Initialise every PWM board at the drive record's PWM frequency into the safe state
+        (all coils off), then run the step's computations once at the box centre so that the
+        first real step is not slowed by first-call costs (an overrun)."""
+        self.coils.initialize(self.cfg.drive.pwm_frequency_hz)
         self.coils.all_off()
         self.path.current_a[:] = 0.0
         self.state = "safe"
@@ -374,11 +396,12 @@ class Runner:
             tm = self._mark("object_force", tm)
         command = self._allocate(p, f_ref)
         total = float(np.sum(np.abs(command)))
-        if np.any(np.abs(command) > self.limit + 1e-9) or total > cfg.total_current_a + 1e-9 \
+        budget = cfg.drive.total_current_a
+        if np.any(np.abs(command) > self.limit + 1e-9) or total > budget + 1e-9 \
                 or (cfg.unipolar and np.any(command < -1e-9)):
             self._enter_fault(t_s, "over_limit",
                               f"command max |I| {np.abs(command).max():.3f} A, sum {total:.3f} A "
-                              f"(limits {cfg.current_limit_a:.3f} A, {cfg.total_current_a:.3f} A)")
+                              f"(limits {cfg.drive.current_limit_a:.3f} A, {budget:.3f} A)")
             return self._record(t_s, t0, p, f_ref, new_frame, off=True)
         return self._drive(t_s, t0, p, f_ref, command, new_frame)
 
@@ -397,21 +420,18 @@ class Runner:
             if len(k) < cfg.n_coils:
                 keep = k
         fm = self.force_matrix(p, keep)
-        target = f_ref[2:3] if self.z_only else f_ref
-        bias = getattr(self.map, "bias_force", None)
-        if bias is not None:
-            b = np.asarray(bias(p), float)
-            target = target - (b[2:3] if self.z_only else b)
+        b = np.asarray(self.map.bias_force(p), float)
+        target = (f_ref - b)[2:3] if self.z_only else f_ref - b
         if prof:
             tm = self._mark("force_matrix", tm)
         if keep is None:
-            command, _ = self.allocate(fm, target, self.limit, cfg.total_current_a,
+            command, _ = self.allocate(fm, target, self.limit, cfg.drive.total_current_a,
                                        unipolar=cfg.unipolar)
             command = np.asarray(command, float)
         else:
             command = np.zeros(cfg.n_coils)
             if len(keep):
-                i, _ = self.allocate(fm, target, self.limit[keep], cfg.total_current_a,
+                i, _ = self.allocate(fm, target, self.limit[keep], cfg.drive.total_current_a,
                                      unipolar=cfg.unipolar)
                 command[keep] = i
         if prof:

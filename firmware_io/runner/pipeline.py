@@ -114,8 +114,9 @@ class SensorPipeline:
     localizer : object
         ``locate(top, bottom, currents=None)`` -> an estimate with ``position_m`` and ``ok``.
     fieldmap : object
-        Optionally ``sensor_coil_field() -> (2, n, 3, n)`` T/A and ``sensor_positions_m``
-        (2, n, 3) m: the expected-saturation test (:data:`EXPECTED_SATURATION`).
+        Optionally ``sensor_coil_field() -> (2 n, 3, n_coils)`` T/A and
+        ``sensor_positions_m`` (2 n, 3) m, the map's flat sensor list (upper array, then
+        lower): the expected-saturation test (:data:`EXPECTED_SATURATION`).
     n_coils : int
     n_sensors : int or None -- sensors per array (default: the map's sensor positions, else the
         localizer model's, else one per coil)
@@ -140,7 +141,7 @@ class SensorPipeline:
         self._coil_field = None
         if coil_field is not None:
             g = np.asarray(coil_field(), float) if callable(coil_field) else None
-            if g is not None and g.shape == (2, self.n, 3, n_coils):
+            if g is not None and g.size == 2 * self.n * 3 * n_coils:
                 self._coil_field = g.reshape(2 * self.n * 3, n_coils)
                 self._sensor_pts = np.asarray(fieldmap.sensor_positions_m,
                                               float).reshape(-1, 3)
@@ -219,10 +220,12 @@ class SensorPipeline:
 
 
 def _sensors_per_array(fieldmap, localizer, n_coils: int) -> int:
-    """Sensors per array: the map's sensor positions (2, n, 3), else the localizer model's,
-    else one per coil."""
+    """Sensors per array: half the map's flat sensor list (2 n, 3), else the localizer
+    model's (2, n, 3), else one per coil."""
     for owner in (fieldmap, getattr(localizer, "model", None)):
         pts = getattr(owner, "sensor_positions_m", None)
         if pts is not None and np.ndim(pts) == 3 and np.shape(pts)[0] == 2:
             return int(np.shape(pts)[1])
+        if pts is not None and np.ndim(pts) == 2 and len(pts) % 2 == 0:
+            return len(pts) // 2
     return int(n_coils)

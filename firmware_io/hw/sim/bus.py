@@ -17,7 +17,7 @@ from typing import Any, Literal
 
 from ...errors import NACK_ERRNO
 from ..bus import I2C_M_RD, transaction_wire_time_s
-from .device import SimDevice, _Nack
+from .device import SimDevice, Nack
 
 
 class SimClock:
@@ -98,7 +98,7 @@ class SimBus:
     def _give_clock(self, device: SimDevice) -> None:
         if self.clock is not None:
             device.clock = self.clock.now
-        for ch in getattr(device, "channels", []):
+        for ch in device.channels:
             for d in ch:
                 self._give_clock(d)
 
@@ -108,7 +108,7 @@ class SimBus:
 
         def walk(d: SimDevice) -> None:
             out.append(d)
-            for ch in getattr(d, "channels", []):
+            for ch in d.channels:
                 for sub in ch:
                     walk(sub)
         for d in self.devices:
@@ -178,7 +178,7 @@ class SimBus:
                         acked |= d.on_general_call(data)
                         touched.append(d)
                     if not acked:
-                        raise _Nack
+                        raise Nack
                     continue
                 devs = [d for d in reach if d.responds_to(addr)]
                 if len(devs) > 1:
@@ -188,11 +188,11 @@ class SimBus:
                     break
                 if not devs:
                     logged.append(Message(op, addr, bytes(payload) if op == "w" else b""))
-                    raise _Nack
+                    raise Nack
                 dev = devs[0]
                 try:
                     dev._check_nack()
-                except _Nack:
+                except Nack:
                     logged.append(Message(op, addr, bytes(payload) if op == "w" else b""))
                     raise
                 if dev not in touched:
@@ -205,7 +205,7 @@ class SimBus:
                     data = dev.on_read(addr, int(payload))
                     logged.append(Message("r", addr, data))
                     reads.append(data)
-        except _Nack:
+        except Nack:
             error = NACK_ERRNO
         finally:
             for d in touched:  # the master sends STOP after a NACK too

@@ -11,15 +11,18 @@ import time
 from collections.abc import Callable
 
 
-class _Nack(Exception):
-    pass
-
+class Nack(Exception):
+    """A simulated device did not acknowledge (the bus turns it into errno 121, as Linux does)."""
 
 
 class SimDevice:
-    """Base of the device models: address matching, NACK injection, rule violations."""
+    """Base of the device models: address matching, NACK injection, rule violations.
+
+    ``channels``: the devices behind this one, one list per downstream channel (a switch's; an
+    end device has none)."""
 
     def __init__(self) -> None:
+        self.channels: list[list[SimDevice]] = []
         self.violations: list[str] = []
         self._nack_remaining = 0
         self._nack_skip = 0
@@ -33,13 +36,13 @@ class SimDevice:
 
     def _check_nack(self) -> None:
         if self.nack_always:
-            raise _Nack
+            raise Nack
         if self._nack_remaining > 0:
             if self._nack_skip > 0:
                 self._nack_skip -= 1
                 return
             self._nack_remaining -= 1
-            raise _Nack
+            raise Nack
 
     def responds_to(self, addr: int) -> bool:
         raise NotImplementedError
