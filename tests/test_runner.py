@@ -111,7 +111,7 @@ def _run(device_and_a, faults: str, duration_s: float, *, limit=4.8, total=20.0,
         holder["runner"] = r
         return r
 
-    res = simulate(dev, factory, traj, duration_s=duration_s, period_s=1e-3,
+    res = simulate(dev, factory, traj, duration_s=duration_s,
                    faults=FaultSchedule.parse(faults, duration_s), progress=False)
     return dev, holder["runner"], res
 

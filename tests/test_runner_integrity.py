@@ -84,7 +84,7 @@ def _jumping_run(device, seed, duration, faults, spikes, moved, **cfg):
         holder["runner"], holder["loc"] = r, loc
         return r
 
-    res = simulate(dev, factory, traj, duration_s=duration, period_s=1e-3,
+    res = simulate(dev, factory, traj, duration_s=duration,
                    faults=FaultSchedule.parse(faults, duration), progress=False)
     return res, holder["runner"], holder["loc"]
 
@@ -221,7 +221,7 @@ def test_multi_frame_pl_lets_the_runner_acquire_and_render(device, sigma_m, rend
         r.start()
         return r
 
-    res = simulate(dev, factory, traj, duration_s=0.3, period_s=1e-3, progress=False)
+    res = simulate(dev, factory, traj, duration_s=0.3, progress=False)
     write_run_csv(tmp_path / "run.csv", res.columns)
     with (tmp_path / "run.csv").open() as fh:
         rows = list(csv.DictReader(fh))

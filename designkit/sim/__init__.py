@@ -19,7 +19,7 @@ The loop is :mod:`.loop`, what a run says :mod:`.report` and :mod:`.plot`, the w
 
 from .device import SimulatedDevice
 from .faults import FAULT_TYPES, FaultSchedule, inject
-from .loop import SimulationResult, simulate
+from .loop import LoopTiming, SimulationResult, simulate
 from .plot import plot_run
 from .report import (force_error_causes, force_lag_s, loop_by_kind, loop_by_state, summarize,
                      time_to_safe, write_run_csv)
@@ -29,7 +29,7 @@ from .trajectory import TRAJECTORY_COLUMNS, Trajectory, poke_trajectory, slide_t
 
 __all__ = [
     "SimulatedDevice", "FAULT_TYPES", "FaultSchedule", "inject",
-    "SimulationResult", "simulate", "plot_run", "force_error_causes", "force_lag_s",
+    "LoopTiming", "SimulationResult", "simulate", "plot_run", "force_error_causes", "force_lag_s",
     "loop_by_kind", "loop_by_state", "summarize", "time_to_safe", "write_run_csv", "drive_data",
     "run_simulation", "SimSensorSource", "TRAJECTORY_COLUMNS", "Trajectory", "poke_trajectory",
     "slide_trajectory",

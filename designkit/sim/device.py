@@ -24,7 +24,7 @@ from firmware_io.hw.sim import SimBus, SimClock, SimPCA9685, SimTCA9548A, SimTLV
 from ..array import CoilArray, force_matrix
 from ..coil import Coil
 from ..sensor_sim import SensorSimulator, analog_reading
-from .sensors import SimSensorSource
+from .sensors import MODELLED_FIT_S, SimSensorSource
 
 
 class SimulatedDevice:
@@ -211,10 +211,12 @@ class SimulatedDevice:
         self.current_a[:] = 0.0
         return calibrate_sensors(model, top, bottom, applied)
 
-    def sensor_source(self, position_at, period_s: float) -> SimSensorSource:
+    def sensor_source(self, position_at, period_s: float,
+                      fit_time_s: float | None = MODELLED_FIT_S) -> SimSensorSource:
         """The runner's sensor source on this device; ``position_at(t_s)`` is the true position
-        (the path given to :meth:`prepare`, one sample per control period ``period_s``)."""
-        return SimSensorSource(self, position_at, period_s)
+        (the path given to :meth:`prepare`, one sample per control period ``period_s``);
+        ``fit_time_s``: the fit's compute time in the timeline (None: measured)."""
+        return SimSensorSource(self, position_at, period_s, fit_time_s)
 
 
 def _interp_rows(steps, idx, values):

@@ -29,7 +29,7 @@ from ..render.laws import ConstraintLaw
 from ..render import scenefile  # called through the module: tests substitute its functions
 from .device import SimulatedDevice
 from .faults import FaultSchedule
-from .loop import simulate
+from .loop import LoopTiming, simulate
 from .plot import plot_run
 from .report import force_error_causes, summarize, write_run_csv
 from .trajectory import Trajectory, poke_trajectory, slide_trajectory
@@ -110,7 +110,8 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
         runner.start()
         return runner
 
-    res = simulate(device, factory, path, duration_s=duration, period_s=period_s,
+    timing = LoopTiming(period_s, "measured" if profile else "modelled")
+    res = simulate(device, factory, path, duration_s=duration, timing=timing,
                    faults=schedule, scene_force=SceneForce(scene).force, progress=progress)
     summary = summarize(res, force_error_causes(device, fmap, res))
     summary.update({"object": obj, "trajectory": str(trajectory), "design": design.name,
