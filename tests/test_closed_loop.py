@@ -45,7 +45,8 @@ def run(small_map, thesis_array, tmp_path_factory):
     finally:
         mp.undo()
     rows = list(csv.DictReader((out / "r" / "run.csv").open()))
-    col = {k: np.array([float(r[k]) for r in rows]) for k in rows[0] if k != "state"}
+    col = {k: np.array([float(r[k]) for r in rows]) for k in rows[0]
+           if k not in ("state", "fault_excluded")}
     judged = (col["t_s"] >= SETTLE_S) & np.array([r["state"] == "running" for r in rows])
     return summary, col, judged
 

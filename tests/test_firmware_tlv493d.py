@@ -12,7 +12,7 @@ import pytest
 
 from firmware_io.hw.bus import raw_write
 
-from firmware_io.hw.tlv493d import TLV493D, tlv493d_address, tlv493d_decode, tlv493d_write_frame
+from firmware_io.hw.tlv493d import FrameChecks, TLV493D, tlv493d_address, tlv493d_decode, tlv493d_write_frame
 from firmware_io.errors import BadInputError, I2CError, SensorConfigError
 from firmware_io.hw.sim import SimBus, SimClock, SimTLV493D
 
@@ -132,7 +132,7 @@ def test_address_assignment_and_low_reset_level():
 
 
 def test_recovery_from_stuck_frame_counter():
-    bus, sim, tlv, _ = make(hang_threshold=3)
+    bus, sim, tlv, _ = make(checks=FrameChecks(hang_reads=3))
     tlv.configure()
     tlv.read()
     resets_before = sim.resets

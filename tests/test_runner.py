@@ -16,11 +16,10 @@ from designkit.errors import BadInputError
 from designkit.sim import (FAULT_TYPES, FaultSchedule, SimulatedDevice, Trajectory, simulate,
                            slide_trajectory, time_to_safe)
 from firmware_io.errors import FirmwareIOError
-from firmware_io.localization import ConstantVelocityKalman
-from firmware_io.runner import (Fix, Runner, RunnerConfig, ThermalGuard, feedforward_voltage,
-                                rl_step)
+from firmware_io.runner import (Fix, PoseTracker, Runner, RunnerConfig, RunnerIO, ThermalGuard,
+                                feedforward_voltage, rl_step)
 
-from _runner_fakes import ConstantMap, HoldTracker, PlaneScene, TruthLocalizer, clipped_lstsq
+from _runner_fakes import HoldTracker, PlaneScene, TruthEstimator, clipped_lstsq, device_map
 
 BOX = (np.array([-0.075, -0.075, 0.010]), np.array([0.075, 0.075, 0.080]))
 
@@ -95,8 +94,7 @@ def _run(device_and_a, faults: str, duration_s: float, *, limit=4.8, total=20.0,
     dev = SimulatedDevice(design, array, seed=4)
     traj = slide_trajectory(lambda x, y: np.full_like(x, 0.05), duration_s=duration_s,
                             samples=401)
-    moment = dev.moment
-    fmap = ConstantMap(a, BOX, moment)
+    fmap = device_map(a, BOX, dev)
     holder = {}
 
     def factory(source, clock, hook):
@@ -104,9 +102,10 @@ def _run(device_and_a, faults: str, duration_s: float, *, limit=4.8, total=20.0,
                            inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
                            current_limit_a=limit, total_current_a=total,
                            resume_after_s=resume_after_s, thermal_time_constant_s=300.0)
-        r = Runner(fmap, PlaneScene(0.05, 6.0), TruthLocalizer(lambda: source.frame_truth_m),
-                   HoldTracker(), hook(clipped_lstsq), dev.coils, source, cfg, clock=clock,
-                   log=lambda line: None)
+        r = Runner(fmap, PlaneScene(0.05, 6.0),
+                   TruthEstimator(lambda: source.frame_truth_m, dev.moment),
+                   RunnerIO(dev.coils, source, lambda line: None, clock), cfg,
+                   tracker=HoldTracker(), allocate=hook(clipped_lstsq))
         r.start()
         holder["runner"] = r
         return r
@@ -163,11 +162,12 @@ def test_safe_state_is_one_all_off_write_per_board(device_and_a):
     class Source:
         def __call__(self, t):
             from firmware_io.runner import SensorFrame
-            return SensorFrame(np.zeros((9, 3)), np.zeros((9, 3)), ("ok",) * 18, t)
+            return SensorFrame(np.zeros((18, 3)), ("ok",) * 18, t)
 
-    r = Runner(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0),
-               TruthLocalizer(lambda: truth["p"]), HoldTracker(), clipped_lstsq, dev.coils,
-               Source(), cfg, log=lambda line: None, clock=lambda: 0.0)
+    r = Runner(device_map(a, BOX, dev), PlaneScene(0.05, 6.0),
+               TruthEstimator(lambda: truth["p"], dev.moment),
+               RunnerIO(dev.coils, Source(), lambda line: None, lambda: 0.0), cfg,
+               tracker=HoldTracker(), allocate=clipped_lstsq)
     r.start()
     rec = r.step(0.0)
     assert rec.state == "running" and np.any(rec.command_a != 0)
@@ -224,11 +224,12 @@ def test_pwm_nack_is_latched_after_repeated_failures(device_and_a):
     class Source:
         def __call__(self, t):
             from firmware_io.runner import SensorFrame
-            return SensorFrame(np.zeros((9, 3)), np.zeros((9, 3)), ("ok",) * 18, t)
+            return SensorFrame(np.zeros((18, 3)), ("ok",) * 18, t)
 
-    r = Runner(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0),
-               TruthLocalizer(lambda: np.array([0.0, 0.0, 0.03])), HoldTracker(), clipped_lstsq,
-               dev.coils, Source(), cfg, log=lambda line: None, clock=lambda: 0.0)
+    r = Runner(device_map(a, BOX, dev), PlaneScene(0.05, 6.0),
+               TruthEstimator(lambda: np.array([0.0, 0.0, 0.03]), dev.moment),
+               RunnerIO(dev.coils, Source(), lambda line: None, lambda: 0.0), cfg,
+               tracker=HoldTracker(), allocate=clipped_lstsq)
     r.start()
     assert r.step(0.0).state == "running"
     dev.sim_boards[0].nack_always = True
@@ -276,8 +277,8 @@ def test_hardware_entry_refuses_a_missing_sensor_array():
     for i in range(9):                       # the upper array only: the lower cable is off
         muxes[i // 8].attach(i % 8, SimTLV493D())
     status = SensorArrays(bus, sleep=clock.sleep).configure()
-    with pytest.raises(FirmwareIOError, match="lower sensor array answers with 0 of 9"):
-        check_sensor_arrays(status, 9)
+    with pytest.raises(FirmwareIOError, match="9 of 18 sensors answer.*sensors \\[9, 10"):
+        check_sensor_arrays(status)
 
 
 def test_trajectory_file_with_wrong_columns(tmp_path):
@@ -366,12 +367,12 @@ def _scripted_runner(device_and_a, script):
 
     def source(t):
         ok, problems = script.get(int(round(t / 1e-3)), (True, ()))
-        return Fix(p.copy(), ok, t, problems, np.zeros(18, bool), 0.0,
+        return Fix(p.copy(), dev.moment.copy(), ok, t, problems, np.zeros(18, bool), 0.0,
                    (0.3e-3) ** 2 * np.eye(3), 1e-3)
 
-    r = Runner(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0),
-               TruthLocalizer(lambda: p), ConstantVelocityKalman(), clipped_lstsq, dev.coils,
-               source, cfg, log=lambda line: None, clock=lambda: 0.0)
+    r = Runner(device_map(a, BOX, dev), PlaneScene(0.05, 6.0), TruthEstimator(lambda: p),
+               RunnerIO(dev.coils, source, lambda line: None, lambda: 0.0), cfg,
+               tracker=PoseTracker(), allocate=clipped_lstsq)
     r.start()
     return r, dev
 

@@ -56,9 +56,9 @@ def _fake_loop(thesis_array, timing, faults="sensor_dead@0.1"):
 
     from designkit.design import default_design
     from designkit.sim import FaultSchedule, SimulatedDevice, simulate, slide_trajectory
-    from firmware_io.runner import Runner, RunnerConfig
+    from firmware_io.runner import Runner, RunnerConfig, RunnerIO
 
-    from _runner_fakes import ConstantMap, HoldTracker, PlaneScene, TruthLocalizer, clipped_lstsq
+    from _runner_fakes import HoldTracker, PlaneScene, TruthEstimator, clipped_lstsq, device_map
 
     box = (np.array([-0.075, -0.075, 0.010]), np.array([0.075, 0.075, 0.080]))
     dev = SimulatedDevice(default_design(), thesis_array, seed=3)
@@ -68,10 +68,10 @@ def _fake_loop(thesis_array, timing, faults="sensor_dead@0.1"):
         cfg = RunnerConfig(resistance_ohm=(dev.resistance_ohm,) * 9,
                            inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
                            current_limit_a=4.8, total_current_a=20.0, resume_after_s=0.02)
-        r = Runner(ConstantMap(a, box, dev.moment), PlaneScene(0.05, 6.0),
-                   TruthLocalizer(lambda: source.frame_truth_m), HoldTracker(),
-                   hook(clipped_lstsq), dev.coils, source, cfg, clock=clock,
-                   log=lambda line: None)
+        r = Runner(device_map(a, box, dev), PlaneScene(0.05, 6.0),
+                   TruthEstimator(lambda: source.frame_truth_m, dev.moment),
+                   RunnerIO(dev.coils, source, lambda line: None, clock), cfg,
+                   tracker=HoldTracker(), allocate=hook(clipped_lstsq))
         r.start()
         return r
 

@@ -30,10 +30,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"virtual object: {', '.join(OBJECTS)} or an STL/PLY mesh path "
                              "(default hemisphere)")
     parser.add_argument("--trajectory", default="slide",
-                        help="slide | poke | FILE.csv with columns t_s,x_m,y_m,z_m (default slide)")
+                        help="slide | poke | tilt (a slide tilting the magnet up to 45 deg) | "
+                             "FILE.csv with columns t_s,x_m,y_m,z_m and optionally tilt_deg "
+                             "(0..180), azimuth_deg (default slide)")
     parser.add_argument("--duration", type=float, default=None,
                         help="simulated time, s, up to 600 (default: the trajectory's own, 4 s "
-                             "slide, 3 s poke); the finger keeps the trajectory's speed: a "
+                             "slide and tilt, 3 s poke); the finger keeps the trajectory's speed: a "
                              "shorter run cuts it, a longer one holds its last point")
     parser.add_argument("--faults", default="none",
                         help="none | default (each fault type once) | TYPE@S,TYPE@S,...")

@@ -3,10 +3,13 @@
 What is simulated, and from what:
 
 * the finger: a scripted trajectory (:mod:`.trajectory`: ``slide`` over the object as in
-  thesis Fig. 4.5, ``poke`` down into it, or a CSV file with columns ``t_s, x_m, y_m, z_m``);
-* the true force on the magnet: designkit's array model evaluated directly at the true position
-  (``CoilArray.force`` + the magnet's pull on the cores when the model has it), never the map, so
-  that the map's and the allocator's errors show up in the result (:mod:`.device`);
+  thesis Fig. 4.5, ``poke`` down into it, ``tilt`` (a slide with the magnet tilting up to 45
+  degrees), or a CSV file with columns ``t_s, x_m, y_m, z_m`` and optionally ``tilt_deg,
+  azimuth_deg``);
+* the true force on the magnet: designkit's array model evaluated directly at the true pose
+  (position and tilted moment, + the magnet's pull on the cores when the model has it), never
+  the map, so that the map's, the estimator's and the allocator's errors show up in the result
+  (:mod:`.device`, :mod:`.samples`);
 * the coil currents: each coil an R-L circuit driven by the voltage its MD10C applies, read back
   from the simulated PCA9685 registers, so the bytes the runner wrote are what moves the current;
 * the sensors: register-level TLV493D models behind TCA9548A muxes on their own simulated bus,
@@ -25,12 +28,13 @@ from .report import (force_error_causes, force_lag_s, loop_by_kind, loop_by_stat
                      time_to_safe, write_run_csv)
 from .run import drive_data, run_simulation
 from .sensors import SimSensorSource
-from .trajectory import TRAJECTORY_COLUMNS, Trajectory, poke_trajectory, slide_trajectory
+from .trajectory import (TILT_COLUMNS, TRAJECTORY_COLUMNS, Trajectory, poke_trajectory,
+                         slide_trajectory, tilt_trajectory, tilted_direction)
 
 __all__ = [
     "SimulatedDevice", "FAULT_TYPES", "FaultSchedule", "inject",
     "LoopTiming", "SimulationResult", "simulate", "plot_run", "force_error_causes", "force_lag_s",
     "loop_by_kind", "loop_by_state", "summarize", "time_to_safe", "write_run_csv", "drive_data",
-    "run_simulation", "SimSensorSource", "TRAJECTORY_COLUMNS", "Trajectory", "poke_trajectory",
-    "slide_trajectory",
+    "run_simulation", "SimSensorSource", "TILT_COLUMNS", "TRAJECTORY_COLUMNS", "Trajectory",
+    "poke_trajectory", "slide_trajectory", "tilt_trajectory", "tilted_direction",
 ]

@@ -15,8 +15,8 @@ import numpy as np
 from firmware_io.allocation import Allocator
 from firmware_io.localization import Localizer
 from firmware_io.mapfile import MapFile
-from firmware_io.runner import (CALIBRATED_RELATIVE_ERROR, ConstantVelocityTracker, Runner,
-                                RunnerConfig, SceneForce)
+from firmware_io.runner import (CALIBRATED_RELATIVE_ERROR, LocalizerShim, Runner, RunnerConfig,
+                                RunnerIO, SceneForce, SensorHeadroom)
 from firmware_io.scene import Scene
 
 from .. import electrical, fieldmap
@@ -32,12 +32,12 @@ from .faults import FaultSchedule
 from .loop import LoopTiming, simulate
 from .plot import plot_run
 from .report import force_error_causes, summarize, write_run_csv
-from .trajectory import Trajectory, poke_trajectory, slide_trajectory
+from .trajectory import Trajectory, poke_trajectory, slide_trajectory, tilt_trajectory
 
 MAX_DURATION_S = 600.0
 """Longest simulated run, s."""
 
-SCRIPTED_DURATION_S = {"slide": 4.0, "poke": 3.0}
+SCRIPTED_DURATION_S = {"slide": 4.0, "poke": 3.0, "tilt": 4.0}
 """Length of the scripted trajectories at their own speed, s."""
 
 TOP_OF_BOX_M = 0.078
@@ -102,10 +102,12 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
                            control_period_s=period_s, unipolar=unipolar,
                            force_axes="z" if rows == "fz" else "xyz",
                            skip_force_n=skip_force_n)
-        localizer = Localizer.from_map(map_path, method=method, **loc_kw)
-        runner = Runner(fmap, SceneForce(scene), localizer, ConstantVelocityTracker(),
-                        hook(Allocator()), device.coils, source, cfg, clock=clock,
-                        log=lambda line: print(line) if progress else None)
+        localizer = LocalizerShim(Localizer.from_map(map_path, method=method, **loc_kw))
+        io = RunnerIO(device.coils, source, lambda line: print(line) if progress else None,
+                      clock)
+        runner = Runner(fmap, SceneForce(scene), localizer, io, cfg,
+                        allocate=hook(Allocator()),
+                        headroom=SensorHeadroom.from_meta(scene.meta))
         runner.profile = profile
         runner.start()
         return runner
@@ -178,7 +180,8 @@ def _scripted_path(design, array, virtual, trajectory: str) -> Trajectory:
     # and 1 mm (the board and the sensor package) above the highest sensor
     floor = (float(np.max(array.sensor_positions_m()[0, :, 2]))
              + design.magnet.length_m / 2 + 1e-3)
-    make = slide_trajectory if trajectory == "slide" else poke_trajectory
+    make = {"slide": slide_trajectory, "poke": poke_trajectory,
+            "tilt": tilt_trajectory}[trajectory]
     return make(lambda x, y: virtual.height(np.c_[x, y, np.zeros_like(x)]),
                 duration_s=SCRIPTED_DURATION_S[trajectory], z_limits_m=(floor, TOP_OF_BOX_M))
 

@@ -76,7 +76,7 @@ class SimSensorSource:
             if t_s + 1e-12 < ready_s:
                 return
             self.in_flight = None
-            frame = SensorFrame(reading.top_t, reading.bottom_t, reading.status, field_s)
+            frame = SensorFrame(reading.field_t, reading.status, field_s)
             self.frame_truth_m = self.position_at(field_s)   # diagnostics: where it really was
             fit_s = 0.0
             if self.pipeline is not None:
