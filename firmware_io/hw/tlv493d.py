@@ -294,8 +294,8 @@ class TLV493D:
             return str(exc)
         if second.power_down_flag == 1 and second.frame_counter == (first.frame_counter + 1) % 4:
             self._last_frm = second.frame_counter
-            self._stuck = self._same = self._zeros = 0
-            self._last_raw = None
+            # the value checks keep their count: a reset does not mend a frozen data path
+            self._stuck = 0
             self.last_frame = second
             self.status = "ok"
             return ""
