@@ -16,7 +16,7 @@ from .._io import atomic_path
 from ..array import force_matrix
 from .device import SimulatedDevice
 from .samples import bias_force_any
-from .faults import FAULT_CLEARS_S
+from .faults import FAULT_CLEARS_S, FAULT_STATE
 from .loop import SimulationResult
 
 CURRENT_OFF_A = 0.01
@@ -53,7 +53,8 @@ def time_to_safe(columns: dict, events, period_s: float) -> list[dict]:
         again = [float(t2) for t2, n2 in events[j + 1:] if n2 == name]
         window = (t >= te - 1e-12) & (t < (again[0] - 1e-12 if again else np.inf))
         at = np.flatnonzero(t >= te - 1e-12)
-        own = np.flatnonzero(window & (st == name))
+        state = FAULT_STATE.get(name, name)
+        own = np.flatnonzero(window & (st == state))
         row = {"fault": name, "injected_s": te,
                "state_at_injection": str(st[at[0]]) if len(at) else None,
                "state": None, "detected_s": None, "time_to_safe_s": None, "periods": None,
@@ -61,14 +62,14 @@ def time_to_safe(columns: dict, events, period_s: float) -> list[dict]:
                "recovered_s": None}
         if len(own):
             k = int(own[0])
-            row.update(state=name, detected_s=float(t[k]), time_to_safe_s=float(t[k] - te),
+            row.update(state=state, detected_s=float(t[k]), time_to_safe_s=float(t[k] - te),
                        periods=float((t[k] - te) / period_s))
             back = np.flatnonzero(st[k:] == "running")
             stop = k + back[0] if len(back) else len(t)
             quiet = np.flatnonzero(off[k:stop])
             if len(quiet):
                 row["currents_off_s"] = float(t[k + quiet[0]] - te)
-            other = np.flatnonzero(st[k:] != name)
+            other = np.flatnonzero(st[k:] != state)
             if len(other):
                 row.update(ended_s=float(t[k + other[0]] - te), ended_into=str(st[k + other[0]]))
             if len(back):
