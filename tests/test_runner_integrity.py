@@ -276,3 +276,43 @@ def test_recovery_takes_a_few_frames_once_the_fault_is_gone(device):
     t_clear = box_at + FAULT_CLEARS_S["out_of_box"]
     d = frame_intervals(t_clear, t_clear + out["recovered_s"])
     assert out["recovered_s"] <= (2 + 2 + n_fix + 1) * d.max() + 1e-3, (out, d)
+
+
+def test_no_force_with_a_position_older_than_one_sensor_pass(device):
+    """Fixes every 5 ms (frames 8 ms old at hand-over), then none: the runner renders while
+    the newest trusted fix is at most STALE_PASSES passes (+ 2 periods) old at hand-over and
+    goes 'lost' at the first step beyond; after max_fix_age_s it drops the track, so a finger
+    that comes back 40 mm away is taken at once (not gated against where it left) and renders
+    after resume_fixes fixes."""
+    from firmware_io.runner import Fix
+    from firmware_io.runner.loop import STALE_PASSES
+
+    design, array, a = device
+    dev = SimulatedDevice(design, array, seed=2)
+    cfg = RunnerConfig(resistance_ohm=(dev.resistance_ohm,) * 9,
+                       inductance_h=(dev.inductance_h,) * 9, supply_voltage_v=30.0,
+                       current_limit_a=4.8, total_current_a=20.0)
+    here, there = np.array([0.0, 0.0, 0.04]), np.array([0.04, 0.0, 0.04])
+
+    def source(t):
+        k = int(round(t * 1e3))
+        if k % 5 or 50 < k < 120:
+            return None
+        p = here if k <= 50 else there
+        return Fix(p.copy(), MOMENT.copy(), True, t - 0.008, (), np.zeros(18, bool), 0.0,
+                   (0.3e-3) ** 2 * np.eye(3), 1e-3)
+
+    r = Runner(device_map(a, BOX, dev), PlaneScene(0.05, 6.0), NoisyLocalizer(None, 0.3e-3),
+               RunnerIO(dev.coils, source, lambda line: None, lambda: 0.0), cfg,
+               tracker=PoseTracker(), allocate=clipped_lstsq)
+    r.start()
+    recs = [r.step(k * 1e-3) for k in range(140)]
+    states = [x.state for x in recs]
+    limit_ms = STALE_PASSES * 5 + 2                          # 9.5 ms after the hand-over at 50
+    assert states[50:60] == ["running"] * 10 and states[60] == "lost"
+    assert 50 + limit_ms < 60 <= 50 + limit_ms + 1
+    assert all(s == "lost" for s in states[60:130])
+    # the track was dropped: the fixes at 120, 125, 130 are accepted, the third one resumes
+    assert states[130] == "running" and "gated" not in states
+    assert np.linalg.norm(recs[130].position_m - there) < 1e-3
+    assert all(not np.any(x.command_a) for x in recs[60:130])

@@ -235,7 +235,7 @@ def write_run_csv(path, columns: dict) -> None:
              "tze_n_m"]
     order += [k for k in columns if k.startswith("i") and k.endswith("_a")]
     order += [k for k in columns if k.startswith("cmd")]
-    order += ["n_saturating", "fault_excluded", "loop_s", "state"]
+    order += ["n_saturating", "fault_excluded", "fix_t_s", "loop_s", "state"]
     order = [k for k in order if k in columns]
     with atomic_path(path) as tmp, tmp.open("w", newline="") as fh:
         w = csv.writer(fh)

@@ -362,11 +362,16 @@ class Runner:
         cfg = self.cfg
         age = t_s - self.tracker.t
         if age > cfg.max_fix_age_s:
+            # also an acquisition's track (fixes beyond the alert limit): a state that old
+            # would bend the next fixes with its velocity
             self.tracker.reset()
-            self.have_fix = False
             self.pipeline.reacquire = True
-            problems.append(("lost", f"newest accepted fix {age * 1e3:.0f} ms old > "
-                             f"{cfg.max_fix_age_s * 1e3:.0f} ms: track dropped"))
+            if self.have_fix:
+                self.have_fix = False
+                problems.append(("lost", f"newest accepted fix {age * 1e3:.0f} ms old > "
+                                 f"{cfg.max_fix_age_s * 1e3:.0f} ms: track dropped"))
+            return
+        if not self.have_fix:
             return
         dt = self.pass_interval_s
         if dt is None:
@@ -392,7 +397,7 @@ class Runner:
         self.history.push(t_s, self.path.current_a)
         new_frame, problems = self._take_fix(t_s)
         tm = self._mark("fix", t0) if prof else t0
-        if self.have_fix:
+        if self.tracker.x is not None:
             self._freshness(t_s, problems)
         if not self.have_fix:
             if problems and (self.fault is None or problems[0][0] != self.fault):
