@@ -21,14 +21,19 @@ Usage::
     alloc = Allocator()                                               # in a control loop:
     currents_a, residual = alloc(F, f_n, 6.0, 54.0, unipolar=True)   # same answer, warm start
 
+``allocate_within(F, f_n, 6.0, 54.0, (G, h))`` (constrained.py): the same with G I <= h too
+(e.g. Hall sensors kept in their linear range).
+
 ``ray_limits`` (reach.py): for many positions at once, how far a force reaches along a ray
 within the bounds (the force constant's per-point lambda; docs/allocation.md).
 """
 
 from __future__ import annotations
 
+from .allocator import Allocator
+from .constrained import allocate_within
 from .problem import EPS_REL
 from .reach import ray_limits
-from .solve import Allocator, allocate
+from .solve import allocate
 
-__all__ = ["allocate", "Allocator", "EPS_REL", "ray_limits"]
+__all__ = ["allocate", "allocate_within", "Allocator", "EPS_REL", "ray_limits"]
