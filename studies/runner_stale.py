@@ -26,7 +26,7 @@ if __package__ in (None, ""):
 
 import numpy as np
 
-from designkit.sim import run_simulation
+from designkit.sim import RunSettings, run_simulation
 from studies._common import design_and_map, finish, load_average
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "runner_stale"
@@ -99,9 +99,9 @@ def run(out_dir=DEFAULT_OUT, *, map_path=None, seeds: int = 3, design=None, arra
     res = {"load_average_1min": load_average(), "limit_m": LIMIT_M, "runs": []}
     for seed in range(seeds):
         sub = out_dir / f"seed{seed}"
-        summary = run_simulation(design=design, obj="hemisphere",
-                                 trajectory=str(out_dir / "path.csv"), map_path=map_path,
-                                 array=array, seed=seed, out=sub, progress=False)
+        summary = run_simulation(RunSettings(trajectory=str(out_dir / "path.csv"), seed=seed),
+                                 design=design, map_path=map_path, array=array, out=sub,
+                                 progress=False)
         row = measure(sub / "run.csv", events)
         row.update(seed=seed, running_fraction=summary["running_fraction"])
         res["runs"].append(row)

@@ -38,10 +38,9 @@ def run(small_map, thesis_array, tmp_path_factory):
     mp = pytest.MonkeyPatch()
     mp.setattr(sim_run, "plot_run", lambda *a, **k: None)  # figures are not physics
     try:
-        summary = sim_run.run_simulation(design=SMALL_BOX, obj="hemisphere",
-                                         trajectory=str(path), duration_s=DURATION_S,
-                                         map_path=small_map, array=thesis_array,
-                                         out=out / "r", progress=False)
+        summary = sim_run.run_simulation(
+            sim_run.RunSettings(trajectory=str(path), duration_s=DURATION_S), design=SMALL_BOX,
+            map_path=small_map, array=thesis_array, out=out / "r", progress=False)
     finally:
         mp.undo()
     rows = list(csv.DictReader((out / "r" / "run.csv").open()))

@@ -407,3 +407,39 @@ def test_a_nack_superseded_by_a_localization_fault_still_reinitialises_the_board
     states = [r.step(k * 1e-3).state for k in range(1, 8)]
     assert states[:3] == ["pwm_nack", "pwm_nack", "lost"]
     assert calls and states[-1] == "running" and r.pwm_reinit_needed is False
+
+
+def test_trajectory_tilt_columns_are_read_and_checked(tmp_path):
+    """tilt_deg / azimuth_deg columns give the moment direction: tilt 30 towards azimuth 90
+    is (0, sin 30, cos 30) from an upright design; a tilt out of [0, 180] is refused naming
+    the column, the value, its line and the range."""
+    p = tmp_path / "t.csv"
+    p.write_text("t_s,x_m,y_m,z_m,tilt_deg,azimuth_deg\n0,0,0,0.03,0,0\n1,0,0,0.04,30,90\n")
+    t = Trajectory.from_csv(p)
+    assert t.tilted
+    u = t.moment_direction([0.0, 1.0, 2.0], [0.0, 0.0, 0.909])
+    np.testing.assert_allclose(u[1], [0.0, 0.5, np.sqrt(3) / 2], atol=1e-15)
+    np.testing.assert_allclose(u[0], [0.0, 0.0, 1.0], atol=1e-15)
+    np.testing.assert_allclose(u[2], u[1], atol=1e-15)         # held after the last sample
+    p.write_text("t_s,x_m,y_m,z_m,tilt_deg\n0,0,0,0.03,0\n1,0,0,0.04,195\n")
+    with pytest.raises(BadInputError) as err:
+        Trajectory.from_csv(p)
+    msg = str(err.value)
+    assert "tilt_deg" in msg and "195" in msg and "[0, 180]" in msg and "line 3" in msg
+    assert "\n" not in msg
+    p.write_text("t_s,x_m,y_m,z_m,tilt_deg\n0,0,0,0.03,0\n1,0,0,0.04,nan\n")
+    with pytest.raises(BadInputError, match="tilt_deg"):
+        Trajectory.from_csv(p)
+
+
+def test_cli_refuses_a_tilt_out_of_range_in_one_line(tmp_path, capsys):
+    from designkit.cli import main
+
+    p = tmp_path / "t.csv"
+    p.write_text("t_s,x_m,y_m,z_m,tilt_deg\n0,0,0,0.03,0\n1,0,0,0.04,-5\n")
+    rc = main(["run", "--simulate", "--trajectory", str(p), "--out", str(tmp_path / "o"),
+               "--no-progress"])
+    err = capsys.readouterr().err.strip()
+    assert rc != 0 and len(err.splitlines()) == 1 and "Traceback" not in err
+    assert "tilt_deg" in err and "-5" in err and "[0, 180]" in err
+    assert not (tmp_path / "o").exists()

@@ -13,7 +13,7 @@ import pytest
 
 from designkit import fieldmap
 from designkit.design import default_design
-from designkit.sim.run import run_simulation
+from designkit.sim.run import RunSettings, run_simulation
 from firmware_io.runner import PoseEstimate, SensorFrame, SensorLayout, SensorPipeline
 
 BOX = (np.array([-0.07, -0.03, 0.015]), np.array([0.07, 0.03, 0.06]))
@@ -33,8 +33,8 @@ def small(tmp_path_factory):
 def test_one_by_two_air_core_board_runs(small, tmp_path):
     design, path = small
     out = tmp_path / "run"
-    s = run_simulation(design=design, obj="plane", duration_s=0.4, map_path=path, out=out,
-                       progress=False)
+    s = run_simulation(RunSettings(obj="plane", duration_s=0.4), design=design, map_path=path,
+                       out=out, progress=False)
     rows = list(csv.DictReader((out / "run.csv").open()))
     assert len(rows) == 400
     # two coils: two current and two command columns, no third

@@ -26,7 +26,7 @@ from .loop import LoopTiming, SimulationResult, simulate
 from .plot import plot_run
 from .report import (force_error_causes, force_lag_s, loop_by_kind, loop_by_state, summarize,
                      time_to_safe, write_run_csv)
-from .run import drive_data, run_simulation
+from .run import RunSettings, drive_data, run_simulation
 from .sensors import SimSensorSource
 from .trajectory import (TILT_COLUMNS, TRAJECTORY_COLUMNS, Trajectory, poke_trajectory,
                          slide_trajectory, tilt_trajectory, tilted_direction)
@@ -35,6 +35,6 @@ __all__ = [
     "SimulatedDevice", "FAULT_TYPES", "FaultSchedule", "inject",
     "LoopTiming", "SimulationResult", "simulate", "plot_run", "force_error_causes", "force_lag_s",
     "loop_by_kind", "loop_by_state", "summarize", "time_to_safe", "write_run_csv", "drive_data",
-    "run_simulation", "SimSensorSource", "TILT_COLUMNS", "TRAJECTORY_COLUMNS", "Trajectory",
+    "RunSettings", "run_simulation", "SimSensorSource", "TILT_COLUMNS", "TRAJECTORY_COLUMNS", "Trajectory",
     "poke_trajectory", "slide_trajectory", "tilt_trajectory", "tilted_direction",
 ]
