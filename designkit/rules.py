@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import electrical as el
+from .array import CoilArray
 from .design import Design
 
 TOLERANCE_M = 1e-9
@@ -337,7 +338,6 @@ def sensor_saturation(design: Design, array=None) -> list[dict]:
     ``one_coil_a`` (A), ``coil`` (its index), ``all_coils_a`` (A).
     """
     if array is None:
-        from .array import CoilArray
         array = CoilArray.from_design(design)
     pts = array.sensor_positions_m().reshape(-1, 3)
     c = np.abs(array.actuation_matrix(pts)[:, :3, :])          # (n_sensors, 3, n_coils) T/A

@@ -8,8 +8,8 @@ hovers, is taken away (lifted 0.3 m, out of the sensors' reach) for 0.2 s and co
 from where it left. For every running step: how far the rendered position is from the finger
 at the frame time of the newest fix the runner had (what it could know; acceptance: never more
 than 5 mm) and from the finger now (that includes the sensing latency, about two bus passes);
-for each event the time from the finger's arrival to the first running step (acceptance:
-<= 50 ms), and the running steps at the old position after it.
+for each event the time from the finger's arrival to the first running step (the issue's
+acceptance limit: README), and the running steps at the old position after it.
 
     python studies/runner_stale.py [OUT_DIR] [--map FILE] [--seeds N]
 """

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..allocation import Allocator
 from ..errors import BadInputError, CoilWriteError
 from .config import RunnerConfig
 from .drive import CurrentPath
@@ -143,7 +144,6 @@ class Runner:
             raise BadInputError("config.resistance_ohm", f"{io.coils.n_coils} coils (the "
                                 "driver's)", config.n_coils)
         if allocate is None:
-            from ..allocation import Allocator
             allocate = Allocator()
         self.map, self.scene, self.estimator, self.cfg = fieldmap, scene, estimator, config
         self.tracker = tracker if tracker is not None else PoseTracker()
