@@ -241,10 +241,11 @@ def test_recovery_takes_a_few_frames_once_the_fault_is_gone(device):
     the frames the design needs, not after a fixed hold time. A frame holds the field of the
     previous pass's start, so after the fault is gone 2 frames still show it (after the bus's
     gap while the dead sensor is reset they are older than ``max_fix_age_s``); back from the
-    excursion one fix is gated and the re-acquired one confirms the jump; then
-    ``resume_fixes`` accepted fixes; plus one frame interval for the fit's compute time on the
-    sensor side (measured CPU time). While the sensor is still dead the runner runs with it
-    excluded; nothing renders in between."""
+    excursion the track is older than ``max_fix_age_s`` and was dropped, so the first trusted
+    fix restarts it (the bound still allows a gated fix and its confirmation); then
+    ``resume_fixes`` accepted fixes; plus one frame interval for the fit's modelled compute
+    time on the sensor side. While the sensor is still dead the runner runs with it excluded;
+    nothing renders in between."""
     dead_at, box_at = 0.15, 0.5
     res, runner, _ = _jumping_run(device, 6, 0.9, f"sensor_dead@{dead_at},out_of_box@{box_at}",
                                   (), 10 ** 9)

@@ -35,6 +35,6 @@ __all__ = [
     "SimulatedDevice", "FAULT_TYPES", "FaultSchedule", "inject",
     "LoopTiming", "SimulationResult", "simulate", "plot_run", "force_error_causes", "force_lag_s",
     "loop_by_kind", "loop_by_state", "summarize", "time_to_safe", "write_run_csv", "drive_data",
-    "RunSettings", "run_simulation", "SimSensorSource", "TILT_COLUMNS", "TRAJECTORY_COLUMNS", "Trajectory",
-    "poke_trajectory", "slide_trajectory", "tilt_trajectory", "tilted_direction",
+    "RunSettings", "run_simulation", "SimSensorSource", "TILT_COLUMNS", "TRAJECTORY_COLUMNS",
+    "Trajectory", "poke_trajectory", "slide_trajectory", "tilt_trajectory", "tilted_direction",
 ]

@@ -173,6 +173,7 @@ class Runner:
         self.have_fix = False
         self.accepted_at_s = -math.inf     # step time the newest accepted fix was taken
         self.frame_times = deque(maxlen=PASSES_KEPT + 1)
+        self.pass_interval_s: float | None = None   # median spacing of frame_times, s
         self.position_m = np.full(3, np.nan)
         self.fault_log: list[tuple[float, str, str]] = []
         self.exclusion_log: list[tuple[float, tuple]] = []
@@ -194,15 +195,6 @@ class Runner:
     def current_a(self) -> np.ndarray:
         """The model of the coil currents, (n,) A (the feed-forward's state)."""
         return self.path.current_a
-
-    @property
-    def pass_interval_s(self) -> float | None:
-        """The sensor side's frame interval, s: the median of the last frame times' spacing
-        (None before two frames)."""
-        if len(self.frame_times) < 2:
-            return None
-        t = np.asarray(self.frame_times)
-        return float(np.median(np.diff(t)))
 
     # -- life cycle ----------------------------------------------------------------------------
     def start(self, pwm_frequency_hz: float = 1526.0) -> None:
@@ -317,6 +309,10 @@ class Runner:
         self.last_fix = fix
         if math.isfinite(fix.frame_t_s):
             self.frame_times.append(fix.frame_t_s)
+            if len(self.frame_times) > 1:   # the pass interval: the (lower) median spacing
+                t = list(self.frame_times)
+                d = sorted(b - a for a, b in zip(t, t[1:]))
+                self.pass_interval_s = d[(len(d) - 1) // 2]
         problems.extend(fix.problems)
         if fix.fault_excluded != self.fault_excluded:
             self.fault_excluded = fix.fault_excluded
