@@ -51,7 +51,7 @@ def active_set(ws, eps, x, face, at_face=None):
                 if kind == 1:
                     _set_sign(face, systems, block, bsign, ws)
             if alpha < 1.0:
-                _step(ws, systems, face, (xl, hl), alpha, block, kind)
+                _step(ws, systems, face, xl, hl, (alpha, block, kind))
                 x = None
                 continue
             xl = hl
@@ -126,14 +126,17 @@ def _set_sign(face, systems, i, s, ws):
     sg = list(face.sg)
     sg[i] = s
     face.sg = sg
-    systems.set_sign(i, s, ws.k, ws.n)
+    aug = systems.aug
+    if aug is not None:
+        k, n = ws.k, ws.n
+        aug[0][k, i] = aug[2][n, i] = aug[2][i, n] = s
 
 
-def _step(ws, systems, face, points, alpha, block, kind):
-    """Step a fraction alpha < 1 from x towards the face minimizer h (``points`` = (xl, hl),
-    lists; xl changes in place) and add the blocking constraint (kind as
-    :func:`_ratio_signed`) to the working set ``face``."""
-    xl, hl = points
+def _step(ws, systems, face, xl, hl, ratio):
+    """Step a fraction alpha < 1 from x towards the face minimizer h (lists; xl changes in
+    place) and add the blocking constraint to the working set ``face``; ``ratio`` = (alpha,
+    blocking coil, kind) of :func:`_ratio_signed`."""
+    alpha, block, kind = ratio
     usl = ws.usl
     alpha = max(alpha, 0.0)
     j = face.j

@@ -34,18 +34,16 @@ def face_minimizer(ws, face, eps, systems=None, keep=None, want_y=False):
     want_y : bool -- also return the kernel coefficients y (x_J = F_J^T y + t s) when the
         kernel form applies, else None: (x, y)
     """
-    fixv = face.fixv
+    fixv, j, bud, fe = face.fixv, face.j, face.bud, face.fe
     n = len(fixv)
-    j = face.j
     nf = len(j)
     anyfix = any(fixv)
     aug = None if systems is None else systems.aug
-    bud = face.bud
     k = ws.k
     if bud and aug is not None and 0 < nf <= k + 1:
-        x = _bordered_face(aug, face, eps, anyfix, keep)
+        x = _bordered_face(aug, j, fe, n, anyfix, eps, keep)
         return (x, None) if want_y else x
-    fixed = face.fe[:n].copy() if anyfix else np.zeros(n)  # written in place below
+    fixed = fe[:n].copy() if anyfix else np.zeros(n)  # written in place below
     if nf == 0:
         return (fixed, None) if want_y else fixed
     c = ws.ts - math.fsum(map(abs, fixv)) if bud and aug is None else None
@@ -56,16 +54,14 @@ def face_minimizer(ws, face, eps, systems=None, keep=None, want_y=False):
     return (x, None) if want_y else x
 
 
-def _bordered_face(aug, face, eps, anyfix, keep):
+def _bordered_face(aug, j, fe, n, anyfix, eps, keep):
     """A budget face's primal normal equations: a slice of the kept bordered system
-    [[F^T F + eps I, sg], [sg^T, 0]], [F^T f; I_t] (``aug[2]``, ``aug[3]``)."""
+    [[F^T F + eps I, sg], [sg^T, 0]], [F^T f; I_t] (``aug[2]``, ``aug[3]``); ``j`` the free
+    coils, ``fe`` the fixed values and the budget's slot (n + 1,)."""
     hb, qb = aug[2], aug[3]
-    j = face.j
-    n = len(face.fixv)
     jj = j + [n]
     hr = hb.take(jj, 0)
     if anyfix:
-        fe = face.fe
         rhs = qb.take(jj) - hr.dot(fe)
         x = fe[:n].copy()
     else:

@@ -20,7 +20,7 @@ from .feasible import inside, on_face
 from .linalg import eye, fast_solve
 from .polish import least_energy, polish
 from .problem import EPS_REL, EXACT_FIT_TOL, FLOAT_MAX, MULT_TOL, check_inputs, scale
-from .working_set import Face
+from .working_set import Face, point_face
 from .workspace import Workspace
 
 
@@ -117,6 +117,7 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
     ws.max_iter = 50 + 10 * n if max_iter is None else max_iter
     x, face, keep = _iterate(ws, eps, xl, warm, key)
     x, y, res2, face = _polish_final(ws, eps, x, face, keep)
+    final = (face.free, face.sg, face.fixv, face.bud)
     # ---- an exact fit: the least-energy stage on its own, free of eps (see least_energy)
     lim = EXACT_FIT_TOL * (math.sqrt(ft2) + math.sqrt(c2 * float(x.dot(x))))
     if res2 <= lim * lim:
@@ -124,10 +125,10 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
         if x2 is not None:
             x = x2
             if warm is not None:
-                face = Face.of_point(x.tolist(), usl, ts, budget_possible)
+                final = point_face(x.tolist(), usl, ts, budget_possible)
     if warm is not None:
-        warm.face = (face.free, face.sg,
-                     [v / ui if ui > 0.0 else 0.0 for v, ui in zip(face.fixv, usl)], face.bud)
+        free, sg, fixv, bud = final
+        warm.face = (free, sg, [v / ui if ui > 0.0 else 0.0 for v, ui in zip(fixv, usl)], bud)
         warm.key = key
     return _clamp(x, usl, ts, umax, 0.0 if unipolar else -1.0)
 

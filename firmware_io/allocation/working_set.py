@@ -31,10 +31,15 @@ class Face:
 
     @classmethod
     def of_point(cls, xl, usl, ts: float, budget_possible: bool) -> "Face":
-        """The face of a feasible point x (list, scaled): free the coils strictly inside their
-        box; the budget when it holds to 1e-12 (and can bind at all)."""
-        free = [0.0 < abs(v) < ui for v, ui in zip(xl, usl)]
-        sg = [1.0 if v >= 0.0 else -1.0 for v in xl]
-        fixv = [0.0 if fr else v for v, fr in zip(xl, free)]
-        bud = budget_possible and any(free) and math.fsum(map(abs, xl)) >= ts * (1 - 1e-12)
-        return cls(free, sg, fixv, bud)
+        """The face of a feasible point x (list, scaled): :func:`point_face`."""
+        return cls(*point_face(xl, usl, ts, budget_possible))
+
+
+def point_face(xl, usl, ts: float, budget_possible: bool) -> tuple:
+    """(free, sg, fixv, bud) of a feasible point x (list, scaled): free the coils strictly
+    inside their box; the budget when it holds to 1e-12 (and can bind at all)."""
+    free = [0.0 < abs(v) < ui for v, ui in zip(xl, usl)]
+    sg = [1.0 if v >= 0.0 else -1.0 for v in xl]
+    fixv = [0.0 if fr else v for v, fr in zip(xl, free)]
+    bud = budget_possible and any(free) and math.fsum(map(abs, xl)) >= ts * (1 - 1e-12)
+    return free, sg, fixv, bud

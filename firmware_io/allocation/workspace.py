@@ -47,7 +47,7 @@ class Workspace:
 class FaceSystems:
     """F^T F + eps I (``heps``), F^T f (``q``) and, when the budget can bind, ``aug`` = ([F; sg]
     (k + 1, n), [f; I_t] (k + 1,), the bordered [[F^T F + eps I, sg], [sg^T, 0]], [F^T f; I_t])
-    with the signs ``sg`` of the working set (kept in step with it: :meth:`set_sign`)."""
+    with the signs ``sg`` of the working set (the active set keeps them in step)."""
 
     __slots__ = ("heps", "q", "aug")
 
@@ -77,12 +77,6 @@ class FaceSystems:
         qb[:n] = ws.q
         qb[n] = ws.ts
         return cls(heps, ws.q, (aug_a, aug_b, hb, qb))
-
-    def set_sign(self, i: int, s: float, k: int, n: int) -> None:
-        """Coil i's sign s into the bordered systems (no-op without a budget)."""
-        aug = self.aug
-        if aug is not None:
-            aug[0][k, i] = aug[2][n, i] = aug[2][i, n] = s
 
     def set_signs(self, sg, k: int, n: int) -> None:
         """Every sign ``sg`` (list) into the bordered systems."""
