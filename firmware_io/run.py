@@ -25,11 +25,11 @@ from .hw.pca9685 import PCA9685
 from .errors import FirmwareIOError
 from .localization import Localizer
 from .mapfile import MapFile
-from .runner import (CALIBRATED_RELATIVE_ERROR, CALIBRATION_CURRENT_A, ConstantVelocityTracker,
-                     Runner, RunnerParts, SceneForce, SensorFrame, calibrate_sensors,
+from .runner import (CALIBRATED_RELATIVE_ERROR, CALIBRATION_CURRENT_A, LocalizerShim, Runner,
+                     RunnerIO, SceneForce, SensorFrame, SensorHeadroom, calibrate_sensors,
                      calibration_currents, config_from_map, record_calibration)
 from .scene import Scene
-from .hw.sensors import SensorArrays
+from .hw.sensors import SensorArrays, default_sensor_layout
 
 EXIT_BAD_INPUT = 2
 
@@ -81,12 +81,11 @@ class ThreadedSensorSource:
             except Exception as exc:  # noqa: BLE001 - the loop must see it, not the thread die
                 self.error = exc
                 status = ("failed",) * len(self.arrays.sensors)
-                n = len(status) // 2
-                frame = SensorFrame(np.full((n, 3), np.nan), np.full((n, 3), np.nan), status, t0)
+                frame = SensorFrame(np.full((len(status), 3), np.nan), status, t0)
             else:
                 if field_t is None:
                     continue
-                frame = SensorFrame(r.top_t, r.bottom_t, r.status, field_t)
+                frame = SensorFrame(r.field_t, r.status, field_t)
             if self.pipeline is not None:
                 try:
                     frame = self.pipeline.process(frame)
@@ -138,15 +137,15 @@ def _bus_number(text: str, what: str, dev_dir: str = "/dev") -> int:
     return n
 
 
-def check_sensor_arrays(status, n_per_array: int, min_per_array: int = 4) -> None:
-    """Refuse to start when an array is missing: fewer than ``min_per_array`` sensors of the upper
-    or the lower array configured (the localization needs both)."""
-    for name, part in (("upper", status[:n_per_array]), ("lower", status[n_per_array:])):
-        ok = sum(s == "ok" for s in part)
-        if ok < min_per_array:
-            raise FirmwareIOError(f"the {name} sensor array answers with {ok} of {n_per_array} "
-                                  f"sensors (need >= {min_per_array}); statuses {list(part)}: "
-                                  "check its cable, the TCA9548A addresses and power")
+def check_sensor_arrays(status, min_fraction: float = 0.75) -> None:
+    """Refuse to start when fewer than ``min_fraction`` of the sensors are configured (a board
+    or a mux is missing: the pose needs sensors around the workspace)."""
+    ok = sum(s == "ok" for s in status)
+    if ok < min_fraction * len(status):
+        bad = [i for i, s in enumerate(status) if s != "ok"]
+        raise FirmwareIOError(f"{ok} of {len(status)} sensors answer (need >= "
+                              f"{min_fraction:.0%}); not configured: sensors {bad}: check the "
+                              "boards' cables, the TCA9548A addresses and power")
 
 
 def load_inputs(map_path: str, scene_path: str, method: str):
@@ -157,13 +156,14 @@ def load_inputs(map_path: str, scene_path: str, method: str):
     return fmap, scene, localizer
 
 
-def open_device(bus_number: int, sensor_bus_number: int | None, drives):
+def open_device(bus_number: int, sensor_bus_number: int | None, drives, n_sensors: int):
     """Open the bus(es) and build the PWM boards (one :class:`firmware_io.hw.driver.CoilDrive`
-    per coil: the drive record's ``drives``) and sensor arrays (default wiring)."""
+    per coil: the drive record's ``drives``) and the ``n_sensors`` sensors (default wiring, the
+    map's sensor order)."""
     bus = open_bus(bus_number)
     sbus = bus if sensor_bus_number is None else open_bus(sensor_bus_number)
     boards = [PCA9685(bus, 0x40 + b) for b in range((len(drives) + 7) // 8)]
-    return CoilDriver(boards, drives), SensorArrays(sbus)
+    return CoilDriver(boards, drives), SensorArrays(sbus, default_sensor_layout(n_sensors))
 
 
 def calibrated_localizer(map_path: str, method: str, localizer, coils, arrays, cfg,
@@ -174,9 +174,9 @@ def calibrated_localizer(map_path: str, method: str, localizer, coils, arrays, c
     amp = min(CALIBRATION_CURRENT_A, cfg.drive.current_limit_a)
     print(f"calibrating the sensors ({amp:.1f} A patterns, keep the magnet away)...",
           file=sys.stderr)
-    top, bottom, applied = record_calibration(coils, arrays, calibration_currents(cfg.n_coils, amp),
-                                              settle_s=7 * tau, sleep=sleep)
-    cal = calibrate_sensors(localizer.model, top, bottom, applied)
+    readings, applied = record_calibration(coils, arrays, calibration_currents(cfg.n_coils, amp),
+                                           settle_s=7 * tau, sleep=sleep)
+    cal = calibrate_sensors(localizer.model, readings, applied)
     return Localizer.from_map(map_path, method=method, calibration=cal,
                               relative_error=CALIBRATED_RELATIVE_ERROR)
 
@@ -191,16 +191,16 @@ def main(argv: list[str] | None = None) -> int:
         cfg = config_from_map(fmap, control_period_s=args.period_ms * 1e-3,
                               unipolar=args.unipolar, force_axes="z" if rows == "fz" else "xyz")
         cfg.drive.check_ratings()    # a supply or PWM the driver is not rated for: refused
-        coils, arrays = open_device(bus_n, sbus_n, cfg.drive.drives)
-        check_sensor_arrays(arrays.configure(), cfg.n_coils)
+        coils, arrays = open_device(bus_n, sbus_n, cfg.drive.drives, fmap.n_sensors)
+        check_sensor_arrays(arrays.configure())
         if args.calibrate:
             localizer = calibrated_localizer(args.map, args.method, localizer, coils, arrays, cfg)
     except (FirmwareIOError, OSError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     source = ThreadedSensorSource(arrays)
-    runner = Runner(RunnerParts(fmap, SceneForce(scene), localizer, ConstantVelocityTracker(),
-                                Allocator(), coils, source), cfg)
+    runner = Runner(fmap, SceneForce(scene), LocalizerShim(localizer), RunnerIO(coils, source),
+                    cfg, allocate=Allocator(), headroom=SensorHeadroom.from_meta(scene.meta))
     runner.start()
     source.start()
     t0 = time.monotonic()

@@ -38,7 +38,7 @@ if __package__ in (None, ""):
 import numpy as np
 
 from designkit.render.scenefile import make_object
-from designkit.sim import drive_data, run_simulation, slide_trajectory
+from designkit.sim import RunSettings, drive_data, run_simulation, slide_trajectory
 from firmware_io.allocation import allocate
 from firmware_io.mapfile import MapFile
 from firmware_io.runner import CoilSkipBound, force_law_rows
@@ -118,17 +118,15 @@ def run(out_dir=DEFAULT_OUT, *, map_path=None, duration_s: float = 2.0,
 
     # -- the closed loop, stage by stage, 3-D force and Fz alone
     for rows in (("force",) if quick else ("force", "fz")):
-        s = run_simulation(design=design, obj="hemisphere", trajectory="slide",
-                           duration_s=duration_s, map_path=map_path, rows=rows,
-                           out=out_dir / f"loop-{rows}", progress=False, array=array,
-                           profile=True)
+        s = run_simulation(RunSettings(duration_s=duration_s, rows=rows, profile=True),
+                           design=design, map_path=map_path, out=out_dir / f"loop-{rows}",
+                           progress=False, array=array)
         res[f"loop_{rows}"] = _loop(s)
 
     # -- the step per runner state: every fault injected once (the hemisphere's slide)
-    s = run_simulation(design=design, obj="hemisphere", trajectory="slide",
-                       duration_s=4.0 if not quick else 1.0, faults="default",
-                       map_path=map_path, out=out_dir / "loop-faults", progress=False,
-                       array=array)
+    s = run_simulation(RunSettings(duration_s=4.0 if not quick else 1.0, faults="default"),
+                       design=design, map_path=map_path, out=out_dir / "loop-faults",
+                       progress=False, array=array)
     res["reference"] = _reference_us()
     res["by_state"] = _by_state(s)
     res["recovery"] = [{k: f[k] for k in ("fault", "injected_s", "time_to_safe_s",
@@ -157,7 +155,7 @@ def run(out_dir=DEFAULT_OUT, *, map_path=None, duration_s: float = 2.0,
     rows_z, mat_z = force_law_rows(m, "z")
     skip["law_rows_fz"] = _us(_timed(lambda k: mat_z @ fmap.actuation(path[k], rows=rows_z), n))
     t0 = time.perf_counter()
-    bound = CoilSkipBound(fmap, rows3, mat3)
+    bound = CoilSkipBound(fmap)
     skip["bound_table_s"] = time.perf_counter() - t0
     full_i = [allocate(mat3 @ fmap.actuation(path[k], rows=rows3), f_obj[k] - bias[k], limit,
                        total)[0] for k in range(n)]
@@ -166,12 +164,14 @@ def run(out_dir=DEFAULT_OUT, *, map_path=None, duration_s: float = 2.0,
                            limit, total), n))
     # the bound must hold: the exact force per ampere at the path points is below it
     exact = np.linalg.norm(np.einsum("ij,njk->nik", mat3, fmap.actuation(path)[:, rows3]), axis=1)
-    skip["bound_holds"] = bool(np.all(exact <= np.array([bound.at(p) for p in path]) + 1e-15))
+    m_norm = float(np.linalg.norm(m))
+    skip["bound_holds"] = bool(np.all(exact <= m_norm * np.array([bound.at(p) for p in path])
+                                      + 1e-15))
     for force in SKIP_FORCES_N:
         kept, miss = [], []
 
         def step(k, force=force):
-            keep = bound.keep(path[k], limit, force)
+            keep = bound.keep(path[k], limit, force, m_norm)
             fm = mat3 @ fmap.actuation(path[k], coils=keep)[rows3]
             i, _ = allocate(fm, f_obj[k] - bias[k], limit[keep], total)
             kept.append(len(keep))

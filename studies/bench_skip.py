@@ -39,8 +39,12 @@ DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "bench_skip"
 SKIP_FORCES_N = (0.0, 0.001, 0.01, 0.03, 0.1, 0.3, 1.0)
 
 
-def run(fmap, bound, rows, mat, path, target, limit, total, force):
-    """Per-step times (s), coils kept, the force rendered (n, 3) N, with skip force ``force``."""
+def run(fmap, bound, law, path, target, limits, force):
+    """Per-step times (s), coils kept, the force rendered (n, 3) N, with skip force ``force``;
+    ``law`` = (rows, matrix) of the force law, ``limits`` = (per-coil limit, total) A."""
+    rows, mat = law
+    limit, total = limits
+    m_norm = float(np.linalg.norm(fmap.moment_a_m2))
     n = len(path)
     best = np.full(n, np.inf)
     kept = np.empty(n, int)
@@ -49,7 +53,7 @@ def run(fmap, bound, rows, mat, path, target, limit, total, force):
         alloc = Allocator()
         for k in range(n):
             t = time.perf_counter()
-            keep = bound.keep(path[k], limit, force) if force > 0 else None
+            keep = bound.keep(path[k], limit, force, m_norm) if force > 0 else None
             fm = mat @ fmap.actuation(path[k], rows=rows, coils=keep)
             cur, _ = alloc(fm, target[k], limit if keep is None else limit[keep], total)
             best[k] = min(best[k], time.perf_counter() - t)
@@ -76,13 +80,13 @@ def main(argv=None):
     total = design.drive.total_current_a
     mm = matmul_seconds()
     t0 = time.perf_counter()
-    bound = CoilSkipBound(fmap, rows, mat)
+    bound = CoilSkipBound(fmap)
     table_s = time.perf_counter() - t0
     res = {"steps": len(path), "matmul_2000_s": mm, "load_average_1min": load_average(),
            "bound_table_s": table_s, "rows": []}
     ref = None
     for force in SKIP_FORCES_N:
-        t, kept, f = run(fmap, bound, rows, mat, path, target, limit, total, force)
+        t, kept, f = run(fmap, bound, (rows, mat), path, target, (limit, total), force)
         ref = f if ref is None else ref
         miss = np.linalg.norm(f - ref, axis=1)
         res["rows"].append({"skip_force_n": force, "median_us": 1e6 * float(np.median(t)),

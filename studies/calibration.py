@@ -42,7 +42,7 @@ from designkit import calibration as cal
 from designkit.model.array import CoilArray
 from designkit.design.asbuilt import AsBuilt, BuildTolerances, PARAMETERS, random_asbuilt
 from designkit.design import default_design, design_to_toml
-from designkit.sim import run_simulation
+from designkit.sim import RunSettings, run_simulation
 from firmware_io.scene import Scene
 from studies._common import finish, load_average
 from studies.bench_map import matmul_s
@@ -113,10 +113,9 @@ def _run_part(design, truth_design, calibrated_design, out_dir, duration, repeat
             # the maps are compared, not the sensor calibration; a repeat reuses the map and
             # draws other sensor noise (and meets other loop timing)
             dirs[name] = out_dir / (f"run-{name}" + (f"-seed{seed}" if seed else ""))
-            s = run_simulation(design=map_design, obj="hemisphere", trajectory="slide",
-                               duration_s=duration, out=dirs[name], progress=False,
-                               plant=truth_design, calibrate=False, seed=seed,
-                               map_path=maps.get(name))
+            s = run_simulation(RunSettings(duration_s=duration, calibrate=False, seed=seed),
+                               design=map_design, out=dirs[name], progress=False,
+                               plant=truth_design, map_path=maps.get(name))
             maps.setdefault(name, dirs[name] / "map.npz")
             rms[name] = s["force_error_rms_n"]
             rms[f"{name}_running_fraction"] = s["running_fraction"]

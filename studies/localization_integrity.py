@@ -45,7 +45,7 @@ from designkit.sim.readings import SensorSimulator, case_currents, forward_model
 from firmware_io.constants import MU0
 from firmware_io.localization import Localizer, SensorModel, multipole_field
 from firmware_io.localization.integrity import fused_protection_level, ratio_quantiles
-from firmware_io.runner import ConstantVelocityTracker
+from firmware_io.runner import PoseTracker
 from studies.localization import _calibrate, with_coil_gradient
 
 ALERT_LIMIT_M = 5e-3
@@ -177,7 +177,7 @@ def thesis_tracked(loc, sim, case, m, rng) -> dict:
     rd = sim.read(pos, cur, parts=(magnet_field_magpylib(sim, pos), sim.induced_part(pos)),
                   rng=rng)
     loc.reset()
-    trk, acquired = ConstantVelocityTracker(), False
+    trk, acquired = PoseTracker(), False
     ok = np.zeros(m, bool)
     err, pls = np.empty(m), np.empty(m)
     for k in range(m):

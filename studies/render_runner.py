@@ -32,7 +32,7 @@ if __package__ in (None, ""):
 
 import numpy as np
 
-from designkit.sim import run_simulation
+from designkit.sim import RunSettings, run_simulation
 from studies._common import design_and_map, finish, load_average
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "render_runner"
@@ -90,8 +90,8 @@ def run(out_dir=DEFAULT_OUT, *, map_path=None, duration_s: float = 4.0,
     for obj in objects:
         for r in rows:
             run_dir = out_dir / f"{obj}-{r}"
-            s = run_simulation(design=design, obj=obj, trajectory="slide", duration_s=duration_s,
-                               map_path=map_path, rows=r, out=run_dir, progress=False,
+            s = run_simulation(RunSettings(obj=obj, duration_s=duration_s, rows=r),
+                               design=design, map_path=map_path, out=run_dir, progress=False,
                                array=array)
             v = {k: s[k] for k in (
                 "force_error_rms_n", "force_error_p95_n", "object_force_rms_n", "force_lag_s",
@@ -102,9 +102,8 @@ def run(out_dir=DEFAULT_OUT, *, map_path=None, duration_s: float = 4.0,
             limits.append(check_run_csv(run_dir / "run.csv", s))
     if not quick:
         fault_dir = out_dir / "faults-hemisphere"
-        s = run_simulation(design=design, obj="hemisphere", trajectory="slide",
-                           duration_s=duration_s, faults="default", map_path=map_path,
-                           out=fault_dir, progress=False, array=array)
+        s = run_simulation(RunSettings(duration_s=duration_s, faults="default"), design=design,
+                           map_path=map_path, out=fault_dir, progress=False, array=array)
         res["faults"] = check_run_csv(fault_dir / "run.csv", s)
         limits.append(res["faults"])
     res["all_within_limits"] = all(c["within_limits"] for c in limits)

@@ -3,50 +3,79 @@
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
+import math
 
 import numpy as np
 
-
-@dataclass
-class Estimate:
-    position_m: np.ndarray
-    residual: float
-    ok: bool
+from firmware_io.runner import PoseEstimate
 
 
-class TruthLocalizer:
-    """Returns the true position (read from a callable) unless every sensor is NaN."""
+class TruthEstimator:
+    """A pose estimator that returns the true position (read from a callable) and the given
+    moment, trusted unless every sensor is NaN."""
 
-    def __init__(self, truth):
+    integrity_risk = 1e-4
+    model_bias_m = 0.0
+
+    def __init__(self, truth, moment=(0.0, 0.0, 0.909)):
         self.truth = truth
+        self.moment = np.asarray(moment, float)
+        self.resets = 0
 
-    def locate(self, top, bottom, currents=None):
-        ok = bool(np.isfinite(top).any() or np.isfinite(bottom).any())
-        return Estimate(np.asarray(self.truth(), float), 0.0, ok)
+    def reset(self):
+        self.resets += 1
+
+    def fix(self, readings_t, currents_a):
+        ok = bool(np.isfinite(readings_t).any())
+        return PoseEstimate(np.asarray(self.truth(), float), self.moment.copy(), ok,
+                            "" if ok else "no sensor", None, 0.0 if ok else math.inf)
 
 
 class HoldTracker:
-    """Holds the last estimate (zero velocity)."""
+    """Holds the last estimate (zero velocity); every fix passes its gate."""
+
+    r = 1e-6
 
     def __init__(self):
-        self.x = None
+        self.reset()
 
-    def update(self, position_m, time_s, ok=True):
-        self.x = np.stack([np.asarray(position_m, float), np.zeros(3)])
+    def reset(self):
+        self.x = None
+        self.t = None
+        self.moment_a_m2 = None
+
+    def update(self, position_m, time_s, ok=True, moment_a_m2=None):
+        if ok:
+            self.x = np.stack([np.asarray(position_m, float), np.zeros(3)])
+            self.t = float(time_s)
+            if moment_a_m2 is not None:
+                self.moment_a_m2 = np.asarray(moment_a_m2, float)
 
     def predict(self, time_s):
         return self.x[0]
 
+    def innovation(self, position_m, time_s):
+        return np.zeros(3), 1.0
+
 
 class ConstantMap:
-    """A(p) fixed at one point's value (fault-logic tests do not need the field's shape)."""
+    """A(p) fixed at one point's value (fault-logic tests do not need the field's shape), with
+    a sensor section: positions (n_sensors, 3) m and the coils' field there (n_sensors, 3,
+    n_coils) T/A (default: 18 sensors of the thesis' 3 x 3 board, no coil field)."""
 
-    def __init__(self, a, bounds, moment, bias=None):
+    def __init__(self, a, bounds, moment, bias=None, sensors=None):
         self.a = np.asarray(a, float)
         self.bounds = bounds
         self.moment_a_m2 = np.asarray(moment, float)
         self._bias = bias
+        if sensors is None:
+            xy = np.array([[x, y] for y in (0.05, 0.0, -0.05) for x in (-0.05, 0.0, 0.05)])
+            pts = np.r_[np.c_[xy, np.full(9, 0.014)], np.c_[xy, np.full(9, -0.114)]]
+            sensors = (pts, np.zeros((18, 3, self.a.shape[1])))
+        self.sensor_positions_m, self._sensor_field = (np.asarray(s, float) for s in sensors)
+
+    def sensor_coil_field(self):
+        return self._sensor_field.copy()
 
     def actuation(self, p, *, rows=None, coils=None):
         p = np.asarray(p, float)
@@ -58,6 +87,15 @@ class ConstantMap:
         b = np.zeros(3) if self._bias is None else np.asarray(self._bias, float)
         p = np.asarray(p, float)
         return b if p.ndim == 1 else np.broadcast_to(b, (len(p), 3))
+
+
+def device_map(a, bounds, device, bias=None):
+    """A :class:`ConstantMap` with the simulated device's sensors (nominal positions and the
+    coils' field there), flat in the device's order."""
+    sim = device.sensor_sim
+    return ConstantMap(a, bounds, device.moment, bias,
+                       (sim.nominal_m.reshape(-1, 3),
+                        sim.coil_field_t_per_a.reshape(-1, 3, a.shape[1])))
 
 
 class PlaneScene:

@@ -304,7 +304,7 @@ def test_binding_budget_far_targets_match_slsqp(wrench_matrices, k, uni):
 def test_budget_hit_is_the_first_crossing():
     """_budget_hit (the step at which sum |x + a d| reaches the budget, coils crossing 0 on
     the way) against a dense scan of the same function (independent: no breakpoints)."""
-    from firmware_io.allocation.feasible import _budget_hit
+    from firmware_io.allocation.feasible import budget_hit
 
     rng = np.random.default_rng(7)
     grid = np.linspace(0.0, 1.0, 200001)
@@ -315,7 +315,7 @@ def test_budget_hit_is_the_first_crossing():
         if np.abs(x).sum() > ts:  # the start must be feasible
             ts = float(np.abs(x).sum())
         alpha = float(rng.uniform(0.3, 1.0))
-        a = _budget_hit(x.tolist(), h.tolist(), alpha, ts)
+        a = budget_hit(x.tolist(), h.tolist(), alpha, ts)
         path = np.abs(x[None, :] + (grid * alpha)[:, None] * (h - x)[None, :]).sum(axis=1)
         over = np.nonzero(path > ts * (1 + 1e-12))[0]
         if len(over) == 0:

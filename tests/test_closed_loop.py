@@ -38,14 +38,14 @@ def run(small_map, thesis_array, tmp_path_factory):
     mp = pytest.MonkeyPatch()
     mp.setattr(sim_run, "plot_run", lambda *a, **k: None)  # figures are not physics
     try:
-        summary = sim_run.run_simulation(design=SMALL_BOX, obj="hemisphere",
-                                         trajectory=str(path), duration_s=DURATION_S,
-                                         map_path=small_map, array=thesis_array,
-                                         out=out / "r", progress=False)
+        summary = sim_run.run_simulation(
+            sim_run.RunSettings(trajectory=str(path), duration_s=DURATION_S), design=SMALL_BOX,
+            map_path=small_map, array=thesis_array, out=out / "r", progress=False)
     finally:
         mp.undo()
     rows = list(csv.DictReader((out / "r" / "run.csv").open()))
-    col = {k: np.array([float(r[k]) for r in rows]) for k in rows[0] if k != "state"}
+    col = {k: np.array([float(r[k]) for r in rows]) for k in rows[0]
+           if k not in ("state", "fault_excluded")}
     judged = (col["t_s"] >= SETTLE_S) & np.array([r["state"] == "running" for r in rows])
     return summary, col, judged
 

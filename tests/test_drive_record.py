@@ -268,7 +268,7 @@ def small48(tmp_path_factory):
 
 
 def test_a_48_v_design_runs_in_the_simulator_at_48_v(small48, tmp_path):
-    from designkit.sim.run import run_simulation
+    from designkit.sim.run import RunSettings, run_simulation
     from firmware_io.mapfile import MapFile
     from firmware_io.runner import config_from_map
 
@@ -276,7 +276,7 @@ def test_a_48_v_design_runs_in_the_simulator_at_48_v(small48, tmp_path):
     cfg = config_from_map(MapFile.load(path))
     assert cfg.drive.supply_voltage_v == 48.0 and cfg.drive.driver.max_voltage_v == 50.0
     assert all(d.supply_voltage_v == 48.0 for d in cfg.drive.drives)
-    s = run_simulation(design=design, obj="plane", duration_s=0.3, map_path=path,
+    s = run_simulation(RunSettings(obj="plane", duration_s=0.3), design=design, map_path=path,
                        out=tmp_path / "run", progress=False)
     assert s["drive"]["supply_voltage_v"] == 48.0 and s["drive_violations"] == []
     assert s["drive"] == cfg.drive.to_dict()

@@ -22,10 +22,10 @@ from designkit.fieldmap.symmetry import Orbits, array_symmetries, random_orbits
 from designkit.geometry.pose import Pose
 from designkit.render import Hemisphere
 from designkit.sim import SimulatedDevice
-from firmware_io.runner import Runner, RunnerConfig, RunnerParts, SensorFrame
+from firmware_io.runner import Runner, RunnerConfig, RunnerIO, SensorFrame
 from firmware_io.scene import Scene
 
-from _runner_fakes import HoldTracker, PlaneScene, TruthLocalizer, clipped_lstsq, md10c_drive
+from _runner_fakes import HoldTracker, PlaneScene, TruthEstimator, clipped_lstsq, md10c_drive
 
 AIR = default_design().replace(core=None)
 
@@ -215,11 +215,11 @@ def test_runner_fails_safe_outside_a_scene_maps_region(scene_map):
 
     class Source:
         def __call__(self, t):
-            return SensorFrame(np.zeros((9, 3)), np.zeros((9, 3)), ("ok",) * 18, t)
+            return SensorFrame(np.zeros((18, 3)), ("ok",) * 18, t)
 
-    r = Runner(RunnerParts(fm, PlaneScene(hi[2], 6.0), TruthLocalizer(lambda: truth["p"]),
-                           HoldTracker(), clipped_lstsq, dev.coils, Source()),
-               cfg, log=lambda line: None, clock=lambda: 0.0)
+    r = Runner(fm, PlaneScene(hi[2], 6.0), TruthEstimator(lambda: truth["p"], dev.moment),
+               RunnerIO(dev.coils, Source(), lambda line: None, lambda: 0.0), cfg,
+               tracker=HoldTracker(), allocate=clipped_lstsq)
     r.start()
     assert r.step(0.0).state == "running"
     # inside the design's full box but beside the scene's region

@@ -12,7 +12,7 @@ import pytest
 
 from firmware_io.hw.bus import raw_write
 
-from firmware_io.hw.tlv493d import TLV493D, tlv493d_address, tlv493d_decode, tlv493d_write_frame
+from firmware_io.hw.tlv493d import FrameChecks, TLV493D, tlv493d_address, tlv493d_decode, tlv493d_write_frame
 from firmware_io.errors import BadInputError, I2CError, SensorConfigError
 from firmware_io.hw.sim import SimBus, SimClock, SimTLV493D
 
@@ -132,7 +132,7 @@ def test_address_assignment_and_low_reset_level():
 
 
 def test_recovery_from_stuck_frame_counter():
-    bus, sim, tlv, _ = make(hang_threshold=3)
+    bus, sim, tlv, _ = make(checks=FrameChecks(hang_reads=3))
     tlv.configure()
     tlv.read()
     resets_before = sim.resets
@@ -192,3 +192,92 @@ def test_temperature_on_reads_seven_bytes():
     tlv.read()
     assert len(bus.log[-1].messages[0].data) == 7
     assert tlv.temperature_c == pytest.approx((350 - 340) * 1.1 + 25)
+
+
+# ---------------------------------------------------------------------------------------------
+# values a sensor reports with an ok frame: frozen, all zero
+
+
+def _frame_bytes(bx, by, bz, frm, pd=1, ff=1):
+    """The six bytes a TLV493D sends for 12-bit values bx, by, bz (temperature off: its nibble
+    and byte 6 are 0), frame counter ``frm``, channel 0 [UM register map]."""
+    x, y, z = (v & 0xFFF for v in (bx, by, bz))
+    return bytes([x >> 4, y >> 4, z >> 4, frm << 2, (x & 0xF) << 4 | (y & 0xF),
+                  ff << 5 | pd << 4 | (z & 0xF)])
+
+
+def test_frame_bytes_by_hand():
+    # 12.3 mT -> 125.5 -> 126 = 0x07E; -45.6 mT -> -465.3 -> -465 = 0xE2F; 100 mT -> 1020 = 0x3FC
+    assert _frame_bytes(126, -465, 1020, 2) == bytes([0x07, 0xE2, 0x3F, 0x08, 0xEF, 0x3C])
+
+
+def test_frozen_values_with_a_live_frame_counter_are_reported():
+    """The chip keeps converting (the frame counter advances) but repeats its values: 'ok' for
+    frozen_reads - 1 repeats, 'frozen' from the frozen_reads-th (8 by default). The read before
+    the fault already showed these values, so the 8th read after it is the 8th repeat."""
+    bus, sim, tlv, _ = make(field=(0.0123, -0.0456, 0.1))
+    tlv.configure()
+    tlv.read()
+    sim.value_fault = "frozen"
+    sim.field_t = (0.02, 0.02, 0.02)     # the field changes; the chip does not say so
+    statuses, frames = [], []
+    for _ in range(10):
+        tlv.read()
+        statuses.append(tlv.status)
+        frames.append(bus.log[-1].messages[0].data)
+    assert statuses == ["ok"] * 7 + ["frozen"] * 3
+    counters = [(f[3] >> 2) & 3 for f in frames]
+    assert all((b - a) % 4 == 1 for a, b in zip(counters, counters[1:]))   # live counter
+    for f, frm in zip(frames, counters):
+        assert f == _frame_bytes(126, -465, 1020, frm)
+    assert FrameChecks().frozen_reads == 8
+
+
+def test_all_zero_values_are_reported_after_zero_reads():
+    bus, sim, tlv, _ = make(field=(0.0123, -0.0456, 0.1))
+    tlv.configure()
+    tlv.read()
+    sim.value_fault = "zero"
+    statuses = []
+    for _ in range(7):
+        tlv.read()
+        statuses.append(tlv.status)
+    # the first read returns the conversion made before the fault; then five zero frames
+    assert statuses == ["ok"] * 5 + ["zero"] * 2
+    frm = (bus.log[-1].messages[0].data[3] >> 2) & 3
+    assert bus.log[-1].messages[0].data == _frame_bytes(0, 0, 0, frm)
+    # the checks can be switched off (a test bench with a constant, noise-free field)
+    bus2, sim2, tlv2, _ = make(checks=FrameChecks(frozen_reads=0, zero_reads=0))
+    tlv2.configure()
+    sim2.value_fault = "zero"
+    for _ in range(20):
+        tlv2.read()
+    assert tlv2.status == "ok"
+
+
+def test_a_healthy_sensor_with_datasheet_noise_is_not_flagged():
+    """0.1 mT rms noise (about one LSB) in a zero field and in a constant one, 3000 reads each:
+    never 'frozen' nor 'zero' (by chance: ~1e-3 and ~1e-11 per read window); a sensor at
+    frozen_reads = 2 would be."""
+    import numpy as np
+
+    rng = np.random.default_rng(1)
+    for field in ((0.0, 0.0, 0.0), (0.01, -0.02, 0.03)):
+        bus, sim, tlv, _ = make()
+        sim.field_source = lambda f=field: np.asarray(f) + rng.normal(scale=1e-4, size=3)
+        tlv.configure()
+        seen = {tlv.read() and tlv.status for _ in range(3000)}
+        assert seen == {"ok"}, seen
+    bus, sim, tlv, _ = make(checks=FrameChecks(frozen_reads=2))
+    sim.field_source = lambda: np.array([0.0, 0.0, 0.0]) + rng.normal(scale=1e-4, size=3)
+    tlv.configure()
+    assert "frozen" in {tlv.read() and tlv.status for _ in range(3000)}
+
+
+def test_frame_checks_refuse_bad_debounces():
+    with pytest.raises(BadInputError, match="hang_reads"):
+        FrameChecks(hang_reads=0)
+    with pytest.raises(BadInputError, match="frozen_reads"):
+        FrameChecks(frozen_reads=-1)
+    with pytest.raises(BadInputError, match="checks"):
+        TLV493D(SimBus(), 0x5E, checks=3)

@@ -302,3 +302,41 @@ def test_active_constraints_print_a_zero_margin_not_round_off(tmp_path, capsys):
         line = next(x for x in out.splitlines() if x.strip().startswith(n))
         assert "margin +0 " in line or " 0 mm " in line, line
     assert not re.search(r"margin [+-]\d(\.\d+)?e-1\d", out)
+
+
+def test_sensor_saturation_of_one_air_coil_is_the_thick_solenoids_closed_form():
+    """One air coil: the sensor on its axis, sensors.offset_m above the top face, saturates at
+    range / B_z per ampere, with B_z of a uniformly wound thick solenoid on its axis in closed
+    form (mu0 n J / 2 [u ln((R2 + sqrt(R2^2 + u^2)) / (R1 + sqrt(R1^2 + u^2)))] between the
+    ends), independent of the winding quadrature; all coils = one coil here."""
+    d0 = default_design()
+    design = dataclasses.replace(d0, core=None,
+                                 array=dataclasses.replace(d0.array, rows=1, columns=1))
+    c = design.coil
+    z = c.length_m / 2 + design.sensors.offset_m          # from the winding's centre
+    j = c.turns / (c.length_m * (c.outer_radius_m - c.inner_radius_m))   # turns per m^2
+
+    def f(u):
+        r1, r2 = c.inner_radius_m, c.outer_radius_m
+        return u * math.log((r2 + math.hypot(r2, u)) / (r1 + math.hypot(r1, u)))
+
+    bz = 4e-7 * math.pi * j / 2 * (f(z + c.length_m / 2) - f(z - c.length_m / 2))
+    rows = rules.sensor_saturation(design)
+    assert len(rows) == 2 and rows[0]["coil"] == 0
+    assert rows[0]["one_coil_a"] == pytest.approx(design.sensors.range_t / bz, rel=1e-6)
+    assert rows[0]["all_coils_a"] == pytest.approx(rows[0]["one_coil_a"], rel=1e-12)
+    assert rows[1]["one_coil_a"] == pytest.approx(rows[0]["one_coil_a"], rel=1e-6)  # mirror
+
+
+def test_check_prints_the_currents_that_blind_each_sensor(thesis_array, capsys):
+    """The thesis device: each sensor above/below a cored coil leaves its linear range at
+    ~4.2 A in that coil (the issue's ~31 mT/A) -- within the 6 A limit, so check names every
+    sensor; with all coils the worst pattern blinds them at less."""
+    assert main(["check"]) in (0, 1)
+    out = capsys.readouterr().out
+    rows = rules.sensor_saturation(default_design(), thesis_array)
+    assert len(rows) == 18 and all(3.9 < r["one_coil_a"] < 4.6 for r in rows)
+    assert all(r["all_coils_a"] < r["one_coil_a"] for r in rows)
+    assert [r["coil"] for r in rows] == list(range(9)) * 2
+    assert "sensor saturation" in out and "one coil alone blinds sensors [0, 1, 2" in out
+    assert f"{rows[4]['one_coil_a']:6.2f} A (coil 4)" in out

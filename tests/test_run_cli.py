@@ -14,7 +14,7 @@ import sys
 import numpy as np
 import pytest
 
-from designkit.sim.faults import FAULT_CLEARS_S
+from designkit.sim.faults import FAULT_CLEARS_S, FAULT_TYPES
 from conftest import ROOT
 from test_run_simulated import map_file  # noqa: F401  (the module's map, built once)
 
@@ -88,7 +88,7 @@ def test_fault_table_is_each_faults_own_from_run_csv(map_file, tmp_path):
                                                         & (state == "running"))
         assert f["currents_off_s"] is None or f["currents_off_s"] >= f["time_to_safe_s"]
     # every scheduled fault is accounted for: injected (in the table) or said not to be
-    assert len(table) + len(summary["faults_not_injected"]) == 8
+    assert len(table) + len(summary["faults_not_injected"]) == len(FAULT_TYPES)
     assert "fault sensor_stuck @" in res.stdout
 
 

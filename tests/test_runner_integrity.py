@@ -6,7 +6,6 @@ safe, and no running step renders at a gated-out position."""
 from __future__ import annotations
 
 import csv
-from dataclasses import dataclass
 
 import numpy as np
 import pytest
@@ -17,27 +16,30 @@ from designkit.sim import (FaultSchedule, SimulatedDevice, simulate, slide_traje
                            time_to_safe)
 from designkit.sim.faults import FAULT_CLEARS_S
 from designkit.sim.report import write_run_csv
-from firmware_io.runner import ConstantVelocityTracker, Runner, RunnerConfig, RunnerParts
+from firmware_io.runner import PoseEstimate, PoseTracker, Runner, RunnerConfig, RunnerIO
 
-from _runner_fakes import ConstantMap, PlaneScene, clipped_lstsq, md10c_drive
+from _runner_fakes import PlaneScene, clipped_lstsq, device_map, md10c_drive
 
 BOX = (np.array([-0.075, -0.075, 0.010]), np.array([0.075, 0.075, 0.080]))
 JUMP = np.array([0.030, 0.0, 0.0])
 
 
-@dataclass
-class Estimate:
-    position_m: np.ndarray
-    ok: bool
-    covariance_m2: np.ndarray
-    protection_level_m: float
-    reason: str = ""
+MOMENT = np.array([0.0, 0.0, 0.909])
+
+
+def _estimate(p, ok, sigma_m, pl_m):
+    """A pose estimate at p with covariance sigma^2 I and protection level ``pl_m``."""
+    return PoseEstimate(np.asarray(p, float), MOMENT.copy(), ok, "" if ok else "no sensor",
+                        sigma_m ** 2 * np.eye(3), pl_m)
 
 
 class JumpingLocalizer:
     """The true position with a 0.3 mm covariance, except on the frames listed in ``spikes``
     (one frame 30 mm off) and from frame ``moved`` on (30 mm off for good: the finger 'really'
     moved, as after a lost stretch). Counts its resets (re-acquisition requests)."""
+
+    integrity_risk = 1e-4
+    model_bias_m = 0.0
 
     def __init__(self, truth, spikes, moved):
         self.truth, self.spikes, self.moved = truth, set(spikes), moved
@@ -46,14 +48,13 @@ class JumpingLocalizer:
     def reset(self):
         self.resets += 1
 
-    def fix(self, top, bottom, currents=None):
+    def fix(self, readings_t, currents_a):
         k = self.calls
         self.calls += 1
         p = np.asarray(self.truth(), float)
         if k in self.spikes or k >= self.moved:
             p = p + JUMP
-        ok = bool(np.isfinite(top).any() or np.isfinite(bottom).any())
-        return Estimate(p, ok, (0.3e-3) ** 2 * np.eye(3), 1e-3)
+        return _estimate(p, bool(np.isfinite(readings_t).any()), 0.3e-3, 1e-3)
 
 
 @pytest.fixture(scope="module")
@@ -75,14 +76,14 @@ def _jumping_run(device, seed, duration, faults, spikes, moved, **cfg):
     def factory(source, clock, hook):
         conf = RunnerConfig(dev.drive, **cfg)
         loc = JumpingLocalizer(lambda: source.frame_truth_m, spikes=spikes, moved=moved)
-        parts = RunnerParts(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0), loc,
-                            ConstantVelocityTracker(), hook(clipped_lstsq), dev.coils, source)
-        r = Runner(parts, conf, clock=clock, log=lambda line: None)
+        r = Runner(device_map(a, BOX, dev), PlaneScene(0.05, 6.0), loc,
+                   RunnerIO(dev.coils, source, lambda line: None, clock), conf,
+                   tracker=PoseTracker(), allocate=hook(clipped_lstsq))
         r.start()
         holder["runner"], holder["loc"] = r, loc
         return r
 
-    res = simulate(dev, factory, traj, duration_s=duration, period_s=1e-3,
+    res = simulate(dev, factory, traj, duration_s=duration,
                    faults=FaultSchedule.parse(faults, duration), progress=False)
     return res, holder["runner"], holder["loc"]
 
@@ -126,8 +127,7 @@ def test_bad_frames_reach_the_loop_as_not_ok_fixes_with_a_reason():
     import magpylib as magpy
 
     from firmware_io.localization import Localizer, SensorModel
-    from firmware_io.runner import SensorFrame
-    from firmware_io.runner.pipeline import SensorPipeline
+    from firmware_io.runner import LocalizerShim, SensorFrame, SensorLayout, SensorPipeline
 
     rng = np.random.default_rng(0)
     xy = np.array([[x, y] for y in (0.05, 0.0, -0.05) for x in (-0.05, 0.0, 0.05)])
@@ -136,24 +136,25 @@ def test_bad_frames_reach_the_loop_as_not_ok_fixes_with_a_reason():
     moment = np.array([0.0, 0.0, 0.909])
     model = SensorModel(sp, np.stack([up, up * np.array([-1.0, -1.0, 1.0])[None, :, None]]),
                         moment, "a" * 64, 0.0, None)
-    pipe = SensorPipeline(Localizer(model, "model", cores=False), object(), 9,
+    layout = SensorLayout(sp.reshape(-1, 3), model.coil_field_t_per_a.reshape(18, 3, 9))
+    pipe = SensorPipeline(LocalizerShim(Localizer(model, "model", cores=False)), layout,
                           lambda t: np.zeros(9), moment)
     p = np.array([0.0, 0.01, 0.04])
-    good = magpy.misc.Dipole(moment=moment, position=p).getB(sp.reshape(-1, 3)).reshape(2, 9, 3)
-    ok9 = ("ok",) * 18
-    fix = pipe.process(SensorFrame(np.where(np.arange(9)[:, None] == 3, np.inf, good[0]),
-                                   good[1], ok9, 0.0))
+    good = magpy.misc.Dipole(moment=moment, position=p).getB(sp.reshape(-1, 3))
+    ok18 = ("ok",) * 18
+    fix = pipe.process(SensorFrame(np.where(np.arange(18)[:, None] == 3, np.inf, good), ok18,
+                                   0.0))
     assert fix.ok and fix.excluded[3] and fix.problems[0][0] == "sensor_saturated"
     assert np.linalg.norm(fix.position_m - p) < 1e-4
-    bad = {"shape": SensorFrame(good[0][:8], good[1], ok9, 0.0),
-           "usable": SensorFrame(np.full((9, 3), np.nan), np.full((9, 3), np.nan),
-                                 ("saturated",) * 18, 0.0)}
+    bad = {"shape": SensorFrame(good[:17], ok18, 0.0),
+           "usable": SensorFrame(np.full((18, 3), np.nan), ("saturated",) * 18, 0.0),
+           "numbers": SensorFrame([["a", 1, 2]] * 18, ok18, 0.0)}
     for word, frame in bad.items():
         fix = pipe.process(frame)
         assert not fix.ok and np.all(np.isfinite(fix.position_m))
         assert any(name == "lost" and word in detail for name, detail in fix.problems), \
             (word, fix.problems)
-    fix = pipe.process(SensorFrame(good[0], good[1], ok9, 0.01))
+    fix = pipe.process(SensorFrame(good, ok18, 0.01))
     assert fix.ok and np.linalg.norm(fix.position_m - p) < 1e-4
     assert fix.covariance_m2.shape == (3, 3) and 0 < fix.protection_level_m < 5e-3
 
@@ -189,13 +190,17 @@ class NoisyLocalizer:
     (1 mm bias + 4.6 sigma): over the 5 mm alert limit for sigma = 1.5 mm."""
 
     model_bias_m = 1e-3
+    integrity_risk = 1e-4
 
     def __init__(self, truth, sigma_m):
         self.truth, self.sigma = truth, sigma_m
 
-    def fix(self, top, bottom, currents=None):
+    def reset(self):
+        pass
+
+    def fix(self, readings_t, currents_a):
         pl = self.model_bias_m + 4.6 * self.sigma
-        return Estimate(np.asarray(self.truth(), float), True, self.sigma ** 2 * np.eye(3), pl)
+        return _estimate(self.truth(), True, self.sigma, pl)
 
 
 @pytest.mark.parametrize("sigma_m, renders", [(1.5e-3, True), (20e-3, False)])
@@ -210,13 +215,13 @@ def test_multi_frame_pl_lets_the_runner_acquire_and_render(device, sigma_m, rend
     def factory(source, clock, hook):
         cfg = RunnerConfig(dev.drive, resume_after_s=0.02, alert_limit_m=5e-3)
         loc = NoisyLocalizer(lambda: source.frame_truth_m, sigma_m)
-        parts = RunnerParts(ConstantMap(a, BOX, dev.moment), PlaneScene(0.05, 6.0), loc,
-                            ConstantVelocityTracker(), hook(clipped_lstsq), dev.coils, source)
-        r = Runner(parts, cfg, clock=clock, log=lambda line: None)
+        r = Runner(device_map(a, BOX, dev), PlaneScene(0.05, 6.0), loc,
+                   RunnerIO(dev.coils, source, lambda line: None, clock), cfg,
+                   tracker=PoseTracker(), allocate=hook(clipped_lstsq))
         r.start()
         return r
 
-    res = simulate(dev, factory, traj, duration_s=0.3, period_s=1e-3, progress=False)
+    res = simulate(dev, factory, traj, duration_s=0.3, progress=False)
     write_run_csv(tmp_path / "run.csv", res.columns)
     with (tmp_path / "run.csv").open() as fh:
         rows = list(csv.DictReader(fh))
@@ -231,10 +236,11 @@ def test_recovery_takes_a_few_frames_once_the_fault_is_gone(device):
     the frames the design needs, not after a fixed hold time. A frame holds the field of the
     previous pass's start, so after the fault is gone 2 frames still show it (after the bus's
     gap while the dead sensor is reset they are older than ``max_fix_age_s``); back from the
-    excursion one fix is gated and the re-acquired one confirms the jump; then
-    ``resume_fixes`` accepted fixes; plus one frame interval for the fit's compute time on the
-    sensor side (measured CPU time). While the sensor is still dead the runner runs with it
-    excluded; nothing renders in between."""
+    excursion the track is older than ``max_fix_age_s`` and was dropped, so the first trusted
+    fix restarts it (the bound still allows a gated fix and its confirmation); then
+    ``resume_fixes`` accepted fixes; plus one frame interval for the fit's modelled compute
+    time on the sensor side. While the sensor is still dead the runner runs with it excluded;
+    nothing renders in between."""
     dead_at, box_at = 0.15, 0.5
     res, runner, _ = _jumping_run(device, 6, 0.9, f"sensor_dead@{dead_at},out_of_box@{box_at}",
                                   (), 10 ** 9)
@@ -266,3 +272,41 @@ def test_recovery_takes_a_few_frames_once_the_fault_is_gone(device):
     t_clear = box_at + FAULT_CLEARS_S["out_of_box"]
     d = frame_intervals(t_clear, t_clear + out["recovered_s"])
     assert out["recovered_s"] <= (2 + 2 + n_fix + 1) * d.max() + 1e-3, (out, d)
+
+
+def test_no_force_with_a_position_older_than_one_sensor_pass(device):
+    """Fixes every 5 ms (frames 8 ms old at hand-over), then none: the runner renders while
+    the newest trusted fix is at most STALE_PASSES passes (+ 2 periods) old at hand-over and
+    goes 'lost' at the first step beyond; after max_fix_age_s it drops the track, so a finger
+    that comes back 40 mm away is taken at once (not gated against where it left) and renders
+    after resume_fixes fixes."""
+    from firmware_io.runner import Fix
+    from firmware_io.runner.loop import STALE_PASSES
+
+    design, array, a = device
+    dev = SimulatedDevice(design, array, seed=2, drive=md10c_drive(design))
+    cfg = RunnerConfig(dev.drive)
+    here, there = np.array([0.0, 0.0, 0.04]), np.array([0.04, 0.0, 0.04])
+
+    def source(t):
+        k = int(round(t * 1e3))
+        if k % 5 or 50 < k < 120:
+            return None
+        p = here if k <= 50 else there
+        return Fix(p.copy(), MOMENT.copy(), True, t - 0.008, (), np.zeros(18, bool), 0.0,
+                   (0.3e-3) ** 2 * np.eye(3), 1e-3)
+
+    r = Runner(device_map(a, BOX, dev), PlaneScene(0.05, 6.0), NoisyLocalizer(None, 0.3e-3),
+               RunnerIO(dev.coils, source, lambda line: None, lambda: 0.0), cfg,
+               tracker=PoseTracker(), allocate=clipped_lstsq)
+    r.start()
+    recs = [r.step(k * 1e-3) for k in range(140)]
+    states = [x.state for x in recs]
+    limit_ms = STALE_PASSES * 5 + 2                          # 9.5 ms after the hand-over at 50
+    assert states[50:60] == ["running"] * 10 and states[60] == "lost"
+    assert 50 + limit_ms < 60 <= 50 + limit_ms + 1
+    assert all(s == "lost" for s in states[60:130])
+    # the track was dropped: the fixes at 120, 125, 130 are accepted, the third one resumes
+    assert states[130] == "running" and "gated" not in states
+    assert np.linalg.norm(recs[130].position_m - there) < 1e-3
+    assert all(not np.any(x.command_a) for x in recs[60:130])

@@ -13,8 +13,8 @@ import pytest
 
 from designkit import fieldmap
 from designkit.design import default_design
-from designkit.sim.run import run_simulation
-from firmware_io.runner import SensorFrame, SensorPipeline
+from designkit.sim.run import RunSettings, run_simulation
+from firmware_io.runner import PoseEstimate, SensorFrame, SensorLayout, SensorPipeline
 
 BOX = (np.array([-0.07, -0.03, 0.015]), np.array([0.07, 0.03, 0.06]))
 
@@ -33,8 +33,8 @@ def small(tmp_path_factory):
 def test_one_by_two_air_core_board_runs(small, tmp_path):
     design, path = small
     out = tmp_path / "run"
-    s = run_simulation(design=design, obj="plane", duration_s=0.4, map_path=path, out=out,
-                       progress=False)
+    s = run_simulation(RunSettings(obj="plane", duration_s=0.4), design=design, map_path=path,
+                       out=out, progress=False)
     rows = list(csv.DictReader((out / "run.csv").open()))
     assert len(rows) == 400
     # two coils: two current and two command columns, no third
@@ -46,13 +46,16 @@ def test_one_by_two_air_core_board_runs(small, tmp_path):
     assert max(abs(float(r["cmd1_a"])) + abs(float(r["cmd2_a"])) for r in running) > 0
 
 
-class _Loc:
+class _Estimator:
     def __init__(self):
         self.shapes = []
 
-    def fix(self, top, bottom, currents=None):
-        self.shapes.append((np.shape(top), np.shape(bottom), np.shape(currents)))
-        return type("E", (), {"position_m": np.zeros(3), "ok": True})()
+    def reset(self):
+        pass
+
+    def fix(self, readings_t, currents_a):
+        self.shapes.append((np.shape(readings_t), np.shape(currents_a)))
+        return PoseEstimate(np.zeros(3), np.array([0.0, 0.0, 1.0]), True)
 
 
 class _Map:
@@ -63,11 +66,12 @@ class _Map:
 
 
 def test_pipeline_sizes_from_the_map_not_the_coil_count():
-    loc = _Loc()
-    p = SensorPipeline(loc, _Map(), 2, lambda t: np.zeros(2), np.array([0.0, 0.0, 1.0]))
-    assert p.n == 4 and p.excluded.shape == (8,)
-    fix = p.process(SensorFrame(np.zeros((4, 3)), np.zeros((4, 3)), ("ok",) * 8, 0.0))
-    assert fix.ok and loc.shapes == [((4, 3), (4, 3), (2,))]
+    est = _Estimator()
+    p = SensorPipeline(est, SensorLayout.of_map(_Map()), lambda t: np.zeros(2),
+                       np.array([0.0, 0.0, 1.0]))
+    assert p.n == 8 and p.excluded.shape == (8,)
+    fix = p.process(SensorFrame(np.zeros((8, 3)), ("ok",) * 8, 0.0))
+    assert fix.ok and est.shapes == [((8, 3), (2,))]
     # a frame of the wrong size: not ok, with the reason, no exception
-    bad = p.process(SensorFrame(np.zeros((2, 3)), np.zeros((2, 3)), ("ok",) * 4, 0.0))
-    assert not bad.ok and "expected (4, 3)" in bad.problems[0][1]
+    bad = p.process(SensorFrame(np.zeros((4, 3)), ("ok",) * 4, 0.0))
+    assert not bad.ok and "expected (8, 3)" in bad.problems[0][1]

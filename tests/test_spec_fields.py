@@ -66,7 +66,7 @@ def test_run_takes_lambda_from_the_design_render_stiffness(monkeypatch, tmp_path
 
     import designkit.render.scenefile as scenefile
     import firmware_io.mapfile as mapfile
-    from designkit.sim import run_simulation
+    from designkit.sim import RunSettings, run_simulation
 
     class Stop(Exception):
         pass
@@ -83,7 +83,7 @@ def test_run_takes_lambda_from_the_design_render_stiffness(monkeypatch, tmp_path
     d = default_design().replace(**{"render.stiffness_n_per_m": 4.25})
     for lam, want in ((None, 4.25), (7.0, 7.0)):
         with pytest.raises(Stop):
-            run_simulation(design=d, map_path=tmp_path / "m.npz", out=tmp_path / "o",
-                           array=SimpleNamespace(sensor_positions_m=lambda: np.zeros((2, 9, 3))),
-                           duration_s=0.1, lam_n_per_m=lam)
+            run_simulation(RunSettings(duration_s=0.1, lam_n_per_m=lam), design=d,
+                           map_path=tmp_path / "m.npz", out=tmp_path / "o",
+                           array=SimpleNamespace(sensor_positions_m=lambda: np.zeros((2, 9, 3))))
         assert seen["lam"] == want

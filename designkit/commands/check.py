@@ -5,7 +5,10 @@ Prints every rule of the rule book (:mod:`designkit.rules`) and every device con
 air-core design's R, I R, 5 L/R and heating with the closed-form air-core inductance): value,
 limit, margin (>= 0 is met), the design keys that fix it. The same table decides
 ``optimize`` (its bounds), ``report`` (its "violates" line) and ``cad`` (its refusal: the
-rules of group 'cad'). Exit 0 when every row is met, 1 when one is violated.
+rules of group 'cad'). Then, per Hall sensor, the coil currents that take it out of its linear
+range (:func:`designkit.rules.sensor_saturation`: reported, not a rule -- the runner leaves
+out a sensor it predicts beyond 80 % of its range). Exit 0 when every row is met, 1 when one
+is violated.
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ import argparse
 
 from ..design import load_design
 from ..optimize import rule_table
+from ..rules import sensor_saturation
 from .common import add_design_argument, add_progress_argument, shown_margin
 
 
@@ -48,8 +52,28 @@ def table_text(name: str, table: dict) -> str:
     return "\n".join(lines)
 
 
+def saturation_text(design, rows: list) -> str:
+    """The sensors' saturation currents as aligned text (positions in mm), and which sensors
+    the design's own current limit can blind."""
+    limit = design.drive.max_current_a
+    lines = [f"sensor saturation (TLV493D linear range +-{design.sensors.range_t * 1e3:g} mT per "
+             "axis, the coils' field alone; the runner leaves out a sensor it predicts beyond "
+             "80 % of it):",
+             "  sensor  position (mm)              one coil alone     all coils, worst signs"]
+    for r in rows:
+        pos = ", ".join(f"{1e3 * x:6.1f}" for x in r["position_m"])
+        lines.append(f"  {r['sensor']:6d}  ({pos})  {r['one_coil_a']:6.2f} A (coil {r['coil']})"
+                     f"  {r['all_coils_a']:6.2f} A")
+    one = [r["sensor"] for r in rows if r["one_coil_a"] < limit]
+    worst = [r["sensor"] for r in rows if r["all_coils_a"] < limit]
+    lines.append(f"at the design's {limit:g} A per coil: one coil alone blinds sensors "
+                 f"{one or 'none'}; some pattern of all coils blinds sensors {worst or 'none'}")
+    return "\n".join(lines)
+
+
 def run(args: argparse.Namespace) -> int:
     design = load_design(args.design)
     table = rule_table(design)
     print(table_text(design.name, table))
+    print(saturation_text(design, sensor_saturation(design)))
     return 0 if all(r["met"] for r in table.values()) else 1

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from ..design import load_design
 from ..errors import BadInputError
-from ..sim import run_simulation
+from ..sim import RunSettings, run_simulation
 from ..support.atomic import write_json_atomic
 from .common import add_design_argument, add_progress_argument, show_progress, staged_folder
 
@@ -30,10 +30,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"virtual object: {', '.join(OBJECTS)} or an STL/PLY mesh path "
                              "(default hemisphere)")
     parser.add_argument("--trajectory", default="slide",
-                        help="slide | poke | FILE.csv with columns t_s,x_m,y_m,z_m (default slide)")
+                        help="slide | poke | tilt (a slide tilting the magnet up to 45 deg) | "
+                             "FILE.csv with columns t_s,x_m,y_m,z_m and optionally tilt_deg "
+                             "(0..180), azimuth_deg (default slide)")
     parser.add_argument("--duration", type=float, default=None,
                         help="simulated time, s, up to 600 (default: the trajectory's own, 4 s "
-                             "slide, 3 s poke); the finger keeps the trajectory's speed: a "
+                             "slide and tilt, 3 s poke); the finger keeps the trajectory's speed: a "
                              "shorter run cuts it, a longer one holds its last point")
     parser.add_argument("--faults", default="none",
                         help="none | default (each fault type once) | TYPE@S,TYPE@S,...")
@@ -55,6 +57,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "gives the force error with the nominal map")
     parser.add_argument("--seed", type=int, default=0,
                         help="seed of the simulated sensor noise, an integer (default 0)")
+    parser.add_argument("--keep-sensors", dest="keep_sensors", default="",
+                        help="sensors the scene keeps in their linear range while rendering "
+                             "(indices in the map's order, e.g. 0-8 or 3,4,5; default none: "
+                             "`designkit check` lists the currents that blind each sensor)")
     parser.add_argument("--out", type=Path, default=Path("run-out"),
                         help="output folder (default ./run-out)")
     add_progress_argument(parser)
@@ -68,8 +74,8 @@ def run(args: argparse.Namespace) -> int:
     # staged: a run that fails (bad trajectory file, a fault, Ctrl-C) leaves no half-written
     # folder (map and scene without a summary) behind
     with staged_folder(args.out) as stage:
-        summary = run_simulation(design=args.design, map_path=args.map, out=stage,
-                                 **_run_options(args))
+        summary = run_simulation(_settings(args), design=args.design, map_path=args.map,
+                                 out=stage, progress=show_progress(args), plant=args.as_built)
         if args.as_built is not None:
             _as_built_comparison(args, summary, stage)
     print(f"wrote {args.out}/run.csv, summary.json, run.png, loop_timing.png: force error RMS "
@@ -89,12 +95,28 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _run_options(args: argparse.Namespace) -> dict:
-    """The options of :func:`designkit.sim.run_simulation` every run of this command shares."""
-    return dict(obj=args.object, trajectory=args.trajectory, duration_s=args.duration,
-                faults=args.faults, method=args.method, period_s=args.period_ms * 1e-3,
-                unipolar=args.unipolar, rows=args.rows, lam_n_per_m=args.lam, seed=args.seed,
-                progress=show_progress(args), plant=args.as_built)
+def _settings(args: argparse.Namespace) -> RunSettings:
+    """The :class:`designkit.sim.RunSettings` every run of this command shares."""
+    return RunSettings(obj=args.object, trajectory=args.trajectory, duration_s=args.duration,
+                       faults=args.faults, method=args.method, period_s=args.period_ms * 1e-3,
+                       unipolar=args.unipolar, rows=args.rows, lam_n_per_m=args.lam,
+                       seed=args.seed, keep_sensors=_sensor_list(args.keep_sensors))
+
+
+def _sensor_list(text: str) -> tuple:
+    """'0-8,12' -> (0, 1, ..., 8, 12); '' -> ()."""
+    out = []
+    for part in filter(None, (p.strip() for p in text.split(","))):
+        a, _, b = part.partition("-")
+        try:
+            lo, hi = int(a), int(b or a)
+        except ValueError:
+            raise BadInputError("--keep-sensors", "sensor indices or ranges, e.g. 0-8 or 3,4,5",
+                                text) from None
+        if not 0 <= lo <= hi:
+            raise BadInputError("--keep-sensors", "ranges lo-hi with 0 <= lo <= hi", part)
+        out.extend(range(lo, hi + 1))
+    return tuple(out)
 
 
 def _fault_line(f: dict) -> str:
@@ -122,7 +144,8 @@ def _as_built_comparison(args, summary, stage) -> None:
            "force_error_rms_n": summary["force_error_rms_n"]}
     if design.asbuilt is not None:
         nominal = dataclasses.replace(design, asbuilt=None)
-        other = run_simulation(design=nominal, out=stage / "nominal-map", **_run_options(args))
+        other = run_simulation(_settings(args), design=nominal, out=stage / "nominal-map",
+                               progress=show_progress(args), plant=args.as_built)
         out["nominal_map_force_error_rms_n"] = other["force_error_rms_n"]
     summary["as_built"] = out
     write_json_atomic(stage / "summary.json", summary)

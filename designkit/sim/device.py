@@ -4,9 +4,10 @@ driven by exact array physics and R-L coil currents.
 The coil currents (A) follow the voltage each coil driver applies from the drive record's
 supply (the design's: what the coils see), read back from the simulated PCA9685 registers (PWM
 duty, DIR level), so the bytes the runner wrote are what moves the current. The true force on the magnet (N) comes from designkit's array model at the true
-position (``CoilArray.force`` + the magnet's pull on the cores), never the map, so that the
-map's and the allocator's errors show up in a run. The sensors see that field through their
-errors and noise (designkit.sim.readings.SensorSimulator).
+pose -- its position and the moment the finger's tilt gives it (``CoilArray`` A(p) with
+F = F(m) G5, + the magnet's pull on the cores) -- never the map, so that the map's, the
+estimator's and the allocator's errors show up in a run. The sensors see the tilted magnet's
+exact field through their errors and noise (designkit.sim.readings.SensorSimulator).
 """
 
 from __future__ import annotations
@@ -24,8 +25,9 @@ from firmware_io.mapfile.drive import DriveRecord
 from ..model.array import CoilArray, force_matrix
 from ..model.coil import Coil
 from ..model.electrical import drive_data
-from .readings import SensorSimulator, analog_reading
-from .sensors import SimSensorSource
+from .readings import SensorSimulator, analog_reading, magnet_field
+from .samples import Sampled, bias_force_any, induced_field_any, sample_steps
+from .sensors import MODELLED_FIT_S, SimSensorSource
 
 
 class SimulatedDevice:
@@ -115,62 +117,66 @@ class SimulatedDevice:
         return self.current_a
 
     # -- physics ---------------------------------------------------------------------------------
-    def prepare(self, positions_m, *, sample_step_m: float = 2.5e-4, max_stride: int = 10,
-                induced_step_m: float = 2e-3) -> None:
-        """Evaluate the array model once, in one batch, along every step's true position.
+    def prepare(self, positions_m, directions=None, *, sample_step_m: float = 2.5e-4,
+                max_stride: int = 10, induced_step_m: float = 2e-3) -> None:
+        """Evaluate the array model in a few batches along every step's true pose.
 
-        The finger's path is scripted, so the model is never called inside the loop: it is
-        evaluated where the path has moved ``sample_step_m`` since the last sample (at least every
-        ``max_stride`` steps, and on both sides of a jump) and interpolated linearly in between;
-        per step only (3, n) @ (n,) products remain. For a path that moves 0.25 mm between samples
-        the interpolation error of A is ~(0.25 mm / 30 mm)^2 ~ 1e-4 relative at the design point
-        (the field varies on the coil-size scale). Sets the per-step force matrices (k, 3, n) N/A,
-        bias forces (k, 3) N, and the coils' field at the sensors per ampere.
+        The finger's path and tilt are scripted, so the model is never called inside the loop:
+        A(p) is evaluated where the path has moved ``sample_step_m`` or the magnet turned 0.5
+        degrees since the last sample (at least every ``max_stride`` steps, and on both sides of
+        a jump) and interpolated linearly in between; for a path that moves 0.25 mm between
+        samples the interpolation error of A is ~(0.25 mm / 30 mm)^2 ~ 1e-4 relative at the
+        design point (the field varies on the coil-size scale). The magnet-induced core field
+        at the sensors, a small smooth term, every ``induced_step_m`` or 2 degrees.
+
+        Parameters
+        ----------
+        positions_m : (k, 3) m -- the true position at each step
+        directions : (k, 3) unit vectors, optional -- the true moment direction at each step
+            (default: the design's)
         """
         p = np.asarray(positions_m, float).reshape(-1, 3)
-        idx = [0]
-        for k in range(1, len(p)):
-            jump = np.linalg.norm(p[k] - p[k - 1]) > 1e-3
-            if jump and idx[-1] != k - 1:
-                idx.append(k - 1)
-            if (jump or k - idx[-1] >= max_stride
-                    or np.linalg.norm(p[k] - p[idx[-1]]) >= sample_step_m):
-                idx.append(k)
-        if idx[-1] != len(p) - 1:
-            idx.append(len(p) - 1)
-        idx = np.asarray(idx)
+        mag = float(np.linalg.norm(self.moment))
+        u = (np.tile(self.moment / mag, (len(p), 1)) if directions is None
+             else np.asarray(directions, float).reshape(-1, 3))
+        self.path_m, self.moment_steps = p, mag * u
+        idx = sample_steps(p, u, step_m=sample_step_m, turn_rad=np.radians(0.5),
+                           max_stride=max_stride)
         a = self.array.actuation_matrix(p[idx])
-        f_s = np.einsum("ij,kjl->kil", force_matrix(self.moment), a[:, 3:, :])
-        b_s = np.asarray(self.array.bias_force(p[idx], self.moment), float).reshape(-1, 3)
-        steps = np.arange(len(p))
-        self.force_per_amp = _interp_rows(steps, idx, f_s)
-        self.bias_n = _interp_rows(steps, idx, b_s)
-        # the magnet-induced core field at the sensors is a small, smooth term (a few mT):
-        # sampled every induced_step_m of travel
-        coarse = [0]
-        for k in idx[1:]:
-            if (np.linalg.norm(p[k] - p[coarse[-1]]) >= induced_step_m
-                    or np.linalg.norm(p[k] - p[k - 1]) > 1e-3):
-                if coarse[-1] != k - 1 and np.linalg.norm(p[k] - p[k - 1]) > 1e-3:
-                    coarse.append(k - 1)
-                coarse.append(int(k))
-        if coarse[-1] != len(p) - 1:
-            coarse.append(len(p) - 1)
-        coarse = np.asarray(sorted(set(coarse)))
-        self.induced_t = _interp_rows(steps, coarse, self.sensor_sim.induced_part(p[coarse]))
-        self.path_m = p
+        self.g5 = Sampled(idx, a[:, 3:, :])          # gradient rows per ampere, T/(m A)
+        self.b_per_amp = Sampled(idx, a[:, :3, :])   # field per ampere at the magnet, T/A
+        self.bias = Sampled(idx, bias_force_any(self.array, p[idx], self.moment_steps[idx]))
+        coarse = sample_steps(p, u, step_m=induced_step_m, turn_rad=np.radians(2.0))
+        pts = self.sensor_sim.true_m.reshape(-1, 3)
+        self.induced = Sampled(coarse, induced_field_any(self.array, pts, p[coarse],
+                                                         self.moment_steps[coarse]))
 
     def true_force_n(self, step: int, current_a) -> np.ndarray:
-        """Force on the magnet at step ``step``'s true position, N, shape (3,)."""
-        return self.force_per_amp[step] @ current_a + self.bias_n[step]
+        """Force on the true magnet (its moment at step ``step``) at its true position, N, (3,):
+        F(m) G5(p) I + F0(p, m)."""
+        f = force_matrix(self.moment_steps[step]) @ self.g5.at(step)
+        return f @ current_a + self.bias.at(step)
+
+    def true_torque_n_m(self, step: int, current_a) -> np.ndarray:
+        """Torque m x B of the coils' field on the true magnet at step ``step``, N m, (3,)."""
+        return np.cross(self.moment_steps[step], self.b_per_amp.at(step) @ current_a)
+
+    def force_per_amp(self, step: int) -> np.ndarray:
+        """The true magnet's force per ampere at step ``step``, (3, n) N/A."""
+        return force_matrix(self.moment_steps[step]) @ self.g5.at(step)
 
     def sensor_readings_t(self, step: int, position_m, current_a) -> np.ndarray:
-        """(2 n_coils, 3) T, what each sensor's ADC converts at step ``step`` (magnet at
-        ``position_m``): the field (magnet, coils, induced cores) through the sensor errors,
-        plus noise and injected offsets; the TLV493D models quantize and clip it."""
+        """(n_sensors, 3) T, what each sensor's ADC converts at step ``step`` (the magnet at
+        ``position_m`` with its moment at that step): the field (magnet, coils, induced cores)
+        through the sensor errors, plus noise and injected offsets; the TLV493D models quantize
+        and clip it."""
         sim = self.sensor_sim
-        b = (sim.magnet_part(np.asarray(position_m, float)[None])[0]
-             + sim.coil_part(np.asarray(current_a, float)[None])[0] + self.induced_t[step])
+        mg = self.design.magnet
+        pts = sim.true_m.reshape(-1, 3)
+        magnet = magnet_field(pts, np.asarray(position_m, float), self.moment_steps[step],
+                              mg.radius_m, mg.length_m)
+        b = (magnet + self.induced.at(step)).reshape(sim.true_m.shape) \
+            + sim.coil_part(np.asarray(current_a, float)[None])[0]
         a = analog_reading(b[None], sim.errors, self.noise_t, self.rng)[0].reshape(-1, 3)
         return a + self.field_offset_t
 
@@ -203,24 +209,15 @@ class SimulatedDevice:
                   self.supply_v / self.resistance_ohm)
         currents = calibration_currents(self.array.n_coils, amp, frames)
         tau = self.inductance_h / self.resistance_ohm
-        top, bottom, applied = record_calibration(self.coils, self.sensors, currents,
-                                                  settle_s=7 * tau, sleep=settle)
+        readings, applied = record_calibration(self.coils, self.sensors, currents,
+                                               settle_s=7 * tau, sleep=settle)
         settle(7 * tau)          # coils off: decayed before the run starts
         self.current_a[:] = 0.0
-        return calibrate_sensors(model, top, bottom, applied)
+        return calibrate_sensors(model, readings, applied)
 
-    def sensor_source(self, position_at, period_s: float) -> SimSensorSource:
+    def sensor_source(self, position_at, period_s: float,
+                      fit_time_s: float | None = MODELLED_FIT_S) -> SimSensorSource:
         """The runner's sensor source on this device; ``position_at(t_s)`` is the true position
-        (the path given to :meth:`prepare`, one sample per control period ``period_s``)."""
-        return SimSensorSource(self, position_at, period_s)
-
-
-def _interp_rows(steps, idx, values):
-    """Linear interpolation of ``values`` (len(idx), ...) sampled at ``idx`` onto ``steps``."""
-    flat = values.reshape(len(idx), -1)
-    out = np.empty((len(steps), flat.shape[1]))
-    for j in range(flat.shape[1]):
-        out[:, j] = np.interp(steps, idx, flat[:, j])
-    return out.reshape((len(steps),) + values.shape[1:])
-
-
+        (the path given to :meth:`prepare`, one sample per control period ``period_s``);
+        ``fit_time_s``: the fit's compute time in the timeline (None: measured)."""
+        return SimSensorSource(self, position_at, period_s, fit_time_s)

@@ -15,18 +15,30 @@ import numpy as np
 
 from ..errors import BadInputError
 
-FAULT_TYPES = ("pwm_nack", "sensor_stuck", "sensor_dead", "sensor_saturated", "out_of_box",
-               "overrun", "over_limit", "thermal")
+FAULT_TYPES = ("pwm_nack", "sensor_stuck", "sensor_dead", "sensor_saturated", "sensor_value",
+               "out_of_box", "overrun", "over_limit", "thermal")
 """Fault types the plant can inject (``--faults default`` injects each once, in this order;
-thermal last because a coil over its I^2 t budget stays off until it has cooled, minutes)."""
+thermal last because a coil over its I^2 t budget stays off until it has cooled, minutes).
+``sensor_value``: the top sensor above the centre coil keeps converting (its frame counter
+runs) but repeats its values."""
+
+EXTRA_FAULT_TYPES = ("sensor_zero", "sensor_offset")
+"""Injectable by name, not in ``default``: the same sensor reads 0 on every axis
+(``sensor_zero``), or reads 2 mT too much on x with an ok status (``sensor_offset``: only the
+estimator's fault detection can see it)."""
+
+FAULT_STATE = {"sensor_zero": "sensor_value", "sensor_offset": "sensor_value"}
+"""The runner state an injected fault should end in, where its name is not that state."""
 
 FAULT_CLEARS_S = {"pwm_nack": 0.0, "sensor_stuck": 0.0, "sensor_dead": 0.3,
-                  "sensor_saturated": 0.2, "out_of_box": 0.3, "overrun": 0.0,
+                  "sensor_saturated": 0.2, "sensor_value": 0.0, "sensor_zero": 0.0,
+                  "sensor_offset": 0.0, "out_of_box": 0.3, "overrun": 0.0,
                   "over_limit": 0.0, "thermal": None}
 """How long after its injection each fault's cause is gone, s: a dead sensor answers again, a
 saturated one reads in range, the finger is back in the box; 0 for a one-step defect (one NACK,
 one slow step, one over-limit command) and for the stuck sensor, which stays stuck (the runner
-recovers with it excluded); None: the coil must cool (minutes). Time to recover is counted from
+recovers with it excluded), and for the value faults (it stays faulty: the runner recovers
+with it excluded); None: the coil must cool (minutes). Time to recover is counted from
 there (:func:`designkit.sim.report.time_to_safe`)."""
 
 
@@ -48,9 +60,9 @@ class FaultSchedule:
         events = []
         for item in text.split(","):
             name, _, when = item.strip().partition("@")
-            if name not in FAULT_TYPES:
+            if name not in FAULT_TYPES + EXTRA_FAULT_TYPES:
                 raise BadInputError("faults", f"'default', 'none' or TYPE@SECONDS with TYPE in "
-                                    f"{', '.join(FAULT_TYPES)}", item)
+                                    f"{', '.join(FAULT_TYPES + EXTRA_FAULT_TYPES)}", item)
             try:
                 t = float(when)
             except ValueError:
@@ -72,6 +84,10 @@ def inject(device, runner, name: str, t_s: float, state: dict) -> None:
     elif name == "sensor_dead":
         device.tlv[n + 1].nack_always = True           # a bottom sensor stops answering
         state["dead_until"] = t_s + FAULT_CLEARS_S[name]
+    elif name in ("sensor_value", "sensor_zero"):
+        device.tlv[n // 2].value_fault = "frozen" if name == "sensor_value" else "zero"
+    elif name == "sensor_offset":
+        device.field_offset_t[n // 2] = (2e-3, 0.0, 0.0)
     elif name == "sensor_saturated":
         device.field_offset_t[0] = (0.0, 0.0, 0.3)     # past the 12-bit code range (+-200 mT)
         state["saturated_until"] = t_s + FAULT_CLEARS_S[name]

@@ -15,7 +15,8 @@ import numpy as np
 from ..model.array import force_matrix
 from ..support.atomic import atomic_path
 from .device import SimulatedDevice
-from .faults import FAULT_CLEARS_S
+from .samples import bias_force_any
+from .faults import FAULT_CLEARS_S, FAULT_STATE
 from .loop import SimulationResult
 
 CURRENT_OFF_A = 0.01
@@ -52,7 +53,8 @@ def time_to_safe(columns: dict, events, period_s: float) -> list[dict]:
         again = [float(t2) for t2, n2 in events[j + 1:] if n2 == name]
         window = (t >= te - 1e-12) & (t < (again[0] - 1e-12 if again else np.inf))
         at = np.flatnonzero(t >= te - 1e-12)
-        own = np.flatnonzero(window & (st == name))
+        state = FAULT_STATE.get(name, name)
+        own = np.flatnonzero(window & (st == state))
         row = {"fault": name, "injected_s": te,
                "state_at_injection": str(st[at[0]]) if len(at) else None,
                "state": None, "detected_s": None, "time_to_safe_s": None, "periods": None,
@@ -60,14 +62,14 @@ def time_to_safe(columns: dict, events, period_s: float) -> list[dict]:
                "recovered_s": None}
         if len(own):
             k = int(own[0])
-            row.update(state=name, detected_s=float(t[k]), time_to_safe_s=float(t[k] - te),
+            row.update(state=state, detected_s=float(t[k]), time_to_safe_s=float(t[k] - te),
                        periods=float((t[k] - te) / period_s))
             back = np.flatnonzero(st[k:] == "running")
             stop = k + back[0] if len(back) else len(t)
             quiet = np.flatnonzero(off[k:stop])
             if len(quiet):
                 row["currents_off_s"] = float(t[k + quiet[0]] - te)
-            other = np.flatnonzero(st[k:] != name)
+            other = np.flatnonzero(st[k:] != state)
             if len(other):
                 row.update(ended_s=float(t[k + other[0]] - te), ended_into=str(st[k + other[0]]))
             if len(back):
@@ -167,18 +169,74 @@ def summarize(result: SimulationResult, causes: dict | None = None) -> dict:
         "faults": time_to_safe(c, result.faults, result.period_s),
         "fault_log": [{"t_s": float(t), "state": s, "detail": d} for t, s, d in result.fault_log],
     }
+    out.update(pose_summary(c))
     if causes is not None:
         out["force_error_causes"] = causes
     return out
 
 
+STALE_LIMIT_M = 5e-3
+"""A rendered position farther than this from where the finger was is counted, m."""
+
+
+def pose_summary(columns: dict) -> dict:
+    """summary.json's pose and torque rows, from the run.csv columns (SI): the tilt, the moment
+    direction error, the torque of the coils' field on the true magnet and as the runner
+    reported it, the sensors fault detection excluded and those dropped for saturation, and
+    how far the rendered position was from the finger -- at the frame time of the newest fix
+    the runner had (what the runner could know: ``rendered_off_frame_steps``) and now (the
+    sensing latency included)."""
+    c = columns
+    running = c["state"] == "running"
+    m = np.stack([c["mx_a_m2"], c["my_a_m2"], c["mz_a_m2"]], 1)
+    me = np.stack([c["mxe_a_m2"], c["mye_a_m2"], c["mze_a_m2"]], 1)
+    ref = m[0] / np.linalg.norm(m[0])
+    unit = m / np.linalg.norm(m, axis=1, keepdims=True)
+    tilt = np.degrees(np.arccos(np.clip(unit @ ref, -1.0, 1.0)))
+    cos_e = np.sum(unit * me, axis=1) / np.maximum(np.linalg.norm(me, axis=1), 1e-300)
+    err = np.degrees(np.arccos(np.clip(cos_e, -1.0, 1.0)))[running]
+    tau = np.linalg.norm(np.stack([c["tx_n_m"], c["ty_n_m"], c["tz_n_m"]], 1), axis=1)[running]
+    tau_e = np.linalg.norm(np.stack([c["txe_n_m"], c["tye_n_m"], c["tze_n_m"]], 1),
+                           axis=1)[running]
+    t = np.asarray(c["t_s"], float)
+    p = np.stack([c["x_m"], c["y_m"], c["z_m"]], 1)
+    pe = np.stack([c["xe_m"], c["ye_m"], c["ze_m"]], 1)
+    t_fix = np.asarray(c["fix_t_s"], float)
+    at_fix = np.stack([np.interp(t_fix, t, p[:, k]) for k in range(3)], 1)
+    off_frame = np.linalg.norm(pe - at_fix, axis=1)[running]
+    off_now = np.linalg.norm(pe - p, axis=1)[running]
+    changes = [str(x) for k, x in enumerate(c["fault_excluded"])
+               if k == 0 or x != c["fault_excluded"][k - 1]]
+
+    def top(x):
+        return float(np.max(x)) if len(x) else None
+
+    return {"max_tilt_deg": float(np.max(tilt)),
+            "moment_error_median_deg": float(np.median(err)) if len(err) else None,
+            "moment_error_max_deg": top(err),
+            "torque_rms_n_m": float(np.sqrt(np.mean(tau ** 2))) if len(tau) else None,
+            "torque_max_n_m": top(tau),
+            "reported_torque_rms_n_m": float(np.sqrt(np.mean(tau_e ** 2))) if len(tau_e)
+            else None,
+            "fault_excluded_sensors": sorted({int(k) for x in changes for k in x.split()}),
+            "max_saturating_sensors": int(np.max(c["n_saturating"])),
+            "fix_age_max_s": top((t - t_fix)[running]),
+            "rendered_off_frame_steps": int(np.sum(off_frame > STALE_LIMIT_M)),
+            "rendered_off_frame_max_m": top(off_frame),
+            "rendered_off_now_steps": int(np.sum(off_now > STALE_LIMIT_M)),
+            "rendered_off_now_max_m": top(off_now)}
+
+
 def write_run_csv(path, columns: dict) -> None:
     """run.csv: one row per control step, SI columns (see :func:`simulate`)."""
-    order = ["t_s", "x_m", "y_m", "z_m", "xe_m", "ye_m", "ze_m", "fx_ref_n", "fy_ref_n",
-             "fz_ref_n", "fx_n", "fy_n", "fz_n"]
+    order = ["t_s", "x_m", "y_m", "z_m", "xe_m", "ye_m", "ze_m", "mx_a_m2", "my_a_m2",
+             "mz_a_m2", "mxe_a_m2", "mye_a_m2", "mze_a_m2", "fx_ref_n", "fy_ref_n", "fz_ref_n",
+             "fx_n", "fy_n", "fz_n", "tx_n_m", "ty_n_m", "tz_n_m", "txe_n_m", "tye_n_m",
+             "tze_n_m"]
     order += [k for k in columns if k.startswith("i") and k.endswith("_a")]
     order += [k for k in columns if k.startswith("cmd")]
-    order += ["loop_s", "state"]
+    order += ["n_saturating", "fault_excluded", "fix_t_s", "loop_s", "state"]
+    order = [k for k in order if k in columns]
     with atomic_path(path) as tmp, tmp.open("w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(order)
@@ -194,15 +252,18 @@ def force_error_causes(device: SimulatedDevice, fieldmap, result: SimulationResu
     ``max_steps`` of them, evenly spaced: the exact coupled model at each estimate is the
     costly part; RMS and p95 of an evenly spaced subsample of a 4000-step run).
 
-    With p the true and q the estimated position, I* the command and I the true currents,
-    F(.) / F0(.) the exact force per ampere and bias force and Fm / F0m the map's::
+    With (p, m) the true and (q, n) the estimated pose (position, moment), I* the command and I
+    the true currents, F(., m) / F0(., m) the exact force per ampere and bias force on a
+    moment m and Fm / F0m the map's (the map's F0 is for its own moment)::
 
-        F(p) I + F0(p) - f(p) =   [f(q) - f(p)] + [F(p) I* + F0(p) - F(q) I* - F0(q)]  localization
-                                + [Fm(q) I* + F0m(q) - f(q)]                           allocation
-                                + [F(q) I* + F0(q) - Fm(q) I* - F0m(q)]                map
-                                + F(p) (I - I*)                                        current lag
+        F(p,m) I + F0(p,m) - f(p) = [f(q) - f(p)]
+                                    + [F(p,m) I* + F0(p,m) - F(q,n) I* - F0(q,n)]  localization
+                                    + [Fm(q,n) I* + F0m(q) - f(q)]                 allocation
+                                    + [F(q,n) I* + F0(q,n) - Fm(q,n) I* - F0m(q)]  map
+                                    + F(p,m) (I - I*)                              current lag
 
-    Returns RMS and p95 (N) of each term's Fz and of its magnitude, and of the total.
+    ('localization' holds the pose's error, position and orientation.) Returns RMS and p95 (N)
+    of each term's Fz and of its magnitude, and of the total.
     """
     c = result.columns
     run = np.flatnonzero(c["state"] == "running")
@@ -211,24 +272,29 @@ def force_error_causes(device: SimulatedDevice, fieldmap, result: SimulationResu
     n_running = len(run)
     if n_running > max_steps:
         run = run[np.unique(np.linspace(0, n_running - 1, max_steps).round().astype(int))]
-    m = device.moment
     n = device.array.n_coils
-    q = np.stack([c["xe_m"], c["ye_m"], c["ze_m"]], 1)[run]
+
+    def col3(names):
+        return np.stack([c[k] for k in names.split()], 1)[run]
+
+    q = col3("xe_m ye_m ze_m")
+    m_est = col3("mxe_a_m2 mye_a_m2 mze_a_m2")
     i_cmd = np.stack([c[f"cmd{k + 1}_a"] for k in range(n)], 1)[run]
     i_true = np.stack([c[f"i{k + 1}_a"] for k in range(n)], 1)[run]
-    f_ref = np.stack([c["fx_ref_n"], c["fy_ref_n"], c["fz_ref_n"]], 1)[run]
-    f_obj = np.stack([c["fx_obj_n"], c["fy_obj_n"], c["fz_obj_n"]], 1)[run]
-    fm = force_matrix(m)
-    f_exact_q = np.einsum("ij,kjl->kil", fm, device.array.actuation_matrix(q)[:, 3:, :])
-    f0_exact_q = np.asarray(device.array.bias_force(q, m), float).reshape(-1, 3)
+    f_ref = col3("fx_ref_n fy_ref_n fz_ref_n")
+    f_obj = col3("fx_obj_n fy_obj_n fz_obj_n")
+    fm = np.stack([force_matrix(m) for m in m_est])
+    f_exact_q = np.einsum("kij,kjl->kil", fm, device.array.actuation_matrix(q)[:, 3:, :])
+    f0_exact_q = bias_force_any(device.array, q, m_est)
     inside = _inside(fieldmap, q)
     f_map_q = np.zeros_like(f_exact_q)
-    f_map_q[inside] = np.einsum("ij,kjl->kil", fm, fieldmap.actuation(q[inside])[:, 3:, :])
+    f_map_q[inside] = np.einsum("kij,kjl->kil", fm[inside],
+                                fieldmap.actuation(q[inside])[:, 3:, :])
     f0_map_q = np.zeros_like(q)
     if inside.any():
         f0_map_q[inside] = np.asarray(fieldmap.bias_force(q[inside]), float).reshape(-1, 3)
-    f_p = device.force_per_amp[run]
-    f0_p = device.bias_n[run]
+    f_p = np.stack([device.force_per_amp(k) for k in run])
+    f0_p = np.stack([device.bias.at(k) for k in run])
 
     def mv(a, i):
         return np.einsum("kil,kl->ki", a, i)

@@ -8,6 +8,7 @@ Every input is checked before anything is computed.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -16,8 +17,8 @@ from firmware_io.allocation import Allocator
 from firmware_io.localization import Localizer
 from firmware_io.mapfile import MapFile
 from firmware_io.mapfile.drive import DriveRecord
-from firmware_io.runner import (CALIBRATED_RELATIVE_ERROR, ConstantVelocityTracker, Runner,
-                                RunnerParts, SceneForce, config_from_map)
+from firmware_io.runner import (CALIBRATED_RELATIVE_ERROR, LocalizerShim, Runner, RunnerIO,
+                                SceneForce, SensorHeadroom, config_from_map)
 from firmware_io.scene import Scene
 
 from .. import fieldmap
@@ -31,15 +32,15 @@ from ..render.laws import ConstraintLaw
 from ..support.atomic import write_json_atomic
 from .device import SimulatedDevice
 from .faults import FaultSchedule
-from .loop import simulate
+from .loop import LoopTiming, simulate
 from .plot import plot_run
 from .report import force_error_causes, summarize, write_run_csv
-from .trajectory import Trajectory, poke_trajectory, slide_trajectory
+from .trajectory import Trajectory, poke_trajectory, slide_trajectory, tilt_trajectory
 
 MAX_DURATION_S = 600.0
 """Longest simulated run, s."""
 
-SCRIPTED_DURATION_S = {"slide": 4.0, "poke": 3.0}
+SCRIPTED_DURATION_S = {"slide": 4.0, "poke": 3.0, "tilt": 4.0}
 """Length of the scripted trajectories at their own speed, s."""
 
 TOP_OF_BOX_M = 0.078
@@ -52,69 +53,108 @@ def drive_data(design) -> DriveRecord:
                                          for k in range(design.n_coils)])
 
 
-def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "slide",
-                   duration_s: float | None = None, faults: str = "none", map_path=None,
-                   method: str = "model", period_s: float = 1e-3, unipolar: bool = False,
-                   lam_n_per_m: float | None = None, rows: str = "force", seed: int = 0,
+@dataclass(frozen=True)
+class RunSettings:
+    """What a simulated run renders, and how (SI; the ``designkit run --simulate`` options).
+
+    Attributes
+    ----------
+    obj : str -- the virtual object ('plane', 'hemisphere', 'half-cylinder', 'wedge') or a mesh
+    trajectory : str -- 'slide', 'poke', 'tilt' or a CSV file (:mod:`.trajectory`)
+    duration_s : float or None -- simulated time, s (None: the trajectory's own)
+    faults : str -- 'none', 'default' or 'TYPE@SECONDS,...' (:mod:`.faults`)
+    method : str -- the localization method
+    period_s : float -- the control period, s
+    unipolar : bool -- the thesis' drive (0 <= I)
+    lam_n_per_m : float or None -- the force constant, N/m (None: the design's)
+    rows : {'force', 'fz'} -- the object's 3-D force, or only its vertical component (the
+        thesis' eq. 4.6)
+    seed : int -- the sensor noise's
+    calibrate : bool -- the start-up sensor calibration (:meth:`SimulatedDevice.
+        calibrate_sensors`); the localizer then weighs the sensors with
+        :data:`firmware_io.runner.CALIBRATED_RELATIVE_ERROR`
+    profile : bool -- the runner times each stage of its step (summary
+        ``loop_by_kind['stages']``; compute time measured, not modelled)
+    skip_force_n : float -- the runner's coil-skip force, N
+    keep_sensors : tuple of int -- sensors the scene keeps in their linear range
+        (:class:`firmware_io.runner.SensorHeadroom`; default none)
+    """
+
+    obj: str = "hemisphere"
+    trajectory: str = "slide"
+    duration_s: float | None = None
+    faults: str = "none"
+    method: str = "model"
+    period_s: float = 1e-3
+    unipolar: bool = False
+    lam_n_per_m: float | None = None
+    rows: str = "force"
+    seed: int = 0
+    calibrate: bool = True
+    profile: bool = False
+    skip_force_n: float = 0.0
+    keep_sensors: tuple = ()
+
+
+def run_simulation(settings: RunSettings = RunSettings(), *, design=None, map_path=None,
                    out=Path("run-out"), progress: bool = True, array=None,
-                   calibrate: bool = True, profile: bool = False,
-                   skip_force_n: float = 0.0, plant=None) -> dict:
+                   plant=None) -> dict:
     """Build (or load) the map, compile the scene, close the runner around the simulated device,
     and write run.csv, summary.json, run.png and loop_timing.png into ``out``. Returns the
     summary. Every input is checked before anything is computed.
 
-    ``rows``: 'force' renders the object's 3-D force, 'fz' only its vertical component (the
-    thesis' eq. 4.6; the runner then evaluates only the two rows of A(p) Fz needs). ``array``:
-    the design's CoilArray when the caller has one (its coupled solve is reused).
-    ``calibrate``: the start-up sensor calibration (:meth:`SimulatedDevice.calibrate_sensors`)
-    before the run; the localizer then weighs the sensors with
-    :data:`firmware_io.runner.CALIBRATED_RELATIVE_ERROR`. ``profile``: the runner times each
-    stage of its step (summary ``loop_by_kind['stages']``). ``skip_force_n``: the runner's coil-skip force, N.
-    ``plant``: the device that was built (a design with ``[asbuilt]``, or its path): the
-    simulated device is it, while the runner uses the map of ``design``.
+    ``settings``: :class:`RunSettings`. ``array``: the design's CoilArray when the caller has
+    one (its coupled solve is reused). ``plant``: the device that was built (a design with
+    ``[asbuilt]``, or its path): the simulated device is it, while the runner uses the map of
+    ``design``.
     """
+    st = settings
     design = design if isinstance(design, Design) else load_design(design)
-    virtual, path, duration, schedule = _checked_inputs(obj, trajectory, duration_s, faults,
-                                                        rows, period_s, lam_n_per_m)
+    virtual, path, duration, schedule = _checked_inputs(st)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     array = array if array is not None else CoilArray.from_design(design)
     if path is None:
-        path = _scripted_path(design, array, virtual, trajectory)
+        path = _scripted_path(design, array, virtual, st.trajectory)
     map_path, fmap = _map(design, array, map_path, out, progress)
-    lam = design.render.stiffness_n_per_m if lam_n_per_m is None else float(lam_n_per_m)
+    lam = design.render.stiffness_n_per_m if st.lam_n_per_m is None else float(st.lam_n_per_m)
+    meta = {"object": st.obj, "rows": st.rows}
+    if st.keep_sensors:
+        meta["keep_sensors"] = [int(k) for k in st.keep_sensors]
     scene_path = scenefile.compile_scene(virtual, out / "scene.npz", lam_n_per_m=lam,
                                          law=ConstraintLaw(lam),
-                                         map_design_sha256=fmap.design_sha256,
-                                         extra_meta={"object": obj, "rows": rows})
+                                         map_design_sha256=fmap.design_sha256, extra_meta=meta)
     scene = Scene.load(scene_path, expected_design_sha256=fmap.design_sha256)
     # the runner's configuration from the map's drive record, as on the controller
-    cfg = config_from_map(fmap, control_period_s=period_s, unipolar=unipolar,
-                          force_axes="z" if rows == "fz" else "xyz", skip_force_n=skip_force_n)
+    cfg = config_from_map(fmap, control_period_s=st.period_s, unipolar=st.unipolar,
+                          force_axes="z" if st.rows == "fz" else "xyz",
+                          skip_force_n=st.skip_force_n)
     drive = cfg.drive     # its rating violations are simulated and listed, not refused
     plant_design, plant_array = design, array
     if plant is not None:  # the as-built device under the runner of ``design``'s map
         plant_design = plant if isinstance(plant, Design) else load_design(plant)
         plant_array = CoilArray.from_design(plant_design)
-    device = SimulatedDevice(plant_design, plant_array, seed=seed, drive=drive)
-    loc_kw = _localizer_options(device, map_path, method, calibrate)
+    device = SimulatedDevice(plant_design, plant_array, seed=st.seed, drive=drive)
+    loc_kw = _localizer_options(device, map_path, st.method, st.calibrate)
 
     def factory(source, clock, hook):
-        localizer = Localizer.from_map(map_path, method=method, **loc_kw)
-        parts = RunnerParts(fmap, SceneForce(scene), localizer, ConstantVelocityTracker(),
-                            hook(Allocator()), device.coils, source)
-        runner = Runner(parts, cfg, clock=clock,
-                        log=lambda line: print(line) if progress else None)
-        runner.profile = profile
+        localizer = LocalizerShim(Localizer.from_map(map_path, method=st.method, **loc_kw))
+        io = RunnerIO(device.coils, source, lambda line: print(line) if progress else None,
+                      clock)
+        runner = Runner(fmap, SceneForce(scene), localizer, io, cfg,
+                        allocate=hook(Allocator()),
+                        headroom=SensorHeadroom.from_meta(scene.meta))
+        runner.profile = st.profile
         runner.start()
         return runner
 
-    res = simulate(device, factory, path, duration_s=duration, period_s=period_s,
+    timing = LoopTiming(st.period_s, "measured" if st.profile else "modelled")
+    res = simulate(device, factory, path, duration_s=duration, timing=timing,
                    faults=schedule, scene_force=SceneForce(scene).force, progress=progress)
     summary = summarize(res, force_error_causes(device, fmap, res))
-    summary.update({"object": obj, "trajectory": str(trajectory), "design": design.name,
-                    "rows": rows,
-                    "lambda_n_per_m": lam, "method": method, "unipolar": unipolar,
+    summary.update({"object": st.obj, "trajectory": str(st.trajectory), "design": design.name,
+                    "rows": st.rows, "lambda_n_per_m": lam, "method": st.method,
+                    "unipolar": st.unipolar, "keep_sensors": list(st.keep_sensors),
                     "drive": drive.to_dict(), "drive_violations": drive.violations(),
                     **_duration_note(path.duration_s, duration),
                     "faults_not_injected": _not_injected(schedule, res.faults)})
@@ -123,27 +163,31 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
     write_run_csv(out / "run.csv", res.columns)
     write_json_atomic(out / "summary.json", summary)
     plot_run(res, out, surface_height=lambda x, y: virtual.height(np.c_[x, y, np.zeros_like(x)]),
-             title=f"{obj}: {trajectory}, lambda = {lam:g} N/m")
+             title=f"{st.obj}: {st.trajectory}, lambda = {lam:g} N/m")
     return summary
 
 
-def _checked_inputs(obj, trajectory, duration_s, faults, rows, period_s, lam_n_per_m=None):
+def _checked_inputs(st: RunSettings):
     """The run's inputs, checked: (virtual object, trajectory from a file or None for a scripted
     one, duration s, fault schedule)."""
-    if rows not in ("force", "fz"):
-        raise BadInputError("--rows", "'force' (3-D) or 'fz' (the thesis' vertical force)", rows)
-    if not 1e-4 <= period_s <= 0.05:
-        raise BadInputError("--period-ms", "in [0.1, 50] ms", period_s * 1e3)
-    if lam_n_per_m is not None and not 0 <= float(lam_n_per_m) < np.inf:
-        raise BadInputError("--lambda", ">= 0 and finite, N/m", lam_n_per_m)
-    virtual = scenefile.make_object(obj)
-    scripted = trajectory in SCRIPTED_DURATION_S
-    path = None if scripted else Trajectory.from_csv(trajectory)
-    duration = float(duration_s or (path.duration_s if path is not None
-                                     else SCRIPTED_DURATION_S[trajectory]))
+    if st.rows not in ("force", "fz"):
+        raise BadInputError("--rows", "'force' (3-D) or 'fz' (the thesis' vertical force)",
+                            st.rows)
+    if not 1e-4 <= st.period_s <= 0.05:
+        raise BadInputError("--period-ms", "in [0.1, 50] ms", st.period_s * 1e3)
+    if st.lam_n_per_m is not None and not 0 <= float(st.lam_n_per_m) < np.inf:
+        raise BadInputError("--lambda", ">= 0 and finite, N/m", st.lam_n_per_m)
+    if any(not (isinstance(k, (int, np.integer)) and k >= 0) for k in st.keep_sensors):
+        raise BadInputError("--keep-sensors", "sensor indices >= 0 (the map's order)",
+                            list(st.keep_sensors))
+    virtual = scenefile.make_object(st.obj)
+    scripted = st.trajectory in SCRIPTED_DURATION_S
+    path = None if scripted else Trajectory.from_csv(st.trajectory)
+    duration = float(st.duration_s or (path.duration_s if path is not None
+                                        else SCRIPTED_DURATION_S[st.trajectory]))
     if not 0 < duration <= MAX_DURATION_S:
         raise BadInputError("--duration", f"in (0, {MAX_DURATION_S:g}] s", duration)
-    return virtual, path, duration, FaultSchedule.parse(faults, duration)
+    return virtual, path, duration, FaultSchedule.parse(st.faults, duration)
 
 
 def _duration_note(trajectory_s: float, duration_s: float) -> dict:
@@ -177,7 +221,8 @@ def _scripted_path(design, array, virtual, trajectory: str) -> Trajectory:
     # and 1 mm (the board and the sensor package) above the highest sensor
     floor = (float(np.max(array.sensor_positions_m()[0, :, 2]))
              + design.magnet.length_m / 2 + 1e-3)
-    make = slide_trajectory if trajectory == "slide" else poke_trajectory
+    make = {"slide": slide_trajectory, "poke": poke_trajectory,
+            "tilt": tilt_trajectory}[trajectory]
     return make(lambda x, y: virtual.height(np.c_[x, y, np.zeros_like(x)]),
                 duration_s=SCRIPTED_DURATION_S[trajectory], z_limits_m=(floor, TOP_OF_BOX_M))
 

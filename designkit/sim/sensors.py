@@ -1,10 +1,11 @@
 """The runner's sensor source on the simulated sensor bus, with the sensor thread's timing.
 
-Models :class:`firmware_io.run.ThreadedSensorSource`: read a pass of both arrays (its wire time
-on the simulated 400 kHz bus), fit it (its measured compute time on this thread's CPU clock),
-publish the :class:`firmware_io.runner.Fix`, read the next pass. Each frame carries the field
-(T) of the previous pass's start, as a master-controlled TLV493D returns the conversion the
-previous read triggered.
+Models :class:`firmware_io.run.ThreadedSensorSource`: read a pass of every sensor (its wire time
+on the simulated 400 kHz bus), fit it (a modelled compute time, so that a run does not depend on
+the host's speed or load; or, asked for, its measured CPU time), publish the
+:class:`firmware_io.runner.Fix`, read the next pass. Each frame carries the field (T) of the
+previous pass's start, as a master-controlled TLV493D returns the conversion the previous read
+triggered.
 """
 
 from __future__ import annotations
@@ -12,6 +13,12 @@ from __future__ import annotations
 import time
 
 from firmware_io.runner import SensorFrame
+
+MODELLED_FIT_S = 1e-3
+"""Compute time of one fit on the sensor side in the simulated timeline, s: a fixed value, so
+that when a fix is published does not depend on the host (a warm fit takes a few hundred us on
+a desktop CPU, a cold one and a slower controller more; studies/bench_runner.py measures it)."""
+
 
 class SimSensorSource:
     """The sensor side of :class:`firmware_io.runner.Runner` on the simulated sensor bus, with
@@ -22,7 +29,8 @@ class SimSensorSource:
     :class:`firmware_io.runner.SensorPipeline` on the frame); the plant calls it before each
     runner step, outside the runner's timed section, as the sensor thread runs beside the
     control loop on hardware. The thread's cycle is: read a pass (its wire time on the bus
-    model), then fit (its measured compute time, this thread's CPU clock), publish the
+    model), then fit (``fit_time_s``, or its measured compute time on this thread's CPU clock
+    when that is None), publish the
     :class:`firmware_io.runner.Fix`, read the next pass. The runner takes a result at the first
     control step at or after the time it is published. In master-controlled mode a TLV493D
     returns the conversion triggered by the previous read, so each frame carries the field of
@@ -33,17 +41,23 @@ class SimSensorSource:
     device : designkit.sim.device.SimulatedDevice
     position_at : callable, ``position_at(t_s) -> (3,)`` m, the true position
     period_s : float, s -- the control period
+    fit_time_s : float or None, s -- the modelled compute time of a fit (default
+        :data:`MODELLED_FIT_S`); None: the fit's measured CPU time (the timeline then depends
+        on the host)
 
     Attributes
     ----------
     fit_s : list of float
-        Compute time of each fit on the sensor side, s.
+        Measured CPU time of each fit on the sensor side, s (diagnostics; the timeline uses
+        ``fit_time_s`` unless it is None).
     frame_truth_m : ndarray (3,) or None
         The true position at the field time of the last frame read (diagnostics).
     """
 
-    def __init__(self, device, position_at, period_s: float):
+    def __init__(self, device, position_at, period_s: float,
+                 fit_time_s: float | None = MODELLED_FIT_S):
         self.device, self.position_at, self.period_s = device, position_at, period_s
+        self.fit_time_s = fit_time_s
         self.in_flight = None      # (ready time s, field time s, reading)
         self.fitted = None         # (publish time s, result, field time s)
         self.ready = None          # a result the runner has not taken yet
@@ -62,14 +76,15 @@ class SimSensorSource:
             if t_s + 1e-12 < ready_s:
                 return
             self.in_flight = None
-            frame = SensorFrame(reading.top_t, reading.bottom_t, reading.status, field_s)
+            frame = SensorFrame(reading.field_t, reading.status, field_s)
             self.frame_truth_m = self.position_at(field_s)   # diagnostics: where it really was
             fit_s = 0.0
             if self.pipeline is not None:
                 c0 = time.thread_time()
                 frame = self.pipeline.process(frame)
-                fit_s = time.thread_time() - c0
-                self.fit_s.append(fit_s)
+                measured = time.thread_time() - c0
+                self.fit_s.append(measured)
+                fit_s = measured if self.fit_time_s is None else self.fit_time_s
             self.fitted = (ready_s + fit_s, frame, field_s)
         if self.fitted is not None:
             publish_s, result, field_s = self.fitted

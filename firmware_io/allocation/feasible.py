@@ -1,8 +1,8 @@
 """The feasible set X = {lo <= I <= u, sum |I| <= I_t} of the scaled problem, on plain lists.
 
-Membership (:func:`_inside`, :func:`_on_face`), the Euclidean projection onto X
-(:func:`_proj_list`) and the first step at which a segment reaches the budget
-(:func:`_budget_hit`). Currents are in units of u_max; n ~ 9, so plain Python floats are cheaper
+Membership (:func:`inside`, :func:`on_face`), the Euclidean projection onto X
+(:func:`project`) and the first step at which a segment reaches the budget
+(:func:`budget_hit`). Currents are in units of u_max; n ~ 9, so plain Python floats are cheaper
 than numpy calls here.
 """
 
@@ -10,10 +10,8 @@ from __future__ import annotations
 
 import math
 
-_INF = math.inf
 
-
-def _inside(xl, usl, ts, unipolar):
+def inside(xl, usl, ts, unipolar):
     """x (list) inside the box and the budget."""
     tot = 0.0
     if unipolar:
@@ -30,13 +28,14 @@ def _inside(xl, usl, ts, unipolar):
     return tot <= ts
 
 
-def _on_face(xl, free, sg, usl, ts, bud, unipolar):
-    """x (list) feasible and on the working face: free coils on their side inside the box
-    (either side, bipolar without the budget), fixed ones where they were put, the budget
-    kept."""
+def on_face(xl, face, usl, ts, unipolar):
+    """x (list) feasible and on the working ``face`` (:class:`.working_set.Face`): free coils
+    on their side inside the box (either side, bipolar without the budget), fixed ones where
+    they were put, the budget kept."""
     tot = 0.0
+    bud = face.bud
     signfree = not (unipolar or bud)
-    for v, fr, s, ui in zip(xl, free, sg, usl):
+    for v, fr, s, ui in zip(xl, face.free, face.sg, usl):
         a = abs(v) if signfree else s * v
         if fr and not 0.0 <= a <= ui:
             return False
@@ -44,17 +43,17 @@ def _on_face(xl, free, sg, usl, ts, bud, unipolar):
     return bud or tot <= ts
 
 
-def _budget_hit(xl, hl, alpha, ts):
+def budget_hit(xl, hl, alpha, ts):
     """The first step a in [0, alpha] at which sum |x + a (h - x)| reaches ts (lists; convex
-    and piecewise linear in a, breakpoints where a coordinate crosses 0); _INF if it stays
+    and piecewise linear in a, breakpoints where a coordinate crosses 0); inf if it stays
     within ts up to alpha."""
     if math.fsum(map(abs, hl)) <= ts:  # x is feasible and sum |.| convex: never above ts
-        return _INF
+        return math.inf
     d = [w - v for v, w in zip(xl, hl)]
     t0 = math.fsum(map(abs, xl))
     tend = math.fsum(abs(v + alpha * e) for v, e in zip(xl, d))
     if tend <= ts:
-        return _INF
+        return math.inf
     bps = sorted(-v / e for v, e in zip(xl, d) if e != 0.0 and 0.0 < -v / e < alpha)
     a0 = 0.0
     for a1 in bps + [alpha]:
@@ -65,7 +64,7 @@ def _budget_hit(xl, hl, alpha, ts):
     return alpha
 
 
-def _proj_list(v, us, ts, unipolar):
+def project(v, us, ts, unipolar):
     """Euclidean projection of v (list) onto {lo <= x <= u, sum |x| <= ts} in plain Python
     floats (n ~ 9: a loop is cheaper than a dozen numpy calls). Returns (x, tau), tau the
     budget's soft threshold."""

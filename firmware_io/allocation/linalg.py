@@ -15,11 +15,12 @@ _EYES = [np.eye(i) for i in range(16)]
 _EYES_B = [np.diag([1.0] * i + [0.0]) for i in range(16)]
 
 
-def _eye(m):
+def eye(m):
+    """The m x m identity (cached for m < 16: do not write into it)."""
     return _EYES[m] if m < 16 else np.eye(m)
 
 
-def _eye_bordered(m):
+def eye_bordered(m):
     """The (m + 1) x (m + 1) identity with a 0 in the last place (the border)."""
     return _EYES_B[m] if m < 16 else np.diag([1.0] * m + [0.0])
 
@@ -27,7 +28,7 @@ def _eye_bordered(m):
 _EPS_DIAG = {}
 
 
-def _eps_diag(eps, k, m):
+def eps_diag(eps, k, m):
     """eps on the first k diagonal entries of an m x m matrix (cached per eps: one per solve)."""
     key = (eps, k, m)
     d = _EPS_DIAG.get(key)
@@ -46,17 +47,18 @@ try:  # the gufunc behind np.linalg.solve without its Python wrapper and errstat
     _solve1 = _ul.solve1
     _SIG = {"signature": "dd->d"}
 
-    def _fast_solve(mat, rhs):
+    def fast_solve(mat, rhs):
+        """``np.linalg.solve`` of a small system without its wrapper (no singularity check)."""
         return _solve1(mat, rhs, signature="dd->d")
 except (ImportError, AttributeError):  # pragma: no cover - other numpy layouts
-    _fast_solve = np.linalg.solve
+    fast_solve = np.linalg.solve
     _SIG = {}
 
     def _solve1(mat, rhs):
         return np.linalg.solve(mat, rhs)
 
 
-def _lsolve(mat, rhs, regularized=True):
+def lsolve(mat, rhs, regularized=True):
     """Solve; ``regularized`` systems (eps > 0) are never singular, so they skip the
     floating-point guards; others fall back to least squares on an exactly singular face."""
     if regularized:
@@ -65,7 +67,7 @@ def _lsolve(mat, rhs, regularized=True):
             return out
     try:
         with np.errstate(invalid="raise", divide="raise", over="ignore"):
-            out = _fast_solve(mat, rhs)
+            out = fast_solve(mat, rhs)
         if all(map(math.isfinite, out.tolist())):
             return out
     except (np.linalg.LinAlgError, FloatingPointError):

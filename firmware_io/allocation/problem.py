@@ -18,17 +18,16 @@ EPS_REL = 1e-10
 """Tikhonov weight relative to the largest squared column norm of the scaled F (see
 docs/allocation.md)."""
 
-_MULT_TOL = 1e-13
-"""Multipliers above -_MULT_TOL x (gradient scale) count as non-negative (rounding level,
+MULT_TOL = 1e-13
+"""Multipliers above -MULT_TOL x (gradient scale) count as non-negative (rounding level,
 three decades below the eps-level multipliers of the tie-break)."""
 
-_EXACT_FIT_TOL = 1e-11
+EXACT_FIT_TOL = 1e-11
 """The least-norm exact fit is accepted when ||F x - f|| <= this x (||f|| + ||F|| ||x||): two
 decades inside the 1e-9 KKT tolerance (the gradient F^T r is at most ||F|| ||r||)."""
 
-
-_INF = math.inf
-_FLOAT_MAX = float.fromhex("0x1.fffffffffffffp+1023")
+FLOAT_MAX = float.fromhex("0x1.fffffffffffffp+1023")
+"""The largest float: a residual beyond the float range is reported as this, never inf."""
 
 
 def _bad_matrix(fm):
@@ -37,8 +36,9 @@ def _bad_matrix(fm):
                         f"{fm[tuple(bad)]} at index {tuple(int(b) for b in bad)}")
 
 
-def _check_inputs(force_matrix, target, current_limit, total_limit, bias):
-    """(F (k, n) ndarray, f (k,) ndarray, u list of n floats, I_t float); cheap checks first
+def check_inputs(force_matrix, target, current_limit, total_limit, bias):
+    """(F (k, n) ndarray, f (k,) ndarray, u list of n floats, I_t float, power-of-two scale
+    exponent of F) of :func:`firmware_io.allocation.allocate`'s inputs; cheap checks first
     (this runs every control period), the precise message only on failure."""
     try:
         fm = np.asarray(force_matrix, dtype=float)
@@ -96,7 +96,7 @@ def _check_inputs(force_matrix, target, current_limit, total_limit, bias):
             raise BadInputError("current_limit", f"a number or {n} numbers >= 0, A",
                                 current_limit) from None
     for ui in u:
-        if not 0.0 <= ui < _INF:
+        if not 0.0 <= ui < math.inf:
             raise BadInputError("current_limit", "finite and >= 0 (per coil), A", ui)
     try:
         tl = float(total_limit)
@@ -108,7 +108,7 @@ def _check_inputs(force_matrix, target, current_limit, total_limit, bias):
     return fm, t, u, tl, scale_e
 
 
-def _scale(fm, f, umax):
+def scale(fm, f, umax):
     """The scaled problem: (fs (k', n), ft (k',), c2, F F^T (k', k'), k'), currents in units
     of u_max and forces in units of the largest achievable column force (or the target, if
     larger); c2 the largest squared column norm of fs. All-zero rows (e.g. torque about m: a

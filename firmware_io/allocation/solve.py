@@ -2,7 +2,9 @@
 
 scale -> least-norm fast exit -> start (warm face or cold projection) -> active set -> polish
 (eps -> 0) -> least-energy exact fit -> clamp to the bounds. Inputs and outputs in SI (A, N);
-the phases work in the scaled units of :func:`.problem._scale`. Method: docs/allocation.md.
+the phases work in the scaled units of :func:`.problem.scale` (:class:`.workspace.Workspace`).
+With extra linear constraints on the currents the solve is :mod:`.constrained`'s. Method:
+docs/allocation.md.
 """
 
 from __future__ import annotations
@@ -11,13 +13,15 @@ import math
 
 import numpy as np
 
-from .active_set import _active_set, _cold_start
-from .faces import _face_minimizer
-from .feasible import _inside, _on_face
-from .linalg import _eye, _fast_solve
-from .polish import _least_energy, _polish
-from .problem import (_EXACT_FIT_TOL, _FLOAT_MAX, _INF, _MULT_TOL, EPS_REL, _check_inputs,
-                      _scale)
+from .active_set import active_set
+from .cold_start import cold_start
+from .faces import face_minimizer
+from .feasible import inside, on_face
+from .linalg import eye, fast_solve
+from .polish import least_energy, polish
+from .problem import EPS_REL, EXACT_FIT_TOL, FLOAT_MAX, MULT_TOL, check_inputs, scale
+from .working_set import Face, point_face
+from .workspace import Workspace
 
 
 def allocate(force_matrix, target, current_limit, total_limit, *, unipolar: bool = False,
@@ -59,8 +63,8 @@ def allocate(force_matrix, target, current_limit, total_limit, *, unipolar: bool
     BadInputError (a ValueError)
         Non-finite matrix/target/bias, wrong shapes, negative or NaN limits, I_t < 0.
     """
-    fm, t, u, tl, scale_e = _check_inputs(force_matrix, target, current_limit, total_limit,
-                                          bias)
+    fm, t, u, tl, scale_e = check_inputs(force_matrix, target, current_limit, total_limit,
+                                         bias)
     x = _solve(fm, t, u, tl, bool(unipolar), max_iter, warm)
     r = fm.dot(x) - t
     big = max(map(abs, r.tolist()))
@@ -74,42 +78,8 @@ def allocate(force_matrix, target, current_limit, total_limit, *, unipolar: bool
         try:
             res = math.ldexp(res, 2 * scale_e)
         except OverflowError:  # beyond the float range: the largest float, never inf
-            res = _FLOAT_MAX
+            res = FLOAT_MAX
     return x, res
-
-
-class Allocator:
-    """`allocate` with a warm start, for a control loop that solves at nearby positions.
-
-    It keeps the working set of the last solve (which coils were free, at 0, at +-u, and
-    whether the budget held with equality) and tries that face first: when it is still optimal
-    (the usual case between two control periods) the solve is one face solve, its multiplier
-    check and the eps -> 0 polish. The result is the exact answer of `allocate` whatever the
-    start (a stale face is only a start for the same active-set method). A call with another
-    number of rows or coils, another drive mode, or limits that change which coils are off,
-    starts cold.
-
-    Usage::
-
-        alloc = Allocator()
-        currents_a, residual = alloc(F, f_n, 6.0, 54.0, unipolar=True)   # same as allocate
-    """
-
-    __slots__ = ("face", "key")
-
-    def __init__(self):
-        self.face = None    # (free, sg, fixed value / u_i, budget) of the last final face
-        self.key = None     # (k, n, unipolar) it belongs to
-
-    def reset(self) -> None:
-        """Forget the warm start."""
-        self.face = None
-        self.key = None
-
-    def __call__(self, force_matrix, target, current_limit, total_limit, *,
-                 unipolar: bool = False, bias=None, max_iter: int | None = None):
-        return allocate(force_matrix, target, current_limit, total_limit, unipolar=unipolar,
-                        bias=bias, max_iter=max_iter, warm=self)
 
 
 def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
@@ -119,7 +89,7 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
     tl_eff = min(tl, math.fsum(ul))
     if umax == 0.0 or tl_eff == 0.0:
         return np.zeros(n)
-    scaled = _scale(fm, f, umax)
+    scaled = scale(fm, f, umax)
     if scaled is None:
         return np.zeros(n)
     fs, ft, c2, ffT, k = scaled
@@ -127,41 +97,37 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
     usl = [ui * inv_umax for ui in ul]
     ts = tl_eff * inv_umax
     budget_possible = ts < math.fsum(usl) * (1 - 1e-15)
-    tsb = ts if budget_possible else _INF
-    eps = EPS_REL * max(c2, 1e-300)
+    tsb = ts if budget_possible else math.inf
     key = (k, n, unipolar)
 
     # ---- fast exit: the least-norm exact fit F^T (F F^T)^-1 f inside the bounds is the answer
     y0, x0 = _least_norm_fit(fs, ft, ffT, c2, k)
     xl = x0.tolist()
     ft2 = float(ft.dot(ft))
-    if _inside(xl, usl, tsb, unipolar) and _fits(fs, ft, x0, ft2, c2):
+    if inside(xl, usl, tsb, unipolar) and _fits(fs, ft, x0, ft2, c2):
         if warm is not None:
             warm.face = ([True] * n, [1.0 if v >= 0.0 else -1.0 for v in xl], [0.0] * n, False)
             warm.key = key
         return x0 * umax
 
-    h = fs.T.dot(fs)
-    q = fs.T.dot(ft)
-    gscale = c2 + math.sqrt(float(q.dot(q))) + 1e-300
-    tol = _MULT_TOL * gscale
-    if max_iter is None:
-        max_iter = 50 + 10 * n
-    common = (fs, ft, h, q, usl, ts)
-    state = _iterate(common, tsb, eps, tol, unipolar, budget_possible, k, n, max_iter, xl,
-                     warm, key)
-    x, y, res2, state = _polish_final(common, eps, tol, unipolar, budget_possible, k, n,
-                                      max_iter, state)
-    # ---- an exact fit: the least-energy stage on its own, free of eps (see _least_energy)
-    lim = _EXACT_FIT_TOL * (math.sqrt(ft2) + math.sqrt(c2 * float(x.dot(x))))
+    ws = Workspace(fs, ft, usl, ts, budget_possible, unipolar, k)
+    eps = EPS_REL * max(c2, 1e-300)
+    gscale = c2 + math.sqrt(float(ws.q.dot(ws.q))) + 1e-300
+    ws.tol = MULT_TOL * gscale
+    ws.max_iter = 50 + 10 * n if max_iter is None else max_iter
+    x, face, keep = _iterate(ws, eps, xl, warm, key)
+    x, y, res2, face = _polish_final(ws, eps, x, face, keep)
+    final = (face.free, face.sg, face.fixv, face.bud)
+    # ---- an exact fit: the least-energy stage on its own, free of eps (see least_energy)
+    lim = EXACT_FIT_TOL * (math.sqrt(ft2) + math.sqrt(c2 * float(x.dot(x))))
     if res2 <= lim * lim:
-        x2 = _least_energy(fs, ft, usl, tsb, unipolar, y0 if y is None else y, lim, c2, k)
+        x2 = least_energy(ws, y0 if y is None else y, lim, c2)
         if x2 is not None:
             x = x2
             if warm is not None:
-                state = _face_of(x, usl, ts, budget_possible)
+                final = point_face(x.tolist(), usl, ts, budget_possible)
     if warm is not None:
-        _, free, sg, fixv, bud, _ = state
+        free, sg, fixv, bud = final
         warm.face = (free, sg, [v / ui if ui > 0.0 else 0.0 for v, ui in zip(fixv, usl)], bud)
         warm.key = key
     return _clamp(x, usl, ts, umax, 0.0 if unipolar else -1.0)
@@ -170,66 +136,51 @@ def _solve(fm, f, ul, tl, unipolar, max_iter, warm=None):
 def _least_norm_fit(fs, ft, ffT, c2, k):
     """(y0, x0 = F^T y0): the least-norm exact fit F^T (F F^T)^-1 f. A 1e-14 shift keeps the
     solve regular whatever F; one refinement step removes it."""
-    mreg = ffT + (1e-14 * c2) * _eye(k)
-    y0 = _fast_solve(mreg, ft)
-    y0 += _fast_solve(mreg, ft - ffT.dot(y0))
+    mreg = ffT + (1e-14 * c2) * eye(k)
+    y0 = fast_solve(mreg, ft)
+    y0 += fast_solve(mreg, ft - ffT.dot(y0))
     return y0, fs.T.dot(y0)
 
 
 def _fits(fs, ft, x0, ft2, c2):
-    """x0 fits the target to _EXACT_FIT_TOL (relative to ||f|| + ||F|| ||x0||)."""
+    """x0 fits the target to EXACT_FIT_TOL (relative to ||f|| + ||F|| ||x0||)."""
     r = fs.dot(x0) - ft
-    lim = _EXACT_FIT_TOL * (math.sqrt(ft2) + math.sqrt(c2 * float(x0.dot(x0))))
+    lim = EXACT_FIT_TOL * (math.sqrt(ft2) + math.sqrt(c2 * float(x0.dot(x0))))
     return float(r.dot(r)) <= lim * lim
 
 
-def _iterate(common, tsb, eps, tol, unipolar, budget_possible, k, n, max_iter, xl, warm, key):
+def _iterate(ws, eps, xl, warm, key):
     """The active set from the warm face if its minimizer is feasible here, else from the
-    cold start (`_cold_start`, from the least-norm fit ``xl``). Returns its state (x, free,
-    sg, fixv, bud, final face system)."""
-    fs, ft, h, q, usl, ts = common
+    cold start (:func:`.cold_start.cold_start`, from the least-norm fit ``xl``). Returns
+    (x, face, final face system)."""
+    usl = ws.usl
     if warm is not None and warm.face is not None and warm.key == key:
         free, sg, rel, bud = warm.face
         fixv = [r * ui for r, ui in zip(rel, usl)]
-        if bud and not budget_possible:
+        if bud and not ws.budget_possible:
             bud = False
+        face = Face(free, sg, fixv, bud)
         kept = []
-        xh = _face_minimizer(fs, ft, eps, free, sg, fixv, bud, ts, k, keep=kept)
-        if _on_face(xh.tolist(), free, sg, usl, tsb, bud, unipolar):
-            return _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible,
-                               k, n, max_iter, xh, free, sg, fixv, bud, at_face=kept)
-    xl = _cold_start(fs, ft, q, xl, usl, tsb, unipolar)
-    x, free, sg, fixv, bud, _ = _face_of(np.array(xl), usl, ts, budget_possible, xl)
-    return _active_set(fs, ft, h, q, usl, ts, eps, tol, unipolar, budget_possible, k, n,
-                       max_iter, x, free, sg, fixv, bud)
+        xh = face_minimizer(ws, face, eps, keep=kept)
+        if on_face(xh.tolist(), face, usl, ws.tsb, ws.unipolar):
+            return active_set(ws, eps, xh, face, at_face=kept)
+    xl = cold_start(ws, xl)
+    return active_set(ws, eps, np.array(xl), Face.of_point(xl, usl, ws.ts, ws.budget_possible))
 
 
-def _face_of(x, usl, ts, budget_possible, xl=None):
-    """The working set of a feasible point x: (x, free, sg, fixv, bud, []), free the coils
-    strictly inside their box, bud when the budget holds to 1e-12."""
-    xl = x.tolist() if xl is None else xl
-    free = [0.0 < abs(v) < ui for v, ui in zip(xl, usl)]
-    sg = [1.0 if v >= 0.0 else -1.0 for v in xl]
-    fixv = [0.0 if fr else v for v, fr in zip(xl, free)]
-    bud = budget_possible and any(free) and math.fsum(map(abs, xl)) >= ts * (1 - 1e-12)
-    return x, free, sg, fixv, bud, []
-
-
-def _polish_final(common, eps, tol, unipolar, budget_possible, k, n, max_iter, state):
+def _polish_final(ws, eps, x, face, keep):
     """The eps -> 0 limit on the final face (the lexicographic answer: least residual, then
     least energy) removes the Tikhonov bias when it stays on the face; if it leaves the face, a
     continuation pass with eps 1e4 x smaller (warm started, usually 1 face) first. Returns
-    (x, y, residual^2, state)."""
-    fs, ft, h, q, usl, ts = common
-    x, ok, y, res2 = _polish(fs, ft, h, q, usl, ts, k, unipolar, *state, eps)
+    (x, y, residual^2, face)."""
+    x, ok, y, res2 = polish(ws, x, face, keep, eps)
     if not ok:
-        state = _active_set(fs, ft, h, q, usl, ts, eps * 1e-4, tol, unipolar, budget_possible,
-                            k, n, max_iter, *state[:5])
-        x, _, y, res2 = _polish(fs, ft, h, q, usl, ts, k, unipolar, *state, eps * 1e-4)
+        x, face, keep = active_set(ws, eps * 1e-4, x, face)
+        x, _, y, res2 = polish(ws, x, face, keep, eps * 1e-4)
     if res2 is None:
-        r = fs.dot(x) - ft
+        r = ws.fs.dot(x) - ws.ft
         res2 = float(r.dot(r))
-    return x, y, res2, state
+    return x, y, res2, face
 
 
 def _clamp(x, usl, ts, umax, lo):

@@ -1,15 +1,15 @@
-"""SensorArrays: the 18 TLV493D sensors -> two (9, 3) field arrays in tesla with per-sensor health.
+"""SensorArrays: the TLV493D sensors -> one (n_sensors, 3) field array in tesla with per-sensor
+health.
 
-Default topology: one sensor per mux channel, so sensors that share an
-address never see each other and each reset reaches one sensor only: 18 sensors on three
-TCA9548A at 0x71, 0x72, 0x73 (0x70 is left to the PCA9685 All-Call), sensor i on mux
-0x71 + i // 8, channel i % 8. Sensors 0-8 form the top array, 9-17 the bottom array, each in
-coil order. Only one mux has a channel enabled at any time.
+Default topology: one sensor per mux channel, so sensors that share an address never see each
+other and each reset reaches one sensor only: e.g. 18 sensors on three TCA9548A at 0x71, 0x72,
+0x73 (0x70 is left to the PCA9685 All-Call), sensor i on mux 0x71 + i // 8, channel i % 8,
+in the map's sensor order. Only one mux has a channel enabled at any time.
 
 A runner calls :meth:`SensorArrays.read` once per loop; a sensor that fails keeps its last good
-value, is marked unhealthy, and is reset and reconfigured after ``hang_threshold`` bad reads in
-a row (a NACK; a hung ADC after the sensor's own ``hang_threshold`` frozen frame counters),
-at most once every ``retry_interval`` reads once it has failed. The
+value, is marked unhealthy, and is reset and reconfigured after ``checks.hang_reads`` bad reads
+in a row (a NACK, frozen or zero values; a hung ADC after the sensor's own ``hang_reads``
+frozen frame counters), at most once every ``retry_interval`` reads once it has failed. The
 reset's wake-up wait (``TLV493D.reset_wait_s``, tens of ms) is not spent inside a read: the pass
 sends the reset and goes on, a later pass configures the sensor once the wait is over (up to
 ``TLV493D.config_attempts`` resets), so the other sensors' frames keep their rate.
@@ -27,7 +27,7 @@ import numpy as np
 from ..errors import BadInputError, FirmwareIOError, I2CError
 from .bus import I2CBus
 from .tca9548a import TCA9548A
-from .tlv493d import TLV493D
+from .tlv493d import TLV493D, FrameChecks
 
 
 @dataclass(frozen=True)
@@ -50,32 +50,32 @@ class ArraysReading:
 
     Attributes
     ----------
-    top_t, bottom_t : ndarray, shape (9, 3), T
-        (Bx, By, Bz) of sensors 0-8 and 9-17; an unhealthy sensor shows its last good value
-        (zeros before it ever read well), a saturated one its clipped value.
-    status : tuple of str, length 18
+    field_t : ndarray, shape (n_sensors, 3), T
+        (Bx, By, Bz) of each sensor in the layout's order; an unhealthy sensor shows its last
+        good value (zeros before it ever read well), a saturated one its clipped value.
+    status : tuple of str, length n_sensors
         Per-sensor status (see :meth:`firmware_io.hw.tlv493d.TLV493D.read`).
-    healthy : ndarray, shape (18,), bool
+    healthy : ndarray, shape (n_sensors,), bool
         ``status == 'ok'``.
     """
 
-    top_t: np.ndarray
-    bottom_t: np.ndarray
+    field_t: np.ndarray
     status: tuple[str, ...]
     healthy: np.ndarray
 
 
 class SensorArrays:
-    """Reads the two sensor arrays through TCA9548A muxes.
+    """Reads every sensor through TCA9548A muxes.
 
     Parameters
     ----------
     bus : smbus2.SMBus-like
-    layout : sequence of SensorSlot, length 2 * n_per_array
+    layout : sequence of SensorSlot, one per sensor
         Default :func:`default_sensor_layout` (18 sensors).
     temperature : {'off', 'on'}
-    hang_threshold : int
-        Bad reads in a row before a sensor is reset and reconfigured.
+    checks : firmware_io.hw.tlv493d.FrameChecks
+        Each sensor's read checks; ``hang_reads`` is also the number of bad reads in a row
+        (NACK, frozen, zero) before a sensor is reset and reconfigured.
     retry_interval : int
         Reads between configuration attempts of a sensor that failed.
     sleep : callable
@@ -86,13 +86,13 @@ class SensorArrays:
     """
 
     def __init__(self, bus: I2CBus, layout: Sequence[SensorSlot] | None = None, *,
-                 temperature: Literal["off", "on"] = "off", hang_threshold: int = 3,
+                 temperature: Literal["off", "on"] = "off", checks: FrameChecks = FrameChecks(),
                  retry_interval: int = 100, sleep: Callable[[float], None] = time.sleep,
                  clock: Callable[[], float] = time.monotonic):
         self.layout = tuple(layout) if layout is not None else default_sensor_layout()
         n = len(self.layout)
-        if n == 0 or n % 2:
-            raise BadInputError("layout", "an even, non-zero number of SensorSlot (two arrays)", n)
+        if n == 0:
+            raise BadInputError("layout", "at least one SensorSlot", n)
         seen = set()
         for s in self.layout:
             # sensors sharing a channel see one SDA level at reset and cannot be told apart
@@ -102,12 +102,10 @@ class SensorArrays:
             seen.add(key)
         self.bus = bus
         self.muxes = {a: TCA9548A(bus, a) for a in sorted({s.mux_address for s in self.layout})}
-        self.sensors = [TLV493D(bus, s.sensor_address, temperature=temperature,
-                                hang_threshold=hang_threshold, recover_in_read=False,
-                                sleep=sleep) for s in self.layout]
-        self.hang_threshold = hang_threshold
+        self.sensors = [TLV493D(bus, s.sensor_address, temperature=temperature, checks=checks,
+                                recover_in_read=False, sleep=sleep) for s in self.layout]
+        self.hang_reads = checks.hang_reads
         self.retry_interval = int(retry_interval)
-        self.n_per_array = n // 2
         self._last_good = np.zeros((n, 3))
         self._bad_in_row = [0] * n
         self._retry_countdown = [0] * n
@@ -223,15 +221,10 @@ class SensorArrays:
                 self._start_reset(i, 0, "recovered")
             elif status not in ("stale", "recovered"):  # the sensor itself debounces stale frames
                 self._bad_in_row[i] += 1
-                if self._bad_in_row[i] >= self.hang_threshold:
+                if self._bad_in_row[i] >= self.hang_reads:
                     self._start_reset(i, 0, "recovered")
                     self._bad_in_row[i] = 0
             self.status[i] = status
         status = tuple(self.status)
-        k = self.n_per_array
-        return ArraysReading(
-            top_t=self._last_good[:k].copy(),
-            bottom_t=self._last_good[k:].copy(),
-            status=status,
-            healthy=np.array([s == "ok" for s in status]),
-        )
+        return ArraysReading(self._last_good.copy(), status,
+                             np.array([s == "ok" for s in status]))

@@ -4,7 +4,9 @@ Reads have no register pointer (raw 6, 7 or 10 byte frames), writes are 4 bytes 
 parity bit; the address is latched at a general-call reset from the level on SDA. The pure
 helpers :func:`tlv493d_address`, :func:`tlv493d_write_frame` and :func:`tlv493d_decode` carry
 the bit layouts of the user manual ([UM], register map in docs/hardware.md) and the datasheet
-([DS]) so they can be checked on their own.
+([DS]) so they can be checked on their own. Each read is checked (:class:`FrameChecks`): the
+flags, a frame counter that stopped (an ADC hang), values frozen while the counter runs, and
+all-zero values -- a value a sensor reports with an ok frame is not trusted blindly.
 """
 
 from __future__ import annotations
@@ -74,6 +76,39 @@ def tlv493d_write_frame(factory: bytes, *, iic_addr_code: int = 0,
     return bytes([0x00, mod1, factory[1], mod2])
 
 
+@dataclass(frozen=True)
+class FrameChecks:
+    """Debounces of the checks on each read, in reads in a row.
+
+    Attributes
+    ----------
+    hang_reads : int
+        Frame counter unchanged: 'stale' below this, then an ADC hang ('hung' / 'recovered')
+        [UM 5.6]. Single repeats are seen in practice, so it is debounced.
+    frozen_reads : int
+        The frame counter advances but (Bx, By, Bz) repeat the previous read exactly: 'frozen'
+        from this many repeats on (0: off). With the datasheet's 0.1 mT rms noise (about one
+        LSB) three axes repeat by chance with probability ~0.02 per read, eight in a row
+        ~1e-14.
+    zero_reads : int
+        Bx = By = Bz = 0 exactly: 'zero' from this many reads in a row on (0: off). A sensor in
+        a field below one LSB reads 0 on all three axes with probability ~0.06 per read (0.1 mT
+        noise), five in a row ~1e-6; in this device the magnet and the coils keep every sensor
+        above that.
+    """
+
+    hang_reads: int = 3
+    frozen_reads: int = 8
+    zero_reads: int = 5
+
+    def __post_init__(self):
+        for name in ("hang_reads", "frozen_reads", "zero_reads"):
+            v = getattr(self, name)
+            low = 1 if name == "hang_reads" else 0
+            if isinstance(v, bool) or not isinstance(v, int) or v < low:
+                raise BadInputError(name, f"an int >= {low} (reads)", v)
+
+
 def _s12(v: int) -> int:
     return v - 4096 if v & 0x800 else v
 
@@ -134,7 +169,7 @@ def tlv493d_decode(frame: bytes) -> TLVFrame:
 
 
 SensorStatus = Literal["ok", "saturated", "stale", "not_ready", "test_mode", "recovered",
-                       "hung", "nack", "failed", "unconfigured"]
+                       "hung", "frozen", "zero", "nack", "failed", "unconfigured"]
 
 
 class TLV493D:
@@ -148,9 +183,8 @@ class TLV493D:
         (reset level low). The reset drives SDA to the matching level.
     temperature : {'off', 'on'}
         'off' (recommended) reads 6 bytes per frame; 'on' reads 7 and fills ``temperature_c``.
-    hang_threshold : int
-        Consecutive reads with an unchanged frame counter before the sensor is reset and
-        reconfigured (the check is debounced because single repeats are seen in practice).
+    checks : FrameChecks
+        Debounces of the hang, frozen-value and zero-value checks.
     reset_wait_s : float
         Wait after the general-call reset, s (default 40e-3: the wake-up time of [INF] and
         [RS]; see docs/hardware.md).
@@ -167,19 +201,19 @@ class TLV493D:
     """
 
     def __init__(self, bus: I2CBus, address: int = 0x5E, *,
-                 temperature: Literal["off", "on"] = "off", hang_threshold: int = 3,
+                 temperature: Literal["off", "on"] = "off", checks: FrameChecks = FrameChecks(),
                  reset_wait_s: float = 40e-3, config_attempts: int = 3,
                  recover_in_read: bool = True, sleep: Callable[[float], None] = time.sleep):
         self.base_address, self.iic_addr_code = _split_address(address)
         if temperature not in ("off", "on"):
             raise BadInputError("temperature", "'off' or 'on'", temperature)
-        if isinstance(hang_threshold, bool) or not isinstance(hang_threshold, int) or hang_threshold < 1:
-            raise BadInputError("hang_threshold", "an int >= 1", hang_threshold)
+        if not isinstance(checks, FrameChecks):
+            raise BadInputError("checks", "a FrameChecks", checks)
         self.bus = bus
         self.address = address
         self.temperature = temperature
         self.read_length = 7 if temperature == "on" else 6
-        self.hang_threshold = hang_threshold
+        self.checks = checks
         self.reset_wait_s = float(reset_wait_s)
         self.config_attempts = int(config_attempts)
         self.recover_in_read = bool(recover_in_read)
@@ -191,6 +225,9 @@ class TLV493D:
         self.last_frame: TLVFrame | None = None
         self._last_frm: int | None = None
         self._stuck = 0
+        self._last_raw: tuple | None = None
+        self._same = 0       # reads in a row repeating the previous values (counter running)
+        self._zeros = 0      # reads in a row with Bx = By = Bz = 0
 
     def _name(self) -> str:
         return f"TLV493D at 0x{self.address:02X}"
@@ -257,6 +294,7 @@ class TLV493D:
             return str(exc)
         if second.power_down_flag == 1 and second.frame_counter == (first.frame_counter + 1) % 4:
             self._last_frm = second.frame_counter
+            # the value checks keep their count: a reset does not mend a frozen data path
             self._stuck = 0
             self.last_frame = second
             self.status = "ok"
@@ -281,7 +319,7 @@ class TLV493D:
             return frame
         if self._last_frm is not None and frame.frame_counter == self._last_frm:
             self._stuck += 1
-            if self._stuck < self.hang_threshold:
+            if self._stuck < self.checks.hang_reads:
                 self.status = "stale"
             elif not self.recover_in_read:
                 self.status = "hung"  # the caller resets it (its wake-up wait outside a read)
@@ -295,8 +333,21 @@ class TLV493D:
         self._last_frm = frame.frame_counter
         if frame.temperature_raw is not None:
             self.temperature_c = frame.temperature_c
-        self.status = "saturated" if frame.saturated else "ok"
+        self.status = self._value_check(frame) or ("saturated" if frame.saturated else "ok")
         return frame
+
+    def _value_check(self, frame: TLVFrame) -> str:
+        """'frozen', 'zero' or '' for a frame whose counter advanced (:class:`FrameChecks`)."""
+        raw = (frame.bx_raw, frame.by_raw, frame.bz_raw)
+        self._same = self._same + 1 if raw == self._last_raw else 0
+        self._zeros = self._zeros + 1 if raw == (0, 0, 0) else 0
+        self._last_raw = raw
+        c = self.checks
+        if c.zero_reads and self._zeros >= c.zero_reads:
+            return "zero"
+        if c.frozen_reads and self._same >= c.frozen_reads:
+            return "frozen"
+        return ""
 
     def read(self) -> tuple[float, float, float]:
         """(Bx, By, Bz), T, of the conversion started by the previous read.
@@ -304,9 +355,11 @@ class TLV493D:
         :attr:`status` tells whether the value is fresh: 'ok'; 'saturated' (an axis at the
         12-bit limit, |B| is at least the value); 'stale' (frame counter did not advance);
         'recovered' (the sensor hung and was reset, the value is stale); 'hung' (the frame
-        counter stood still ``hang_threshold`` reads in a row and ``recover_in_read`` is False:
-        the caller must reset it, the value is stale); 'not_ready' (PD=0 or
-        CH!=0); 'test_mode' (T flag set). A NACK raises :class:`I2CError` (status 'nack').
+        counter stood still ``checks.hang_reads`` reads in a row and ``recover_in_read`` is
+        False: the caller must reset it, the value is stale); 'frozen' (the counter runs but
+        the values repeated ``checks.frozen_reads`` times); 'zero' (all three axes 0 in
+        ``checks.zero_reads`` reads in a row); 'not_ready' (PD=0 or CH!=0); 'test_mode' (T
+        flag set). A NACK raises :class:`I2CError` (status 'nack').
         """
         return self.read_frame().field_t
 

@@ -1,8 +1,9 @@
 """Sensor calibration at start-up, through the firmware's own drive and read path.
 
 With the finger magnet away from the board, the coils are driven with known current patterns
-(A) and the two sensor arrays read (T); :func:`firmware_io.localization.calibrate` then fits
-each sensor's gain, mounting rotation and offset. Output: the Localizer's ``calibration``.
+(A) and every sensor read (T, one flat list in the map's order);
+:func:`firmware_io.localization.calibrate` then fits each sensor's gain, mounting rotation and
+offset. Output: the Localizer's ``calibration``.
 """
 
 from __future__ import annotations
@@ -47,12 +48,12 @@ def record_calibration(coils, arrays, currents_a: np.ndarray, *, settle_s: float
 
     Returns
     -------
-    top_t, bottom_t : ndarray, shape (k, n, 3), T (NaN where a sensor was not 'ok')
+    readings_t : ndarray, shape (k, n_sensors, 3), T (NaN where a sensor was not 'ok')
     applied_a : ndarray, shape (k, n_coils), A -- the steady-state currents of the duties
         written (quantized, clamped by the drive)
     """
     i = np.asarray(currents_a, float)
-    tops, bottoms, applied = [], [], []
+    frames, applied = [], []
     coils.initialize()
     try:
         for row in i:
@@ -61,21 +62,22 @@ def record_calibration(coils, arrays, currents_a: np.ndarray, *, settle_s: float
             arrays.read()
             r = arrays.read()
             bad = np.array([s != "ok" for s in r.status])
-            n = len(bad) // 2
-            tops.append(np.where(bad[:n, None], np.nan, r.top_t))
-            bottoms.append(np.where(bad[n:, None], np.nan, r.bottom_t))
+            frames.append(np.where(bad[:, None], np.nan, r.field_t))
             applied.append(np.asarray(res.current_a, float))
     finally:
         coils.all_off()
-    return np.array(tops), np.array(bottoms), np.array(applied)
+    return np.array(frames), np.array(applied)
 
 
-def calibrate_sensors(model, top_t, bottom_t, applied_a):
-    """Per-sensor calibration (gain, mounting rotation, offset) from coil-only frames:
-    :func:`firmware_io.localization.calibrate`, checked to be finite. Returns what it returns,
-    for the Localizer's ``calibration``."""
+def calibrate_sensors(model, readings_t, applied_a):
+    """Per-sensor calibration (gain, mounting rotation, offset) from coil-only frames
+    ``readings_t`` (k, n_sensors, 3) T: :func:`firmware_io.localization.calibrate` (its sensors
+    0..n-1 the upper array, n..2n-1 the lower one), checked to be finite. Returns what it
+    returns, for the Localizer's ``calibration``."""
+    r = np.asarray(readings_t, float)
+    half = r.shape[1] // 2
     try:
-        cal = calibrate(top_t, bottom_t, applied_a, model)
+        cal = calibrate(r[:, :half], r[:, half:], applied_a, model)
     except (np.linalg.LinAlgError, ValueError):
         cal = (np.full(1, np.nan),)
     # (gain_inverse, offsets) or the localizer's calibration object with those attributes

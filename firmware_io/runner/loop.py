@@ -1,13 +1,14 @@
-"""The fail-safe control loop: newest fix -> predicted position -> object force -> currents ->
+"""The fail-safe control loop: newest fix -> predicted pose -> object force -> currents ->
 voltages -> PWM, one step per control period.
 
-Each :meth:`Runner.step` takes the sensor side's newest :class:`~firmware_io.runner.pipeline.Fix`
+Each :meth:`Runner.step` takes the sensor side's newest :class:`~firmware_io.runner.frames.Fix`
 (or None), updates the tracker at the frame's time and predicts to now, evaluates the scene's
-force f (N) there, allocates currents (A) with min ||F(p) I - (f - F0(p))|| within the bounds,
-turns them into the voltages of the R-L feed-forward (:mod:`firmware_io.runner.drive`) and
-writes the MD10C duties, one block write per PCA9685. Every fault switches every coil off in
-the same step. For the fault table, the resume policy and the timing rationale see
-docs/runner.md.
+force f (N) there, allocates currents (A) with min ||F(p, m) I - (f - F0(p))|| within the bounds
+for the moment m the estimator found, turns them into the voltages of the R-L feed-forward
+(:mod:`firmware_io.runner.drive`) and writes the coil drivers' duties, one block write per PCA9685. The
+torque m x B the currents cause is reported with each step. Every fault switches every coil off
+in the same step; no force is rendered with a position older than one sensor pass. For the
+fault table, the resume policy and the timing rationale see docs/runner.md.
 """
 
 from __future__ import annotations
@@ -15,36 +16,54 @@ from __future__ import annotations
 import gc
 import math
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..allocation import Allocator
 from ..errors import BadInputError, CoilWriteError
-from ..localization.integrity import chi2_quantile, fused_protection_level, ratio_quantiles
 from .config import RunnerConfig
 from .drive import CurrentPath
-from .forcelaw import force_law_rows
-from .pipeline import CurrentHistory, Fix, SensorFrame, SensorPipeline
+from .forcelaw import force_law_matrix, torque_matrix
+from .frames import Fix, SensorFrame
+from .gate import InnovationGate, rendered_protection_level
+from .headroom import SensorHeadroom, SensorLayout
+from .history import CurrentHistory
+from .pipeline import SensorPipeline
 from .skip import CoilSkipBound
 from .thermal import ThermalGuard
+from .tracker import PoseTracker
 
-FAULTS = ("pwm_nack", "sensor_stuck", "sensor_dead", "sensor_saturated", "lost", "gated",
-          "out_of_box", "overrun", "thermal", "over_limit")
+FAULTS = ("pwm_nack", "sensor_stuck", "sensor_dead", "sensor_saturated", "sensor_value",
+          "lost", "gated", "out_of_box", "overrun", "thermal", "over_limit")
 """The runner's fault states (docs/runner.md: cause and resume policy of each)."""
 
-LOCALIZATION_FAULTS = ("sensor_stuck", "sensor_dead", "sensor_saturated", "lost", "gated",
-                       "out_of_box")
+LOCALIZATION_FAULTS = ("sensor_stuck", "sensor_dead", "sensor_saturated", "sensor_value",
+                       "lost", "gated", "out_of_box")
 """Faults cleared by ``RunnerConfig.resume_fixes`` accepted fixes in a row (the frames that
 show the position is supported again), not by ``resume_after_s``."""
 
 HISTORY_S = 0.2
 """How far back the modelled currents are kept for the sensor side, s (frames arrive late)."""
 
+STALE_PASSES = 1.5
+"""The rendered position is stale once the newest trusted fix was handed over more than this
+many sensor passes ago (the pass interval measured from the frames; plus two control periods
+of hand-over jitter): a newer frame is missing, so the position is older than one pass."""
+
+PASSES_KEPT = 8
+"""Frame intervals the pass interval is the median of."""
+
+_ALL_ROWS = np.arange(8)
+
 
 @dataclass
 class StepRecord:
-    """What one control step did (SI). ``state`` is 'running', 'safe' or a fault name."""
+    """What one control step did (SI). ``state`` is 'running', 'safe' or a fault name;
+    ``moment_a_m2`` the moment rendered on (the tracker's), ``torque_n_m`` the torque m x B
+    the commanded currents exert on it."""
 
     t_s: float
     position_m: np.ndarray
@@ -55,6 +74,32 @@ class StepRecord:
     loop_s: float
     state: str
     new_frame: bool
+    torque_n_m: np.ndarray
+    moment_a_m2: np.ndarray
+
+
+@dataclass
+class RunnerIO:
+    """What the runner talks to.
+
+    Attributes
+    ----------
+    coils : firmware_io.hw.coils.CoilDriver
+        Takes the voltages of the current path (``command_voltage``); ``all_off`` is the safe
+        state.
+    sensors : callable
+        ``sensors(t_s) -> Fix | SensorFrame | None``: the newest result not yet handed out. A
+        source with ``attach(pipeline)`` is given the runner's :class:`SensorPipeline` and runs
+        it on its side (the sensor thread); a raw :class:`SensorFrame` is processed inside the
+        step.
+    log : callable -- ``log(line)`` for one line per fault, resume or exclusion
+    clock : callable -- ``clock() -> s`` for the compute time of a step
+    """
+
+    coils: object
+    sensors: Callable
+    log: Callable[[str], None] = print
+    clock: Callable[[], float] = time.perf_counter
 
 
 class SceneForce:
@@ -68,86 +113,56 @@ class SceneForce:
         return self.scene.force(np.asarray(p, float)[None], np.asarray(v, float)[None])[0]
 
 
-@dataclass(frozen=True)
-class RunnerParts:
-    """What the control loop is made of besides its configuration.
-
-    Attributes
-    ----------
-    fieldmap : firmware_io.actuation.ActuationSource
-        A(p) (rows Bx, By, Bz, dBx/dx, dBx/dy, dBx/dz, dBy/dy, dBy/dz, per ampere), F0(p) N,
-        ``bounds`` (lower (3,), upper (3,)) m and ``moment_a_m2`` (3,) A m^2.
-    scene : object
-        ``force(position_m, velocity_m_s) -> (3,)`` N, the object's force on the finger.
-    localizer : object
-        ``locate(top, bottom, currents=None)`` -> an estimate with ``position_m`` and ``ok``.
-    tracker : object
-        A constant-velocity filter over the estimates between frames
-        (:class:`firmware_io.localization.ConstantVelocityKalman`): ``update(position_m, time_s,
-        ok)``, ``predict(time_s) -> position_m`` and its state ``x`` ((2, 3): position, velocity).
-    allocate : callable
-        ``allocate(force_matrix, target, current_limit, total_limit, unipolar=...)``
-        -> (currents, residual) (firmware_io.allocation).
-    coils : firmware_io.hw.coils.CoilDriver
-        Takes the voltages of the current path (``command_voltage``); ``all_off`` is the safe
-        state.
-    sensors : callable
-        ``sensors(t_s) -> Fix | SensorFrame | None``: the newest result not yet handed out, or
-        None. A source with ``attach(pipeline)`` is given the runner's
-        :class:`SensorPipeline` and runs it on its side (the sensor thread); a raw
-        :class:`SensorFrame` is processed inside the step.
-    """
-
-    fieldmap: object
-    scene: object
-    localizer: object
-    tracker: object
-    allocate: Callable
-    coils: object
-    sensors: Callable
-
-
 class Runner:
-    """Compose map, scene, localizer, allocator and drivers into the fail-safe control loop.
+    """Compose map, scene, estimator, allocator and drivers into the fail-safe control loop.
 
     Parameters
     ----------
-    parts : RunnerParts
-        The map, scene, localizer, tracker, allocator, coil driver and sensor source.
+    fieldmap : firmware_io.mapfile.MapFile (an ActuationSource with a sensor section)
+        ``actuation(point, coils=...)`` (rows Bx, By, Bz, dBx/dx, dBx/dy, dBx/dz, dBy/dy,
+        dBy/dz, per ampere), ``bias_force(point)`` N, ``bounds`` m, ``moment_a_m2`` A m^2,
+        ``sensor_positions_m`` and ``sensor_coil_field()`` (:class:`SensorLayout`).
+    scene : object -- ``force(position_m, velocity_m_s) -> (3,)`` N
+    estimator : pose estimator
+        ``fix(readings_t, currents_a)``, ``reset()``, ``integrity_risk``, ``model_bias_m``
+        (:mod:`firmware_io.runner.estimator_shim` lists the estimate's fields).
+    io : RunnerIO -- coils, sensor source, log, clock
     config : RunnerConfig
-    log : callable
-        ``log(line)`` for one line per fault/resume.
-    clock : callable
-        ``clock() -> s`` for the compute time of a step (default ``time.perf_counter``).
+    tracker : PoseTracker, optional (default: a new one)
+    allocate : callable, optional
+        ``allocate(force_matrix, target, current_limit, total_limit, unipolar=...,
+        inequalities=...)`` -> (currents, residual) (default
+        :class:`firmware_io.allocation.Allocator`).
+    headroom : SensorHeadroom, optional -- sensors the allocation keeps in their linear range
+        (the scene's choice; default none)
     """
 
-    def __init__(self, parts: RunnerParts, config: RunnerConfig, *,
-                 log: Callable[[str], None] = print,
-                 clock: Callable[[], float] = time.perf_counter):
-        fieldmap, coils, sensors = parts.fieldmap, parts.coils, parts.sensors
-        if coils.n_coils != config.n_coils:
+    def __init__(self, fieldmap, scene, estimator, io: RunnerIO, config: RunnerConfig, *,
+                 tracker: PoseTracker | None = None, allocate: Callable | None = None,
+                 headroom: SensorHeadroom | None = None):
+        if io.coils.n_coils != config.n_coils:
             raise BadInputError("config.drive.resistance_ref_ohm",
-                                f"{coils.n_coils} values (one per coil of the driver)",
+                                f"{io.coils.n_coils} values (one per coil of the driver)",
                                 config.n_coils)
-        self.map, self.scene = fieldmap, parts.scene
-        self.localizer, self.tracker = parts.localizer, parts.tracker
-        self.allocate, self.coils, self.sensors, self.cfg = parts.allocate, coils, sensors, config
-        self.log, self.clock = log, clock
+        if allocate is None:
+            allocate = Allocator()
+        self.map, self.scene, self.estimator, self.cfg = fieldmap, scene, estimator, config
+        self.tracker = tracker if tracker is not None else PoseTracker()
+        self.allocate, self.headroom = allocate, headroom
+        self.coils, self.sensors, self.log, self.clock = io.coils, io.sensors, io.log, io.clock
         n = config.n_coils
         drive = config.drive
         self.path = CurrentPath(drive.drives, config.control_period_s, config.feedforward)
         self.limit = np.full(n, drive.current_limit_a)
         self.thermal = ThermalGuard(n, drive.thermal_continuous_current_a,
                                     drive.thermal_time_constant_s)
-        m = np.asarray(fieldmap.moment_a_m2, float)
-        self.moment = m
-        mx, my, mz = m
-        self.z_only = config.force_axes == "z" and abs(mx) + abs(my) <= 1e-12 * abs(mz)
-        self.law_rows, self.law_matrix = force_law_rows(m, "z" if self.z_only else "xyz")
+        self.moment = np.asarray(fieldmap.moment_a_m2, float)
+        self.z_only = config.force_axes == "z"
         self.lo, self.hi = (np.asarray(b, float) for b in fieldmap.bounds)
-        self.skip = (CoilSkipBound(fieldmap, self.law_rows, self.law_matrix)
-                     if config.skip_force_n > 0 else None)
+        self.skip = CoilSkipBound(fieldmap) if config.skip_force_n > 0 else None
+        self.layout = SensorLayout.of_map(fieldmap)
         self.command_a = np.zeros(n)
+        self.torque_n_m = np.zeros(3)
         self.state = "safe"
         self.fault: str | None = None
         self.fault_since_s = -math.inf
@@ -158,18 +173,23 @@ class Runner:
         self.last_estimate_ok = False
         self.accepted_in_row = 0      # fixes taken into the tracker since the last fault
         self.have_fix = False
+        self.accepted_at_s = -math.inf     # step time the newest accepted fix was taken
+        self.frame_times = deque(maxlen=PASSES_KEPT + 1)
+        self.pass_interval_s: float | None = None   # median spacing of frame_times, s
         self.position_m = np.full(3, np.nan)
         self.fault_log: list[tuple[float, str, str]] = []
+        self.exclusion_log: list[tuple[float, tuple]] = []
+        self.fault_excluded: tuple = ()
+        self.background_t = np.zeros(3)
         # modelled currents at the start of each step of the last HISTORY_S (frames arrive late)
         self.history = CurrentHistory(n, max(16, int(HISTORY_S / config.control_period_s)))
-        self.pipeline = SensorPipeline(self.localizer, fieldmap, n, self.history.at, m)
+        self.pipeline = SensorPipeline(estimator, self.layout, self.history.at, self.moment)
         self.last_fix: Fix | None = None
-        self.gate_d2 = chi2_quantile(config.gate_risk, 3)
-        self._candidate: Fix | None = None     # a gated-out fix awaiting confirmation
+        self.gate = InnovationGate(config.gate_risk)
         # per-stage compute times of the last step (s), when ``profile`` is set
         self.profile = False
         self.stages: dict[str, float] = {}
-        attach = getattr(sensors, "attach", None)
+        attach = getattr(io.sensors, "attach", None)
         if attach is not None:
             attach(self.pipeline)       # the source runs the fit on its side
 
@@ -188,9 +208,10 @@ class Runner:
         self.path.current_a[:] = 0.0
         self.state = "safe"
         centre = 0.5 * (self.lo + self.hi)
-        self._allocate(centre, np.asarray(self.scene.force(centre, np.zeros(3)), float))
+        self._allocate(centre, np.asarray(self.scene.force(centre, np.zeros(3)), float),
+                       self.moment)
         self.coils.plan_voltage(self.path.voltage(self.path.current_a))
-        # a full collection walks every object the map, scene and localizer made at start-up
+        # a full collection walks every object the map, scene and estimator made at start-up
         # (long enough to be an overrun, docs/runner.md): collect once now and move the
         # survivors out of the collector's reach; later collections see only the loop's objects
         gc.collect()
@@ -247,7 +268,7 @@ class Runner:
     def _reinit_pwm(self, t_s: float) -> bool:
         """Re-initialise the PWM boards after a NACK; latch after ``max_pwm_retries`` failures."""
         try:
-            self.coils.initialize()
+            self.coils.initialize(self.cfg.drive.pwm_frequency_hz)
         except CoilWriteError:
             self.pwm_failures += 1
             self.clear_since_s = None
@@ -272,7 +293,7 @@ class Runner:
                 return True
         return self.fault is not None
 
-    # -- the step ------------------------------------------------------------------------------
+    # -- the sensor side's results ------------------------------------------------------------
     def _mark(self, name: str, t_prev: float) -> float:
         t = self.clock()
         self.stages[name] = t - t_prev
@@ -285,78 +306,84 @@ class Runner:
             item = self.pipeline.process(item)
         fix: Fix | None = item
         problems: list[tuple[str, str]] = []
-        if fix is not None:
-            self.last_fix = fix
-            problems.extend(fix.problems)
-            accepted = False
-            gated = self._gate(fix) if fix.ok else ""
-            pl = self._protection_level(fix) if fix.ok and not gated else math.inf
-            if gated:
-                problems.append(("gated", gated))
-            elif fix.ok and pl > self.cfg.alert_limit_m:
-                problems.append(("lost", f"protection level {pl * 1e3:.3g} mm > alert limit "
-                                 f"{self.cfg.alert_limit_m * 1e3:.3g} mm"))
-                if not self.have_fix:
-                    # acquisition: the tracker takes the fix (it passed the localizer's tests
-                    # and the gate), nothing renders until a filtered PL is within the limit
-                    self.tracker.update(fix.position_m, fix.frame_t_s, True)
-            elif fix.ok:
-                self.tracker.update(fix.position_m, fix.frame_t_s, True)
-                self.have_fix = accepted = True
-            self.last_estimate_ok = accepted      # taken into the tracker
-            self.accepted_in_row = self.accepted_in_row + 1 if accepted else 0
-        return fix is not None, problems
-
-    def _protection_level(self, fix: Fix) -> float:
-        """The protection level (m) of the position the runner renders at once this fix (past
-        the gate) is in the tracker: its filtered position, from the fix's covariance and the
-        tracker's prediction (:func:`firmware_io.localization.integrity.
-        fused_protection_level`, the localizer's ``model_bias_m`` kept whole, its quantile
-        table from the localizer's ``integrity_risk``). Without a tracked state (the tracker
-        also holds the fixes of an acquisition): the fix's own."""
-        if getattr(self.tracker, "x", None) is None or not hasattr(self.tracker, "innovation"):
-            return fix.protection_level_m
-        _, var = self.tracker.innovation(fix.position_m, fix.frame_t_s)
-        p = var - self.tracker.r
-        risk = getattr(self.localizer, "integrity_risk", None)
-        return fused_protection_level(fix.protection_level_m, fix.covariance_m2, p,
-                                      float(getattr(self.localizer, "model_bias_m", 0.0)),
-                                      p / var, None if risk is None else ratio_quantiles(risk))
-
-    def _gate(self, fix: Fix) -> str:
-        """The innovation gate: '' when the fix agrees with the tracker's prediction at its
-        frame time (Mahalanobis distance^2 with both covariances <= the chi-square(3) quantile
-        at ``gate_risk``), else why not. A gated-out fix asks the sensor side to re-acquire
-        (the next fit starts from the global search); a following fix consistent with it (both
-        fixes' covariances and the tracker's measurement noise), itself from the global search,
-        re-starts the tracker there (a warm fit could repeat a wrong basin; a cold one would
-        not)."""
-        if getattr(self.tracker, "x", None) is None or not hasattr(self.tracker, "innovation"):
-            return ""
-        cov = fix.covariance_m2 if fix.covariance_m2 is not None else np.zeros((3, 3))
-        innov, var = self.tracker.innovation(fix.position_m, fix.frame_t_s)
-        d2 = float(innov @ np.linalg.solve(cov + var * np.eye(3), innov))
-        if d2 <= self.gate_d2:
-            self._candidate = None
-            return ""
-        c = self._candidate
-        if c is not None and fix.reacquired:
-            cc = c.covariance_m2 if c.covariance_m2 is not None else np.zeros((3, 3))
-            dv = fix.position_m - c.position_m
-            s = cov + cc + 2 * self.tracker.r * np.eye(3)
-            if float(dv @ np.linalg.solve(s, dv)) <= self.gate_d2:
-                # two consecutive re-acquired fixes agree: the tracker was wrong, not the fix
+        if fix is None:
+            return False, problems
+        self.last_fix = fix
+        if math.isfinite(fix.frame_t_s):
+            self.frame_times.append(fix.frame_t_s)
+            if len(self.frame_times) > 1:   # the pass interval: the (lower) median spacing
+                t = list(self.frame_times)
+                d = sorted(b - a for a, b in zip(t, t[1:]))
+                self.pass_interval_s = d[(len(d) - 1) // 2]
+        problems.extend(fix.problems)
+        if fix.fault_excluded != self.fault_excluded:
+            self.fault_excluded = fix.fault_excluded
+            self.exclusion_log.append((t_s, fix.fault_excluded))
+            self.log(f"[{t_s:9.4f} s] fault detection excludes sensors "
+                     f"{list(fix.fault_excluded) or 'none'}")
+        ok = fix.ok and math.isfinite(float(np.sum(fix.position_m) + np.sum(fix.moment_a_m2)))
+        accepted = False
+        gated = ""
+        if ok:
+            gated, restart = self.gate.check(fix, self.tracker)
+            if restart:       # the tracker was wrong, not the fix: restart there
                 self.tracker.reset()
                 self.have_fix = False     # renders again from the next accepted fix
-                self._candidate = None
-                return ""
-        self._candidate = fix
-        self.pipeline.reacquire = True
-        return (f"fix {np.round(fix.position_m * 1e3, 1).tolist()} mm fails the tracker's gate "
-                f"(Mahalanobis^2 {d2:.3g} > {self.gate_d2:.3g}); re-acquiring")
+            if gated:
+                self.pipeline.reacquire = True
+        pl = (rendered_protection_level(fix, self.tracker, self.estimator)
+              if ok and not gated else math.inf)
+        if gated:
+            problems.append(("gated", gated))
+        elif ok and pl > self.cfg.alert_limit_m:
+            problems.append(("lost", f"protection level {pl * 1e3:.3g} mm > alert limit "
+                             f"{self.cfg.alert_limit_m * 1e3:.3g} mm"))
+            if not self.have_fix:
+                # acquisition: the tracker takes the fix (it passed the estimator's tests and
+                # the gate), nothing renders until a filtered PL is within the limit
+                self.tracker.update(fix.position_m, fix.frame_t_s, True, fix.moment_a_m2)
+        elif ok:
+            self.tracker.update(fix.position_m, fix.frame_t_s, True, fix.moment_a_m2)
+            self.have_fix = accepted = True
+            self.accepted_at_s = t_s
+            self.background_t = fix.background_t
+        self.last_estimate_ok = accepted      # taken into the tracker
+        self.accepted_in_row = self.accepted_in_row + 1 if accepted else 0
+        return True, problems
 
+    def _freshness(self, t_s: float, problems: list) -> None:
+        """No force with a position older than one sensor pass: 'lost' once the newest accepted
+        fix was handed over more than :data:`STALE_PASSES` pass intervals ago (a newer frame
+        is missing); beyond ``max_fix_age_s`` the track is dropped (the next fix starts from
+        the global search and restarts the tracker: a returning finger is not gated against
+        where it left)."""
+        cfg = self.cfg
+        age = t_s - self.tracker.t
+        if age > cfg.max_fix_age_s:
+            # also an acquisition's track (fixes beyond the alert limit): a state that old
+            # would bend the next fixes with its velocity
+            self.tracker.reset()
+            self.pipeline.reacquire = True
+            if self.have_fix:
+                self.have_fix = False
+                problems.append(("lost", f"newest accepted fix {age * 1e3:.0f} ms old > "
+                                 f"{cfg.max_fix_age_s * 1e3:.0f} ms: track dropped"))
+            return
+        if not self.have_fix:
+            return
+        dt = self.pass_interval_s
+        if dt is None:
+            return
+        since = t_s - self.accepted_at_s
+        limit = STALE_PASSES * dt + 2 * cfg.control_period_s
+        if since > limit:
+            problems.append(("lost", f"no trusted fix for {since * 1e3:.1f} ms > "
+                             f"{limit * 1e3:.1f} ms ({STALE_PASSES:g} sensor passes)"))
+
+    # -- the step ------------------------------------------------------------------------------
     def step(self, t_s: float) -> StepRecord:
-        """One control step at time ``t_s`` (s). Never raises for a device fault.
+        """One control step at time ``t_s`` (s). Never raises for a device fault or a bad
+        frame.
 
         ``self.sensors(t_s)`` hands over the newest :class:`Fix` of the sensor side, or None;
         a source that hands over raw :class:`SensorFrame` s instead has them processed here
@@ -368,17 +395,17 @@ class Runner:
         self.history.push(t_s, self.path.current_a)
         new_frame, problems = self._take_fix(t_s)
         tm = self._mark("fix", t0) if prof else t0
+        if self.tracker.x is not None:
+            self._freshness(t_s, problems)
         if not self.have_fix:
+            if problems and (self.fault is None or problems[0][0] != self.fault):
+                self._enter_fault(t_s, *problems[0])
             return self._record(t_s, t0, np.full(3, np.nan), np.zeros(3), new_frame,
                                 off=True)
         p = np.asarray(self.tracker.predict(t_s), float)
         vel = np.asarray(self.tracker.x[1], float)
+        m = self._moment()
         self.position_m = p
-        t_fix = getattr(self.tracker, "t", None)    # frame time of the newest accepted fix
-        age = t_s - t_fix if t_fix is not None else 0.0
-        if age > cfg.max_fix_age_s:
-            problems.append(("lost", f"newest accepted fix {age * 1e3:.0f} ms old > "
-                             f"{cfg.max_fix_age_s * 1e3:.0f} ms"))
         inside = bool(np.all(p >= self.lo) and np.all(p <= self.hi))
         if not inside:
             problems.append(("out_of_box", f"estimate {np.round(p * 1e3, 1).tolist()} mm outside "
@@ -394,46 +421,59 @@ class Runner:
         f_ref = np.asarray(self.scene.force(p, vel), float)
         if prof:
             tm = self._mark("object_force", tm)
-        command = self._allocate(p, f_ref)
+        command = self._allocate(p, f_ref, m)
         total = float(np.sum(np.abs(command)))
         budget = cfg.drive.total_current_a
         if np.any(np.abs(command) > self.limit + 1e-9) or total > budget + 1e-9 \
-                or (cfg.unipolar and np.any(command < -1e-9)):
+                or (cfg.unipolar and np.any(command < -1e-9)) \
+                or not math.isfinite(total):
             self._enter_fault(t_s, "over_limit",
                               f"command max |I| {np.abs(command).max():.3f} A, sum {total:.3f} A "
                               f"(limits {cfg.drive.current_limit_a:.3f} A, {budget:.3f} A)")
             return self._record(t_s, t0, p, f_ref, new_frame, off=True)
         return self._drive(t_s, t0, p, f_ref, command, new_frame)
 
-    def force_matrix(self, p: np.ndarray, coils=None) -> np.ndarray:
-        """Force per ampere at p: (1, n) N/A (Fz of a z-dipole) or (3, n); with ``coils`` (index
-        array) only those columns."""
-        return self.law_matrix @ self.map.actuation(p, rows=self.law_rows, coils=coils)
+    def force_matrix(self, p: np.ndarray, moment_a_m2, coils=None) -> np.ndarray:
+        """Force per ampere at p on the moment ``moment_a_m2`` (A m^2): (3, c) N/A, or (1, c)
+        (Fz) when rendering Fz alone; with ``coils`` (index array) only those columns."""
+        a = self.map.actuation(p, coils=coils)
+        f = force_law_matrix(moment_a_m2) @ a[3:]
+        return f[2:3] if self.z_only else f
 
-    def _allocate(self, p: np.ndarray, f_ref: np.ndarray) -> np.ndarray:
+    def _allocate(self, p: np.ndarray, f_ref: np.ndarray, m: np.ndarray) -> np.ndarray:
+        """Currents (n,) A for the object force ``f_ref`` N at p on the moment m; sets
+        ``torque_n_m``, the torque m x B of those currents (N m)."""
         cfg = self.cfg
         prof = self.profile
         tm = self.clock() if prof else 0.0
         keep = None
         if self.skip is not None:
-            k = self.skip.keep(p, self.limit, cfg.skip_force_n)
+            k = self.skip.keep(p, self.limit, cfg.skip_force_n, math.sqrt(float(m @ m)))
             if len(k) < cfg.n_coils:
                 keep = k
-        fm = self.force_matrix(p, keep)
-        b = np.asarray(self.map.bias_force(p), float)
-        target = (f_ref - b)[2:3] if self.z_only else f_ref - b
+        a = self.map.actuation(p, coils=keep)
+        fm = force_law_matrix(m) @ a[3:]
+        target = f_ref - np.asarray(self.map.bias_force(p), float)
+        if self.z_only:
+            fm, target = fm[2:3], target[2:3]
         if prof:
             tm = self._mark("force_matrix", tm)
-        if keep is None:
-            command, _ = self.allocate(fm, target, self.limit, cfg.drive.total_current_a,
-                                       unipolar=cfg.unipolar)
-            command = np.asarray(command, float)
-        else:
-            command = np.zeros(cfg.n_coils)
-            if len(keep):
-                i, _ = self.allocate(fm, target, self.limit[keep], cfg.drive.total_current_a,
-                                     unipolar=cfg.unipolar)
+        limit = self.limit if keep is None else self.limit[keep]
+        kw = {"unipolar": cfg.unipolar}
+        if self.headroom is not None:
+            rest = self.layout.predicted_t(np.zeros(cfg.n_coils), p, m, self.background_t)
+            g, h, _ = self.headroom.constraints(self.layout, rest, keep)
+            if len(h):
+                kw["inequalities"] = (g, h)
+        command = np.zeros(cfg.n_coils)
+        if keep is None or len(keep):
+            i, _ = self.allocate(fm, target, limit, cfg.drive.total_current_a, **kw)
+            if keep is None:
+                command = np.asarray(i, float)
+            else:
                 command[keep] = i
+        b = a[:3] @ (command if keep is None else command[keep])
+        self.torque_n_m = torque_matrix(m) @ b
         if prof:
             self._mark("allocation", tm)
         return command
@@ -461,7 +501,8 @@ class Runner:
         if self.profile:
             self._mark("drive", tm)
         return StepRecord(t_s, p, f_ref, command.copy(), v_out, current.copy(),
-                          self.clock() - t0, self.state, new_frame)
+                          self.clock() - t0, self.state, new_frame, self.torque_n_m.copy(),
+                          self._moment())
 
     def _record(self, t_s, t0, p, f_ref, new_frame, *, off: bool) -> StepRecord:
         cfg = self.cfg
@@ -471,8 +512,15 @@ class Runner:
                 if np.any(self.command_a != 0) or np.any(np.abs(self.path.current_a) > 0):
                     self.coils.all_off()
             self.command_a = np.zeros(cfg.n_coils)
+            self.torque_n_m = np.zeros(3)
             current = self.path.advance(np.zeros(cfg.n_coils))
             self.thermal.update(current, cfg.control_period_s)
         return StepRecord(t_s, np.asarray(p, float).copy(), np.asarray(f_ref, float),
                           self.command_a.copy(), np.zeros(cfg.n_coils), self.path.current_a.copy(),
-                          self.clock() - t0, self.state, new_frame)
+                          self.clock() - t0, self.state, new_frame, self.torque_n_m.copy(),
+                          self._moment())
+
+    def _moment(self) -> np.ndarray:
+        """The moment rendered on, A m^2: the tracker's, else the map's."""
+        m = self.tracker.moment_a_m2
+        return (self.moment if m is None else m).copy()

@@ -4,7 +4,8 @@
 when PT=1, address latched at reset from the level seen on SDA, IICAddr offsets, frame counter
 advancing once per read in master-controlled mode, PD / CH / T flags, 12-bit saturation
 (Infineon TLV493D-A1B6 user manual [UM] and datasheet [DS]; docs/hardware.md). Faults:
-``stuck_frame``, ``reject_config``, ``busy_reads``, :meth:`SimDevice.inject_nack`.
+``stuck_frame``, ``value_fault`` ('frozen' / 'zero' values with a live frame counter),
+``reject_config``, ``busy_reads``, :meth:`SimDevice.inject_nack`.
 """
 
 from __future__ import annotations
@@ -32,7 +33,10 @@ class SimTLV493D(SimDevice):
         Read-only bytes 7..9; their bits 4:3, byte 8 and bits 4:0 must be copied into writes.
 
     Faults: ``stuck_frame`` (ADC hang: no new conversion, frame counter frozen; a general reset
-    clears it unless ``stuck_after_reset``), ``reject_config`` (the next ``reject_config`` writes
+    clears it unless ``stuck_after_reset``), ``value_fault`` ('frozen': each conversion advances
+    the frame counter but repeats the values converted before the fault; 'zero': the values
+    read 0 on every axis; a damaged sensor: a reset does not clear it), ``reject_config`` (the
+    next ``reject_config`` writes
     are ignored as if their parity were wrong), ``busy_reads`` (the next reads see CH != 0, PD = 0),
     :meth:`inject_nack`.
     """
@@ -48,6 +52,9 @@ class SimTLV493D(SimDevice):
         self.factory_bytes = bytes(factory_bytes)
         self.stuck_frame = False
         self.stuck_after_reset = False
+        self.value_fault: Literal["frozen", "zero"] | None = None
+        self._frozen_raw: list | None = None
+        self._last_converted = [0, 0, 0]    # survives a reset: the values the fault freezes
         self.reject_config = 0
         self.busy_reads = 0
         self.parity_rejections = 0
@@ -143,6 +150,13 @@ class SimTLV493D(SimDevice):
         self.conversions += 1
         b_t = self.field_t if self.field_source is None else tuple(self.field_source())
         self.raw = [int(min(max(round(b / TLV493D_LSB_T), -2048), 2047)) for b in b_t]
+        if self.value_fault == "zero":
+            self.raw = [0, 0, 0]
+        elif self.value_fault == "frozen":
+            if self._frozen_raw is None:
+                self._frozen_raw = list(self._last_converted)
+            self.raw = list(self._frozen_raw)
+        self._last_converted = list(self.raw)
         if not self.mod2 & 0x80:  # T=0: temperature measured too
             self.temp_raw_latched = self.temperature_raw
         self.frm = (self.frm + 1) & 0x3
