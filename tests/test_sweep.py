@@ -50,13 +50,26 @@ def test_sweep_cli_serial_writes_csv_and_png(tmp_path, capsys):
             coil.inner_radius, coil.outer_radius, coil.length, 0.7e-3) + 1e-9),
             el.turns_from_geometry(coil.inner_radius, coil.outer_radius, coil.length, 0.7e-3,
                                    d.wire.packing))
-        assert float(r["resistance_ohm"]) == pytest.approx(el.resistance(coil, d.wire), rel=1e-12)
+        # the resistance the limit applies to: hot (100 C) with a core, where the device
+        # constraints hold; the cold one (20 C) beside it for L/R and the power
+        assert float(r["resistance_temperature_c"]) == 100.0
+        assert float(r["resistance_ohm"]) == pytest.approx(
+            el.resistance(coil, d.wire, temperature_c=100.0), rel=1e-12)
+        assert float(r["resistance_cold_ohm"]) == pytest.approx(el.resistance(coil, d.wire),
+                                                                rel=1e-12)
         # the thesis supply (36 V) is above the MD10C's 30 V rating: a rule-book violation of
         # every row, so no row is feasible however R and 5 L/R come out
         assert "rule design_supply_voltage_v" in r["reason"] and r["feasible"] == "0"
-        if float(r["resistance_ohm"]) > 6.0:
-            assert "R > 6 ohm" in r["reason"]
-    assert "no feasible design" in capsys.readouterr().out
+        assert ("resistance_ohm limit" in r["reason"]) == (float(r["resistance_ohm"]) > 6.0)
+        if float(r["resistance_cold_ohm"]) > 6.0:
+            assert "R(20 C) > 6 ohm" in r["reason"]
+    out = capsys.readouterr()
+    assert "no feasible design" in out.out
+    # said at once, before any row: the rule and the key the sweep does not vary
+    assert out.out.index("planned: 12 designs") < out.out.index("core model")
+    note = [ln for ln in out.err.splitlines() if "note:" in ln]
+    assert len(note) == 1 and "design_supply_voltage_v" in note[0]
+    assert "drive.supply_voltage_v is not varied" in note[0] and "36 V" in note[0]
 
 
 def test_sweep_cli_processes_match_serial(tmp_path):

@@ -6,7 +6,12 @@
   place only when it succeeds (:func:`staged_folder`): a failing run leaves nothing behind;
 * one progress flag, ``--no-progress`` (``--quiet`` is the same flag), in every command;
 * per-coil currents: ``--currents I1,I2,...`` (a leading minus works: :func:`join_negative_values`)
-  checked against the design's per-coil limit and total budget unless ``--allow-over-limit``.
+  checked against the design's per-coil limit and total budget unless ``--allow-over-limit``;
+* lengths (:func:`parse_length`): a number with an optional unit, ``40mm``, ``4cm``, ``0.04m``;
+  a bare number is millimetres in an option (``--spacing 10``) and metres in a design key whose
+  name ends in ``_m`` (``--param length_m=0.02:0.1:5``), as the key's name says;
+* a rule no varied key can fix is named before a sweep or an optimization starts
+  (:func:`unfixable_rules`).
 """
 
 from __future__ import annotations
@@ -17,6 +22,7 @@ import math
 import os
 import re
 import shutil
+import sys
 import tempfile
 from pathlib import Path
 from typing import Iterator, Sequence
@@ -24,8 +30,8 @@ from typing import Iterator, Sequence
 from ..design import NAMED_DESIGNS
 from ..errors import BadInputError
 
-VALUE_OPTIONS = ("--currents", "--current")
-"""Options whose value may start with a minus sign (a negative current)."""
+VALUE_OPTIONS = ("--currents", "--current", "--mesh-at")
+"""Options whose value may start with a minus sign (a negative current or coordinate)."""
 
 _NEGATIVE = re.compile(r"^-(\d|\.\d|inf|nan)", re.IGNORECASE)
 
@@ -194,3 +200,82 @@ def shown_margin(constraint: dict) -> float:
     m = float(constraint["margin"])
     scale = max(abs(float(constraint["limit"])), abs(float(constraint["value"])))
     return 0.0 if abs(m) <= ROUND_OFF * scale else m
+
+
+# ----------------------------------------------------------------------------- lengths
+LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6}
+"""Units a length on the command line may carry: ``40mm``, ``4cm``, ``0.04m``, ``500um``."""
+
+_LENGTH = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([a-z]*)\s*$")
+
+
+def parse_length(text: str | float, param: str, *, valid_m: tuple[float, float] | None,
+                 bare: str = "mm") -> float:
+    """A length of the command line, in metres.
+
+    ``text``: a number with an optional unit of :data:`LENGTH_UNITS`; ``bare``: the unit of a
+    bare number ('mm' in an option, 'm' in a design key ending in ``_m``). ``valid_m``: the
+    closed range (m) the length must lie in (None: any finite length). Raises
+    :class:`BadInputError` naming ``param``, the range (in ``bare`` units) and the value; when
+    the number would lie in the range in the other unit (m for mm, mm for m), the message says
+    which unit to write.
+    """
+    raw = str(text).strip()
+    m = _LENGTH.match(raw.lower())
+    lo, hi = (-math.inf, math.inf) if valid_m is None else valid_m
+    scale = LENGTH_UNITS[bare]
+    where = "" if valid_m is None else f" in [{lo / scale:g}, {hi / scale:g}] {bare}"
+    valid = f"a length{where} (a number is {bare}; or give the unit: 10mm, 1cm, 0.01m)"
+    if m is None or (m.group(2) and m.group(2) not in LENGTH_UNITS):
+        raise BadInputError(param, valid, raw)
+    number = float(m.group(1))
+    value = number * LENGTH_UNITS[m.group(2) or bare]
+    if not (math.isfinite(value) and lo <= value <= hi):
+        hint = ""
+        if not m.group(2):
+            other = "m" if bare == "mm" else "mm"
+            if lo <= number * LENGTH_UNITS[other] <= hi:
+                hint = (f"{'Metres' if other == 'm' else 'Millimetres'} where {bare} are "
+                        f"expected? Write {number:g}{other}"
+                        + (f" or {number * LENGTH_UNITS[other] / scale:g}." if other == "mm"
+                           else "."))
+        raise BadInputError(param, valid, raw, hint)
+    return value
+
+
+def parse_lengths(text: str, param: str, count: int, *, sep: str = ",",
+                  valid_m: tuple[float, float], bare: str = "mm") -> tuple[float, ...]:
+    """``count`` lengths separated by ``sep`` (``X,Y,Z``, ``LO:HI``), each as
+    :func:`parse_length` (metres)."""
+    parts = str(text).split(sep)
+    if len(parts) != count:
+        raise BadInputError(param, f"{count} lengths separated by {sep!r} (a number is {bare};"
+                            f" or give the unit: 10mm, 1cm, 0.01m)", str(text))
+    return tuple(parse_length(p, param, valid_m=valid_m, bare=bare) for p in parts)
+
+
+# ----------------------------------------------------------------------------- rules
+def unfixable_rules(design, varied: Sequence[str]) -> list[str]:
+    """The rules of the rule book (:mod:`designkit.rules`) that ``design`` violates and that
+    no key in ``varied`` can fix, one sentence each: every design a sweep or an optimization
+    makes from ``design`` inherits them, so none can be feasible. ``varied``: the design keys
+    the job changes, ``section.field`` or a whole table as ``section.``; a rule is unfixable
+    when none of its keys (``Rule.keys``) is among them."""
+    from .. import rules  # here: the rule book pulls in the electrical model (scipy)
+
+    def moved(key: str) -> bool:
+        return any(key == k or (k.endswith(".") and key.startswith(k)) for k in varied)
+
+    return [f"every design breaks rule {r.name} ({r.message.rstrip('.')}) and "
+            f"{', '.join(r.keys)} {'is' if len(r.keys) == 1 else 'are'} not varied: fix "
+            f"{'it' if len(r.keys) == 1 else 'them'} in the design file"
+            for r in rules.violations(design) if not any(moved(k) for k in r.keys)]
+
+
+def say_unfixable(command: str, design, varied: Sequence[str]) -> list[str]:
+    """Print :func:`unfixable_rules` at once, one line each on stderr (the job still runs:
+    its numbers may be wanted all the same); returns them."""
+    lines = unfixable_rules(design, varied)
+    for line in lines:
+        print(f"designkit {command}: note: {line}", file=sys.stderr, flush=True)
+    return lines
