@@ -79,25 +79,47 @@ def sensor_refs():
     return {k: npz[k] for k in npz.files}, meta
 
 
-def test_core_field_at_the_sensors_against_axisymmetric_fem(sensor_refs):
-    ref, meta = sensor_refs
+@pytest.fixture(scope="module")
+def one_core():
+    """The thesis coil and core alone (a 1 x 1 grid): the FEM's geometry."""
     design = dataclasses.replace(default_design(), array=GridLayout(1, 1, 0.05))
+    return design, CoilArray.from_design(design)
+
+
+def _fem_setup(sensor_refs, design):
+    ref, meta = sensor_refs
     assert meta["design_sha256"] == default_design().spec_hash()  # the FEM's magnet and core
-    arr = CoilArray.from_design(design)
     pos, _ = design.sensor_poses()
     np.testing.assert_allclose(pos[:, 2], ref["sensor_z_m"], atol=1e-12)
     np.testing.assert_allclose(design.magnet.moment_vector_a_m2, ref["moment_a_m2"])
-    magnet = np.array([[0.0, 0.0, h] for h in ref["heights_m"]])
-    got = np.reshape(map_physics(design).sensor_induced(arr, magnet), (len(magnet), 2, 3))
-    fem = ref["bz_t"]  # (heights, [upper, lower]) T
-    assert np.abs(got[..., :2]).max() < 1e-12 * np.abs(fem).max()  # on the axis: Bz only
+    assert meta["change_last_level"] < 1e-4  # the FEM converged far below the tolerances
+    return pos, np.array([[0.0, 0.0, h] for h in ref["heights_m"]]), ref["bz_t"]
+
+
+def test_core_field_at_the_sensors_against_axisymmetric_fem(sensor_refs, one_core):
+    # the cores' field at the sensors, the 10 x 10 mm magnet as what it is (a uniformly
+    # magnetized cylinder): measured +0.02 / -0.17 / -0.26 % (upper sensor, magnet 20 / 30 /
+    # 50 mm above the winding) and +0.04 / -0.03 / -0.05 % (lower sensor)
+    design, arr = one_core
+    pos, magnet, fem = _fem_setup(sensor_refs, design)
+    m = design.magnet
+    got = np.array([arr.magnet_core_field(pos, q, m.moment_vector_a_m2,
+                                          magnet_size_m=(m.radius_m, m.length_m))
+                    for q in magnet])  # (heights, [upper, lower], 3) T
+    assert np.abs(got[..., :2]).max() < 1e-9 * np.abs(fem).max()  # on the axis: Bz only
     rel = got[..., 2] / fem - 1
-    # measured: see docs/testing.md; the FEM's own level-to-level change is in the JSON
-    tol = TOLERANCE
-    assert meta["change_last_level"] < tol / 3
-    assert np.abs(rel).max() < tol, rel
+    assert np.abs(rel).max() < 5e-3, rel
 
 
-TOLERANCE = 5e-3
-"""The coupled model's induced field at the sensors against the FEM (relative, per sensor
-and height): a 5 % error in that field fails it ten times over."""
+def test_the_maps_core_field_at_the_sensors_against_axisymmetric_fem(sensor_refs, one_core):
+    # what the map samples (designkit.fieldmap.physics) takes the magnet as a point dipole:
+    # -1.71 / -1.10 / -0.63 % (upper sensor, 20 / 30 / 50 mm) and -0.51 / -0.43 / -0.24 %
+    # (lower) against the FEM of the real cylinder, the dipole's error falling as 1 / h^2
+    # (docs/testing.md). The tolerance: 0.5 % (the model) + 1.8 % (20 mm / h)^2 -- a map
+    # field 5 % off fails at every height, 2 % off at 50 mm.
+    design, arr = one_core
+    pos, magnet, fem = _fem_setup(sensor_refs, design)
+    got = np.reshape(map_physics(design).sensor_induced(arr, magnet), (len(magnet), 2, 3))
+    rel = got[..., 2] / fem - 1
+    tol = 5e-3 + 0.018 * (0.020 / magnet[:, 2:3]) ** 2
+    assert np.all(np.abs(rel) < tol), (rel, tol)
