@@ -448,6 +448,45 @@ def _check_metres(name: str, value: Any) -> None:
                             f"{value / 1000:g} m: design files are in SI units.")
 
 
+def _magnetization_hint(value: float) -> str:
+    if 0.0 < value < 10.0:
+        return (f"Br in tesla? M = Br / mu0: {value:g} T is {value / MU0:.4g} A/m (an N52 "
+                f"magnet: Br ~1.45 T, M ~1.16e6 A/m).")
+    return ""
+
+
+def _permeability_hint(value: float) -> str:
+    if 0.0 < value < 1.0:
+        return (f"The absolute permeability in H/m? mu_r = mu / mu0: {value:g} H/m is "
+                f"mu_r {value / MU0:.4g}.")
+    return ""
+
+
+def _tesla_hint(value: float) -> str:
+    return f"Millitesla? {value:g} mT is {value * 1e-3:g} T." if value > 0 else ""
+
+
+PHYSICAL_RANGES: dict[str, tuple[float, float, str, Any]] = {
+    "magnetization_a_per_m": (1e4, 2e6, "A/m", _magnetization_hint),
+    "relative_permeability": (1.0, 1e6, "", _permeability_hint),
+    "saturation_t": (0.1, 3.0, "T", _tesla_hint),
+    "range_t": (1e-4, 10.0, "T", _tesla_hint),
+    "lsb_t": (1e-9, 1e-2, "T", _tesla_hint),
+}
+"""Closed ranges of the magnetic keys (low, high, unit, the hint for a value outside): a
+permanent magnet's M lies between a weak rubber magnet's 1e4 A/m and 2e6 A/m (no magnet
+reaches Br = 2.5 T); a core's mu_r between air's 1 and 1e6 (supermalloy); a B-H knee
+between 0.1 and 3 T; a Hall sensor's range and resolution in tesla."""
+
+
+def _check_physical(name: str, key: str, value: float) -> None:
+    """``value`` of the magnetic key ``key`` in :data:`PHYSICAL_RANGES`, else BadInputError
+    naming ``name``, the range and the value, with the unit hint."""
+    lo, hi, unit, hint = PHYSICAL_RANGES[key]
+    if not (math.isfinite(value) and lo <= value <= hi):
+        raise BadInputError(name, f"in [{lo:g}, {hi:g}] {unit}".rstrip(), value, hint(value))
+
+
 def _check_section(sec: str, obj: Any) -> None:
     """Type and range checks of one table's fields, each named ``sec.field``."""
     for f in fields(obj):
@@ -474,6 +513,8 @@ def _check_section(sec: str, obj: Any) -> None:
             v.finite(name, val)
         elif f.name == "z_min_m":
             v.nonnegative(name, val)
+        elif f.name in PHYSICAL_RANGES:
+            _check_physical(name, f.name, val)
         else:
             v.positive(name, val, "")
 
