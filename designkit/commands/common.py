@@ -59,22 +59,26 @@ def join_negative_values(argv: Sequence[str], options: Sequence[str] = VALUE_OPT
 # ----------------------------------------------------------------------------- outputs
 def check_output(path: str | Path, *, folder: bool, param: str = "--out") -> Path:
     """Raise :class:`BadInputError` unless ``path`` can be written as a folder (``folder=True``)
-    or as a file; called before any computation."""
+    or as a file; called before any computation. The folder ``path`` is in must exist: a
+    command makes the folder ``--out`` names (a folder output), never the ones above it (a
+    mistyped parent is an error, not a new tree)."""
     path = Path(path)
     if folder and path.exists() and not path.is_dir():
         raise BadInputError(param, "a folder to write into (this path is an existing file)",
                             str(path))
     if not folder and path.is_dir():
         raise BadInputError(param, "a file name (this path is an existing folder)", str(path))
-    for parent in path.parents:
-        if parent.exists():
-            if not parent.is_dir():
-                raise BadInputError(param, f"a path under a folder ({parent} is a file)",
-                                    str(path))
-            if not _writable(parent):
-                raise BadInputError(param, f"a path in a writable folder ({parent} is not)",
-                                    str(path))
-            break
+    parent = path.absolute().parent
+    if not parent.exists():
+        missing = next(p for p in reversed(parent.parents) if not p.exists()) \
+            if not parent.parent.exists() else parent
+        raise BadInputError(param, f"a path in an existing folder ({missing} does not exist; "
+                            f"designkit makes no folder above the one {param} names)",
+                            str(path))
+    if not parent.is_dir():
+        raise BadInputError(param, f"a path under a folder ({parent} is a file)", str(path))
+    if not _writable(parent):
+        raise BadInputError(param, f"a path in a writable folder ({parent} is not)", str(path))
     return path
 
 
@@ -100,14 +104,12 @@ def _umask() -> int:
 
 @contextlib.contextmanager
 def staged_folder(out: str | Path, param: str = "--out") -> Iterator[Path]:
-    """Yield an empty staging folder next to ``out``; on success move everything written there
-    into ``out`` (files already in ``out`` and not rewritten stay), on failure delete it."""
+    """Yield an empty staging folder next to ``out`` (its folder must exist:
+    :func:`check_output`); on success move everything written there into ``out`` (files
+    already in ``out`` and not rewritten stay), on failure delete it."""
     out = check_output(out, folder=True, param=param).absolute()
-    created = [p for p in reversed(out.parents) if not p.exists()]  # outermost first
-    out.parent.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.staging.", dir=out.parent))
     os.chmod(stage, 0o777 & ~_umask())  # mkdtemp makes 0700; a plain mkdir would not
-    ok = False
     try:
         yield stage
         if not out.exists():
@@ -120,13 +122,8 @@ def staged_folder(out: str | Path, param: str = "--out") -> Iterator[Path]:
                 else:
                     dst.parent.mkdir(parents=True, exist_ok=True)
                     os.replace(src, dst)
-        ok = True
     finally:
         shutil.rmtree(stage, ignore_errors=True)
-        if not ok:  # the parent folders this run made go too
-            for folder in reversed(created):
-                with contextlib.suppress(OSError):
-                    folder.rmdir()
 
 
 # ----------------------------------------------------------------------------- design
