@@ -487,33 +487,62 @@ def _check_physical(name: str, key: str, value: float) -> None:
         raise BadInputError(name, f"in [{lo:g}, {hi:g}] {unit}".rstrip(), value, hint(value))
 
 
+FINITE_FIELDS = ("offset_m", "reference_temperature_c", "operating_temperature_c",
+                 "core_clearance_m", "press_fit_clearance_m")
+"""Fields that may take any finite value (offsets, temperatures, clearances)."""
+
+
+def field_rule(key: str, default: Any) -> tuple:
+    """How a table's field ``key`` (with this default) is checked, one of: ('vector',) the
+    moment's direction, ('list',) a sensor layout's list, ('choice', choices), ('count',),
+    ('finite',), ('nonnegative',), ('range', lo, hi, unit) (:data:`PHYSICAL_RANGES`),
+    ('positive',). Lengths (``*_m``) are also capped by :data:`MAX_LENGTH_M`. The one rule
+    book of :func:`check_design` and of the design-file reference (docs/design_file.md)."""
+    if key == "direction":
+        return ("vector",)
+    if key in ("positions_m", "rotations"):
+        return ("list",)
+    if key in CHOICES:
+        return ("choice", CHOICES[key])
+    if key == "turns":
+        return ("count",)
+    if key in FINITE_FIELDS:
+        return ("finite",)
+    if key == "z_min_m":
+        return ("nonnegative",)
+    if key in PHYSICAL_RANGES:
+        return ("range",) + PHYSICAL_RANGES[key][:3]
+    return ("positive",)
+
+
 def _check_section(sec: str, obj: Any) -> None:
-    """Type and range checks of one table's fields, each named ``sec.field``."""
+    """Type and range checks of one table's fields, each named ``sec.field``
+    (:func:`field_rule`)."""
     for f in fields(obj):
         val = getattr(obj, f.name)
         name = f"{sec}.{f.name}"
-        if f.name == "direction":
+        kind = field_rule(f.name, f.default)[0]
+        if kind == "vector":
             if not (isinstance(val, tuple) and len(val) == 3
                     and all(isinstance(c, float) and math.isfinite(c) for c in val)
                     and any(c != 0.0 for c in val)):
                 raise BadInputError(name, "3 finite numbers, not all 0 (the moment's "
                                     "direction; default [0, 0, -1])", val)
             continue
-        if f.name in ("positions_m", "rotations"):
+        if kind == "list":
             continue  # the sensor layout's lists: _check_sensors
         _check_type(name, val, f.default)
         _check_metres(name, val)
-        if f.name in CHOICES:
+        if kind == "choice":
             if val not in CHOICES[f.name]:
                 raise BadInputError(name, " or ".join(repr(c) for c in CHOICES[f.name]), val)
-        elif f.name == "turns":
+        elif kind == "count":
             v.positive_int(name, val)
-        elif f.name in ("offset_m", "reference_temperature_c", "operating_temperature_c",
-                        "core_clearance_m", "press_fit_clearance_m"):
+        elif kind == "finite":
             v.finite(name, val)
-        elif f.name == "z_min_m":
+        elif kind == "nonnegative":
             v.nonnegative(name, val)
-        elif f.name in PHYSICAL_RANGES:
+        elif kind == "range":
             _check_physical(name, f.name, val)
         else:
             v.positive(name, val, "")
