@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import os
 from pathlib import Path
 
@@ -44,12 +45,10 @@ def finish(path, result: dict, printer) -> dict:
     return result
 
 
-def study_parser(doc: str, default_out, *, quick: str | None = None) -> "argparse.ArgumentParser":
+def study_parser(doc: str, default_out, *, quick: str | None = None) -> argparse.ArgumentParser:
     """The command line the studies share: an optional output folder OUT (``default_out``,
     under out/), ``--quick`` when the study has a short version (``quick``: what it drops),
     ``--help`` from the study's docstring. Studies add their own options to it."""
-    import argparse
-
     ap = argparse.ArgumentParser(description=doc.strip().split("\n\n")[0],
                                  epilog="\n\n".join(doc.strip().split("\n\n")[1:]),
                                  formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -27,6 +27,7 @@ import tempfile
 from pathlib import Path
 from typing import Iterator, Sequence
 
+from .. import rules
 from ..design import NAMED_DESIGNS
 from ..errors import BadInputError
 
@@ -258,8 +259,6 @@ def unfixable_rules(design, varied: Sequence[str]) -> list[str]:
     makes from ``design`` inherits them, so none can be feasible. ``varied``: the design keys
     the job changes, ``section.field`` or a whole table as ``section.``; a rule is unfixable
     when none of its keys (``Rule.keys``) is among them."""
-    from .. import rules  # here: the rule book pulls in the electrical model (scipy)
-
     def moved(key: str) -> bool:
         return any(key == k or (k.endswith(".") and key.startswith(k)) for k in varied)
 
