@@ -73,8 +73,9 @@ def test_sweep_cli_serial_writes_csv_and_png(tmp_path, capsys):
 
 
 def test_sweep_cli_processes_match_serial(tmp_path):
-    args = ["sweep", "--param", "outer_radius_m=0.015:0.025:6", "--param",
-            "length_m=0.02:0.1:5", "--no-progress"]
+    # 6 designs: the chunks start at one design, so two workers share them whatever the size
+    args = ["sweep", "--param", "outer_radius_m=0.015:0.025:3", "--param",
+            "length_m=0.02:0.1:2", "--no-progress"]
     assert main(args + ["--workers", "1", "--out", str(tmp_path / "a")]) == 0
     assert main(args + ["--workers", "2", "--out", str(tmp_path / "b")]) == 0
     assert _read(tmp_path / "a" / "sweep.csv") == _read(tmp_path / "b" / "sweep.csv")
@@ -83,8 +84,8 @@ def test_sweep_cli_processes_match_serial(tmp_path):
 def test_sweep_on_a_local_dask_cluster(tmp_path):
     import dask.distributed as distributed
 
-    args = ["sweep", "--param", "inner_radius_m=0.005:0.015:4", "--param",
-            "length_m=0.02:0.1:3", "--no-progress"]
+    args = ["sweep", "--param", "inner_radius_m=0.005:0.015:2", "--param",
+            "length_m=0.02:0.1:2", "--no-progress"]
     assert main(args + ["--workers", "1", "--out", str(tmp_path / "serial")]) == 0
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
                                   dashboard_address=None) as cluster:
@@ -173,6 +174,7 @@ def test_optimize_cli_bad_design_file(tmp_path, capsys):
     assert not out.exists()
 
 
+@pytest.mark.slow  # a benchmark's smoke test (CI runs it); the optimum: test_optimize.py
 def test_bench_optimize_smoke(tmp_path):
     sys.path.insert(0, str(ROOT / "studies"))
     import bench_optimize
@@ -248,6 +250,7 @@ def test_rendering_winding_part_matches_the_coil_array_field_engine():
     np.testing.assert_allclose(got, ref, rtol=1e-7, atol=1e-9)
 
 
+@pytest.mark.slow  # a benchmark's smoke test (CI runs it); the dask sweeps: the tests above
 def test_bench_sweep_smoke(tmp_path):
     import dask.distributed  # noqa: F401  (a test dependency: no skip)
     sys.path.insert(0, str(ROOT / "studies"))
