@@ -130,7 +130,7 @@ def rows_of(tag, rows):
 def test_chunks_start_at_one_row_and_cover_every_row_once_in_order(workers):
     g = Grid.of([parse_param("inner_radius_m=0.005:0.01:7"), parse_param("length_m=0.02:0.1:5"),
                  parse_param("current_a=1:6:3")])
-    run = run_chunks(rows_of, ("t",), g, workers=workers, progress=False, max_chunk=4)
+    run = run_chunks(rows_of, ("t",), g, workers=workers, progress=None, max_chunk=4)
     got = [r for ch in run.results for r in ch]
     _, whole = grid(g.ranges)
     assert got == [("t", *map(float, r)) for r in whole]

@@ -443,7 +443,7 @@ def run_sweep(design: Design, ranges: Sequence[ParamRange], *, workers: int | No
     problem = CoilDesignProblem.from_design(design, core_model=core_model)
     base = _base_row(design, core_model)
     run = run_chunks(evaluate_chunk, (problem, base, g.names), g, workers=workers,
-                     scheduler=scheduler, progress=progress, desc="sweep", unit="design",
+                     scheduler=scheduler, progress=("sweep", "design") if progress else None,
                      max_chunk=chunk_size)
     return _result(g.names, run)
 
@@ -530,7 +530,8 @@ def run_array_sweep(design: Design, ranges: Sequence[ParamRange], *, workers: in
     chunk_size = v.positive_int("chunk_size", chunk_size)
     g = Grid.of(ranges)
     run = run_chunks(evaluate_array_chunk, (design, g.names), g, workers=workers,
-                     scheduler=scheduler, progress=progress, desc="array sweep", unit="array",
+                     scheduler=scheduler,
+                     progress=("array sweep", "array") if progress else None,
                      max_chunk=chunk_size)
     return _result(g.names, run)
 

@@ -89,21 +89,23 @@ def _ignore_ctrl_c() -> None:
 
 
 def run_chunks(fn: Callable, head: tuple, source: RowSource, *, workers: int | None = None,
-               scheduler: str | None = None, progress: bool = True, desc: str = "rows",
-               unit: str = "row", max_chunk: int = 500) -> ChunkRun:
+               scheduler: str | None = None, progress: tuple[str, str] | None = ("rows", "row"),
+               max_chunk: int = 500) -> ChunkRun:
     """Evaluate ``fn(*head, source.rows(a, b))`` over every row of ``source``.
 
     ``workers``: local processes (default: the CPU count; 1 or a single row: this process);
     ``scheduler``: a dask.distributed scheduler address (the chunks run there instead);
-    ``max_chunk``: the largest chunk, rows. The bar (``desc``, ``unit``) shows the total at
-    once. A KeyboardInterrupt or a worker's exception stops every worker and propagates.
+    ``max_chunk``: the largest chunk, rows; ``progress``: the bar's (description, unit), None
+    for none; the bar shows the total at once. A KeyboardInterrupt or a worker's exception
+    stops every worker and propagates.
     """
     max_chunk = int(max_chunk)
     if max_chunk < 1:
         raise BadInputError("max_chunk", "a whole number >= 1", max_chunk)
     t0 = time.perf_counter()
     sizer = ChunkSizer(max_chunk)
-    bar = tqdm(total=source.size, desc=desc, unit=unit) if progress else None
+    bar = None if progress is None else tqdm(total=source.size, desc=progress[0],
+                                             unit=progress[1])
     done: dict[int, Any] = {}
     n_workers = workers or os.cpu_count() or 1
     try:
