@@ -10,23 +10,12 @@ import argparse
 import dataclasses
 from pathlib import Path
 
-from designkit.support import validate as v
 from designkit.commands.common import (add_design_argument, add_progress_argument, check_output,
-                                       show_progress)
+                                       parse_length, parse_lengths, show_progress)
 from designkit.design import load_design
 
 from . import export
 from .params import PrinterParams, from_design
-
-
-def _triple(text: str) -> tuple[float, float, float]:
-    try:
-        vals = tuple(float(v) for v in text.lower().replace("x", ",").split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected X,Y,Z in mm, got {text!r}") from None
-    if len(vals) != 3 or not all(v > 0 for v in vals):
-        raise argparse.ArgumentTypeError(f"expected three positive numbers X,Y,Z in mm, got {text!r}")
-    return vals
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -41,19 +30,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="what carries the winding: a printed tube, or the core itself "
                              "(auto: a tube when the core leaves room for one; default: the "
                              "design's cad.mandrel, 'auto' unless set)")
-    parser.add_argument("--build-volume", type=_triple, default=(230.0, 190.0, 200.0),
-                        metavar="X,Y,Z", help="printer build volume in mm (default 230,190,200)")
-    parser.add_argument("--min-wall", type=float, default=None,
-                        help="thinnest printable wall in mm (default: the design's "
+    parser.add_argument("--build-volume", default="230,190,200", metavar="X,Y,Z",
+                        help="printer build volume (default 230,190,200; a number is mm, or "
+                             "23cm, 0.23m)")
+    parser.add_argument("--min-wall", default=None, metavar="LENGTH",
+                        help="thinnest printable wall (a number is mm; default: the design's "
                              "cad.min_wall_m, 0.8 mm unless set)")
-    parser.add_argument("--tolerance", type=float, default=0.02,
-                        help="tessellation linear deflection in mm (default 0.02)")
-    parser.add_argument("--finger-diameter", type=float, default=None,
-                        help="inner diameter of the finger ring in mm (default: the design's "
-                             "cad.finger_diameter_m, 18 mm unless set)")
-    parser.add_argument("--press-fit", type=float, default=None,
-                        help="radial clearance of the magnet pocket in mm (default: the "
-                             "design's cad.press_fit_clearance_m, 0.05 mm unless set)")
+    parser.add_argument("--tolerance", default="0.02mm", metavar="LENGTH",
+                        help="tessellation linear deflection (default 0.02mm; a number is mm)")
+    parser.add_argument("--finger-diameter", default=None, metavar="LENGTH",
+                        help="inner diameter of the finger ring (a number is mm; default: the "
+                             "design's cad.finger_diameter_m, 18 mm unless set)")
+    parser.add_argument("--press-fit", default=None, metavar="LENGTH",
+                        help="radial clearance of the magnet pocket (a number is mm; default: "
+                             "the design's cad.press_fit_clearance_m, 0.05 mm unless set)")
     parser.add_argument("--oversize", choices=["error", "skip"], default="error",
                         help="a part larger than the build volume: fail (default) or skip it")
     parser.add_argument("--picture", choices=["png", "none"], default="png",
@@ -61,20 +51,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_progress_argument(parser)
 
 
-def _mm(name: str, value, check):
-    return None if value is None else check(name, value, "mm")
+def _mm(name: str, value, valid_m: tuple[float, float]):
+    """An optional length option (the command line's units) in mm, None when not given."""
+    return None if value is None else 1e3 * parse_length(value, name, valid_m=valid_m)
 
 
 def run(args: argparse.Namespace) -> int:
     """Export the design's parts to --out and print the parts table; 3 when parts were skipped."""
     check_output(args.out, folder=True)
     formats = export.parse_formats(args.format)
+    volume = parse_lengths(args.build_volume.lower().replace("x", ","), "--build-volume", 3,
+                           valid_m=(1e-3, 10.0))
     printer = dataclasses.replace(
-        PrinterParams(), build_volume_mm=tuple(args.build_volume),
-        tolerance_mm=v.positive("--tolerance", args.tolerance, "mm"))
-    min_wall = _mm("--min-wall", args.min_wall, v.positive)
-    finger = _mm("--finger-diameter", args.finger_diameter, v.positive)
-    press_fit = _mm("--press-fit", args.press_fit, v.finite)
+        PrinterParams(), build_volume_mm=tuple(1e3 * q for q in volume),
+        tolerance_mm=_mm("--tolerance", args.tolerance, (1e-7, 1e-3)))
+    min_wall = _mm("--min-wall", args.min_wall, (1e-5, 0.05))
+    finger = _mm("--finger-diameter", args.finger_diameter, (1e-3, 0.1))
+    press_fit = _mm("--press-fit", args.press_fit, (-1e-3, 1e-3))
     design = load_design(args.design)
     params = from_design(design, mandrel=args.mandrel, printer=printer, min_wall_mm=min_wall,
                          finger_diameter_mm=finger, press_fit_clearance_mm=press_fit)

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import argparse
 import os
 from pathlib import Path
 
 from designkit import default_design, fieldmap
 from designkit.support.atomic import write_json_atomic
 from designkit.model.array import CoilArray
+
+ROOT = Path(__file__).resolve().parents[1]
+"""The repository root (the studies' default outputs are under ROOT / 'out')."""
 
 
 def design_and_map(out_dir, map_path=None, *, progress: bool = True):
@@ -39,3 +43,17 @@ def finish(path, result: dict, printer) -> dict:
     write_json_atomic(path, result)
     printer(result)
     return result
+
+
+def study_parser(doc: str, default_out, *, quick: str | None = None) -> argparse.ArgumentParser:
+    """The command line the studies share: an optional output folder OUT (``default_out``,
+    under out/), ``--quick`` when the study has a short version (``quick``: what it drops),
+    ``--help`` from the study's docstring. Studies add their own options to it."""
+    ap = argparse.ArgumentParser(description=doc.strip().split("\n\n")[0],
+                                 epilog="\n\n".join(doc.strip().split("\n\n")[1:]),
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("out", nargs="?", type=Path, default=Path(default_out), metavar="OUT",
+                    help=f"output folder (default {Path(default_out).relative_to(ROOT)})")
+    if quick is not None:
+        ap.add_argument("--quick", action="store_true", help=quick)
+    return ap

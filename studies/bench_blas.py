@@ -87,5 +87,8 @@ def run(out_dir, quick: bool = False, repeats: int = 3) -> dict:
     return out
 
 if __name__ == "__main__":
-    args = [a for a in sys.argv[1:] if not a.startswith("--")]
-    run(args[0] if args else ROOT / "out" / "bench_blas", quick="--quick" in sys.argv)
+    from studies._common import study_parser
+
+    a = study_parser(__doc__, ROOT / "out" / "bench_blas",
+                     quick="a 1 x 2 array, fewer repeats").parse_args()
+    run(a.out, quick=a.quick)

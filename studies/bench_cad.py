@@ -101,10 +101,10 @@ def _table(r: dict) -> str:
 
 
 if __name__ == "__main__":
-    
-    target = (Path(sys.argv[1]) if len(sys.argv) > 1
-           else Path(__file__).resolve().parents[1] / "out" / "bench_cad")
-    res = run(target, quick=False)
+    from studies._common import study_parser
+
+    a = study_parser(__doc__, Path(__file__).resolve().parents[1] / "out" / "bench_cad",
+                     quick="STL only, one tolerance, no picture").parse_args()
+    res = run(a.out, quick=a.quick)
     print(_table(res))
-    print(f"\nfiles under {target}")
-    json.dumps(res)
+    print(f"\nfiles under {a.out}")

@@ -390,6 +390,9 @@ def run(out_dir, quick=False):
 
 
 if __name__ == "__main__":
-    res = run((Path(sys.argv[1]) if len(sys.argv) > 1
-           else Path(__file__).resolve().parents[1] / "out" / "bench_field"))
+    from studies._common import study_parser
+
+    a = study_parser(__doc__, Path(__file__).resolve().parents[1] / "out" / "bench_field",
+                     quick="a smoke test: fewer points and cases").parse_args()
+    res = run(a.out, quick=a.quick)
     print(res["table"])

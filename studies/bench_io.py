@@ -154,9 +154,10 @@ def run(out_dir, quick: bool = False) -> dict:
 
 
 if __name__ == "__main__":
-    
-    out = (Path(sys.argv[1]) if len(sys.argv) > 1
-           else Path(__file__).resolve().parents[1] / "out" / "bench_io")
-    res = run(out)
+    from studies._common import study_parser
+
+    a = study_parser(__doc__, Path(__file__).resolve().parents[1] / "out" / "bench_io",
+                     quick="40 cycles instead of 2000").parse_args()
+    res = run(a.out, quick=a.quick)
     print(res["table"])
-    print(f"written to {out}")
+    print(f"written to {a.out}")

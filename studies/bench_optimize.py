@@ -150,5 +150,8 @@ def _print(r: dict) -> None:
 
 
 if __name__ == "__main__":
-    args = [a for a in sys.argv[1:] if not a.startswith("--")]
-    run(args[0] if args else ROOT / "out" / "bench_optimize", quick="--quick" in sys.argv)
+    from studies._common import study_parser
+
+    a = study_parser(__doc__, ROOT / "out" / "bench_optimize",
+                     quick="one start, one repeat").parse_args()
+    run(a.out, quick=a.quick)

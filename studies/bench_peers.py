@@ -347,13 +347,18 @@ def _figure(rows, out_dir):
 
 
 if __name__ == "__main__":
-    args = [a for a in sys.argv[1:] if not a.startswith("--")]
-    opt = dict(a[2:].split("=", 1) for a in sys.argv[1:] if a.startswith("--") and "=" in a)
-    kw = dict(repeat=opt.get("repeat"))
-    if "sets" in opt:
-        kw["sets"] = tuple(opt["sets"].split(","))
-    if "shells" in opt:
-        kw["shells"] = [int(k) for k in opt["shells"].split(",")]
-    out = Path(args[0]) if args else Path(__file__).resolve().parents[1] / "out" / "bench_peers"
-    res = run(out, quick="--quick" in sys.argv, **kw)
+    from studies._common import study_parser
+
+    ap = study_parser(__doc__, Path(__file__).resolve().parents[1] / "out" / "bench_peers",
+                      quick="a smoke test: fewer points and tolerances")
+    ap.add_argument("--repeat", type=int, default=None, help="timing repeats (default 3)")
+    ap.add_argument("--sets", default="workspace,near,far",
+                    help="point sets, comma-separated (default workspace,near,far)")
+    ap.add_argument("--shells", default=None,
+                    help="shell counts of the thick winding, comma-separated")
+    a = ap.parse_args()
+    kw = {"repeat": a.repeat, "sets": tuple(a.sets.split(","))}
+    if a.shells is not None:
+        kw["shells"] = [int(k) for k in a.shells.split(",")]
+    res = run(a.out, quick=a.quick, **kw)
     print(res["table"])

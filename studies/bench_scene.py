@@ -113,11 +113,17 @@ def _print(res):
 
 
 if __name__ == "__main__":
-    args = [a for a in sys.argv[1:] if a != "--map"]
-    out = (Path(args[0]) if args
-           else Path(__file__).resolve().parents[1] / "out" / "bench_scene")
-    if "--map" in sys.argv[1:]:
-        report_scene(scene_vs_full(out, int(args[1]) if len(args) > 1 else 2000))
+    from studies._common import study_parser
+
+    ap = study_parser(__doc__, Path(__file__).resolve().parents[1] / "out" / "bench_scene",
+                      quick="air coils and a coarse grid (a smoke test)")
+    ap.add_argument("n", nargs="?", type=int, default=2000,
+                    help="with --map: points of the error comparison (default 2000)")
+    ap.add_argument("--map", action="store_true",
+                    help="the scene map against the full map (time, size, error, the floor)")
+    a = ap.parse_args()
+    if a.map:
+        report_scene(scene_vs_full(a.out, a.n))
     else:
-        _print(run(out))
-    print(f"written to {out}")
+        _print(run(a.out, quick=a.quick))
+    print(f"written to {a.out}")

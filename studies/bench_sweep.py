@@ -100,5 +100,8 @@ def run(out_dir, quick: bool = False) -> dict:
 
 
 if __name__ == "__main__":
-    args = [a for a in sys.argv[1:] if not a.startswith("--")]
-    run(args[0] if args else ROOT / "out" / "bench_sweep", quick="--quick" in sys.argv)
+    from studies._common import study_parser
+
+    a = study_parser(__doc__, ROOT / "out" / "bench_sweep",
+                     quick="2 x 2 arrays on 2 workers").parse_args()
+    run(a.out, quick=a.quick)

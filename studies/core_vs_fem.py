@@ -341,8 +341,9 @@ def print_table(res: dict) -> None:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    import sys
+    from studies._common import study_parser
 
-    res = run((Path(sys.argv[1]) if len(sys.argv) > 1
-           else Path(__file__).resolve().parents[1] / "out" / "core_vs_fem"))
+    a = study_parser(__doc__, Path(__file__).resolve().parents[1] / "out" / "core_vs_fem",
+                     quick="FEM level 0, mu_r 1000 and 6 A only").parse_args()
+    res = run(a.out, quick=a.quick)
     print_table(res)

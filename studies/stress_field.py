@@ -204,6 +204,9 @@ def run(out_dir, quick=False):
 
 
 if __name__ == "__main__":
-    res = run((Path(sys.argv[1]) if len(sys.argv) > 1
-           else Path(__file__).resolve().parents[1] / "out" / "stress_field"))
+    from studies._common import study_parser
+
+    a = study_parser(__doc__, Path(__file__).resolve().parents[1] / "out" / "stress_field",
+                     quick="2000 points per region (a smoke test)").parse_args()
+    res = run(a.out, quick=a.quick)
     print(res["table"])

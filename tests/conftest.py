@@ -79,7 +79,7 @@ def small_box_design():
     lower half of the thesis' 50 mm cube and the closed-loop path)."""
     from designkit.design import default_design
 
-    return default_design().replace(**{"workspace.half_width_m": 0.03,
+    return default_design().replace(**{"workspace.shape": "box", "workspace.half_width_m": 0.03,
                                        "workspace.z_min_m": 0.020,
                                        "workspace.z_max_m": 0.045})
 

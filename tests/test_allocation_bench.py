@@ -4,7 +4,10 @@ import importlib.util
 import sys
 from pathlib import Path
 
+import pytest
 
+
+@pytest.mark.slow  # a benchmark's smoke test (CI runs it); certified solves: test_allocation.py
 def test_bench_allocation_quick(tmp_path):
     path = Path(__file__).resolve().parents[1] / "studies" / "bench_allocation.py"
     sys.path.insert(0, str(path.parent))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import scipy.linalg  # noqa: F401  (loads scipy's own BLAS, which must be limited too)
 from threadpoolctl import threadpool_info, threadpool_limits
 
@@ -24,6 +25,7 @@ def test_one_blas_thread_inside_and_the_callers_setting_after():
         assert _blas_threads() == before
 
 
+@pytest.mark.slow  # a benchmark's smoke test (CI runs it; fresh processes, timings only)
 def test_bench_blas_smoke(tmp_path):
     from conftest import load_study
 

@@ -3,10 +3,12 @@
 import json
 
 import build123d  # noqa: F401  (a required dependency: no skip)
+import pytest
 
 from conftest import load_study
 
 
+@pytest.mark.slow  # a benchmark's smoke test (CI runs it); the meshes: test_cad.py
 def test_bench_cad_quick(tmp_path):
     mod = load_study("bench_cad")
     res = mod.run(tmp_path, quick=True)

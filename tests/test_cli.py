@@ -1,9 +1,11 @@
-"""The ``designkit`` command as a user meets it: run as a separate process in a temporary
-folder, bad input gives one clear line and a non-zero exit, never a traceback, and a failing
-run leaves nothing behind."""
+"""The ``designkit`` command as a user meets it: run in a temporary folder (through the
+function the console script calls; the entry point itself as a separate process), bad input
+gives one clear line and a non-zero exit, never a traceback, and a failing run leaves nothing
+behind."""
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import importlib
 import io
@@ -11,6 +13,7 @@ import os
 import shutil
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import pytest
@@ -24,14 +27,38 @@ from designkit.errors import BadInputError
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def designkit(*args: str, cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess:
-    """Run the installed console script when it belongs to this checkout, else the module."""
-    env = dict(os.environ, PYTHONPATH=str(ROOT), PYVISTA_OFF_SCREEN="true", MPLBACKEND="Agg")
-    exe = shutil.which("designkit")
-    cmd = [exe] if exe and Path(exe).parent == Path(sys.executable).parent else \
-        [sys.executable, "-m", "designkit.cli"]
-    return subprocess.run(cmd + list(args), cwd=cwd, env=env, capture_output=True, text=True,
-                          timeout=timeout)
+def designkit(*args: str, cwd: Path, timeout: float = 300,
+              process: bool = False) -> subprocess.CompletedProcess:
+    """Run ``designkit ARGS`` in ``cwd``: in this process by default (``designkit.cli.main``,
+    the function the console script calls, with its stdout, stderr and warnings captured as a
+    process would print them), or with ``process=True`` as a separate process (the installed
+    console script when it belongs to this checkout, else the module): the tests of the
+    process itself (the entry point, a traceback Python would print) keep that."""
+    if process:
+        env = dict(os.environ, PYTHONPATH=str(ROOT), PYVISTA_OFF_SCREEN="true",
+                   MPLBACKEND="Agg")
+        exe = shutil.which("designkit")
+        cmd = [exe] if exe and Path(exe).parent == Path(sys.executable).parent else \
+            [sys.executable, "-m", "designkit.cli"]
+        return subprocess.run(cmd + list(args), cwd=cwd, env=env, capture_output=True,
+                              text=True, timeout=timeout)
+    out, err = io.StringIO(), io.StringIO()
+    here = os.getcwd()
+    os.chdir(cwd)
+    try:
+        with warnings.catch_warnings(record=True) as caught, \
+                contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            # what a fresh interpreter shows: each warning once, not the deprecation kinds
+            warnings.simplefilter("default")
+            for kind in (DeprecationWarning, PendingDeprecationWarning, ImportWarning,
+                         ResourceWarning):
+                warnings.filterwarnings("ignore", category=kind)
+            code = main(list(args))
+    finally:
+        os.chdir(here)
+    shown = "".join(f"{w.filename}:{w.lineno}: {w.category.__name__}: {w.message}\n"
+                    for w in caught)
+    return subprocess.CompletedProcess(list(args), code, out.getvalue(), err.getvalue() + shown)
 
 
 def _one_clear_line(res, *words):
@@ -81,7 +108,7 @@ def test_out_naming_an_existing_folder_is_one_line(tmp_path, command):
 
 def test_out_under_a_file_is_one_line(tmp_path):
     (tmp_path / "f").write_text("")
-    res = designkit("optimize", "--out", "f/sub", cwd=tmp_path)
+    res = designkit("optimize", "--out", "f/sub", cwd=tmp_path, process=True)
     _one_clear_line(res, "--out", "is a file")
 
 
@@ -129,10 +156,9 @@ def test_report_failing_late_leaves_nothing(tmp_path, monkeypatch, capsys):
         ImportError("skip the optimizer in this test")))
     monkeypatch.setattr(report, "_figures_and_vtk", lambda *a, **k: (_ for _ in ()).throw(
         ImportError("skip the figures in this test")))
-    assert main(["report", "--quick", "--no-progress", "--out",
-                 str(tmp_path / "new" / "deeper" / "rep")]) == 1
+    assert main(["report", "--quick", "--no-progress", "--out", str(tmp_path / "rep")]) == 1
     assert "a late failure" in capsys.readouterr().err
-    assert list(tmp_path.iterdir()) == []  # neither rep/, its new parents nor a staging folder
+    assert list(tmp_path.iterdir()) == []  # neither rep/ nor a staging folder
 
 
 def test_report_failing_keeps_a_previous_report_untouched(tmp_path, monkeypatch, capsys):
@@ -223,7 +249,7 @@ def test_progress_is_line_wise_without_a_terminal():
 
 def test_sweep_progress_in_a_pipe_has_no_carriage_returns(tmp_path):
     res = designkit("sweep", "--param", "inner_radius_m=0.006:0.01:5", "--workers", "1",
-                    "--out", "sw", cwd=tmp_path)
+                    "--out", "sw", cwd=tmp_path, process=True)
     assert res.returncode == 0, res.stderr
     assert "\r" not in res.stderr and "sweep" in res.stderr
 
@@ -257,6 +283,7 @@ def test_design_file_type_errors(tmp_path, text, param):
 def test_staged_folder_moves_everything_into_place(tmp_path, monkeypatch):
     from designkit.commands.common import staged_folder
 
+    (tmp_path / "a").mkdir()  # --out's folder must exist (the command makes out/ only)
     with staged_folder(tmp_path / "a" / "out") as stage:
         (stage / "sub").mkdir()
         (stage / "sub" / "x.txt").write_text("x")
@@ -277,7 +304,7 @@ def test_staged_folder_moves_everything_into_place(tmp_path, monkeypatch):
 @pytest.mark.slow
 @pytest.mark.skipif(shutil.which("getdp") is None, reason="needs getdp")
 def test_fem_writes_its_default_relative_out(tmp_path):
-    res = designkit("fem", "--level", "0", cwd=tmp_path, timeout=900)
+    res = designkit("fem", "--level", "0", cwd=tmp_path, timeout=900, process=True)
     assert res.returncode == 0, res.stderr[-2000:]
     out = tmp_path / "fem_out"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["fem_out"]  # no staging folder left

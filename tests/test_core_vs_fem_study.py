@@ -6,8 +6,11 @@ import pytest
 
 from conftest import shared_fem_solves
 
-pytestmark = pytest.mark.skipif(shutil.which("getdp") is None,
-                                reason="GetDP not installed (apt-get install getdp)")
+# slow (CI runs it): the study's live FEM; the model against the FEM is in the default suite
+# through the cached references (test_core_fem_cache.py, 0.2 %; this one checks 3 %)
+pytestmark = [pytest.mark.skipif(shutil.which("getdp") is None,
+                                 reason="GetDP not installed (apt-get install getdp)"),
+              pytest.mark.slow]
 
 
 @pytest.fixture(autouse=True)

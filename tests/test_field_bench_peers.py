@@ -1,9 +1,12 @@
 """Smoke test of studies/bench_peers.py (quick mode): it runs, writes its table and figure, and
 its accuracy columns make sense (no timing asserts)."""
 
+import pytest
+
 from studies import bench_peers
 
 
+@pytest.mark.slow  # a benchmark's smoke test (CI runs it); the accuracy: test_field_winding.py
 def test_bench_peers_quick(tmp_path):
     res = bench_peers.run(tmp_path, quick=True)
     assert (tmp_path / "bench_peers.png").stat().st_size > 1000

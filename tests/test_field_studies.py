@@ -1,9 +1,14 @@
 """Smoke tests of the field studies (quick mode): they run, write their files and the numbers
 they report satisfy the issue's targets where a quick run can show them."""
 
+import pytest
+
 from studies import bench_field, stress_field, winding_accuracy
 
 
+# slow (CI runs it): the kernels' finiteness at adversarial points is in the default suite
+# (test_field_stability.py), their accuracy against mpmath in test_field_loop/_winding.py
+@pytest.mark.slow
 def test_stress_field_quick(tmp_path):
     res = stress_field.run(tmp_path, quick=True)
     assert res["nonfinite"] == 0
@@ -13,6 +18,7 @@ def test_stress_field_quick(tmp_path):
     assert (tmp_path / "stress_field.txt").exists()
 
 
+@pytest.mark.slow  # a benchmark's smoke test (the accuracy it reports: test_field_winding.py)
 def test_bench_field_quick(tmp_path):
     res = bench_field.run(tmp_path, quick=True)
     assert (tmp_path / "bench_field.png").stat().st_size > 1000

@@ -127,11 +127,11 @@ def test_cross_blocks_from_their_images_equal_the_computed_blocks():
         assert np.abs(got - want).max() < 1e-12 * np.abs(want).max()
 
 
-def test_coil_columns_from_their_images_equal_the_computed_columns():
+def test_coil_columns_from_their_images_equal_the_computed_columns(thesis_array):
     # the projected winding field of each coil on each core: the columns the coupled solve
     # takes from an image under the square's symmetries against every column computed
     # directly (a wrong turn, or a ring not symmetric under the group, moves them by O(1))
-    arr = CoilArray.from_design(default_design())
+    arr = thesis_array  # the session's default array (conftest): its one coupled solve
     system = arr.coupled()
     rhs = system.factors[:, None] * system.coil_columns()
     want = np.zeros_like(rhs)
@@ -177,7 +177,8 @@ def test_scene_region_refuses_objects_outside_the_box():
         fieldmap.scene_region([Hemisphere(diameter_m=0.02, centre_m=(0.3, 0, 0))], 0.0, lo, hi)
 
 
-SMALL = default_design().replace(**{"core": None, "workspace.half_width_m": 0.04,
+SMALL = default_design().replace(**{"core": None, "workspace.shape": "box",
+                                     "workspace.half_width_m": 0.04,
                                      "workspace.z_min_m": 0.01, "workspace.z_max_m": 0.04})
 
 
@@ -274,9 +275,8 @@ def _solves_the_assembled_system(system, seed, columns):
                                atol=1e-10 * np.abs(r).max())
 
 
-def test_split_lu_of_the_square_array_pairs_the_two_dimensional_blocks():
-    arr = CoilArray.from_design(default_design())
-    system = arr.coupled()
+def test_split_lu_of_the_square_array_pairs_the_two_dimensional_blocks(thesis_array):
+    system = thesis_array.coupled()  # the session's default array (conftest)
     sizes = sorted(lu[0].shape[0] for _, lu in system._sym.blocks)
     # D4 on 4176 unknowns: the 2-dimensional type's 2112 split by a reflection into two
     # blocks of 1056 whose matrices are equal (one the quarter turn of the other): one LU

@@ -30,8 +30,9 @@ def _adjoint_sensor_field(arr, p, moment):
 
 
 @pytest.fixture(scope="module")
-def thesis():
-    return CoilArray.from_design(default_design()), default_design().magnet.moment_vector_a_m2
+def thesis(thesis_array):
+    """The session's default array (conftest: its one coupled solve) and the magnet's moment."""
+    return thesis_array, default_design().magnet.moment_vector_a_m2
 
 
 @pytest.mark.parametrize("p", [(0.0314, 0.0382, 0.0245), (0.0, 0.0, 0.02), (-0.03, 0.01, 0.06)])

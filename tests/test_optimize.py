@@ -143,6 +143,9 @@ def test_core_protrusion_variable_needs_a_core():
                                           variables=opt.VARIABLES + ("core_protrusion_m",))
 
 
+@pytest.mark.slow  # 8 local solves with finite-difference core gradients (CI runs it); the
+# driver and the coil problem's optimum: test_nlopt_tutorial_constrained_problem and
+# test_thesis_problem_optimum_is_feasible_global_and_beats_the_thesis_design
 def test_freeing_the_core_protrusion_cannot_lower_the_optimum():
     """A relaxation: the 3-variable optimum (protrusion fixed at 5 mm) is a feasible point of
     the 4-variable problem, so its optimum must be at least as large (and its constraints hold).

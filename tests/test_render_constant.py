@@ -90,7 +90,8 @@ def test_map_source_matches_array_and_cli_records_its_hash(tmp_path):
 
     # the box holds the CLI's default plane (100 mm wide at 50 mm): scene compile refuses an
     # object outside the map's box
-    small = default_design().replace(**{"core": None, "workspace.half_width_m": 0.055,
+    small = default_design().replace(**{"core": None, "workspace.shape": "box",
+                                        "workspace.half_width_m": 0.055,
                                         "workspace.z_min_m": 0.01, "workspace.z_max_m": 0.055})
     path = tmp_path / "map.npz"
     fieldmap.write(path, fieldmap.build(small, spacing=0.003, progress=False))

@@ -12,7 +12,7 @@ import pytest
 
 from designkit import Coil, default_design
 from designkit.model import electrical as el
-from designkit.optimize.sweep import parse_param, run_sweep, sweep_figure
+from designkit.optimize.sweep import ParamRange, parse_param, run_sweep, sweep_figure
 
 from test_cli import designkit
 
@@ -28,16 +28,30 @@ def _extent_inside_canvas(fig):
         assert bb.y0 >= canvas.y0 - 0.5 and bb.y1 <= canvas.y1 + 0.5, ax
 
 
-def test_mm_by_mistake_says_why(tmp_path):
-    res = designkit("sweep", "--param", "inner_radius_m=6:10:3", "--workers", "1",
-                    "--no-progress", "--out", "sw", cwd=tmp_path)
-    assert res.returncode == 0, res.stderr
-    assert "0 feasible" in res.stdout and "no feasible design" in res.stdout
-    assert "millimetres" in res.stdout
-    with open(tmp_path / "sw" / "sweep.csv") as fh:
-        rows = list(csv.DictReader(fh))
-    assert len(rows) == 3
-    assert all("outer radius < inner radius" in r["reason"] for r in rows)
+@pytest.mark.parametrize("args,param,value", [
+    (["--param", "inner_radius_m=6:10:3"], "--param inner_radius_m START", "6.0"),
+    (["--param", "length_m=10:100:3"], "--param length_m START", "10.0"),
+    (["--array", "--param", "pitch_m=40:60:2"], "--param pitch_m START", "40.0"),
+])
+def test_mm_by_mistake_is_refused_at_once_with_the_hint(tmp_path, args, param, value):
+    # every row would be invalid: one line (parameter, value, valid range, the mm hint) before
+    # any work, nothing written
+    res = designkit("sweep", *args, "--workers", "1", "--no-progress", "--out", "sw",
+                    cwd=tmp_path)
+    assert res.returncode == 1 and "Traceback" not in res.stderr
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, res.stderr
+    for word in (param, value, "[0.0001, " if "pitch" not in param else "[0.001, ",
+                 "Millimetres where metres are expected", "mm"):
+        assert word in lines[0], lines[0]
+    assert not (tmp_path / "sw").exists() and "planned" not in res.stdout
+
+
+def test_lengths_with_units_are_the_same_sweep(tmp_path):
+    from designkit.commands.sweep import si_param
+
+    assert parse_param(si_param("length_m=20mm:10cm:3")) == parse_param("length_m=0.02:0.1:3")
+    assert si_param("current_a=1:2:2") == "current_a=1:2:2"  # not a length: untouched
 
 
 def test_reason_matches_independent_limits():
@@ -54,7 +68,7 @@ def test_reason_matches_independent_limits():
         res_ohm = el.resistance(coil, d.wire)
         over_r = res_ohm > d.optimize.max_resistance_ohm
         over_t = 5 * r["time_constant_s"] > d.optimize.max_settling_time_s
-        assert ("R > 6 ohm" in r["reason"]) == over_r
+        assert ("R(20 C) > 6 ohm" in r["reason"]) == over_r
         assert ("5 L/R > 100 ms" in r["reason"]) == over_t
         assert (r["reason"] == "") == r["feasible"]
         seen.add((over_r, over_t))
@@ -64,7 +78,8 @@ def test_reason_matches_independent_limits():
 
 def _fig_all_infeasible():
     d = default_design()
-    result = run_sweep(d, [parse_param("inner_radius_m=6:10:3"),
+    # the library's own ranges (the command line refuses these values before any work)
+    result = run_sweep(d, [ParamRange("inner_radius_m", 6.0, 10.0, 3),
                            parse_param("length_m=0.03:0.1:3")], workers=1, progress=False)
     return result, sweep_figure(result)
 
@@ -86,9 +101,10 @@ def _within_rating():
 
 def test_three_parameter_sweep_names_its_slice_and_legend_is_off_the_points():
     d = _within_rating()
-    result = run_sweep(d, [parse_param("inner_radius_m=0.006:0.014:5"),
-                           parse_param("length_m=0.03:0.1:6"),
-                           parse_param("outer_radius_m=0.015:0.025:3")], workers=1,
+    # a small grid: what is checked (the slice, the legend) does not grow with it
+    result = run_sweep(d, [parse_param("inner_radius_m=0.006:0.014:3"),
+                           parse_param("length_m=0.03:0.1:4"),
+                           parse_param("outer_radius_m=0.015:0.025:2")], workers=1,
                        progress=False)
     fig = sweep_figure(result)
     ax = fig.axes[0]
@@ -98,9 +114,9 @@ def test_three_parameter_sweep_names_its_slice_and_legend_is_off_the_points():
     assert f"{best['outer_radius_m'] * 1e3:.4g} mm" in title
     n_slice = sum(1 for r in result.rows if r["outer_radius_m"] == best["outer_radius_m"])
     assert f"{n_slice} of {len(result.rows)} designs" in title
-    # every plotted point belongs to the slice: 5 x 6 points
+    # every plotted point belongs to the slice: 3 x 4 points
     n_points = sum(len(c.get_offsets()) for c in ax.collections)
-    assert n_points == n_slice == 30
+    assert n_points == n_slice == 12
     fig.canvas.draw()
     renderer = fig.canvas.get_renderer()
     legend = ax.get_legend().get_window_extent(renderer)

@@ -6,7 +6,12 @@
   place only when it succeeds (:func:`staged_folder`): a failing run leaves nothing behind;
 * one progress flag, ``--no-progress`` (``--quiet`` is the same flag), in every command;
 * per-coil currents: ``--currents I1,I2,...`` (a leading minus works: :func:`join_negative_values`)
-  checked against the design's per-coil limit and total budget unless ``--allow-over-limit``.
+  checked against the design's per-coil limit and total budget unless ``--allow-over-limit``;
+* lengths (:func:`parse_length`): a number with an optional unit, ``40mm``, ``4cm``, ``0.04m``;
+  a bare number is millimetres in an option (``--spacing 10``) and metres in a design key whose
+  name ends in ``_m`` (``--param length_m=0.02:0.1:5``), as the key's name says;
+* a rule no varied key can fix is named before a sweep or an optimization starts
+  (:func:`unfixable_rules`).
 """
 
 from __future__ import annotations
@@ -17,15 +22,17 @@ import math
 import os
 import re
 import shutil
+import sys
 import tempfile
 from pathlib import Path
 from typing import Iterator, Sequence
 
+from .. import rules
 from ..design import NAMED_DESIGNS
 from ..errors import BadInputError
 
-VALUE_OPTIONS = ("--currents", "--current")
-"""Options whose value may start with a minus sign (a negative current)."""
+VALUE_OPTIONS = ("--currents", "--current", "--mesh-at")
+"""Options whose value may start with a minus sign (a negative current or coordinate)."""
 
 _NEGATIVE = re.compile(r"^-(\d|\.\d|inf|nan)", re.IGNORECASE)
 
@@ -53,22 +60,26 @@ def join_negative_values(argv: Sequence[str], options: Sequence[str] = VALUE_OPT
 # ----------------------------------------------------------------------------- outputs
 def check_output(path: str | Path, *, folder: bool, param: str = "--out") -> Path:
     """Raise :class:`BadInputError` unless ``path`` can be written as a folder (``folder=True``)
-    or as a file; called before any computation."""
+    or as a file; called before any computation. The folder ``path`` is in must exist: a
+    command makes the folder ``--out`` names (a folder output), never the ones above it (a
+    mistyped parent is an error, not a new tree)."""
     path = Path(path)
     if folder and path.exists() and not path.is_dir():
         raise BadInputError(param, "a folder to write into (this path is an existing file)",
                             str(path))
     if not folder and path.is_dir():
         raise BadInputError(param, "a file name (this path is an existing folder)", str(path))
-    for parent in path.parents:
-        if parent.exists():
-            if not parent.is_dir():
-                raise BadInputError(param, f"a path under a folder ({parent} is a file)",
-                                    str(path))
-            if not _writable(parent):
-                raise BadInputError(param, f"a path in a writable folder ({parent} is not)",
-                                    str(path))
-            break
+    parent = path.absolute().parent
+    if not parent.exists():
+        missing = next(p for p in reversed(parent.parents) if not p.exists()) \
+            if not parent.parent.exists() else parent
+        raise BadInputError(param, f"a path in an existing folder ({missing} does not exist; "
+                            f"designkit makes no folder above the one {param} names)",
+                            str(path))
+    if not parent.is_dir():
+        raise BadInputError(param, f"a path under a folder ({parent} is a file)", str(path))
+    if not _writable(parent):
+        raise BadInputError(param, f"a path in a writable folder ({parent} is not)", str(path))
     return path
 
 
@@ -94,14 +105,12 @@ def _umask() -> int:
 
 @contextlib.contextmanager
 def staged_folder(out: str | Path, param: str = "--out") -> Iterator[Path]:
-    """Yield an empty staging folder next to ``out``; on success move everything written there
-    into ``out`` (files already in ``out`` and not rewritten stay), on failure delete it."""
+    """Yield an empty staging folder next to ``out`` (its folder must exist:
+    :func:`check_output`); on success move everything written there into ``out`` (files
+    already in ``out`` and not rewritten stay), on failure delete it."""
     out = check_output(out, folder=True, param=param).absolute()
-    created = [p for p in reversed(out.parents) if not p.exists()]  # outermost first
-    out.parent.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.staging.", dir=out.parent))
     os.chmod(stage, 0o777 & ~_umask())  # mkdtemp makes 0700; a plain mkdir would not
-    ok = False
     try:
         yield stage
         if not out.exists():
@@ -114,13 +123,8 @@ def staged_folder(out: str | Path, param: str = "--out") -> Iterator[Path]:
                 else:
                     dst.parent.mkdir(parents=True, exist_ok=True)
                     os.replace(src, dst)
-        ok = True
     finally:
         shutil.rmtree(stage, ignore_errors=True)
-        if not ok:  # the parent folders this run made go too
-            for folder in reversed(created):
-                with contextlib.suppress(OSError):
-                    folder.rmdir()
 
 
 # ----------------------------------------------------------------------------- design
@@ -194,3 +198,80 @@ def shown_margin(constraint: dict) -> float:
     m = float(constraint["margin"])
     scale = max(abs(float(constraint["limit"])), abs(float(constraint["value"])))
     return 0.0 if abs(m) <= ROUND_OFF * scale else m
+
+
+# ----------------------------------------------------------------------------- lengths
+LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6}
+"""Units a length on the command line may carry: ``40mm``, ``4cm``, ``0.04m``, ``500um``."""
+
+_LENGTH = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([a-z]*)\s*$")
+
+
+def parse_length(text: str | float, param: str, *, valid_m: tuple[float, float] | None,
+                 bare: str = "mm") -> float:
+    """A length of the command line, in metres.
+
+    ``text``: a number with an optional unit of :data:`LENGTH_UNITS`; ``bare``: the unit of a
+    bare number ('mm' in an option, 'm' in a design key ending in ``_m``). ``valid_m``: the
+    closed range (m) the length must lie in (None: any finite length). Raises
+    :class:`BadInputError` naming ``param``, the range (in ``bare`` units) and the value; when
+    the number would lie in the range in the other unit (m for mm, mm for m), the message says
+    which unit to write.
+    """
+    raw = str(text).strip()
+    m = _LENGTH.match(raw.lower())
+    lo, hi = (-math.inf, math.inf) if valid_m is None else valid_m
+    scale = LENGTH_UNITS[bare]
+    where = "" if valid_m is None else f" in [{lo / scale:g}, {hi / scale:g}] {bare}"
+    valid = f"a length{where} (a number is {bare}; or give the unit: 10mm, 1cm, 0.01m)"
+    if m is None or (m.group(2) and m.group(2) not in LENGTH_UNITS):
+        raise BadInputError(param, valid, raw)
+    number = float(m.group(1))
+    value = number * LENGTH_UNITS[m.group(2) or bare]
+    if not (math.isfinite(value) and lo <= value <= hi):
+        hint = ""
+        if not m.group(2):
+            other = "m" if bare == "mm" else "mm"
+            if lo <= number * LENGTH_UNITS[other] <= hi:
+                hint = (f"{'Metres' if other == 'm' else 'Millimetres'} where {bare} are "
+                        f"expected? Write {number:g}{other}"
+                        + (f" or {number * LENGTH_UNITS[other] / scale:g}." if other == "mm"
+                           else "."))
+        raise BadInputError(param, valid, raw, hint)
+    return value
+
+
+def parse_lengths(text: str, param: str, count: int, *, sep: str = ",",
+                  valid_m: tuple[float, float], bare: str = "mm") -> tuple[float, ...]:
+    """``count`` lengths separated by ``sep`` (``X,Y,Z``, ``LO:HI``), each as
+    :func:`parse_length` (metres)."""
+    parts = str(text).split(sep)
+    if len(parts) != count:
+        raise BadInputError(param, f"{count} lengths separated by {sep!r} (a number is {bare};"
+                            f" or give the unit: 10mm, 1cm, 0.01m)", str(text))
+    return tuple(parse_length(p, param, valid_m=valid_m, bare=bare) for p in parts)
+
+
+# ----------------------------------------------------------------------------- rules
+def unfixable_rules(design, varied: Sequence[str]) -> list[str]:
+    """The rules of the rule book (:mod:`designkit.rules`) that ``design`` violates and that
+    no key in ``varied`` can fix, one sentence each: every design a sweep or an optimization
+    makes from ``design`` inherits them, so none can be feasible. ``varied``: the design keys
+    the job changes, ``section.field`` or a whole table as ``section.``; a rule is unfixable
+    when none of its keys (``Rule.keys``) is among them."""
+    def moved(key: str) -> bool:
+        return any(key == k or (k.endswith(".") and key.startswith(k)) for k in varied)
+
+    return [f"every design breaks rule {r.name} ({r.message.rstrip('.')}) and "
+            f"{', '.join(r.keys)} {'is' if len(r.keys) == 1 else 'are'} not varied: fix "
+            f"{'it' if len(r.keys) == 1 else 'them'} in the design file"
+            for r in rules.violations(design) if not any(moved(k) for k in r.keys)]
+
+
+def say_unfixable(command: str, design, varied: Sequence[str]) -> list[str]:
+    """Print :func:`unfixable_rules` at once, one line each on stderr (the job still runs:
+    its numbers may be wanted all the same); returns them."""
+    lines = unfixable_rules(design, varied)
+    for line in lines:
+        print(f"designkit {command}: note: {line}", file=sys.stderr, flush=True)
+    return lines

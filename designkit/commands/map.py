@@ -17,21 +17,22 @@ from firmware_io.scene import Scene
 
 from .. import fieldmap
 from ..design import load_design
-from ..support.validate import in_range
-from .common import add_design_argument, add_progress_argument, check_output, show_progress
+from .common import (add_design_argument, add_progress_argument, check_output, parse_length,
+                     show_progress)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_design_argument(parser)
-    parser.add_argument("--spacing", type=float, default=10.0,
-                        help="x, y step in mm of the grid over magnet positions that carries "
-                             "the bias force beyond the per-core tables (default 10)")
+    parser.add_argument("--spacing", default="10mm", metavar="LENGTH",
+                        help="x, y step of the grid over magnet positions that carries the "
+                             "bias force beyond the per-core tables (default 10mm; a number is "
+                             "mm)")
     parser.add_argument("--scene", type=Path, default=None,
                         help="compiled scene (designkit scene compile): map only the region its "
                              "objects can push in, plus --scene-margin (the runner fails safe "
                              "outside it)")
-    parser.add_argument("--scene-margin", type=float, default=5.0,
-                        help="margin around the scene's objects, mm (default 5)")
+    parser.add_argument("--scene-margin", default="5mm", metavar="LENGTH",
+                        help="margin around the scene's objects (default 5mm; a number is mm)")
     parser.add_argument("--out", type=Path, default=Path("fieldmap.npz"),
                         help="output file, .npz (default ./fieldmap.npz)")
     add_progress_argument(parser)
@@ -51,12 +52,12 @@ def run(args: argparse.Namespace) -> int:
     # everything that can be refused is refused before the (long) computation
     out = fieldmap.check_output(args.out)
     check_output(out, folder=False)  # a folder that cannot be written: refused in < 1 s
-    spacing = in_range("--spacing", args.spacing, 0.5, 100.0, "mm")
-    margin = in_range("--scene-margin", args.scene_margin, 0.0, 100.0, "mm")
+    spacing = parse_length(args.spacing, "--spacing", valid_m=(0.5e-3, 0.1))
+    margin = parse_length(args.scene_margin, "--scene-margin", valid_m=(0.0, 0.1))
     design = load_design(args.design)
-    extra = {} if args.scene is None else scene_args(args.scene, design, margin * 1e-3)
+    extra = {} if args.scene is None else scene_args(args.scene, design, margin)
     t0 = time.perf_counter()
-    data = fieldmap.build(design, spacing=spacing * 1e-3, progress=show_progress(args), **extra)
+    data = fieldmap.build(design, spacing=spacing, progress=show_progress(args), **extra)
     path = fieldmap.write(out, data)
     meta = data["meta"]
     err = meta["errors"]

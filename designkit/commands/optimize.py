@@ -21,8 +21,14 @@ from ..optimize import (CORE_MODEL_NAMES, GLOBAL_METHODS, CoilDesignProblem, dev
                         device_problem_for, evaluate_device, getdp_check, solve, solve_device,
                         verify_device)
 from ..support.atomic import write_json_atomic, write_text_atomic
-from .common import (add_design_argument, add_progress_argument, check_output, show_progress,
-                     shown_margin)
+from .common import (add_design_argument, add_progress_argument, check_output, parse_lengths,
+                     say_unfixable, show_progress, shown_margin)
+
+
+DEVICE_KEYS = ("coil.", "wire.", "core.", "drive.supply_voltage_v", "drive.max_current_a",
+               "workspace.z_min_m")
+"""The design keys the device optimum replaces (:func:`designkit.optimize.device_design`):
+a rule only other keys fix is broken by the optimum too (said before the solve)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -40,8 +46,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="device: the array pitch is a variable too (coils may not overlap; "
                              "implies --objective rendering; slow: one LP per point)")
     parser.add_argument("--pitch-range", default=None, metavar="LO:HI",
-                        help="with --vary-pitch: pitch bounds in m (default 0.6 x the design's "
-                             "pitch to 2 x max outer radius + 1 mm)")
+                        help="with --vary-pitch: pitch bounds, e.g. 30:60 or 30mm:6cm (a "
+                             "number is mm; default 0.6 x the design's pitch to 2 x max outer "
+                             "radius + 1 mm)")
     parser.add_argument("--verify", action="store_true",
                         help="device: also run the global checks (multistart, ISRES, grid)")
     parser.add_argument("--fem", action="store_true",
@@ -77,6 +84,8 @@ def _run_device(args, design, starts: int) -> int:
     objective = args.objective or ("rendering" if args.vary_pitch else "design-point")
     problem = device_problem_for(design, objective=objective, vary_pitch=args.vary_pitch,
                                  pitch_range_m=_pitch_range(args.pitch_range))
+    say_unfixable("optimize", design, DEVICE_KEYS + (("array.pitch_m",) if args.vary_pitch
+                                                     else ()))
     if problem.supply_voltage_v < design.drive.supply_voltage_v:
         print(f"note: drive.supply_voltage_v = {design.drive.supply_voltage_v:g} V is above "
               f"drive.driver_max_voltage_v = {problem.supply_voltage_v:g} V (the driver "
@@ -106,15 +115,11 @@ def _run_device(args, design, starts: int) -> int:
 
 
 def _pitch_range(text: str | None):
-    """'LO:HI' (m) -> (lo, hi); None passes through."""
+    """'LO:HI' (the command line's lengths, :func:`parse_lengths`) -> (lo, hi) m; None
+    passes through."""
     if text is None:
         return None
-    parts = text.split(":")
-    try:
-        lo, hi = (float(q) for q in parts)
-    except ValueError:
-        raise BadInputError("--pitch-range", "LO:HI in m, e.g. 0.04:0.06", text) from None
-    return lo, hi
+    return parse_lengths(text, "--pitch-range", 2, sep=":", valid_m=(1e-3, 1.0))
 
 
 def device_summary(data: dict) -> str:

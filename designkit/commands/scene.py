@@ -18,7 +18,8 @@ from .. import fieldmap, render
 from ..design import load_design
 from ..errors import BadInputError
 from ..support import validate as v
-from .common import add_design_argument, add_progress_argument, check_output, show_progress
+from .common import (add_design_argument, add_progress_argument, check_output, parse_length,
+                     parse_lengths, show_progress)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -52,11 +53,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="surface points per side for lambda (default 61: 3721 points)")
     parser.add_argument("--mesh-scale", type=float, default=1e-3,
                         help="mesh file units to m (default 1e-3: mm)")
-    parser.add_argument("--mesh-spacing", type=float, default=2.0,
-                        help="signed-distance grid spacing, mm (default 2)")
+    parser.add_argument("--mesh-spacing", default="2mm", metavar="LENGTH",
+                        help="signed-distance grid spacing (default 2mm; a number is mm)")
     parser.add_argument("--mesh-at", default="0,0,0", metavar="X,Y,Z",
-                        help="where the mesh's bounding-box bottom centre goes, mm above the "
-                             "coil tops' centre (default 0,0,0)")
+                        help="where the mesh's bounding-box bottom centre goes above the coil "
+                             "tops' centre (default 0,0,0; a number is mm, or 10mm, 1cm, "
+                             "0.01m)")
     add_progress_argument(parser)
 
 
@@ -75,6 +77,8 @@ def _build_scene_map(args: argparse.Namespace, obj) -> Path:
 
 def run(args: argparse.Namespace) -> int:
     check_output(args.out, folder=False)
+    if args.build_map is not None:
+        check_output(fieldmap.check_output(args.build_map), folder=False, param="--build-map")
     _check_numbers(args)
     obj = _object(args)
     if args.build_map is not None:
@@ -133,7 +137,7 @@ def _check_numbers(args) -> None:
     v.in_range("--loop-period", args.loop_period, 0.1, 100.0, "ms")
     v.in_range("--n-side", args.n_side, 3, 401)
     v.in_range("--mesh-scale", args.mesh_scale, 1e-6, 1e3)
-    v.in_range("--mesh-spacing", args.mesh_spacing, 0.1, 50.0, "mm")
+    parse_length(args.mesh_spacing, "--mesh-spacing", valid_m=(1e-4, 0.05))
 
 
 def _mm(p) -> list:
@@ -144,14 +148,10 @@ def _object(args):
     """The virtual object: a named one, or a mesh file scaled and placed by the options."""
     if Path(args.object).suffix.lower() not in (".stl", ".ply"):
         return render.make_object(args.object)
-    try:
-        at = [float(c) * 1e-3 for c in args.mesh_at.split(",")]
-    except ValueError:
-        at = []
-    if len(at) != 3 or not np.all(np.isfinite(at)):
-        raise BadInputError("--mesh-at", "three numbers X,Y,Z in mm", args.mesh_at)
-    return render.make_object(args.object, scale=args.mesh_scale,
-                              spacing_m=args.mesh_spacing * 1e-3, position_m=tuple(at))
+    at = parse_lengths(args.mesh_at, "--mesh-at", 3, valid_m=(-1.0, 1.0))
+    spacing = parse_length(args.mesh_spacing, "--mesh-spacing", valid_m=(1e-4, 0.05))
+    return render.make_object(args.object, scale=args.mesh_scale, spacing_m=spacing,
+                              position_m=at)
 
 
 def _same_design(design_arg, map_path, map_sha: str) -> None:

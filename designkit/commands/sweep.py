@@ -14,21 +14,23 @@ by the fast slice model, every device constraint (designkit.optimize.sweep.evalu
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
 from ..design import load_design
 from ..errors import BadInputError
 from ..optimize import CORE_MODEL_NAMES
 from ..optimize.sweep import (ARRAY_COLUMNS, ARRAY_CORE_MODEL, ARRAY_PARAMETERS, PARAMETERS,
-                              design_core_model, grid, parse_param, plot, reason_summary,
+                              Grid, design_core_model, parse_param, plot, reason_summary,
                               run_array_sweep, run_sweep, write_csv)
-from .common import (add_design_argument, add_progress_argument, check_output, show_progress,
-                     staged_folder)
+from .common import (add_design_argument, add_progress_argument, check_output, parse_length,
+                     say_unfixable, show_progress, staged_folder)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--param", action="append", default=[], metavar="NAME=START:STOP:N",
-                        help=f"swept parameter (repeat); NAME one of {sorted(PARAMETERS)}")
+                        help=f"swept parameter (repeat); NAME one of {sorted(PARAMETERS)}; "
+                             "a length in m as its name says, or with its unit (20mm:100mm)")
     add_design_argument(parser)
     parser.add_argument("--out", type=Path, default=Path("designkit-sweep"),
                         help="output folder (default: ./designkit-sweep)")
@@ -51,11 +53,15 @@ def run(args: argparse.Namespace) -> int:
     if not args.param:
         raise BadInputError("--param", "at least one NAME=START:STOP:N", "nothing")
     array = getattr(args, "array", False)
-    ranges = [parse_param(p, ARRAY_PARAMETERS if array else None) for p in args.param]
-    grid(ranges)  # checks duplicates and size before any work
+    ranges = [parse_param(si_param(p), ARRAY_PARAMETERS if array else None) for p in args.param]
+    g = Grid.of(ranges)  # checks duplicates and size before any work
     if args.workers is not None and args.workers < 1:
         raise BadInputError("--workers", "a whole number >= 1", args.workers)
     design = load_design(args.design)
+    where = (f"the dask scheduler {args.scheduler}" if args.scheduler else
+             f"{args.workers or os.cpu_count() or 1} local worker process(es)")
+    print(f"planned: {g.describe()} on {where}", flush=True)
+    say_unfixable("sweep", design, g.varied_keys())
     if array:
         result = run_array_sweep(design, ranges, workers=args.workers, scheduler=args.scheduler,
                                  progress=show_progress(args))
@@ -95,10 +101,27 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def si_param(text: str) -> str:
+    """``NAME=START:STOP:N`` with START and STOP of a length given with a unit
+    (:func:`~designkit.commands.common.parse_length`: ``20mm``, ``2cm``) written in metres; a
+    bare number stays as given (metres, as the ``_m`` name says: the library checks its
+    range and says when it reads as millimetres)."""
+    name, eq, rng = text.partition("=")
+    parts = rng.split(":")
+    if not eq or len(parts) != 3 or not name.strip().endswith("_m"):
+        return text
+    for k, which in ((0, "START"), (1, "STOP")):
+        if parts[k].strip() and parts[k].strip()[-1].isalpha():
+            parts[k] = repr(parse_length(parts[k], f"--param {name.strip()} {which}",
+                                         valid_m=None, bare="m"))
+    return f"{name}={':'.join(parts)}"
+
+
 def _best_coil(b: dict) -> str:
     return (f"Ri {b['inner_radius_m'] * 1e3:.2f} mm, Ro {b['outer_radius_m'] * 1e3:.2f} mm, "
-            f"L {b['length_m'] * 1e3:.2f} mm, {b['turns']} turns, R {b['resistance_ohm']:.3f} "
-            f"ohm, 5 tau {5e3 * b['time_constant_s']:.2f} ms, force {b['force_n'] * 1e3:.1f} mN")
+            f"L {b['length_m'] * 1e3:.2f} mm, {b['turns']} turns, "
+            f"R({b['resistance_temperature_c']:g} C) {b['resistance_ohm']:.3f} ohm, "
+            f"5 tau {5e3 * b['time_constant_s']:.2f} ms, force {b['force_n'] * 1e3:.1f} mN")
 
 
 def _best_array(b: dict) -> str:

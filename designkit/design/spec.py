@@ -481,35 +481,108 @@ def _check_metres(name: str, value: Any) -> None:
                             f"{value / 1000:g} m: design files are in SI units.")
 
 
+def _magnetization_hint(value: float) -> str:
+    if 0.0 < value < 10.0:
+        return (f"Br in tesla? M = Br / mu0: {value:g} T is {value / MU0:.4g} A/m (an N52 "
+                f"magnet: Br ~1.45 T, M ~1.16e6 A/m).")
+    return ""
+
+
+def _permeability_hint(value: float) -> str:
+    if 0.0 < value < 1.0:
+        return (f"The absolute permeability in H/m? mu_r = mu / mu0: {value:g} H/m is "
+                f"mu_r {value / MU0:.4g}.")
+    return ""
+
+
+def _tesla_hint(value: float) -> str:
+    return f"Millitesla? {value:g} mT is {value * 1e-3:g} T." if value > 0 else ""
+
+
+PHYSICAL_RANGES: dict[str, tuple[float, float, str, Any]] = {
+    "magnetization_a_per_m": (1e4, 2e6, "A/m", _magnetization_hint),
+    "relative_permeability": (1.0, 1e6, "", _permeability_hint),
+    "saturation_t": (0.1, 3.0, "T", _tesla_hint),
+    "range_t": (1e-4, 10.0, "T", _tesla_hint),
+    "lsb_t": (1e-9, 1e-2, "T", _tesla_hint),
+}
+"""Closed ranges of the magnetic keys (low, high, unit, the hint for a value outside): a
+permanent magnet's M lies between a weak rubber magnet's 1e4 A/m and 2e6 A/m (no magnet
+reaches Br = 2.5 T); a core's mu_r between air's 1 and 1e6 (supermalloy); a B-H knee
+between 0.1 and 3 T; a Hall sensor's range and resolution in tesla."""
+
+
+def _check_physical(name: str, key: str, value: float) -> None:
+    """``value`` of the magnetic key ``key`` in :data:`PHYSICAL_RANGES`, else BadInputError
+    naming ``name``, the range and the value, with the unit hint."""
+    lo, hi, unit, hint = PHYSICAL_RANGES[key]
+    if not (math.isfinite(value) and lo <= value <= hi):
+        raise BadInputError(name, f"in [{lo:g}, {hi:g}] {unit}".rstrip(), value, hint(value))
+
+
+FINITE_FIELDS = ("offset_m", "reference_temperature_c", "operating_temperature_c",
+                 "core_clearance_m", "press_fit_clearance_m")
+"""Fields that may take any finite value (offsets, temperatures, clearances)."""
+
+
+def field_rule(key: str, default: Any) -> tuple:
+    """How a table's field ``key`` (with this default) is checked, one of: ('vector',) the
+    moment's direction, ('list',) a sensor layout's list, ('choice', choices), ('name',) a
+    non-empty free text, ('count',),
+    ('finite',), ('nonnegative',), ('range', lo, hi, unit) (:data:`PHYSICAL_RANGES`),
+    ('positive',). Lengths (``*_m``) are also capped by :data:`MAX_LENGTH_M`. The one rule
+    book of :func:`check_design` and of the design-file reference (docs/design_file.md)."""
+    if key == "direction":
+        return ("vector",)
+    if key in ("positions_m", "rotations"):
+        return ("list",)
+    if key in CHOICES:
+        return ("choice", CHOICES[key])
+    if isinstance(default, str):
+        return ("name",)
+    if key == "turns":
+        return ("count",)
+    if key in FINITE_FIELDS:
+        return ("finite",)
+    if key == "z_min_m":
+        return ("nonnegative",)
+    if key in PHYSICAL_RANGES:
+        return ("range",) + PHYSICAL_RANGES[key][:3]
+    return ("positive",)
+
+
 def _check_section(sec: str, obj: Any) -> None:
-    """Type and range checks of one table's fields, each named ``sec.field``."""
+    """Type and range checks of one table's fields, each named ``sec.field``
+    (:func:`field_rule`)."""
     for f in fields(obj):
         val = getattr(obj, f.name)
         name = f"{sec}.{f.name}"
-        if f.name == "direction":
+        kind = field_rule(f.name, f.default)[0]
+        if kind == "vector":
             if not (isinstance(val, tuple) and len(val) == 3
                     and all(isinstance(c, float) and math.isfinite(c) for c in val)
                     and any(c != 0.0 for c in val)):
                 raise BadInputError(name, "3 finite numbers, not all 0 (the moment's "
                                     "direction; default [0, 0, -1])", val)
             continue
-        if f.name in ("positions_m", "rotations"):
+        if kind == "list":
             continue  # the sensor layout's lists: _check_sensors
         _check_type(name, val, f.default)
         _check_metres(name, val)
-        if f.name in CHOICES:
+        if kind == "choice":
             if val not in CHOICES[f.name]:
                 raise BadInputError(name, " or ".join(repr(c) for c in CHOICES[f.name]), val)
-        elif isinstance(f.default, str):
-            if not val.strip():  # free text: a name
+        elif kind == "name":
+            if not val.strip():
                 raise BadInputError(name, "a non-empty name", val)
-        elif f.name == "turns":
+        elif kind == "count":
             v.positive_int(name, val)
-        elif f.name in ("offset_m", "reference_temperature_c", "operating_temperature_c",
-                        "core_clearance_m", "press_fit_clearance_m"):
+        elif kind == "finite":
             v.finite(name, val)
-        elif f.name == "z_min_m":
+        elif kind == "nonnegative":
             v.nonnegative(name, val)
+        elif kind == "range":
+            _check_physical(name, f.name, val)
         else:
             v.positive(name, val, "")
 

@@ -16,12 +16,8 @@ from __future__ import annotations
 import collections
 import csv
 import dataclasses
-import itertools
 import math
-import os
 import textwrap
-import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -30,11 +26,11 @@ import numpy as np
 
 from .. import rules
 from ..design import Design
-from ..errors import BadInputError, DesignkitError, DesignRuleError, require
+from ..errors import BadInputError, DesignkitError, DesignRuleError
 from ..model import electrical as el
 from ..support import validate as v
 from ..support.atomic import atomic_path
-from ..support.progress import tqdm
+from ..support.parallel import run_chunks
 from . import (CORE_MODEL_NAMES, DEVICE_CONSTRAINTS, CoilDesignProblem, device_candidate,
                device_problem_for, rendering_force)
 
@@ -47,11 +43,42 @@ PARAMETERS: dict[str, str] = {
     "current_a": "coil current, A",
 }
 _ALIASES = {f"coil.{k}": k for k in ("inner_radius_m", "outer_radius_m", "length_m")}
-_ALIASES.update({"wire.diameter_m": "wire_diameter_m", "optimize.height_m": "height_m"})
+_ALIASES.update({"wire.diameter_m": "wire_diameter_m", "optimize.height_m": "height_m",
+                 "drive.max_current_a": "current_a", "array.pitch_m": "pitch_m",
+                 "core.length_m": "core_length_m"})
 MAX_DESIGNS = 5_000_000
 COLUMNS = ("inner_radius_m", "outer_radius_m", "length_m", "wire_diameter_m", "height_m",
-           "current_a", "turns", "force_n", "resistance_ohm", "inductance_h", "time_constant_s",
-           "power_w", "valid", "feasible", "reason", "core_model")
+           "current_a", "turns", "force_n", "resistance_ohm", "resistance_temperature_c",
+           "resistance_cold_ohm", "inductance_h", "time_constant_s", "power_w", "valid",
+           "feasible", "reason", "core_model")
+"""Columns of a coil sweep (SI units in the names). ``resistance_ohm`` is the resistance the
+limit applies to, at ``resistance_temperature_c``: the device's hot limit
+(:data:`designkit.optimize.device_problem.HOT_TEMPERATURE_C`) when the design has a core (the
+device constraints apply), else the wire's operating temperature (thesis eq. 2.14);
+``resistance_cold_ohm`` is at the wire's operating temperature, the R of ``time_constant_s``
+(cold copper: the longest L/R) and ``power_w``."""
+
+RANGES: dict[str, tuple[float, float]] = {
+    "inner_radius_m": (1e-4, 0.5), "outer_radius_m": (1e-4, 0.5), "length_m": (1e-4, 1.0),
+    "wire_diameter_m": (1e-5, 0.01), "height_m": (1e-3, 1.0), "current_a": (1e-3, 1000.0),
+    "pitch_m": (1e-3, 1.0), "core_length_m": (1e-4, 1.0), "core_protrusion_m": (0.0, 0.5),
+}
+"""Valid range of each swept parameter (SI; a length in m): a value outside is refused before
+any work, with the millimetre hint when it reads as millimetres."""
+PARAMETER_KEYS: dict[str, tuple[str, ...]] = {
+    "inner_radius_m": ("coil.inner_radius_m", "core.radius_m"),
+    "outer_radius_m": ("coil.outer_radius_m",),
+    "length_m": ("coil.length_m", "core.length_m", "core.offset_m"),
+    "wire_diameter_m": ("wire.diameter_m", "wire.insulated_diameter_m"),
+    "height_m": ("optimize.height_m",),
+    "current_a": ("drive.max_current_a",),
+    "pitch_m": ("array.pitch_m",),
+    "core_length_m": ("core.length_m", "core.offset_m"),
+    "core_protrusion_m": ("core.offset_m",),
+}
+"""The design keys each swept parameter moves (a core follows its winding); every row's turns
+come from its winding section (``coil.turns`` always moves). What
+:func:`designkit.commands.common.unfixable_rules` is given."""
 
 
 @dataclass(frozen=True)
@@ -78,12 +105,15 @@ ARRAY_PARAMETERS: dict[str, str] = {
 """Parameters of ``designkit sweep --array`` (whole arrays, rendering objective)."""
 ARRAY_COLUMNS = ("pitch_m", "inner_radius_m", "outer_radius_m", "length_m", "wire_diameter_m",
                  "core_radius_m", "core_length_m", "core_protrusion_m", "turns", "force_n",
-                 "force_design_point_n", "resistance_ohm", "settling_time_s",
+                 "force_design_point_n", "resistance_ohm", "resistance_temperature_c",
+                 "settling_time_s",
                  "voltage_needed_v", "time_to_max_temperature_s", "valid", "feasible", "reason",
                  "core_model")
 """``force_n`` of an array row is the rendering objective: the smallest upward force over the
-workspace region (:func:`designkit.optimize.rendering_force`); ``reason`` says why a row is not
-feasible (empty when it is); ``core_model`` names the force model of every row."""
+workspace region (:func:`designkit.optimize.rendering_force`); ``resistance_ohm`` is at the
+device's hot limit (``resistance_temperature_c``), where its limit applies; ``reason`` says
+why a row is not feasible (empty when it is); ``core_model`` names the force model of every
+row."""
 ARRAY_CORE_MODEL = "steel1010 fast slice model"
 """The core model of an array sweep row (:mod:`designkit.cores.rod`)."""
 
@@ -95,10 +125,12 @@ def design_core_model(design: Design) -> str:
 
 
 def parse_param(text: str, parameters: dict[str, str] | None = None) -> ParamRange:
-    """Parse ``NAME=START:STOP:N`` (N points, both ends included; N = 1 takes START).
+    """Parse ``NAME=START:STOP:N`` (N points, both ends included; N = 1 takes START), SI
+    values (a length in m, as the name says).
 
-    Raises BadInputError for an unknown NAME, a malformed range, N < 1 (empty range), or
-    values outside the parameter's domain (e.g. a negative wire diameter).
+    Raises BadInputError for an unknown NAME, a malformed range, N < 1 (empty range), or a
+    value outside the parameter's range (:data:`RANGES`), with the millimetre hint when the
+    number reads as millimetres (``length_m=10:100:3``).
     """
     if "=" not in text:
         raise BadInputError("--param", "NAME=START:STOP:N", text)
@@ -121,9 +153,24 @@ def parse_param(text: str, parameters: dict[str, str] | None = None) -> ParamRan
     if count > 1 and start == stop:
         raise BadInputError(f"{name} STOP", f"!= START ({start}) when N > 1", stop)
     for val, which in ((start, "START"), (stop, "STOP")):
-        if not val > 0:
-            raise BadInputError(f"{name} {which}", f"> 0 ({params[name]})", val)
+        check_value(name, val, which, params[name])
     return ParamRange(name, start, stop, count)
+
+
+def check_value(name: str, value: float, which: str, what: str) -> float:
+    """``value`` of the swept parameter ``name`` inside :data:`RANGES` (and > 0 unless its
+    range starts at 0), else BadInputError: the parameter, the value and the range in one line,
+    with the millimetre hint for a length that reads as millimetres."""
+    lo, hi = RANGES[name]
+    unit = "m" if name.endswith("_m") else "A"
+    if (lo <= value <= hi) and (value > 0 or lo == 0.0):
+        return value
+    hint = ""
+    if unit == "m" and lo <= value * 1e-3 <= hi:
+        hint = (f"Millimetres where metres are expected? {value:g} mm is {value * 1e-3:g} m: "
+                f"write {value * 1e-3:g} or {value:g}mm.")
+    raise BadInputError(f"--param {name} {which}", f"in [{lo:g}, {hi:g}] {unit} ({what})",
+                        value, hint)
 
 
 def _num(name, s):
@@ -133,19 +180,57 @@ def _num(name, s):
         raise BadInputError(name, "a number", s) from None
 
 
+@dataclass(frozen=True)
+class Grid:
+    """The Cartesian product of parameter ranges in row-major order (the last parameter varies
+    fastest), served by slices (:meth:`rows`) without being built whole."""
+
+    ranges: tuple[ParamRange, ...]
+
+    @classmethod
+    def of(cls, ranges: Sequence[ParamRange]) -> "Grid":
+        """The grid of ``ranges``: each parameter at most once, at most :data:`MAX_DESIGNS`."""
+        names = [r.name for r in ranges]
+        if len(set(names)) != len(names):
+            dup = next(n for n in names if names.count(n) > 1)
+            raise BadInputError("--param", "each parameter at most once", dup)
+        total = math.prod(r.count for r in ranges)
+        if total > MAX_DESIGNS:
+            raise BadInputError("grid size", f"<= {MAX_DESIGNS} designs", total)
+        return cls(tuple(ranges))
+
+    @property
+    def names(self) -> list[str]:
+        return [r.name for r in self.ranges]
+
+    @property
+    def size(self) -> int:
+        return math.prod(r.count for r in self.ranges)
+
+    def rows(self, start: int, stop: int) -> np.ndarray:
+        """Designs ``start`` to ``stop - 1``: values (n, n_params) in :attr:`names` order."""
+        idx = np.arange(start, stop)
+        if not self.ranges:
+            return np.zeros((len(idx), 0))
+        sub = np.unravel_index(idx, tuple(r.count for r in self.ranges))
+        return np.stack([r.values[i] for r, i in zip(self.ranges, sub)], axis=1)
+
+    def describe(self) -> str:
+        """'1000000 designs (100 inner_radius_m x 100 length_m x 100 outer_radius_m)'."""
+        parts = " x ".join(f"{r.count} {r.name}" for r in self.ranges)
+        return f"{self.size} design{'' if self.size == 1 else 's'} ({parts})"
+
+    def varied_keys(self) -> tuple[str, ...]:
+        """The design keys the grid moves (:data:`PARAMETER_KEYS`; ``coil.turns`` always)."""
+        return ("coil.turns",) + tuple(k for r in self.ranges for k in PARAMETER_KEYS[r.name])
+
+
 def grid(ranges: Sequence[ParamRange]) -> tuple[list[str], np.ndarray]:
-    """(names, values of shape (n_designs, n_params)) of the Cartesian product."""
-    names = [r.name for r in ranges]
-    if len(set(names)) != len(names):
-        dup = next(n for n in names if names.count(n) > 1)
-        raise BadInputError("--param", "each parameter at most once", dup)
-    total = math.prod(r.count for r in ranges)
-    if total > MAX_DESIGNS:
-        raise BadInputError("grid size", f"<= {MAX_DESIGNS} designs", total)
+    """(names, values of shape (n_designs, n_params)) of the Cartesian product (whole)."""
+    g = Grid.of(ranges)
     if not ranges:
         return [], np.zeros((1, 0))
-    vals = np.array(list(itertools.product(*(r.values for r in ranges))), dtype=float)
-    return names, vals
+    return g.names, g.rows(0, g.size)
 
 
 def _base_row(design: Design, core_model: str) -> dict:
@@ -201,7 +286,9 @@ def evaluate_chunk(problem: CoilDesignProblem, base: dict, names: Sequence[str],
             out.append(res)
             continue
         ev = p.evaluate(x, turns=n)
-        res.update(turns=n, force_n=ev.force_n, resistance_ohm=ev.resistance_ohm,
+        t_r, r_lim = limit_resistance(p, dev, x, n, ev.resistance_ohm)
+        res.update(turns=n, force_n=ev.force_n, resistance_ohm=r_lim,
+                   resistance_temperature_c=t_r, resistance_cold_ohm=ev.resistance_ohm,
                    inductance_h=ev.inductance_h, time_constant_s=ev.time_constant_s,
                    power_w=ev.power_w, valid=True)
         broken = book_violations(p.design, dev, res, p.insulated_diameter_m)
@@ -209,6 +296,18 @@ def evaluate_chunk(problem: CoilDesignProblem, base: dict, names: Sequence[str],
         res["reason"] = "; ".join(q for q in [infeasible_reason(p, res)] + broken if q)
         out.append(res)
     return out
+
+
+def limit_resistance(problem: CoilDesignProblem, device, x, turns: int,
+                     cold_ohm: float) -> tuple[float, float]:
+    """(temperature, deg C; resistance, ohm) the row's resistance limit applies at: the device
+    problem's hot temperature with a core (``device`` not None: its constraints apply), else
+    the wire's operating temperature (``cold_ohm``, thesis eq. 2.14)."""
+    if device is None:
+        return problem.design.wire.operating_temperature_c, cold_ohm
+    t = device.hot_temperature_c
+    return t, el.resistance_from_geometry(x[0], x[1], turns, problem.wire_diameter_m,
+                                          el.resistivity(problem.design.wire, t))
 
 
 def _device_problem(design: Design):
@@ -282,8 +381,9 @@ def infeasible_reason(problem: CoilDesignProblem, row: dict) -> str:
         else:
             reasons.append("no whole turn fits the winding section")
     else:
-        if row["resistance_ohm"] > problem.max_resistance_ohm:
-            reasons.append(f"R > {problem.max_resistance_ohm:g} ohm")
+        if row["resistance_cold_ohm"] > problem.max_resistance_ohm:
+            reasons.append(f"R({problem.design.wire.operating_temperature_c:g} C) > "
+                           f"{problem.max_resistance_ohm:g} ohm")
         if 5 * row["time_constant_s"] > problem.max_settling_time_s:
             reasons.append(f"5 L/R > {problem.max_settling_time_s * 1e3:g} ms")
     big = [k for k in ("inner_radius_m", "outer_radius_m", "length_m", "wire_diameter_m",
@@ -329,7 +429,8 @@ def run_sweep(design: Design, ranges: Sequence[ParamRange], *, workers: int | No
         Default: the design's own (:func:`design_core_model`); a cheaper one is an explicit
         choice, named in every row (``core_model``).
     chunk_size : int
-        Designs per task.
+        The most designs per task (chunks start at one design and grow to a few seconds of
+        work: :func:`designkit.support.parallel.run_chunks`).
     """
     if core_model is None:
         core_model = design_core_model(design)
@@ -338,12 +439,13 @@ def run_sweep(design: Design, ranges: Sequence[ParamRange], *, workers: int | No
     if workers is not None:
         workers = v.positive_int("workers", workers)
     chunk_size = v.positive_int("chunk_size", chunk_size)
-    names, vals = grid(ranges)
+    g = Grid.of(ranges)
     problem = CoilDesignProblem.from_design(design, core_model=core_model)
     base = _base_row(design, core_model)
-    chunks = [vals[i:i + chunk_size] for i in range(0, len(vals), chunk_size)]
-    return _run_chunks(evaluate_chunk, (problem, base, names), names, chunks, workers=workers,
-                       scheduler=scheduler, progress=progress, desc="sweep")
+    run = run_chunks(evaluate_chunk, (problem, base, g.names), g, workers=workers,
+                     scheduler=scheduler, progress=("sweep", "design") if progress else None,
+                     max_chunk=chunk_size)
+    return _result(g.names, run)
 
 
 def evaluate_array_chunk(design: Design, names: Sequence[str], values: np.ndarray) -> list[dict]:
@@ -405,6 +507,7 @@ def evaluate_array_chunk(design: Design, names: Sequence[str], values: np.ndarra
         broken += [f"rule {r.name}" for r in rules.violations(d2)]
         res.update(turns=n, force_n=rend["min_upward_force_n"],
                    force_design_point_n=ev["force_n"], resistance_ohm=ev["resistance_ohm"],
+                   resistance_temperature_c=p.hot_temperature_c,
                    settling_time_s=ev["settling_time_s"],
                    voltage_needed_v=ev["voltage_needed_v"],
                    time_to_max_temperature_s=ev["time_to_max_temperature_s"], valid=True,
@@ -425,71 +528,21 @@ def run_array_sweep(design: Design, ranges: Sequence[ParamRange], *, workers: in
     if workers is not None:
         workers = v.positive_int("workers", workers)
     chunk_size = v.positive_int("chunk_size", chunk_size)
-    names, vals = grid(ranges)
-    chunks = [vals[i:i + chunk_size] for i in range(0, len(vals), chunk_size)]
-    return _run_chunks(evaluate_array_chunk, (design, names), names, chunks, workers=workers,
-                       scheduler=scheduler, progress=progress, desc="array sweep")
+    g = Grid.of(ranges)
+    run = run_chunks(evaluate_array_chunk, (design, g.names), g, workers=workers,
+                     scheduler=scheduler,
+                     progress=("array sweep", "array") if progress else None,
+                     max_chunk=chunk_size)
+    return _result(g.names, run)
 
 
-def _run_chunks(fn, head: tuple, names, chunks, *, workers: int | None, scheduler: str | None,
-                progress: bool, desc: str) -> SweepResult:
-    """Evaluate ``fn(*head, chunk)`` for every chunk (rows of one dict per design) on a dask
-    scheduler, local processes or, with one worker or one chunk, in this process; the best
-    row is the feasible one with the largest ``force_n``."""
-    t0 = time.perf_counter()
-    bar = None
-    if progress:
-        bar = tqdm(total=sum(len(ch) for ch in chunks), desc=desc, unit="design")
-    results: list = [None] * len(chunks)
-    try:
-        if scheduler is not None:
-            backend = f"dask:{scheduler}"
-            n_workers = _run_dask_fn(scheduler, fn, head, chunks, results, bar)
-        elif (workers or os.cpu_count() or 1) == 1 or len(chunks) == 1:
-            backend, n_workers = "serial", 1
-            for i, ch in enumerate(chunks):
-                results[i] = fn(*head, ch)
-                if bar is not None:
-                    bar.update(len(ch))
-        else:
-            n_workers = workers or os.cpu_count() or 1
-            backend = "processes"
-            with ProcessPoolExecutor(max_workers=n_workers) as ex:
-                futs = {ex.submit(fn, *head, ch): i for i, ch in enumerate(chunks)}
-                for fut in as_completed(futs):
-                    i = futs[fut]
-                    results[i] = fut.result()
-                    if bar is not None:
-                        bar.update(len(chunks[i]))
-    finally:
-        if bar is not None:
-            bar.close()
-    rows = [r for ch in results for r in ch]
+def _result(names, run) -> SweepResult:
+    """The rows of a :func:`designkit.support.parallel.run_chunks` run; the best row is the
+    feasible one with the largest ``force_n``."""
+    rows = [r for ch in run.results for r in ch]
     feas = [i for i, r in enumerate(rows) if r["feasible"]]
     best = max(feas, key=lambda i: rows[i]["force_n"]) if feas else None
-    return SweepResult(tuple(names), rows, best, time.perf_counter() - t0, n_workers, backend)
-
-
-def _run_dask_fn(address, fn, head: tuple, chunks, results, bar) -> int:
-    """Submit ``fn(*head, chunk)`` per chunk to a dask scheduler; fill ``results`` in order."""
-    distributed = require("dask.distributed", "dask[distributed]", "designkit sweep --scheduler")
-    try:
-        client = distributed.Client(address, timeout="10s")
-    except OSError as exc:
-        raise BadInputError("--scheduler", "the address of a running dask scheduler",
-                            address, str(exc)) from None
-    try:
-        n = max(len(client.scheduler_info().get("workers", {})), 1)
-        futs = [client.submit(fn, *head, ch, pure=False) for ch in chunks]
-        index = {f.key: i for i, f in enumerate(futs)}
-        for fut in distributed.as_completed(futs):
-            i = index[fut.key]
-            results[i] = fut.result()
-            if bar is not None:
-                bar.update(len(chunks[i]))
-    finally:
-        client.close()
-    return n
+    return SweepResult(tuple(names), rows, best, run.seconds, run.workers, run.backend)
 
 
 # ====================================================================== output
