@@ -91,6 +91,15 @@ def solve_height(design, h: float, level: int, timeout_s: float = 1800.0) -> tup
     return [p - q for p, q in zip(lin, air)], stats
 
 
+def fem_inputs(design) -> dict:
+    """What the FEM's geometry and sources depend on: the magnet, winding, core and sensors."""
+    m, c, k = design.magnet, design.coil, design.core
+    return {"magnet": [m.radius_m, m.length_m, m.magnetization_a_per_m],
+            "coil": [c.inner_radius_m, c.outer_radius_m, c.length_m, c.turns],
+            "core": [k.radius_m, k.length_m, k.relative_permeability, k.offset_m],
+            "sensor_offset_m": design.sensors.offset_m}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--levels", default="0,1", help="mesh levels, comma-separated (default 0,1)")
@@ -100,7 +109,7 @@ def main(argv=None) -> int:
     arrays = {"heights_m": np.array(HEIGHTS_M),
               "sensor_z_m": np.array(sensor_heights_m(design)) - design.coil.length_m / 2,
               "moment_a_m2": np.array(design.magnet.moment_vector_a_m2)}
-    meta = {"sheet_m": SHEET_M, "levels": {}, "design_sha256": design.spec_hash(),
+    meta = {"sheet_m": SHEET_M, "levels": {}, "inputs": fem_inputs(design),
             "frame": "design frame: coil top face at z = 0, magnet on the axis at x = y = 0"}
     res = {}
     for lv in levels:
