@@ -69,7 +69,7 @@ def test_sweep_cli_serial_writes_csv_and_png(tmp_path, capsys):
     assert out.out.index("planned: 12 designs") < out.out.index("core model")
     note = [ln for ln in out.err.splitlines() if "note:" in ln]
     assert len(note) == 1 and "design_supply_voltage_v" in note[0]
-    assert "drive.supply_voltage_v is not varied" in note[0] and "36 V" in note[0]
+    assert "drive.supply_voltage_v" in note[0] and "not varied" in note[0] and "36 V" in note[0]
 
 
 def test_sweep_cli_processes_match_serial(tmp_path):
