@@ -7,12 +7,12 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
-from .common import B_MT, B_T, Quality, _image, _pv, _quality
-from .physics import (FIELDLINE_TOLERANCE, _add_field_arrays, _footprint_half_m, array_field,
+from .common import B_MT, B_T, Quality, image_grid, import_pyvista, grid_resolution
+from .physics import (FIELDLINE_TOLERANCE, add_field_arrays, footprint_half_m, array_field,
                       resolve_currents)
 from .scene import scene_meshes
-from .style import (_add_device, _axes, _bar, currents_text, _fit_camera, _log_fmt, _mm,
-                    _plotter, _title, round_range)
+from .style import (add_device, add_axes, bar_args, currents_text, fit_camera, log_format, in_mm,
+                    new_plotter, add_title, round_range)
 
 if TYPE_CHECKING:  # pragma: no cover
     import pyvista
@@ -31,15 +31,15 @@ def field_line_data(design: "Design", currents: Sequence[float] | None = None, *
     lines : pyvista.PolyData
         Streamlines seeded on rings just above the energized coils, with the same arrays.
     """
-    pv = _pv()
-    res = _quality(quality)
+    pv = import_pyvista()
+    res = grid_resolution(quality)
     cur = resolve_currents(design, currents)
-    half = _footprint_half_m(design) + 0.02
+    half = footprint_half_m(design) + 0.02
     zlo = -design.coil.length_m - 0.03
     zhi = design.workspace.z_max_m + 0.03
-    vol = _image(pv, (-half, -half, zlo), (half, half, zhi), res["volume"])
+    vol = image_grid(pv, (-half, -half, zlo), (half, half, zhi), res["volume"])
     b = array_field(design, vol.points, cur, gradient=False, tolerance=FIELDLINE_TOLERANCE)
-    _add_field_arrays(vol, b)
+    add_field_arrays(vol, b)
     seeds = []
     nring = 16 if quality == "full" else 10
     for (x, y, _), current in zip(design.coil_centres_m(), cur):
@@ -63,12 +63,12 @@ def plot_field_lines(design: "Design", currents: Sequence[float] | None = None, 
                      quality: Quality = "full", window_size=(1024, 768), data=None,
                      blocks=None) -> "pyvista.Plotter":
     """Streamlines of B coloured by the magnitude of B (mT, log scale) over the coil array."""
-    pv = _pv()
+    pv = import_pyvista()
     cur = resolve_currents(design, currents)
     vol, lines = field_line_data(design, cur, quality=quality) if data is None else data
     blocks = scene_meshes(design, cur) if blocks is None else blocks
-    p = _plotter(pv, window_size)
-    _add_device(p, design, blocks, opacity=0.3, magnet=True, workspace=True)
+    p = new_plotter(pv, window_size)
+    add_device(p, design, blocks, opacity=0.3, magnet=True, workspace=True)
     clip_note = ""
     if lines.n_points:
         bmt = np.asarray(lines[B_MT])
@@ -80,13 +80,13 @@ def plot_field_lines(design: "Design", currents: Sequence[float] | None = None, 
             clip_note = f"; colours below {lo:.2g} mT clipped"
         lo, hi = round_range(lo, hi, log=True)  # round ends: a labelled tick at the bar's top
         clip_note = f"; colour: B (mT), log scale {lo:g}..{hi:g}" + clip_note
-        p.add_mesh(_mm(lines).tube(radius=0.7), scalars=B_MT, cmap="viridis", log_scale=True,
+        p.add_mesh(in_mm(lines).tube(radius=0.7), scalars=B_MT, cmap="viridis", log_scale=True,
                    clim=(lo, hi), name="streamlines",
-                   scalar_bar_args=_bar("B (mT)", fmt=_log_fmt(lo, hi)))
+                   scalar_bar_args=bar_args("B (mT)", fmt=log_format(lo, hi)))
     else:
         p.add_text("no field: all coils at 0 A", position="lower_left", color="black")
-    p.add_mesh(_mm(vol.outline()), color="grey", line_width=1)
-    _title(p, f"Field lines of B, coloured by its magnitude (log scale)\n{currents_text(cur)}; "
+    p.add_mesh(in_mm(vol.outline()), color="grey", line_width=1)
+    add_title(p, f"Field lines of B, coloured by its magnitude (log scale)\n{currents_text(cur)}; "
               f"lines end at the edge of the computed box{clip_note}", font_size=11)
-    _fit_camera(p, _axes(p), elevation_deg=12.0)
+    fit_camera(p, add_axes(p), elevation_deg=12.0)
     return p

@@ -9,11 +9,11 @@ from typing import TYPE_CHECKING, Sequence
 import numpy as np
 
 from ..support import validate as v
-from .common import F_MN, F_N, MIN_ARROW, Quality, _pv, _quality
-from .physics import _add_field_arrays, array_field, magnet_moment, resolve_currents
+from .common import F_MN, F_N, MIN_ARROW, Quality, import_pyvista, grid_resolution
+from .physics import add_field_arrays, array_field, magnet_moment, resolve_currents
 from .scene import scene_meshes
-from .style import (_add_device, _axes, _bar, currents_text, _fit_camera, _log_fmt,
-                    _magnet_text, _mm, _plotter, _title, round_range)
+from .style import (add_device, add_axes, bar_args, currents_text, fit_camera, log_format,
+                    magnet_text, in_mm, new_plotter, add_title, round_range)
 
 if TYPE_CHECKING:  # pragma: no cover
     import pyvista
@@ -30,8 +30,8 @@ def force_map_data(design: "Design", currents: Sequence[float] | None = None, *,
     pyvista.PolyData
         Points (m) with ``"F (N)"``, ``"F magnitude (mN)"``, ``"Fz (mN)"``, ``"B (T)"``, ``"B magnitude (mT)"``.
     """
-    pv = _pv()
-    res = _quality(quality)
+    pv = import_pyvista()
+    res = grid_resolution(quality)
     cur = resolve_currents(design, currents)
     m = magnet_moment(design, moment)
     h = design.optimize.height_m if height_m is None else v.positive("height_m", height_m)
@@ -42,7 +42,7 @@ def force_map_data(design: "Design", currents: Sequence[float] | None = None, *,
     pts = np.c_[xx.ravel(), yy.ravel(), np.full(xx.size, h)]
     cloud = pv.PolyData(pts)
     b, g = array_field(design, pts, cur, gradient=True)
-    _add_field_arrays(cloud, b, g, m)
+    add_field_arrays(cloud, b, g, m)
     return cloud
 
 
@@ -64,16 +64,16 @@ def plot_force_map(design: "Design", currents: Sequence[float] | None = None, *,
                    window_size=(1024, 768), data=None, blocks=None) -> "pyvista.Plotter":
     """Arrows of the force on the magnet over a grid at one height, coloured by its magnitude
     (mN, log scale); arrow length grows as the square root of the magnitude."""
-    pv = _pv()
+    pv = import_pyvista()
     cur = resolve_currents(design, currents)
     h = design.optimize.height_m if height_m is None else height_m
     cloud = (force_map_data(design, cur, moment=moment, height_m=h, quality=quality)
              if data is None else data)
     blocks = scene_meshes(design, cur) if blocks is None else blocks
-    p = _plotter(pv, window_size)
+    p = new_plotter(pv, window_size)
     # see-through coils, cut DEVICE_DEPTH_M below their tops: the arrows are the subject, and the
     # whole length of the coils would shrink the workspace to a third of the picture
-    _add_device(p, design, _top_of(blocks, -DEVICE_DEPTH_M), opacity=0.25, magnet=False,
+    add_device(p, design, _top_of(blocks, -DEVICE_DEPTH_M), opacity=0.25, magnet=False,
                 workspace=True)
     f = np.asarray(cloud[F_N])
     fmag = np.linalg.norm(f, axis=1)
@@ -81,7 +81,7 @@ def plot_force_map(design: "Design", currents: Sequence[float] | None = None, *,
     colour = "no force: all coils at 0 A"
     n = int(round(math.sqrt(cloud.n_points))) or 1
     spacing_mm = 2e3 * design.workspace.half_width_m / max(n - 1, 1)
-    mm = _mm(cloud)
+    mm = in_mm(cloud)
     if fmax > 0:
         # Length ~ sqrt(|F|): the force over a core is orders of magnitude above that at the
         # workspace's edge; a linear scale would show one arrow and dots.
@@ -95,13 +95,13 @@ def plot_force_map(design: "Design", currents: Sequence[float] | None = None, *,
         colour = f"colour: F (mN), log scale {lo:g}..{hi:g}"
         p.add_mesh(glyphs, scalars=F_MN, cmap="plasma", log_scale=True,
                    clim=(lo, hi), name="force-arrows",
-                   scalar_bar_args=_bar("F (mN)", fmt=_log_fmt(lo, hi)))
+                   scalar_bar_args=bar_args("F (mN)", fmt=log_format(lo, hi)))
     plane = pv.Plane(center=(0, 0, h * 1e3), i_size=2e3 * design.workspace.half_width_m,
                      j_size=2e3 * design.workspace.half_width_m)
     p.add_mesh(plane, color="#dddddd", opacity=0.25)
-    _title(p, f"Force on the magnet ({_magnet_text(design, moment)}) at z = {h * 1e3:.0f} mm\n"
+    add_title(p, f"Force on the magnet ({magnet_text(design, moment)}) at z = {h * 1e3:.0f} mm\n"
               f"largest: {fmax * 1e3:.4g} mN; {currents_text(cur)}; {colour}\n"
               f"arrow length ~ square root of the force (at least {MIN_ARROW:g} of the "
               f"largest)", font_size=11)
-    _fit_camera(p, _axes(p), elevation_deg=50.0)
+    fit_camera(p, add_axes(p), elevation_deg=50.0)
     return p

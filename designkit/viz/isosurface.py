@@ -8,12 +8,12 @@ from typing import TYPE_CHECKING, Sequence
 import numpy as np
 
 from ..support import validate as v
-from .common import FZ_MN, REACH_M, Quality, _image, _pv, _quality
-from .physics import (_add_field_arrays, _footprint_half_m, array_field, force_from_gradient,
+from .common import FZ_MN, REACH_M, Quality, image_grid, import_pyvista, grid_resolution
+from .physics import (add_field_arrays, footprint_half_m, array_field, force_from_gradient,
                       magnet_moment, resolve_currents)
 from .scene import scene_meshes
-from .style import (_add_device, _axes, _bar, currents_text, _fit_camera, _magnet_text, _mm,
-                    _plotter, _title)
+from .style import (add_device, add_axes, bar_args, currents_text, fit_camera, magnet_text, in_mm,
+                    new_plotter, add_title)
 
 if TYPE_CHECKING:  # pragma: no cover
     import pyvista
@@ -55,20 +55,20 @@ def force_isosurface_data(design: "Design", currents: Sequence[float] | None = N
     level_n : float
         The level, N.
     """
-    pv = _pv()
-    res = _quality(quality)
+    pv = import_pyvista()
+    res = grid_resolution(quality)
     cur = resolve_currents(design, currents)
     m = magnet_moment(design, moment)
     level = design.render.threshold_n if level_n is None else v.positive("level_n", level_n, "N")
     reach = _reach_height_m(design, cur, m, level)
     # a box sized to the array (twice its footprint, at most 4 footprints high), not to the
     # reach of the surfaces (up to 0.5 m): the array would be a speck; the plot states the cut
-    foot = _footprint_half_m(design)
+    foot = footprint_half_m(design)
     half = 2.0 * foot
     top = max(min(reach, 4.0 * foot), design.workspace.z_max_m)
-    vol = _image(pv, (-half, -half, design.workspace.z_min_m), (half, half, top), res["iso"])
+    vol = image_grid(pv, (-half, -half, design.workspace.z_min_m), (half, half, top), res["iso"])
     b, g = array_field(design, vol.points, cur, gradient=True)
-    _add_field_arrays(vol, b, g, m)
+    add_field_arrays(vol, b, g, m)
     vol.field_data[REACH_M] = [reach / 1.25]
     surface = vol.contour([-level * 1e3, level * 1e3], scalars=FZ_MN)
     return vol, surface, level
@@ -79,30 +79,30 @@ def plot_force_isosurface(design: "Design", currents: Sequence[float] | None = N
                           window_size=(1024, 768), data=None, blocks=None) -> "pyvista.Plotter":
     """Surfaces Fz = +level (push, red) and Fz = -level (pull, blue) above the array; level
     defaults to the human threshold 0.8 mN."""
-    pv = _pv()
+    pv = import_pyvista()
     cur = resolve_currents(design, currents)
     vol, surface, level = (force_isosurface_data(design, cur, moment=moment, level_n=level_n,
                                                  quality=quality) if data is None else data)
     blocks = scene_meshes(design, cur) if blocks is None else blocks
-    p = _plotter(pv, window_size)
-    _add_device(p, design, blocks, opacity=1.0, magnet=True, workspace=True)
+    p = new_plotter(pv, window_size)
+    add_device(p, design, blocks, opacity=1.0, magnet=True, workspace=True)
     lmn = level * 1e3
     if surface.n_points:
-        p.add_mesh(_mm(surface), scalars=FZ_MN, cmap=["#2166ac", "#b2182b"], clim=(-lmn, lmn),
+        p.add_mesh(in_mm(surface), scalars=FZ_MN, cmap=["#2166ac", "#b2182b"], clim=(-lmn, lmn),
                    opacity=0.5, smooth_shading=True, name="isosurface",
-                   scalar_bar_args=_bar("Fz (mN)", n_labels=2, fmt="%+.2g"))
+                   scalar_bar_args=bar_args("Fz (mN)", n_labels=2, fmt="%+.2g"))
     else:
         p.add_text(f"the vertical force stays below {lmn:g} mN everywhere in the box",
                    position="lower_left", color="black", font_size=11)
-    p.add_mesh(_mm(vol.outline()), color="grey", line_width=1)
+    p.add_mesh(in_mm(vol.outline()), color="grey", line_width=1)
     b = np.asarray(vol.bounds) * 1e3
     reach = (f"; on the coil axes the vertical force passes {lmn:g} mN up to z = "
              f"{float(vol.field_data[REACH_M][0]) * 1e3:.0f} mm" if REACH_M in vol.field_data
              else "")
-    _title(p, f"Where the magnet ({_magnet_text(design, moment)}) feels Fz = +{lmn:g} mN "
+    add_title(p, f"Where the magnet ({magnet_text(design, moment)}) feels Fz = +{lmn:g} mN "
               f"(colour red, push up) and -{lmn:g} mN (blue, pull down); {currents_text(cur)}\n"
               f"the force is larger between the surfaces and the coils{reach}\n"
               f"surfaces cut flat by the grey box: at z = {b[4]:.0f} mm (bottom of the "
               f"workspace), z = {b[5]:.0f} mm and x, y = +-{b[1]:.0f} mm", font_size=10)
-    _fit_camera(p, _axes(p, b), elevation_deg=16.0, margin=1.12)
+    fit_camera(p, add_axes(p, b), elevation_deg=16.0, margin=1.12)
     return p

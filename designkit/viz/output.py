@@ -9,14 +9,14 @@ from typing import TYPE_CHECKING, Sequence
 
 from ..errors import BadInputError
 from ..support.atomic import atomic_path
-from .common import KINDS, Kind, Quality, _pv
+from .common import KINDS, Kind, Quality, import_pyvista
 from .fieldlines import field_line_data, plot_field_lines
 from .forcemap import force_map_data, plot_force_map
 from .isosurface import force_isosurface_data, plot_force_isosurface
 from .physics import resolve_currents
 from .scene import plot_array_scene, scene_meshes
 from .slices import plot_slices, slice_data
-from .style import _clear_bar_titles
+from .style import round_colour_bars
 
 if TYPE_CHECKING:  # pragma: no cover
     import pyvista
@@ -29,7 +29,7 @@ def save_png(plotter: "pyvista.Plotter", path: str | Path) -> Path:
     path = Path(path)
     if path.suffix.lower() != ".png":
         raise BadInputError("path", "a file name ending in .png", str(path))
-    _clear_bar_titles(plotter)
+    round_colour_bars(plotter)
     with atomic_path(path, suffix=".png") as tmp:
         plotter.screenshot(str(tmp))
     return path
@@ -78,7 +78,7 @@ def export_vtk(design: "Design", out_dir: str | Path, currents: Sequence[float] 
     -------
     dict of str -> Path
     """
-    _pv()
+    import_pyvista()
     out = Path(out_dir)
     cur = resolve_currents(design, currents)
     data = dict(data or {})
@@ -113,7 +113,7 @@ def export_vtk(design: "Design", out_dir: str | Path, currents: Sequence[float] 
     written = {}
     for name, mesh in items.items():
         if hasattr(mesh, "extract_surface") and name.endswith(".vtp") and \
-                not isinstance(mesh, _pv().PolyData):
+                not isinstance(mesh, import_pyvista().PolyData):
             mesh = mesh.extract_surface()
         written[name] = _write_vtk(mesh, out / name)
     return written

@@ -143,7 +143,7 @@ def force_from_gradient(gradient_t_per_m: np.ndarray, moment_a_m2: np.ndarray) -
     return g5_from_gradient(np.asarray(gradient_t_per_m)) @ force_matrix(moment_a_m2).T
 
 
-def _add_field_arrays(mesh, b, g=None, moment=None):
+def add_field_arrays(mesh, b, g=None, moment=None):
     mesh.point_data[B_T] = b
     mesh.point_data[B_MT] = np.linalg.norm(b, axis=1) * 1e3
     if g is not None:
@@ -155,7 +155,7 @@ def _add_field_arrays(mesh, b, g=None, moment=None):
     return mesh
 
 
-def _footprint_half_m(design: "Design") -> float:
+def footprint_half_m(design: "Design") -> float:
     """Half side of a square that covers the coils and the workspace, m."""
     tops = design.array.top_centres_m()
     reach = max(float(np.abs(tops[k, :2]).max()) + design.coil_spec(k).outer_radius_m

@@ -7,9 +7,9 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
-from .common import _MAGNET, _STEEL, CURRENT_A, _pv
+from .common import MAGNET_RED, STEEL, CURRENT_A, import_pyvista
 from .physics import magnet_moment, resolve_currents
-from .style import _axes, _bar, currents_text, _fit_camera, _magnet_text, _mm, _plotter, _title
+from .style import add_axes, bar_args, currents_text, fit_camera, magnet_text, in_mm, new_plotter, add_title
 
 if TYPE_CHECKING:  # pragma: no cover
     import pyvista
@@ -21,7 +21,7 @@ def scene_meshes(design: "Design", currents: Sequence[float] | None = None, *,
                  moment=None, resolution: int = 64) -> "pyvista.MultiBlock":
     """Solids of the device, m: windings (hollow cylinders, cell data ``"current (A)"``), cores,
     the finger magnet (cylinder at the design point) and the workspace box outline."""
-    pv = _pv()
+    pv = import_pyvista()
     cur = resolve_currents(design, currents)
     c = design.coil
     windings, cores = [], []
@@ -57,19 +57,19 @@ def plot_array_scene(design: "Design", currents: Sequence[float] | None = None, 
                      moment=None, window_size=(1024, 768), blocks=None) -> "pyvista.Plotter":
     """The coil array (windings coloured by current, cores), the magnet with its moment as an
     arrow at the design point, and the workspace box. Off-screen; never shown."""
-    pv = _pv()
+    pv = import_pyvista()
     cur = resolve_currents(design, currents)
     blocks = scene_meshes(design, cur, moment=moment) if blocks is None else blocks
     m = magnet_moment(design, moment)
-    p = _plotter(pv, window_size)
+    p = new_plotter(pv, window_size)
     imax = float(np.max(np.abs(cur))) or 1.0
-    p.add_mesh(_mm(blocks["windings"]), scalars=CURRENT_A, cmap="coolwarm", clim=(-imax, imax),
+    p.add_mesh(in_mm(blocks["windings"]), scalars=CURRENT_A, cmap="coolwarm", clim=(-imax, imax),
                smooth_shading=True, name="windings",
-               scalar_bar_args=_bar("coil current (A)", fmt="%+.2g"))
+               scalar_bar_args=bar_args("coil current (A)", fmt="%+.2g"))
     if "cores" in blocks.keys():
-        p.add_mesh(_mm(blocks["cores"]), color=_STEEL, name="cores")
-    p.add_mesh(_mm(blocks["magnet"]), color=_MAGNET, name="magnet")
-    p.add_mesh(_mm(blocks["workspace"]), color="#1f4e9c", line_width=2, name="workspace")
+        p.add_mesh(in_mm(blocks["cores"]), color=STEEL, name="cores")
+    p.add_mesh(in_mm(blocks["magnet"]), color=MAGNET_RED, name="magnet")
+    p.add_mesh(in_mm(blocks["workspace"]), color="#1f4e9c", line_width=2, name="workspace")
     dp = np.asarray(design.design_point_m) * 1e3
     mdir = m / (np.linalg.norm(m) or 1.0)
     arrow = pv.Arrow(start=dp, direction=mdir, scale=30.0, tip_length=0.3, tip_radius=0.12,
@@ -83,12 +83,12 @@ def plot_array_scene(design: "Design", currents: Sequence[float] | None = None, 
                        ["workspace"], font_size=12, text_color="#1f4e9c", shape=None,
                        show_points=False, always_visible=True)
     c = design.coil
-    _title(p, f"{design.name}: {design.array.describe()}; winding Ri/Ro/L = "
+    add_title(p, f"{design.name}: {design.array.describe()}; winding Ri/Ro/L = "
               f"{c.inner_radius_m * 1e3:.0f}/{c.outer_radius_m * 1e3:.0f}/"
               f"{c.length_m * 1e3:.0f} mm, {c.turns} turns\n"
-              f"magnet ({_magnet_text(design, moment)}) at the design point "
+              f"magnet ({magnet_text(design, moment)}) at the design point "
               f"z = {design.optimize.height_m * 1e3:.0f} mm; {currents_text(cur)}; windings "
               f"coloured by their current, linear scale {-imax:+.3g}..{imax:+.3g} A",
            font_size=10)
-    _fit_camera(p, _axes(p), elevation_deg=22.0)
+    fit_camera(p, add_axes(p), elevation_deg=22.0)
     return p

@@ -9,12 +9,12 @@ import numpy as np
 
 from ..errors import BadInputError
 from ..support import validate as v
-from .common import B_MT, F_MN, IN_SOLID, Quality, _image, _pv, _quality
-from .physics import (PICTURE_TOLERANCE, _add_field_arrays, _footprint_half_m, array_field,
+from .common import B_MT, F_MN, IN_SOLID, Quality, image_grid, import_pyvista, grid_resolution
+from .physics import (PICTURE_TOLERANCE, add_field_arrays, footprint_half_m, array_field,
                       inside_solids, magnet_moment, resolve_currents)
 from .scene import scene_meshes
-from .style import (_bar, currents_text, _log_fmt, _magnet_text, _mm, _nice_bounds, _plotter,
-                    _title, round_range)
+from .style import (bar_args, currents_text, log_format, magnet_text, in_mm, nice_bounds, new_plotter,
+                    add_title, round_range)
 
 if TYPE_CHECKING:  # pragma: no cover
     import pyvista
@@ -35,19 +35,19 @@ def slice_data(design: "Design", currents: Sequence[float] | None = None, *,
         Flat grids with ``"B (T)"``, ``"B magnitude (mT)"``, ``"grad B (T/m)"``, ``"F (N)"``,
         ``"F magnitude (mN)"`` and ``"Fz (mN)"``.
     """
-    pv = _pv()
-    res = _quality(quality)
+    pv = import_pyvista()
+    res = grid_resolution(quality)
     cur = resolve_currents(design, currents)
     m = magnet_moment(design, moment)
     h = design.optimize.height_m if height_m is None else v.positive("height_m", height_m)
-    half = _footprint_half_m(design)
+    half = footprint_half_m(design)
     nx, nz = res["slice"]
-    vert = _image(pv, (-half, 0.0, 0.002), (half, 0.0, design.workspace.z_max_m), (nx, 1, nz))
-    horiz = _image(pv, (-half, -half, h), (half, half, h), (nx, nx, 1))
+    vert = image_grid(pv, (-half, 0.0, 0.002), (half, 0.0, design.workspace.z_max_m), (nx, 1, nz))
+    horiz = image_grid(pv, (-half, -half, h), (half, half, h), (nx, nx, 1))
     for mesh in (vert, horiz):
         b, g = array_field(design, mesh.points, cur, gradient=True,
                            tolerance=PICTURE_TOLERANCE)
-        _add_field_arrays(mesh, b, g, m)
+        add_field_arrays(mesh, b, g, m)
         mesh.point_data[IN_SOLID] = inside_solids(design, mesh.points).astype(np.uint8)
     return vert, horiz
 
@@ -59,13 +59,13 @@ def _section_lines(pv, design, blocks, view: Literal["xz", "xy"], height_m, z_lo
         if "cores" in blocks.keys():
             cut = cut.merge(blocks["cores"].slice(normal="y", origin=(0, 0, 0)))
         cut = cut.clip(normal=(0, 0, 1), origin=(0, 0, z_low_m), invert=False)
-        return _mm(cut)
+        return in_mm(cut)
     circles = []
     for x, y, _ in design.coil_centres_m():
         for r in (design.coil.inner_radius_m, design.coil.outer_radius_m):
             circles.append(pv.Circle(radius=r, resolution=72)
                            .translate((x, y, height_m + 1e-4)).extract_feature_edges())
-    return _mm(pv.merge(circles))
+    return in_mm(pv.merge(circles))
 
 
 def _drop_solids(mesh):
@@ -107,7 +107,7 @@ def plot_slices(design: "Design", currents: Sequence[float] | None = None, *,
     and on a horizontal slice at the design height (right); one log colour scale shared by both
     (each title says so), the coils' outlines and, for the force, the contour of the human
     threshold (0.8 mN); the force only where the magnet's centre can be (z >= workspace z_min)."""
-    pv = _pv()
+    pv = import_pyvista()
     if quantity not in ("B", "F"):
         raise BadInputError("quantity", "'B' or 'F'", quantity)
     cur = resolve_currents(design, currents)
@@ -129,14 +129,14 @@ def plot_slices(design: "Design", currents: Sequence[float] | None = None, *,
     threshold_mn = design.render.threshold_n * 1e3
     z_low_m = -0.25 * design.coil.length_m  # show the top quarter of the coils
     head = ("Magnitude of B" if quantity == "B"
-            else f"Magnitude of the force on the magnet ({_magnet_text(design, moment)})")
-    p = _plotter(pv, window_size, shape=(1, 2))
+            else f"Magnitude of the force on the magnet ({magnet_text(design, moment)})")
+    p = new_plotter(pv, window_size, shape=(1, 2))
     for col, (mesh, view) in enumerate(((vert, "xz"), (horiz, "xy"))):
         p.subplot(0, col)
-        mm = _mm(mesh)
+        mm = in_mm(mesh)
         p.add_mesh(mm, scalars=name, cmap="inferno", log_scale=True, clim=(lo, hi),
                    name=f"slice-{view}", show_scalar_bar=(col == 1),
-                   scalar_bar_args=_bar(label, fmt=_log_fmt(lo, hi), position_x=0.88,
+                   scalar_bar_args=bar_args(label, fmt=log_format(lo, hi), position_x=0.88,
                                         width=0.045))
         notes = [currents_text(cur), "cyan dot: design point" + clip_note]
         scale = (f"colour: {label}, log scale {lo:g}..{hi:g}, one bar (right) for both "
@@ -161,8 +161,8 @@ def plot_slices(design: "Design", currents: Sequence[float] | None = None, *,
         else:
             where = f"horizontal slice z = {h * 1e3:.0f} mm"
             p.view_xy()
-        _title(p, f"{head}\n{where}\n{scale}\n" + "; ".join(notes), font_size=10)
-        bounds, counts = _nice_bounds(bounds)
+        add_title(p, f"{head}\n{where}\n{scale}\n" + "; ".join(notes), font_size=10)
+        bounds, counts = nice_bounds(bounds)
         p.show_bounds(bounds=bounds, xtitle="x (mm)", ytitle="y (mm)", ztitle="z (mm)",
                       color="black", grid=False, location="front",
                       font_size=max(6, min(9, round(9 * p.window_size[0] / 1500))),
