@@ -36,7 +36,7 @@ IN_SOLID = "inside a core or winding"
 REACH_M = "height where |Fz| on the coil axes falls below the level (m)"
 
 COPPER, STEEL, MAGNET_RED = "#c87533", "#8c8c8c", "#b22222"
-MIN_ARROW = 0.3
+MIN_ARROW = 0.35
 """Shortest force arrow in the force map, as a fraction of the longest."""
 
 

@@ -16,8 +16,14 @@ from .common import COPPER, MAGNET_RED, STEEL, window_pixels
 from .physics import magnet_moment
 
 
-def new_plotter(pv, window_size, shape=(1, 1)):
-    p = pv.Plotter(off_screen=True, window_size=window_pixels(window_size), shape=shape)
+def new_plotter(pv, window_size, shape=(1, 1), col_weights=None):
+    """An off-screen plotter on a white background; ``col_weights``: the panels' relative
+    widths (default equal)."""
+    p = pv.Plotter(off_screen=True, window_size=window_pixels(window_size), shape=shape,
+                   col_weights=col_weights)
+    p._col_fractions = (np.ones(shape[1]) if col_weights is None
+                       else np.asarray(col_weights, float)) / (shape[1] if col_weights is None
+                                                               else sum(col_weights))
     p.set_background("white")
     return p
 
@@ -39,7 +45,9 @@ def bar_args(title, **extra):
 
 def add_title(p, text, font_size=12):
     """Title at the upper left, each line wrapped to the width of its (sub)plot."""
-    width = p.window_size[0] / p.shape[1]
+    fractions = getattr(p, "_col_fractions", np.ones(p.shape[1]) / p.shape[1])
+    width = p.window_size[0] * fractions[p.renderers.index_to_loc(p.renderers.active_index)[1]
+                                         if p.shape[1] > 1 else 0]
     # VTK's default font: a character is about 0.6 font sizes wide, in pixels
     chars = max(20, int(0.92 * width / (0.6 * font_size)))
     lines = [w for line in text.split("\n") for w in (textwrap.wrap(line, chars) or [""])]
@@ -128,19 +136,27 @@ def add_axes(p, mesh_bounds=None, location="outer", **kw):
     return b
 
 
-def fit_camera(p, bounds_mm, elevation_deg=25.0, azimuth_deg=-58.0, margin=1.22):
+def fit_camera(p, bounds_mm, elevation_deg=25.0, azimuth_deg=-58.0, margin=1.22,
+               every_actor=True):
     """Look at the box from (elevation, azimuth) from just far enough that its bounding sphere,
-    widened by ``margin`` for the axis labels, fits the view: nothing is cut at the edges."""
+    widened by ``margin`` for the axis labels, fits the view: nothing is cut at the edges
+    (``every_actor``: the box grown to hold every actor; else the box alone, the subject)."""
     b = np.asarray(bounds_mm, dtype=float)
-    every = np.asarray(p.bounds, dtype=float)  # every actor, e.g. coils below the axes box
-    b[0::2], b[1::2] = np.minimum(b[0::2], every[0::2]), np.maximum(b[1::2], every[1::2])
+    if every_actor:
+        every = np.asarray(p.bounds, dtype=float)  # every actor, e.g. coils below the axes box
+        b[0::2], b[1::2] = np.minimum(b[0::2], every[0::2]), np.maximum(b[1::2], every[1::2])
     centre = (b[0::2] + b[1::2]) / 2
     radius = 0.5 * float(np.linalg.norm(b[1::2] - b[0::2]))
     half_angle = math.radians(p.camera.view_angle / 2)
     # the title's band at the top: the margin leaves room for half of it; the view is fitted
     # in the rest and moved down by that much (the top axis labels stay clear of the title)
     band = 0.5 * min(getattr(p, "_title_band_px", 0.0) / (p.window_size[1] / p.shape[0]), 0.5)
-    distance = margin * radius / math.sin(half_angle) / (1.0 - band)
+    # a panel narrower than it is high fits the sphere in its width
+    fractions = getattr(p, "_col_fractions", np.ones(p.shape[1]) / p.shape[1])
+    col = p.renderers.index_to_loc(p.renderers.active_index)[1] if p.shape[1] > 1 else 0
+    aspect = (p.window_size[0] * fractions[col]) / (p.window_size[1] / p.shape[0])
+    fit_angle = min(half_angle, math.atan(math.tan(half_angle) * aspect))
+    distance = margin * radius / math.sin(fit_angle) / (1.0 - band)
     _iso_camera(p, tuple(centre), distance, elevation_deg, azimuth_deg)
     if band > 0:
         pos, focus = (np.asarray(q, dtype=float) for q in p.camera_position[:2])
