@@ -1,9 +1,14 @@
 """``designkit run --simulate`` end to end: map, scene, simulated device, runner, results.
 
-Builds (or loads) the force-current map of a design, compiles the virtual object into a scene,
-closes firmware_io's runner (the code that runs on the controller) around the simulated device
-and writes run.csv (one row per control step, SI), summary.json, run.png and loop_timing.png.
-Every input is checked before anything is computed.
+Builds (or loads) the force-current map of a design, compiles the virtual object into a scene
+(or loads a compiled one), closes firmware_io's runner (the code that runs on the controller)
+around the simulated device and writes run.csv (one row per control step, SI), summary.json,
+run.png and loop_timing.png. Every input is checked before anything is computed.
+
+The force constant lambda (thesis eq. 4.3): given (``lam_n_per_m``), the compiled scene's, or
+the design's ``render.stiffness_n_per_m`` capped at what the device renders over the object
+(:func:`designkit.render.force_constant` on the map, with the runner's current bounds and drive
+mode): a stiffer object than the coils can push asks for currents beyond the limit everywhere.
 """
 
 from __future__ import annotations
@@ -19,7 +24,7 @@ from firmware_io.runner import (CALIBRATED_RELATIVE_ERROR, ConstantVelocityTrack
                                 RunnerConfig, SceneForce)
 from firmware_io.scene import Scene
 
-from .. import fieldmap
+from .. import fieldmap, render
 from ..design import Design, load_design
 from ..errors import BadInputError
 from ..model import electrical
@@ -41,8 +46,8 @@ MAX_DURATION_S = 600.0
 SCRIPTED_DURATION_S = {"slide": 4.0, "poke": 3.0}
 """Length of the scripted trajectories at their own speed, s."""
 
-TOP_OF_BOX_M = 0.078
-"""Highest finger position of a scripted trajectory, m (inside the map box)."""
+BOX_MARGIN_M = 0.002
+"""A scripted trajectory keeps this far inside the map's box at its top, m."""
 
 
 def drive_data(design) -> dict:
@@ -51,43 +56,64 @@ def drive_data(design) -> dict:
                                  * design.n_coils)
 
 
-def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "slide",
+def run_simulation(*, design=None, obj: str | None = None, trajectory: str = "slide",
                    duration_s: float | None = None, faults: str = "none", map_path=None,
                    method: str = "model", period_s: float = 1e-3, unipolar: bool = False,
                    lam_n_per_m: float | None = None, rows: str = "force", seed: int = 0,
                    out=Path("run-out"), progress: bool = True, array=None,
                    calibrate: bool = True, profile: bool = False,
-                   skip_force_n: float = 0.0, plant=None) -> dict:
-    """Build (or load) the map, compile the scene, close the runner around the simulated device,
-    and write run.csv, summary.json, run.png and loop_timing.png into ``out``. Returns the
-    summary. Every input is checked before anything is computed.
+                   skip_force_n: float = 0.0, plant=None, scene_path=None) -> dict:
+    """Build (or load) the map, compile the scene (or load ``scene_path``), close the runner
+    around the simulated device, and write run.csv, summary.json, run.png and loop_timing.png
+    into ``out``. Returns the summary. Every input is checked before anything is computed.
 
-    ``rows``: 'force' renders the object's 3-D force, 'fz' only its vertical component (the
-    thesis' eq. 4.6; the runner then evaluates only the two rows of A(p) Fz needs). ``array``:
-    the design's CoilArray when the caller has one (its coupled solve is reused).
-    ``calibrate``: the start-up sensor calibration (:meth:`SimulatedDevice.calibrate_sensors`)
-    before the run; the localizer then weighs the sensors with
-    :data:`firmware_io.runner.CALIBRATED_RELATIVE_ERROR`. ``profile``: the runner times each
-    stage of its step (summary ``loop_by_kind['stages']``). ``skip_force_n``: the runner's coil-skip force, N.
-    ``plant``: the device that was built (a design with ``[asbuilt]``, or its path): the
-    simulated device is it, while the runner uses the map of ``design``.
+    ``obj``: the virtual object (default hemisphere; not with ``scene_path``, whose objects
+    are run). ``lam_n_per_m``: the force constant, N/m (not with ``scene_path``, which carries
+    its own); None: the design's ``render.stiffness_n_per_m`` capped at what the device renders
+    over the object (:func:`choose_lambda`). ``rows``: 'force' renders the object's 3-D force,
+    'fz' only its vertical component (the thesis' eq. 4.6; the runner then evaluates only the
+    two rows of A(p) Fz needs). ``array``: the design's CoilArray when the caller has one (its
+    coupled solve is reused). ``calibrate``: the start-up sensor calibration
+    (:meth:`SimulatedDevice.calibrate_sensors`) before the run; the localizer then weighs the
+    sensors with :data:`firmware_io.runner.CALIBRATED_RELATIVE_ERROR`. ``profile``: the runner
+    times each stage of its step (summary ``loop_by_kind['stages']``). ``skip_force_n``: the
+    runner's coil-skip force, N. ``plant``: the device that was built (a design with
+    ``[asbuilt]``, or its path): the simulated device is it, while the runner uses the map of
+    ``design``.
     """
     design = design if isinstance(design, Design) else load_design(design)
+    if scene_path is not None:
+        for name, value in (("--object", obj), ("--lambda", lam_n_per_m)):
+            if value is not None:
+                raise BadInputError(name, "left out with --scene (the compiled scene has its "
+                                    "objects and lambda)", value)
+    obj = "hemisphere" if obj is None and scene_path is None else obj
     virtual, path, duration, schedule = _checked_inputs(obj, trajectory, duration_s, faults,
                                                         rows, period_s, lam_n_per_m)
+    # the scene is read and matched to the design before the map is built
+    scene = (None if scene_path is None else
+             Scene.load(scene_path, expected_design_sha256=design.spec_hash()))
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     array = array if array is not None else CoilArray.from_design(design)
-    if path is None:
-        path = _scripted_path(design, array, virtual, trajectory)
     map_path, fmap = _map(design, array, map_path, out, progress)
-    lam = design.render.stiffness_n_per_m if lam_n_per_m is None else float(lam_n_per_m)
-    scene_path = scenefile.compile_scene(virtual, out / "scene.npz", lam_n_per_m=lam,
-                                         law=ConstraintLaw(lam),
-                                         map_design_sha256=fmap.design_sha256,
-                                         extra_meta={"object": obj, "rows": rows})
-    scene = Scene.load(scene_path, expected_design_sha256=fmap.design_sha256)
     drive = drive_data(design)
+    if scene is not None:
+        virtual = SceneSurface(scene)
+        choice = {"lambda_n_per_m": scene.lam_n_per_m, "lambda_source": f"scene {scene_path}"}
+        obj = ", ".join(str(o.kind) for o in scene.objects)
+    else:
+        choice = choose_lambda(design, virtual, fmap, drive, lam_n_per_m,
+                               unipolar=unipolar, rows=rows, progress=progress)
+        scene_path = scenefile.compile_scene(virtual, out / "scene.npz",
+                                             lam_n_per_m=choice["lambda_n_per_m"],
+                                             law=ConstraintLaw(choice["lambda_n_per_m"]),
+                                             map_design_sha256=fmap.design_sha256,
+                                             extra_meta={"object": obj, "rows": rows})
+        scene = Scene.load(scene_path, expected_design_sha256=fmap.design_sha256)
+    lam = choice["lambda_n_per_m"]
+    if path is None:
+        path = _scripted_path(design, array, virtual, trajectory, fmap.bounds)
     plant_design, plant_array = design, array
     if plant is not None:  # the as-built device under the runner of ``design``'s map
         plant_design = plant if isinstance(plant, Design) else load_design(plant)
@@ -115,8 +141,7 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
                    faults=schedule, scene_force=SceneForce(scene).force, progress=progress)
     summary = summarize(res, force_error_causes(device, fmap, res))
     summary.update({"object": obj, "trajectory": str(trajectory), "design": design.name,
-                    "rows": rows,
-                    "lambda_n_per_m": lam, "method": method, "unipolar": unipolar,
+                    "rows": rows, **choice, "method": method, "unipolar": unipolar,
                     "drive": drive, **_duration_note(path.duration_s, duration),
                     "faults_not_injected": _not_injected(schedule, res.faults)})
     if plant is not None:
@@ -124,8 +149,46 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
     write_run_csv(out / "run.csv", res.columns)
     write_json_atomic(out / "summary.json", summary)
     plot_run(res, out, surface_height=lambda x, y: virtual.height(np.c_[x, y, np.zeros_like(x)]),
-             title=f"{obj}: {trajectory}, lambda = {lam:g} N/m")
+             title=f"{obj}: {trajectory}, lambda = {lam:.3g} N/m")
     return summary
+
+
+class SceneSurface:
+    """The top surface h(x, y) of a compiled scene's objects (the highest where they overlap),
+    for the scripted trajectories and the run figure."""
+
+    def __init__(self, scene: Scene):
+        self.objects = list(scene.objects)
+
+    def height(self, points) -> np.ndarray:
+        """h(x, y) of the points (n, 3), m, shape (n,)."""
+        return np.max([o.height(points) for o in self.objects], axis=0)
+
+
+def choose_lambda(design: Design, virtual, fmap, drive: dict, lam_n_per_m=None, *,
+                  unipolar: bool, rows: str, progress: bool) -> dict:
+    """The run's force constant and where it comes from (summary keys): ``lam_n_per_m`` when
+    given; else ``render.stiffness_n_per_m`` capped at the largest lambda the device renders
+    over the object's surface points where it renders any (thesis eq. 4.3 on the map, the
+    runner's per-coil and total current bounds; ``lambda_unrenderable_points``: surface points
+    where no lambda > 0 is renderable, the cores' pull there exceeding what the coils can
+    cancel: no object force is rendered there whatever lambda)."""
+    if lam_n_per_m is not None:
+        return {"lambda_n_per_m": float(lam_n_per_m), "lambda_source": "--lambda"}
+    fc = render.force_constant(virtual, fmap, current_limit_a=drive["current_limit_a"],
+                               total_current_a=drive["total_current_a"], unipolar=unipolar,
+                               rows=rows, progress=progress)
+    renderable = fc.lam_where_renderable()
+    asked = design.render.stiffness_n_per_m
+    lam = min(asked, renderable)
+    return {"lambda_n_per_m": lam,
+            "lambda_source": ("render.stiffness_n_per_m" if lam == asked else
+                              "the device's force constant (eq. 4.3), below "
+                              "render.stiffness_n_per_m"),
+            "lambda_design_n_per_m": asked, "lambda_renderable_n_per_m": renderable,
+            "lambda_limiting_point_m": fc.limiting_point_where_renderable().tolist(),
+            "lambda_unrenderable_points": fc.unrenderable_points,
+            "lambda_surface_points": int(len(fc.points_m))}
 
 
 def _checked_inputs(obj, trajectory, duration_s, faults, rows, period_s, lam_n_per_m=None):
@@ -137,7 +200,7 @@ def _checked_inputs(obj, trajectory, duration_s, faults, rows, period_s, lam_n_p
         raise BadInputError("--period-ms", "in [0.1, 50] ms", period_s * 1e3)
     if lam_n_per_m is not None and not 0 <= float(lam_n_per_m) < np.inf:
         raise BadInputError("--lambda", ">= 0 and finite, N/m", lam_n_per_m)
-    virtual = scenefile.make_object(obj)
+    virtual = None if obj is None else scenefile.make_object(obj)
     scripted = trajectory in SCRIPTED_DURATION_S
     path = None if scripted else Trajectory.from_csv(trajectory)
     duration = float(duration_s or (path.duration_s if path is not None
@@ -171,16 +234,20 @@ def _not_injected(schedule: FaultSchedule, injected) -> list:
     return out
 
 
-def _scripted_path(design, array, virtual, trajectory: str) -> Trajectory:
-    """``slide`` or ``poke`` over the virtual object at its own speed, kept above the upper
-    sensor board."""
-    # the magnet cannot go below the upper sensor board: its centre stays half its length
-    # and 1 mm (the board and the sensor package) above the highest sensor
-    floor = (float(np.max(array.sensor_positions_m()[0, :, 2]))
-             + design.magnet.length_m / 2 + 1e-3)
+def _scripted_path(design, array, virtual, trajectory: str, bounds) -> Trajectory:
+    """``slide`` or ``poke`` over the virtual object at its own speed, inside the map's box
+    (``bounds``: lower, upper corners, m) and above the sensor boards below it."""
+    # the magnet cannot go below a sensor board under the box: its centre stays half its
+    # length and 1 mm (the board and the sensor package) above the highest such sensor
+    lo, hi = (np.asarray(b, float) for b in bounds)
+    sensors, _ = array.sensor_poses()
+    below = sensors[:, 2][sensors[:, 2] <= lo[2]]
+    floor = max(lo[2], (float(below.max()) if below.size else -np.inf)
+                + design.magnet.length_m / 2 + 1e-3)
     make = slide_trajectory if trajectory == "slide" else poke_trajectory
     return make(lambda x, y: virtual.height(np.c_[x, y, np.zeros_like(x)]),
-                duration_s=SCRIPTED_DURATION_S[trajectory], z_limits_m=(floor, TOP_OF_BOX_M))
+                duration_s=SCRIPTED_DURATION_S[trajectory],
+                z_limits_m=(floor, hi[2] - BOX_MARGIN_M))
 
 
 def _map(design, array, map_path, out: Path, progress: bool):
