@@ -20,6 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+import math
 import warnings
 
 import numpy as np
@@ -27,7 +28,6 @@ import numpy as np
 from ..model.array import force_matrix, g5_from_gradient
 from ..model.coil import Coil
 from .physics import design_coil
-from .style import round_range
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..design import Design
@@ -73,10 +73,13 @@ def colour_ranges(design: "Design") -> ColourRanges:
 
 
 def _log_range(top: float) -> tuple[float, float]:
-    """[top / 10^DECADES, top] rounded out to 1, 2, 5 x 10^k; (1e-4, 1) for no field."""
+    """(hi / 10^DECADES, hi), hi = top rounded up to 1, 2, 5 x 10^k; (1e-4, 1) for no field."""
     if not top > 0:
         return 1e-4, 1.0
-    return round_range(top * 10.0 ** -DECADES, top, log=True)
+    e = math.floor(math.log10(top))
+    hi = min(m * 10.0 ** k for k in (e, e + 1) for m in (1, 2, 5)
+             if m * 10.0 ** k >= top * (1 - 1e-9))
+    return hi * 10.0 ** -DECADES, hi
 
 
 def clip_note(values, lo: float, hi: float, unit: str) -> str:

@@ -200,8 +200,8 @@ def plot_slices(design: "Design", currents: Sequence[float] | None = None, *,
     z_low_m = _z_low(design)
     head = ("Magnitude of B (mT)" if quantity == "B"
             else f"Force on the magnet ({magnet_text(design, moment)}), magnitude in mN")
-    scale = (f"log scale {lo:g}..{hi:g} {unit}, the design's fixed range; one bar (right) for "
-             f"both panels{clipped}")
+    scale = (f"colour: log scale {lo:g}..{hi:g} {unit}, the design's fixed range; one bar "
+             f"(right) for both panels{clipped}")
     dp = sec.point_m
     p = new_plotter(pv, window_size, shape=(1, 2))
     for col, (mesh, view) in enumerate(((vert, "xz"), (horiz, "xy"))):
