@@ -40,7 +40,8 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__, fieldmap, viz
-from ..design import Design, default_design, design_to_toml, load_design, named_design
+from ..design import (Design, GridLayout, default_design, design_to_toml, load_design,
+                      named_design)
 from ..errors import BadInputError
 from ..model.array import array_for_design, force_matrix, g5_from_gradient
 from ..geometry.pose import Pose
@@ -422,8 +423,13 @@ def designs_side_by_side(design: Design) -> dict:
 
 def not_comparable(design: Design, optimum: Design) -> str:
     """Why the design is not put next to the shipped optimum ('' when it is): forces over a
-    workspace compare only between devices of one layout kind and coil count."""
-    if design.array.kind == optimum.array.kind and design.n_coils == optimum.n_coils:
+    workspace compare only between devices of one layout kind and coil count (and, for grids,
+    the same rows x columns: a 1 x 9 line is not a 3 x 3 square)."""
+    a, b = design.array, optimum.array
+    same = a.kind == b.kind and design.n_coils == optimum.n_coils
+    if same and isinstance(a, GridLayout) and isinstance(b, GridLayout):
+        same = sorted((a.rows, a.columns)) == sorted((b.rows, b.columns))
+    if same:
         return ""
     return (f"the shipped optimum `{optimum.name}` is a {optimum.array.describe()} "
             f"({optimum.n_coils} coils) and this design a {design.array.describe()} "

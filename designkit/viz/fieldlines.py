@@ -10,7 +10,7 @@ import numpy as np
 from .common import B_MT, B_T, Quality, image_grid, import_pyvista, grid_resolution
 from .physics import (FIELDLINE_TOLERANCE, add_field_arrays, footprint_half_m, array_field,
                       resolve_currents)
-from .ranges import ColourRanges, clip_note, colour_ranges
+from .ranges import clip_note, colour_ranges
 from .scene import pole_points_m, scene_meshes
 from .style import (add_axes, add_device, add_title, bar_args, currents_text, fit_camera,
                     in_mm, log_format, new_plotter)
@@ -67,7 +67,7 @@ def field_line_data(design: "Design", currents: Sequence[float] | None = None, *
 
 def plot_field_lines(design: "Design", currents: Sequence[float] | None = None, *,
                      quality: Quality = "full", window_size=(1024, 768), data=None,
-                     blocks=None, ranges: ColourRanges | None = None) -> "pyvista.Plotter":
+                     blocks=None) -> "pyvista.Plotter":
     """Streamlines of B coloured by the magnitude of B (mT, log scale, the design's fixed range)
     over the coil array."""
     pv = import_pyvista()
@@ -76,7 +76,7 @@ def plot_field_lines(design: "Design", currents: Sequence[float] | None = None, 
     blocks = scene_meshes(design, cur) if blocks is None else blocks
     p = new_plotter(pv, window_size)
     add_device(p, design, blocks, opacity=0.3, magnet=True, workspace=True)
-    lo, hi = (colour_ranges(design) if ranges is None else ranges).b_mt
+    lo, hi = colour_ranges(design).b_mt
     scale = ""
     if lines.n_points:
         bmt = np.asarray(lines[B_MT])

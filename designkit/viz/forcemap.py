@@ -11,7 +11,7 @@ from ..support import validate as v
 from .common import F_MN, F_N, MIN_ARROW, Quality, grid_resolution, import_pyvista
 from .physics import (add_field_arrays, array_field, design_point_m, magnet_moment,
                       resolve_currents)
-from .ranges import ColourRanges, clip_note, colour_ranges
+from .ranges import clip_note, colour_ranges
 from .scene import scene_meshes
 from .style import (add_axes, add_device, add_title, bar_args, currents_text, fit_camera,
                     in_mm, log_format, magnet_text, new_plotter)
@@ -69,8 +69,7 @@ def _top_of(blocks, z_min_m: float):
 
 def plot_force_map(design: "Design", currents: Sequence[float] | None = None, *,
                    moment=None, height_m: float | None = None, quality: Quality = "full",
-                   window_size=(1024, 768), data=None, blocks=None,
-                   ranges: ColourRanges | None = None) -> "pyvista.Plotter":
+                   window_size=(1024, 768), data=None, blocks=None) -> "pyvista.Plotter":
     """Arrows of the force on the magnet over the workspace at one height, coloured by its
     magnitude (mN, log scale, the design's fixed range); arrow length grows as the square root
     of the magnitude, from :data:`MIN_ARROW` of the grid step to the whole step. The view holds
@@ -81,7 +80,7 @@ def plot_force_map(design: "Design", currents: Sequence[float] | None = None, *,
     cloud = (force_map_data(design, cur, moment=moment, height_m=h, quality=quality)
              if data is None else data)
     blocks = scene_meshes(design, cur) if blocks is None else blocks
-    ranges = colour_ranges(design) if ranges is None else ranges
+    ranges = colour_ranges(design)
     p = new_plotter(pv, window_size)
     # see-through coils, cut DEVICE_DEPTH_M below their tops: the arrows are the subject, and the
     # whole length of the coils would shrink the workspace to a third of the picture

@@ -16,7 +16,7 @@ from .common import B_MT, F_MN, IN_SOLID, Quality, grid_resolution, image_grid, 
 from .physics import (PICTURE_TOLERANCE, add_field_arrays, array_field, design_coil,
                       design_point_m, footprint_half_m, magnet_moment, resolve_currents,
                       solid_distance_m)
-from .ranges import ColourRanges, clip_note, colour_ranges
+from .ranges import clip_note, colour_ranges
 from .scene import pose_matrix, scene_meshes
 from .style import (add_title, bar_args, currents_text, in_mm, log_format, magnet_text,
                     new_plotter, nice_bounds)
@@ -170,7 +170,7 @@ def _section_lines(pv, design, blocks, sec: Section, view: Literal["xz", "xy"], 
 def plot_slices(design: "Design", currents: Sequence[float] | None = None, *,
                 quantity: Literal["B", "F"] = "B", moment=None, height_m: float | None = None,
                 quality: Quality = "full", window_size=(1500, 640), data=None,
-                blocks=None, ranges: ColourRanges | None = None) -> "pyvista.Plotter":
+                blocks=None) -> "pyvista.Plotter":
     """Magnitude of B (mT) or of the force on the magnet (mN) on the vertical section through
     the design point (left) and on a horizontal section at its height (right); one log colour
     scale, the design's fixed one (:func:`designkit.viz.ranges.colour_ranges`), shared by both;
@@ -185,7 +185,7 @@ def plot_slices(design: "Design", currents: Sequence[float] | None = None, *,
     vert, horiz = (slice_data(design, cur, moment=moment, height_m=h, quality=quality)
                    if data is None else data)
     blocks = scene_meshes(design, cur) if blocks is None else blocks
-    ranges = colour_ranges(design) if ranges is None else ranges
+    ranges = colour_ranges(design)
     name = B_MT if quantity == "B" else F_MN
     unit = "mT" if quantity == "B" else "mN"
     # points inside a core or a winding are not in air: cut out along the solids' surfaces
