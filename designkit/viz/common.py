@@ -25,7 +25,7 @@ QUALITIES: tuple[str, ...] = ("quick", "full")
 GRID_POINTS = {
     "quick": {"volume": (17, 17, 19), "slice": (33, 21), "plane": (35, 35), "map": 9,
               "iso": (19, 19, 17)},
-    "full": {"volume": (33, 33, 41), "slice": (81, 51), "plane": (81, 81), "map": 15,
+    "full": {"volume": (33, 33, 41), "slice": (81, 51), "plane": (81, 81), "map": 11,
              "iso": (37, 37, 31)},
 }
 
@@ -36,7 +36,7 @@ IN_SOLID = "inside a core or winding"
 REACH_M = "height where |Fz| on the coil axes falls below the level (m)"
 
 COPPER, STEEL, MAGNET_RED = "#c87533", "#8c8c8c", "#b22222"
-MIN_ARROW = 0.35
+MIN_ARROW = 0.45
 """Shortest force arrow in the force map, as a fraction of the longest."""
 
 

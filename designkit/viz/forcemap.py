@@ -118,5 +118,8 @@ def plot_force_map(design: "Design", currents: Sequence[float] | None = None, *,
     reach = spacing_mm
     box = [lo_ws[0] * 1e3, hi_ws[0] * 1e3, lo_ws[1] * 1e3, hi_ws[1] * 1e3,
            h * 1e3 - reach, h * 1e3 + reach]
-    fit_camera(p, add_axes(p, box), elevation_deg=50.0, margin=1.1, every_actor=False)
+    # no z axis: the arrows' layer is one height (the title's), a z axis a spacing tall would
+    # crowd its labels into one smudge
+    fit_camera(p, add_axes(p, box, show_zaxis=False, show_zlabels=False), elevation_deg=50.0, margin=1.1,
+               every_actor=False)
     return p
