@@ -118,6 +118,8 @@ def coil_top_discs(design: "Design", currents, resolution: int = 64) -> "pyvista
     return pv.merge(discs)
 
 
+DESIGN_POINT_RING_MM = 8.0
+"""Radius of the top view's ring about the design point, mm (a marker, clear of the number)."""
 SCENE_PANELS = (3, 2)
 """Relative widths of the scene's two panels: the device in 3-D, its top view."""
 
@@ -177,15 +179,16 @@ def _top_view(p, pv, design, cur, clim) -> None:
                        text_color="black", shape=None, show_points=False, always_visible=True,
                        justification_horizontal="center", justification_vertical="center",
                        name="coil-numbers")
-    # the magnet's outline at the design point: a ring, so that the coil number stays readable
+    # a ring about the design point, wide enough to leave the coil's number inside it readable
     dp = design_point_m(design) * 1e3
-    ring = pv.Circle(radius=design.magnet.radius_m * 1e3, resolution=48).extract_feature_edges()
-    p.add_mesh(ring.translate(dp + lift - (0.0, 0.0, dp[2])), color=MAGNET_RED, line_width=3,
-               name="design-point")
+    ring = pv.Circle(radius=DESIGN_POINT_RING_MM, resolution=48).extract_feature_edges()
+    p.add_mesh(ring.translate(dp + lift - (0.0, 0.0, dp[2])), color="cyan", line_width=3,
+               name="design-point")  # cyan as the design point of the sections
     over = ("" if not np.any(np.abs(cur) > hi * (1 + 1e-9)) else
             f" (beyond: the end colours)")
     add_title(p, f"top view: coil numbers; colour: the coil's current, {lo:+.3g}..{hi:+.3g} A, "
-                 f"the per-coil limit{over}; red ring: the magnet\n{currents_text(cur)}",
+                 f"the per-coil limit{over}; cyan ring: about the design point\n"
+                 f"{currents_text(cur)}",
               font_size=10)
     p.view_xy()
     p.enable_parallel_projection()
