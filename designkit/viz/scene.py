@@ -172,8 +172,14 @@ def _top_view(p, pv, design, cur, clim) -> None:
                clim=(lo, hi), name="coil-tops", lighting=False,
                scalar_bar_args=bar_args("I (A)", fmt="%+.2g", position_x=0.86, width=0.05,
                                         n_labels=5))
-    p.add_mesh(in_mm(blocks_outline(design)), color="#1f4e9c", line_width=2, name="outline")
     tops = np.asarray(design.array.top_centres_m(), dtype=float) * 1e3
+    # the workspace's outline under the coils, and each bore's mouth white: where the outline
+    # crosses a coil (a ring's outline runs through its coils' tops) the coil and its number
+    # stay on top
+    below = np.array([0.0, 0.0, min(0.0, float(tops[:, 2].min())) - COIL_LEAN_DEPTH_MM])
+    p.add_mesh(in_mm(blocks_outline(design)).translate(below), color="#1f4e9c", line_width=2,
+               name="outline")
+    p.add_mesh(in_mm(bore_mouths(design)), color="white", lighting=False, name="bores")
     lift = np.array([0.0, 0.0, 1.0 + max(0.0, float(tops[:, 2].max()))])
     p.add_point_labels(tops + lift, [str(k + 1) for k in range(len(tops))], font_size=12,
                        text_color="black", shape=None, show_points=False, always_visible=True,
@@ -199,6 +205,23 @@ def _top_view(p, pv, design, cur, clim) -> None:
                   **counts)
     p.reset_camera(bounds=bounds)
     p.camera.zoom(0.8)
+
+
+COIL_LEAN_DEPTH_MM = 30.0
+"""How far below the coil tops' plane the top view draws the workspace's outline, mm: below
+the lowest point of a leaning coil's top face."""
+
+
+def bore_mouths(design: "Design", resolution: int = 48) -> "pyvista.PolyData":
+    """Each coil's bore at its top face (a disc of the winding's inner radius in its pose), m."""
+    pv = import_pyvista()
+    discs = []
+    for k, pose in enumerate(design.coil_poses()):
+        c = design.coil_spec(k)
+        disc = pv.Disc(center=(0.0, 0.0, c.length_m / 2), inner=0.0, outer=c.inner_radius_m,
+                       c_res=resolution).triangulate()
+        discs.append(disc.transform(pose_matrix(pose), inplace=False))
+    return pv.merge(discs)
 
 
 def blocks_outline(design: "Design") -> "pyvista.PolyData":
