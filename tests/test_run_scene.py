@@ -38,8 +38,15 @@ def files(tmp_path_factory):
     assert main(["scene", "compile", "hemisphere", "--map", str(out / "map.npz"),
                  "--lambda", str(SCENE_LAMBDA), "--out", str(out / "scene.npz"),
                  "--no-progress"]) == 0
+    # a slide inside the small box, 5-15 mm inside the dome (the scripted one starts at
+    # x = -40 mm, outside this box)
+    path = out / "path.csv"
+    t = np.linspace(0.0, 0.3, 31)
+    x = np.interp(t, [0.0, 0.3], [-0.02, 0.01])
+    path.write_text("t_s,x_m,y_m,z_m\n" + "".join(f"{a:.6f},{b:.6f},0.0,0.035\n"
+                                                   for a, b in zip(t, x)))
     return SimpleNamespace(out=out, design=design, map=out / "map.npz",
-                           scene=out / "scene.npz")
+                           scene=out / "scene.npz", path=path)
 
 
 @pytest.fixture(scope="module")
@@ -50,7 +57,8 @@ def scene_run(files):
     mp.setattr("builtins.print", lambda *a, **k: printed.append(" ".join(map(str, a))))
     try:
         code = main(["run", "--simulate", "--design", str(files.design), "--map",
-                     str(files.map), "--scene", str(files.scene), "--duration", "0.3",
+                     str(files.map), "--scene", str(files.scene), "--trajectory",
+                     str(files.path), "--duration", "0.3",
                      "--faults", "sensor_dead@0.15", "--out", str(files.out / "run")])
     finally:
         mp.undo()
