@@ -1,30 +1,19 @@
 """``designkit report``: the main job on a design (default: the embedded thesis device).
 
-Runs the whole pipeline and writes a report folder ``OUT`` (default ``./designkit-report``):
+Writes a report folder ``OUT`` (default ``./designkit-report``): ``report.json`` (version, the
+design and its hash, the single coil's field, gradient, force and torque at the design point,
+the whole array's force there, the design next to the shipped optimized device -- only for a
+device of its layout kind and coil count, else the entry says why --, the files written, the
+steps ``skipped`` and the parts ``failed`` with the reason, ``quick``); ``report.md`` (the same
+for people); ``design.json`` / ``design.md`` / ``design.toml`` (every field, SI, derived coil
+quantities, the TOML that reproduces it); ``designs.json`` (the comparison in full);
+``figures/*.png`` and ``vtk/*`` (:func:`designkit.viz.write_figures`,
+:func:`designkit.viz.export_vtk`); ``map/forcemap.npz`` (a coarse map, :data:`MAP_SPACING_M`;
+the controller's comes from ``designkit map``).
 
-``report.json``
-    Version, design name/hash, the design, the single coil's field, gradient, force and torque
-    at the design point (``design_point``), the whole array's force there (``array``), the
-    design side by side with the shipped optimized device (``designs``: every device
-    constraint with its margin, violations flagged, the upward force at the design point and
-    the smallest upward force the array renders over the workspace region; the optimum only
-    for a design of its layout kind and coil count, ``designs_note`` says why otherwise), the
-    files written, the steps ``skipped`` and the figures ``failed`` with the reason, and
-    ``quick`` (true for a --quick run).
-``report.md``: the same for people, tables and the figures.
-``design.json``, ``design.md``, ``design.toml``: the design summary (every field, SI, with
-    derived coil quantities) as JSON, a Markdown table and the TOML that reproduces it.
-``designs.json``: the side-by-side evaluation in full (constraint tables, rendering points).
-``figures/*.png``: array scene, field lines, |B| and |F| slices, force map, Fz = +/-0.8 mN
-    iso-surface; ``vtk/*``: their data for ParaView (:func:`designkit.viz.export_vtk`).
-``map/forcemap.npz``: a force-current map file on a coarse grid (:data:`MAP_SPACING_M`);
-    the controller's map comes from ``designkit map``.
-
-Every file is written atomically and re-running overwrites the same files with the same
-content (no time stamps), so the job is idempotent. ``--quick`` uses coarse grids, small images
-and fewer optimizer starts; tests use it. ``--no-figures`` leaves out the figures and their VTK
-files. A figure that fails is named with its error in the report and the summary; the other
-figures and files are written.
+Files are written atomically, without time stamps: re-running is idempotent. ``--quick``: coarse
+grids, small images, fewer optimizer starts. ``--no-figures``: no figures, no VTK files. A
+figure that fails is named with its error and the rest is written.
 
 The design point is the magnet's centre at the design height above the coil nearest the
 layout's centre, on its axis (:func:`designkit.viz.design_point_m`); the single-coil rows are
@@ -42,7 +31,6 @@ import numpy as np
 from .. import __version__, fieldmap, viz
 from ..design import (Design, GridLayout, default_design, design_to_toml, load_design,
                       named_design)
-from ..errors import BadInputError
 from ..model.array import array_for_design, force_matrix, g5_from_gradient
 from ..geometry.pose import Pose
 from ..model.coil import Coil
@@ -549,7 +537,10 @@ def _run(args, design, current, currents_arg, out):
     # 4-5. figures and VTK files from the same datasets
     step(steps[3])
     if getattr(args, "figures", True):
-        _figures_and_vtk(design, currents, quality, out, report, skipped)
+        try:
+            _figures_and_vtk(design, currents, quality, out, report)
+        except ImportError as exc:  # pyvista missing: MissingDependencyError
+            skipped["figures"] = skipped["VTK files"] = str(exc)
     else:
         skipped["figures"] = skipped["VTK files"] = "--no-figures"
     done()
@@ -561,8 +552,6 @@ def _run(args, design, current, currents_arg, out):
         report["map"] = str(_field_map(design, out, quality).relative_to(out))
     except ImportError as exc:
         skipped["map file"] = f"designkit.fieldmap is not available ({exc})"
-    except BadInputError as exc:  # the map's own limits (e.g. its box): the report goes on
-        report.setdefault("failed", {})["map file"] = str(exc)
     done()
 
     # 7. report
@@ -576,16 +565,11 @@ def _run(args, design, current, currents_arg, out):
     return summary, report
 
 
-def _figures_and_vtk(design, currents, quality, out, report, skipped) -> None:
+def _figures_and_vtk(design, currents, quality, out, report) -> None:
     """figures/*.png and vtk/* (the figures' datasets); a figure that fails is named in
     ``report["failed"]`` with its error, the others are written."""
     sizes = ((640, 480), (960, 420)) if quality == "quick" else ((1024, 768), (1500, 640))
-    try:
-        made = viz.write_figures(design, out / "figures", currents, quality=quality,
-                                 sizes=sizes)
-    except ImportError as exc:  # pyvista missing: MissingDependencyError
-        skipped["figures"] = skipped["VTK files"] = str(exc)
-        return
+    made = viz.write_figures(design, out / "figures", currents, quality=quality, sizes=sizes)
     report["figures"] = {kind: f"figures/{kind}.png" for kind in made.figures}
     report["failed"] = {f"figure {kind}": why for kind, why in made.failed.items()}
     files = viz.export_vtk(design, out / "vtk", currents, quality=quality, data=made.data,
