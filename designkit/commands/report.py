@@ -584,8 +584,10 @@ def _print_summary(design, summary, current, report, out) -> None:
     print(f"coil: Ri/Ro/L = {design.coil.inner_radius_m * 1e3:.1f}/"
           f"{design.coil.outer_radius_m * 1e3:.1f}/{design.coil.length_m * 1e3:.1f} mm, "
           f"{design.coil.turns} turns, core: {summary['core_model'] or 'none'}")
-    print(f"design point: {design.optimize.height_m * 1e3:.1f} mm above the coil top, "
-          f"I = {current:g} A")
+    where = ", ".join(f"{x * 1e3:.4g}" for x in viz.design_point_m(design))
+    print(f"design point: {design.optimize.height_m * 1e3:.1f} mm above the top of coil "
+          f"{viz.design_coil(design) + 1}, on its axis ({where}) mm; I = {current:g} A (the "
+          "single-coil rows: that coil alone)")
     print(f"  B      = ({b[0] * 1e3:+.4f}, {b[1] * 1e3:+.4f}, {b[2] * 1e3:+.4f}) mT")
     print(f"  dBz/dz = {summary['gradient_t_per_m'][2][2]:+.5f} T/m")
     print(f"  F      = ({f[0] * 1e3:+.3f}, {f[1] * 1e3:+.3f}, {f[2] * 1e3:+.3f}) mN on m = "
