@@ -148,6 +148,26 @@ class ForceConstant:
     current_limit_a: float
     total_current_a: float
 
+    @property
+    def unrenderable_points(self) -> int:
+        """Surface points where no lambda > 0 is renderable (lambda_j = 0: there the magnet's
+        pull on the cores, F0, is beyond what the coils can cancel)."""
+        return int(np.sum(self.lam_per_point <= 0.0))
+
+    def lam_where_renderable(self) -> float:
+        """lambda*, N/m, over the points where some lambda > 0 is renderable (0 when none is):
+        a few points at the workspace's floor over a core would otherwise make the whole
+        object's lambda 0."""
+        ok = self.lam_per_point > 0.0
+        return float(self.lam_per_point[ok].min()) if ok.any() else 0.0
+
+    def limiting_point_where_renderable(self) -> np.ndarray:
+        """(3,) m: where :meth:`lam_where_renderable` is reached (the overall limiting point
+        when no point is renderable)."""
+        lam = np.where(self.lam_per_point > 0.0, self.lam_per_point, np.inf)
+        k = int(np.argmin(lam)) if np.isfinite(lam).any() else self.limiting_index
+        return self.points_m[k].copy()
+
 
 def _targets(rows, normals, heights):
     if rows == "force":
@@ -269,8 +289,10 @@ def _faces_lambdas(fms, d_all, bias, u, tl, unipolar, rtol, progress):
     inside = ~out & (inside0 | (proven & (sep < -tol0)))
     res = np.where(out, 0.0, np.where(inside & proven & (x < _FLOAT_MAX), x, np.nan))
     alloc = Allocator()
-    for i in tqdm(np.flatnonzero(np.isnan(res)).tolist(), desc="force constant",
-                  disable=not progress, mininterval=2):
+    left = np.flatnonzero(np.isnan(res)).tolist()
+    # a bar only when points are left to the allocator (an empty one printed "0it" twice)
+    for i in tqdm(left, desc="force constant: points checked by the allocator",
+                  disable=not progress or not left, mininterval=2):
         fm, d, f0, xi = fl[i], dl[i], bl[i], float(x[i])
         ok = inside[i] and xi < _FLOAT_MAX and _renders(alloc, fm, xi, d, f0, u, tl,
                                                           unipolar)
@@ -283,7 +305,7 @@ def _faces_lambdas(fms, d_all, bias, u, tl, unipolar, rtol, progress):
 def _secant_lambdas(fms, d_all, bias, u, tl, unipolar, rtol, progress):
     """Per-point lambda by the secant search on the allocator's residual (the reference)."""
     lam = np.empty(len(fms))
-    for j in tqdm(range(len(fms)), desc="force constant", disable=not progress,
+    for j in tqdm(range(len(fms)), desc="force constant", disable=not progress or not len(fms),
                   mininterval=2):
         d = d_all[j]
         if np.linalg.norm(d) == 0.0:
