@@ -45,14 +45,14 @@ def _texts(plotter) -> str:
 def test_design_point_is_above_the_coil_nearest_the_layouts_centre():
     # 4 x 4 grid, rows from +y: the four middle coils are 5, 6, 9, 10; the first of them,
     # row 1 / column 1, sits at (-25, +25) mm
-    assert viz.design_coil(GRID) == 5
-    np.testing.assert_allclose(viz.design_point_m(GRID), [-0.025, 0.025, 0.030], atol=1e-15)
+    assert GRID.design_coil == 5
+    np.testing.assert_allclose(GRID.design_point_m, [-0.025, 0.025, 0.030], atol=1e-15)
     # a ring: every coil is as near; coil 0 on +x, the point on its leaning axis
     h = RING.optimize.height_m
-    np.testing.assert_allclose(viz.design_point_m(RING),
+    np.testing.assert_allclose(np.asarray(RING.design_point_m),
                                np.array([0.075, 0.0, 0.0]) + h * ring_axis(0), atol=1e-15)
     # the thesis device keeps its design point, (0, 0, h) above the centre coil
-    np.testing.assert_allclose(viz.design_point_m(default_design()), [0, 0, 0.03], atol=1e-15)
+    np.testing.assert_allclose(default_design().design_point_m, [0, 0, 0.03], atol=1e-15)
 
 
 def test_default_currents_drive_the_coil_nearest_the_design_point_not_the_middle_index():
@@ -68,9 +68,9 @@ def test_default_currents_drive_the_coil_nearest_the_design_point_not_the_middle
 
 def test_sections_pass_through_the_design_point_and_are_not_empty():
     for design in (GRID, RING):
-        dp = viz.design_point_m(design)
+        dp = np.asarray(design.design_point_m)
         sec = viz.section_plane(design)
-        k = viz.design_coil(design)
+        k = design.design_coil
         axis = design.array.axes()[k]
         # the vertical plane holds the design point and the design coil's axis
         assert abs(sec.normal @ axis) < 1e-12 and abs(sec.normal[2]) == 0.0
@@ -95,7 +95,7 @@ def test_sections_pass_through_the_design_point_and_are_not_empty():
             assert np.abs(viz.solid_distance_m(design, world)).max() <= tol
             text = " ".join(_texts(p).split())
             assert "centre coil" not in text and "through the design point" in text
-            assert f"coil {viz.design_coil(design) + 1} at" in text
+            assert f"coil {design.design_coil + 1} at" in text
         finally:
             p.close()
 

@@ -79,7 +79,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def single_coil(design: Design) -> Coil:
     """The coil under the design point (:func:`designkit.viz.design_coil`), alone, upright, its
     top face at z = 0 about the origin: the single-coil problem of thesis eq. 2.14."""
-    k = viz.design_coil(design)
+    k = design.design_coil
     c = design.coil_spec(k)
     return Coil.from_specs(c, design.core_spec(k), Pose((0.0, 0.0, -c.length_m / 2)))
 
@@ -505,14 +505,14 @@ def _run(args, design, current, currents_arg, out):
         "design_hash": design.spec_hash(),
         "design": design.to_dict(),
         "design_point": summary,
-        "design_point_m": viz.design_point_m(design).tolist(),
-        "design_point_coil": viz.design_coil(design) + 1,
+        "design_point_m": np.asarray(design.design_point_m).tolist(),
+        "design_point_coil": design.design_coil + 1,
         "n_coils": design.n_coils,
         "coil": derived,
     }
     currents = viz.resolve_currents(design, currents_arg)
     try:
-        point = viz.design_point_m(design)
+        point = np.asarray(design.design_point_m)
         b, g = viz.array_field(design, point[None, :], currents)
         f = viz.force_from_gradient(g, viz.magnet_moment(design))[0]
         report["array"] = {"currents_a": currents.tolist(),
@@ -585,9 +585,9 @@ def _print_summary(design, summary, current, report, out) -> None:
     print(f"coil: Ri/Ro/L = {design.coil.inner_radius_m * 1e3:.1f}/"
           f"{design.coil.outer_radius_m * 1e3:.1f}/{design.coil.length_m * 1e3:.1f} mm, "
           f"{design.coil.turns} turns, core: {summary['core_model'] or 'none'}")
-    where = ", ".join(f"{x * 1e3:.4g}" for x in viz.design_point_m(design))
+    where = ", ".join(f"{x * 1e3:.4g}" for x in np.asarray(design.design_point_m))
     print(f"design point: {design.optimize.height_m * 1e3:.1f} mm above the top of coil "
-          f"{viz.design_coil(design) + 1}, on its axis ({where}) mm; I = {current:g} A (the "
+          f"{design.design_coil + 1}, on its axis ({where}) mm; I = {current:g} A (the "
           "single-coil rows: that coil alone)")
     print(f"  B      = ({b[0] * 1e3:+.4f}, {b[1] * 1e3:+.4f}, {b[2] * 1e3:+.4f}) mT")
     print(f"  dBz/dz = {summary['gradient_t_per_m'][2][2]:+.5f} T/m")

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..support import validate as v
 from .common import F_MN, F_N, MIN_ARROW, Quality, grid_resolution, import_pyvista
-from .physics import (add_field_arrays, array_field, design_point_m, magnet_moment,
+from .physics import (add_field_arrays, array_field, magnet_moment,
                       resolve_currents)
 from .ranges import clip_note, colour_ranges
 from .scene import scene_meshes
@@ -37,7 +37,7 @@ def force_map_data(design: "Design", currents: Sequence[float] | None = None, *,
     res = grid_resolution(quality)
     cur = resolve_currents(design, currents)
     m = magnet_moment(design, moment)
-    h = float(design_point_m(design)[2]) if height_m is None else v.positive("height_m",
+    h = float(np.asarray(design.design_point_m)[2]) if height_m is None else v.positive("height_m",
                                                                               height_m)
     xy = design.workspace_region().grid_xy(map_spacing_m(design, quality))
     pts = np.c_[xy, np.full(len(xy), h)]
@@ -76,7 +76,7 @@ def plot_force_map(design: "Design", currents: Sequence[float] | None = None, *,
     the arrows' layer; the coils below are drawn see-through for context."""
     pv = import_pyvista()
     cur = resolve_currents(design, currents)
-    h = float(design_point_m(design)[2]) if height_m is None else height_m
+    h = float(np.asarray(design.design_point_m)[2]) if height_m is None else height_m
     cloud = (force_map_data(design, cur, moment=moment, height_m=h, quality=quality)
              if data is None else data)
     blocks = scene_meshes(design, cur) if blocks is None else blocks

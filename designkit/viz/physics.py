@@ -31,27 +31,9 @@ TIE_M = 1e-9
 """Coils whose distances differ by less than this, m, are equally near: the lower index wins."""
 
 
-def design_coil(design: "Design") -> int:
-    """Index of the coil the design point sits above: the coil whose top-face centre is nearest
-    (in x, y) to the layout's centre, the mean of the top-face centres; of equally near coils
-    (a 4 x 4 grid's four middle ones, a ring's all) the first in the layout's order."""
-    tops = np.asarray(design.array.top_centres_m(), dtype=float)
-    d = np.hypot(*(tops[:, :2] - tops[:, :2].mean(axis=0)).T)
-    return int(np.flatnonzero(d <= d.min() + TIE_M)[0])
-
-
-def design_point_m(design: "Design") -> np.ndarray:
-    """The design point, m, shape (3,): the magnet's centre ``optimize.height_m`` above the top
-    face of :func:`design_coil`, on its axis (for an upright coil at the origin: (0, 0, h), where
-    the single-coil problem of thesis eq. 2.14 puts it)."""
-    k = design_coil(design)
-    top = np.asarray(design.array.top_centres_m()[k], dtype=float)
-    return top + design.optimize.height_m * np.asarray(design.array.axes()[k], dtype=float)
-
-
 def nearest_coil(design: "Design", point_m) -> int:
     """Index of the coil whose top-face centre is nearest to the point (m); ties as in
-    :func:`design_coil`."""
+    :attr:`designkit.design.Design.design_coil`."""
     p = np.asarray(v.vector3("point_m", point_m, "m"), dtype=float)
     d = np.linalg.norm(np.asarray(design.array.top_centres_m(), dtype=float) - p, axis=1)
     return int(np.flatnonzero(d <= d.min() + TIE_M)[0])
@@ -66,7 +48,7 @@ def resolve_currents(design: "Design", currents: Sequence[float] | None = None) 
     n = design.n_coils
     if currents is None:
         out = np.zeros(n)
-        out[nearest_coil(design, design_point_m(design))] = design.drive.max_current_a
+        out[nearest_coil(design, np.asarray(design.design_point_m))] = design.drive.max_current_a
         return out
     try:
         arr = np.asarray(currents, dtype=float).reshape(-1)

@@ -1,8 +1,8 @@
 """The colour ranges of the figures: fixed by the design, not by the currents drawn, so that two
 figures of one design (other currents, another kind) read on the same scale.
 
-Each range is set by the coil the design point sits above (:func:`designkit.viz.physics.
-design_coil`), alone, at the design's per-coil limit ``drive.max_current_a``:
+Each range is set by the coil the design point sits above
+(:attr:`designkit.design.Design.design_coil`), alone, at the design's per-coil limit ``drive.max_current_a``:
 
 * |B| (mT): up to its largest |B| :data:`POLE_GAP_M` from its pole (its highest solid's top
   face: the core's, or the winding's bore), on the axis and at the rim (the slices and the field
@@ -27,7 +27,6 @@ import numpy as np
 
 from ..model.array import force_matrix, g5_from_gradient
 from ..model.coil import Coil
-from .physics import design_coil
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..design import Design
@@ -50,7 +49,7 @@ class ColourRanges:
 
 def colour_ranges(design: "Design") -> ColourRanges:
     """The fixed colour ranges of the design's figures (see the module docstring)."""
-    k = design_coil(design)
+    k = design.design_coil
     coil = Coil.of_design(design, k)
     frame = design.coil_poses()[k].matrix
     side, axis = frame[:, 0], frame[:, 2]

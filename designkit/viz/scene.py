@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Sequence
 import numpy as np
 
 from .common import CURRENT_A, MAGNET_RED, STEEL, import_pyvista
-from .physics import design_coil, design_point_m, magnet_moment, resolve_currents
+from .physics import magnet_moment, resolve_currents
 from .ranges import colour_ranges
 from .style import (add_axes, add_title, bar_args, currents_text, fit_camera, in_mm,
                     magnet_text, new_plotter, nice_bounds)
@@ -78,7 +78,8 @@ def scene_meshes(design: "Design", currents: Sequence[float] | None = None, *,
     m = magnet_moment(design, moment)
     mag = design.magnet
     axis = m / np.linalg.norm(m) if np.linalg.norm(m) > 0 else np.array([0.0, 0.0, 1.0])
-    magnet = pv.Cylinder(center=design_point_m(design), direction=axis, radius=mag.radius_m,
+    magnet = pv.Cylinder(center=np.asarray(design.design_point_m), direction=axis,
+                         radius=mag.radius_m,
                          height=mag.length_m, resolution=resolution)
     blocks = pv.MultiBlock()
     blocks["windings"] = pv.merge(windings)
@@ -143,14 +144,14 @@ def plot_array_scene(design: "Design", currents: Sequence[float] | None = None, 
         p.add_mesh(in_mm(blocks["cores"]), color=STEEL, name="cores")
     p.add_mesh(in_mm(blocks["magnet"]), color=MAGNET_RED, name="magnet")
     p.add_mesh(in_mm(blocks["workspace"]), color="#1f4e9c", line_width=2, name="workspace")
-    dp = design_point_m(design) * 1e3
+    dp = np.asarray(design.design_point_m) * 1e3
     mdir = m / (np.linalg.norm(m) or 1.0)
     # the arrow ends at the magnet, on the side its moment comes from: clear of the coils
     length = 25.0
     start = dp - mdir * (length + design.magnet.length_m * 1e3 / 2 + 2.0)
     p.add_mesh(pv.Arrow(start=start, direction=mdir, scale=length, tip_length=0.3,
                         tip_radius=0.12, shaft_radius=0.05), color="black", name="moment")
-    k = design_coil(design)
+    k = design.design_coil
     c = design.coil_spec(k)
     add_title(p, f"{design.name}: {design.array.describe()}\n"
                  f"winding Ri/Ro/L = {c.inner_radius_m * 1e3:.3g}/{c.outer_radius_m * 1e3:.3g}/"
@@ -186,7 +187,7 @@ def _top_view(p, pv, design, cur, clim) -> None:
                        justification_horizontal="center", justification_vertical="center",
                        name="coil-numbers")
     # a ring about the design point, wide enough to leave the coil's number inside it readable
-    dp = design_point_m(design) * 1e3
+    dp = np.asarray(design.design_point_m) * 1e3
     ring = pv.Circle(radius=DESIGN_POINT_RING_MM, resolution=48).extract_feature_edges()
     p.add_mesh(ring.translate(dp + lift - (0.0, 0.0, dp[2])), color="cyan", line_width=3,
                name="design-point")  # cyan as the design point of the sections

@@ -13,8 +13,8 @@ import numpy as np
 from ..errors import BadInputError
 from ..support import validate as v
 from .common import B_MT, F_MN, IN_SOLID, Quality, grid_resolution, image_grid, import_pyvista
-from .physics import (PICTURE_TOLERANCE, add_field_arrays, array_field, design_coil,
-                      design_point_m, footprint_half_m, magnet_moment, resolve_currents,
+from .physics import (PICTURE_TOLERANCE, add_field_arrays, array_field,
+                      footprint_half_m, magnet_moment, resolve_currents,
                       solid_distance_m)
 from .ranges import clip_note, colour_ranges
 from .scene import pose_matrix, scene_meshes
@@ -70,8 +70,8 @@ class Section:
 def section_plane(design: "Design") -> Section:
     """The vertical section through the design point: it holds the design coil's axis (for a
     leaning coil, the plane of its lean; for an upright one, the plane along x)."""
-    dp = design_point_m(design)
-    axis = np.asarray(design.array.axes()[design_coil(design)], dtype=float)
+    dp = np.asarray(design.design_point_m)
+    axis = np.asarray(design.array.axes()[design.design_coil], dtype=float)
     lean = np.array([axis[0], axis[1], 0.0])
     if np.linalg.norm(lean) < 1e-9:
         along = np.array([1.0, 0.0, 0.0])
@@ -129,7 +129,7 @@ def slice_data(design: "Design", currents: Sequence[float] | None = None, *,
 
 def _z_low(design: "Design") -> float:
     """Bottom of the vertical section, m: a quarter of the design coil's length below the tops."""
-    return -DRAWN_COIL_FRACTION * design.coil_spec(design_coil(design)).length_m
+    return -DRAWN_COIL_FRACTION * design.coil_spec(design.design_coil).length_m
 
 
 def _air(mesh):
