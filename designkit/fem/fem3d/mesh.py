@@ -22,9 +22,11 @@ def _add_bodies(occ, bodies, symmetry, r_int, r_ext):
     inner = occ.addSphere(0, 0, 0, r_int)
     vols = []
     for b in bodies:
-        c = occ.addCylinder(b.x, b.y, b.z0, 0, 0, b.z1 - b.z0, b.radius)
+        base, top = b.end_points()
+        d = top - base
+        c = occ.addCylinder(*base, *d, b.radius)
         if b.inner_radius > 0:
-            h = occ.addCylinder(b.x, b.y, b.z0, 0, 0, b.z1 - b.z0, b.inner_radius)
+            h = occ.addCylinder(*base, *d, b.inner_radius)
             c = occ.cut([(3, c)], [(3, h)])[0][0][1]
         vols.append(c)
     objs = [(3, outer), (3, inner)] + [(3, v) for v in vols]

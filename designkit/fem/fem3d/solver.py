@@ -44,6 +44,9 @@ def _checked(bodies, points, symmetry, outputs):
     if pts.ndim != 2 or pts.shape[1] != 3 or not np.all(np.isfinite(pts)):
         raise BadInputError("points", "finite array of shape (n, 3), m", pts.shape)
     has_magnet = any(b.kind == "magnet" for b in bodies)
+    if any(b.kind == "magnet" and not b.vertical for b in bodies):
+        raise BadInputError("bodies", "a magnet with a vertical axis (the face rule of the "
+                            "force integral)", [b.axis for b in bodies if b.kind == "magnet"])
     outputs = ("lines" if has_magnet else "iron") if outputs is None else outputs
     if outputs not in ("iron", "lines") or (outputs == "iron" and has_magnet):
         raise BadInputError("outputs", "'lines', or 'iron' when no body is a magnet", outputs)
