@@ -27,7 +27,7 @@ from ..support.progress import tqdm
 from .cells import fit_layers
 from .physics import MapPhysics, map_physics
 from .plan import N_CHECK, _nodes, box_axes, cell_layers, default_box, layer_nodes, sources_top, table_specs
-from .symmetry import Orbits, array_symmetries, random_orbits
+from .symmetry import Orbits, random_orbits, sampling_group
 from .tables import compute_magnet_table, coupled_modes, mode_table_entry
 
 FORMAT, FORMAT_VERSION, UNITS = mf.FORMAT, mf.FORMAT_VERSION, mf.UNITS
@@ -204,8 +204,8 @@ class _Plan:
 
 def _plan(arr: CoilArray, lower, upper, s: BuildSettings, moment=None) -> _Plan:
     """The layout of everything the build samples, from the box and the settings; the
-    array's symmetries about the box's vertical axis (:mod:`.symmetry`) pick the points
-    sampled (the bias force's only with ``moment`` (3,) A m^2 along z)."""
+    array's symmetries (:func:`.symmetry.sampling_group`) pick the points sampled (the bias
+    force's only those that keep the line of ``moment`` (3,) A m^2)."""
     types = list(arr.coil_types().items())
     m_specs = table_specs(arr, [idx for _, idx in types], lower, upper, s.magnet_rz_step,
                           s.magnet_rz_log_step, s.rz_rho_scale, 2)
@@ -216,17 +216,16 @@ def _plan(arr: CoilArray, lower, upper, s: BuildSettings, moment=None) -> _Plan:
     z_ref = max(arr.coils[k].pose.position[2] + sp["z_ref_m"]
                 for (_, idx), sp in zip(types, m_specs) for k in idx)
     m_axes = box_axes(lower, upper, s.spacing, z_ref, s.log_step)
-    centre = 0.5 * (lower[:2] + upper[:2])
-    group = array_symmetries(arr, centre)
-    check, check_orbits = random_orbits(lower, upper, s.n_check, group, centre,
+    group = sampling_group(arr)
+    check, check_orbits = random_orbits(lower, upper, s.n_check, group,
                                         np.random.default_rng(CHECK_SEED))
     m_nodes = _nodes(m_axes)
-    upright = moment is not None and not np.any(np.asarray(moment, float)[:2])
+    f_group = (sampling_group(arr, moment) if moment is not None
+               else group.subgroup(lambda e, s: False))
     return _Plan(lower, upper, types, m_specs, z_top, layers, lattices, fit_pts, m_axes,
                  m_nodes, check, min(s.n_check, max(10, s.n_check // 8)), arr.positions(),
                  [list(map(list, c.pose.rotation)) for c in arr.coils],
-                 Orbits.of(fit_pts, group, centre),
-                 Orbits.of(m_nodes, group if upright else group[:1], centre), check_orbits)
+                 Orbits.of(fit_pts, group), Orbits.of(m_nodes, f_group), check_orbits)
 
 
 # ============================================================================ samples

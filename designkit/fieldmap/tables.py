@@ -93,7 +93,8 @@ def coupled_modes(arr: CoilArray, sensor_tolerance: float = 1e-3) -> dict | None
         return None
     nc = arr.n_coils
     sens = arr.sensor_positions_m().reshape(-1, 3)
-    x = system.adjoint(sens)  # (nu, ns * 3), columns (sensor, component)
+    # columns (sensor, component); the tables' (cos, sin) modes are read in the coils' frames
+    x = system.in_coil_frames(system.adjoint(sens))  # (nu, ns * 3)
     blocks = {}
     for jj, k in enumerate(system.core_index):
         model = system.models[jj]

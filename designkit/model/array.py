@@ -31,6 +31,7 @@ import numpy as np
 from scipy.optimize import linprog
 
 from ..cores import ArraySystem, saturation_table
+from ..cores.symmetry import PlacementGroup, find_symmetries
 from ..design import default_design
 from ..errors import BadInputError, DesignRuleError
 from ..geometry.pose import Pose
@@ -272,6 +273,18 @@ class CoilArray:
         for k, c in enumerate(self.coils):
             out.setdefault(dataclasses.replace(c, pose=Pose()), []).append(k)
         return out
+
+    def symmetries(self) -> PlacementGroup:
+        """The array's symmetry group about the vertical axis through its coils' centroid
+        (:func:`designkit.cores.symmetry.find_symmetries` of the winding centres, axes and the
+        coils without their poses): the elements that map every coil onto an identical coil.
+        Built once."""
+        if "_group" not in self.__dict__:
+            kinds = [dataclasses.replace(c, pose=Pose()) for c in self.coils]
+            group = find_symmetries(self.positions(),
+                                    [c.pose.matrix[:, 2] for c in self.coils], kinds)
+            object.__setattr__(self, "_group", group)
+        return self.__dict__["_group"]
 
     def __getstate__(self):
         # the cached coupled solve (tens of MB) is rebuilt on demand, not pickled to workers
