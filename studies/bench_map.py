@@ -283,7 +283,7 @@ def run(out_dir=DEFAULT_OUT, quick: bool = False, n_points: int = 10000) -> dict
     out_dir.mkdir(parents=True, exist_ok=True)
     d = default_design()
     if quick:  # air coils over a small box: no iron, seconds
-        small = d.replace(**{"core": None, "workspace.half_width_m": 0.03,
+        small = d.replace(**{"core": None, "workspace.shape": "box", "workspace.half_width_m": 0.03,
                              "workspace.z_max_m": 0.03})
         res = {"air_quick": _case(small, out_dir, "air_quick", 300, 5, n_check=10)}
     else:

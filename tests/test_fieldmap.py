@@ -19,7 +19,8 @@ from designkit.cli import main
 from designkit.design import design_to_toml
 from designkit.errors import BadInputError
 
-SMALL = default_design().replace(**{"core": None, "workspace.half_width_m": 0.03,
+SMALL = default_design().replace(**{"core": None, "workspace.shape": "box",
+                                     "workspace.half_width_m": 0.03,
                                      "workspace.z_min_m": 0.01, "workspace.z_max_m": 0.04})
 
 
@@ -449,7 +450,7 @@ def test_cli_map_refuses_bad_outputs_before_computing(tmp_path, monkeypatch, cap
 
 
 # ---------------------------------------------------------------------------- coupled iron cores
-TWO = default_design().replace(**{"array.rows": 1, "array.columns": 2,
+TWO = default_design().replace(**{"array.rows": 1, "array.columns": 2, "workspace.shape": "box",
                                    "workspace.half_width_m": 0.03, "workspace.z_max_m": 0.04})
 
 

@@ -22,7 +22,7 @@ def _geometry(shape, seed):
     return default_design().replace(**{
         "array.rows": rows, "array.columns": cols, "array.pitch_m": pitch,
         "core.radius_m": rng.uniform(0.008, 0.012), "core.length_m": rng.uniform(0.100, 0.115),
-        "workspace.half_width_m": half, "workspace.z_min_m": z_min,
+        "workspace.shape": "box", "workspace.half_width_m": half, "workspace.z_min_m": z_min,
         "workspace.z_max_m": z_min + rng.uniform(0.02, 0.04)})
 
 

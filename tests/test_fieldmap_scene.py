@@ -191,7 +191,8 @@ def test_scene_region_refuses_objects_outside_the_box():
         fieldmap.scene_region([Hemisphere(diameter_m=0.02, centre_m=(0.3, 0, 0))], 0.0, lo, hi)
 
 
-SMALL = default_design().replace(**{"core": None, "workspace.half_width_m": 0.04,
+SMALL = default_design().replace(**{"core": None, "workspace.shape": "box",
+                                     "workspace.half_width_m": 0.04,
                                      "workspace.z_min_m": 0.01, "workspace.z_max_m": 0.04})
 
 

@@ -23,9 +23,10 @@ from .common import add_design_argument, add_progress_argument, check_output, sh
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_design_argument(parser)
-    parser.add_argument("--spacing", type=float, default=10.0,
+    parser.add_argument("--spacing", type=float, default=None,
                         help="x, y step in mm of the grid over magnet positions that carries "
-                             "the bias force beyond the per-core tables (default 10)")
+                             "the bias force beyond the per-core tables (default 10, or 5 when "
+                             "some core's axis is not along the magnet's moment)")
     parser.add_argument("--scene", type=Path, default=None,
                         help="compiled scene (designkit scene compile): map only the region its "
                              "objects can push in, plus --scene-margin (the runner fails safe "
@@ -51,12 +52,13 @@ def run(args: argparse.Namespace) -> int:
     # everything that can be refused is refused before the (long) computation
     out = fieldmap.check_output(args.out)
     check_output(out, folder=False)  # a folder that cannot be written: refused in < 1 s
-    spacing = in_range("--spacing", args.spacing, 0.5, 100.0, "mm")
+    spacing = None if args.spacing is None else in_range("--spacing", args.spacing, 0.5,
+                                                          100.0, "mm") * 1e-3
     margin = in_range("--scene-margin", args.scene_margin, 0.0, 100.0, "mm")
     design = load_design(args.design)
     extra = {} if args.scene is None else scene_args(args.scene, design, margin * 1e-3)
     t0 = time.perf_counter()
-    data = fieldmap.build(design, spacing=spacing * 1e-3, progress=show_progress(args), **extra)
+    data = fieldmap.build(design, spacing=spacing, progress=show_progress(args), **extra)
     path = fieldmap.write(out, data)
     meta = data["meta"]
     err = meta["errors"]

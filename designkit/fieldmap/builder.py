@@ -21,12 +21,13 @@ from .. import __version__
 from ..errors import BadInputError
 from ..model.array import ROWS, CoilArray
 from ..model.electrical import drive_data
-from ..support import validate as v
 from ..support.blas import one_blas_thread
 from ..support.progress import tqdm
 from .cells import fit_layers
+from .clearance import Clearance
 from .physics import MapPhysics, map_physics
-from .plan import N_CHECK, _nodes, box_axes, cell_layers, default_box, layer_nodes, sources_top, table_specs
+from .settings import BuildSettings
+from .plan import box_axes, cell_layers, default_box, layer_nodes, lattice_nodes, table_specs
 from .symmetry import Orbits, random_orbits, sampling_group
 from .tables import compute_magnet_table, coupled_modes, mode_table_entry
 
@@ -39,57 +40,30 @@ CHECK_SEED = 20261123
 """Seed of the random check points (the same points for every build of a box)."""
 
 
-def build(design, *, spacing: float = 0.01, log_step: float = 0.25,
-          cell_ratio=(1.0, 0.5), layer_ratio=(0.7, 0.5), degree=(12, 7),
-          fit_nodes: int = 4, sensor_mode_tolerance: float = 1e-3,
-          rz_rho_scale: float = 0.05, sensor_mode_rz_step: float = 2.5e-4,
-          sensor_mode_rz_log_step: float = 0.04, magnet_rz_step: float = 5e-4,
-          magnet_rz_log_step: float = 0.02, box=None, n_check: int = N_CHECK,
-          progress: bool = True, array: CoilArray | None = None,
-          region: dict | None = None) -> dict:
+def build(design, settings: BuildSettings | None = None, *, box=None, progress: bool = True,
+          array: CoilArray | None = None, region: dict | None = None, **changes) -> dict:
     """Compute the map v2 of ``design``: ``{"arrays": {...}, "meta": {...}}`` (not yet written).
 
     Parameters
     ----------
-    spacing, log_step : float
-        x, y step (m) of the grids over magnet positions that carry what the per-core magnet
-        tables miss (the bias force's core-to-core part, trilinear); their z steps grow from
-        ``log_step`` x the height above the cores' tops, never above ``spacing``. The defaults'
-        F0 error against the coupled model: docs/fieldmap.md.
-    cell_ratio, layer_ratio, degree, fit_nodes
-        A's harmonic cells (:func:`~designkit.fieldmap.plan.cell_layers`): cells no wider than
-        ``cell_ratio`` and layers ``layer_ratio`` x the height of their floor above the sources'
-        top, potentials of degree ``degree`` (K = (degree + 1)^2 - 1 coefficients per cell and
-        coil); each a sequence per layer from the lowest (the last entry for the layers above;
-        ``layer_ratio`` may be one number); fitted on ``fit_nodes``^3 Chebyshev-Lobatto nodes
-        per cell (shared across faces; each node is one evaluation of the coupled model).
-    sensor_mode_tolerance : float
-        The sensor field's core modes are kept while their singular value is above this
-        fraction of the largest of their order (m = 0, 1, 2) (the unit dipoles ~9 mm from a
-        core's end need many; 1e-3 keeps the file small for an error of ~2 % of the field,
-        itself a few mT).
-    rz_rho_scale : float, m
-        The (rho, z) tables' rho steps grow as (1 + rho / rz_rho_scale)^2.
-        ``sensor_mode_rz_step``, ``sensor_mode_rz_log_step``: rho step on the axis (m) and step
-        in log(z - z_ref) of the sensor field's mode tables (0.25 mm, 4 %);
-        ``magnet_rz_step``, ``magnet_rz_log_step`` for the magnet tables (0.5 mm, 2 %: the pull
-        of one core falls ~z^-7 near it, so coarse bilinear steps in z leave large errors).
+    settings : BuildSettings or None
+        How densely the map samples (:class:`.settings.BuildSettings`; None: its defaults);
+        ``changes``: fields of it to replace (``build(d, n_check=20)``), checked alike.
     box : (lower, upper) or None
         Corners, m; default :func:`~designkit.fieldmap.plan.default_box`.
-    n_check : int
-        Random points where the finished map is compared with the coupled model (meta
-        'errors'): n_check / |G| uniform points evaluated directly and their images under the
-        box's symmetries G filled exactly (:func:`.symmetry.random_orbits`).
+    progress : bool
+        One progress bar over the sampling.
+    array : CoilArray or None
+        The design's array when already built (its coupled solve is reused).
     region : dict or None
         What ``box`` was made for (a scene map: :mod:`.region`), stored as meta 'region'.
     """
-    s = BuildSettings.checked(spacing, log_step, cell_ratio, layer_ratio, degree, fit_nodes,
-                              sensor_mode_tolerance, rz_rho_scale, sensor_mode_rz_step,
-                              sensor_mode_rz_log_step, magnet_rz_step, magnet_rz_log_step,
-                              n_check)
+    s = BuildSettings.with_changes(settings, changes)
     arr = array or CoilArray.from_design(design)
-    lower, upper = _box(design, box)
     phys = map_physics(design)
+    s = s.resolved(tilted_pull(arr, phys.moment_a_m2))
+    check_sensor_count(arr)
+    lower, upper = _box(design, box)
     plan = _plan(arr, lower, upper, s, phys.moment_a_m2)
     smp = _sample(phys, arr, plan, s, progress)
     t0, c0 = time.perf_counter(), time.process_time()
@@ -106,66 +80,12 @@ def build(design, *, spacing: float = 0.01, log_step: float = 0.25,
     return {"arrays": arrays, "meta": meta}
 
 
-# ============================================================================ settings
-@dataclass(frozen=True)
-class BuildSettings:
-    """The validated arguments of :func:`build` (same names and units)."""
-
-    spacing: float
-    log_step: float
-    cell_ratio: tuple
-    layer_ratio: tuple
-    degree: tuple
-    fit_nodes: int
-    sensor_mode_tolerance: float
-    rz_rho_scale: float
-    sensor_mode_rz_step: float
-    sensor_mode_rz_log_step: float
-    magnet_rz_step: float
-    magnet_rz_log_step: float
-    n_check: int
-
-    @classmethod
-    def checked(cls, spacing, log_step, cell_ratio, layer_ratio, degree, fit_nodes,
-                sensor_mode_tolerance, rz_rho_scale, sensor_mode_rz_step,
-                sensor_mode_rz_log_step, magnet_rz_step, magnet_rz_log_step,
-                n_check) -> "BuildSettings":
-        """Every argument checked, in this order (BadInputError naming it and its range)."""
-        spacing = v.in_range("spacing", spacing, 5e-4, 0.1, "m")
-        log_step = v.in_range("log_step", log_step, 1e-3, 2.0)
-        if np.ndim(layer_ratio) == 0:
-            layer_ratio = (layer_ratio,)
-        if (np.ndim(cell_ratio) != 1 or np.ndim(degree) != 1 or np.ndim(layer_ratio) != 1
-                or not len(cell_ratio) or not len(degree) or not len(layer_ratio)):
-            raise BadInputError("cell_ratio, layer_ratio, degree", "sequences, per layer from "
-                                "the lowest (the last one for the layers above)",
-                                (cell_ratio, layer_ratio, degree))
-        return cls(
-            spacing, log_step,
-            tuple(v.in_range("cell_ratio", r, 0.05, 2.0) for r in cell_ratio),
-            tuple(v.in_range("layer_ratio", r, 0.05, 2.0) for r in layer_ratio),
-            tuple(int(v.in_range("degree", d, 2, 12)) for d in degree),
-            int(v.in_range("fit_nodes", fit_nodes, 3, 8)),
-            v.in_range("sensor_mode_tolerance", sensor_mode_tolerance, 1e-8, 1e-1),
-            v.in_range("rz_rho_scale", rz_rho_scale, 1e-3, 10.0, "m"),
-            v.in_range("sensor_mode_rz_step", sensor_mode_rz_step, 1e-5, 0.01, "m"),
-            v.in_range("sensor_mode_rz_log_step", sensor_mode_rz_log_step, 1e-3, 0.5),
-            v.in_range("magnet_rz_step", magnet_rz_step, 1e-5, 0.01, "m"),
-            v.in_range("magnet_rz_log_step", magnet_rz_log_step, 1e-3, 0.5),
-            v.positive_int("n_check", n_check))
-
-    def meta(self, n_fit_points: int) -> dict:
-        """The map's meta ``settings`` (lengths with their unit in the key)."""
-        return {"spacing_m": self.spacing, "log_step": self.log_step,
-                "cell_ratio": list(self.cell_ratio), "layer_ratio": list(self.layer_ratio),
-                "degree": list(self.degree), "fit_nodes": self.fit_nodes,
-                "n_fit_points": n_fit_points,
-                "sensor_mode_tolerance": self.sensor_mode_tolerance,
-                "rz_rho_scale_m": self.rz_rho_scale,
-                "sensor_mode_rz_step_m": self.sensor_mode_rz_step,
-                "sensor_mode_rz_log_step": self.sensor_mode_rz_log_step,
-                "magnet_rz_step_m": self.magnet_rz_step,
-                "magnet_rz_log_step": self.magnet_rz_log_step}
+def tilted_pull(arr: CoilArray, moment) -> bool:
+    """Whether some coupled core's axis is not along the magnet's ``moment`` (3,): its pull is
+    then not axisymmetric about it, and the magnet tables hold only a part of it."""
+    m = np.asarray(moment, float) / max(float(np.linalg.norm(moment)), 1e-300)
+    return any(c.core is not None and abs(abs(float(c.pose.matrix[:, 2] @ m)) - 1.0) > 1e-9
+               for c in arr.coils)
 
 
 def _box(design, box) -> tuple[np.ndarray, np.ndarray]:
@@ -187,7 +107,7 @@ class _Plan:
     upper: np.ndarray
     types: list            # [(prototype coil, [coil indices])] per coil type
     m_specs: list          # the magnet tables' grids, per coil type
-    z_top: float           # the top of all sources
+    z_top: float           # the sources' effective top (the box's floor less its clearance)
     layers: list           # meta a_layers
     lattices: list         # per layer its fit lattice's x, y, z axes
     fit_pts: np.ndarray    # (N, 3) every layer's lattice, in layer order
@@ -209,17 +129,18 @@ def _plan(arr: CoilArray, lower, upper, s: BuildSettings, moment=None) -> _Plan:
     types = list(arr.coil_types().items())
     m_specs = table_specs(arr, [idx for _, idx in types], lower, upper, s.magnet_rz_step,
                           s.magnet_rz_log_step, s.rz_rho_scale, 2)
-    z_top = sources_top(arr)
-    layers = cell_layers(lower, upper, z_top, s.cell_ratio, s.layer_ratio, s.degree)
+    clear = Clearance(arr)
+    z_top = float(lower[2]) - clear(lower, np.r_[upper[:2], lower[2]])
+    layers = cell_layers(lower, upper, clear.slab(lower, upper), s.cell_ratio, s.layer_ratio,
+                         s.degree)
     lattices = [layer_nodes(lay, s.fit_nodes) for lay in layers]
-    fit_pts = np.concatenate([_nodes(ax) for ax in lattices])
-    z_ref = max(arr.coils[k].pose.position[2] + sp["z_ref_m"]
-                for (_, idx), sp in zip(types, m_specs) for k in idx)
-    m_axes = box_axes(lower, upper, s.spacing, z_ref, s.log_step)
+    fit_pts = np.concatenate([lattice_nodes(ax) for ax in lattices])
+    # the residual grid's z steps grow with the distance from the sources, as the cells
+    m_axes = box_axes(lower, upper, s.spacing, z_top, s.log_step)
     group = sampling_group(arr)
     check, check_orbits = random_orbits(lower, upper, s.n_check, group,
                                         np.random.default_rng(CHECK_SEED))
-    m_nodes = _nodes(m_axes)
+    m_nodes = lattice_nodes(m_axes)
     f_group = (sampling_group(arr, moment) if moment is not None
                else group.subgroup(lambda e, s: False))
     return _Plan(lower, upper, types, m_specs, z_top, layers, lattices, fit_pts, m_axes,
@@ -339,18 +260,42 @@ def _arrays(phys: MapPhysics, arr: CoilArray, plan: _Plan, smp: _Samples,
                               plan.positions, plan.rotations)
     f_pair = mf.magnet_terms(mprep, plan.m_nodes)
     m_shape = tuple(len(a) for a in plan.m_axes)
-    sensor_rows = phys.sensor_coil_rows(arr)
+    sensor_rows = phys.sensor_coil_rows(arr)  # (n_sensors, 8, nc)
+    n_s = len(sensor_rows)
+    arrays.update(sensor_file_arrays({
+        "SCOEF": smp.modes["sensor_coef"] if smp.modes else np.zeros((nc, 0, n_s, 3)),
+        "SENSOR_POS": phys.sensor_positions(arr).astype(np.float64),
+        "SENSOR_COIL": sensor_rows[:, :3].astype(np.float64),
+        "SENSOR_COIL_GRAD": sensor_rows[:, 3:].astype(np.float64)}, nc))
     arrays.update({
-        "SCOEF": smp.modes["sensor_coef"] if smp.modes else np.zeros((nc, 0, 2, nc, 3)),
         "F0_RES": (smp.f0 - f_pair).reshape(m_shape + (3,)).astype(np.float32),
         "M_X": plan.m_axes[0], "M_Y": plan.m_axes[1], "M_Z": plan.m_axes[2],
-        "SENSOR_POS": phys.sensor_positions(arr).astype(np.float64),
-        "SENSOR_COIL": sensor_rows[:, :, :3].astype(np.float64),
-        "SENSOR_COIL_GRAD": sensor_rows[:, :, 3:].astype(np.float64),
         "MOMENT": phys.moment_a_m2.astype(np.float64),
         "SAT_I": smp.sat_i.astype(np.float64), "SAT_FACTOR": smp.sat_f.astype(np.float64),
     })
     return arrays, row_max
+
+
+def sensor_file_arrays(flat: dict, n_coils: int) -> dict:
+    """The sensor arrays of the build, flat over the sensor list (SENSOR_POS (n_s, 3),
+    SENSOR_COIL (n_s, 3, nc), SENSOR_COIL_GRAD (n_s, 5, nc), SCOEF (nc, n_b, n_s, 3)), in the
+    map format's shapes: an upper and a lower array of one sensor per coil, (2, nc, ...)
+    (:func:`check_sensor_count` refuses other counts before the build)."""
+    return {"SENSOR_POS": flat["SENSOR_POS"].reshape(2, n_coils, 3),
+            "SENSOR_COIL": flat["SENSOR_COIL"].reshape(
+                (2, n_coils) + flat["SENSOR_COIL"].shape[1:]),
+            "SENSOR_COIL_GRAD": flat["SENSOR_COIL_GRAD"].reshape(
+                (2, n_coils) + flat["SENSOR_COIL_GRAD"].shape[1:]),
+            "SCOEF": flat["SCOEF"].reshape(flat["SCOEF"].shape[:2] + (2, n_coils, 3))}
+
+
+def check_sensor_count(arr: CoilArray) -> None:
+    """The map format stores the sensors as an upper and a lower array of one sensor per coil:
+    BadInputError for any other count (a free sensor list of another length)."""
+    n_s = len(arr.sensor_poses()[0])
+    if n_s != 2 * arr.n_coils:
+        raise BadInputError("sensors.positions_m", f"{2 * arr.n_coils} sensors (the map format "
+                            "holds two a coil: an upper and a lower array)", f"{n_s} sensors")
 
 
 def _meta(design, arr: CoilArray, phys: MapPhysics, plan: _Plan, s: BuildSettings,
@@ -396,7 +341,8 @@ def _errors(reader: mf.MapFile, plan: _Plan, smp: _Samples, row_max: np.ndarray)
         "actuation_fit_nodes_max_rel": float(fit_err.max()),
         "n_magnet_points": plan.n_mcheck,
         "bias_force_max_rel": _rel(reader.bias_force(check), smp.f0_check),
-        "sensor_induced_max_rel": _rel(reader.sensor_induced_field(check), smp.sind_check)}
+        "sensor_induced_max_rel": _rel(reader.sensor_induced_field(check).reshape(
+            smp.sind_check.shape), smp.sind_check)}
 
 
 def _drive_coils(arr: CoilArray) -> list:

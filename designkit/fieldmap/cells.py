@@ -13,7 +13,7 @@ import numpy as np
 from firmware_io import mapfile as mf
 
 from ..support.blas import one_blas_thread
-from .plan import _lobatto
+from .plan import lobatto
 
 
 def fit_layer(lay: dict, values: np.ndarray, row_max: np.ndarray, n: int) -> np.ndarray:
@@ -25,7 +25,7 @@ def fit_layer(lay: dict, values: np.ndarray, row_max: np.ndarray, n: int) -> np.
     hx, hy = lay["cell_x_m"], lay["cell_y_m"]
     dz = lay["z_hi_m"] - lay["z_lo_m"]
     r = max(hx, hy, dz) / 2
-    t = _lobatto(n) - 0.5
+    t = lobatto(n) - 0.5
     s = np.stack(np.meshgrid(t * hx / r, t * hy / r, t * dz / r, indexing="ij"), -1)
     ops = mf.harmonic_rows(deg)  # (8, M, K)
     scale = np.array([r] * 3 + [r * r] * 5) * row_max

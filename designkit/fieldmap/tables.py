@@ -23,7 +23,7 @@ from ..geometry.pose import Pose
 from ..model.array import CoilArray
 from ..support.blas import one_blas_thread
 from .physics import MapPhysics
-from .plan import _spec_nodes
+from .plan import spec_nodes
 
 
 def _even_on_axis(out: np.ndarray, rho: np.ndarray, cols) -> None:
@@ -42,7 +42,7 @@ def compute_magnet_table(phys: "MapPhysics", coil, spec: dict, stride: int = 2) 
     pull is smooth: stride 2 is within 1e-4 of the largest value of each column of the table
     computed at every node (docs/fieldmap.md), far below the reader's bilinear steps."""
     alone = CoilArray((coil.replace(pose=Pose()),))
-    rho, z = _spec_nodes(spec)
+    rho, z = spec_nodes(spec)
     i, j = _sub_nodes(len(rho), stride), _sub_nodes(len(z), stride)
     R, Z = np.meshgrid(rho[i], z[j], indexing="ij")
     pts = np.c_[R.ravel(), np.zeros(R.size), Z.ravel()]
@@ -77,7 +77,7 @@ def coupled_modes(arr: CoilArray, sensor_tolerance: float = 1e-3) -> dict | None
     type (None without coupled cores).
 
     The field at sensor s along e_c of the cores magnetized by the magnet m at p is m . the
-    field at p of the adjoint columns X = M^-T E^T (module docstring; 3 x 2 x n_coils columns,
+    field at p of the adjoint columns X = M^-T E^T (module docstring; 3 n_sensors columns,
     X_j core j's rows: m = 0 rings, m = 1, 2 cos and sin rings; the adjoint sources' fields:
     :func:`adjoint_basis_field`). Per core type and mode order m, the SVD of
     all X blocks gives the shapes U_m (kept while the singular values are above
@@ -85,14 +85,14 @@ def coupled_modes(arr: CoilArray, sensor_tolerance: float = 1e-3) -> dict | None
     U_m^T X_j[:, (s, c)].
 
     Returns {"types": [{"model", "coils", "sets": [sensors] ({"U": {m: (n_m, R_m)},
-    "basis": [(m, r, c)]})}], "sensor_coef": (n_coils, n_basis_max, 2, n_coils, 3)}; basis
+    "basis": [(m, r, c)]})}], "sensor_coef": (n_coils, n_basis_max, n_sensors, 3)}; basis
     entries (m, r, c): mode order, shape index, c = 0 cos / 1 sin (m = 0: c = 0).
     """
     system = arr.coupled()
     if system is None:
         return None
     nc = arr.n_coils
-    sens = arr.sensor_positions_m().reshape(-1, 3)
+    sens = arr.sensor_poses()[0]
     # columns (sensor, component); the tables' (cos, sin) modes are read in the coils' frames
     x = system.in_coil_frames(system.adjoint(sens))  # (nu, ns * 3)
     blocks = {}
@@ -128,7 +128,7 @@ def coupled_modes(arr: CoilArray, sensor_tolerance: float = 1e-3) -> dict | None
             for b, (m, r, c) in enumerate(st["basis"]):
                 sl = [s for s, cc in t["parts"][m] if cc == c][0]
                 coef[k, b] = st["U"][m][:, r] @ d[sl]
-    return {"types": types, "sensor_coef": coef.reshape(nc, nb, 2, nc, 3)}
+    return {"types": types, "sensor_coef": coef.reshape(nc, nb, len(sens), 3)}
 
 
 def adjoint_basis_field(model, pts: np.ndarray, n_phi: int = 12, m_top: int | None = None):
@@ -229,7 +229,7 @@ def compute_mode_tables(t: dict, spec: dict, progress=None, stride: int = 2) -> 
     table, :func:`compute_magnet_table`)."""
     model = t["model"]
     t_sets = t["sets"]
-    rho_all, z_all = _spec_nodes(spec)
+    rho_all, z_all = spec_nodes(spec)
     i_sub, j_sub = _sub_nodes(len(rho_all), stride), _sub_nodes(len(z_all), stride)
     rho, z = rho_all[i_sub], z_all[j_sub]
     R, Z = np.meshgrid(rho, z, indexing="ij")
