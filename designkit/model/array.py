@@ -34,7 +34,8 @@ from ..errors import BadInputError
 from ..geometry.pose import Pose
 from ..support import validate as v
 from .coil import Coil
-from .overlap import check_overlap, check_separation
+from .overlap import (check_layout_overlap, check_overlap, check_sensors_clear,
+                      check_separation, sensor_inside)
 from firmware_io.mapfile import check_currents
 
 ROWS = ("Bx", "By", "Bz", "dBx/dx", "dBx/dy", "dBx/dz", "dBy/dy", "dBy/dz")
@@ -127,10 +128,12 @@ class CoilArray:
         """The design's array: its layout's coils (each with its own winding and core), its
         sensors; as built (moved, tilted, rewound, other cores) when the design has
         ``[asbuilt]``, with the sensors where the nominal design puts them."""
-        coils = tuple(Coil.of_design(design, k) for k in range(design.n_coils))
+        check_layout_overlap(design, _nominal_coils)
+        coils = _nominal_coils(design)
         if design.asbuilt is not None:
             coils = design.asbuilt.apply(coils)
         pos, rot = design.sensor_poses()
+        check_design_sensors(design, coils, pos)
         return cls(coils, sensor_offset_m=design.sensors.offset_m,
                    sensors=(_nested(pos), _nested(rot)))
 
@@ -398,6 +401,27 @@ class CoilArray:
         sk = skew_matrix(moment)
         a = self.actuation_matrix(np.atleast_2d(np.asarray(points, dtype=float)))
         return (a[:, :3, :] @ self._currents(currents)) @ sk.T
+
+
+def _nominal_coils(design) -> tuple:
+    """The design's coils in their layout's poses (not as built)."""
+    return tuple(Coil.of_design(design, k) for k in range(design.n_coils))
+
+
+def check_design_sensors(design, coils, positions) -> None:
+    """BadInputError when a sensor of ``design`` (``positions`` (n, 3) m) lies in a coil's
+    winding or core: a free list names ``sensors.positions_m[k]``; the default layout names
+    ``sensors.offset_m`` and the offset the cores' ends need."""
+    if design.sensors.layout == "free":
+        check_sensors_clear(coils, positions, "sensors.positions_m")
+        return
+    if any(sensor_inside(coils, p) is not None for p in positions):
+        need = max(max(0.0, c.core.offset + c.core.length / 2 - c.length / 2,
+                       c.core.length / 2 - c.core.offset - c.length / 2)
+                   for c in coils if c.core is not None)
+        raise BadInputError("sensors.offset_m", f"> {need:.4g} m (the cores reach that far "
+                            "beyond their windings' ends: a sensor there sits in the iron)",
+                            design.sensors.offset_m)
 
 
 @functools.lru_cache(maxsize=8)

@@ -87,18 +87,79 @@ def _segment_distance(ca, ha, cb, hb) -> float:
     return float(np.sqrt(np.einsum("ij,ij->i", d, d).min()) - step)
 
 
-def check_overlap(coils) -> None:
-    """Raise :class:`DesignRuleError` naming the first pair of coils whose solids intersect."""
+def first_overlap(coils) -> tuple[int, int, str, str] | None:
+    """(i, j, solid of i, solid of j) of the first pair of coils whose solids intersect, or
+    None."""
     for (i, ci), (j, cj) in itertools.combinations(enumerate(coils), 2):
         for a in coil_solids(ci):
             for b in coil_solids(cj):
                 if solids_overlap(ci.pose, a, cj.pose, b):
-                    raise DesignRuleError(
-                        f"Coils {i} and {j} overlap: the {a[0]} of coil {i} (at "
-                        f"{np.round(np.asarray(ci.pose.position) * 1e3, 3).tolist()} mm) "
-                        f"intersects the {b[0]} of coil {j} (at "
-                        f"{np.round(np.asarray(cj.pose.position) * 1e3, 3).tolist()} mm). "
-                        "Move them apart or make them smaller.")
+                    return i, j, a[0], b[0]
+    return None
+
+
+def check_overlap(coils) -> None:
+    """Raise :class:`DesignRuleError` naming the first pair of coils whose solids intersect."""
+    hit = first_overlap(coils)
+    if hit is not None:
+        i, j, a, b = hit
+        ci, cj = coils[i], coils[j]
+        raise DesignRuleError(
+            f"Coils {i} and {j} overlap: the {a} of coil {i} (at "
+            f"{np.round(np.asarray(ci.pose.position) * 1e3, 3).tolist()} mm) "
+            f"intersects the {b} of coil {j} (at "
+            f"{np.round(np.asarray(cj.pose.position) * 1e3, 3).tolist()} mm). "
+            "Move them apart or make them smaller.")
+
+
+SCALE_KEYS = {"grid": "pitch_m", "hex": "pitch_m", "ring": "radius_m"}
+"""The key that spreads each generated layout's coils apart (m)."""
+
+
+def check_layout_overlap(design, coils_of) -> None:
+    """Raise :class:`DesignRuleError` in one line naming the design keys when the coils of
+    ``design`` intersect: a generated layout's spreading key (:data:`SCALE_KEYS`), its value
+    and the smallest value at which these coils clear each other (bisection, 1 % of it, with
+    ``coils_of(design)`` building the coils); a free layout's two positions (and axes).
+    """
+    hit = first_overlap(coils_of(design))
+    if hit is None:
+        return
+    i, j, a, b = hit
+    what = f"the {a} of coil {i} intersects the {b} of coil {j}"
+    lay = design.array
+    key = SCALE_KEYS.get(lay.kind)
+    if key is None:
+        def vec(v):
+            return [float(q) for q in v]
+
+        axes = (f" (axes {vec(lay.axis_vectors[i])}, {vec(lay.axis_vectors[j])})"
+                if lay.axis_vectors else "")
+        raise DesignRuleError(
+            f"array.positions_m[{i}] = {vec(lay.positions_m[i])} and array.positions_m[{j}] = "
+            f"{vec(lay.positions_m[j])} m{axes}: {what}; move them apart so that no winding "
+            "or core meets another.")
+    value = float(getattr(lay, key))
+    tilt = f" at tilt_deg = {lay.tilt_deg:g}" if lay.kind == "ring" else ""
+    need = _smallest_clear(design, key, value, coils_of)
+    raise DesignRuleError(
+        f"array.{key} = {value:g} m{tilt}: {what}; valid range: array.{key} >= {need:.4g} m "
+        f"for these coils (layout '{lay.kind}').")
+
+
+def _smallest_clear(design, key: str, value: float, coils_of) -> float:
+    """The smallest value of ``array.<key>`` (m) at which the coils clear each other, by
+    bisection between ``value`` (they meet) and a value where they do not (1 % of it)."""
+    def clear(x):
+        return first_overlap(coils_of(design.replace(**{f"array.{key}": x}))) is None
+
+    lo, hi = value, 2.0 * value
+    while not clear(hi):
+        lo, hi = hi, 2.0 * hi
+    while hi - lo > 0.01 * hi:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if clear(mid) else (mid, hi)
+    return hi
 
 
 def check_separation(coils) -> None:
@@ -140,7 +201,7 @@ def sensor_inside(coils, position) -> tuple[int, str] | None:
     for k, c in enumerate(coils):
         loc = c.pose.to_local(p)[0]
         rho = float(np.hypot(loc[0], loc[1]))
-        for name, r, z0, z1 in coil_solids(c):
+        for name, r, z0, z1 in coil_solids(c)[::-1]:  # the core first: inside the envelope
             if rho <= r and z0 <= loc[2] <= z1:
                 return k, name
     return None
