@@ -90,8 +90,12 @@ def fill_symmetric(g, red):
         g[:, k, i] = red[:, j]
 
 
-def self_charge_matrices(radius, z_lo, z_hi, kind, lo, hi, rho_c, z_c, m_max):
+def self_charge_matrices(radius, z_ends, panels, m_max):
     """D_m (n1, n1): normal H at the collocation points (phi = 0) per unit cos(m phi') density.
+
+    ``radius`` and ``z_ends`` (z_lo, z_hi) of the core, m; ``panels`` (kind, lo, hi, rho_c,
+    z_c): each panel's kind (0 side, 1 top, 2 bottom), its extent along the contour and its
+    collocation point (m), as :func:`designkit.cores.core_model` lays them out.
 
     Side panels: the z' integral is done in closed form (a uniform line charge), end-face
     panels by composite Gauss in r'; phi' by Gauss on intervals graded geometrically towards
@@ -100,6 +104,8 @@ def self_charge_matrices(radius, z_lo, z_hi, kind, lo, hi, rho_c, z_c, m_max):
     surface is what the on-surface integral gives (the +-sigma/2 jump is added by the equation).
     Every source panel of a kind at once: (source, collocation, phi') arrays.
     """
+    z_lo, z_hi = z_ends
+    kind, lo, hi, rho_c, z_c = panels
     n1 = len(kind)
     ph, wph = _phi_nodes_graded()
     cph, sph = np.cos(ph), np.sin(ph)

@@ -381,7 +381,7 @@ def core_model(radius: float, length: float, offset: float, mu_r: float, key: tu
     kind, lo1, hi1, rho1, z1 = _charge_panels(radius, lo, hi, refine)
     self1 = ()
     if m_max:
-        d = self_charge_matrices(radius, lo, hi, kind, lo1, hi1, rho1, z1, m_max)
+        d = self_charge_matrices(radius, (lo, hi), (kind, lo1, hi1, rho1, z1), m_max)
         lam2 = 2.0 * (mu_r - 1.0) / (mu_r + 1.0)
         self1 = tuple(np.eye(len(kind)) - lam2 * d[m] for m in range(m_max))
     # compressed far rules of both (as CoreSolution.groups): the side in three stretches

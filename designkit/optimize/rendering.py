@@ -14,7 +14,7 @@ from typing import Sequence
 import numpy as np
 
 from ..constants import MU0
-from ..cores.rod import solve_rod
+from ..cores.rod import RodGeometry, RodSettings, solve_rod
 from ..design import Design
 from ..errors import BadInputError
 from ..field import cylindrical_to_cartesian
@@ -37,8 +37,8 @@ def array_force_per_amp(coil_x: Sequence[float], turns: float, current_a: float,
     """
     ri, ro, ln, a, lc, prot, _ = [float(q) for q in coil_x]
     off = ln / 2 + prot - lc / 2
-    sol = solve_rod(ri, ro, ln, turns, min(a, ri), lc, off, current_a, n_slices=n_slices,
-                    quadrature="bessel")
+    sol = solve_rod(RodGeometry(ri, ro, ln, turns, min(a, ri), lc, off), current_a,
+                    RodSettings(n_slices=n_slices, quadrature="bessel"))
     pts = np.asarray(points_m, dtype=float)
     cen = np.asarray(centres_xy_m, dtype=float)
     nc, npt = len(cen), len(pts)

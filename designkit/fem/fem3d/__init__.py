@@ -25,11 +25,12 @@ from .cases import (WORKSPACE_BOX, array_case, image_force_z, magnet_block_force
 from .device import device_bodies, device_case
 from .iron import conical_rule, core_dipoles, dipoles_field, iron_field
 from .lines import FIT_DEGREE, FIT_HALF_WINDOW, FIT_SAMPLES
-from .mesh import build_mesh
+from .mesh import MeshSettings, build_mesh
 from .problem import problem_text
-from .solver import Fem3DResult, solve
+from .solver import Fem3DResult, Fem3DSettings, solve
 
 __all__ = ["AIR", "BOUNDARY", "CORE0", "MAGNET", "SHELL", "WIND0", "Cyl", "Fem3DResult",
+           "Fem3DSettings", "MeshSettings",
            "device_bodies", "device_case", "model_symmetry",
            "FIT_DEGREE", "FIT_HALF_WINDOW", "FIT_SAMPLES", "WORKSPACE_BOX", "array_case",
            "build_mesh", "conical_rule", "core_dipoles", "dipoles_field", "image_force_z",
