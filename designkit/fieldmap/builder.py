@@ -10,6 +10,7 @@ N. What the choices cost and how accurate the result is: docs/fieldmap.md.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -215,7 +216,11 @@ def _step(kind: str, k: int, smp: _Samples, phys: MapPhysics, arr: CoilArray, pl
     elif kind == "magnet tables":
         proto, idx = plan.types[k]
         spec = plan.m_specs[k]
-        smp.tables[f"MRZ{k}"] = compute_magnet_table(phys, proto, spec).astype(np.float32)
+        # each core alone in its own frame, the moment along its axis: the part of its pull
+        # the (rho, z) table can hold (tilted_pull: the residual grid carries the rest)
+        axial = dataclasses.replace(phys, moment_a_m2=np.array(
+            [0.0, 0.0, float(np.linalg.norm(phys.moment_a_m2))]))
+        smp.tables[f"MRZ{k}"] = compute_magnet_table(axial, proto, spec).astype(np.float32)
         smp.mrz_meta.append({"name": f"MRZ{k}", "coils": [int(c) for c in idx], **spec})
     elif kind == "mode tables":
         for j, t in enumerate(smp.modes["types"] if smp.modes else []):

@@ -86,20 +86,25 @@ def workspace_metrics(design, *, spacing: float = 0.005, heights=None, out_png=N
     """Largest vertical force, where it passes the human threshold, and conditioning.
 
     Evaluated on horizontal planes (``heights``, m above the coil tops; default 10, 30, 50 mm)
-    over the workspace footprint with the design's drive limits (per coil and total) and a
-    magnet of the design (its moment vector, MagnetSpec.direction).
+    over the bounding box of the workspace's outline (the layout's footprint,
+    :meth:`designkit.design.Design.workspace_region`) with the design's drive limits (per
+    coil and total) and a magnet of the design (its moment vector, MagnetSpec.direction);
+    ``fraction_above_threshold`` counts the points inside the outline.
 
     Returns a dict of arrays and summary numbers; writes a PNG map to ``out_png`` if given.
     """
     arr = array or CoilArray.from_design(design)
-    ws = design.workspace
+    region = design.workspace_region()
+    lo, hi = region.bounds_m()
     heights = (0.010, 0.030, 0.050) if heights is None else tuple(heights)
-    xs = np.arange(-ws.half_width_m, ws.half_width_m + 1e-12, spacing)
+    xs = np.arange(lo[0], hi[0] + 1e-12, spacing)
+    ys = np.arange(lo[1], hi[1] + 1e-12, spacing)
     m = np.array(design.magnet.moment_vector_a_m2)
     thr = design.render.threshold_n
+    X, Y = np.meshgrid(xs, ys, indexing="xy")
+    inside = region.contains_xy(np.c_[X.ravel(), Y.ravel()]).reshape(X.shape)
     fmax, cond = [], []
     for h in heights:
-        X, Y = np.meshgrid(xs, xs, indexing="xy")
         pts = np.c_[X.ravel(), Y.ravel(), np.full(X.size, h)]
         # the array's own exact matrix: designkit.model.skipping (tables, faster) imports this module
         a = arr.actuation_matrix(pts)
@@ -108,8 +113,9 @@ def workspace_metrics(design, *, spacing: float = 0.005, heights=None, out_png=N
                                        design.drive.total_current_a).reshape(X.shape))
         cond.append(condition_number(a).reshape(X.shape))
     fmax, cond = np.array(fmax), np.array(cond)
-    out = {"heights_m": np.array(heights), "x_m": xs, "max_fz_n": fmax, "condition": cond,
-           "fraction_above_threshold": [(f > thr).mean() for f in fmax],
+    out = {"heights_m": np.array(heights), "x_m": xs, "y_m": ys, "max_fz_n": fmax,
+           "condition": cond, "inside": inside,
+           "fraction_above_threshold": [(f[inside] > thr).mean() for f in fmax],
            "threshold_n": thr}
     if out_png is not None:
         _plot_metrics(out, out_png)
@@ -123,7 +129,7 @@ def _plot_metrics(res: dict, out_png) -> None:
     import matplotlib.pyplot as plt
 
     hs = res["heights_m"]
-    ext = np.array([res["x_m"][0], res["x_m"][-1]] * 2) * 1e3
+    ext = np.array([res["x_m"][0], res["x_m"][-1], res["y_m"][0], res["y_m"][-1]]) * 1e3
     fig, axes = plt.subplots(2, len(hs), figsize=(4 * len(hs), 7), squeeze=False)
     for k, h in enumerate(hs):
         ax = axes[0, k]
