@@ -220,21 +220,23 @@ class ChargeModes:
         """Charge quadrature: positions (n1, ng, nphi, 3), weights (n1, ng) (area / dphi)."""
         key = (ng, nphi)
         cache = self._charge_nodes_cache
-        if key not in cache:
-            x, w = gauss(ng)
-            mid = 0.5 * (self.lo1 + self.hi1)
-            half = 0.5 * (self.hi1 - self.lo1)
-            s = mid[:, None] + half[:, None] * x[None]
-            ws = half[:, None] * w[None]
-            phi = 2.0 * math.pi * (np.arange(nphi) + 0.5) / nphi
-            side = (self.kind1 == 0)[:, None]
-            r = np.where(side, self.radius, s)
-            zz = np.where(side, s, np.where((self.kind1 == 1)[:, None], self.z_hi, self.z_lo))
-            wt = ws * r * (2.0 * math.pi / nphi)  # dA = r ds dphi
-            pos = np.stack([r[:, :, None] * np.cos(phi), r[:, :, None] * np.sin(phi),
-                            np.repeat(zz[:, :, None], nphi, axis=2)], axis=-1)
-            cache[key] = (pos, wt, phi)
-        return cache[key]
+        got = cache.get(key)  # one lookup: the map's sampling threads share the cache
+        if got is not None:
+            return got
+        x, w = gauss(ng)
+        mid = 0.5 * (self.lo1 + self.hi1)
+        half = 0.5 * (self.hi1 - self.lo1)
+        s = mid[:, None] + half[:, None] * x[None]
+        ws = half[:, None] * w[None]
+        phi = 2.0 * math.pi * (np.arange(nphi) + 0.5) / nphi
+        side = (self.kind1 == 0)[:, None]
+        r = np.where(side, self.radius, s)
+        zz = np.where(side, s, np.where((self.kind1 == 1)[:, None], self.z_hi, self.z_lo))
+        wt = ws * r * (2.0 * math.pi / nphi)  # dA = r ds dphi
+        pos = np.stack([r[:, :, None] * np.cos(phi), r[:, :, None] * np.sin(phi),
+                        np.repeat(zz[:, :, None], nphi, axis=2)], axis=-1)
+        cache[key] = got = (pos, wt, phi)
+        return got
 
     def _m1_field(self, pts, ng, nphi, gradient, chunk=128):
         """H [and G] of every m >= 1 unknown (unit density) at local points: (n, 3, nb) A/m

@@ -11,6 +11,9 @@ N. What the choices cost and how accurate the result is: docs/fieldmap.md.
 from __future__ import annotations
 
 import dataclasses
+import multiprocessing
+import os
+import signal
 import time
 from dataclasses import dataclass, field
 
@@ -37,6 +40,8 @@ CHUNK = 64
 """Magnet positions / check points per coupled-model call of the sampling phase."""
 FIT_CHUNK = 512
 """Fit nodes per coupled-model call of the sampling phase."""
+WORKERS = min(2, os.cpu_count() or 1)
+"""Processes of the sampling phase after the coupled solve (docs/fieldmap.md, "Costs")."""
 CHECK_SEED = 20261123
 """Seed of the random check points (the same points for every build of a box)."""
 
@@ -183,74 +188,135 @@ def _steps(plan: _Plan, n_check: int) -> list:
 
 def _sample(phys: MapPhysics, arr: CoilArray, plan: _Plan, s: BuildSettings,
             progress: bool) -> _Samples:
-    """Every evaluation of the coupled model the map needs, under one progress bar."""
+    """Every evaluation of the coupled model the map needs, under one progress bar: the
+    coupled solve first, then the other steps, on :data:`WORKERS` forked processes where the
+    platform forks (they inherit the solved system; threads cannot share OpenBLAS's
+    single-threaded LAPACK calls, which then return wrong solves). Per stage: the summed wall
+    seconds of its steps and their CPU seconds, in whichever process ran them."""
     nc = arr.n_coils
     # a_fit, a_check and f0 hold the orbits' representatives until the loop is done
     smp = _Samples(np.empty((len(plan.fit_orbits.reps), 8, nc)),
                    np.empty((len(plan.check_orbits.reps), 8, nc)),
                    np.empty((len(plan.m_orbits.reps), 3)))
-    bar = tqdm(_steps(plan, s.n_check), desc="map", unit="step", disable=not progress,
-               leave=False)
-    for kind, k in bar:
-        bar.set_postfix_str(kind, refresh=False)
-        t0, c0 = time.perf_counter(), time.process_time()
-        _step(kind, k, smp, phys, arr, plan, s, bar)
-        smp.seconds[kind] = smp.seconds.get(kind, 0.0) + time.perf_counter() - t0
-        smp.cpu_seconds[kind] = smp.cpu_seconds.get(kind, 0.0) + time.process_time() - c0
-    bar.close()
+    smp.mrz_meta = [None] * len(plan.types)
+    steps = _steps(plan, s.n_check)
+    bar = tqdm(total=len(steps), desc="map", unit="step", disable=not progress, leave=False)
+    _CONTEXT.update(phys=phys, arr=arr, plan=plan, settings=s)
+    try:
+        for kind, k, value, wall, cpu in _run_steps(steps):
+            _store(smp, kind, k, value)
+            smp.seconds[kind] = smp.seconds.get(kind, 0.0) + wall
+            smp.cpu_seconds[kind] = smp.cpu_seconds.get(kind, 0.0) + cpu
+            bar.set_postfix_str(kind, refresh=False)
+            bar.update()
+    finally:
+        _CONTEXT.clear()
+        bar.close()
     smp.a_fit = plan.fit_orbits.expand_actuation(smp.a_fit)
     smp.a_check = plan.check_orbits.expand_actuation(smp.a_check)
     smp.f0 = plan.m_orbits.expand_force(smp.f0)
     return smp
 
 
-def _step(kind: str, k: int, smp: _Samples, phys: MapPhysics, arr: CoilArray, plan: _Plan,
-          s: BuildSettings, bar) -> None:
-    """One step of :func:`_steps` into ``smp``."""
+_CONTEXT: dict = {}
+"""What the sampling steps read (the physics, the array with its solved system, the plan, the
+settings, the sensor field's modes): set by :func:`_sample` before the workers fork, so they
+inherit it."""
+
+
+def _forks() -> bool:
+    """Whether the sampling may fork :data:`WORKERS` processes: more than one worker, the
+    platform forks, and this process is not itself a pool's daemon worker."""
+    return (WORKERS > 1 and "fork" in multiprocessing.get_all_start_methods()
+            and not multiprocessing.current_process().daemon)
+
+
+def _run_steps(steps: list):
+    """(kind, k, value, wall s, CPU s) of every step: the coupled solve here, the others on
+    the forked workers (in completion order) or here, one after the other."""
+    first = _timed_step(steps[0])  # the coupled solve: every other step needs it
+    _CONTEXT["modes"] = first[2]
+    yield first
+    if not _forks():
+        for st in steps[1:]:
+            yield _timed_step(st)
+        return
+    # forked after the solve: the workers inherit it; they ignore Ctrl-C, which the parent
+    # answers by terminating them
+    with multiprocessing.get_context("fork").Pool(WORKERS, initializer=_ignore_sigint) as pool:
+        try:
+            yield from pool.imap_unordered(_timed_step, steps[1:])
+        except BaseException:
+            pool.terminate()
+            raise
+
+
+def _ignore_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _timed_step(step):
+    kind, k = step
+    t0, c0 = time.perf_counter(), time.process_time()
+    with one_blas_thread():
+        value = _step(kind, k, _CONTEXT)
+    return kind, k, value, time.perf_counter() - t0, time.process_time() - c0
+
+
+def _step(kind: str, k: int, ctx: dict):
+    """The value of one step of :func:`_steps` (:func:`_store` puts it into the samples)."""
+    phys, arr, plan, s = ctx["phys"], ctx["arr"], ctx["plan"], ctx["settings"]
     if kind == "coupled solve":
         arr.actuation_matrix(plan.fit_pts[:1])  # the coupled solve, once
-        smp.modes = coupled_modes(arr, s.sensor_mode_tolerance)
-    elif kind == "cell nodes":
-        reps = plan.fit_orbits.reps[k:k + FIT_CHUNK]
-        smp.a_fit[k:k + FIT_CHUNK] = phys.actuation(arr, plan.fit_pts[reps])
-    elif kind == "magnet tables":
+        return coupled_modes(arr, s.sensor_mode_tolerance)
+    if kind == "cell nodes":
+        return phys.actuation(arr, plan.fit_pts[plan.fit_orbits.reps[k:k + FIT_CHUNK]])
+    if kind == "magnet tables":
         proto, idx = plan.types[k]
         spec = plan.m_specs[k]
         # each core alone in its own frame, the moment along its axis: the part of its pull
         # the (rho, z) table can hold (tilted_pull: the residual grid carries the rest)
         axial = dataclasses.replace(phys, moment_a_m2=np.array(
             [0.0, 0.0, float(np.linalg.norm(phys.moment_a_m2))]))
-        smp.tables[f"MRZ{k}"] = compute_magnet_table(axial, proto, spec).astype(np.float32)
-        smp.mrz_meta.append({"name": f"MRZ{k}", "coils": [int(c) for c in idx], **spec})
-    elif kind == "mode tables":
-        for j, t in enumerate(smp.modes["types"] if smp.modes else []):
+        return (compute_magnet_table(axial, proto, spec).astype(np.float32),
+                {"name": f"MRZ{k}", "coils": [int(c) for c in idx], **spec})
+    if kind == "mode tables":
+        out = []
+        for j, t in enumerate(ctx["modes"]["types"] if ctx["modes"] else []):
             spec = table_specs(arr, [t["coils"]], plan.lower, plan.upper, s.sensor_mode_rz_step,
                                s.sensor_mode_rz_log_step, s.rz_rho_scale, 1)[0]
-            smp.tables[f"SM{j}"], entry = mode_table_entry(t, spec, j, _postfix(bar, j))
+            out.append(mode_table_entry(t, spec, j))
+        return out
+    if kind == "magnet":
+        return phys.bias_force(arr, plan.m_nodes[plan.m_orbits.reps[k:k + CHUNK]])
+    if kind == "check":
+        return phys.actuation(arr, plan.check[plan.check_orbits.reps[k:k + CHUNK]])
+    if kind == "magnet check":
+        return (phys.bias_force(arr, plan.check[:plan.n_mcheck]),
+                phys.sensor_induced(arr, plan.check[:plan.n_mcheck]))
+    return phys.saturation(arr)
+
+
+def _store(smp: _Samples, kind: str, k: int, value) -> None:
+    """Put the value of step (kind, k) into ``smp``."""
+    if kind == "coupled solve":
+        smp.modes = value
+    elif kind == "cell nodes":
+        smp.a_fit[k:k + FIT_CHUNK] = value
+    elif kind == "magnet tables":
+        smp.tables[f"MRZ{k}"], smp.mrz_meta[k] = value
+    elif kind == "mode tables":
+        for j, (tab, entry) in enumerate(value):
+            smp.tables[f"SM{j}"] = tab
             smp.sm_meta.append(entry)
     elif kind == "magnet":
-        reps = plan.m_orbits.reps[k:k + CHUNK]
-        smp.f0[k:k + CHUNK] = phys.bias_force(arr, plan.m_nodes[reps])
+        smp.f0[k:k + CHUNK] = value
     elif kind == "check":
-        reps = plan.check_orbits.reps[k:k + CHUNK]
-        smp.a_check[k:k + CHUNK] = phys.actuation(arr, plan.check[reps])
+        smp.a_check[k:k + CHUNK] = value
     elif kind == "magnet check":
-        smp.f0_check = phys.bias_force(arr, plan.check[:plan.n_mcheck])
-        smp.sind_check = phys.sensor_induced(arr, plan.check[:plan.n_mcheck])
+        smp.f0_check, smp.sind_check = value
     else:
-        smp.sat_i, smp.sat_f = phys.saturation(arr)
-
-
-def _postfix(bar, k: int):
-    """Progress callback of mode table ``k``: a postfix line per 10 %, not per chunk."""
-    last = [-1]
-
-    def show(frac):
-        if int(frac * 10) != last[0]:
-            last[0] = int(frac * 10)
-            bar.set_postfix_str(f"mode tables {k + 1}: {frac:.0%}")
-
-    return show
+        smp.sat_i, smp.sat_f = value
 
 
 # ============================================================================ arrays, meta, check
