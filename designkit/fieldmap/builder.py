@@ -167,7 +167,8 @@ class _Samples:
     tables: dict = field(default_factory=dict)   # MRZ<k>, SM<k>
     mrz_meta: list = field(default_factory=list)
     sm_meta: list = field(default_factory=list)
-    modes: dict | None = None         # coupled_modes
+    sensor_coef: np.ndarray | None = None  # coupled_modes' sensor_coef (None: no cores)
+    sensor_rows: np.ndarray | None = None  # (n_sensors, 8, nc) the coils' rows at the sensors
     f0_check: np.ndarray | None = None
     sind_check: np.ndarray | None = None
     sat_i: np.ndarray | None = None
@@ -183,7 +184,7 @@ def _steps(plan: _Plan, n_check: int) -> list:
             + [("magnet tables", k) for k in range(len(plan.types))] + [("mode tables", 0)]
             + [("magnet", s) for s in range(0, len(plan.m_orbits.reps), CHUNK)]
             + [("check", s) for s in range(0, len(plan.check_orbits.reps), CHUNK)]
-            + [("magnet check", 0), ("saturation", 0)])
+            + [("magnet check", 0), ("saturation", 0), ("sensor rows", 0)])
 
 
 def _sample(phys: MapPhysics, arr: CoilArray, plan: _Plan, s: BuildSettings,
@@ -220,7 +221,7 @@ def _sample(phys: MapPhysics, arr: CoilArray, plan: _Plan, s: BuildSettings,
 
 _CONTEXT: dict = {}
 """What the sampling steps read (the physics, the array with its solved system, the plan, the
-settings, the sensor field's modes): set by :func:`_sample` before the workers fork, so they
+settings): set by :func:`_sample` before the workers fork, so they
 inherit it."""
 
 
@@ -234,9 +235,7 @@ def _forks() -> bool:
 def _run_steps(steps: list):
     """(kind, k, value, wall s, CPU s) of every step: the coupled solve here, the others on
     the forked workers (in completion order) or here, one after the other."""
-    first = _timed_step(steps[0])  # the coupled solve: every other step needs it
-    _CONTEXT["modes"] = first[2]
-    yield first
+    yield _timed_step(steps[0])  # the coupled solve: every other step needs it
     if not _forks():
         for st in steps[1:]:
             yield _timed_step(st)
@@ -268,7 +267,7 @@ def _step(kind: str, k: int, ctx: dict):
     phys, arr, plan, s = ctx["phys"], ctx["arr"], ctx["plan"], ctx["settings"]
     if kind == "coupled solve":
         arr.actuation_matrix(plan.fit_pts[:1])  # the coupled solve, once
-        return coupled_modes(arr, s.sensor_mode_tolerance)
+        return None
     if kind == "cell nodes":
         return phys.actuation(arr, plan.fit_pts[plan.fit_orbits.reps[k:k + FIT_CHUNK]])
     if kind == "magnet tables":
@@ -280,13 +279,16 @@ def _step(kind: str, k: int, ctx: dict):
             [0.0, 0.0, float(np.linalg.norm(phys.moment_a_m2))]))
         return (compute_magnet_table(axial, proto, spec).astype(np.float32),
                 {"name": f"MRZ{k}", "coils": [int(c) for c in idx], **spec})
-    if kind == "mode tables":
+    if kind == "mode tables":  # the sensor field's adjoint modes and their tables
+        modes = coupled_modes(arr, s.sensor_mode_tolerance)
         out = []
-        for j, t in enumerate(ctx["modes"]["types"] if ctx["modes"] else []):
+        for j, t in enumerate(modes["types"] if modes else []):
             spec = table_specs(arr, [t["coils"]], plan.lower, plan.upper, s.sensor_mode_rz_step,
                                s.sensor_mode_rz_log_step, s.rz_rho_scale, 1)[0]
             out.append(mode_table_entry(t, spec, j))
-        return out
+        return (None if modes is None else modes["sensor_coef"]), out
+    if kind == "sensor rows":
+        return phys.sensor_coil_rows(arr)
     if kind == "magnet":
         return phys.bias_force(arr, plan.m_nodes[plan.m_orbits.reps[k:k + CHUNK]])
     if kind == "check":
@@ -300,13 +302,16 @@ def _step(kind: str, k: int, ctx: dict):
 def _store(smp: _Samples, kind: str, k: int, value) -> None:
     """Put the value of step (kind, k) into ``smp``."""
     if kind == "coupled solve":
-        smp.modes = value
+        pass
+    elif kind == "sensor rows":
+        smp.sensor_rows = value
     elif kind == "cell nodes":
         smp.a_fit[k:k + FIT_CHUNK] = value
     elif kind == "magnet tables":
         smp.tables[f"MRZ{k}"], smp.mrz_meta[k] = value
     elif kind == "mode tables":
-        for j, (tab, entry) in enumerate(value):
+        smp.sensor_coef, tables = value
+        for j, (tab, entry) in enumerate(tables):
             smp.tables[f"SM{j}"] = tab
             smp.sm_meta.append(entry)
     elif kind == "magnet":
@@ -331,10 +336,10 @@ def _arrays(phys: MapPhysics, arr: CoilArray, plan: _Plan, smp: _Samples,
                               plan.positions, plan.rotations)
     f_pair = mf.magnet_terms(mprep, plan.m_nodes)
     m_shape = tuple(len(a) for a in plan.m_axes)
-    sensor_rows = phys.sensor_coil_rows(arr)  # (n_sensors, 8, nc)
+    sensor_rows = smp.sensor_rows  # (n_sensors, 8, nc)
     n_s = len(sensor_rows)
     arrays.update(sensor_file_arrays({
-        "SCOEF": smp.modes["sensor_coef"] if smp.modes else np.zeros((nc, 0, n_s, 3)),
+        "SCOEF": smp.sensor_coef if smp.sensor_coef is not None else np.zeros((nc, 0, n_s, 3)),
         "SENSOR_POS": phys.sensor_positions(arr).astype(np.float64),
         "SENSOR_COIL": sensor_rows[:, :3].astype(np.float64),
         "SENSOR_COIL_GRAD": sensor_rows[:, 3:].astype(np.float64)}, nc))
