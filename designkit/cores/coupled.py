@@ -32,7 +32,7 @@ from ..support.blas import one_blas_thread
 from .core_model import M_MAX, CoreModel, core_model
 from .discretization import gauss
 from .symmetric_solve import SymmetricLU
-from .symmetry import PlacementGroup, adapted_frames, find_symmetries
+from .symmetry import PlacementGroup, adapted_frames
 
 N_PHI_RING = 12
 """Azimuthal samples per collocation ring when projecting another core's / a winding's field."""

@@ -30,8 +30,8 @@ from ..support.progress import tqdm
 from .cells import fit_layers
 from .clearance import Clearance
 from .physics import MapPhysics, map_physics
-from .settings import BuildSettings
 from .plan import box_axes, cell_layers, default_box, layer_nodes, lattice_nodes, table_specs
+from .settings import BuildSettings
 from .symmetry import Orbits, random_orbits, sampling_group
 from .tables import compute_magnet_table, coupled_modes, mode_table_entry
 
