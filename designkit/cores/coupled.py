@@ -32,7 +32,7 @@ from ..support.blas import one_blas_thread
 from .core_model import M_MAX, CoreModel, core_model
 from .discretization import gauss
 from .symmetric_solve import SymmetricLU
-from .symmetry import PlacementGroup, adapted_frames
+from .symmetry import adapted_frames
 
 N_PHI_RING = 12
 """Azimuthal samples per collocation ring when projecting another core's / a winding's field."""
@@ -119,7 +119,7 @@ def coupled_cores(array) -> list:
             if c.core is not None and c.core.model == "surface-current"]
 
 
-def solve_symmetry(array, cores, use: Literal["auto", "none"] = "auto"):
+def solve_symmetry(array, cores, use: Literal["auto", "none"] = "auto") -> tuple:
     """The array's symmetries the coupled solve uses and the coils' frames it works in
     (PlacementGroup, (n_coils, 3, 3)): the coils' own frames when every element of the
     array's group (:meth:`designkit.model.array.CoilArray.symmetries`) maps the collocation
