@@ -191,3 +191,30 @@ def test_sensors_inside_iron_are_refused_naming_the_key_its_value_and_why():
     with pytest.raises(BadInputError, match=r"sensors.offset_m must be > 0.005 m"):
         CoilArray.from_design(_design("[sensors]\noffset_m = 0.003\n"))
     CoilArray.from_design(_design("[sensors]\noffset_m = 0.006\n"))
+
+
+def test_saturation_correction_of_a_tilted_ring_and_of_groups():
+    # the per-coil factor is its core type's single-core curve whatever the pose; the coupled
+    # mid-plane flux per ampere follows the group: C[perm k, perm j] = C[k, j] for every
+    # symmetry (a core's axis taken as +z instead of its own tilted axis breaks it: the flux
+    # along z of a tilted core is cos 30 of its own); an air coil of a group has factor 1 and
+    # no flux row
+    ring = CoilArray.from_design(_design(RING))
+    upright = CoilArray.from_design(_design('[array]\nlayout = "ring"\ncount = 6\n'
+                                            'radius_m = 0.075\n'))
+    cur = np.array([0.0, 3.0, 6.0])
+    s, u = ring.saturation_correction(currents_a=cur), upright.saturation_correction(
+        currents_a=cur)
+    np.testing.assert_allclose(s["saturation_factor"], u["saturation_factor"])
+    assert np.all(s["saturation_factor"][-1] < 1.0)  # the 1010 curve bends by 6 A
+    c = s["core_flux_t_per_a"]
+    for el in ring.symmetries().elements:
+        np.testing.assert_allclose(c[np.ix_(el.perm, el.perm)], c, rtol=1e-9, atol=1e-12)
+    # each core's own flux: its winding's own, to within the neighbours' coupling (a few %)
+    assert np.allclose(np.diag(c), c[0, 0]) and 0.9 < c[0, 0] / u["core_flux_t_per_a"][0, 0] < 1.1
+    mixed = CoilArray.from_design(_design(HEX + '[[groups]]\ncoils = [0]\n[groups.core]\n'
+                                                'enabled = false\n'))
+    m = mixed.saturation_correction(currents_a=cur)
+    np.testing.assert_allclose(m["saturation_factor"][:, 0], 1.0)
+    np.testing.assert_array_equal(m["core_flux_t_per_a"][0], 0.0)
+    assert np.all(m["saturation_factor"][-1, 1:] < 1.0)
