@@ -2,8 +2,9 @@
 
 Question: what does designkit's own 3-D GetDP model (``designkit.fem.fem3d.device_case``: every
 core in its pose, one energized winding at 1 A, linear cores) say about a hexagonal array of 7
-coils and a ring of 6 coils whose axes lean 30 degrees inwards, so that the default tests hold
-the coupled model of any layout to an independent reference without running a solver?
+coils, a ring of 6 coils whose axes lean 30 degrees inwards and (``--cases grid4x4_c5``, a full
+model) a 4 x 4 grid, so that the default tests hold the coupled model of any layout to an
+independent reference without running a solver?
 
 Writes ``layout_fem_refs.npz`` next to this file (per case ``<case>_points_m`` (n, 3) m,
 ``<case>_b_t`` (n, 3) T, ``<case>_g_t_per_m`` (n, 3, 3) T/m) and ``layout_fem_refs.json``
@@ -12,7 +13,7 @@ symmetry cut and the wall-clock seconds). Points: a 5 x 5 grid over the design's
 bounding box at 20, 30, 50 and 80 mm above the coil tops.
 
 Usage: ``PYTHONPATH=$PWD python tests/data/make_layout_fem_refs.py [--level N]
-[--cases hex7_c0,hex7_c1,ring6_c0]`` (needs GetDP; minutes per case).
+[--cases hex7_c0,hex7_c1,ring6_c0,grid4x4_c5]`` (needs GetDP; minutes to an hour per case).
 """
 
 from __future__ import annotations
@@ -31,10 +32,13 @@ HEIGHTS_M = (0.020, 0.030, 0.050, 0.080)
 DESIGNS = {
     "hex7": '[array]\nlayout = "hex"\nrings = 1\npitch_m = 0.044\n',
     "ring6": '[array]\nlayout = "ring"\ncount = 6\nradius_m = 0.075\ntilt_deg = 30\n',
+    "grid4x4": '[array]\nrows = 4\ncolumns = 4\n',
 }
 """The design files of the cases (every other key the default design's)."""
-CASES = {"hex7_c0": ("hex7", 0), "hex7_c1": ("hex7", 1), "ring6_c0": ("ring6", 0)}
-"""Case name -> (design, energized coil)."""
+CASES = {"hex7_c0": ("hex7", 0), "hex7_c1": ("hex7", 1), "ring6_c0": ("ring6", 0),
+         "grid4x4_c5": ("grid4x4", 5)}
+"""Case name -> (design, energized coil) (the 4 x 4 grid's coil 5 is an inner one: no mirror
+keeps it, the full model is solved)."""
 
 
 def case_array(name: str):
@@ -67,7 +71,7 @@ def main(argv=None) -> int:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--level", type=int, default=0, help="3-D mesh level")
-    ap.add_argument("--cases", default=",".join(CASES))
+    ap.add_argument("--cases", default="hex7_c0,hex7_c1,ring6_c0")
     a = ap.parse_args(argv)
     arrays, meta = _load()
     for case in a.cases.split(","):
