@@ -1,31 +1,22 @@
 """Question: does the map file v2 meet its targets (``TARGETS``) on the default design -- file
-size, build time, actuation() time for one point given as (3,) or (1, 3) and for 1e4 points with
-numpy alone, interpolation error relative to each row's largest |A| against direct evaluation
-of the coupled model -- and how fast are the localizer's per-iteration lookups
-(sensor_induced_field, bias_force) and the runner's row / coil subsets?
+size, build time, actuation() time for one point ((3,) or (1, 3)) and for 1e4 points with numpy
+alone, interpolation error relative to each row's largest |A| against the coupled model -- and
+how fast are the localizer's lookups (sensor_induced_field, bias_force) and the runner's row /
+coil subsets? ``--layouts``: also the maps of ``LAYOUTS`` (hex-19, a ring of 6 tilted 30
+degrees; build target ``LAYOUT_BUILD_S``), their errors at N_POINTS / 5.
 
-Builds the default map (thesis design: coupled iron-core array), writes and reloads it with
-firmware_io.mapfile (numpy only), times the lookups, and compares with CoilArray (the coupled
-model) at ``n_points`` random points: half uniform in the box, half in its lowest 10 mm (where
-the fields vary fastest). Errors per row are relative to that row's largest |value| over the
-sample. The bias force and the sensor fields are compared with CoilArray.bias_force and
-CoilArray.magnet_core_field at fewer points (each is one core solve).
-
-Timings are the minimum over repeated short runs (robust to a loaded machine) with the median
-beside it. References run in the same process: ``ref_call_us``, one 8 x 9 @ 9 numpy matvec
-(the cost of a single numpy call, the unit of the one-point lookup), ``ref_copy_ms``, a numpy
-copy of a (1e4, 72) float64 array (the memory traffic of writing A for 1e4 points), and
-``direct_per_point_ms``, the coupled model itself (what the map replaces).
-
-``--layouts``: also the maps of a hexagonal array of 19 coils and of a ring of 6 coils tilted 30
-degrees inwards (``LAYOUTS``; build target ``LAYOUT_BUILD_S``), their errors at N_POINTS / 5.
+Builds the map, writes and reloads it with firmware_io.mapfile (numpy only), times the lookups
+and compares with CoilArray at ``n_points`` random points, half in the box's lowest 10 mm; the
+bias force and the sensor fields at fewer points (each is one core solve). Timings: the minimum
+over repeated short runs with the median beside it, and references in the same process
+(``ref_call_us`` one 8 x 9 @ 9 matvec, ``ref_copy_ms`` a copy of a (1e4, 72) array,
+``direct_per_point_ms`` the coupled model itself, the 2000 x 2000 matmul).
 
 ``--scene``: full map vs the thesis hemisphere's scene map: build wall and CPU, size, errors of
-both at the same points in the region, the same process's 2000 x 2000 matmul, and the CPU of
-the box-independent stages vs the rest (whose ratio is the time ratio's floor), fit nodes.
+both at the same points in the region, the CPU of the box-independent stages vs the rest (whose
+ratio is the time ratio's floor), fit nodes.
 
     python studies/bench_map.py [OUT_DIR] [N_POINTS] [--scene | --layouts]
-    (default out/bench_map, 10000)
 """
 
 from __future__ import annotations

@@ -191,9 +191,10 @@ def _sample(phys: MapPhysics, arr: CoilArray, plan: _Plan, s: BuildSettings,
             progress: bool) -> _Samples:
     """Every evaluation of the coupled model the map needs, under one progress bar: the
     coupled solve first, then the other steps, on :data:`WORKERS` forked processes where the
-    platform forks (they inherit the solved system; threads cannot share OpenBLAS's
-    single-threaded LAPACK calls, which then return wrong solves). Per stage: the summed wall
-    seconds of its steps and their CPU seconds, in whichever process ran them."""
+    platform forks (they inherit the solved system; threads cannot share the single-threaded
+    LAPACK calls of the BLAS numpy ships, which then return wrong solves: docs/fieldmap.md).
+    Per stage: the summed wall seconds of its steps and their CPU seconds, in whichever
+    process ran them."""
     nc = arr.n_coils
     # a_fit, a_check and f0 hold the orbits' representatives until the loop is done
     smp = _Samples(np.empty((len(plan.fit_orbits.reps), 8, nc)),
