@@ -251,12 +251,12 @@ def test_batched_rod_solve_equals_one_design_at_a_time():
     lc = rng.uniform(0.04, 0.07, n)
     off = rng.uniform(-0.005, 0.01, n)
     turns = rng.uniform(300, 1500, n)
-    bt = rod.solve_rods(ri, ro, ln, turns, a, lc, off, 6.0, n_slices=12,
-                              quadrature="bessel")
+    bt = rod.solve_rods(rod.RodGeometry(ri, ro, ln, turns, a, lc, off), 6.0,
+                        rod.RodSettings(n_slices=12, quadrature="bessel"))
     z = np.full(n, 0.06)
     for i in range(n):
-        one = rod.solve_rod(ri[i], ro[i], ln[i], turns[i], a[i], lc[i], off[i], 6.0,
-                                  n_slices=12, quadrature="bessel")
+        one = rod.solve_rod(rod.RodGeometry(ri[i], ro[i], ln[i], turns[i], a[i], lc[i], off[i]),
+                            6.0, rod.RodSettings(n_slices=12, quadrature="bessel"))
         assert bt.linkage_wb[i] == pytest.approx(one.linkage_wb, rel=1e-12)
         assert bt.dlinkage_di_wb_per_a[i] == pytest.approx(one.dlinkage_di_wb_per_a, rel=1e-12)
         assert bt.axis_field(z)[1][i] == pytest.approx(one.axis_field(0.06)[1], rel=1e-12)
@@ -264,8 +264,8 @@ def test_batched_rod_solve_equals_one_design_at_a_time():
 
 def test_toeplitz_slice_coupling_equals_the_interval_formula():
     a, lc, n = 0.008, 0.07, 10
-    s = rod.solve_rod(0.009, 0.02, 0.06, 800, a, lc, 0.0, 1.0, n_slices=n,
-                            relative_permeability=500.0)
+    s = rod.solve_rod(rod.RodGeometry(0.009, 0.02, 0.06, 800, a, lc, 0.0), 1.0,
+                      rod.RodSettings(n_slices=n, relative_permeability=500.0))
     e = rod.slice_edges(lc, 0.0, n)
     iv = np.column_stack([e[:-1], e[1:]])
     c = rod.interval_mutual(iv, iv, a)
@@ -276,17 +276,18 @@ def test_toeplitz_slice_coupling_equals_the_interval_formula():
 
 
 def test_fast_rod_saturates_and_its_incremental_inductance_is_the_derivative():
-    geo = (0.009, 0.024, 0.063, 1173, 0.009, 0.07, 0.009)
-    lo = rod.solve_rod(*geo, 0.5, quadrature="bessel")
-    hi = rod.solve_rod(*geo, 6.0, quadrature="bessel")
+    geo = rod.RodGeometry(0.009, 0.024, 0.063, 1173, 0.009, 0.07, 0.009)
+    bessel = rod.RodSettings(quadrature="bessel")
+    lo = rod.solve_rod(geo, 0.5, bessel)
+    hi = rod.solve_rod(geo, 6.0, bessel)
     # saturation: past the 1.5 T knee the incremental inductance drops below the secant one
     assert hi.peak_b_t > 1.5 > lo.peak_b_t
     assert hi.incremental_extra_inductance_h < 0.95 * hi.secant_extra_inductance_h
     assert lo.incremental_extra_inductance_h >= 0.99 * lo.secant_extra_inductance_h
     # incremental = d linkage / dI (central difference of independent solves)
     h = 1e-3
-    p = rod.solve_rod(*geo, 6.0 + h, quadrature="bessel").linkage_wb
-    m = rod.solve_rod(*geo, 6.0 - h, quadrature="bessel").linkage_wb
+    p = rod.solve_rod(geo, 6.0 + h, bessel).linkage_wb
+    m = rod.solve_rod(geo, 6.0 - h, bessel).linkage_wb
     assert hi.incremental_extra_inductance_h == pytest.approx((p - m) / (2 * h), rel=1e-5)
 
 

@@ -207,7 +207,7 @@ def test_rendering_lp_is_bracketed_by_two_independent_allocations():
     only raise it."""
     import numpy as np
 
-    from designkit.model.array import max_vertical_force
+    from designkit.model.metrics import max_vertical_force
     from designkit.design import load_design
     from designkit.optimize import array_force_per_amp, rendering_force
 

@@ -23,7 +23,7 @@ import numpy as np
 
 from .. import rules
 from ..cores.panel import Core
-from ..cores.rod import solve_rods
+from ..cores.rod import RodGeometry, RodSettings, solve_rods
 from ..design import Design
 from ..errors import BadInputError
 from ..model import electrical as el
@@ -355,8 +355,8 @@ class DeviceProblem(DesignView):
         xs = np.atleast_2d(np.asarray(xs, dtype=float))
         ri, ro, ln, a, lc, prot, d = xs[:, :7].T
         n = self.turns(xs.T) if turns is None else np.asarray(turns, dtype=float)
-        sol = solve_rods(ri, ro, ln, n, np.minimum(a, ri), lc, ln / 2 + prot - lc / 2,
-                         self.current_a, n_slices=self.n_slices, quadrature="bessel")
+        sol = solve_rods(RodGeometry(ri, ro, ln, n, np.minimum(a, ri), lc, ln / 2 + prot - lc / 2),
+                         self.current_a, RodSettings(n_slices=self.n_slices, quadrature="bessel"))
         g_c = sol.axis_field(ln / 2 + self.height_m)[1] * self.corrections[0]
         lam = sol.linkage_wb * self.corrections[1]
         l_inc = sol.dlinkage_di_wb_per_a * self.corrections[1]

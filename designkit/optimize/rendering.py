@@ -3,7 +3,7 @@
 Each coil is its winding (exact kernel) plus its 1010-steel core magnetized as the fast slice
 model of :mod:`designkit.cores.rod` gives at the operating current; the force per ampere on
 the finger magnet (a z-axis dipole) of every coil at every point feeds one bounded LP per point
-(:func:`designkit.model.array.max_vertical_force`: |I_k| <= the coil limit, sum |I_k| <= the total,
+(:func:`designkit.model.metrics.max_vertical_force`: |I_k| <= the coil limit, sum |I_k| <= the total,
 Fx = Fy = 0). The bipolar drive makes the result independent of the magnet's polarity.
 """
 
@@ -14,13 +14,13 @@ from typing import Sequence
 import numpy as np
 
 from ..constants import MU0
-from ..cores.rod import solve_rod
+from ..cores.rod import RodGeometry, RodSettings, solve_rod
 from ..design import Design
 from ..errors import BadInputError
 from ..field import cylindrical_to_cartesian
 from ..field.kernels import sheet_rz
 from ..field.winding import winding_rz
-from ..model.array import max_vertical_force
+from ..model.metrics import max_vertical_force
 from .workspace import workspace_region
 
 
@@ -37,8 +37,8 @@ def array_force_per_amp(coil_x: Sequence[float], turns: float, current_a: float,
     """
     ri, ro, ln, a, lc, prot, _ = [float(q) for q in coil_x]
     off = ln / 2 + prot - lc / 2
-    sol = solve_rod(ri, ro, ln, turns, min(a, ri), lc, off, current_a, n_slices=n_slices,
-                    quadrature="bessel")
+    sol = solve_rod(RodGeometry(ri, ro, ln, turns, min(a, ri), lc, off), current_a,
+                    RodSettings(n_slices=n_slices, quadrature="bessel"))
     pts = np.asarray(points_m, dtype=float)
     cen = np.asarray(centres_xy_m, dtype=float)
     nc, npt = len(cen), len(pts)
@@ -70,7 +70,7 @@ def array_render_forces(coil_x: Sequence[float], turns: float, current_a: float,
                         moment_a_m2: float, *, core_force_ratio: float = 1.0,
                         n_slices: int = 12) -> np.ndarray:
     """Largest upward force the array renders at each point (N, (n,)): |I_k| <= current_a,
-    sum |I_k| <= total_current_a, Fx = Fy = 0 (:func:`designkit.model.array.max_vertical_force`,
+    sum |I_k| <= total_current_a, Fx = Fy = 0 (:func:`designkit.model.metrics.max_vertical_force`,
     one LP per point) with the coils of :func:`array_force_per_amp`."""
     f = array_force_per_amp(coil_x, turns, current_a, centres_xy_m, points_m, moment_a_m2,
                             core_force_ratio=core_force_ratio, n_slices=n_slices)
@@ -83,7 +83,7 @@ def rendering_force(design: Design, *, coil_x: Sequence[float] | None = None,
     """The rendering objective: the smallest upward force the array can render over the
     workspace region with the bounded allocation (|I_k| <= drive.max_current_a,
     sum |I_k| <= drive.total_current_a, Fx = Fy = 0: one LP per point,
-    :func:`designkit.model.array.max_vertical_force` with ``lateral='zero'``).
+    :func:`designkit.model.metrics.max_vertical_force` with ``lateral='zero'``).
 
     The bipolar drive makes the result independent of the magnet's polarity (I -> -I).
     Default coil: the design's own. Returns min_upward_force_n, per-point forces (N) and the
