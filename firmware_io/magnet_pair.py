@@ -11,8 +11,14 @@ dV). B_a is the exact cylinder field (Derby & Olbert, :func:`firmware_io.localiz
 cylinder_field`); the faces are integrated with Gauss-Legendre in r^2 and the trapezoid rule in
 the azimuth, with a node count chosen from how close the faces come to magnet a (the integrand
 is analytic on a face, its nearest singularity magnet a's edge). Far apart the pair tends to two
-point dipoles. Positions m, moments A m^2, forces N, torques N m; numpy only (runs on the
-controller, which compensates the pair's force at run time: it depends on both positions).
+point dipoles.
+
+At run time (:class:`MagnetPairs`, :func:`pair_forces`) a pair whose centres are far enough
+apart for the proven bound of :mod:`firmware_io.magnet_charges` (each magnet as 4 pairs of
+charges on its axis, its multipoles to l = 7) is computed from the charges; the face quadrature
+runs only for closer pairs. Positions m, moments A m^2, forces N, torques N m; numpy only (runs
+on the controller, which compensates the pair's force at run time: it depends on both
+positions).
 """
 
 from __future__ import annotations
@@ -21,7 +27,10 @@ import math
 
 import numpy as np
 
+from .cylinder_magnet import CylinderMagnet, check_apart
+from .errors import BadInputError
 from .localization.magnet import cylinder_field
+from .magnet_charges import AxialCharges, PairBound, charge_forces
 
 MAX_NODES = 64
 """Most nodes per face direction: faces closer to the source than ~1 % of their radius are
@@ -96,39 +105,68 @@ def pair_force_torque(a: "CylinderMagnet", b: "CylinderMagnet", tol: float = 1e-
     return charge @ field, charge @ np.cross(rel, field)
 
 
-class CylinderMagnet:
-    """A finger magnet where it is: centre ``position_m`` (3,) m, moment ``moment_a_m2`` (3,)
-    A m^2 along its axis, ``radius_m`` and ``length_m`` m."""
+PAIR_TOL = 1e-4
+"""Default error of :class:`MagnetPairs`, relative to the pair's dipole scale 3 mu0 |m_a|
+|m_b| / (4 pi R^4) (force) and 2 mu0 |m_a| |m_b| / (4 pi R^3) (torque)."""
 
-    __slots__ = ("position_m", "moment_a_m2", "radius_m", "length_m")
 
-    def __init__(self, position_m, moment_a_m2, radius_m: float, length_m: float):
-        self.position_m = np.asarray(position_m, dtype=float)
-        self.moment_a_m2 = np.asarray(moment_a_m2, dtype=float)
-        self.radius_m = float(radius_m)
-        self.length_m = float(length_m)
+class MagnetPairs:
+    """The finger magnets' pull on each other, for a fixed set of N magnets (cylinders of
+    ``radii_m`` and ``lengths_m``, (N,) m; ``names`` for the messages), to ``tol`` relative to
+    each pair's dipole scale (:data:`PAIR_TOL`).
 
-    def frame(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The unit axis u (along the moment) and two unit vectors e1, e2 across it."""
-        u = self.moment_a_m2 / np.linalg.norm(self.moment_a_m2)
-        e1 = np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0])
-        e1 /= np.linalg.norm(e1)
-        return u, e1, np.cross(u, e1)
+    Built once (the charge models and, per pair, the distance from which their proven bound
+    holds: ``switch_distance_m`` (N, N) m); :meth:`forces` at run time."""
 
-    @property
-    def bounding_radius_m(self) -> float:
-        """Radius of the sphere about the centre that holds the cylinder, m."""
-        return math.hypot(self.radius_m, 0.5 * self.length_m)
+    def __init__(self, radii_m, lengths_m, tol: float = PAIR_TOL, names=None):
+        r = np.asarray(radii_m, float).ravel()
+        length = np.asarray(lengths_m, float).ravel()
+        if (r.shape != length.shape or not len(r) or not np.all(np.isfinite(r))
+                or not np.all(np.isfinite(length)) or np.any(r <= 0) or np.any(length <= 0)):
+            raise BadInputError("radii_m, lengths_m", "equal numbers of positive sizes, m",
+                                f"{r.tolist()}, {length.tolist()}")
+        if not (math.isfinite(tol) and 0.0 < tol < 1.0):
+            raise BadInputError("tol", "in (0, 1)", tol)
+        self.radii_m, self.lengths_m, self.tol = r, length, float(tol)
+        self.names = [str(k) for k in range(len(r))] if names is None else list(names)
+        geo = {}
+        self.models = [geo.setdefault((a, b), AxialCharges(a, b)) for a, b in zip(r, length)]
+        n = len(r)
+        self.switch_distance_m = np.full((n, n), np.inf)
+        for i in range(n):
+            for j in range(i + 1, n):
+                d = PairBound(self.models[i], self.models[j]).switch_distance_m(self.tol)
+                self.switch_distance_m[i, j] = self.switch_distance_m[j, i] = d
 
-    def overlaps(self, other: "CylinderMagnet") -> bool:
-        """Do the two cylinders share a point? (exact for parallel axes, conservative
-        otherwise: their bounding capsules)."""
-        d = other.position_m - self.position_m
-        u = self.moment_a_m2 / np.linalg.norm(self.moment_a_m2)
-        v = other.moment_a_m2 / np.linalg.norm(other.moment_a_m2)
-        if abs(abs(float(u @ v)) - 1.0) < 1e-12:
-            axial = abs(float(d @ u))
-            radial = float(np.linalg.norm(d - (d @ u) * u))
-            return (axial < 0.5 * (self.length_m + other.length_m)
-                    and radial < self.radius_m + other.radius_m)
-        return float(np.linalg.norm(d)) < self.bounding_radius_m + other.bounding_radius_m
+    def forces(self, positions_m, moments_a_m2) -> tuple[np.ndarray, np.ndarray]:
+        """Force (N, 3) N and torque (N, 3) N m (about its centre) on each magnet from all the
+        others, magnets at ``positions_m`` (N, 3) m with ``moments_a_m2`` (N, 3) A m^2 (each
+        along its axis). Overlapping magnets are refused (:func:`check_apart`)."""
+        pos = np.asarray(positions_m, float)
+        mom = np.asarray(moments_a_m2, float)
+        n = len(self.models)
+        if (pos.shape != (n, 3) or mom.shape != (n, 3) or not np.all(np.isfinite(pos))
+                or not np.all(np.isfinite(mom))):
+            raise BadInputError("positions_m, moments_a_m2", f"finite arrays of shape ({n}, 3)",
+                                f"shapes {pos.shape}, {mom.shape}")
+        dist = np.sqrt(((pos[:, None, :] - pos[None, :, :]) ** 2).sum(axis=-1))
+        close = dist < self.switch_distance_m
+        force, torque = (charge_forces(pos, mom, self.models, ~close) if n > 1
+                         else (np.zeros((1, 3)), np.zeros((1, 3))))
+        if close.any():
+            mags = [CylinderMagnet(p, m, a, b) for p, m, a, b in zip(pos, mom, self.radii_m,
+                                                                       self.lengths_m)]
+            check_apart(mags, self.names)
+            for i, j in zip(*np.nonzero(np.triu(close, 1))):
+                f, t = pair_force_torque(mags[i], mags[j], self.tol)
+                force[j] += f
+                force[i] -= f
+                torque[j] += t
+                torque[i] += pair_force_torque(mags[j], mags[i], self.tol)[1]
+        return force, torque
+
+
+def pair_forces(positions_m, moments_a_m2, radii_m, lengths_m, tol: float = PAIR_TOL):
+    """Force (N, 3) N and torque (N, 3) N m on each of N cylinder magnets from the others
+    (:class:`MagnetPairs`, built for this call: a runner keeps one)."""
+    return MagnetPairs(radii_m, lengths_m, tol).forces(positions_m, moments_a_m2)
