@@ -10,7 +10,8 @@ Modules: :mod:`.bodies` (the bodies, region tags, mirror folding), :mod:`.mesh` 
 :mod:`.problem` (the .pro text), :mod:`.solver` (:func:`solve`), :mod:`.device` (any
 array's cores in their poses and one energized winding), :mod:`.iron` (B and grad B
 from the iron's magnetization, the conical rule), :mod:`.lines` (line fits), :mod:`.force`
-(the force on the magnet), :mod:`.cases` (the thesis cases). Units SI: m, T, T/m, N.
+(the force on the magnet), :mod:`.cases` (the thesis cases), :mod:`.magnets` (several
+magnets magnetizing a device's cores, each alone: F0 and the cross terms). Units SI: m, T, T/m, N.
 
 The formulation, the output methods, the force integral and the measured accuracy and mesh
 convergence (with the commands that measure them) are in docs/fem.md.
@@ -18,22 +19,23 @@ convergence (with the commands that measure them) are in docs/fem.md.
 
 from __future__ import annotations
 
-from .bodies import AIR, BOUNDARY, CORE0, MAGNET, SHELL, WIND0, Cyl, model_symmetry
+from .bodies import AIR, BOUNDARY, CORE0, MAG0, SHELL, WIND0, Cyl, model_symmetry
 from .cases import (WORKSPACE_BOX, array_case, image_force_z, magnet_block_force,
                     magnet_pull_case, single_core_case, thesis_geometry, two_cores_case,
                     workspace_points)
 from .device import device_bodies, device_case
 from .iron import conical_rule, core_dipoles, dipoles_field, iron_field
 from .lines import FIT_DEGREE, FIT_HALF_WINDOW, FIT_SAMPLES
+from .magnets import magnets_case
 from .mesh import MeshSettings, build_mesh
 from .problem import problem_text
 from .solver import Fem3DResult, Fem3DSettings, solve
 
-__all__ = ["AIR", "BOUNDARY", "CORE0", "MAGNET", "SHELL", "WIND0", "Cyl", "Fem3DResult",
+__all__ = ["AIR", "BOUNDARY", "CORE0", "MAG0", "SHELL", "WIND0", "Cyl", "Fem3DResult",
            "Fem3DSettings", "MeshSettings",
            "device_bodies", "device_case", "model_symmetry",
            "FIT_DEGREE", "FIT_HALF_WINDOW", "FIT_SAMPLES", "WORKSPACE_BOX", "array_case",
            "build_mesh", "conical_rule", "core_dipoles", "dipoles_field", "image_force_z",
-           "iron_field", "magnet_block_force", "magnet_pull_case", "problem_text",
+           "iron_field", "magnet_block_force", "magnets_case", "magnet_pull_case", "problem_text",
            "single_core_case", "solve", "thesis_geometry", "two_cores_case",
            "workspace_points"]

@@ -1,6 +1,6 @@
 """The bodies of a 3-D model, their gmsh region tags, and the mirror symmetry of the models.
 
-A model is a list of :class:`Cyl` (cores, the energized winding, a magnet), each a coaxial
+A model is a list of :class:`Cyl` (cores, the energized winding, magnets), each a coaxial
 cylinder about its own axis (any direction; the magnet's vertical), in SI units (m, A/m^2,
 A/m). The symmetric models keep only y >= 0 (``'half'``) or x, y >= 0 (``'quarter'``);
 :func:`mirror` folds output points into that part and :func:`model_symmetry` finds the
@@ -14,9 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-AIR, SHELL, MAGNET, BOUNDARY = 1, 2, 3, 4
-CORE0, WIND0 = 100, 200
-"""Region tags: body k is region CORE0 + k (a core) or WIND0 + k (the energized winding)."""
+AIR, SHELL, BOUNDARY = 1, 2, 4
+CORE0, WIND0, MAG0 = 100, 200, 300
+"""Region tags: body k is region CORE0 + k (a core), WIND0 + k (the energized winding) or
+MAG0 + k (a magnet: each its own region, so that each can be driven alone)."""
 
 
 @dataclass(frozen=True)

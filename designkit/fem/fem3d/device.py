@@ -25,20 +25,27 @@ BODY_SIZE_M = 4e-3
 """Element size (level 0) at the bodies' surfaces, m (as the 3 x 3 array case)."""
 
 
+def core_bodies(array) -> list:
+    """One 'core' :class:`Cyl` per coil of ``array`` with a core (its linear
+    ``relative_permeability``, along its coil's axis, shifted by its offset)."""
+    out = []
+    for c in array.coils:
+        if c.core is None:
+            continue
+        axis = c.pose.matrix[:, 2]
+        centre = np.asarray(c.pose.position) + c.core.offset * axis
+        out.append(Cyl.on_axis("core", centre, axis, c.core.length / 2, c.core.radius,
+                               mu_r=float(c.core.relative_permeability)))
+    return out
+
+
 def device_bodies(array, energized: int, current_a: float = 1.0) -> list:
     """The bodies of ``array`` (a CoilArray) with coil ``energized`` carrying ``current_a`` A:
     one 'core' per coil with a core (its linear ``relative_permeability``), then the energized
     winding (the other windings carry no current: air)."""
     if not 0 <= int(energized) < array.n_coils:
         raise BadInputError("energized", f"a coil index in [0, {array.n_coils - 1}]", energized)
-    bodies = []
-    for c in array.coils:
-        if c.core is None:
-            continue
-        axis = c.pose.matrix[:, 2]
-        centre = np.asarray(c.pose.position) + c.core.offset * axis
-        bodies.append(Cyl.on_axis("core", centre, axis, c.core.length / 2, c.core.radius,
-                                  mu_r=float(c.core.relative_permeability)))
+    bodies = core_bodies(array)
     c = array.coils[int(energized)]
     j = c.turns * float(current_a) / ((c.outer_radius - c.inner_radius) * c.length)
     bodies.append(Cyl.on_axis("winding", c.pose.position, c.pose.matrix[:, 2], c.length / 2,

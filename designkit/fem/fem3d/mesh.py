@@ -1,7 +1,7 @@
 """gmsh 3-D mesh of a model: the bodies inside an air sphere and a shell, cut to its symmetry part.
 
 Regions (physical tags, :mod:`.bodies`): air (|x| < R_int), shell (R_int..R_ext, mapped to
-infinity by GetDP), the magnet, one region per core and per energized winding; the boundary
+infinity by GetDP), one region per magnet, per core and per energized winding; the boundary
 surface (outer sphere and, with symmetry, the cut planes). Sizes (m) come from a distance
 field to the bodies' surfaces, refinement boxes and balls around fitting points; every size
 shrinks by sqrt(2) per ``level``. The mesh levels and their accuracy are in docs/fem.md.
@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..mesh import gmsh_model, mesh_to_file
-from .bodies import AIR, BOUNDARY, CORE0, MAGNET, SHELL, WIND0
+from .bodies import AIR, BOUNDARY, CORE0, MAG0, SHELL, WIND0
 from .lines import FIT_HALF_WINDOW
 
 
@@ -46,15 +46,15 @@ def _add_bodies(occ, bodies, symmetry, r_int, r_ext):
 
 
 def _volume_groups(bodies, objs, out_map):
-    """Which region each fragment volume belongs to: ({AIR, SHELL, MAGNET: [tags]},
-    {core or winding region tag: [tags]}); later inputs own the overlaps (bodies inside)."""
+    """Which region each fragment volume belongs to: ({AIR, SHELL: [tags]}, {core, winding or
+    magnet region tag: [tags]}); later inputs own the overlaps (bodies inside)."""
     present = [o for o in objs if o is not None]
     owner = {}
     for idx, ents in enumerate(out_map):
         for d, t in ents:
             if d == 3:
                 owner[t] = idx  # the innermost (last) input wins
-    groups = {AIR: [], SHELL: [], MAGNET: []}
+    groups = {AIR: [], SHELL: []}
     body_groups = {}
     for t, idx in owner.items():
         src = present[idx]
@@ -65,12 +65,8 @@ def _volume_groups(bodies, objs, out_map):
             groups[AIR].append(t)
         else:
             bi = k - 2
-            b = bodies[bi]
-            if b.kind == "magnet":
-                groups[MAGNET].append(t)
-            else:
-                tag = (CORE0 if b.kind == "core" else WIND0) + bi
-                body_groups.setdefault(tag, []).append(t)
+            base = {"core": CORE0, "winding": WIND0, "magnet": MAG0}[bodies[bi].kind]
+            body_groups.setdefault(base + bi, []).append(t)
     return groups, body_groups
 
 
@@ -173,12 +169,13 @@ def build_mesh(bodies, msh_path, settings: MeshSettings = MeshSettings()) -> dic
         for tag, ents in body_groups.items():
             gmsh.model.addPhysicalGroup(3, ents, tag)
         _boundary_group(gmsh, symmetry, r_int, r_ext)
-        fields = _size_fields(gmsh, list(body_groups.values()) + [groups[MAGNET]], s,
+        fields = _size_fields(gmsh, list(body_groups.values()), s,
                               refine=refine, balls=balls, body_size=body_size,
                               far_size=far_size, point_size=point_size)
         mesh_to_file(gmsh, fields, 3, msh_path)
         nodes = len(gmsh.model.mesh.getNodes()[0])
         _, et, _ = gmsh.model.mesh.getElements(3)
         ntet = int(sum(len(t) for t in et))
-        return {"nodes": nodes, "tetrahedra": ntet, "cores": sorted(body_groups),
-                "magnet": bool(groups[MAGNET])}
+        return {"nodes": nodes, "tetrahedra": ntet,
+                "cores": sorted(t for t in body_groups if t < MAG0),
+                "magnets": sorted(t for t in body_groups if t >= MAG0)}

@@ -3,12 +3,13 @@
 Whitney edge functions plus the second-order rotational face functions (B linear in each
 tetrahedron), a spanning-tree gauge, GetDP's ``VolSphShell`` Jacobian on the shell, linear
 cores (nu = 1 / (mu0 mu_r)), the analytic azimuthal current density of the energized winding
-and the rigid magnetization of the magnet (br = mu0 M). Region tags from :mod:`.bodies`.
+and the rigid magnetization of each magnet (br = mu0 M along its axis; M = 0: a passive
+magnet, air). Region tags from :mod:`.bodies`.
 """
 
 from __future__ import annotations
 
-from .bodies import AIR, BOUNDARY, CORE0, MAGNET, SHELL, WIND0
+from .bodies import AIR, BOUNDARY, CORE0, MAG0, SHELL, WIND0
 
 # second-order rotational (face) functions: curl a, so B, linear in each tetrahedron;
 # the gradient-type second-order functions (BF_Edge_2E) are left out, so the tree gauge
@@ -39,22 +40,22 @@ _RESOLUTION_AND_POST = [
 ]
 
 
-def _groups(cores, winds, has_mag):
+def _groups(cores, winds, mags):
     L = ["Group {",
          f"  Air = Region[{{{AIR}}}]; Shell = Region[{{{SHELL}}}];",
          f"  Bnd = Region[{{{BOUNDARY}}}];"]
-    for t in cores + winds:
+    for t in cores + winds + mags:
         L.append(f"  B{t} = Region[{{{t}}}];")
     L.append(f"  Cores = Region[{{{', '.join(str(t) for t in cores)}}}];")
     L.append(f"  Winds = Region[{{{', '.join(str(t) for t in winds)}}}];")
-    L.append(f"  Mag = Region[{{{MAGNET if has_mag else ''}}}];")
+    L.append(f"  Mag = Region[{{{', '.join(str(t) for t in mags)}}}];")
     L.append("  Domain = Region[{Air, Shell, Cores, Winds, Mag}];")
     L.append("}")
     return L
 
 
-def _functions(bodies, cores, winds, has_mag, mu_scale):
-    """nu per region (cores scaled by ``mu_scale``), js of the windings, br of the magnet."""
+def _functions(bodies, cores, winds, mags, mu_scale):
+    """nu per region (cores scaled by ``mu_scale``), js of the windings, br of each magnet."""
     L = ["Function {", "  mu0 = 4.e-7 * Pi;", "  nu[Region[{Air, Shell, Winds, Mag}]] = 1. / mu0;"]
     for t in cores:
         b = bodies[t - CORE0]
@@ -63,10 +64,10 @@ def _functions(bodies, cores, winds, has_mag, mu_scale):
     for t in winds:
         b = bodies[t - WIND0]
         L.append(f"  js[B{t}] = {b.current_density!r} * {_azimuthal(b)};")
-    if has_mag:
-        mb = [b for b in bodies if b.kind == "magnet"][0]
+    for t in mags:
+        mb = bodies[t - MAG0]
         ax, ay, az = (f"mu0 * {mb.magnetization * q!r}" for q in mb.axis)
-        L.append(f"  br[Mag] = Vector[{ax}, {ay}, {az}];")
+        L.append(f"  br[B{t}] = Vector[{ax}, {ay}, {az}];")
     L.append("}")
     return L
 
@@ -138,9 +139,10 @@ def problem_text(bodies, stats, *, mu_scale=1.0, r_int=0.25, r_ext=0.32,
     point; ``core_table``: b at the vertices of every core element (``bcore_<tag>.txt``)."""
     cores = [t for t in stats["cores"] if t < WIND0]
     winds = [t for t in stats["cores"] if t >= WIND0]
-    has_mag = stats["magnet"]
-    L = (_groups(cores, winds, has_mag)
-         + _functions(bodies, cores, winds, has_mag, mu_scale)
+    mags = list(stats["magnets"])
+    has_mag = bool(mags)
+    L = (_groups(cores, winds, mags)
+         + _functions(bodies, cores, winds, mags, mu_scale)
          + _constraints_and_jacobian(r_int, r_ext)
          + _INTEGRATION_AND_SPACE
          + _formulation(winds, has_mag)
