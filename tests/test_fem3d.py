@@ -79,3 +79,30 @@ def test_bad_symmetry_is_refused():
 
     with pytest.raises(BadInputError, match="symmetry"):
         fem3d.solve([], np.zeros((1, 3)), symmetry="octant")
+
+
+@pytest.mark.slow
+def test_two_magnets_over_one_core_coarse():
+    """magnets_case (one run per magnet, the other passive) against the coupled model's F0 and
+    cross terms (designkit.model.magnets), two 10 x 10 mm magnets over one thesis core at
+    level -2 (~7k tetrahedra): every entry 1.09-1.11 x the FEM's (the coarse FEM's common
+    low factor; tests/test_model_magnets.py holds the cached level -1 array), within 3 % of
+    each other, the same directions."""
+    from designkit.design import default_design
+    from designkit.fem.fem3d import magnets_case
+    from designkit.model.array import CoilArray
+    from firmware_io.cylinder_magnet import CylinderMagnet
+
+    one = CoilArray((CoilArray.default().coils[4],))
+    mag = default_design().magnet
+    size = (mag.radius_m, mag.length_m)
+    pos = np.array([[-0.015, 0.0, 0.025], [0.015, 0.0, 0.03]])
+    mom = mag.moment_a_m2 * np.array([[0.0, 0.0, -1.0], [0.0, 0.0, -1.0]])
+    res = magnets_case(one, [CylinderMagnet(p, m, *size) for p, m in zip(pos, mom)],
+                       [[0.0, 0.0, 0.05]], level=-2)
+    f, _ = one.bias_force_matrix(pos, mom, magnet_sizes_m=size)
+    fe = res["force_n"]
+    r = np.linalg.norm(f, axis=-1) / np.linalg.norm(fe, axis=-1)
+    assert 1.0 < r.min() and r.max() < 1.15 and r.max() / r.min() < 1.03, r
+    cos = (f * fe).sum(-1) / np.linalg.norm(f, axis=-1) / np.linalg.norm(fe, axis=-1)
+    assert cos.min() > np.cos(np.radians(2.0))

@@ -474,20 +474,30 @@ class ArraySystem:
 
     def magnet_load(self, positions: np.ndarray, moment: np.ndarray, magnet_size_m=None,
                     n_r: int = 4, n_phi: int = 8):
-        """Force (n, 3) N and torque (n, 3) N m on the magnet from the cores it magnetizes.
+        """Force (n, 3) N and torque (n, 3) N m on the magnet from the cores it magnetizes
+        (:meth:`load_on` of :meth:`magnet_solution`, the same magnet at each position)."""
+        pos = np.atleast_2d(np.asarray(positions, dtype=float))
+        x = self.magnet_solution(pos, moment, magnet_size_m)
+        return self.load_on(x, pos, moment, magnet_size_m, (n_r, n_phi))
 
-        Point dipole (``magnet_size_m`` None): F = (m . grad) B_ind(p), tau = m x B_ind(p).
+    def load_on(self, x: np.ndarray, positions: np.ndarray, moment: np.ndarray,
+                magnet_size_m=None, nodes: tuple = (4, 8)):
+        """Force (n, 3) N and torque (n, 3) N m on a magnet of ``moment`` (3,) A m^2 at each
+        of ``positions`` (n, 3) m from the cores with the unknown columns ``x`` (nu, n)
+        (column i for position i: whichever sources magnetized them).
+
+        Point dipole (``magnet_size_m`` None): F = (m . grad) B(p), tau = m x B(p).
         Cylinder (radius, length): its uniform axial M as face charges +-M on the end faces,
-        F = M [int_top B_ind dA - int_bot B_ind dA], tau = M [int_top (r - p) x B_ind dA -
-        int_bot ...] (exact for a uniformly magnetized body in a curl-free field; Gauss rule
-        of n_r x n_phi points per face).
+        F = M [int_top B dA - int_bot B dA], tau = M [int_top (r - p) x B dA - int_bot ...]
+        (exact for a uniformly magnetized body in a curl-free field; Gauss rule of
+        ``nodes`` = (n_r, n_phi) points per face).
         """
         pos = np.atleast_2d(np.asarray(positions, dtype=float))
         m = np.asarray(moment, dtype=float)
-        x = self.magnet_solution(pos, m, magnet_size_m)
         if magnet_size_m is None:
             b, g = self.core_field_pointwise(pos, x, gradient=True)
             return np.einsum("nji,j->ni", g, m), np.cross(m[None], b)
+        n_r, n_phi = nodes
         a, length, u, mag = _cylinder_magnet(m, magnet_size_m)
         e1 = np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0])
         e1 /= np.linalg.norm(e1)

@@ -34,6 +34,7 @@ from ..errors import BadInputError
 from ..geometry.pose import Pose
 from ..support import validate as v
 from .coil import Coil
+from .magnets import bias_force_matrix, magnets_core_field
 from .overlap import (check_layout_overlap, check_overlap, check_sensors_clear,
                       check_separation, sensor_inside)
 from firmware_io.mapfile import check_currents
@@ -315,6 +316,31 @@ class CoilArray:
         point dipole: m x B_ind(p). ``magnet_size_m`` as in :meth:`bias_force`."""
         _, t, single = self._bias(magnet_positions_m, moment_a_m2, magnet_size_m)
         return t[0] if single else t
+
+    # ------------------------------------------------------------------ several magnets
+    def bias_force_matrix(self, magnet_positions_m, moments_a_m2, *, magnet_sizes_m=None):
+        """Zero-current forces (N, N, 3) N and torques (N, N, 3) N m of the cores on N
+        magnets: entry [i, k] on magnet i (about its centre) from the cores magnetized by
+        magnet k (the diagonal: each magnet's own F0, as :meth:`bias_force`; the rest: the
+        cross terms). ``magnet_positions_m`` (N, 3) m, ``moments_a_m2`` (N, 3) A m^2,
+        ``magnet_sizes_m``: None (point dipoles), (radius, length) m for all or (N, 2);
+        overlapping magnets are refused (:mod:`designkit.model.magnets`)."""
+        return bias_force_matrix(self, magnet_positions_m, moments_a_m2, magnet_sizes_m)
+
+    def bias_forces(self, magnet_positions_m, moments_a_m2, *, magnet_sizes_m=None):
+        """Force (N, 3) N and torque (N, 3) N m on each of N magnets from the cores
+        magnetized by all of them, at zero current (each magnet's F0 plus the cross terms:
+        :meth:`bias_force_matrix` summed over the sources). The magnets' direct pull on each
+        other is :func:`firmware_io.magnet_pair.pair_forces`."""
+        f, t = bias_force_matrix(self, magnet_positions_m, moments_a_m2, magnet_sizes_m)
+        return f.sum(axis=1), t.sum(axis=1)
+
+    def magnets_core_field(self, points_m, magnet_positions_m, moments_a_m2, *,
+                           magnet_sizes_m=None, gradient: bool = False):
+        """Field (n, 3) T [, gradient (n, 3, 3) T/m] at ``points_m`` (n, 3) of the cores
+        magnetized by all N magnets together (inputs as :meth:`bias_force_matrix`)."""
+        return magnets_core_field(self, points_m, magnet_positions_m, moments_a_m2,
+                                  magnet_sizes_m, gradient)
 
     def sensor_poses(self) -> tuple[np.ndarray, np.ndarray]:
         """Sensor positions (n_sensors, 3) m and frames (n_sensors, 3, 3) (columns: each chip's
