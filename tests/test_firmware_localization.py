@@ -5,17 +5,25 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 
 import numpy as np
 import pytest
 
 from firmware_io.errors import BadInputError
-from firmware_io.localization import (ConstantVelocityKalman, LearnedInverse, Localizer,
-                                      SensorModel, calibrate, multipole_field)
+from firmware_io.localization import (ConstantVelocityKalman, EstimatorSettings,
+                                      LearnedInverse, SensorModel, calibrate,
+                                      estimator_from_map, make_estimator, multipole_field)
 
 import magpylib as magpy  # noqa: E402  (a test dependency: no skip)
 
 MOMENT = np.array([0.0, 0.0, 0.909])
+
+
+def _loc(model, method="model", *, calibration=None, learned=None, **settings):
+    """The estimator of ``method`` with these settings (EstimatorSettings' keywords)."""
+    return make_estimator(method, model, EstimatorSettings(**settings), calibration=calibration,
+                          learned=learned)
 
 
 def _positions():
@@ -64,7 +72,7 @@ def test_fused_multipole_rows_match_magpylib_and_differences(seed):
     """The fit's fused field + Jacobian (one (n, 3, 4) block, in units of mu0): the dipole part
     against magpylib, the octupole's field and Jacobian against central differences of the
     field, random moments and points 5-80 mm away."""
-    from firmware_io.localization.magnet import MU0, _multipole_rows, _multipole_work
+    from firmware_io.localization.magnet import MU0, multipole_rows, multipole_work
 
     rng = np.random.default_rng(seed)
     d = rng.normal(size=(18, 3))
@@ -73,13 +81,13 @@ def test_fused_multipole_rows_match_magpylib_and_differences(seed):
     m = rng.normal(size=3)
     mag = np.linalg.norm(m)
     u, cc = m / mag, mag / (4 * math.pi)
-    work = _multipole_work(18, u, cc)
+    work = multipole_work(18, u, cc)
     out = np.empty((18, 3, 4))
-    _multipole_rows(pts - c, u, cc, 0.0, out, work)
+    multipole_rows(pts - c, u, cc, 0.0, out, work)
     ref = magpy.misc.Dipole(moment=m, position=c).getB(pts)
     assert np.allclose(MU0 * out[..., 3], ref, rtol=1e-9, atol=1e-9 * np.abs(ref).max())
     q = rng.uniform(-3e-5, 3e-5)
-    _multipole_rows(pts - c, u, cc, 0.5 * cc * q, out, work)   # the buffers reused
+    multipole_rows(pts - c, u, cc, 0.5 * cc * q, out, work)   # the buffers reused
     b = multipole_field(pts, c, m, q)
     assert np.allclose(MU0 * out[..., 3], b, rtol=1e-12, atol=1e-12 * np.abs(b).max())
     h = 1e-8
@@ -109,19 +117,19 @@ def test_octupole_term_approaches_the_exact_cylinder():
 def test_fit_recovers_a_noiseless_dipole(method):
     rng = np.random.default_rng(2)
     model = _model(rng)
-    loc = Localizer(model, method, cores=False)
+    loc = _loc(model, method, cores=False)
     for _ in range(8):
         p = np.r_[rng.uniform(-0.025, 0.025, 2), rng.uniform(0.02, 0.07)]
         i = rng.uniform(-1, 1, 9)
         top, bot = _dipole_readings(model, p, i)
         loc.reset()
-        est = loc.locate(top, bot, i)
+        est = loc.estimate(np.r_[top, bot], i)
         assert est.ok, est.reason
         assert np.linalg.norm(est.position_m - p) < 1e-6
         # warm start from the last estimate, a nearby frame
         p2 = p + rng.normal(scale=1e-3, size=3)
         top, bot = _dipole_readings(model, p2, i)
-        est = loc.locate(top, bot, i)
+        est = loc.estimate(np.r_[top, bot], i)
         assert est.ok and np.linalg.norm(est.position_m - p2) < 1e-6
 
 
@@ -137,7 +145,7 @@ def test_warm_fit_of_noisy_frames_matches_scipy_least_squares(method):
     rng = np.random.default_rng(11)
     model = _model(rng)
     noise, rel = 1e-4, 0.02
-    loc = Localizer(model, method, cores=False, noise_t=noise, relative_error=rel)
+    loc = _loc(model, method, cores=False, noise_t=noise, relative_error=rel)
     sp = model.sensor_positions_m
     mirror = np.array([-1.0, -1.0, 1.0])
     p = np.array([0.0, 0.0, 0.04])
@@ -149,7 +157,7 @@ def test_warm_fit_of_noisy_frames_matches_scipy_least_squares(method):
         bot = bot + rng.normal(scale=noise, size=bot.shape)
         if k % 3 == 2:
             top[rng.integers(9)] = np.nan
-        est = loc.locate(top, bot, i)
+        est = loc.estimate(np.r_[top, bot], i)
         assert est.ok, est.reason
         coil = np.einsum("asdc,c->asd", model.coil_field_t_per_a, i)
         if method == "dipole":
@@ -174,14 +182,14 @@ def test_warm_fit_of_noisy_frames_matches_scipy_least_squares(method):
 def test_nan_sensor_is_excluded(method):
     rng = np.random.default_rng(3)
     model = _model(rng)
-    loc = Localizer(model, method, cores=False)
+    loc = _loc(model, method, cores=False)
     p = np.array([0.004, -0.006, 0.03])
     i = rng.uniform(-1, 1, 9)
     top, bot = _dipole_readings(model, p, i)
     top[4] = [np.nan, 0.0, 0.0]      # the strongest sensor saturated
     bot[0] = np.nan                  # a dead one in the lower array
     top[7] = 1e3 * 0 + 0.5 * np.nan  # NaN everywhere in one more
-    est = loc.locate(top, bot, i)
+    est = loc.estimate(np.r_[top, bot], i)
     assert est.ok, est.reason
     assert np.linalg.norm(est.position_m - p) < 1e-6
     assert est.n_used == (6 if method == "dipole" else 15)
@@ -190,15 +198,15 @@ def test_nan_sensor_is_excluded(method):
 def test_too_few_sensors_and_garbage_give_ok_false():
     rng = np.random.default_rng(4)
     model = _model(rng)
-    loc = Localizer(model, "model", cores=False)
+    loc = _loc(model, "model", cores=False)
     top = np.full((9, 3), np.nan)
     bot = np.full((9, 3), np.nan)
     top[:2] = 1e-3
-    est = loc.locate(top, bot, np.zeros(9))
+    est = loc.estimate(np.r_[top, bot], np.zeros(9))
     assert not est.ok and "usable" in est.reason
     assert np.all(np.isfinite(est.position_m))
     # a field no dipole in the box can make: +50 mT along x at every sensor
-    est = loc.locate(np.tile([0.05, 0, 0], (9, 1)), np.tile([0.05, 0, 0], (9, 1)), np.zeros(9))
+    est = loc.estimate(np.r_[np.tile([0.05, 0, 0], (9, 1)), np.tile([0.05, 0, 0], (9, 1))], np.zeros(9))
     assert not est.ok
     assert np.all(np.isfinite(est.position_m)) and math.isfinite(est.residual)
 
@@ -207,15 +215,15 @@ def test_model_based_cancellation_uses_the_commanded_currents():
     """Large coil fields, a wrong current in the model -> detected (residual), right -> exact."""
     rng = np.random.default_rng(5)
     model = _model(rng)
-    loc = Localizer(model, "model", cores=False, relative_error=0.0)
+    loc = _loc(model, "model", cores=False, relative_error=0.0)
     p = np.array([-0.01, 0.012, 0.05])
     i = rng.uniform(-5, 5, 9)
     top, bot = _dipole_readings(model, p, i)
-    assert np.linalg.norm(loc.locate(top, bot, i).position_m - p) < 1e-6
+    assert np.linalg.norm(loc.estimate(np.r_[top, bot], i).position_m - p) < 1e-6
     loc.reset()
     wrong = i.copy()
     wrong[3] += 1.0
-    assert not loc.locate(top, bot, wrong).ok
+    assert not loc.estimate(np.r_[top, bot], wrong).ok
 
 
 def test_induced_term_is_fitted():
@@ -229,9 +237,9 @@ def test_induced_term_is_fitted():
     model = _model(rng, induced=induced)
     p = np.array([0.005, 0.002, 0.035])
     top, bot = _dipole_readings(model, p, np.zeros(9)) + induced(p)
-    est = Localizer(model, "model").locate(top, bot, np.zeros(9))
+    est = _loc(model, "model").estimate(np.r_[top, bot], np.zeros(9))
     assert est.ok and np.linalg.norm(est.position_m - p) < 1e-5
-    naive = Localizer(model, "model", cores=False, residual_limit=1e9).locate(top, bot, np.zeros(9))
+    naive = _loc(model, "model", cores=False, residual_limit=1e9).estimate(np.r_[top, bot], np.zeros(9))
     assert np.linalg.norm(naive.position_m - p) > 1e-4
 
 
@@ -246,7 +254,7 @@ def test_learned_inverse_never_leaves_its_box_unflagged():
     rng = np.random.default_rng(7)
     inv = _inverse(rng)
     model = _model(rng)
-    loc = Localizer(model, "learned", learned=inv)
+    loc = _loc(model, "learned", learned=inv)
     n_flagged = 0
     for _ in range(300):
         b = rng.normal(size=3) * 10 ** rng.uniform(-5, -0.5)
@@ -259,7 +267,7 @@ def test_learned_inverse_never_leaves_its_box_unflagged():
             n_flagged += 1
         top = np.zeros((9, 3))
         top[int(rng.integers(9))] = b
-        est = loc.locate(top, np.zeros((9, 3)))
+        est = loc.estimate(np.r_[top, np.zeros((9, 3))])
         k = int(np.argmax(np.linalg.norm(top, axis=1)))
         if out_of_box or not inside:
             assert not est.ok
@@ -277,38 +285,42 @@ def test_learned_weights_round_trip_and_design_check(tmp_path):
     other = _model(rng)
     other.design_sha256 = "b" * 64
     with pytest.raises(BadInputError, match="weights"):
-        Localizer(other, "learned", learned=back)
+        _loc(other, "learned", learned=back)
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
     with pytest.raises(BadInputError, match="weights"):
         LearnedInverse.load(tmp_path / "junk.npz")
 
 
 def test_bad_inputs_name_the_parameter(tmp_path):
+    """A bad frame is a not-ok estimate naming the input (never an exception); a bad
+    estimator or map is a BadInputError naming the parameter."""
     rng = np.random.default_rng(9)
     model = _model(rng)
-    loc = Localizer(model, "model", cores=False)
+    loc = _loc(model, "model", cores=False)
     ok = np.zeros((9, 3))
-    with pytest.raises(BadInputError, match="top.*shape"):
-        loc.locate(np.zeros((8, 3)), ok, np.zeros(9))
-    with pytest.raises(BadInputError, match="bottom.*Inf"):
-        bad = ok.copy()
-        bad[2, 1] = np.inf
-        loc.locate(ok, bad, np.zeros(9))
-    with pytest.raises(BadInputError, match="millitesla"):
-        loc.locate(ok + 50.0, ok, np.zeros(9))
-    with pytest.raises(BadInputError, match="currents"):
-        loc.locate(ok, ok, np.zeros(8))
-    with pytest.raises(BadInputError, match="currents"):
-        loc.locate(ok, ok, np.r_[np.zeros(8), np.nan])
-    with pytest.raises(BadInputError, match="currents"):
-        loc.locate(ok, ok)
+    bad = ok.copy()
+    bad[2, 1] = np.inf
+    frames = {"readings_t.*shape": (np.r_[np.zeros((8, 3)), ok], np.zeros(9)),
+              "readings_t.*Inf": (np.r_[ok, bad], np.zeros(9)),
+              "millitesla": (np.r_[ok + 50.0, ok], np.zeros(9)),
+              "currents_a.*shape": (np.r_[ok, ok], np.zeros(8)),
+              "currents_a.*nan": (np.r_[ok, ok], np.r_[np.zeros(8), np.nan]),
+              "currents_a.*None": (np.r_[ok, ok], None)}
+    for pattern, (readings, currents) in frames.items():
+        est = loc.estimate(readings, currents)
+        assert not est.ok and re.search(pattern, est.reason), (pattern, est.reason)
+        assert np.all(np.isfinite(est.position_m))
+    est = loc.estimate(np.r_[ok, ok], np.zeros(9), usable=np.ones(17, bool))
+    assert not est.ok and "usable" in est.reason
     with pytest.raises(BadInputError, match="method"):
-        Localizer(model, "neural")
+        _loc(model, "neural")
+    with pytest.raises(BadInputError, match="noise_t"):
+        _loc(model, "model", noise_t=-1.0)
     with pytest.raises(BadInputError, match="sensor_positions_m"):
         SensorModel(np.zeros((9, 3)), model.coil_field_t_per_a, MOMENT, "x")
     with pytest.raises(BadInputError, match="map file"):
         (tmp_path / "m.npz").write_bytes(b"junk")
-        Localizer.from_map(tmp_path / "m.npz")
+        estimator_from_map(tmp_path / "m.npz")
 
 
 def test_kalman_tracks_constant_velocity_exactly():
@@ -330,15 +342,15 @@ def test_legacy_calibration_pair_still_accepted():
     model = _model(rng)
     gi = np.tile(np.eye(3), (2, 9, 1, 1)) * 1.01
     off = rng.normal(scale=1e-5, size=(2, 9, 3))
-    loc = Localizer(model, "model", cores=False, calibration=(gi, off))
+    loc = _loc(model, "model", cores=False, calibration=(gi, off))
     p = np.array([0.003, 0.004, 0.035])
     i = rng.uniform(-1, 1, 9)
     top, bot = _dipole_readings(model, p, i)
     raw = np.einsum("ij,asj->asi", np.linalg.inv(gi[0, 0]), np.stack([top, bot])) + off
-    est = loc.locate(raw[0], raw[1], i)
+    est = loc.estimate(np.r_[raw[0], raw[1]], i)
     assert est.ok and np.linalg.norm(est.position_m - p) < 1e-6
     with pytest.raises(BadInputError, match="calibration"):
-        Localizer(model, "model", cores=False, calibration=(gi[:, :4], off))
+        _loc(model, "model", cores=False, calibration=(gi[:, :4], off))
 
 
 # ---------------------------------------------------------------- calibration (coil-driven)
@@ -502,8 +514,8 @@ def test_fit_with_the_exact_magnet_recovers_a_cylinder(method):
     model = _model(rng)
     exact = dataclasses.replace(model, magnet_size_m=(0.005, 0.010), octupole_m2=0.25 * 0.005**2)
     j = 0.909 / (math.pi * 0.005**2 * 0.010) * magpy.mu_0
-    loc = Localizer(exact, method)
-    multipole = Localizer(dataclasses.replace(exact, magnet_size_m=None), method)
+    loc = _loc(exact, method)
+    multipole = _loc(dataclasses.replace(exact, magnet_size_m=None), method)
     worst_multipole = 0.0
     p = np.array([0.004, -0.006, 0.024])
     for k in range(12):
@@ -515,14 +527,14 @@ def test_fit_with_the_exact_magnet_recovers_a_cylinder(method):
         b[np.any(np.abs(b) > 0.13, axis=-1)] = np.nan
         if k == 0:
             loc.reset()
-        est = loc.locate(b[0], b[1], i)
+        est = loc.estimate(np.r_[b[0], b[1]], i)
         assert est.ok, est.reason
         # cold: re-linearized to the end; warm: the reused linearization's error is kept near
         # noise / 20 (0.005 mT), a few um here against ~300 um of noise-limited error
         assert np.linalg.norm(est.position_m - p) < (2e-6 if k == 0 else 20e-6)
         multipole.reset()
         worst_multipole = max(worst_multipole,
-                              np.linalg.norm(multipole.locate(b[0], b[1], i).position_m - p))
+                              np.linalg.norm(multipole.estimate(np.r_[b[0], b[1]], i).position_m - p))
     assert worst_multipole > 5e-6
 
 

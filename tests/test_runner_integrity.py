@@ -6,8 +6,6 @@ safe, and no running step renders at a gated-out position."""
 from __future__ import annotations
 
 import csv
-from dataclasses import dataclass
-
 import numpy as np
 import pytest
 
@@ -17,6 +15,7 @@ from designkit.sim import (FaultSchedule, SimulatedDevice, simulate, slide_traje
                            time_to_safe)
 from designkit.sim.faults import FAULT_CLEARS_S
 from designkit.sim.report import write_run_csv
+from firmware_io.localization import Estimate
 from firmware_io.runner import ConstantVelocityTracker, Runner, RunnerConfig
 
 from _runner_fakes import ConstantMap, PlaneScene, clipped_lstsq
@@ -25,13 +24,9 @@ BOX = (np.array([-0.075, -0.075, 0.010]), np.array([0.075, 0.075, 0.080]))
 JUMP = np.array([0.030, 0.0, 0.0])
 
 
-@dataclass
-class Estimate:
-    position_m: np.ndarray
-    ok: bool
-    covariance_m2: np.ndarray
-    protection_level_m: float
-    reason: str = ""
+def _estimate(position_m, ok, covariance_m2, protection_level_m):
+    return Estimate(position_m, np.array([0.0, 0.0, 1.0]), ok, "" if ok else "no sensor",
+                    covariance_m2, protection_level_m)
 
 
 class JumpingLocalizer:
@@ -46,14 +41,14 @@ class JumpingLocalizer:
     def reset(self):
         self.resets += 1
 
-    def fix(self, top, bottom, currents=None):
+    def estimate(self, readings_t, currents_a=None):
         k = self.calls
         self.calls += 1
         p = np.asarray(self.truth(), float)
         if k in self.spikes or k >= self.moved:
             p = p + JUMP
-        ok = bool(np.isfinite(top).any() or np.isfinite(bottom).any())
-        return Estimate(p, ok, (0.3e-3) ** 2 * np.eye(3), 1e-3)
+        ok = bool(np.isfinite(readings_t).any())
+        return _estimate(p, ok, (0.3e-3) ** 2 * np.eye(3), 1e-3)
 
 
 @pytest.fixture(scope="module")
@@ -127,7 +122,7 @@ def test_bad_frames_reach_the_loop_as_not_ok_fixes_with_a_reason():
     excluded (the others still fix the position); then a good frame is fitted."""
     import magpylib as magpy
 
-    from firmware_io.localization import Localizer, SensorModel
+    from firmware_io.localization import EstimatorSettings, ModelEstimator, SensorModel
     from firmware_io.runner import SensorFrame
     from firmware_io.runner.pipeline import SensorPipeline
 
@@ -138,7 +133,7 @@ def test_bad_frames_reach_the_loop_as_not_ok_fixes_with_a_reason():
     moment = np.array([0.0, 0.0, 0.909])
     model = SensorModel(sp, np.stack([up, up * np.array([-1.0, -1.0, 1.0])[None, :, None]]),
                         moment, "a" * 64, 0.0, None)
-    pipe = SensorPipeline(Localizer(model, "model", cores=False), object(), 9,
+    pipe = SensorPipeline(ModelEstimator(model, EstimatorSettings(cores=False)), object(), 9,
                           lambda t: np.zeros(9), moment)
     p = np.array([0.0, 0.01, 0.04])
     good = magpy.misc.Dipole(moment=moment, position=p).getB(sp.reshape(-1, 3)).reshape(2, 9, 3)
@@ -195,9 +190,9 @@ class NoisyLocalizer:
     def __init__(self, truth, sigma_m):
         self.truth, self.sigma = truth, sigma_m
 
-    def fix(self, top, bottom, currents=None):
+    def estimate(self, readings_t, currents_a=None):
         pl = self.model_bias_m + 4.6 * self.sigma
-        return Estimate(np.asarray(self.truth(), float), True, self.sigma ** 2 * np.eye(3), pl)
+        return _estimate(np.asarray(self.truth(), float), True, self.sigma ** 2 * np.eye(3), pl)
 
 
 @pytest.mark.parametrize("sigma_m, renders", [(1.5e-3, True), (20e-3, False)])

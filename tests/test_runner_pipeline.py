@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from firmware_io.errors import BadInputError
+from firmware_io.localization import Estimate
 from firmware_io.runner import (CoilSkipBound, ConstantVelocityTracker, CurrentHistory, Fix,
                                 RunnerConfig, SensorFrame, SensorPipeline, force_law_rows)
 
@@ -159,18 +160,14 @@ def test_current_history_returns_the_newest_step_at_or_before_the_frame():
     assert np.array_equal(h.at(0.0), kept[0][1])           # older than kept: the oldest
 
 
-class _Estimate:
-    def __init__(self, p, ok=True):
-        self.position_m, self.ok = np.asarray(p, float), ok
-
-
 class _RecordingLocalizer:
     def __init__(self):
         self.calls = []
 
-    def locate(self, top, bottom, currents=None):
-        self.calls.append((top.copy(), bottom.copy(), np.array(currents)))
-        return _Estimate([0.0, 0.0, 0.03])
+    def estimate(self, readings_t, currents_a=None):
+        self.calls.append((readings_t[:9].copy(), readings_t[9:].copy(), np.array(currents_a)))
+        return Estimate(np.array([0.0, 0.0, 0.03]), np.array([0.0, 0.0, 1.0]), True,
+                        protection_level_m=0.0)
 
 
 def test_pipeline_excludes_unhealthy_sensors_and_fits_with_the_frame_time_currents():

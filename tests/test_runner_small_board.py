@@ -14,6 +14,7 @@ import pytest
 from designkit import fieldmap
 from designkit.design import default_design
 from designkit.sim.run import run_simulation
+from firmware_io.localization import Estimate
 from firmware_io.runner import SensorFrame, SensorPipeline
 
 BOX = (np.array([-0.07, -0.03, 0.015]), np.array([0.07, 0.03, 0.06]))
@@ -50,9 +51,9 @@ class _Loc:
     def __init__(self):
         self.shapes = []
 
-    def fix(self, top, bottom, currents=None):
-        self.shapes.append((np.shape(top), np.shape(bottom), np.shape(currents)))
-        return type("E", (), {"position_m": np.zeros(3), "ok": True})()
+    def estimate(self, readings_t, currents_a=None):
+        self.shapes.append((np.shape(readings_t), np.shape(currents_a)))
+        return Estimate(np.zeros(3), np.array([0.0, 0.0, 1.0]), True, protection_level_m=0.0)
 
 
 class _Map:
@@ -67,7 +68,7 @@ def test_pipeline_sizes_from_the_map_not_the_coil_count():
     p = SensorPipeline(loc, _Map(), 2, lambda t: np.zeros(2), np.array([0.0, 0.0, 1.0]))
     assert p.n == 4 and p.excluded.shape == (8,)
     fix = p.process(SensorFrame(np.zeros((4, 3)), np.zeros((4, 3)), ("ok",) * 8, 0.0))
-    assert fix.ok and loc.shapes == [((4, 3), (4, 3), (2,))]
+    assert fix.ok and loc.shapes == [((8, 3), (2,))]
     # a frame of the wrong size: not ok, with the reason, no exception
     bad = p.process(SensorFrame(np.zeros((2, 3)), np.zeros((2, 3)), ("ok",) * 4, 0.0))
     assert not bad.ok and "expected (4, 3)" in bad.problems[0][1]

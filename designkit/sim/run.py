@@ -13,10 +13,9 @@ from pathlib import Path
 import numpy as np
 
 from firmware_io.allocation import Allocator
-from firmware_io.localization import Localizer
+from firmware_io.localization import SensorModel, estimator_from_map
 from firmware_io.mapfile import MapFile
-from firmware_io.runner import (CALIBRATED_RELATIVE_ERROR, ConstantVelocityTracker, Runner,
-                                RunnerConfig, SceneForce)
+from firmware_io.runner import ConstantVelocityTracker, Runner, RunnerConfig, SceneForce
 from firmware_io.scene import Scene
 
 from .. import electrical, fieldmap
@@ -65,8 +64,8 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
     thesis' eq. 4.6; the runner then evaluates only the two rows of A(p) Fz needs). ``array``:
     the design's CoilArray when the caller has one (its coupled solve is reused).
     ``calibrate``: the start-up sensor calibration (:meth:`SimulatedDevice.calibrate_sensors`)
-    before the run; the localizer then weighs the sensors with
-    :data:`firmware_io.runner.CALIBRATED_RELATIVE_ERROR`. ``profile``: the runner times each
+    before the run; the localizer then weighs the sensors as calibrated
+    (:class:`firmware_io.localization.EstimatorSettings`). ``profile``: the runner times each
     stage of its step (summary ``loop_by_kind['stages']``). ``skip_force_n``: the runner's coil-skip force, N.
     ``plant``: the device that was built (a design with ``[asbuilt]``, or its path): the
     simulated device is it, while the runner uses the map of ``design``.
@@ -102,7 +101,7 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
                            control_period_s=period_s, unipolar=unipolar,
                            force_axes="z" if rows == "fz" else "xyz",
                            skip_force_n=skip_force_n)
-        localizer = Localizer.from_map(map_path, method=method, **loc_kw)
+        localizer = estimator_from_map(map_path, method, **loc_kw)
         runner = Runner(fmap, SceneForce(scene), localizer, ConstantVelocityTracker(),
                         hook(Allocator()), device.coils, source, cfg, clock=clock,
                         log=lambda line: print(line) if progress else None)
@@ -194,10 +193,8 @@ def _map(design, array, map_path, out: Path, progress: bool):
 
 def _localizer_options(device: SimulatedDevice, map_path, method: str, calibrate: bool) -> dict:
     """The localizer's keywords: the start-up calibration (coils only; the map carries the
-    magnet's cylinder) and the calibrated sensors' weight, unless not calibrating."""
+    magnet's cylinder), unless not calibrating."""
     loc_kw: dict = {}
     if calibrate and method != "learned":
-        base = Localizer.from_map(map_path, method=method, **loc_kw)
-        loc_kw.update(calibration=device.calibrate_sensors(base.model),
-                      relative_error=CALIBRATED_RELATIVE_ERROR)
+        loc_kw.update(calibration=device.calibrate_sensors(SensorModel.from_map(map_path)))
     return loc_kw

@@ -1,7 +1,7 @@
 """The finger magnet's field at the sensors: the axisymmetric multipole and the exact cylinder.
 
 :func:`multipole_field` is the dipole plus the l = 3 term of an axially magnetized magnet, with
-its analytic Jacobian; :func:`_multipole_rows` is the same algebra arranged for the fit's inner
+its analytic Jacobian; :func:`multipole_rows` is the same algebra arranged for the fit's inner
 loop. :func:`cylinder_field` is the exact field of a uniformly magnetized cylinder (Derby &
 Olbert, Am. J. Phys. 78, 229 (2010), with Bulirsch's cel from :mod:`firmware_io.special`).
 Points, positions in m, moments in A m^2, fields in T. Derivations: docs/localization.md.
@@ -17,7 +17,7 @@ import numpy as np
 from .. import special
 from ..constants import MU0
 
-_EYE = np.eye(3)
+EYE3 = np.eye(3)
 _DIAG = np.arange(3)
 
 
@@ -76,15 +76,15 @@ def multipole_field(points_m: np.ndarray, position_m: np.ndarray, moment_a_m2: n
     return b, MU0 * d  # d/d(position) = -d/dr
 
 
-def _multipole_rows(r: np.ndarray, u: np.ndarray, c: float, k: float, out: np.ndarray,
+def multipole_rows(r: np.ndarray, u: np.ndarray, c: float, k: float, out: np.ndarray,
                     work: tuple | None = None):
     """The fit's hot path: :func:`multipole_field`'s Jacobian and field at r = points - position
     (n, 3) m, written as out[:, :, :3] = dB/d(position) / mu0 (T/m per mu0) and out[:, :, 3] =
     B / mu0 (T per mu0), out (n, 3, 4); c = |m| / (4 pi), k = c q / 2, u the unit moment;
-    ``work``: :func:`_multipole_work` (n, u, c), reused between calls. The same algebra as
+    ``work``: :func:`multipole_work` (n, u, c), reused between calls. The same algebra as
     :func:`multipole_field` (tested equal), arranged as a few matrix products (the overhead of a
     small numpy call outweighs its arithmetic here)."""
-    b3, r5, pq, cm, tv, v, k6 = work if work is not None else _multipole_work(len(r), u, c)
+    b3, r5, pq, cm, tv, v, k6 = work if work is not None else multipole_work(len(r), u, c)
     rho = np.einsum("ij,ij->i", r, r)
     s = r @ u
     ir = 1.0 / rho
@@ -112,8 +112,8 @@ def _multipole_rows(r: np.ndarray, u: np.ndarray, c: float, k: float, out: np.nd
     return out
 
 
-def _multipole_work(n: int, u: np.ndarray, c: float) -> tuple:
-    """Buffers and constants of :func:`_multipole_rows` for n points, unit moment u and c =
+def multipole_work(n: int, u: np.ndarray, c: float) -> tuple:
+    """Buffers and constants of :func:`multipole_rows` for n points, unit moment u and c =
     |m| / (4 pi): b3 (n, 3, 4) = [[r, 0], [u, 0], [0, 0, 0, 1]], r5 (n, 3, 5) = [r, u, I],
     pq (n, 5, 4) (rows 2-4: 2 f_rho [I, 0]), cm (n, 2, 3), tv (n, 3) = [1, w, w t],
     v (n, 6) = [s / rho, 1, s, 1, s, rho], k6 (3, 6) the polynomials' coefficients; r, s, rho,
@@ -123,7 +123,7 @@ def _multipole_work(n: int, u: np.ndarray, c: float) -> tuple:
     b3[:, 2, 3] = 1.0
     r5 = np.zeros((n, 3, 5))
     r5[:, :, 1] = u
-    r5[:, :, 2:] = _EYE
+    r5[:, :, 2:] = EYE3
     tv = np.zeros((n, 3))
     tv[:, 0] = 1.0
     v = np.ones((n, 6))

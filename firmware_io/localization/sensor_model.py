@@ -16,6 +16,7 @@ from typing import Callable
 import numpy as np
 
 from ..errors import BadInputError
+from ..mapfile import MapFile
 from .magnet import MU0, multipole_field
 
 DEFAULT_NOISE_T = 0.1e-3
@@ -108,6 +109,43 @@ class SensorModel:
 
         model.induced = induced
         return model
+
+    @classmethod
+    def from_map(cls, path, *, expected_design_sha256: str | None = None,
+                 octupole_m2: float | None = None, magnet_size_m=None) -> "SensorModel":
+        """From a v2 map file's sensor section.
+
+        ``magnet_size_m``: (radius, length) m of the cylinder magnet -> its exact field; default
+        the map's ``meta['magnet_radius_m']``, ``meta['magnet_length_m']`` if it has them.
+        ``octupole_m2``: the magnet's l = 3 coefficient ratio h^2 - 3 a^2 / 4 (m^2); default from
+        the magnet's size, else the map's ``meta['magnet_octupole_m2']``, else 0 (pure dipole).
+        """
+        m = MapFile.load(path, expected_design_sha256=expected_design_sha256)
+        sp = np.asarray(m.sensor_positions_m, float)
+        lo, hi = (np.asarray(b, float) for b in m.bounds)
+        # plausible positions: the map's box widened (the magnet model is analytic; outside the
+        # box the runner fails safe on its own 'out_of_box' test), never below the upper board
+        box_lo = lo - [0.015, 0.015, 0.0]
+        box_hi = hi + [0.015, 0.015, 0.02]
+        box_lo[2] = max(lo[2], float(sp[0, :, 2].max()) + 0.002)
+        if magnet_size_m is None and "magnet_radius_m" in m.meta and "magnet_length_m" in m.meta:
+            magnet_size_m = (m.meta["magnet_radius_m"], m.meta["magnet_length_m"])
+        if octupole_m2 is None:
+            if magnet_size_m is not None:
+                a, length = (float(x) for x in magnet_size_m)
+                octupole_m2 = (length / 2) ** 2 - 0.75 * a * a
+            else:
+                octupole_m2 = float(m.meta.get("magnet_octupole_m2", 0.0))
+        # the coils' field gradient at every sensor (the map's SENSOR_COIL_GRAD: the sensors sit
+        # below the box of A) for calibrate() to recover their position errors
+        grad = np.asarray(m.sensor_coil_gradient(), float)
+        known = np.ones(sp.shape[:2], bool)
+        return cls(sp, np.asarray(m.sensor_coil_field(), float), np.asarray(m.moment_a_m2, float),
+                   str(m.design_sha256), float(octupole_m2),
+                   # the induced term is a small correction: outside the map's box the nearest
+                   # box point is safer than extrapolating its polynomials
+                   lambda p: m.sensor_induced_field(np.clip(p, lo, hi)),
+                   box_lo, box_hi, magnet_size_m, grad, known)
 
     @property
     def n_sensors(self) -> int:

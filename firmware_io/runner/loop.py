@@ -80,7 +80,7 @@ class Runner:
     scene : object
         ``force(position_m, velocity_m_s) -> (3,)`` N, the object's force on the finger.
     localizer : object
-        ``locate(top, bottom, currents=None)`` -> an estimate with ``position_m`` and ``ok``.
+        ``estimate(readings_t, currents_a)`` -> an Estimate (firmware_io.localization.Estimator).
     tracker : object
         A constant-velocity filter over the estimates between frames
         (:class:`firmware_io.localization.ConstantVelocityKalman`): ``update(position_m, time_s,

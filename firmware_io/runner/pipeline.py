@@ -111,8 +111,8 @@ class SensorPipeline:
 
     Parameters
     ----------
-    localizer : object
-        ``locate(top, bottom, currents=None)`` -> an estimate with ``position_m`` and ``ok``.
+    localizer : firmware_io.localization.Estimator
+        ``estimate(readings_t (2 n, 3), currents_a)`` -> an Estimate (upper array, then lower).
     fieldmap : object
         Optionally ``sensor_coil_field() -> (2, n, 3, n)`` T/A and ``sensor_positions_m``
         (2, n, 3) m: the expected-saturation test (:data:`EXPECTED_SATURATION`).
@@ -196,26 +196,18 @@ class SensorPipeline:
         if cold:
             self.reacquire = False
             getattr(self.localizer, "reset", lambda: None)()
-        # a localizer's fix() never raises on a bad frame; locate() may (then: not ok)
-        locate = getattr(self.localizer, "fix", None) or self.localizer.locate
-        try:
-            est = locate(top, bottom, currents=currents)
-        except (ValueError, ArithmeticError) as exc:   # BadInputError is a ValueError
-            est = None
-            reason = f"bad frame: {exc}"
-        ok = est is not None and bool(est.ok)
-        p = (np.asarray(est.position_m, float).copy() if est is not None
-             else np.zeros(3) if self.position_m is None else self.position_m.copy())
+        # the estimator never raises on a bad frame: a not-ok estimate with its reason
+        est = self.localizer.estimate(np.concatenate([top, bottom]), currents)
+        ok = bool(est.ok)
+        p = np.asarray(est.position_m, float).copy()
         if ok:
             self.position_m = p
         else:
-            if est is not None:
-                reason = getattr(est, "reason", "") or "the localizer flagged its estimate"
-            problems.append(("lost", reason))
-        cov = getattr(est, "covariance_m2", None)
+            problems.append(("lost", est.reason or "the localizer flagged its estimate"))
+        cov = est.position_covariance_m2
         return Fix(p, ok, float(frame.t_s), tuple(problems), self.excluded.copy(),
                    self.clock() - t0, None if cov is None else np.asarray(cov, float),
-                   float(getattr(est, "protection_level_m", 0.0)), cold)
+                   float(est.protection_level_m), cold)
 
 
 def _sensors_per_array(fieldmap, localizer, n_coils: int) -> int:

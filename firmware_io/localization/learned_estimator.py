@@ -1,0 +1,49 @@
+"""The thesis' learned inverse as an estimator, method 'learned': :class:`LearnedEstimator`.
+
+Subtract the lower array from the upper one, take the sensor with the largest remainder and map
+its 3-vector to the magnet's position relative to that sensor with the
+:class:`LearnedInverse` (thesis section 3.2.2). Nothing bounds its error, so its estimates are
+never ok; it is here to compare with the thesis.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import BadInputError
+from .estimate import Estimate, Pose
+from .estimator import Estimator
+from .learned import LearnedInverse
+from .position_fit import PositionFit
+
+
+class LearnedEstimator(Estimator):
+    """Method 'learned' (module docstring). ``learned``: the trained :class:`LearnedInverse`
+    of the model's design."""
+
+    method = "learned"
+    needs_currents = False
+
+    def __init__(self, model, settings=None, *, calibration=None,
+                 learned: LearnedInverse | None = None):
+        super().__init__(model, settings, calibration=calibration)
+        if learned is None:
+            raise BadInputError("weights", "a learned-inverse file for method 'learned'", None)
+        if learned.design_sha256 != model.design_sha256:
+            raise BadInputError("weights", f"trained for design {model.design_sha256[:12]}...",
+                                f"design {learned.design_sha256[:12]}...",
+                                "Retrain: designkit.learned_inverse.train_learned_inverse.")
+        self.learned = learned
+        self.engine = PositionFit(self.model, self.settings, self.calibration)
+        self.calibration = self.engine.calibration
+
+    def fit(self, readings: np.ndarray, currents: np.ndarray | None, seed: Pose | None,
+            time_s: float | None) -> Estimate:
+        meas = self.engine.corrected(readings.reshape(2, -1, 3))
+        return self.engine.learned_fit(meas, self.learned)
+
+    def reset(self) -> None:
+        self.engine.reset()
+
+    def fallback_position_m(self) -> np.ndarray:
+        return self.engine.last_position_m

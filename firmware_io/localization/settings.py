@@ -1,0 +1,90 @@
+"""The estimators' settings: one frozen :class:`EstimatorSettings` (SI units, checked once).
+
+Every estimator (:mod:`.estimator`) takes one; ``dataclasses.replace(settings, ...)`` makes a
+variant. Why each default: docs/localization.md ("Settings").
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ..errors import BadInputError
+from ..hw.tlv493d import TLV493D_LSB_T
+from .calibration import CALIBRATED_RELATIVE_ERROR, UNCALIBRATED_RELATIVE_ERROR
+from .sensor_model import DEFAULT_NOISE_T
+
+
+@dataclass(frozen=True)
+class EstimatorSettings:
+    """What an estimator assumes and how far it trusts a fix (SI).
+
+    noise_t : T rms per axis, the sensors' analog noise; the fit's per-axis variance is
+        noise_t^2 + lsb_t^2 / 12 plus the model-error terms
+    lsb_t : T, the readout's quantization step
+    relative_error : relative model error of a reading (gain, mounting); None: 0.02
+        uncalibrated, 0.001 with a calibration
+    mount_position_m : m, sensor position uncertainty (weighs near-field sensors)
+    model_bias_m : m, bound on the fit's bias from what the noise model leaves out, added to
+        the protection level; None: 1 mm uncalibrated, 0.5 mm calibrated
+    integrity_risk : probability per fix that the error exceeds the protection level
+    false_alarm : probability per fix that a correct fit fails the residual test
+    alert_limit_m : m, largest position protection level of an ok fix
+    residual_limit : largest normalized rms residual of an ok fix (a cap beside the test)
+    reacquire_m : m, a warm fit that moved farther is checked by the global search
+    refresh_m : m, the magnet-model corrections are re-linearized beyond this move
+    max_iterations : Levenberg-Marquardt iterations per solve
+    cores : model the magnet-induced core field (None: when the sensor model has it)
+    """
+
+    noise_t: float = DEFAULT_NOISE_T
+    lsb_t: float = TLV493D_LSB_T
+    relative_error: float | None = None
+    mount_position_m: float = 0.0
+    model_bias_m: float | None = None
+    integrity_risk: float = 1e-4
+    false_alarm: float = 1e-6
+    alert_limit_m: float = math.inf
+    residual_limit: float = 5.0
+    reacquire_m: float = 5e-3
+    refresh_m: float = 1e-3
+    max_iterations: int = 30
+    cores: bool | None = None
+
+    def __post_init__(self):
+        for name in ("noise_t", "residual_limit", "reacquire_m", "refresh_m"):
+            val = getattr(self, name)
+            if not (isinstance(val, (int, float)) and math.isfinite(val) and val > 0):
+                raise BadInputError(name, "a finite number > 0 (SI)", val)
+        for name in ("lsb_t", "mount_position_m", "relative_error", "model_bias_m"):
+            val = getattr(self, name)
+            if val is not None and not (isinstance(val, (int, float)) and math.isfinite(val)
+                                        and val >= 0):
+                raise BadInputError(name, "a finite number >= 0 (SI) or None", val)
+        for name in ("integrity_risk", "false_alarm"):
+            val = getattr(self, name)
+            if not (isinstance(val, (int, float)) and 0 < val < 0.5):
+                raise BadInputError(name, "a probability in (0, 0.5)", val)
+        for name in ("alert_limit_m",):
+            val = getattr(self, name)
+            if not (isinstance(val, (int, float)) and val > 0):
+                raise BadInputError(name, "a number > 0 (or inf)", val)
+        if not (isinstance(self.max_iterations, int) and 1 <= self.max_iterations <= 1000):
+            raise BadInputError("max_iterations", "an integer in [1, 1000]", self.max_iterations)
+
+    def relative_error_for(self, calibrated: bool) -> float:
+        """The relative model error of a reading, with or without a calibration."""
+        if self.relative_error is not None:
+            return float(self.relative_error)
+        return CALIBRATED_RELATIVE_ERROR if calibrated else UNCALIBRATED_RELATIVE_ERROR
+
+    def model_bias_for(self, calibrated: bool) -> float:
+        """The model-bias bound (m) added to the protection level."""
+        if self.model_bias_m is not None:
+            return float(self.model_bias_m)
+        return 0.5e-3 if calibrated else 1e-3
+
+    @property
+    def variance_floor_t2(self) -> float:
+        """noise_t^2 + lsb_t^2 / 12, T^2: a reading's variance per axis before model errors."""
+        return self.noise_t ** 2 + self.lsb_t ** 2 / 12.0

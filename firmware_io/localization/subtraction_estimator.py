@@ -1,0 +1,41 @@
+"""The thesis' subtraction, method 'dipole': :class:`SubtractionEstimator`.
+
+The lower array, mirrored onto the upper one (the coils' field maps as B_upper = P B_lower; for
+the symmetric array P = diag(-1, -1, 1)), is subtracted from the upper array, which cancels the
+coils' field without knowing the currents; the magnet (and, unless ``settings.cores`` is False,
+the cores it magnetizes) is fitted to the remainder. The fit: :mod:`.position_fit`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .estimate import Estimate, Pose
+from .estimator import Estimator
+from .position_fit import PositionFit
+
+
+class SubtractionEstimator(Estimator):
+    """Method 'dipole' (module docstring); the :class:`Estimator` interface. Currents, when
+    given, are checked and not used."""
+
+    method = "dipole"
+    needs_currents = False
+
+    def __init__(self, model, settings=None, *, calibration=None):
+        super().__init__(model, settings, calibration=calibration)
+        self.engine = PositionFit(self.model, self.settings, self.calibration)
+        self.calibration = self.engine.calibration
+
+    def fit(self, readings: np.ndarray, currents: np.ndarray | None, seed: Pose | None,
+            time_s: float | None) -> Estimate:
+        if seed is not None:
+            self.engine.warm_start(seed.position_m)
+        meas = self.engine.corrected(readings.reshape(2, -1, 3))
+        return self.engine.fit(meas, None, self.method)
+
+    def reset(self) -> None:
+        self.engine.reset()
+
+    def fallback_position_m(self) -> np.ndarray:
+        return self.engine.last_position_m
