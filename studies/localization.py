@@ -131,8 +131,8 @@ def _induced(sim, model, pos, region):
         for k in range(n):
             for j in range(3):
                 dp = np.eye(3)[j] * h
-                ind_jac[k, ..., j] = (model.induced(pos[k] + dp)
-                                      - model.induced(pos[k] - dp)) / (2 * h)
+                ind_jac[k, ..., j] = ((model.induced(pos[k] + dp) - model.induced(pos[k] - dp))
+                                      / (2 * h)).reshape(2, sim.n, 3)
     return ind, ind_jac
 
 
@@ -141,7 +141,7 @@ def _subtraction_error(make, size, locs, pos, mag, ind):
     and what it does to the position on noise-free readings; returns (numbers, plot data)."""
     n = len(pos)
     cf = locs["dipole-naive"].model.coil_field_t_per_a
-    mirror = np.stack([cf[0, i] @ np.linalg.pinv(cf[1, i]) for i in range(cf.shape[1])])
+    mirror = np.stack([cf[a] @ np.linalg.pinv(cf[b]) for a, b in locs["dipole-naive"].model.pairs])
     sub = ind[:, 0] - np.einsum("sij,ksj->ksi", mirror, ind[:, 1])
     res = {"max_over_sensors_median": float(np.median(np.abs(sub).max(axis=(1, 2)))),
            "max_over_sensors_max": float(np.abs(sub).max())}
@@ -257,8 +257,7 @@ def with_coil_gradient(sim, model):
     from it."""
     rows = sim.array.actuation_matrix(sim.nominal_m.reshape(-1, 3))[:, 3:8]
     grad = np.moveaxis(gradient_tensor(np.moveaxis(rows, 1, -1)), 1, -1)
-    return dataclasses.replace(model, coil_gradient_t_per_a_m=grad.reshape(
-        2, sim.n, 3, 3, sim.array.n_coils))
+    return dataclasses.replace(model, coil_gradient_t_per_a_m=grad)
 
 
 def _calibration_frames(sim, seed, n_frames):
@@ -279,22 +278,23 @@ def _calibration_frames(sim, seed, n_frames):
 def _calibrate(sim, model, seed, n_frames):
     """Run the start-up calibration on simulated frames; report what it recovered."""
     rd, cur = _calibration_frames(sim, seed, n_frames)
-    cal = calibrate(rd.top_t, rd.bottom_t, cur, model, noise_t=sim.noise_t)
+    cal = calibrate(np.concatenate([rd.top_t, rd.bottom_t], 1), cur, model, noise_t=sim.noise_t)
     e = sim.errors
     g_true = e.gains[..., :, None] * np.swapaxes(e.rotations, -1, -2)   # reading = G B
-    left = np.einsum("asij,asjk->asik", cal.gain_inverse, g_true) - np.eye(3)
+    left = (np.einsum("sij,sjk->sik", cal.gain_inverse, g_true.reshape(-1, 3, 3))
+            - np.eye(3)).reshape(2, sim.n, 3, 3)
     uncal = g_true - np.eye(3)
-    known = model.gradient_known if model.gradient_known is not None else np.zeros((2, sim.n),
-                                                                                   bool)
-    sh_err = np.linalg.norm(cal.shift_m - e.position_errors_m, axis=-1)
+    known = (model.gradient_known.reshape(2, sim.n) if model.gradient_known is not None
+             else np.zeros((2, sim.n), bool))
+    sh_err = np.linalg.norm(cal.shift_m.reshape(2, sim.n, 3) - e.position_errors_m, axis=-1)
     sh_true = np.linalg.norm(e.position_errors_m, axis=-1)
     rep = {"frames": n_frames,
            "gain_rotation_error_before_max": float(np.abs(uncal).max()),
            "gain_rotation_error_after_upper_max": float(np.abs(left[0]).max()),
            "gain_rotation_error_after_lower_max": float(np.abs(left[1]).max()),
            "offset_true_rms_mt": float(np.sqrt(np.mean(e.offsets_t ** 2)) * 1e3),
-           "offset_error_after_rms_mt": float(np.sqrt(np.mean((cal.offsets_t - e.offsets_t) ** 2))
-                                              * 1e3),
+           "offset_error_after_rms_mt": float(np.sqrt(np.mean(
+               (cal.offsets_t.reshape(2, sim.n, 3) - e.offsets_t) ** 2)) * 1e3),
            "shift_true_mm": float(sh_true.mean() * 1e3),
            "shift_error_after_mean_mm": float(sh_err[known].mean() * 1e3) if known.any()
            else float("nan"),

@@ -39,11 +39,12 @@ DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "localization_full_c
 def _induced_jacobian(model, pos, h=0.5e-3):
     """(k, 2, n, 3, 3) T/m: the model's induced field's Jacobian at each position (central
     differences), for the noise-limited reference's linearization."""
-    out = np.zeros((len(pos),) + model.sensor_positions_m.shape + (3,))
+    out = np.zeros((len(pos), 2, model.n_sensors // 2, 3, 3))
     for k, p in enumerate(pos):
         for j in range(3):
             dp = np.eye(3)[j] * h
-            out[k, ..., j] = (model.induced(p + dp) - model.induced(p - dp)) / (2 * h)
+            out[k, ..., j] = ((model.induced(p + dp) - model.induced(p - dp))
+                              / (2 * h)).reshape(2, -1, 3)
     return out
 
 

@@ -40,14 +40,15 @@ def _model(rng, *, induced=None):
     # a coil field per ampere with the array's mirror symmetry (Br odd about the mid-plane)
     up = rng.normal(scale=5e-3, size=(9, 3, 9))
     lo = up * np.array([-1.0, -1.0, 1.0])[None, :, None]
-    return SensorModel(sp, np.stack([up, lo]), MOMENT, "a" * 64, 0.0, induced)
+    return SensorModel(sp.reshape(-1, 3), np.concatenate([up, lo]), MOMENT, "a" * 64, 0.0,
+                       induced)
 
 
 def _dipole_readings(model, p, currents):
     """Readings from magpylib's dipole (independent of the code under test) plus coils."""
     dip = magpy.misc.Dipole(moment=MOMENT, position=p)
-    b = dip.getB(model.sensor_positions_m.reshape(-1, 3)).reshape(2, 9, 3)
-    return b + np.einsum("asdc,c->asd", model.coil_field_t_per_a, currents)
+    b = dip.getB(model.sensor_positions_m) + model.coil_field_t_per_a @ currents
+    return b.reshape(2, 9, 3)
 
 
 def test_multipole_dipole_matches_magpylib_and_jacobian_matches_differences():
@@ -159,7 +160,7 @@ def test_warm_fit_of_noisy_frames_matches_scipy_least_squares(method):
             top[rng.integers(9)] = np.nan
         est = loc.estimate(np.r_[top, bot], i)
         assert est.ok, est.reason
-        coil = np.einsum("asdc,c->asd", model.coil_field_t_per_a, i)
+        coil = (model.coil_field_t_per_a @ i).reshape(2, 9, 3)
         if method == "dipole":
             d = top - mirror * bot
             sig = np.sqrt(2 * noise**2 + rel**2 * (np.sum(top**2, 1) + np.sum(bot**2, 1)))
@@ -271,7 +272,7 @@ def test_learned_inverse_never_leaves_its_box_unflagged():
         k = int(np.argmax(np.linalg.norm(top, axis=1)))
         if out_of_box or not inside:
             assert not est.ok
-        assert np.all(est.position_m - model.sensor_positions_m[0, k] >= inv.box_lower_m - 1e-12)
+        assert np.all(est.position_m - model.sensor_positions_m[k] >= inv.box_lower_m - 1e-12)
     assert n_flagged > 10  # the random network does leave its box: the check is exercised
 
 
@@ -317,7 +318,7 @@ def test_bad_inputs_name_the_parameter(tmp_path):
     with pytest.raises(BadInputError, match="noise_t"):
         _loc(model, "model", noise_t=-1.0)
     with pytest.raises(BadInputError, match="sensor_positions_m"):
-        SensorModel(np.zeros((9, 3)), model.coil_field_t_per_a, MOMENT, "x")
+        SensorModel(np.zeros((18, 2)), model.coil_field_t_per_a, MOMENT, "x")
     with pytest.raises(BadInputError, match="map file"):
         (tmp_path / "m.npz").write_bytes(b"junk")
         estimator_from_map(tmp_path / "m.npz")
@@ -340,17 +341,17 @@ def test_kalman_tracks_constant_velocity_exactly():
 def test_legacy_calibration_pair_still_accepted():
     rng = np.random.default_rng(10)
     model = _model(rng)
-    gi = np.tile(np.eye(3), (2, 9, 1, 1)) * 1.01
-    off = rng.normal(scale=1e-5, size=(2, 9, 3))
+    gi = np.tile(np.eye(3), (18, 1, 1)) * 1.01
+    off = rng.normal(scale=1e-5, size=(18, 3))
     loc = _loc(model, "model", cores=False, calibration=(gi, off))
     p = np.array([0.003, 0.004, 0.035])
     i = rng.uniform(-1, 1, 9)
     top, bot = _dipole_readings(model, p, i)
-    raw = np.einsum("ij,asj->asi", np.linalg.inv(gi[0, 0]), np.stack([top, bot])) + off
-    est = loc.estimate(np.r_[raw[0], raw[1]], i)
+    raw = np.r_[top, bot] @ np.linalg.inv(gi[0]).T + off
+    est = loc.estimate(raw, i)
     assert est.ok and np.linalg.norm(est.position_m - p) < 1e-6
     with pytest.raises(BadInputError, match="calibration"):
-        _loc(model, "model", cores=False, calibration=(gi[:, :4], off))
+        _loc(model, "model", cores=False, calibration=(gi[:4], off))
 
 
 # ---------------------------------------------------------------- calibration (coil-driven)
@@ -408,12 +409,12 @@ def test_calibration_recovers_injected_offset_gain_rotation_and_shift(seed):
     rows = _coil_rows_factory(sources)
     sp = _positions()
     nominal = rows(sp.reshape(-1, 3))
-    coil = nominal[:, :3].reshape(2, 9, 3, 9)
-    grad = np.stack([_field_gradient_ref(r) for r in nominal]).reshape(2, 9, 3, 3, 9)
-    known = np.zeros((2, 9), bool)
-    known[0] = True
-    model = SensorModel(sp, coil, MOMENT, "a" * 64, 0.0, None, None, None, None, grad, known,
-                        rows)
+    coil = nominal[:, :3]
+    grad = np.stack([_field_gradient_ref(r) for r in nominal])
+    known = np.zeros(18, bool)
+    known[:9] = True
+    model = SensorModel(sp.reshape(-1, 3), coil, MOMENT, "a" * 64, 0.0, None, None, None, None,
+                        grad, known, rows)
     rng = np.random.default_rng(seed)
     gains = 1 + rng.normal(scale=0.01, size=(2, 9, 3))
     axes = rng.normal(size=(2, 9, 3))
@@ -433,15 +434,15 @@ def test_calibration_recovers_injected_offset_gain_rotation_and_shift(seed):
     b = np.einsum("asdc,kc->kasd", true_coil, cur)
     meas = np.einsum("asij,kasj->kasi", g_true, b) + offsets
     meas = meas + noise.normal(scale=1e-4, size=meas.shape)
-    cal = calibrate(meas[:, 0], meas[:, 1], cur, model)
-    assert np.abs(cal.offsets_t - offsets).max() < 0.015e-3
-    left = np.einsum("asij,asjk->asik", cal.gain_inverse, g_true) - np.eye(3)
-    assert np.abs(left[0]).max() < 0.004
-    assert np.abs(left[1]).max() < 0.03
-    assert np.linalg.norm(cal.shift_m[0] - shift[0], axis=-1).max() < 0.1e-3
-    assert np.all(cal.shift_m[1] == 0)
+    cal = calibrate(meas.reshape(k, 18, 3), cur, model)
+    assert np.abs(cal.offsets_t - offsets.reshape(18, 3)).max() < 0.015e-3
+    left = np.einsum("sij,sjk->sik", cal.gain_inverse, g_true.reshape(18, 3, 3)) - np.eye(3)
+    assert np.abs(left[:9]).max() < 0.004
+    assert np.abs(left[9:]).max() < 0.03
+    assert np.linalg.norm(cal.shift_m[:9] - shift[0], axis=-1).max() < 0.1e-3
+    assert np.all(cal.shift_m[9:] == 0)
     # the coils' field at the upper sensors, back in the array frame (0.4 % of ~25 mT)
-    assert np.allclose(cal.coil_field_t_per_a[0], true_coil[0], atol=0.1e-3)
+    assert np.allclose(cal.coil_field_t_per_a[:9], true_coil[0], atol=0.1e-3)
 
 
 def _field_gradient_ref(r):
@@ -458,17 +459,17 @@ def test_calibration_round_trip_and_bad_input(tmp_path):
     rng = np.random.default_rng(24)
     model = _model(rng)
     cur = rng.uniform(-2, 2, (40, 9))
-    b = np.einsum("asdc,kc->kasd", model.coil_field_t_per_a, cur)
-    cal = calibrate(b[:, 0], b[:, 1], cur, model)
+    b = np.einsum("sdc,kc->ksd", model.coil_field_t_per_a, cur)
+    cal = calibrate(b, cur, model)
     assert isinstance(cal, SensorCalibration)
     cal.save(tmp_path / "cal.npz")
     back = SensorCalibration.load(tmp_path / "cal.npz")
     assert np.array_equal(back.gain_inverse, cal.gain_inverse)
     assert np.array_equal(back.coil_field_t_per_a, cal.coil_field_t_per_a)
     with pytest.raises(BadInputError, match="currents"):
-        calibrate(b[:, 0], b[:, 1], cur[:, :8], model)
+        calibrate(b, cur[:, :8], model)
     with pytest.raises(BadInputError, match="currents"):
-        calibrate(b[:5, 0], b[:5, 1], cur[:5], model)   # too few frames for 9 coils
+        calibrate(b[:5], cur[:5], model)   # too few frames for 9 coils
     (tmp_path / "junk.npz").write_bytes(b"junk")
     with pytest.raises(BadInputError, match="calibration"):
         SensorCalibration.load(tmp_path / "junk.npz")
@@ -522,8 +523,8 @@ def test_fit_with_the_exact_magnet_recovers_a_cylinder(method):
         p = p + rng.normal(scale=0.4e-3, size=3) if k else p
         i = rng.uniform(-1, 1, 9)
         cyl = magpy.magnet.Cylinder(polarization=(0, 0, j), dimension=(0.010, 0.010), position=p)
-        b = cyl.getB(model.sensor_positions_m.reshape(-1, 3)).reshape(2, 9, 3)
-        b = b + np.einsum("asdc,c->asd", model.coil_field_t_per_a, i)
+        b = cyl.getB(model.sensor_positions_m) + model.coil_field_t_per_a @ i
+        b = b.reshape(2, 9, 3)
         b[np.any(np.abs(b) > 0.13, axis=-1)] = np.nan
         if k == 0:
             loc.reset()

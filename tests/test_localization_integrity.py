@@ -31,15 +31,16 @@ def _model(seed=0):
     xy = np.array([[x, y] for y in (0.05, 0.0, -0.05) for x in (-0.05, 0.0, 0.05)])
     sp = np.stack([np.c_[xy, np.full(9, 0.014)], np.c_[xy, np.full(9, -0.114)]])
     up = rng.normal(scale=5e-3, size=(9, 3, 9))
-    return SensorModel(sp, np.stack([up, up * np.array([-1.0, -1.0, 1.0])[None, :, None]]),
+    return SensorModel(sp.reshape(-1, 3),
+                       np.concatenate([up, up * np.array([-1.0, -1.0, 1.0])[None, :, None]]),
                        MOMENT, "a" * 64, 0.0, None)
 
 
 def _frame(model, p, currents, rng):
     """magpylib's dipole (independent of the code under test) + coils + Gaussian noise."""
     b = magpy.misc.Dipole(moment=MOMENT, position=p).getB(
-        model.sensor_positions_m.reshape(-1, 3)).reshape(2, 9, 3)
-    b = b + np.einsum("asdc,c->asd", model.coil_field_t_per_a, currents)
+        model.sensor_positions_m) + model.coil_field_t_per_a @ currents
+    b = b.reshape(2, 9, 3)
     return b + rng.normal(scale=NOISE, size=b.shape)
 
 

@@ -119,7 +119,7 @@ def test_calibration_removes_the_mounting_bias(tmp_path):
     zero = np.zeros((1000, 2, 9, 3))
     frames = noisy.read(np.zeros((1000, 3)), cur, parts=(zero, zero), rng=rng)
     plain = ModelEstimator.from_map(path, magnet_size_m=size)
-    cal = calibrate(frames.top_t, frames.bottom_t, cur, plain.model)
+    cal = calibrate(np.concatenate([frames.top_t, frames.bottom_t], 1), cur, plain.model)
     fitted = ModelEstimator.from_map(path, magnet_size_m=size, calibration=cal)
     p = random_positions(25, np.random.default_rng(8), z_range_m=(0.020, 0.045))
     i = np.random.default_rng(9).uniform(-1, 1, (25, 9))

@@ -97,8 +97,8 @@ def lower_half_errors(small_map):
     mag = sim.magnet_part(pos)
     ind = np.stack([sim.induced_part(pos[k:k + 1])[0] for k in range(N_LOC)])
     h = 0.5e-3
-    jac = np.stack([np.stack([(model.induced(p + h * e) - model.induced(p - h * e)) / (2 * h)
-                              for e in np.eye(3)], axis=-1) for p in pos])
+    jac = np.stack([np.stack([(model.induced(p + h * e) - model.induced(p - h * e)).reshape(
+        2, 9, 3) / (2 * h) for e in np.eye(3)], axis=-1) for p in pos])
     out = {}
     for case in ("off", "static"):
         cur = case_currents(case, rng.uniform(0, 20, N_LOC), model.n_coils, seed=7)

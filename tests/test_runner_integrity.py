@@ -131,7 +131,8 @@ def test_bad_frames_reach_the_loop_as_not_ok_fixes_with_a_reason():
     sp = np.stack([np.c_[xy, np.full(9, 0.014)], np.c_[xy, np.full(9, -0.114)]])
     up = rng.normal(scale=5e-3, size=(9, 3, 9))
     moment = np.array([0.0, 0.0, 0.909])
-    model = SensorModel(sp, np.stack([up, up * np.array([-1.0, -1.0, 1.0])[None, :, None]]),
+    model = SensorModel(sp.reshape(-1, 3),
+                        np.concatenate([up, up * np.array([-1.0, -1.0, 1.0])[None, :, None]]),
                         moment, "a" * 64, 0.0, None)
     pipe = SensorPipeline(ModelEstimator(model, EstimatorSettings(cores=False)), object(), 9,
                           lambda t: np.zeros(9), moment)

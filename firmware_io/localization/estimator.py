@@ -66,7 +66,7 @@ class Estimator(abc.ABC):
     @property
     def n_sensors(self) -> int:
         """Sensors in a frame (the rows of ``readings_t``)."""
-        return 2 * self.model.n_sensors
+        return self.model.n_sensors
 
     @property
     def integrity_risk(self) -> float:

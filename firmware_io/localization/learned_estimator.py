@@ -27,6 +27,9 @@ class LearnedEstimator(Estimator):
     def __init__(self, model, settings=None, *, calibration=None,
                  learned: LearnedInverse | None = None):
         super().__init__(model, settings, calibration=calibration)
+        if model.pairs is None:
+            raise BadInputError("model.pairs", "(upper, lower) sensor pairs for the subtraction",
+                                None)
         if learned is None:
             raise BadInputError("weights", "a learned-inverse file for method 'learned'", None)
         if learned.design_sha256 != model.design_sha256:
@@ -39,7 +42,7 @@ class LearnedEstimator(Estimator):
 
     def fit(self, readings: np.ndarray, currents: np.ndarray | None, seed: Pose | None,
             time_s: float | None) -> Estimate:
-        meas = self.engine.corrected(readings.reshape(2, -1, 3))
+        meas = self.engine.corrected(readings)
         return self.engine.learned_fit(meas, self.learned)
 
     def reset(self) -> None:

@@ -31,7 +31,7 @@ class ModelEstimator(Estimator):
             time_s: float | None) -> Estimate:
         if seed is not None:
             self.engine.warm_start(seed.position_m)
-        meas = self.engine.corrected(readings.reshape(2, -1, 3))
+        meas = self.engine.corrected(readings)
         return self.engine.fit(meas, currents, self.method)
 
     def reset(self) -> None:

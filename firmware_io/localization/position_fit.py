@@ -67,7 +67,7 @@ class PositionFit:
         self.integrity_risk, self.false_alarm = settings.integrity_risk, settings.false_alarm
         self.alert_limit_m, self.reacquire_m = settings.alert_limit_m, settings.reacquire_m
         self._k2 = ratio_quantiles(self.integrity_risk)
-        self._chi2_max = thresholds(self.false_alarm, 6 * model.n_sensors)
+        self._chi2_max = thresholds(self.false_alarm, 3 * model.n_sensors)
         cores = settings.cores
         self.cores = (model.induced is not None) if cores is None else bool(cores)
         if self.cores and model.induced is None:
@@ -78,36 +78,40 @@ class PositionFit:
         cf = self._use_calibration(calibration)
         # subtraction: the lower sensor's coil field mapped onto the upper one's (for the
         # symmetric array diag(-1, -1, 1): Br is odd about the coil's mid-plane)
-        self._mirror = np.stack([cf[0, i] @ np.linalg.pinv(cf[1, i]) for i in range(n)])
-        # the residual's linear maps of the 2n sensors' fields (rows: per used sensor, 3 each):
-        # subtraction top - P bottom, or the identity for the model-based fit
-        sub = np.zeros((n, 3, 2, n, 3))
-        for s_ in range(n):
-            sub[s_, :, 0, s_] = EYE3
-            sub[s_, :, 1, s_] = -self._mirror[s_]
-        self._sub_op = sub.reshape(n, 3, 6 * n)
-        self._id_op = np.eye(6 * n).reshape(2 * n, 3, 6 * n)
-        self._sub_op_all = self._sub_op.reshape(3 * n, 6 * n)
-        self._id_op_all = self._id_op.reshape(6 * n, 6 * n)
+        pairs = model.pairs if model.pairs is not None else np.zeros((0, 2), int)
+        self._up, self._lo = pairs[:, 0], pairs[:, 1]
+        self._mirror = np.stack([cf[a] @ np.linalg.pinv(cf[b]) for a, b in pairs]) \
+            if len(pairs) else np.zeros((0, 3, 3))
+        # the residual's linear maps of the n sensors' fields (rows: per used sensor or pair,
+        # 3 each): subtraction upper - P lower, or the identity for the model-based fit
+        k = len(pairs)
+        sub = np.zeros((k, 3, n, 3))
+        for j, (a, b) in enumerate(pairs):
+            sub[j, :, a] = EYE3
+            sub[j, :, b] = -self._mirror[j]
+        self._sub_op = sub.reshape(k, 3, 3 * n)
+        self._id_op = np.eye(3 * n).reshape(n, 3, 3 * n)
+        self._sub_op_all = self._sub_op.reshape(3 * k, 3 * n)
+        self._id_op_all = self._id_op.reshape(3 * n, 3 * n)
         # every sensor usable (the usual frame): (op, mu0 op) by subtract
         self._ops = {True: (self._sub_op_all, MU0 * self._sub_op_all),
                      False: (self._id_op_all, MU0 * self._id_op_all)}
         mom = model.moment_a_m2
         mag = math.sqrt(float(mom @ mom))
         c_ = mag / (4 * math.pi)
-        # the multipole's constants for multipole_rows (u, c, k) and its (2n, 3, 4) buffer
+        # the multipole's constants for multipole_rows (u, c, k) and its (n, 3, 4) buffer
         self._mp = (mom / mag, c_, 0.5 * c_ * model.octupole_m2)
-        self._mp_stack = np.zeros((6 * n + 4, 4))
+        self._mp_stack = np.zeros((3 * n + 4, 4))
         self._mp_stack[-4:] = np.eye(4)
-        self._mp_work = multipole_work(2 * n, self._mp[0], c_)
+        self._mp_work = multipole_work(n, self._mp[0], c_)
         self._exact = model.magnet_size_m is not None
         self._candidates = self._grid_points(model.box_lower_m, model.box_upper_m)
         self._grid = self._grid_fields(self._candidates)
         self._last: np.ndarray | None = None
         self._box_lo = [float(x) for x in model.box_lower_m]
         self._box_hi = [float(x) for x in model.box_upper_m]
-        # per correction: (p_c, value (2n, 3), jacobian (2n, 3, 3), radius, const (6n,),
-        # jacobian (6n, 3)) -- the last two the same linearization as const + jacobian @ q
+        # per correction: (p_c, value (n, 3), jacobian (n, 3, 3), radius, const (3n,),
+        # jacobian (3n, 3)) -- the last two the same linearization as const + jacobian @ q
         self._lin = {}
         self._pj = None  # where the core term's Jacobian was last differenced
         self._radius = self.refresh_m  # reuse radius of the linearization, adapted
@@ -117,16 +121,16 @@ class PositionFit:
         (the measured one when the calibration has it) and the calibration's own variance
         sigma^2 x^T D x per sensor at x = (I, 1); returns that coils' field."""
         model, n = self.model, self.model.n_sensors
-        self._pts = model.sensor_positions_m.reshape(-1, 3)
+        self._pts = model.sensor_positions_m
         cf, self.calibration, self._resp = model.coil_field_t_per_a, None, None
         if calibration is not None:
             self.calibration = SensorCalibration.coerce(calibration, n, model.n_coils)
-            self._pts = (model.sensor_positions_m + self.calibration.shift_m).reshape(-1, 3)
+            self._pts = model.sensor_positions_m + self.calibration.shift_m
             if self.calibration.coil_field_t_per_a is not None:
                 cf = self.calibration.coil_field_t_per_a
             d_inv = self.calibration.response_design_inverse
             if d_inv is not None:
-                self._resp = self._sig2n * d_inv.reshape(2 * n, model.n_coils + 1, -1)
+                self._resp = self._sig2n * d_inv
         self._coil = cf
         return cf
 
@@ -143,16 +147,17 @@ class PositionFit:
         """Start the next fit from ``position_m`` (3,) m (a tracker's prediction)."""
         self._last = np.array(position_m, float)
 
-    def corrected(self, meas: np.ndarray) -> np.ndarray:
-        """(2, n, 3) T readings with the calibration applied (gain_inverse @ (r - offset))."""
-        if self.calibration is None:
-            return meas
-        cal = self.calibration
-        return np.matmul(cal.gain_inverse, (meas - cal.offsets_t)[..., None])[..., 0]
+    def corrected(self, readings: np.ndarray) -> np.ndarray:
+        """(n, 3) T readings, each in its sensor's frame, as the field in the array frame:
+        R (gain_inverse @ (r - offset)) with the calibration, R r without."""
+        if self.calibration is not None:
+            cal = self.calibration
+            readings = np.matmul(cal.gain_inverse, (readings - cal.offsets_t)[..., None])[..., 0]
+        return np.matmul(self.model.sensor_orientations, readings[..., None])[..., 0]
 
     def fit(self, meas: np.ndarray, currents: np.ndarray | None, method: str) -> Estimate:
-        """The fix of calibrated readings ``meas`` (2, n, 3) T: 'model' with ``currents``
-        (n_coils,) A, the subtraction ('dipole') without."""
+        """The fix of the field ``meas`` (n, 3) T (array frame, :meth:`corrected`): 'model'
+        with ``currents`` (n_coils,) A, the subtraction ('dipole') without."""
         return self._fit(meas, currents, method)
 
     def _box_centre(self) -> np.ndarray:
@@ -170,12 +175,12 @@ class PositionFit:
 
     def _data(self, meas, currents):
         sig2n = self._sig2n
-        mag2 = np.einsum("asi,asi->as", meas, meas)
+        mag2 = np.einsum("si,si->s", meas, meas)
         if currents is None:
-            d = meas[0] - np.matmul(self._mirror, meas[1][..., None])[..., 0]
+            d = meas[self._up] - np.matmul(self._mirror, meas[self._lo][..., None])[..., 0]
             # a row sum is NaN when any component is (|B| <= 1 T: no overflow)
             use = np.isfinite(d.sum(1))
-            s2 = 2 * sig2n + self.rel**2 * (mag2[0] + mag2[1])
+            s2 = 2 * sig2n + self.rel**2 * (mag2[self._up] + mag2[self._lo])
         else:
             d = (meas - self._coil @ currents).reshape(-1, 3)
             use = np.isfinite(d.sum(1))
@@ -189,8 +194,8 @@ class PositionFit:
 
     def _exact_part(self, p):
         """The exact cylinder's field minus the multipole at the sensors near p, and its
-        Jacobian (central differences, h = 0.1 mm, all in one vectorized call): (2n, 3) T,
-        (2n, 3, 3) T/m. The l >= 5 terms the multipole misses fall as (size / r)^4 of the
+        Jacobian (central differences, h = 0.1 mm, all in one vectorized call): (n, 3) T,
+        (n, 3, 3) T/m. The l >= 5 terms the multipole misses fall as (size / r)^4 of the
         dipole's field: beyond 5 magnet lengths they are < 0.002 mT, 50x below the noise."""
         m = self.model
         a, length = m.magnet_size_m
@@ -213,7 +218,7 @@ class PositionFit:
         return self.model.induced(p).reshape(-1, 3)
 
     def _extra(self, p) -> np.ndarray:
-        """(2n, 3) T: what the multipole misses at the sensors -- the exact cylinder's field minus
+        """(n, 3) T: what the multipole misses at the sensors -- the exact cylinder's field minus
         the multipole, plus the field of the cores the magnet magnetizes."""
         out = np.zeros((len(self._pts), 3))
         if self._exact:
@@ -265,7 +270,7 @@ class PositionFit:
                    for c in self._lin.values())
 
     def _linearized(self, p, tol=None):
-        """(const (6n,) T, jacobian (6n, 3) T/m): the corrections to the multipole at the 2n
+        """(const (3n,) T, jacobian (3n, 3) T/m): the corrections to the multipole at the n
         sensors, affine in the position q near p: const + jacobian @ q. Each part keeps its own
         linearization point and reuse radius (adapted from the linearization's observed error):
         the exact magnet's part (cheap, curved near the sensors: value and Jacobian fresh at each
@@ -290,7 +295,7 @@ class PositionFit:
 
     def _subtracted_model(self, p, extra=None):
         """The model of the subtracted data at position p: (n, 3) T, the multipole plus the
-        corrections ``extra`` (2n, 3) T at the 2n sensors, mapped by the fit's own subtraction
+        corrections ``extra`` (n, 3) T at the n sensors, mapped by the fit's own subtraction
         operator."""
         m = self.model
         b = multipole_field(self._pts, p, m.moment_a_m2, m.octupole_m2)
@@ -307,14 +312,14 @@ class PositionFit:
                             f"only {n_used} usable sensors (need 3)", n_used=n_used,
                             method=method)
         # the whole weighted (and, for subtraction, mirrored) residual is one linear map of the
-        # 2n sensors' field and Jacobian: op (3 m, 6 n), built once per frame
+        # n sensors' field and Jacobian: op (3 m, 6 n), built once per frame
         if n_used == len(use):
             op, opm = self._ops[subtract]
             w3 = (1.0 / sig).repeat(3)[:, None]
             du = d.reshape(-1)
         else:
             op = (self._sub_op if subtract else self._id_op)[use].reshape(
-                -1, 6 * self.model.n_sensors)
+                -1, 3 * self.model.n_sensors)
             opm = MU0 * op
             w3 = (1.0 / sig[use]).repeat(3)[:, None]
             du = d[use].reshape(-1)
@@ -421,9 +426,9 @@ class PositionFit:
         return g.reshape(-1, 3)
 
     def _grid_fields(self, c):
-        """The magnet's field at the 2n sensors for every grid candidate c (C, 3) m: the exact
-        cylinder when its size is known, else the multipole; as (C, 6n) T for the model-based
-        fit and subtracted (C, 3n) T, each with its square (the search's weighted costs)."""
+        """The magnet's field at the n sensors for every grid candidate c (C, 3) m: the exact
+        cylinder when its size is known, else the multipole; as (C, 3n) T for the model-based
+        fit and subtracted (C, 3k) T, each with its square (the search's weighted costs)."""
         m = self.model
         rel = (self._pts[None] - c[:, None]).reshape(-1, 3)
         if self._exact:
@@ -457,7 +462,7 @@ class PositionFit:
         u, cc, k = self._mp
         pts = self._pts
         work = self._mp_work
-        # one product: [mu0 op | A | -c] @ [[multipole rows (6n, 4)], [I, p], [0, 0, 0, 1]] =
+        # one product: [mu0 op | A | -c] @ [[multipole rows (3n, 4)], [I, p], [0, 0, 0, 1]] =
         # op b(p) + A p - c next to op J(p) + A (A = 0 without corrections)
         stack = self._mp_stack
         buf = stack[:-4].reshape(-1, 3, 4)
@@ -470,7 +475,7 @@ class PositionFit:
         return evaluate
 
     def learned_fit(self, meas: np.ndarray, learned) -> Estimate:
-        """The thesis' learned inverse on the subtracted data of ``meas`` (2, n, 3) T: the
+        """The thesis' learned inverse on the subtracted data of ``meas`` (n, 3) T: the
         sensor with the largest remainder, its field mapped to the magnet's position. No
         covariance, no protection level: never ok (nothing bounds its error); ``reason`` says
         whether it also left its training box or failed the residual cap."""
@@ -481,7 +486,7 @@ class PositionFit:
         mag = np.where(use, np.linalg.norm(np.nan_to_num(d), axis=1), -1.0)
         k = int(np.argmax(mag))
         rel, inside = learned(d[k])
-        p = self.model.sensor_positions_m[0, k] + rel
+        p = self.model.sensor_positions_m[self._up[k]] + rel
         b = self._subtracted_model(p, self._extra(p) if (self._exact or self.cores) else None)
         r = ((d[use] - b[use]) / sig[use, None]).reshape(-1)
         chi2, dof = float(r @ r), max(r.size - 3, 1)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import BadInputError
 from .estimate import Estimate, Pose
 from .estimator import Estimator
 from .position_fit import PositionFit
@@ -24,6 +25,9 @@ class SubtractionEstimator(Estimator):
 
     def __init__(self, model, settings=None, *, calibration=None):
         super().__init__(model, settings, calibration=calibration)
+        if model.pairs is None:
+            raise BadInputError("model.pairs", "(upper, lower) sensor pairs for the subtraction",
+                                None)
         self.engine = PositionFit(self.model, self.settings, self.calibration)
         self.calibration = self.engine.calibration
 
@@ -31,7 +35,7 @@ class SubtractionEstimator(Estimator):
             time_s: float | None) -> Estimate:
         if seed is not None:
             self.engine.warm_start(seed.position_m)
-        meas = self.engine.corrected(readings.reshape(2, -1, 3))
+        meas = self.engine.corrected(readings)
         return self.engine.fit(meas, None, self.method)
 
     def reset(self) -> None:

@@ -75,7 +75,7 @@ def calibrate_sensors(model, top_t, bottom_t, applied_a):
     :func:`firmware_io.localization.calibrate`, checked to be finite. Returns what it returns,
     for the Localizer's ``calibration``."""
     try:
-        cal = calibrate(top_t, bottom_t, applied_a, model)
+        cal = calibrate(np.concatenate([top_t, bottom_t], axis=1), applied_a, model)
     except (np.linalg.LinAlgError, ValueError):
         cal = (np.full(1, np.nan),)
     # (gain_inverse, offsets) or the localizer's calibration object with those attributes
