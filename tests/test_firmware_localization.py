@@ -69,11 +69,11 @@ def test_multipole_dipole_matches_magpylib_and_jacobian_matches_differences():
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_fused_multipole_rows_match_magpylib_and_differences(seed):
-    """The fit's fused field + Jacobian (one (n, 3, 4) block, in units of mu0): the dipole part
-    against magpylib, the octupole's field and Jacobian against central differences of the
-    field, random moments and points 5-80 mm away."""
-    from firmware_io.localization.magnet import MU0, multipole_rows, multipole_work
+def test_pose_rows_match_magpylib_and_differences(seed):
+    """The fit's kernel (field, position and moment-direction Jacobians in one pass): the
+    dipole part against magpylib, the octupole's field and Jacobian against central
+    differences of the field, random moments and points 5-80 mm away."""
+    from firmware_io.localization.magnet import multipole_pose_rows
 
     rng = np.random.default_rng(seed)
     d = rng.normal(size=(18, 3))
@@ -82,20 +82,18 @@ def test_fused_multipole_rows_match_magpylib_and_differences(seed):
     m = rng.normal(size=3)
     mag = np.linalg.norm(m)
     u, cc = m / mag, mag / (4 * math.pi)
-    work = multipole_work(18, u, cc)
-    out = np.empty((18, 3, 4))
-    multipole_rows(pts - c, u, cc, 0.0, out, work)
+    b, _, _ = multipole_pose_rows(pts - c, u, cc, 0.0)
     ref = magpy.misc.Dipole(moment=m, position=c).getB(pts)
-    assert np.allclose(MU0 * out[..., 3], ref, rtol=1e-9, atol=1e-9 * np.abs(ref).max())
+    assert np.allclose(b, ref, rtol=1e-9, atol=1e-9 * np.abs(ref).max())
     q = rng.uniform(-3e-5, 3e-5)
-    multipole_rows(pts - c, u, cc, 0.5 * cc * q, out, work)   # the buffers reused
-    b = multipole_field(pts, c, m, q)
-    assert np.allclose(MU0 * out[..., 3], b, rtol=1e-12, atol=1e-12 * np.abs(b).max())
+    b, jp, _ = multipole_pose_rows(pts - c, u, cc, 0.5 * cc * q)
+    want = multipole_field(pts, c, m, q)
+    assert np.allclose(b, want, rtol=1e-12, atol=1e-12 * np.abs(want).max())
     h = 1e-8
     fd = np.stack([(multipole_field(pts, c + h * e, m, q) - multipole_field(pts, c - h * e, m, q))
                    / (2 * h) for e in np.eye(3)], -1)
     scale = np.abs(fd).max(axis=(1, 2))[:, None, None]
-    assert np.all(np.abs(MU0 * out[..., :3] - fd) < 1e-5 * scale)
+    assert np.all(np.abs(jp - fd) < 1e-5 * scale)
 
 
 def test_octupole_term_approaches_the_exact_cylinder():
@@ -136,24 +134,33 @@ def test_fit_recovers_a_noiseless_dipole(method):
 
 @pytest.mark.parametrize("method", ["dipole", "model"])
 def test_warm_fit_of_noisy_frames_matches_scipy_least_squares(method):
-    """The fused fit path (one linear map of the field + Jacobian, weights, subtraction, a NaN
-    sensor) against scipy's least_squares on the same weighted cost written out independently
-    (magpylib's dipole; sigma^2 = noise^2 per reading + (rel |B|)^2, the subtraction's mirror
-    diag(-1, -1, 1) from the array's symmetry): warm-started estimates agree to < 1/20 of the
-    estimate's own standard deviation (the fit's stopping rule), with 0.1 mT noise."""
+    """The fit (5 unknowns: position and moment direction; weights, subtraction, a NaN sensor)
+    against scipy's least_squares on the same weighted cost written out independently
+    (magpylib's dipole; the direction as polar angles; sigma^2 = noise^2 + lsb^2 / 12 per
+    reading + (rel |B|)^2, the subtraction's mirror diag(-1, -1, 1) from the array's symmetry)
+    along a moving, tilting magnet: warm-started estimates agree to < 1/20 of the estimate's
+    own standard deviation (the fit's stopping rule), with 0.1 mT noise."""
     from scipy.optimize import least_squares
 
     rng = np.random.default_rng(11)
     model = _model(rng)
-    noise, rel = 1e-4, 0.02
-    loc = _loc(model, method, cores=False, noise_t=noise, relative_error=rel)
+    noise, rel, lsb = 1e-4, 0.02, 0.098e-3
+    loc = _loc(model, method, cores=False, noise_t=noise, relative_error=rel, lsb_t=lsb)
     sp = model.sensor_positions_m
     mirror = np.array([-1.0, -1.0, 1.0])
-    p = np.array([0.0, 0.0, 0.04])
+    p, ang = np.array([0.0, 0.0, 0.035]), np.array([0.2, 0.5])
+    var = noise ** 2 + lsb ** 2 / 12
+
+    def direction(a):
+        return np.array([math.sin(a[0]) * math.cos(a[1]), math.sin(a[0]) * math.sin(a[1]),
+                         math.cos(a[0])])
+
     for k in range(12):
-        p = p + rng.normal(scale=0.5e-3, size=3)     # a moving magnet, frame to frame
+        p = p + rng.normal(scale=0.5e-3, size=3)     # a moving, tilting magnet
+        ang = ang + rng.normal(scale=0.02, size=2)
         i = rng.uniform(-1, 1, 9)
-        top, bot = _dipole_readings(model, p, i)
+        b = magpy.misc.Dipole(moment=0.909 * direction(ang), position=p).getB(sp)
+        top, bot = (b + model.coil_field_t_per_a @ i).reshape(2, 9, 3)
         top = top + rng.normal(scale=noise, size=top.shape)
         bot = bot + rng.normal(scale=noise, size=bot.shape)
         if k % 3 == 2:
@@ -163,20 +170,23 @@ def test_warm_fit_of_noisy_frames_matches_scipy_least_squares(method):
         coil = (model.coil_field_t_per_a @ i).reshape(2, 9, 3)
         if method == "dipole":
             d = top - mirror * bot
-            sig = np.sqrt(2 * noise**2 + rel**2 * (np.sum(top**2, 1) + np.sum(bot**2, 1)))
+            sig = np.sqrt(2 * var + rel**2 * (np.sum(top**2, 1) + np.sum(bot**2, 1)))
         else:
             d = np.r_[top - coil[0], bot - coil[1]]
-            sig = np.sqrt(noise**2 + rel**2 * np.sum(np.r_[top, bot] ** 2, 1))
+            sig = np.sqrt(var + rel**2 * np.sum(np.r_[top, bot] ** 2, 1))
         use = np.all(np.isfinite(d), axis=1)
 
-        def res(q):
-            b = magpy.misc.Dipole(moment=MOMENT, position=q).getB(sp.reshape(-1, 3))
-            b = (b[:9] - mirror * b[9:]) if method == "dipole" else b
-            return ((d - b)[use] / sig[use, None]).ravel()
+        def res(x):
+            f = magpy.misc.Dipole(moment=0.909 * direction(x[3:]), position=x[:3]).getB(sp)
+            f = (f[:9] - mirror * f[9:]) if method == "dipole" else f
+            return ((d - f)[use] / sig[use, None]).ravel()
 
-        ref = least_squares(res, p, x_scale=1e-3, xtol=1e-12, ftol=1e-12, gtol=1e-12)
-        sd = np.sqrt(np.trace(np.linalg.inv(ref.jac.T @ ref.jac)))
-        assert np.linalg.norm(est.position_m - ref.x) < 0.05 * sd, (k, est.position_m - ref.x, sd)
+        ref = least_squares(res, np.r_[p, ang], x_scale=np.r_[1e-3, 1e-3, 1e-3, 0.01, 0.01],
+                            xtol=1e-12, ftol=1e-12, gtol=1e-12)
+        cov = np.linalg.inv(ref.jac.T @ ref.jac)
+        assert np.linalg.norm(est.position_m - ref.x[:3]) < 0.05 * np.sqrt(np.trace(cov[:3, :3]))
+        turn = math.acos(min(1.0, est.moment_a_m2 @ direction(ref.x[3:]) / 0.909))
+        assert turn < 0.05 * math.sqrt(cov[3, 3] + (math.sin(ref.x[3]) ** 2) * cov[4, 4])
 
 
 @pytest.mark.parametrize("method", ["dipole", "model"])
@@ -207,7 +217,7 @@ def test_too_few_sensors_and_garbage_give_ok_false():
     assert not est.ok and "usable" in est.reason
     assert np.all(np.isfinite(est.position_m))
     # a field no dipole in the box can make: +50 mT along x at every sensor
-    est = loc.estimate(np.r_[np.tile([0.05, 0, 0], (9, 1)), np.tile([0.05, 0, 0], (9, 1))], np.zeros(9))
+    est = loc.estimate(np.tile([0.05, 0, 0], (18, 1)), np.zeros(9))
     assert not est.ok
     assert np.all(np.isfinite(est.position_m)) and math.isfinite(est.residual)
 
@@ -228,19 +238,25 @@ def test_model_based_cancellation_uses_the_commanded_currents():
 
 
 def test_induced_term_is_fitted():
-    """A position-dependent extra field known to the model (the cores' stand-in) is fitted."""
+    """A field known to the model, linear in the moment and falling with the height (the
+    magnet-magnetized cores' stand-in), of a tilted magnet: fitted to 10 um and 0.05 degree;
+    left out, the fit is off."""
     rng = np.random.default_rng(6)
+    mix = rng.normal(scale=2e-3 / 0.909, size=(18, 3, 3))   # T per A m^2, 30 mm away
 
-    def induced(p):
-        # a smooth field falling with height, as the magnet-magnetized cores make
-        return np.broadcast_to(np.array([0.0, 0.0, 4e-3]) * (0.03 / p[2]) ** 3, (2, 9, 3)).copy()
+    def induced(positions):
+        d = np.linalg.norm(model.sensor_positions_m[None] - positions[:, None], axis=-1)
+        return (0.03 / d)[..., None, None] ** 3 * mix
 
     model = _model(rng, induced=induced)
-    p = np.array([0.005, 0.002, 0.035])
-    top, bot = _dipole_readings(model, p, np.zeros(9)) + induced(p)
-    est = _loc(model, "model").estimate(np.r_[top, bot], np.zeros(9))
+    p, u = np.array([0.005, 0.002, 0.035]), np.array([0.3, -0.2, 0.93])
+    u /= np.linalg.norm(u)
+    b = magpy.misc.Dipole(moment=0.909 * u, position=p).getB(model.sensor_positions_m)
+    readings = b + induced(p[None])[0] @ (0.909 * u)
+    est = _loc(model, "model").estimate(readings, np.zeros(9))
     assert est.ok and np.linalg.norm(est.position_m - p) < 1e-5
-    naive = _loc(model, "model", cores=False, residual_limit=1e9).estimate(np.r_[top, bot], np.zeros(9))
+    assert math.degrees(math.acos(min(1.0, est.moment_a_m2 @ u / 0.909))) < 0.05
+    naive = _loc(model, "model", cores=False, residual_limit=1e9).estimate(readings, np.zeros(9))
     assert np.linalg.norm(naive.position_m - p) > 1e-4
 
 

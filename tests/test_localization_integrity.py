@@ -154,7 +154,7 @@ def test_alert_limit_and_bad_frames_give_not_ok_with_a_reason_never_an_exception
         assert np.all(np.isfinite(est.position_m))
     # a good frame after the bad ones: found again
     est = loc.estimate(np.r_[f[0], f[1]], np.zeros(9))
-    assert est.ok and np.linalg.norm(est.position_m - p) < 1e-3
+    assert est.ok and np.linalg.norm(est.position_m - p) < est.protection_level_m
 
 
 def test_ratio_quantiles_match_the_closed_forms_and_a_monte_carlo():

@@ -14,7 +14,7 @@ from ..errors import BadInputError
 from .estimate import Estimate, Pose
 from .estimator import Estimator
 from .learned import LearnedInverse
-from .position_fit import PositionFit
+from .pose_fit import PoseFit
 
 
 class LearnedEstimator(Estimator):
@@ -37,16 +37,26 @@ class LearnedEstimator(Estimator):
                                 f"design {learned.design_sha256[:12]}...",
                                 "Retrain: designkit.learned_inverse.train_learned_inverse.")
         self.learned = learned
-        self.engine = PositionFit(self.model, self.settings, self.calibration)
+        self.engine = PoseFit(self.model, self.settings, self.calibration, subtract=True)
         self.calibration = self.engine.calibration
 
     def fit(self, readings: np.ndarray, currents: np.ndarray | None, seed: Pose | None,
             time_s: float | None) -> Estimate:
-        meas = self.engine.corrected(readings)
-        return self.engine.learned_fit(meas, self.learned)
+        fit = self.engine
+        d, use, _ = fit.data(fit.corrected(readings), None)
+        mom = self.model.moment_a_m2.copy()
+        if not use.any():
+            return Estimate.refused(self.fallback_position_m(), mom, "no usable sensor pair",
+                                    self.method)
+        k = int(np.argmax(np.where(use, np.linalg.norm(d, axis=1), -1.0)))
+        rel, inside = self.learned(d[k])
+        p = self.model.sensor_positions_m[fit.pairs[k, 0]] + rel
+        reason = ("the learned inverse has no protection level" if inside
+                  else "outside the learned inverse's training box")
+        return Estimate(p, mom, False, reason, n_used=int(use.sum()), method=self.method)
 
     def reset(self) -> None:
-        self.engine.reset()
+        """Nothing to forget: each frame is mapped on its own."""
 
     def fallback_position_m(self) -> np.ndarray:
-        return self.engine.last_position_m
+        return 0.5 * (self.model.box_lower_m + self.model.box_upper_m)

@@ -13,7 +13,8 @@ import numpy as np
 
 from .estimate import Estimate, Pose
 from .estimator import Estimator
-from .position_fit import PositionFit
+from .fix import fallback_position, locate
+from .pose_fit import PoseFit
 
 
 class ModelEstimator(Estimator):
@@ -24,18 +25,17 @@ class ModelEstimator(Estimator):
 
     def __init__(self, model, settings=None, *, calibration=None):
         super().__init__(model, settings, calibration=calibration)
-        self.engine = PositionFit(self.model, self.settings, self.calibration)
+        self.engine = PoseFit(self.model, self.settings, self.calibration, subtract=False)
         self.calibration = self.engine.calibration
 
     def fit(self, readings: np.ndarray, currents: np.ndarray | None, seed: Pose | None,
             time_s: float | None) -> Estimate:
-        if seed is not None:
-            self.engine.warm_start(seed.position_m)
-        meas = self.engine.corrected(readings)
-        return self.engine.fit(meas, currents, self.method)
+        fit = self.engine
+        d, use, sigma = fit.data(fit.corrected(readings), currents)
+        return locate(fit, d, use, sigma, seed, self.method)
 
     def reset(self) -> None:
-        self.engine.reset()
+        self.engine.last = None
 
     def fallback_position_m(self) -> np.ndarray:
-        return self.engine.last_position_m
+        return fallback_position(self.engine)

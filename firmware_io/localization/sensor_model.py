@@ -5,7 +5,8 @@ A flat list of sensors, any layout: each sensor's nominal position (m) and orien
 axes as the columns of a rotation, array frame: a reading is R^T B), the coils' field and
 gradient there per ampere (array frame, T/A, T/(m A)); the magnet (moment A m^2, multipole
 ratio m^2, cylinder size m); the field of the cores the magnet magnetizes (a callable of the
-position); optionally the (upper, lower) sensor pairs of the thesis' subtraction.
+position and the moment, linear in the moment); optionally the (upper, lower) sensor pairs of
+the thesis' subtraction.
 :data:`DEFAULT_NOISE_T` is the TLV493D datasheet's noise per axis.
 """
 
@@ -42,6 +43,25 @@ def stacked_pairs(positions_m: np.ndarray, tol_m: float = 1e-3) -> np.ndarray | 
     return np.array(sorted(pairs), int) if pairs else None
 
 
+def induced_from_map(mapfile: MapFile, lo, hi, n: int):
+    """The map's magnet-induced field at the sensors per unit moment: positions (k, 3) ->
+    (k, n, 3, 3). The map stores it for its own moment, as m . B of per-sensor adjoint fields
+    (linear in m), so three copies of its sensor section with the moment along x, y and z
+    give the basis. Outside the map's box [lo, hi] the nearest box point is used (a small
+    correction: safer than extrapolating its polynomials)."""
+    copies = []
+    for axis in np.eye(3):
+        arrays = dict(mapfile.arrays)
+        arrays["MOMENT"] = axis
+        copies.append(MapFile.from_arrays(arrays, mapfile.meta))
+
+    def induced(positions):
+        q = np.clip(np.asarray(positions, float).reshape(-1, 3), lo, hi)
+        return np.stack([c.sensor_induced_field(q).reshape(len(q), n, 3) for c in copies], -1)
+
+    return induced
+
+
 @dataclass
 class SensorModel:
     """What the estimators know (the v2 map's sensor section), n sensors in a flat list.
@@ -51,8 +71,11 @@ class SensorModel:
     moment_a_m2 : (3,) A m^2
     design_sha256 : str
     octupole_m2 : float, m^2 (0 = pure dipole)
-    induced : callable (3,) m -> (n, 3) T, or None: field of the magnet-magnetized cores
-    box_lower_m, box_upper_m : (3,) plausible magnet positions (outside: ok = False)
+    induced : callable, or None: the field of the magnet-magnetized cores at the sensors per
+        unit moment, positions (k, 3) m -> (k, n, 3, 3) T/(A m^2) (column j: the moment along
+        axis j; linear cores: the field is this times the moment)
+    box_lower_m, box_upper_m : (3,) plausible magnet positions (outside: ok = False); default
+        25 mm beyond the sensors' footprint, from 2 to 150 mm above the highest sensor
     magnet_size_m : (radius, length) m of the cylinder magnet, or None. Given, the fits use its
         exact field (:func:`cylinder_field`; the multipole with its analytic Jacobian carries
         the iterations, the difference enters as a per-frame linearized correction).
@@ -118,8 +141,8 @@ class SensorModel:
         if self.box_lower_m is None:
             xy = np.abs(sp[:, :2]).max()
             top = sp[:, 2].max()
-            self.box_lower_m = np.array([-xy - 0.05, -xy - 0.05, top + 0.002])
-            self.box_upper_m = np.array([xy + 0.05, xy + 0.05, top + 0.15])
+            self.box_lower_m = np.array([-xy - 0.025, -xy - 0.025, top + 0.002])
+            self.box_upper_m = np.array([xy + 0.025, xy + 0.025, top + 0.15])
         self.pairs = stacked_pairs(sp) if self.pairs is None else self._checked_pairs(n)
 
     def _check_orientations(self, n: int) -> None:
@@ -143,15 +166,21 @@ class SensorModel:
     @classmethod
     def from_operator(cls, *, induced_samples_m, induced_operator, **kw) -> "SensorModel":
         """Induced field as a linear operator on the magnet's applied H_z at sample points
-        (designkit.sensor_sim.InducedCoreModel), evaluated with the multipole magnet model."""
+        (designkit.sensor_sim.InducedCoreModel), the applied field the magnet's dipole (per
+        unit moment; the l = 3 term changes H_z at the cores, >= 20 mm away, by < 2 %)."""
         samples = np.asarray(induced_samples_m, float)
         op = np.asarray(induced_operator, float)
         model = cls(**kw)
-        shape = model.sensor_positions_m.shape
+        n = model.n_sensors
 
-        def induced(p):
-            h = multipole_field(samples, p, model.moment_a_m2, model.octupole_m2)[:, 2] / MU0
-            return (op @ h).reshape(shape)
+        def induced(positions):
+            r = samples[None] - np.asarray(positions, float)[:, None]    # (k, S, 3)
+            rho2 = np.einsum("ksi,ksi->ks", r, r)
+            inv3 = rho2 ** -1.5 / (4 * math.pi)
+            # H_z of a unit dipole along axis j: (3 r_z r_j / r^5 - delta_zj / r^3) / (4 pi)
+            hz = (3.0 * r[..., 2] * inv3 / rho2)[..., None] * r
+            hz[..., 2] -= inv3
+            return (op @ hz).reshape(len(r), n, 3, 3)
 
         model.induced = induced
         return model
@@ -183,15 +212,13 @@ class SensorModel:
             else:
                 octupole_m2 = float(m.meta.get("magnet_octupole_m2", 0.0))
         nc = m.n_coils
+        induced = induced_from_map(m, lo, hi, len(sp))
         # the coils' field gradient at every sensor (the map's SENSOR_COIL_GRAD: the sensors sit
         # below the box of A) for calibrate() to recover their position errors
         grad = np.asarray(m.sensor_coil_gradient(), float).reshape(-1, 3, 3, nc)
         return cls(sp, np.asarray(m.sensor_coil_field(), float).reshape(-1, 3, nc),
                    np.asarray(m.moment_a_m2, float), str(m.design_sha256), float(octupole_m2),
-                   # the induced term is a small correction: outside the map's box the nearest
-                   # box point is safer than extrapolating its polynomials
-                   lambda p: m.sensor_induced_field(np.clip(p, lo, hi)).reshape(-1, 3),
-                   box_lo, box_hi, magnet_size_m, grad, np.ones(len(sp), bool))
+                   induced, box_lo, box_hi, magnet_size_m, grad, np.ones(len(sp), bool))
 
     @property
     def n_sensors(self) -> int:

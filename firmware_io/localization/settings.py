@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Literal
 
 from ..errors import BadInputError
 from ..hw.tlv493d import TLV493D_LSB_T
@@ -27,14 +28,19 @@ class EstimatorSettings:
     mount_position_m : m, sensor position uncertainty (weighs near-field sensors)
     model_bias_m : m, bound on the fit's bias from what the noise model leaves out, added to
         the protection level; None: 1 mm uncalibrated, 0.5 mm calibrated
+    model_bias_rad : rad, the same for the moment direction; None: 1 degree uncalibrated,
+        0.5 degree calibrated
     integrity_risk : probability per fix that the error exceeds the protection level
     false_alarm : probability per fix that a correct fit fails the residual test
     alert_limit_m : m, largest position protection level of an ok fix
+    orientation_alert_limit_rad : rad, largest moment-direction protection level of an ok fix
     residual_limit : largest normalized rms residual of an ok fix (a cap beside the test)
     reacquire_m : m, a warm fit that moved farther is checked by the global search
     refresh_m : m, the magnet-model corrections are re-linearized beyond this move
     max_iterations : Levenberg-Marquardt iterations per solve
     cores : model the magnet-induced core field (None: when the sensor model has it)
+    fit_moment_magnitude : fit |m| as a sixth unknown (calibration); else |m| from the model
+    background : 'uniform' fits a uniform ambient field (3 unknowns), 'off' assumes none
     """
 
     noise_t: float = DEFAULT_NOISE_T
@@ -42,21 +48,26 @@ class EstimatorSettings:
     relative_error: float | None = None
     mount_position_m: float = 0.0
     model_bias_m: float | None = None
+    model_bias_rad: float | None = None
     integrity_risk: float = 1e-4
     false_alarm: float = 1e-6
     alert_limit_m: float = math.inf
+    orientation_alert_limit_rad: float = math.inf
     residual_limit: float = 5.0
     reacquire_m: float = 5e-3
     refresh_m: float = 1e-3
     max_iterations: int = 30
     cores: bool | None = None
+    fit_moment_magnitude: bool = False
+    background: Literal["uniform", "off"] = "off"
 
     def __post_init__(self):
         for name in ("noise_t", "residual_limit", "reacquire_m", "refresh_m"):
             val = getattr(self, name)
             if not (isinstance(val, (int, float)) and math.isfinite(val) and val > 0):
                 raise BadInputError(name, "a finite number > 0 (SI)", val)
-        for name in ("lsb_t", "mount_position_m", "relative_error", "model_bias_m"):
+        for name in ("lsb_t", "mount_position_m", "relative_error", "model_bias_m",
+                     "model_bias_rad"):
             val = getattr(self, name)
             if val is not None and not (isinstance(val, (int, float)) and math.isfinite(val)
                                         and val >= 0):
@@ -65,12 +76,17 @@ class EstimatorSettings:
             val = getattr(self, name)
             if not (isinstance(val, (int, float)) and 0 < val < 0.5):
                 raise BadInputError(name, "a probability in (0, 0.5)", val)
-        for name in ("alert_limit_m",):
+        for name in ("alert_limit_m", "orientation_alert_limit_rad"):
             val = getattr(self, name)
             if not (isinstance(val, (int, float)) and val > 0):
                 raise BadInputError(name, "a number > 0 (or inf)", val)
         if not (isinstance(self.max_iterations, int) and 1 <= self.max_iterations <= 1000):
             raise BadInputError("max_iterations", "an integer in [1, 1000]", self.max_iterations)
+        if self.background not in ("uniform", "off"):
+            raise BadInputError("background", "'uniform' or 'off'", self.background)
+        if not isinstance(self.fit_moment_magnitude, bool):
+            raise BadInputError("fit_moment_magnitude", "True or False",
+                                self.fit_moment_magnitude)
 
     def relative_error_for(self, calibrated: bool) -> float:
         """The relative model error of a reading, with or without a calibration."""
@@ -83,6 +99,12 @@ class EstimatorSettings:
         if self.model_bias_m is not None:
             return float(self.model_bias_m)
         return 0.5e-3 if calibrated else 1e-3
+
+    def model_bias_rad_for(self, calibrated: bool) -> float:
+        """The moment direction's model-bias bound (rad) added to its protection level."""
+        if self.model_bias_rad is not None:
+            return float(self.model_bias_rad)
+        return math.radians(0.5 if calibrated else 1.0)
 
     @property
     def variance_floor_t2(self) -> float:

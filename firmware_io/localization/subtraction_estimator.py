@@ -13,7 +13,8 @@ import numpy as np
 from ..errors import BadInputError
 from .estimate import Estimate, Pose
 from .estimator import Estimator
-from .position_fit import PositionFit
+from .fix import fallback_position, locate
+from .pose_fit import PoseFit
 
 
 class SubtractionEstimator(Estimator):
@@ -28,18 +29,17 @@ class SubtractionEstimator(Estimator):
         if model.pairs is None:
             raise BadInputError("model.pairs", "(upper, lower) sensor pairs for the subtraction",
                                 None)
-        self.engine = PositionFit(self.model, self.settings, self.calibration)
+        self.engine = PoseFit(self.model, self.settings, self.calibration, subtract=True)
         self.calibration = self.engine.calibration
 
     def fit(self, readings: np.ndarray, currents: np.ndarray | None, seed: Pose | None,
             time_s: float | None) -> Estimate:
-        if seed is not None:
-            self.engine.warm_start(seed.position_m)
-        meas = self.engine.corrected(readings)
-        return self.engine.fit(meas, None, self.method)
+        fit = self.engine
+        d, use, sigma = fit.data(fit.corrected(readings), None)
+        return locate(fit, d, use, sigma, seed, self.method)
 
     def reset(self) -> None:
-        self.engine.reset()
+        self.engine.last = None
 
     def fallback_position_m(self) -> np.ndarray:
-        return self.engine.last_position_m
+        return fallback_position(self.engine)
