@@ -1,13 +1,19 @@
 """One frame's fix from a :class:`PoseFit`: :func:`locate` (warm or cold start, the integrity
-verdict, the :class:`Estimate`).
+verdict with fault exclusion, the :class:`Estimate`).
 
 The warm start is the caller's prior pose, else the last trusted fix; a warm fit that fails
 its verdict or moved farther than ``reacquire_m`` is solved again from the global search's
 best starts and the better verdict wins (trusted first, then the lower chi2 per degree of
 freedom). The verdict (:func:`assess`): converged, inside the plausible box, chi2 within the
 test's threshold, the normalized residual within its cap, the protection levels within the
-alert limits. The protection levels: the fault-free bound of the covariance (inflated by
-chi2 / dof above 1) plus the model-bias bounds (:mod:`.integrity`).
+alert limits. The protection levels (position, orientation): the model-bias bound plus the
+larger of the fault-free bound of the covariance (inflated by chi2 / dof above 1) and the
+undetected single-sensor fault's (:mod:`.fde`): max over sensors of slope x sqrt(lam_md) for
+a fault of any shape, or of the worst undetected offset or gain error within their bounds
+(``settings.fault_model``).
+Fault exclusion (RAIM FDE): when chi2 fails its test, the sensor whose removal lowers chi2 the
+most is excluded if the rest then passes and no other single sensor's removal would
+(separation); the fit is solved again without it and judged anew, up to ``max_exclusions``.
 """
 
 from __future__ import annotations
@@ -18,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .estimate import Estimate, Pose
+from .fde import block_statistics, gain_and_offset_bias
 from .integrity import orientation_protection_level, position_protection_level
 from .pose import tangent_axes
 from .pose_fit import PoseFit, Solution, State
@@ -42,22 +49,73 @@ class Verdict:
         return (not self.ok, self.solution.chi2 / max(self.dof, 1))
 
 
-def assess(fit: PoseFit, sol: Solution) -> Verdict:
-    """The verdict of a solution (module docstring)."""
+@dataclass(frozen=True)
+class Blocks:
+    """One frame's observation blocks: data d (b, 3) T (0 where unusable), weights w (b,)
+    1 / sigma (0 where unusable), the readings whose gain a fault would change (b, 3) T."""
+
+    d: np.ndarray
+    w: np.ndarray
+    reading: np.ndarray
+
+
+def assess(fit: PoseFit, sol: Solution, frame: Blocks, excluded: tuple = ()) -> Verdict:
+    """The verdict of a solution (module docstring), with fault exclusion when chi2 fails."""
     s = fit.settings
     rows, unknowns = sol.jac.shape
     dof = rows - unknowns
-    cov, pl_m, pl_rad = None, math.inf, math.inf
+    cov, pl_m, pl_rad, stats = None, math.inf, math.inf, None
     try:
         cov0 = np.linalg.inv(sol.jac.T @ sol.jac)
     except np.linalg.LinAlgError:
         cov0 = None
-    if cov0 is not None and np.all(np.isfinite(cov0)):
-        cov = cov0 * max(1.0, sol.chi2 / max(dof, 1))
-        pl_m = fit.bias_m + position_protection_level(cov[:3, :3], fit.k2)
-        pl_rad = fit.bias_rad + orientation_protection_level(cov[3:5, 3:5], s.integrity_risk)
+    if cov0 is not None and dof >= 1 and np.all(np.isfinite(cov0)):
+        inflate = max(1.0, sol.chi2 / dof)
+        cov = cov0 * inflate
+        stats = block_statistics(sol.jac, sol.res, cov0)
+        fault_m, fault_rad = _fault_bias(fit, sol, frame, cov0, stats, fit.lam_md[dof])
+        scale = math.sqrt(inflate)
+        pl_m = fit.bias_m + max(position_protection_level(cov[:3, :3], fit.k2),
+                                fault_m * scale)
+        pl_rad = fit.bias_rad + max(
+            orientation_protection_level(cov[3:5, 3:5], s.integrity_risk), fault_rad * scale)
     reason = _failed(fit, sol, dof, pl_m, pl_rad)
-    return Verdict(sol, not reason, reason, cov, pl_m, pl_rad, dof)
+    verdict = Verdict(sol, not reason, reason, cov, pl_m, pl_rad, dof, excluded)
+    if (stats is not None and not sol.chi2 <= fit.chi2_max[dof] and sol.converged
+            and len(excluded) < s.max_exclusions and dof > 3):
+        return _exclude(fit, sol, frame, stats, dof, excluded) or verdict
+    return verdict
+
+
+def _fault_bias(fit: PoseFit, sol: Solution, frame: Blocks, cov0, stats, lam_md: float):
+    """The worst undetected single-sensor fault's bias (m, rad) per the fault model."""
+    if fit.settings.fault_model == "any":
+        root = math.sqrt(lam_md)
+        return float(stats.slope_p.max()) * root, float(stats.slope_u.max()) * root
+    s = fit.settings
+    w = frame.w[sol.blocks]
+    reading = frame.reading[sol.blocks]
+    # offsets on one axis, a gain error on one axis, on all three
+    shapes = np.concatenate([np.broadcast_to(s.fault_offset_t * np.eye(3), (len(w), 3, 3)),
+                             s.fault_gain * reading[:, :, None] * np.eye(3),
+                             s.fault_gain * reading[:, None]], 1)
+    dp, du = gain_and_offset_bias(sol.jac, cov0, shapes * w[:, None, None], lam_md)
+    return float(dp.max()), float(du.max())
+
+
+def _exclude(fit: PoseFit, sol: Solution, frame: Blocks, stats, dof: int,
+             excluded: tuple) -> Verdict | None:
+    """The verdict without the one sensor that explains the failed residual test, or None
+    when none does or two would (not identifiable)."""
+    limit = fit.chi2_max[dof - 3]
+    order = np.argsort(-stats.delta)
+    rest = sol.chi2 - stats.delta[order]
+    if not rest[0] <= limit or (len(rest) > 1 and rest[1] <= limit):
+        return None
+    drop = int(sol.blocks[order[0]])
+    blocks = sol.blocks[sol.blocks != drop]
+    again = fit.solve_corrected(sol.state, blocks, frame.w[blocks], frame.d[blocks])
+    return assess(fit, again, frame, excluded + (drop,))
 
 
 def _failed(fit: PoseFit, sol: Solution, dof: int, pl_m: float, pl_rad: float) -> str:
@@ -87,10 +145,11 @@ def _failed(fit: PoseFit, sol: Solution, dof: int, pl_m: float, pl_rad: float) -
     return ""
 
 
-def locate(fit: PoseFit, d: np.ndarray, use: np.ndarray, sigma: np.ndarray,
+def locate(fit: PoseFit, d: np.ndarray, use: np.ndarray, sigma: np.ndarray, reading: np.ndarray,
            seed: Pose | None, method: str) -> Estimate:
     """The estimate of one frame's blocks: data d (b, 3) T (0 where unusable), ``use`` (b,),
-    sigma (b,) T; ``seed`` a prior pose (None: the last trusted fix, else cold)."""
+    sigma (b,) T, the readings (b, 3) T (the fault model's gain errors scale them); ``seed``
+    a prior pose (None: the last trusted fix, else cold)."""
     blocks = np.flatnonzero(use)
     need = max(3, -(-(fit.n_unknowns(False) + 1) // 3))    # >= 1 degree of freedom
     if len(blocks) < need:
@@ -98,16 +157,17 @@ def locate(fit: PoseFit, d: np.ndarray, use: np.ndarray, sigma: np.ndarray,
                                 f"usable sensors (need {need})", method)
     w_all = np.where(use, 1.0 / sigma, 0.0)
     w, db = w_all[blocks], d[blocks]
+    frame = Blocks(d, w_all, np.nan_to_num(reading))
     start = (fit.initial_state(seed.position_m, seed.moment_a_m2) if seed is not None
              else fit.last)
     best = None
     if start is not None:
-        best = assess(fit, fit.solve_corrected(start, blocks, w, db))
+        best = assess(fit, fit.solve_corrected(start, blocks, w, db), frame)
         moved = float(np.linalg.norm(best.solution.state.p - start.p))
         if best.ok and moved <= fit.settings.reacquire_m:
             return _estimate(fit, best, method)
     for st in fit.cold_starts(d, w_all ** 2):
-        v = assess(fit, fit.solve_cold(st, blocks, w, db))
+        v = assess(fit, fit.solve_cold(st, blocks, w, db), frame)
         if best is None or v.rank() < best.rank():
             best = v
         if best.ok:

@@ -43,7 +43,7 @@ class LearnedEstimator(Estimator):
     def fit(self, readings: np.ndarray, currents: np.ndarray | None, seed: Pose | None,
             time_s: float | None) -> Estimate:
         fit = self.engine
-        d, use, _ = fit.data(fit.corrected(readings), None)
+        d, use, _, _ = fit.data(fit.corrected(readings), None)
         mom = self.model.moment_a_m2.copy()
         if not use.any():
             return Estimate.refused(self.fallback_position_m(), mom, "no usable sensor pair",

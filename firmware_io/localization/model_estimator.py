@@ -31,8 +31,8 @@ class ModelEstimator(Estimator):
     def fit(self, readings: np.ndarray, currents: np.ndarray | None, seed: Pose | None,
             time_s: float | None) -> Estimate:
         fit = self.engine
-        d, use, sigma = fit.data(fit.corrected(readings), currents)
-        return locate(fit, d, use, sigma, seed, self.method)
+        d, use, sigma, field = fit.data(fit.corrected(readings), currents)
+        return locate(fit, d, use, sigma, field, seed, self.method)
 
     def reset(self) -> None:
         self.engine.last = None

@@ -10,9 +10,8 @@ b + G (x - x0). Observation blocks are the sensors ('model': readings minus the 
 the frame's currents) or the subtracted (upper, lower) pairs ('dipole'). Levenberg-Marquardt on
 the whitened residual (sigma^2 = noise^2 + lsb^2 / 12 + (relative_error |B|)^2 + the
 calibration's own variance); a warm start from a prior pose, a cold one from the global search
-(:mod:`.search`). Integrity (:meth:`PoseFit.assess`): the chi-square test, single-sensor
-fault exclusion and the undetected-fault protection levels (:mod:`.fde`), the gradient when
-the data support it. Derivations and measured accuracy: docs/localization.md.
+(:mod:`.search`). Integrity (:mod:`.fix`): the chi-square test, single-sensor fault exclusion
+and the undetected-fault protection levels (:mod:`.fde`). Derivations and measured accuracy: docs/localization.md.
 """
 
 from __future__ import annotations
@@ -25,7 +24,7 @@ import numpy as np
 from ..errors import BadInputError
 from .calibration import SensorCalibration
 from .corrections import Corrections
-from .integrity import ratio_quantiles, thresholds
+from .integrity import missed_detection_noncentrality, ratio_quantiles, thresholds
 from .magnet import MU0, multipole_pose_rows
 from .pose import rotated, tangent_axes
 from .search import GridSearch
@@ -118,6 +117,8 @@ class PoseFit:
         rows = 3 * self.n_blocks
         self.chi2_max = thresholds(settings.false_alarm, rows)
         self.k2 = ratio_quantiles(settings.integrity_risk)
+        self.lam_md = [0.0] + [missed_detection_noncentrality(
+            settings.false_alarm, settings.missed_detection, d) for d in range(1, rows + 1)]
         self.last: State | None = None
 
     def _observation(self, subtract: bool) -> None:
@@ -153,9 +154,10 @@ class PoseFit:
         return np.matmul(self.model.sensor_orientations, readings[..., None])[..., 0]
 
     def data(self, field: np.ndarray, currents: np.ndarray | None):
-        """(d (b, 3) T, usable (b,), sigma (b,) T) of the blocks from the field (n, 3) T (array
-        frame): the field minus the coils' at ``currents`` per sensor, or the subtracted pairs
-        (``currents`` None)."""
+        """(d (b, 3) T, usable (b,), sigma (b,) T, reading (b, 3) T) of the blocks from the
+        field (n, 3) T (array frame): the field minus the coils' at ``currents`` per sensor,
+        or the subtracted pairs (``currents`` None); ``reading`` is the field a gain error
+        would scale (the sensor's, or the subtracted pair's)."""
         sig2n = self.settings.variance_floor_t2
         mag2 = np.einsum("si,si->s", field, field)
         if self.op is None:
@@ -171,7 +173,8 @@ class PoseFit:
         if self.settings.mount_position_m:
             s2 = s2 + self._mount_variance(d)
         use = np.isfinite(d.sum(1))      # a row sum is NaN when any component is
-        return np.where(use[:, None], d, 0.0), use, np.sqrt(s2)
+        reading = field if self.op is None else d
+        return np.where(use[:, None], d, 0.0), use, np.sqrt(s2), reading
 
     def _mount_variance(self, d):
         """Variance from the sensors' position uncertainty: |dB| ~ 3 |B| dr / r for the magnet's

@@ -32,6 +32,8 @@ class EstimatorSettings:
         0.5 degree calibrated
     integrity_risk : probability per fix that the error exceeds the protection level
     false_alarm : probability per fix that a correct fit fails the residual test
+    missed_detection : probability that the residual test misses the fault that makes the
+        undetected-fault protection level (RAIM's P_md)
     alert_limit_m : m, largest position protection level of an ok fix
     orientation_alert_limit_rad : rad, largest moment-direction protection level of an ok fix
     residual_limit : largest normalized rms residual of an ok fix (a cap beside the test)
@@ -41,6 +43,14 @@ class EstimatorSettings:
     cores : model the magnet-induced core field (None: when the sensor model has it)
     fit_moment_magnitude : fit |m| as a sixth unknown (calibration); else |m| from the model
     background : 'uniform' fits a uniform ambient field (3 unknowns), 'off' assumes none
+    max_exclusions : sensors fault exclusion may drop from one fix (0: detection only)
+    fault_model : the faults the undetected-fault protection level covers: 'bounded' -- on any
+        one sensor an offset up to ``fault_offset_t`` on one axis or a gain error up to
+        ``fault_gain`` (larger errors, a zero or frozen reading, must fail the residual test:
+        the integrity study measures that they do); 'any' -- a fault of any shape and size (the
+        GNSS slope bound; a sensor without redundancy then makes the level infinite)
+    fault_offset_t : T, the largest offset of a bounded fault
+    fault_gain : the largest relative gain error of a bounded fault
     """
 
     noise_t: float = DEFAULT_NOISE_T
@@ -51,6 +61,7 @@ class EstimatorSettings:
     model_bias_rad: float | None = None
     integrity_risk: float = 1e-4
     false_alarm: float = 1e-6
+    missed_detection: float = 1e-3
     alert_limit_m: float = math.inf
     orientation_alert_limit_rad: float = math.inf
     residual_limit: float = 5.0
@@ -60,6 +71,10 @@ class EstimatorSettings:
     cores: bool | None = None
     fit_moment_magnitude: bool = False
     background: Literal["uniform", "off"] = "off"
+    max_exclusions: int = 1
+    fault_model: Literal["bounded", "any"] = "bounded"
+    fault_offset_t: float = 2e-3
+    fault_gain: float = 0.05
 
     def __post_init__(self):
         for name in ("noise_t", "residual_limit", "reacquire_m", "refresh_m"):
@@ -67,12 +82,12 @@ class EstimatorSettings:
             if not (isinstance(val, (int, float)) and math.isfinite(val) and val > 0):
                 raise BadInputError(name, "a finite number > 0 (SI)", val)
         for name in ("lsb_t", "mount_position_m", "relative_error", "model_bias_m",
-                     "model_bias_rad"):
+                     "model_bias_rad", "fault_offset_t", "fault_gain"):
             val = getattr(self, name)
             if val is not None and not (isinstance(val, (int, float)) and math.isfinite(val)
                                         and val >= 0):
                 raise BadInputError(name, "a finite number >= 0 (SI) or None", val)
-        for name in ("integrity_risk", "false_alarm"):
+        for name in ("integrity_risk", "false_alarm", "missed_detection"):
             val = getattr(self, name)
             if not (isinstance(val, (int, float)) and 0 < val < 0.5):
                 raise BadInputError(name, "a probability in (0, 0.5)", val)
@@ -82,6 +97,10 @@ class EstimatorSettings:
                 raise BadInputError(name, "a number > 0 (or inf)", val)
         if not (isinstance(self.max_iterations, int) and 1 <= self.max_iterations <= 1000):
             raise BadInputError("max_iterations", "an integer in [1, 1000]", self.max_iterations)
+        if not (isinstance(self.max_exclusions, int) and 0 <= self.max_exclusions <= 3):
+            raise BadInputError("max_exclusions", "an integer in [0, 3]", self.max_exclusions)
+        if self.fault_model not in ("bounded", "any"):
+            raise BadInputError("fault_model", "'bounded' or 'any'", self.fault_model)
         if self.background not in ("uniform", "off"):
             raise BadInputError("background", "'uniform' or 'off'", self.background)
         if not isinstance(self.fit_moment_magnitude, bool):
