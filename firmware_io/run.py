@@ -23,7 +23,7 @@ from .hw.bus import open_bus
 from .hw.coils import CoilDriver
 from .hw.pca9685 import PCA9685
 from .errors import FirmwareIOError
-from .localization import estimator_from_map
+from .localization import RUNNER_SETTINGS, estimator_from_map
 from .mapfile import MapFile
 from .runner import (CALIBRATION_CURRENT_A, ConstantVelocityTracker, Runner, SceneForce, SensorFrame, calibrate_sensors, calibration_currents,
                      config_from_map, record_calibration)
@@ -152,7 +152,7 @@ def load_inputs(map_path: str, scene_path: str, method: str):
     """Map, scene and localizer, checked against each other (no device is touched)."""
     fmap = MapFile.load(map_path)
     scene = Scene.load(scene_path, expected_design_sha256=fmap.design_sha256)
-    localizer = estimator_from_map(map_path, method)
+    localizer = estimator_from_map(map_path, method, RUNNER_SETTINGS)
     return fmap, scene, localizer
 
 
@@ -176,7 +176,7 @@ def calibrated_localizer(map_path: str, method: str, localizer, coils, arrays, c
     top, bottom, applied = record_calibration(coils, arrays, calibration_currents(cfg.n_coils, amp),
                                               settle_s=7 * tau, sleep=sleep)
     cal = calibrate_sensors(localizer.model, top, bottom, applied)
-    return estimator_from_map(map_path, method, calibration=cal)
+    return estimator_from_map(map_path, method, RUNNER_SETTINGS, calibration=cal)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -21,7 +21,9 @@ MOMENT = np.array([0.0, 0.0, 0.909])
 
 
 def _loc(model, method="model", *, calibration=None, learned=None, **settings):
-    """The estimator of ``method`` with these settings (EstimatorSettings' keywords)."""
+    """The estimator of ``method`` with these settings (EstimatorSettings' keywords; no alert
+    limits unless given: these tests check the fit and its residual test)."""
+    settings = {"alert_limit_m": math.inf, "orientation_alert_limit_rad": math.inf, **settings}
     return make_estimator(method, model, EstimatorSettings(**settings), calibration=calibration,
                           learned=learned)
 
@@ -145,7 +147,8 @@ def test_warm_fit_of_noisy_frames_matches_scipy_least_squares(method):
     rng = np.random.default_rng(11)
     model = _model(rng)
     noise, rel, lsb = 1e-4, 0.02, 0.098e-3
-    loc = _loc(model, method, cores=False, noise_t=noise, relative_error=rel, lsb_t=lsb)
+    loc = _loc(model, method, cores=False, noise_t=noise, relative_error=rel, lsb_t=lsb,
+               background="off")
     sp = model.sensor_positions_m
     mirror = np.array([-1.0, -1.0, 1.0])
     p, ang = np.array([0.0, 0.0, 0.035]), np.array([0.2, 0.5])

@@ -19,7 +19,9 @@ NOISE = 1e-4
 
 
 def _loc(model, method="model", *, calibration=None, learned=None, **settings):
-    """The estimator of ``method`` with these settings (EstimatorSettings' keywords)."""
+    """The estimator of ``method`` with these settings (EstimatorSettings' keywords; no alert
+    limits unless given: these tests check the fit and its residual test)."""
+    settings = {"alert_limit_m": math.inf, "orientation_alert_limit_rad": math.inf, **settings}
     return make_estimator(method, model, EstimatorSettings(**settings), calibration=calibration,
                           learned=learned)
 

@@ -16,6 +16,8 @@ from firmware_io.localization.magnet import cylinder_field, multipole_field, mul
 from firmware_io.localization.pose import rotation_derivatives, tangent_axes
 
 M = 0.909                     # A m^2: the thesis' 10 x 10 mm N52 cylinder
+NO_LIMITS = dict(alert_limit_m=math.inf, orientation_alert_limit_rad=math.inf)
+"""These tests check the fit: ok without alert limits (test_localization_fde checks them)."""
 RADIUS, LENGTH = 0.005, 0.010
 OCTUPOLE = (LENGTH / 2) ** 2 - 0.75 * RADIUS ** 2
 
@@ -117,7 +119,7 @@ def test_a_tilted_cylinder_is_found_cold(tilt, azimuth):
     5-unknown fit with the exact-cylinder correction) finds the position to 20 um and the
     moment direction to 0.05 degree; a 3-unknown fit of a 30-degree tilt is off by mm."""
     model = _model()
-    est = ModelEstimator(model, EstimatorSettings(cores=False))
+    est = ModelEstimator(model, EstimatorSettings(cores=False, **NO_LIMITS))
     rng = np.random.default_rng(tilt + azimuth)
     u = _direction(tilt, azimuth)
     for p in (np.array([0.004, -0.006, 0.022]), np.array([-0.012, 0.008, 0.04]),
@@ -135,7 +137,7 @@ def test_the_moment_magnitude_as_a_sixth_unknown():
     """A magnet 8 % stronger than the model's (a calibration's question): with
     fit_moment_magnitude the fit recovers |m| to 0.1 % and the pose; the covariance is 6 x 6."""
     model = _model()
-    est = ModelEstimator(model, EstimatorSettings(cores=False, fit_moment_magnitude=True))
+    est = ModelEstimator(model, EstimatorSettings(cores=False, fit_moment_magnitude=True, **NO_LIMITS))
     p, u = np.array([0.006, 0.004, 0.03]), _direction(25, 70)
     i = np.zeros(9)
     fix = est.estimate(_frame(model, p, u, i, moment=1.08 * M), i)
@@ -152,7 +154,7 @@ def test_pose_covariance_matches_the_scatter():
     2), and no ok fix errs beyond either protection level."""
     model = _model(3)
     s = EstimatorSettings(cores=False, noise_t=1e-4, lsb_t=0.0, relative_error=0.0,
-                          model_bias_m=0.0, model_bias_rad=0.0, false_alarm=1e-3)
+                          model_bias_m=0.0, model_bias_rad=0.0, false_alarm=1e-3, **NO_LIMITS)
     est = ModelEstimator(model, s)
     rng = np.random.default_rng(4)
     m5, m2, over = [], [], 0
@@ -183,7 +185,7 @@ def test_a_tilted_magnet_with_the_three_unknown_model_is_not_trusted_with_its_fa
     model = _model()
     p, u = np.array([0.01, -0.004, 0.035]), _direction(30, 45)
     i = np.zeros(9)
-    fix = ModelEstimator(model, EstimatorSettings(cores=False)).estimate(
+    fix = ModelEstimator(model, EstimatorSettings(cores=False, **NO_LIMITS)).estimate(
         _frame(model, p, u, i), i)
     assert fix.ok and _angle_deg(fix.moment_a_m2, np.array([0.0, 0.0, 1.0])) > 29.9
     assert np.linalg.norm(fix.position_m - p) < 20e-6
@@ -195,7 +197,7 @@ def test_warm_fix_follows_a_tilting_magnet_from_a_seed():
     from firmware_io.localization import Pose
 
     model = _model()
-    est = ModelEstimator(model, EstimatorSettings(cores=False))
+    est = ModelEstimator(model, EstimatorSettings(cores=False, **NO_LIMITS))
     p, u = np.array([-0.008, 0.01, 0.032]), _direction(33, 10)
     i = np.zeros(9)
     frame = _frame(model, p, u, i)

@@ -122,7 +122,9 @@ def test_bad_frames_reach_the_loop_as_not_ok_fixes_with_a_reason():
     excluded (the others still fix the position); then a good frame is fitted."""
     import magpylib as magpy
 
-    from firmware_io.localization import EstimatorSettings, ModelEstimator, SensorModel
+    import dataclasses
+
+    from firmware_io.localization import RUNNER_SETTINGS, ModelEstimator, SensorModel
     from firmware_io.runner import SensorFrame
     from firmware_io.runner.pipeline import SensorPipeline
 
@@ -134,7 +136,8 @@ def test_bad_frames_reach_the_loop_as_not_ok_fixes_with_a_reason():
     model = SensorModel(sp.reshape(-1, 3),
                         np.concatenate([up, up * np.array([-1.0, -1.0, 1.0])[None, :, None]]),
                         moment, "a" * 64, 0.0, None)
-    pipe = SensorPipeline(ModelEstimator(model, EstimatorSettings(cores=False)), object(), 9,
+    pipe = SensorPipeline(ModelEstimator(model, dataclasses.replace(RUNNER_SETTINGS, cores=False)),
+                          object(), 9,
                           lambda t: np.zeros(9), moment)
     p = np.array([0.0, 0.01, 0.04])
     good = magpy.misc.Dipole(moment=moment, position=p).getB(sp.reshape(-1, 3)).reshape(2, 9, 3)
@@ -153,7 +156,7 @@ def test_bad_frames_reach_the_loop_as_not_ok_fixes_with_a_reason():
             (word, fix.problems)
     fix = pipe.process(SensorFrame(good[0], good[1], ok9, 0.01))
     assert fix.ok and np.linalg.norm(fix.position_m - p) < 1e-4
-    assert fix.covariance_m2.shape == (3, 3) and 0 < fix.protection_level_m < 10e-3
+    assert fix.covariance_m2.shape == (3, 3) and 0 < fix.protection_level_m < 20e-3
 
 
 def test_multi_frame_protection_level_of_the_filtered_position():

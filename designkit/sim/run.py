@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from firmware_io.allocation import Allocator
-from firmware_io.localization import SensorModel, estimator_from_map
+from firmware_io.localization import RUNNER_SETTINGS, SensorModel, estimator_from_map
 from firmware_io.mapfile import MapFile
 from firmware_io.runner import ConstantVelocityTracker, Runner, RunnerConfig, SceneForce
 from firmware_io.scene import Scene
@@ -101,7 +101,7 @@ def run_simulation(*, design=None, obj: str = "hemisphere", trajectory: str = "s
                            control_period_s=period_s, unipolar=unipolar,
                            force_axes="z" if rows == "fz" else "xyz",
                            skip_force_n=skip_force_n)
-        localizer = estimator_from_map(map_path, method, **loc_kw)
+        localizer = estimator_from_map(map_path, method, RUNNER_SETTINGS, **loc_kw)
         runner = Runner(fmap, SceneForce(scene), localizer, ConstantVelocityTracker(),
                         hook(Allocator()), device.coils, source, cfg, clock=clock,
                         log=lambda line: print(line) if progress else None)

@@ -20,10 +20,15 @@ import numpy as np
 @dataclass(frozen=True)
 class Pose:
     """A magnet pose: position_m (3,) m and moment_a_m2 (3,) A m^2, array frame (a tracker's
-    prediction for a warm start)."""
+    prediction for a warm start). With ``covariance`` (5, 5) over the position (m^2) and two
+    rotations of the moment (rad^2, about the axes :func:`firmware_io.localization.pose.
+    tangent_axes` gives for its direction, as an :class:`Estimate`'s ``orientation_axes``) the
+    estimator also uses it as a prior observation of the pose (a tracker's prediction and its
+    uncertainty): a frame that disagrees with it is solved again without it, cold."""
 
     position_m: np.ndarray
     moment_a_m2: np.ndarray
+    covariance: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

@@ -40,10 +40,11 @@ class BlockStatistics:
     slope_u: np.ndarray
 
 
-def block_statistics(jac: np.ndarray, res: np.ndarray, cov0: np.ndarray) -> BlockStatistics:
+def block_statistics(jac: np.ndarray, res: np.ndarray, cov0: np.ndarray,
+                     n_rot: int = 2) -> BlockStatistics:
     """The single-block statistics (module docstring) of a fit: ``jac`` (3 b, P) whitened
     Jacobian, ``res`` (3 b,) whitened residual, ``cov0`` (P, P) = (J^T J)^-1; the position is
-    the first three unknowns, the moment direction the next two."""
+    the first three unknowns, the moment direction the next ``n_rot`` (2, or 0 when fixed)."""
     b = len(res) // 3
     jb = jac.reshape(b, 3, -1)
     k = np.einsum("pq,bjq->bpj", cov0, jb)                     # C0 J_i^T: (b, P, 3)
@@ -53,18 +54,20 @@ def block_statistics(jac: np.ndarray, res: np.ndarray, cov0: np.ndarray) -> Bloc
     s_inv = np.linalg.inv(np.where(ok[:, None, None], s, np.eye(3)))
     rb = res.reshape(b, 3)
     delta = np.einsum("bi,bij,bj->b", rb, s_inv, rb)
-    kp, ku = k[:, :3], k[:, 3:5]
+    kp, ku = k[:, :3], k[:, 3:3 + n_rot]
     mp = np.einsum("bij,bjk,blk->bil", kp, s_inv, kp)
-    mu = np.einsum("bij,bjk,blk->bil", ku, s_inv, ku)
     slope_p = np.sqrt(np.maximum(np.linalg.eigvalsh(mp)[:, -1], 0.0))
-    slope_u = np.sqrt(np.maximum(np.linalg.eigvalsh(mu)[:, -1], 0.0))
+    slope_u = np.zeros(b)
+    if n_rot:
+        mu = np.einsum("bij,bjk,blk->bil", ku, s_inv, ku)
+        slope_u = np.sqrt(np.maximum(np.linalg.eigvalsh(mu)[:, -1], 0.0))
     inf = np.full(b, np.inf)
     return BlockStatistics(np.where(ok, delta, 0.0), np.where(ok, slope_p, inf),
                            np.where(ok, slope_u, inf))
 
 
 def gain_and_offset_bias(jac: np.ndarray, cov0: np.ndarray, shapes: np.ndarray,
-                         lam_md: float):
+                         lam_md: float, n_rot: int = 2):
     """The largest position (m) and orientation (rad) bias per block that a fault of the given
     shapes can cause while undetected: shapes (b, s, 3) whitened fault vectors (their
     largest magnitudes); a shape f scaled by a <= 1 moves the estimate by a C0 J_i^T f at
@@ -78,5 +81,6 @@ def gain_and_offset_bias(jac: np.ndarray, cov0: np.ndarray, shapes: np.ndarray,
     scale = np.minimum(1.0, np.sqrt(lam_md / np.maximum(nc, 1e-300)))
     move = np.einsum("bpj,bsj->bsp", k, shapes) * scale[..., None]       # (b, s, P)
     dp = np.sqrt(np.einsum("bsp,bsp->bs", move[..., :3], move[..., :3])).max(axis=1)
-    du = np.sqrt(np.einsum("bsp,bsp->bs", move[..., 3:5], move[..., 3:5])).max(axis=1)
+    rot = move[..., 3:3 + n_rot]
+    du = np.sqrt(np.einsum("bsp,bsp->bs", rot, rot)).max(axis=1)
     return dp, du

@@ -14,6 +14,10 @@ a fault of any shape, or of the worst undetected offset or gain error within the
 Fault exclusion (RAIM FDE): when chi2 fails its test, the sensor whose removal lowers chi2 the
 most is excluded if the rest then passes and no other single sensor's removal would
 (separation); the fit is solved again without it and judged anew, up to ``max_exclusions``.
+When no single sensor explains it, the ambient field's gradient is tried (``gradient``
+'auto'): kept when it lowers chi2 by more than the chi-square(5) quantile at the false-alarm
+probability and the fit then passes; a field the gradient cannot describe either (a steel
+object near the sensors) stays refused.
 """
 
 from __future__ import annotations
@@ -72,18 +76,25 @@ def assess(fit: PoseFit, sol: Solution, frame: Blocks, excluded: tuple = ()) -> 
     if cov0 is not None and dof >= 1 and np.all(np.isfinite(cov0)):
         inflate = max(1.0, sol.chi2 / dof)
         cov = cov0 * inflate
-        stats = block_statistics(sol.jac, sol.res, cov0)
+        k = 3 * len(sol.blocks)                 # the sensors' rows (a prior's follow)
+        stats = block_statistics(sol.jac[:k], sol.res[:k], cov0, fit.n_rot)
         fault_m, fault_rad = _fault_bias(fit, sol, frame, cov0, stats, fit.lam_md[dof])
         scale = math.sqrt(inflate)
         pl_m = fit.bias_m + max(position_protection_level(cov[:3, :3], fit.k2),
                                 fault_m * scale)
-        pl_rad = fit.bias_rad + max(
-            orientation_protection_level(cov[3:5, 3:5], s.integrity_risk), fault_rad * scale)
+        pl_rad = (fit.bias_rad + max(orientation_protection_level(cov[3:5, 3:5],
+                                                                  s.integrity_risk),
+                                     fault_rad * scale) if fit.n_rot else math.inf)
     reason = _failed(fit, sol, dof, pl_m, pl_rad)
     verdict = Verdict(sol, not reason, reason, cov, pl_m, pl_rad, dof, excluded)
-    if (stats is not None and not sol.chi2 <= fit.chi2_max[dof] and sol.converged
-            and len(excluded) < s.max_exclusions and dof > 3):
-        return _exclude(fit, sol, frame, stats, dof, excluded) or verdict
+    if stats is None or sol.chi2 <= fit.chi2_max[dof] or not sol.converged:
+        return verdict
+    if len(excluded) < s.max_exclusions and dof > 3:
+        better = _exclude(fit, sol, frame, stats, dof, excluded)
+        if better is not None:
+            return better
+    if s.gradient == "auto" and sol.state.g is None and dof > 5 and not excluded:
+        return _with_gradient(fit, sol, frame) or verdict
     return verdict
 
 
@@ -99,8 +110,23 @@ def _fault_bias(fit: PoseFit, sol: Solution, frame: Blocks, cov0, stats, lam_md:
     shapes = np.concatenate([np.broadcast_to(s.fault_offset_t * np.eye(3), (len(w), 3, 3)),
                              s.fault_gain * reading[:, :, None] * np.eye(3),
                              s.fault_gain * reading[:, None]], 1)
-    dp, du = gain_and_offset_bias(sol.jac, cov0, shapes * w[:, None, None], lam_md)
+    dp, du = gain_and_offset_bias(sol.jac[:3 * len(w)], cov0, shapes * w[:, None, None], lam_md,
+                                  fit.n_rot)
     return float(dp.max()), float(du.max())
+
+
+def _with_gradient(fit: PoseFit, sol: Solution, frame: Blocks) -> Verdict | None:
+    """The verdict with the ambient field's gradient fitted too, when it is significant and
+    passes the test (module docstring); else None."""
+    st = sol.state
+    start = State(st.p, st.u, st.log_scale, st.b, np.zeros(5))
+    blocks = sol.blocks
+    again = fit.solve_corrected(start, blocks, frame.w[blocks], frame.d[blocks])
+    dof = again.jac.shape[0] - again.jac.shape[1]
+    if not (again.converged and sol.chi2 - again.chi2 > fit.gradient_drop
+            and again.chi2 <= fit.chi2_max[dof]):
+        return None
+    return assess(fit, again, frame)
 
 
 def _exclude(fit: PoseFit, sol: Solution, frame: Blocks, stats, dof: int,
@@ -134,12 +160,12 @@ def _failed(fit: PoseFit, sol: Solution, dof: int, pl_m: float, pl_rad: float) -
                 f"false-alarm {s.false_alarm:g}): lost or model error")
     if rms > s.residual_limit:
         return f"residual {rms:.3g} > {s.residual_limit:g} (lost or implausible)"
-    if not (math.isfinite(pl_m) and math.isfinite(pl_rad)):
+    if not (math.isfinite(pl_m) and (math.isfinite(pl_rad) or not fit.n_rot)):
         return "singular Fisher information: the pose is not determined"
     if not pl_m <= s.alert_limit_m:
         return (f"protection level {pl_m * 1e3:.3g} mm > alert limit "
                 f"{s.alert_limit_m * 1e3:.3g} mm")
-    if not pl_rad <= s.orientation_alert_limit_rad:
+    if fit.n_rot and not pl_rad <= s.orientation_alert_limit_rad:
         return (f"orientation protection level {math.degrees(pl_rad):.3g} deg > alert limit "
                 f"{math.degrees(s.orientation_alert_limit_rad):.3g} deg")
     return ""
@@ -162,28 +188,50 @@ def locate(fit: PoseFit, d: np.ndarray, use: np.ndarray, sigma: np.ndarray, read
              else fit.last)
     best = None
     if start is not None:
-        best = assess(fit, fit.solve_corrected(start, blocks, w, db), frame)
+        fit.set_prior(seed)
+        try:
+            best = assess(fit, fit.solve_corrected(start, blocks, w, db), frame)
+        finally:
+            fit.set_prior(None)
         moved = float(np.linalg.norm(best.solution.state.p - start.p))
-        if best.ok and moved <= fit.settings.reacquire_m:
+        if best.ok and (moved <= fit.settings.reacquire_m or seed is not None):
             return _estimate(fit, best, method)
     for st in fit.cold_starts(d, w_all ** 2):
         v = assess(fit, fit.solve_cold(st, blocks, w, db), frame)
         if best is None or v.rank() < best.rank():
             best = v
         if best.ok:
-            break
+            return _estimate(fit, best, method)
+    if not best.solution.chi2 <= fit.chi2_max[best.dof] and len(blocks) > need:
+        # a gross fault can pull every start into a wrong basin, where the linearized
+        # exclusion test cannot name the liar: search again without the block the failed fit
+        # explains worst, and judge all blocks at that pose (the exclusion test then runs
+        # where the others agree; a fit of all blocks would slide back)
+        res = best.solution.res[:3 * len(best.solution.blocks)].reshape(-1, 3)
+        suspect = int(best.solution.blocks[int(np.argmax(np.einsum("bi,bi->b", res, res)))])
+        w_rest = w_all.copy()
+        w_rest[suspect] = 0.0
+        rest = blocks[blocks != suspect]
+        for st in fit.cold_starts(d, w_rest ** 2)[:1]:
+            sub = fit.solve_cold(st, rest, w_all[rest], d[rest])
+            jac, res = fit.rows(sub.state, blocks, w, db)
+            v = assess(fit, Solution(sub.state, jac, res, blocks, float(res @ res),
+                                     sub.converged, sub.iterations), frame)
+            if v.rank() < best.rank():
+                best = v
     return _estimate(fit, best, method)
 
 
 def _estimate(fit: PoseFit, v: Verdict, method: str) -> Estimate:
     st = v.solution.state
     fit.last = st if v.ok else None
-    k = 6 if fit.fit_scale else 5
+    k = 3 + fit.n_rot + fit.fit_scale
     cov = None if v.covariance is None else v.covariance[:k, :k].copy()
     excluded = tuple(sorted(s for b in v.excluded for s in fit.block_sensors[b]))
     return Estimate(st.p.copy(), _moment(fit, st), v.ok, v.reason, cov, v.pl_m, v.pl_rad,
                     excluded, st.b.copy(), float(v.solution.chi2), v.dof,
-                    len(v.solution.blocks), v.solution.iterations, method, tangent_axes(st.u))
+                    len(v.solution.blocks), v.solution.iterations, method,
+                    tangent_axes(st.u) if fit.n_rot else None)
 
 
 def _moment(fit: PoseFit, st: State | None) -> np.ndarray:

@@ -11,7 +11,8 @@ the frame's currents) or the subtracted (upper, lower) pairs ('dipole'). Levenbe
 the whitened residual (sigma^2 = noise^2 + lsb^2 / 12 + (relative_error |B|)^2 + the
 calibration's own variance); a warm start from a prior pose, a cold one from the global search
 (:mod:`.search`). Integrity (:mod:`.fix`): the chi-square test, single-sensor fault exclusion
-and the undetected-fault protection levels (:mod:`.fde`). Derivations and measured accuracy: docs/localization.md.
+and the undetected-fault protection levels (:mod:`.fde`), the gradient when the data call for
+it. Derivations and measured accuracy: docs/localization.md.
 """
 
 from __future__ import annotations
@@ -24,7 +25,8 @@ import numpy as np
 from ..errors import BadInputError
 from .calibration import SensorCalibration
 from .corrections import Corrections
-from .integrity import missed_detection_noncentrality, ratio_quantiles, thresholds
+from .integrity import (chi2_quantile, missed_detection_noncentrality, ratio_quantiles,
+                        thresholds)
 from .magnet import MU0, multipole_pose_rows
 from .pose import rotated, tangent_axes
 from .search import GridSearch
@@ -109,17 +111,35 @@ class PoseFit:
         self.corr = Corrections(self.pts, model, exact=model.magnet_size_m is not None,
                                 cores=bool(cores), noise_t=settings.noise_t,
                                 first_radius_m=settings.refresh_m)
-        self.search = GridSearch(self.pts, self.op, self.lo, self.hi, self.moment)
-        self.eye = np.tile(np.eye(3), (n, 1, 1))
+        self.background = settings.background == "uniform"
+        self.bg_basis = self._background_basis() if self.background else np.zeros((3, 0))
+        self.search = GridSearch(self.pts, self.op, self.lo, self.hi, self.moment,
+                                 self.bg_basis)
+        self.bcols = np.tile(self.bg_basis, (n, 1, 1))
         self.gcols = gradient_columns(self.pts)
         self.fit_scale = settings.fit_moment_magnitude
-        self.background = settings.background == "uniform"
+        self.n_rot = 2 if settings.orientation == "fit" else 0
         rows = 3 * self.n_blocks
         self.chi2_max = thresholds(settings.false_alarm, rows)
         self.k2 = ratio_quantiles(settings.integrity_risk)
+        self.gradient_drop = chi2_quantile(settings.false_alarm, 5)
         self.lam_md = [0.0] + [missed_detection_noncentrality(
             settings.false_alarm, settings.missed_detection, d) for d in range(1, rows + 1)]
         self.last: State | None = None
+        self.prior = None
+
+    def set_prior(self, seed) -> None:
+        """Use ``seed`` (a :class:`Pose` with a ``covariance``) as five more observations of the
+        pose in the next solves: (p - p0, e1.u, e2.u) whitened by the covariance's inverse
+        square root (e1, e2 the seed's tangent axes); None or no covariance: no prior."""
+        if seed is None or seed.covariance is None:
+            self.prior = None
+            return
+        cov = np.asarray(seed.covariance, float)[:3 + self.n_rot, :3 + self.n_rot]
+        info = np.linalg.cholesky(np.linalg.inv(cov)).T          # info^T info = cov^-1
+        u0 = np.asarray(seed.moment_a_m2, float)
+        u0 = u0 / math.sqrt(float(u0 @ u0))
+        self.prior = (np.asarray(seed.position_m, float), tangent_axes(u0), info)
 
     def _observation(self, subtract: bool) -> None:
         """The observation blocks: each sensor, or each (upper, lower) pair with the lower
@@ -139,6 +159,16 @@ class PoseFit:
             op[j, :, b] = -self.mirror[j]
         self.op = op
         self.block_sensors = [(int(a), int(b)) for a, b in pairs]
+
+    def _background_basis(self) -> np.ndarray:
+        """(3, k): the uniform field's directions the blocks see (all three for sensors; the
+        subtraction cancels what the mirror maps onto itself, e.g. B_z for P = diag(-1, -1,
+        1))."""
+        if self.op is None:
+            return np.eye(3)
+        t = self.op.sum(axis=2).reshape(-1, 3)
+        _, sv, vt = np.linalg.svd(t, full_matrices=False)
+        return vt[sv > 1e-6 * sv[0]].T
 
     @property
     def n_blocks(self) -> int:
@@ -185,7 +215,7 @@ class PoseFit:
 
     # -- the model and its Jacobian ----------------------------------------------------------
     def n_unknowns(self, gradient: bool) -> int:
-        return 5 + self.fit_scale + 3 * self.background + 5 * gradient
+        return 3 + self.n_rot + self.fit_scale + self.bg_basis.shape[1] + 5 * gradient
 
     def rows(self, st: State, blocks: np.ndarray, w: np.ndarray, d: np.ndarray,
              corrected: bool = True):
@@ -200,12 +230,12 @@ class PoseFit:
             b = b + cv
             jp = jp + self.corr.jac_p * scale
             ju = ju + self.corr.jac_u * scale
-        cols = [jp, ju @ axes.T]
+        cols = [jp, ju @ axes.T] if self.n_rot else [jp]
         if self.fit_scale:
             cols.append(b[:, :, None])
         f = b
         if self.background:
-            cols.append(self.eye)
+            cols.append(self.bcols)
             f = f + st.b
         if st.g is not None:
             cols.append(self.gcols)
@@ -214,23 +244,34 @@ class PoseFit:
         if self.op is not None:
             jac = np.einsum("kisj,sjq->kiq", self.op, jac)
             f = np.einsum("kisj,sj->ki", self.op, f)
-        jac = jac[blocks] * w[:, None, None]
-        res = (d - f[blocks]) * w[:, None]
-        return jac.reshape(3 * len(blocks), -1), res.reshape(-1)
+        jac = (jac[blocks] * w[:, None, None]).reshape(3 * len(blocks), -1)
+        res = ((d - f[blocks]) * w[:, None]).reshape(-1)
+        if self.prior is None:
+            return jac, res
+        p0, axes0, info = self.prior
+        k = 3 + self.n_rot
+        jp = np.zeros((k, jac.shape[1]))
+        jp[:3, :3] = np.eye(3)
+        dev = p - p0
+        if self.n_rot:
+            jp[3:, 3:5] = axes0 @ axes.T
+            dev = np.r_[dev, axes0 @ u]
+        return np.r_[jac, info[:k, :k] @ jp], np.r_[res, -(info[:k, :k] @ dev)]
 
     def step(self, st: State, delta: np.ndarray) -> State:
         """The state moved by the solve's step ``delta`` (position kept inside the box)."""
         p = np.minimum(np.maximum(st.p + delta[:3], self.lo), self.hi)
-        u = rotated(st.u, tangent_axes(st.u), delta[3:5])
-        j = 5
+        j = 3 + self.n_rot
+        u = rotated(st.u, tangent_axes(st.u), delta[3:5]) if self.n_rot else st.u
         log_scale = st.log_scale
         if self.fit_scale:
             log_scale += float(delta[5])
             j = 6
         b = st.b
         if self.background:
-            b = st.b + delta[j:j + 3]
-            j += 3
+            k = self.bg_basis.shape[1]
+            b = st.b + self.bg_basis @ delta[j:j + k]
+            j += k
         g = None if st.g is None else st.g + delta[j:j + 5]
         return State(p, u, log_scale, b, g)
 
@@ -292,7 +333,7 @@ class PoseFit:
     def initial_state(self, position, moment, gradient: bool = False) -> State:
         m = np.asarray(moment, float)
         size = math.sqrt(float(m @ m))
-        u = m / size if size > 0 else self.model.moment_a_m2 / self.moment
+        u = m / size if size > 0 and self.n_rot else self.model.moment_a_m2 / self.moment
         return State(np.minimum(np.maximum(np.asarray(position, float), self.lo), self.hi), u,
                      0.0, np.zeros(3), np.zeros(5) if gradient else None)
 

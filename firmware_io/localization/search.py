@@ -48,9 +48,11 @@ _SYM = (0, 1, 2, 4, 5, 8)
 
 class GridSearch:
     """The global search over ``points`` (n, 3) m with observation blocks ``op`` (k, 3, n, 3)
-    (None: one block a sensor), the box [lo, hi] and the model's |m| ``moment`` (A m^2)."""
+    (None: one block a sensor), the box [lo, hi], the model's |m| ``moment`` (A m^2) and the
+    background's observable directions ``basis`` (3, j) (the subtraction sees fewer)."""
 
-    def __init__(self, points: np.ndarray, op: np.ndarray | None, lo, hi, moment: float):
+    def __init__(self, points: np.ndarray, op: np.ndarray | None, lo, hi, moment: float,
+                 basis: np.ndarray):
         self.candidates = grid_points(np.asarray(lo, float), np.asarray(hi, float))
         d = dipole_basis(np.asarray(points, float), self.candidates)      # (C, n, 3, 3)
         n = len(points)
@@ -68,11 +70,12 @@ class GridSearch:
                                            .transpose(0, 3, 1, 2).reshape(c * 3, n * 3))
             return
         d = np.einsum("kisj,csjl->ckil", op, d)
-        t = op.sum(axis=2)                                                # (k, 3, 3)
+        t = op.sum(axis=2) @ basis                                        # (k, 3, j)
         c, k = d.shape[:2]
         self.t = t
         self.qa = np.ascontiguousarray(np.einsum("ckji,ckjl->cilk", d, d).reshape(c * 9, k))
-        self.qe = np.ascontiguousarray(np.einsum("ckji,kjl->cilk", d, t).reshape(c * 9, k))
+        self.qe = np.ascontiguousarray(np.einsum("ckji,kjl->cilk", d, t).reshape(
+            c * 3 * t.shape[2], k))
         self.dt = np.ascontiguousarray(np.einsum("ckji->cikj", d).reshape(c * 3, k * 3))
 
     def starts(self, data: np.ndarray, weights: np.ndarray, background: bool,
@@ -122,11 +125,11 @@ class GridSearch:
         """The same for general blocks (subtracted pairs): the batched 3 x 3 Schur complement."""
         c = len(self.candidates)
         a = (self.qa @ weights).reshape(c, 3, 3)
-        if background:
+        if background and self.t.shape[2]:
             f = np.einsum("k,kji,kjl->il", weights, self.t, self.t)
             rb = np.einsum("kji,kj->i", self.t, wd)
             finv = np.linalg.inv(f)
-            e = (self.qe @ weights).reshape(c, 3, 3)
+            e = (self.qe @ weights).reshape(c, 3, -1)
             ef = e @ finv
             a = a - ef @ np.swapaxes(e, 1, 2)
             rhs -= ef @ rb

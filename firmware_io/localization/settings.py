@@ -1,7 +1,8 @@
 """The estimators' settings: one frozen :class:`EstimatorSettings` (SI units, checked once).
 
 Every estimator (:mod:`.estimator`) takes one; ``dataclasses.replace(settings, ...)`` makes a
-variant. Why each default: docs/localization.md ("Settings").
+variant. The defaults make ``ok`` mean trusted: a fix whose protection level exceeds 5 mm or
+15 degrees is not ok. Why each default: docs/localization.md ("Settings").
 """
 
 from __future__ import annotations
@@ -42,7 +43,14 @@ class EstimatorSettings:
     max_iterations : Levenberg-Marquardt iterations per solve
     cores : model the magnet-induced core field (None: when the sensor model has it)
     fit_moment_magnitude : fit |m| as a sixth unknown (calibration); else |m| from the model
+    orientation : 'fit' the moment's direction (the pose), or keep the model's 'fixed' (the
+        position alone: for layouts with too few sensors for a pose; ok then trusts the
+        assumed direction and the orientation protection level is inf)
     background : 'uniform' fits a uniform ambient field (3 unknowns), 'off' assumes none
+    gradient : 'auto' adds the ambient field's gradient (5 unknowns: symmetric, traceless) when
+        the uniform model fails the residual test, no single sensor explains it, and the
+        gradient lowers chi2 by more than the chi-square(5) quantile at ``false_alarm`` and
+        passes the test; 'off' never
     max_exclusions : sensors fault exclusion may drop from one fix (0: detection only)
     fault_model : the faults the undetected-fault protection level covers: 'bounded' -- on any
         one sensor an offset up to ``fault_offset_t`` on one axis or a gain error up to
@@ -62,15 +70,17 @@ class EstimatorSettings:
     integrity_risk: float = 1e-4
     false_alarm: float = 1e-6
     missed_detection: float = 1e-3
-    alert_limit_m: float = math.inf
-    orientation_alert_limit_rad: float = math.inf
+    alert_limit_m: float = 5e-3
+    orientation_alert_limit_rad: float = math.radians(15.0)
     residual_limit: float = 5.0
     reacquire_m: float = 5e-3
     refresh_m: float = 1e-3
     max_iterations: int = 30
     cores: bool | None = None
     fit_moment_magnitude: bool = False
-    background: Literal["uniform", "off"] = "off"
+    orientation: Literal["fit", "fixed"] = "fit"
+    background: Literal["uniform", "off"] = "uniform"
+    gradient: Literal["auto", "off"] = "auto"
     max_exclusions: int = 1
     fault_model: Literal["bounded", "any"] = "bounded"
     fault_offset_t: float = 2e-3
@@ -101,6 +111,10 @@ class EstimatorSettings:
             raise BadInputError("max_exclusions", "an integer in [0, 3]", self.max_exclusions)
         if self.fault_model not in ("bounded", "any"):
             raise BadInputError("fault_model", "'bounded' or 'any'", self.fault_model)
+        if self.gradient not in ("auto", "off"):
+            raise BadInputError("gradient", "'auto' or 'off'", self.gradient)
+        if self.orientation not in ("fit", "fixed"):
+            raise BadInputError("orientation", "'fit' or 'fixed'", self.orientation)
         if self.background not in ("uniform", "off"):
             raise BadInputError("background", "'uniform' or 'off'", self.background)
         if not isinstance(self.fit_moment_magnitude, bool):
@@ -129,3 +143,13 @@ class EstimatorSettings:
     def variance_floor_t2(self) -> float:
         """noise_t^2 + lsb_t^2 / 12, T^2: a reading's variance per axis before model errors."""
         return self.noise_t ** 2 + self.lsb_t ** 2 / 12.0
+
+
+RUNNER_SETTINGS = EstimatorSettings(alert_limit_m=math.inf, orientation="fixed",
+                                    fault_offset_t=0.0, fault_gain=0.0, background="off")
+"""What the runner builds its estimator with until it carries the pose and passes its tracker's
+prediction as each fix's prior (``seed``): the position alone (the magnet's direction as the
+map states it), no background, no alert limit of the estimator's own (the runner applies its
+scene's to the protection level of its tracker's filtered position, docs/runner.md
+"Integrity") and no undetected-fault term (a cold frame alone cannot bound a lying sensor below
+the magnet: docs/localization.md "Integrity"); exclusion stays on."""
