@@ -42,7 +42,7 @@ from designkit.design import default_design
 from designkit.learned_inverse import train_learned_inverse
 from designkit.sensor_sim import (THESIS_MAE_MM, SensorErrors, SensorSimulator, analog_reading,
                                   case_currents, forward_model, random_positions)
-from firmware_io.localization import (ConstantVelocityKalman, EstimatorSettings,
+from firmware_io.localization import (POSITION_ONLY, ConstantVelocityKalman,
                                       KalmanEstimator, LearnedInverse, SensorModel, calibrate,
                                       cylinder_field, make_estimator, multipole_field)
 from firmware_io.mapfile import gradient_tensor
@@ -89,8 +89,8 @@ def _estimators(sim, out, map_path, quick, seed):
     if map_path is not None and Path(map_path).is_file():
         def make(method, magnet_size_m=None, calibration=None, learned=None, **kw):
             m = SensorModel.from_map(map_path, magnet_size_m=magnet_size_m)
-            return make_estimator(method, m, EstimatorSettings(**kw), calibration=calibration,
-                                  learned=learned)
+            return make_estimator(method, m, dataclasses.replace(POSITION_ONLY, **kw),
+                                  calibration=calibration, learned=learned)
         model = make("dipole", magnet_size_m=size).model
         source = f"map {map_path}"
     else:
@@ -98,8 +98,8 @@ def _estimators(sim, out, map_path, quick, seed):
 
         def make(method, magnet_size_m=None, calibration=None, learned=None, **kw):
             m = dataclasses.replace(base, magnet_size_m=magnet_size_m)
-            return make_estimator(method, m, EstimatorSettings(**kw), calibration=calibration,
-                                  learned=learned)
+            return make_estimator(method, m, dataclasses.replace(POSITION_ONLY, **kw),
+                                  calibration=calibration, learned=learned)
         model = make("dipole", magnet_size_m=size).model
         source = "designkit.sensor_sim.forward_model (rod induced model)"
     t0 = time.perf_counter()
@@ -131,7 +131,7 @@ def _induced(sim, model, pos, region):
         for k in range(n):
             for j in range(3):
                 dp = np.eye(3)[j] * h
-                ind_jac[k, ..., j] = ((model.induced(pos[k] + dp) - model.induced(pos[k] - dp))
+                ind_jac[k, ..., j] = ((model.induced_field(pos[k] + dp) - model.induced_field(pos[k] - dp))
                                       / (2 * h)).reshape(2, sim.n, 3)
     return ind, ind_jac
 

@@ -29,7 +29,7 @@ import numpy as np
 
 from designkit.design import default_design
 from designkit.sensor_sim import SensorSimulator, case_currents, forward_model, random_positions
-from firmware_io.localization import EstimatorSettings, ModelEstimator, SensorModel
+from firmware_io.localization import POSITION_ONLY, ModelEstimator, SensorModel
 from studies._common import finish
 from studies.localization import _calibrate, _noise_limited, with_coil_gradient
 
@@ -43,7 +43,7 @@ def _induced_jacobian(model, pos, h=0.5e-3):
     for k, p in enumerate(pos):
         for j in range(3):
             dp = np.eye(3)[j] * h
-            out[k, ..., j] = ((model.induced(p + dp) - model.induced(p - dp))
+            out[k, ..., j] = ((model.induced_field(p + dp) - model.induced_field(p - dp))
                               / (2 * h)).reshape(2, -1, 3)
     return out
 
@@ -68,7 +68,8 @@ def run(n: int = 200, seed: int = 0, noise_t: float = 0.1e-3, out_dir=DEFAULT_OU
                          ("model-cal, coil gradient (as from_map)",
                           with_coil_gradient(sim, plain))):
         cal, _ = _calibrate(sim, model, seed + 1000, 1000)
-        loc = ModelEstimator(model, EstimatorSettings(noise_t=noise_t), calibration=cal)
+        loc = ModelEstimator(model, dataclasses.replace(POSITION_ONLY, noise_t=noise_t),
+                             calibration=cal)
         err, ok = np.empty(n), np.empty(n, bool)
         for k in range(n):
             loc.reset()

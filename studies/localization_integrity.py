@@ -43,8 +43,7 @@ from scipy.stats import beta
 from designkit.design import default_design
 from designkit.sensor_sim import SensorSimulator, case_currents, forward_model, random_positions
 from firmware_io.constants import MU0
-from firmware_io.localization import (EstimatorSettings, ModelEstimator, SensorModel,
-                                      multipole_field)
+from firmware_io.localization import POSITION_ONLY, ModelEstimator, SensorModel, multipole_field
 from firmware_io.localization.integrity import fused_protection_level, ratio_quantiles
 from firmware_io.runner import ConstantVelocityTracker
 from studies.localization import _calibrate, with_coil_gradient
@@ -228,7 +227,8 @@ def bench(n: int = 100, seed: int = 0, repeats: int = 3, noise_t: float = NOISE_
     currents), with the same-process multipole reference."""
     rng = np.random.default_rng(seed)
     sim, model, cal = _device(seed, noise_t)
-    loc = ModelEstimator(model, EstimatorSettings(noise_t=noise_t), calibration=cal)
+    loc = ModelEstimator(model, dataclasses.replace(POSITION_ONLY, noise_t=noise_t),
+                         calibration=cal)
     cur = case_currents("sinusoidal", rng.uniform(0, 20, n), sim.array.n_coils)
     cold = sim.read(random_positions(n, rng), cur, rng=rng)
     walk = np.cumsum(rng.normal(scale=0.5e-3, size=(n, 3)), 0) + [0.0, 0.0, 0.04]
@@ -271,8 +271,8 @@ def run(out_dir, n: int = 10000, seed: int = 0, conditions=CONDITIONS,
     kw = dict(integrity_risk=RISK, noise_t=noise_t)
     if model_bias_m is not None:
         kw["model_bias_m"] = model_bias_m
-    loc_cal = ModelEstimator(model, EstimatorSettings(**kw), calibration=cal)
-    loc_uncal = ModelEstimator(model, EstimatorSettings(**kw))
+    loc_cal = ModelEstimator(model, dataclasses.replace(POSITION_ONLY, **kw), calibration=cal)
+    loc_uncal = ModelEstimator(model, dataclasses.replace(POSITION_ONLY, **kw))
     rows = []
     for c in conditions:
         rows.append(run_condition(loc_uncal if c == "uncalibrated" else loc_cal, sim, c, n, rng))

@@ -247,15 +247,15 @@ def test_induced_term_is_fitted():
     rng = np.random.default_rng(6)
     mix = rng.normal(scale=2e-3 / 0.909, size=(18, 3, 3))   # T per A m^2, 30 mm away
 
-    def induced(positions):
+    def induced(positions, directions):
         d = np.linalg.norm(model.sensor_positions_m[None] - positions[:, None], axis=-1)
-        return (0.03 / d)[..., None, None] ** 3 * mix
+        return (0.03 / d)[..., None, None] ** 3 * mix @ directions
 
     model = _model(rng, induced=induced)
     p, u = np.array([0.005, 0.002, 0.035]), np.array([0.3, -0.2, 0.93])
     u /= np.linalg.norm(u)
     b = magpy.misc.Dipole(moment=0.909 * u, position=p).getB(model.sensor_positions_m)
-    readings = b + induced(p[None])[0] @ (0.909 * u)
+    readings = b + induced(p[None], np.eye(3))[0] @ (0.909 * u)
     est = _loc(model, "model").estimate(readings, np.zeros(9))
     assert est.ok and np.linalg.norm(est.position_m - p) < 1e-5
     assert math.degrees(math.acos(min(1.0, est.moment_a_m2 @ u / 0.909))) < 0.05

@@ -71,13 +71,15 @@ def test_from_map_end_to_end_and_design_check(tmp_path):
     from designkit import default_design, fieldmap
     from designkit.sensor_sim import SensorSimulator
     from firmware_io.errors import BadInputError
-    from firmware_io.localization import EstimatorSettings, SensorModel, estimator_from_map
+    import dataclasses
+
+    from firmware_io.localization import POSITION_ONLY, SensorModel, estimator_from_map
 
     d = default_design()
     path = fieldmap.write(tmp_path / "map.npz", fieldmap.build(d, progress=False))
     mg = d.magnet
     q = (mg.length_m / 2) ** 2 - 0.75 * mg.radius_m**2
-    loc = estimator_from_map(path, "model", EstimatorSettings(relative_error=0.0),
+    loc = estimator_from_map(path, "model", dataclasses.replace(POSITION_ONLY, relative_error=0.0),
                              octupole_m2=q, expected_design_sha256=d.spec_hash())
     assert loc.n_sensors == 18
     sim = SensorSimulator(d, errors="ideal", noise_t=0.0, seed=1)
@@ -105,7 +107,7 @@ def test_calibration_removes_the_mounting_bias(tmp_path):
     the sensors left the box of A; uncalibrated 0.6-0.9 mm)."""
     from designkit import default_design, fieldmap
     from designkit.sensor_sim import SensorSimulator, random_positions
-    from firmware_io.localization import ModelEstimator, calibrate
+    from firmware_io.localization import POSITION_ONLY, ModelEstimator, calibrate
 
     d = default_design()
     path = fieldmap.write(tmp_path / "map.npz", fieldmap.build(d, progress=False))
@@ -118,9 +120,9 @@ def test_calibration_removes_the_mounting_bias(tmp_path):
     cur[np.arange(500), np.arange(500) % 9] = np.where(np.arange(500) % 18 < 9, 3.0, -3.0)
     zero = np.zeros((1000, 2, 9, 3))
     frames = noisy.read(np.zeros((1000, 3)), cur, parts=(zero, zero), rng=rng)
-    plain = ModelEstimator.from_map(path, magnet_size_m=size)
+    plain = ModelEstimator.from_map(path, POSITION_ONLY, magnet_size_m=size)
     cal = calibrate(np.concatenate([frames.top_t, frames.bottom_t], 1), cur, plain.model)
-    fitted = ModelEstimator.from_map(path, magnet_size_m=size, calibration=cal)
+    fitted = ModelEstimator.from_map(path, POSITION_ONLY, magnet_size_m=size, calibration=cal)
     p = random_positions(25, np.random.default_rng(8), z_range_m=(0.020, 0.045))
     i = np.random.default_rng(9).uniform(-1, 1, (25, 9))
     rd = sim.read(p, i)

@@ -27,7 +27,7 @@ from .learned_estimator import LearnedEstimator
 from .magnet import MU0, cylinder_field, multipole_field
 from .model_estimator import ModelEstimator
 from .sensor_model import DEFAULT_NOISE_T, SensorModel
-from .settings import RUNNER_SETTINGS, EstimatorSettings
+from .settings import POSITION_ONLY, RUNNER_SETTINGS, EstimatorSettings
 from .subtraction_estimator import SubtractionEstimator
 
 __all__ = [
@@ -35,6 +35,6 @@ __all__ = [
     "calibrate", "Estimate", "Pose", "Estimator", "METHODS", "estimator_from_map",
     "make_estimator", "ConstantVelocityKalman", "KalmanEstimator", "LearnedInverse",
     "LearnedEstimator", "MU0", "cylinder_field", "multipole_field", "ModelEstimator",
-    "DEFAULT_NOISE_T", "SensorModel", "EstimatorSettings", "RUNNER_SETTINGS",
+    "DEFAULT_NOISE_T", "SensorModel", "EstimatorSettings", "RUNNER_SETTINGS", "POSITION_ONLY",
     "SubtractionEstimator",
 ]

@@ -37,10 +37,13 @@ class Corrections:
     that sets the reuse radius."""
 
     def __init__(self, points_m: np.ndarray, model, *, exact: bool, cores: bool,
-                 noise_t: float, first_radius_m: float):
+                 noise_t: float, first_radius_m: float, fixed_direction: bool = False):
         self.points = np.asarray(points_m, float)
         self.model = model
         self.moment = float(np.linalg.norm(model.moment_a_m2))
+        # the cores' basis: along the model's moment alone when the direction is fixed
+        self.directions = ((model.moment_a_m2 / self.moment)[:, None] if fixed_direction
+                           else np.eye(3))
         self.noise_t = noise_t
         self.parts = (("exact",) if exact else ()) + (("cores",) if cores else ())
         self.excess = (cylinder_excess(*model.magnet_size_m, float(model.octupole_m2))
@@ -131,7 +134,12 @@ class Corrections:
         >= 20 mm away, their field's curvature over h is far below the noise), J_u = |m|
         basis."""
         h = 0.25e-3
-        basis = self.model.induced(np.r_[p[None], p + h * EYE3])      # (4, n, 3, 3)
+        basis = self.model.induced(np.r_[p[None], p + h * EYE3], self.directions)
+        if self.directions.shape[1] == 1:              # the direction fixed: u is the model's
+            val = self.moment * basis[0, ..., 0]
+            jp = np.stack([self.moment * (basis[1 + k, ..., 0] - basis[0, ..., 0]) / h
+                           for k in range(3)], -1)
+            return val, jp, val[:, :, None] * u
         mom = self.moment * u
         val = basis[0] @ mom
         jp = np.stack([(basis[1 + k] - basis[0]) @ mom / h for k in range(3)], -1)

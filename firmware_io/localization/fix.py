@@ -104,6 +104,8 @@ def _fault_bias(fit: PoseFit, sol: Solution, frame: Blocks, cov0, stats, lam_md:
         root = math.sqrt(lam_md)
         return float(stats.slope_p.max()) * root, float(stats.slope_u.max()) * root
     s = fit.settings
+    if not (s.fault_offset_t or s.fault_gain):
+        return 0.0, 0.0
     w = frame.w[sol.blocks]
     reading = frame.reading[sol.blocks]
     # offsets on one axis, a gain error on one axis, on all three

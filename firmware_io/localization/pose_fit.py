@@ -110,7 +110,8 @@ class PoseFit:
             raise BadInputError("cores", "False (the model carries no induced core field)", cores)
         self.corr = Corrections(self.pts, model, exact=model.magnet_size_m is not None,
                                 cores=bool(cores), noise_t=settings.noise_t,
-                                first_radius_m=settings.refresh_m)
+                                first_radius_m=settings.refresh_m,
+                                fixed_direction=settings.orientation == "fixed")
         self.background = settings.background == "uniform"
         self.bg_basis = self._background_basis() if self.background else np.zeros((3, 0))
         self.search = GridSearch(self.pts, self.op, self.lo, self.hi, self.moment,

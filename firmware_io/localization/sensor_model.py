@@ -44,22 +44,43 @@ def stacked_pairs(positions_m: np.ndarray, tol_m: float = 1e-3) -> np.ndarray | 
 
 
 def induced_from_map(mapfile: MapFile, lo, hi, n: int):
-    """The map's magnet-induced field at the sensors per unit moment: positions (k, 3) ->
-    (k, n, 3, 3). The map stores it for its own moment, as m . B of per-sensor adjoint fields
-    (linear in m), so three copies of its sensor section with the moment along x, y and z
-    give the basis. Outside the map's box [lo, hi] the nearest box point is used (a small
+    """The map's magnet-induced field at the sensors per unit moment (``SensorModel.induced``).
+    The map stores it for its own moment m0, as m . B of per-sensor adjoint fields (linear in
+    m), so copies of its sensor section with the moment along two axes perpendicular to m0 give
+    the rest of the basis (built when first asked for: a fit that keeps the direction never
+    needs them). Outside the map's box [lo, hi] the nearest box point is used (a small
     correction: safer than extrapolating its polynomials)."""
-    copies = []
-    for axis in np.eye(3):
-        arrays = dict(mapfile.arrays)
-        arrays["MOMENT"] = axis
-        copies.append(MapFile.from_arrays(arrays, mapfile.meta))
+    m0 = np.asarray(mapfile.moment_a_m2, float)
+    size = float(np.linalg.norm(m0))
+    frame = np.c_[m0 / size, _perpendicular(m0 / size)]        # (3, 3): u0, e1, e2
+    maps = [mapfile]
 
-    def induced(positions):
+    def along(k, q):
+        if k >= len(maps):
+            for axis in frame[:, len(maps):].T:
+                arrays = dict(mapfile.arrays)
+                arrays["MOMENT"] = axis * size
+                maps.append(MapFile.from_arrays(arrays, mapfile.meta))
+        return maps[k].sensor_induced_field(q).reshape(len(q), n, 3) / size
+
+    def induced(positions, directions):
         q = np.clip(np.asarray(positions, float).reshape(-1, 3), lo, hi)
-        return np.stack([c.sensor_induced_field(q).reshape(len(q), n, 3) for c in copies], -1)
+        coef = frame.T @ directions                        # directions in (u0, e1, e2)
+        need = [k for k in range(3) if np.any(np.abs(coef[k]) > 1e-12)]
+        out = np.zeros((len(q), n, 3, directions.shape[1]))
+        for k in need:
+            out += along(k, q)[..., None] * coef[k]
+        return out
 
     return induced
+
+
+def _perpendicular(u: np.ndarray) -> np.ndarray:
+    """(3, 2): two unit vectors perpendicular to the unit vector u and to each other."""
+    helper = np.eye(3)[int(np.argmin(np.abs(u)))]
+    e1 = np.cross(helper, u)
+    e1 /= np.linalg.norm(e1)
+    return np.c_[e1, np.cross(u, e1)]
 
 
 @dataclass
@@ -72,8 +93,9 @@ class SensorModel:
     design_sha256 : str
     octupole_m2 : float, m^2 (0 = pure dipole)
     induced : callable, or None: the field of the magnet-magnetized cores at the sensors per
-        unit moment, positions (k, 3) m -> (k, n, 3, 3) T/(A m^2) (column j: the moment along
-        axis j; linear cores: the field is this times the moment)
+        unit moment, ``induced(positions (k, 3) m, directions (3, d))`` -> (k, n, 3, d)
+        T/(A m^2) (column j: a unit moment along directions[:, j]; linear cores: the field of
+        a moment m is the basis of the three axes times m)
     box_lower_m, box_upper_m : (3,) plausible magnet positions (outside: ok = False); default
         25 mm beyond the sensors' footprint, from 2 to 150 mm above the highest sensor
     magnet_size_m : (radius, length) m of the cylinder magnet, or None. Given, the fits use its
@@ -173,14 +195,14 @@ class SensorModel:
         model = cls(**kw)
         n = model.n_sensors
 
-        def induced(positions):
+        def induced(positions, directions):
             r = samples[None] - np.asarray(positions, float)[:, None]    # (k, S, 3)
             rho2 = np.einsum("ksi,ksi->ks", r, r)
             inv3 = rho2 ** -1.5 / (4 * math.pi)
             # H_z of a unit dipole along axis j: (3 r_z r_j / r^5 - delta_zj / r^3) / (4 pi)
             hz = (3.0 * r[..., 2] * inv3 / rho2)[..., None] * r
             hz[..., 2] -= inv3
-            return (op @ hz).reshape(len(r), n, 3, 3)
+            return (op @ (hz @ directions)).reshape(len(r), n, 3, -1)
 
         model.induced = induced
         return model
@@ -219,6 +241,16 @@ class SensorModel:
         return cls(sp, np.asarray(m.sensor_coil_field(), float).reshape(-1, 3, nc),
                    np.asarray(m.moment_a_m2, float), str(m.design_sha256), float(octupole_m2),
                    induced, box_lo, box_hi, magnet_size_m, grad, np.ones(len(sp), bool))
+
+    def induced_field(self, position_m, moment_a_m2=None) -> np.ndarray:
+        """(n, 3) T: the cores' field at the sensors for the magnet at ``position_m`` (3,) m with
+        ``moment_a_m2`` (3,) A m^2 (default: the model's); zeros without a core model."""
+        m = self.moment_a_m2 if moment_a_m2 is None else np.asarray(moment_a_m2, float)
+        if self.induced is None:
+            return np.zeros((self.n_sensors, 3))
+        size = float(np.linalg.norm(m))
+        p = np.asarray(position_m, float)[None]
+        return size * self.induced(p, (m / size)[:, None])[0, ..., 0]
 
     @property
     def n_sensors(self) -> int:

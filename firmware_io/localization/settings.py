@@ -145,8 +145,13 @@ class EstimatorSettings:
         return self.noise_t ** 2 + self.lsb_t ** 2 / 12.0
 
 
-RUNNER_SETTINGS = EstimatorSettings(alert_limit_m=math.inf, orientation="fixed",
-                                    fault_offset_t=0.0, fault_gain=0.0, background="off")
+POSITION_ONLY = EstimatorSettings(alert_limit_m=math.inf, orientation="fixed",
+                                  fault_offset_t=0.0, fault_gain=0.0, background="off")
+"""The position fit of a magnet whose direction is known (the thesis' upright magnet, the
+estimators before the pose): no background, the fault-free protection level, no alert limit
+(a caller applies its own)."""
+
+RUNNER_SETTINGS = POSITION_ONLY
 """What the runner builds its estimator with until it carries the pose and passes its tracker's
 prediction as each fix's prior (``seed``): the position alone (the magnet's direction as the
 map states it), no background, no alert limit of the estimator's own (the runner applies its
