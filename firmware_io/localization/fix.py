@@ -87,7 +87,7 @@ def assess(fit: PoseFit, sol: Solution, frame: Blocks, excluded: tuple = ()) -> 
                                      fault_rad * scale) if fit.n_rot else math.inf)
     reason = _failed(fit, sol, dof, pl_m, pl_rad)
     verdict = Verdict(sol, not reason, reason, cov, pl_m, pl_rad, dof, excluded)
-    if stats is None or sol.chi2 <= fit.chi2_max[dof] or not sol.converged:
+    if stats is None or (sol.chi2 <= fit.chi2_max[dof] and sol.converged):
         return verdict
     if len(excluded) < s.max_exclusions and dof > 3:
         better = _exclude(fit, sol, frame, stats, dof, excluded)
