@@ -12,7 +12,7 @@ fix (thread CPU time, which a loaded host inflates less than the wall clock) and
 matmul; the table gives medians, p99 and the ratio to the matmul. ``--runs`` runs in one
 process; the acceptance asks the median of 3 idle runs (run it 3 times, take the median).
 
-    nice -n 10 python studies/bench_pose.py [--n 200] [--runs 3]
+    nice -n 10 python studies/bench_pose.py [OUT] [--n 200] [--runs 3]   # bench_pose.json
 """
 
 from __future__ import annotations
@@ -29,9 +29,10 @@ if __package__ in (None, ""):
 import numpy as np
 
 from firmware_io.localization import EstimatorSettings, ModelEstimator, Pose
-from studies._common import load_average
+from studies._common import finish, load_average
 from studies.pose_integrity import _device, _magnet_field, _tilted
 
+DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "bench_pose"
 STEP = (0.3e-3, math.radians(0.3))
 """The warm walk's step per frame: position sd per axis (m), direction (rad)."""
 RESTART = np.diag([1e-3 ** 2] * 3 + [math.radians(3.0) ** 2] * 2)
@@ -64,7 +65,7 @@ def _matmul_s() -> float:
     return time.perf_counter() - t0
 
 
-def run(n: int = 200, runs: int = 3, seed: int = 0) -> dict:
+def run(n: int = 200, runs: int = 3, seed: int = 0, out_dir=DEFAULT_OUT) -> dict:
     sim, model, cal, cores = _device(seed, 0.1e-3)
     est = ModelEstimator(model, EstimatorSettings(noise_t=0.1e-3), calibration=cal)
     rng = np.random.default_rng(seed + 5)
@@ -122,7 +123,10 @@ def run(n: int = 200, runs: int = 3, seed: int = 0) -> dict:
           f"{med['warm'] * 1e6:.0f} us (target <= 200), with exclusion p99 warm "
           f"{p99['warm_fault'] * 1e3:.2f} ms / cold {p99['cold_fault'] * 1e3:.2f} ms (target "
           f"<= 3); 2000 x 2000 matmul {mm:.3f} s; load {load_average()}", flush=True)
-    return {"median_s": med, "p99_s": p99, "matmul_s": mm, "load_average": load_average()}
+    res = {"median_s": med, "p99_s": p99, "matmul_s": mm, "load_average": load_average(),
+           "n": n, "runs": runs}
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    return finish(Path(out_dir) / "bench_pose.json", res, lambda r: None)
 
 
 def _line(row) -> str:
@@ -137,6 +141,7 @@ def _line(row) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("out", nargs="?", default=str(DEFAULT_OUT), help="output folder")
     ap.add_argument("--n", type=int, default=200, help="fixes per kind and run")
     ap.add_argument("--runs", type=int, default=3, help="runs in this process")
     ap.add_argument("--seed", type=int, default=0)
@@ -144,7 +149,7 @@ def main(argv=None) -> int:
     if a.n < 2 or a.runs < 1:
         print(f"error: --n {a.n} / --runs {a.runs}: n >= 2, runs >= 1", file=sys.stderr)
         return 2
-    run(a.n, a.runs, a.seed)
+    run(a.n, a.runs, a.seed, a.out)
     return 0
 
 
