@@ -32,10 +32,9 @@ if __package__ in (None, ""):
 import numpy as np
 
 from designkit.sim import RunSettings, SimulatedDevice, run_simulation
-from firmware_io.localization import Localizer
+from firmware_io.localization import RUNNER_SETTINGS, SensorModel, estimator_from_map
 from firmware_io.mapfile import MapFile
-from firmware_io.runner import (CALIBRATED_RELATIVE_ERROR, CurrentHistory, LocalizerShim,
-                                SensorFrame, SensorLayout, SensorPipeline)
+from firmware_io.runner import CurrentHistory, SensorFrame, SensorLayout, SensorPipeline
 from studies._common import design_and_map, finish, load_average
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "runner_headroom"
@@ -51,9 +50,8 @@ def frames_at(design, array, map_path, amplitude_a: float, n: int, seed: int = 0
     device = SimulatedDevice(design, array, seed=seed)
     sim = device.sensor_sim
     fmap = MapFile.load(map_path)
-    cal = device.calibrate_sensors(Localizer.from_map(map_path).model)
-    shim = LocalizerShim(Localizer.from_map(map_path, calibration=cal,
-                                            relative_error=CALIBRATED_RELATIVE_ERROR))
+    cal = device.calibrate_sensors(SensorModel.from_map(map_path))
+    estimator = estimator_from_map(map_path, "model", RUNNER_SETTINGS, calibration=cal)
     layout = SensorLayout.of_map(fmap)
     pos = rng.uniform([-0.03, -0.03, 0.02], [0.03, 0.03, 0.07], (n, 3))
     signs = rng.choice([-1.0, 1.0], (n, array.n_coils))
@@ -66,9 +64,9 @@ def frames_at(design, array, map_path, amplitude_a: float, n: int, seed: int = 0
     for k in range(n):
         hist = CurrentHistory(array.n_coils, 2)
         hist.push(0.0, cur[k])
-        pipe = SensorPipeline(shim, layout, hist.at, fmap.moment_a_m2)
+        pipe = SensorPipeline(estimator, layout, hist.at, fmap.moment_a_m2)
         pipe.position_m = pos[k]                    # the pose the model predicts with
-        shim.reset()
+        estimator.reset()
         fix = pipe.process(SensorFrame(readings[k], ("ok",) * len(readings[k]), 0.0))
         left.append(int((~fix.excluded & np.isfinite(readings[k]).all(axis=1)).sum()))
         if fix.ok:

@@ -1,6 +1,6 @@
 """Closed-loop physics in the default suite: the runner on the simulated device renders the
 scene's force (sign, magnitude, correlation) with the magnet's pull F0 compensated, on the
-coupled iron-core map of the thesis array and ``Localizer.from_map``.
+coupled iron-core map of the thesis array and ``estimator_from_map``.
 
 The true force comes from the exact coupled array model at the true position with the R-L
 currents the PWM registers produced (designkit.sim), independent of the map and of the runner's
@@ -11,13 +11,14 @@ where F0 is 15-65 mN. Longer runs and the fault paths: tests/test_run_simulated.
 """
 
 import csv
+import math
 
 import numpy as np
 import pytest
 
 from conftest import small_box_design
 from designkit.sim import run as sim_run
-from firmware_io.localization import Localizer
+from firmware_io.localization import EstimatorSettings, estimator_from_map
 from firmware_io.mapfile import MapFile
 
 SMALL_BOX = small_box_design()
@@ -121,10 +122,13 @@ def test_localizer_from_map_recovers_a_position(small_map, thesis_array):
     # magnetizes + coils at known currents) -> the fit with the map's sensor section
     from designkit.sim.readings import SensorSimulator
 
-    loc = Localizer.from_map(small_map)
+    loc = estimator_from_map(small_map, settings=EstimatorSettings(
+        alert_limit_m=math.inf, orientation_alert_limit_rad=math.inf))
     sim = SensorSimulator(SMALL_BOX, array=thesis_array, errors="ideal", noise_t=0.0)
     p = np.array([0.012, -0.007, 0.033])
     currents = np.array([0.0, 1.0, 0.0, -1.0, 2.0, 0.0, 0.0, 0.5, 0.0])
     true = sim.read([p], [currents]).true_field_t[0]
-    est = loc.locate(true[0], true[1], currents=currents)
+    est = loc.estimate(true.reshape(-1, 3), currents)
     assert est.ok and np.linalg.norm(est.position_m - p) < 5e-4
+    m = sim.moment_a_m2
+    assert est.moment_a_m2 @ m / (np.linalg.norm(m) * np.linalg.norm(est.moment_a_m2)) > 0.9998

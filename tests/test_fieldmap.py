@@ -294,7 +294,7 @@ def test_the_format_holds_any_number_of_sensors(mapfile, tmp_path):
     # the sensors are a flat list independent of the coil count: the map's first 5 sensors
     # (and a tilted orientation) make a valid map whose reader gives those 5, unchanged
     from firmware_io.mapfile import MapFile, data_hash, read
-    from firmware_io.localization.sensor_model import upper_lower
+    from firmware_io.localization import SensorModel
 
     arrays, meta = read(mapfile)
     keep = slice(0, 5)
@@ -314,9 +314,12 @@ def test_the_format_holds_any_number_of_sensors(mapfile, tmp_path):
     np.testing.assert_array_equal(m.sensor_coil_field(), full.sensor_coil_field()[keep])
     np.testing.assert_array_equal(m.sensor_rotations[2], rot[2])
     assert m.sensor_induced_field(np.mean(m.bounds, axis=0)).shape == (5, 3)
-    # the localizer's estimators still need an upper and a lower array of equal size
-    with pytest.raises(ValueError, match="even number of sensors"):
-        upper_lower(m.sensor_positions_m)
+    # the pose estimators take the flat list as it is: its 5 sensors and their rotations
+    model = SensorModel.from_map(path)
+    assert model.n_sensors == 5 and model.n_coils == 9
+    np.testing.assert_array_equal(model.sensor_positions_m, full.sensor_positions_m[keep])
+    np.testing.assert_array_equal(model.sensor_orientations[2], rot[2])
+    assert model.induced_field(np.mean(m.bounds, axis=0)).shape == (5, 3)
 
 
 def test_outside_points(fm):

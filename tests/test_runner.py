@@ -340,7 +340,7 @@ def test_start_up_calibration_through_the_firmware_recovers_the_sensor_errors(de
     # what the controller knows: the nominal sensor poses' coil field per ampere (exact here, so
     # that only the sensor errors remain to be learned)
     g = np.stack([sim.coil_part(np.eye(9)[k][None])[0] for k in range(9)], -1)
-    model = SensorModel(sim.nominal_m, g.reshape(2, 9, 3, 9), dev.moment, "x" * 64)
+    model = SensorModel(sim.nominal_m.reshape(-1, 3), g.reshape(18, 3, 9), dev.moment, "x" * 64)
     cal = dev.calibrate_sensors(model)
     gi, off = cal if isinstance(cal, tuple) else (cal.gain_inverse, cal.offsets_t)
     assert np.all(dev.current_a == 0) and all(b.duty(ch) == 0 for b in dev.sim_boards
@@ -351,7 +351,7 @@ def test_start_up_calibration_through_the_firmware_recovers_the_sensor_errors(de
         field = sim.coil_part(i[None])                     # (1, 2, 9, 3) T, exact
         truth = field[0]
         raw = analog_reading(field, sim.errors, 0.0, rng)[0]
-        fixed = np.einsum("asij,asj->asi", gi, raw - off)
+        fixed = np.einsum("asij,asj->asi", gi.reshape(2, 9, 3, 3), raw - off.reshape(2, 9, 3))
         before = np.abs(raw - truth).max()
         after = np.abs(fixed - truth).max()
         # 1 % gains, 1 degree mountings of fields up to ~50 mT: ~1 mT before; the 0.1 mT noise

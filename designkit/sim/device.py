@@ -193,7 +193,7 @@ class SimulatedDevice:
         frames : int; current_a : float, A (default :data:`firmware_io.runner.
             CALIBRATION_CURRENT_A`, at most the drive's limit)
 
-        Returns the Localizer's ``calibration`` (gain_inverse (2, n, 3, 3), offsets (2, n, 3)).
+        Returns the estimator's ``calibration`` (gain_inverse (2, n, 3, 3), offsets (2, n, 3)).
         """
         sim = self.sensor_sim
 

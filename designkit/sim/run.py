@@ -14,11 +14,10 @@ from pathlib import Path
 import numpy as np
 
 from firmware_io.allocation import Allocator
-from firmware_io.localization import Localizer
+from firmware_io.localization import RUNNER_SETTINGS, SensorModel, estimator_from_map
 from firmware_io.mapfile import MapFile
 from firmware_io.mapfile.drive import DriveRecord
-from firmware_io.runner import (CALIBRATED_RELATIVE_ERROR, LocalizerShim, Runner, RunnerIO,
-                                SceneForce, SensorHeadroom, config_from_map)
+from firmware_io.runner import Runner, RunnerIO, SceneForce, SensorHeadroom, config_from_map
 from firmware_io.scene import Scene
 
 from .. import fieldmap
@@ -71,8 +70,8 @@ class RunSettings:
         thesis' eq. 4.6)
     seed : int -- the sensor noise's
     calibrate : bool -- the start-up sensor calibration (:meth:`SimulatedDevice.
-        calibrate_sensors`); the localizer then weighs the sensors with
-        :data:`firmware_io.runner.CALIBRATED_RELATIVE_ERROR`
+        calibrate_sensors`); the estimator then weighs the sensors as calibrated
+        (:meth:`firmware_io.localization.EstimatorSettings.relative_error_for`)
     profile : bool -- the runner times each stage of its step (summary
         ``loop_by_kind['stages']``; compute time measured, not modelled)
     skip_force_n : float -- the runner's coil-skip force, N
@@ -138,10 +137,10 @@ def run_simulation(settings: RunSettings = RunSettings(), *, design=None, map_pa
     loc_kw = _localizer_options(device, map_path, st.method, st.calibrate)
 
     def factory(source, clock, hook):
-        localizer = LocalizerShim(Localizer.from_map(map_path, method=st.method, **loc_kw))
+        estimator = estimator_from_map(map_path, st.method, RUNNER_SETTINGS, **loc_kw)
         io = RunnerIO(device.coils, source, lambda line: print(line) if progress else None,
                       clock)
-        runner = Runner(fmap, SceneForce(scene), localizer, io, cfg,
+        runner = Runner(fmap, SceneForce(scene), estimator, io, cfg,
                         allocate=hook(Allocator()),
                         headroom=SensorHeadroom.from_meta(scene.meta))
         runner.profile = st.profile
@@ -239,10 +238,8 @@ def _map(design, array, map_path, out: Path, progress: bool):
 
 def _localizer_options(device: SimulatedDevice, map_path, method: str, calibrate: bool) -> dict:
     """The localizer's keywords: the start-up calibration (coils only; the map carries the
-    magnet's cylinder) and the calibrated sensors' weight, unless not calibrating."""
+    magnet's cylinder), unless not calibrating."""
     loc_kw: dict = {}
     if calibrate and method != "learned":
-        base = Localizer.from_map(map_path, method=method, **loc_kw)
-        loc_kw.update(calibration=device.calibrate_sensors(base.model),
-                      relative_error=CALIBRATED_RELATIVE_ERROR)
+        loc_kw.update(calibration=device.calibrate_sensors(SensorModel.from_map(map_path)))
     return loc_kw

@@ -123,9 +123,10 @@ class Runner:
         dBy/dz, per ampere), ``bias_force(point)`` N, ``bounds`` m, ``moment_a_m2`` A m^2,
         ``sensor_positions_m`` and ``sensor_coil_field()`` (:class:`SensorLayout`).
     scene : object -- ``force(position_m, velocity_m_s) -> (3,)`` N
-    estimator : pose estimator
-        ``fix(readings_t, currents_a)``, ``reset()``, ``integrity_risk``, ``model_bias_m``
-        (:mod:`firmware_io.runner.estimator_shim` lists the estimate's fields).
+    estimator : firmware_io.localization.Estimator
+        ``estimate(readings_t, currents_a, ...)``, ``reset()``, ``integrity_risk``,
+        ``model_bias_m`` (:class:`firmware_io.localization.Estimate` lists the estimate's
+        fields).
     io : RunnerIO -- coils, sensor source, log, clock
     config : RunnerConfig
     tracker : PoseTracker, optional (default: a new one)

@@ -28,9 +28,9 @@ class SensorPipeline:
 
     Parameters
     ----------
-    estimator : pose estimator
-        ``fix(readings_t (n_sensors, 3), currents_a) -> estimate`` (never raises; fields in
-        :mod:`firmware_io.runner.estimator_shim`) and ``reset()``.
+    estimator : firmware_io.localization.Estimator
+        ``estimate(readings_t (n_sensors, 3), currents_a) -> Estimate`` (never raises on a
+        frame) and ``reset()``.
     layout : SensorLayout -- the sensors in the estimator's order
     currents_at : callable -- ``currents_at(t_s) -> (n_coils,)`` A, the modelled currents when
         a frame was sampled
@@ -94,7 +94,7 @@ class SensorPipeline:
         if cold:
             self.reacquire = False
             self.estimator.reset()
-        est = self.estimator.fix(readings, currents)
+        est = self.estimator.estimate(readings, currents)
         ok = bool(est.ok)
         fde = tuple(int(k) for k in est.excluded_sensors)
         for k in self.latch.update(fde, ok):
@@ -108,10 +108,10 @@ class SensorPipeline:
             self.background_t = np.asarray(est.background_t, float)
         else:
             problems.append(("lost", est.reason or "the estimator does not trust its pose"))
-        cov = est.covariance
+        cov = est.position_covariance_m2
         return Fix(np.asarray(est.position_m, float).copy(), moment.copy(), ok,
                    float(frame.t_s), tuple(problems), self.excluded.copy(), self.clock() - t0,
-                   None if cov is None else np.asarray(cov, float)[:3, :3],
+                   None if cov is None else np.asarray(cov, float),
                    float(est.protection_level_m), cold, fde,
                    tuple(int(k) for k in np.flatnonzero(quiet)), est.reason,
                    np.asarray(est.background_t, float))

@@ -1,0 +1,252 @@
+"""One frame's fix from a :class:`PoseFit`: :func:`locate` (warm or cold start, the integrity
+verdict with fault exclusion, the :class:`Estimate`).
+
+The warm start is the caller's prior pose, else the last trusted fix; a warm fit that fails
+its verdict or moved farther than ``reacquire_m`` is solved again from the global search's
+best starts and the better verdict wins (trusted first, then the lower chi2 per degree of
+freedom). The verdict (:func:`assess`): converged, inside the plausible box, chi2 within the
+test's threshold, the normalized residual within its cap, the protection levels within the
+alert limits. The protection levels (position, orientation): the model-bias bound plus the
+larger of the fault-free bound of the covariance (inflated by chi2 / dof above 1) and the
+undetected single-sensor fault's (:mod:`.fde`): max over sensors of slope x sqrt(lam_md) for
+a fault of any shape, or of the worst undetected offset or gain error within their bounds
+(``settings.fault_model``).
+Fault exclusion (RAIM FDE): when chi2 fails its test, the sensor whose removal lowers chi2 the
+most is excluded if the rest then passes and no other single sensor's removal would
+(separation); the fit is solved again without it and judged anew, up to ``max_exclusions``.
+When no single sensor explains it, the ambient field's gradient is tried (``gradient``
+'auto'): kept when it lowers chi2 by more than the chi-square(5) quantile at the false-alarm
+probability and the fit then passes; a field the gradient cannot describe either (a steel
+object near the sensors) stays refused.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .estimate import Estimate, Pose
+from .fde import block_statistics, gain_and_offset_bias
+from .integrity import orientation_protection_level, position_protection_level
+from .pose import tangent_axes
+from .pose_fit import PoseFit, Solution, State
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The integrity of one solution: ok, reason, covariance (P, P) (inflated), the position
+    and orientation protection levels (m, rad), dof, the blocks it excluded."""
+
+    solution: Solution
+    ok: bool
+    reason: str
+    covariance: np.ndarray | None
+    pl_m: float
+    pl_rad: float
+    dof: int
+    excluded: tuple = ()
+
+    def rank(self) -> tuple:
+        """Sort key: trusted first, then the lower chi2 per degree of freedom."""
+        return (not self.ok, self.solution.chi2 / max(self.dof, 1))
+
+
+@dataclass(frozen=True)
+class Blocks:
+    """One frame's observation blocks: data d (b, 3) T (0 where unusable), weights w (b,)
+    1 / sigma (0 where unusable), the readings whose gain a fault would change (b, 3) T."""
+
+    d: np.ndarray
+    w: np.ndarray
+    reading: np.ndarray
+
+
+def assess(fit: PoseFit, sol: Solution, frame: Blocks, excluded: tuple = ()) -> Verdict:
+    """The verdict of a solution (module docstring), with fault exclusion when chi2 fails."""
+    s = fit.settings
+    rows, unknowns = sol.jac.shape
+    dof = rows - unknowns
+    cov, pl_m, pl_rad, stats = None, math.inf, math.inf, None
+    try:
+        cov0 = np.linalg.inv(sol.jac.T @ sol.jac)
+    except np.linalg.LinAlgError:
+        cov0 = None
+    if cov0 is not None and dof >= 1 and np.all(np.isfinite(cov0)):
+        inflate = max(1.0, sol.chi2 / dof)
+        cov = cov0 * inflate
+        k = 3 * len(sol.blocks)                 # the sensors' rows (a prior's follow)
+        stats = block_statistics(sol.jac[:k], sol.res[:k], cov0, fit.n_rot)
+        fault_m, fault_rad = _fault_bias(fit, sol, frame, cov0, stats, fit.lam_md[dof])
+        scale = math.sqrt(inflate)
+        pl_m = fit.bias_m + max(position_protection_level(cov[:3, :3], fit.k2),
+                                fault_m * scale)
+        pl_rad = (fit.bias_rad + max(orientation_protection_level(cov[3:5, 3:5],
+                                                                  s.integrity_risk),
+                                     fault_rad * scale) if fit.n_rot else math.inf)
+    reason = _failed(fit, sol, dof, pl_m, pl_rad)
+    verdict = Verdict(sol, not reason, reason, cov, pl_m, pl_rad, dof, excluded)
+    if stats is None or (sol.chi2 <= fit.chi2_max[dof] and sol.converged):
+        return verdict
+    if len(excluded) < s.max_exclusions and dof > 3:
+        better = _exclude(fit, sol, frame, stats, dof, excluded)
+        if better is not None:
+            return better
+    if s.gradient == "auto" and sol.state.g is None and dof > 5 and not excluded:
+        return _with_gradient(fit, sol, frame) or verdict
+    return verdict
+
+
+def _fault_bias(fit: PoseFit, sol: Solution, frame: Blocks, cov0, stats, lam_md: float):
+    """The worst undetected single-sensor fault's bias (m, rad) per the fault model."""
+    if fit.settings.fault_model == "any":
+        root = math.sqrt(lam_md)
+        return float(stats.slope_p.max()) * root, float(stats.slope_u.max()) * root
+    s = fit.settings
+    if not (s.fault_offset_t or s.fault_gain):
+        return 0.0, 0.0
+    w = frame.w[sol.blocks]
+    reading = frame.reading[sol.blocks]
+    # offsets on one axis, a gain error on one axis, on all three
+    shapes = np.concatenate([np.broadcast_to(s.fault_offset_t * np.eye(3), (len(w), 3, 3)),
+                             s.fault_gain * reading[:, :, None] * np.eye(3),
+                             s.fault_gain * reading[:, None]], 1)
+    dp, du = gain_and_offset_bias(sol.jac[:3 * len(w)], cov0, shapes * w[:, None, None], lam_md,
+                                  fit.n_rot)
+    return float(dp.max()), float(du.max())
+
+
+def _with_gradient(fit: PoseFit, sol: Solution, frame: Blocks) -> Verdict | None:
+    """The verdict with the ambient field's gradient fitted too, when it is significant and
+    passes the test (module docstring); else None."""
+    st = sol.state
+    start = State(st.p, st.u, st.log_scale, st.b, np.zeros(5))
+    blocks = sol.blocks
+    again = fit.solve_corrected(start, blocks, frame.w[blocks], frame.d[blocks])
+    dof = again.jac.shape[0] - again.jac.shape[1]
+    if not (again.converged and sol.chi2 - again.chi2 > fit.gradient_drop
+            and again.chi2 <= fit.chi2_max[dof]):
+        return None
+    return assess(fit, again, frame)
+
+
+def _exclude(fit: PoseFit, sol: Solution, frame: Blocks, stats, dof: int,
+             excluded: tuple) -> Verdict | None:
+    """The verdict without the one sensor that explains the failed residual test, or None
+    when none does or two would (not identifiable)."""
+    limit = fit.chi2_max[dof - 3]
+    order = np.argsort(-stats.delta)
+    rest = sol.chi2 - stats.delta[order]
+    if not rest[0] <= limit or (len(rest) > 1 and rest[1] <= limit):
+        return None
+    drop = int(sol.blocks[order[0]])
+    blocks = sol.blocks[sol.blocks != drop]
+    again = fit.solve_corrected(sol.state, blocks, frame.w[blocks], frame.d[blocks])
+    return assess(fit, again, frame, excluded + (drop,))
+
+
+def _failed(fit: PoseFit, sol: Solution, dof: int, pl_m: float, pl_rad: float) -> str:
+    """Why the solution is not trusted ('' when it is)."""
+    s = fit.settings
+    p = sol.state.p
+    rms = math.sqrt(sol.chi2 / max(dof, 1))
+    if dof < 1:
+        return f"{len(sol.blocks)} usable sensors leave no redundancy"
+    if not sol.converged:
+        return "fit did not converge"
+    if not (np.all(p > fit.lo + 1e-6) and np.all(p < fit.hi - 1e-6)):
+        return "position at or outside the plausible box's edge"
+    if not sol.chi2 <= fit.chi2_max[dof]:
+        return (f"residual chi2 {sol.chi2:.3g} > {fit.chi2_max[dof]:.3g} ({dof} dof, "
+                f"false-alarm {s.false_alarm:g}): lost or model error")
+    if rms > s.residual_limit:
+        return f"residual {rms:.3g} > {s.residual_limit:g} (lost or implausible)"
+    if not (math.isfinite(pl_m) and (math.isfinite(pl_rad) or not fit.n_rot)):
+        return "singular Fisher information: the pose is not determined"
+    if not pl_m <= s.alert_limit_m:
+        return (f"protection level {pl_m * 1e3:.3g} mm > alert limit "
+                f"{s.alert_limit_m * 1e3:.3g} mm")
+    if fit.n_rot and not pl_rad <= s.orientation_alert_limit_rad:
+        return (f"orientation protection level {math.degrees(pl_rad):.3g} deg > alert limit "
+                f"{math.degrees(s.orientation_alert_limit_rad):.3g} deg")
+    return ""
+
+
+def locate(fit: PoseFit, d: np.ndarray, use: np.ndarray, sigma: np.ndarray, reading: np.ndarray,
+           seed: Pose | None, method: str) -> Estimate:
+    """The estimate of one frame's blocks: data d (b, 3) T (0 where unusable), ``use`` (b,),
+    sigma (b,) T, the readings (b, 3) T (the fault model's gain errors scale them); ``seed``
+    a prior pose (None: the last trusted fix, else cold)."""
+    blocks = np.flatnonzero(use)
+    need = max(3, -(-(fit.n_unknowns(False) + 1) // 3))    # >= 1 degree of freedom
+    if len(blocks) < need:
+        return Estimate.refused(_fallback(fit), _moment(fit, fit.last), f"only {len(blocks)} "
+                                f"usable sensors (need {need})", method)
+    w_all = np.where(use, 1.0 / sigma, 0.0)
+    w, db = w_all[blocks], d[blocks]
+    frame = Blocks(d, w_all, np.nan_to_num(reading))
+    start = (fit.initial_state(seed.position_m, seed.moment_a_m2) if seed is not None
+             else fit.last)
+    best = None
+    if start is not None:
+        fit.set_prior(seed)
+        try:
+            best = assess(fit, fit.solve_corrected(start, blocks, w, db), frame)
+        finally:
+            fit.set_prior(None)
+        moved = float(np.linalg.norm(best.solution.state.p - start.p))
+        if best.ok and (moved <= fit.settings.reacquire_m or seed is not None):
+            return _estimate(fit, best, method)
+    for st in fit.cold_starts(d, w_all ** 2):
+        v = assess(fit, fit.solve_cold(st, blocks, w, db), frame)
+        if best is None or v.rank() < best.rank():
+            best = v
+        if best.ok:
+            return _estimate(fit, best, method)
+    if not best.solution.chi2 <= fit.chi2_max[best.dof] and len(blocks) > need:
+        # a gross fault can pull every start into a wrong basin, where the linearized
+        # exclusion test cannot name the liar: search again without the block the failed fit
+        # explains worst, and judge all blocks at that pose (the exclusion test then runs
+        # where the others agree; a fit of all blocks would slide back)
+        res = best.solution.res[:3 * len(best.solution.blocks)].reshape(-1, 3)
+        suspect = int(best.solution.blocks[int(np.argmax(np.einsum("bi,bi->b", res, res)))])
+        w_rest = w_all.copy()
+        w_rest[suspect] = 0.0
+        rest = blocks[blocks != suspect]
+        for st in fit.cold_starts(d, w_rest ** 2)[:1]:
+            sub = fit.solve_cold(st, rest, w_all[rest], d[rest])
+            jac, res = fit.rows(sub.state, blocks, w, db)
+            v = assess(fit, Solution(sub.state, jac, res, blocks, float(res @ res),
+                                     sub.converged, sub.iterations), frame)
+            if v.rank() < best.rank():
+                best = v
+    return _estimate(fit, best, method)
+
+
+def _estimate(fit: PoseFit, v: Verdict, method: str) -> Estimate:
+    st = v.solution.state
+    fit.last = st if v.ok else None
+    k = 3 + fit.n_rot + fit.fit_scale
+    cov = None if v.covariance is None else v.covariance[:k, :k].copy()
+    excluded = tuple(sorted(s for b in v.excluded for s in fit.block_sensors[b]))
+    return Estimate(st.p.copy(), _moment(fit, st), v.ok, v.reason, cov, v.pl_m, v.pl_rad,
+                    excluded, st.b.copy(), float(v.solution.chi2), v.dof,
+                    len(v.solution.blocks), v.solution.iterations, method,
+                    tangent_axes(st.u) if fit.n_rot else None)
+
+
+def _moment(fit: PoseFit, st: State | None) -> np.ndarray:
+    if st is None:
+        return fit.model.moment_a_m2.copy()
+    return fit.moment * math.exp(st.log_scale) * st.u
+
+
+def _fallback(fit: PoseFit) -> np.ndarray:
+    return (fit.last.p if fit.last is not None else 0.5 * (fit.lo + fit.hi)).copy()
+
+
+def fallback_position(fit: PoseFit) -> np.ndarray:
+    """(3,) m for a not-ok estimate without a fit: the last trusted position or the box's
+    centre."""
+    return _fallback(fit)
