@@ -23,7 +23,7 @@ from .hw.bus import open_bus
 from .hw.coils import CoilDriver
 from .hw.pca9685 import PCA9685
 from .errors import FirmwareIOError
-from .localization import RUNNER_SETTINGS, estimator_from_map
+from .localization import estimator_from_map
 from .mapfile import MapFile
 from .runner import (CALIBRATION_CURRENT_A, Runner, RunnerIO, SceneForce, SensorFrame,
                      SensorHeadroom, calibrate_sensors, calibration_currents, config_from_map,
@@ -152,7 +152,7 @@ def load_inputs(map_path: str, scene_path: str, method: str):
     """Map, scene and pose estimator, checked against each other (no device is touched)."""
     fmap = MapFile.load(map_path)
     scene = Scene.load(scene_path, expected_design_sha256=fmap.design_sha256)
-    estimator = estimator_from_map(map_path, method, RUNNER_SETTINGS)
+    estimator = estimator_from_map(map_path, method)
     return fmap, scene, estimator
 
 
@@ -177,7 +177,7 @@ def calibrated_estimator(map_path: str, method: str, estimator, coils, arrays, c
     readings, applied = record_calibration(coils, arrays, calibration_currents(cfg.n_coils, amp),
                                            settle_s=7 * tau, sleep=sleep)
     cal = calibrate_sensors(estimator.model, readings, applied)
-    return estimator_from_map(map_path, method, RUNNER_SETTINGS, calibration=cal)
+    return estimator_from_map(map_path, method, calibration=cal)
 
 
 def main(argv: list[str] | None = None) -> int:

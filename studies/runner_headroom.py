@@ -32,7 +32,7 @@ if __package__ in (None, ""):
 import numpy as np
 
 from designkit.sim import RunSettings, SimulatedDevice, run_simulation
-from firmware_io.localization import RUNNER_SETTINGS, SensorModel, estimator_from_map
+from firmware_io.localization import SensorModel, estimator_from_map
 from firmware_io.mapfile import MapFile
 from firmware_io.runner import CurrentHistory, SensorFrame, SensorLayout, SensorPipeline
 from studies._common import design_and_map, finish, load_average
@@ -51,7 +51,7 @@ def frames_at(design, array, map_path, amplitude_a: float, n: int, seed: int = 0
     sim = device.sensor_sim
     fmap = MapFile.load(map_path)
     cal = device.calibrate_sensors(SensorModel.from_map(map_path))
-    estimator = estimator_from_map(map_path, "model", RUNNER_SETTINGS, calibration=cal)
+    estimator = estimator_from_map(map_path, "model", calibration=cal)
     layout = SensorLayout.of_map(fmap)
     pos = rng.uniform([-0.03, -0.03, 0.02], [0.03, 0.03, 0.07], (n, 3))
     signs = rng.choice([-1.0, 1.0], (n, array.n_coils))

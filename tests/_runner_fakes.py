@@ -26,6 +26,9 @@ class TruthEstimator:
     def reset(self):
         self.resets += 1
 
+    def magnet_free(self, readings_t, currents_a=None):
+        return False
+
     def estimate(self, readings_t, currents_a=None, *, usable=None, seed=None, time_s=None):
         ok = bool(np.isfinite(readings_t).any())
         return Estimate(np.asarray(self.truth(), float), self.moment.copy(), ok,
@@ -45,7 +48,7 @@ class HoldTracker:
         self.t = None
         self.moment_a_m2 = None
 
-    def update(self, position_m, time_s, ok=True, moment_a_m2=None):
+    def update(self, position_m, time_s, ok=True, moment_a_m2=None, covariance=None):
         if ok:
             self.x = np.stack([np.asarray(position_m, float), np.zeros(3)])
             self.t = float(time_s)
@@ -57,6 +60,9 @@ class HoldTracker:
 
     def innovation(self, position_m, time_s):
         return np.zeros(3), 1.0
+
+    def snapshot(self):
+        return None
 
 
 class ConstantMap:

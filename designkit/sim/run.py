@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from firmware_io.allocation import Allocator
-from firmware_io.localization import RUNNER_SETTINGS, SensorModel, estimator_from_map
+from firmware_io.localization import SensorModel, estimator_from_map
 from firmware_io.mapfile import MapFile
 from firmware_io.mapfile.drive import DriveRecord
 from firmware_io.runner import Runner, RunnerIO, SceneForce, SensorHeadroom, config_from_map
@@ -137,7 +137,7 @@ def run_simulation(settings: RunSettings = RunSettings(), *, design=None, map_pa
     loc_kw = _localizer_options(device, map_path, st.method, st.calibrate)
 
     def factory(source, clock, hook):
-        estimator = estimator_from_map(map_path, st.method, RUNNER_SETTINGS, **loc_kw)
+        estimator = estimator_from_map(map_path, st.method, **loc_kw)
         io = RunnerIO(device.coils, source, lambda line: print(line) if progress else None,
                       clock)
         runner = Runner(fmap, SceneForce(scene), estimator, io, cfg,

@@ -27,7 +27,8 @@ from .learned_estimator import LearnedEstimator
 from .magnet import MU0, cylinder_field, multipole_field
 from .model_estimator import ModelEstimator
 from .sensor_model import DEFAULT_NOISE_T, SensorModel
-from .settings import POSITION_ONLY, RUNNER_SETTINGS, EstimatorSettings
+from .settings import (MIN_SENSORS_FOR_POSE, POSITION_ONLY, EstimatorSettings,
+                       settings_for_layout)
 from .subtraction_estimator import SubtractionEstimator
 
 __all__ = [
@@ -35,6 +36,7 @@ __all__ = [
     "calibrate", "Estimate", "Pose", "Estimator", "METHODS", "estimator_from_map",
     "make_estimator", "ConstantVelocityKalman", "KalmanEstimator", "LearnedInverse",
     "LearnedEstimator", "MU0", "cylinder_field", "multipole_field", "ModelEstimator",
-    "DEFAULT_NOISE_T", "SensorModel", "EstimatorSettings", "RUNNER_SETTINGS", "POSITION_ONLY",
+    "DEFAULT_NOISE_T", "SensorModel", "EstimatorSettings", "POSITION_ONLY",
+    "MIN_SENSORS_FOR_POSE", "settings_for_layout",
     "SubtractionEstimator",
 ]

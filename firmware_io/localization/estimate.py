@@ -50,6 +50,14 @@ class Estimate:
     n_used : sensors (or subtracted pairs) in the fit; iterations; method
     orientation_axes : (2, 3), e1 and e2 of the covariance's orientation block
     velocity_m_s : (3,) m/s from a filtering estimator, else None
+    consistent : the fit passed every test but the alert limits (converged, inside the box,
+        the residual test after any exclusion, finite protection levels): what a caller that
+        bounds the undetected fault otherwise (a runner's acquisition) may use
+    fault_free_protection_level_m, fault_free_orientation_protection_level_rad : m, rad, the
+        protection levels without the undetected single-sensor fault's term (the model bias
+        and the covariance's bound); inf without a fit
+    prior_used : the fit was solved with the seed's covariance as a prior (False: no prior
+        given, or the frame disagreed with it and was solved cold)
     """
 
     position_m: np.ndarray
@@ -68,6 +76,10 @@ class Estimate:
     method: str = ""
     orientation_axes: np.ndarray | None = None
     velocity_m_s: np.ndarray | None = None
+    consistent: bool = False
+    fault_free_protection_level_m: float = math.inf
+    fault_free_orientation_protection_level_rad: float = math.inf
+    prior_used: bool = False
 
     @property
     def position_covariance_m2(self) -> np.ndarray | None:

@@ -106,6 +106,14 @@ class Estimator(abc.ABC):
             return Estimate.refused(self.fallback_position_m(), self.model.moment_a_m2,
                                     f"numerical failure: {exc}", self.method)
 
+    def magnet_free(self, readings_t, currents_a=None) -> bool:
+        """Does the frame show no magnet and sensors that agree: the coils' field at
+        ``currents_a`` and (when the settings fit one) a uniform background explain every usable
+        sensor within the residual test at the false-alarm probability? Then no sensor carries
+        an offset much beyond the noise -- a check of the sensors while the finger is away (a
+        runner's acquisition uses it). Never raises; False when the method cannot tell."""
+        return False
+
     @abc.abstractmethod
     def fit(self, readings: np.ndarray, currents: np.ndarray | None, seed: Pose | None,
             time_s: float | None) -> Estimate:

@@ -14,7 +14,7 @@ from .learned import LearnedInverse
 from .learned_estimator import LearnedEstimator
 from .model_estimator import ModelEstimator
 from .sensor_model import SensorModel
-from .settings import EstimatorSettings
+from .settings import EstimatorSettings, settings_for_layout
 from .subtraction_estimator import SubtractionEstimator
 
 METHODS = ("learned", "dipole", "model", "kalman")
@@ -22,7 +22,10 @@ METHODS = ("learned", "dipole", "model", "kalman")
 
 def make_estimator(method: str, model: SensorModel, settings: EstimatorSettings | None = None,
                    *, calibration=None, learned: LearnedInverse | None = None) -> Estimator:
-    """The estimator of ``method`` (one of :data:`METHODS`) for ``model``."""
+    """The estimator of ``method`` (one of :data:`METHODS`) for ``model``; ``settings`` None:
+    :func:`settings_for_layout` of its sensors."""
+    if settings is None:
+        settings = settings_for_layout(model.n_sensors)
     if method == "model":
         return ModelEstimator(model, settings, calibration=calibration)
     if method == "dipole":

@@ -9,8 +9,10 @@ from typing import ClassVar
 
 import numpy as np
 
+from ..errors import BadInputError
 from .estimate import Estimate, Pose
 from .estimator import Estimator
+from .frame import check_currents, check_readings
 from .fix import fallback_position, locate
 from .pose_fit import PoseFit
 
@@ -34,6 +36,17 @@ class PoseFitEstimator(Estimator):
         d, use, sigma, field = fit.data(fit.corrected(readings),
                                         None if self.subtract else currents)
         return locate(fit, d, use, sigma, field, seed, self.method)
+
+    def magnet_free(self, readings_t, currents_a=None) -> bool:
+        fit = self.engine
+        try:
+            readings = check_readings(readings_t, self.n_sensors, None)
+            currents = (None if self.subtract
+                        else check_currents(currents_a, self.model.n_coils))
+        except BadInputError:
+            return False
+        d, use, sigma, _ = fit.data(fit.corrected(readings), currents)
+        return fit.explained_without_magnet(d, np.where(use, 1.0 / sigma, 0.0))
 
     def reset(self) -> None:
         self.engine.last = None

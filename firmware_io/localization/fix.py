@@ -4,7 +4,8 @@ verdict with fault exclusion, the :class:`Estimate`).
 The warm start is the caller's prior pose, else the last trusted fix; a warm fit that fails
 its verdict or moved farther than ``reacquire_m`` is solved again from the global search's
 best starts and the better verdict wins (trusted first, then the lower chi2 per degree of
-freedom). The verdict (:func:`assess`): converged, inside the plausible box, chi2 within the
+freedom). A prior with a covariance that the frame agrees with (the fit passes every test but
+the alert limits) is kept: its fix is returned, trusted or not, without the search. The verdict (:func:`assess`): converged, inside the plausible box, chi2 within the
 test's threshold, the normalized residual within its cap, the protection levels within the
 alert limits. The protection levels (position, orientation): the model-bias bound plus the
 larger of the fault-free bound of the covariance (inflated by chi2 / dof above 1) and the
@@ -37,7 +38,9 @@ from .pose_fit import PoseFit, Solution, State
 @dataclass(frozen=True)
 class Verdict:
     """The integrity of one solution: ok, reason, covariance (P, P) (inflated), the position
-    and orientation protection levels (m, rad), dof, the blocks it excluded."""
+    and orientation protection levels (m, rad), dof, the blocks it excluded; ``consistent``:
+    it passed every test but the alert limits; ``free``: the fault-free protection levels (the
+    model bias and the covariance's bound, without the undetected fault) (m, rad)."""
 
     solution: Solution
     ok: bool
@@ -47,6 +50,8 @@ class Verdict:
     pl_rad: float
     dof: int
     excluded: tuple = ()
+    consistent: bool = False
+    free: tuple = (math.inf, math.inf)
 
     def rank(self) -> tuple:
         """Sort key: trusted first, then the lower chi2 per degree of freedom."""
@@ -69,6 +74,7 @@ def assess(fit: PoseFit, sol: Solution, frame: Blocks, excluded: tuple = ()) -> 
     rows, unknowns = sol.jac.shape
     dof = rows - unknowns
     cov, pl_m, pl_rad, stats = None, math.inf, math.inf, None
+    free_m, free_rad = math.inf, math.inf
     try:
         cov0 = np.linalg.inv(sol.jac.T @ sol.jac)
     except np.linalg.LinAlgError:
@@ -80,13 +86,17 @@ def assess(fit: PoseFit, sol: Solution, frame: Blocks, excluded: tuple = ()) -> 
         stats = block_statistics(sol.jac[:k], sol.res[:k], cov0, fit.n_rot)
         fault_m, fault_rad = _fault_bias(fit, sol, frame, cov0, stats, fit.lam_md[dof])
         scale = math.sqrt(inflate)
-        pl_m = fit.bias_m + max(position_protection_level(cov[:3, :3], fit.k2),
-                                fault_m * scale)
-        pl_rad = (fit.bias_rad + max(orientation_protection_level(cov[3:5, 3:5],
-                                                                  s.integrity_risk),
-                                     fault_rad * scale) if fit.n_rot else math.inf)
-    reason = _failed(fit, sol, dof, pl_m, pl_rad)
-    verdict = Verdict(sol, not reason, reason, cov, pl_m, pl_rad, dof, excluded)
+        noise_m = position_protection_level(cov[:3, :3], fit.k2)
+        pl_m = fit.bias_m + max(noise_m, fault_m * scale)
+        free_m = fit.bias_m + noise_m
+        if fit.n_rot:
+            noise_rad = orientation_protection_level(cov[3:5, 3:5], s.integrity_risk)
+            pl_rad = fit.bias_rad + max(noise_rad, fault_rad * scale)
+            free_rad = fit.bias_rad + noise_rad
+    inconsistent = _inconsistent(fit, sol, dof, pl_m, pl_rad)
+    reason = inconsistent or _beyond_limits(fit, pl_m, pl_rad)
+    verdict = Verdict(sol, not reason, reason, cov, pl_m, pl_rad, dof, excluded,
+                      not inconsistent, (free_m, free_rad))
     if stats is None or (sol.chi2 <= fit.chi2_max[dof] and sol.converged):
         return verdict
     if len(excluded) < s.max_exclusions and dof > 3:
@@ -146,8 +156,8 @@ def _exclude(fit: PoseFit, sol: Solution, frame: Blocks, stats, dof: int,
     return assess(fit, again, frame, excluded + (drop,))
 
 
-def _failed(fit: PoseFit, sol: Solution, dof: int, pl_m: float, pl_rad: float) -> str:
-    """Why the solution is not trusted ('' when it is)."""
+def _inconsistent(fit: PoseFit, sol: Solution, dof: int, pl_m: float, pl_rad: float) -> str:
+    """Why the solution fails a test other than the alert limits ('' when it passes them)."""
     s = fit.settings
     p = sol.state.p
     rms = math.sqrt(sol.chi2 / max(dof, 1))
@@ -164,6 +174,12 @@ def _failed(fit: PoseFit, sol: Solution, dof: int, pl_m: float, pl_rad: float) -
         return f"residual {rms:.3g} > {s.residual_limit:g} (lost or implausible)"
     if not (math.isfinite(pl_m) and (math.isfinite(pl_rad) or not fit.n_rot)):
         return "singular Fisher information: the pose is not determined"
+    return ""
+
+
+def _beyond_limits(fit: PoseFit, pl_m: float, pl_rad: float) -> str:
+    """Why the protection levels are not within the alert limits ('' when they are)."""
+    s = fit.settings
     if not pl_m <= s.alert_limit_m:
         return (f"protection level {pl_m * 1e3:.3g} mm > alert limit "
                 f"{s.alert_limit_m * 1e3:.3g} mm")
@@ -188,22 +204,25 @@ def locate(fit: PoseFit, d: np.ndarray, use: np.ndarray, sigma: np.ndarray, read
     frame = Blocks(d, w_all, np.nan_to_num(reading))
     start = (fit.initial_state(seed.position_m, seed.moment_a_m2) if seed is not None
              else fit.last)
-    best = None
+    best, from_prior = None, False
     if start is not None:
         fit.set_prior(seed)
+        from_prior = fit.prior is not None
         try:
             best = assess(fit, fit.solve_corrected(start, blocks, w, db), frame)
         finally:
             fit.set_prior(None)
         moved = float(np.linalg.norm(best.solution.state.p - start.p))
-        if best.ok and (moved <= fit.settings.reacquire_m or seed is not None):
-            return _estimate(fit, best, method)
+        # a frame that agrees with a prior keeps it (a cold solve has less information)
+        if (best.ok and (moved <= fit.settings.reacquire_m or seed is not None)) \
+                or (from_prior and best.consistent):
+            return _estimate(fit, best, method, from_prior)
     for st in fit.cold_starts(d, w_all ** 2):
         v = assess(fit, fit.solve_cold(st, blocks, w, db), frame)
         if best is None or v.rank() < best.rank():
-            best = v
+            best, from_prior = v, False
         if best.ok:
-            return _estimate(fit, best, method)
+            return _estimate(fit, best, method, from_prior)
     if not best.solution.chi2 <= fit.chi2_max[best.dof] and len(blocks) > need:
         # a gross fault can pull every start into a wrong basin, where the linearized
         # exclusion test cannot name the liar: search again without the block the failed fit
@@ -220,11 +239,11 @@ def locate(fit: PoseFit, d: np.ndarray, use: np.ndarray, sigma: np.ndarray, read
             v = assess(fit, Solution(sub.state, jac, res, blocks, float(res @ res),
                                      sub.converged, sub.iterations), frame)
             if v.rank() < best.rank():
-                best = v
-    return _estimate(fit, best, method)
+                best, from_prior = v, False
+    return _estimate(fit, best, method, from_prior)
 
 
-def _estimate(fit: PoseFit, v: Verdict, method: str) -> Estimate:
+def _estimate(fit: PoseFit, v: Verdict, method: str, prior_used: bool) -> Estimate:
     st = v.solution.state
     fit.last = st if v.ok else None
     k = 3 + fit.n_rot + fit.fit_scale
@@ -233,7 +252,8 @@ def _estimate(fit: PoseFit, v: Verdict, method: str) -> Estimate:
     return Estimate(st.p.copy(), _moment(fit, st), v.ok, v.reason, cov, v.pl_m, v.pl_rad,
                     excluded, st.b.copy(), float(v.solution.chi2), v.dof,
                     len(v.solution.blocks), v.solution.iterations, method,
-                    tangent_axes(st.u) if fit.n_rot else None)
+                    tangent_axes(st.u) if fit.n_rot else None, None, v.consistent,
+                    v.free[0], v.free[1], prior_used)
 
 
 def _moment(fit: PoseFit, st: State | None) -> np.ndarray:

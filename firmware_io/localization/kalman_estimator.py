@@ -66,6 +66,9 @@ class KalmanEstimator(Estimator):
         """The filter's extrapolated position (3,) m at ``time_s``."""
         return self.kalman.predict(time_s)
 
+    def magnet_free(self, readings_t, currents_a=None) -> bool:
+        return self.inner.magnet_free(readings_t, currents_a)
+
     def reset(self) -> None:
         self.inner.reset()
         self.kalman.reset()

@@ -214,6 +214,25 @@ class PoseFit:
         r = np.cbrt(MU0 * self.moment / (2 * math.pi * np.maximum(b, 1e-9)))
         return (3 * self.settings.mount_position_m * b / r) ** 2
 
+    def explained_without_magnet(self, d: np.ndarray, w_all: np.ndarray) -> bool:
+        """Do the blocks' data d (b, 3) T (weights w = 1 / sigma, 0 where unusable) pass the
+        residual test with no magnet: a uniform background alone (its observable directions,
+        when fitted), else nothing? Needs at least two usable blocks."""
+        use = w_all > 0
+        n_use = int(use.sum())
+        if n_use < 2:
+            return False
+        wd = (d[use] * w_all[use, None]).reshape(-1)
+        k = self.bg_basis.shape[1]
+        if k:
+            jac = (np.broadcast_to(self.bg_basis, (n_use, 3, k)) if self.op is None
+                   else self.op.sum(axis=2)[use] @ self.bg_basis) * w_all[use, None, None]
+            jac = jac.reshape(-1, k)
+            coef, *_ = np.linalg.lstsq(jac, wd, rcond=None)
+            wd = wd - jac @ coef
+        dof = 3 * n_use - k
+        return bool(float(wd @ wd) <= self.chi2_max[dof])
+
     # -- the model and its Jacobian ----------------------------------------------------------
     def n_unknowns(self, gradient: bool) -> int:
         return 3 + self.n_rot + self.fit_scale + self.bg_basis.shape[1] + 5 * gradient

@@ -151,10 +151,21 @@ POSITION_ONLY = EstimatorSettings(alert_limit_m=math.inf, orientation="fixed",
 estimators before the pose): no background, the fault-free protection level, no alert limit
 (a caller applies its own)."""
 
-RUNNER_SETTINGS = POSITION_ONLY
-"""What the runner builds its estimator with until it carries the pose and passes its tracker's
-prediction as each fix's prior (``seed``): the position alone (the magnet's direction as the
-map states it), no background, no alert limit of the estimator's own (the runner applies its
-scene's to the protection level of its tracker's filtered position, docs/runner.md
-"Integrity") and no undetected-fault term (a cold frame alone cannot bound a lying sensor below
-the magnet: docs/localization.md "Integrity"); exclusion stays on."""
+
+MIN_SENSORS_FOR_POSE = 7
+"""Fewest sensors whose frame the default settings fit the pose and the room with: after one
+sensor is excluded, 3 (n - 1) readings for 8 unknowns (position, direction, background) leave
+at least as many degrees of freedom as unknowns for the residual test to see a fault."""
+
+
+def settings_for_layout(n_sensors: int) -> EstimatorSettings:
+    """The default settings for a layout of ``n_sensors`` sensors: :class:`EstimatorSettings`
+    (the pose, the uniform background, the bounded-fault protection) from
+    :data:`MIN_SENSORS_FOR_POSE` sensors on. Below, the position alone with the map's moment
+    direction and no background (3 unknowns), the same alert limits, and no undetected-fault
+    term: so few sensors cannot bound one lying sensor's effect (each carries the fix), so
+    ``ok`` then trusts every sensor's value (fault detection still excludes a gross liar)."""
+    if n_sensors >= MIN_SENSORS_FOR_POSE:
+        return EstimatorSettings()
+    return EstimatorSettings(orientation="fixed", background="off", gradient="off",
+                             fault_offset_t=0.0, fault_gain=0.0)

@@ -342,14 +342,17 @@ class Runner:
             if not self.have_fix:
                 # acquisition: the tracker takes the fix (it passed the estimator's tests and
                 # the gate), nothing renders until a filtered PL is within the limit
-                self.tracker.update(fix.position_m, fix.frame_t_s, True, fix.moment_a_m2)
+                self.tracker.update(fix.position_m, fix.frame_t_s, True, fix.moment_a_m2,
+                                    fix.pose_covariance)
         elif ok:
-            self.tracker.update(fix.position_m, fix.frame_t_s, True, fix.moment_a_m2)
+            self.tracker.update(fix.position_m, fix.frame_t_s, True, fix.moment_a_m2,
+                                fix.pose_covariance)
             self.have_fix = accepted = True
             self.accepted_at_s = t_s
             self.background_t = fix.background_t
         self.last_estimate_ok = accepted      # taken into the tracker
         self.accepted_in_row = self.accepted_in_row + 1 if accepted else 0
+        self.pipeline.track = self.tracker.snapshot()   # the next frame's prior
         return True, problems
 
     def _freshness(self, t_s: float, problems: list) -> None:
@@ -364,6 +367,7 @@ class Runner:
             # also an acquisition's track (fixes beyond the alert limit): a state that old
             # would bend the next fixes with its velocity
             self.tracker.reset()
+            self.pipeline.track = None
             self.pipeline.reacquire = True
             if self.have_fix:
                 self.have_fix = False

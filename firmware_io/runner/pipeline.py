@@ -6,21 +6,64 @@ with the same timing by designkit.sim's simulated source. For each frame (fields
 where unusable, each sensor's driver status) it excludes the unhealthy sensors, those the model
 predicts beyond :data:`~firmware_io.runner.headroom.EXPECTED_SATURATION` of their linear range
 at the frame's currents and pose, and those latched out, then runs the pose estimator with the
-coil currents of the frame's own time (:class:`~firmware_io.runner.history.CurrentHistory`).
-It never raises on a bad frame. Fault names and the exclusion policy: docs/runner.md.
+coil currents of the frame's own time (:class:`~firmware_io.runner.history.CurrentHistory`)
+and, while the control step tracks the finger, its tracker's prediction at that time as the
+prior (:class:`~firmware_io.runner.tracker.TrackedPose`). Without a track it acquires
+(:class:`Acquisition`). It never raises on a bad frame. Fault names, the exclusion policy and
+why acquisition keeps integrity: docs/runner.md ("Priors and acquisition").
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import BadInputError
 from ..hw.tlv493d import TLV493D_LINEAR_RANGE_T
+from ..localization.integrity import chi2_quantile
 from .frames import Fix, SensorFrame
 from .headroom import SensorLayout, expected_saturation
 from .sensor_faults import SENSOR_FAULTS, ExclusionLatch
+
+
+@dataclass(frozen=True)
+class Acquisition:
+    """When a fix the estimator does not trust is trusted on its fault-free protection level:
+    how the runner acquires (a cold frame with one sensor per coil is rarely trusted on its own:
+    the undetected single-sensor fault's term; docs/localization.md, "Integrity") and how a
+    weak prior grows into a strong one.
+
+    Such a fix passed every test but the alert limits (``Estimate.consistent``), its fault-free
+    protection levels are within the estimator's alert limits, and the sensors were checked at
+    most ``hold_s`` before its frame: at the start, by a fix the estimator trusted with a prior
+    that excluded no sensor (there a bounded fault on any one sensor is detected or its effect
+    bounded), or by a frame without a magnet that the coils' field and a uniform background
+    explain (there an offset beyond the noise fails the residual test). What is left is a fault
+    that begins within ``hold_s`` of a check and escapes every frame's test until then. While a
+    track exists, a fix solved cold (the frame rejected the track's prior) counts only when it
+    lies farther from the prior than its own protection level (which bounds any bounded
+    fault's effect) plus ``jump_sigmas`` of the prior's sd: the finger moved.
+
+    hold_s : s; jump_risk : the probability that a correct prior lies beyond ``jump_sigmas``
+        (chi-square(3))
+    """
+
+    hold_s: float = 1.0
+    jump_risk: float = 1e-4
+
+    def __post_init__(self):
+        if not (isinstance(self.hold_s, (int, float)) and 0 <= self.hold_s < math.inf):
+            raise BadInputError("hold_s", "a time >= 0 s", self.hold_s)
+        if not (isinstance(self.jump_risk, (int, float)) and 0 < self.jump_risk < 0.5):
+            raise BadInputError("jump_risk", "a probability in (0, 0.5)", self.jump_risk)
+
+    @property
+    def jump_sigmas(self) -> float:
+        return math.sqrt(chi2_quantile(self.jump_risk, 3))
 
 
 class SensorPipeline:
@@ -36,11 +79,19 @@ class SensorPipeline:
         a frame was sampled
     moment_a_m2 : ndarray (3,), A m^2 -- the magnet's moment until the estimator finds one
     clock : callable, s
+    acquisition : Acquisition (default: its defaults)
+
+    ``track``: the control step's newest :class:`~firmware_io.runner.tracker.TrackedPose` (or
+    None: no track), set by the runner; each frame is fitted with its prior at the frame time.
     """
 
     def __init__(self, estimator, layout: SensorLayout, currents_at: Callable,
-                 moment_a_m2, clock: Callable[[], float] = time.perf_counter):
+                 moment_a_m2, clock: Callable[[], float] = time.perf_counter,
+                 acquisition: Acquisition | None = None):
         self.estimator, self.layout = estimator, layout
+        self.acquisition = acquisition if acquisition is not None else Acquisition()
+        self.track = None
+        self.checked_s: float | None = None   # the sensors' last check (None: the start's)
         self.n = layout.n_sensors
         self.currents_at, self.clock = currents_at, clock
         self.moment = np.asarray(moment_a_m2, float)
@@ -94,9 +145,20 @@ class SensorPipeline:
         if cold:
             self.reacquire = False
             self.estimator.reset()
-        est = self.estimator.estimate(readings, currents)
-        ok = bool(est.ok)
+        track = None if cold else self.track
+        t = float(frame.t_s)
+        if self.checked_s is None:
+            self.checked_s = t      # the start-up check (docs/runner.md)
+        seed = track.prior(t) if track is not None else None
+        est = self.estimator.estimate(readings, currents, seed=seed, time_s=t)
         fde = tuple(int(k) for k in est.excluded_sensors)
+        acquired = self._acquired(est, seed, t)
+        ok = bool(est.ok) or acquired
+        if est.ok and est.prior_used and not fde:
+            self.checked_s = t      # a bounded fault on any sensor would have shown
+        elif (seed is None and not ok and not est.consistent
+              and self.estimator.magnet_free(readings, currents)):
+            self.checked_s = t      # no magnet, and every sensor agrees with the others
         for k in self.latch.update(fde, ok):
             problems.append(("sensor_value", f"sensor {k} excluded by the estimator's fault "
                              f"detection in {self.latch.passes} trusted frames in a row; "
@@ -108,13 +170,35 @@ class SensorPipeline:
             self.background_t = np.asarray(est.background_t, float)
         else:
             problems.append(("lost", est.reason or "the estimator does not trust its pose"))
-        cov = est.position_covariance_m2
-        return Fix(np.asarray(est.position_m, float).copy(), moment.copy(), ok,
-                   float(frame.t_s), tuple(problems), self.excluded.copy(), self.clock() - t0,
-                   None if cov is None else np.asarray(cov, float),
-                   float(est.protection_level_m), cold, fde,
-                   tuple(int(k) for k in np.flatnonzero(quiet)), est.reason,
-                   np.asarray(est.background_t, float))
+        cov = est.covariance
+        pl = (est.fault_free_protection_level_m if acquired else est.protection_level_m)
+        return Fix(np.asarray(est.position_m, float).copy(), moment.copy(), ok, t,
+                   tuple(problems), self.excluded.copy(), self.clock() - t0,
+                   None if cov is None else np.asarray(cov, float)[:3, :3], float(pl), cold,
+                   fde, tuple(int(k) for k in np.flatnonzero(quiet)),
+                   "" if ok else est.reason, np.asarray(est.background_t, float),
+                   None if cov is None else np.asarray(cov, float).copy(),
+                   acquired, bool(est.prior_used))
+
+    def _acquired(self, est, seed, t_s: float) -> bool:
+        """Is a fix the estimator does not trust trusted on its fault-free protection level
+        (:class:`Acquisition`)?"""
+        if est.ok or not est.consistent:
+            return False
+        if t_s - self.checked_s > self.acquisition.hold_s:
+            return False
+        s = self.estimator.settings
+        if not est.fault_free_protection_level_m <= s.alert_limit_m:
+            return False
+        if est.orientation_axes is not None and not (
+                est.fault_free_orientation_protection_level_rad <= s.orientation_alert_limit_rad):
+            return False
+        if seed is None or est.prior_used:
+            return True
+        # the frame rejected the track's prior: a jump, unless a bounded fault could explain it
+        sd = math.sqrt(float(np.max(np.diag(seed.covariance)[:3])))
+        far = float(np.linalg.norm(np.asarray(est.position_m, float) - seed.position_m))
+        return far > est.protection_level_m + self.acquisition.jump_sigmas * sd
 
     def _bad_frame(self, frame) -> str:
         """Why ``frame`` cannot be fitted ('' when it can): the shapes."""
