@@ -5,7 +5,7 @@ as v0 + J_p (p - p0) + J_u (u - u0) while the pose stays near (u as a free 3-vec
 fixed; both parts scale with |m|):
 
 - 'exact': the exact cylinder's field minus the multipole, tabulated once
-  (:class:`.magnet_table.CylinderExcess`); J_p by central differences of the table (h = 0.1
+  (:class:`.magnet_table.CylinderExcess`); J_p by forward differences of the table (h = 0.1
   mm), J_u from J_p: the difference rotates rigidly with the moment
   (:func:`.pose.rotation_derivatives`);
 - 'cores': the field of the cores the magnet magnetizes, ``model.induced`` (linear in the
@@ -108,7 +108,9 @@ class Corrections:
         return self.const + self.jac_p @ p + self.jac_u @ u
 
     def _exact(self, p, u):
-        """The exact cylinder minus the multipole: value, J_p, J_u (module docstring)."""
+        """The exact cylinder minus the multipole: value, J_p (forward differences, h = 0.1
+        mm: the difference varies on the scale of its distance, >= 10 mm), J_u (module
+        docstring)."""
         h = 1e-4
         n = len(self.points)
         val, jp, ju = np.zeros((n, 3)), np.zeros((n, 3, 3)), np.zeros((n, 3, 3))
@@ -117,12 +119,12 @@ class Corrections:
         if not near.any():
             return val, jp, ju
         k = int(near.sum())
-        # the magnet moved by +-h e_k is the sensors moved by -+h e_k
-        shifts = np.r_[np.zeros((1, 3)), -h * EYE3, h * EYE3]
+        # the magnet moved by +h e_k is the sensors moved by -h e_k
+        shifts = np.r_[np.zeros((1, 3)), -h * EYE3]
         pts = (self.points[near][None] + shifts[:, None]).reshape(-1, 3)
-        d = self.moment * self.excess.field(pts, p, u).reshape(7, k, 3)
+        d = self.moment * self.excess.field(pts, p, u).reshape(4, k, 3)
         val[near] = d[0]
-        jp[near] = np.stack([(d[1 + j] - d[4 + j]) / (2 * h) for j in range(3)], -1)
+        jp[near] = np.stack([(d[1 + j] - d[0]) / h for j in range(3)], -1)
         axes = tangent_axes(u)
         rot = rotation_derivatives(val[near], jp[near], rel[near], axes)
         # as a derivative in u (a free 3-vector): the two rotations plus |m|'s scaling along u

@@ -4,8 +4,10 @@ verdict with fault exclusion, the :class:`Estimate`).
 The warm start is the caller's prior pose, else the last trusted fix; a warm fit that fails
 its verdict or moved farther than ``reacquire_m`` is solved again from the global search's
 best starts and the better verdict wins (trusted first, then the lower chi2 per degree of
-freedom). A prior with a covariance that the frame agrees with (the fit passes every test but
-the alert limits) is kept: its fix is returned, trusted or not, without the search. The verdict (:func:`assess`): converged, inside the plausible box, chi2 within the
+freedom); the first consistent start ends the search. A prior with a covariance is also an
+observation: a block it cannot explain is excluded before the solve (innovation screening),
+and when the frame agrees with the prior (the fit passes every test but the alert limits) its
+fix is returned, trusted or not, without the search. The verdict (:func:`assess`): converged, inside the plausible box, chi2 within the
 test's threshold, the normalized residual within its cap, the protection levels within the
 alert limits. The protection levels (position, orientation): the model-bias bound plus the
 larger of the fault-free bound of the covariance (inflated by chi2 / dof above 1) and the
@@ -24,12 +26,12 @@ object near the sensors) stays refused.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .estimate import Estimate, Pose
-from .fde import block_statistics, gain_and_offset_bias
+from .fde import bounded_fault_bias, exclusion_drops, fault_slopes, projections
 from .integrity import orientation_protection_level, position_protection_level
 from .pose import tangent_axes
 from .pose_fit import PoseFit, Solution, State
@@ -54,8 +56,10 @@ class Verdict:
     free: tuple = (math.inf, math.inf)
 
     def rank(self) -> tuple:
-        """Sort key: trusted first, then the lower chi2 per degree of freedom."""
-        return (not self.ok, self.solution.chi2 / max(self.dof, 1))
+        """Sort key: trusted first, then consistent, then converged, then the lower chi2 per
+        degree of freedom."""
+        return (not self.ok, not self.consistent, not self.solution.converged,
+                self.solution.chi2 / max(self.dof, 1))
 
 
 @dataclass(frozen=True)
@@ -68,13 +72,16 @@ class Blocks:
     reading: np.ndarray
 
 
-def assess(fit: PoseFit, sol: Solution, frame: Blocks, excluded: tuple = ()) -> Verdict:
-    """The verdict of a solution (module docstring), with fault exclusion when chi2 fails."""
+def assess(fit: PoseFit, sol: Solution, frame: Blocks, excluded: tuple = (),
+           gradient: bool = True) -> Verdict:
+    """The verdict of a solution (module docstring), with fault exclusion when chi2 fails and,
+    unless ``gradient`` is False, the ambient field's gradient when no sensor explains it."""
     s = fit.settings
     rows, unknowns = sol.jac.shape
     dof = rows - unknowns
-    cov, pl_m, pl_rad, stats = None, math.inf, math.inf, None
+    cov, pl_m, pl_rad, kt = None, math.inf, math.inf, None
     free_m, free_rad = math.inf, math.inf
+    k = 3 * len(sol.blocks)                     # the sensors' rows (a prior's follow)
     try:
         cov0 = np.linalg.inv(sol.jac.T @ sol.jac)
     except np.linalg.LinAlgError:
@@ -82,9 +89,8 @@ def assess(fit: PoseFit, sol: Solution, frame: Blocks, excluded: tuple = ()) -> 
     if cov0 is not None and dof >= 1 and np.all(np.isfinite(cov0)):
         inflate = max(1.0, sol.chi2 / dof)
         cov = cov0 * inflate
-        k = 3 * len(sol.blocks)                 # the sensors' rows (a prior's follow)
-        stats = block_statistics(sol.jac[:k], sol.res[:k], cov0, fit.n_rot)
-        fault_m, fault_rad = _fault_bias(fit, sol, frame, cov0, stats, fit.lam_md[dof])
+        kt = projections(sol.jac[:k], cov0)
+        fault_m, fault_rad = _fault_bias(fit, sol, frame, kt, fit.lam_md[dof])
         scale = math.sqrt(inflate)
         noise_m = position_protection_level(cov[:3, :3], fit.k2)
         pl_m = fit.bias_m + max(noise_m, fault_m * scale)
@@ -97,33 +103,35 @@ def assess(fit: PoseFit, sol: Solution, frame: Blocks, excluded: tuple = ()) -> 
     reason = inconsistent or _beyond_limits(fit, pl_m, pl_rad)
     verdict = Verdict(sol, not reason, reason, cov, pl_m, pl_rad, dof, excluded,
                       not inconsistent, (free_m, free_rad))
-    if stats is None or (sol.chi2 <= fit.chi2_max[dof] and sol.converged):
+    if kt is None or (sol.chi2 <= fit.chi2_max[dof] and sol.converged):
         return verdict
     if len(excluded) < s.max_exclusions and dof > 3:
-        better = _exclude(fit, sol, frame, stats, dof, excluded)
+        drops = exclusion_drops(sol.jac[:k], sol.res[:k], kt)
+        better = _exclude(fit, sol, frame, drops, dof, excluded)
         if better is not None:
             return better
-    if s.gradient == "auto" and sol.state.g is None and dof > 5 and not excluded:
+    if gradient and s.gradient == "auto" and sol.state.g is None and dof > 5 and not excluded:
         return _with_gradient(fit, sol, frame) or verdict
     return verdict
 
 
-def _fault_bias(fit: PoseFit, sol: Solution, frame: Blocks, cov0, stats, lam_md: float):
-    """The worst undetected single-sensor fault's bias (m, rad) per the fault model."""
+def _fault_bias(fit: PoseFit, sol: Solution, frame: Blocks, kt: np.ndarray, lam_md: float):
+    """The worst undetected single-sensor fault's bias (m, rad) per the fault model; ``kt``
+    the blocks' gains (:func:`.fde.projections`)."""
+    jac = sol.jac[:3 * len(sol.blocks)]
     if fit.settings.fault_model == "any":
         root = math.sqrt(lam_md)
-        return float(stats.slope_p.max()) * root, float(stats.slope_u.max()) * root
+        slope_p, slope_u = fault_slopes(jac, kt, fit.n_rot)
+        return float(slope_p.max()) * root, float(slope_u.max()) * root
     s = fit.settings
     if not (s.fault_offset_t or s.fault_gain):
         return 0.0, 0.0
     w = frame.w[sol.blocks]
     reading = frame.reading[sol.blocks]
-    # offsets on one axis, a gain error on one axis, on all three
-    shapes = np.concatenate([np.broadcast_to(s.fault_offset_t * np.eye(3), (len(w), 3, 3)),
-                             s.fault_gain * reading[:, :, None] * np.eye(3),
-                             s.fault_gain * reading[:, None]], 1)
-    dp, du = gain_and_offset_bias(sol.jac[:3 * len(w)], cov0, shapes * w[:, None, None], lam_md,
-                                  fit.n_rot)
+    # an offset or a gain error on one axis (the larger of the two), a gain error on all three
+    axis_amp = w[:, None] * np.maximum(s.fault_offset_t, s.fault_gain * np.abs(reading))
+    dp, du = bounded_fault_bias(jac, kt, axis_amp, (s.fault_gain * w)[:, None] * reading,
+                                lam_md, fit.n_rot)
     return float(dp.max()), float(du.max())
 
 
@@ -141,13 +149,14 @@ def _with_gradient(fit: PoseFit, sol: Solution, frame: Blocks) -> Verdict | None
     return assess(fit, again, frame)
 
 
-def _exclude(fit: PoseFit, sol: Solution, frame: Blocks, stats, dof: int,
+def _exclude(fit: PoseFit, sol: Solution, frame: Blocks, drops: np.ndarray, dof: int,
              excluded: tuple) -> Verdict | None:
-    """The verdict without the one sensor that explains the failed residual test, or None
-    when none does or two would (not identifiable)."""
+    """The verdict without the one sensor that explains the failed residual test (``drops``:
+    the chi-square drop of removing each block), or None when none does or two would (not
+    identifiable)."""
     limit = fit.chi2_max[dof - 3]
-    order = np.argsort(-stats.delta)
-    rest = sol.chi2 - stats.delta[order]
+    order = np.argsort(-drops)
+    rest = sol.chi2 - drops[order]
     if not rest[0] <= limit or (len(rest) > 1 and rest[1] <= limit):
         return None
     drop = int(sol.blocks[order[0]])
@@ -164,7 +173,9 @@ def _inconsistent(fit: PoseFit, sol: Solution, dof: int, pl_m: float, pl_rad: fl
     if dof < 1:
         return f"{len(sol.blocks)} usable sensors leave no redundancy"
     if not sol.converged:
-        return "fit did not converge"
+        return "fit did not converge" + ("" if sol.chi2 <= fit.chi2_max[dof] else
+                                         f" (residual chi2 {sol.chi2:.3g} > "
+                                         f"{fit.chi2_max[dof]:.3g}, {dof} dof)")
     if not (np.all(p > fit.lo + 1e-6) and np.all(p < fit.hi - 1e-6)):
         return "position at or outside the plausible box's edge"
     if not sol.chi2 <= fit.chi2_max[dof]:
@@ -200,47 +211,120 @@ def locate(fit: PoseFit, d: np.ndarray, use: np.ndarray, sigma: np.ndarray, read
         return Estimate.refused(_fallback(fit), _moment(fit, fit.last), f"only {len(blocks)} "
                                 f"usable sensors (need {need})", method)
     w_all = np.where(use, 1.0 / sigma, 0.0)
-    w, db = w_all[blocks], d[blocks]
     frame = Blocks(d, w_all, np.nan_to_num(reading))
-    start = (fit.initial_state(seed.position_m, seed.moment_a_m2) if seed is not None
-             else fit.last)
-    best, from_prior = None, False
-    if start is not None:
-        fit.set_prior(seed)
-        from_prior = fit.prior is not None
-        try:
-            best = assess(fit, fit.solve_corrected(start, blocks, w, db), frame)
-        finally:
-            fit.set_prior(None)
+    best = None
+    if seed is not None and seed.covariance is not None:
+        best = _with_prior(fit, frame, blocks, seed)
+        if best.consistent:      # a frame that agrees with its prior keeps it
+            return _estimate(fit, best, method, True)
+    elif seed is not None or fit.last is not None:
+        start = (fit.initial_state(seed.position_m, seed.moment_a_m2) if seed is not None
+                 else fit.last)
+        best = assess(fit, fit.solve_corrected(start, blocks, w_all[blocks], d[blocks]), frame)
         moved = float(np.linalg.norm(best.solution.state.p - start.p))
-        # a frame that agrees with a prior keeps it (a cold solve has less information)
-        if (best.ok and (moved <= fit.settings.reacquire_m or seed is not None)) \
-                or (from_prior and best.consistent):
-            return _estimate(fit, best, method, from_prior)
-    for st in fit.cold_starts(d, w_all ** 2):
-        v = assess(fit, fit.solve_cold(st, blocks, w, db), frame)
+        if best.ok and (moved <= fit.settings.reacquire_m or seed is not None):
+            return _estimate(fit, best, method, False)
+    return _estimate(fit, _cold(fit, frame, blocks, need, best), method, False)
+
+
+def _with_prior(fit: PoseFit, frame: Blocks, blocks: np.ndarray, seed: Pose) -> Verdict:
+    """The verdict of the fit aided by the seed's prior, from the seed: a block the prior
+    cannot explain (:func:`_screen`) is excluded before the solve."""
+    start = fit.initial_state(seed.position_m, seed.moment_a_m2)
+    if fit.last is not None:
+        start = replace(start, b=fit.last.b.copy())     # the room changes slowly
+    w, db = frame.w[blocks], frame.d[blocks]
+    fit.set_prior(seed)
+    try:
+        fit.corr.update(start.p, start.u)
+        first = fit.rows(start, blocks, w, db)
+        drop = _screen(fit, first, blocks, w, seed.covariance)
+        if drop is None:
+            return assess(fit, fit.solve_corrected(start, blocks, w, db, first), frame)
+        rest = blocks[blocks != drop]
+        sol = fit.solve_corrected(start, rest, frame.w[rest], frame.d[rest])
+        return assess(fit, sol, frame, (drop,))
+    finally:
+        fit.set_prior(None)
+
+
+def _screen(fit: PoseFit, first: tuple, blocks: np.ndarray, w: np.ndarray,
+            prior_cov: np.ndarray) -> int | None:
+    """The one block whose reading the prior cannot explain, or None: at the prior pose each
+    block's whitened innovation r_i (its data minus the model, minus the robust (median)
+    uniform background of all blocks) has the covariance I + J_i C J_i^T with C the prior's
+    (J_i the block's pose columns); a block beyond the residual test's chi-square(3) threshold
+    at the false-alarm probability is a fault the prior names before any solve can be dragged
+    by it. More than one such block: the frame disagrees with the prior, not one sensor
+    (None). Only for one block a sensor (the 'model' observation)."""
+    if fit.op is not None or len(blocks) <= 3 or fit.settings.max_exclusions < 1:
+        return None
+    jac, res = first
+    nb = len(blocks)
+    rb = res[:3 * nb].reshape(nb, 3)
+    if fit.background:
+        rb = rb - w[:, None] * np.median(rb / w[:, None], axis=0)
+    k = 3 + fit.n_rot
+    jp = jac[:3 * nb, :k].reshape(nb, 3, k)
+    cov = np.asarray(prior_cov, float)[:k, :k]
+    s = np.eye(3) + jp @ cov @ jp.transpose(0, 2, 1)
+    q = np.einsum("bi,bi->b", rb, np.linalg.solve(s, rb[..., None])[..., 0])
+    out = np.flatnonzero(q > fit.chi2_max[3])
+    return int(blocks[out[0]]) if len(out) == 1 else None
+
+
+def _cold(fit: PoseFit, frame: Blocks, blocks: np.ndarray, need: int,
+          best: Verdict | None) -> Verdict:
+    """The verdict from the global search's starts, the best first; the first consistent one
+    ends the search (another basin cannot be more trusted). A gross fault can pull every start
+    into a wrong basin, where the linearized exclusion test cannot name the liar: when the best
+    start fails the residual test, the search is run once per block left out
+    (:meth:`.search.GridSearch.leave_one_out`) and all blocks are judged at the pose the
+    others give (the exclusion test then runs where the others agree; a fit of all blocks
+    would slide back); only then the ambient field's gradient, then the other starts."""
+    d, w_all = frame.d, frame.w
+    w, db = w_all[blocks], d[blocks]
+    starts = fit.cold_starts(d, w_all ** 2)
+    for k, st in enumerate(starts):
+        sol = fit.solve_cold(st, blocks, w, db)
+        v = assess(fit, sol, frame, gradient=k > 0)
         if best is None or v.rank() < best.rank():
-            best, from_prior = v, False
-        if best.ok:
-            return _estimate(fit, best, method, from_prior)
-    if not best.solution.chi2 <= fit.chi2_max[best.dof] and len(blocks) > need:
-        # a gross fault can pull every start into a wrong basin, where the linearized
-        # exclusion test cannot name the liar: search again without the block the failed fit
-        # explains worst, and judge all blocks at that pose (the exclusion test then runs
-        # where the others agree; a fit of all blocks would slide back)
-        res = best.solution.res[:3 * len(best.solution.blocks)].reshape(-1, 3)
-        suspect = int(best.solution.blocks[int(np.argmax(np.einsum("bi,bi->b", res, res)))])
-        w_rest = w_all.copy()
-        w_rest[suspect] = 0.0
-        rest = blocks[blocks != suspect]
-        for st in fit.cold_starts(d, w_rest ** 2)[:1]:
-            sub = fit.solve_cold(st, rest, w_all[rest], d[rest])
-            jac, res = fit.rows(sub.state, blocks, w, db)
-            v = assess(fit, Solution(sub.state, jac, res, blocks, float(res @ res),
-                                     sub.converged, sub.iterations), frame)
-            if v.rank() < best.rank():
-                best, from_prior = v, False
-    return _estimate(fit, best, method, from_prior)
+            best = v
+        if best.consistent or k > 0:
+            if best.consistent:
+                return best
+            continue
+        if not v.solution.chi2 <= fit.chi2_max[v.dof] and len(blocks) > need:
+            loo = _leave_one_out(fit, frame, blocks)
+            if loo is not None and loo.rank() < best.rank():
+                best = loo
+            if best.consistent:
+                return best
+            if fit.settings.gradient == "auto" and sol.state.g is None and v.dof > 5:
+                again = _with_gradient(fit, sol, frame)
+                if again is not None and again.rank() < best.rank():
+                    best = again
+                if best.consistent:
+                    return best
+    return best
+
+
+def _leave_one_out(fit: PoseFit, frame: Blocks, blocks: np.ndarray) -> Verdict | None:
+    """The block whose removal fits best (:meth:`.search.GridSearch.leave_one_out`), the
+    search and the fit without it, judged with every block at that pose (:func:`_cold`).
+    None when the search cannot tell."""
+    d, w_all = frame.d, frame.w
+    suspect = fit.search.leave_one_out(d, w_all ** 2, fit.background)
+    if suspect is None:
+        return None
+    w_rest = w_all.copy()
+    w_rest[suspect] = 0.0
+    rest = blocks[blocks != suspect]
+    st = fit.cold_starts(d, w_rest ** 2)[0]
+    sub = fit.solve_cold(st, rest, w_all[rest], d[rest])
+    jac, res = fit.rows(sub.state, blocks, w_all[blocks], d[blocks])
+    return assess(fit, Solution(sub.state, jac, res, blocks, float(res @ res), sub.converged,
+                                sub.iterations), frame, gradient=False)
 
 
 def _estimate(fit: PoseFit, v: Verdict, method: str, prior_used: bool) -> Estimate:

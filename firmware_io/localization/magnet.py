@@ -138,3 +138,48 @@ def multipole_pose_rows(r: np.ndarray, u: np.ndarray, c: float, k: float):
     ju[:, _DIAG, _DIAG] += fs[:, None]
     ju *= -MU0
     return b, jp, ju
+
+
+_POLY_ALPHA = np.array([-3.0, 7.5, 7.5, -26.25, 30.0])
+_POLY_BETA = np.array([15.0, -17.5, -52.5, 78.75, 0.0])
+_SCALES = MU0 * np.array([-1.0, -2.0, 2.0, 4.0, 1.0])
+
+
+def multipole_pose_columns(r: np.ndarray, u: np.ndarray, axes: np.ndarray, c: float, k: float,
+                           out: np.ndarray) -> np.ndarray:
+    """The multipole's field and its pose Jacobian written into ``out`` (n, 3, >= 5): columns
+    0-2 dB/d(position) (T/m), 3-4 dB along the rotations about ``axes`` (e1, e2) (T/rad), for
+    the pose fit's inner loop (the derivative along a rotation w of the moment is dB/du (w x
+    u); about e1 it moves u along e2 and about e2 along -e1: the directions the fit steps in,
+    :func:`.pose.rotated`). r, u, c, k as in :func:`multipole_pose_rows`. Returns B (n, 3) T.
+
+    The five radial functions of :func:`_radial` are each a prefactor (a rho, s a, a, s a /
+    rho, s a) times c_i + w (alpha_i + beta_i t), w = k / rho, evaluated together; then, with
+    the mu0 factors folded in, B = g0 u + g1 r, dB/dp = r (g3 r + g2 u)^T + u v^T - g1 I with
+    v = g2 r + g4 u, and the rotation along e: g0 e - v (r . e).
+    """
+    rho = np.einsum("ij,ij->i", r, r)
+    s = r @ u
+    ir = 1.0 / rho
+    sq = np.sqrt(ir)
+    a = ir * sq * ir
+    sa = s * a
+    t = s * s * ir
+    poly = (k * ir)[:, None] * (_POLY_ALPHA + t[:, None] * _POLY_BETA)
+    poly[:, 0] += c
+    poly[:, 1:4] -= (1.5 * c, 1.5 * c, -3.75 * c)
+    pre = np.stack([ir * sq, sa, a, sa * ir, sa], 1)
+    g = pre * poly * _SCALES                  # (n, 5): g0 .. g4
+    g0, g1, g2, g3, g4 = (g[:, j:j + 1] for j in range(5))
+    b = g0 * u + g1 * r
+    v = g2 * r + g4 * u
+    w1 = g3 * r + g2 * u
+    jp = out[:, :, :3]
+    np.multiply(r[:, :, None], w1[:, None, :], out=jp)
+    jp += u[None, :, None] * v[:, None, :]
+    jp[:, _DIAG, _DIAG] -= g1
+    re = r @ axes.T                                         # (n, 2)
+    rot = out[:, :, 3:5]
+    np.multiply(v[:, :, None], re[:, None, :], out=rot)
+    np.subtract(g0[:, :, None] * axes.T[None], rot, out=rot)
+    return b

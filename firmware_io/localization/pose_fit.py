@@ -27,11 +27,18 @@ from .calibration import SensorCalibration
 from .corrections import Corrections
 from .integrity import (chi2_quantile, missed_detection_noncentrality, ratio_quantiles,
                         thresholds)
-from .magnet import MU0, multipole_pose_rows
+from .magnet import MU0, multipole_pose_columns
 from .pose import rotated, tangent_axes
 from .search import GridSearch
 from .sensor_model import SensorModel
 from .settings import EstimatorSettings
+
+
+COLD_ITERATIONS = 20
+"""Iterations of a cold start's multipole solve (a good start converges in 3-15)."""
+
+CONVERGED_GAIN = 2.5e-3
+"""The Gauss-Newton step's predicted chi-square drop below which a solve has converged."""
 
 
 @dataclass(frozen=True)
@@ -114,6 +121,8 @@ class PoseFit:
                                 fixed_direction=settings.orientation == "fixed")
         self.background = settings.background == "uniform"
         self.bg_basis = self._background_basis() if self.background else np.zeros((3, 0))
+        self.bg_identity = self.bg_basis.shape == (3, 3) and bool(np.all(self.bg_basis
+                                                                          == np.eye(3)))
         self.search = GridSearch(self.pts, self.op, self.lo, self.hi, self.moment,
                                  self.bg_basis)
         self.bcols = np.tile(self.bg_basis, (n, 1, 1))
@@ -136,7 +145,8 @@ class PoseFit:
         if seed is None or seed.covariance is None:
             self.prior = None
             return
-        cov = np.asarray(seed.covariance, float)[:3 + self.n_rot, :3 + self.n_rot]
+        k = 3 + self.n_rot
+        cov = np.asarray(seed.covariance, float)[:k, :k]
         info = np.linalg.cholesky(np.linalg.inv(cov)).T          # info^T info = cov^-1
         u0 = np.asarray(seed.moment_a_m2, float)
         u0 = u0 / math.sqrt(float(u0 @ u0))
@@ -240,43 +250,61 @@ class PoseFit:
     def rows(self, st: State, blocks: np.ndarray, w: np.ndarray, d: np.ndarray,
              corrected: bool = True):
         """Whitened Jacobian (3 b, P) and residual (3 b,) of the used ``blocks`` at ``st``
-        (weights w = 1 / sigma of those blocks, data d of those blocks)."""
+        (weights w = 1 / sigma of those blocks, data d of those blocks); with a prior
+        (:meth:`set_prior`) its rows follow."""
         p, u = st.p, st.u
         scale = math.exp(st.log_scale)
         axes = tangent_axes(u)
-        b, jp, ju = multipole_pose_rows(self.pts - p, u, self.c * scale, self.k * scale)
+        n, nb = len(self.pts), len(blocks)
+        n_par = self.n_unknowns(st.g is not None)
+        kp = 0 if self.prior is None else 3 + self.n_rot
+        jac = np.empty((3 * nb + kp, n_par))
+        direct = self.op is None and nb == n        # every sensor a block: fill jac in place
+        cols = jac[:3 * n].reshape(n, 3, n_par) if direct else np.empty((n, 3, n_par))
+        pose = cols if self.n_rot else np.empty((n, 3, 5))
+        b = multipole_pose_columns(self.pts - p, u, axes, self.c * scale, self.k * scale, pose)
+        if not self.n_rot:
+            cols[:, :, :3] = pose[:, :, :3]
         if corrected and self.corr.active:
-            cv = self.corr.value(p, u) * scale
-            b = b + cv
-            jp = jp + self.corr.jac_p * scale
-            ju = ju + self.corr.jac_u * scale
-        cols = [jp, ju @ axes.T] if self.n_rot else [jp]
+            corr = self.corr
+            b += scale * corr.value(p, u)
+            cols[:, :, :3] += scale * corr.jac_p
+            if self.n_rot:
+                cols[:, :, 3:5] += scale * (corr.jac_u @ axes.T)
+        j = 3 + self.n_rot
         if self.fit_scale:
-            cols.append(b[:, :, None])
+            cols[:, :, j] = b
+            j += 1
         f = b
         if self.background:
-            cols.append(self.bcols)
-            f = f + st.b
+            k = self.bg_basis.shape[1]
+            cols[:, :, j:j + k] = self.bg_basis
+            f += st.b
+            j += k
         if st.g is not None:
-            cols.append(self.gcols)
-            f = f + self.gcols @ st.g
-        jac = np.concatenate(cols, axis=2)
-        if self.op is not None:
-            jac = np.einsum("kisj,sjq->kiq", self.op, jac)
-            f = np.einsum("kisj,sj->ki", self.op, f)
-        jac = (jac[blocks] * w[:, None, None]).reshape(3 * len(blocks), -1)
-        res = ((d - f[blocks]) * w[:, None]).reshape(-1)
-        if self.prior is None:
-            return jac, res
-        p0, axes0, info = self.prior
-        k = 3 + self.n_rot
-        jp = np.zeros((k, jac.shape[1]))
-        jp[:3, :3] = np.eye(3)
-        dev = p - p0
-        if self.n_rot:
-            jp[3:, 3:5] = axes0 @ axes.T
-            dev = np.r_[dev, axes0 @ u]
-        return np.r_[jac, info[:k, :k] @ jp], np.r_[res, -(info[:k, :k] @ dev)]
+            cols[:, :, j:j + 5] = self.gcols
+            f += self.gcols @ st.g
+        res = np.empty(3 * nb + kp)
+        if direct:
+            cols *= w[:, None, None]
+            res[:3 * n] = ((d - f) * w[:, None]).reshape(-1)
+        else:
+            if self.op is not None:
+                cols = np.einsum("kisj,sjq->kiq", self.op, cols)
+                f = np.einsum("kisj,sj->ki", self.op, f)
+            jac[:3 * nb] = (cols[blocks] * w[:, None, None]).reshape(3 * nb, n_par)
+            res[:3 * nb] = ((d - f[blocks]) * w[:, None]).reshape(-1)
+        if kp:
+            p0, axes0, info = self.prior
+            top = jac[3 * nb:]
+            top[:] = 0.0
+            top[:, :3] = info[:, :3]
+            dev = p - p0
+            if self.n_rot:
+                top[:, 3:5] = info[:, 3:] @ (axes0 @ axes.T)
+                dev = np.concatenate([dev, axes0 @ u])
+            res[3 * nb:] = -(info @ dev)
+        return jac, res
 
     def step(self, st: State, delta: np.ndarray) -> State:
         """The state moved by the solve's step ``delta`` (position kept inside the box)."""
@@ -285,36 +313,46 @@ class PoseFit:
         u = rotated(st.u, tangent_axes(st.u), delta[3:5]) if self.n_rot else st.u
         log_scale = st.log_scale
         if self.fit_scale:
-            log_scale += float(delta[5])
-            j = 6
+            log_scale += float(delta[j])
+            j += 1
         b = st.b
         if self.background:
             k = self.bg_basis.shape[1]
-            b = st.b + self.bg_basis @ delta[j:j + k]
+            b = st.b + (delta[j:j + 3] if self.bg_identity else self.bg_basis @ delta[j:j + k])
             j += k
         g = None if st.g is None else st.g + delta[j:j + 5]
         return State(p, u, log_scale, b, g)
 
     # -- solving ---------------------------------------------------------------------------
-    def solve(self, st: State, blocks, w, d, corrected: bool = True) -> Solution:
+    def solve(self, st: State, blocks, w, d, corrected: bool = True,
+              first: tuple | None = None, max_iterations: int | None = None) -> Solution:
         """Levenberg-Marquardt from ``st`` on the used blocks. Converged when the Gauss-Newton
-        step would lower chi2 by < 2.5e-3 (a step below 1/20 of the estimate's own noise,
-        Mahalanobis): that step is taken and the fit stops."""
-        jac, res = self.rows(st, blocks, w, d, corrected)
+        step would lower chi2 by < :data:`CONVERGED_GAIN` (a step below 1/20 of the estimate's
+        own noise, Mahalanobis), or when, converging quadratically (the last step was accepted
+        undamped), the step after it would by a tenth of that: g_next ~ g^3 / g_prev^2 for the
+        predicted drops g of successive steps (errors e_{k+1} ~ C e_k^2, g ~ e^2). That step is
+        taken and the fit
+        stops (the Jacobian and chi2 reported are those before it). ``first``: the rows at
+        ``st`` when the caller has them; ``max_iterations`` (default the settings')."""
+        jac, res = first if first is not None else self.rows(st, blocks, w, d, corrected)
         cost = float(res @ res)
         lam, converged, it = 1e-4, False, 0
-        for it in range(1, self.settings.max_iterations + 1):
+        prev_gain = 0.0         # the last accepted undamped step's predicted drop (0: none)
+        idx = np.arange(jac.shape[1])
+        for it in range(1, (max_iterations or self.settings.max_iterations) + 1):
             a = jac.T @ jac
             g = jac.T @ res
-            diag = np.diag(a).copy()
+            a[idx, idx] *= 1.0 + lam
+            a[idx, idx] += 1e-300
             try:
-                delta = np.linalg.solve(a + np.diag(lam * diag + 1e-300), g)
+                delta = np.linalg.solve(a, g)
             except np.linalg.LinAlgError:
                 break
             gain = float(delta @ g)
             if not math.isfinite(gain):
                 break
-            if gain < 2.5e-3 and lam < 1e-2:
+            if lam < 1e-2 and (gain < CONVERGED_GAIN
+                               or gain ** 3 < 0.1 * CONVERGED_GAIN * prev_gain * prev_gain):
                 st = self.step(st, delta)
                 converged = True
                 break
@@ -325,28 +363,34 @@ class PoseFit:
                 st, jac, res = new, jac2, res2
                 small = cost - cost2 <= 1e-9 * cost
                 cost = cost2
+                prev_gain = gain if lam < 1e-3 else 0.0
                 lam = max(lam * 0.2, 1e-9)
                 if small:
                     converged = True
                     break
             else:
+                prev_gain = 0.0
                 lam *= 10.0
                 if lam > 1e8:
                     break
         return Solution(st, jac, res, blocks, cost, converged, it)
 
-    def solve_corrected(self, st: State, blocks, w, d, tol: float | None = None) -> Solution:
+    def solve_corrected(self, st: State, blocks, w, d, first: tuple | None = None) -> Solution:
         """:meth:`solve` with the corrections linearized near the pose, re-linearized (at most
-        4 times) until the solution stays within their reuse radius (or ``tol``)."""
+        4 times) until the solution stays within their reuse radius. ``first``: the rows at
+        ``st`` with the corrections as they are linearized now."""
         if not self.corr.active:
-            return self.solve(st, blocks, w, d, corrected=False)
+            return self.solve(st, blocks, w, d, corrected=False, first=first)
         iterations = 0
         for _ in range(5):
-            self.corr.update(st.p, st.u, tol)
-            sol = self.solve(st, blocks, w, d)
+            if first is None or not self.corr.within(st.p, st.u):
+                self.corr.update(st.p, st.u)
+                first = None
+            sol = self.solve(st, blocks, w, d, first=first)
+            first = None
             iterations += sol.iterations
             st = sol.state
-            if not sol.converged or self.corr.within(st.p, st.u, tol):
+            if not sol.converged or self.corr.within(st.p, st.u):
                 break
         return replace(sol, iterations=iterations)
 
@@ -364,6 +408,11 @@ class PoseFit:
                 for p0, m0 in self.search.starts(d_all, weights_all, self.background)]
 
     def solve_cold(self, st: State, blocks, w, d) -> Solution:
-        """From a search start: the multipole alone first, then corrected."""
-        sol = self.solve(st, blocks, w, d, corrected=False)
-        return self.solve_corrected(sol.state, blocks, w, d, 0.25 * self.settings.refresh_m)
+        """From a search start: the multipole alone first (at most :data:`COLD_ITERATIONS`
+        iterations: a start that does not converge by then is in a wrong basin or dragged by a
+        liar, and is returned as not converged), then corrected."""
+        sol = self.solve(st, blocks, w, d, corrected=False,
+                         max_iterations=min(COLD_ITERATIONS, self.settings.max_iterations))
+        if not sol.converged:
+            return sol
+        return self.solve_corrected(sol.state, blocks, w, d)

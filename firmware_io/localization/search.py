@@ -68,6 +68,15 @@ class GridSearch:
                 0, 2, 1).reshape(c * 6, n))
             self.dt = np.ascontiguousarray(d.reshape(c, n * 3 * 3).reshape(c, n, 3, 3)
                                            .transpose(0, 3, 1, 2).reshape(c * 3, n * 3))
+            # the leave-one-out pass's coarse candidates (every other one in x and y) and the
+            # rows of its tables
+            g = self.candidates
+            xs, ys = np.unique(g[:, 0]), np.unique(g[:, 1])
+            keep = np.isin(g[:, 0], xs[::2]) & np.isin(g[:, 1], ys[::2])
+            self.coarse = np.flatnonzero(keep)
+            self.coarse3 = (3 * self.coarse[:, None] + np.arange(3)).reshape(-1)
+            self.coarse6 = (6 * self.coarse[:, None] + np.arange(6)).reshape(-1)
+            self.dt3 = self.dt.reshape(c * 3, n, 3)
             return
         d = np.einsum("kisj,csjl->ckil", op, d)
         t = op.sum(axis=2) @ basis                                        # (k, 3, j)
@@ -98,6 +107,51 @@ class GridSearch:
         best = np.argpartition(cost, k - 1)[:k]
         best = best[np.argsort(cost[best])]
         return [(self.candidates[j].copy(), m[j].copy()) for j in best]
+
+    def leave_one_out(self, data: np.ndarray, weights: np.ndarray,
+                      background: bool) -> int | None:
+        """The block whose removal fits the frame best (one block a sensor only), or None: the
+        search once per block left out, in one pass over every other candidate in x and y
+        (the coarse grid tells the liar; the full search without it then gives the start). A
+        single gross fault drags every start and the full search; without the liar the others
+        agree, so its removal lowers the best cost the most. Each left-out sum is the full one
+        minus that block's term: a batch of 3 x 3 solves over candidates x blocks."""
+        if not self.isotropic or int(np.count_nonzero(weights)) < 4:
+            return None
+        sub = self.coarse
+        c, n = len(sub), len(weights)
+        wd = data * weights[:, None]
+        # per block: the candidates' right-hand sides D^T w d (C, 3, b) and A's entries (6, C, b)
+        per = np.einsum("xka,ka->xk", self.dt3[self.coarse3], wd).reshape(c, 3, n)
+        rhs = per.sum(axis=2, keepdims=True) - per
+        a_blk = (self.qa[self.coarse6] * weights).reshape(c, 6, n)
+        a = (a_blk.sum(axis=2, keepdims=True) - a_blk).transpose(1, 0, 2)
+        base = float(np.einsum("ki,ki->", wd, data)) - np.einsum("ki,ki->k", wd, data)
+        if background:
+            e_blk = (self.qe[self.coarse6] * weights).reshape(c, 6, n)
+            e = (e_blk.sum(axis=2, keepdims=True) - e_blk).transpose(1, 0, 2)
+            wt = np.maximum(float(weights.sum()) - weights, 1e-300)
+            rb = wd.sum(axis=0)[:, None] - wd.T                          # (3, b)
+            e00, e01, e02, e11, e12, e22 = e
+            a = a - np.stack([e00 * e00 + e01 * e01 + e02 * e02,
+                              e00 * e01 + e01 * e11 + e02 * e12,
+                              e00 * e02 + e01 * e12 + e02 * e22,
+                              e01 * e01 + e11 * e11 + e12 * e12,
+                              e01 * e02 + e11 * e12 + e12 * e22,
+                              e02 * e02 + e12 * e12 + e22 * e22]) / wt
+            rhs = rhs - np.stack([e00 * rb[0] + e01 * rb[1] + e02 * rb[2],
+                                  e01 * rb[0] + e11 * rb[1] + e12 * rb[2],
+                                  e02 * rb[0] + e12 * rb[1] + e22 * rb[2]], 1) / wt
+            base = base - np.einsum("ib,ib->b", rb, rb) / wt
+        m = _solve_sym3(a.reshape(6, -1), rhs.transpose(0, 2, 1).reshape(-1, 3))
+        m = m.reshape(c, n, 3)
+        cost = base - np.einsum("cib,cbi->cb", rhs, m)
+        size = np.sqrt(np.einsum("cbi,cbi->cb", m, m)) / self.moment
+        cost = np.where(np.isfinite(cost) & (size > 0.25) & (size < 4.0) & (weights > 0),
+                        cost, np.inf)
+        best = cost.min(axis=0)
+        j = int(np.argmin(best))
+        return j if np.isfinite(best[j]) else None
 
     def _isotropic(self, weights, wd, rhs, base, background):
         """The moments (C, 3) and the candidate-independent cost part, T = I: with the
