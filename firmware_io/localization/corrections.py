@@ -71,18 +71,17 @@ class Corrections:
         dp, du = p - c[0], u - c[1]
         return math.sqrt(dp @ dp) + RHO_M * math.sqrt(du @ du)
 
-    def within(self, p: np.ndarray, u: np.ndarray, tol: float | None = None) -> bool:
-        """Is (p, u) within every part's reuse radius (or ``tol``)?"""
-        return all(self.distance(k, p, u) <= (tol if tol is not None else self.lin[k][5])
-                   for k in self.parts)
+    def within(self, p: np.ndarray, u: np.ndarray, slack: float = 1.0) -> bool:
+        """Is (p, u) within ``slack`` times every part's reuse radius?"""
+        return all(self.distance(k, p, u) <= slack * self.lin[k][5] for k in self.parts)
 
-    def update(self, p: np.ndarray, u: np.ndarray, tol: float | None = None) -> None:
-        """Re-linearize the parts (p, u) left (beyond their radius, or ``tol``), then sum."""
+    def update(self, p: np.ndarray, u: np.ndarray) -> None:
+        """Re-linearize the parts (p, u) left (beyond their radius), then sum."""
         changed = False
         for part in self.parts:
             c = self.lin.get(part)
             d = self.distance(part, p, u)
-            if c is not None and d <= (c[5] if tol is None else min(tol, c[5])):
+            if c is not None and d <= c[5]:
                 continue
             val, jp, ju = (self._exact if part == "exact" else self._cores)(p, u)
             radius = self.first[part]

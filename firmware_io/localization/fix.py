@@ -34,7 +34,7 @@ from .estimate import Estimate, Pose
 from .fde import bounded_fault_bias, exclusion_drops, fault_slopes, projections
 from .integrity import orientation_protection_level, position_protection_level
 from .pose import tangent_axes
-from .pose_fit import PoseFit, Solution, State
+from .pose_fit import PRIOR_ITERATIONS, PoseFit, Solution, State
 
 
 @dataclass(frozen=True)
@@ -227,9 +227,17 @@ def locate(fit: PoseFit, d: np.ndarray, use: np.ndarray, sigma: np.ndarray, read
     return _estimate(fit, _cold(fit, frame, blocks, need, best), method, False)
 
 
+GROSS = 100.0
+"""A block whose whitened innovation at the prior exceeds this many times the residual test's
+chi-square(3) threshold is screened before the first solve (it would drag it)."""
+
+
 def _with_prior(fit: PoseFit, frame: Blocks, blocks: np.ndarray, seed: Pose) -> Verdict:
-    """The verdict of the fit aided by the seed's prior, from the seed: a block the prior
-    cannot explain (:func:`_screen`) is excluded before the solve."""
+    """The verdict of the fit aided by the seed's prior, from the seed. A block the prior
+    cannot explain at the seed (:func:`_screen`) is excluded: before the solve when its
+    innovation is gross, else when the solve fails the residual test and the linearized
+    exclusion cannot name a liar (then the fit is solved again from the seed); then the
+    ambient field's gradient."""
     start = fit.initial_state(seed.position_m, seed.moment_a_m2)
     if fit.last is not None:
         start = replace(start, b=fit.last.b.copy())     # the room changes slowly
@@ -238,38 +246,67 @@ def _with_prior(fit: PoseFit, frame: Blocks, blocks: np.ndarray, seed: Pose) -> 
     try:
         fit.corr.update(start.p, start.u)
         first = fit.rows(start, blocks, w, db)
+        drop = _screen(fit, first, blocks, w, seed.covariance, GROSS)
+        if drop is not None:
+            return _prior_without(fit, frame, blocks, start, drop)
+        sol = fit.solve_corrected(start, blocks, w, db, first, PRIOR_ITERATIONS)
+        best = assess(fit, sol, frame, gradient=False)
+        if best.consistent or not sol.chi2 > fit.chi2_max[best.dof]:
+            return best
         drop = _screen(fit, first, blocks, w, seed.covariance)
-        if drop is None:
-            return assess(fit, fit.solve_corrected(start, blocks, w, db, first), frame)
-        rest = blocks[blocks != drop]
-        sol = fit.solve_corrected(start, rest, frame.w[rest], frame.d[rest])
-        return assess(fit, sol, frame, (drop,))
+        if drop is not None:
+            again = _prior_without(fit, frame, blocks, start, drop)
+            if again.rank() < best.rank():
+                best = again
+            if best.consistent:
+                return best
+        if fit.settings.gradient == "auto" and sol.state.g is None and best.dof > 5:
+            again = _with_gradient(fit, sol, frame)
+            if again is not None and again.rank() < best.rank():
+                best = again
+        return best
     finally:
         fit.set_prior(None)
 
 
+def _prior_without(fit: PoseFit, frame: Blocks, blocks: np.ndarray, start: State,
+                   drop: int) -> Verdict:
+    """The prior-aided verdict without block ``drop``, solved from ``start``."""
+    rest = blocks[blocks != drop]
+    sol = fit.solve_corrected(start, rest, frame.w[rest], frame.d[rest])
+    return assess(fit, sol, frame, (drop,))
+
+
 def _screen(fit: PoseFit, first: tuple, blocks: np.ndarray, w: np.ndarray,
-            prior_cov: np.ndarray) -> int | None:
+            prior_cov: np.ndarray, gross: float = 1.0) -> int | None:
     """The one block whose reading the prior cannot explain, or None: at the prior pose each
     block's whitened innovation r_i (its data minus the model, minus the robust (median)
     uniform background of all blocks) has the covariance I + J_i C J_i^T with C the prior's
     (J_i the block's pose columns); a block beyond the residual test's chi-square(3) threshold
     at the false-alarm probability is a fault the prior names before any solve can be dragged
     by it. More than one such block: the frame disagrees with the prior, not one sensor
-    (None). Only for one block a sensor (the 'model' observation)."""
+    (None). With ``gross`` > 1 only when some |r_i|^2 exceeds ``gross`` times the threshold.
+    Only for one block a sensor (the 'model' observation)."""
     if fit.op is not None or len(blocks) <= 3 or fit.settings.max_exclusions < 1:
         return None
     jac, res = first
     nb = len(blocks)
     rb = res[:3 * nb].reshape(nb, 3)
     if fit.background:
-        rb = rb - w[:, None] * np.median(rb / w[:, None], axis=0)
+        # the robust uniform background: each axis' middle value over the blocks
+        rb = rb - w[:, None] * np.sort(rb / w[:, None], axis=0)[nb // 2]
+    limit = fit.chi2_max[3]
+    # q_i <= |r_i|^2 (the innovation's covariance is at least I): most frames stop here
+    r2 = np.einsum("bi,bi->b", rb, rb)
+    if not r2.max() > gross * limit:
+        return None
     k = 3 + fit.n_rot
-    jp = jac[:3 * nb, :k].reshape(nb, 3, k)
     cov = np.asarray(prior_cov, float)[:k, :k]
-    s = np.eye(3) + jp @ cov @ jp.transpose(0, 2, 1)
+    g = jac[:3 * nb, :k].reshape(nb, 3, k) @ np.linalg.cholesky(cov)
+    s = np.einsum("bip,bjp->bij", g, g)
+    s[:, [0, 1, 2], [0, 1, 2]] += 1.0
     q = np.einsum("bi,bi->b", rb, np.linalg.solve(s, rb[..., None])[..., 0])
-    out = np.flatnonzero(q > fit.chi2_max[3])
+    out = np.flatnonzero(q > limit)
     return int(blocks[out[0]]) if len(out) == 1 else None
 
 

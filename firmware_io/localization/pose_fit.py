@@ -34,6 +34,10 @@ from .sensor_model import SensorModel
 from .settings import EstimatorSettings
 
 
+PRIOR_ITERATIONS = 6
+"""Iterations of a solve from a prior (a frame that agrees with it converges in 2-4; one that
+does not is dragged by a liar, or the prior is wrong)."""
+
 COLD_ITERATIONS = 20
 """Iterations of a cold start's multipole solve (a good start converges in 3-15)."""
 
@@ -103,6 +107,11 @@ class PoseFit:
         self.bias_m = settings.model_bias_for(calibrated)
         self.bias_rad = settings.model_bias_rad_for(calibrated)
         self.pts = model.sensor_positions_m + (cal.shift_m if calibrated else 0.0)
+        # a reading r (sensor frame) to the array frame: R G^-1 (r - o) = M r - M o
+        rot = model.sensor_orientations
+        self.to_array = rot @ cal.gain_inverse if calibrated else rot.copy()
+        self.to_array_offset = (np.einsum("sij,sj->si", self.to_array, cal.offsets_t)
+                                if calibrated else np.zeros((n, 3)))
         self.coil = (cal.coil_field_t_per_a if calibrated and cal.coil_field_t_per_a is not None
                      else model.coil_field_t_per_a)
         self.resp = (settings.variance_floor_t2 * cal.response_design_inverse
@@ -189,10 +198,7 @@ class PoseFit:
     def corrected(self, readings: np.ndarray) -> np.ndarray:
         """(n, 3) T readings, each in its sensor's frame, as the field in the array frame:
         R (gain_inverse @ (r - offset)) with the calibration, R r without."""
-        if self.calibration is not None:
-            cal = self.calibration
-            readings = np.matmul(cal.gain_inverse, (readings - cal.offsets_t)[..., None])[..., 0]
-        return np.matmul(self.model.sensor_orientations, readings[..., None])[..., 0]
+        return np.einsum("sij,sj->si", self.to_array, readings) - self.to_array_offset
 
     def data(self, field: np.ndarray, currents: np.ndarray | None):
         """(d (b, 3) T, usable (b,), sigma (b,) T, reading (b, 3) T) of the blocks from the
@@ -375,22 +381,27 @@ class PoseFit:
                     break
         return Solution(st, jac, res, blocks, cost, converged, it)
 
-    def solve_corrected(self, st: State, blocks, w, d, first: tuple | None = None) -> Solution:
+    def solve_corrected(self, st: State, blocks, w, d, first: tuple | None = None,
+                        max_iterations: int | None = None) -> Solution:
         """:meth:`solve` with the corrections linearized near the pose, re-linearized (at most
-        4 times) until the solution stays within their reuse radius. ``first``: the rows at
-        ``st`` with the corrections as they are linearized now."""
+        4 times) until the solution stays within twice their reuse radius. ``first``: the rows
+        at ``st`` with the corrections as they are linearized now; ``max_iterations`` per
+        solve (default the settings')."""
         if not self.corr.active:
-            return self.solve(st, blocks, w, d, corrected=False, first=first)
+            return self.solve(st, blocks, w, d, corrected=False, first=first,
+                              max_iterations=max_iterations)
         iterations = 0
         for _ in range(5):
             if first is None or not self.corr.within(st.p, st.u):
                 self.corr.update(st.p, st.u)
                 first = None
-            sol = self.solve(st, blocks, w, d, first=first)
+            sol = self.solve(st, blocks, w, d, first=first, max_iterations=max_iterations)
             first = None
             iterations += sol.iterations
             st = sol.state
-            if not sol.converged or self.corr.within(st.p, st.u):
+            # twice the radius leaves a quarter of the noise / 20 the radius keeps (the error
+            # grows as the distance squared); the next fix re-linearizes from here
+            if not sol.converged or self.corr.within(st.p, st.u, slack=2.0):
                 break
         return replace(sol, iterations=iterations)
 
