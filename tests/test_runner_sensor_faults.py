@@ -45,13 +45,15 @@ class ExcludingEstimator:
                         excl)
 
 
-def test_exclusion_latch_counts_trusted_frames_in_a_row():
+def test_exclusion_latch_counts_consistent_frames_until_a_trusted_fix_vouches():
     latch = ExclusionLatch(5, passes=3)
     assert latch.update((2,), True) == [] and latch.update((2,), True) == []
     assert latch.update((2,), False) == []          # a refused frame: no evidence either way
-    assert latch.update((2, 4), True) == [2]        # third trusted frame in a row
-    assert latch.update((4,), True) == [] and latch.update((), True) == []
+    assert latch.update((2, 4), True) == [2]        # third frame the others agreed with
+    assert latch.update((4,), True) == []
+    assert latch.update((), True, vouched=(0, 1, 3, 4)) == []   # a trusted fix used sensor 4
     assert latch.count[4] == 0 and latch.latched.tolist() == [False, False, True, False, False]
+    assert latch.update((4,), True) == [] and latch.count[4] == 1
 
 
 @pytest.fixture(scope="module")

@@ -94,6 +94,7 @@ class SimulatedDevice:
 
         self.current_a = np.zeros(n)
         self.field_offset_t = np.zeros((n_sensors, 3))   # fault injection (saturation)
+        self.ambient_t = np.zeros(3)     # a uniform field in the room (array frame), T
         self._in_flight: tuple[float, float, object] | None = None
         self._last_set_s = 0.0
 
@@ -168,14 +169,14 @@ class SimulatedDevice:
     def sensor_readings_t(self, step: int, position_m, current_a) -> np.ndarray:
         """(n_sensors, 3) T, what each sensor's ADC converts at step ``step`` (the magnet at
         ``position_m`` with its moment at that step): the field (magnet, coils, induced cores)
-        through the sensor errors, plus noise and injected offsets; the TLV493D models quantize
-        and clip it."""
+        through the sensor errors, plus noise and injected offsets, with the room's uniform field
+        ``ambient_t``; the TLV493D models quantize and clip it."""
         sim = self.sensor_sim
         mg = self.design.magnet
         pts = sim.true_m.reshape(-1, 3)
         magnet = magnet_field(pts, np.asarray(position_m, float), self.moment_steps[step],
                               mg.radius_m, mg.length_m)
-        b = (magnet + self.induced.at(step)).reshape(sim.true_m.shape) \
+        b = (magnet + self.induced.at(step) + self.ambient_t).reshape(sim.true_m.shape) \
             + sim.coil_part(np.asarray(current_a, float)[None])[0]
         a = analog_reading(b[None], sim.errors, self.noise_t, self.rng)[0].reshape(-1, 3)
         return a + self.field_offset_t

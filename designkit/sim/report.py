@@ -170,6 +170,7 @@ def summarize(result: SimulationResult, causes: dict | None = None) -> dict:
         "fault_log": [{"t_s": float(t), "state": s, "detail": d} for t, s, d in result.fault_log],
     }
     out.update(pose_summary(c))
+    out.update(fix_summary(result.fixes))
     if causes is not None:
         out["force_error_causes"] = causes
     return out
@@ -177,6 +178,18 @@ def summarize(result: SimulationResult, causes: dict | None = None) -> dict:
 
 STALE_LIMIT_M = 5e-3
 """A rendered position farther than this from where the finger was is counted, m."""
+
+
+def fix_summary(fixes) -> dict:
+    """summary.json's sensor-side rows: the fixes published, the share trusted, and the
+    trusted ones more than :data:`STALE_LIMIT_M` from the truth at their frame's field time
+    (``fixes``: (field time s, trusted, distance m) per fix)."""
+    if not fixes:
+        return {"fixes": 0, "fixes_trusted_fraction": None, "trusted_fixes_beyond_5mm": 0}
+    ok = np.array([f[1] for f in fixes], bool)
+    far = np.array([f[2] for f in fixes], float) > STALE_LIMIT_M
+    return {"fixes": int(len(ok)), "fixes_trusted_fraction": float(ok.mean()),
+            "trusted_fixes_beyond_5mm": int(np.sum(ok & far))}
 
 
 def pose_summary(columns: dict) -> dict:

@@ -77,6 +77,9 @@ class RunSettings:
     skip_force_n : float -- the runner's coil-skip force, N
     keep_sensors : tuple of int -- sensors the scene keeps in their linear range
         (:class:`firmware_io.runner.SensorHeadroom`; default none)
+    background_t : (3,) T -- a uniform ambient field (array frame) that appears after the
+        start-up calibration (which would take a constant one as the sensors' offsets): the
+        estimator must find it
     """
 
     obj: str = "hemisphere"
@@ -93,6 +96,11 @@ class RunSettings:
     profile: bool = False
     skip_force_n: float = 0.0
     keep_sensors: tuple = ()
+    background_t: tuple = (0.0, 0.0, 0.0)
+
+
+MAX_BACKGROUND_T = 10e-3
+"""Largest ambient field a simulated run takes, T per axis (beyond, sensors saturate)."""
 
 
 def run_simulation(settings: RunSettings = RunSettings(), *, design=None, map_path=None,
@@ -135,6 +143,7 @@ def run_simulation(settings: RunSettings = RunSettings(), *, design=None, map_pa
         plant_array = CoilArray.from_design(plant_design)
     device = SimulatedDevice(plant_design, plant_array, seed=st.seed, drive=drive)
     loc_kw = _localizer_options(device, map_path, st.method, st.calibrate)
+    device.ambient_t = np.asarray(st.background_t, float)     # after the calibration
 
     def factory(source, clock, hook):
         estimator = estimator_from_map(map_path, st.method, **loc_kw)
@@ -154,6 +163,7 @@ def run_simulation(settings: RunSettings = RunSettings(), *, design=None, map_pa
     summary.update({"object": st.obj, "trajectory": str(st.trajectory), "design": design.name,
                     "rows": st.rows, "lambda_n_per_m": lam, "method": st.method,
                     "unipolar": st.unipolar, "keep_sensors": list(st.keep_sensors),
+                    "background_t": [float(x) for x in st.background_t],
                     "drive": drive.to_dict(), "drive_violations": drive.violations(),
                     **_duration_note(path.duration_s, duration),
                     "faults_not_injected": _not_injected(schedule, res.faults)})
@@ -176,6 +186,10 @@ def _checked_inputs(st: RunSettings):
         raise BadInputError("--period-ms", "in [0.1, 50] ms", st.period_s * 1e3)
     if st.lam_n_per_m is not None and not 0 <= float(st.lam_n_per_m) < np.inf:
         raise BadInputError("--lambda", ">= 0 and finite, N/m", st.lam_n_per_m)
+    bg = np.asarray(st.background_t, dtype=float)
+    if bg.shape != (3,) or not np.all(np.abs(bg) <= MAX_BACKGROUND_T):
+        raise BadInputError("--background-mt", f"three values within +-{MAX_BACKGROUND_T * 1e3:g} "
+                            "mT (x, y, z, the array frame)", np.round(bg * 1e3, 3).tolist())
     if any(not (isinstance(k, (int, np.integer)) and k >= 0) for k in st.keep_sensors):
         raise BadInputError("--keep-sensors", "sensor indices >= 0 (the map's order)",
                             list(st.keep_sensors))

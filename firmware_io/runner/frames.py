@@ -57,6 +57,9 @@ class Fix:
     acquired : bool -- trusted by the acquisition rule (:class:`firmware_io.runner.pipeline.
         Acquisition`) on its fault-free protection level, not by the estimator's own verdict
     prior_used : bool -- fitted with the track's prediction as the prior
+    candidate : bool -- not trusted, but a consistent fix the acquisition rule would trust
+        but for its protection levels: an acquiring tracker takes it as the next frame's
+        prior (nothing renders on it)
     """
 
     position_m: np.ndarray
@@ -76,3 +79,4 @@ class Fix:
     pose_covariance: np.ndarray | None = None
     acquired: bool = False
     prior_used: bool = False
+    candidate: bool = False

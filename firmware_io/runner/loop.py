@@ -332,6 +332,12 @@ class Runner:
                 self.have_fix = False     # renders again from the next accepted fix
             if gated:
                 self.pipeline.reacquire = True
+        if not ok and fix.candidate and not self.have_fix and math.isfinite(
+                float(np.sum(fix.position_m) + np.sum(fix.moment_a_m2))):
+            # acquiring: a consistent fix beyond the limits is the next frame's prior (frames'
+            # noise averages out in the chain), nothing renders on it
+            self.tracker.update(fix.position_m, fix.frame_t_s, True, fix.moment_a_m2,
+                                fix.pose_covariance)
         pl = (rendered_protection_level(fix, self.tracker, self.estimator)
               if ok and not gated else math.inf)
         if gated:

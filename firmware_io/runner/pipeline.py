@@ -38,21 +38,26 @@ class Acquisition:
     weak prior grows into a strong one.
 
     Such a fix passed every test but the alert limits (``Estimate.consistent``), its fault-free
-    protection levels are within the estimator's alert limits, and the sensors were checked at
-    most ``hold_s`` before its frame: at the start, by a fix the estimator trusted with a prior
-    that excluded no sensor (there a bounded fault on any one sensor is detected or its effect
-    bounded), or by a frame without a magnet that the coils' field and a uniform background
-    explain (there an offset beyond the noise fails the residual test). What is left is a fault
-    that begins within ``hold_s`` of a check and escapes every frame's test until then. While a
-    track exists, a fix solved cold (the frame rejected the track's prior) counts only when it
-    lies farther from the prior than its own protection level (which bounds any bounded
-    fault's effect) plus ``jump_sigmas`` of the prior's sd: the finger moved.
+    protection levels are within the estimator's alert limits, it uses no suspect sensor, and
+    the sensors were checked at most ``hold_s`` before its frame: at the start, by a fix the
+    estimator trusted with a prior and without naming a liar (there a bounded fault on any
+    used sensor is detected or its effect bounded), or by a frame without a magnet that the
+    coils' field and a uniform background explain (there an offset beyond the noise fails the
+    residual test). A sensor the estimator's fault detection excluded is suspect: a fix that
+    uses it is trusted only on the estimator's own verdict (and, if not, solved again without
+    it), until a prior-aided fix the estimator trusts uses it or a check without a magnet
+    clears it. What is left is a fault that begins within ``hold_s`` of a check, escapes every
+    frame's test until then and sits where it moves a cold fix most: a sensor value fault is
+    rare, so the exposure (its rate times the window) stays small with a window of a minute.
+    While a track exists, a fix solved cold (the frame rejected the track's prior) counts only
+    when it lies farther from the prior than its own protection level (which bounds any
+    bounded fault's effect) plus ``jump_sigmas`` of the prior's sd: the finger moved.
 
     hold_s : s; jump_risk : the probability that a correct prior lies beyond ``jump_sigmas``
         (chi-square(3))
     """
 
-    hold_s: float = 1.0
+    hold_s: float = 60.0
     jump_risk: float = 1e-4
 
     def __post_init__(self):
@@ -93,6 +98,7 @@ class SensorPipeline:
         self.track = None
         self.checked_s: float | None = None   # the sensors' last check (None: the start's)
         self.n = layout.n_sensors
+        self.suspect = np.zeros(self.n, dtype=bool)   # excluded by fault detection, not cleared
         self.currents_at, self.clock = currents_at, clock
         self.moment = np.asarray(moment_a_m2, float)
         self.excluded = np.zeros(self.n, dtype=bool)
@@ -150,19 +156,14 @@ class SensorPipeline:
         if self.checked_s is None:
             self.checked_s = t      # the start-up check (docs/runner.md)
         seed = track.prior(t) if track is not None else None
-        est = self.estimator.estimate(readings, currents, seed=seed, time_s=t)
-        fde = tuple(int(k) for k in est.excluded_sensors)
-        acquired = self._acquired(est, seed, t)
+        est, fde, named, (candidate, acquired) = self._fit(readings, currents, seed, t)
         ok = bool(est.ok) or acquired
-        if est.ok and est.prior_used and not fde:
-            self.checked_s = t      # a bounded fault on any sensor would have shown
-        elif (seed is None and not ok and not est.consistent
-              and self.estimator.magnet_free(readings, currents)):
-            self.checked_s = t      # no magnet, and every sensor agrees with the others
-        for k in self.latch.update(fde, ok):
+        vouched = np.flatnonzero(np.isfinite(readings).all(axis=1)) if ok else ()
+        vouched = [k for k in vouched if k not in fde]
+        for k in self.latch.update(named, bool(est.ok or est.consistent), vouched):
             problems.append(("sensor_value", f"sensor {k} excluded by the estimator's fault "
-                             f"detection in {self.latch.passes} trusted frames in a row; "
-                             "left out from now on"))
+                             f"detection in {self.latch.passes} frames, no trusted fix using "
+                             "it in between; left out from now on"))
         moment = np.asarray(est.moment_a_m2, float)
         if ok:
             self.position_m = np.asarray(est.position_m, float).copy()
@@ -178,20 +179,49 @@ class SensorPipeline:
                    fde, tuple(int(k) for k in np.flatnonzero(quiet)),
                    "" if ok else est.reason, np.asarray(est.background_t, float),
                    None if cov is None else np.asarray(cov, float).copy(),
-                   acquired, bool(est.prior_used))
+                   acquired, bool(est.prior_used), candidate and not acquired)
 
-    def _acquired(self, est, seed, t_s: float) -> bool:
-        """Is a fix the estimator does not trust trusted on its fault-free protection level
-        (:class:`Acquisition`)?"""
+    def _fit(self, readings: np.ndarray, currents, seed, t_s: float):
+        """The estimate of one frame with the sensor side's trust: (estimate, the sensors fault
+        detection excluded or left out as suspects, those the estimator named in this frame,
+        (may it acquire, is it trusted) by :class:`Acquisition`). A fix
+        the estimator does not trust that uses a suspect sensor is solved again without it;
+        a fix the estimator trusts with a prior clears the suspects it used (its protection
+        level covers their undetected bounded faults)."""
+        est = self.estimator.estimate(readings, currents, seed=seed, time_s=t_s)
+        named = tuple(int(k) for k in est.excluded_sensors)   # liars named in this frame
+        fde = set(named)
+        used = np.isfinite(readings).all(axis=1)
+        used[list(fde)] = False
+        left = self.suspect & used
+        if not est.ok and est.consistent and left.any():
+            again = self.estimator.estimate(readings, currents, usable=~left, seed=seed,
+                                            time_s=t_s)
+            if again.ok or again.consistent:
+                est = again
+                named = tuple(int(k) for k in again.excluded_sensors)
+                fde = set(named) | {int(k) for k in np.flatnonzero(left)}
+                used &= ~left
+                used[[int(k) for k in again.excluded_sensors]] = False
+        self.suspect[list(fde)] = True
+        if est.ok and est.prior_used:
+            self.suspect &= ~used
+            if not named:
+                self.checked_s = t_s        # a bounded fault on any used sensor would show
+        candidate = self._candidate(est, seed, t_s) and not np.any(self.suspect & used)
+        acquired = candidate and self._within_limits(est)
+        if (seed is None and not est.ok and not est.consistent
+                and self.estimator.magnet_free(readings, currents)):
+            self.checked_s = t_s            # no magnet, and every sensor agrees with the others
+            self.suspect &= ~used
+        return est, tuple(sorted(fde)), named, (candidate, acquired)
+
+    def _candidate(self, est, seed, t_s: float) -> bool:
+        """May a fix the estimator does not trust be trusted on its fault-free protection
+        levels (:class:`Acquisition`, its limits aside)?"""
         if est.ok or not est.consistent:
             return False
         if t_s - self.checked_s > self.acquisition.hold_s:
-            return False
-        s = self.estimator.settings
-        if not est.fault_free_protection_level_m <= s.alert_limit_m:
-            return False
-        if est.orientation_axes is not None and not (
-                est.fault_free_orientation_protection_level_rad <= s.orientation_alert_limit_rad):
             return False
         if seed is None or est.prior_used:
             return True
@@ -199,6 +229,13 @@ class SensorPipeline:
         sd = math.sqrt(float(np.max(np.diag(seed.covariance)[:3])))
         far = float(np.linalg.norm(np.asarray(est.position_m, float) - seed.position_m))
         return far > est.protection_level_m + self.acquisition.jump_sigmas * sd
+
+    def _within_limits(self, est) -> bool:
+        """Are the fault-free protection levels within the estimator's alert limits?"""
+        s = self.estimator.settings
+        return est.fault_free_protection_level_m <= s.alert_limit_m and (
+            est.orientation_axes is None
+            or est.fault_free_orientation_protection_level_rad <= s.orientation_alert_limit_rad)
 
     def _bad_frame(self, frame) -> str:
         """Why ``frame`` cannot be fitted ('' when it can): the shapes."""
