@@ -91,7 +91,7 @@ def _triangulation(shape) -> tuple[np.ndarray, np.ndarray]:
         if face.wrapped.Orientation() == TopAbs_REVERSED:
             idx = idx[:, ::-1]
         corners.append(nodes[idx].reshape(-1, 3))
-    return meshcheck._merge(np.concatenate(corners))
+    return meshcheck.merge_corners(np.concatenate(corners))
 
 
 _3MF_TYPES = ('<?xml version="1.0" encoding="UTF-8"?>\n<Types xmlns="http://schemas.openxmlformats.org/'
@@ -381,7 +381,7 @@ def _tessellate(shape, p: CadParams) -> tuple[np.ndarray, np.ndarray]:
     verts, tris = shape.tessellate(p.printer.tolerance_mm * 5, p.printer.angular_tolerance_rad)
     xyz = np.array([tuple(v) for v in verts], dtype=float)
     # build123d repeats edge vertices per face; merge them so the mesh is closed for capping
-    return meshcheck._merge(xyz[np.asarray(tris, dtype=np.int64).reshape(-1)])
+    return meshcheck.merge_corners(xyz[np.asarray(tris, dtype=np.int64).reshape(-1)])
 
 
 def _capped_half(mesh, cut_y: float):

@@ -222,7 +222,7 @@ def test_meshcheck_on_a_cube(tmp_path):
     assert rep.watertight and rep.volume == pytest.approx(-8.0)
     assert any("not positive" in s for s in meshcheck.check_mesh(rep, 8.0, 24.0, 0.01))
     doubled = np.concatenate([tris, tris])
-    rep = meshcheck.mesh_report(*meshcheck._merge(doubled.reshape(-1, 3)))
+    rep = meshcheck.mesh_report(*meshcheck.merge_corners(doubled.reshape(-1, 3)))
     assert not rep.manifold
 
 

@@ -36,7 +36,7 @@ def test_textbook_loop_radius_for_maximum_axial_gradient():
         h = 1e-8
         return g(x[0]), [(g(x[0] + h) - g(x[0] - h)) / (2 * h)]
 
-    run = opt.maximize(f, None, 0, [0.001], [0.1], [0.08], xtol_rel=1e-12)
+    run = opt.maximize(f, None, 0, [0.001], [0.1], [0.08], opt.SolverOptions(xtol_rel=1e-12))
     assert run.x[0] == pytest.approx(d * math.sqrt(2 / 3), rel=1e-6)
 
 
@@ -348,8 +348,8 @@ def test_device_optimum_beats_a_dense_two_variable_grid():
 
     pc = dataclasses.replace(p, corrections=res.corrections)
     y = opt.DeviceProblem.search(res.x_continuous)
-    m = fast_model._FastModel(pc, {6: res.wire_diameter_m})
-    ref = fast_model._local(m, [y[k] for k in m.free]).value
+    m = fast_model.FastModel(pc, {6: res.wire_diameter_m})
+    ref = fast_model.local_solve(m, [y[k] for k in m.free]).value
     best = 0.0
     for ri in np.linspace(p.lower[0], 0.015, 20):
         for ln in np.linspace(p.lower[2], p.upper[2], 20):
@@ -491,7 +491,7 @@ def test_pitch_variable_needs_the_rendering_objective_and_bounds_the_overlap():
     # 0.8 mm wall + 2 x (1.5 mm flange lip + 0.3 mm pocket clearance) = 4.4 mm
     assert p.coil_clearance_m == pytest.approx(4.4e-3)
     assert p.upper[1] == pytest.approx(min(0.5 * (0.06 - 4.4e-3), d.optimize.max_outer_radius_m))
-    m = fast_model._FastModel(p)
+    m = fast_model.FastModel(p)
     y = np.array(p.lower) + 0.5 * (np.array(p.upper) - np.array(p.lower))
     y[1], y[7] = 0.02, 0.04  # 2 x 20 mm + 4.4 mm > 40 mm: short by 4.4 mm
     assert m.values(y)[1 + len(opt.DEVICE_CONSTRAINTS)] == pytest.approx(4.4)

@@ -28,7 +28,7 @@ from .device_problem import (DEVICE_CONSTRAINTS, DEVICE_OBJECTIVES, DEVICE_VARIA
                              PITCH_VARIABLE, SEARCH_VARIABLES, DeviceProblem, device_problem_for)
 from .device_solve import DeviceResult, device_design, round_design, solve_device
 from .fast_model import FAST_MODEL_ENVELOPE, RESIDUAL_BOUND
-from .nlopt_driver import LocalRun, maximize
+from .nlopt_driver import LocalRun, SolverOptions, maximize
 from .rendering import array_force_per_amp, array_render_forces, rendering_force
 from .solve import (GLOBAL_METHODS, THESIS_FORCE_N, THESIS_POINT, THESIS_TURNS, GlobalMethod,
                     OptimizeResult, ParetoPoint, optimize_wire, pareto_front, solve,

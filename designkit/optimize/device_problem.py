@@ -33,7 +33,7 @@ from .axial_kernel import axial_gradient_per_current_density
 from .design_view import DesignView
 from .rendering import array_render_forces
 from .wire_table import GRADE1_INSULATION_RATIO, METRIC_DIAMETERS_M
-from .workspace import _fold_points, workspace_region
+from .workspace import fold_points, workspace_region
 
 DEVICE_VARIABLES = ("inner_radius_m", "outer_radius_m", "length_m", "core_radius_m",
                     "core_length_m", "core_protrusion_m", "wire_diameter_m")
@@ -219,7 +219,7 @@ class DeviceProblem(DesignView):
         pts = ()
         if objective == "rendering":
             pts = tuple(tuple(float(c) for c in q)
-                        for q in _fold_points(workspace_region(design), cen))
+                        for q in fold_points(workspace_region(design), cen))
         kw = dict(
             design=design, lower=lower, upper=upper, hot_temperature_c=hot_temperature_c,
             render_duty=render_duty, min_time_to_hot_s=min_time_to_hot_s,

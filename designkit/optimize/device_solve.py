@@ -2,7 +2,7 @@
 
 Stages of :func:`solve_device`: SLSQP multistart on the corrected fast model (coarse
 tolerances: the starts only find the basin) -> the two IEC 60317 sizes around the continuous
-wire, each re-solved -> the a-posteriori correction loop (:func:`_correct_for_wire`): the panel
+wire, each re-solved -> the a-posteriori correction loop (:func:`correct_for_wire`): the panel
 model (:mod:`designkit.cores`, steel1010) at the rounded design, the panel/fast ratios of the
 core's shares as corrections, re-solve until the corrected fast model reproduces the panel
 model within :data:`RESIDUAL_BOUND` -> whole layers and turns, every reported number the panel
@@ -32,13 +32,13 @@ from ..support.progress import tqdm
 from .candidate import device_candidate
 from .device_problem import (DEVICE_CONSTRAINTS, DEVICE_VARIABLES, PITCH_VARIABLE,
                              SEARCH_VARIABLES, DeviceProblem)
-from .fast_model import FAST_MODEL_ENVELOPE, RESIDUAL_BOUND, _FastModel, _local
-from .nlopt_driver import LocalRun, _sobol
+from .fast_model import FAST_MODEL_ENVELOPE, RESIDUAL_BOUND, FastModel, local_solve
+from .nlopt_driver import LocalRun, halton_box
 
 
 def _device_starts(problem: DeviceProblem, n: int, seed: int) -> np.ndarray:
     """Shifted-Halton starts made geometrically sensible (core in the bore, Ro above Ri)."""
-    x = _sobol(problem.lower, problem.upper, n, seed)
+    x = halton_box(problem.lower, problem.upper, n, seed)
     x[:, 1] = np.maximum(x[:, 1], np.minimum(x[:, 0] + 2e-3, problem.upper[1]))
     return x
 
@@ -140,7 +140,7 @@ class DeviceResult:
 def _diagnose_infeasible(problem: DeviceProblem) -> BadInputError:
     """Which constraint makes the bounds infeasible, and by how much (fast model)."""
     # the constraints do not depend on the objective: diagnose on the cheap one
-    model = _FastModel(dataclasses.replace(problem, objective="design-point"))
+    model = FastModel(dataclasses.replace(problem, objective="design-point"))
     names = DEVICE_CONSTRAINTS
     worst = []
     y0 = _device_starts(problem, 1, 1)[0]
@@ -196,7 +196,7 @@ def solve_device(problem: DeviceProblem, *, starts: int = 4, seed: int = 0,
     """Optimize the device (see :func:`_solve_device`), BLAS on one thread.
 
     ``max_corrections``: at most this many panel-model evaluations in the correction loop
-    (:func:`_correct_for_wire`); ``correction_tol``: the residual bound it enforces
+    (:func:`correct_for_wire`); ``correction_tol``: the residual bound it enforces
     (:data:`RESIDUAL_BOUND`).
     """
     with one_blas_thread():
@@ -219,7 +219,7 @@ def _solve_device(problem: DeviceProblem, *, starts: int = 4, seed: int = 0,
     t0 = time.perf_counter()
     if problem.magnet_bottom_clearance_m < 0:
         raise _diagnose_infeasible(problem)
-    model = _FastModel(problem)
+    model = FastModel(problem)
     runs = []
     it = list(_device_starts(problem, starts, seed))
     bar = None
@@ -227,7 +227,7 @@ def _solve_device(problem: DeviceProblem, *, starts: int = 4, seed: int = 0,
         bar = tqdm(total=starts + 2, desc="optimize", unit="stage")
     for y0 in it:
         # coarse tolerances: the starts only have to find the basin; the wire stage polishes
-        runs.append(_local(model, y0, xtol_rel=1e-3, ftol_rel=1e-6))
+        runs.append(local_solve(model, y0, xtol_rel=1e-3, ftol_rel=1e-6))
         if bar is not None:
             bar.update(1)
     fast_calls = model.calls
@@ -246,8 +246,8 @@ def _solve_device(problem: DeviceProblem, *, starts: int = 4, seed: int = 0,
     prob = problem
     wire_runs = []
     for d in cands:
-        m = _FastModel(prob, {6: d})
-        r = _local(m, [best.x[k] for k in m.free])
+        m = FastModel(prob, {6: d})
+        r = local_solve(m, [best.x[k] for k in m.free])
         fast_calls += m.calls
         if r.feasible:
             wire_runs.append((r.value, d, m.full_y(r.x)))
@@ -260,7 +260,7 @@ def _solve_device(problem: DeviceProblem, *, starts: int = 4, seed: int = 0,
     _, wire, y = max(wire_runs)
     if bar is not None:
         bar.update(1)
-    c = _correct_for_wire(prob, wire, y, max_corrections=max_corrections,
+    c = correct_for_wire(prob, wire, y, max_corrections=max_corrections,
                           correction_tol=correction_tol)
     if bar is not None:
         bar.update(1)
@@ -310,7 +310,7 @@ def _best_pitch(prob: DeviceProblem, x, turns: int) -> list[float]:
     return x
 
 
-def _correct_for_wire(prob: DeviceProblem, wire: float, y, *, max_corrections: int = 4,
+def correct_for_wire(prob: DeviceProblem, wire: float, y, *, max_corrections: int = 4,
                       correction_tol: float = RESIDUAL_BOUND) -> dict:
     """A-posteriori correction loop for one wire (the proof of the fast model's numbers).
 
@@ -346,8 +346,8 @@ def _correct_for_wire(prob: DeviceProblem, wire: float, y, *, max_corrections: i
         prob = dataclasses.replace(prob, corrections=corr)
         if (within and all(gv <= 1e-9 for gv in ev_panel["g"])) or k + 1 >= max_corrections:
             break
-        m = _FastModel(prob, {6: wire})
-        r = _local(m, [y[q] for q in m.free])
+        m = FastModel(prob, {6: wire})
+        r = local_solve(m, [y[q] for q in m.free])
         fast_calls += m.calls
         if not r.feasible:
             break

@@ -2,7 +2,7 @@
 
 The magnet's centre cannot go below the upper Hall-sensor board's top plus its half length
 (:func:`designkit.rules.reachable_height_m`); :func:`workspace_region` samples the region the
-rendering objective is judged on, and :func:`_fold_points` keeps one point of each set the
+rendering objective is judged on, and :func:`fold_points` keeps one point of each set the
 array's mirror symmetries map onto each other.
 """
 
@@ -30,7 +30,7 @@ def workspace_region(design: Design, *, half_width_m: float | None = None,
     return np.c_[X.ravel(), Y.ravel(), Z.ravel()]
 
 
-def _fold_points(points_m: np.ndarray, centres: np.ndarray) -> np.ndarray:
+def fold_points(points_m: np.ndarray, centres: np.ndarray) -> np.ndarray:
     """The distinct points under the mirror symmetries the array's centres have (x -> -x,
     y -> -y, x <-> y): symmetric points see the same forces, so each is solved once, m."""
     pts = np.array(points_m, dtype=float)
