@@ -369,7 +369,8 @@ def test_infeasible_device_bounds_name_the_constraint_and_the_amount():
                                             r"0\.0048 m"):
         opt.solve_device(opt.device_problem_for(d))
     # an impossible heating requirement: no winding in the bounds lasts 1e6 s
-    p = opt.device_problem_for(default_design(), min_time_to_hot_s=1e6)
+    p = opt.device_problem_for(default_design(),
+                              conditions=opt.OperatingConditions(min_time_to_hot_s=1e6))
     with pytest.raises(BadInputError, match="time_to_max_temperature_s: misses its limit"):
         opt.solve_device(p, starts=1)
 
@@ -481,9 +482,8 @@ def test_render_points_folded_by_the_array_symmetry_keep_every_distinct_force():
 def test_pitch_variable_needs_the_rendering_objective_and_bounds_the_overlap():
     d = default_design()
     with pytest.raises(BadInputError, match="rendering"):
-        opt.device_problem_for(d, vary_pitch=True)
-    p = opt.device_problem_for(d, objective="rendering", vary_pitch=True,
-                               pitch_range_m=(0.04, 0.06))
+        opt.device_problem_for(d, vary={"pitch_m": None})
+    p = opt.device_problem_for(d, objective="rendering", vary={"pitch_m": (0.04, 0.06)})
     assert p.n_search == 8 and p.pitch_bounds_m == (0.04, 0.06)
     assert "coil_overlap_m" in p.constraint_names
     # Ro's bound follows the largest pitch; the overlap is a constraint on each design. The
@@ -496,8 +496,7 @@ def test_pitch_variable_needs_the_rendering_objective_and_bounds_the_overlap():
     y[1], y[7] = 0.02, 0.04  # 2 x 20 mm + 4.4 mm > 40 mm: short by 4.4 mm
     assert m.values(y)[1 + len(opt.DEVICE_CONSTRAINTS)] == pytest.approx(4.4)
     with pytest.raises(BadInputError, match="pitch_range_m"):
-        opt.device_problem_for(d, objective="rendering", vary_pitch=True,
-                               pitch_range_m=(0.005, 0.06))
+        opt.device_problem_for(d, objective="rendering", vary={"pitch_m": (0.005, 0.06)})
     # a given design (7 variables, no pitch among them) is judged at its own pitch
     rep = opt.evaluate_device(d, p)
     od = rep["constraints"]["outer_diameter_m"]
@@ -510,7 +509,7 @@ def test_pitch_optimum_meets_the_constraints_and_no_other_pitch_renders_more():
     """--vary-pitch: the reported device is feasible under the panel model, its coils do not
     overlap, and with its coil fixed a scan of the pitch finds no stronger rendering."""
     d = default_design()
-    p = opt.device_problem_for(d, objective="rendering", vary_pitch=True)
+    p = opt.device_problem_for(d, objective="rendering", vary={"pitch_m": None})
     res = opt.solve_device(p, starts=1)
     assert res.feasible and res.fast_model_check["within_bound"]
     x = list(res.x)

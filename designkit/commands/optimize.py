@@ -75,8 +75,8 @@ def _run_device(args, design, starts: int) -> int:
         raise BadInputError("--pitch-range", "given together with --vary-pitch",
                             args.pitch_range)
     objective = args.objective or ("rendering" if args.vary_pitch else "design-point")
-    problem = device_problem_for(design, objective=objective, vary_pitch=args.vary_pitch,
-                                 pitch_range_m=_pitch_range(args.pitch_range))
+    vary = {"pitch_m": _pitch_range(args.pitch_range)} if args.vary_pitch else {}
+    problem = device_problem_for(design, objective=objective, vary=vary)
     result = solve_device(problem, starts=starts, seed=args.seed,
                           progress=show_progress(args))
     data = {"design_name": design.name, "design_hash": design.spec_hash(),
