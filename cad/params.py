@@ -16,9 +16,11 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
+import numpy as np
+
 from designkit.design import Design
 from designkit.errors import BadInputError
-from designkit.rules import Layout, layout
+from designkit.rules import Assembly, CoilType, assembly
 
 MM_PER_M = 1000.0
 """The one unit factor of cad/: millimetres per metre."""
@@ -280,19 +282,21 @@ def from_design(design: Design, *, mandrel: Mandrel | None = None,
                             mandrel, "An air-core coil needs a printed tube to wind on.")
     design = with_overrides(design, mandrel, **overrides_mm)
     printer = printer or PrinterParams()
-    g = layout(design)
+    g = assembly(design)
     c, mm = design.cad, MM_PER_M
-    bobbin, core_p = _bobbin_and_core(design, g)
+    bobbin, core_p = _bobbin_and_core(design, g.types[0])
+    outline = np.asarray(g.upper.outline_m)
     grid = GridParams(rows=design.array.rows, columns=design.array.columns,
                       pitch_mm=design.array.pitch_m * mm,
-                      centres_xy_mm=tuple((x * mm, y * mm) for x, y in g.centres_xy_m),
-                      footprint_x_mm=g.footprint_x_m * mm, footprint_y_mm=g.footprint_y_m * mm,
+                      centres_xy_mm=tuple((x * mm, y * mm) for x, y, _ in design.coil_centres_m()),
+                      footprint_x_mm=float(np.ptp(outline[:, 0])) * mm,
+                      footprint_y_mm=float(np.ptp(outline[:, 1])) * mm,
                       fixing_inset_mm=c.fixing_inset_m * mm,
                       fixing_hole_radius_mm=c.fixing_hole_radius_m * mm)
     length = bobbin.winding_length_mm
     mid = -length / 2
     frame = FrameParams(grid=grid, thickness_mm=c.plate_thickness_m * mm,
-                        pocket_radius_mm=g.pocket_radius_m * mm,
+                        pocket_radius_mm=g.types[0].pocket_radius_m * mm,
                         pocket_depth_mm=c.flange_thickness_m * mm,
                         through_radius_mm=bobbin.bore_radius_mm, mirror_z_mm=mid)
     standoff = StandoffParams(outer_radius_mm=c.standoff_outer_radius_m * mm,
@@ -318,10 +322,10 @@ def from_design(design: Design, *, mandrel: Mandrel | None = None,
                      printer=printer, magnet_centre_mm=magnet_centre, design=design)
 
 
-def _bobbin_and_core(design: Design, g: Layout) -> tuple[BobbinParams, CoreParams | None]:
+def _bobbin_and_core(design: Design, g: CoilType) -> tuple[BobbinParams, CoreParams | None]:
     """The bobbin (with the rule book's mandrel) and the core, mm, from the design."""
     mm = MM_PER_M
-    coil, core = design.coil, design.core
+    coil, core = g.coil, g.core
     length = coil.length_m * mm
     core_p = None
     if core is not None:

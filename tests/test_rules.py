@@ -70,7 +70,7 @@ def test_cad_error_names_design_keys_that_fix_it(tmp_path, capsys):
     assert "cad.flange_lip_m" in err and "array.pitch_m" in err
     # the key is a design key: a smaller lip and pocket clearance move the verdict
     d = load_design(path)
-    assert not rules.layout(d).flange_radius_m == pytest.approx(0.0245 + 0.0015)
+    assert rules.assembly(d).types[0].flange_radius_m == pytest.approx(0.0245 + 0.002)
     thin = d.replace(**{"cad.flange_lip_m": 0.0008, "cad.pocket_clearance_m": 0.0001,
                         "coil.outer_radius_m": 0.0236})
     assert [r.name for r in rules.violations(thin, "cad")] == []

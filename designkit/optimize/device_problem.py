@@ -225,12 +225,14 @@ class DeviceProblem(DesignView):
 
     @property
     def board_top_m(self) -> float:
-        """Top of the upper sensor board above the coil tops, m."""
-        return rules.board_top_m(self.design)
+        """Top of the highest sensor board or printed part under the magnet at the design
+        point, m (:func:`designkit.rules.design_point_floor_m` less the magnet's half
+        length)."""
+        return rules.design_point_floor_m(self.design) - self.design.magnet.length_m / 2
 
     @property
     def magnet_bottom_clearance_m(self) -> float:
-        """Design height - magnet half length - upper-board top, m (>= 0 for the magnet to
+        """Design height - magnet half length - :attr:`board_top_m`, m (>= 0 for the magnet to
         reach the design point)."""
         return self.design.optimize.height_m - self.design.magnet.length_m / 2 - self.board_top_m
 
