@@ -495,7 +495,7 @@ def test_pitch_variable_needs_the_rendering_objective_and_bounds_the_overlap():
     y = np.array(p.lower) + 0.5 * (np.array(p.upper) - np.array(p.lower))
     y[1], y[7] = 0.02, 0.04  # 2 x 20 mm + 4.4 mm > 40 mm: short by 4.4 mm
     assert m.values(y)[1 + len(opt.DEVICE_CONSTRAINTS)] == pytest.approx(4.4)
-    with pytest.raises(BadInputError, match="pitch_range_m"):
+    with pytest.raises(BadInputError, match="pitch_m range"):
         opt.device_problem_for(d, objective="rendering", vary={"pitch_m": (0.005, 0.06)})
     # a given design (7 variables, no pitch among them) is judged at its own pitch
     rep = opt.evaluate_device(d, p)

@@ -4,7 +4,10 @@ Prints every rule of the rule book (:mod:`designkit.rules`) and, for a cored des
 device constraint under the saturating panel model (:func:`designkit.optimize.rule_table`):
 value, limit, margin (>= 0 is met), the design keys that fix it. The same table decides
 ``optimize`` (its bounds), ``report`` (its "violates" line) and ``cad`` (its refusal: the
-rules of group 'cad'). Exit 0 when every row is met, 1 when one is violated.
+rules of group 'cad'). Any layout: coils in their poses (docs/rules.md). Exit codes:
+:data:`EXIT_MET` when every row is met, :data:`EXIT_VIOLATED` when one is violated (the row
+names the design keys that fix it), 1 on bad input (a design file that cannot be read or is
+refused: one line naming the key, its value and the valid range).
 """
 
 from __future__ import annotations
@@ -14,6 +17,11 @@ import argparse
 from ..design import load_design
 from ..optimize import rule_table
 from .common import add_design_argument, add_progress_argument, shown_margin
+
+EXIT_MET = 0
+"""Every rule of the design holds."""
+EXIT_VIOLATED = 3
+"""At least one rule is violated (bad input is 1, as for every command)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -54,4 +62,4 @@ def run(args: argparse.Namespace) -> int:
     if design.core is None:
         print("no core: the device constraints (R, I R, 5 L/R, heating) are those of the "
               "iron-core device problem and were not evaluated")
-    return 0 if all(r["met"] for r in table.values()) else 1
+    return EXIT_MET if all(r["met"] for r in table.values()) else EXIT_VIOLATED

@@ -36,12 +36,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="device: the upward force at the design point (default) or the "
                              "smallest upward force the array renders over the workspace "
                              "region (bounded LP allocation)")
+    parser.add_argument("--vary", action="append", default=[], metavar="KEY[=LO:HI]",
+                        help="device: a layout key of the design file ([array]) becomes a "
+                             "variable too, within LO:HI (m or deg; default ranges in "
+                             "docs/optimize.md): pitch_m (grid, hex), radius_m and tilt_deg "
+                             "(ring); repeat or join with commas (--vary radius_m,tilt_deg). "
+                             "Coils may not overlap; implies --objective rendering")
     parser.add_argument("--vary-pitch", action="store_true",
-                        help="device: the array pitch is a variable too (coils may not overlap; "
-                             "implies --objective rendering; slow: one LP per point)")
+                        help="device: the same as --vary pitch_m")
     parser.add_argument("--pitch-range", default=None, metavar="LO:HI",
-                        help="with --vary-pitch: pitch bounds in m (default 0.6 x the design's "
-                             "pitch to 2 x max outer radius + 1 mm)")
+                        help="with --vary-pitch: pitch bounds in m (the same as --vary "
+                             "pitch_m=LO:HI)")
     parser.add_argument("--verify", action="store_true",
                         help="device: also run the global checks (multistart, ISRES, grid)")
     parser.add_argument("--fem", action="store_true",
@@ -65,17 +70,17 @@ def run(args: argparse.Namespace) -> int:
     if starts < 1:
         raise BadInputError("--starts", "a whole number >= 1", starts)
     if args.problem == "coil":
+        if args.vary or args.vary_pitch:
+            raise BadInputError("--vary", "only with --problem device (the coil problem has no "
+                                "layout)", ",".join(args.vary) or "pitch_m")
         return _run_coil(args, design, starts)
     return _run_device(args, design, starts)
 
 
 def _run_device(args, design, starts: int) -> int:
     t0 = time.perf_counter()
-    if args.pitch_range is not None and not args.vary_pitch:
-        raise BadInputError("--pitch-range", "given together with --vary-pitch",
-                            args.pitch_range)
-    objective = args.objective or ("rendering" if args.vary_pitch else "design-point")
-    vary = {"pitch_m": _pitch_range(args.pitch_range)} if args.vary_pitch else {}
+    vary = layout_variables(args.vary, args.vary_pitch, args.pitch_range)
+    objective = args.objective or ("rendering" if vary else "design-point")
     problem = device_problem_for(design, objective=objective, vary=vary)
     result = solve_device(problem, starts=starts, seed=args.seed,
                           progress=show_progress(args))
@@ -101,16 +106,41 @@ def _run_device(args, design, starts: int) -> int:
     return 0
 
 
-def _pitch_range(text: str | None):
-    """'LO:HI' (m) -> (lo, hi); None passes through."""
+def _range(option: str, text: str | None):
+    """'LO:HI' -> (lo, hi); None passes through."""
     if text is None:
         return None
     parts = text.split(":")
     try:
         lo, hi = (float(q) for q in parts)
     except ValueError:
-        raise BadInputError("--pitch-range", "LO:HI in m, e.g. 0.04:0.06", text) from None
+        raise BadInputError(option, "LO:HI, e.g. 0.04:0.06 (m) or 0:40 (deg)", text) from None
     return lo, hi
+
+
+def layout_variables(vary: list[str], vary_pitch: bool = False,
+                     pitch_range: str | None = None) -> dict:
+    """``--vary`` (and its pitch aliases) -> {layout key: (lo, hi) or None}; a key's layout is
+    checked by the device problem (:func:`designkit.optimize.search_space.device_space`)."""
+    if pitch_range is not None and not vary_pitch:
+        raise BadInputError("--pitch-range", "given together with --vary-pitch", pitch_range)
+    out: dict = {"pitch_m": _range("--pitch-range", pitch_range)} if vary_pitch else {}
+    for item in vary:
+        for part in (q.strip() for q in item.split(",")):
+            if not part:
+                raise BadInputError("--vary", "KEY[=LO:HI][,KEY...]", item)
+            name, _, rng = part.partition("=")
+            name = name.strip()
+            if name in out:
+                raise BadInputError("--vary", "each layout key once", name)
+            out[name] = _range(f"--vary {name}", rng) if rng else None
+    return out
+
+
+LAYOUT_ROWS = {"pitch_m": ("array pitch (mm)", 1e3, ".2f"),
+               "radius_m": ("ring radius (mm)", 1e3, ".2f"),
+               "tilt_deg": ("ring tilt (deg)", 1.0, ".2f")}
+"""Summary rows of the layout keys: label, scale, format."""
 
 
 def device_summary(data: dict) -> str:
@@ -134,8 +164,13 @@ def device_summary(data: dict) -> str:
     ]
     rend = data.get("rendering")
     if rend:
-        rows.append((f"array pitch (mm){' (optimized)' if data.get('pitch_varied') else ''}",
-                     f"{data['pitch_m'] * 1e3:.2f}"))
+        varied = data.get("layout_varied", [])
+        layout = data.get("layout", {})
+        for key in [k for k in LAYOUT_ROWS if k in layout] or ["pitch_m"]:
+            label, scale, fmt = LAYOUT_ROWS[key]
+            value = layout.get(key, data["pitch_m"])
+            rows.append((f"{label}{' (optimized)' if key in varied else ''}",
+                         f"{value * scale:{fmt}}"))
         rows.append((f"rendering: smallest upward Fz over {len(rend['points_m'])} points (mN)",
                      f"{rend['min_upward_force_n'] * 1e3:.1f}"))
     w = max(len(r[0]) for r in rows)

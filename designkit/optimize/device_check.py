@@ -58,11 +58,32 @@ def evaluate_device(design: Design, problem: DeviceProblem | None = None) -> dic
 def rule_table(design: Design) -> dict:
     """Every rule and constraint of a design, by name -> :meth:`designkit.rules.Rule.as_dict`
     rows: the device constraints under the panel model (:func:`evaluate_device`, a cored
-    design) and the rule book (:func:`designkit.rules.rules`, any design)."""
+    design; each cored coil type of its ``[[groups]]`` too, :func:`group_constraints`) and the
+    rule book (:func:`designkit.rules.rules`, any design)."""
     if design.core is None:
-        return {r.name: r.as_dict() for r in rules.rules(design)}
-    table = evaluate_device(design)["constraints"]
+        table = {r.name: r.as_dict() for r in rules.rules(design)}
+    else:
+        table = evaluate_device(design)["constraints"]
     for row in table.values():
         row.setdefault("group", "device")
         row.setdefault("keys", [])
-    return table
+    return {**table, **group_constraints(design)}
+
+
+def group_constraints(design: Design) -> dict:
+    """The device constraints of each cored coil type of the design's ``[[groups]]`` (its
+    winding and core under the panel model, as :func:`evaluate_device` judges the design's
+    own), named ``NAME@groups[g]``, their keys the group's."""
+    out = {}
+    for t in rules.coil_types(design)[0]:
+        if not t.where or t.core is None:
+            continue
+        alone = dataclasses.replace(design, coil=t.coil, core=t.core, groups=())
+        where = t.where.rstrip(".")
+        for name, row in evaluate_device(alone)["constraints"].items():
+            if "group" in row:  # a rule of the rule book: the whole design's table has it
+                continue
+            keys = [t.where + k if k.startswith(("coil.", "core.")) else k
+                    for k in row.get("keys", [])]
+            out[f"{name}@{where}"] = {**row, "group": "device", "keys": keys}
+    return out

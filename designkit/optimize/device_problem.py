@@ -16,6 +16,7 @@ surface-current panel model of :mod:`designkit.cores`). Details: docs/optimize.m
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Mapping
@@ -32,8 +33,8 @@ from ..model.coil import Coil
 from ..support import validate as v
 from .axial_kernel import axial_gradient_per_current_density
 from .design_view import DesignView
-from .rendering import RodCoil, array_render_forces
-from .search_space import SEARCH_VARIABLES, SearchSpace, device_space
+from .rendering import RodCoil, array_render_forces, render_forces_many
+from .search_space import SEARCH_VARIABLES, SearchSpace, device_space, nearest_spacing_m
 from .wire_table import GRADE1_INSULATION_RATIO, METRIC_DIAMETERS_M
 from .workspace import fold_points, workspace_region
 
@@ -171,9 +172,9 @@ class DeviceProblem(DesignView):
         space = device_space(design, vary, coil_clearance_m, board_clearance_m)
         pts = ()
         if objective == "rendering":
-            cen = np.array([[x, y] for x, y, _ in design.coil_centres_m()])
-            pts = tuple(tuple(float(c) for c in q)
-                        for q in fold_points(workspace_region(design), cen))
+            folded = fold_points(workspace_region(design), design.array.top_centres_m(),
+                                 design.array.axes())
+            pts = tuple(tuple(float(c) for c in q) for q in folded)
         kw = dict(design=design, space=space, conditions=conditions or OperatingConditions(),
                   objective=objective, coil_clearance_m=coil_clearance_m, render_points_m=pts)
         kw.update(changes)
@@ -220,8 +221,9 @@ class DeviceProblem(DesignView):
 
     @property
     def pitch_m(self) -> float:
-        """The design's pitch, m (1 m for a single coil)."""
-        return self.design.array.pitch_m if self.design.n_coils > 1 else 1.0
+        """The distance of the design's nearest two coils, m: a lattice's pitch (1 m for a
+        single coil)."""
+        return nearest_spacing_m(self.design)
 
     @property
     def board_top_m(self) -> float:
@@ -321,6 +323,26 @@ class DeviceProblem(DesignView):
         given design's 7 variables sit at ``pitch_m``), else ``pitch_m``."""
         return float(x[7]) if self.pitch_bounds_m is not None and len(x) > 7 else self.pitch_m
 
+    def spacing_of(self, x) -> float:
+        """Distance of the nearest two top-face centres of the layout of ``x``, m (a
+        lattice's pitch)."""
+        if self.design.array.kind in ("grid", "hex"):
+            return self.pitch_of(x)
+        return nearest_spacing_m(dataclasses.replace(self.design, array=self.layout_of(x)))
+
+    def overlap_m(self, x) -> float:
+        """How much closer than a frame web the flange pockets of the coils of ``x`` come, m
+        (<= 0: they fit). A grid or hex lattice: 2 Ro + coil_clearance_m - pitch; any other
+        layout: the minimum wall less the smallest signed distance of the pockets in their
+        poses (:func:`designkit.rules.lattice_gap_m`)."""
+        ro = float(x[1])
+        if self.design.array.kind in ("grid", "hex"):
+            return 2 * ro + self.coil_clearance_m - self.pitch_of(x)
+        c = self.design.cad
+        gap = rules.lattice_gap_m(self.layout_of(x), ro + c.flange_lip_m + c.pocket_clearance_m,
+                                  float(x[2]), c.flange_thickness_m)
+        return c.min_wall_m - gap
+
     def layout_of(self, x):
         """The layout of search or physical vector ``x``: the design's, with the layout
         variables of ``x`` when it has them (:meth:`SearchSpace.layout_of`)."""
@@ -335,6 +357,16 @@ class DeviceProblem(DesignView):
         return array_render_forces(coil, self.layout_of(x),
                                    np.asarray(self.render_points_m, dtype=float),
                                    self.moment_a_m2, self.total_current_a)
+
+    def render_forces_many(self, xs) -> np.ndarray:
+        """:meth:`render_forces` of the rows of ``xs`` (B, n) physical vectors, their own turns,
+        (B, P) N, in one batch (:func:`designkit.optimize.rendering.render_forces_many`)."""
+        xs = [[float(q) for q in x] for x in xs]
+        coils = [RodCoil(tuple(x[:7]), self.turns(x), self.current_a, self.corrections[0],
+                         self.n_slices) for x in xs]
+        return render_forces_many(coils, [self.layout_of(x) for x in xs],
+                                  np.asarray(self.render_points_m, dtype=float),
+                                  self.moment_a_m2, self.total_current_a)
 
     def _assemble(self, xs, n, g_c, lam, l_inc_core, peak, l_air) -> dict:
         """The numbers of :meth:`evaluate` from the core's share (arrays over designs, SI)."""
@@ -397,8 +429,10 @@ class DeviceProblem(DesignView):
                                           f"{self.current_a:g} A, {self.cold_temperature_c:g} "
                                           f"-> {self.hot_temperature_c:g} C"),
             "core_radius_m": (a, ri, 1, "core fits the bore"),
-            "outer_diameter_m": (2 * ro, self.pitch_of(x) - self.coil_clearance_m, 1,
-                                 "coils, flanges and frame pockets fit at the pitch"),
+            "outer_diameter_m": (2 * ro, (self.pitch_of(x) - self.coil_clearance_m
+                                          if self.design.array.kind in ("grid", "hex")
+                                          else 2 * ro - self.overlap_m(x)), 1,
+                                 "coils, flanges and frame pockets fit at the spacing"),
             "core_protrusion_m": (prot, self.upper[5], 1,
                                   "core top below the upper sensor board"),
             "magnet_bottom_m": (self.magnet_bottom_clearance_m + self.board_top_m,
@@ -413,7 +447,9 @@ class DeviceProblem(DesignView):
             out[name] = {"value": float(val), "limit": float(lim), "unit": _unit_of(name),
                          "kind": "upper" if sense > 0 else "lower", "margin": float(margin),
                          "met": bool(margin >= -1e-9 * max(abs(lim), 1e-12)), "note": note,
-                         "keys": list(_FIXED_BY.get(name, ()))}
+                         "keys": list(_FIXED_BY.get(name, ()) if name != "outer_diameter_m"
+                                      else ("coil.outer_radius_m",)
+                                      + rules.layout_keys(self.design))}
         return out
 
 

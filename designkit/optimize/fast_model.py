@@ -83,14 +83,12 @@ class FastModel:
                 ev = self.p.evaluate_many(xs[~empty], air_cache=self.air_cache)
                 out[~empty, 0] = ev["force_n"]
                 out[~empty, 1:1 + len(DEVICE_CONSTRAINTS)] = ev["g"]
-                if self.rendering:
-                    for i in np.nonzero(~empty)[0]:
-                        f = self.p.render_forces(xs[i])
-                        out[i, 1 + self.n_g:] = f
-                        out[i, 0] = f.min()
-            if self.n_g > len(DEVICE_CONSTRAINTS):  # the coils must not overlap at the pitch
-                out[:, 1 + len(DEVICE_CONSTRAINTS)] = (
-                    2 * xs[:, 1] + self.p.coil_clearance_m - xs[:, 7]) / 1e-3
+                if self.rendering:  # the whole stencil in one batch
+                    f = self.p.render_forces_many(xs[~empty])
+                    out[~empty, 1 + self.n_g:] = f
+                    out[~empty, 0] = f.min(axis=1)
+            if self.n_g > len(DEVICE_CONSTRAINTS):  # the coils' pockets keep a frame web
+                out[:, 1 + len(DEVICE_CONSTRAINTS)] = [self.p.overlap_m(x) / 1e-3 for x in xs]
             self.calls += len(miss)
             for i, row in zip(miss, out):
                 self.cache[keys[i]] = row
@@ -108,6 +106,40 @@ class FastModel:
         base = vals[0]
         jac = ((vals[1:] - base[None, :]) / h[:, None]).T
         return base, jac
+
+
+FEASIBLE_MARGIN = 0.01
+"""How far inside every scaled constraint the feasibility stage of :func:`local_solve` goes."""
+
+
+def feasible_start(model: FastModel, y0, max_evaluations: int = 80) -> np.ndarray:
+    """A point of the box where every constraint holds, found from ``y0`` by maximizing the
+    smallest scaled margin s (g_i(y) + s <= 0, s <= :data:`FEASIBLE_MARGIN`) with SLSQP;
+    ``y0`` itself when it is feasible or none is found."""
+    y0 = np.asarray(y0, dtype=float)
+    ng, nv = model.n_g, len(y0)
+    g0 = model.values(y0)[1:1 + ng]
+    if np.all(g0 <= 0):
+        return y0
+
+    def margin(u):
+        grad = np.zeros(nv + 1)
+        grad[-1] = 1.0
+        return float(u[-1]), grad
+
+    def cons(u):
+        val, jac = model.with_gradient(u[:-1])
+        j = np.zeros((ng, nv + 1))
+        j[:, :nv] = jac[1:1 + ng]
+        j[:, -1] = 1.0
+        return val[1:1 + ng] + u[-1], j
+
+    worst = float(np.max(g0))
+    run = maximize(margin, cons, ng, np.r_[model.lo, -worst - 1.0], np.r_[model.hi, FEASIBLE_MARGIN],
+                   np.r_[y0, -worst], SolverOptions(xtol_rel=1e-6, ftol_rel=1e-9,
+                                                    max_evaluations=max_evaluations))
+    y = np.asarray(run.x[:-1])
+    return y if np.all(model.values(y)[1:1 + ng] <= 1e-8) else y0
 
 
 def local_solve(model: FastModel, y0, max_evaluations: int = 80, *, xtol_rel: float = 1e-5,
@@ -130,7 +162,7 @@ def local_solve(model: FastModel, y0, max_evaluations: int = 80, *, xtol_rel: fl
 
     if not model.rendering:
         return maximize(obj, cons, ng, model.lo, model.hi, y0, options)
-    y0 = np.asarray(y0, dtype=float)
+    y0 = feasible_start(model, y0)  # the epigraph stage and the polish need a feasible start
     n_pts = len(model.p.render_points_m)
     t_hi = 10.0 * float(np.max(model.values(y0)[1 + ng:])) + 1.0
     nv = len(y0)

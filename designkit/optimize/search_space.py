@@ -15,6 +15,8 @@ import math
 from dataclasses import dataclass
 from typing import Mapping
 
+import numpy as np
+
 from .. import rules
 from ..design import Design
 from ..design.layouts import Layout
@@ -25,7 +27,7 @@ SEARCH_VARIABLES = ("inner_radius_m", "outer_radius_m", "length_m", "core_fill",
 """What the optimizer moves: core radius = core_fill x inner radius (the bore bounds it) and
 core length = core_depth_fraction x (winding length + protrusion) (the core's bottom never
 below the winding's), so those two limits are bounds, not constraints."""
-LAYOUT_VARIABLES = {"grid": ("pitch_m",), "hex": ("pitch_m",)}
+LAYOUT_VARIABLES = {"grid": ("pitch_m",), "hex": ("pitch_m",), "ring": ("radius_m", "tilt_deg")}
 """The layout keys the optimizer may vary, by layout kind."""
 
 MIN_WINDING_LENGTH_M = 0.010
@@ -106,29 +108,54 @@ class SearchSpace:
         return self
 
 
-def _array_pitch(design: Design) -> float:
-    """The design's pitch, m (1 m for a single coil: no neighbour to overlap)."""
-    return design.array.pitch_m if design.n_coils > 1 else 1.0
+def chord_factor(n: int) -> float:
+    """Distance of neighbouring top centres of a ring of ``n`` / its radius: 2 sin(pi / n)
+    (1 for one coil)."""
+    return 2 * math.sin(math.pi / n) if n > 1 else 1.0
 
 
-def _pitch_bounds(design: Design, coil_clearance_m: float,
-                  pitch_range_m: tuple[float, float] | None) -> tuple[float, float]:
-    """Checked (lo, hi) of a varying pitch, m (default: :func:`device_space`)."""
-    o, pitch = design.optimize, _array_pitch(design)
+def nearest_spacing_m(design: Design) -> float:
+    """Distance of the nearest two top-face centres, m: the pitch of a grid or hex lattice,
+    1 m for a single coil."""
     if design.n_coils < 2:
-        raise BadInputError("array", "at least 2 coils when the pitch varies",
-                            design.n_coils)
-    if pitch_range_m is None:
-        pitch_range_m = (max(PITCH_RANGE_FACTOR * pitch, 2 * o.min_inner_radius_m
-                             + 2 * MIN_PITCH_WINDING_DEPTH_M + coil_clearance_m),
-                         max(pitch, 2 * o.max_outer_radius_m + coil_clearance_m))
-    lo_p, hi_p = (float(q) for q in pitch_range_m)
-    smallest = 2 * o.min_inner_radius_m + 2 * MIN_WINDING_DEPTH_M + coil_clearance_m
-    if not (math.isfinite(lo_p) and math.isfinite(hi_p) and smallest < lo_p < hi_p):
+        return 1.0
+    if design.array.kind in ("grid", "hex"):
+        return design.array.pitch_m
+    t = design.array.top_centres_m()
+    d = np.linalg.norm(t[:, None, :] - t[None, :, :], axis=-1)
+    return float(d[np.triu_indices(len(t), 1)].min())
+
+
+def _spacing_range(design: Design, name: str, coil_clearance_m: float,
+                   given: tuple[float, float] | None) -> tuple[float, float]:
+    """Checked (lo, hi) of a varying pitch or ring radius, m (defaults: :func:`device_space`)."""
+    o = design.optimize
+    if design.n_coils < 2:
+        raise BadInputError("array", f"at least 2 coils when {name} varies", design.n_coils)
+    scale = 1.0 if name == "pitch_m" else chord_factor(design.array.count)
+    value = getattr(design.array, name)
+    if given is None:
+        given = (max(PITCH_RANGE_FACTOR * value, (2 * o.min_inner_radius_m
+                                                  + 2 * MIN_PITCH_WINDING_DEPTH_M
+                                                  + coil_clearance_m) / scale),
+                 max(value, (2 * o.max_outer_radius_m + coil_clearance_m) / scale))
+    lo, hi = (float(q) for q in given)
+    smallest = (2 * o.min_inner_radius_m + 2 * MIN_WINDING_DEPTH_M + coil_clearance_m) / scale
+    if not (math.isfinite(lo) and math.isfinite(hi) and smallest < lo < hi):
         raise BadInputError(
-            "pitch_range_m", f"finite lo < hi with lo > 2 x min inner radius + "
-            f"{2 * MIN_WINDING_DEPTH_M * 1e3:g} mm + clearance ({smallest:.4g} m)", pitch_range_m)
-    return lo_p, hi_p
+            f"{name} range", f"finite lo < hi (m) with lo > {smallest:.4g} m (neighbours of the "
+            f"smallest inner radius, {2 * MIN_WINDING_DEPTH_M * 1e3:g} mm of winding and the "
+            "clearance)", given)
+    return lo, hi
+
+
+def _tilt_range(given: tuple[float, float] | None) -> tuple[float, float]:
+    """Checked (lo, hi) of a varying ring tilt, degrees (default: upright to the printable
+    limit, :data:`designkit.rules.MAX_OVERHANG_DEG`)."""
+    lo, hi = (0.0, rules.MAX_OVERHANG_DEG) if given is None else (float(q) for q in given)
+    if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi < 90.0):
+        raise BadInputError("tilt_deg range", "0 <= lo < hi < 90 (degrees)", given)
+    return lo, hi
 
 
 def device_space(design: Design, vary: Mapping[str, tuple[float, float] | None],
@@ -137,12 +164,13 @@ def device_space(design: Design, vary: Mapping[str, tuple[float, float] | None],
 
     ``vary``: layout keys to search ({name: (lo, hi) or None for the default range}; the
     pitch's default: from 0.6 x the design's pitch to 2 x optimize.max_outer_radius_m +
-    coil_clearance_m, or the design's pitch if larger). Coil bounds: inner radius
+    coil_clearance_m, or the design's pitch if larger; a ring's radius: the same for the
+    distance of neighbouring coils, 2 r sin(pi / count); its tilt: 0 to
+    :data:`designkit.rules.MAX_OVERHANG_DEG`). Coil bounds: inner radius
     [optimize.min_inner_radius_m, Ro bound - 0.3 mm]; outer radius up to
-    (widest pitch - coil_clearance_m)/2 (no overlap at the pitch); winding length
-    [10 mm, optimize.max_length_m]; core fill [0.25, 1]; core depth fraction [0.1, 1];
-    protrusion above the winding [0, the upper sensor board's underside - board_clearance_m];
-    bare wire [0.2, 1.6] mm.
+    (widest spacing - coil_clearance_m)/2; winding length [10 mm, optimize.max_length_m];
+    core fill [0.25, 1]; core depth fraction [0.1, 1]; protrusion above the winding [0, the
+    upper sensor board's underside - board_clearance_m]; bare wire [0.2, 1.6] mm.
     """
     allowed = LAYOUT_VARIABLES.get(design.array.kind, ())
     for name in vary:
@@ -152,11 +180,17 @@ def device_space(design: Design, vary: Mapping[str, tuple[float, float] | None],
                                 "none (this layout has no variable the optimizer searches)",
                                 name)
     layout_vars = []
-    if "pitch_m" in vary:
-        lo_p, hi_p = _pitch_bounds(design, coil_clearance_m, vary["pitch_m"])
-        layout_vars.append(Variable("pitch_m", lo_p, hi_p))
+    widest = nearest_spacing_m(design)
+    for name in allowed:  # in the layout's order
+        if name not in vary:
+            continue
+        if name == "tilt_deg":
+            layout_vars.append(Variable(name, *_tilt_range(vary[name])))
+            continue
+        lo, hi = _spacing_range(design, name, coil_clearance_m, vary[name])
+        layout_vars.append(Variable(name, lo, hi))
+        widest = hi * (1.0 if name == "pitch_m" else chord_factor(design.array.count))
     o = design.optimize
-    widest = layout_vars[0].upper if layout_vars else _array_pitch(design)
     r_out = min(0.5 * (widest - coil_clearance_m), o.max_outer_radius_m)
     # buildability (designkit.rules): the core top stays below the upper sensor mount
     max_prot = max(min(design.sensors.offset_m - board_clearance_m,

@@ -11,11 +11,13 @@ the solids + the two radii), which for side-by-side parallel coils is the pitch.
 
 from __future__ import annotations
 
+import functools
 import itertools
 
 import numpy as np
 
 from ..design import Design
+from ..design.layouts import Layout
 from .geometry import Assembly, CoilType, pocket_solid, standoff_solid
 from .convex import Box, Cylinder, lower_bound_m, signed_distance
 from .rule import Rule, wall
@@ -180,3 +182,21 @@ def standoff_rule(design: Design, asm: Assembly) -> Rule:
     return wall("standoff_to_pocket", "standoff to the nearest flange pocket", sd, c.min_wall_m,
                 keys, "reduce cad.fixing_inset_m or cad.standoff_outer_radius_m, or increase "
                 f"{keys[-1]}")
+
+
+@functools.lru_cache(maxsize=4096)
+def lattice_gap_m(layout: Layout, radius_m: float, length_m: float, beyond_m: float) -> float:
+    """Smallest signed distance between identical coil cylinders on ``layout``, m: radius
+    ``radius_m`` along each axis from ``beyond_m`` above the top face to ``beyond_m`` below a
+    winding of ``length_m`` (e.g. the frame pockets: the pocket radius and the flange
+    thickness). A grid or hex lattice of upright coils: the pitch less two radii."""
+    tops, axes = layout.top_centres_m(), layout.axes()
+    if len(tops) < 2:
+        return np.inf
+    if layout.kind in ("grid", "hex"):
+        return layout.pitch_m - 2 * radius_m
+    half = length_m / 2 + beyond_m
+    cyl = [Cylinder(tuple(t - a * length_m / 2), tuple(a), half, radius_m)
+           for t, a in zip(tops, axes)]
+    return _closest(((i, j), cyl[i], cyl[j])
+                    for i, j in itertools.combinations(range(len(cyl)), 2))[0]

@@ -27,8 +27,10 @@ DISTANCE_TOLERANCE_M = 1e-12
 """Certified gap of the distance of two solids that are apart, m."""
 MAX_ITERATIONS = 400
 """Major iterations of the minimum-norm-point algorithm."""
-SPHERE_DIRECTIONS = 1200
+SPHERE_DIRECTIONS = 600
 """Directions of the Fibonacci grid that starts the penetration depth."""
+POLISHED_DIRECTIONS = 3
+"""The best grid directions polished (Nelder-Mead on the sphere's angles)."""
 
 
 @dataclass(frozen=True)
@@ -202,7 +204,7 @@ def _penetration(a: Solid, b: Solid) -> float:
     grid = _fibonacci_sphere(SPHERE_DIRECTIONS)
     vals = h(grid)
     best = float(vals.min())
-    for k in np.argsort(vals)[:6]:
+    for k in np.argsort(vals)[:POLISHED_DIRECTIONS]:
         n0 = grid[k]
         theta0 = [math.acos(max(-1.0, min(1.0, n0[2]))), math.atan2(n0[1], n0[0])]
 
@@ -212,7 +214,7 @@ def _penetration(a: Solid, b: Solid) -> float:
                                       math.cos(t[0])]]))[0])
 
         res = minimize(f, theta0, method="Nelder-Mead",
-                       options={"xatol": 1e-10, "fatol": 1e-13, "maxiter": 400})
+                       options={"xatol": 1e-9, "fatol": 1e-13, "maxiter": 200})
         best = min(best, float(res.fun))
     return max(best, 0.0)
 
