@@ -18,7 +18,7 @@ import math
 import numpy as np
 from scipy.optimize import linprog
 
-from ..design import Design
+from ..design import Design, pose_on_axis
 from ..design.layouts import grown_hull
 from .geometry import assembly, board_top_m
 from .convex import Box, Cylinder, Prism
@@ -42,8 +42,6 @@ def _local_bounds(solid) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray
         a = np.vstack([np.eye(3), -np.eye(3)])
         return np.asarray(solid.centre), np.asarray(solid.rotation), a, np.r_[e, e]
     if isinstance(solid, Cylinder):
-        from ..design import pose_on_axis
-
         r = pose_on_axis((0.0, 0.0, 0.0), solid.axis).matrix
         ang = 2 * math.pi * np.arange(CAP_SIDES) / CAP_SIDES
         sides = np.c_[np.cos(ang), np.sin(ang), np.zeros(CAP_SIDES)]
