@@ -17,30 +17,10 @@ import numpy as np
 from .. import rules
 from ..design import Design
 from ..design.layouts import grown_hull
+from ..rules import clip_polygon
 
 INSIDE_TOLERANCE_M = 1e-9
 """A sample this close outside the clipped outline counts as inside, m (vertices, edges)."""
-
-
-def clip_polygon(subject: np.ndarray, clip: np.ndarray) -> np.ndarray:
-    """The intersection of two convex counter-clockwise polygons (k, 2) m (Sutherland-Hodgman);
-    (0, 2) when they do not meet."""
-    out = np.asarray(subject, dtype=float)
-    c = np.asarray(clip, dtype=float)
-    for a, b in zip(c, np.roll(c, -1, axis=0)):
-        if len(out) == 0:
-            break
-        e = b - a
-        side = e[0] * (out[:, 1] - a[1]) - e[1] * (out[:, 0] - a[0])  # >= 0: inside
-        new = []
-        for k in range(len(out)):
-            p, q, sp, sq = out[k], out[(k + 1) % len(out)], side[k], side[(k + 1) % len(out)]
-            if sp >= 0:
-                new.append(p)
-            if (sp >= 0) != (sq >= 0):
-                new.append(p + (q - p) * (sp / (sp - sq)))
-        out = np.array(new).reshape(-1, 2)
-    return out
 
 
 def render_outline(design: Design) -> np.ndarray:

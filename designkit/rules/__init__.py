@@ -16,7 +16,7 @@ rule: docs/rules.md.
 """
 
 from .geometry import (MAX_OVERHANG_DEG, Assembly, CoilType, Plate, Seat, assembly, board_top_m,
-                       coil_types, max_core_protrusion_m, pitch_clearance_m)
+                       clip_polygon, coil_types, max_core_protrusion_m, pitch_clearance_m)
 from .book import rules, violations
 from .clearance import board_solids, coil_solid, lattice_gap_m, layout_keys
 from .convex import Box, Cylinder, Prism, signed_distance
@@ -24,6 +24,6 @@ from .reach import design_point_floor_m, reachable_height_m
 from .rule import TOLERANCE_M, Rule
 
 __all__ = ["MAX_OVERHANG_DEG", "Assembly", "CoilType", "Plate", "Seat", "assembly",
-           "board_top_m", "coil_types", "max_core_protrusion_m", "pitch_clearance_m", "rules",
+           "board_top_m", "clip_polygon", "coil_types", "max_core_protrusion_m", "pitch_clearance_m", "rules",
            "violations", "board_solids", "coil_solid", "lattice_gap_m", "layout_keys", "Box", "Cylinder", "Prism",
            "signed_distance", "design_point_floor_m", "reachable_height_m", "TOLERANCE_M", "Rule"]
