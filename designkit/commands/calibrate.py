@@ -60,7 +60,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "alone at +-2 A (what the start-up calibration reads)")
     parser.add_argument("--noise-t", type=float, default=None, metavar="SIGMA",
                         help="with --simulate: Gaussian reading noise per axis, T (default: "
-                             "each row's sigma_t; 0: noiseless); written as sigma_t")
+                             "each row's sigma_t), written as sigma_t; 0: noiseless readings, "
+                             "the plan's sigma_t kept as the fit's weights")
     parser.add_argument("--seed", type=int, default=0,
                         help="with --simulate: seed of the noise (default 0)")
     parser.add_argument("--coupling-rounds", type=int, default=2,
@@ -229,10 +230,14 @@ def _simulate(args) -> int:
     if args.onboard:
         onboard = cal.onboard_plan(true.sensor_poses()[0], true.n_coils)
         n_onboard, plan = len(onboard), onboard.concat(plan)
+    noise = plan
     if args.noise_t is not None:
-        sigma = np.full(len(plan), float(args.noise_t))
-        plan = cal.Measurements(plan.points_m, plan.currents_a, plan.b_t, sigma)
-    meas = cal.simulate(CoilArray.from_design(true), plan, np.random.default_rng(args.seed))
+        noise = cal.Measurements(plan.points_m, plan.currents_a, plan.b_t,
+                                 np.full(len(plan), float(args.noise_t)))
+    meas = cal.simulate(CoilArray.from_design(true), noise, np.random.default_rng(args.seed))
+    if args.noise_t is not None and args.noise_t > 0:
+        plan = noise  # the file's sigma_t is the noise it was drawn with
+    meas = cal.Measurements(meas.points_m, meas.currents_a, meas.b_t, plan.sigma_t)
     over = np.flatnonzero((np.abs(meas.b_t) >= true.sensors.range_t * (1 - 1e-9)).any(axis=1))
     if len(over):
         k = int(over[0])
