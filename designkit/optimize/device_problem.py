@@ -432,7 +432,9 @@ class DeviceProblem(DesignView):
             "outer_diameter_m": (2 * ro, (self.pitch_of(x) - self.coil_clearance_m
                                           if self.design.array.kind in ("grid", "hex")
                                           else 2 * ro - self.overlap_m(x)), 1,
-                                 "coils, flanges and frame pockets fit at the spacing"),
+                                 "coils, flanges and frame pockets fit at the "
+                                 + ("pitch" if self.design.array.kind in ("grid", "hex")
+                                    else "spacing")),
             "core_protrusion_m": (prot, self.upper[5], 1,
                                   "core top below the upper sensor board"),
             "magnet_bottom_m": (self.magnet_bottom_clearance_m + self.board_top_m,
