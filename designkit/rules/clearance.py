@@ -179,9 +179,10 @@ def standoff_rule(design: Design, asm: Assembly) -> Rule:
              for f, p in enumerate(asm.fixing_xy_m) for k in range(design.n_coils)]
     sd, _ = _closest(pairs)
     keys = ("cad.fixing_inset_m", "cad.standoff_outer_radius_m") + layout_keys(design)[:1]
+    spread = (f"increase {keys[-1]}" if design.array.kind in ("grid", "hex")
+              else f"move the coils ({' / '.join(layout_keys(design))})")
     return wall("standoff_to_pocket", "standoff to the nearest flange pocket", sd, c.min_wall_m,
-                keys, "reduce cad.fixing_inset_m or cad.standoff_outer_radius_m, or increase "
-                f"{keys[-1]}")
+                keys, f"reduce cad.fixing_inset_m or cad.standoff_outer_radius_m, or {spread}")
 
 
 @functools.lru_cache(maxsize=4096)
