@@ -107,20 +107,27 @@ TURN_OVER = ((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
 """Rotation of 180 degrees about the local x axis: an upper part as the lower one."""
 
 
-def _plate_names(p: CadParams, side: str) -> list[str]:
-    """The parts of a frame plate: itself, its one segment printed n times, or each segment."""
-    plate = p.upper if side == "upper" else p.lower
-    base = f"frame_{side}"
+def _pieces(p: CadParams, name: str):
+    """(base name, its plate or mount parameters) of a frame plate or sensor mount."""
+    if name.startswith("frame_"):
+        return name, (p.upper if name == "frame_upper" else p.lower)
+    return name, p.sensor_mount
+
+
+def _piece_names(p: CadParams, name: str) -> list[str]:
+    """The parts of a frame plate or sensor mount: itself, its one segment printed n times,
+    or each segment."""
+    base, plate = _pieces(p, name)
     if plate.segments_identical:
         return [f"{base}_segment"]
     return [f"{base}_s{k + 1}" for k in range(len(plate.segments))] or [base]
 
 
-def _plate_placements(p: CadParams, side: str) -> list[Placement]:
-    """Where a plate's parts go: built in place; a repeated segment turned about the plate's
-    centre."""
-    plate = p.upper if side == "upper" else p.lower
-    names = _plate_names(p, side)
+def _piece_placements(p: CadParams, name: str) -> list[Placement]:
+    """Where a plate's or mount's parts go: built in place; a repeated segment turned about
+    the plate's centre."""
+    base, plate = _pieces(p, name)
+    names = _piece_names(p, name)
     if not plate.segments_identical:
         return [Placement(n) for n in names]
     out = []
@@ -146,9 +153,9 @@ def part_names(p: CadParams, kind: Literal["all", "exported"] = "all") -> list[s
                      + t.suffix)
         if t.core is not None:
             names.append("core" + t.suffix)
-    names += _plate_names(p, "upper") + _plate_names(p, "lower") + ["standoff"]
+    names += _piece_names(p, "frame_upper") + _piece_names(p, "frame_lower") + ["standoff"]
     if p.sensor_holder == "mount":
-        names += ["sensor_mount_upper", "sensor_mount_lower"]
+        names += _piece_names(p, "sensor_mount_upper") + _piece_names(p, "sensor_mount_lower")
     for t in p.types:
         names += _cap_names(p, t)
     names.append("magnet_holder")
@@ -162,18 +169,16 @@ def build_part(p: CadParams, name: str):
     base = _SUFFIX.sub("", name, count=1)
     t = next((t for t in p.types if t.suffix and name.endswith(t.suffix)), p.types[0])
     seg = re.search(r"_s(\d+)$", name)
+    piece = 0 if name.endswith("_segment") else None if seg is None else int(seg.group(1)) - 1
     if base in ("frame_upper", "frame_lower"):
-        plate = p.upper if base == "frame_upper" else p.lower
-        if name.endswith("_segment"):
-            return P.frame_plate(plate, 0)
-        return P.frame_plate(plate, None if seg is None else int(seg.group(1)) - 1)
+        return P.frame_plate(p.upper if base == "frame_upper" else p.lower, piece)
+    if base in ("sensor_mount_upper", "sensor_mount_lower"):
+        return P.sensor_mount(p.sensor_mount, base.rsplit("_", 1)[1], piece)
     builders = {
         "bobbin": lambda: P.bobbin(t.bobbin),
         "bobbin_flange": lambda: P.bobbin_flange(t.bobbin),
         "core": lambda: P.core(t.core),
         "standoff": lambda: P.standoff(p.standoff),
-        "sensor_mount_upper": lambda: P.sensor_mount(p.sensor_mount, "upper"),
-        "sensor_mount_lower": lambda: P.sensor_mount(p.sensor_mount, "lower"),
         "sensor_cap": lambda: P.sensor_cap(t.cap_upper),
         "sensor_cap_upper": lambda: P.sensor_cap(t.cap_upper),
         "sensor_cap_lower": lambda: P.sensor_cap(t.cap_lower),
@@ -223,9 +228,10 @@ def placements(p: CadParams) -> list[Placement]:
     out: list[Placement] = []
     for k in range(len(p.coil_frames)):
         out += _coil_placements(p, k)
-    out += _plate_placements(p, "upper") + _plate_placements(p, "lower")
+    out += _piece_placements(p, "frame_upper") + _piece_placements(p, "frame_lower")
     if p.sensor_holder == "mount":
-        out += [Placement("sensor_mount_upper"), Placement("sensor_mount_lower")]
+        out += (_piece_placements(p, "sensor_mount_upper")
+                + _piece_placements(p, "sensor_mount_lower"))
     for x, y in p.fixing_xy_mm:
         out.append(Placement("standoff", (x, y, p.standoff_top_z_mm)))
     mx, my, mz = p.magnet_centre_mm

@@ -176,12 +176,13 @@ def _coils_of(name: str, p: CadParams) -> str:
 
 def _segment_of(name: str, p: CadParams) -> str:
     """', segment k of n' / ', one of n identical segments' for a plate printed in pieces."""
-    m = re.search(r"frame_(upper|lower)_(s(\d+)|segment)$", name)
+    m = re.search(r"(frame|sensor_mount)_(upper|lower)_(s(\d+)|segment)$", name)
     if m is None:
         return ""
-    n = len((p.upper if m.group(1) == "upper" else p.lower).segments)
-    return (f", one of {n} identical segments (the rods clamp the seams)" if m.group(3) is None
-            else f", segment {m.group(3)} of {n} (the rods clamp the seams)")
+    n = len((p.sensor_mount if m.group(1) == "sensor_mount" else
+             p.upper if m.group(2) == "upper" else p.lower).segments)
+    return (f", one of {n} identical segments (the rods clamp the seams)" if m.group(4) is None
+            else f", segment {m.group(4)} of {n} (the rods clamp the seams)")
 
 
 def _part_row(name: str, shape, qty: int, p: CadParams) -> dict:

@@ -190,6 +190,10 @@ class SensorMountParams:
     fixing_xy_mm: tuple[tuple[float, float], ...]
     fixing_hole_radius_mm: float
     mirror_z_mm: float
+    segments: tuple[tuple[float, float], ...] = ()
+    """As :attr:`PlateParams.segments`: a mount larger than the printer is printed in wedges."""
+    centre_xy_mm: tuple[float, float] = (0.0, 0.0)
+    segments_identical: bool = False
 
     @property
     def top_z_mm(self) -> float:
@@ -370,7 +374,7 @@ def from_design(design: Design, *, mandrel: Mandrel | None = None,
     standoff = StandoffParams(outer_radius_mm=c.standoff_outer_radius_m * mm,
                               hole_radius_mm=c.fixing_hole_radius_m * mm,
                               length_mm=(z_hi - z_lo) * mm)
-    mount = _mount(design, g) if g.sensor_holder == "mount" else None
+    mount = _mount(design, g, printer) if g.sensor_holder == "mount" else None
     holder = MagnetHolderParams(
         magnet_radius_mm=design.magnet.radius_m * mm, magnet_length_mm=design.magnet.length_m * mm,
         press_fit_clearance_mm=c.press_fit_clearance_m * mm,
@@ -420,25 +424,36 @@ def _plate(design: Design, g: Assembly, plate: Plate, printer: PrinterParams) ->
         pocket_depth_mm=c.flange_thickness_m * mm,
         through_radius_mm=g.type_of_coil(s.coil).bore_radius_m * mm) for s in plate.seats)
     outline = np.asarray(plate.outline_m) * mm
-    size = (float(np.ptp(outline[:, 0])), float(np.ptp(outline[:, 1])),
-            (plate.z1_m - plate.z0_m) * mm)
     fixings = tuple((x * mm, y * mm) for x, y in g.fixing_xy_m)
+    poses = [tuple(s.centre_mm) + tuple(np.asarray(s.rotation)[:, 2]) for s in seats]
+    segments, centre, identical = _segmentation(outline, (plate.z1_m - plate.z0_m) * mm,
+                                                fixings, poses, printer)
+    return PlateParams(side=plate.side, outline_mm=tuple(map(tuple, outline)),
+                       z0_mm=plate.z0_m * mm, z1_mm=plate.z1_m * mm, seats=seats,
+                       fixing_xy_mm=fixings, fixing_hole_radius_mm=c.fixing_hole_radius_m * mm,
+                       segments=segments, centre_xy_mm=centre, segments_identical=identical)
+
+
+def _segmentation(outline: np.ndarray, thickness_mm: float, fixings, poses,
+                  printer: PrinterParams) -> tuple[tuple, tuple[float, float], bool]:
+    """(segments, centre, identical) of a plate over ``outline`` (k, 2) mm: no segments when it
+    fits the printer, else wedges about its centre between consecutive ``fixings`` when each
+    of them fits (identical: each is the first turned, with the plate's ``poses``: rows of
+    position and axis, mm)."""
+    size = (float(np.ptp(outline[:, 0])), float(np.ptp(outline[:, 1])), thickness_mm)
     centre = tuple(float(q) for q in outline.mean(axis=0))
     segments: tuple = ()
     if fit_in_build_volume(size, printer.build_volume_mm) is None and len(fixings) >= 3:
         ang = sorted(math.atan2(y - centre[1], x - centre[0]) for x, y in fixings)
         pieces = tuple((a, b if b > a else b + 2 * math.pi)
                        for a, b in zip(ang, ang[1:] + ang[:1]))
-        if all(fit_in_build_volume(_segment_size(outline, centre, a, size[2]),
+        if all(fit_in_build_volume(_segment_size(outline, centre, a, thickness_mm),
                                    printer.build_volume_mm) is not None for a in pieces):
             segments = pieces
     identical = bool(segments) and all(
-        _turned_onto_itself(outline, seats, fixings, centre, a - segments[0][0])
+        _turned_onto_itself(outline, poses, fixings, centre, a - segments[0][0])
         for a, _ in segments)
-    return PlateParams(side=plate.side, outline_mm=tuple(map(tuple, outline)),
-                       z0_mm=plate.z0_m * mm, z1_mm=plate.z1_m * mm, seats=seats,
-                       fixing_xy_mm=fixings, fixing_hole_radius_mm=c.fixing_hole_radius_m * mm,
-                       segments=segments, centre_xy_mm=centre, segments_identical=identical)
+    return segments, centre, identical
 
 
 def segment_outline(outline, centre_xy, angles) -> np.ndarray:
@@ -467,9 +482,9 @@ def turn_about(centre_xy, angle: float) -> tuple[np.ndarray, np.ndarray]:
     return r, centre - r @ centre
 
 
-def _turned_onto_itself(outline, seats, fixings, centre, angle: float) -> bool:
-    """Whether a turn by ``angle`` about ``centre`` maps the plate's outline, seats (centres
-    and axes) and fixings onto themselves (to 1e-6 mm)."""
+def _turned_onto_itself(outline, poses, fixings, centre, angle: float) -> bool:
+    """Whether a turn by ``angle`` about ``centre`` maps the plate's outline, poses (rows of
+    position and axis) and fixings onto themselves (to 1e-6 mm)."""
     r, off = turn_about(centre, angle)
 
     def key(rows):
@@ -479,29 +494,35 @@ def _turned_onto_itself(outline, seats, fixings, centre, angle: float) -> bool:
         rows = np.asarray(rows, dtype=float)
         return rows @ r[:rows.shape[1], :rows.shape[1]].T + off[:rows.shape[1]]
 
-    poses = [tuple(s.centre_mm) + tuple(np.asarray(s.rotation)[:, 2]) for s in seats]
-    poses_t = [tuple(r @ np.asarray(s.centre_mm) + off) + tuple(r @ np.asarray(s.rotation)[:, 2])
-               for s in seats]
+    poses = np.asarray(poses, dtype=float).reshape(-1, 6)
+    poses_t = np.c_[poses[:, :3] @ r.T + off, poses[:, 3:] @ r.T]
     return (key(turned(outline)) == key(outline) and key(turned(fixings)) == key(fixings)
             and key(poses_t) == key(poses))
 
 
-def _mount(design: Design, g: Assembly) -> SensorMountParams:
-    """The sensor mount plate of level, upright boards, mm."""
+def _mount(design: Design, g: Assembly, printer: PrinterParams) -> SensorMountParams:
+    """The sensor mount plate of level, upright boards, mm (in segments like a frame plate
+    when it is larger than the printer)."""
     mm, c = MM_PER_M, design.cad
     top = max(s.centre_m[2] for s in g.upper.seats)
     bottom = max(s.centre_m[2] for s in g.lower.seats)
+    outline = np.asarray(g.upper.outline_m) * mm
+    boards = tuple((s.centre_m[0] * mm, s.centre_m[1] * mm) for s in g.upper.seats)
+    fixings = tuple((x * mm, y * mm) for x, y in g.fixing_xy_m)
+    thickness = (c.board_thickness_m + c.mount_floor_m) * mm
+    segments, centre, identical = _segmentation(outline, thickness, fixings,
+                                                [(x, y, 0.0, 0.0, 0.0, 1.0) for x, y in boards],
+                                                printer)
     return SensorMountParams(
-        outline_mm=tuple((x * mm, y * mm) for x, y in g.upper.outline_m),
-        board_xy_mm=tuple((s.centre_m[0] * mm, s.centre_m[1] * mm) for s in g.upper.seats),
+        outline_mm=tuple(map(tuple, outline)), board_xy_mm=boards,
         sensor_z_mm=(top + design.sensors.offset_m) * mm,
         board_size_mm=(c.board_width_m * mm, c.board_width_m * mm),
         board_thickness_mm=c.board_thickness_m * mm,
         pocket_clearance_mm=c.board_clearance_m * mm, floor_thickness_mm=c.mount_floor_m * mm,
         channel_width_mm=c.channel_width_m * mm, leg_outer_radius_mm=c.standoff_outer_radius_m * mm,
-        leg_bottom_z_mm=g.upper.z1_m * mm,
-        fixing_xy_mm=tuple((x * mm, y * mm) for x, y in g.fixing_xy_m),
-        fixing_hole_radius_mm=c.fixing_hole_radius_m * mm, mirror_z_mm=(top + bottom) / 2 * mm)
+        leg_bottom_z_mm=g.upper.z1_m * mm, fixing_xy_mm=fixings,
+        fixing_hole_radius_mm=c.fixing_hole_radius_m * mm, mirror_z_mm=(top + bottom) / 2 * mm,
+        segments=segments, centre_xy_mm=centre, segments_identical=identical)
 
 
 def _bobbin_and_core(design: Design, g: CoilType) -> tuple[BobbinParams, CoreParams | None]:

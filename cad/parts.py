@@ -170,14 +170,15 @@ def standoff_volume_mm3(p: StandoffParams) -> float:
     return math.pi * (p.outer_radius_mm**2 - p.hole_radius_mm**2) * p.length_mm
 
 
-def sensor_mount(p: SensorMountParams, side: Literal["upper", "lower"] = "upper") -> Part:
+def sensor_mount(p: SensorMountParams, side: Literal["upper", "lower"] = "upper",
+                 segment: int | None = None) -> Part:
     """Board mount of one Hall-sensor array of level boards, in place in the array frame.
 
     Upper: a plate over the frame's outline whose top face is at sensor_z + board/2, a board
     pocket centred on each coil axis (the board's mid-plane is the sensing plane), a cable
     channel from each pocket to the +x edge, and legs standing on the upper frame plate at the
     fixing holes (the M3 rods pass through them). Lower: its mirror image about the array's
-    mid-plane.
+    mid-plane. ``segment``: the piece of a mount printed in segments (:attr:`segments`).
     """
     if side not in ("upper", "lower"):
         raise BadInputError("side", "'upper' or 'lower'", side)
@@ -197,6 +198,9 @@ def sensor_mount(p: SensorMountParams, side: Literal["upper", "lower"] = "upper"
     cuts += [_cyl(p.fixing_hole_radius_mm, p.leg_bottom_z_mm - _EPS, top + _EPS, x, y)
              for x, y in p.fixing_xy_mm]
     mount = Part(body - Part(children=cuts))
+    if segment is not None:  # the wedge of the segment, legs and channels included
+        piece = segment_outline(p.outline_mm, p.centre_xy_mm, p.segments[segment])
+        mount = Part(mount & _prism(piece, p.leg_bottom_z_mm - _EPS, top + _EPS))
     if side == "upper":
         return mount
     return Part(mirror(mount, Plane.XY.offset(p.mirror_z_mm)))
