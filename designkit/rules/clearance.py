@@ -18,7 +18,7 @@ import numpy as np
 
 from ..design import Design
 from ..design.layouts import Layout
-from .geometry import Assembly, CoilType, pocket_solid, standoff_solid
+from .geometry import Assembly, CoilType, coil_axes, pocket_solid, standoff_solid
 from .convex import Box, Cylinder, lower_bound_m, signed_distance
 from .rule import Rule, wall
 
@@ -35,18 +35,17 @@ def layout_keys(design: Design) -> tuple[str, ...]:
 def coil_solid(design: Design, t: CoilType, k: int, what: str) -> Cylinder | None:
     """Coil k's 'winding', 'core', 'envelope' (bobbin: flange radius, both flanges) or
     'pocket' as a cylinder in its pose, m (None: an air coil's core)."""
-    pose = design.coil_poses()[k]
-    axis = tuple(float(q) for q in pose.matrix[:, 2])
+    position, axis = coil_axes(design)[k]
     half = t.coil.length_m / 2
     if what == "winding":
-        return Cylinder(pose.position, axis, half, t.coil.outer_radius_m)
+        return Cylinder(position, axis, half, t.coil.outer_radius_m)
     if what == "core":
         if t.core is None:
             return None
-        c = np.asarray(pose.position) + np.asarray(axis) * t.core.offset_m
+        c = np.asarray(position) + np.asarray(axis) * t.core.offset_m
         return Cylinder(tuple(c), axis, t.core.length_m / 2, t.core.radius_m)
     if what == "envelope":
-        return Cylinder(pose.position, axis, half + design.cad.flange_thickness_m,
+        return Cylinder(position, axis, half + design.cad.flange_thickness_m,
                         t.flange_radius_m)
     return pocket_solid(design, t, k)
 

@@ -31,6 +31,8 @@ TOLERANCE_M = 1e-9
 MAX_OVERHANG_DEG = 45.0
 """Steepest overhang an FDM printer makes without support, degrees from vertical: the largest
 coil tilt the frame plates (printed pockets up, bores along the coil axes) accept."""
+FIXING_SIDES = 16
+"""Sides of the polygon about a standoff that the lower plate's outline takes in."""
 UPRIGHT_TOLERANCE = 1e-12
 """Largest |axis - z| of an upright coil."""
 
@@ -180,13 +182,22 @@ def coil_types(design: Design) -> tuple[tuple[CoilType, ...], tuple[int, ...]]:
     return tuple(types), tuple(type_of)
 
 
+@functools.lru_cache(maxsize=256)
+def coil_axes(design: Design) -> tuple[tuple[tuple[float, float, float],
+                                                tuple[float, float, float]], ...]:
+    """Each coil's winding centre (m) and unit axis, from :meth:`Design.coil_poses` (once per
+    design: the rules read them many times)."""
+    return tuple((tuple(map(float, p.position)), tuple(map(float, p.matrix[:, 2])))
+                 for p in design.coil_poses())
+
+
 def seats(design: Design) -> tuple[tuple[Seat, ...], tuple[Seat, ...]]:
     """(top seats, bottom seats), one per coil: face centre and outward axis."""
     top, bottom = [], []
-    for k, pose in enumerate(design.coil_poses()):
-        axis = pose.matrix[:, 2]
+    for k, (centre, axis) in enumerate(coil_axes(design)):
+        axis = np.asarray(axis)
         half = design.coil_spec(k).length_m / 2
-        c = np.asarray(pose.position)
+        c = np.asarray(centre)
         top.append(Seat(k, tuple(map(float, c + half * axis)), tuple(map(float, axis))))
         bottom.append(Seat(k, tuple(map(float, c - half * axis)), tuple(map(float, -axis))))
     return tuple(top), tuple(bottom)
@@ -264,10 +275,9 @@ def _plate(design: Design, side: str, types, type_of, seat_list, extra_xy) -> Pl
 
 def pocket_solid(design: Design, t: CoilType, k: int) -> Cylinder:
     """Coil k's flange pocket as a cylinder over its whole bobbin (winding + both flanges), m."""
-    pose = design.coil_poses()[k]
+    centre, axis = coil_axes(design)[k]
     half = t.coil.length_m / 2 + design.cad.flange_thickness_m
-    return Cylinder(pose.position, tuple(map(float, pose.matrix[:, 2])), half,
-                    t.pocket_radius_m)
+    return Cylinder(centre, axis, half, t.pocket_radius_m)
 
 
 def standoff_solid(design: Design, xy, z_lo: float, z_hi: float) -> Cylinder:
@@ -313,8 +323,11 @@ def assembly(design: Design) -> Assembly:
     upper = _plate(design, "upper", types, type_of, top, [])
     lower_z1 = max(s.centre_m[2] for s in bottom)
     fixings = _fixings(design, types, type_of, upper.outline_m, lower_z1, upper.z0_m)
-    # the lower plate holds the standoffs as far inside its edge as the upper one does
-    grown = [grown_hull(np.asarray([p]), design.cad.fixing_inset_m) for p in fixings]
+    # the lower plate holds the standoffs as far inside its edge as the upper one does: a
+    # polygon inscribed in the circle of the inset about each (within any corner it sits in)
+    ang = 2 * math.pi * np.arange(FIXING_SIDES) / FIXING_SIDES
+    ring = design.cad.fixing_inset_m * np.c_[np.cos(ang), np.sin(ang)]
+    grown = [np.asarray(p) + ring for p in fixings]
     lower = _plate(design, "lower", types, type_of, bottom, np.vstack(grown) if grown else [])
     c = design.cad
     return Assembly(types, type_of, upper, lower, fixings, _sensor_holder(design),
