@@ -97,9 +97,18 @@ def upper_obstacles(design: Design) -> list:
 def _floor(design: Design, region_xy: np.ndarray) -> float:
     """Lowest magnet centre over ``region_xy``: obstacles' highest point + L_m / 2, m."""
     grown = grown_hull(region_xy, design.magnet.radius_m)
-    tops = [h for h in (highest_point_m(o, grown) for o in upper_obstacles(design))
-            if h is not None]
-    return max(tops, default=0.0) + design.magnet.length_m / 2
+    up = np.array([[0.0, 0.0, 1.0]])
+    obstacles = upper_obstacles(design)
+    tops = sorted(((float(o.support_value(up)[0]), k) for k, o in enumerate(obstacles)),
+                  reverse=True)
+    best = -np.inf
+    for top, k in tops:  # the highest first: one not above the best so far cannot raise it
+        if top <= best:
+            break
+        h = highest_point_m(obstacles[k], grown)
+        if h is not None:
+            best = max(best, h)
+    return (best if np.isfinite(best) else 0.0) + design.magnet.length_m / 2
 
 
 @functools.lru_cache(maxsize=64)
