@@ -42,9 +42,10 @@ from designkit.design import default_design
 from designkit.calibration.learned_inverse import train_learned_inverse
 from designkit.sim.readings import (THESIS_MAE_MM, SensorErrors, SensorSimulator, analog_reading,
                                     case_currents, forward_model, random_positions)
-from firmware_io.localization import (POSITION_ONLY, ConstantVelocityKalman,
-                                      KalmanEstimator, LearnedInverse, SensorModel, calibrate,
-                                      cylinder_field, make_estimator, multipole_field)
+from firmware_io.localization import (POSITION_ONLY, CalibrationSettings,
+                                      ConstantVelocityKalman, KalmanEstimator, LearnedInverse,
+                                      SensorModel, calibrate, cylinder_field, make_estimator,
+                                      multipole_field)
 from firmware_io.mapfile import gradient_tensor
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "localization"
@@ -278,7 +279,8 @@ def _calibration_frames(sim, seed, n_frames):
 def _calibrate(sim, model, seed, n_frames):
     """Run the start-up calibration on simulated frames; report what it recovered."""
     rd, cur = _calibration_frames(sim, seed, n_frames)
-    cal = calibrate(np.concatenate([rd.top_t, rd.bottom_t], 1), cur, model, noise_t=sim.noise_t)
+    cal = calibrate(np.concatenate([rd.top_t, rd.bottom_t], 1), cur, model,
+                    CalibrationSettings(noise_t=sim.noise_t))
     e = sim.errors
     g_true = e.gains[..., :, None] * np.swapaxes(e.rotations, -1, -2)   # reading = G B
     left = (np.einsum("sij,sjk->sik", cal.gain_inverse, g_true.reshape(-1, 3, 3))

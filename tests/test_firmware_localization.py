@@ -475,7 +475,7 @@ def _field_gradient_ref(r):
 
 
 def test_calibration_round_trip_and_bad_input(tmp_path):
-    from firmware_io.localization import SensorCalibration, calibrate
+    from firmware_io.localization import CalibrationSettings, SensorCalibration, calibrate
 
     rng = np.random.default_rng(24)
     model = _model(rng)
@@ -491,6 +491,9 @@ def test_calibration_round_trip_and_bad_input(tmp_path):
         calibrate(b, cur[:, :8], model)
     with pytest.raises(BadInputError, match="currents"):
         calibrate(b[:5], cur[:5], model)   # too few frames for 9 coils
+    for bad in (dict(noise_t=-1e-4), dict(prior_gain=math.nan), dict(iterations=0)):
+        with pytest.raises(BadInputError, match=next(iter(bad))):
+            CalibrationSettings(**bad)
     (tmp_path / "junk.npz").write_bytes(b"junk")
     with pytest.raises(BadInputError, match="calibration"):
         SensorCalibration.load(tmp_path / "junk.npz")

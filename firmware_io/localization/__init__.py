@@ -16,7 +16,7 @@ measured accuracy: docs/localization.md.
 """
 
 from .calibration import (CALIBRATED_RELATIVE_ERROR, UNCALIBRATED_RELATIVE_ERROR,
-                          SensorCalibration, calibrate)
+                          CalibrationSettings, SensorCalibration, calibrate)
 from .estimate import Estimate, Pose
 from .estimator import Estimator
 from .factory import METHODS, estimator_from_map, make_estimator
@@ -32,8 +32,8 @@ from .settings import (MIN_SENSORS_FOR_POSE, POSITION_ONLY, EstimatorSettings,
 from .subtraction_estimator import SubtractionEstimator
 
 __all__ = [
-    "CALIBRATED_RELATIVE_ERROR", "UNCALIBRATED_RELATIVE_ERROR", "SensorCalibration",
-    "calibrate", "Estimate", "Pose", "Estimator", "METHODS", "estimator_from_map",
+    "CALIBRATED_RELATIVE_ERROR", "UNCALIBRATED_RELATIVE_ERROR", "CalibrationSettings",
+    "SensorCalibration", "calibrate", "Estimate", "Pose", "Estimator", "METHODS", "estimator_from_map",
     "make_estimator", "ConstantVelocityKalman", "KalmanEstimator", "LearnedInverse",
     "LearnedEstimator", "MU0", "cylinder_field", "multipole_field", "ModelEstimator",
     "DEFAULT_NOISE_T", "SensorModel", "EstimatorSettings", "POSITION_ONLY",

@@ -118,10 +118,43 @@ def _field_gradient(rows: np.ndarray):
     return rows[:, :3], np.moveaxis(g, 1, -1)
 
 
-def calibrate(frames_t, currents, model: SensorModel, *,
-              noise_t: float = DEFAULT_NOISE_T, prior_gain: float = 0.02,
-              prior_angle_deg: float = 2.0, prior_shift_m: float = 0.5e-3,
-              fit_shift: bool = True, iterations: int = 10) -> SensorCalibration:
+@dataclass(frozen=True)
+class CalibrationSettings:
+    """The options of :func:`calibrate`, checked when made.
+
+    noise_t : T rms per axis of one reading
+    prior_gain : the gains' prior standard deviation (relative, about 1)
+    prior_angle_deg : the mounting angles' prior standard deviation, degrees
+    prior_shift_m : the position errors' prior standard deviation per axis, m
+    fit_shift : fit the sensors' position errors where the map gives the coils' field gradient
+    iterations : Gauss-Newton iterations at most, per sensor
+    """
+
+    noise_t: float = DEFAULT_NOISE_T
+    prior_gain: float = 0.02
+    prior_angle_deg: float = 2.0
+    prior_shift_m: float = 0.5e-3
+    fit_shift: bool = True
+    iterations: int = 10
+
+    def __post_init__(self):
+        for name in ("noise_t", "prior_gain", "prior_angle_deg", "prior_shift_m"):
+            val = getattr(self, name)
+            if not (isinstance(val, (int, float, np.integer, np.floating))
+                    and math.isfinite(val) and val > 0):
+                raise BadInputError(name, "a finite number > 0", val)
+        if not (isinstance(self.iterations, (int, np.integer)) and self.iterations >= 1):
+            raise BadInputError("iterations", "an integer >= 1", self.iterations)
+
+    @property
+    def prior(self) -> np.ndarray:
+        """(9,) the priors' standard deviations: gains - 1 (3), angles (3) rad, shift (3) m."""
+        return np.r_[np.full(3, self.prior_gain), np.full(3, math.radians(self.prior_angle_deg)),
+                     np.full(3, self.prior_shift_m)]
+
+
+def calibrate(frames_t, currents, model: SensorModel,
+              settings: CalibrationSettings = CalibrationSettings()) -> SensorCalibration:
     """Per-sensor calibration from frames with the coils driven and the magnet away.
 
     The device runs it at start-up with the finger magnet away from the arrays: drive the
@@ -147,8 +180,8 @@ def calibrate(frames_t, currents, model: SensorModel, *,
     currents : (k, n_coils) A -- each frame's currents; together they must excite every coil
         independently (rank n_coils + 1 with the offset)
     model : SensorModel
-    noise_t : float, T rms per axis of one reading
-    prior_gain, prior_angle_deg, prior_shift_m : prior standard deviations (see above)
+    settings : CalibrationSettings -- the reading's noise, the priors' standard deviations (see
+        above), whether to fit the position errors, the iterations
 
     Returns
     -------
@@ -162,22 +195,18 @@ def calibrate(frames_t, currents, model: SensorModel, *,
     k = len(meas)
     if i.shape != (k, nc) or not np.all(np.isfinite(i)):
         raise BadInputError("currents", f"finite, shape ({k}, {nc}), A", f"shape {i.shape}")
-    for name, val in (("noise_t", noise_t), ("prior_gain", prior_gain),
-                      ("prior_angle_deg", prior_angle_deg), ("prior_shift_m", prior_shift_m)):
-        if not (math.isfinite(val) and val > 0):
-            raise BadInputError(name, "a finite number > 0", val)
-    prior_all = np.r_[np.full(3, prior_gain), np.full(3, math.radians(prior_angle_deg)),
-                      np.full(3, prior_shift_m)]
+    st = settings
+    prior_all = st.prior
     gi = np.empty((n, 3, 3))
     off = np.empty((n, 3))
     shift = np.zeros((n, 3))
     coil = np.empty((n, 3, nc))
     cov = np.empty((n, nc + 1, nc + 1))
     for s in range(n):
-        kk, off[s], w, cov[s] = _measured_response(meas[:, s], i, noise_t, str(s))
-        shifts = (fit_shift and model.gradient_known is not None
+        kk, off[s], w, cov[s] = _measured_response(meas[:, s], i, st.noise_t, str(s))
+        shifts = (st.fit_shift and model.gradient_known is not None
                   and bool(model.gradient_known[s]))
-        theta = _fit_sensor_pose(model, s, kk, w, prior_all[:9 if shifts else 6], iterations)
+        theta = _fit_sensor_pose(model, s, kk, w, prior_all[:9 if shifts else 6], st.iterations)
         g_mat = (1.0 + theta[:3])[:, None] * (np.eye(3) - _skew(theta[3:6]))
         gi[s] = np.linalg.inv(g_mat)
         if shifts:
