@@ -161,8 +161,10 @@ def _subtraction_error(make, size, locs, pos, mag, ind):
     return res, (pos, np.linalg.norm(sub, axis=-1).max(axis=1), e_naive, e_cores)
 
 
-def _case_rows(sim, locs, region, case, cur, pos, mag, ind, ind_jac):
-    """Every method's errors on one (region, field case); returns (table rows, errors)."""
+def _case_rows(sim, locs, region, case, cur, pos, fields):
+    """Every method's errors on one (region, field case); ``fields``: the magnet's field, the
+    cores' induced field and its Jacobian at ``pos``. Returns (table rows, errors)."""
+    mag, ind, ind_jac = fields
     n = len(pos)
     rd = sim.read(pos, cur, parts=(mag, ind))
     errs = {m: np.empty(n) for m in METHODS}
@@ -241,7 +243,7 @@ def run(out_dir=DEFAULT_OUT, n: int = 1000, seed: int = 0, *, map_path=None,
                 make, size, locs, pos, mag, ind)
         for case in CASES:
             cur = case_currents(case, rng.uniform(0, 20, len(pos)), model.n_coils, seed=seed + 7)
-            rows, errs = _case_rows(sim, locs, region, case, cur, pos, mag, ind, ind_jac)
+            rows, errs = _case_rows(sim, locs, region, case, cur, pos, (mag, ind, ind_jac))
             results["rows"] += rows
             errors_store[(region, case)] = (pos, errs)
     results["kalman"] = _kalman(sim, model, rng, quick, locs)

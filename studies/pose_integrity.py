@@ -256,11 +256,17 @@ def run_condition(est, sim, truth, cond: str, mode: str, seed: int) -> dict:
     crb = _crb_mae(est, {"pos": truth["pos"][trusted], "dirs": truth["dirs"][trusted]},
                    readings[trusted], mode == "prior") if len(trusted) else np.zeros(0)
     force = _force_errors(sim, truth, est_pos, est_m, trusted[:FORCE_CHECKS], rng)
-    return _summary(cond, mode, ok, err, ang, pl, plu, named, excluded_any, crb, force, ts,
-                    truth["pos"][:, 2])
+    fixes = {"ok": ok, "err": err, "ang": ang, "pl": pl, "plu": plu, "named": named,
+             "excluded_any": excluded_any, "ts": ts}
+    return _summary(cond, mode, fixes, crb, force, truth["pos"][:, 2])
 
 
-def _summary(cond, mode, ok, err, ang, pl, plu, named, excluded_any, crb, force, ts, z) -> dict:
+def _summary(cond, mode, fixes: dict, crb, force, z) -> dict:
+    """One condition's row from its per-fix arrays ``fixes`` (ok, err m, ang rad, pl m, plu rad,
+    named, excluded_any, ts s), the trusted fixes' Cramer-Rao MAE (m), the force errors and
+    the true heights ``z`` (m)."""
+    ok, err, ang, pl, plu, ts = (fixes[k] for k in ("ok", "err", "ang", "pl", "plu", "ts"))
+    named, excluded_any = fixes["named"], fixes["excluded_any"]
     n, t = len(ok), ok
     bands = {f"{lo}-{hi} mm": float(ok[(z >= lo / 1e3) & (z < hi / 1e3)].mean())
              for lo, hi in ((20, 35), (35, 50), (50, 70))}
