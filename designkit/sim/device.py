@@ -46,8 +46,8 @@ class SimulatedDevice:
     seed : int
     drive : firmware_io.mapfile.drive.DriveRecord, optional
         The coils' drive (default: :func:`designkit.model.electrical.drive_data` of the design's
-        coil): its supply, driver, and the first coil's R (at the operating temperature) and L
-        are the simulated coils'.
+        coils): its supply, driver, and each coil's R (at the operating temperature) and L are
+        the simulated coils' (a design with coils of several sizes drives each by its own).
 
     The coil bus runs at 1 MHz (the PCA9685s on their own adapter: Fm+, per the PCA9685
     datasheet), the sensor bus at 400 kHz (the TCA9548A's limit); each has its own simulated
@@ -61,8 +61,8 @@ class SimulatedDevice:
         n = self.array.n_coils
         self.drive = (drive if drive is not None
                       else drive_data(design, [Coil.of_design(design, k) for k in range(n)]))
-        self.resistance_ohm = self.drive.resistance_ohm[0]
-        self.inductance_h = self.drive.inductance_h[0]
+        self.resistance_ohm = np.asarray(self.drive.resistance_ohm, float)   # (n,) ohm
+        self.inductance_h = np.asarray(self.drive.inductance_h, float)       # (n,) H
         self.supply_v = self.drive.supply_voltage_v
         self.noise_t = float(noise_t)
         self.rng = np.random.default_rng(seed)
@@ -81,7 +81,7 @@ class SimulatedDevice:
         boards = [PCA9685(self.coil_bus, 0x40 + b, sleep=self.coil_clock.sleep)
                   for b in range(n_boards)]
         # the runner commands voltages: the drive may apply any voltage within the supply
-        self.coils = CoilDriver(boards, [self.drive.drives[0]] * n, sleep=self.coil_clock.sleep)
+        self.coils = CoilDriver(boards, list(self.drive.drives), sleep=self.coil_clock.sleep)
 
         self.sensor_clock = SimClock()
         self.sensor_bus = SimBus(scl_hz=400e3, clock=self.sensor_clock)
@@ -206,9 +206,9 @@ class SimulatedDevice:
                 sensor.field_t = tuple(bi)
 
         amp = min(CALIBRATION_CURRENT_A if current_a is None else current_a,
-                  self.supply_v / self.resistance_ohm)
+                  self.supply_v / float(self.resistance_ohm.max()))
         currents = calibration_currents(self.array.n_coils, amp, frames)
-        tau = self.inductance_h / self.resistance_ohm
+        tau = float(np.max(self.inductance_h / self.resistance_ohm))   # the slowest coil
         readings, applied = record_calibration(self.coils, self.sensors, currents,
                                                settle_s=7 * tau, sleep=settle)
         settle(7 * tau)          # coils off: decayed before the run starts
