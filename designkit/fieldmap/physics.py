@@ -63,8 +63,8 @@ class MapPhysics:
 
     def saturation(self, array: CoilArray) -> tuple[np.ndarray, np.ndarray]:
         """Currents (n_s,) A and per-coil factors (n_s, n_coils) on the columns of A
-        (:meth:`CoilArray.saturation_correction`; 1 for air coils)."""
-        if array.coupled() is None:  # no iron: nothing saturates (and no solve to pay for)
+        (:meth:`CoilArray.saturation_correction`; 1 for air coils and linear cores)."""
+        if not array.saturating_coils():  # air or linear cores: nothing to solve for
             cur = np.array([0.0, 1.0])
             return cur, np.ones((2, array.n_coils))
         # 7 currents: linear interpolation between them follows a 13-point curve closely (the

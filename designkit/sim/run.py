@@ -34,7 +34,7 @@ from .device import SimulatedDevice
 from .faults import FaultSchedule
 from .loop import LoopTiming, simulate
 from .plot import plot_run
-from .report import force_error_causes, summarize, write_run_csv
+from .report import force_error_causes, saturation_summary, summarize, write_run_csv
 from .trajectory import Trajectory, poke_trajectory, slide_trajectory, tilt_trajectory
 
 MAX_DURATION_S = 600.0
@@ -152,6 +152,9 @@ def run_simulation(settings: RunSettings = RunSettings(), *, design=None, map_pa
     res = simulate(device, factory, path, duration_s=duration, timing=timing,
                    faults=schedule, scene_force=SceneForce(scene).force, progress=progress)
     summary = summarize(res, force_error_causes(device, fmap, res))
+    sat = saturation_summary(device, fmap, res, drive.current_limit_a)
+    if sat:
+        summary["saturation"] = sat
     summary.update({"object": st.obj, "trajectory": str(st.trajectory), "design": design.name,
                     "rows": st.rows, "lambda_n_per_m": lam, "method": st.method,
                     "unipolar": st.unipolar, "keep_sensors": list(st.keep_sensors),
