@@ -19,6 +19,8 @@ class MapPhysics:
 
     moment_a_m2: np.ndarray
     max_current_a: float
+    magnet_size_m: tuple | None = None
+    """(radius, length) m of the finger magnet's cylinder (:meth:`bias_force_finite`)."""
     source: str = "designkit.cores.coupled (all cores solved together, linear cores)"
 
     def sensor_positions(self, array: CoilArray) -> np.ndarray:
@@ -35,8 +37,16 @@ class MapPhysics:
         return array.actuation_matrix(np.asarray(points, float))
 
     def bias_force(self, array: CoilArray, points) -> np.ndarray:
-        """F0 (n, 3) N on the magnet at ``points`` at zero current."""
+        """F0 (n, 3) N on the magnet, as a point dipole, at ``points`` at zero current."""
         return array.bias_force(np.asarray(points, float), self.moment_a_m2)
+
+    def bias_force_finite(self, array: CoilArray, points) -> np.ndarray:
+        """F0 (n, 3) N on the magnet as the uniformly magnetized cylinder it is
+        (:attr:`magnet_size_m`; ~20 x the dipole's cost), at ``points`` at zero current: the
+        map's per-core tables carry its difference from the dipole (docs/fieldmap.md, "The
+        magnet's finite size")."""
+        return array.bias_force(np.asarray(points, float), self.moment_a_m2,
+                                magnet_size_m=self.magnet_size_m)
 
     def sensor_induced(self, array: CoilArray, magnet_positions, chunk: int = 64) -> np.ndarray:
         """(n, n_sensors, 3) T: the field of the magnet-magnetized cores at the sensors."""
@@ -76,4 +86,5 @@ class MapPhysics:
 def map_physics(design) -> MapPhysics:
     """The one place the map's physics comes from (see :class:`MapPhysics`)."""
     return MapPhysics(np.asarray(design.magnet.moment_vector_a_m2, float),
-                      design.drive.max_current_a)
+                      design.drive.max_current_a,
+                      (design.magnet.radius_m, design.magnet.length_m))

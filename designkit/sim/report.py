@@ -292,7 +292,11 @@ def force_error_causes(device: SimulatedDevice, fieldmap, result: SimulationResu
     a_lin = device.array.actuation_matrix(q)
     f_lin_q = np.einsum("kij,kjl->kil", fm, a_lin[:, 3:, :])
     f_exact_q = np.einsum("kij,kjl->kil", fm, device.saturated(q, a_lin, i_cmd)[:, 3:, :])
-    f0_exact_q = bias_force_any(device.array, q, m_est)
+    # F0 at the estimate: the point dipole's there, plus the magnet's finite-size part at the
+    # true position (a few % of F0, smooth: its change over the localization error is small)
+    f0_exact_q = (bias_force_any(device.array, q, m_est)
+                  + np.stack([device.bias.at(k) for k in run])
+                  - bias_force_any(device.array, device.path_m[run], device.moment_steps[run]))
     s_map = fieldmap.saturation_table().factor_at(i_cmd)          # (k, n)
     inside = _inside(fieldmap, q)
     f_map_q = np.zeros_like(f_exact_q)
