@@ -110,7 +110,7 @@ def run_simulation(settings: RunSettings = RunSettings(), *, design=None, map_pa
     """
     st = settings
     design = design if isinstance(design, Design) else load_design(design)
-    virtual, path, duration, schedule = _checked_inputs(st)
+    virtual, path, duration, schedule = _checked_inputs(st, design)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     array = array if array is not None else CoilArray.from_design(design)
@@ -170,9 +170,9 @@ def run_simulation(settings: RunSettings = RunSettings(), *, design=None, map_pa
     return summary
 
 
-def _checked_inputs(st: RunSettings):
-    """The run's inputs, checked: (virtual object, trajectory from a file or None for a scripted
-    one, duration s, fault schedule)."""
+def _checked_inputs(st: RunSettings, design: Design):
+    """The run's inputs, checked: (virtual object, trajectory from a file -- inside the design's
+    workspace -- or None for a scripted one, duration s, fault schedule)."""
     if st.rows not in ("force", "fz"):
         raise BadInputError("--rows", "'force' (3-D) or 'fz' (the thesis' vertical force)",
                             st.rows)
@@ -185,7 +185,7 @@ def _checked_inputs(st: RunSettings):
                             list(st.keep_sensors))
     virtual = scenefile.make_object(st.obj)
     scripted = st.trajectory in SCRIPTED_DURATION_S
-    path = None if scripted else Trajectory.from_csv(st.trajectory)
+    path = None if scripted else Trajectory.from_csv(st.trajectory, design.workspace_region())
     duration = float(st.duration_s or (path.duration_s if path is not None
                                         else SCRIPTED_DURATION_S[st.trajectory]))
     if not 0 < duration <= MAX_DURATION_S:
