@@ -126,6 +126,10 @@ def _print(res: dict) -> None:
             if k in sat:
                 print(f"  runner's model vs exact saturating cores, {k:15s}: RMS "
                       f"{sat[k]['rel_rms'] * 100:.2f} %, max {sat[k]['rel_max'] * 100:.2f} %")
+        if "commands_vs_rendered_mean_rel" in sat:
+            print(f"  the commands through that model against the rendered force, "
+                  f"{sat['below_bound_steps']} steps below the bounds: mean "
+                  f"{sat['commands_vs_rendered_mean_rel'] * 100:+.2f} %")
         if dl.get("steps"):
             print(f"  delivered Fz - rendered Fz at those steps: mean "
                   f"{dl['fz_error_mean_n'] * 1e3:+.0f} mN, RMS {dl['fz_error_rms_n'] * 1e3:.0f} "
