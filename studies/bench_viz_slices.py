@@ -30,8 +30,8 @@ from studies._common import finish, load_average
 from studies.bench_constant import matmul_seconds
 from designkit import default_design
 from designkit.model.array import array_for_design
-from designkit.viz.common import _RES
-from designkit.viz.physics import (FIELDLINE_TOLERANCE, PICTURE_TOLERANCE, _footprint_half_m,
+from designkit.viz.common import GRID_POINTS
+from designkit.viz.physics import (FIELDLINE_TOLERANCE, PICTURE_TOLERANCE, footprint_half_m,
                                    array_field, resolve_currents)
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "bench_viz_slices"
@@ -40,8 +40,8 @@ DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "bench_viz_slices"
 
 def slice_points(design, quality):
     """The two slices' points (as slice_data lays them out), (n, 3) m."""
-    nx, nz = _RES[quality]["slice"]
-    half = _footprint_half_m(design)
+    nx, nz = GRID_POINTS[quality]["slice"]
+    half = footprint_half_m(design)
     x = np.linspace(-half, half, nx)
     vert = np.stack(np.meshgrid(x, [0.0], np.linspace(0.002, design.workspace.z_max_m, nz),
                                 indexing="ij"), -1).reshape(-1, 3)
@@ -52,10 +52,10 @@ def slice_points(design, quality):
 
 def volume_points(design, quality):
     """The field lines' volume grid (as field_line_data lays it out), (n, 3) m."""
-    half = _footprint_half_m(design) + 0.02
+    half = footprint_half_m(design) + 0.02
     lo = (-half, -half, -design.coil.length_m - 0.03)
     hi = (half, half, design.workspace.z_max_m + 0.03)
-    axes = [np.linspace(a, b, d) for a, b, d in zip(lo, hi, _RES[quality]["volume"])]
+    axes = [np.linspace(a, b, d) for a, b, d in zip(lo, hi, GRID_POINTS[quality]["volume"])]
     return np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
 
 

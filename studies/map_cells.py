@@ -214,8 +214,8 @@ def run(out_dir=DEFAULT_OUT, quick: bool = False) -> dict:
     # (20 mm since; the cells' heights below are above the coil tops either way)
     design = default_design().replace(**{"workspace.z_min_m": 0.010})
     if quick:  # air coils over a small box: no coupled solve, seconds
-        design = design.replace(**{"core": None, "workspace.half_width_m": 0.03,
-                                   "workspace.z_max_m": 0.03})
+        design = design.replace(**{"core": None, "workspace.shape": "box",
+                                   "workspace.half_width_m": 0.03, "workspace.z_max_m": 0.03})
     arr = CoilArray.from_design(design)
     lo, hi = fieldmap.default_box(design)
     rng = np.random.default_rng(20261123)

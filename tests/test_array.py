@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from designkit import Coil, Pose, default_design
-from designkit.model.array import (ROWS, CoilArray, condition_number, force_matrix,
-                                   g5_from_gradient, gradient_from_g5, max_vertical_force,
-                                   skew_matrix, fz_per_amp)
+from designkit.model.array import (ROWS, CoilArray, force_matrix, g5_from_gradient,
+                                   gradient_from_g5, skew_matrix)
+from designkit.model.metrics import condition_number, fz_per_amp, max_vertical_force
 from designkit.errors import BadInputError, DesignRuleError
 from designkit.field import dipole_field
 
@@ -143,7 +143,7 @@ def test_metrics_on_the_array(arr):
 
 
 def test_workspace_metrics_png(tmp_path, arr):
-    from designkit.model.array import workspace_metrics
+    from designkit.model.metrics import workspace_metrics
 
     png = tmp_path / "metrics.png"
     res = workspace_metrics(AIR, spacing=0.025, heights=(0.03,), out_png=png, array=arr)

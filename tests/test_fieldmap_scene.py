@@ -8,6 +8,7 @@
 """
 
 import math
+import tomllib
 
 import numpy as np
 import pytest
@@ -16,9 +17,9 @@ from designkit import default_design, fieldmap
 from designkit.model.array import CoilArray
 from designkit.cli import main
 from designkit.cores import coupled as cp
-from designkit.design import design_to_toml
+from designkit.design import design_from_dict, design_to_toml
 from designkit.errors import BadInputError
-from designkit.fieldmap.symmetry import Orbits, array_symmetries, random_orbits
+from designkit.fieldmap.symmetry import Orbits, random_orbits, sampling_group
 from designkit.geometry.pose import Pose
 from designkit.render import Hemisphere
 from designkit.sim import SimulatedDevice
@@ -28,37 +29,46 @@ from firmware_io.scene import Scene
 from _runner_fakes import HoldTracker, PlaneScene, TruthEstimator, clipped_lstsq, md10c_drive
 
 AIR = default_design().replace(core=None)
+GRID = ""
+HEX = '[array]\nlayout = "hex"\nrings = 1\npitch_m = 0.044\n'
+RING = '[array]\nlayout = "ring"\ncount = 6\nradius_m = 0.075\ntilt_deg = 30\n'
 
 
-def test_square_array_has_the_eight_symmetries_and_an_off_centre_axis_fewer():
+def _layout(toml: str):
+    return design_from_dict(tomllib.loads(toml))
+
+
+def test_square_array_has_the_eight_symmetries_and_an_off_centre_coil_fewer():
     arr = CoilArray.from_design(AIR)
-    assert len(array_symmetries(arr, [0.0, 0.0])) == 8
-    # about an axis through x = 50 mm only the identity and the mirror y -> -y remain
-    got = array_symmetries(arr, [0.05, 0.0])
-    assert len(got) == 2 and np.allclose(got[1].g, np.diag([1.0, -1.0, 1.0]))
+    assert len(arr.symmetries()) == 8
+    # a coil moved off the square leaves only the mirror through it and the array's centre
+    moved = CoilArray(arr.coils[:2] + (arr.coils[2].moved((0.06, 0.06, -0.05)),)
+                      + arr.coils[3:])
+    got = moved.symmetries()
+    assert len(got) == 2 and np.allclose(got.elements[1].g[:2, :2] @ [1.0, 1.0], [1.0, 1.0])
 
 
 def test_orbit_fill_equals_direct_evaluation_at_the_images():
     arr = CoilArray.from_design(AIR)
-    group = array_symmetries(arr, [0.0, 0.0])
+    group = arr.symmetries()
     rng = np.random.default_rng(3)
     p = rng.uniform([-0.07, -0.07, 0.02], [0.07, 0.07, 0.06], (4, 3))
-    pts = np.concatenate([p @ s.g.T for s in group])
-    orb = Orbits.of(pts, group, np.zeros(2))
+    pts = np.concatenate([p @ s.g.T for s in group.elements])
+    orb = Orbits.of(pts, group)
     assert len(orb.reps) == 4
     a = arr.actuation_matrix(pts)
     np.testing.assert_allclose(orb.expand_actuation(a[orb.reps]), a, rtol=0,
                                atol=1e-12 * np.abs(a).max())
     # a point set that is not closed under the group keeps only the elements that map it
-    half = Orbits.of(pts[:8], group, np.zeros(2))
+    half = Orbits.of(pts[:8], group)
     assert len(half.reps) >= 4 and len(half.group) >= 1
 
 
 def test_random_check_points_are_images_in_the_box_and_their_fill_is_direct():
     arr = CoilArray.from_design(AIR)
-    group = array_symmetries(arr, [0.0, 0.0])
+    group = arr.symmetries()
     lo, hi = np.array([-0.07, -0.07, 0.02]), np.array([0.07, 0.07, 0.06])
-    pts, orb = random_orbits(lo, hi, 20, group, np.zeros(2), np.random.default_rng(5))
+    pts, orb = random_orbits(lo, hi, 20, group, np.random.default_rng(5))
     assert pts.shape == (20, 3) and np.all((pts >= lo) & (pts <= hi))
     assert len(orb.reps) == 3 and np.array_equal(orb.reps, [0, 1, 2])  # ceil(20 / 8)
     assert len(np.unique(np.round(pts, 12), axis=0)) == 20
@@ -67,8 +77,7 @@ def test_random_check_points_are_images_in_the_box_and_their_fill_is_direct():
                                atol=1e-12 * np.abs(a).max())
     # a box 140 x 100 mm: the quarter turns do not map it onto itself, the mirrors do
     hi2 = np.array([0.07, 0.05, 0.06])
-    pts2, orb2 = random_orbits(-hi2 * [1, 1, -0.5], hi2, 8, group, np.zeros(2),
-                               np.random.default_rng(5))
+    pts2, orb2 = random_orbits(-hi2 * [1, 1, -0.5], hi2, 8, group, np.random.default_rng(5))
     assert len(orb2.group) == 4 and len(orb2.reps) == 2
     assert np.all(np.abs(pts2[:, :2]) <= hi2[:2])
     a2 = arr.actuation_matrix(pts2)
@@ -79,11 +88,11 @@ def test_random_check_points_are_images_in_the_box_and_their_fill_is_direct():
 def test_bias_force_symmetry_of_the_coupled_array():
     design = default_design().replace(**{"array.rows": 1, "array.columns": 2})
     arr = CoilArray.from_design(design)
-    group = array_symmetries(arr, [0.0, 0.0])
+    group = sampling_group(arr, design.magnet.moment_vector_a_m2)
     assert len(group) == 4  # 1 x 2: the rectangle's group (180 degrees, two mirrors)
     p = np.array([[0.012, 0.007, 0.03]])
-    pts = np.concatenate([p @ s.g.T for s in group])
-    orb = Orbits.of(pts, group, np.zeros(2))
+    pts = np.concatenate([p @ s.g.T for s in group.elements])
+    orb = Orbits.of(pts, group)
     f = arr.bias_force(pts, design.magnet.moment_vector_a_m2)
     np.testing.assert_allclose(orb.expand_force(f[orb.reps]), f, rtol=1e-10,
                                atol=1e-12 * np.abs(f).max())
@@ -106,32 +115,36 @@ def test_split_lu_only_for_symmetric_arrays_and_it_solves_the_system():
     for j in range(2):
         mat[j * n:(j + 1) * n, j * n:(j + 1) * n] = m.self_block()
         i = 1 - j
-        mat[j * n:(j + 1) * n, i * n:(i + 1) * n] = -m.factors()[:, None] * \
-            cp.ArraySystem._cross_block(m, poses[i], m, poses[j])
+        mat[j * n:(j + 1) * n, i * n:(i + 1) * n] = system.coupling_block(m, poses[i], m,
+                                                                            poses[j])
     b = np.random.default_rng(0).random((2 * n, 3))
     np.testing.assert_allclose(mat @ system.solve(b), b, atol=1e-10)
 
 
-def test_cross_blocks_from_their_images_equal_the_computed_blocks():
-    design = default_design()
-    coil = CoilArray.from_design(design).coils[0]
-    model = cp._core_model_of(coil, cp.M_MAX)
-    pa = Pose()
-    d = np.array([0.05, 0.1, 0.0])
-    base = cp.ArraySystem._cross_block(model, pa, model, Pose(position=tuple(d)))
-    cache = {(id(model), id(model), cp._rel_key(pa, Pose(position=tuple(d)))): base}
-    for g in cp._D4:
-        pb = Pose(position=tuple(np.r_[g @ d[:2], 0.0]))
-        got = cp._block_by_symmetry(cache, model, model, cp._rel_key(pa, pb))
-        want = cp.ArraySystem._cross_block(model, pa, model, pb)
-        assert np.abs(got - want).max() < 1e-12 * np.abs(want).max()
+@pytest.mark.parametrize("toml", [GRID, HEX, RING])
+def test_cross_blocks_from_their_images_equal_the_computed_blocks(toml):
+    # every cross block the solve takes from an image under the group (T(h_j) B T(h_i)^T)
+    # against the block computed directly at its own placement: a turn applied as R instead
+    # of R^T, an action of the wrong core, or a symmetry the layout lacks moves them by O(1)
+    system = CoilArray.from_design(_layout(toml)).coupled()
+    reps, pairs = system.placements()
+    assert len(reps) < len(pairs)
+    m, poses = system.models, system.poses
+    for jj, ii, key, hj, hi in pairs:
+        if hj is None:
+            continue
+        got = cp.turn(cp.turn(reps[key], m[jj], hj).T, m[ii], hi).T
+        want = system.coupling_block(m[ii], poses[ii], m[jj], poses[jj])
+        # a hexagon's positions carry rounding of cos / sin: 1e-11, not 1e-12
+        assert np.abs(got - want).max() < 1e-11 * np.abs(want).max()
 
 
-def test_coil_columns_from_their_images_equal_the_computed_columns(thesis_array):
+@pytest.mark.parametrize("toml", [GRID, HEX, RING])
+def test_coil_columns_from_their_images_equal_the_computed_columns(toml):
     # the projected winding field of each coil on each core: the columns the coupled solve
-    # takes from an image under the square's symmetries against every column computed
-    # directly (a wrong turn, or a ring not symmetric under the group, moves them by O(1))
-    arr = thesis_array  # the session's default array (conftest): its one coupled solve
+    # takes from an image under the group against every column computed directly (a wrong
+    # turn, or a ring not symmetric under the group, moves them by O(1))
+    arr = CoilArray.from_design(_layout(toml))
     system = arr.coupled()
     rhs = system.factors[:, None] * system.coil_columns()
     want = np.zeros_like(rhs)
@@ -147,13 +160,14 @@ def test_coil_columns_from_their_images_equal_the_computed_columns(thesis_array)
 
 
 def test_mode_transform_is_an_orthogonal_representation_and_turn_applies_it():
-    model = cp._core_model_of(CoilArray.from_design(default_design()).coils[0], cp.M_MAX)
-    els = [np.eye(2)] + cp._D4
+    model = CoilArray.from_design(default_design()).coupled().models[0]
+    els = [g.g[:2, :2] for g in CoilArray.from_design(default_design()).symmetries().elements]
+    els += [np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]) for a in (0.3, 2.0)]
     t = {k: cp.mode_transform(model, g) for k, g in enumerate(els)}
     b = np.random.default_rng(2).random((model.n_unknowns, 7))
     for a, ga in enumerate(els):
         np.testing.assert_allclose(t[a] @ t[a].T, np.eye(model.n_unknowns), atol=1e-12)
-        np.testing.assert_allclose(cp._turn(b, model, ga), t[a] @ b, atol=1e-12)
+        np.testing.assert_allclose(cp.turn(b, model, ga), t[a] @ b, atol=1e-12)
         for c, gc in enumerate(els):  # T(g h) = T(g) T(h)
             np.testing.assert_allclose(cp.mode_transform(model, ga @ gc), t[a] @ t[c],
                                        atol=1e-12)
@@ -264,11 +278,23 @@ def test_cli_scene_compile_builds_its_scene_map(tmp_path):
                  str(tmp_path / "m2.npz"), "--out", str(out), "--quiet"]) == 1
 
 
+def _assembled(system) -> np.ndarray:
+    """M assembled block by block, every cross block computed at its own placement."""
+    n, off = system.n_unknowns, system.offsets
+    m, poses = system.models, system.poses
+    mat = np.zeros((n, n))
+    for j in range(len(m)):
+        for i in range(len(m)):
+            mat[off[j]:off[j + 1], off[i]:off[i + 1]] = (
+                m[j].self_block() if i == j
+                else system.coupling_block(m[i], poses[i], m[j], poses[j]))
+    return mat
+
+
 def _solves_the_assembled_system(system, seed, columns):
     """The split solve (and its transpose) against M assembled block by block."""
+    mat = _assembled(system)
     n = system.n_unknowns
-    mat = np.zeros((n, n))
-    system._assemble(mat, {})
     r = np.random.default_rng(seed).standard_normal((n, columns))
     np.testing.assert_allclose(mat @ system.solve(r), r, atol=1e-10 * np.abs(r).max())
     np.testing.assert_allclose(mat.T @ system.solve(r, transpose=True), r,
@@ -284,6 +310,30 @@ def test_split_lu_of_the_square_array_pairs_the_two_dimensional_blocks(thesis_ar
     big = [lu for _, lu in system._sym.blocks if lu[0].shape[0] == 1056]
     assert big[0] is big[1]
     _solves_the_assembled_system(system, seed=5, columns=3)
+
+
+@pytest.mark.parametrize("toml, sizes", [
+    (HEX, [192, 256, 336, 352, 528, 528, 528, 528]),
+    (RING, [192, 192, 272, 272, 464, 464, 464, 464])])
+def test_split_of_hexagonal_and_tilted_arrays_solves_the_assembled_system(toml, sizes):
+    # C6v on 7 upright cores (the centre on the axis) and on a ring of 6 cores tilted 30
+    # degrees (frames adapted to the group): the components of its 6 irreducible types, the
+    # two 2-dimensional ones split by a reflection into equal twins; against M assembled
+    # from blocks computed at every placement (a symmetry the layout lacks, or a turn of the
+    # wrong core, fails by O(1))
+    system = CoilArray.from_design(_layout(toml)).coupled()
+    assert len(system.group) == 12 and system._lu is None
+    assert sorted(lu[0].shape[0] for _, lu in system._sym.blocks) == sizes
+    _solves_the_assembled_system(system, seed=7, columns=2)
+
+
+def test_a_free_layout_without_symmetry_gets_the_plain_solve():
+    d = _layout('[array]\nlayout = "free"\npositions_m = [[0, 0, 0], [0.05, 0, 0], '
+                '[0.01, 0.06, 0.004]]\naxes = [[0, 0, 1], [-0.2, 0, 0.9797958971132712], '
+                '[0, 0, 1]]\n')
+    system = CoilArray.from_design(d).coupled()
+    assert len(system.group) == 1 and system._sym is None
+    _solves_the_assembled_system(system, seed=8, columns=1)
 
 
 def test_split_of_a_rectangular_array_solves_the_assembled_system():

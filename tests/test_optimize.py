@@ -36,7 +36,7 @@ def test_textbook_loop_radius_for_maximum_axial_gradient():
         h = 1e-8
         return g(x[0]), [(g(x[0] + h) - g(x[0] - h)) / (2 * h)]
 
-    run = opt.maximize(f, None, 0, [0.001], [0.1], [0.08], xtol_rel=1e-12)
+    run = opt.maximize(f, None, 0, [0.001], [0.1], [0.08], opt.SolverOptions(xtol_rel=1e-12))
     assert run.x[0] == pytest.approx(d * math.sqrt(2 / 3), rel=1e-6)
 
 
@@ -251,12 +251,12 @@ def test_batched_rod_solve_equals_one_design_at_a_time():
     lc = rng.uniform(0.04, 0.07, n)
     off = rng.uniform(-0.005, 0.01, n)
     turns = rng.uniform(300, 1500, n)
-    bt = rod.solve_rods(ri, ro, ln, turns, a, lc, off, 6.0, n_slices=12,
-                              quadrature="bessel")
+    bt = rod.solve_rods(rod.RodGeometry(ri, ro, ln, turns, a, lc, off), 6.0,
+                        rod.RodSettings(n_slices=12, quadrature="bessel"))
     z = np.full(n, 0.06)
     for i in range(n):
-        one = rod.solve_rod(ri[i], ro[i], ln[i], turns[i], a[i], lc[i], off[i], 6.0,
-                                  n_slices=12, quadrature="bessel")
+        one = rod.solve_rod(rod.RodGeometry(ri[i], ro[i], ln[i], turns[i], a[i], lc[i], off[i]),
+                            6.0, rod.RodSettings(n_slices=12, quadrature="bessel"))
         assert bt.linkage_wb[i] == pytest.approx(one.linkage_wb, rel=1e-12)
         assert bt.dlinkage_di_wb_per_a[i] == pytest.approx(one.dlinkage_di_wb_per_a, rel=1e-12)
         assert bt.axis_field(z)[1][i] == pytest.approx(one.axis_field(0.06)[1], rel=1e-12)
@@ -264,8 +264,8 @@ def test_batched_rod_solve_equals_one_design_at_a_time():
 
 def test_toeplitz_slice_coupling_equals_the_interval_formula():
     a, lc, n = 0.008, 0.07, 10
-    s = rod.solve_rod(0.009, 0.02, 0.06, 800, a, lc, 0.0, 1.0, n_slices=n,
-                            relative_permeability=500.0)
+    s = rod.solve_rod(rod.RodGeometry(0.009, 0.02, 0.06, 800, a, lc, 0.0), 1.0,
+                      rod.RodSettings(n_slices=n, relative_permeability=500.0))
     e = rod.slice_edges(lc, 0.0, n)
     iv = np.column_stack([e[:-1], e[1:]])
     c = rod.interval_mutual(iv, iv, a)
@@ -276,17 +276,18 @@ def test_toeplitz_slice_coupling_equals_the_interval_formula():
 
 
 def test_fast_rod_saturates_and_its_incremental_inductance_is_the_derivative():
-    geo = (0.009, 0.024, 0.063, 1173, 0.009, 0.07, 0.009)
-    lo = rod.solve_rod(*geo, 0.5, quadrature="bessel")
-    hi = rod.solve_rod(*geo, 6.0, quadrature="bessel")
+    geo = rod.RodGeometry(0.009, 0.024, 0.063, 1173, 0.009, 0.07, 0.009)
+    bessel = rod.RodSettings(quadrature="bessel")
+    lo = rod.solve_rod(geo, 0.5, bessel)
+    hi = rod.solve_rod(geo, 6.0, bessel)
     # saturation: past the 1.5 T knee the incremental inductance drops below the secant one
     assert hi.peak_b_t > 1.5 > lo.peak_b_t
     assert hi.incremental_extra_inductance_h < 0.95 * hi.secant_extra_inductance_h
     assert lo.incremental_extra_inductance_h >= 0.99 * lo.secant_extra_inductance_h
     # incremental = d linkage / dI (central difference of independent solves)
     h = 1e-3
-    p = rod.solve_rod(*geo, 6.0 + h, quadrature="bessel").linkage_wb
-    m = rod.solve_rod(*geo, 6.0 - h, quadrature="bessel").linkage_wb
+    p = rod.solve_rod(geo, 6.0 + h, bessel).linkage_wb
+    m = rod.solve_rod(geo, 6.0 - h, bessel).linkage_wb
     assert hi.incremental_extra_inductance_h == pytest.approx((p - m) / (2 * h), rel=1e-5)
 
 
@@ -351,8 +352,8 @@ def test_device_optimum_beats_a_dense_two_variable_grid():
 
     pc = dataclasses.replace(p, corrections=res.corrections)
     y = opt.DeviceProblem.search(res.x_continuous)
-    m = fast_model._FastModel(pc, {6: res.wire_diameter_m})
-    ref = fast_model._local(m, [y[k] for k in m.free]).value
+    m = fast_model.FastModel(pc, {6: res.wire_diameter_m})
+    ref = fast_model.local_solve(m, [y[k] for k in m.free]).value
     best = 0.0
     for ri in np.linspace(p.lower[0], 0.015, 20):
         for ln in np.linspace(p.lower[2], p.upper[2], 20):
@@ -401,7 +402,8 @@ def test_infeasible_device_bounds_name_the_constraint_and_the_amount():
                                             r"0\.0048 m"):
         opt.solve_device(opt.device_problem_for(d))
     # an impossible heating requirement: no winding in the bounds lasts 1e6 s
-    p = opt.device_problem_for(default_design(), min_time_to_hot_s=1e6)
+    p = opt.device_problem_for(default_design(),
+                              conditions=opt.OperatingConditions(min_time_to_hot_s=1e6))
     with pytest.raises(BadInputError, match="time_to_max_temperature_s: misses its limit"):
         opt.solve_device(p, starts=1)
 
@@ -513,9 +515,8 @@ def test_render_points_folded_by_the_array_symmetry_keep_every_distinct_force():
 def test_pitch_variable_needs_the_rendering_objective_and_bounds_the_overlap():
     d = default_design()
     with pytest.raises(BadInputError, match="rendering"):
-        opt.device_problem_for(d, vary_pitch=True)
-    p = opt.device_problem_for(d, objective="rendering", vary_pitch=True,
-                               pitch_range_m=(0.04, 0.06))
+        opt.device_problem_for(d, vary={"pitch_m": None})
+    p = opt.device_problem_for(d, objective="rendering", vary={"pitch_m": (0.04, 0.06)})
     assert p.n_search == 8 and p.pitch_bounds_m == (0.04, 0.06)
     assert "coil_overlap_m" in p.constraint_names
     # Ro's bound follows the largest pitch; the overlap is a constraint on each design. The
@@ -523,13 +524,12 @@ def test_pitch_variable_needs_the_rendering_objective_and_bounds_the_overlap():
     # 0.8 mm wall + 2 x (1.5 mm flange lip + 0.3 mm pocket clearance) = 4.4 mm
     assert p.coil_clearance_m == pytest.approx(4.4e-3)
     assert p.upper[1] == pytest.approx(min(0.5 * (0.06 - 4.4e-3), d.optimize.max_outer_radius_m))
-    m = fast_model._FastModel(p)
+    m = fast_model.FastModel(p)
     y = np.array(p.lower) + 0.5 * (np.array(p.upper) - np.array(p.lower))
     y[1], y[7] = 0.02, 0.04  # 2 x 20 mm + 4.4 mm > 40 mm: short by 4.4 mm
     assert m.values(y)[1 + len(opt.DEVICE_CONSTRAINTS)] == pytest.approx(4.4)
-    with pytest.raises(BadInputError, match="pitch_range_m"):
-        opt.device_problem_for(d, objective="rendering", vary_pitch=True,
-                               pitch_range_m=(0.005, 0.06))
+    with pytest.raises(BadInputError, match="pitch_m range"):
+        opt.device_problem_for(d, objective="rendering", vary={"pitch_m": (0.005, 0.06)})
     # a given design (7 variables, no pitch among them) is judged at its own pitch
     rep = opt.evaluate_device(d, p)
     od = rep["constraints"]["outer_diameter_m"]
@@ -542,7 +542,7 @@ def test_pitch_optimum_meets_the_constraints_and_no_other_pitch_renders_more():
     """--vary-pitch: the reported device is feasible under the panel model, its coils do not
     overlap, and with its coil fixed a scan of the pitch finds no stronger rendering."""
     d = default_design()
-    p = opt.device_problem_for(d, objective="rendering", vary_pitch=True)
+    p = opt.device_problem_for(d, objective="rendering", vary={"pitch_m": None})
     res = opt.solve_device(p, starts=1)
     assert res.feasible and res.fast_model_check["within_bound"]
     x = list(res.x)

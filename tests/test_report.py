@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from designkit import Coil, default_design
+from designkit import Coil, default_design, viz
 from designkit.model.array import array_for_design
 from designkit.cli import main
 from designkit.cores import ArraySystem
@@ -81,7 +81,7 @@ def test_report_files_have_the_right_content(quick_report):
     # figures: PNGs of the quick sizes, not blank
     for kind, rel in rep["figures"].items():
         img = imread(out / rel)
-        want = (420, 960) if kind.startswith("slice") else (480, 640)
+        want = (420, 960) if kind in viz.output.WIDE_KINDS else (480, 640)
         assert img.shape[:2] == want, kind
         assert img[..., :3].std() > 0.05, kind
     # VTK files load and carry the SI arrays the docs promise

@@ -6,7 +6,7 @@ import pytest
 from designkit import Coil, default_design
 from designkit.model.array import CoilArray, force_matrix
 from designkit.errors import BadInputError
-from designkit.model.skipping import SkippingEvaluator as Scene, _bound_at, build_table, _COMP
+from designkit.model.skipping import SkippingEvaluator as Scene, bound_at, build_table, RZ_COMPONENTS
 
 AIR = default_design().replace(core=None)
 M = (0.0, 0.0, 0.909)
@@ -82,7 +82,7 @@ def test_sphere_bound_holds_at_random_points():
     d = rng.normal(size=(400, 3))
     d /= np.linalg.norm(d, axis=1)[:, None]
     p = d * rng.uniform(0.06, 0.5, (400, 1)) + c.pose.position
-    eb, eg = _bound_at(c, c.pose.to_local(p))
+    eb, eg = bound_at(c, c.pose.to_local(p))
     b, g = c.field(p, 1.0, gradient=True)
     ok = np.isfinite(eb)
     assert ok.sum() > 200
@@ -92,7 +92,7 @@ def test_sphere_bound_holds_at_random_points():
 
 def test_table_refuses_a_box_that_touches_the_sources():
     c = Coil.from_design(AIR, (0, 0, 0))
-    assert build_table(c, (0.0, 0.1), (0.0, 0.1), _COMP, 1e-4) is None
+    assert build_table(c, (0.0, 0.1), (0.0, 0.1), RZ_COMPONENTS, 1e-4) is None
 
 
 def test_bad_input(arr):

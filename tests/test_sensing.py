@@ -46,3 +46,22 @@ def test_clipping_follows_the_sensor_range():
     b = abs(res["coil_field_t"][2])
     assert sensor_headroom(d.replace(**{"sensors.range_t": 0.9 * b}))["clips"]
     assert not sensor_headroom(d.replace(**{"sensors.range_t": 1.1 * b}))["clips"]
+
+
+def test_tilted_sensors_read_in_their_own_frames():
+    # a ring of 6 air coils tilted 40 degrees: each default sensor sits on its coil's axis in
+    # its coil's frame, so the coil under it reads the closed-form axial field on the chip's z
+    # axis whatever the tilt (a chip frame applied as R instead of R^T spreads it over x, z)
+    import tomllib
+
+    from designkit.design import design_from_dict
+
+    d = design_from_dict(tomllib.loads('[array]\nlayout = "ring"\ncount = 6\nradius_m = 0.09\n'
+                                       'tilt_deg = 40\n[core]\nenabled = false\n'))
+    res = sensor_headroom(d)
+    c, s = d.coil, d.sensors
+    bz = _thick_solenoid_axis_bz(c.inner_radius_m, c.outer_radius_m, c.length_m, c.turns,
+                                 d.drive.max_current_a, c.length_m / 2 + s.offset_m)
+    assert res["coil_index"] == res["sensor_index"] % 6  # its own coil drives it hardest
+    assert res["coil_field_fraction_of_range"] == pytest.approx(abs(bz) / s.range_t, rel=1e-6)
+    assert len(res["fraction_of_range_per_sensor"]) == 12

@@ -61,12 +61,14 @@ def test_electrical_report_uses_the_design_pwm_frequency():
 
 
 def test_run_takes_lambda_from_the_design_render_stiffness(monkeypatch, tmp_path):
-    """render.stiffness_n_per_m is the force constant of ``designkit run`` without --lambda."""
+    """render.stiffness_n_per_m is the force constant of ``designkit run`` without --lambda,
+    capped at what the device renders over the object (designkit.sim.run.choose_lambda)."""
     from types import SimpleNamespace
 
     import designkit.render.scenefile as scenefile
     import firmware_io.mapfile as mapfile
     from designkit.sim import RunSettings, run_simulation
+    from designkit.sim import run as sim_run
 
     class Stop(Exception):
         pass
@@ -77,11 +79,21 @@ def test_run_takes_lambda_from_the_design_render_stiffness(monkeypatch, tmp_path
         seen["lam"] = lam_n_per_m
         raise Stop  # what follows (the run itself) is the runner tests' business
 
+    def force_constant(*args, **kwargs):
+        return SimpleNamespace(lam_where_renderable=lambda: seen["device"],
+                               limiting_point_where_renderable=lambda: np.zeros(3),
+                               unrenderable_points=0, points_m=np.zeros((4, 3)))
+
     monkeypatch.setattr(mapfile.MapFile, "load",
                         classmethod(lambda cls, *a, **k: SimpleNamespace(design_sha256="x")))
     monkeypatch.setattr(scenefile, "compile_scene", compile_scene)
+    monkeypatch.setattr(sim_run.render, "force_constant", force_constant)
+    drive = SimpleNamespace(current_limit_a=6.0, total_current_a=54.0)
+    monkeypatch.setattr(sim_run, "config_from_map",
+                        lambda fmap, **kw: SimpleNamespace(drive=drive))
     d = default_design().replace(**{"render.stiffness_n_per_m": 4.25})
-    for lam, want in ((None, 4.25), (7.0, 7.0)):
+    for lam, device, want in ((None, 10.0, 4.25), (None, 3.0, 3.0), (7.0, 3.0, 7.0)):
+        seen["device"] = device
         with pytest.raises(Stop):
             run_simulation(RunSettings(duration_s=0.1, lam_n_per_m=lam), design=d,
                            map_path=tmp_path / "m.npz", out=tmp_path / "o",

@@ -1,6 +1,6 @@
 """Generate docs/design_file.md, the reference of every key a design file may hold, from the
 design package itself: the dataclasses (keys, types, defaults), their field docstrings (what
-each key is) and the rule the checks apply (:func:`designkit.design.spec.field_rule`: the valid
+each key is) and the rule the checks apply (:func:`designkit.design.checks.field_rule`: the valid
 range), so the reference cannot drift from the code. tests/test_design_file_doc.py fails when
 the committed file differs from what this prints, or when a key of the spec is missing.
 
@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from designkit.design import asbuilt, layouts, spec  # noqa: E402
+from designkit.design import asbuilt, checks, layouts, tables  # noqa: E402
 
 TARGET = ROOT / "docs" / "design_file.md"
 
@@ -156,8 +156,8 @@ def _toml(value) -> str:
 
 
 def spec_valid(key: str, default) -> str:
-    """The valid range of a spec field, from :func:`designkit.design.spec.field_rule`."""
-    rule = spec.field_rule(key, default)
+    """The valid range of a spec field, from :func:`designkit.design.checks.field_rule`."""
+    rule = checks.field_rule(key, default)
     kind = rule[0]
     if kind == "vector":
         return "3 finite numbers, not all 0 (normalized on use)"
@@ -173,7 +173,7 @@ def spec_valid(key: str, default) -> str:
         return f"[{rule[1]:g}, {rule[2]:g}] {rule[3]}".rstrip()
     text = {"finite": "any finite number", "nonnegative": ">= 0", "positive": "> 0"}[kind]
     if unit_of(key) == "m":
-        cap = spec.MAX_LENGTH_M / 2 if "radius" in key else spec.MAX_LENGTH_M
+        cap = checks.MAX_LENGTH_M / 2 if "radius" in key else checks.MAX_LENGTH_M
         text += f", at most {cap:g} m in size"
     return text
 
@@ -294,9 +294,9 @@ radius_m = 0.05
 
 
 def render() -> str:
-    docs = {**field_docs(spec), **field_docs(layouts), **field_docs(asbuilt)}
+    docs = {**field_docs(tables), **field_docs(layouts), **field_docs(asbuilt)}
     out = [INTRO]
-    for sec, cls in spec.SECTIONS.items():
+    for sec, cls in tables.SECTIONS.items():
         title = f"## [{sec}]"
         doc = class_doc(cls) or SECTION_NOTES.get(sec, "")
         if sec == "array":

@@ -23,9 +23,10 @@ from .common import (add_design_argument, add_progress_argument, check_output, p
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_design_argument(parser)
-    parser.add_argument("--spacing", default="10mm", metavar="LENGTH",
+    parser.add_argument("--spacing", default=None, metavar="LENGTH",
                         help="x, y step of the grid over magnet positions that carries the "
-                             "bias force beyond the per-core tables (default 10mm; a number is "
+                             "bias force beyond the per-core tables (default 10mm, or 5mm when "
+                             "some core's axis is not along the magnet's moment; a number is "
                              "mm)")
     parser.add_argument("--scene", type=Path, default=None,
                         help="compiled scene (designkit scene compile): map only the region its "
@@ -52,7 +53,8 @@ def run(args: argparse.Namespace) -> int:
     # everything that can be refused is refused before the (long) computation
     out = fieldmap.check_output(args.out)
     check_output(out, folder=False)  # a folder that cannot be written: refused in < 1 s
-    spacing = parse_length(args.spacing, "--spacing", valid_m=(0.5e-3, 0.1))
+    spacing = (None if args.spacing is None else
+               parse_length(args.spacing, "--spacing", valid_m=(0.5e-3, 0.1)))
     margin = parse_length(args.scene_margin, "--scene-margin", valid_m=(0.0, 0.1))
     design = load_design(args.design)
     extra = {} if args.scene is None else scene_args(args.scene, design, margin)

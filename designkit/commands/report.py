@@ -1,26 +1,23 @@
 """``designkit report``: the main job on a design (default: the embedded thesis device).
 
-Runs the whole pipeline and writes a report folder ``OUT`` (default ``./designkit-report``):
+Writes a report folder ``OUT`` (default ``./designkit-report``): ``report.json`` (version, the
+design and its hash, the single coil's field, gradient, force and torque at the design point,
+the whole array's force there, the design next to the shipped optimized device -- only for a
+device of its layout kind and coil count, else the entry says why --, the files written, the
+steps ``skipped`` and the parts ``failed`` with the reason, ``quick``); ``report.md`` (the same
+for people); ``design.json`` / ``design.md`` / ``design.toml`` (every field, SI, derived coil
+quantities, the TOML that reproduces it); ``designs.json`` (the comparison in full);
+``figures/*.png`` and ``vtk/*`` (:func:`designkit.viz.write_figures`,
+:func:`designkit.viz.export_vtk`); ``map/forcemap.npz`` (a coarse map, :data:`MAP_SPACING_M`;
+the controller's comes from ``designkit map``).
 
-``report.json``
-    Version, design name/hash, the design, the single coil's field, gradient, force and torque
-    at the design point (``design_point``), the whole array's force there (``array``), the
-    design side by side with the shipped optimized device (``designs``: every device
-    constraint with its margin, violations flagged, the upward force at the design point and
-    the smallest upward force the array renders over the workspace region), the files
-    written, the steps ``skipped`` with the reason, and ``quick`` (true for a --quick run).
-``report.md``: the same for people, tables and the figures.
-``design.json``, ``design.md``, ``design.toml``: the design summary (every field, SI, with
-    derived coil quantities) as JSON, a Markdown table and the TOML that reproduces it.
-``designs.json``: the side-by-side evaluation in full (constraint tables, rendering points).
-``figures/*.png``: array scene, field lines, |B| and |F| slices, force map, Fz = +/-0.8 mN
-    iso-surface; ``vtk/*``: their data for ParaView (:func:`designkit.viz.export_vtk`).
-``map/forcemap.npz``: a force-current map file on a coarse grid (:data:`MAP_SPACING_M`);
-    the controller's map comes from ``designkit map``.
+Files are written atomically, without time stamps: re-running is idempotent. ``--quick``: coarse
+grids, small images, fewer optimizer starts. ``--no-figures``: no figures, no VTK files. A
+figure that fails is named with its error and the rest is written.
 
-Every file is written atomically and re-running overwrites the same files with the same
-content (no time stamps), so the job is idempotent. ``--quick`` uses coarse grids, small images
-and fewer optimizer starts; tests use it.
+The design point is the magnet's centre at the design height above the coil nearest the
+layout's centre, on its axis (:func:`designkit.viz.design_point_m`); the single-coil rows are
+that coil alone, upright at the origin (the problem of thesis eq. 2.14).
 """
 
 from __future__ import annotations
@@ -32,8 +29,10 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__, fieldmap, viz
-from ..design import Design, default_design, design_to_toml, load_design, named_design
+from ..design import (Design, GridLayout, default_design, design_to_toml, load_design,
+                      named_design)
 from ..model.array import array_for_design, force_matrix, g5_from_gradient
+from ..geometry.pose import Pose
 from ..model.coil import Coil
 from ..model.sensor_headroom import sensor_headroom
 from ..optimize import device_problem_for, evaluate_device, rendering_force
@@ -66,18 +65,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="coil current in A for the design point (default: the design's "
                              "per-coil limit)")
     add_currents_arguments(parser, "per-coil currents in A for the figures, comma-separated, "
-                                   "row-major (default: the centre coil at the per-coil limit)")
+                                   "in the layout's coil order (default: the coil nearest the "
+                                   "design point at the per-coil limit)")
     parser.add_argument("--quick", action="store_const", const="quick", dest="quality",
                         default="full",
                         help="coarse grids, small images, fewer optimizer starts (seconds)")
+    parser.add_argument("--no-figures", action="store_false", dest="figures",
+                        help="leave out the figures and their VTK files")
     add_progress_argument(parser)
 
 
 # ----------------------------------------------------------------------------- pieces
+def single_coil(design: Design) -> Coil:
+    """The coil under the design point (:func:`designkit.viz.design_coil`), alone, upright, its
+    top face at z = 0 about the origin: the single-coil problem of thesis eq. 2.14."""
+    k = design.design_coil
+    c = design.coil_spec(k)
+    return Coil.from_specs(c, design.core_spec(k), Pose((0.0, 0.0, -c.length_m / 2)))
+
+
 def design_point_summary(design: Design, current_a: float) -> dict:
-    """Field, gradient, force and torque of the design's coil at its design point (SI)."""
-    coil = Coil.from_design(design)
-    p = np.array(design.design_point_m)
+    """Field, gradient, force and torque of the design's coil at its design point (SI): the
+    coil under the design point alone (:func:`single_coil`), the magnet on its axis at the
+    design height."""
+    coil = single_coil(design)
+    p = np.array([0.0, 0.0, design.optimize.height_m])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         b, g = coil.field(p, current_a, gradient=True)
@@ -98,9 +110,9 @@ def design_point_summary(design: Design, current_a: float) -> dict:
 
 
 def coil_properties(design: Design) -> dict:
-    """Electrical quantities of the design's coil (SI): R, current at the supply, L (with the
-    core, small-signal) and L/R."""
-    coil = Coil.from_design(design)
+    """Electrical quantities of the coil under the design point (SI): R, current at the supply,
+    L (with the core, small-signal) and L/R."""
+    coil = single_coil(design)
     r = coil.resistance(design.wire)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the saturation warning is reported once, elsewhere
@@ -204,14 +216,29 @@ def _core_text(design: dict) -> str:
     return f"saturating core ({core['bh']} B-H)"
 
 
+def _mn1(force_n: float, sign: str = "") -> str:
+    """A force in mN to 0.1 mN, never '-0.0'."""
+    return f"{round(force_n * 1e3, 1) + 0.0:{sign}.1f}"
+
+
+def _at_least(force_n: float) -> str:
+    """'Fz >= 12.3 mN', or what a smallest upward force of zero (or below) means."""
+    if round(force_n * 1e3, 1) <= 0.0:
+        return "Fz = 0 mN: somewhere in the region the array cannot push the magnet up"
+    return f"Fz >= {_mn1(force_n)} mN"
+
+
 def forces_markdown(report: dict) -> list[str]:
     """One table: every design-point force of the report with what it assumes."""
     dp, d = report["design_point"], report["design"]
     h = dp["point_m"][2] * 1e3
+    n, k = report["n_coils"], report["design_point_coil"]
+    where = ", ".join(f"{x * 1e3:.4g}" for x in report["design_point_m"])
     lines = ["## Forces at the design point, side by side", "",
-             f"Magnet centre {h:g} mm above the coil top (the array centre), moment "
-             f"{_vec(dp['magnet_moment_a_m2'], 1.0, 'A m^2')}. Each row is a different question; "
-             "the columns say what each assumes.", "",
+             f"Magnet centre {h:g} mm above the top face of coil {k} (the coil nearest the "
+             f"layout's centre), on its axis: the design point, ({where}) mm in the array frame; "
+             f"moment {_vec(dp['magnet_moment_a_m2'], 1.0, 'A m^2')}. Each row is a different "
+             "question; the columns say what each assumes.", "",
              "| case | coils | core, model | currents | B | dBz/dz | F |",
              "| --- | --- | --- | --- | --- | --- | --- |",
              f"| single coil | 1 (the others absent) | {_core_text(d)}, `{dp['core_model']}` | "
@@ -219,7 +246,7 @@ def forces_markdown(report: dict) -> list[str]:
              f"{dp['gradient_t_per_m'][2][2]:+.5g} T/m | {_vec_mn(dp['force_n'])} |"]
     arr = report.get("array")
     if arr:
-        lines.append(f"| array, figure currents | {d['array']['rows'] * d['array']['columns']} "
+        lines.append(f"| array, figure currents | {n} "
                      f"(coupled: every core magnetised) | {_core_text(d)}, `{dp['core_model']}` | "
                      f"{arr['currents_text']} | {_vec_mt(arr['flux_density_t'])} | "
                      f"{arr['dbz_dz_t_per_m']:+.5g} T/m | {_vec_mn(arr['force_n'])} |")
@@ -228,13 +255,13 @@ def forces_markdown(report: dict) -> list[str]:
     if ev:
         lines.append(f"| single coil, device problem | 1 | saturating core (steel1010 B-H), "
                      f"`{ev['core_model']}` | {ev['current_a']:g} A | - | - | "
-                     f"Fz = {ev['upward_force_design_point_n'] * 1e3:+.1f} mN |")
+                     f"Fz = {_mn1(ev['upward_force_design_point_n'], '+')} mN |")
         dr = d["drive"]
         lines.append(f"| smallest upward Fz over the workspace region | "
-                     f"{d['array']['rows'] * d['array']['columns']} | saturating core, fast "
+                     f"{n} | saturating core, fast "
                      f"slice model scaled to the panel model | LP allocation, bipolar, <= "
                      f"{dr['max_current_a']:g} A per coil, sum <= {dr['total_current_a']:g} A | "
-                     f"- | - | Fz >= {ev['min_upward_force_workspace_n'] * 1e3:.1f} mN |")
+                     f"- | - | {_at_least(ev['min_upward_force_workspace_n'])} |")
         lines += ["", "Why they differ: a linear core does not saturate, so it overstates the "
                   "force of the saturating 1010-steel core; the array rows drive several coils "
                   "(and magnetise every core), so the smallest force the array can render over "
@@ -259,18 +286,20 @@ _ROWS = [
                                           f"{e['current_a']:g} A"),
     ("5 L/R (cold)", lambda e: f"{e['settling_time_s'] * 1e3:.4g} ms"),
     ("peak core B", lambda e: f"{e['peak_core_flux_density_t']:.3g} T"),
-    ("upward Fz at the design point", lambda e: f"{e['upward_force_design_point_n'] * 1e3:.1f} "
+    ("upward Fz at the design point", lambda e: f"{_mn1(e['upward_force_design_point_n'])} "
                                                 f"mN at {e['design_height_m'] * 1e3:g} mm"),
     ("smallest upward Fz over the workspace region",
-     lambda e: f"{e['min_upward_force_workspace_n'] * 1e3:.1f} mN"),
+     lambda e: f"{_mn1(e['min_upward_force_workspace_n'])} mN"),
 ]
 
 
 def designs_markdown(designs: dict) -> list[str]:
     """Side-by-side tables: quantities, then every constraint with its margin (flagged)."""
     ents = [designs[k] for k in ("design", "optimized") if "skipped" not in designs.get(k, {})]
+    omitted = [f"`{e['name']}` omitted: {e['skipped']}." for e in designs.values()
+               if "skipped" in e]
     if not ents:
-        return []
+        return ["", "## Design vs the optimized device", ""] + omitted
     head = " | ".join(f"`{e['name']}`" for e in ents)
     lines = ["", "## Design vs the optimized device", "",
              "Saturating 1010-steel core (surface-current panel model, checked against GetDP); "
@@ -300,6 +329,7 @@ def designs_markdown(designs: dict) -> list[str]:
     for e in ents:
         bad = ", ".join(e["violated"]) or "none"
         lines.append(f"\n`{e['name']}` violates: {bad}.")
+    lines += [""] + omitted if omitted else []
     lines += ["", "Full numbers: [designs.json](designs.json)."]
     return lines
 
@@ -338,6 +368,10 @@ def report_markdown(report: dict) -> str:
         lines += ["## ParaView files", "", ", ".join(f"[{n}]({p})" for n, p in vtk.items()), ""]
     if report.get("map"):
         lines += ["## Force-current map", "", f"[{report['map']}]({report['map']})", ""]
+    failed = report.get("failed", {})
+    if failed:
+        lines += ["## Failed (the rest of the report is complete)", ""] + \
+            [f"- {k}: {why}" for k, why in failed.items()] + [""]
     skipped = report.get("skipped", {})
     if skipped:
         lines += ["## Skipped", ""] + [f"- {k}: {why}" for k, why in skipped.items()] + [""]
@@ -353,29 +387,59 @@ def designs_side_by_side(design: Design) -> dict:
     design point and ``min_upward_force_workspace_n`` (:func:`designkit.optimize.rendering_force`,
     the fast core model scaled by the panel/fast core-force ratio at the design point).
     Fz sign convention: z up (away from the coils); ``*_upward_*`` forces are Fz >= 0 rendered
-    with the current's sign chosen (bipolar drive).
+    with the current's sign chosen (bipolar drive). The optimum only where the comparison means
+    something (:func:`not_comparable`); else its entry is ``skipped`` with the reason. A device
+    the device problem cannot evaluate is ``skipped`` with the error.
     """
     optimized = named_design("optimized")
     left = default_design() if design.name == optimized.name else design
     out = {}
+    why_not = not_comparable(left, optimized)
     for role, d in (("design", left), ("optimized", optimized)):
+        if role == "optimized" and why_not:
+            out[role] = {"name": d.name, "skipped": why_not}
+            continue
         if d.core is None:
             out[role] = {"name": d.name, "skipped": "no core: the device problem has one"}
             continue
-        problem = device_problem_for(d)
-        ev = evaluate_device(d, problem)
-        fast = problem.evaluate([ev["inner_radius_m"], ev["outer_radius_m"], ev["length_m"],
-                                 ev["core_radius_m"], ev["core_length_m"],
-                                 max(ev["core_protrusion_m"], 0.0), ev["wire_diameter_m"]],
-                                turns=ev["turns"])
-        ratio = ev["dbz_dz_core_t_per_m"] / fast["dbz_dz_core_t_per_m"]
-        rend = rendering_force(d, core_force_ratio=ratio)
-        ev["upward_force_design_point_n"] = ev.pop("force_n")
-        ev["design_height_m"] = d.optimize.height_m
-        ev["min_upward_force_workspace_n"] = rend["min_upward_force_n"]
-        ev["rendering"] = rend
-        out[role] = ev
+        try:
+            out[role] = _device_entry(d)
+        except (AttributeError, ValueError, TypeError, IndexError, KeyError) as exc:
+            out[role] = {"name": d.name, "skipped": "the device problem cannot evaluate this "
+                                                    f"layout ({type(exc).__name__}: {exc})"}
     return out
+
+
+def not_comparable(design: Design, optimum: Design) -> str:
+    """Why the design is not put next to the shipped optimum ('' when it is): forces over a
+    workspace compare only between devices of one layout kind and coil count (and, for grids,
+    the same rows x columns: a 1 x 9 line is not a 3 x 3 square)."""
+    a, b = design.array, optimum.array
+    same = a.kind == b.kind and design.n_coils == optimum.n_coils
+    if same and isinstance(a, GridLayout) and isinstance(b, GridLayout):
+        same = sorted((a.rows, a.columns)) == sorted((b.rows, b.columns))
+    if same:
+        return ""
+    return (f"the shipped optimum `{optimum.name}` is a {optimum.array.describe()} "
+            f"({optimum.n_coils} coils) and this design a {design.array.describe()} "
+            f"({design.n_coils} coils): their forces over their workspaces do not compare")
+
+
+def _device_entry(d: Design) -> dict:
+    """One column of :func:`designs_side_by_side`."""
+    problem = device_problem_for(d)
+    ev = evaluate_device(d, problem)
+    fast = problem.evaluate([ev["inner_radius_m"], ev["outer_radius_m"], ev["length_m"],
+                             ev["core_radius_m"], ev["core_length_m"],
+                             max(ev["core_protrusion_m"], 0.0), ev["wire_diameter_m"]],
+                            turns=ev["turns"])
+    ratio = ev["dbz_dz_core_t_per_m"] / fast["dbz_dz_core_t_per_m"]
+    rend = rendering_force(d, core_force_ratio=ratio)
+    ev["upward_force_design_point_n"] = ev.pop("force_n")
+    ev["design_height_m"] = d.optimize.height_m
+    ev["min_upward_force_workspace_n"] = rend["min_upward_force_n"]
+    ev["rendering"] = rend
+    return ev
 
 
 def _field_map(design: Design, out: Path, quality: str) -> Path:
@@ -441,15 +505,19 @@ def _run(args, design, current, currents_arg, out):
         "design_hash": design.spec_hash(),
         "design": design.to_dict(),
         "design_point": summary,
+        "design_point_m": np.asarray(design.design_point_m).tolist(),
+        "design_point_coil": design.design_coil + 1,
+        "n_coils": design.n_coils,
         "coil": derived,
     }
     currents = viz.resolve_currents(design, currents_arg)
     try:
-        b, g = viz.array_field(design, np.array([design.design_point_m]), currents)
+        point = np.asarray(design.design_point_m)
+        b, g = viz.array_field(design, point[None, :], currents)
         f = viz.force_from_gradient(g, viz.magnet_moment(design))[0]
         report["array"] = {"currents_a": currents.tolist(),
                            "currents_text": viz.currents_text(currents),
-                           "point_m": list(design.design_point_m),
+                           "point_m": point.tolist(),
                            "flux_density_t": b[0].tolist(), "gradient_t_per_m": g[0].tolist(),
                            "dbz_dz_t_per_m": float(g[0, 2, 2]), "force_n": f.tolist()}
     except ImportError as exc:
@@ -468,10 +536,16 @@ def _run(args, design, current, currents_arg, out):
     done()
 
     # 4-5. figures and VTK files from the same datasets
-    try:
-        _figures_and_vtk(viz, design, currents, quality, out, report, step, done, steps)
-    except ImportError as exc:  # pyvista missing: MissingDependencyError
-        skipped["figures"] = skipped["VTK files"] = str(exc)
+    step(steps[3])
+    if getattr(args, "figures", True):
+        try:
+            _figures_and_vtk(design, currents, quality, out, report)
+        except ImportError as exc:  # pyvista missing: MissingDependencyError
+            skipped["figures"] = skipped["VTK files"] = str(exc)
+    else:
+        skipped["figures"] = skipped["VTK files"] = "--no-figures"
+    done()
+    done()
 
     # 6. map file
     step(steps[5])
@@ -492,45 +566,16 @@ def _run(args, design, current, currents_arg, out):
     return summary, report
 
 
-def _figures_and_vtk(viz, design, currents, quality, out, report, step, done, steps):
-    size = (640, 480) if quality == "quick" else (1024, 768)
-    wide = (960, 420) if quality == "quick" else (1500, 640)
-    step(steps[3])
-    data = {"scene": viz.scene_meshes(design, currents)}
-    data["fieldlines"] = viz.field_line_data(design, currents, quality=quality)
-    data["slices"] = viz.slice_data(design, currents, quality=quality)
-    data["forcemap"] = viz.force_map_data(design, currents, quality=quality)
-    data["isosurface"] = viz.force_isosurface_data(design, currents, quality=quality)
-    blocks = data["scene"]
-    plots = {
-        "scene": lambda: viz.plot_array_scene(design, currents, window_size=size,
-                                              blocks=blocks),
-        "fieldlines": lambda: viz.plot_field_lines(design, currents, window_size=size,
-                                                   data=data["fieldlines"], blocks=blocks),
-        "slice-B": lambda: viz.plot_slices(design, currents, quantity="B", window_size=wide,
-                                           data=data["slices"], blocks=blocks),
-        "slice-F": lambda: viz.plot_slices(design, currents, quantity="F", window_size=wide,
-                                           data=data["slices"], blocks=blocks),
-        "forcemap": lambda: viz.plot_force_map(design, currents, window_size=size,
-                                               data=data["forcemap"], blocks=blocks),
-        "isosurface": lambda: viz.plot_force_isosurface(design, currents, window_size=size,
-                                                        data=data["isosurface"],
-                                                        blocks=blocks),
-    }
-    figures = {}
-    for kind in FIGURES:
-        plotter = plots[kind]()
-        try:
-            viz.save_png(plotter, out / "figures" / f"{kind}.png")
-        finally:
-            plotter.close()
-        figures[kind] = f"figures/{kind}.png"
-    report["figures"] = figures
-    done()
-    step(steps[4])
-    files = viz.export_vtk(design, out / "vtk", currents, quality=quality, data=data)
+def _figures_and_vtk(design, currents, quality, out, report) -> None:
+    """figures/*.png and vtk/* (the figures' datasets); a figure that fails is named in
+    ``report["failed"]`` with its error, the others are written."""
+    sizes = ((640, 480), (960, 420)) if quality == "quick" else ((1024, 768), (1500, 640))
+    made = viz.write_figures(design, out / "figures", currents, quality=quality, sizes=sizes)
+    report["figures"] = {kind: f"figures/{kind}.png" for kind in made.figures}
+    report["failed"] = {f"figure {kind}": why for kind, why in made.failed.items()}
+    files = viz.export_vtk(design, out / "vtk", currents, quality=quality, data=made.data,
+                           compute_missing=False)
     report["vtk"] = {name: f"vtk/{name}" for name in sorted(files)}
-    done()
 
 
 def _print_summary(design, summary, current, report, out) -> None:
@@ -540,8 +585,10 @@ def _print_summary(design, summary, current, report, out) -> None:
     print(f"coil: Ri/Ro/L = {design.coil.inner_radius_m * 1e3:.1f}/"
           f"{design.coil.outer_radius_m * 1e3:.1f}/{design.coil.length_m * 1e3:.1f} mm, "
           f"{design.coil.turns} turns, core: {summary['core_model'] or 'none'}")
-    print(f"design point: {design.optimize.height_m * 1e3:.1f} mm above the coil top, "
-          f"I = {current:g} A")
+    where = ", ".join(f"{x * 1e3:.4g}" for x in np.asarray(design.design_point_m))
+    print(f"design point: {design.optimize.height_m * 1e3:.1f} mm above the top of coil "
+          f"{design.design_coil + 1}, on its axis ({where}) mm; I = {current:g} A (the "
+          "single-coil rows: that coil alone)")
     print(f"  B      = ({b[0] * 1e3:+.4f}, {b[1] * 1e3:+.4f}, {b[2] * 1e3:+.4f}) mT")
     print(f"  dBz/dz = {summary['gradient_t_per_m'][2][2]:+.5f} T/m")
     print(f"  F      = ({f[0] * 1e3:+.3f}, {f[1] * 1e3:+.3f}, {f[2] * 1e3:+.3f}) mN on m = "
@@ -550,14 +597,17 @@ def _print_summary(design, summary, current, report, out) -> None:
         print(f"  warning: {w}")
     for role, e in report.get("designs", {}).items():
         if "skipped" in e:
+            print(f"{role} '{e['name']}' omitted: {e['skipped']}")
             continue
         bad = ", ".join(e["violated"]) or "none"
-        print(f"{role} '{e['name']}': upward Fz {e['upward_force_design_point_n'] * 1e3:.1f} mN "
-              f"at the design point, >= {e['min_upward_force_workspace_n'] * 1e3:.1f} mN over "
-              f"the workspace region; violates: {bad}")
+        print(f"{role} '{e['name']}': upward Fz {_mn1(e['upward_force_design_point_n'])} mN "
+              f"at the design point; over the workspace region "
+              f"{_at_least(e['min_upward_force_workspace_n'])}; violates: {bad}")
     if report.get("quick"):
         print("QUICK RUN (--quick): coarse grids and small images")
     for what, why in report.get("skipped", {}).items():
         print(f"skipped {what}: {why}")
+    for what, why in report.get("failed", {}).items():
+        print(f"FAILED {what}: {why}")
     print(f"wrote {out / 'report.json'}, {out / 'report.md'}, "
           f"{len(report.get('figures', {}))} figures, {len(report.get('vtk', {}))} VTK files")

@@ -3,7 +3,10 @@
 The runner is firmware_io's (the code that runs on the controller); the device is
 :mod:`designkit.sim` (exact array physics, R-L coils, register-level sensors and PWM boards).
 Writes ``run.csv`` (one row per control step), ``summary.json``, ``run.png`` (thesis Fig. 4.5-like)
-and ``loop_timing.png`` into ``--out``. On the controller itself use
+and ``loop_timing.png`` into ``--out``. ``--scene FILE`` runs a compiled scene (``designkit scene
+compile``: its objects and lambda); otherwise ``--object`` is compiled with ``--lambda`` or, by
+default, the design's ``render.stiffness_n_per_m`` capped at what the device renders over the
+object (:func:`designkit.sim.run.choose_lambda`). On the controller itself use
 ``python -m firmware_io.run --bus 1 --map FILE --scene FILE``.
 """
 
@@ -26,9 +29,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--simulate", action="store_true",
                         help="run on the simulated device (required here; on the controller use "
                              "python -m firmware_io.run)")
-    parser.add_argument("--object", default="hemisphere",
+    parser.add_argument("--object", default=None,
                         help=f"virtual object: {', '.join(OBJECTS)} or an STL/PLY mesh path "
-                             "(default hemisphere)")
+                             "(default hemisphere; not with --scene)")
+    parser.add_argument("--scene", type=Path, default=None,
+                        help="a compiled scene (designkit scene compile ... --out FILE.npz) to "
+                             "run: its objects and lambda, compiled for the map's design")
     parser.add_argument("--trajectory", default="slide",
                         help="slide | poke | tilt (a slide tilting the magnet up to 45 deg) | "
                              "FILE.csv with columns t_s,x_m,y_m,z_m and optionally tilt_deg "
@@ -49,7 +55,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rows", choices=["force", "fz"], default="force",
                         help="render the object's 3-D force (default) or only Fz (thesis eq. 4.6)")
     parser.add_argument("--lambda", dest="lam", type=float, default=None,
-                        help="force constant, N/m (default: the design's render.stiffness)")
+                        help="force constant, N/m (default: the design's "
+                             "render.stiffness_n_per_m, capped at what the device renders over "
+                             "the object, eq. 4.3; not with --scene)")
     parser.add_argument("--as-built", dest="as_built", type=Path, default=None,
                         help="design TOML of the device as built ([asbuilt]): the simulated "
                              "plant; the runner uses the map of --design (nominal or "
@@ -79,9 +87,12 @@ def run(args: argparse.Namespace) -> int:
         if args.as_built is not None:
             _as_built_comparison(args, summary, stage)
     print(f"wrote {args.out}/run.csv, summary.json, run.png, loop_timing.png: force error RMS "
-          f"{_mn(summary['force_error_rms_n'])} (p95 {_mn(summary['force_error_p95_n'])}), "
-          f"localization MAE {_mm(summary['localization_mae_m'])}, loop p99 "
-          f"{_us(summary['loop_p99_s'])}, faults {len(summary['faults'])}")
+          f"{_mn(summary['force_error_rms_n'])} (p95 {_mn(summary['force_error_p95_n'])}) on an "
+          f"object force RMS {_mn(summary['object_force_rms_n'])}, localization MAE "
+          f"{_mm(summary['localization_mae_m'])}, loop p99 {_us(summary['loop_p99_s'])}")
+    print("  " + lambda_line(summary))
+    print(f"  faults injected {len(summary['faults'])}, faults the runner detected "
+          f"{len(summary['fault_log'])}")
     if summary["trajectory_played"] != "whole":
         print(f"  simulated {summary['duration_s']:g} s of the "
               f"{summary['trajectory_duration_s']:g} s trajectory at its own speed "
@@ -100,7 +111,8 @@ def _settings(args: argparse.Namespace) -> RunSettings:
     return RunSettings(obj=args.object, trajectory=args.trajectory, duration_s=args.duration,
                        faults=args.faults, method=args.method, period_s=args.period_ms * 1e-3,
                        unipolar=args.unipolar, rows=args.rows, lam_n_per_m=args.lam,
-                       seed=args.seed, keep_sensors=_sensor_list(args.keep_sensors))
+                       seed=args.seed, keep_sensors=_sensor_list(args.keep_sensors),
+                       scene_path=args.scene)
 
 
 def _sensor_list(text: str) -> tuple:
@@ -117,6 +129,21 @@ def _sensor_list(text: str) -> tuple:
             raise BadInputError("--keep-sensors", "ranges lo-hi with 0 <= lo <= hi", part)
         out.extend(range(lo, hi + 1))
     return tuple(out)
+
+
+def lambda_line(summary: dict) -> str:
+    """Which force constant the run used and why (:func:`designkit.sim.run.choose_lambda`)."""
+    lam, source = summary["lambda_n_per_m"], summary["lambda_source"]
+    if "lambda_renderable_n_per_m" not in summary:
+        return f"lambda = {lam:.4g} N/m ({source})"
+    where = ", ".join(f"{x * 1e3:.0f}" for x in summary["lambda_limiting_point_m"])
+    cant = summary["lambda_unrenderable_points"]
+    return (f"lambda = {lam:.4g} N/m: the design asks {summary['lambda_design_n_per_m']:.4g}, "
+            f"the device renders up to {summary['lambda_renderable_n_per_m']:.4g} over the "
+            f"object (eq. 4.3, limited at ({where}) mm)"
+            + (f"; at {cant} of its {summary['lambda_surface_points']} surface points it "
+               "cannot cancel the cores' pull, and renders no object force there" if cant
+               else ""))
 
 
 def _fault_line(f: dict) -> str:

@@ -3,7 +3,9 @@
 OBJECT is plane, hemisphere, half-cylinder, wedge (thesis sizes) or an STL/PLY file (closed
 mesh, millimetres unless --mesh-scale). Without --lambda the force constant (thesis eq. 4.3) is
 computed with the exact allocator against the map (--map; --build-map builds the object's scene
-map first) or, without a map, the design's coil array directly. The scene records the map's
+map first) or, without a map, the design's coil array directly, over the surface points where
+any force is renderable (where the magnet's pull on the cores cannot be cancelled, no lambda is,
+and those points are counted, as ``designkit run --simulate`` does). The scene records the map's
 design SHA-256; the runner's loader refuses the scene with another map.
 """
 
@@ -102,13 +104,17 @@ def run(args: argparse.Namespace) -> int:
         fc = render.force_constant(obj, source, current_limit_a=u, total_current_a=tl,
                                    unipolar=args.unipolar, rows=args.rows, n_side=args.n_side,
                                    progress=show_progress(args))
-        lam = fc.lam_n_per_m
+        lam = fc.lam_where_renderable()
         if args.law == "constraint":  # lambda h n with lambda 0 renders nothing
             _check_renderable(args, fc)
-        extra["lambda_limiting_point_m"] = fc.limiting_point_m.tolist()
+        limit = fc.limiting_point_where_renderable()
+        extra["lambda_limiting_point_m"] = limit.tolist()
         extra["lambda_points"] = int(len(fc.points_m))
+        extra["lambda_unrenderable_points"] = fc.unrenderable_points
         how = (f"computed (eq. 4.3, {len(fc.points_m)} surface points), limiting point "
-               f"{_mm(fc.limiting_point_m)} mm")
+               f"{_mm(limit)} mm" + (f"; {fc.unrenderable_points} points where the cores' "
+                                     "pull cannot be cancelled left out"
+                                     if fc.unrenderable_points else ""))
     else:
         lam, how = args.lam, "given"
     if args.law == "constraint":
@@ -184,7 +190,7 @@ def _check_inside(obj, source, args) -> None:
 
 def _check_renderable(args, fc) -> None:
     """lambda = 0: the drive cannot render the object at all; say where and what to change."""
-    if fc.lam_n_per_m > 0:
+    if fc.lam_where_renderable() > 0:
         return
     drive = "unipolar drive (0 <= I <= u)" if args.unipolar else "bipolar drive (|I| <= u)"
     raise BadInputError("OBJECT", f"an object the {drive} can render (lambda > 0 N/m)",

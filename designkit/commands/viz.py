@@ -1,9 +1,10 @@
 """``designkit viz KIND``: one off-screen pyvista figure of a design, written as a PNG.
 
-KIND is one of ``scene`` (coil array, magnet, workspace), ``fieldlines`` (streamlines of B),
-``slice-B`` / ``slice-F`` (|B| / |F| on a vertical and a horizontal slice), ``forcemap`` (force
-arrows at the design height) and ``isosurface`` (Fz = +/-0.8 mN). Renders without a display.
-``--vtk DIR`` also writes the figures' data for ParaView.
+KIND is one of ``scene`` (coil array, magnet, workspace; a numbered top view), ``fieldlines``
+(streamlines of B), ``slice-B`` / ``slice-F`` (|B| / |F| on a vertical and a horizontal section
+through the design point), ``forcemap`` (force arrows at the design point's height) and
+``isosurface`` (Fz = +/-0.8 mN). Renders without a display. ``--vtk DIR`` also writes the
+figures' data for ParaView.
 """
 
 from __future__ import annotations
@@ -31,12 +32,14 @@ def parse_size(text: str) -> tuple[int, int]:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("kind", choices=viz.KINDS, help="which figure")
     add_design_argument(parser)
-    add_currents_arguments(parser, "per-coil currents in A, comma-separated, row-major "
-                                   "(default: the centre coil at drive.max_current_a, others 0)")
+    add_currents_arguments(parser, "per-coil currents in A, comma-separated, in the layout's "
+                                   "coil order (default: the coil nearest the design point at "
+                                   "drive.max_current_a, others 0)")
     parser.add_argument("--out", type=Path, default=None,
                         help="PNG file (default: ./designkit-viz-KIND.png)")
     parser.add_argument("--size", default=None,
-                        help="image size WIDTHxHEIGHT in pixels, each 16..8192 (default 1024x768)")
+                        help="image size WIDTHxHEIGHT in pixels, each 16..8192 (default 1024x768; "
+                             "the two-panel scene and slices 1280x640 and 1500x640)")
     parser.add_argument("--quality", choices=("quick", "full"), default="full",
                         help="grid resolution (quick: coarse grids, a few seconds)")
     parser.add_argument("--vtk", type=Path, default=None,

@@ -19,13 +19,13 @@ from .material import (BH_CURVES, KNEE_T, STEEL1010_B, STEEL1010_H, steel1010_h,
 from .nagaoka import demagnetizing_factor, nagaoka_self
 from .panel import CORE_MODELS, Core
 from .quadrature import EVAL_RTOL
-from .rod import RodBatch, RodSolution, solve_rod, solve_rods
+from .rod import RodBatch, RodGeometry, RodSettings, RodSolution, solve_rod, solve_rods
 from .saturation import SaturationWarning, saturation_table
 from .solution import CoreSolution
 
 __all__ = [
     "ArraySystem", "BH_CURVES", "CORE_MODELS", "Core", "CoreModel", "CoreSolution",
-    "EVAL_RTOL", "KNEE_T", "M_MAX", "RodBatch", "RodSolution", "STEEL1010_B", "STEEL1010_H",
+    "EVAL_RTOL", "KNEE_T", "M_MAX", "RodBatch", "RodGeometry", "RodSettings", "RodSolution", "STEEL1010_B", "STEEL1010_H",
     "SaturationWarning", "core_model", "demagnetizing_factor", "nagaoka_self",
     "saturation_table", "solve_rod", "solve_rods", "steel1010_h", "steel1010_h_smooth",
     "steel1010_mu_r",

@@ -90,8 +90,12 @@ def fill_symmetric(g, red):
         g[:, k, i] = red[:, j]
 
 
-def self_charge_matrices(radius, z_lo, z_hi, kind, lo, hi, rho_c, z_c, m_max):
+def self_charge_matrices(radius, z_ends, panels, m_max):
     """D_m (n1, n1): normal H at the collocation points (phi = 0) per unit cos(m phi') density.
+
+    ``radius`` and ``z_ends`` (z_lo, z_hi) of the core, m; ``panels`` (kind, lo, hi, rho_c,
+    z_c): each panel's kind (0 side, 1 top, 2 bottom), its extent along the contour and its
+    collocation point (m), as :func:`designkit.cores.core_model` lays them out.
 
     Side panels: the z' integral is done in closed form (a uniform line charge), end-face
     panels by composite Gauss in r'; phi' by Gauss on intervals graded geometrically towards
@@ -100,6 +104,8 @@ def self_charge_matrices(radius, z_lo, z_hi, kind, lo, hi, rho_c, z_c, m_max):
     surface is what the on-surface integral gives (the +-sigma/2 jump is added by the equation).
     Every source panel of a kind at once: (source, collocation, phi') arrays.
     """
+    z_lo, z_hi = z_ends
+    kind, lo, hi, rho_c, z_c = panels
     n1 = len(kind)
     ph, wph = _phi_nodes_graded()
     cph, sph = np.cos(ph), np.sin(ph)
@@ -214,21 +220,23 @@ class ChargeModes:
         """Charge quadrature: positions (n1, ng, nphi, 3), weights (n1, ng) (area / dphi)."""
         key = (ng, nphi)
         cache = self._charge_nodes_cache
-        if key not in cache:
-            x, w = gauss(ng)
-            mid = 0.5 * (self.lo1 + self.hi1)
-            half = 0.5 * (self.hi1 - self.lo1)
-            s = mid[:, None] + half[:, None] * x[None]
-            ws = half[:, None] * w[None]
-            phi = 2.0 * math.pi * (np.arange(nphi) + 0.5) / nphi
-            side = (self.kind1 == 0)[:, None]
-            r = np.where(side, self.radius, s)
-            zz = np.where(side, s, np.where((self.kind1 == 1)[:, None], self.z_hi, self.z_lo))
-            wt = ws * r * (2.0 * math.pi / nphi)  # dA = r ds dphi
-            pos = np.stack([r[:, :, None] * np.cos(phi), r[:, :, None] * np.sin(phi),
-                            np.repeat(zz[:, :, None], nphi, axis=2)], axis=-1)
-            cache[key] = (pos, wt, phi)
-        return cache[key]
+        got = cache.get(key)  # one lookup: the map's sampling threads share the cache
+        if got is not None:
+            return got
+        x, w = gauss(ng)
+        mid = 0.5 * (self.lo1 + self.hi1)
+        half = 0.5 * (self.hi1 - self.lo1)
+        s = mid[:, None] + half[:, None] * x[None]
+        ws = half[:, None] * w[None]
+        phi = 2.0 * math.pi * (np.arange(nphi) + 0.5) / nphi
+        side = (self.kind1 == 0)[:, None]
+        r = np.where(side, self.radius, s)
+        zz = np.where(side, s, np.where((self.kind1 == 1)[:, None], self.z_hi, self.z_lo))
+        wt = ws * r * (2.0 * math.pi / nphi)  # dA = r ds dphi
+        pos = np.stack([r[:, :, None] * np.cos(phi), r[:, :, None] * np.sin(phi),
+                        np.repeat(zz[:, :, None], nphi, axis=2)], axis=-1)
+        cache[key] = got = (pos, wt, phi)
+        return got
 
     def _m1_field(self, pts, ng, nphi, gradient, chunk=128):
         """H [and G] of every m >= 1 unknown (unit density) at local points: (n, 3, nb) A/m

@@ -283,15 +283,17 @@ class CoreModel(ChargeModes):
         compressed rules are built on first use, per instance)."""
         key = x0.tobytes()
         cache = self._own_solutions
-        if key not in cache:
+        sol = cache.get(key)  # one lookup: the map's sampling threads share the cache
+        if sol is None:
             if len(cache) > 64:
                 cache.clear()
             ns = len(self.side)
             x0 = x0.copy()
-            cache[key] = CoreSolution(self.radius, self.side[:, 0], self.side[:, 1], x0[:ns],
-                                      self.discs[:, 0], self.discs[:, 1], self.discs[:, 2],
-                                      x0[ns:], 0.0)
-        return cache[key]
+            sol = CoreSolution(self.radius, self.side[:, 0], self.side[:, 1], x0[:ns],
+                               self.discs[:, 0], self.discs[:, 1], self.discs[:, 2],
+                               x0[ns:], 0.0)
+            cache[key] = sol
+        return sol
 
     def _m0_rz(self, pts, rho, gradient, far):
         """Cylindrical components per m = 0 unknown: list of (n, n0) arrays."""
@@ -381,7 +383,7 @@ def core_model(radius: float, length: float, offset: float, mu_r: float, key: tu
     kind, lo1, hi1, rho1, z1 = _charge_panels(radius, lo, hi, refine)
     self1 = ()
     if m_max:
-        d = self_charge_matrices(radius, lo, hi, kind, lo1, hi1, rho1, z1, m_max)
+        d = self_charge_matrices(radius, (lo, hi), (kind, lo1, hi1, rho1, z1), m_max)
         lam2 = 2.0 * (mu_r - 1.0) / (mu_r + 1.0)
         self1 = tuple(np.eye(len(kind)) - lam2 * d[m] for m in range(m_max))
     # compressed far rules of both (as CoreSolution.groups): the side in three stretches

@@ -18,21 +18,28 @@ from __future__ import annotations
 import dataclasses
 import math
 from contextlib import nullcontext
+from typing import Literal
 
 import numpy as np
 from scipy.linalg import lu_factor, lu_solve
 
 from ..constants import MU0
+from ..errors import BadInputError
 from ..field.kernels import sheet_rz
 from ..geometry.pose import Pose
 from ..geometry.winding import WindingGeometry
 from ..support.blas import one_blas_thread
 from .core_model import M_MAX, CoreModel, core_model
 from .discretization import gauss
-from .symmetric_solve import SQUARE_GROUP, SymmetricLU
+from .symmetric_solve import SymmetricLU
+from .symmetry import adapted_frames
 
 N_PHI_RING = 12
 """Azimuthal samples per collocation ring when projecting another core's / a winding's field."""
+FIELD_AZIMUTHS = (24, 32)
+"""Azimuth counts of the cores' field rules (the compressed far rule, the near panels'
+rule: :mod:`.charges`, :mod:`.core_model`): an element of the array's group fills a map's
+values at an image exactly only if it maps them onto themselves on every core."""
 N_PHI_MAGNET = 32
 """... and when projecting the magnet's field (it can be ~5 mm from a core top).
 Observation points where :meth:`CoreModel.far_mask` fails sum a core's panels (m = 0) and
@@ -47,11 +54,11 @@ def _core_model_of(coil, m_max, refine=1) -> CoreModel:
                       int(refine))
 
 
-def _rel_key(pa, pb):
+def rel_key(pa, pb) -> tuple:
     """Hashable relative placement of pose b seen from pose a (rounded to 1e-9 m / 1e-12)."""
     rel_pos = pa.to_local(np.asarray(pb.position, dtype=float)[None])[0]
     rel_rot = pa.matrix.T @ pb.matrix
-    return tuple(np.round(rel_pos, 9)) + tuple(np.round(rel_rot.ravel(), 12))
+    return tuple(np.round(rel_pos, 9) + 0.0) + tuple(np.round(rel_rot.ravel(), 12) + 0.0)
 
 
 def _cylinder_magnet(moment, magnet_size_m):
@@ -62,10 +69,6 @@ def _cylinder_magnet(moment, magnet_size_m):
     mm = float(np.linalg.norm(moment))
     u = moment / mm if mm > 0 else np.array([0.0, 0.0, 1.0])
     return a, length, u, mm / (math.pi * a * a * length)
-
-
-_D4 = SQUARE_GROUP[1:]
-"""The elements of the square's symmetry group but the identity (x, y part; z is kept)."""
 
 
 def mode_rotation(m: int, g: np.ndarray) -> np.ndarray:
@@ -94,38 +97,7 @@ def mode_transform(model: CoreModel, g: np.ndarray) -> np.ndarray:
     return t
 
 
-def _images(rel: tuple):
-    """(g, g^-1 rel) for g in :data:`_D4`: the relative placements (:func:`_rel_key`, upright
-    cores) whose image under g is ``rel``, rounded as :func:`_rel_key` rounds."""
-    d = np.array(rel[:3])
-    for g in _D4:
-        yield g, tuple(np.round(np.r_[g.T @ d[:2], d[2]], 9)) + rel[3:]
-
-
-def _block_by_symmetry(cache: dict, mi: CoreModel, mj: CoreModel, rel: tuple):
-    """The cross block of upright cores at relative placement ``rel`` (a :func:`_rel_key`)
-    from a cached block at its image under the square's symmetries, or None: block(g d) =
-    T_j(g) block(d) T_i(g)^T (the rings' azimuths and the field rules are symmetric under the
-    group, :func:`mode_transform`)."""
-    for g, src in _images(rel):
-        key = (id(mi), id(mj), src)
-        if key in cache:
-            return _turn(_turn(cache[key], mj, g).T, mi, g).T  # T_j B T_i^T
-    return None
-
-
-def _column_by_symmetry(cache: dict, key: tuple, model: CoreModel):
-    """The projected field (n_unknowns,) of an axisymmetric upright winding on an upright
-    core at relative placement ``key[2]`` (a :func:`_rel_key`) from a cached column at its
-    image under the square's symmetries, or None: column(g d) = T(g) column(d)
-    (:func:`mode_transform`; the rings' azimuths are symmetric under the group)."""
-    for g, src in _images(key[2]):
-        if key[:2] + (src,) in cache:
-            return _turn(cache[key[:2] + (src,)][:, None], model, g)[:, 0]
-    return None
-
-
-def _turn(b: np.ndarray, model: CoreModel, g: np.ndarray) -> np.ndarray:
+def turn(b: np.ndarray, model: CoreModel, g: np.ndarray) -> np.ndarray:
     """T(g) @ b for T = :func:`mode_transform` (model, g), without forming T: each mode
     order's (cos, sin) row blocks mixed by its 2 x 2 rotation."""
     out = b.copy()
@@ -139,6 +111,42 @@ def _turn(b: np.ndarray, model: CoreModel, g: np.ndarray) -> np.ndarray:
     return out
 
 
+def coupled_cores(array) -> list:
+    """Indices of the coils whose cores take part in the coupled solve: linear at
+    ``relative_permeability`` (a 1010-steel core too: its saturation is the separate
+    correction, ``saturation_table``); 'thesis-uniform' cores stay uncoupled."""
+    return [k for k, c in enumerate(array.coils)
+            if c.core is not None and c.core.model == "surface-current"]
+
+
+def solve_symmetry(array, cores, use: Literal["auto", "none"] = "auto") -> tuple:
+    """The array's symmetries the coupled solve uses and the coils' frames it works in
+    (PlacementGroup, (n_coils, 3, 3)): the coils' own frames when every element of the
+    array's group (:meth:`designkit.model.array.CoilArray.symmetries`) maps the collocation
+    rings of the ``cores`` (coil indices) onto themselves in them, else frames adapted to the
+    group (:func:`.symmetry.adapted_frames`); the group is cut to the elements that do
+    (:meth:`.symmetry.PlacementGroup.keeping_grids`), so that a block or a column taken from
+    its image is the one computed directly. ``use`` 'none': the identity alone in the coils'
+    own frames (the reference the symmetric solve is checked against)."""
+    if use not in ("auto", "none"):
+        raise BadInputError("symmetry", "'auto' or 'none'", use)
+    group = array.symmetries()
+    own = np.array([c.pose.matrix for c in array.coils])
+    if use == "none":
+        return group.subgroup(lambda e, s: False), own
+
+    def usable(frames):
+        return group.keeping_grids(group.local_actions(frames), (N_PHI_RING,), cores)
+
+    best, frames = usable(own), own
+    if len(best) < len(group):
+        adapted = adapted_frames(group, own)
+        other = usable(adapted)
+        if len(other) > len(best):
+            best, frames = other, adapted
+    return best, frames
+
+
 class ArraySystem:
     """All cores of a :class:`~designkit.model.array.CoilArray` solved together (linear cores).
 
@@ -147,82 +155,114 @@ class ArraySystem:
     cores' fields are evaluated from the solved unknowns.
     """
 
-    def __init__(self, array, m_max: int = M_MAX, refine: int = 1):
+    def __init__(self, array, m_max: int = M_MAX, refine: int = 1,
+                 symmetry: Literal["auto", "none"] = "auto"):
         self.array = array
         self.m_max = int(m_max)
-        # linear at relative_permeability (a 1010-steel core too: its saturation is the
-        # separate correction, saturation_table); 'thesis-uniform' cores stay uncoupled
-        self.core_index = [k for k, c in enumerate(array.coils)
-                           if c.core is not None and c.core.model == "surface-current"]
+        self.core_index = coupled_cores(array)
         self.models = [_core_model_of(array.coils[k], self.m_max, refine)
                        for k in self.core_index]
-        self.poses = [array.coils[k].pose for k in self.core_index]
+        self.group, frames = solve_symmetry(array, self.core_index, symmetry)
+        self.frames = frames  # (n_coils, 3, 3): the cores' frames of the solve
+        self.poses = [Pose(array.coils[k].pose.position, frames[k]) for k in self.core_index]
         sizes = [m.n_unknowns for m in self.models]
         self.offsets = np.r_[0, np.cumsum(sizes)].astype(int)
         n = int(self.offsets[-1])
         self.factors = np.concatenate([m.factors() for m in self.models]) if n else np.zeros(0)
         self.n_unknowns = n
         self._lu = None
-        # identical upright cores on a symmetric lattice: one LU per isotypic component, each
-        # block summed from the distinct placements' cross blocks (M itself is never formed)
-        self._sym = self._split_by_symmetry() if n else None
-        if n and self._sym is None:
+        self._sym = None
+        self._coil_solution = None
+        if not n:
+            return
+        with one_blas_thread():
+            reps, pairs = self.placements()
+        # identical cores in a symmetric layout: one LU per isotypic component, each block
+        # summed from the distinct placements' cross blocks (M itself is never formed)
+        if len(self.group) > 1:
+            self._sym = SymmetricLU.from_orbits(self, self._core_group(), mode_rotation,
+                                                self.models[0].self_block(), reps, pairs)
+        if self._sym is None:
             mat = np.zeros((n, n))
-            cache = {}
             with one_blas_thread():
-                self._assemble(mat, cache)
-            self.n_blocks = len(cache)
+                self._assemble(mat, reps, pairs)
             with one_blas_thread() if n <= 2000 else nullcontext():  # as in :meth:`solve`
                 self._lu = lu_factor(mat)
-        self._coil_solution = None
 
-    def _split_by_symmetry(self):
-        """:meth:`SymmetricLU.from_orbits` of the system: one cross block per orbit of the
-        relative placements under the square's symmetries, or None (cores not identical and
-        upright, no symmetry, or the split fails its check)."""
-        model = self.models[0]
-        if SymmetricLU.layout(self, _D4, mode_rotation, self.n_unknowns) is None:
-            return None
+    # ------------------------------------------------------------------ symmetry
+    def _core_group(self):
+        """The group on the cores: (matrices (n_g, 3, 3), core permutations (n_g, n_cores),
+        local actions (n_g, n_cores, 2, 2)) for :class:`SymmetricLU`."""
+        slot = {k: jj for jj, k in enumerate(self.core_index)}
+        acts = self.group.local_actions(self.frames)[:, self.core_index]
+        perms = np.array([[slot[int(s.perm[k])] for k in self.core_index]
+                          for s in self.group.elements])
+        return np.array([s.g for s in self.group.elements]), perms, acts
+
+    def placements(self):
+        """The cross blocks: ``reps`` {key: block} computed (:meth:`coupling_block`), one per
+        distinct relative placement (models and :func:`rel_key`) that is not an image of a
+        computed one under the group, and ``pairs`` [(j, i, key, h_j, h_i)]: block (j, i) of
+        M is T(h_j) reps[key] T(h_i)^T (:func:`mode_transform` of the local actions h, None:
+        the identity)."""
+        mats, perms, acts = self._core_group()
+        inv = [np.argsort(p) for p in perms]
+        models, poses = self.models, self.poses
+
+        def key(j, i):
+            return id(models[i]), id(models[j]), rel_key(poses[i], poses[j])
+
         reps, pairs, seen = {}, [], set()
-        with one_blas_thread():
-            for jj, pj in enumerate(self.poses):
-                for ii, pi in enumerate(self.poses):
-                    if ii == jj:
-                        continue
-                    rel = _rel_key(pi, pj)
-                    seen.add(rel)
-                    # rel = g rel0 for a known placement rel0 (k: g's index in [1] + _D4)
-                    k, key = next(((k, src) for k, (_, src) in enumerate(_images(rel), 1)
-                                   if rel not in reps and src in reps), (0, rel))
-                    if key not in reps:
-                        reps[rel] = self._coupling_block(model, pi, model, pj)
-                    pairs.append((jj, ii, key, k))
-        self.n_blocks = len(seen)
-        return SymmetricLU.from_orbits(self, _D4, mode_rotation, model.self_block(), reps,
-                                       pairs)
+        for jj in range(len(models)):
+            for ii in range(len(models)):
+                if ii == jj:
+                    continue
+                k = key(jj, ii)
+                seen.add(k)
+                src = None if k in reps else next(
+                    ((k0, acts[e, j0], acts[e, i0]) for e in range(1, len(mats))
+                     for j0, i0 in [(inv[e][jj], inv[e][ii])]
+                     for k0 in [key(j0, i0)] if k0 in reps), None)
+                if src is None:
+                    if k not in reps:
+                        reps[k] = self.coupling_block(models[ii], poses[ii], models[jj],
+                                                       poses[jj])
+                    src = (k, None, None)
+                pairs.append((jj, ii) + src)
+        self.n_blocks, self.n_computed_blocks = len(seen), len(reps)
+        return reps, pairs
 
-    def _assemble(self, mat, cache):
-        """Fill the dense system ``mat`` (n, n): self blocks and :meth:`_coupling_block` s,
-        one per distinct relative placement in ``cache`` (upright cores: from an image under
-        the square's symmetries where one is known, :func:`_block_by_symmetry`)."""
-        upright = all(p.is_identity_rotation for p in self.poses)
+    def _assemble(self, mat, reps, pairs):
+        """Fill the dense system ``mat`` (n, n): self blocks and the cross blocks of
+        :meth:`placements` (turned where taken from an image)."""
         selfs = {}
-        for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
+        for jj, mj in enumerate(self.models):
             sj = slice(self.offsets[jj], self.offsets[jj + 1])
             if id(mj) not in selfs:  # one self block per core type
                 selfs[id(mj)] = mj.self_block()
             mat[sj, sj] = selfs[id(mj)]
-            for ii, (mi, pi) in enumerate(zip(self.models, self.poses)):
-                if ii == jj:
-                    continue
-                key = (id(mi), id(mj), _rel_key(pi, pj))
-                if key not in cache:
-                    block = _block_by_symmetry(cache, mi, mj, key[2]) if upright else None
-                    cache[key] = (self._coupling_block(mi, pi, mj, pj) if block is None
-                                  else block)
-                mat[sj, self.offsets[ii]:self.offsets[ii + 1]] = cache[key]
+        for jj, ii, k, hj, hi in pairs:
+            block = reps[k]
+            if hj is not None:
+                block = turn(turn(block, self.models[jj], hj).T, self.models[ii], hi).T
+            mat[self.offsets[jj]:self.offsets[jj + 1],
+                self.offsets[ii]:self.offsets[ii + 1]] = block
 
-    def _coupling_block(self, mi, pi, mj, pj):
+    def in_coil_frames(self, x: np.ndarray) -> np.ndarray:
+        """Unknowns (n_unknowns, ...) of the solve's core frames (:attr:`poses`) expressed in
+        the coils' own frames (``array.coils[k].pose``): each core's (cos, sin) pairs turned
+        by the rotation between the two about its axis (:func:`turn`)."""
+        out = np.array(x, dtype=float, copy=True)
+        for jj, k in enumerate(self.core_index):
+            h = self.array.coils[k].pose.matrix.T @ self.poses[jj].matrix
+            if np.allclose(h, np.eye(3), rtol=0.0, atol=1e-14):
+                continue
+            rows = slice(self.offsets[jj], self.offsets[jj + 1])
+            flat = out[rows].reshape(self.models[jj].n_unknowns, -1)
+            out[rows] = turn(flat, self.models[jj], h[:2, :2]).reshape(out[rows].shape)
+        return out
+
+    def coupling_block(self, mi, pi, mj, pj):
         """M's block of rows core j, columns core i: -F_j times :meth:`_cross_block` (the
         row factors F commute with the symmetries' mode turns)."""
         return np.multiply(-mj.factors()[:, None], self._cross_block(mi, pi, mj, pj))
@@ -316,25 +356,31 @@ class ArraySystem:
         the row factors)."""
         coils = self.array.coils
         rhs = np.zeros((self.n_unknowns, len(coils)))
-        cache = {}
-        upright = all(p.is_identity_rotation for p in self.poses)
+        cache, done = {}, {}
+        poses = [Pose(c.pose.position, f) for c, f in zip(coils, self.frames)]
+        acts = self.group.local_actions(self.frames)
+        inv = [np.argsort(s.perm) for s in self.group.elements]
         for jj, (mj, pj) in enumerate(zip(self.models, self.poses)):
             ring = mj.ring_points(N_PHI_RING)
             glob = ring.reshape(-1, 3) @ pj.matrix.T + np.asarray(pj.position)
+            j = self.core_index[jj]
             for k, c in enumerate(coils):
-                # identical windings at the same relative placement: one evaluation; upright
-                # ones at a placement turned by the square's symmetries: its image (an
+                # identical windings at the same relative placement: one evaluation; at the
+                # image of a computed placement under the group: that column turned (an
                 # axisymmetric winding's field turns with the placement)
                 key = (dataclasses.replace(c, core=None, pose=Pose()), id(mj),
-                       _rel_key(c.pose, pj))
+                       rel_key(poses[k], pj))
                 if key not in cache:
-                    col = (_column_by_symmetry(cache, key, mj)
-                           if upright and c.pose.is_identity_rotation else None)
+                    col = next((turn(cache[done[(k0, j0)]][:, None], mj, acts[e, j0])[:, 0]
+                                for e in range(1, len(inv))
+                                for k0, j0 in [(inv[e][k], inv[e][j])] if (k0, j0) in done),
+                               None)
                     if col is None:
                         h = c.field(glob, 1.0, include="winding", rtol=1e-9) / MU0
                         h = h @ pj.matrix  # to local j
                         col = mj.project(h.reshape(ring.shape[:2] + (3,)))
                     cache[key] = col
+                done[(k, j)] = key
                 rhs[self.offsets[jj]:self.offsets[jj + 1], k] = cache[key]
         return rhs
 

@@ -234,9 +234,15 @@ def _nonlinear_setup(radius, length, offset, key, n_slices):
     return side, side_slice, discs, a, h_t, _slice_probe(radius, side, discs, slice_edges, key)
 
 
+NONLINEAR_MAX_ITER = 100
+"""Iterations of the secant-permeability iteration at most."""
+NONLINEAR_TOL = 1e-5
+"""... until the slices' reluctivities change by less than this (relative)."""
+
+
 @functools.lru_cache(maxsize=256)
-def _solve_nonlinear(radius, length, offset, bh, key, current, n_slices=N_SLICES,
-                     max_iter=100, tol=1e-5) -> CoreSolution:
+def _solve_nonlinear(radius, length, offset, bh, key, current,
+                     n_slices=N_SLICES) -> CoreSolution:
     """Secant-permeability iteration over axial slices with the B-H curve (docs/core_model.md).
 
     A damped fixed-point iteration on the slices' reluctivities 1/mu_k. Returns the solution
@@ -251,7 +257,7 @@ def _solve_nonlinear(radius, length, offset, bh, key, current, n_slices=N_SLICES
     mus = np.full(n_slices, float(steel1010_mu_r(np.array([0.3]))[0]))
     b = np.zeros(n_slices)
     with one_blas_thread():  # small dense solves: threads wait longer than they compute
-        for _ in range(max_iter):
+        for _ in range(NONLINEAR_MAX_ITER):
             ks, kd = _solve_with_mu(side, side_slice, discs, mus, a, h_t * current)
             k = np.concatenate([ks, kd])
             bmag = MU0 * np.hypot(p_r @ k + hr * current, p_z @ k + hz * current)
@@ -260,7 +266,7 @@ def _solve_nonlinear(radius, length, offset, bh, key, current, n_slices=N_SLICES
             # damped update of the reluctivity: the undamped map overshoots past the knee
             nu_new = 0.5 * nu + 0.5 / steel1010_mu_r(b)
             mus = 1.0 / nu_new
-            if np.max(np.abs(nu_new - nu) / nu) < tol:
+            if np.max(np.abs(nu_new - nu) / nu) < NONLINEAR_TOL:
                 break
         ks, kd = _solve_with_mu(side, side_slice, discs, mus, a, h_t * current)
     return CoreSolution(radius, side[:, 0].copy(), side[:, 1].copy(), ks / current,

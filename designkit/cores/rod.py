@@ -213,47 +213,59 @@ def bessel_slice_flux(inner_radius_m, outer_radius_m, length_m, turns, radius_m,
     return out[0] if single else out
 
 
-def solve_rod(inner_radius_m: float, outer_radius_m: float, length_m: float, turns: float,
-              core_radius_m: float, core_length_m: float, core_offset_m: float,
-              current_a: float, *, n_slices: int = N_SLICES, tol_t: float = 1e-12,
-              max_iter: int = 60, relative_permeability: float | None = None,
-              quadrature: tuple[int, int] | str = (3, 3)) -> RodSolution:
-    """Solve the slice model of a 1010-steel rod core driven by the winding at ``current_a``.
+@dataclass(frozen=True)
+class RodGeometry:
+    """The winding and the core of one or B rod models (scalars or (B,) arrays): winding
+    section ``inner_radius_m``, ``outer_radius_m``, ``length_m`` (m, centred at z = 0),
+    ``turns``; core ``core_radius_m``, ``core_length_m`` (m) and ``core_offset_m`` (its
+    centre's z, m)."""
 
-    Parameters
-    ----------
-    inner_radius_m, outer_radius_m, length_m : winding section, m (centred at z = 0)
-    turns : float
-    core_radius_m, core_length_m : m; core_offset_m : core centre's z, m
-    current_a : A (> 0)
-    n_slices : int
-    relative_permeability : float, optional
-        Linear core with this mu_r instead of the B-H curve (for checks of the linear limit).
-    quadrature : (nr, nz) or 'bessel'
-        Gauss points per slice in the area coordinate and in z for the winding's flux, or the
-        Fourier-Bessel integral (:func:`bessel_slice_flux`, smooth in the geometry).
+    inner_radius_m: object
+    outer_radius_m: object
+    length_m: object
+    turns: object
+    core_radius_m: object
+    core_length_m: object
+    core_offset_m: object
 
-    Returns
-    -------
-    RodSolution (one design of :func:`solve_rods`)
+
+@dataclass(frozen=True)
+class RodSettings:
+    """How the rod model is solved: ``n_slices``; Newton until |residual| < ``tol_t`` (T) or
+    ``max_iter``; ``relative_permeability`` a linear core with this mu_r instead of the B-H
+    curve (for checks of the linear limit); ``quadrature`` (nr, nz) Gauss points per slice in
+    the area coordinate and in z for the winding's flux, or 'bessel' (the Fourier-Bessel
+    integral, :func:`bessel_slice_flux`, smooth in the geometry)."""
+
+    n_slices: int = N_SLICES
+    tol_t: float = 1e-12
+    max_iter: int = 60
+    relative_permeability: float | None = None
+    quadrature: tuple[int, int] | str = (3, 3)
+
+
+def solve_rod(geometry: RodGeometry, current_a: float,
+              settings: RodSettings = RodSettings()) -> RodSolution:
+    """Solve the slice model of a 1010-steel rod core driven by the winding at ``current_a``
+    (A, > 0): :func:`solve_rods` of one design (``geometry`` of scalars)."""
+    return solve_rods(geometry, current_a, settings)[0]
+
+
+def solve_rods(geometry: RodGeometry, current_a: float,
+               settings: RodSettings = RodSettings()) -> "RodBatch":
+    """:func:`solve_rod` for B designs at once (``geometry`` of scalars or (B,) arrays, m).
+
+    One Newton iteration works on all designs still above ``settings.tol_t`` together
+    (stacked n x n solves): an optimizer's finite-difference gradient costs about one solve,
+    not one per variable. Each design's iterates are those of its own solve.
     """
-    return solve_rods(inner_radius_m, outer_radius_m, length_m, turns, core_radius_m,
-                      core_length_m, core_offset_m, current_a, n_slices=n_slices, tol_t=tol_t,
-                      max_iter=max_iter, relative_permeability=relative_permeability,
-                      quadrature=quadrature)[0]
-
-
-def solve_rods(inner_radius_m, outer_radius_m, length_m, turns, core_radius_m, core_length_m,
-               core_offset_m, current_a: float, *, n_slices: int = N_SLICES,
-               tol_t: float = 1e-12, max_iter: int = 60,
-               relative_permeability: float | None = None,
-               quadrature: tuple[int, int] | str = (3, 3)) -> "RodBatch":
-    """:func:`solve_rod` for B designs at once (geometry arguments scalars or (B,) arrays, m).
-
-    One Newton iteration works on all designs still above ``tol_t`` together (stacked
-    n x n solves): an optimizer's finite-difference gradient costs about one solve, not one
-    per variable. Each design's iterates are those of its own solve.
-    """
+    g_ = geometry
+    n_slices, tol_t, max_iter = settings.n_slices, settings.tol_t, settings.max_iter
+    relative_permeability, quadrature = settings.relative_permeability, settings.quadrature
+    inner_radius_m, outer_radius_m, length_m, turns = (g_.inner_radius_m, g_.outer_radius_m,
+                                                       g_.length_m, g_.turns)
+    core_radius_m, core_length_m, core_offset_m = (g_.core_radius_m, g_.core_length_m,
+                                                   g_.core_offset_m)
     geo = np.broadcast_arrays(*(np.atleast_1d(np.asarray(q, dtype=float)) for q in (
         inner_radius_m, outer_radius_m, length_m, turns, core_radius_m, core_length_m,
         core_offset_m)))

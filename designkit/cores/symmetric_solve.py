@@ -1,9 +1,10 @@
 """The coupled cores' system split by the array's symmetry: smaller LU factorizations.
 
-When identical upright cores sit on a square's or a rectangle's lattice, the block system M of
-:class:`designkit.cores.coupled.ArraySystem` commutes with the group's action U(g) on the
-unknowns (core k -> core sigma(k), its modes turned by
-:func:`designkit.cores.coupled.mode_transform`). In an orthonormal basis Q adapted to the
+When identical cores sit in a symmetric layout (any point group about a vertical axis:
+:mod:`.symmetry`), the block system M of :class:`designkit.cores.coupled.ArraySystem` commutes
+with the group's action U(g) on the unknowns (core k -> core sigma(k), its modes turned by
+:func:`designkit.cores.coupled.mode_transform` of g's local action on core k,
+:meth:`.symmetry.PlacementGroup.local_actions`). In an orthonormal basis Q adapted to the
 isotypic components of U (the parts of the space carrying one irreducible representation each)
 Q^T M Q is block-diagonal, so one LU per component replaces the LU of M: for the 3 x 3 array
 (D4) the largest component is about half the unknowns, an eighth of the factorization's cost.
@@ -24,52 +25,32 @@ from scipy.linalg import lu_factor, lu_solve
 
 from ..support.blas import one_blas_thread
 
-TOL_M = 1e-9
-"""Two positions (cores, map points) closer than this (m) are the same."""
 
-SQUARE_GROUP = [np.array(g, float) for g in (
-    [[1, 0], [0, 1]], [[0, -1], [1, 0]], [[-1, 0], [0, -1]], [[0, 1], [-1, 0]],
-    [[-1, 0], [0, 1]], [[1, 0], [0, -1]], [[0, 1], [1, 0]], [[0, -1], [-1, 0]])]
-"""The symmetry group of the square (D4), identity first: (2, 2) x, y parts; z is kept."""
-
-
-def _group(system, d4) -> list:
-    """[(g (2, 2), perm (n_cores,))] of the elements of ``d4`` (and the identity) that map
-    the cores onto each other about the vertical axis through their centroid."""
-    pos = np.array([np.asarray(p.position, float) for p in system.poses])
-    c = pos[:, :2].mean(axis=0)
-    out = [(np.eye(2), np.arange(len(pos)))]
-    for g in d4:
-        img = np.c_[(pos[:, :2] - c) @ g.T + c, pos[:, 2]]
-        dist = np.linalg.norm(img[:, None] - pos[None], axis=2)
-        perm = dist.argmin(axis=1)
-        if np.all(dist[np.arange(len(pos)), perm] < TOL_M) and len(set(perm)) == len(pos):
-            out.append((g, perm))
-    return out
-
-
-def _classes(group) -> np.ndarray:
-    """Conjugacy class label of each element of ``group`` ([(g, perm)], 2 x 2 parts)."""
-    mats = [g for g, _ in group]
+def _classes(mats: list) -> np.ndarray:
+    """Conjugacy class label of each element of a group given by its faithful orthogonal
+    matrices ``mats`` (3, 3)."""
     label = -np.ones(len(mats), int)
     for a in range(len(mats)):
         if label[a] >= 0:
             continue
         for h in mats:
             conj = h @ mats[a] @ h.T
-            b = next(i for i, m in enumerate(mats) if np.allclose(m, conj))
+            b = next(i for i, m in enumerate(mats) if np.allclose(m, conj, atol=1e-9))
             label[b] = a
     return label
 
 
-def _small_rep(group, t_small) -> list:
-    """The group's matrices on the small space (core, component) with ``t_small(g)`` the
-    per-core action (r, r): D(g) = P(g) kron t_small(g)."""
+def _small_rep(perms: list, actions: np.ndarray, t_small) -> list:
+    """The group's matrices on the small space (core, component): D(g) has the block
+    ``t_small(actions[g, k])`` (r, r) at (perm_g[k], k)."""
     out = []
-    for g, perm in group:
-        p = np.zeros((len(perm), len(perm)))
-        p[perm, np.arange(len(perm))] = 1.0
-        out.append(np.kron(p, t_small(g)))
+    for e, perm in enumerate(perms):
+        blocks = [np.atleast_2d(t_small(h)) for h in actions[e]]
+        r = blocks[0].shape[0]
+        d = np.zeros((len(perm) * r, len(perm) * r))
+        for k, (j, blk) in enumerate(zip(perm, blocks)):
+            d[j * r:(j + 1) * r, k * r:(k + 1) * r] = blk
+        out.append(d)
     return out
 
 
@@ -87,59 +68,59 @@ class SymmetricLU:
         self.n = n
 
     @staticmethod
-    def layout(system, d4, rotation_of, n: int):
-        """The split of ``system``'s n unknowns (an ArraySystem), or None when the cores are
-        not identical and upright or the group is trivial: (parts, sels, twin) -- per mode
-        order its rows and V_m, per block the columns of each V_m it takes, and the blocks
-        whose matrix is another's (``twin``: block -> that block). ``d4``: the candidate
-        2 x 2 matrices; ``rotation_of(m, g)``: the (2, 2) action on (cos, sin) of mode order
-        m >= 1."""
+    def layout(system, group, rotation_of):
+        """The split of ``system``'s unknowns (an ArraySystem), or None when its cores are not
+        all of one model or the group is trivial: (parts, sels, twin) -- per mode order its
+        rows and V_m, per block the columns of each V_m it takes, and the blocks whose matrix
+        is another's (``twin``: block -> that block). ``group``: (matrices (n_g, 3, 3), core
+        permutations (n_g, n_cores), local actions (n_g, n_cores, 2, 2)), identity first;
+        ``rotation_of(m, h)``: the (2, 2) action of a local action h on (cos, sin) of mode
+        order m >= 1."""
         models = system.models
-        if len(models) < 2 or any(m is not models[0] for m in models) or \
-                not all(p.is_identity_rotation for p in system.poses):
-            return None
-        group = _group(system, d4)
-        if len(group) < 2:
+        mats, perms, actions = group
+        if len(models) < 2 or any(m is not models[0] for m in models) or len(mats) < 2:
             return None
         model = models[0]
-        label = _classes(group)
-        w = np.random.default_rng(20261127).uniform(1.0, 2.0, len(group))[label]
-        mirror = next((k for k, (g, _) in enumerate(group) if np.linalg.det(g) < 0), None)
-        quarter = next((k for k, (g, _) in enumerate(group)
-                        if np.linalg.det(g) > 0 and abs(g[0, 0]) < 0.5), None)
-        reps = [(0, _small_rep(group, lambda g: np.eye(1)))]
-        reps += [(m, _small_rep(group, lambda g, m=m: rotation_of(m, g)))
+        label = _classes(list(mats))
+        w = np.random.default_rng(20261127).uniform(1.0, 2.0, len(mats))[label]
+        mirror = next((k for k, g in enumerate(mats) if np.linalg.det(g) < 0), None)
+        turns = [(abs(np.arctan2(g[1, 0], g[0, 0])), k) for k, g in enumerate(mats)
+                 if np.linalg.det(g) > 0 and k > 0]
+        step = min(turns)[1] if turns else None  # the smallest rotation: the twins' generator
+        reps = [(0, _small_rep(perms, actions, lambda h: np.eye(1)))]
+        reps += [(m, _small_rep(perms, actions, lambda h, m=m: rotation_of(m, h)))
                  for m in range(1, model.m_max + 1)]
         parts, keys, unpaired = [], [], set()
-        for m, mats in reps:
-            vec, key, bad = _adapted_basis(sum(wi * d for wi, d in zip(w, mats)),
-                                           None if mirror is None else mats[mirror],
-                                           None if quarter is None else mats[quarter])
+        for m, ds in reps:
+            vec, key, bad = _adapted_basis(sum(wi * d for wi, d in zip(w, ds)),
+                                           None if mirror is None else ds[mirror],
+                                           None if step is None else ds[step])
             parts.append((_rows(system, model, m), vec))
             keys.append(key)
             unpaired |= bad
         names = sorted(set(k for key in keys for k in key))
         sels = [[np.flatnonzero([k == name for k in key]) for key in keys] for name in names]
-        if sum(len(r) for r, _ in parts) != n:
+        if sum(len(r) for r, _ in parts) != system.n_unknowns:
             return None
-        # the reflection's -1 half of the 2-dimensional type's component is the quarter turn
-        # of its +1 half, vector by vector: the same block (M commutes with the turn)
+        # the reflection's -1 half of a 2-dimensional type's component is the image of its
+        # +1 half under (U(r) - U(r)^T) / |.| (r the smallest rotation), vector by vector:
+        # the same block (M commutes with every U(g))
         twin = {i: names.index((lam, 1.0)) for i, (lam, sgn) in enumerate(names)
-                if sgn < 0 and quarter is not None and lam not in unpaired
+                if sgn < 0 and step is not None and lam not in unpaired
                 and (lam, 1.0) in names}
         return parts, sels, twin
 
     @classmethod
-    def from_orbits(cls, system, d4, rotation_of, self_block: np.ndarray, reps: dict,
+    def from_orbits(cls, system, group, rotation_of, self_block: np.ndarray, reps: dict,
                     pairs: list) -> "SymmetricLU | None":
         """The split factorization without assembling M: its core blocks are ``self_block``
-        on the diagonal and, for the cores j != i, T(g) reps[key] T(g)^T with (j, i, key, k)
-        in ``pairs``, g = ([identity] + ``d4``)[k] (T(g) = R_m(g) (x) I per mode order m,
-        ``rotation_of``). Each block
-        Q_s^T M Q_s is summed over the few distinct placements ``reps`` with coefficients on
-        the small space, never over the n^2 entries of M. None as :meth:`layout`."""
+        on the diagonal and, for the cores j != i, T(h_j) reps[key] T(h_i)^T with
+        (j, i, key, h_j, h_i) in ``pairs`` (h: 2 x 2 local actions, T(h) = R_m(h) (x) I per
+        mode order m, ``rotation_of``; None: the identity). Each block Q_s^T M Q_s is summed
+        over the few distinct placements ``reps`` with coefficients on the small space,
+        never over the n^2 entries of M. None as :meth:`layout`."""
         n = system.n_unknowns
-        lay = cls.layout(system, d4, rotation_of, n)
+        lay = cls.layout(system, group, rotation_of)
         if lay is None:
             return None
         parts, sels, twin = lay
@@ -148,23 +129,28 @@ class SymmetricLU:
         local = [np.arange(model.n0)] + [model.n0 + 2 * (m - 1) * model.n1
                                          + np.arange(2 * model.n1)
                                          for m in range(1, model.m_max + 1)]
-        gs = [np.eye(2)] + [g for g in d4]
-        rot = [[np.eye(1) if m == 0 else rotation_of(m, g) for g in gs]
-               for m in range(len(parts))]
-        # R_m(g)^T V_m seen from each core: (n_g, cores, n_s, r_m) per mode order
-        w = [np.einsum("gts,kta->gksa", np.array(rot[m]), v.reshape(n_cores, -1, v.shape[1]))
-             for m, (_, v) in enumerate(parts)]
-        terms = {None: (np.arange(n_cores), np.arange(n_cores), np.zeros(n_cores, int))}
-        for key in reps:
-            terms[key] = tuple(np.array(t) for t in zip(*[(j, i, k) for j, i, kk, k in pairs
-                                                           if kk == key]))
+        eye2 = np.eye(2)
+
+        def t(m, h):
+            return np.eye(1) if m == 0 else rotation_of(m, eye2 if h is None else h)
+
+        # T(h)^T V_m seen from each side of each pair: (P, r_small, r_m) per mode order
+        vs = [v.reshape(n_cores, -1, v.shape[1]) for _, v in parts]
+        terms = {None: [(j, j, None, None) for j in range(n_cores)]}
+        for j, i, key, hj, hi in pairs:
+            terms.setdefault(key, []).append((j, i, hj, hi))
+        w = {}
+        for key, lst in terms.items():
+            w[key] = [(np.array([t(m, hj).T @ vs[m][j] for j, _, hj, _ in lst]),
+                       np.array([t(m, hi).T @ vs[m][i] for _, i, _, hi in lst]))
+                      for m in range(len(parts))]
         mats = {**reps, None: self_block}
         lus = {}
         with one_blas_thread():
             for b, sel in enumerate(sels):
                 if b in twin:
                     continue
-                sizes = [len(s) * len(loc) // w[m].shape[2]
+                sizes = [len(s) * len(loc) // vs[m].shape[1]
                          for m, (s, loc) in enumerate(zip(sel, local))]
                 edges = np.r_[0, np.cumsum(sizes)]
                 blk = np.zeros((edges[-1], edges[-1]))
@@ -172,11 +158,11 @@ class SymmetricLU:
                     if not sizes[mr] or not sizes[mc]:
                         continue
                     acc = 0.0
-                    for key, (jj, ii, gg) in terms.items():
+                    for key in terms:
                         if key is None and mr != mc:
                             continue  # the self blocks are mode-diagonal
-                        c = np.einsum("psa,ptb->satb", w[mr][gg, jj][..., sel[mr]],
-                                      w[mc][gg, ii][..., sel[mc]])
+                        c = np.einsum("psa,ptb->satb", w[key][mr][0][..., sel[mr]],
+                                      w[key][mc][1][..., sel[mc]])
                         sub = mats[key][np.ix_(local[mr], local[mc])]
                         sub = sub.reshape(c.shape[0], -1, c.shape[2], sub.shape[1] // c.shape[2])
                         acc = acc + np.einsum("satb,sptq->apbq", c, sub, optimize=True)
@@ -185,10 +171,11 @@ class SymmetricLU:
                 lus[b] = lu_factor(blk, overwrite_a=True)
         res = cls(parts, [(sel, lus[twin.get(b, b)]) for b, sel in enumerate(sels)], n)
 
-        def turn(x, g):  # T(g) x on one core's unknowns
+        def turn(x, h, transpose=False):  # T(h) x (T(h)^T x) on one core's unknowns
             out = x.copy()
             for m in range(1, len(parts)):
-                out[local[m]] = (rotation_of(m, g) @ x[local[m]].reshape(2, -1)).ravel()
+                r = t(m, h)
+                out[local[m]] = ((r.T if transpose else r) @ x[local[m]].reshape(2, -1)).ravel()
             return out
 
         def matvec(x):
@@ -196,9 +183,9 @@ class SymmetricLU:
             off = system.offsets
             for j in range(n_cores):
                 y[off[j]:off[j + 1]] = self_block @ x[off[j]:off[j + 1]]
-            for j, i, key, k in pairs:
-                g = gs[k]
-                y[off[j]:off[j + 1]] += turn(mats[key] @ turn(x[off[i]:off[i + 1]], g.T), g)
+            for j, i, key, hj, hi in pairs:
+                y[off[j]:off[j + 1]] += turn(mats[key] @ turn(x[off[i]:off[i + 1]], hi, True),
+                                             hj)
             return y
 
         return res if res.solves(matvec) else None
@@ -231,13 +218,15 @@ class SymmetricLU:
         return out.reshape(np.shape(rhs))
 
 
-def _adapted_basis(z: np.ndarray, mirror, quarter=None) -> tuple[np.ndarray, list, set]:
+def _adapted_basis(z: np.ndarray, mirror, step=None) -> tuple[np.ndarray, list, set]:
     """Orthonormal eigenvectors (r, r) of the central element ``z`` (a different scalar on each
     isotypic component), each component split further by the eigenvalue +-1 of the
-    reflection ``mirror`` (r, r) (commuting with M, it halves the 2-dimensional irreducible
+    reflection ``mirror`` (r, r) (commuting with M, it halves a 2-dimensional irreducible
     type's component), each vector's block key (eigenvalue, reflection sign), and the
-    eigenvalues whose -1 half could not be made the quarter turn ``quarter`` (r, r) of the +1
-    half (where both halves exist and a quarter turn is given, it is made so)."""
+    eigenvalues whose -1 half could not be made the image of the +1 half under
+    (``step`` - ``step``^T) / |.| (``step`` (r, r) a rotation of the group; on a
+    2-dimensional type's component it is a multiple of an orthogonal map that commutes with
+    M and swaps the reflection's eigenspaces)."""
     lam, vec = np.linalg.eigh(0.5 * (z + z.T))
     lam = np.round(lam, 6)
     cols, keys, bad = [], [], set()
@@ -251,9 +240,12 @@ def _adapted_basis(z: np.ndarray, mirror, quarter=None) -> tuple[np.ndarray, lis
         u = u @ w
         sgn = np.round(sgn)
         plus, minus = u[:, sgn > 0], u[:, sgn < 0]
-        if quarter is not None and plus.shape[1] and plus.shape[1] == minus.shape[1]:
-            turned = quarter @ plus
-            if np.abs(mirror @ turned + turned).max() < 1e-10:
+        if step is not None and plus.shape[1] and plus.shape[1] == minus.shape[1]:
+            turned = (step - step.T) @ plus
+            norm = np.linalg.norm(turned[:, 0])
+            turned = turned / norm if norm > 1e-9 else turned
+            if (norm > 1e-9 and np.abs(mirror @ turned + turned).max() < 1e-10
+                    and np.abs(turned.T @ turned - np.eye(turned.shape[1])).max() < 1e-10):
                 minus = turned
             else:
                 bad.add(float(value))

@@ -17,8 +17,8 @@ from typing import Any, Mapping
 from ..errors import BadInputError
 from .asbuilt import asbuilt_from_dict
 from .layouts import layout_from_table, layout_to_table
-from .spec import (SECTIONS, CoilGroup, CoilSpec, CoreSpec, Design, MagnetSpec, default_design,
-                   implied_shape)
+from .spec import Design, default_design
+from .tables import SECTIONS, CoilGroup, CoilSpec, CoreSpec, MagnetSpec, implied_shape
 
 
 def design_from_dict(data: Mapping[str, Any], *, source: str = "design") -> Design:

@@ -6,7 +6,8 @@ from the same :class:`designkit.Coil` that designkit's own models use, so the tw
 point by point. GetDP is an external program (Debian package ``getdp``); gmsh and meshio are
 Python packages. Nothing here is imported by the rest of designkit.
 
-Entry point: :func:`solve` -> :class:`FemResult`.
+Entry point: :func:`solve` -> :class:`FemResult`. The 3-D model of several cores in any pose
+is :mod:`.fem3d`; :mod:`.array_check` compares a design's whole coupled array with it.
 """
 
 from __future__ import annotations

@@ -44,7 +44,7 @@ class MeshSpec:
         return 2.0 ** (-self.level / 2.0)
 
 
-def _size_near(f, what: str, tags, size_min: float, size_max: float, dist_min: float,
+def size_near(f, what: str, tags, size_min: float, size_max: float, dist_min: float,
                dist_max: float, sampling: int | None = None) -> int:
     """gmsh Distance + Threshold fields: element size ``size_min`` within ``dist_min`` of the
     curves or points ``tags`` (``what`` = "CurvesList" / "PointsList"), growing to ``size_max``
@@ -175,13 +175,13 @@ def build_mesh(spec: MeshSpec, msh_path: str | Path) -> dict:
         for tag in groups[CORE] + groups[WINDING]:
             obj_curves += [abs(c[1]) for c in gmsh.model.getBoundary([(2, tag)], oriented=False)]
         obj_curves = [c for c in set(obj_curves) if c not in axis]
-        thr = _size_near(f, "CurvesList", obj_curves, h_obj, h_far, 2e-3, 0.08, sampling=200)
+        thr = size_near(f, "CurvesList", obj_curves, h_obj, h_far, 2e-3, 0.08, sampling=200)
         corner_pts = []
         for tag in groups[CORE] + groups[WINDING]:
             for d, p in gmsh.model.getBoundary([(2, tag)], recursive=True):
                 if d == 0:
                     corner_pts.append(p)
-        thrp = _size_near(f, "PointsList", sorted(set(corner_pts)), h_corner, h_far, 0.3e-3, 0.01)
+        thrp = size_near(f, "PointsList", sorted(set(corner_pts)), h_corner, h_far, 0.3e-3, 0.01)
         fields = [box, thr, thrp]
         if spec.probe_box is not None:
             pbox = f.add("Box")

@@ -13,6 +13,8 @@ density of +J along phi_hat enters as ``js = Vector[0, 0, -J]``, and CompZ[a] = 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .mesh import AIR, AXIS, CORE, OUTER, SHELL, WINDING
@@ -133,30 +135,46 @@ def _post(lines, winding_area, turns):
     return f
 
 
-def problem_text(*, current_density: float, mu_r: float | None, bh: tuple | None,
-                 has_core: bool, shell_inner: float, shell_outer: float,
-                 lines: list[tuple[float, float, float, float, int, str]],
-                 winding_area: float, turns: int, newton_tol: float = 1e-10,
-                 newton_max: int = 60) -> str:
-    """The complete .pro file.
+@dataclass(frozen=True)
+class AxiProblem:
+    """What the .pro file of the axisymmetric model says.
 
-    Parameters
-    ----------
     current_density : float, A/m^2
         Azimuthal current density in the winding (turns * current / section area).
     mu_r : float or None
         Linear relative permeability of the core (None with ``bh``).
     bh : (h, b) arrays or None
         B-H table of the core (A/m, T), b[0] = h[0] = 0.
+    has_core : bool
+    shell_inner, shell_outer : float, m
+        The shell mapped to infinity.
     lines : list of (r0, z0, r1, z1, n, filename)
         Extraction lines: b printed at n + 1 points.
     winding_area, turns : section area (m^2) and turns, for the flux linkage.
+    newton_tol, newton_max : the nonlinear core's Newton iterations.
     """
-    nonlinear = has_core and bh is not None
-    f = (_groups(has_core, nonlinear)
-         + _functions(current_density, mu_r, bh, has_core, nonlinear)
-         + _constraints_and_jacobian(shell_inner, shell_outer)
+
+    current_density: float
+    mu_r: float | None
+    bh: tuple | None
+    has_core: bool
+    shell_inner: float
+    shell_outer: float
+    lines: list
+    winding_area: float
+    turns: int
+    newton_tol: float = 1e-10
+    newton_max: int = 60
+
+
+def problem_text(problem: AxiProblem) -> str:
+    """The complete .pro file of ``problem``."""
+    p = problem
+    nonlinear = p.has_core and p.bh is not None
+    f = (_groups(p.has_core, nonlinear)
+         + _functions(p.current_density, p.mu_r, p.bh, p.has_core, nonlinear)
+         + _constraints_and_jacobian(p.shell_inner, p.shell_outer)
          + _INTEGRATION_AND_SPACE
-         + _formulation_and_resolution(nonlinear, newton_tol, newton_max)
-         + _post(lines, winding_area, turns))
+         + _formulation_and_resolution(nonlinear, p.newton_tol, p.newton_max)
+         + _post(p.lines, p.winding_area, p.turns))
     return "\n".join(f) + "\n"

@@ -9,6 +9,7 @@ densely sampled B (the FEM's b is piecewise linear; the fit averages its inter-e
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import math
 import shutil
@@ -25,7 +26,7 @@ from ..cores.material import STEEL1010_B, STEEL1010_H
 from ..errors import BadInputError, MissingDependencyError
 from ..support.atomic import write_json_atomic
 from .mesh import MeshSpec, build_mesh, export_meshio
-from .problem import problem_text
+from .problem import AxiProblem, problem_text
 
 APT_HINT = "sudo apt-get install getdp"
 
@@ -168,7 +169,7 @@ class FemResult:
         }
 
 
-def _read_line(path: Path, r: float) -> LineResult:
+def read_line(path: Path, r: float) -> LineResult:
     data = np.loadtxt(path, ndmin=2)
     # SimpleTable: x y z bx by bz (GetDP prints the 3 vector components after the coordinates)
     y = data[:, 1]
@@ -225,29 +226,22 @@ def _read_probes(work: Path, probes, probe_half_window) -> dict:
     """B and its z-derivatives at each probe from the fit along its segment (FemResult.probes)."""
     cols = {k: np.empty(len(probes)) for k in ("br", "bz", "dbr_dz", "dbz_dz")}
     for i, (pr, pz) in enumerate(probes):
-        fit = _read_line(work / f"probe_{i}.txt", pr).fit(
+        fit = read_line(work / f"probe_{i}.txt", pr).fit(
             np.array([pz]), half_window=probe_half_window)
         for k in cols:
             cols[k][i] = fit[k][0]
     return {"r": probes[:, 0].copy(), "z": probes[:, 1].copy(), **cols}
 
 
-def solve(coil, current: float, *, mu_r: float | None = None, bh: str | None = None,
-          level: int = 1, line_z=(0.010, 0.105), off_axis_r: float = 0.010,
-          out_dir: str | Path | None = None, export: bool = False,
-          sample_step: float = 0.25e-3, timeout_s: float = 600.0,
-          probes=None, probe_half_window: float = 2.5e-3) -> FemResult:
-    """Solve the axisymmetric FEM model of ``coil`` at ``current`` with GetDP.
+@dataclass(frozen=True)
+class FemSettings:
+    """How :func:`solve` models and samples one coil (SI).
 
-    Parameters
-    ----------
-    coil : designkit.Coil
-        Geometry (its pose is ignored: the model is in the winding's local frame). Its core, if
-        any, is meshed; the material is ``mu_r`` (linear) or ``bh`` (B-H curve name), by
+    mu_r, bh
+        The core's material: linear ``mu_r``, or ``bh`` (B-H curve name, 'steel1010'); by
         default the core's own ``relative_permeability``.
-    current : float, A (> 0)
     level : int
-        Mesh refinement level (0 coarse ... 4 fine); sizes shrink by sqrt(2) per level.
+        Mesh refinement level (0 coarse ... 6 fine); sizes shrink by sqrt(2) per level.
     line_z : (lo, hi), m
         Range of the extraction lines *above the winding's top face*.
     off_axis_r : float, m
@@ -256,18 +250,47 @@ def solve(coil, current: float, *, mu_r: float | None = None, bh: str | None = N
         Where to keep the mesh, .pro and raw outputs; None uses a temporary folder.
     export : bool
         Also write .vtu and .xdmf copies of the mesh (meshio).
-
+    sample_step : float, m
+        Spacing of B along the extraction lines.
+    timeout_s : float
+        GetDP's wall-clock limit, s.
     probes : array (n, 2) or None
         (r, z) points in the winding's local frame (m) anywhere around the coil, in air and at
         least ``probe_half_window`` from any material boundary: B there and dB/dz from a
         degree-4 least-squares polynomial through B sampled on the vertical segment
         z +- probe_half_window (the FEM's b is piecewise polynomial; the fit averages its
         inter-element jumps). The region holding them is meshed at 1 mm x 2^(-level/2).
-
-    Returns
-    -------
-    FemResult
     """
+
+    mu_r: float | None = None
+    bh: str | None = None
+    level: int = 1
+    line_z: tuple = (0.010, 0.105)
+    off_axis_r: float = 0.010
+    out_dir: str | Path | None = None
+    export: bool = False
+    sample_step: float = 0.25e-3
+    timeout_s: float = 600.0
+    probes: object = None
+    probe_half_window: float = 2.5e-3
+
+
+def solve(coil, current: float, settings: FemSettings | None = None, **changes) -> FemResult:
+    """Solve the axisymmetric FEM model of ``coil`` at ``current`` (A, > 0) with GetDP.
+
+    ``coil``: a designkit.Coil (its pose is ignored: the model is in the winding's local
+    frame; its core, if any, is meshed). ``settings`` (:class:`FemSettings`; None: its
+    defaults), ``changes``: fields of it to replace (``solve(coil, 1.0, level=0)``).
+    Returns :class:`FemResult`.
+    """
+    names = {f.name for f in dataclasses.fields(FemSettings)}
+    for key in changes:
+        if key not in names:
+            raise BadInputError("FEM setting", f"one of {sorted(names)}", key)
+    st = dataclasses.replace(settings or FemSettings(), **changes)
+    mu_r, bh, level, line_z, off_axis_r = st.mu_r, st.bh, st.level, st.line_z, st.off_axis_r
+    out_dir, export, sample_step, timeout_s = st.out_dir, st.export, st.sample_step, st.timeout_s
+    probes, probe_half_window = st.probes, st.probe_half_window
     exe = find_getdp()
     current = float(current)
     if not (math.isfinite(current) and current > 0):
@@ -300,17 +323,18 @@ def solve(coil, current: float, *, mu_r: float | None = None, bh: str | None = N
         lines = _extraction_lines(z_lo, z_hi, margin, sample_step, off_axis_r, probes,
                                   probe_half_window)
         bh_tab = (STEEL1010_H, STEEL1010_B) if bh == "steel1010" else None
-        pro = problem_text(current_density=jd, mu_r=mu_r, bh=bh_tab, has_core=core is not None,
-                           shell_inner=spec.shell_inner, shell_outer=spec.shell_outer,
-                           lines=lines, winding_area=area, turns=coil.turns)
+        pro = problem_text(AxiProblem(
+            current_density=jd, mu_r=mu_r, bh=bh_tab, has_core=core is not None,
+            shell_inner=spec.shell_inner, shell_outer=spec.shell_outer, lines=lines,
+            winding_area=area, turns=coil.turns))
         stdout, t_solve = run_getdp(exe, work, pro, msh, timeout_s, verbosity=3,
                                     expect="line_axis.txt")
         files["pro"], files["log"] = work / "model.pro", work / "getdp.log"
         converged = True
         if bh_tab is not None:
             converged = "Non linear" not in stdout or "did not converge" not in stdout
-        axis = _read_line(work / "line_axis.txt", 0.0)
-        off = _read_line(work / "line_off.txt", off_axis_r)
+        axis = read_line(work / "line_axis.txt", 0.0)
+        off = read_line(work / "line_off.txt", off_axis_r)
         probe_out = None if probes is None else _read_probes(work, probes, probe_half_window)
         # GetDP's axisymmetric Jacobians integrate per radian of azimuth: times 2 pi
         energy = 2 * math.pi * _read_global(work / "energy.txt")
@@ -327,5 +351,5 @@ def write_result_json(result: FemResult, path: str | Path, extra: dict | None = 
     return write_json_atomic(path, data)
 
 
-__all__ = ["FemResult", "LineResult", "GetDPNotFoundError", "find_getdp", "solve",
+__all__ = ["FemResult", "FemSettings", "LineResult", "GetDPNotFoundError", "find_getdp", "solve",
            "write_result_json", "MU0", "json"]

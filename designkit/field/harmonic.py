@@ -208,11 +208,13 @@ def _partial(coef, M, last, need):
     return full
 
 
-def _series(g, s, x, t, rho, sin, L, gradient, spherical):
+def _series(g, s, pts, L, gradient, spherical):
     """Truncated sums to degree L[i] (sorted ascending) per point: (br, bz) or (br, bz,
-    br_over_rho, dbr_dz, dbz_dz). ``spherical``: everything from the P recurrence (Brho and
-    dBz/drho through the spherical components, divided by sin theta); else Brho / rho and
-    dBrho/dz from the C recurrence (exact on the axis)."""
+    br_over_rho, dbr_dz, dbz_dz); ``pts`` the points' (x, t, rho, sin theta) arrays.
+    ``spherical``: everything from the P recurrence (Brho and dBz/drho through the spherical
+    components, divided by sin theta); else Brho / rho and dBrho/dz from the C recurrence
+    (exact on the axis)."""
+    x, t, rho, sin = pts
     xt = x * t
     t2 = t * t
     lm = int(L[-1])
@@ -306,8 +308,8 @@ def harmonic_rz(ri, ro, h, rho, z, gradient, rtol, tries=2):
         k = todo.size - int(np.count_nonzero(axis[todo]))
         for sph, sl in ((True, slice(0, k)), (False, slice(k, todo.size))):
             if sl.stop > sl.start:
-                res[:, sl] = _series(g, s, xs[sl], ts[sl], rs[sl], ss[sl], Ls[sl], gradient,
-                                     sph)
+                res[:, sl] = _series(g, s, (xs[sl], ts[sl], rs[sl], ss[sl]), Ls[sl],
+                                     gradient, sph)
         rnd = ROUND * (Ls + 2.0)
         if gradient:
             rnd_g = rnd.copy()

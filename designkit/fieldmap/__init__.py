@@ -6,7 +6,9 @@ numpy-only reader :mod:`firmware_io.mapfile`; this package computes the arrays f
 :class:`firmware_io.mapfile.MapFile` with designkit's errors. All the physics the map samples
 comes through one function, :func:`map_physics`.
 
+* :mod:`.settings`: :class:`BuildSettings`, how densely a map samples;
 * :mod:`.plan`: the box, the harmonic-cell layers, the fit lattices, the table grids;
+* :mod:`.clearance`: how far the box is from the sources (the cells' scale);
 * :mod:`.physics`: :class:`MapPhysics`, what the map samples;
 * :mod:`.tables`: the per-core (rho, z) tables (magnet pull, sensor-field core modes);
 * :mod:`.cells`: the least-squares fit of A's harmonic cells;
@@ -19,7 +21,8 @@ Target: A within 1e-3 of each row's largest |A| over the box. The representation
 budget, the measured errors and costs, and the commands that measure them: docs/fieldmap.md.
 """
 
-from .builder import FORMAT, FORMAT_VERSION, UNITS, BuildSettings, build
+from .builder import FORMAT, FORMAT_VERSION, UNITS, build
+from .settings import BuildSettings
 from .cells import fit_layer, fit_layers
 from .physics import MapPhysics, map_physics
 from .plan import (box_axes, cell_layers, default_box, graded_axis, layer_nodes, rz_table_spec,

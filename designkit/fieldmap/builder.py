@@ -10,6 +10,10 @@ N. What the choices cost and how accurate the result is: docs/fieldmap.md.
 
 from __future__ import annotations
 
+import dataclasses
+import multiprocessing
+import os
+import signal
 import time
 from dataclasses import dataclass, field
 
@@ -21,13 +25,14 @@ from .. import __version__
 from ..errors import BadInputError
 from ..model.array import ROWS, CoilArray
 from ..model.electrical import drive_data
-from ..support import validate as v
 from ..support.blas import one_blas_thread
 from ..support.progress import tqdm
 from .cells import fit_layers
+from .clearance import Clearance
 from .physics import MapPhysics, map_physics
-from .plan import N_CHECK, _nodes, box_axes, cell_layers, default_box, layer_nodes, sources_top, table_specs
-from .symmetry import Orbits, array_symmetries, random_orbits
+from .plan import box_axes, cell_layers, default_box, layer_nodes, lattice_nodes, table_specs
+from .settings import BuildSettings
+from .symmetry import Orbits, random_orbits, sampling_group
 from .tables import (compute_magnet_table, coupled_modes, finite_size_correction,
                      mode_table_entry)
 
@@ -36,6 +41,8 @@ CHUNK = 64
 """Magnet positions / check points per coupled-model call of the sampling phase."""
 FIT_CHUNK = 512
 """Fit nodes per coupled-model call of the sampling phase."""
+WORKERS = min(2, os.cpu_count() or 1)
+"""Processes of the sampling phase after the coupled solve (docs/fieldmap.md, "Costs")."""
 CHECK_SEED = 20261123
 """Seed of the random check points (the same points for every build of a box)."""
 N_F0_CHECK = 16
@@ -43,57 +50,29 @@ N_F0_CHECK = 16
 ~15-30 ms each, the dipole's ~1 ms: the first of the magnet check points)."""
 
 
-def build(design, *, spacing: float = 0.01, log_step: float = 0.25,
-          cell_ratio=(1.0, 0.5), layer_ratio=(0.7, 0.5), degree=(12, 7),
-          fit_nodes: int = 4, sensor_mode_tolerance: float = 1e-3,
-          rz_rho_scale: float = 0.05, sensor_mode_rz_step: float = 2.5e-4,
-          sensor_mode_rz_log_step: float = 0.04, magnet_rz_step: float = 5e-4,
-          magnet_rz_log_step: float = 0.02, box=None, n_check: int = N_CHECK,
-          progress: bool = True, array: CoilArray | None = None,
-          region: dict | None = None) -> dict:
+def build(design, settings: BuildSettings | None = None, *, box=None, progress: bool = True,
+          array: CoilArray | None = None, region: dict | None = None, **changes) -> dict:
     """Compute the map v2 of ``design``: ``{"arrays": {...}, "meta": {...}}`` (not yet written).
 
     Parameters
     ----------
-    spacing, log_step : float
-        x, y step (m) of the grids over magnet positions that carry what the per-core magnet
-        tables miss (the bias force's core-to-core part, trilinear); their z steps grow from
-        ``log_step`` x the height above the cores' tops, never above ``spacing``. The defaults'
-        F0 error against the coupled model: docs/fieldmap.md.
-    cell_ratio, layer_ratio, degree, fit_nodes
-        A's harmonic cells (:func:`~designkit.fieldmap.plan.cell_layers`): cells no wider than
-        ``cell_ratio`` and layers ``layer_ratio`` x the height of their floor above the sources'
-        top, potentials of degree ``degree`` (K = (degree + 1)^2 - 1 coefficients per cell and
-        coil); each a sequence per layer from the lowest (the last entry for the layers above;
-        ``layer_ratio`` may be one number); fitted on ``fit_nodes``^3 Chebyshev-Lobatto nodes
-        per cell (shared across faces; each node is one evaluation of the coupled model).
-    sensor_mode_tolerance : float
-        The sensor field's core modes are kept while their singular value is above this
-        fraction of the largest of their order (m = 0, 1, 2) (the unit dipoles ~9 mm from a
-        core's end need many; 1e-3 keeps the file small for an error of ~2 % of the field,
-        itself a few mT).
-    rz_rho_scale : float, m
-        The (rho, z) tables' rho steps grow as (1 + rho / rz_rho_scale)^2.
-        ``sensor_mode_rz_step``, ``sensor_mode_rz_log_step``: rho step on the axis (m) and step
-        in log(z - z_ref) of the sensor field's mode tables (0.25 mm, 4 %);
-        ``magnet_rz_step``, ``magnet_rz_log_step`` for the magnet tables (0.5 mm, 2 %: the pull
-        of one core falls ~z^-7 near it, so coarse bilinear steps in z leave large errors).
+    settings : BuildSettings or None
+        How densely the map samples (:class:`.settings.BuildSettings`; None: its defaults);
+        ``changes``: fields of it to replace (``build(d, n_check=20)``), checked alike.
     box : (lower, upper) or None
         Corners, m; default :func:`~designkit.fieldmap.plan.default_box`.
-    n_check : int
-        Random points where the finished map is compared with the coupled model (meta
-        'errors'): n_check / |G| uniform points evaluated directly and their images under the
-        box's symmetries G filled exactly (:func:`.symmetry.random_orbits`).
+    progress : bool
+        One progress bar over the sampling.
+    array : CoilArray or None
+        The design's array when already built (its coupled solve is reused).
     region : dict or None
         What ``box`` was made for (a scene map: :mod:`.region`), stored as meta 'region'.
     """
-    s = BuildSettings.checked(spacing, log_step, cell_ratio, layer_ratio, degree, fit_nodes,
-                              sensor_mode_tolerance, rz_rho_scale, sensor_mode_rz_step,
-                              sensor_mode_rz_log_step, magnet_rz_step, magnet_rz_log_step,
-                              n_check)
+    s = BuildSettings.with_changes(settings, changes)
     arr = array or CoilArray.from_design(design)
-    lower, upper = _box(design, box)
     phys = map_physics(design)
+    s = s.resolved(tilted_pull(arr, phys.moment_a_m2))
+    lower, upper = _box(design, box)
     plan = _plan(arr, lower, upper, s, phys.moment_a_m2)
     smp = _sample(phys, arr, plan, s, progress)
     t0, c0 = time.perf_counter(), time.process_time()
@@ -110,66 +89,12 @@ def build(design, *, spacing: float = 0.01, log_step: float = 0.25,
     return {"arrays": arrays, "meta": meta}
 
 
-# ============================================================================ settings
-@dataclass(frozen=True)
-class BuildSettings:
-    """The validated arguments of :func:`build` (same names and units)."""
-
-    spacing: float
-    log_step: float
-    cell_ratio: tuple
-    layer_ratio: tuple
-    degree: tuple
-    fit_nodes: int
-    sensor_mode_tolerance: float
-    rz_rho_scale: float
-    sensor_mode_rz_step: float
-    sensor_mode_rz_log_step: float
-    magnet_rz_step: float
-    magnet_rz_log_step: float
-    n_check: int
-
-    @classmethod
-    def checked(cls, spacing, log_step, cell_ratio, layer_ratio, degree, fit_nodes,
-                sensor_mode_tolerance, rz_rho_scale, sensor_mode_rz_step,
-                sensor_mode_rz_log_step, magnet_rz_step, magnet_rz_log_step,
-                n_check) -> "BuildSettings":
-        """Every argument checked, in this order (BadInputError naming it and its range)."""
-        spacing = v.in_range("spacing", spacing, 5e-4, 0.1, "m")
-        log_step = v.in_range("log_step", log_step, 1e-3, 2.0)
-        if np.ndim(layer_ratio) == 0:
-            layer_ratio = (layer_ratio,)
-        if (np.ndim(cell_ratio) != 1 or np.ndim(degree) != 1 or np.ndim(layer_ratio) != 1
-                or not len(cell_ratio) or not len(degree) or not len(layer_ratio)):
-            raise BadInputError("cell_ratio, layer_ratio, degree", "sequences, per layer from "
-                                "the lowest (the last one for the layers above)",
-                                (cell_ratio, layer_ratio, degree))
-        return cls(
-            spacing, log_step,
-            tuple(v.in_range("cell_ratio", r, 0.05, 2.0) for r in cell_ratio),
-            tuple(v.in_range("layer_ratio", r, 0.05, 2.0) for r in layer_ratio),
-            tuple(int(v.in_range("degree", d, 2, 12)) for d in degree),
-            int(v.in_range("fit_nodes", fit_nodes, 3, 8)),
-            v.in_range("sensor_mode_tolerance", sensor_mode_tolerance, 1e-8, 1e-1),
-            v.in_range("rz_rho_scale", rz_rho_scale, 1e-3, 10.0, "m"),
-            v.in_range("sensor_mode_rz_step", sensor_mode_rz_step, 1e-5, 0.01, "m"),
-            v.in_range("sensor_mode_rz_log_step", sensor_mode_rz_log_step, 1e-3, 0.5),
-            v.in_range("magnet_rz_step", magnet_rz_step, 1e-5, 0.01, "m"),
-            v.in_range("magnet_rz_log_step", magnet_rz_log_step, 1e-3, 0.5),
-            v.positive_int("n_check", n_check))
-
-    def meta(self, n_fit_points: int) -> dict:
-        """The map's meta ``settings`` (lengths with their unit in the key)."""
-        return {"spacing_m": self.spacing, "log_step": self.log_step,
-                "cell_ratio": list(self.cell_ratio), "layer_ratio": list(self.layer_ratio),
-                "degree": list(self.degree), "fit_nodes": self.fit_nodes,
-                "n_fit_points": n_fit_points,
-                "sensor_mode_tolerance": self.sensor_mode_tolerance,
-                "rz_rho_scale_m": self.rz_rho_scale,
-                "sensor_mode_rz_step_m": self.sensor_mode_rz_step,
-                "sensor_mode_rz_log_step": self.sensor_mode_rz_log_step,
-                "magnet_rz_step_m": self.magnet_rz_step,
-                "magnet_rz_log_step": self.magnet_rz_log_step}
+def tilted_pull(arr: CoilArray, moment) -> bool:
+    """Whether some coupled core's axis is not along the magnet's ``moment`` (3,): its pull is
+    then not axisymmetric about it, and the magnet tables hold only a part of it."""
+    m = np.asarray(moment, float) / max(float(np.linalg.norm(moment)), 1e-300)
+    return any(c.core is not None and abs(abs(float(c.pose.matrix[:, 2] @ m)) - 1.0) > 1e-9
+               for c in arr.coils)
 
 
 def _box(design, box) -> tuple[np.ndarray, np.ndarray]:
@@ -191,7 +116,7 @@ class _Plan:
     upper: np.ndarray
     types: list            # [(prototype coil, [coil indices])] per coil type
     m_specs: list          # the magnet tables' grids, per coil type
-    z_top: float           # the top of all sources
+    z_top: float           # the sources' effective top (the box's floor less its clearance)
     layers: list           # meta a_layers
     lattices: list         # per layer its fit lattice's x, y, z axes
     fit_pts: np.ndarray    # (N, 3) every layer's lattice, in layer order
@@ -208,29 +133,29 @@ class _Plan:
 
 def _plan(arr: CoilArray, lower, upper, s: BuildSettings, moment=None) -> _Plan:
     """The layout of everything the build samples, from the box and the settings; the
-    array's symmetries about the box's vertical axis (:mod:`.symmetry`) pick the points
-    sampled (the bias force's only with ``moment`` (3,) A m^2 along z)."""
+    array's symmetries (:func:`.symmetry.sampling_group`) pick the points sampled (the bias
+    force's only those that keep the line of ``moment`` (3,) A m^2)."""
     types = list(arr.coil_types().items())
     m_specs = table_specs(arr, [idx for _, idx in types], lower, upper, s.magnet_rz_step,
                           s.magnet_rz_log_step, s.rz_rho_scale, 2)
-    z_top = sources_top(arr)
-    layers = cell_layers(lower, upper, z_top, s.cell_ratio, s.layer_ratio, s.degree)
+    clear = Clearance(arr)
+    z_top = float(lower[2]) - clear(lower, np.r_[upper[:2], lower[2]])
+    layers = cell_layers(lower, upper, clear.slab(lower, upper), s.cell_ratio, s.layer_ratio,
+                         s.degree)
     lattices = [layer_nodes(lay, s.fit_nodes) for lay in layers]
-    fit_pts = np.concatenate([_nodes(ax) for ax in lattices])
-    z_ref = max(arr.coils[k].pose.position[2] + sp["z_ref_m"]
-                for (_, idx), sp in zip(types, m_specs) for k in idx)
-    m_axes = box_axes(lower, upper, s.spacing, z_ref, s.log_step)
-    centre = 0.5 * (lower[:2] + upper[:2])
-    group = array_symmetries(arr, centre)
-    check, check_orbits = random_orbits(lower, upper, s.n_check, group, centre,
+    fit_pts = np.concatenate([lattice_nodes(ax) for ax in lattices])
+    # the residual grid's z steps grow with the distance from the sources, as the cells
+    m_axes = box_axes(lower, upper, s.spacing, z_top, s.log_step)
+    group = sampling_group(arr)
+    check, check_orbits = random_orbits(lower, upper, s.n_check, group,
                                         np.random.default_rng(CHECK_SEED))
-    m_nodes = _nodes(m_axes)
-    upright = moment is not None and not np.any(np.asarray(moment, float)[:2])
+    m_nodes = lattice_nodes(m_axes)
+    f_group = (sampling_group(arr, moment) if moment is not None
+               else group.subgroup(lambda e, s: False))
     return _Plan(lower, upper, types, m_specs, z_top, layers, lattices, fit_pts, m_axes,
                  m_nodes, check, min(s.n_check, max(10, s.n_check // 8)), arr.positions(),
                  [list(map(list, c.pose.rotation)) for c in arr.coils],
-                 Orbits.of(fit_pts, group, centre),
-                 Orbits.of(m_nodes, group if upright else group[:1], centre), check_orbits)
+                 Orbits.of(fit_pts, group), Orbits.of(m_nodes, f_group), check_orbits)
 
 
 # ============================================================================ samples
@@ -246,7 +171,8 @@ class _Samples:
     mrz_dipole: dict = field(default_factory=dict)   # MRZ<k> of the point dipole (residual)
     mrz_meta: list = field(default_factory=list)
     sm_meta: list = field(default_factory=list)
-    modes: dict | None = None         # coupled_modes
+    sensor_coef: np.ndarray | None = None  # coupled_modes' sensor_coef (None: no cores)
+    sensor_rows: np.ndarray | None = None  # (n_sensors, 8, nc) the coils' rows at the sensors
     f0_check: np.ndarray | None = None
     sind_check: np.ndarray | None = None
     sat_i: np.ndarray | None = None
@@ -262,82 +188,149 @@ def _steps(plan: _Plan, n_check: int) -> list:
             + [("magnet tables", k) for k in range(len(plan.types))] + [("mode tables", 0)]
             + [("magnet", s) for s in range(0, len(plan.m_orbits.reps), CHUNK)]
             + [("check", s) for s in range(0, len(plan.check_orbits.reps), CHUNK)]
-            + [("magnet check", 0), ("saturation", 0)])
+            + [("magnet check", 0), ("saturation", 0), ("sensor rows", 0)])
 
 
 def _sample(phys: MapPhysics, arr: CoilArray, plan: _Plan, s: BuildSettings,
             progress: bool) -> _Samples:
-    """Every evaluation of the coupled model the map needs, under one progress bar."""
+    """Every evaluation of the coupled model the map needs, under one progress bar: the
+    coupled solve first, then the other steps, on :data:`WORKERS` forked processes where the
+    platform forks (they inherit the solved system; threads cannot share the single-threaded
+    LAPACK calls of the BLAS numpy ships, which then return wrong solves: docs/fieldmap.md).
+    Per stage: the summed wall seconds of its steps and their CPU seconds, in whichever
+    process ran them."""
     nc = arr.n_coils
     # a_fit, a_check and f0 hold the orbits' representatives until the loop is done
     smp = _Samples(np.empty((len(plan.fit_orbits.reps), 8, nc)),
                    np.empty((len(plan.check_orbits.reps), 8, nc)),
                    np.empty((len(plan.m_orbits.reps), 3)))
-    bar = tqdm(_steps(plan, s.n_check), desc="map", unit="step", disable=not progress,
-               leave=False)
-    for kind, k in bar:
-        bar.set_postfix_str(kind, refresh=False)
-        t0, c0 = time.perf_counter(), time.process_time()
-        _step(kind, k, smp, phys, arr, plan, s, bar)
-        smp.seconds[kind] = smp.seconds.get(kind, 0.0) + time.perf_counter() - t0
-        smp.cpu_seconds[kind] = smp.cpu_seconds.get(kind, 0.0) + time.process_time() - c0
-    bar.close()
+    smp.mrz_meta = [None] * len(plan.types)
+    steps = _steps(plan, s.n_check)
+    bar = tqdm(total=len(steps), desc="map", unit="step", disable=not progress, leave=False)
+    _CONTEXT.update(phys=phys, arr=arr, plan=plan, settings=s)
+    try:
+        for kind, k, value, wall, cpu in _run_steps(steps):
+            _store(smp, kind, k, value)
+            smp.seconds[kind] = smp.seconds.get(kind, 0.0) + wall
+            smp.cpu_seconds[kind] = smp.cpu_seconds.get(kind, 0.0) + cpu
+            bar.set_postfix_str(kind, refresh=False)
+            bar.update()
+    finally:
+        _CONTEXT.clear()
+        bar.close()
     smp.a_fit = plan.fit_orbits.expand_actuation(smp.a_fit)
     smp.a_check = plan.check_orbits.expand_actuation(smp.a_check)
     smp.f0 = plan.m_orbits.expand_force(smp.f0)
     return smp
 
 
-def _step(kind: str, k: int, smp: _Samples, phys: MapPhysics, arr: CoilArray, plan: _Plan,
-          s: BuildSettings, bar) -> None:
-    """One step of :func:`_steps` into ``smp``."""
+_CONTEXT: dict = {}
+"""What the sampling steps read (the physics, the array with its solved system, the plan, the
+settings): set by :func:`_sample` before the workers fork, so they
+inherit it."""
+
+
+def _forks() -> bool:
+    """Whether the sampling may fork :data:`WORKERS` processes: more than one worker, the
+    platform forks, and this process is not itself a pool's daemon worker."""
+    return (WORKERS > 1 and "fork" in multiprocessing.get_all_start_methods()
+            and not multiprocessing.current_process().daemon)
+
+
+def _run_steps(steps: list):
+    """(kind, k, value, wall s, CPU s) of every step: the coupled solve here, the others on
+    the forked workers (in completion order) or here, one after the other."""
+    yield _timed_step(steps[0])  # the coupled solve: every other step needs it
+    if not _forks():
+        for st in steps[1:]:
+            yield _timed_step(st)
+        return
+    # forked after the solve: the workers inherit it; they ignore Ctrl-C, which the parent
+    # answers by terminating them
+    with multiprocessing.get_context("fork").Pool(WORKERS, initializer=_ignore_sigint) as pool:
+        try:
+            yield from pool.imap_unordered(_timed_step, steps[1:])
+        except BaseException:
+            pool.terminate()
+            raise
+
+
+def _ignore_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _timed_step(step):
+    kind, k = step
+    t0, c0 = time.perf_counter(), time.process_time()
+    with one_blas_thread():
+        value = _step(kind, k, _CONTEXT)
+    return kind, k, value, time.perf_counter() - t0, time.process_time() - c0
+
+
+def _step(kind: str, k: int, ctx: dict):
+    """The value of one step of :func:`_steps` (:func:`_store` puts it into the samples)."""
+    phys, arr, plan, s = ctx["phys"], ctx["arr"], ctx["plan"], ctx["settings"]
     if kind == "coupled solve":
         arr.actuation_matrix(plan.fit_pts[:1])  # the coupled solve, once
-        smp.modes = coupled_modes(arr, s.sensor_mode_tolerance)
-    elif kind == "cell nodes":
-        reps = plan.fit_orbits.reps[k:k + FIT_CHUNK]
-        smp.a_fit[k:k + FIT_CHUNK] = phys.actuation(arr, plan.fit_pts[reps])
-    elif kind == "magnet tables":
+        return None
+    if kind == "cell nodes":
+        return phys.actuation(arr, plan.fit_pts[plan.fit_orbits.reps[k:k + FIT_CHUNK]])
+    if kind == "magnet tables":
         proto, idx = plan.types[k]
         spec = plan.m_specs[k]
-        # the point dipole's table carries the grid's residual; the stored one adds what the
+        # each core alone in its own frame, the moment along its axis: the part of its pull
+        # the (rho, z) table can hold (tilted_pull: the residual grid carries the rest). The
+        # point dipole's table carries the grid's residual; the stored one adds what the
         # magnet's finite size changes in each core's own pull (docs/fieldmap.md)
-        dipole = compute_magnet_table(phys, proto, spec).astype(np.float32)
-        smp.mrz_dipole[f"MRZ{k}"] = dipole
-        smp.tables[f"MRZ{k}"] = (dipole + finite_size_correction(phys, proto, spec)
-                                 ).astype(np.float32)
-        smp.mrz_meta.append({"name": f"MRZ{k}", "coils": [int(c) for c in idx], **spec})
-    elif kind == "mode tables":
-        for j, t in enumerate(smp.modes["types"] if smp.modes else []):
+        axial = dataclasses.replace(phys, moment_a_m2=np.array(
+            [0.0, 0.0, float(np.linalg.norm(phys.moment_a_m2))]))
+        dipole = compute_magnet_table(axial, proto, spec).astype(np.float32)
+        stored = (dipole + finite_size_correction(axial, proto, spec)).astype(np.float32)
+        return dipole, stored, {"name": f"MRZ{k}", "coils": [int(c) for c in idx], **spec}
+    if kind == "mode tables":  # the sensor field's adjoint modes and their tables
+        modes = coupled_modes(arr, s.sensor_mode_tolerance)
+        out = []
+        for j, t in enumerate(modes["types"] if modes else []):
             spec = table_specs(arr, [t["coils"]], plan.lower, plan.upper, s.sensor_mode_rz_step,
                                s.sensor_mode_rz_log_step, s.rz_rho_scale, 1)[0]
-            smp.tables[f"SM{j}"], entry = mode_table_entry(t, spec, j, _postfix(bar, j))
+            out.append(mode_table_entry(t, spec, j))
+        return (None if modes is None else modes["sensor_coef"]), out
+    if kind == "sensor rows":
+        return phys.sensor_coil_rows(arr)
+    if kind == "magnet":
+        return phys.bias_force(arr, plan.m_nodes[plan.m_orbits.reps[k:k + CHUNK]])
+    if kind == "check":
+        return phys.actuation(arr, plan.check[plan.check_orbits.reps[k:k + CHUNK]])
+    if kind == "magnet check":
+        # the truth: the finite cylinder (~20 x a dipole's cost: the first few points)
+        return (phys.bias_force_finite(arr, plan.check[:min(plan.n_mcheck, N_F0_CHECK)]),
+                phys.sensor_induced(arr, plan.check[:plan.n_mcheck]))
+    return phys.saturation(arr)
+
+
+def _store(smp: _Samples, kind: str, k: int, value) -> None:
+    """Put the value of step (kind, k) into ``smp``."""
+    if kind == "coupled solve":
+        pass
+    elif kind == "sensor rows":
+        smp.sensor_rows = value
+    elif kind == "cell nodes":
+        smp.a_fit[k:k + FIT_CHUNK] = value
+    elif kind == "magnet tables":
+        smp.mrz_dipole[f"MRZ{k}"], smp.tables[f"MRZ{k}"], smp.mrz_meta[k] = value
+    elif kind == "mode tables":
+        smp.sensor_coef, tables = value
+        for j, (tab, entry) in enumerate(tables):
+            smp.tables[f"SM{j}"] = tab
             smp.sm_meta.append(entry)
     elif kind == "magnet":
-        reps = plan.m_orbits.reps[k:k + CHUNK]
-        smp.f0[k:k + CHUNK] = phys.bias_force(arr, plan.m_nodes[reps])
+        smp.f0[k:k + CHUNK] = value
     elif kind == "check":
-        reps = plan.check_orbits.reps[k:k + CHUNK]
-        smp.a_check[k:k + CHUNK] = phys.actuation(arr, plan.check[reps])
+        smp.a_check[k:k + CHUNK] = value
     elif kind == "magnet check":
-        # the truth: the finite cylinder (~20 x a dipole's cost: the first few points)
-        smp.f0_check = phys.bias_force_finite(arr, plan.check[:min(plan.n_mcheck,
-                                                                    N_F0_CHECK)])
-        smp.sind_check = phys.sensor_induced(arr, plan.check[:plan.n_mcheck])
+        smp.f0_check, smp.sind_check = value
     else:
-        smp.sat_i, smp.sat_f = phys.saturation(arr)
-
-
-def _postfix(bar, k: int):
-    """Progress callback of mode table ``k``: a postfix line per 10 %, not per chunk."""
-    last = [-1]
-
-    def show(frac):
-        if int(frac * 10) != last[0]:
-            last[0] = int(frac * 10)
-            bar.set_postfix_str(f"mode tables {k + 1}: {frac:.0%}")
-
-    return show
+        smp.sat_i, smp.sat_f = value
 
 
 # ============================================================================ arrays, meta, check
@@ -352,10 +345,10 @@ def _arrays(phys: MapPhysics, arr: CoilArray, plan: _Plan, smp: _Samples,
                               plan.positions, plan.rotations)
     f_pair = mf.magnet_terms(mprep, plan.m_nodes)
     m_shape = tuple(len(a) for a in plan.m_axes)
-    sensor_rows = phys.sensor_coil_rows(arr)
+    sensor_rows = smp.sensor_rows  # (n_sensors, 8, nc)
+    n_s = len(sensor_rows)
     arrays.update({
-        "SCOEF": (smp.modes["sensor_coef"] if smp.modes
-                  else np.zeros((nc, 0, len(sensor_rows), 3))),
+        "SCOEF": smp.sensor_coef if smp.sensor_coef is not None else np.zeros((nc, 0, n_s, 3)),
         "F0_RES": (smp.f0 - f_pair).reshape(m_shape + (3,)).astype(np.float32),
         "M_X": plan.m_axes[0], "M_Y": plan.m_axes[1], "M_Z": plan.m_axes[2],
         "SENSOR_POS": phys.sensor_positions(arr).astype(np.float64),
@@ -414,7 +407,8 @@ def _errors(reader: mf.MapFile, plan: _Plan, smp: _Samples, row_max: np.ndarray)
         "n_bias_force_points": len(smp.f0_check),
         "bias_force_max_rel": _rel(reader.bias_force(check[:len(smp.f0_check)]),
                                    smp.f0_check),
-        "sensor_induced_max_rel": _rel(reader.sensor_induced_field(check), smp.sind_check)}
+        "sensor_induced_max_rel": _rel(reader.sensor_induced_field(check).reshape(
+            smp.sind_check.shape), smp.sind_check)}
 
 
 def _drive_coils(arr: CoilArray) -> list:

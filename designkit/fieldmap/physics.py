@@ -1,5 +1,6 @@
 """What the map samples, for one design: :class:`MapPhysics`, the one place its physics comes
-from (the coupled array model, :mod:`designkit.cores.coupled` through :class:`CoilArray`); SI units."""
+from (the coupled array model, :mod:`designkit.cores.coupled` through :class:`CoilArray`);
+SI units; the sensors as the array's flat list (:meth:`CoilArray.sensor_poses`)."""
 
 from __future__ import annotations
 
@@ -24,12 +25,13 @@ class MapPhysics:
     source: str = "designkit.cores.coupled (all cores solved together, linear cores)"
 
     def sensor_positions(self, array: CoilArray) -> np.ndarray:
-        """(n_sensors, 3) m, the map's flat sensor list (:meth:`CoilArray.sensor_poses`; the
-        default layout: the upper array in coil order, then the lower array)."""
+        """(n_sensors, 3) m, the array's flat sensor list (:meth:`CoilArray.sensor_poses`;
+        the default layout: the upper array in coil order, then the lower array)."""
         return array.sensor_poses()[0]
 
     def sensor_rotations(self, array: CoilArray) -> np.ndarray:
-        """(n_sensors, 3, 3): sensor frame -> array frame (columns: each chip's axes)."""
+        """(n_sensors, 3, 3): each sensor's frame (columns: the chip's x, y, z axes in the
+        array frame)."""
         return array.sensor_poses()[1]
 
     def actuation(self, array: CoilArray, points) -> np.ndarray:
@@ -49,7 +51,8 @@ class MapPhysics:
                                 magnet_size_m=self.magnet_size_m)
 
     def sensor_induced(self, array: CoilArray, magnet_positions, chunk: int = 64) -> np.ndarray:
-        """(n, n_sensors, 3) T: the field of the magnet-magnetized cores at the sensors."""
+        """(n, n_sensors, 3) T: the field of the magnet-magnetized cores at the sensors (array
+        frame)."""
         p = np.asarray(magnet_positions, float)
         sens = self.sensor_positions(array)
         system = array.coupled()
@@ -59,12 +62,12 @@ class MapPhysics:
         for a in range(0, len(p), chunk):  # one back-substitution per magnet position
             x = system.magnet_solution(p[a:a + chunk], self.moment_a_m2)
             b = system.core_field(sens, x)  # (n_sensors, 3, k)
-            out[a:a + chunk] = np.moveaxis(b, -1, 0).reshape((-1,) + sens.shape)
+            out[a:a + chunk] = np.moveaxis(b, -1, 0)
         return out
 
     def sensor_coil_rows(self, array: CoilArray) -> np.ndarray:
         """(n_sensors, 8, n_coils): the coupled field (T/A) and gradient rows (T/(m A),
-        :data:`~designkit.model.array.ROWS`) of each coil at the sensors."""
+        :data:`~designkit.model.array.ROWS`) of each coil at the sensors (array frame)."""
         return self.actuation(array, self.sensor_positions(array))
 
     def sensor_coil_field(self, array: CoilArray) -> np.ndarray:

@@ -16,9 +16,8 @@ import numpy as np
 from ..errors import BadInputError
 from ..model.array import CoilArray
 from ..model.skipping import source_box
+from .clearance import Clearance
 
-N_CHECK = 400
-"""Random check points of a map over the design's whole box (its build's self-check)."""
 
 
 def default_box(design) -> tuple[np.ndarray, np.ndarray]:
@@ -55,7 +54,8 @@ def box_axes(lower, upper, spacing: float, z_ref: float, log_step: float) -> lis
             graded_axis(lower[2], upper[2], z_ref, log_step, spacing)]
 
 
-def _nodes(axes) -> np.ndarray:
+def lattice_nodes(axes) -> np.ndarray:
+    """The nodes (n, 3) m of the lattice of x, y, z ``axes``, x slowest."""
     return np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
 
 
@@ -93,7 +93,7 @@ def rz_table_spec(coil, lower, upper, rho_step: float, log_step: float,
             "u0": float(u_lo - log_step), "u_step": float(log_step), "shape": [n_rho, n_u, n_q]}
 
 
-def _spec_nodes(spec: dict):
+def spec_nodes(spec: dict):
     """rho (n_rho,) and z (n_u,) nodes of a table spec, m (local frame)."""
     n_rho, n_u, _ = spec["shape"]
     vn = spec["rho_step_m"] * np.arange(n_rho)
@@ -102,7 +102,7 @@ def _spec_nodes(spec: dict):
     return rho, z
 
 
-def _union_spec(specs: list) -> dict:
+def union_spec(specs: list) -> dict:
     """One table grid covering several specs of the same coil type (same steps and z_ref)."""
     if len(specs) == 1:
         return specs[0]
@@ -116,7 +116,7 @@ def _union_spec(specs: list) -> dict:
 def table_specs(arr: CoilArray, idx_lists, lower, upper, step: float, log_step: float,
                 rho_scale: float, n_q: int) -> list:
     """One (v, u) table spec per list of coil indices (a coil type), covering the box for every
-    coil of the list (:func:`rz_table_spec`, :func:`_union_spec`); BadInputError when some
+    coil of the list (:func:`rz_table_spec`, :func:`union_spec`); BadInputError when some
     coil's sources reach into the box."""
     out = []
     for idx in idx_lists:
@@ -126,13 +126,18 @@ def table_specs(arr: CoilArray, idx_lists, lower, upper, step: float, log_step: 
             raise BadInputError("box", "above every coil's winding and core (the map's "
                                 "(rho, z) tables cover only points above the sources), m",
                                 (lower.tolist(), upper.tolist()))
-        out.append(_union_spec(s))
+        out.append(union_spec(s))
     return out
 
 
-def sources_top(arr: CoilArray) -> float:
-    """The top of all the coils' sources (any pose), m: the cells' potentials are harmonic
-    above it."""
+def sources_top(arr: CoilArray, lower=None, upper=None) -> float:
+    """The sources' effective top, m: the floor of the box [lower, upper] less its distance
+    from the nearest source (:class:`designkit.fieldmap.clearance.Clearance`); for upright coils
+    under the box, the top of their sources. Without a box: the highest point of any source
+    (any pose)."""
+    if lower is not None:
+        lower, upper = np.asarray(lower, float), np.asarray(upper, float)
+        return float(lower[2]) - Clearance(arr)(lower, np.r_[upper[:2], lower[2]])
     corners = [np.array([[x, y, z] for x in (-r, r) for y in (-r, r) for z in (zl, zh)])
                for r, zl, zh in (source_box(c) for c in arr.coils)]
     return max(float((c.pose.vectors_to_global(k)[:, 2] + c.pose.position[2]).max())
@@ -141,11 +146,14 @@ def sources_top(arr: CoilArray) -> float:
 
 # ============================================================================ harmonic cells
 
-def cell_layers(lower, upper, z_top: float, cell_ratio: tuple, layer_ratio,
+def cell_layers(lower, upper, clearance, cell_ratio: tuple, layer_ratio,
                 degree: tuple) -> list:
     """The harmonic-cell layout of A over the box (meta ``a_layers``): layers from the floor
-    up, each ``layer_ratio`` x its floor's height d above the sources' top ``z_top`` (m) thick,
-    cut into a uniform grid of cells no wider than ``cell_ratio`` x d, potentials of degree
+    up, each ``layer_ratio`` x d thick, d its distance from the sources (``clearance``: the
+    sources' top z, m, for sources under the box -- d is the height above it -- or a callable
+    (z_lo, z_hi) -> m, the distance between that slab of the box and the sources,
+    :meth:`designkit.fieldmap.clearance.Clearance.slab`), cut into a uniform grid of cells no
+    wider than ``cell_ratio`` x d, potentials of degree
     ``degree``; all three are sequences per layer from the lowest, the last entry serving every
     layer above (``layer_ratio`` may be one number for all). A polynomial's error in a cell
     grows with (cell size / distance to the sources)^degree, so fixed ratios keep it about even
@@ -156,15 +164,19 @@ def cell_layers(lower, upper, z_top: float, cell_ratio: tuple, layer_ratio,
     A thin remainder at the top is shared with the layer below."""
     layer_ratio = tuple(np.atleast_1d(layer_ratio).tolist())
     lo, hi = np.asarray(lower, float), np.asarray(upper, float)
-    if lo[2] - z_top < 1e-4:
-        raise BadInputError("box", f"above the top of every coil's sources (z > {z_top} m; the "
-                            "map's potential is harmonic only there), m",
-                            (lo.tolist(), hi.tolist()))
+    height = ((lambda z0, z1: z0 - float(clearance)) if np.ndim(clearance) == 0
+              and not callable(clearance) else clearance)
+    if height(lo[2], lo[2]) < 1e-4:
+        raise BadInputError("box", "clear of every coil's sources by > 0.1 mm (the map's "
+                            "potential is harmonic only there), m", (lo.tolist(), hi.tolist()))
     wx, wy = hi[0] - lo[0], hi[1] - lo[1]
     layers, z = [], float(lo[2])
     while z < hi[2] - 1e-12:
-        d = z - z_top
-        dz = layer_ratio[min(len(layers), len(layer_ratio) - 1)] * d
+        ratio_z = layer_ratio[min(len(layers), len(layer_ratio) - 1)]
+        d = height(z, z)
+        # sources beside the box can come nearer the slab than its floor
+        d = min(d, height(z, min(float(hi[2]), z + ratio_z * d)))
+        dz = ratio_z * d
         rest = float(hi[2]) - z
         if rest <= 1.5 * dz:
             dz = rest if rest <= dz else rest / 2
@@ -180,7 +192,7 @@ def cell_layers(lower, upper, z_top: float, cell_ratio: tuple, layer_ratio,
     return layers
 
 
-def _lobatto(n: int) -> np.ndarray:
+def lobatto(n: int) -> np.ndarray:
     """n Chebyshev-Lobatto nodes on [0, 1] (both ends: neighbouring cells share them)."""
     return (1.0 - np.cos(np.pi * np.arange(n) / (n - 1))) / 2
 
@@ -188,11 +200,11 @@ def _lobatto(n: int) -> np.ndarray:
 def layer_nodes(lay: dict, n: int) -> list:
     """The fit lattice of a layer: x, y, z node axes (m), ``n`` Chebyshev-Lobatto nodes per
     cell and axis, shared across cell faces."""
-    t = _lobatto(n)[:-1]
+    t = lobatto(n)[:-1]
 
     def axis(x0, h, count):
         return np.r_[(x0 + h * (np.arange(count)[:, None] + t)).ravel(), x0 + h * count]
 
     return [axis(lay["x0_m"], lay["cell_x_m"], lay["nx"]),
             axis(lay["y0_m"], lay["cell_y_m"], lay["ny"]),
-            lay["z_lo_m"] + (lay["z_hi_m"] - lay["z_lo_m"]) * _lobatto(n)]
+            lay["z_lo_m"] + (lay["z_hi_m"] - lay["z_lo_m"]) * lobatto(n)]

@@ -13,7 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import BadInputError
-from .plan import N_CHECK, _nodes, default_box, uniform_axis
+from .plan import default_box, lattice_nodes, uniform_axis
+from .settings import N_CHECK
 
 SPACING_M = 0.002
 """Grid step (m) on which the objects' signed distances are sampled."""
@@ -32,7 +33,7 @@ def scene_region(objects, band_m: float, lower, upper, margin_m: float = MARGIN_
 
     BadInputError when no object reaches into the box."""
     lower, upper = np.asarray(lower, float), np.asarray(upper, float)
-    pts = _nodes([uniform_axis(lower[i], upper[i], spacing_m) for i in range(3)])
+    pts = lattice_nodes([uniform_axis(lower[i], upper[i], spacing_m) for i in range(3)])
     near = within_reach(objects, pts, band_m)
     if not near.any():
         raise BadInputError("scene", "objects that reach into the map's box "
@@ -73,7 +74,7 @@ def scene_build_args(design, objects, band_m: float, margin_m: float = MARGIN_M,
 
 def scene_check_points(box, full_box) -> int:
     """The check points of a map over ``box`` (lower, upper) m: the full map's
-    :data:`~designkit.fieldmap.plan.N_CHECK` over ``full_box`` at the same density, at least
+    :data:`~designkit.fieldmap.settings.N_CHECK` over ``full_box`` at the same density, at least
     :data:`MIN_CHECK`."""
     vol = float(np.prod(np.subtract(box[1], box[0])))
     full = float(np.prod(np.subtract(full_box[1], full_box[0])))

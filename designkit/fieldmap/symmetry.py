@@ -1,86 +1,71 @@
-"""The array's symmetries about a vertical axis, and sampling only one point per orbit.
+"""The array's symmetries the map may sample with, and sampling only one point per orbit.
 
-A symmetry is an orthogonal G that keeps z (a rotation by a multiple of 90 degrees about the
-vertical axis through ``centre`` (x, y) m, or a reflection in a vertical plane through it) and
-maps every coil onto a coil of the same type (upright coils, axisymmetric windings and cores).
-Then, coil sigma(k) being the image of coil k, the actuation and the bias force obey (exactly,
-for linear cores; the coupled model's azimuthal rules are symmetric too)
+The array's group (:meth:`designkit.model.array.CoilArray.symmetries`: rotations about the
+vertical axis through its coils' centroid and reflections in vertical planes through it that
+map every coil onto an identical coil, found from the poses) gives, coil sigma(k) being the
+image of coil k under G (exactly, for linear cores),
 
     B_sigma(k)(G p) = G B_k(p),    grad B_sigma(k)(G p) = G grad B_k(p) G^T,
-    F0(G p) = G F0(p)   (magnet moment along z: the force is quadratic in the moment);
+    F0(G p) = G F0(p)   when G m = +-m (the force is quadratic in the magnet's moment m);
 
 under a reflection B is a pseudovector (-G B) and the mirrored winding circulates the other
-way (-1 A): the two signs cancel. A point set
-closed under the group is evaluated at one representative per orbit (:class:`Orbits`) and the
-other points filled by these relations: up to 8x fewer evaluations for a square array.
-Lengths in m; A rows as :data:`designkit.model.array.ROWS`. Reference: the group D4, e.g.
-M. Tinkham, Group Theory and Quantum Mechanics, ch. 4.
+way (-1 A): the two signs cancel. The coupled model's discrete rules obey these relations only
+for the elements that map each core's azimuth grids onto themselves
+(:func:`sampling_group`). A point set closed under the group is evaluated at one representative
+per orbit (:class:`Orbits`) and the other points filled by these relations: up to 8x fewer
+evaluations for a square array, 4x for a hexagonal array's rectangular box. Lengths in m; A
+rows as :data:`designkit.model.array.ROWS`. Reference: M. Tinkham, Group Theory and Quantum
+Mechanics, ch. 4.
 """
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..cores.symmetric_solve import SQUARE_GROUP, TOL_M
-from ..geometry.pose import Pose
+from ..cores.coupled import FIELD_AZIMUTHS, N_PHI_MAGNET, coupled_cores, solve_symmetry
+from ..cores.symmetry import TOL_M, PlacementGroup
 from ..model.array import CoilArray, g5_from_gradient, gradient_from_g5
 
 
-
-@dataclass(frozen=True)
-class Symmetry:
-    """One group element: G (3, 3), the coil permutation ``perm`` (coil k -> perm[k])."""
-
-    g: np.ndarray
-    perm: np.ndarray
-
-
-def _apply(g: np.ndarray, centre: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    c = np.r_[centre, 0.0]
-    return (pts - c) @ g.T + c
-
-
-def array_symmetries(arr: CoilArray, centre) -> list[Symmetry]:
-    """The group elements (identity first) that map the array onto itself about the vertical
-    axis through ``centre`` (2,) m; only the identity when a coil is not upright."""
-    centre = np.asarray(centre, float)
-    eye = Symmetry(np.eye(3), np.arange(arr.n_coils))
-    if not all(c.pose.is_identity_rotation for c in arr.coils):
-        return [eye]
-    pos = arr.positions()
-    kinds = [dataclasses.replace(c, pose=Pose()) for c in arr.coils]
-    tree = cKDTree(pos)
-    out = []
-    for g2 in SQUARE_GROUP:
-        g = np.eye(3)
-        g[:2, :2] = g2
-        dist, idx = tree.query(_apply(g, centre, pos))
-        if (np.all(dist < TOL_M) and len(set(idx.tolist())) == arr.n_coils
-                and all(kinds[j] == kinds[k] for k, j in enumerate(idx))):
-            out.append(Symmetry(g, idx.astype(int)))
-    return out
+def sampling_group(arr: CoilArray, moment=None) -> PlacementGroup:
+    """The elements of the array's group whose relations above hold for the coupled model's
+    values, not only for the fields: for coupled cores, those that map the cores' field rules'
+    and the magnet's projection's azimuth grids onto themselves in the solve's frames
+    (:meth:`designkit.cores.symmetry.PlacementGroup.keeping_grids`; the solve's own group
+    keeps its collocation rings); with ``moment`` (3,) A m^2, also G m = +-m (for F0)."""
+    cores = coupled_cores(arr)
+    group = arr.symmetries()
+    if cores:  # the solve's group and frames (solve_symmetry), without solving
+        group, frames = solve_symmetry(arr, cores)
+        group = group.keeping_grids(group.local_actions(frames),
+                                    FIELD_AZIMUTHS + (N_PHI_MAGNET,), cores)
+    if moment is None:
+        return group
+    m = np.asarray(moment, float)
+    m = m / max(np.linalg.norm(m), 1e-300)
+    return group.subgroup(lambda e, s: abs(abs(float(m @ s.g @ m)) - 1.0) < 1e-12)
 
 
-def random_orbits(lower, upper, n: int, group, centre, rng) -> tuple[np.ndarray, "Orbits"]:
+def random_orbits(lower, upper, n: int, group: PlacementGroup,
+                  rng) -> tuple[np.ndarray, "Orbits"]:
     """``n`` random points (n, 3) m of the box [lower, upper] and their :class:`Orbits`:
     uniform base points (the first ones, the representatives) followed by their images under
-    each element of ``group`` that maps the box onto itself about ``centre`` (2,) m, so that
-    only about n / |group| of them need evaluating (uniform images of a uniform sample)."""
-    lower, upper, centre = (np.asarray(a, float) for a in (lower, upper, centre))
-    half = 0.5 * (upper[:2] - lower[:2])
-    keep = [s for s in group if np.allclose(centre, 0.5 * (lower[:2] + upper[:2]), rtol=0,
-                                            atol=TOL_M)
-            and np.allclose(np.abs(s.g[:2, :2]) @ half, half, rtol=0, atol=TOL_M)] or \
-        [group[0]]
+    each element of ``group`` that maps the box onto itself, so that only about n / |group|
+    of them need evaluating (uniform images of a uniform sample)."""
+    lower, upper = (np.asarray(a, float) for a in (lower, upper))
+    corners = np.array([[x, y, z] for x in (lower[0], upper[0]) for y in (lower[1], upper[1])
+                        for z in (lower[2], upper[2])])
+    tree = cKDTree(corners)
+    keep = group.subgroup(lambda e, s: bool(np.all(tree.query(group.apply(s, corners))[0]
+                                                   < TOL_M)))
     nb = -(-n // len(keep))
     base = rng.uniform(lower, upper, (nb, 3))
-    pts = np.concatenate([_apply(s.g, centre, base) for s in keep])[:n]
+    pts = np.concatenate([keep.apply(s, base) for s in keep.elements])[:n]
     orbits = Orbits(np.arange(min(nb, n)), np.tile(np.arange(nb), len(keep))[:n],
-                    np.repeat(np.arange(len(keep)), nb)[:n], tuple(keep))
+                    np.repeat(np.arange(len(keep)), nb)[:n], keep.elements)
     return np.clip(pts, lower, upper), orbits
 
 
@@ -95,14 +80,14 @@ class Orbits:
     group: tuple
 
     @classmethod
-    def of(cls, pts: np.ndarray, group, centre) -> "Orbits":
+    def of(cls, pts: np.ndarray, group: PlacementGroup) -> "Orbits":
         """The orbits of ``pts`` (n, 3) m under the elements of ``group`` that map the set
         onto itself (the others are dropped; at least the identity stays)."""
         pts = np.asarray(pts, float)
         tree = cKDTree(pts)
         keep, images = [], []
-        for s in group:
-            dist, idx = tree.query(_apply(s.g, centre, pts))
+        for s in group.elements:
+            dist, idx = tree.query(group.apply(s, pts))
             if np.all(dist < TOL_M):
                 keep.append(s)
                 images.append(idx)
@@ -142,7 +127,8 @@ class Orbits:
         return out
 
     def expand_force(self, f_reps: np.ndarray) -> np.ndarray:
-        """F0 at every point (n, 3) from F0 at the representatives (r, 3) (moment along z)."""
+        """F0 at every point (n, 3) from F0 at the representatives (r, 3) (a group that keeps
+        the moment's line: :func:`sampling_group`)."""
         out = np.empty((len(self.rep), 3))
         for e, s in enumerate(self.group):
             sel = np.flatnonzero(self.elem == e)

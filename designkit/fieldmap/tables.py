@@ -23,7 +23,7 @@ from ..geometry.pose import Pose
 from ..model.array import CoilArray
 from ..support.blas import one_blas_thread
 from .physics import MapPhysics
-from .plan import _spec_nodes
+from .plan import spec_nodes
 
 
 def _even_on_axis(out: np.ndarray, rho: np.ndarray, cols) -> None:
@@ -50,7 +50,7 @@ def compute_magnet_table(phys: "MapPhysics", coil, spec: dict, stride: int = 2,
     smooth: stride 2 is within 1e-4 of the largest value of each column of the table computed
     at every node (docs/fieldmap.md), far below the reader's bilinear steps."""
     alone = CoilArray((coil.replace(pose=Pose()),))
-    rho, z = _spec_nodes(spec)
+    rho, z = spec_nodes(spec)
     i, j = _sub_nodes(len(rho), stride), _sub_nodes(len(z), stride)
     R, Z = np.meshgrid(rho[i], z[j], indexing="ij")
     pts = np.c_[R.ravel(), np.zeros(R.size), Z.ravel()]
@@ -95,7 +95,7 @@ def coupled_modes(arr: CoilArray, sensor_tolerance: float = 1e-3) -> dict | None
     type (None without coupled cores).
 
     The field at sensor s along e_c of the cores magnetized by the magnet m at p is m . the
-    field at p of the adjoint columns X = M^-T E^T (module docstring; 3 x 2 x n_coils columns,
+    field at p of the adjoint columns X = M^-T E^T (module docstring; 3 n_sensors columns,
     X_j core j's rows: m = 0 rings, m = 1, 2 cos and sin rings; the adjoint sources' fields:
     :func:`adjoint_basis_field`). Per core type and mode order m, the SVD of
     all X blocks gives the shapes U_m (kept while the singular values are above
@@ -110,8 +110,9 @@ def coupled_modes(arr: CoilArray, sensor_tolerance: float = 1e-3) -> dict | None
     if system is None:
         return None
     nc = arr.n_coils
-    sens = arr.sensor_positions_m().reshape(-1, 3)
-    x = system.adjoint(sens)  # (nu, ns * 3), columns (sensor, component)
+    sens = arr.sensor_poses()[0]
+    # columns (sensor, component); the tables' (cos, sin) modes are read in the coils' frames
+    x = system.in_coil_frames(system.adjoint(sens))  # (nu, ns * 3)
     blocks = {}
     for jj, k in enumerate(system.core_index):
         model = system.models[jj]
@@ -246,7 +247,7 @@ def compute_mode_tables(t: dict, spec: dict, progress=None, stride: int = 2) -> 
     table, :func:`compute_magnet_table`)."""
     model = t["model"]
     t_sets = t["sets"]
-    rho_all, z_all = _spec_nodes(spec)
+    rho_all, z_all = spec_nodes(spec)
     i_sub, j_sub = _sub_nodes(len(rho_all), stride), _sub_nodes(len(z_all), stride)
     rho, z = rho_all[i_sub], z_all[j_sub]
     R, Z = np.meshgrid(rho, z, indexing="ij")

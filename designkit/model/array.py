@@ -23,20 +23,19 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import itertools
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
-from scipy.optimize import linprog
 
 from ..cores import ArraySystem, saturation_table
+from ..cores.symmetry import PlacementGroup, find_symmetries
 from ..design import default_design
-from ..errors import BadInputError, DesignRuleError
+from ..errors import BadInputError
 from ..geometry.pose import Pose
 from ..support import validate as v
-from ..support.atomic import atomic_path
 from .coil import Coil
+from .overlap import (check_layout_overlap, check_overlap, check_sensors_clear,
+                      check_separation, sensor_inside)
 from firmware_io.mapfile import check_currents
 from firmware_io.mapfile.format import ROWS  # the row order of A(p), defined once (re-exported)
 
@@ -69,123 +68,6 @@ def gradient_from_g5(g5: np.ndarray) -> np.ndarray:
     gxx, gxy, gxz, gyy, gyz = np.moveaxis(np.asarray(g5), -1, 0)
     return np.stack([np.stack([gxx, gxy, gxz], -1), np.stack([gxy, gyy, gyz], -1),
                      np.stack([gxz, gyz, -gxx - gyy], -1)], -2)
-
-
-# ---------------------------------------------------------------------------- geometry
-def _cylinders(coil: Coil):
-    """Solid cylinders (radius, z_lo, z_hi) a coil occupies in its local frame, with names."""
-    out = [("winding", coil.outer_radius, -coil.length / 2, coil.length / 2)]
-    if coil.core is not None:
-        c = coil.core
-        out.append(("core", c.radius, c.offset - c.length / 2, c.offset + c.length / 2))
-    return out
-
-
-def _cyl_overlap(pa: Pose, a, pb: Pose, b) -> bool:
-    """Do two solid cylinders (in poses) share interior points?
-
-    Exact for parallel (or anti-parallel) axes; otherwise surface points of each (0.5 mm
-    spacing or finer) are tested inside the other, which finds any overlap deeper than that.
-    """
-    _, ra, za0, za1 = a
-    _, rb, zb0, zb1 = b
-    ca = np.asarray(pa.position) + pa.matrix[:, 2] * 0.5 * (za0 + za1)
-    cb = np.asarray(pb.position) + pb.matrix[:, 2] * 0.5 * (zb0 + zb1)
-    rsa = np.hypot(ra, 0.5 * (za1 - za0))
-    rsb = np.hypot(rb, 0.5 * (zb1 - zb0))
-    if np.linalg.norm(ca - cb) >= rsa + rsb:
-        return False
-    ua, ub = pa.matrix[:, 2], pb.matrix[:, 2]
-    eps = 1e-12
-    # each cylinder lies inside the capsule of its radius about its axis segment
-    if _segment_distance(ca, ua * 0.5 * (za1 - za0), cb, ub * 0.5 * (zb1 - zb0)) >= ra + rb:
-        return False
-    if abs(abs(ua @ ub) - 1.0) < 1e-9:
-        d = cb - ca
-        axial = d @ ua
-        radial = np.linalg.norm(d - axial * ua)
-        ha, hb = 0.5 * (za1 - za0), 0.5 * (zb1 - zb0)
-        return bool(radial < ra + rb - eps and abs(axial) < ha + hb - eps)
-
-    def surface(pose, r, z0, z1):
-        step = min(5e-4, r / 8)
-        nphi = max(16, int(2 * np.pi * r / step))
-        nz = max(2, int((z1 - z0) / step) + 1)
-        nr = max(2, int(r / step) + 1)
-        phi = np.linspace(0, 2 * np.pi, nphi, endpoint=False)
-        zz = np.linspace(z0, z1, nz)
-        P, Z = np.meshgrid(phi, zz, indexing="ij")
-        pts = [np.stack([r * np.cos(P), r * np.sin(P), Z], -1).reshape(-1, 3)]
-        rr = np.linspace(0, r, nr)
-        R, P = np.meshgrid(rr, phi, indexing="ij")
-        for zc in (z0, z1):
-            pts.append(np.c_[(R * np.cos(P)).ravel(), (R * np.sin(P)).ravel(),
-                             np.full(R.size, zc)])
-        loc = np.vstack(pts)
-        return loc @ pose.matrix.T + np.asarray(pose.position)
-
-    def inside(pose, r, z0, z1, pts):
-        loc = pose.to_local(pts)
-        return (np.hypot(loc[:, 0], loc[:, 1]) < r - eps) & (loc[:, 2] > z0 + eps) & (
-            loc[:, 2] < z1 - eps)
-
-    return bool(np.any(inside(pb, rb, zb0, zb1, surface(pa, ra, za0, za1)))
-                or np.any(inside(pa, ra, za0, za1, surface(pb, rb, zb0, zb1))))
-
-
-def _segment_distance(ca, ha, cb, hb) -> float:
-    """Shortest distance between the segments ca +- ha and cb +- hb (3-vectors, m)."""
-    s, t = np.meshgrid(np.linspace(-1.0, 1.0, 41), np.linspace(-1.0, 1.0, 41))
-    d = (ca + s.ravel()[:, None] * ha) - (cb + t.ravel()[:, None] * hb)
-    # sampled minimum, less the largest step between samples: a lower bound
-    step = 0.05 * (np.linalg.norm(ha) + np.linalg.norm(hb))
-    return float(np.sqrt(np.einsum("ij,ij->i", d, d).min()) - step)
-
-
-def check_overlap(coils) -> None:
-    """Raise :class:`DesignRuleError` naming the first pair of coils whose solids intersect."""
-    for (i, ci), (j, cj) in itertools.combinations(enumerate(coils), 2):
-        for a in _cylinders(ci):
-            for b in _cylinders(cj):
-                if _cyl_overlap(ci.pose, a, cj.pose, b):
-                    raise DesignRuleError(
-                        f"Coils {i} and {j} overlap: the {a[0]} of coil {i} (at "
-                        f"{np.round(np.asarray(ci.pose.position) * 1e3, 3).tolist()} mm) "
-                        f"intersects the {b[0]} of coil {j} (at "
-                        f"{np.round(np.asarray(cj.pose.position) * 1e3, 3).tolist()} mm). "
-                        "Move them apart or make them smaller.")
-
-
-def check_separation(coils) -> None:
-    """Raise :class:`DesignRuleError` naming any core that overlaps or touches another coil's
-    core or winding (the coupled solve needs every core surrounded by air).
-
-    coils : sequence of :class:`designkit.Coil` in their poses.
-    """
-    for i, ci in enumerate(coils):
-        if ci.core is None:
-            continue
-        core_cyl = _cylinders(ci)[1]
-        for j, cj in enumerate(coils):
-            if j == i:
-                continue
-            # winding and core of cj; core-core pairs once (j > i)
-            others = _cylinders(cj) if j > i else _cylinders(cj)[:1]
-            for o in others:
-                if _cyl_overlap(ci.pose, _grow(core_cyl), cj.pose, _grow(o)):
-                    raise DesignRuleError(
-                        f"The core of coil {i} (at "
-                        f"{np.round(np.asarray(ci.pose.position) * 1e3, 3).tolist()} mm) "
-                        f"{'overlaps or touches'} the {o[0]} of coil {j} (at "
-                        f"{np.round(np.asarray(cj.pose.position) * 1e3, 3).tolist()} mm); "
-                        "cores must be separated from every other coil by air. Move the coils "
-                        "apart or make them smaller.")
-
-
-def _grow(cyl, eps=1e-9):
-    """Grow a cylinder by eps so that touching counts as overlapping."""
-    name, r, z0, z1 = cyl
-    return (name, r + eps, z0 - eps, z1 + eps)
 
 
 def _nested(a: np.ndarray) -> tuple:
@@ -244,10 +126,12 @@ class CoilArray:
         """The design's array: its layout's coils (each with its own winding and core), its
         sensors; as built (moved, tilted, rewound, other cores) when the design has
         ``[asbuilt]``, with the sensors where the nominal design puts them."""
-        coils = tuple(Coil.of_design(design, k) for k in range(design.n_coils))
+        check_layout_overlap(design, _nominal_coils)
+        coils = _nominal_coils(design)
         if design.asbuilt is not None:
             coils = design.asbuilt.apply(coils)
         pos, rot = design.sensor_poses()
+        check_design_sensors(design, coils, pos)
         return cls(coils, sensor_offset_m=design.sensors.offset_m,
                    sensors=(_nested(pos), _nested(rot)))
 
@@ -270,6 +154,18 @@ class CoilArray:
         for k, c in enumerate(self.coils):
             out.setdefault(dataclasses.replace(c, pose=Pose()), []).append(k)
         return out
+
+    def symmetries(self) -> PlacementGroup:
+        """The array's symmetry group about the vertical axis through its coils' centroid
+        (:func:`designkit.cores.symmetry.find_symmetries` of the winding centres, axes and the
+        coils without their poses): the elements that map every coil onto an identical coil.
+        Built once."""
+        if "_group" not in self.__dict__:
+            kinds = [dataclasses.replace(c, pose=Pose()) for c in self.coils]
+            group = find_symmetries(self.positions(),
+                                    [c.pose.matrix[:, 2] for c in self.coils], kinds)
+            object.__setattr__(self, "_group", group)
+        return self.__dict__["_group"]
 
     def __getstate__(self):
         # the cached coupled solve (tens of MB) is rebuilt on demand, not pickled to workers
@@ -510,136 +406,30 @@ class CoilArray:
         return (a[:, :3, :] @ self._currents(currents)) @ sk.T
 
 
+def _nominal_coils(design) -> tuple:
+    """The design's coils in their layout's poses (not as built)."""
+    return tuple(Coil.of_design(design, k) for k in range(design.n_coils))
+
+
+def check_design_sensors(design, coils, positions) -> None:
+    """BadInputError when a sensor of ``design`` (``positions`` (n, 3) m) lies in a coil's
+    winding or core: a free list names ``sensors.positions_m[k]``; the default layout names
+    ``sensors.offset_m`` and the offset the cores' ends need."""
+    if design.sensors.layout == "free":
+        check_sensors_clear(coils, positions, "sensors.positions_m")
+        return
+    if any(sensor_inside(coils, p) is not None for p in positions):
+        need = max(max(0.0, c.core.offset + c.core.length / 2 - c.length / 2,
+                       c.core.length / 2 - c.core.offset - c.length / 2)
+                   for c in coils if c.core is not None)
+        raise BadInputError("sensors.offset_m", f"> {need:.4g} m (the cores reach that far "
+                            "beyond their windings' ends: a sensor there sits in the iron)",
+                            design.sensors.offset_m)
+
+
 @functools.lru_cache(maxsize=8)
 def array_for_design(design) -> CoilArray:
     """``CoilArray.from_design(design)``, cached per design so its coupled solve is reused."""
     return CoilArray.from_design(design)
 
 
-# ---------------------------------------------------------------------------- workspace metrics
-def fz_per_amp(actuation: np.ndarray, moment) -> np.ndarray:
-    """Vertical force per ampere of each coil, (n, n_coils), N/A, from A (n, 8, n_coils)."""
-    return np.einsum("k,nkc->nc", force_matrix(moment)[2], actuation[:, 3:, :])
-
-
-def max_vertical_force(fz_coeff: np.ndarray, max_current: float, total_current: float, *,
-                       lateral: Literal["free", "zero"] = "free") -> np.ndarray:
-    """Largest upward force reachable at each point under the drive limits, N.
-
-    Maximize ``Fz = a . I`` subject to ``|I_k| <= max_current`` and ``sum |I_k| <= total_current``.
-
-    ``lateral='free'``: closed form (a fractional knapsack with equal weights): give
-    ``max_current`` with sign(a_k) to the coils with the largest |a_k| until the budget is spent.
-    ``lateral='zero'``: also require Fx = Fy = 0 (a pure push); one linear program per point
-    (scipy.optimize.linprog, HiGHS) -- then ``fz_coeff`` must be (n, 3, n_coils) force per amp.
-
-    Parameters
-    ----------
-    fz_coeff : ndarray, shape (n, n_coils) N/A ('free') or (n, 3, n_coils) N/A ('zero')
-    max_current, total_current : float, A
-
-    Returns
-    -------
-    ndarray, shape (n,), N (>= 0).
-    """
-    imax = v.positive("max_current", max_current, "A")
-    itot = v.positive("total_current", total_current, "A")
-    if lateral == "free":
-        a = np.sort(np.abs(np.asarray(fz_coeff, dtype=float)), axis=1)[:, ::-1]
-        n_full = int(min(a.shape[1], itot // imax))
-        out = imax * a[:, :n_full].sum(axis=1)
-        if n_full < a.shape[1]:
-            out += (itot - n_full * imax) * a[:, n_full]
-        return out
-    if lateral != "zero":
-        raise BadInputError("lateral", "'free' or 'zero'", lateral)
-    f = np.asarray(fz_coeff, dtype=float)
-    nc = f.shape[2]
-    # I = Ip - In with Ip, In >= 0: the L1 budget becomes linear
-    a_ub = np.ones((1, 2 * nc))
-    out = np.empty(len(f))
-    for k in range(len(f)):
-        c = -np.r_[f[k, 2], -f[k, 2]]
-        a_eq = np.c_[f[k, :2], -f[k, :2]]
-        res = linprog(c, A_ub=a_ub, b_ub=[itot], A_eq=a_eq, b_eq=[0.0, 0.0],
-                      bounds=[(0, imax)] * (2 * nc), method="highs")
-        out[k] = -res.fun if res.status == 0 else 0.0
-    return out
-
-
-def condition_number(actuation: np.ndarray, length_scale: float = 0.03) -> np.ndarray:
-    """2-norm condition number of A(p) with the gradient rows times ``length_scale`` (m).
-
-    The rows of A have different units (T/A and T/(m A)); scaling the gradient rows by a length
-    (default 30 mm, the design height) makes the singular values comparable.
-    Returns shape (n,); inf where A is rank deficient.
-    """
-    a = np.array(actuation, dtype=float, copy=True)
-    a[:, 3:, :] *= v.positive("length_scale", length_scale)
-    s = np.linalg.svd(a, compute_uv=False)
-    with np.errstate(divide="ignore"):
-        return np.where(s[:, -1] > 0, s[:, 0] / np.where(s[:, -1] > 0, s[:, -1], 1.0), np.inf)
-
-
-def workspace_metrics(design, *, spacing: float = 0.005, heights=None, out_png=None,
-                      array: CoilArray | None = None) -> dict:
-    """Largest vertical force, where it passes the human threshold, and conditioning.
-
-    Evaluated on horizontal planes (``heights``, m above the coil tops; default 10, 30, 50 mm)
-    over the workspace footprint with the design's drive limits (per coil and total) and a
-    magnet of the design (its moment vector, MagnetSpec.direction).
-
-    Returns a dict of arrays and summary numbers; writes a PNG map to ``out_png`` if given.
-    """
-    arr = array or CoilArray.from_design(design)
-    ws = design.workspace
-    heights = (0.010, 0.030, 0.050) if heights is None else tuple(heights)
-    xs = np.arange(-ws.half_width_m, ws.half_width_m + 1e-12, spacing)
-    m = np.array(design.magnet.moment_vector_a_m2)
-    thr = design.render.threshold_n
-    fmax, cond = [], []
-    for h in heights:
-        X, Y = np.meshgrid(xs, xs, indexing="xy")
-        pts = np.c_[X.ravel(), Y.ravel(), np.full(X.size, h)]
-        # the array's own exact matrix: designkit.model.skipping (tables, faster) imports this module
-        a = arr.actuation_matrix(pts)
-        fz = fz_per_amp(a, m)
-        fmax.append(max_vertical_force(fz, design.drive.max_current_a,
-                                       design.drive.total_current_a).reshape(X.shape))
-        cond.append(condition_number(a).reshape(X.shape))
-    fmax, cond = np.array(fmax), np.array(cond)
-    out = {"heights_m": np.array(heights), "x_m": xs, "max_fz_n": fmax, "condition": cond,
-           "fraction_above_threshold": [(f > thr).mean() for f in fmax],
-           "threshold_n": thr}
-    if out_png is not None:
-        _plot_metrics(out, out_png)
-    return out
-
-
-def _plot_metrics(res: dict, out_png) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    hs = res["heights_m"]
-    ext = np.array([res["x_m"][0], res["x_m"][-1]] * 2) * 1e3
-    fig, axes = plt.subplots(2, len(hs), figsize=(4 * len(hs), 7), squeeze=False)
-    for k, h in enumerate(hs):
-        ax = axes[0, k]
-        im = ax.imshow(res["max_fz_n"][k] * 1e3, origin="lower", extent=ext, cmap="viridis")
-        ax.contour(res["max_fz_n"][k] * 1e3, levels=[res["threshold_n"] * 1e3], colors="w",
-                   extent=ext, origin="lower")
-        ax.set_title(f"max Fz (mN), z = {h * 1e3:.0f} mm\nwhite: {res['threshold_n'] * 1e3} mN")
-        fig.colorbar(im, ax=ax)
-        ax = axes[1, k]
-        im = ax.imshow(np.log10(res["condition"][k]), origin="lower", extent=ext, cmap="magma")
-        ax.set_title("log10 cond A (grad rows x 30 mm)")
-        fig.colorbar(im, ax=ax)
-        for a in axes[:, k]:
-            a.set_xlabel("x (mm)")
-            a.set_ylabel("y (mm)")
-    fig.tight_layout()
-    with atomic_path(out_png, suffix=".png") as tmp:
-        fig.savefig(tmp, format="png", dpi=90)
-    plt.close(fig)

@@ -44,7 +44,8 @@ from .coil import Coil
 
 Output = Literal["B", "gradient", "force", "fz", "torque"]
 OUTPUTS = ("B", "gradient", "force", "fz", "torque")
-_COMP = ("br", "bz", "dbr_dz", "dbz_dz", "br_over_rho")
+RZ_COMPONENTS = ("br", "bz", "dbr_dz", "dbz_dz", "br_over_rho")
+"""The (rho, z) components a per-coil-type table can hold (T/A, T/(m A))."""
 
 
 # ============================================================================ per coil type
@@ -92,7 +93,7 @@ def sphere_bounds(coil: Coil):
     return zc, radii, eb, eg
 
 
-def _bound_at(coil: Coil, local: np.ndarray):
+def bound_at(coil: Coil, local: np.ndarray):
     """Bounds (|B|, |G|_F) per ampere at local points; inf inside the first sphere."""
     zc, radii, eb, eg = sphere_bounds(dataclasses.replace(coil, pose=Pose()))
     d = np.sqrt(local[:, 0] ** 2 + local[:, 1] ** 2 + (local[:, 2] - zc) ** 2)
@@ -301,8 +302,8 @@ class SkippingEvaluator:
             else:
                 full_g = True
         if full_g:
-            comps |= set(_COMP)
-        return full_g, tuple(c for c in _COMP if c in comps)
+            comps |= set(RZ_COMPONENTS)
+        return full_g, tuple(c for c in RZ_COMPONENTS if c in comps)
 
     # ------------------------------------------------------------------ evaluation
     def evaluate(self) -> SkippingResult:
@@ -362,7 +363,7 @@ class SkippingEvaluator:
         mm = np.linalg.norm(self.moment) if self.moment is not None else 0.0
         mz = abs(self.moment[2]) if self.moment is not None else 0.0
         locs = [c.pose.to_local(p) for c in arr.coils]
-        bounds = [_bound_at(c, l) for c, l in zip(arr.coils, locs)]
+        bounds = [bound_at(c, l) for c, l in zip(arr.coils, locs)]
         eb = np.array([b[0] for b in bounds])  # (nc, n)
         eg = np.array([b[1] for b in bounds])
         fac = {"B": (eb, 1.0), "torque": (eb, mm), "gradient": (eg, 1.0), "force": (eg, mm),

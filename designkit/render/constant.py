@@ -20,6 +20,7 @@ eq. 4.2's magnitude); 'fz' -- the thesis' eq. 4.2 literally: only F_z = lambda h
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -148,6 +149,26 @@ class ForceConstant:
     current_limit_a: float
     total_current_a: float
 
+    @property
+    def unrenderable_points(self) -> int:
+        """Surface points where no lambda > 0 is renderable (lambda_j = 0: there the magnet's
+        pull on the cores, F0, is beyond what the coils can cancel)."""
+        return int(np.sum(self.lam_per_point <= 0.0))
+
+    def lam_where_renderable(self) -> float:
+        """lambda*, N/m, over the points where some lambda > 0 is renderable (0 when none is):
+        a few points at the workspace's floor over a core would otherwise make the whole
+        object's lambda 0."""
+        ok = self.lam_per_point > 0.0
+        return float(self.lam_per_point[ok].min()) if ok.any() else 0.0
+
+    def limiting_point_where_renderable(self) -> np.ndarray:
+        """(3,) m: where :meth:`lam_where_renderable` is reached (the overall limiting point
+        when no point is renderable)."""
+        lam = np.where(self.lam_per_point > 0.0, self.lam_per_point, np.inf)
+        k = int(np.argmin(lam)) if np.isfinite(lam).any() else self.limiting_index
+        return self.points_m[k].copy()
+
 
 def _targets(rows, normals, heights):
     if rows == "force":
@@ -269,8 +290,10 @@ def _faces_lambdas(fms, d_all, bias, u, tl, unipolar, rtol, progress):
     inside = ~out & (inside0 | (proven & (sep < -tol0)))
     res = np.where(out, 0.0, np.where(inside & proven & (x < _FLOAT_MAX), x, np.nan))
     alloc = Allocator()
-    for i in tqdm(np.flatnonzero(np.isnan(res)).tolist(), desc="force constant",
-                  disable=not progress, mininterval=2):
+    left = np.flatnonzero(np.isnan(res)).tolist()
+    # a bar only when points are left to the allocator (an empty one printed "0it" twice)
+    for i in tqdm(left, desc="force constant: points checked by the allocator",
+                  disable=not progress or not left, mininterval=2):
         fm, d, f0, xi = fl[i], dl[i], bl[i], float(x[i])
         ok = inside[i] and xi < _FLOAT_MAX and _renders(alloc, fm, xi, d, f0, u, tl,
                                                           unipolar)
@@ -283,7 +306,7 @@ def _faces_lambdas(fms, d_all, bias, u, tl, unipolar, rtol, progress):
 def _secant_lambdas(fms, d_all, bias, u, tl, unipolar, rtol, progress):
     """Per-point lambda by the secant search on the allocator's residual (the reference)."""
     lam = np.empty(len(fms))
-    for j in tqdm(range(len(fms)), desc="force constant", disable=not progress,
+    for j in tqdm(range(len(fms)), desc="force constant", disable=not progress or not len(fms),
                   mininterval=2):
         d = d_all[j]
         if np.linalg.norm(d) == 0.0:
@@ -294,18 +317,12 @@ def _secant_lambdas(fms, d_all, bias, u, tl, unipolar, rtol, progress):
     return lam
 
 
-def force_constant(obj, fieldmap, *, current_limit_a: float, total_current_a: float,
-                   unipolar: bool = False, rows: str = "force", n_side: int = 61,
-                   rtol: float = 1e-6, progress: bool = True,
-                   method: str = "faces") -> ForceConstant:
-    """Largest lambda (N/m) with every surface point's required force renderable (eq. 4.3).
+@dataclass(frozen=True)
+class ConstantSettings:
+    """How :func:`force_constant` computes lambda.
 
-    Parameters
+    Attributes
     ----------
-    obj : designkit.render.VirtualObject
-    fieldmap : ActuationSource
-        A FieldMap, a MapFile or an :class:`ArrayActuation` (designkit's CoilArray directly).
-    current_limit_a, total_current_a : the bounds u_i and I_t, A
     unipolar : 0 <= I_i <= u_i (the thesis) instead of |I_i| <= u_i
     rows : 'force' (3-D lambda h n) or 'fz' (eq. 4.2: F_z = lambda h only)
     n_side : surface discretization (61 x 61 grid over the footprint, the thesis' 3721)
@@ -314,10 +331,39 @@ def force_constant(obj, fieldmap, *, current_limit_a: float, total_current_a: fl
     method : 'faces' (default: the reachable set's facets, each point's lambda confirmed by
         the allocator or by the facets' completeness) or 'secant' (the secant search on the
         allocator's residual per point, the reference; both to ``rtol``)
+    """
+
+    unipolar: bool = False
+    rows: str = "force"
+    n_side: int = 61
+    rtol: float = 1e-6
+    method: str = "faces"
+
+
+def force_constant(obj, fieldmap, *, current_limit_a: float, total_current_a: float,
+                   settings: ConstantSettings | None = None, progress: bool = True,
+                   **changes) -> ForceConstant:
+    """Largest lambda (N/m) with every surface point's required force renderable (eq. 4.3).
+
+    Parameters
+    ----------
+    obj : designkit.render.VirtualObject
+    fieldmap : ActuationSource
+        A FieldMap, a MapFile or an :class:`ArrayActuation` (designkit's CoilArray directly).
+    current_limit_a, total_current_a : the bounds u_i and I_t, A
+    settings : ConstantSettings or None (its defaults); ``changes``: fields of it to replace
+        (``force_constant(..., rows="fz")``), a name that is no field refused
+    progress : one progress bar over the surface points
 
     The magnet's pull on the cores at zero current, F0 (the source's ``bias_force``), is
     included: lambda d - F0 must be renderable.
     """
+    names = {f.name for f in dataclasses.fields(ConstantSettings)}
+    for key in changes:
+        if key not in names:
+            raise BadInputError("force_constant setting", f"one of {sorted(names)}", key)
+    st = dataclasses.replace(settings or ConstantSettings(), **changes)
+    unipolar, rows, n_side, rtol, method = st.unipolar, st.rows, st.n_side, st.rtol, st.method
     if rows not in ("force", "fz"):
         raise BadInputError("rows", "'force' or 'fz'", rows)
     if method not in ("faces", "secant"):

@@ -67,7 +67,7 @@ class SimulatedDevice:
         self.array = array if array is not None else CoilArray.from_design(design)
         n = self.array.n_coils
         self.drive = (drive if drive is not None
-                      else drive_data(design, [Coil.from_design(design)] * n))
+                      else drive_data(design, [Coil.of_design(design, k) for k in range(n)]))
         self.resistance_ohm = self.drive.resistance_ohm[0]
         self.inductance_h = self.drive.inductance_h[0]
         self.supply_v = self.drive.supply_voltage_v

@@ -61,8 +61,8 @@ def _time_panels(ax, result) -> None:
     ax[1].plot(t, c["fz_n"] * 1e3, color="tab:red", lw=1.0, label="rendered (true force on magnet)")
     ax[1].plot(t, c["fz_ref_n"] * 1e3, color="tab:green", lw=0.8, ls="--",
                label="object force at the estimate")
-    for k in range(sum(1 for key in c if key.startswith("cmd"))):
-        ax[2].plot(t, c[f"i{k + 1}_a"], lw=1.0, label=f"coil {k + 1}")
+    _current_lines(ax[2], t, [c[f"i{k + 1}_a"] for k in range(
+        sum(1 for key in c if key.startswith("cmd")))])
     for a in ax[1:]:
         _shade_faults(a, t, running)
         _mark_injections(a, result.faults)
@@ -71,6 +71,53 @@ def _time_panels(ax, result) -> None:
     ax[1].legend(**OUTSIDE, fontsize=8)
     ax[2].set_ylabel("coil current (A)")
     ax[2].legend(**OUTSIDE, fontsize=7, ncol=2)
+
+
+IDLE_FRACTION = 0.02
+"""A coil whose |current| stays below this fraction of the largest coil current of the run is
+drawn as one grey line group ("idle")."""
+
+
+def coil_colours(n: int) -> list:
+    """n distinct RGBA colours for coil lines: tab10 up to 10 coils, tab20 up to 20, else n
+    hues evenly spaced around the HSV circle (full saturation, value alternating 0.9 / 0.6)."""
+    from matplotlib import colormaps
+    from matplotlib.colors import hsv_to_rgb
+
+    if n <= 10:
+        return [colormaps["tab10"](k) for k in range(n)]
+    if n <= 20:
+        return [colormaps["tab20"](k) for k in range(n)]
+    return [(*hsv_to_rgb((k / n, 1.0, 0.9 if k % 2 == 0 else 0.6)), 1.0) for k in range(n)]
+
+
+def _current_lines(ax, t, currents) -> None:
+    """One coloured line a coil that carries current (:func:`coil_colours`, labelled with its
+    number), the idle ones (:data:`IDLE_FRACTION`) thin and grey under one legend entry."""
+    peaks = np.array([np.max(np.abs(i)) if len(i) else 0.0 for i in currents])
+    top = float(peaks.max()) if len(peaks) else 0.0
+    active = [k for k in range(len(currents)) if peaks[k] > IDLE_FRACTION * top]
+    idle = [k for k in range(len(currents)) if k not in active]
+    for k in idle:
+        ax.plot(t, currents[k], lw=0.6, color="0.7",
+                label=f"idle: coils {_numbers(idle)}" if k == idle[0] else None)
+    for k, colour in zip(active, coil_colours(len(active))):
+        ax.plot(t, currents[k], lw=1.0, color=colour, label=f"coil {k + 1}")
+
+
+def _numbers(indices) -> str:
+    """'1-3, 7, 9-12' for 0-based indices [0, 1, 2, 6, 8, 9, 10, 11] (coils count from 1)."""
+    out = []
+    group = [indices[0]] if indices else []
+    for k in indices[1:]:
+        if k == group[-1] + 1:
+            group.append(k)
+        else:
+            out.append(group)
+            group = [k]
+    if group:
+        out.append(group)
+    return ", ".join(f"{g[0] + 1}" if len(g) == 1 else f"{g[0] + 1}-{g[-1] + 1}" for g in out)
 
 
 def _loop_timing(result, out_dir: Path, plt) -> Path:

@@ -1,9 +1,14 @@
 """``designkit run --simulate`` end to end: map, scene, simulated device, runner, results.
 
-Builds (or loads) the force-current map of a design, compiles the virtual object into a scene,
-closes firmware_io's runner (the code that runs on the controller) around the simulated device
-and writes run.csv (one row per control step, SI), summary.json, run.png and loop_timing.png.
-Every input is checked before anything is computed.
+Builds (or loads) the force-current map of a design, compiles the virtual object into a scene
+(or loads a compiled one), closes firmware_io's runner (the code that runs on the controller)
+around the simulated device and writes run.csv (one row per control step, SI), summary.json,
+run.png and loop_timing.png. Every input is checked before anything is computed.
+
+The force constant lambda (thesis eq. 4.3): given (``lam_n_per_m``), the compiled scene's, or
+the design's ``render.stiffness_n_per_m`` capped at what the device renders over the object
+(:func:`designkit.render.force_constant` on the map, with the runner's current bounds and drive
+mode): a stiffer object than the coils can push asks for currents beyond the limit everywhere.
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ from firmware_io.runner import (CALIBRATED_RELATIVE_ERROR, LocalizerShim, Runner
                                 SceneForce, SensorHeadroom, config_from_map)
 from firmware_io.scene import Scene
 
-from .. import fieldmap
+from .. import fieldmap, render
 from ..design import Design, load_design
 from ..errors import BadInputError
 from ..model import electrical
@@ -43,8 +48,8 @@ MAX_DURATION_S = 600.0
 SCRIPTED_DURATION_S = {"slide": 4.0, "poke": 3.0, "tilt": 4.0}
 """Length of the scripted trajectories at their own speed, s."""
 
-TOP_OF_BOX_M = 0.078
-"""Highest finger position of a scripted trajectory, m (inside the map box)."""
+BOX_MARGIN_M = 0.002
+"""A scripted trajectory keeps this far inside the map's box at its top, m."""
 
 
 def drive_data(design) -> DriveRecord:
@@ -59,14 +64,17 @@ class RunSettings:
 
     Attributes
     ----------
-    obj : str -- the virtual object ('plane', 'hemisphere', 'half-cylinder', 'wedge') or a mesh
+    obj : str or None -- the virtual object ('plane', 'hemisphere', 'half-cylinder', 'wedge') or
+        a mesh (None: the hemisphere, or the objects of ``scene_path``)
     trajectory : str -- 'slide', 'poke', 'tilt' or a CSV file (:mod:`.trajectory`)
     duration_s : float or None -- simulated time, s (None: the trajectory's own)
     faults : str -- 'none', 'default' or 'TYPE@SECONDS,...' (:mod:`.faults`)
     method : str -- the localization method
     period_s : float -- the control period, s
     unipolar : bool -- the thesis' drive (0 <= I)
-    lam_n_per_m : float or None -- the force constant, N/m (None: the design's)
+    lam_n_per_m : float or None -- the force constant, N/m (None: the design's
+        ``render.stiffness_n_per_m`` capped at what the device renders over the object,
+        :func:`choose_lambda`; not with ``scene_path``, which carries its own)
     rows : {'force', 'fz'} -- the object's 3-D force, or only its vertical component (the
         thesis' eq. 4.6)
     seed : int -- the sensor noise's
@@ -78,9 +86,11 @@ class RunSettings:
     skip_force_n : float -- the runner's coil-skip force, N
     keep_sensors : tuple of int -- sensors the scene keeps in their linear range
         (:class:`firmware_io.runner.SensorHeadroom`; default none)
+    scene_path : str or None -- a compiled scene (``designkit scene compile``) to run instead
+        of ``obj``: its objects and its lambda
     """
 
-    obj: str = "hemisphere"
+    obj: str | None = None
     trajectory: str = "slide"
     duration_s: float | None = None
     faults: str = "none"
@@ -94,14 +104,16 @@ class RunSettings:
     profile: bool = False
     skip_force_n: float = 0.0
     keep_sensors: tuple = ()
+    scene_path: str | None = None
 
 
 def run_simulation(settings: RunSettings = RunSettings(), *, design=None, map_path=None,
                    out=Path("run-out"), progress: bool = True, array=None,
                    plant=None) -> dict:
-    """Build (or load) the map, compile the scene, close the runner around the simulated device,
-    and write run.csv, summary.json, run.png and loop_timing.png into ``out``. Returns the
-    summary. Every input is checked before anything is computed.
+    """Build (or load) the map, compile the scene (or load ``settings.scene_path``), close the
+    runner around the simulated device, and write run.csv, summary.json, run.png and
+    loop_timing.png into ``out``. Returns the summary. Every input is checked before anything
+    is computed.
 
     ``settings``: :class:`RunSettings`. ``array``: the design's CoilArray when the caller has
     one (its coupled solve is reused). ``plant``: the device that was built (a design with
@@ -110,26 +122,43 @@ def run_simulation(settings: RunSettings = RunSettings(), *, design=None, map_pa
     """
     st = settings
     design = design if isinstance(design, Design) else load_design(design)
-    virtual, path, duration, schedule = _checked_inputs(st, design)
+    if st.scene_path is not None:
+        for name, value in (("--object", st.obj), ("--lambda", st.lam_n_per_m)):
+            if value is not None:
+                raise BadInputError(name, "left out with --scene (the compiled scene has its "
+                                    "objects and lambda)", value)
+    obj = "hemisphere" if st.obj is None and st.scene_path is None else st.obj
+    virtual, path, duration, schedule = _checked_inputs(st, obj, design)
+    # the scene is read and matched to the design before the map is built
+    scene = (None if st.scene_path is None else
+             Scene.load(st.scene_path, expected_design_sha256=design.spec_hash()))
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     array = array if array is not None else CoilArray.from_design(design)
-    if path is None:
-        path = _scripted_path(design, array, virtual, st.trajectory)
     map_path, fmap = _map(design, array, map_path, out, progress)
-    lam = design.render.stiffness_n_per_m if st.lam_n_per_m is None else float(st.lam_n_per_m)
-    meta = {"object": st.obj, "rows": st.rows}
-    if st.keep_sensors:
-        meta["keep_sensors"] = [int(k) for k in st.keep_sensors]
-    scene_path = scenefile.compile_scene(virtual, out / "scene.npz", lam_n_per_m=lam,
-                                         law=ConstraintLaw(lam),
-                                         map_design_sha256=fmap.design_sha256, extra_meta=meta)
-    scene = Scene.load(scene_path, expected_design_sha256=fmap.design_sha256)
     # the runner's configuration from the map's drive record, as on the controller
     cfg = config_from_map(fmap, control_period_s=st.period_s, unipolar=st.unipolar,
                           force_axes="z" if st.rows == "fz" else "xyz",
                           skip_force_n=st.skip_force_n)
     drive = cfg.drive     # its rating violations are simulated and listed, not refused
+    if scene is not None:
+        virtual = SceneSurface(scene)
+        choice = {"lambda_n_per_m": scene.lam_n_per_m, "lambda_source": f"scene {st.scene_path}"}
+        obj = ", ".join(str(o.kind) for o in scene.objects)
+    else:
+        choice = choose_lambda(design, virtual, fmap, drive, st, progress=progress)
+        meta = {"object": obj, "rows": st.rows}
+        if st.keep_sensors:
+            meta["keep_sensors"] = [int(k) for k in st.keep_sensors]
+        scene_file = scenefile.compile_scene(virtual, out / "scene.npz",
+                                             lam_n_per_m=choice["lambda_n_per_m"],
+                                             law=ConstraintLaw(choice["lambda_n_per_m"]),
+                                             map_design_sha256=fmap.design_sha256,
+                                             extra_meta=meta)
+        scene = Scene.load(scene_file, expected_design_sha256=fmap.design_sha256)
+    lam = choice["lambda_n_per_m"]
+    if path is None:
+        path = _scripted_path(design, array, virtual, st.trajectory, fmap.bounds)
     plant_design, plant_array = design, array
     if plant is not None:  # the as-built device under the runner of ``design``'s map
         plant_design = plant if isinstance(plant, Design) else load_design(plant)
@@ -155,8 +184,8 @@ def run_simulation(settings: RunSettings = RunSettings(), *, design=None, map_pa
     sat = saturation_summary(device, fmap, res, drive.current_limit_a)
     if sat:
         summary["saturation"] = sat
-    summary.update({"object": st.obj, "trajectory": str(st.trajectory), "design": design.name,
-                    "rows": st.rows, "lambda_n_per_m": lam, "method": st.method,
+    summary.update({"object": obj, "trajectory": str(st.trajectory), "design": design.name,
+                    "rows": st.rows, **choice, "method": st.method,
                     "unipolar": st.unipolar, "keep_sensors": list(st.keep_sensors),
                     "drive": drive.to_dict(), "drive_violations": drive.violations(),
                     **_duration_note(path.duration_s, duration),
@@ -166,13 +195,52 @@ def run_simulation(settings: RunSettings = RunSettings(), *, design=None, map_pa
     write_run_csv(out / "run.csv", res.columns)
     write_json_atomic(out / "summary.json", summary)
     plot_run(res, out, surface_height=lambda x, y: virtual.height(np.c_[x, y, np.zeros_like(x)]),
-             title=f"{st.obj}: {st.trajectory}, lambda = {lam:g} N/m")
+             title=f"{obj}: {st.trajectory}, lambda = {lam:.3g} N/m")
     return summary
 
 
-def _checked_inputs(st: RunSettings, design: Design):
-    """The run's inputs, checked: (virtual object, trajectory from a file -- inside the design's
-    workspace -- or None for a scripted one, duration s, fault schedule)."""
+class SceneSurface:
+    """The top surface h(x, y) of a compiled scene's objects (the highest where they overlap),
+    for the scripted trajectories and the run figure."""
+
+    def __init__(self, scene: Scene):
+        self.objects = list(scene.objects)
+
+    def height(self, points) -> np.ndarray:
+        """h(x, y) of the points (n, 3), m, shape (n,)."""
+        return np.max([o.height(points) for o in self.objects], axis=0)
+
+
+def choose_lambda(design: Design, virtual, fmap, drive: DriveRecord, st: RunSettings, *,
+                  progress: bool) -> dict:
+    """The run's force constant and where it comes from (summary keys): ``st.lam_n_per_m`` when
+    given; else ``render.stiffness_n_per_m`` capped at the largest lambda the device renders
+    over the object's surface points where it renders any (thesis eq. 4.3 on the map, the
+    runner's per-coil and total current bounds; ``lambda_unrenderable_points``: surface points
+    where no lambda > 0 is renderable, the cores' pull there exceeding what the coils can
+    cancel: no object force is rendered there whatever lambda)."""
+    if st.lam_n_per_m is not None:
+        return {"lambda_n_per_m": float(st.lam_n_per_m), "lambda_source": "--lambda"}
+    fc = render.force_constant(virtual, fmap, current_limit_a=drive.current_limit_a,
+                               total_current_a=drive.total_current_a, unipolar=st.unipolar,
+                               rows=st.rows, progress=progress)
+    renderable = fc.lam_where_renderable()
+    asked = design.render.stiffness_n_per_m
+    lam = min(asked, renderable)
+    return {"lambda_n_per_m": lam,
+            "lambda_source": ("render.stiffness_n_per_m" if lam == asked else
+                              "the device's force constant (eq. 4.3), below "
+                              "render.stiffness_n_per_m"),
+            "lambda_design_n_per_m": asked, "lambda_renderable_n_per_m": renderable,
+            "lambda_limiting_point_m": fc.limiting_point_where_renderable().tolist(),
+            "lambda_unrenderable_points": fc.unrenderable_points,
+            "lambda_surface_points": int(len(fc.points_m))}
+
+
+def _checked_inputs(st: RunSettings, obj: str | None, design: Design):
+    """The run's inputs, checked: (virtual object (None with a scene file), trajectory from a
+    file -- inside the design's workspace -- or None for a scripted one, duration s, fault
+    schedule)."""
     if st.rows not in ("force", "fz"):
         raise BadInputError("--rows", "'force' (3-D) or 'fz' (the thesis' vertical force)",
                             st.rows)
@@ -183,7 +251,7 @@ def _checked_inputs(st: RunSettings, design: Design):
     if any(not (isinstance(k, (int, np.integer)) and k >= 0) for k in st.keep_sensors):
         raise BadInputError("--keep-sensors", "sensor indices >= 0 (the map's order)",
                             list(st.keep_sensors))
-    virtual = scenefile.make_object(st.obj)
+    virtual = None if obj is None else scenefile.make_object(obj)
     scripted = st.trajectory in SCRIPTED_DURATION_S
     path = None if scripted else Trajectory.from_csv(st.trajectory, design.workspace_region())
     duration = float(st.duration_s or (path.duration_s if path is not None
@@ -217,17 +285,21 @@ def _not_injected(schedule: FaultSchedule, injected) -> list:
     return out
 
 
-def _scripted_path(design, array, virtual, trajectory: str) -> Trajectory:
-    """``slide`` or ``poke`` over the virtual object at its own speed, kept above the upper
-    sensor board."""
-    # the magnet cannot go below the upper sensor board: its centre stays half its length
-    # and 1 mm (the board and the sensor package) above the highest sensor
-    floor = (float(np.max(array.sensor_positions_m()[0, :, 2]))
-             + design.magnet.length_m / 2 + 1e-3)
+def _scripted_path(design, array, virtual, trajectory: str, bounds) -> Trajectory:
+    """``slide``, ``poke`` or ``tilt`` over the virtual object at its own speed, inside the map's
+    box (``bounds``: lower, upper corners, m) and above the sensor boards below it."""
+    # the magnet cannot go below a sensor board under the box: its centre stays half its
+    # length and 1 mm (the board and the sensor package) above the highest such sensor
+    lo, hi = (np.asarray(b, float) for b in bounds)
+    sensors, _ = array.sensor_poses()
+    below = sensors[:, 2][sensors[:, 2] <= lo[2]]
+    floor = max(lo[2], (float(below.max()) if below.size else -np.inf)
+                + design.magnet.length_m / 2 + 1e-3)
     make = {"slide": slide_trajectory, "poke": poke_trajectory,
             "tilt": tilt_trajectory}[trajectory]
     return make(lambda x, y: virtual.height(np.c_[x, y, np.zeros_like(x)]),
-                duration_s=SCRIPTED_DURATION_S[trajectory], z_limits_m=(floor, TOP_OF_BOX_M))
+                duration_s=SCRIPTED_DURATION_S[trajectory],
+                z_limits_m=(floor, hi[2] - BOX_MARGIN_M))
 
 
 def _map(design, array, map_path, out: Path, progress: bool):

@@ -12,9 +12,11 @@ Two layers:
   and :func:`export_vtk` writes the datasets as ``.vtp`` / ``.vts`` files for ParaView.
 
 The force on the finger magnet is ``F = (grad B)^T m`` (thesis eq. 2.5) with ``m`` the design's
-magnet moment unless another is given. Default currents (``currents=None``): the coil nearest
-the array centre at ``drive.max_current_a``, every other coil at 0 A (skipped when the field is
-evaluated). pyvista is imported lazily: without it the figures raise
+magnet moment unless another is given. The design point
+(:attr:`designkit.design.Design.design_point_m`): the magnet's centre at the design height above
+the coil nearest the layout's centre (``Design.design_coil``), on its axis; the sections pass through it. Default currents (``currents=None``): the coil nearest
+the design point at ``drive.max_current_a``, every other coil at 0 A (skipped when the field is
+evaluated). Colour ranges are the design's (:func:`colour_ranges`), whatever the currents. pyvista is imported lazily: without it the figures raise
 :class:`designkit.errors.MissingDependencyError` ("designkit.viz needs pyvista: pip install
 pyvista"). Figure by figure: docs/figures.md.
 """
@@ -26,11 +28,13 @@ from .common import (B_MT, B_T, CURRENT_A, F_MN, F_N, FZ_MN, GRAD_T_M, IN_SOLID,
 from .fieldlines import field_line_data, plot_field_lines
 from .forcemap import force_map_data, plot_force_map
 from .isosurface import force_isosurface_data, plot_force_isosurface
-from .output import export_vtk, render, save_png
-from .physics import (array_field, force_from_gradient, inside_solids, magnet_moment,
-                      resolve_currents)
+from .output import FigureSet, export_vtk, render, save_png, write_figures
+from .physics import (array_field, force_from_gradient,
+                      inside_solids, magnet_moment, nearest_coil, resolve_currents,
+                      solid_distance_m)
+from .ranges import ColourRanges, colour_ranges
 from .scene import plot_array_scene, scene_meshes
-from .slices import plot_slices, slice_data
+from .slices import Section, plot_slices, section_plane, slice_data
 from .style import bar_label_values, currents_text, nice_ticks
 
 __all__ = ["B_MT", "B_T", "CURRENT_A", "F_MN", "F_N", "FZ_MN", "GRAD_T_M", "IN_SOLID", "KINDS",
@@ -39,4 +43,6 @@ __all__ = ["B_MT", "B_T", "CURRENT_A", "F_MN", "F_N", "FZ_MN", "GRAD_T_M", "IN_S
            "force_isosurface_data", "force_map_data", "inside_solids", "magnet_moment",
            "nice_ticks", "plot_array_scene", "plot_field_lines", "plot_force_isosurface",
            "plot_force_map", "plot_slices", "render", "resolve_currents", "save_png",
-           "scene_meshes", "slice_data", "currents_text"]
+           "scene_meshes", "slice_data", "currents_text", "FigureSet", "write_figures",
+           "nearest_coil", "solid_distance_m", "ColourRanges",
+           "colour_ranges", "Section", "section_plane"]

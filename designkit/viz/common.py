@@ -3,7 +3,7 @@ and grid qualities, the names of the data arrays and the checks of the plot opti
 
 Array names carry their unit: SI arrays (``"B (T)"``, ``"grad B (T/m)"``, ``"F (N)"``) and,
 for colouring, magnitudes in the units people read (``"B magnitude (mT)"``, ``"F magnitude
-(mN)"``, ``"Fz (mN)"``). pyvista is imported only in :func:`_pv`: without it the figures raise
+(mN)"``, ``"Fz (mN)"``). pyvista is imported only in :func:`import_pyvista`: without it the figures raise
 :class:`designkit.errors.MissingDependencyError` with the fix; without a display (no
 ``DISPLAY``) VTK is pointed at its EGL render window, which renders off-screen.
 """
@@ -22,10 +22,10 @@ QUALITIES: tuple[str, ...] = ("quick", "full")
 
 # Grid points per axis. "quick" is for tests and `designkit report --quick`; "full" is the
 # report's (what it costs: docs/figures.md).
-_RES = {
+GRID_POINTS = {
     "quick": {"volume": (17, 17, 19), "slice": (33, 21), "plane": (35, 35), "map": 9,
               "iso": (19, 19, 17)},
-    "full": {"volume": (33, 33, 41), "slice": (81, 51), "plane": (81, 81), "map": 15,
+    "full": {"volume": (33, 33, 41), "slice": (81, 51), "plane": (81, 81), "map": 11,
              "iso": (37, 37, 31)},
 }
 
@@ -35,12 +35,12 @@ CURRENT_A = "current (A)"
 IN_SOLID = "inside a core or winding"
 REACH_M = "height where |Fz| on the coil axes falls below the level (m)"
 
-_COPPER, _STEEL, _MAGNET = "#c87533", "#8c8c8c", "#b22222"
-MIN_ARROW = 0.3
+COPPER, STEEL, MAGNET_RED = "#c87533", "#8c8c8c", "#b22222"
+MIN_ARROW = 0.45
 """Shortest force arrow in the force map, as a fraction of the longest."""
 
 
-def _pv():
+def import_pyvista():
     """Import pyvista for off-screen use, or raise MissingDependencyError with the fix."""
     if not os.environ.get("DISPLAY"):
         # VTK otherwise tries X first and logs "bad X server connection" before falling back.
@@ -52,13 +52,13 @@ def _pv():
     return pyvista
 
 
-def _quality(quality: str) -> dict:
+def grid_resolution(quality: str) -> dict:
     if quality not in QUALITIES:
         raise BadInputError("quality", f"one of {QUALITIES}", quality)
-    return _RES[quality]
+    return GRID_POINTS[quality]
 
 
-def _window(window_size) -> tuple[int, int]:
+def window_pixels(window_size) -> tuple[int, int]:
     try:
         w, h = (int(x) for x in window_size)
     except (TypeError, ValueError):
@@ -69,7 +69,7 @@ def _window(window_size) -> tuple[int, int]:
     return w, h
 
 
-def _image(pv, lo, hi, dims):
+def image_grid(pv, lo, hi, dims):
     dims = tuple(int(d) for d in dims)
     spacing = tuple((h - l) / (d - 1) if d > 1 else 1.0 for l, h, d in zip(lo, hi, dims))
     return pv.ImageData(dimensions=dims, spacing=spacing, origin=tuple(lo))

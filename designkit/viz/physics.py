@@ -2,9 +2,10 @@
 
 The force on the finger magnet is ``F = (grad B)^T m`` (:func:`designkit.model.array.force_matrix`,
 thesis eq. 2.5) with ``m`` the design's magnet moment (MagnetSpec.direction, default -z) unless
-another moment is given. Default currents (``currents=None``): the coil nearest the array
-centre at the design's ``drive.max_current_a`` and every other coil at 0 A -- the situation of
-the design point in ``designkit report``.
+another moment is given. The design point (:func:`design_point_m`) is the magnet's centre at the
+design height above the coil nearest the layout's centre, on that coil's axis; default currents
+(``currents=None``): the coil nearest the design point at the design's ``drive.max_current_a``
+and every other coil at 0 A -- the situation of the design point in ``designkit report``.
 """
 
 from __future__ import annotations
@@ -26,23 +27,36 @@ if TYPE_CHECKING:  # pragma: no cover
     from ..design import Design
 
 
-def resolve_currents(design: "Design", currents: Sequence[float] | None = None) -> np.ndarray:
-    """Per-coil currents, A, shape (ncoils,), row-major like :meth:`Design.coil_centres_m`.
+TIE_M = 1e-9
+"""Coils whose distances differ by less than this, m, are equally near: the lower index wins."""
 
-    ``None`` gives the default: the coil nearest the array centre at ``drive.max_current_a``.
+
+def nearest_coil(design: "Design", point_m) -> int:
+    """Index of the coil whose top-face centre is nearest to the point (m); ties as in
+    :attr:`designkit.design.Design.design_coil`."""
+    p = np.asarray(v.vector3("point_m", point_m, "m"), dtype=float)
+    d = np.linalg.norm(np.asarray(design.array.top_centres_m(), dtype=float) - p, axis=1)
+    return int(np.flatnonzero(d <= d.min() + TIE_M)[0])
+
+
+def resolve_currents(design: "Design", currents: Sequence[float] | None = None) -> np.ndarray:
+    """Per-coil currents, A, shape (ncoils,), in the layout's coil order.
+
+    ``None`` gives the default: the coil nearest the design point (:func:`design_point_m`) at
+    ``drive.max_current_a``, the others at 0 A.
     """
-    centres = np.array(design.coil_centres_m())
-    n = len(centres)
+    n = design.n_coils
     if currents is None:
         out = np.zeros(n)
-        out[int(np.argmin(np.hypot(centres[:, 0], centres[:, 1])))] = design.drive.max_current_a
+        out[nearest_coil(design, np.asarray(design.design_point_m))] = design.drive.max_current_a
         return out
     try:
         arr = np.asarray(currents, dtype=float).reshape(-1)
     except (TypeError, ValueError):
         raise BadInputError("currents", f"{n} numbers in A (one per coil)", currents) from None
     if arr.size != n:
-        raise BadInputError("currents", f"{n} numbers in A (one per coil, row-major)",
+        raise BadInputError("currents", f"{n} numbers in A (one per coil, in the layout's "
+                            "order)",
                             f"{arr.size} values")
     if not np.all(np.isfinite(arr)):
         raise BadInputError("currents", "finite numbers in A", arr.tolist())
@@ -143,7 +157,7 @@ def force_from_gradient(gradient_t_per_m: np.ndarray, moment_a_m2: np.ndarray) -
     return g5_from_gradient(np.asarray(gradient_t_per_m)) @ force_matrix(moment_a_m2).T
 
 
-def _add_field_arrays(mesh, b, g=None, moment=None):
+def add_field_arrays(mesh, b, g=None, moment=None):
     mesh.point_data[B_T] = b
     mesh.point_data[B_MT] = np.linalg.norm(b, axis=1) * 1e3
     if g is not None:
@@ -155,25 +169,47 @@ def _add_field_arrays(mesh, b, g=None, moment=None):
     return mesh
 
 
-def _footprint_half_m(design: "Design") -> float:
-    """Half side of a square that covers the coils and the workspace, m."""
+def footprint_half_m(design: "Design") -> float:
+    """Half side of a square about the array's axis that covers the coil tops (each with its
+    outer radius) and the workspace, m."""
     tops = design.array.top_centres_m()
     reach = max(float(np.abs(tops[k, :2]).max()) + design.coil_spec(k).outer_radius_m
                 for k in range(len(tops)))
     return max(design.workspace_region().half_width_m(), reach)
 
 
-def inside_solids(design: "Design", points) -> np.ndarray:
-    """Boolean mask (n,): the points (m) that lie inside a core or a winding of the array."""
+def solid_distance_m(design: "Design", points) -> np.ndarray:
+    """Signed distance, m, shape (n,), from points (n, 3) m to the nearest winding or core of
+    the array, each in its pose: < 0 inside a solid, > 0 in air.
+
+    A winding is the hollow cylinder ``inner_radius_m <= rho <= outer_radius_m``, ``|z| <=
+    length_m / 2`` of its coil's frame, a core the cylinder ``rho <= radius_m``, ``|z - offset_m|
+    <= length_m / 2``; both are solids of revolution, so the distance is that to a rectangle in
+    the meridian half-plane (rho, z), exact.
+    """
     p, _ = v.points(points)
-    inside = np.zeros(len(p), dtype=bool)
+    out = np.full(len(p), np.inf)
     for k, pose in enumerate(design.coil_poses()):
-        c, core = design.coil_spec(k), design.core_spec(k)
         local = pose.to_local(p)
         rho = np.hypot(local[:, 0], local[:, 1])
-        dz = local[:, 2]
-        inside |= (rho >= c.inner_radius_m) & (rho <= c.outer_radius_m) & \
-            (np.abs(dz) <= c.length_m / 2)
+        c, core = design.coil_spec(k), design.core_spec(k)
+        out = np.minimum(out, _box_distance(np.maximum(c.inner_radius_m - rho,
+                                                       rho - c.outer_radius_m),
+                                            np.abs(local[:, 2]) - c.length_m / 2))
         if core is not None:
-            inside |= (rho <= core.radius_m) & (np.abs(dz - core.offset_m) <= core.length_m / 2)
-    return inside
+            out = np.minimum(out, _box_distance(rho - core.radius_m,
+                                                np.abs(local[:, 2] - core.offset_m)
+                                                - core.length_m / 2))
+    return out
+
+
+def _box_distance(d_rho: np.ndarray, d_z: np.ndarray) -> np.ndarray:
+    """Signed distance to a rectangle from the signed distances to its two slabs."""
+    outside = np.hypot(np.maximum(d_rho, 0.0), np.maximum(d_z, 0.0))
+    return np.where((d_rho > 0) | (d_z > 0), outside, np.maximum(d_rho, d_z))
+
+
+def inside_solids(design: "Design", points) -> np.ndarray:
+    """Boolean mask (n,): the points (m) inside or on a core or a winding of the array, each in
+    its pose (:func:`solid_distance_m` <= 0)."""
+    return solid_distance_m(design, points) <= 0.0

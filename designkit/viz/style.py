@@ -12,24 +12,30 @@ import textwrap
 
 import numpy as np
 
-from .common import _COPPER, _MAGNET, _STEEL, _window
+from .common import COPPER, MAGNET_RED, STEEL, window_pixels
 from .physics import magnet_moment
 
 
-def _plotter(pv, window_size, shape=(1, 1)):
-    p = pv.Plotter(off_screen=True, window_size=_window(window_size), shape=shape)
+def new_plotter(pv, window_size, shape=(1, 1), col_weights=None):
+    """An off-screen plotter on a white background; ``col_weights``: the panels' relative
+    widths (default equal)."""
+    p = pv.Plotter(off_screen=True, window_size=window_pixels(window_size), shape=shape,
+                   col_weights=col_weights)
+    p._col_fractions = (np.ones(shape[1]) if col_weights is None
+                       else np.asarray(col_weights, float)) / (shape[1] if col_weights is None
+                                                               else sum(col_weights))
     p.set_background("white")
     return p
 
 
-def _mm(mesh):
+def in_mm(mesh):
     """A copy of the mesh with its points in millimetres (data arrays untouched)."""
     out = mesh.cast_to_structured_grid() if hasattr(mesh, "spacing") else mesh.copy()
     out.points = np.asarray(out.points) * 1e3
     return out
 
 
-def _bar(title, **extra):
+def bar_args(title, **extra):
     args = dict(title=title, color="black", vertical=True, position_x=0.87, position_y=0.2,
                 width=0.05, height=0.6, title_font_size=14, label_font_size=12, fmt="%.3g",
                 n_labels=5)
@@ -37,14 +43,16 @@ def _bar(title, **extra):
     return args
 
 
-def _title(p, text, font_size=12):
+def add_title(p, text, font_size=12):
     """Title at the upper left, each line wrapped to the width of its (sub)plot."""
-    width = p.window_size[0] / p.shape[1]
+    fractions = getattr(p, "_col_fractions", np.ones(p.shape[1]) / p.shape[1])
+    width = p.window_size[0] * fractions[p.renderers.index_to_loc(p.renderers.active_index)[1]
+                                         if p.shape[1] > 1 else 0]
     # VTK's default font: a character is about 0.6 font sizes wide, in pixels
     chars = max(20, int(0.92 * width / (0.6 * font_size)))
     lines = [w for line in text.split("\n") for w in (textwrap.wrap(line, chars) or [""])]
     p.add_text("\n".join(lines), position="upper_left", font_size=font_size, color="black")
-    # the band the title takes, px: _fit_camera keeps the scene and its axis labels below it
+    # the band the title takes, px: fit_camera keeps the scene and its axis labels below it
     p._title_band_px = len(lines) * TITLE_LINE_PX_PER_PT * font_size + 6
 
 
@@ -93,7 +101,7 @@ def nice_ticks(lo: float, hi: float, target: int = 5) -> tuple[float, float, flo
     return best[1] if best else (lo, hi, span / target)
 
 
-def _nice_bounds(bounds) -> tuple[list[float], dict]:
+def nice_bounds(bounds) -> tuple[list[float], dict]:
     b = list(map(float, bounds))
     counts = {}
     for i, axis in enumerate("xyz"):
@@ -110,9 +118,9 @@ def axis_font_size(window_width_px: int) -> int:
     return int(max(6, min(10, round(10 * window_width_px / 1024))))
 
 
-def _axes(p, mesh_bounds=None, location="outer", **kw):
+def add_axes(p, mesh_bounds=None, location="outer", **kw):
     """Axes in mm on round tick values (the bounds are widened to the nearest round ticks)."""
-    b, counts = _nice_bounds(p.bounds if mesh_bounds is None else mesh_bounds)
+    b, counts = nice_bounds(p.bounds if mesh_bounds is None else mesh_bounds)
     p.show_bounds(bounds=b, xtitle="x (mm)", ytitle="y (mm)", ztitle="z (mm)",
                   color="black", font_size=axis_font_size(p.window_size[0] / p.shape[1]),
                   grid=False, location=location, ticks="outside", minor_ticks=False, fmt="%g",
@@ -128,19 +136,27 @@ def _axes(p, mesh_bounds=None, location="outer", **kw):
     return b
 
 
-def _fit_camera(p, bounds_mm, elevation_deg=25.0, azimuth_deg=-58.0, margin=1.22):
+def fit_camera(p, bounds_mm, elevation_deg=25.0, azimuth_deg=-58.0, margin=1.22,
+               every_actor=True):
     """Look at the box from (elevation, azimuth) from just far enough that its bounding sphere,
-    widened by ``margin`` for the axis labels, fits the view: nothing is cut at the edges."""
+    widened by ``margin`` for the axis labels, fits the view: nothing is cut at the edges
+    (``every_actor``: the box grown to hold every actor; else the box alone, the subject)."""
     b = np.asarray(bounds_mm, dtype=float)
-    every = np.asarray(p.bounds, dtype=float)  # every actor, e.g. coils below the axes box
-    b[0::2], b[1::2] = np.minimum(b[0::2], every[0::2]), np.maximum(b[1::2], every[1::2])
+    if every_actor:
+        every = np.asarray(p.bounds, dtype=float)  # every actor, e.g. coils below the axes box
+        b[0::2], b[1::2] = np.minimum(b[0::2], every[0::2]), np.maximum(b[1::2], every[1::2])
     centre = (b[0::2] + b[1::2]) / 2
     radius = 0.5 * float(np.linalg.norm(b[1::2] - b[0::2]))
     half_angle = math.radians(p.camera.view_angle / 2)
     # the title's band at the top: the margin leaves room for half of it; the view is fitted
     # in the rest and moved down by that much (the top axis labels stay clear of the title)
     band = 0.5 * min(getattr(p, "_title_band_px", 0.0) / (p.window_size[1] / p.shape[0]), 0.5)
-    distance = margin * radius / math.sin(half_angle) / (1.0 - band)
+    # a panel narrower than it is high fits the sphere in its width
+    fractions = getattr(p, "_col_fractions", np.ones(p.shape[1]) / p.shape[1])
+    col = p.renderers.index_to_loc(p.renderers.active_index)[1] if p.shape[1] > 1 else 0
+    aspect = (p.window_size[0] * fractions[col]) / (p.window_size[1] / p.shape[0])
+    fit_angle = min(half_angle, math.atan(math.tan(half_angle) * aspect))
+    distance = margin * radius / math.sin(fit_angle) / (1.0 - band)
     _iso_camera(p, tuple(centre), distance, elevation_deg, azimuth_deg)
     if band > 0:
         pos, focus = (np.asarray(q, dtype=float) for q in p.camera_position[:2])
@@ -150,15 +166,15 @@ def _fit_camera(p, bounds_mm, elevation_deg=25.0, azimuth_deg=-58.0, margin=1.22
         p.camera_position = [tuple(pos + shift), tuple(focus + shift), (0.0, 0.0, 1.0)]
 
 
-def _add_device(p, design, blocks, *, opacity=1.0, magnet=True, workspace=True):
-    p.add_mesh(_mm(blocks["windings"]), color=_COPPER, opacity=opacity, smooth_shading=True,
+def add_device(p, design, blocks, *, opacity=1.0, magnet=True, workspace=True):
+    p.add_mesh(in_mm(blocks["windings"]), color=COPPER, opacity=opacity, smooth_shading=True,
                name="windings")
     if "cores" in blocks.keys():
-        p.add_mesh(_mm(blocks["cores"]), color=_STEEL, opacity=opacity, name="cores")
+        p.add_mesh(in_mm(blocks["cores"]), color=STEEL, opacity=opacity, name="cores")
     if magnet:
-        p.add_mesh(_mm(blocks["magnet"]), color=_MAGNET, name="magnet")
+        p.add_mesh(in_mm(blocks["magnet"]), color=MAGNET_RED, name="magnet")
     if workspace:
-        p.add_mesh(_mm(blocks["workspace"]), color="#1f4e9c", line_width=1.5, name="workspace")
+        p.add_mesh(in_mm(blocks["workspace"]), color="#1f4e9c", line_width=1.5, name="workspace")
 
 
 def currents_text(cur) -> str:
@@ -171,7 +187,7 @@ def currents_text(cur) -> str:
     return "I = [" + ", ".join(f"{c:+.2g}" for c in cur) + "] A"
 
 
-def _log_fmt(lo: float, hi: float) -> str:
+def log_format(lo: float, hi: float) -> str:
     if lo >= 1.0:
         return "%.0f"
     return "%.2g" if hi < 100 else "%.3g"
@@ -184,7 +200,7 @@ def _iso_camera(p, focus_mm, distance_mm, elevation_deg=28.0, azimuth_deg=-58.0)
     p.camera_position = [tuple(pos), tuple(focus_mm), (0.0, 0.0, 1.0)]
 
 
-def _magnet_text(design, moment) -> str:
+def magnet_text(design, moment) -> str:
     m = magnet_moment(design, moment)
     direction = "+z" if np.allclose(m[:2], 0) and m[2] > 0 else (
         "-z" if np.allclose(m[:2], 0) else "(" + ", ".join(f"{x:.2g}" for x in m) + ")")
@@ -232,7 +248,7 @@ def _round_125(x: float) -> bool:
     return min(abs(mant - m) for m in (1, 2, 5, 10)) < 1e-9
 
 
-def _clear_bar_titles(plotter) -> None:
+def round_colour_bars(plotter) -> None:
     """Colour bars on round label values (:func:`bar_label_values`), their title lifted above
     the top label (VTK draws them overlapping)."""
     from vtkmodules.vtkCommonCore import vtkDoubleArray

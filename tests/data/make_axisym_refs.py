@@ -30,10 +30,10 @@ import numpy as np
 
 from designkit.model.coil import Coil
 from designkit.design import default_design
-from designkit.fem.mesh import AIR, AXIS, CORE, OUTER, SHELL, WINDING, _size_near, gmsh_model
+from designkit.fem.mesh import AIR, AXIS, CORE, OUTER, SHELL, WINDING, gmsh_model, size_near
 from designkit.fem.mesh import mesh_to_file
-from designkit.fem.problem import problem_text
-from designkit.fem.runner import _read_line, find_getdp, run_getdp, work_folder
+from designkit.fem.problem import AxiProblem, problem_text
+from designkit.fem.runner import find_getdp, read_line, run_getdp, work_folder
 
 HERE = Path(__file__).resolve().parent
 HEIGHTS_M = (0.012, 0.020, 0.030, 0.050, 0.080)
@@ -84,9 +84,9 @@ def size_fields(gmsh, s: float, boxes, h_box: float, bodies, axis) -> list:
     for tag in bodies:
         curves |= {abs(e[1]) for e in gmsh.model.getBoundary([(2, tag)], oriented=False)}
         corners |= {p for dd, p in gmsh.model.getBoundary([(2, tag)], recursive=True) if dd == 0}
-    fields.append(_size_near(f, "CurvesList", sorted(curves - set(axis)), 1.0e-3 * s, h_far,
+    fields.append(size_near(f, "CurvesList", sorted(curves - set(axis)), 1.0e-3 * s, h_far,
                              2e-3, 0.08, sampling=200))
-    fields.append(_size_near(f, "PointsList", sorted(corners), 0.15e-3 * s, h_far, 0.3e-3,
+    fields.append(size_near(f, "PointsList", sorted(corners), 0.15e-3 * s, h_far, 0.3e-3,
                              0.01))
     return fields
 
@@ -149,9 +149,10 @@ def solve(geo: dict, level: int, timeout_s: float = 1800.0) -> tuple[dict, dict]
              for r, z0, z1, name in spans]
     box = [(r + 4e-3, float(z0 + shift), float(z1 + shift)) for r, z0, z1, _ in spans]
     area = (coil.outer_radius - coil.inner_radius) * coil.length
-    pro = problem_text(current_density=coil.turns / area, mu_r=float(coil.core.relative_permeability),
-                       bh=None, has_core=True, shell_inner=SHELL_M[0], shell_outer=SHELL_M[1],
-                       lines=lines, winding_area=area, turns=coil.turns)
+    pro = problem_text(AxiProblem(
+        current_density=coil.turns / area, mu_r=float(coil.core.relative_permeability), bh=None,
+        has_core=True, shell_inner=SHELL_M[0], shell_outer=SHELL_M[1], lines=lines,
+        winding_area=area, turns=coil.turns))
     hl = coil.length / 2
     boxes = {WINDING: [(coil.inner_radius, shift - hl, coil.outer_radius, shift + hl)],
              CORE: [_core_rect(coil, zc) for zc in (shift, shift + d)]}
@@ -160,7 +161,7 @@ def solve(geo: dict, level: int, timeout_s: float = 1800.0) -> tuple[dict, dict]
         run_getdp(find_getdp(), work, pro, work / "model.msh", timeout_s, expect="side.txt")
         out = {k: [] for k in ("br", "bz", "dbr_dz", "dbz_dz")}
         for (r, _, _, name), zz in zip(spans, (axis_z, side_z)):
-            fit = _read_line(work / name, r).fit(zz + shift)
+            fit = read_line(work / name, r).fit(zz + shift)
             for k in out:
                 out[k].append(fit[k])
     return {k: np.concatenate(v) for k, v in out.items()}, stats
@@ -188,12 +189,13 @@ def pull(level: int, timeout_s: float = 1800.0) -> tuple[np.ndarray, dict]:
             stats = _mesh(boxes, level, [(a + 3e-3, z0 - 3e-3, z1 + 3e-3)], work / "model.msh",
                           h_fine=0.1e-3)
             for mu in (1000.0, 1.0):
-                pro = problem_text(current_density=jd, mu_r=mu, bh=None, has_core=True,
-                                   shell_inner=SHELL_M[0], shell_outer=SHELL_M[1], lines=lines,
-                                   winding_area=d * length, turns=1)
+                pro = problem_text(AxiProblem(
+                    current_density=jd, mu_r=mu, bh=None, has_core=True,
+                    shell_inner=SHELL_M[0], shell_outer=SHELL_M[1], lines=lines,
+                    winding_area=d * length, turns=1))
                 run_getdp(find_getdp(), work, pro, work / "model.msh", timeout_s,
                           expect="sheet.txt")
-                br[mu] = _read_line(work / "sheet.txt", a)
+                br[mu] = read_line(work / "sheet.txt", a)
         ind = br[1000.0].br - br[1.0].br
         fz.append(-2 * math.pi * a * jd * d * np.trapezoid(ind, br[1000.0].z))
     return np.array(fz), stats

@@ -35,8 +35,9 @@ def face_rule(mag, n, symmetry):
     eps = 1e-4 * (mag.z1 - mag.z0)
     x = mag.x + (R * np.cos(P)).ravel()
     y = mag.y + (R * np.sin(P)).ravel()
-    top = np.column_stack([x, y, np.full(x.size, mag.z1 - eps)])
-    bot = np.column_stack([x, y, np.full(x.size, mag.z0 + eps)])
+    z0, z1 = mag.origin_z + mag.z0, mag.origin_z + mag.z1
+    top = np.column_stack([x, y, np.full(x.size, z1 - eps)])
+    bot = np.column_stack([x, y, np.full(x.size, z0 + eps)])
     return top, bot, W.ravel()
 
 

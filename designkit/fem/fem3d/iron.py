@@ -80,6 +80,16 @@ def dipoles_field(points: np.ndarray, pos: np.ndarray, mom: np.ndarray,
     return b, g
 
 
+def _frame(axis) -> np.ndarray:
+    """A rotation (3, 3) whose third column is the unit ``axis`` (the winding field is
+    axisymmetric: the first two columns are any orthonormal pair)."""
+    z = np.asarray(axis, float)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    return np.column_stack([x, np.cross(z, x), z])
+
+
 def iron_field(work, stats, bodies, points, symmetry):
     """B (n, 3) T, G (n, 3, 3) T/m at points: the windings' exact field plus the cores' (from
     the ``bcore_<tag>.txt`` tables :func:`problem_text` prints with ``core_table``)."""
@@ -88,13 +98,14 @@ def iron_field(work, stats, bodies, points, symmetry):
     for t in stats["cores"]:
         body = bodies[t - (WIND0 if t >= WIND0 else CORE0)]
         if t >= WIND0:
-            loc = points - np.array([body.x, body.y, 0.5 * (body.z0 + body.z1)])
+            rot = _frame(body.axis)  # columns: local x, y, z (the axis) in the global frame
+            loc = (points - body.centre()) @ rot
             length = body.z1 - body.z0
             amp_turns = body.current_density * (body.radius - body.inner_radius) * length
             bw, gw = winding_field(loc, body.inner_radius, body.radius, length, 1.0,
                                    amp_turns, gradient=True)
-            b += bw
-            g += gw
+            b += bw @ rot.T
+            g += np.einsum("ia,nab,jb->nij", rot, gw, rot)
         else:
             d = np.loadtxt(work / f"bcore_{t}.txt", ndmin=2)
             pos, mom = core_dipoles(d[:, :12].reshape(-1, 4, 3), d[:, 12:24].reshape(-1, 4, 3),

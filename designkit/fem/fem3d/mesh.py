@@ -9,6 +9,8 @@ shrinks by sqrt(2) per ``level``. The mesh levels and their accuracy are in docs
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from ..mesh import gmsh_model, mesh_to_file
 from .bodies import AIR, BOUNDARY, CORE0, MAGNET, SHELL, WIND0
 from .lines import FIT_HALF_WINDOW
@@ -22,9 +24,11 @@ def _add_bodies(occ, bodies, symmetry, r_int, r_ext):
     inner = occ.addSphere(0, 0, 0, r_int)
     vols = []
     for b in bodies:
-        c = occ.addCylinder(b.x, b.y, b.z0, 0, 0, b.z1 - b.z0, b.radius)
+        base, top = b.end_points()
+        d = top - base
+        c = occ.addCylinder(*base, *d, b.radius)
         if b.inner_radius > 0:
-            h = occ.addCylinder(b.x, b.y, b.z0, 0, 0, b.z1 - b.z0, b.inner_radius)
+            h = occ.addCylinder(*base, *d, b.inner_radius)
             c = occ.cut([(3, c)], [(3, h)])[0][0][1]
         vols.append(c)
     objs = [(3, outer), (3, inner)] + [(3, v) for v in vols]
@@ -131,14 +135,31 @@ def _size_fields(gmsh, body_volumes, s, *, refine, balls, body_size, far_size, p
     return fields
 
 
-def build_mesh(bodies, msh_path, *, symmetry="none", level=0, refine=(), r_int=0.25,
-               r_ext=0.32, body_size=3.0e-3, far_size=25e-3, balls=(),
-               point_size=2.0e-3) -> dict:
-    """gmsh 3-D mesh of the bodies in a sphere + shell, cut to the symmetry part.
+@dataclass(frozen=True)
+class MeshSettings:
+    """The mesh of a 3-D model: its ``symmetry`` part, refinement ``level`` (sizes shrink by
+    sqrt(2) per level), ``refine`` boxes (xmin, xmax, ymin, ymax, zmin, zmax, size), the air
+    sphere ``r_int`` and the shell to ``r_ext`` (m), element sizes at the bodies and far
+    away, and ``balls``: points (m) meshed at ``point_size`` within FIT_HALF_WINDOW + 2 mm
+    (the fitting lines)."""
 
-    ``refine``: list of (xmin, xmax, ymin, ymax, zmin, zmax, size) boxes (m); ``balls``:
-    points (m) meshed at ``point_size`` within FIT_HALF_WINDOW + 2 mm (the fitting lines).
-    Sizes shrink by sqrt(2) per ``level``. Returns mesh statistics."""
+    symmetry: str = "none"
+    level: int = 0
+    refine: tuple = ()
+    r_int: float = 0.25
+    r_ext: float = 0.32
+    body_size: float = 3.0e-3
+    far_size: float = 25e-3
+    balls: object = ()
+    point_size: float = 2.0e-3
+
+
+def build_mesh(bodies, msh_path, settings: MeshSettings = MeshSettings()) -> dict:
+    """gmsh 3-D mesh of the bodies in a sphere + shell, cut to the symmetry part
+    (:class:`MeshSettings`). Returns mesh statistics."""
+    st = settings
+    symmetry, level, refine, r_int, r_ext = st.symmetry, st.level, st.refine, st.r_int, st.r_ext
+    body_size, far_size, balls, point_size = st.body_size, st.far_size, st.balls, st.point_size
     s = 2.0 ** (-level / 2.0)
     with gmsh_model("designkit_fem3d") as gmsh:
         occ = gmsh.model.occ

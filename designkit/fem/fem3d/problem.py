@@ -62,13 +62,27 @@ def _functions(bodies, cores, winds, has_mag, mu_scale):
         L.append(f"  nu[B{t}] = 1. / (mu0 * {mu!r});")
     for t in winds:
         b = bodies[t - WIND0]
-        L.append(f"  js[B{t}] = {b.current_density!r} * Vector[-(Y[] - {b.y!r}), X[] - {b.x!r}, 0]"
-                 f" / Sqrt[(X[] - {b.x!r})^2 + (Y[] - {b.y!r})^2];")
+        L.append(f"  js[B{t}] = {b.current_density!r} * {_azimuthal(b)};")
     if has_mag:
         mb = [b for b in bodies if b.kind == "magnet"][0]
-        L.append(f"  br[Mag] = Vector[0, 0, mu0 * {mb.magnetization!r}];")
+        ax, ay, az = (f"mu0 * {mb.magnetization * q!r}" for q in mb.axis)
+        L.append(f"  br[Mag] = Vector[{ax}, {ay}, {az}];")
     L.append("}")
     return L
+
+
+def _azimuthal(b) -> str:
+    """GetDP expression of the unit azimuthal direction about body ``b``'s axis, a x (r - o) /
+    |a x (r - o)| (o a point of the axis; counter-clockwise seen from the tip of a)."""
+    if b.vertical:
+        return (f"Vector[-(Y[] - {b.y!r}), X[] - {b.x!r}, 0]"
+                f" / Sqrt[(X[] - {b.x!r})^2 + (Y[] - {b.y!r})^2]")
+    (ax, ay, az), (ox, oy, oz) = (float(q) for q in b.axis), (float(q) for q in b.origin)
+    dx, dy, dz = f"(X[] - {ox!r})", f"(Y[] - {oy!r})", f"(Z[] - {oz!r})"
+    cx = f"({ay!r} * {dz} - {az!r} * {dy})"
+    cy = f"({az!r} * {dx} - {ax!r} * {dz})"
+    cz = f"({ax!r} * {dy} - {ay!r} * {dx})"
+    return f"Vector[{cx}, {cy}, {cz}] / Sqrt[{cx}^2 + {cy}^2 + {cz}^2]"
 
 
 def _constraints_and_jacobian(r_int, r_ext):
