@@ -21,6 +21,7 @@ from designkit.sim import drive_data
 from designkit.sim.device import SimulatedDevice
 from firmware_io.errors import BadInputError
 from firmware_io.hw.driver import MD10C, CoilDrive, DriverRating, voltage_to_command
+from firmware_io.mapfile import SaturationTable
 from firmware_io.mapfile.drive import DriveRecord
 from firmware_io.runner import RunnerConfig
 
@@ -234,6 +235,9 @@ def test_hardware_entry_refuses_a_map_over_its_driver_rating(tmp_path, monkeypat
     class Map:
         meta = {"drive": drive_data(default_design()).to_dict()}
         n_coils = 9
+
+        def saturation_table(self):
+            return SaturationTable([0.0, 6.0], np.ones((2, 9)))
 
     class Scene:
         meta = {"rows": "force"}
