@@ -72,8 +72,8 @@ class SimulatedDevice:
         self.inductance_h = np.asarray(self.drive.inductance_h, float)       # (n,) H
         self.supply_v = self.drive.supply_voltage_v
         # the cores' saturation up to the largest current the supply can drive
-        self.saturation = PlantSaturation.of(
-            self.array, max(self.drive.current_limit_a, self.supply_v / self.resistance_ohm))
+        top_a = max(self.drive.current_limit_a, self.supply_v / float(self.resistance_ohm.min()))
+        self.saturation = PlantSaturation.of(self.array, top_a)
         self.noise_t = float(noise_t)
         self.rng = np.random.default_rng(seed)
         self.moment = np.asarray(design.magnet.moment_vector_a_m2, float)
