@@ -330,7 +330,10 @@ def run(out_dir=DEFAULT_OUT, quick: bool = False, fem: bool = False,
     i30 = int(np.argmin(np.abs(zs - 0.03)))
     res["f0"] = {"png": str(png), "x_mm": (xs * 1e3).tolist(), "z_mm": (zs * 1e3).tolist(),
                  "fz_centre_column_n": f[:, len(xs) // 2, 2].tolist(),
-                 "fz_at_30mm_centre_n": float(arr.bias_force([0, 0, 0.03], moment)[2]),
+                 "fz_at_30mm_centre_n": float(arr.bias_force(
+                     [0, 0, 0.03], moment, magnet_size_m=(design.magnet.radius_m,
+                                                          design.magnet.length_m))[2]),
+                 "fz_at_30mm_centre_dipole_n": float(arr.bias_force([0, 0, 0.03], moment)[2]),
                  "max_abs_f0_at_30mm_n": float(np.abs(f[i30]).max()),
                  "threshold_n": design.render.threshold_n}
     bar.update()
@@ -386,7 +389,9 @@ def _print(res):
           [f"{v:.1%}" for v in w["b_change_percentiles_5_50_95"]], " dBz/dz change:",
           [f"{v:.1%}" for v in w["dbz_dz_change_percentiles_5_50_95"]])
     f = res["f0"]
+    dip = f["fz_at_30mm_centre_dipole_n"]
     print(f"\nF0 at 30 mm above the centre coil: {f['fz_at_30mm_centre_n'] * 1e3:.1f} mN "
+          f"(the 10 x 10 mm cylinder; point dipole {dip * 1e3:.1f} mN) "
           f"(threshold {f['threshold_n'] * 1e3} mN); PNG {f['png']}")
     s = res["sensor_centre_magnet_30mm"]
     print(f"induced core field at the centre sensors, magnet 30 mm above the centre: upper "

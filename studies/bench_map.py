@@ -7,7 +7,7 @@ degrees; build target ``LAYOUT_BUILD_S``), their errors at N_POINTS / 5.
 
 Builds the map, writes and reloads it with firmware_io.mapfile (numpy only), times the lookups
 and compares with CoilArray at ``n_points`` random points, half in the box's lowest 10 mm; the
-bias force and the sensor fields at fewer points (each is one core solve). Timings: the minimum
+bias force (against the magnet as its finite cylinder) and the sensor fields at fewer points. Timings: the minimum
 over repeated short runs with the median beside it, and references in the same process
 (``ref_call_us`` one 8 x 9 @ 9 matvec, ``ref_copy_ms`` a copy of a (1e4, 72) array,
 ``direct_per_point_ms`` the coupled model itself, the 2000 x 2000 matmul).
@@ -121,7 +121,8 @@ def _case(design, out_dir: Path, name: str, n_points: int, n_magnet: int, **buil
     bottom = pts[:, 2] < lo[2] + 0.010
     moment = m.moment_a_m2
     mp = pts[:n_magnet]
-    f_ref = arr.bias_force(mp, moment)
+    size = (design.magnet.radius_m, design.magnet.length_m)   # the magnet as the cylinder it is
+    f_ref = arr.bias_force(mp, moment, magnet_size_m=size)
     f_err = np.abs(m.bias_force(mp) - f_ref).max() / max(np.abs(f_ref).max(), 1e-300)
     sens = m.sensor_positions_m.reshape(-1, 3)
     nm = min(n_magnet, 20)
@@ -225,7 +226,7 @@ def scene_vs_full(out_dir=DEFAULT_OUT, n_points: int = 2000) -> dict:
     ref = arr.actuation_matrix(pts)
     mp = pts[:50]
     moment = d.magnet.moment_vector_a_m2
-    f_ref = arr.bias_force(mp, moment)
+    f_ref = arr.bias_force(mp, moment, magnet_size_m=(d.magnet.radius_m, d.magnet.length_m))
     sens = arr.sensor_positions_m().reshape(-1, 3)
     s_ref = np.array([arr.magnet_core_field(sens, q, moment) for q in mp[:10]])
     scene = fieldmap.scene_build_args(d, [Hemisphere()], 0.0, region={"objects": ["half_ball"]})

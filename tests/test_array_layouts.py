@@ -164,15 +164,10 @@ def test_a_tilted_ring_written_free_gives_the_ring_built_by_hand_and_by_its_gene
 
 def test_coils_that_meet_are_refused_naming_the_layout_key_and_its_range():
     with pytest.raises(DesignRuleError, match=r"array.radius_m = 0.03 m at tilt_deg = 30.*"
-                                              r"valid range: array.radius_m >= 0.03\d+ m"):
+                                              r"valid range: array.radius_m >= 0.03\d+ m") as exc:
         CoilArray.from_design(_design(RING.replace("0.075", "0.03")))
     # the smallest radius it names clears the coils, 2 % less does not
-    msg = ""
-    try:
-        CoilArray.from_design(_design(RING.replace("0.075", "0.03")))
-    except DesignRuleError as exc:
-        msg = str(exc)
-    need = float(msg.split(">= ")[1].split(" m")[0])
+    need = float(str(exc.value).split(">= ")[1].split(" m")[0])
     CoilArray.from_design(_design(RING.replace("0.075", f"{need:.6g}")))
     with pytest.raises(DesignRuleError):
         CoilArray.from_design(_design(RING.replace("0.075", f"{0.98 * need:.6g}")))

@@ -38,7 +38,7 @@ from .device import SimulatedDevice
 from .faults import FaultSchedule
 from .loop import LoopTiming, simulate
 from .plot import plot_run
-from .report import force_error_causes, summarize, write_run_csv
+from .report import force_error_causes, saturation_summary, summarize, write_run_csv
 from .trajectory import Trajectory, poke_trajectory, slide_trajectory, tilt_trajectory
 
 MAX_DURATION_S = 600.0
@@ -135,7 +135,7 @@ def run_simulation(settings: RunSettings = RunSettings(), *, design=None, map_pa
                 raise BadInputError(name, "left out with --scene (the compiled scene has its "
                                     "objects and lambda)", value)
     obj = "hemisphere" if st.obj is None and st.scene_path is None else st.obj
-    virtual, path, duration, schedule = _checked_inputs(st, obj)
+    virtual, path, duration, schedule = _checked_inputs(st, obj, design)
     # the scene is read and matched to the design before the map is built
     scene = (None if st.scene_path is None else
              Scene.load(st.scene_path, expected_design_sha256=design.spec_hash()))
@@ -189,6 +189,9 @@ def run_simulation(settings: RunSettings = RunSettings(), *, design=None, map_pa
     res = simulate(device, factory, path, duration_s=duration, timing=timing,
                    faults=schedule, scene_force=SceneForce(scene).force, progress=progress)
     summary = summarize(res, force_error_causes(device, fmap, res))
+    sat = saturation_summary(device, fmap, res, drive.current_limit_a)
+    if sat:
+        summary["saturation"] = sat
     summary.update({"object": obj, "trajectory": str(st.trajectory), "design": design.name,
                     "rows": st.rows, **choice, "method": st.method,
                     "unipolar": st.unipolar, "keep_sensors": list(st.keep_sensors),
@@ -243,9 +246,10 @@ def choose_lambda(design: Design, virtual, fmap, drive: DriveRecord, st: RunSett
             "lambda_surface_points": int(len(fc.points_m))}
 
 
-def _checked_inputs(st: RunSettings, obj: str | None):
+def _checked_inputs(st: RunSettings, obj: str | None, design: Design):
     """The run's inputs, checked: (virtual object (None with a scene file), trajectory from a
-    file or None for a scripted one, duration s, fault schedule)."""
+    file -- inside the design's workspace -- or None for a scripted one, duration s, fault
+    schedule)."""
     if st.rows not in ("force", "fz"):
         raise BadInputError("--rows", "'force' (3-D) or 'fz' (the thesis' vertical force)",
                             st.rows)
@@ -262,7 +266,7 @@ def _checked_inputs(st: RunSettings, obj: str | None):
                             list(st.keep_sensors))
     virtual = None if obj is None else scenefile.make_object(obj)
     scripted = st.trajectory in SCRIPTED_DURATION_S
-    path = None if scripted else Trajectory.from_csv(st.trajectory)
+    path = None if scripted else Trajectory.from_csv(st.trajectory, design.workspace_region())
     duration = float(st.duration_s or (path.duration_s if path is not None
                                         else SCRIPTED_DURATION_S[st.trajectory]))
     if not 0 < duration <= MAX_DURATION_S:

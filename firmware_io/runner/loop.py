@@ -4,7 +4,8 @@ voltages -> PWM, one step per control period.
 Each :meth:`Runner.step` takes the sensor side's newest :class:`~firmware_io.runner.frames.Fix`
 (or None), updates the tracker at the frame's time and predicts to now, evaluates the scene's
 force f (N) there, allocates currents (A) with min ||F(p, m) I - (f - F0(p))|| within the bounds
-for the moment m the estimator found, turns them into the voltages of the R-L feed-forward
+for the moment m the estimator found (column k of F scaled by the map's saturation factor at
+|I_k| when the cores saturate), turns them into the voltages of the R-L feed-forward
 (:mod:`firmware_io.runner.drive`) and writes the coil drivers' duties, one block write per PCA9685. The
 torque m x B the currents cause is reported with each step. Every fault switches every coil off
 in the same step; no force is rendered with a position older than one sensor pass. For the
@@ -55,6 +56,18 @@ of hand-over jitter): a newer frame is missing, so the position is older than on
 
 PASSES_KEPT = 8
 """Frame intervals the pass interval is the median of."""
+
+SATURATION_SOLVES = 2
+"""Allocations per step with saturating cores: about the previous command, then (when that
+linearization is off at the result) once about the result (docs/runner.md, "Saturation")."""
+
+SATURATION_RTOL = 1e-3
+"""The linearization of g(I) = s(|I|) I is accepted at the allocation's result when it is off
+by at most SATURATION_RTOL |I_k| + :data:`SATURATION_ATOL_A` in every coil (0.1 % of that
+coil's force, plus 1 mA)."""
+
+SATURATION_ATOL_A = 1e-3
+"""See :data:`SATURATION_RTOL`, A."""
 
 _ALL_ROWS = np.arange(8)
 
@@ -477,17 +490,42 @@ class Runner:
             if len(h):
                 kw["inequalities"] = (g, h)
         command = np.zeros(cfg.n_coils)
+        equivalent = np.zeros(0 if keep is None else len(keep))
         if keep is None or len(keep):
-            i, _ = self.allocate(fm, target, limit, cfg.drive.total_current_a, **kw)
+            i, equivalent = self._currents_for(fm, target, limit, kw, keep)
             if keep is None:
-                command = np.asarray(i, float)
+                command = i
             else:
                 command[keep] = i
-        b = a[:3] @ (command if keep is None else command[keep])
+        b = a[:3] @ equivalent       # the saturating cores' field of those currents
         self.torque_n_m = torque_matrix(m) @ b
         if prof:
             self._mark("allocation", tm)
         return command
+
+    def _currents_for(self, fm, target, limit, kw, keep) -> tuple[np.ndarray, np.ndarray]:
+        """The allocation's currents I (A) for the force per ampere ``fm`` (linear cores) and
+        ``target`` (N), and their linear-equivalent currents g(I) (A: what the linear columns
+        of A multiply). Saturating cores (``cfg.saturation``): column k scaled by s_k(|I_k|) at
+        the currents solved for, g(I) = s(|I|) I -- the allocation runs on g linearized about
+        the previous command and, when the result lies where that is off by more than
+        :data:`SATURATION_RTOL`, once more about the result (docs/runner.md, "Saturation")."""
+        total = self.cfg.drive.total_current_a
+        sat = self.cfg.saturation
+        if sat is None:
+            i = np.asarray(self.allocate(fm, target, limit, total, **kw)[0], float)
+            return i, i
+        about = self.command_a if keep is None else self.command_a[keep]
+        for _ in range(SATURATION_SOLVES):
+            gain, offset = sat.linearize(about, keep)
+            i = np.asarray(self.allocate(fm * gain, target - fm @ offset, limit, total,
+                                         **kw)[0], float)
+            g = sat.equivalent(i, keep)
+            if np.all(np.abs(g - gain * i - offset) <= SATURATION_RTOL * np.abs(i)
+                      + SATURATION_ATOL_A):
+                break
+            about = i
+        return i, g
 
     def _drive(self, t_s, t0, p, f_ref, command, new_frame) -> StepRecord:
         cfg = self.cfg
