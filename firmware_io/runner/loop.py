@@ -422,6 +422,9 @@ class Runner:
         if self.tracker.x is not None:
             self._freshness(t_s, problems)
         if not self.have_fix:
+            # a coil over its budget is a fault whether or not the finger is located; it
+            # outlasts any localization problem (it waits for the coil to cool), so it is shown
+            problems[:0] = self._thermal_problem([])
             if problems and (self.fault is None or problems[0][0] != self.fault):
                 self._enter_fault(t_s, *problems[0])
             return self._record(t_s, t0, np.full(3, np.nan), np.zeros(3), new_frame,
@@ -434,9 +437,7 @@ class Runner:
         if not inside:
             problems.append(("out_of_box", f"estimate {np.round(p * 1e3, 1).tolist()} mm outside "
                              f"the map box"))
-        if self.thermal.exceeded():
-            problems.append(("thermal", f"I^2 t {self.thermal.energy_a2s.max():.0f} A^2 s above "
-                             f"the budget {self.thermal.budget_a2s:.0f} A^2 s"))
+        self._thermal_problem(problems)
         if self._still_off(t_s, problems):
             return self._record(t_s, t0, p, np.zeros(3), new_frame, off=True)
         if prof:
@@ -456,6 +457,14 @@ class Runner:
                               f"(limits {cfg.drive.current_limit_a:.3f} A, {budget:.3f} A)")
             return self._record(t_s, t0, p, f_ref, new_frame, off=True)
         return self._drive(t_s, t0, p, f_ref, command, new_frame)
+
+    def _thermal_problem(self, problems: list) -> list:
+        """``problems`` with the 'thermal' problem appended when a coil's I^2 t is over its
+        budget."""
+        if self.thermal.exceeded():
+            problems.append(("thermal", f"I^2 t {self.thermal.energy_a2s.max():.0f} A^2 s above "
+                             f"the budget {self.thermal.budget_a2s:.0f} A^2 s"))
+        return problems
 
     def force_matrix(self, p: np.ndarray, moment_a_m2, coils=None) -> np.ndarray:
         """Force per ampere at p on the moment ``moment_a_m2`` (A m^2): (3, c) N/A, or (1, c)
