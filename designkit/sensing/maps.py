@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..model.array import array_for_design
 from .crb import Bound, BoundSettings, pose_bound
 from .region import Scenarios
 from .response import MagnetShape, magnet_response
@@ -49,8 +50,11 @@ def layout_bounds(design, layouts, scenarios: Scenarios, settings: BoundSettings
 def scenario_response(design, sites, scenarios: Scenarios, settings: BoundSettings,
                       array=None):
     """:func:`designkit.sensing.response.magnet_response` of the scenarios' poses at the sites
-    (the design's first magnet's shape; its cores when ``settings.cores`` is 'coupled')."""
-    use = array if settings.cores == "coupled" else None
+    (the design's first magnet's shape; its cores when ``settings.cores`` is 'coupled': those
+    of ``array``, default the design's)."""
+    use = None
+    if settings.cores == "coupled":
+        use = array_for_design(design) if array is None else array
     return magnet_response(sites, scenarios.positions_m, scenarios.directions,
                            MagnetShape.of(design.magnet), array=use)
 

@@ -22,7 +22,7 @@ from ..errors import BadInputError
 from .crb import BoundSettings, pose_bound, scenario_jacobians, usable_sensors
 from .response import Response
 
-PRIOR_SD = {"position_m": 0.05, "angle_rad": 1.0, "background_t": 0.01}
+PRIOR_SD = {"position_m": 1.0, "angle_rad": 10.0, "background_t": 1.0}
 """Standard deviations of the weak prior the search adds to every scenario's information."""
 UNIT = {"position": 1e-3, "angle": 1.0, "background": 1e-3}
 """The search works in mm, rad and mT (the information matrices stay well scaled)."""
