@@ -12,6 +12,7 @@ from designkit import default_design
 from designkit.cli import main
 from designkit.design import load_design
 from designkit.design.files import design_from_dict
+from designkit.errors import BadInputError
 from designkit.sensing.crb import BoundSettings
 from designkit.sensing.maps import Layout, layout_bounds
 from designkit.sensing.region import RegionSettings, one_magnet
@@ -91,3 +92,22 @@ def test_the_default_count_is_the_designs():
     req = request_of(p.parse_args(["plan"]), default_design())
     assert req.count == 18 and req.magnets == 1
     assert req.region.heights_m == (0.02, 0.08)
+
+
+def test_the_report_section_reads_a_planned_table_and_refuses_a_bad_one(planned, tmp_path):
+    from designkit.sensing.layout_report import layout_report, planned_layout
+    design = default_design()
+    lay = planned_layout(design, planned / "sensors.toml")
+    plan = json.loads((planned / "plan.json").read_text())
+    np.testing.assert_allclose(lay.positions_m, plan["layouts"]["planned"]["positions_m"])
+    entry = layout_report(design, tmp_path / "b.png", "quick", lay,
+                          BoundSettings(cores="none"))
+    assert list(entry["summaries"]["two magnets"]) == ["design", "planned (sensors.toml)"]
+    assert (tmp_path / "b.png").stat().st_size > 10000
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[sensors]\nlayout = \"free\"\npositions_m = [[0, 0]]\n")
+    with pytest.raises(BadInputError, match="sensors.positions_m"):
+        planned_layout(design, bad)
+    bad.write_text("[coil]\nturns = 3\n")
+    with pytest.raises(BadInputError, match=r"--sensors.*\[sensors\] table"):
+        planned_layout(design, bad)

@@ -77,10 +77,10 @@ def bound_figure(blocks, design, path, *, title: str = "") -> Path:
                 ax.add_patch(plt.Circle((cx * 1e3, cy * 1e3), rad * 1e3, fill=False,
                                         color="0.6", lw=0.8))
             _sensors(ax, lay, boards)
-            kind = "pair centre" if scen.n_magnets == 2 else "magnet"
-            ax.set_title(f"{lay.name}, {len(lay.positions_m)} sensors\n{kind} at "
-                         f"z = {heights[c] * 1e3:g} mm: worst {v.max() * 1e3:.2g}, median "
-                         f"{np.median(v) * 1e3:.2g} mm", fontsize=8.5)
+            kind = "two magnets" if scen.n_magnets == 2 else "one magnet"
+            ax.set_title(f"{lay.name} ({len(lay.positions_m)} sensors), {kind}, z = "
+                         f"{heights[c] * 1e3:g} mm\nworst {v.max() * 1e3:.3g}, median "
+                         f"{np.median(v) * 1e3:.3g} mm", fontsize=8.5)
             ax.set_aspect("equal")
             ax.set_xlabel("x (mm)", fontsize=8)
             ax.set_ylabel("y (mm)", fontsize=8)
@@ -88,8 +88,11 @@ def bound_figure(blocks, design, path, *, title: str = "") -> Path:
     bar = fig.colorbar(image, ax=axes, shrink=0.8)
     bar.set_label("position Cramer-Rao bound, rms (mm)")
     bar.ax.axhline(ACCURACY_TARGET_M * 1e3, color="w", lw=1.5)
-    fig.suptitle(title or "Cramer-Rao bound of the magnet position (sensors: filled upper "
-                 "board, hollow lower board)", fontsize=10)
+    bar.ax.text(1.05, ACCURACY_TARGET_M * 1e3, f" {ACCURACY_TARGET_M * 1e3:g} mm",
+                transform=bar.ax.get_yaxis_transform(), va="center", fontsize=7)
+    fig.suptitle(title or "Cramer-Rao bound of the magnet position (two magnets: at the pair's "
+                 "centre, the worst pair there; sensors: upper board filled, lower hollow)",
+                 fontsize=10)
     path = Path(path)
     fig.savefig(path, dpi=110)
     plt.close(fig)

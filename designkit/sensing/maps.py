@@ -109,6 +109,13 @@ def summary_text(summaries: dict[str, dict]) -> str:
             r = summaries[n]["rows"][k]
             cells.append(f"{r['worst_rms_m'] * 1e3:6.2f} /{r['median_rms_m'] * 1e3:6.2f} "
                          f"{r['worst_mae_m'] * 1e3:6.2f} {r['within_target']:4.0%} "
-                         f"{math.degrees(r['worst_orientation_rad']):5.1f}".rjust(30))
+                         f"{direction_text(r['worst_orientation_rad']):>5}".rjust(30))
         lines.append("  ".join(cells))
     return "\n".join(lines)
+
+
+def direction_text(angle_rad: float) -> str:
+    """A direction bound in degrees; beyond 90 degrees the linear bound means nothing but
+    'unknown', shown as '>90'."""
+    deg = math.degrees(angle_rad)
+    return ">90" if deg > 90 else f"{deg:.1f}"
