@@ -108,7 +108,10 @@ def plan_design(design, request: PlanRequest, bar=None) -> PlanOutcome:
     pos, frames = design.sensor_poses()
     every = np.r_[sites.positions_m, pos]
     kind = "two magnets" if magnets == 2 else "one magnet"
+    _say(bar, f"the field of {len(scenarios[kind].positions_m)} magnet poses at "
+              f"{len(every)} sites")
     response = scenario_response(design, every, scenarios[kind], request.bound, array)
+    _say(bar, f"search over {len(scenarios[kind].index)} scenarios")
     n = len(sites.positions_m)
     search_sites = Response(response.field_t[:n], response.jacobian[:n], response.tangents)
     settings = request.search or PlanSettings(count=request.count)
@@ -143,3 +146,9 @@ def scenario_sets(design, region: RegionSettings, magnets: int) -> dict:
     pairs = magnet_pairs(ws, region, [mags[0].direction, second.direction])
     return {"one magnet": one_magnet_of(pairs), "two magnets": pairs}
 
+
+
+def _say(bar, text: str) -> None:
+    """The phase on the progress bar, when there is one."""
+    if bar is not None:
+        bar.set_postfix_str(text)

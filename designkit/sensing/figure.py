@@ -21,10 +21,18 @@ MARKERS = {"upper": ("^", "k"), "lower": ("v", "none"), "plane": ("D", "k")}
 
 def panel_values(bound, scenarios, height_m: float):
     """(x (n,), y (n,), value (n,)) m, m, m: the worst position rms over the magnets of the
-    scenarios at ``height_m`` (both magnets there), by the scenario's x-y centre."""
+    scenarios at ``height_m`` (both magnets there), by the lattice point nearest the
+    scenario's x-y centre."""
     h = scenarios.heights_m()
     at = np.all(np.abs(h - height_m) < 1e-9, axis=1)
-    centre = np.round(scenarios.centres_m()[at, :2], 9)
+    centre = scenarios.centres_m()[at, :2]
+    # a pair's centre falls between lattice points: each goes to the nearest one
+    lattice = scenarios.positions_m[:, :2]
+    step = np.diff(np.unique(np.round(lattice[:, 0], 9)))
+    if len(step):
+        origin = lattice.min(axis=0)
+        centre = origin + np.round((centre - origin) / step.min()) * step.min()
+    centre = np.round(centre, 9)
     val = bound.position_rms_m[at].max(axis=1)
     keys, inv = np.unique(centre, axis=0, return_inverse=True)
     worst = np.full(len(keys), -np.inf)
