@@ -28,6 +28,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
 
 from designkit import default_design
 from designkit.constants import MU0
@@ -38,6 +40,7 @@ from designkit.sensing.maps import ACCURACY_TARGET_M, Layout, layout_bounds, sum
 from designkit.sensing.planner import PlanSettings
 from designkit.sensing.region import RegionSettings
 from designkit.sensing.response import MagnetShape, magnet_response, tangent_frame
+from firmware_io.localization.magnet import cylinder_field
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "sensor_plan"
 MAGNET_ONLY = BoundSettings(cores="none")
@@ -48,10 +51,6 @@ def fit_check(trials: int, seed: int = 0) -> list[dict]:
     """rms position and direction errors of least-squares fits (5 unknowns + background) to
     magpylib readings (0.1 mT noise, rounded to counts) against the bound, at three poses."""
     import magpylib as magpy
-    from scipy.optimize import least_squares
-    from scipy.spatial.transform import Rotation
-
-    from firmware_io.localization.magnet import cylinder_field
 
     d = default_design()
     shape = MagnetShape.of(d.magnet)
