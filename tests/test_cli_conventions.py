@@ -83,7 +83,7 @@ LENGTH_CASES = [
     (["map", "--spacing", "8"], "designkit.fieldmap.build", lambda a, k: k["spacing"], 0.008),
     (["optimize", "--vary-pitch", "--pitch-range", "40:6cm"],
      "designkit.commands.optimize.device_problem_for",
-     lambda a, k: k["pitch_range_m"], (0.04, 0.06)),
+     lambda a, k: k["vary"]["pitch_m"], (0.04, 0.06)),
     (["cad", "--min-wall", "0.8"], "cad.cli.from_design",
      lambda a, k: k["min_wall_mm"] * 1e-3, 0.8e-3),
     (["cad", "--min-wall", "1.2mm", "--build-volume", "20cm,19cm,0.2m"], "cad.cli.from_design",
