@@ -55,7 +55,7 @@ def test_the_plan_is_a_sensors_table_a_design_file_takes(planned):
 @pytest.mark.parametrize("args,words", [
     (["--count", "2"], ["--count", "at least 3 sensors", "8 unknowns", "2"]),
     (["--count", "4", "--magnets", "2"], ["--count", "at least 5 sensors", "13 unknowns"]),
-    (["--magnets", "3"], ["--magnets", "1 to 2", "3"]),
+    (["--magnets", "3"], ["--magnets", "1 or 2", "3"]),
     (["--plane", "-20"], ["--plane", "the coils and their cores span", "-20 mm"]),
     (["--plane", "50"], ["--plane", "the magnet moves there", "50 mm"]),
     (["--heights", "10:60"], ["--heights", "[20, 80] mm", "'10'"]),
@@ -63,6 +63,10 @@ def test_the_plan_is_a_sensors_table_a_design_file_takes(planned):
     (["--max-current", "-1"], ["--max-current", "> 0", "-1"]),
     (["--noise-mt", "0"], ["--noise-mt", "> 0"]),
     (["--count", "500", "--spacing", "50"], ["--count", "at most", "sites"]),
+    (["--separation", "1:2", "--magnets", "2"], ["--separation", "lattice step 30 mm", "1:2 mm"]),
+    (["--seed", "-1"], ["--seed", "[0, 2^63)", "-1"]),
+    (["--design", "no-such-design.toml"], ["design", "existing TOML file",
+                                           "no-such-design.toml"]),
 ])
 def test_bad_input_is_one_line_and_nothing_is_written(tmp_path, capsys, args, words):
     out = tmp_path / "sp"
@@ -80,7 +84,7 @@ def test_magnets_beyond_what_the_coils_serve_are_refused(tmp_path, capsys):
     assert main(["sensors", "plan", "--design", str(line), "--magnets", "2", *SMALL,
                  "--out", str(tmp_path / "sp")]) == 1
     err = capsys.readouterr().err.strip()
-    assert "--magnets" in err and "1 to 1" in err and "3 coils" in err
+    assert "--magnets" in err and "must be 1 (" in err and "3 coils" in err
     assert not (tmp_path / "sp").exists()
 
 
@@ -111,3 +115,15 @@ def test_the_report_section_reads_a_planned_table_and_refuses_a_bad_one(planned,
     bad.write_text("[coil]\nturns = 3\n")
     with pytest.raises(BadInputError, match=r"--sensors.*\[sensors\] table"):
         planned_layout(design, bad)
+
+
+@pytest.mark.parametrize("args", [["--plane", "0"], ["--count", "500", "--spacing", "50"],
+                                  ["--separation", "1:2", "--magnets", "2"]])
+def test_refusals_found_with_the_sites_come_before_the_progress_bar(tmp_path, capsys, args):
+    # refusals that need the array, the sites or the scenarios are raised before the bar starts
+    base = [a for a in SMALL if a != "--no-progress"]
+    assert main(["sensors", "plan", *base, *args, "--out", str(tmp_path / "sp")]) == 1
+    cap = capsys.readouterr()
+    err = [ln for ln in (cap.out + cap.err).splitlines() if ln.strip()]
+    assert len(err) == 1 and args[0] in err[0], err
+    assert list(tmp_path.iterdir()) == []

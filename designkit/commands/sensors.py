@@ -28,7 +28,8 @@ from ..design import design_to_toml, load_design
 from ..design.tables import SensorSpec
 from ..errors import BadInputError
 from ..sensing.crb import BoundSettings
-from ..sensing.design_plan import PlanRequest, check_count, check_magnets, plan_design
+from ..sensing.design_plan import (PlanRequest, check_count, check_magnets, plan_design,
+                                   prepare)
 from ..sensing.figure import bound_figure
 from ..sensing.maps import summary_text
 from ..sensing.planner import PlanSettings
@@ -64,11 +65,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-current", type=float, default=None, metavar="A",
                         help="per-coil current every sensor must stay linear at (default: the "
                              "design's drive.max_current_a)")
-    parser.add_argument("--noise-mt", type=float, default=0.1,
+    parser.add_argument("--noise-mt", type=float, default=0.1, metavar="MT",
                         help="sensor noise per axis, mT rms (default 0.1, the TLV493D's)")
     parser.add_argument("--no-cores", action="store_true",
                         help="leave out the field of the cores the magnets magnetize")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the search (default 0)")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="seed of the search, an integer >= 0 (default 0)")
     add_progress_argument(parser)
 
 
@@ -92,6 +94,8 @@ def request_of(args: argparse.Namespace, design) -> PlanRequest:
     plane = None if args.plane is None else parse_length(args.plane, "--plane", valid_m=None)
     current = None if args.max_current is None else _positive("--max-current",
                                                               args.max_current)
+    if isinstance(args.seed, bool) or not 0 <= args.seed < 2 ** 63:
+        raise BadInputError("--seed", "an integer in [0, 2^63)", args.seed)
     return PlanRequest(count, magnets, RegionSettings(tuple(heights), lattice, lattice,
                                                       tuple(sep)),
                        spacing, plane, current, bound, PlanSettings(count=count, seed=args.seed))
@@ -108,10 +112,11 @@ def run(args: argparse.Namespace) -> int:
     design = load_design(args.design)
     request = request_of(args, design)
     start = time.perf_counter()
+    prepared = prepare(design, request)          # every refusal before the bar starts
     total = request.count * (1 + 4 * (request.search.exchange_passes + 1))
     with tqdm(total=total, desc="designkit sensors plan", unit="step",
               disable=not show_progress(args)) as bar:
-        outcome = plan_design(design, request, bar)
+        outcome = plan_design(design, request, bar, prepared)
         bar.update(bar.total - bar.n)
     seconds = time.perf_counter() - start
     with staged_folder(out) as stage:

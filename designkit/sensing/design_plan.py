@@ -60,7 +60,7 @@ def check_magnets(design, magnets: int, param: str = "--magnets") -> int:
     """1 or 2, and no more than the coils can serve (3 force rows a magnet)."""
     most = min(2, max(design.n_coils // 3, 1))
     if isinstance(magnets, bool) or magnets not in range(1, most + 1):
-        raise BadInputError(param, f"1 to {most} (a design of {design.n_coils} coils serves "
+        raise BadInputError(param, f"{' or '.join(map(str, range(1, most + 1)))} (a design of {design.n_coils} coils serves "
                             f"{max(design.n_coils // 3, 1)} magnet(s): 3 force rows each; the "
                             "planner does 1 or 2)", magnets)
     return int(magnets)
@@ -88,8 +88,23 @@ def board_names(positions_m: np.ndarray, boards) -> list[str]:
     return out
 
 
-def plan_design(design, request: PlanRequest, bar=None) -> PlanOutcome:
-    """Plan ``request.count`` sensors for ``design`` and judge them against its own layout."""
+@dataclass(frozen=True)
+class Prepared:
+    """A checked request's coupled ``array``, ``boards``, the current every sensor must stay
+    linear at (A), the candidate ``sites`` (:class:`.sites.Sites`) and the ``scenarios``
+    (:func:`scenario_sets`)."""
+
+    array: object
+    boards: tuple
+    max_current_a: float
+    sites: object
+    scenarios: dict
+
+
+def prepare(design, request: PlanRequest) -> Prepared:
+    """The boards and their sites for ``request``, every refusal of it raised here (before any
+    long work starts): the magnets, the count, the plane, a count above the sites left, a
+    lattice or separation that leaves no scenario."""
     magnets = check_magnets(design, request.magnets)
     check_count(request.count, magnets, request.bound)
     array = array_for_design(design)
@@ -102,9 +117,22 @@ def plan_design(design, request: PlanRequest, bar=None) -> PlanOutcome:
     if len(sites.positions_m) < request.count:
         raise BadInputError("--count", f"at most {len(sites.positions_m)} sensors (the sites "
                             f"left on the boards at a {request.spacing_m * 1e3:g} mm spacing "
-                            f"within the headroom at {current:g} A: {sites.excluded}; a finer "
+                            f"within the headroom at {current:g} A; "
+                            + ", ".join(f"{v} {k}" for k, v in sites.excluded.items())
+                            + "; a finer "
                             "--spacing or a lower --max-current gives more)", request.count)
-    scenarios = scenario_sets(design, request.region, magnets)
+    return Prepared(array, tuple(boards), float(current), sites,
+                    scenario_sets(design, request.region, magnets))
+
+
+def plan_design(design, request: PlanRequest, bar=None,
+                prepared: Prepared | None = None) -> PlanOutcome:
+    """Plan ``request.count`` sensors for ``design`` and judge them against its own layout
+    (``prepared``: :func:`prepare`'s result for this request, when the caller has it)."""
+    ready = prepare(design, request) if prepared is None else prepared
+    magnets, array, boards = request.magnets, ready.array, ready.boards
+    current, level = ready.max_current_a, request.bound.usable_fraction * request.bound.range_t
+    sites, scenarios = ready.sites, ready.scenarios
     pos, frames = design.sensor_poses()
     every = np.r_[sites.positions_m, pos]
     kind = "two magnets" if magnets == 2 else "one magnet"

@@ -71,8 +71,8 @@ def lattice(workspace, settings: RegionSettings) -> np.ndarray:
     xy = workspace.grid_xy(settings.spacing_m)
     z = height_levels(settings.heights_m, settings.height_step_m)
     if len(xy) == 0:
-        raise BadInputError("spacing_m", "a lattice step that leaves points in the workspace",
-                            settings.spacing_m)
+        raise BadInputError("--lattice", "a lattice step that leaves points in the workspace",
+                            f"{settings.spacing_m * 1e3:g} mm")
     return np.concatenate([np.c_[xy, np.full(len(xy), h)] for h in z])
 
 
@@ -99,8 +99,9 @@ def magnet_pairs(workspace, settings: RegionSettings, directions) -> Scenarios:
             if lo - 1e-9 <= n * unit <= hi + 1e-9:
                 offsets.append(n * step * h)
     if not offsets:
-        raise BadInputError("separation_m", f"a range holding a multiple of the lattice step "
-                            f"{h * 1e3:g} mm (or its diagonal)", settings.separation_m)
+        raise BadInputError("--separation", "a range holding a multiple of the lattice step "
+                            f"{h * 1e3:g} mm (--lattice) or of its diagonal",
+                            f"{lo * 1e3:g}:{hi * 1e3:g} mm")
     key = {tuple(np.round(p * 1e9).astype(np.int64)): i for i, p in enumerate(pts)}
     z = np.unique(pts[:, 2])
     pairs, seps = [], []
@@ -122,6 +123,9 @@ def magnet_pairs(workspace, settings: RegionSettings, directions) -> Scenarios:
                     if jp is not None and iq is not None:
                         pairs.append((jp, iq))
                         seps.append(float(np.hypot(*off)))
+    if not pairs:
+        raise BadInputError("--separation", "a range that fits two magnets in the workspace "
+                            f"(lattice step {h * 1e3:g} mm)", f"{lo * 1e3:g}:{hi * 1e3:g} mm")
     d = np.asarray(directions, dtype=float).reshape(2, 3)
     index = np.array(pairs, dtype=int).reshape(-1, 2)
     if np.allclose(d[0], d[1]):
