@@ -7,6 +7,7 @@ off-screen (Agg), imported on first use.
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -94,13 +95,15 @@ def bound_figure(blocks, design, path, *, title: str = "") -> Path:
             ax.set_ylabel("y (mm)", fontsize=8)
             ax.tick_params(labelsize=7)
     bar = fig.colorbar(image, ax=axes, shrink=0.8)
-    bar.set_label("position Cramer-Rao bound, rms (mm)")
+    bar.set_label("position Cramer-Rao bound, rms (mm)", labelpad=22)  # clear of the mark
     bar.ax.axhline(ACCURACY_TARGET_M * 1e3, color="w", lw=1.5)
     bar.ax.text(1.05, ACCURACY_TARGET_M * 1e3, f" {ACCURACY_TARGET_M * 1e3:g} mm",
                 transform=bar.ax.get_yaxis_transform(), va="center", fontsize=7)
-    fig.suptitle(title or "Cramer-Rao bound of the magnet position (two magnets: at the pair's "
-                 "centre, the worst pair there; sensors: upper board filled, lower hollow)",
-                 fontsize=10)
+    text = title or ("Cramer-Rao bound of the magnet position (two magnets: at the pair's "
+                     "centre, the worst pair there; sensors: upper board filled, lower hollow)")
+    # wrapped to the figure's width: a 10 pt character is about 0.6 x 10 pt wide
+    chars = max(40, int(fig.get_size_inches()[0] * 72 / (0.6 * 10)))
+    fig.suptitle("\n".join(textwrap.wrap(text, chars)), fontsize=10)
     path = Path(path)
     fig.savefig(path, dpi=110)
     plt.close(fig)
