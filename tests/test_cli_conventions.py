@@ -35,6 +35,7 @@ OUT_CASES = {
     "cad": (["cad"], "cad.export.export_all", "cad"),
     "fem": (["fem"], "designkit.commands.fem.solve", "fem"),
     "calibrate": (["calibrate", "--plan"], "designkit.commands.calibrate.make_plan", "p.csv"),
+    "sensors": (["sensors", "plan"], "designkit.commands.sensors.plan_design", "sp"),
 }
 
 
