@@ -416,8 +416,21 @@ def _print(res):
     print("\nconvergence:", res["convergence"])
 
 
+def main(argv=None) -> int:
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("out", nargs="?", default=str(DEFAULT_OUT),
+                    help="output folder (default out/array_coupling)")
+    ap.add_argument("--quick", action="store_true", help="coarse grids (the smoke test's run)")
+    ap.add_argument("--fem", action="store_true", help="the 3-D GetDP reference too")
+    ap.add_argument("--saturation-fem", action="store_true",
+                    help="the nonlinear GetDP reference of the saturation factor too")
+    a = ap.parse_args(argv)
+    _print(run(a.out, quick=a.quick, fem=a.fem, saturation_fem=a.saturation_fem))
+    return 0
+
+
 if __name__ == "__main__":
-    args = [a for a in sys.argv[1:] if not a.startswith("--")]
-    r = run(args[0] if args else DEFAULT_OUT, quick="--quick" in sys.argv,
-            fem="--fem" in sys.argv, saturation_fem="--saturation-fem" in sys.argv)
-    _print(r)
+    sys.exit(main())

@@ -354,12 +354,31 @@ def report(res: dict) -> None:
               f"({r['n_sensor_points']} positions)")
 
 
-if __name__ == "__main__":
-    args = [a for a in sys.argv[1:] if a not in ("--scene", "--layouts")]
-    folder = Path(args[0]) if args else DEFAULT_OUT
-    if "--scene" in sys.argv[1:]:
-        report_scene(scene_vs_full(folder, int(args[1]) if len(args) > 1 else 2000))
+def main(argv=None) -> int:
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("out", nargs="?", default=str(DEFAULT_OUT),
+                    help="output folder (default out/bench_map)")
+    ap.add_argument("n_points", nargs="?", type=int, default=None,
+                    help="random check points (default 10000; 2000 with --scene)")
+    which = ap.add_mutually_exclusive_group()
+    which.add_argument("--scene", action="store_true",
+                       help="the full map against the thesis hemisphere's scene map")
+    which.add_argument("--layouts", action="store_true",
+                       help="also the maps of a hex-19 and a tilted ring of 6")
+    a = ap.parse_args(argv)
+    if a.n_points is not None and a.n_points < 10:
+        ap.error(f"n_points must be >= 10; got {a.n_points}")
+    folder = Path(a.out)
+    if a.scene:
+        report_scene(scene_vs_full(folder, a.n_points or 2000))
     else:
-        report(run(folder, n_points=int(args[1]) if len(args) > 1 else 10000,
-                   layouts="--layouts" in sys.argv[1:]))
+        report(run(folder, n_points=a.n_points or 10000, layouts=a.layouts))
     print(f"written to {folder}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -258,5 +258,16 @@ def run(out_dir=DEFAULT_OUT, quick: bool = False) -> dict:
     return res
 
 
+def main(argv=None) -> int:
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("out", nargs="?", default=str(DEFAULT_OUT),
+                    help="output folder (default out/map_cells)")
+    run(ap.parse_args(argv).out)
+    return 0
+
+
 if __name__ == "__main__":
-    run(sys.argv[1] if len(sys.argv) > 1 else DEFAULT_OUT)
+    sys.exit(main())

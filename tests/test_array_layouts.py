@@ -194,9 +194,10 @@ def test_saturation_correction_of_a_tilted_ring_and_of_groups():
     # symmetry (a core's axis taken as +z instead of its own tilted axis breaks it: the flux
     # along z of a tilted core is cos 30 of its own); an air coil of a group has factor 1 and
     # no flux row
-    ring = CoilArray.from_design(_design(RING))
+    steel = '[core]\nbh = "steel1010"\n'   # a linear core's model does not saturate
+    ring = CoilArray.from_design(_design(RING + steel))
     upright = CoilArray.from_design(_design('[array]\nlayout = "ring"\ncount = 6\n'
-                                            'radius_m = 0.075\n'))
+                                            'radius_m = 0.075\n' + steel))
     cur = np.array([0.0, 3.0, 6.0])
     s, u = ring.saturation_correction(currents_a=cur), upright.saturation_correction(
         currents_a=cur)
@@ -207,8 +208,10 @@ def test_saturation_correction_of_a_tilted_ring_and_of_groups():
         np.testing.assert_allclose(c[np.ix_(el.perm, el.perm)], c, rtol=1e-9, atol=1e-12)
     # each core's own flux: its winding's own, to within the neighbours' coupling (a few %)
     assert np.allclose(np.diag(c), c[0, 0]) and 0.9 < c[0, 0] / u["core_flux_t_per_a"][0, 0] < 1.1
-    mixed = CoilArray.from_design(_design(HEX + '[[groups]]\ncoils = [0]\n[groups.core]\n'
-                                                'enabled = false\n'))
+    mixed = CoilArray.from_design(_design(HEX + steel + '[[groups]]\ncoils = [0]\n'
+                                                '[groups.core]\nenabled = false\n'))
+    assert np.all(CoilArray.from_design(_design(HEX)).saturation_correction(
+        currents_a=cur)["saturation_factor"] == 1.0)   # linear cores: factor 1
     m = mixed.saturation_correction(currents_a=cur)
     np.testing.assert_allclose(m["saturation_factor"][:, 0], 1.0)
     np.testing.assert_array_equal(m["core_flux_t_per_a"][0], 0.0)

@@ -79,6 +79,7 @@ OUT_FOLDER_COMMANDS = {
     "cad": ["cad"],
     "fem": ["fem"],
     "run": ["run", "--simulate"],
+    "sensors": ["sensors", "plan"],
 }
 OUT_FILE_COMMANDS = {
     "map": ["map"],

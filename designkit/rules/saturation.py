@@ -3,12 +3,9 @@
 
 from __future__ import annotations
 
-import math
-
-import numpy as np
-
 from ..design import Design
 from ..model.array import CoilArray
+from ..sensing.sites import headroom
 
 
 def sensor_saturation(design: Design, array=None) -> list[dict]:
@@ -29,14 +26,7 @@ def sensor_saturation(design: Design, array=None) -> list[dict]:
     if array is None:
         array = CoilArray.from_design(design)
     pts, frames = array.sensor_poses()
-    b = array.actuation_matrix(pts)[:, :3, :]                   # (n_sensors, 3, n_coils) T/A
-    c = np.abs(np.einsum("sji,sjk->sik", frames, b))            # on each chip's x, y, z axes
-    rng = design.sensors.range_t
-    out = []
-    for s, (pos, cs) in enumerate(zip(pts, c)):
-        axis, coil = np.unravel_index(int(np.argmax(cs)), cs.shape)
-        out.append({"sensor": s, "position_m": pos.tolist(),
-                    "one_coil_a": float(rng / cs[axis, coil]) if cs[axis, coil] > 0 else math.inf,
-                    "coil": int(coil),
-                    "all_coils_a": float(rng / cs.sum(axis=1).max()) if cs.any() else math.inf})
-    return out
+    room = headroom(array, pts, frames, design.sensors.range_t)
+    return [{"sensor": s, "position_m": pos.tolist(), "one_coil_a": float(room.one_coil_a[s]),
+             "coil": int(max(room.coil[s], 0)), "all_coils_a": float(room.worst_signs_a[s])}
+            for s, pos in enumerate(pts)]
