@@ -20,6 +20,7 @@ Usage: ``PYTHONPATH=$PWD python studies/array_coupling.py [out_dir] [--quick] [-
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import sys
 import time
@@ -417,7 +418,6 @@ def _print(res):
 
 
 def main(argv=None) -> int:
-    import argparse
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)

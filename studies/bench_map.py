@@ -21,6 +21,7 @@ ratio is the time ratio's floor), fit nodes.
 
 from __future__ import annotations
 
+import argparse
 import functools
 import importlib
 import os
@@ -355,7 +356,6 @@ def report(res: dict) -> None:
 
 
 def main(argv=None) -> int:
-    import argparse
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)

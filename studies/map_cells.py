@@ -27,6 +27,7 @@ loop of a batch lookup (50 .. 1400 cells), one 8 x n_coils matvec against a harm
 
 from __future__ import annotations
 
+import argparse
 import itertools
 import math
 import sys
@@ -259,7 +260,6 @@ def run(out_dir=DEFAULT_OUT, quick: bool = False) -> dict:
 
 
 def main(argv=None) -> int:
-    import argparse
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
