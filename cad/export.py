@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import re
 import time
 import zipfile
 from dataclasses import asdict
@@ -29,7 +30,7 @@ from designkit.support.progress import tqdm
 from designkit.errors import BadInputError, DesignRuleError
 
 from . import meshcheck
-from .assembly import (PART_INFO, assembly, build_parts, interferences, part_names, placements,
+from .assembly import (assembly, build_parts, interferences, part_info, part_names, placements,
                        quantities)
 from .params import CadParams
 from .rules import check_rules, fit_in_build_volume
@@ -91,7 +92,7 @@ def _triangulation(shape) -> tuple[np.ndarray, np.ndarray]:
         if face.wrapped.Orientation() == TopAbs_REVERSED:
             idx = idx[:, ::-1]
         corners.append(nodes[idx].reshape(-1, 3))
-    return meshcheck._merge(np.concatenate(corners))
+    return meshcheck.merge_corners(np.concatenate(corners))
 
 
 _3MF_TYPES = ('<?xml version="1.0" encoding="UTF-8"?>\n<Types xmlns="http://schemas.openxmlformats.org/'
@@ -165,13 +166,33 @@ def _check_file(name: str, shape, path: Path, fmt: Format, p: CadParams) -> dict
             "_mesh": (verts, tris)}
 
 
+def _coils_of(name: str, p: CadParams) -> str:
+    """' (coils 0, 4)' for a part of one coil type when the design has several, else ''."""
+    for t in p.types:
+        if t.suffix and name.endswith(t.suffix):
+            return f" (coils {', '.join(map(str, t.coils))})"
+    return ""
+
+
+def _segment_of(name: str, p: CadParams) -> str:
+    """', segment k of n' / ', one of n identical segments' for a plate printed in pieces."""
+    m = re.search(r"(frame|sensor_mount)_(upper|lower)_(s(\d+)|segment)$", name)
+    if m is None:
+        return ""
+    n = len((p.sensor_mount if m.group(1) == "sensor_mount" else
+             p.upper if m.group(2) == "upper" else p.lower).segments)
+    return (f", one of {n} identical segments (the rods clamp the seams)" if m.group(4) is None
+            else f", segment {m.group(4)} of {n} (the rods clamp the seams)")
+
+
 def _part_row(name: str, shape, qty: int, p: CadParams) -> dict:
-    info = PART_INFO[name]
+    info = part_info(name)
     v = float(shape.volume)
     bb = shape.bounding_box()
     size = tuple(round(float(s), 4) for s in bb.size)
     row = {
-        "part": name, "description": info.description, "quantity": qty,
+        "part": name, "description": info.description + _coils_of(name, p) + _segment_of(name, p),
+        "quantity": qty,
         "material": info.material, "kind": info.kind,
         "volume_mm3": v, "area_mm2": float(shape.area), "size_mm": size,
         "mass_g": v * dict(p.printer.density_g_cm3)[info.material] * 1e-3,
@@ -381,25 +402,40 @@ def _tessellate(shape, p: CadParams) -> tuple[np.ndarray, np.ndarray]:
     verts, tris = shape.tessellate(p.printer.tolerance_mm * 5, p.printer.angular_tolerance_rad)
     xyz = np.array([tuple(v) for v in verts], dtype=float)
     # build123d repeats edge vertices per face; merge them so the mesh is closed for capping
-    return meshcheck._merge(xyz[np.asarray(tris, dtype=np.int64).reshape(-1)])
+    return meshcheck.merge_corners(xyz[np.asarray(tris, dtype=np.int64).reshape(-1)])
 
 
-def _capped_half(mesh, cut_y: float):
-    """The part of a closed mesh with y >= cut_y, closed by a cap on the cut plane."""
-    lo, hi = mesh.bounds[2], mesh.bounds[3]
-    if lo >= cut_y:
+def _capped_half(mesh, origin, normal):
+    """The part of a closed mesh on the ``normal`` side of the plane through ``origin``,
+    closed by a cap on the cut plane."""
+    d = (np.asarray(mesh.points) - origin) @ normal
+    if d.size and d.min() >= 0:
         return mesh
-    if hi <= cut_y:
+    if not d.size or d.max() <= 0:
         return mesh.extract_points([], adjacent_cells=False)  # empty
     try:
-        return mesh.clip_closed_surface(normal=(0, 1, 0), origin=(0, cut_y, 0))
+        return mesh.clip_closed_surface(normal=tuple(normal), origin=tuple(origin))
     except Exception:  # pragma: no cover - VTK refuses non-manifold input; show it open
-        return mesh.clip(normal=(0, 1, 0), origin=(0, cut_y, 0), invert=False)
+        return mesh.clip(normal=tuple(normal), origin=tuple(origin), invert=False)
+
+
+def section_plane(p: CadParams) -> tuple[np.ndarray, np.ndarray, int]:
+    """The vertical plane of the assembly picture's section: through the magnet's design point
+    and the top of the coil nearest it (the plane y = const when that coil is under it).
+    Returns (origin (3,) mm, unit normal (3,), the coil's index)."""
+    m = np.asarray(p.magnet_centre_mm, dtype=float)
+    tops = np.array([top for top, _ in p.coil_frames])
+    d = tops[:, :2] - m[:2]
+    dist = np.hypot(d[:, 0], d[:, 1])
+    k = int(np.flatnonzero(dist <= dist.min() + 1e-6)[0])  # ties: the first coil
+    along = d[k] / np.linalg.norm(d[k]) if np.linalg.norm(d[k]) > 1e-6 else np.array([1.0, 0.0])
+    return m, np.array([-along[1], along[0], 0.0]) + 0.0, k
 
 
 def render_assembly_png(p: CadParams, meshes: dict[str, tuple[np.ndarray, np.ndarray]],
                         path: str | Path, window_size: tuple[int, int] = (1600, 800)) -> Path:
-    """Off-screen picture of the assembly: isometric view and a section through a coil row.
+    """Off-screen picture of the assembly: isometric view and a vertical section through the
+    magnet's design point and the coil nearest it (:func:`section_plane`).
 
     Parameters
     ----------
@@ -411,33 +447,38 @@ def render_assembly_png(p: CadParams, meshes: dict[str, tuple[np.ndarray, np.nda
     """
     import pyvista as pv
 
-    placed: dict[str, list] = {}
+    placed: dict[str, list] = {}  # by kind: a plate's segments are one entry of the legend
     for pl in placements(p):
         if pl.part not in meshes:
             continue
         v, t = meshes[pl.part]
         faces = np.hstack([np.full((len(t), 1), 3), t]).ravel()
         mesh = pv.PolyData(v.copy(), faces).transform(pl.matrix(), inplace=False)
-        placed.setdefault(pl.part, []).append(mesh)
+        placed.setdefault(re.sub(r"_(s\d+|segment)$", "", pl.part), []).append(mesh)
 
-    cut_y = p.magnet_centre_mm[1]
+    origin, normal, nearest = section_plane(p)
+    if abs(normal[0]) < 1e-12:
+        where = f"y = {origin[1]:g} mm"
+    else:
+        angle = np.degrees(np.arctan2(-normal[0], normal[1])) % 180.0
+        where = f"along {angle:.0f} deg from x"
     with pv.vtk_verbosity("off"):  # no display here: silence VTK's X-server warning
         plotter = pv.Plotter(off_screen=True, window_size=list(window_size), shape=(1, 2),
                              border=False)
     plotter.set_background("white")
     for col, title in [(0, "assembly"),
-                       (1, f"section y = {cut_y:g} mm (through the magnet and the centre coils)")]:
+                       (1, f"section {where} through the magnet and coil {nearest}")]:
         plotter.subplot(0, col)
         for name, group in placed.items():
             shown = group
             if col == 1:
                 # keep the half behind the cut, capped, so cores and pockets read as solids
-                shown = [_capped_half(m, cut_y) for m in group]
+                shown = [_capped_half(m, origin, normal) for m in group]
                 shown = [m for m in shown if m.n_points]
                 if not shown:
                     continue
             merged = pv.merge(shown) if len(shown) > 1 else shown[0]
-            plotter.add_mesh(merged, color=PART_INFO[name].color, smooth_shading=False,
+            plotter.add_mesh(merged, color=part_info(name).color, smooth_shading=False,
                              label=None if col else f"{name} x{len(group)}")
         plotter.add_text(title, font_size=10, color="black", position="upper_edge")
         if col == 0:
@@ -446,8 +487,11 @@ def render_assembly_png(p: CadParams, meshes: dict[str, tuple[np.ndarray, np.nda
             plotter.reset_camera()
             plotter.camera.zoom(0.95)
         else:
+            # look at the cut face from the side the kept half is not on
             plotter.enable_parallel_projection()
-            plotter.view_xz()
+            plotter.camera.focal_point = tuple(origin)
+            plotter.camera.position = tuple(origin - 1000.0 * normal)
+            plotter.camera.up = (0.0, 0.0, 1.0)
             plotter.camera.elevation = 8
             plotter.reset_camera()
             plotter.camera.zoom(1.1)

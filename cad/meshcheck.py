@@ -75,7 +75,7 @@ def read_stl(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
             raise BadInputError("STL file", f"84 + 50 x {n} bytes", f"{len(data)} bytes")
         rec = np.dtype([("normal", "<f4", (3,)), ("v", "<f4", (3, 3)), ("attr", "<u2")])
         coords = np.frombuffer(data, dtype=rec, count=n, offset=84)["v"].reshape(-1, 3)
-    return _merge(coords.astype(np.float64))
+    return merge_corners(coords.astype(np.float64))
 
 
 def _ascii_stl_vertices(data: bytes) -> np.ndarray:
@@ -112,10 +112,10 @@ def read_3mf(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
         raise BadInputError("3MF file", "at least one <mesh>", str(path))
     xyz = np.concatenate(all_xyz)
     tri = np.concatenate(all_tri)
-    return _merge(xyz[tri.reshape(-1)])
+    return merge_corners(xyz[tri.reshape(-1)])
 
 
-def _merge(corner_xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def merge_corners(corner_xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Triangle corners (3m, 3) -> unique vertices and (m, 3) indices (exact-coordinate merge)."""
     vertices, inverse = np.unique(corner_xyz, axis=0, return_inverse=True)
     return vertices, inverse.reshape(-1, 3).astype(np.int64)

@@ -6,19 +6,24 @@ and nothing else. Values the thesis does not give (fits, wall thicknesses, board
 diameter) are printing choices, stated in the field docs and overridable through
 :func:`from_design`'s keyword arguments.
 
-Frame: the design's array frame in mm, coil top faces at z = 0, z up, coil (0, 0) at the
-array centre for an odd number of rows and columns.
+Frame: the design's array frame in mm (z up; the top faces of an upright array at z = 0).
+Parts that exist once per coil (bobbin, core, winding, caps) are parameters of its coil type
+(:class:`CoilTypeParts`) and are placed in each coil's frame.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 from typing import Literal
 
-from designkit.design import Design
+import numpy as np
+
+from designkit.design import Design, pose_on_axis
 from designkit.errors import BadInputError
-from designkit.rules import Layout, layout
+from designkit.rules import Assembly, CoilType, Plate, assembly, clip_polygon
+
 
 MM_PER_M = 1000.0
 """The one unit factor of cad/: millimetres per metre."""
@@ -42,6 +47,24 @@ class PrinterParams:
         ("PLA", 1.24), ("steel", 7.85), ("copper", 8.96), ("NdFeB", 7.5))
     """Density of each part material, g/cm^3 (copper: the winding as solid copper, an upper
     bound; NdFeB: sintered N52 datasheet value)."""
+
+
+def fit_in_build_volume(size_mm: tuple[float, float, float],
+                        build_mm: tuple[float, float, float]) -> tuple[int, int, int] | None:
+    """An axis order that fits the part's box in the build volume, or None.
+
+    Parts may be laid down in any of the 6 axis-aligned orientations; rotations about z
+    by other angles are not tried (conservative).
+
+    Returns
+    -------
+    tuple of int or None
+        ``order`` such that ``size_mm[order[k]] <= build_mm[k]`` for k = 0, 1, 2.
+    """
+    for order in itertools.permutations(range(3)):
+        if all(size_mm[order[k]] <= build_mm[k] for k in range(3)):
+            return order
+    return None
 
 
 @dataclass(frozen=True)
@@ -93,73 +116,84 @@ class CoreParams:
 
 
 @dataclass(frozen=True)
-class GridParams:
-    """Where the coils are: the design's rows x columns at its pitch, and the footprint."""
+class SeatParams:
+    """A coil end held by a frame plate: its face centre (mm) and its frame (columns: local
+    x, y, z in the array frame; local z = the outward axis), with the pocket and bore."""
 
-    rows: int
-    columns: int
-    pitch_mm: float
-    centres_xy_mm: tuple[tuple[float, float], ...]
-    """Coil axes, row-major as :meth:`Design.coil_centres_m`, mm."""
-    footprint_x_mm: float
-    footprint_y_mm: float
-    fixing_inset_mm: float
-    """Distance of the four corner fixing holes from the footprint edges, mm."""
-    fixing_hole_radius_mm: float
-    """M3 clearance hole, mm."""
-
-    @property
-    def fixing_xy_mm(self) -> tuple[tuple[float, float], ...]:
-        hx = self.footprint_x_mm / 2 - self.fixing_inset_mm
-        hy = self.footprint_y_mm / 2 - self.fixing_inset_mm
-        return ((-hx, -hy), (hx, -hy), (hx, hy), (-hx, hy))
+    coil: int
+    centre_mm: tuple[float, float, float]
+    rotation: tuple[tuple[float, float, float], ...]
+    pocket_radius_mm: float
+    """Flange seat: flange radius + fit clearance, mm."""
+    pocket_depth_mm: float
+    """= flange thickness, from the face outwards, mm."""
+    through_radius_mm: float
+    """Hole beyond the pocket through which the core passes (= bobbin bore), mm."""
 
 
 @dataclass(frozen=True)
-class FrameParams:
-    """Upper frame plate (the lower one is its mirror image about the array mid-plane)."""
+class PlateParams:
+    """A frame plate: a vertical prism over ``outline_mm`` (counter-clockwise) from ``z0_mm`` to
+    ``z1_mm``, a pocket and bore along each seat's axis, a vertical hole at each fixing. A
+    plate larger than the printer is printed in ``segments``: wedges about ``centre_xy_mm``
+    between consecutive fixings (the standoffs' rods clamp the seams)."""
 
-    grid: GridParams
-    thickness_mm: float
-    """Plate thickness; the plate's bottom face lies on the coil top plane z = 0, mm."""
-    pocket_radius_mm: float
-    """Flange seat from the underside: flange radius + fit clearance, mm."""
-    pocket_depth_mm: float
-    """= flange thickness, so the plate's underside rests on the winding's end plane, mm."""
-    through_radius_mm: float
-    """Hole above the pocket through which the core passes (= bobbin bore), mm."""
-    mirror_z_mm: float
-    """z of the array mid-plane about which the lower plate mirrors the upper one, mm."""
+    side: Literal["upper", "lower"]
+    outline_mm: tuple[tuple[float, float], ...]
+    z0_mm: float
+    z1_mm: float
+    seats: tuple[SeatParams, ...]
+    fixing_xy_mm: tuple[tuple[float, float], ...]
+    fixing_hole_radius_mm: float
+    segments: tuple[tuple[float, float], ...] = ()
+    """Angle ranges (rad) of the printed pieces about ``centre_xy_mm``; empty: one piece."""
+    centre_xy_mm: tuple[float, float] = (0.0, 0.0)
+    segments_identical: bool = False
+    """Every segment is the first one turned about ``centre_xy_mm`` (one part, printed n
+    times)."""
+
+    @property
+    def thickness_mm(self) -> float:
+        return self.z1_mm - self.z0_mm
 
 
 @dataclass(frozen=True)
 class StandoffParams:
-    """Spacer tube between the two frame plates, on an M3 rod at each corner."""
+    """Spacer tube between the two frame plates, on an M3 rod at each fixing."""
 
     outer_radius_mm: float
     hole_radius_mm: float
     length_mm: float
-    """= winding length: the plates rest on the winding end planes, mm."""
+    """From the lower plate's top face to the upper plate's bottom face, mm."""
 
 
 @dataclass(frozen=True)
 class SensorMountParams:
-    """Board mount of the upper Hall-sensor array (the lower one mirrors it)."""
+    """Board mount of the upper Hall-sensor array of level, upright boards (the lower one is
+    its mirror image about ``mirror_z_mm``)."""
 
-    grid: GridParams
+    outline_mm: tuple[tuple[float, float], ...]
+    board_xy_mm: tuple[tuple[float, float], ...]
+    """Board centres (the coil axes), mm."""
     sensor_z_mm: float
-    """Height of the sensing plane (board mid-plane) above the coil tops, mm."""
+    """Height of the sensing plane (board mid-plane), mm."""
     board_size_mm: tuple[float, float]
     """Sensor breakout board, x by y, mm (assumed 12 x 12: a TSOP-6 TLV493D on a small PCB)."""
     board_thickness_mm: float
     pocket_clearance_mm: float
     floor_thickness_mm: float
     channel_width_mm: float
-    """Cable channel per row, from the pockets to the +x edge, as deep as the pocket, mm."""
+    """Cable channel from each pocket to the +x edge, as deep as the pocket, mm."""
     leg_outer_radius_mm: float
     leg_bottom_z_mm: float
     """Top face of the upper frame plate, on which the mount's legs stand, mm."""
+    fixing_xy_mm: tuple[tuple[float, float], ...]
+    fixing_hole_radius_mm: float
     mirror_z_mm: float
+    segments: tuple[tuple[float, float], ...] = ()
+    """As :attr:`PlateParams.segments`: a mount larger than the printer is printed in wedges."""
+    centre_xy_mm: tuple[float, float] = (0.0, 0.0)
+    segments_identical: bool = False
 
     @property
     def top_z_mm(self) -> float:
@@ -168,6 +202,37 @@ class SensorMountParams:
     @property
     def bottom_z_mm(self) -> float:
         return self.top_z_mm - self.board_thickness_mm - self.floor_thickness_mm
+
+
+@dataclass(frozen=True)
+class SensorCapParams:
+    """A sensor board's cap on one coil end, in the end's frame: from z = 0 (resting on the core
+    end or the bobbin) to ``height_mm`` outwards along the axis, pressed into the frame plate's
+    bore; the board pocket at its outer face, a cable channel to its rim along local +x."""
+
+    radius_mm: float
+    """The bore's radius less the press-fit clearance, mm."""
+    height_mm: float
+    board_size_mm: tuple[float, float]
+    board_thickness_mm: float
+    pocket_clearance_mm: float
+    channel_width_mm: float
+
+
+@dataclass(frozen=True)
+class CoilTypeParts:
+    """The parts of one coil type (coils sharing a winding and core), mm."""
+
+    suffix: str
+    """Appended to its part names: '' for a single type, '_t1', '_t2', ... otherwise."""
+    coils: tuple[int, ...]
+    bobbin: BobbinParams
+    core: CoreParams | None
+    cap_upper: SensorCapParams | None
+    cap_lower: SensorCapParams | None
+    reach_upper_mm: float
+    """Where the upper cap rests: the core top or the top flange above the winding, mm."""
+    reach_lower_mm: float
 
 
 @dataclass(frozen=True)
@@ -214,18 +279,37 @@ class CadParams:
     """Everything cad/ builds, derived from one design (mm)."""
 
     design_name: str
-    bobbin: BobbinParams
-    core: CoreParams | None
-    grid: GridParams
-    frame: FrameParams
+    types: tuple[CoilTypeParts, ...]
+    coil_type: tuple[int, ...]
+    """Each coil's index into ``types``."""
+    coil_frames: tuple[tuple[tuple[float, float, float], tuple], ...]
+    """Each coil's top-face centre (mm) and frame (3 x 3, columns local x, y, z = axis)."""
+    upper: PlateParams
+    lower: PlateParams
     standoff: StandoffParams
-    sensor_mount: SensorMountParams
+    standoff_top_z_mm: float
+    """The upper plate's bottom face, where each standoff ends, mm."""
+    sensor_holder: Literal["mount", "caps", "none"]
+    sensor_mount: SensorMountParams | None
     magnet_holder: MagnetHolderParams
     printer: PrinterParams
     magnet_centre_mm: tuple[float, float, float]
-    """Where the assembly puts the magnet: the design point above the array centre, mm."""
+    """Where the assembly puts the magnet: the design point, mm."""
     design: Design
     """The design with every override applied: what the rule book checks."""
+
+    @property
+    def bobbin(self) -> BobbinParams:
+        """The first coil type's bobbin (the only one of a design without groups)."""
+        return self.types[0].bobbin
+
+    @property
+    def core(self) -> CoreParams | None:
+        return self.types[0].core
+
+    @property
+    def fixing_xy_mm(self) -> tuple[tuple[float, float], ...]:
+        return self.upper.fixing_xy_mm
 
 
 _OVERRIDES_MM = ("min_wall", "core_clearance", "air_core_tube_wall", "flange_thickness",
@@ -280,48 +364,171 @@ def from_design(design: Design, *, mandrel: Mandrel | None = None,
                             mandrel, "An air-core coil needs a printed tube to wind on.")
     design = with_overrides(design, mandrel, **overrides_mm)
     printer = printer or PrinterParams()
-    g = layout(design)
+    g = assembly(design)
     c, mm = design.cad, MM_PER_M
-    bobbin, core_p = _bobbin_and_core(design, g)
-    grid = GridParams(rows=design.array.rows, columns=design.array.columns,
-                      pitch_mm=design.array.pitch_m * mm,
-                      centres_xy_mm=tuple((x * mm, y * mm) for x, y in g.centres_xy_m),
-                      footprint_x_mm=g.footprint_x_m * mm, footprint_y_mm=g.footprint_y_m * mm,
-                      fixing_inset_mm=c.fixing_inset_m * mm,
-                      fixing_hole_radius_mm=c.fixing_hole_radius_m * mm)
-    length = bobbin.winding_length_mm
-    mid = -length / 2
-    frame = FrameParams(grid=grid, thickness_mm=c.plate_thickness_m * mm,
-                        pocket_radius_mm=g.pocket_radius_m * mm,
-                        pocket_depth_mm=c.flange_thickness_m * mm,
-                        through_radius_mm=bobbin.bore_radius_mm, mirror_z_mm=mid)
+    types = tuple(_type_parts(design, g, t) for t in g.types)
+    frames = tuple((tuple(float(q) * mm for q in s.centre_m), _frame(s.axis))
+                   for s in g.upper.seats)
+    upper, lower = (_plate(design, g, plate, printer) for plate in (g.upper, g.lower))
+    z_lo, z_hi = g.standoff_z_m
     standoff = StandoffParams(outer_radius_mm=c.standoff_outer_radius_m * mm,
-                              hole_radius_mm=c.fixing_hole_radius_m * mm, length_mm=length)
-    sensors = SensorMountParams(
-        grid=grid, sensor_z_mm=design.sensors.offset_m * mm,
-        board_size_mm=(c.board_width_m * mm, c.board_width_m * mm),
-        board_thickness_mm=c.board_thickness_m * mm,
-        pocket_clearance_mm=c.board_clearance_m * mm, floor_thickness_mm=c.mount_floor_m * mm,
-        channel_width_mm=c.channel_width_m * mm, leg_outer_radius_mm=c.standoff_outer_radius_m * mm,
-        leg_bottom_z_mm=c.plate_thickness_m * mm, mirror_z_mm=mid)
+                              hole_radius_mm=c.fixing_hole_radius_m * mm,
+                              length_mm=(z_hi - z_lo) * mm)
+    mount = _mount(design, g, printer) if g.sensor_holder == "mount" else None
     holder = MagnetHolderParams(
         magnet_radius_mm=design.magnet.radius_m * mm, magnet_length_mm=design.magnet.length_m * mm,
         press_fit_clearance_mm=c.press_fit_clearance_m * mm,
         finger_diameter_mm=c.finger_diameter_m * mm, ring_wall_mm=c.ring_wall_m * mm,
         ring_width_mm=c.ring_width_m * mm, boss_wall_mm=c.boss_wall_m * mm,
         floor_thickness_mm=c.holder_floor_m * mm)
-    # The design point sits above coil (0, 0) of the optimization; in the array that is the
-    # array centre (a coil axis for odd rows x columns).
-    magnet_centre = (0.0, 0.0, design.optimize.height_m * mm)
-    return CadParams(design_name=design.name, bobbin=bobbin, core=core_p, grid=grid, frame=frame,
-                     standoff=standoff, sensor_mount=sensors, magnet_holder=holder,
-                     printer=printer, magnet_centre_mm=magnet_centre, design=design)
+    magnet_centre = tuple(float(q) * mm for q in design.design_point_m)
+    return CadParams(design_name=design.name, types=types, coil_type=g.type_of,
+                     coil_frames=frames, upper=upper, lower=lower, standoff=standoff,
+                     standoff_top_z_mm=z_hi * mm, sensor_holder=g.sensor_holder,
+                     sensor_mount=mount, magnet_holder=holder, printer=printer,
+                     magnet_centre_mm=magnet_centre, design=design)
 
 
-def _bobbin_and_core(design: Design, g: Layout) -> tuple[BobbinParams, CoreParams | None]:
+def _frame(axis) -> tuple:
+    """The frame (3 x 3 nested tuples) whose local z is ``axis``: the identity when upright
+    (:func:`designkit.design.pose_on_axis`)."""
+    return tuple(map(tuple, pose_on_axis((0.0, 0.0, 0.0), axis).matrix))
+
+
+def _type_parts(design: Design, g: Assembly, t: CoilType) -> CoilTypeParts:
+    """The bobbin, core and sensor caps of one coil type, mm."""
+    mm, c = MM_PER_M, design.cad
+    bobbin, core_p = _bobbin_and_core(design, t)
+    caps = [None, None]
+    if g.sensor_holder == "caps":
+        top = design.sensors.offset_m + c.board_thickness_m / 2
+        caps = [SensorCapParams(radius_mm=(t.bore_radius_m - c.press_fit_clearance_m) * mm,
+                                height_mm=(top - reach[0]) * mm,
+                                board_size_mm=(c.board_width_m * mm, c.board_width_m * mm),
+                                board_thickness_mm=c.board_thickness_m * mm,
+                                pocket_clearance_mm=c.board_clearance_m * mm,
+                                channel_width_mm=c.channel_width_m * mm)
+                for reach in (t.reach_upper_m, t.reach_lower_m)]
+    return CoilTypeParts(suffix="" if len(g.types) == 1 else f"_t{t.index + 1}", coils=t.coils,
+                         bobbin=bobbin, core=core_p, cap_upper=caps[0], cap_lower=caps[1],
+                         reach_upper_mm=t.reach_upper_m[0] * mm,
+                         reach_lower_mm=t.reach_lower_m[0] * mm)
+
+
+def _plate(design: Design, g: Assembly, plate: Plate, printer: PrinterParams) -> PlateParams:
+    """A frame plate in mm, split into segments when it fits the printer in no orientation."""
+    mm, c = MM_PER_M, design.cad
+    seats = tuple(SeatParams(
+        coil=s.coil, centre_mm=tuple(float(q) * mm for q in s.centre_m), rotation=_frame(s.axis),
+        pocket_radius_mm=g.type_of_coil(s.coil).pocket_radius_m * mm,
+        pocket_depth_mm=c.flange_thickness_m * mm,
+        through_radius_mm=g.type_of_coil(s.coil).bore_radius_m * mm) for s in plate.seats)
+    outline = np.asarray(plate.outline_m) * mm
+    fixings = tuple((x * mm, y * mm) for x, y in g.fixing_xy_m)
+    poses = [tuple(s.centre_mm) + tuple(np.asarray(s.rotation)[:, 2]) for s in seats]
+    segments, centre, identical = _segmentation(outline, (plate.z1_m - plate.z0_m) * mm,
+                                                fixings, poses, printer)
+    return PlateParams(side=plate.side, outline_mm=tuple(map(tuple, outline)),
+                       z0_mm=plate.z0_m * mm, z1_mm=plate.z1_m * mm, seats=seats,
+                       fixing_xy_mm=fixings, fixing_hole_radius_mm=c.fixing_hole_radius_m * mm,
+                       segments=segments, centre_xy_mm=centre, segments_identical=identical)
+
+
+def _segmentation(outline: np.ndarray, thickness_mm: float, fixings, poses,
+                  printer: PrinterParams) -> tuple[tuple, tuple[float, float], bool]:
+    """(segments, centre, identical) of a plate over ``outline`` (k, 2) mm: no segments when it
+    fits the printer, else wedges about its centre between consecutive ``fixings`` when each
+    of them fits (identical: each is the first turned, with the plate's ``poses``: rows of
+    position and axis, mm)."""
+    size = (float(np.ptp(outline[:, 0])), float(np.ptp(outline[:, 1])), thickness_mm)
+    centre = tuple(float(q) for q in outline.mean(axis=0))
+    segments: tuple = ()
+    if fit_in_build_volume(size, printer.build_volume_mm) is None and len(fixings) >= 3:
+        ang = sorted(math.atan2(y - centre[1], x - centre[0]) for x, y in fixings)
+        pieces = tuple((a, b if b > a else b + 2 * math.pi)
+                       for a, b in zip(ang, ang[1:] + ang[:1]))
+        if all(fit_in_build_volume(_segment_size(outline, centre, a, thickness_mm),
+                                   printer.build_volume_mm) is not None for a in pieces):
+            segments = pieces
+    identical = bool(segments) and all(
+        _turned_onto_itself(outline, poses, fixings, centre, a - segments[0][0])
+        for a, _ in segments)
+    return segments, centre, identical
+
+
+def segment_outline(outline, centre_xy, angles) -> np.ndarray:
+    """The part of a plate's outline (k, 2) mm in the wedge of ``angles`` (rad, < pi) about
+    ``centre_xy``: a printed segment of the plate."""
+    o = np.asarray(outline, dtype=float)
+    a0, a1 = angles
+    r = 2.0 * float(np.max(np.linalg.norm(o - centre_xy, axis=1))) / math.cos((a1 - a0) / 2)
+    cx, cy = centre_xy
+    wedge = np.array([(cx, cy), (cx + r * math.cos(a0), cy + r * math.sin(a0)),
+                      (cx + r * math.cos(a1), cy + r * math.sin(a1))])
+    return clip_polygon(o, wedge)
+
+
+def _segment_size(outline, centre_xy, angles, thickness_mm: float):
+    piece = segment_outline(outline, centre_xy, angles)
+    return (float(np.ptp(piece[:, 0])), float(np.ptp(piece[:, 1])), thickness_mm)
+
+
+def turn_about(centre_xy, angle: float) -> tuple[np.ndarray, np.ndarray]:
+    """(rotation (3, 3), offset (3,) mm) of a turn by ``angle`` (rad) about the vertical axis
+    through ``centre_xy`` (mm): p -> R p + offset."""
+    c, s = math.cos(angle), math.sin(angle)
+    r = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    centre = np.r_[np.asarray(centre_xy, dtype=float), 0.0]
+    return r, centre - r @ centre
+
+
+def _turned_onto_itself(outline, poses, fixings, centre, angle: float) -> bool:
+    """Whether a turn by ``angle`` about ``centre`` maps the plate's outline, poses (rows of
+    position and axis) and fixings onto themselves (to 1e-6 mm)."""
+    r, off = turn_about(centre, angle)
+
+    def key(rows):
+        return set(map(tuple, np.round(np.asarray(rows, dtype=float), 6) + 0.0))
+
+    def turned(rows):
+        rows = np.asarray(rows, dtype=float)
+        return rows @ r[:rows.shape[1], :rows.shape[1]].T + off[:rows.shape[1]]
+
+    poses = np.asarray(poses, dtype=float).reshape(-1, 6)
+    poses_t = np.c_[poses[:, :3] @ r.T + off, poses[:, 3:] @ r.T]
+    return (key(turned(outline)) == key(outline) and key(turned(fixings)) == key(fixings)
+            and key(poses_t) == key(poses))
+
+
+def _mount(design: Design, g: Assembly, printer: PrinterParams) -> SensorMountParams:
+    """The sensor mount plate of level, upright boards, mm (in segments like a frame plate
+    when it is larger than the printer)."""
+    mm, c = MM_PER_M, design.cad
+    top = max(s.centre_m[2] for s in g.upper.seats)
+    bottom = max(s.centre_m[2] for s in g.lower.seats)
+    outline = np.asarray(g.upper.outline_m) * mm
+    boards = tuple((s.centre_m[0] * mm, s.centre_m[1] * mm) for s in g.upper.seats)
+    fixings = tuple((x * mm, y * mm) for x, y in g.fixing_xy_m)
+    thickness = (c.board_thickness_m + c.mount_floor_m) * mm
+    segments, centre, identical = _segmentation(outline, thickness, fixings,
+                                                [(x, y, 0.0, 0.0, 0.0, 1.0) for x, y in boards],
+                                                printer)
+    return SensorMountParams(
+        outline_mm=tuple(map(tuple, outline)), board_xy_mm=boards,
+        sensor_z_mm=(top + design.sensors.offset_m) * mm,
+        board_size_mm=(c.board_width_m * mm, c.board_width_m * mm),
+        board_thickness_mm=c.board_thickness_m * mm,
+        pocket_clearance_mm=c.board_clearance_m * mm, floor_thickness_mm=c.mount_floor_m * mm,
+        channel_width_mm=c.channel_width_m * mm, leg_outer_radius_mm=c.standoff_outer_radius_m * mm,
+        leg_bottom_z_mm=g.upper.z1_m * mm, fixing_xy_mm=fixings,
+        fixing_hole_radius_mm=c.fixing_hole_radius_m * mm, mirror_z_mm=(top + bottom) / 2 * mm,
+        segments=segments, centre_xy_mm=centre, segments_identical=identical)
+
+
+def _bobbin_and_core(design: Design, g: CoilType) -> tuple[BobbinParams, CoreParams | None]:
     """The bobbin (with the rule book's mandrel) and the core, mm, from the design."""
     mm = MM_PER_M
-    coil, core = design.coil, design.core
+    coil, core = g.coil, g.core
     length = coil.length_m * mm
     core_p = None
     if core is not None:

@@ -1,9 +1,9 @@
 """build123d part functions: each takes one frozen parameter dataclass (mm) and returns a Part.
 
 Nothing here writes files; export is :mod:`cad.export`. Parts that exist once per coil
-(bobbin, flange, core, winding) are built in the frame of the coil at the array origin
-(winding top face at z = 0, axis = z) and placed by :mod:`cad.assembly`; plates are built in
-place in the array frame.
+(bobbin, flange, core, winding, sensor cap) are built in the frame of a coil end (its face at
+z = 0, axis = z) and placed by :mod:`cad.assembly`; plates are built in place in the array
+frame.
 """
 
 from __future__ import annotations
@@ -11,12 +11,14 @@ from __future__ import annotations
 import math
 from typing import Literal
 
-from build123d import Align, Box, Cylinder, Part, Pos, Rot
+import numpy as np
+from build123d import (Align, Box, BuildPart, BuildSketch, Cylinder, Location, Part, Plane,
+                       Polygon, Pos, Rot, extrude, mirror)
 
 from designkit.errors import BadInputError
 
-from .params import (BobbinParams, CoreParams, FrameParams, MagnetHolderParams,
-                     SensorMountParams, StandoffParams)
+from .params import (BobbinParams, CoreParams, MagnetHolderParams, PlateParams,
+                     SensorCapParams, SensorMountParams, StandoffParams, segment_outline)
 
 _BOTTOM = (Align.CENTER, Align.CENTER, Align.MIN)
 _EPS = 1.0
@@ -110,27 +112,52 @@ def _turn_over(part: Part, mid_z: float) -> Part:
     return Pos(0, 0, mid_z) * Rot(180, 0, 0) * Pos(0, 0, -mid_z) * part
 
 
-def frame_plate(p: FrameParams, side: Literal["upper", "lower"] = "upper") -> Part:
-    """Frame plate holding every bobbin by its flange, with four corner fixing holes.
+def _prism(outline, z0: float, z1: float) -> Part:
+    """Vertical prism over a counter-clockwise polygon (k, 2) mm from z0 to z1."""
+    with BuildPart() as prism:
+        with BuildSketch(Plane.XY.offset(z0)):
+            Polygon(*[(float(x), float(y)) for x, y in outline], align=None)
+        extrude(amount=z1 - z0)
+    return prism.part
 
-    The upper plate spans z in [0, thickness]: a flange seat (pocket) from the underside at
-    each coil, a through hole for the core above it. The lower plate is the same plate
-    turned over about the array mid-plane (rows are symmetric in y, so it is also its
-    mirror image).
-    """
-    if side not in ("upper", "lower"):
-        raise BadInputError("side", "'upper' or 'lower'", side)
-    g, T = p.grid, p.thickness_mm
-    plate = _box(-g.footprint_x_mm / 2, g.footprint_x_mm / 2, -g.footprint_y_mm / 2,
-                 g.footprint_y_mm / 2, 0.0, T)
+
+def _in_frame(part: Part, centre, rotation) -> Part:
+    """``part`` built in a local frame, moved to ``centre`` (mm) with ``rotation`` (3 x 3,
+    columns: the local axes in the array frame)."""
+    r = np.asarray(rotation, dtype=float)
+    plane = Plane(origin=tuple(map(float, centre)), x_dir=tuple(r[:, 0]), z_dir=tuple(r[:, 2]))
+    return Location(plane) * part
+
+
+def _seat_cuts(p: PlateParams) -> list[Part]:
+    """The flange pocket (from beyond the coil to the flange's outer face) and the bore of every
+    seat, along its axis; long enough to leave the plate whatever the tilt."""
+    reach = 3.0 * (p.thickness_mm + max(s.pocket_radius_mm for s in p.seats)) + _EPS
     cuts = []
-    for x, y in g.centres_xy_mm:
-        cuts.append(_cyl(p.pocket_radius_mm, -_EPS, p.pocket_depth_mm, x, y))
-        cuts.append(_cyl(p.through_radius_mm, -_EPS, T + _EPS, x, y))
-    for x, y in g.fixing_xy_mm:
-        cuts.append(_cyl(g.fixing_hole_radius_mm, -_EPS, T + _EPS, x, y))
-    plate = Part(plate - Part(children=cuts))
-    return plate if side == "upper" else _turn_over(plate, p.mirror_z_mm)
+    for s in p.seats:
+        cuts.append(_in_frame(_cyl(s.pocket_radius_mm, -reach, s.pocket_depth_mm),
+                              s.centre_mm, s.rotation))
+        cuts.append(_in_frame(_cyl(s.through_radius_mm, -reach, reach), s.centre_mm, s.rotation))
+    return cuts
+
+
+def frame_plate(p: PlateParams, segment: int | None = None) -> Part:
+    """Frame plate holding every coil end by its flange, in place in the array frame.
+
+    A prism over the outline from z0 to z1 with, for each seat, a flange pocket from the coil
+    side (a seat's depth along its axis) and a bore beyond it, and a vertical fixing hole at
+    each standoff. The upper plate is printed turned over and the lower one as it stands, so
+    the pockets open upwards and a tilted bore overhangs by its coil's tilt.
+    ``segment``: the piece of a plate printed in segments (:attr:`PlateParams.segments`).
+    """
+    outline = np.asarray(p.outline_mm, dtype=float)
+    if segment is not None:
+        outline = segment_outline(outline, p.centre_xy_mm, p.segments[segment])
+    plate = _prism(outline, p.z0_mm, p.z1_mm)
+    cuts = _seat_cuts(p)
+    cuts += [_cyl(p.fixing_hole_radius_mm, p.z0_mm - _EPS, p.z1_mm + _EPS, x, y)
+             for x, y in p.fixing_xy_mm]
+    return Part(plate - Part(children=cuts))
 
 
 def standoff(p: StandoffParams) -> Part:
@@ -143,36 +170,70 @@ def standoff_volume_mm3(p: StandoffParams) -> float:
     return math.pi * (p.outer_radius_mm**2 - p.hole_radius_mm**2) * p.length_mm
 
 
-def sensor_mount(p: SensorMountParams, side: Literal["upper", "lower"] = "upper") -> Part:
-    """Board mount of one Hall-sensor array, in place in the array frame.
+def sensor_mount(p: SensorMountParams, side: Literal["upper", "lower"] = "upper",
+                 segment: int | None = None) -> Part:
+    """Board mount of one Hall-sensor array of level boards, in place in the array frame.
 
-    Upper: a plate whose top face is at sensor_z + board/2, a board pocket centred on each
-    coil axis (the board's mid-plane is the sensing plane), one cable channel per row
-    running to the +x edge, and four legs standing on the upper frame plate at the fixing
-    holes (the M3 rods pass through them). Lower: the same part turned over.
+    Upper: a plate over the frame's outline whose top face is at sensor_z + board/2, a board
+    pocket centred on each coil axis (the board's mid-plane is the sensing plane), a cable
+    channel from each pocket to the +x edge, and legs standing on the upper frame plate at the
+    fixing holes (the M3 rods pass through them). Lower: its mirror image about the array's
+    mid-plane. ``segment``: the piece of a mount printed in segments (:attr:`segments`).
     """
     if side not in ("upper", "lower"):
         raise BadInputError("side", "'upper' or 'lower'", side)
-    g = p.grid
     top, bottom = p.top_z_mm, p.bottom_z_mm
-    hx, hy = g.footprint_x_mm / 2, g.footprint_y_mm / 2
-    body = _box(-hx, hx, -hy, hy, bottom, top)
+    body = _prism(p.outline_mm, bottom, top)
     legs = [_cyl(p.leg_outer_radius_mm, p.leg_bottom_z_mm, bottom + _EPS, x, y)
-            for x, y in g.fixing_xy_mm] if bottom > p.leg_bottom_z_mm else []
+            for x, y in p.fixing_xy_mm] if bottom > p.leg_bottom_z_mm else []
     if legs:
         body = body + Part(children=legs)
     floor = top - p.board_thickness_mm
     bx = p.board_size_mm[0] / 2 + p.pocket_clearance_mm
     by = p.board_size_mm[1] / 2 + p.pocket_clearance_mm
-    cuts = [_box(x - bx, x + bx, y - by, y + by, floor, top + _EPS) for x, y in g.centres_xy_mm]
+    edge = max(x for x, _ in p.outline_mm)
     w = p.channel_width_mm / 2
-    for y in sorted({round(c[1], 9) for c in g.centres_xy_mm}):
-        x_first = min(c[0] for c in g.centres_xy_mm if round(c[1], 9) == y)
-        cuts.append(_box(x_first, hx + _EPS, y - w, y + w, floor, top + _EPS))
-    cuts += [_cyl(g.fixing_hole_radius_mm, p.leg_bottom_z_mm - _EPS, top + _EPS, x, y)
-             for x, y in g.fixing_xy_mm]
+    cuts = [_box(x - bx, x + bx, y - by, y + by, floor, top + _EPS) for x, y in p.board_xy_mm]
+    cuts += [_box(x, edge + _EPS, y - w, y + w, floor, top + _EPS) for x, y in p.board_xy_mm]
+    cuts += [_cyl(p.fixing_hole_radius_mm, p.leg_bottom_z_mm - _EPS, top + _EPS, x, y)
+             for x, y in p.fixing_xy_mm]
     mount = Part(body - Part(children=cuts))
-    return mount if side == "upper" else _turn_over(mount, p.mirror_z_mm)
+    if segment is not None:  # the wedge of the segment, legs and channels included
+        piece = segment_outline(p.outline_mm, p.centre_xy_mm, p.segments[segment])
+        mount = Part(mount & _prism(piece, p.leg_bottom_z_mm - _EPS, top + _EPS))
+    if side == "upper":
+        return mount
+    return Part(mirror(mount, Plane.XY.offset(p.mirror_z_mm)))
+
+
+def sensor_cap(p: SensorCapParams) -> Part:
+    """A sensor board's cap on a coil end, local frame: z from 0 (the face it rests on) to the
+    board's outer face at ``height_mm``; the board pocket there and a cable channel along +x to
+    the rim. Printed standing on its base; pressed into the frame plate's bore."""
+    h = p.height_mm
+    bx = p.board_size_mm[0] / 2 + p.pocket_clearance_mm
+    by = p.board_size_mm[1] / 2 + p.pocket_clearance_mm
+    floor = h - p.board_thickness_mm
+    w = p.channel_width_mm / 2
+    cuts = [_box(-bx, bx, -by, by, floor, h + _EPS),
+            _box(0.0, p.radius_mm + _EPS, -w, w, floor, h + _EPS)]
+    return Part(_cyl(p.radius_mm, 0.0, h) - Part(children=cuts))
+
+
+def sensor_cap_volume_mm3(p: SensorCapParams) -> float:
+    """Closed-form volume of :func:`sensor_cap`: the cylinder less the board pocket and the
+    channel's part beyond the pocket (a rectangle cut by the rim circle), mm^3."""
+    bx = p.board_size_mm[0] / 2 + p.pocket_clearance_mm
+    by = p.board_size_mm[1] / 2 + p.pocket_clearance_mm
+    r, w = p.radius_mm, p.channel_width_mm / 2
+
+    def area_x_from(x0):  # area of {x >= x0, |y| <= w} inside the circle of radius r
+        def f(y):
+            return y * math.sqrt(r * r - y * y) / 2 + r * r * math.asin(y / r) / 2
+        return 2 * (f(w) - x0 * w)
+
+    removed = 4 * bx * by + area_x_from(bx)
+    return p.board_thickness_mm * (-removed) + math.pi * r * r * p.height_mm
 
 
 def magnet_holder(p: MagnetHolderParams) -> Part:

@@ -9,12 +9,12 @@ backs them up; :func:`fit_in_build_volume` is the one printer rule that needs th
 
 from __future__ import annotations
 
-import itertools
-
 from designkit import rules as rule_book
 from designkit.errors import DesignRuleError
 
-from .params import CadParams
+from .params import CadParams, fit_in_build_volume
+
+__all__ = ["check_rules", "fit_in_build_volume", "violations"]
 
 
 def violations(p: CadParams) -> list[str]:
@@ -29,21 +29,3 @@ def check_rules(p: CadParams) -> None:
         raise DesignRuleError(f"{len(bad)} design rule(s) violated for '{p.design_name}' "
                               "(designkit check --design FILE prints them all):\n  - "
                               + "\n  - ".join(bad))
-
-
-def fit_in_build_volume(size_mm: tuple[float, float, float],
-                        build_mm: tuple[float, float, float]) -> tuple[int, int, int] | None:
-    """An axis order that fits the part's box in the build volume, or None.
-
-    Parts may be laid down in any of the 6 axis-aligned orientations; rotations about z
-    by other angles are not tried (conservative).
-
-    Returns
-    -------
-    tuple of int or None
-        ``order`` such that ``size_mm[order[k]] <= build_mm[k]`` for k = 0, 1, 2.
-    """
-    for order in itertools.permutations(range(3)):
-        if all(size_mm[order[k]] <= build_mm[k] for k in range(3)):
-            return order
-    return None

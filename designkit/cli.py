@@ -32,6 +32,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "scene": ("designkit.commands.scene", "compile a virtual object for the runner (ch. 4)"),
     "run": ("designkit.commands.run", "the rendering runner on the simulated device"),
     "calibrate": ("designkit.commands.calibrate", "fit the as-built device to field readings"),
+    "sensors": ("designkit.commands.sensors", "plan a sensor layout from the Cramer-Rao bound"),
 }
 
 

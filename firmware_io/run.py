@@ -23,11 +23,11 @@ from .hw.bus import open_bus
 from .hw.coils import CoilDriver
 from .hw.pca9685 import PCA9685
 from .errors import FirmwareIOError
-from .localization import Localizer
+from .localization import estimator_from_map
 from .mapfile import MapFile
-from .runner import (CALIBRATED_RELATIVE_ERROR, CALIBRATION_CURRENT_A, LocalizerShim, Runner,
-                     RunnerIO, SceneForce, SensorFrame, SensorHeadroom, calibrate_sensors,
-                     calibration_currents, config_from_map, record_calibration)
+from .runner import (CALIBRATION_CURRENT_A, Runner, RunnerIO, SceneForce, SensorFrame,
+                     SensorHeadroom, calibrate_sensors, calibration_currents, config_from_map,
+                     record_calibration)
 from .scene import Scene
 from .hw.sensors import SensorArrays, default_sensor_layout
 
@@ -149,11 +149,11 @@ def check_sensor_arrays(status, min_fraction: float = 0.75) -> None:
 
 
 def load_inputs(map_path: str, scene_path: str, method: str):
-    """Map, scene and localizer, checked against each other (no device is touched)."""
+    """Map, scene and pose estimator, checked against each other (no device is touched)."""
     fmap = MapFile.load(map_path)
     scene = Scene.load(scene_path, expected_design_sha256=fmap.design_sha256)
-    localizer = Localizer.from_map(map_path, method=method)
-    return fmap, scene, localizer
+    estimator = estimator_from_map(map_path, method)
+    return fmap, scene, estimator
 
 
 def open_device(bus_number: int, sensor_bus_number: int | None, drives, n_sensors: int):
@@ -166,19 +166,18 @@ def open_device(bus_number: int, sensor_bus_number: int | None, drives, n_sensor
     return CoilDriver(boards, drives), SensorArrays(sbus, default_sensor_layout(n_sensors))
 
 
-def calibrated_localizer(map_path: str, method: str, localizer, coils, arrays, cfg,
+def calibrated_estimator(map_path: str, method: str, estimator, coils, arrays, cfg,
                          sleep=time.sleep):
     """The start-up sensor calibration (firmware_io.runner.record_calibration: coils alone,
-    each pattern held for 7 L/R), then a localizer that uses it."""
+    each pattern held for 7 L/R), then a pose estimator that uses it."""
     tau = max(cfg.drive.time_constant_s)
     amp = min(CALIBRATION_CURRENT_A, cfg.drive.current_limit_a)
     print(f"calibrating the sensors ({amp:.1f} A patterns, keep the magnet away)...",
           file=sys.stderr)
     readings, applied = record_calibration(coils, arrays, calibration_currents(cfg.n_coils, amp),
                                            settle_s=7 * tau, sleep=sleep)
-    cal = calibrate_sensors(localizer.model, readings, applied)
-    return Localizer.from_map(map_path, method=method, calibration=cal,
-                              relative_error=CALIBRATED_RELATIVE_ERROR)
+    cal = calibrate_sensors(estimator.model, readings, applied)
+    return estimator_from_map(map_path, method, calibration=cal)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -186,7 +185,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         bus_n = _bus_number(args.bus, "--bus")
         sbus_n = None if args.sensor_bus is None else _bus_number(args.sensor_bus, "--sensor-bus")
-        fmap, scene, localizer = load_inputs(args.map, args.scene, args.method)
+        fmap, scene, estimator = load_inputs(args.map, args.scene, args.method)
         rows = scene.meta.get("rows", "force")
         cfg = config_from_map(fmap, control_period_s=args.period_ms * 1e-3,
                               unipolar=args.unipolar, force_axes="z" if rows == "fz" else "xyz")
@@ -194,12 +193,12 @@ def main(argv: list[str] | None = None) -> int:
         coils, arrays = open_device(bus_n, sbus_n, cfg.drive.drives, fmap.n_sensors)
         check_sensor_arrays(arrays.configure())
         if args.calibrate:
-            localizer = calibrated_localizer(args.map, args.method, localizer, coils, arrays, cfg)
+            estimator = calibrated_estimator(args.map, args.method, estimator, coils, arrays, cfg)
     except (FirmwareIOError, OSError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     source = ThreadedSensorSource(arrays)
-    runner = Runner(fmap, SceneForce(scene), LocalizerShim(localizer), RunnerIO(coils, source),
+    runner = Runner(fmap, SceneForce(scene), estimator, RunnerIO(coils, source),
                     cfg, allocate=Allocator(), headroom=SensorHeadroom.from_meta(scene.meta))
     runner.start()
     source.start()

@@ -6,26 +6,38 @@ import argparse
 import os
 from pathlib import Path
 
+import numpy as np
+
 from designkit import default_design, fieldmap
 from designkit.support.atomic import write_json_atomic
 from designkit.model.array import CoilArray
+from firmware_io.mapfile import read
 
 ROOT = Path(__file__).resolve().parents[1]
 """The repository root (the studies' default outputs are under ROOT / 'out')."""
 
 
-def design_and_map(out_dir, map_path=None, *, progress: bool = True):
-    """Create ``out_dir``; the default design, its CoilArray (one coupled solve) and a map file
-    (``map_path``, or one built into ``out_dir/map.npz``). Returns (out_dir, design, array,
-    map_path)."""
+def design_and_map(out_dir, map_path=None, *, progress: bool = True, design=None):
+    """Create ``out_dir``; the design (default: the default design), its CoilArray (one
+    coupled solve) and a map file (``map_path``, or one built into ``out_dir/map.npz``).
+    Returns (out_dir, design, array, map_path)."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    design = default_design()
+    design = default_design() if design is None else design
     array = CoilArray.from_design(design)
     if map_path is None:
         map_path = out_dir / "map.npz"
         fieldmap.write(map_path, fieldmap.build(design, array=array, progress=progress))
     return out_dir, design, array, Path(map_path)
+
+
+def without_saturation(map_path, out) -> Path:
+    """A copy of the map at ``out`` with its saturation factor table set to 1 (the runner then
+    allocates on the linear columns)."""
+    arrays, meta = read(map_path)
+    arrays = dict(arrays, SAT_FACTOR=np.ones_like(arrays["SAT_FACTOR"]))
+    meta = {k: v for k, v in meta.items() if k != "data_sha256"}
+    return fieldmap.write(out, {"arrays": arrays, "meta": meta})
 
 
 def load_average() -> float | None:

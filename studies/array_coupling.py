@@ -20,6 +20,7 @@ Usage: ``PYTHONPATH=$PWD python studies/array_coupling.py [out_dir] [--quick] [-
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import sys
 import time
@@ -330,7 +331,10 @@ def run(out_dir=DEFAULT_OUT, quick: bool = False, fem: bool = False,
     i30 = int(np.argmin(np.abs(zs - 0.03)))
     res["f0"] = {"png": str(png), "x_mm": (xs * 1e3).tolist(), "z_mm": (zs * 1e3).tolist(),
                  "fz_centre_column_n": f[:, len(xs) // 2, 2].tolist(),
-                 "fz_at_30mm_centre_n": float(arr.bias_force([0, 0, 0.03], moment)[2]),
+                 "fz_at_30mm_centre_n": float(arr.bias_force(
+                     [0, 0, 0.03], moment, magnet_size_m=(design.magnet.radius_m,
+                                                          design.magnet.length_m))[2]),
+                 "fz_at_30mm_centre_dipole_n": float(arr.bias_force([0, 0, 0.03], moment)[2]),
                  "max_abs_f0_at_30mm_n": float(np.abs(f[i30]).max()),
                  "threshold_n": design.render.threshold_n}
     bar.update()
@@ -386,7 +390,9 @@ def _print(res):
           [f"{v:.1%}" for v in w["b_change_percentiles_5_50_95"]], " dBz/dz change:",
           [f"{v:.1%}" for v in w["dbz_dz_change_percentiles_5_50_95"]])
     f = res["f0"]
+    dip = f["fz_at_30mm_centre_dipole_n"]
     print(f"\nF0 at 30 mm above the centre coil: {f['fz_at_30mm_centre_n'] * 1e3:.1f} mN "
+          f"(the 10 x 10 mm cylinder; point dipole {dip * 1e3:.1f} mN) "
           f"(threshold {f['threshold_n'] * 1e3} mN); PNG {f['png']}")
     s = res["sensor_centre_magnet_30mm"]
     print(f"induced core field at the centre sensors, magnet 30 mm above the centre: upper "
@@ -411,8 +417,20 @@ def _print(res):
     print("\nconvergence:", res["convergence"])
 
 
+def main(argv=None) -> int:
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("out", nargs="?", default=str(DEFAULT_OUT),
+                    help="output folder (default out/array_coupling)")
+    ap.add_argument("--quick", action="store_true", help="coarse grids (the smoke test's run)")
+    ap.add_argument("--fem", action="store_true", help="the 3-D GetDP reference too")
+    ap.add_argument("--saturation-fem", action="store_true",
+                    help="the nonlinear GetDP reference of the saturation factor too")
+    a = ap.parse_args(argv)
+    _print(run(a.out, quick=a.quick, fem=a.fem, saturation_fem=a.saturation_fem))
+    return 0
+
+
 if __name__ == "__main__":
-    args = [a for a in sys.argv[1:] if not a.startswith("--")]
-    r = run(args[0] if args else DEFAULT_OUT, quick="--quick" in sys.argv,
-            fem="--fem" in sys.argv, saturation_fem="--saturation-fem" in sys.argv)
-    _print(r)
+    sys.exit(main())

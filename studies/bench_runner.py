@@ -9,20 +9,20 @@ boards' own time subtracted) of 'fix' (taking the sensor side's result, Kalman u
 'predict', 'object_force', 'force_matrix' (A(p) rows the law uses + the bias force, the map),
 'allocation' and 'drive' (voltage feed-forward, MD10C duty/direction, PCA9685 bytes, the block
 writes). Split by step kind (with / without a new sensor result) as median and p99, and the fit's
-time on the sensor side separately. Target: p99 <= one control period for every step.
-Per runner state (running = tracking, gated, lost = the sensor side re-acquiring, the fault
-states) from a run with every fault injected once: median, p99 and max of the step, next to a
+time on the sensor side separately. Target: p99 <= one control period for every step. Per
+runner state (running = tracking, gated, lost = the sensor side re-acquiring, the fault states)
+from a run with every fault injected once: median, p99 and max of the step, next to a
 same-process reference (a fixed numpy workload on the same clock) and their ratio.
-
 "Skip what the scene doesn't need", against the full evaluation in the same process, one point
 at a time along the path: all 8 rows of A(p) for all coils, then only the rows the force law uses
 (firmware_io.runner.force_law_rows: 4 for the 3-D force of a z-dipole, 2 for Fz alone; selected
-inside the map's kernel, or sliced after it as the runner does), then
-also only the coils whose bound of force per ampere near p (firmware_io.runner.CoilSkipBound)
-times the current limit exceeds a stated force; with the allocation on the kept coils and the
-force it then misses against the full allocation.
+inside the map's kernel, or sliced after it as the runner does), then also only the coils whose
+bound of force per ampere near p (firmware_io.runner.CoilSkipBound) times the current limit
+exceeds a stated force; with the allocation on the kept coils and the force it then misses.
+``--design``: another design (1010-steel cores: the allocation applies the map's saturation
+factor); ``--no-saturation``: the map's factor table set to 1 (the linear columns' step).
 
-    python studies/bench_runner.py [OUT_DIR] [--map FILE] [--duration S] [--quick]
+    python studies/bench_runner.py [OUT] [--map F] [--design F.toml] [--no-saturation] [--quick]
 """
 
 from __future__ import annotations
@@ -37,13 +37,14 @@ if __package__ in (None, ""):
 
 import numpy as np
 
+from designkit.design import load_design
 from designkit.render.scenefile import make_object
 from designkit.sim import RunSettings, drive_data, run_simulation, slide_trajectory
 from firmware_io.allocation import allocate
 from firmware_io.mapfile import MapFile
 from firmware_io.runner import CoilSkipBound, force_law_rows
 from firmware_io.scene import Scene
-from studies._common import design_and_map, finish, load_average
+from studies._common import design_and_map, finish, load_average, without_saturation
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "bench_runner"
 """Default output folder (git-ignored), whatever the working directory."""
@@ -110,11 +111,15 @@ def _loop(summary: dict) -> dict:
 
 
 def run(out_dir=DEFAULT_OUT, *, map_path=None, duration_s: float = 2.0,
-        quick: bool = False) -> dict:
-    out_dir, design, array, map_path = design_and_map(out_dir, map_path, progress=not quick)
+        quick: bool = False, design=None, saturation: bool = True) -> dict:
+    out_dir, design, array, map_path = design_and_map(out_dir, map_path, progress=not quick,
+                                                      design=design)
+    if not saturation:
+        map_path = without_saturation(map_path, out_dir / "map_factor_1.npz")
     duration_s = min(duration_s, 0.4) if quick else duration_s
     res: dict = {"load_average_1min": load_average(), "duration_s": duration_s,
-                 "clock": "thread CPU time", "target_p99_us": 1000.0}
+                 "clock": "thread CPU time", "target_p99_us": 1000.0, "design": design.name,
+                 "saturation_applied": not MapFile.load(map_path).saturation_table().linear}
 
     # -- the closed loop, stage by stage, 3-D force and Fz alone
     for rows in (("force",) if quick else ("force", "fz")):
@@ -200,7 +205,8 @@ def _fmt(v) -> str:
 def _print(res: dict) -> None:
     print(f"runner control step, {res['duration_s']} s slide over the hemisphere per mode "
           f"({res['clock']}; load average {res['load_average_1min']}; target p99 "
-          f"{res['target_p99_us']:.0f} us)")
+          f"{res['target_p99_us']:.0f} us); design {res['design']}, saturation factor "
+          f"{'applied' if res['saturation_applied'] else 'none (linear cores or set to 1)'}")
     for key in [k for k in res if k.startswith("loop_")]:
         lp = res[key]
         print(f"\n{key[5:]}: step kind / stage        median us   p99 us    steps")
@@ -249,5 +255,11 @@ if __name__ == "__main__":
     ap.add_argument("--map", default=None, help="an existing map file (default: build one)")
     ap.add_argument("--duration", type=float, default=2.0, help="simulated seconds per mode")
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--design", default=None,
+                    help="design TOML file or a shipped design (default: the thesis device)")
+    ap.add_argument("--no-saturation", action="store_true",
+                    help="run with the map's saturation factor table set to 1")
     a = ap.parse_args()
-    run(a.out, map_path=a.map, duration_s=a.duration, quick=a.quick)
+    run(a.out, map_path=a.map, duration_s=a.duration, quick=a.quick,
+        design=None if a.design is None else load_design(a.design),
+        saturation=not a.no_saturation)

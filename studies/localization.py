@@ -42,8 +42,10 @@ from designkit.design import default_design
 from designkit.calibration.learned_inverse import train_learned_inverse
 from designkit.sim.readings import (THESIS_MAE_MM, SensorErrors, SensorSimulator, analog_reading,
                                     case_currents, forward_model, random_positions)
-from firmware_io.localization import (ConstantVelocityKalman, LearnedInverse, Localizer,
-                                      SensorModel, calibrate, cylinder_field, multipole_field)
+from firmware_io.localization import (POSITION_ONLY, CalibrationSettings,
+                                      ConstantVelocityKalman, KalmanEstimator, LearnedInverse,
+                                      SensorModel, calibrate, cylinder_field, make_estimator,
+                                      multipole_field)
 from firmware_io.mapfile import gradient_tensor
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "localization"
@@ -82,20 +84,23 @@ def _noise_limited(sim, readings, k, p_true, currents, ind_true, ind_jac):
 
 def _estimators(sim, out, map_path, quick, seed):
     """The table's estimators, from the v2 map if given, else the same numbers from designkit;
-    returns (make, model, source, train_s, calibration report, {name: Localizer})."""
+    returns (make, model, source, train_s, calibration report, {name: Estimator})."""
     mg = sim.design.magnet
     size = (mg.radius_m, mg.length_m)
     if map_path is not None and Path(map_path).is_file():
-        def make(method, **kw):
-            return Localizer.from_map(map_path, method, **kw)
+        def make(method, magnet_size_m=None, calibration=None, learned=None, **kw):
+            m = SensorModel.from_map(map_path, magnet_size_m=magnet_size_m)
+            return make_estimator(method, m, dataclasses.replace(POSITION_ONLY, **kw),
+                                  calibration=calibration, learned=learned)
         model = make("dipole", magnet_size_m=size).model
         source = f"map {map_path}"
     else:
         base = with_coil_gradient(sim, SensorModel.from_operator(**forward_model(sim)))
 
-        def make(method, magnet_size_m=None, **kw):
+        def make(method, magnet_size_m=None, calibration=None, learned=None, **kw):
             m = dataclasses.replace(base, magnet_size_m=magnet_size_m)
-            return Localizer(m, method, **kw)
+            return make_estimator(method, m, dataclasses.replace(POSITION_ONLY, **kw),
+                                  calibration=calibration, learned=learned)
         model = make("dipole", magnet_size_m=size).model
         source = "designkit.sim.readings.forward_model (rod induced model)"
     t0 = time.perf_counter()
@@ -127,8 +132,8 @@ def _induced(sim, model, pos, region):
         for k in range(n):
             for j in range(3):
                 dp = np.eye(3)[j] * h
-                ind_jac[k, ..., j] = (model.induced(pos[k] + dp)
-                                      - model.induced(pos[k] - dp)) / (2 * h)
+                ind_jac[k, ..., j] = ((model.induced_field(pos[k] + dp) - model.induced_field(pos[k] - dp))
+                                      / (2 * h)).reshape(2, sim.n, 3)
     return ind, ind_jac
 
 
@@ -136,7 +141,9 @@ def _subtraction_error(make, size, locs, pos, mag, ind):
     """The thesis subtraction's error from the cores' magnetization by the magnet, per position,
     and what it does to the position on noise-free readings; returns (numbers, plot data)."""
     n = len(pos)
-    sub = ind[:, 0] - np.einsum("sij,ksj->ksi", locs["dipole-naive"]._mirror, ind[:, 1])
+    cf = locs["dipole-naive"].model.coil_field_t_per_a
+    mirror = np.stack([cf[a] @ np.linalg.pinv(cf[b]) for a, b in locs["dipole-naive"].model.pairs])
+    sub = ind[:, 0] - np.einsum("sij,ksj->ksi", mirror, ind[:, 1])
     res = {"max_over_sensors_median": float(np.median(np.abs(sub).max(axis=(1, 2)))),
            "max_over_sensors_max": float(np.abs(sub).max())}
     # noise-free readings (coils off, ideal chain)
@@ -147,15 +154,17 @@ def _subtraction_error(make, size, locs, pos, mag, ind):
     for k in range(n):
         for loc, out_e in ((locs["dipole-naive"], e_naive), (uncal_dipole, e_cores)):
             loc.reset()
-            est = loc.locate(clean[k, 0], clean[k, 1])
+            est = loc.estimate(np.r_[clean[k, 0], clean[k, 1]])
             out_e[k] = np.linalg.norm(est.position_m - pos[k])
     res["position_error_naive_mae_mm"] = float(e_naive.mean() * 1e3)
     res["position_error_with_cores_mae_mm"] = float(e_cores.mean() * 1e3)
     return res, (pos, np.linalg.norm(sub, axis=-1).max(axis=1), e_naive, e_cores)
 
 
-def _case_rows(sim, locs, region, case, cur, pos, mag, ind, ind_jac):
-    """Every method's errors on one (region, field case); returns (table rows, errors)."""
+def _case_rows(sim, locs, region, case, cur, pos, fields):
+    """Every method's errors on one (region, field case); ``fields``: the magnet's field, the
+    cores' induced field and its Jacobian at ``pos``. Returns (table rows, errors)."""
+    mag, ind, ind_jac = fields
     n = len(pos)
     rd = sim.read(pos, cur, parts=(mag, ind))
     errs = {m: np.empty(n) for m in METHODS}
@@ -163,7 +172,7 @@ def _case_rows(sim, locs, region, case, cur, pos, mag, ind, ind_jac):
     for k in _progress(range(n), f"{region} {case}"):
         for name, loc in locs.items():
             loc.reset()
-            e = loc.locate(rd.top_t[k], rd.bottom_t[k], cur[k])
+            e = loc.estimate(np.r_[rd.top_t[k], rd.bottom_t[k]], cur[k])
             errs[name][k] = np.linalg.norm(e.position_m - pos[k])
             oks[name][k] = e.ok
         p = _noise_limited(sim, rd, k, pos[k], cur[k], ind[k], ind_jac[k])
@@ -234,7 +243,7 @@ def run(out_dir=DEFAULT_OUT, n: int = 1000, seed: int = 0, *, map_path=None,
                 make, size, locs, pos, mag, ind)
         for case in CASES:
             cur = case_currents(case, rng.uniform(0, 20, len(pos)), model.n_coils, seed=seed + 7)
-            rows, errs = _case_rows(sim, locs, region, case, cur, pos, mag, ind, ind_jac)
+            rows, errs = _case_rows(sim, locs, region, case, cur, pos, (mag, ind, ind_jac))
             results["rows"] += rows
             errors_store[(region, case)] = (pos, errs)
     results["kalman"] = _kalman(sim, model, rng, quick, locs)
@@ -247,12 +256,11 @@ def run(out_dir=DEFAULT_OUT, n: int = 1000, seed: int = 0, *, map_path=None,
 
 def with_coil_gradient(sim, model):
     """``model`` with the coils' field gradient at the nominal sensor poses, as the v2 map
-    carries it (``Localizer.from_map``): the calibration recovers the sensors' position errors
+    carries it (``SensorModel.from_map``): the calibration recovers the sensors' position errors
     from it."""
     rows = sim.array.actuation_matrix(sim.nominal_m.reshape(-1, 3))[:, 3:8]
     grad = np.moveaxis(gradient_tensor(np.moveaxis(rows, 1, -1)), 1, -1)
-    return dataclasses.replace(model, coil_gradient_t_per_a_m=grad.reshape(
-        2, sim.n, 3, 3, sim.array.n_coils))
+    return dataclasses.replace(model, coil_gradient_t_per_a_m=grad)
 
 
 def _calibration_frames(sim, seed, n_frames):
@@ -273,22 +281,24 @@ def _calibration_frames(sim, seed, n_frames):
 def _calibrate(sim, model, seed, n_frames):
     """Run the start-up calibration on simulated frames; report what it recovered."""
     rd, cur = _calibration_frames(sim, seed, n_frames)
-    cal = calibrate(rd.top_t, rd.bottom_t, cur, model, noise_t=sim.noise_t)
+    cal = calibrate(np.concatenate([rd.top_t, rd.bottom_t], 1), cur, model,
+                    CalibrationSettings(noise_t=sim.noise_t))
     e = sim.errors
     g_true = e.gains[..., :, None] * np.swapaxes(e.rotations, -1, -2)   # reading = G B
-    left = np.einsum("asij,asjk->asik", cal.gain_inverse, g_true) - np.eye(3)
+    left = (np.einsum("sij,sjk->sik", cal.gain_inverse, g_true.reshape(-1, 3, 3))
+            - np.eye(3)).reshape(2, sim.n, 3, 3)
     uncal = g_true - np.eye(3)
-    known = model.gradient_known if model.gradient_known is not None else np.zeros((2, sim.n),
-                                                                                   bool)
-    sh_err = np.linalg.norm(cal.shift_m - e.position_errors_m, axis=-1)
+    known = (model.gradient_known.reshape(2, sim.n) if model.gradient_known is not None
+             else np.zeros((2, sim.n), bool))
+    sh_err = np.linalg.norm(cal.shift_m.reshape(2, sim.n, 3) - e.position_errors_m, axis=-1)
     sh_true = np.linalg.norm(e.position_errors_m, axis=-1)
     rep = {"frames": n_frames,
            "gain_rotation_error_before_max": float(np.abs(uncal).max()),
            "gain_rotation_error_after_upper_max": float(np.abs(left[0]).max()),
            "gain_rotation_error_after_lower_max": float(np.abs(left[1]).max()),
            "offset_true_rms_mt": float(np.sqrt(np.mean(e.offsets_t ** 2)) * 1e3),
-           "offset_error_after_rms_mt": float(np.sqrt(np.mean((cal.offsets_t - e.offsets_t) ** 2))
-                                              * 1e3),
+           "offset_error_after_rms_mt": float(np.sqrt(np.mean(
+               (cal.offsets_t.reshape(2, sim.n, 3) - e.offsets_t) ** 2)) * 1e3),
            "shift_true_mm": float(sh_true.mean() * 1e3),
            "shift_error_after_mean_mm": float(sh_err[known].mean() * 1e3) if known.any()
            else float("nan"),
@@ -346,7 +356,8 @@ def _budget(sim, make, size, seed, n):
             e = []
             for k in range(n):
                 loc.reset()
-                e.append(np.linalg.norm(loc.locate(top[k], bot[k], cur[k]).position_m - pos[k]))
+                e.append(np.linalg.norm(loc.estimate(np.r_[top[k], bot[k]], cur[k]).position_m
+                                        - pos[k]))
             out[method] = float(np.mean(e) * 1e3)
         return out
 
@@ -397,12 +408,13 @@ def _kalman(sim, model, rng, quick, locs):
         rd = sim.read(path, cur, parts=(mag, ind))
         raw = locs["model-cal"]
         raw.reset()
-        kf = Localizer(raw.model, "kalman", kalman=ConstantVelocityKalman(2.0, 1.0e-3),
-                       calibration=raw.calibration)
+        kf = KalmanEstimator(make_estimator("model", raw.model, raw.settings,
+                                            calibration=raw.calibration),
+                             ConstantVelocityKalman(2.0, 1.0e-3))
         e_raw, e_kf = [], []
         for k in range(len(t)):
-            a = raw.locate(rd.top_t[k], rd.bottom_t[k], cur[k])
-            b = kf.locate(rd.top_t[k], rd.bottom_t[k], cur[k], time_s=t[k])
+            a = raw.estimate(np.r_[rd.top_t[k], rd.bottom_t[k]], cur[k])
+            b = kf.estimate(np.r_[rd.top_t[k], rd.bottom_t[k]], cur[k], time_s=t[k])
             e_raw.append(np.linalg.norm(a.position_m - path[k]))
             e_kf.append(np.linalg.norm(b.position_m - path[k]))
         skip = 20  # filter settling
@@ -429,13 +441,15 @@ def _static_hold(sim, locs, rng, n, frames=20, rate_hz=100.0):
             cur = case_currents(case, t, raw.model.n_coils, seed=7)
             rep = np.zeros(frames, int) + k
             rd = sim.read(pos[rep], cur, parts=(mag[rep], ind[rep]))
-            kf = Localizer(raw.model, "kalman", kalman=ConstantVelocityKalman(2.0, 1.0e-3),
-                           calibration=raw.calibration)
+            kf = KalmanEstimator(make_estimator("model", raw.model, raw.settings,
+                                                calibration=raw.calibration),
+                                 ConstantVelocityKalman(2.0, 1.0e-3))
             raw.reset()
             fits = []
             for f in range(frames):
-                fits.append(raw.locate(rd.top_t[f], rd.bottom_t[f], cur[f]).position_m)
-                last = kf.locate(rd.top_t[f], rd.bottom_t[f], cur[f], time_s=t[f]).position_m
+                fits.append(raw.estimate(np.r_[rd.top_t[f], rd.bottom_t[f]], cur[f]).position_m)
+                last = kf.estimate(np.r_[rd.top_t[f], rd.bottom_t[f]], cur[f],
+                                   time_s=t[f]).position_m
             e1[k] = np.linalg.norm(fits[0] - pos[k])
             ek[k] = np.linalg.norm(last - pos[k])
             em[k] = np.linalg.norm(np.mean(fits, axis=0) - pos[k])
@@ -473,10 +487,10 @@ def _benchmark(sim, model, locs, rng, quick):
         dt, cpu = [], []
         for _ in range(1 if quick else 3):
             loc.reset()
-            loc.locate(rd.top_t[0], rd.bottom_t[0], cur[0])
+            loc.estimate(np.r_[rd.top_t[0], rd.bottom_t[0]], cur[0])
             for k in range(1, len(t)):
                 t0, c0 = time.perf_counter_ns(), time.thread_time_ns()
-                loc.locate(rd.top_t[k], rd.bottom_t[k], cur[k])
+                loc.estimate(np.r_[rd.top_t[k], rd.bottom_t[k]], cur[k])
                 cpu.append((time.thread_time_ns() - c0) * 1e-3)
                 dt.append((time.perf_counter_ns() - t0) * 1e-3)
         out[name] = {"median_us": float(np.median(dt)), "p99_us": float(np.percentile(dt, 99)),

@@ -6,7 +6,7 @@ coils' field at the sensors' true, displaced poses, the cores' induced field ('r
 TLV493D chain with the device's sensor errors, --noise-mt rms noise); positions in the lower half
 of the thesis cube (|x|, |y| <= 25 mm, 20-45 mm). The noise limit: the same readings fitted
 with the exact forward model (true poses, gains, offsets; localization._noise_limited). The
-estimator: Localizer 'model' with the exact magnet and the start-up calibration (1000 coil-only
+estimator: ModelEstimator ('model') with the exact magnet and the start-up calibration (1000 coil-only
 frames), its forward model with and without the coils' field gradient at the sensors (the v2
 map carries it; without it the calibration cannot recover the sensors' position errors).
 Cold fixes. Prints one table row per variant (MAE, ratio to the noise limit, ok share) and
@@ -29,7 +29,7 @@ import numpy as np
 
 from designkit.design import default_design
 from designkit.sim.readings import SensorSimulator, case_currents, forward_model, random_positions
-from firmware_io.localization import Localizer, SensorModel
+from firmware_io.localization import POSITION_ONLY, ModelEstimator, SensorModel
 from studies._common import finish
 from studies.localization import _calibrate, _noise_limited, with_coil_gradient
 
@@ -39,11 +39,12 @@ DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "localization_full_c
 def _induced_jacobian(model, pos, h=0.5e-3):
     """(k, 2, n, 3, 3) T/m: the model's induced field's Jacobian at each position (central
     differences), for the noise-limited reference's linearization."""
-    out = np.zeros((len(pos),) + model.sensor_positions_m.shape + (3,))
+    out = np.zeros((len(pos), 2, model.n_sensors // 2, 3, 3))
     for k, p in enumerate(pos):
         for j in range(3):
             dp = np.eye(3)[j] * h
-            out[k, ..., j] = (model.induced(p + dp) - model.induced(p - dp)) / (2 * h)
+            out[k, ..., j] = ((model.induced_field(p + dp) - model.induced_field(p - dp))
+                              / (2 * h)).reshape(2, -1, 3)
     return out
 
 
@@ -67,11 +68,12 @@ def run(n: int = 200, seed: int = 0, noise_t: float = 0.1e-3, out_dir=DEFAULT_OU
                          ("model-cal, coil gradient (as from_map)",
                           with_coil_gradient(sim, plain))):
         cal, _ = _calibrate(sim, model, seed + 1000, 1000)
-        loc = Localizer(model, "model", calibration=cal, noise_t=noise_t)
+        loc = ModelEstimator(model, dataclasses.replace(POSITION_ONLY, noise_t=noise_t),
+                             calibration=cal)
         err, ok = np.empty(n), np.empty(n, bool)
         for k in range(n):
             loc.reset()
-            e = loc.fix(rd.top_t[k], rd.bottom_t[k], cur[k])
+            e = loc.estimate(np.r_[rd.top_t[k], rd.bottom_t[k]], cur[k])
             err[k], ok[k] = np.linalg.norm(e.position_m - pos[k]), e.ok
         rows.append((label, err.mean(), err.mean() / limit.mean(), ok.mean()))
     res = {"n": n, "seed": seed, "noise_t": noise_t,

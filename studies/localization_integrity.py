@@ -43,7 +43,7 @@ from scipy.stats import beta
 from designkit.design import default_design
 from designkit.sim.readings import SensorSimulator, case_currents, forward_model, random_positions
 from firmware_io.constants import MU0
-from firmware_io.localization import Localizer, SensorModel, multipole_field
+from firmware_io.localization import POSITION_ONLY, ModelEstimator, SensorModel, multipole_field
 from firmware_io.localization.integrity import fused_protection_level, ratio_quantiles
 from firmware_io.runner import PoseTracker
 from studies.localization import _calibrate, with_coil_gradient
@@ -134,7 +134,7 @@ def run_condition(loc, sim, cond, n, rng) -> dict:
         if cond in ("cold", "two saturated", "6 A", "uncalibrated"):
             loc.reset()
         t0 = time.perf_counter()
-        e = loc.fix(top[k], bot[k], cur[k])
+        e = loc.estimate(np.r_[top[k], bot[k]], cur[k])
         ts[k] = time.perf_counter() - t0
         err[k] = np.linalg.norm(e.position_m - pos[k])
         pl[k], ok[k] = e.protection_level_m, e.ok
@@ -181,11 +181,11 @@ def thesis_tracked(loc, sim, case, m, rng) -> dict:
     ok = np.zeros(m, bool)
     err, pls = np.empty(m), np.empty(m)
     for k in range(m):
-        e = loc.fix(rd.top_t[k], rd.bottom_t[k], cur[k])
+        e = loc.estimate(np.r_[rd.top_t[k], rd.bottom_t[k]], cur[k])
         pl, tracked = e.protection_level_m, trk.x is not None
         if e.ok and tracked:
             _, var = trk.innovation(e.position_m, k * FRAME_S)
-            pl = fused_protection_level(pl, e.covariance_m2, var - trk.r, loc.model_bias_m,
+            pl = fused_protection_level(pl, e.position_covariance_m2, var - trk.r, loc.model_bias_m,
                                         (var - trk.r) / var, ratio_quantiles(loc.integrity_risk))
         ok[k], pls[k] = e.ok and pl <= ALERT_LIMIT_M, pl
         if ok[k] or e.ok and not acquired:   # acquisition: the runner's tracker takes it
@@ -227,7 +227,8 @@ def bench(n: int = 100, seed: int = 0, repeats: int = 3, noise_t: float = NOISE_
     currents), with the same-process multipole reference."""
     rng = np.random.default_rng(seed)
     sim, model, cal = _device(seed, noise_t)
-    loc = Localizer(model, "model", calibration=cal, noise_t=noise_t)
+    loc = ModelEstimator(model, dataclasses.replace(POSITION_ONLY, noise_t=noise_t),
+                         calibration=cal)
     cur = case_currents("sinusoidal", rng.uniform(0, 20, n), sim.array.n_coils)
     cold = sim.read(random_positions(n, rng), cur, rng=rng)
     walk = np.cumsum(rng.normal(scale=0.5e-3, size=(n, 3)), 0) + [0.0, 0.0, 0.04]
@@ -238,11 +239,11 @@ def bench(n: int = 100, seed: int = 0, repeats: int = 3, noise_t: float = NOISE_
         for k in range(n):
             loc.reset()
             t0 = time.perf_counter()
-            loc.fix(cold.top_t[k], cold.bottom_t[k], cur[k])
+            loc.estimate(np.r_[cold.top_t[k], cold.bottom_t[k]], cur[k])
             tc.append(time.perf_counter() - t0)
         for k in range(n):
             t0 = time.perf_counter()
-            loc.fix(warm.top_t[k], warm.bottom_t[k], cur[k])
+            loc.estimate(np.r_[warm.top_t[k], warm.bottom_t[k]], cur[k])
             tw.append(time.perf_counter() - t0)
         ref = _reference_s(model)
         out.append({"cold_ms_median": float(np.median(tc) * 1e3),
@@ -270,8 +271,8 @@ def run(out_dir, n: int = 10000, seed: int = 0, conditions=CONDITIONS,
     kw = dict(integrity_risk=RISK, noise_t=noise_t)
     if model_bias_m is not None:
         kw["model_bias_m"] = model_bias_m
-    loc_cal = Localizer(model, "model", calibration=cal, **kw)
-    loc_uncal = Localizer(model, "model", **kw)
+    loc_cal = ModelEstimator(model, dataclasses.replace(POSITION_ONLY, **kw), calibration=cal)
+    loc_uncal = ModelEstimator(model, dataclasses.replace(POSITION_ONLY, **kw))
     rows = []
     for c in conditions:
         rows.append(run_condition(loc_uncal if c == "uncalibrated" else loc_cal, sim, c, n, rng))
@@ -286,7 +287,7 @@ def run(out_dir, n: int = 10000, seed: int = 0, conditions=CONDITIONS,
         oks = []
         for k in range(m):
             loc_cal.reset()
-            e = loc_cal.fix(rd.top_t[k], rd.bottom_t[k], cur[k])
+            e = loc_cal.estimate(np.r_[rd.top_t[k], rd.bottom_t[k]], cur[k])
             oks.append((e.ok and e.protection_level_m <= ALERT_LIMIT_M,
                         e.ok and e.protection_level_m <= ALERT_LIMIT_RUNNER_M))
         a5, a10 = np.mean(oks, axis=0)

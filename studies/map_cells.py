@@ -27,6 +27,7 @@ loop of a batch lookup (50 .. 1400 cells), one 8 x n_coils matvec against a harm
 
 from __future__ import annotations
 
+import argparse
 import itertools
 import math
 import sys
@@ -258,5 +259,15 @@ def run(out_dir=DEFAULT_OUT, quick: bool = False) -> dict:
     return res
 
 
+def main(argv=None) -> int:
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("out", nargs="?", default=str(DEFAULT_OUT),
+                    help="output folder (default out/map_cells)")
+    run(ap.parse_args(argv).out)
+    return 0
+
+
 if __name__ == "__main__":
-    run(sys.argv[1] if len(sys.argv) > 1 else DEFAULT_OUT)
+    sys.exit(main())

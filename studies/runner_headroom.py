@@ -8,8 +8,11 @@ path, 0.1 mT noise, 12-bit clipping) with the magnet at random positions
 20-70 mm above the coils and current patterns of one amplitude (every coil at +-A, random
 signs; and the +-A checkerboard); the runner's SensorPipeline leaves out every sensor its model
 predicts beyond 80 % of the 130 mT range (the coils' field from the map, the magnet's dipole
-at the true position) and the map's localizer fits the rest. Per amplitude: the sensors left,
-the fraction of frames with a trusted fix, and the trusted fixes more than 5 mm off.
+at the true position) and the map's estimator fits the rest, as the runner does while it
+tracks the finger (with its tracker's prior: the true pose off by PRIOR_SD) and cold (no
+prior: the first fix, or one after the track was lost). Per amplitude: the sensors left,
+the fraction of frames with a trusted fix (tracking, cold), and the trusted fixes more than
+5 mm off.
 `designkit check` gives the same in currents: one coil alone blinds its sensors at ~4.2 A.
 
 Closed loop: the hemisphere slide with a stiff object (lambda 40 N/m: forces up to ~1.6 N,
@@ -32,10 +35,11 @@ if __package__ in (None, ""):
 import numpy as np
 
 from designkit.sim import RunSettings, SimulatedDevice, run_simulation
-from firmware_io.localization import Localizer
+from firmware_io.localization import SensorModel, estimator_from_map
 from firmware_io.mapfile import MapFile
-from firmware_io.runner import (CALIBRATED_RELATIVE_ERROR, CurrentHistory, LocalizerShim,
-                                SensorFrame, SensorLayout, SensorPipeline)
+from firmware_io.localization.pose import tangent_axes
+from firmware_io.runner import CurrentHistory, SensorFrame, SensorLayout, SensorPipeline
+from firmware_io.runner.tracker import TrackedPose
 from studies._common import design_and_map, finish, load_average
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "runner_headroom"
@@ -44,6 +48,10 @@ DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "runner_headroom"
 AMPLITUDES_A = (0.0, 2.0, 3.0, 4.0, 6.0)
 """Current amplitudes of the patterns, A."""
 
+PRIOR_SD = (0.5e-3, np.radians(2.0))
+"""The tracker's prior while tracking: position sd per axis, m; direction sd per tangent axis,
+rad (as studies/pose_integrity.py)."""
+
 
 def frames_at(design, array, map_path, amplitude_a: float, n: int, seed: int = 0) -> dict:
     """The open-loop frames at one amplitude (module docstring): dict of the numbers."""
@@ -51,9 +59,8 @@ def frames_at(design, array, map_path, amplitude_a: float, n: int, seed: int = 0
     device = SimulatedDevice(design, array, seed=seed)
     sim = device.sensor_sim
     fmap = MapFile.load(map_path)
-    cal = device.calibrate_sensors(Localizer.from_map(map_path).model)
-    shim = LocalizerShim(Localizer.from_map(map_path, calibration=cal,
-                                            relative_error=CALIBRATED_RELATIVE_ERROR))
+    cal = device.calibrate_sensors(SensorModel.from_map(map_path))
+    estimator = estimator_from_map(map_path, "model", calibration=cal)
     layout = SensorLayout.of_map(fmap)
     pos = rng.uniform([-0.03, -0.03, 0.02], [0.03, 0.03, 0.07], (n, 3))
     signs = rng.choice([-1.0, 1.0], (n, array.n_coils))
@@ -62,21 +69,37 @@ def frames_at(design, array, map_path, amplitude_a: float, n: int, seed: int = 0
     cur = amplitude_a * signs
     r = sim.read(pos, cur)
     readings = np.concatenate([r.top_t, r.bottom_t], axis=1)
-    left, trusted, off = [], 0, 0
+    left, trusted, off = [], {"track": 0, "cold": 0}, 0
+    moment = np.asarray(fmap.moment_a_m2, float)     # the simulated magnet is upright
+    cov = np.diag([PRIOR_SD[0] ** 2] * 3 + [PRIOR_SD[1] ** 2] * 2)
     for k in range(n):
         hist = CurrentHistory(array.n_coils, 2)
         hist.push(0.0, cur[k])
-        pipe = SensorPipeline(shim, layout, hist.at, fmap.moment_a_m2)
-        pipe.position_m = pos[k]                    # the pose the model predicts with
-        shim.reset()
-        fix = pipe.process(SensorFrame(readings[k], ("ok",) * len(readings[k]), 0.0))
-        left.append(int((~fix.excluded & np.isfinite(readings[k]).all(axis=1)).sum()))
-        if fix.ok:
-            trusted += 1
-            off += int(np.linalg.norm(fix.position_m - pos[k]) > 5e-3)
+        for mode in trusted:
+            pipe = SensorPipeline(estimator, layout, hist.at, fmap.moment_a_m2)
+            pipe.position_m = pos[k]                    # the pose the model predicts with
+            if mode == "track":
+                pipe.track = _prior(pos[k], moment, cov, rng)
+            estimator.reset()
+            fix = pipe.process(SensorFrame(readings[k], ("ok",) * len(readings[k]), 0.0))
+            if mode == "track":
+                left.append(int((~fix.excluded & np.isfinite(readings[k]).all(axis=1)).sum()))
+            if fix.ok:
+                trusted[mode] += 1
+                off += int(np.linalg.norm(fix.position_m - pos[k]) > 5e-3)
     return {"amplitude_a": amplitude_a, "frames": n, "sensors_left_median": float(np.median(left)),
-            "sensors_left_min": int(min(left)), "trusted_fraction": trusted / n,
-            "trusted_beyond_5mm": off}
+            "sensors_left_min": int(min(left)), "trusted_fraction": trusted["track"] / n,
+            "trusted_fraction_cold": trusted["cold"] / n, "trusted_beyond_5mm": off}
+
+
+def _prior(position_m, moment_a_m2, cov, rng) -> TrackedPose:
+    """A tracker's state at the frame's time: the true pose off by :data:`PRIOR_SD`."""
+    e1, e2 = tangent_axes(moment_a_m2 / np.linalg.norm(moment_a_m2))
+    a, b = rng.normal(scale=PRIOR_SD[1], size=2)
+    m = moment_a_m2 + np.linalg.norm(moment_a_m2) * (a * e1 + b * e2)
+    m *= np.linalg.norm(moment_a_m2) / np.linalg.norm(m)
+    return TrackedPose(position_m + rng.normal(scale=PRIOR_SD[0], size=3), m, cov, 0.0,
+                       np.zeros(3), 0.0, 0.0, 0.0)
 
 
 def run(out_dir=DEFAULT_OUT, *, map_path=None, frames: int = 200, quick: bool = False) -> dict:
@@ -96,11 +119,12 @@ def run(out_dir=DEFAULT_OUT, *, map_path=None, frames: int = 200, quick: bool = 
 
 def _print(res: dict) -> None:
     print(f"sensor headroom (load average {res['load_average_1min']})")
-    print("open loop: amplitude A | sensors left median (min) | trusted fixes | > 5 mm off")
+    print("open loop: amplitude A | sensors left median (min) | trusted fixes tracking "
+          "(cold) | > 5 mm off")
     for r in res["open_loop"]:
         print(f"  {r['amplitude_a']:4.1f} | {r['sensors_left_median']:5.1f} "
-              f"({r['sensors_left_min']:2d}) | {r['trusted_fraction']:6.3f} | "
-              f"{r['trusted_beyond_5mm']}")
+              f"({r['sensors_left_min']:2d}) | {r['trusted_fraction']:6.3f} "
+              f"({r['trusted_fraction_cold']:5.3f}) | {r['trusted_beyond_5mm']}")
     print("closed loop, hemisphere at 40 N/m: running | force error RMS mN (object RMS) | "
           "max |I| A | most sensors dropped | MAE mm")
     for name, r in res["closed_loop"].items():

@@ -4,8 +4,8 @@ the sensors no longer support, and how soon is it back once the finger returns?
 The closed loop (designkit.sim: firmware_io's runner with the map's localizer on the simulated
 device, start-up calibration, 0.1 mT noise, modelled compute time) over the hemisphere. The
 finger hovers 30 mm above the coils, then jumps 40 mm sideways between two control steps,
-hovers, is taken away (lifted 0.3 m, out of the sensors' reach) for 0.2 s and comes back 40 mm
-from where it left. For every running step: how far the rendered position is from the finger
+hovers, is taken away (the simulator's ``out_of_box``: lifted 60 mm above the map box, where no
+trajectory may go, for 0.3 s) and comes back 40 mm from where it left. For every running step: how far the rendered position is from the finger
 at the frame time of the newest fix the runner had (what it could know; acceptance: never more
 than 5 mm) and from the finger now (that includes the sensing latency, about two bus passes);
 for each event the time from the finger's arrival to the first running step (the issue's
@@ -27,6 +27,7 @@ if __package__ in (None, ""):
 import numpy as np
 
 from designkit.sim import RunSettings, run_simulation
+from designkit.sim.loop import OUT_OF_BOX_S
 from studies._common import design_and_map, finish, load_average
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "runner_stale"
@@ -37,15 +38,16 @@ LIMIT_M = 5e-3
 
 
 def path_csv(path, *, height_m: float = 0.030, jump_m: float = 0.040) -> dict:
-    """Write the trajectory (hover, jump, hover, removal, return) and return its event times,
-    s: {'jump': t, 'removed': t, 'back': t}."""
-    ev = {"jump": 0.35, "removed": 0.65, "back": 0.85}
-    end = 1.2
+    """Write the trajectory (hover, jump, hover, the sideways move back while the finger is
+    away) and return the event times, s: {'jump': t, 'removed': t, 'back': t}; the removal is
+    the fault schedule's ``out_of_box`` at 'removed' (the finger away for
+    :data:`designkit.sim.loop.OUT_OF_BOX_S`)."""
+    ev = {"jump": 0.35, "removed": 0.65, "back": 0.65 + OUT_OF_BOX_S}
+    end = ev["back"] + 0.35
     x0, x1 = -jump_m / 2, jump_m / 2
-    far = height_m + 0.3
+    away = (ev["removed"] + ev["back"]) / 2
     pts = [(0.0, x0, height_m), (ev["jump"] - 1e-6, x0, height_m), (ev["jump"], x1, height_m),
-           (ev["removed"] - 1e-6, x1, height_m), (ev["removed"], x1, far),
-           (ev["back"] - 1e-6, x1, far), (ev["back"], x0, height_m), (end, x0, height_m)]
+           (away - 1e-6, x1, height_m), (away, x0, height_m), (end, x0, height_m)]
     Path(path).write_text("t_s,x_m,y_m,z_m\n" + "".join(f"{t:.7f},{x:.6f},0.0,{z:.6f}\n"
                                                        for t, x, z in pts))
     return ev
@@ -99,7 +101,8 @@ def run(out_dir=DEFAULT_OUT, *, map_path=None, seeds: int = 3, design=None, arra
     res = {"load_average_1min": load_average(), "limit_m": LIMIT_M, "runs": []}
     for seed in range(seeds):
         sub = out_dir / f"seed{seed}"
-        summary = run_simulation(RunSettings(trajectory=str(out_dir / "path.csv"), seed=seed),
+        summary = run_simulation(RunSettings(trajectory=str(out_dir / "path.csv"), seed=seed,
+                                             faults=f"out_of_box@{events['removed']:g}"),
                                  design=design, map_path=map_path, array=array, out=sub,
                                  progress=False)
         row = measure(sub / "run.csv", events)

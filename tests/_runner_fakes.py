@@ -7,12 +7,13 @@ import math
 
 import numpy as np
 
-from firmware_io.runner import PoseEstimate
+from firmware_io.localization import Estimate
 
 
 class TruthEstimator:
     """A pose estimator that returns the true position (read from a callable) and the given
-    moment, trusted unless every sensor is NaN."""
+    moment, trusted unless every sensor is NaN, with a zero protection level (the runner's own
+    integrity logic is tested elsewhere)."""
 
     integrity_risk = 1e-4
     model_bias_m = 0.0
@@ -25,10 +26,13 @@ class TruthEstimator:
     def reset(self):
         self.resets += 1
 
-    def fix(self, readings_t, currents_a):
+    def magnet_free(self, readings_t, currents_a=None):
+        return False
+
+    def estimate(self, readings_t, currents_a=None, *, usable=None, seed=None, time_s=None):
         ok = bool(np.isfinite(readings_t).any())
-        return PoseEstimate(np.asarray(self.truth(), float), self.moment.copy(), ok,
-                            "" if ok else "no sensor", None, 0.0 if ok else math.inf)
+        return Estimate(np.asarray(self.truth(), float), self.moment.copy(), ok,
+                        "" if ok else "no usable sensor", None, 0.0 if ok else math.inf)
 
 
 class HoldTracker:
@@ -44,7 +48,7 @@ class HoldTracker:
         self.t = None
         self.moment_a_m2 = None
 
-    def update(self, position_m, time_s, ok=True, moment_a_m2=None):
+    def update(self, position_m, time_s, ok=True, moment_a_m2=None, covariance=None):
         if ok:
             self.x = np.stack([np.asarray(position_m, float), np.zeros(3)])
             self.t = float(time_s)
@@ -56,6 +60,9 @@ class HoldTracker:
 
     def innovation(self, position_m, time_s):
         return np.zeros(3), 1.0
+
+    def snapshot(self):
+        return None
 
 
 class ConstantMap:

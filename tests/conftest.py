@@ -84,6 +84,26 @@ def small_box_design():
                                        "workspace.z_max_m": 0.045})
 
 
+def small_steel_design():
+    """:func:`small_box_design` with 1010-steel cores: they saturate, so its map stores their
+    factor and the simulated plant's cores saturate (tests/test_saturation.py)."""
+    return small_box_design().replace(**{"name": "thesis-steel1010-small",
+                                         "core.bh": "steel1010"})
+
+
+@pytest.fixture(scope="session")
+def steel_small_map(tmp_path_factory):
+    """(map path, CoilArray) of :func:`small_steel_design`, built once per run."""
+    from designkit import fieldmap
+    from designkit.model.array import CoilArray
+
+    arr = CoilArray.from_design(small_steel_design())
+    path = tmp_path_factory.mktemp("steel_map") / "map.npz"
+    fieldmap.write(path, fieldmap.build(small_steel_design(), array=arr, n_check=10,
+                                        progress=False))
+    return path, arr
+
+
 @pytest.fixture(scope="session")
 def small_map(tmp_path_factory, thesis_array):
     """The coupled iron-core map (v2 file) of :func:`small_box_design`, built once per run."""

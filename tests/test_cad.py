@@ -38,8 +38,9 @@ def test_params_follow_the_thesis_design(params):
         pytest.approx((12.0, 19.0, 100.0))
     assert params.core.length_mm == pytest.approx(110.0)
     assert params.core.top_z_mm == pytest.approx(5.0)  # protrudes 5 mm beyond each end
-    assert params.grid.footprint_x_mm == pytest.approx(150.0)
-    xs = sorted({round(x, 9) for x, _ in params.grid.centres_xy_mm})
+    outline = np.asarray(params.upper.outline_mm)
+    assert np.ptp(outline[:, 0]) == pytest.approx(150.0)
+    xs = sorted({round(top[0], 9) for top, _ in params.coil_frames})
     assert xs == pytest.approx([-50.0, 0.0, 50.0])
     assert params.sensor_mount.sensor_z_mm == pytest.approx(14.0)
     # the design's core fills the 24 mm bore: no room for a printed tube -> wound on the core
@@ -89,19 +90,20 @@ def test_printed_tube_bobbin_volume():
 
 
 def test_frame_plate_volume(params):
-    f, g = params.frame, params.grid
-    T, d = f.thickness_mm, f.pocket_depth_mm
-    exact = (150.0 * 150.0 * T
-             - 9 * (pi * f.pocket_radius_mm**2 * d + pi * f.through_radius_mm**2 * (T - d))
-             - 4 * pi * g.fixing_hole_radius_mm**2 * T)
-    for side in ("upper", "lower"):
-        assert P.frame_plate(f, side).volume == pytest.approx(exact, rel=1e-9)
-    lower = P.frame_plate(f, "lower").bounding_box()
+    f = params.upper
+    T, d = f.thickness_mm, f.seats[0].pocket_depth_mm
+    rp, rt = f.seats[0].pocket_radius_mm, f.seats[0].through_radius_mm
+    exact = (150.0 * 150.0 * T - 9 * (pi * rp**2 * d + pi * rt**2 * (T - d))
+             - 4 * pi * f.fixing_hole_radius_mm**2 * T)
+    assert T == pytest.approx(6.0)
+    for plate in (params.upper, params.lower):
+        assert P.frame_plate(plate).volume == pytest.approx(exact, rel=1e-9)
+    lower = P.frame_plate(params.lower).bounding_box()
     assert (lower.min.Z, lower.max.Z) == pytest.approx((-106.0, -100.0))
 
 
 def test_sensor_mount_volume(params):
-    s, g = params.sensor_mount, params.grid
+    s = params.sensor_mount
     top, bottom = s.top_z_mm, s.bottom_z_mm
     bx = s.board_size_mm[0] + 2 * s.pocket_clearance_mm
     by = s.board_size_mm[1] + 2 * s.pocket_clearance_mm
@@ -110,8 +112,9 @@ def test_sensor_mount_volume(params):
     removed_per_row = 3 * bx * by + (hx - (-50.0)) * cw - (bx / 2 + 2 * bx) * cw  # channel minus overlaps
     exact = (150.0 * 150.0 * (top - bottom) - 3 * removed_per_row * s.board_thickness_mm
              + 4 * pi * s.leg_outer_radius_mm**2 * leg_h
-             - 4 * pi * g.fixing_hole_radius_mm**2 * (top - s.leg_bottom_z_mm))
-    assert P.sensor_mount(s, "upper").volume == pytest.approx(exact, rel=1e-9)
+             - 4 * pi * s.fixing_hole_radius_mm**2 * (top - s.leg_bottom_z_mm))
+    for side in ("upper", "lower"):
+        assert P.sensor_mount(s, side).volume == pytest.approx(exact, rel=1e-9)
 
 
 def test_magnet_holder_pocket_fits_magnet(params):
@@ -133,7 +136,7 @@ def test_outer_radius_changes_flange_and_frame_pocket(params):
     assert f0.bounding_box().size.Y == pytest.approx(2 * (19.0 + 1.5), abs=1e-6)
     assert f1.bounding_box().size.Y == pytest.approx(2 * (21.0 + 1.5), abs=1e-6)
     # nine pockets 2 mm deep grow from r = 20.8 mm to 22.8 mm
-    dv = P.frame_plate(params.frame).volume - P.frame_plate(wider.frame).volume
+    dv = P.frame_plate(params.upper).volume - P.frame_plate(wider.upper).volume
     assert dv == pytest.approx(9 * pi * (22.8**2 - 20.8**2) * 2.0, rel=1e-9)
 
 
@@ -184,7 +187,10 @@ def test_build_volume_fit():
 def test_interference_check_finds_a_tight_pocket(params):
     # one coil keeps the boolean work small; the pocket (20 mm) is smaller than the flange (20.5)
     single = from_design(default_design().replace(**{"array.rows": 1, "array.columns": 1}))
-    tight = dataclasses.replace(single, frame=dataclasses.replace(single.frame, pocket_radius_mm=20.0))
+    plates = {side: dataclasses.replace(getattr(single, side), seats=tuple(
+        dataclasses.replace(s, pocket_radius_mm=20.0) for s in getattr(single, side).seats))
+        for side in ("upper", "lower")}
+    tight = dataclasses.replace(single, **plates)
     assert interferences(single) == []
     hits = interferences(tight)
     labels = {a.split("@")[0] for a, b, _ in hits} | {b.split("@")[0] for a, b, _ in hits}
@@ -222,7 +228,7 @@ def test_meshcheck_on_a_cube(tmp_path):
     assert rep.watertight and rep.volume == pytest.approx(-8.0)
     assert any("not positive" in s for s in meshcheck.check_mesh(rep, 8.0, 24.0, 0.01))
     doubled = np.concatenate([tris, tris])
-    rep = meshcheck.mesh_report(*meshcheck._merge(doubled.reshape(-1, 3)))
+    rep = meshcheck.mesh_report(*meshcheck.merge_corners(doubled.reshape(-1, 3)))
     assert not rep.manifold
 
 

@@ -79,6 +79,7 @@ OUT_FOLDER_COMMANDS = {
     "cad": ["cad"],
     "fem": ["fem"],
     "run": ["run", "--simulate"],
+    "sensors": ["sensors", "plan"],
 }
 OUT_FILE_COMMANDS = {
     "map": ["map"],
@@ -350,10 +351,45 @@ def test_an_unwritable_out_is_refused_before_any_work(tmp_path, monkeypatch, cap
 
 # ----------------------------------------------------------------------------- scene compile
 @pytest.mark.slow
-def test_scene_compile_refuses_lambda_zero_and_says_why(tmp_path):
+def test_scene_compile_unipolar_leaves_out_the_points_it_cannot_render(tmp_path):
+    """Under a unipolar drive the cores' pull (F0) cannot be cancelled at the wedge's lowest
+    points; lambda is the smallest over the points that can be rendered (> 0 N/m), the left-out
+    points are counted on stdout and in the file."""
+    import json
+
+    import numpy as np
+
     res = designkit("scene", "compile", "wedge", "--unipolar", "--n-side", "11", "--quiet",
                     "--out", "w.npz", cwd=tmp_path, timeout=900)
-    line = _one_clear_line(res, "wedge", "lambda = 0 N/m", "--unipolar", "--lambda")
+    assert res.returncode == 0, res.stderr
+    assert "Traceback" not in res.stderr
+    with np.load(tmp_path / "w.npz") as z:
+        meta = json.loads(str(z["meta"]))
+    left_out = meta["lambda_unrenderable_points"]
+    assert 0 < left_out < meta["lambda_points"]
+    assert meta["lambda_n_per_m"] > 0.0
+    assert f"{left_out} points where the cores' pull cannot be cancelled left out" in res.stdout
+
+
+def test_scene_compile_refuses_an_object_nothing_can_render(tmp_path, monkeypatch):
+    """lambda = 0 at every point (no point renderable): one line naming the object, the
+    limiting point and the ways out; nothing written."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    def force_constant(*args, **kwargs):
+        return SimpleNamespace(lam_where_renderable=lambda: 0.0,
+                               limiting_point_where_renderable=lambda: np.array([0, 0, 0.03]),
+                               limiting_point_m=np.array([0, 0, 0.03]),
+                               unrenderable_points=4, points_m=np.zeros((4, 3)))
+
+    monkeypatch.setattr(importlib.import_module("designkit.render"), "force_constant",
+                        force_constant)
+    res = designkit("scene", "compile", "wedge", "--unipolar", "--n-side", "5", "--quiet",
+                    "--out", "w.npz", cwd=tmp_path)
+    line = _one_clear_line(res, "wedge", "lambda = 0 N/m", "[0.0, 0.0, 30.0] mm", "--unipolar",
+                           "--lambda")
     assert "lam_n_per_m" not in line
     assert list(tmp_path.iterdir()) == []
 

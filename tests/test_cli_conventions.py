@@ -35,6 +35,7 @@ OUT_CASES = {
     "cad": (["cad"], "cad.export.export_all", "cad"),
     "fem": (["fem"], "designkit.commands.fem.solve", "fem"),
     "calibrate": (["calibrate", "--plan"], "designkit.commands.calibrate.make_plan", "p.csv"),
+    "sensors": (["sensors", "plan"], "designkit.commands.sensors.plan_design", "sp"),
 }
 
 
@@ -82,7 +83,7 @@ LENGTH_CASES = [
     (["map", "--spacing", "8"], "designkit.fieldmap.build", lambda a, k: k["spacing"], 0.008),
     (["optimize", "--vary-pitch", "--pitch-range", "40:6cm"],
      "designkit.commands.optimize.device_problem_for",
-     lambda a, k: k["pitch_range_m"], (0.04, 0.06)),
+     lambda a, k: k["vary"]["pitch_m"], (0.04, 0.06)),
     (["cad", "--min-wall", "0.8"], "cad.cli.from_design",
      lambda a, k: k["min_wall_mm"] * 1e-3, 0.8e-3),
     (["cad", "--min-wall", "1.2mm", "--build-volume", "20cm,19cm,0.2m"], "cad.cli.from_design",
@@ -141,10 +142,6 @@ def test_optimize_names_a_rule_it_cannot_fix_before_it_solves(tmp_path, monkeypa
 
 
 # ----------------------------------------------------------------------------- studies
-PENDING_STUDIES = {"bench_map", "array_coupling", "map_cells"}
-"""Studies whose owners convert them to argparse in this round (issue 39)."""
-
-
 def _reads_argv_by_hand(path: Path) -> bool:
     """The script's own code reads ``sys.argv`` (code run in a child process, written in a
     string, does not count)."""
@@ -160,9 +157,7 @@ def _studies():
     for p in sorted((ROOT / "studies").glob("*.py")):
         if p.name.startswith("_") or 'if __name__ == "__main__"' not in p.read_text():
             continue
-        marks = [pytest.mark.xfail(reason="converted by its owner (issue 39)", strict=False)] \
-            if p.stem in PENDING_STUDIES else []
-        out.append(pytest.param(p, id=p.stem, marks=marks))
+        out.append(pytest.param(p, id=p.stem))
     return out
 
 

@@ -57,6 +57,10 @@ CASES = {
     "fem": (["fem", "--level", "1", "--out", "fem"], "designkit.commands.fem.solve", 4.0),
     "cad": (["cad", "--out", "cad"], "cad.export._write_parts", 4.0),
     "run": (["run", "--simulate", "--out", "run"], "designkit.commands.run.run_simulation", 3.0),
+    # the figure is written into the staging folder, after sensors.toml and plan.json
+    "sensors": (["sensors", "plan", "--heights", "30:60", "--lattice", "30", "--spacing", "25",
+                 "--max-current", "2", "--count", "8", "--out", "sp"],
+                "designkit.commands.sensors.bound_figure", 2.0),
     # the shipped optimized design: no rule every row breaks (the thesis' 36 V supply is one,
     # and the sweep says so on stderr before it starts)
     "sweep": (["sweep", "--param", "inner_radius_m=0.006:0.01:3", "--design", "optimized",

@@ -1,6 +1,6 @@
 """Closed-loop physics in the default suite: the runner on the simulated device renders the
 scene's force (sign, magnitude, correlation) with the magnet's pull F0 compensated, on the
-coupled iron-core map of the thesis array and ``Localizer.from_map``.
+coupled iron-core map of the thesis array and ``estimator_from_map``.
 
 The true force comes from the exact coupled array model at the true position with the R-L
 currents the PWM registers produced (designkit.sim), independent of the map and of the runner's
@@ -11,13 +11,15 @@ where F0 is 15-65 mN. Longer runs and the fault paths: tests/test_run_simulated.
 """
 
 import csv
+import math
 
 import numpy as np
 import pytest
 
 from conftest import small_box_design
+from designkit.model.array import force_matrix
 from designkit.sim import run as sim_run
-from firmware_io.localization import Localizer
+from firmware_io.localization import EstimatorSettings, estimator_from_map
 from firmware_io.mapfile import MapFile
 
 SMALL_BOX = small_box_design()
@@ -77,16 +79,38 @@ def test_delivered_force_follows_the_scene(run):
     assert np.corrcoef(f.ravel(), ref.ravel())[0, 1] > 0.97
 
 
-def test_the_magnets_pull_is_compensated(run, small_map):
+F0_COMPENSATION = 0.015
+"""Largest error of the F0 the runner compensates, relative to F0 along the path (sum of the
+differences' norms over the sum of F0's norms): measured 0.4 %; a 3 % error in F0 -- in the
+map's tables, its reader or the runner's arithmetic -- makes it ~3 %."""
+
+
+def test_the_magnets_pull_is_compensated(run, small_map, thesis_array):
+    """The F0 the runner subtracted, read back from what it commanded: f_ref - Fm(q, n) I* at
+    its estimate q and moment n (Fm: the map's force per ampere; the allocation is exact here,
+    every current inside its bounds, so Fm I* = f_ref - F0_used), against the coupled model's
+    pull of the cores on the magnet as the finite cylinder it is, at the same q (independent of
+    the map). The loop is deterministic (modelled compute time), so is the number. F0 dropped,
+    added or 3 % off fails it; the delivered force's sign: test_delivered_force_follows_the_scene.
+    """
     _, col, ok = run
     fm = MapFile.load(small_map)
-    p = _vec(col, "", "_m")[ok]
-    f0 = fm.bias_force(p)[:, 2]
-    # F0 pulls down 15-65 mN along the path: uncompensated the mean Fz error would be ~F0,
-    # with F0 added instead of subtracted ~ -2 F0; compensated it is the lag's few mN
-    assert np.mean(f0) < -0.02, np.mean(f0)
-    fz_err = col["fz_n"][ok] - col["fz_ref_n"][ok]
-    assert abs(np.mean(fz_err)) < 0.5 * abs(np.mean(f0)), (np.mean(fz_err), np.mean(f0))
+    steps = np.flatnonzero(ok)[::8]
+    q = _vec(col, "", "e_m")[steps]
+    n = _vec(col, "m", "e_a_m2")[steps]
+    cmd = np.stack([col[f"cmd{k + 1}_a"] for k in range(fm.n_coils)], 1)[steps]
+    assert np.abs(cmd).max() < 0.9 * fm.max_current_a        # no bound active
+    f_ref = _vec(col, "f", "_ref_n")[steps]
+    a = fm.actuation(q)[:, 3:, :]
+    used = f_ref - np.stack([force_matrix(m) @ ak @ ik for m, ak, ik in zip(n, a, cmd)])
+    mg = SMALL_BOX.magnet
+    exact = np.array([thesis_array.bias_force(p, m, magnet_size_m=(mg.radius_m, mg.length_m))
+                      for p, m in zip(q, n)])
+    # F0 pulls down 15-65 mN along the path
+    assert np.mean(exact[:, 2]) < -0.015, np.mean(exact[:, 2])
+    err = np.linalg.norm(used - exact, axis=1).sum() / np.linalg.norm(exact, axis=1).sum()
+    print(f"compensated F0 against the cylinder's: {err:.2%} over {len(steps)} steps")
+    assert err < F0_COMPENSATION, err
 
 
 def test_localization_from_the_map_follows_the_finger(run):
@@ -106,9 +130,11 @@ def test_iron_core_map_against_the_coupled_model(small_map, thesis_array):
     scale = np.abs(a).max(axis=(0, 2))
     # docs/fieldmap.md: 1e-3 of each row's largest value
     assert np.all(np.abs(fm.actuation(p) - a).max(axis=(0, 2)) < 1e-3 * scale)
-    m = np.asarray(SMALL_BOX.magnet.moment_vector_a_m2, float)
-    f0 = thesis_array.bias_force(p[:6], m)
-    # measured 1.2 % of the largest |F0| at the box's floor (26 mm), 0.2-0.5 % above it (the
+    mg = SMALL_BOX.magnet
+    m = np.asarray(mg.moment_vector_a_m2, float)
+    # the magnet as the finite cylinder it is (the point dipole's pull is 2-4 % weaker here)
+    f0 = thesis_array.bias_force(p[:6], m, magnet_size_m=(mg.radius_m, mg.length_m))
+    # measured 1.3 % of the largest |F0| at the box's floor (21 mm), 0.2 % above it (the
     # map's own check: 0.5 %); without the map's core-to-core grid 3-7 % at every point
     err = np.abs(fm.bias_force(p[:6]) - f0).max() / np.abs(f0).max()
     assert err < 0.02, err
@@ -121,10 +147,13 @@ def test_localizer_from_map_recovers_a_position(small_map, thesis_array):
     # magnetizes + coils at known currents) -> the fit with the map's sensor section
     from designkit.sim.readings import SensorSimulator
 
-    loc = Localizer.from_map(small_map)
+    loc = estimator_from_map(small_map, settings=EstimatorSettings(
+        alert_limit_m=math.inf, orientation_alert_limit_rad=math.inf))
     sim = SensorSimulator(SMALL_BOX, array=thesis_array, errors="ideal", noise_t=0.0)
     p = np.array([0.012, -0.007, 0.033])
     currents = np.array([0.0, 1.0, 0.0, -1.0, 2.0, 0.0, 0.0, 0.5, 0.0])
     true = sim.read([p], [currents]).true_field_t[0]
-    est = loc.locate(true[0], true[1], currents=currents)
+    est = loc.estimate(true.reshape(-1, 3), currents)
     assert est.ok and np.linalg.norm(est.position_m - p) < 5e-4
+    m = sim.moment_a_m2
+    assert est.moment_a_m2 @ m / (np.linalg.norm(m) * np.linalg.norm(est.moment_a_m2)) > 0.9998

@@ -179,3 +179,21 @@ def test_workspace_follows_the_layout():
     assert grid.workspace_region().half_width_m() == pytest.approx(0.1)
     one = Design(array=FreeLayout(positions_m=((0.0, 0.0, 0.0),)))
     assert one.workspace_region().half_width_m() == pytest.approx(0.025)
+
+
+def test_more_sensors_than_the_sensor_bus_addresses_are_refused():
+    # the default bus: TCA9548A muxes 0x71..0x77, 8 channels each = 56 sensors; a hex of 3 rings
+    # (37 coils, 74 sensors above and below) is refused at load, naming the count and the limit
+    from firmware_io.errors import InputRangeError
+    from firmware_io.hw.sensors import MAX_SENSORS, default_sensor_layout
+
+    assert MAX_SENSORS == 56 and len(default_sensor_layout(56)) == 56
+    with pytest.raises(BadInputError, match=r"sensors.layout .*at most 28 coils.*37 coils "
+                                            r"\(74 sensors\)"):
+        _design('[array]\nlayout = "hex"\nrings = 3\npitch_m = 0.044\n')
+    _design('[array]\nlayout = "ring"\ncount = 28\nradius_m = 0.3\n')   # 56 sensors: fits
+    free = [[0.01 * k, 0.0, 0.05] for k in range(57)]
+    with pytest.raises(BadInputError, match=r"sensors.positions_m .*at most 56.*57 sensors"):
+        _design(f'[sensors]\nlayout = "free"\npositions_m = {free}\n')
+    with pytest.raises(InputRangeError, match="n_sensors"):   # firmware_io's own error
+        default_sensor_layout(57)

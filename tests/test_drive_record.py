@@ -21,6 +21,7 @@ from designkit.sim import drive_data
 from designkit.sim.device import SimulatedDevice
 from firmware_io.errors import BadInputError
 from firmware_io.hw.driver import MD10C, CoilDrive, DriverRating, voltage_to_command
+from firmware_io.mapfile import SaturationTable
 from firmware_io.mapfile.drive import DriveRecord
 from firmware_io.runner import RunnerConfig
 
@@ -235,6 +236,9 @@ def test_hardware_entry_refuses_a_map_over_its_driver_rating(tmp_path, monkeypat
         meta = {"drive": drive_data(default_design()).to_dict()}
         n_coils = 9
 
+        def saturation_table(self):
+            return SaturationTable([0.0, 6.0], np.ones((2, 9)))
+
     class Scene:
         meta = {"rows": "force"}
 
@@ -283,3 +287,29 @@ def test_a_48_v_design_runs_in_the_simulator_at_48_v(small48, tmp_path):
     # and check passes the supply against the driver it names
     table = rule_table(design)
     assert table["design_supply_voltage_v"]["met"] and table["supply_voltage_v"]["limit"] == 48.0
+
+
+def test_simulated_coils_of_two_sizes_each_follow_their_own_r_and_l():
+    # a 1 x 2 air-core array whose second coil has 900 turns, not 1020: a step of 12 V on both
+    # gives each coil its own exact R-L response, I(t) = V/R_k (1 - exp(-t R_k / L_k)) (a plant
+    # driving every coil with the first coil's R and L fails)
+    import tomllib
+
+    from designkit.design import design_from_dict
+
+    design = design_from_dict(tomllib.loads('[array]\nrows = 1\ncolumns = 2\n[core]\nenabled = false\n'
+                              '[[groups]]\ncoils = [1]\n[groups.coil]\nturns = 900\n'))
+    dev = SimulatedDevice(design, seed=0, sensor_errors="ideal")
+    r = np.asarray(dev.drive.resistance_ohm)
+    ind = np.asarray(dev.drive.inductance_h)
+    assert r[1] < 0.95 * r[0] and ind[1] < 0.85 * ind[0]   # the record's per-coil values
+    dev.coils.initialize()
+    dev.coils.command_voltage(np.full(2, 12.0))
+    volts = dev.applied_voltage_v()             # 12 V to the PWM's 12-bit step
+    np.testing.assert_allclose(volts, 12.0, rtol=2e-3)
+    t = 0.0
+    for dt in (1e-3, 2e-3, 5e-3):
+        dev.advance_currents(dt)
+        t += dt
+        want = volts / r * (1.0 - np.exp(-t * r / ind))
+        np.testing.assert_allclose(dev.current_a, want, rtol=1e-9)

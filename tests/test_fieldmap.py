@@ -294,7 +294,7 @@ def test_the_format_holds_any_number_of_sensors(mapfile, tmp_path):
     # the sensors are a flat list independent of the coil count: the map's first 5 sensors
     # (and a tilted orientation) make a valid map whose reader gives those 5, unchanged
     from firmware_io.mapfile import MapFile, data_hash, read
-    from firmware_io.localization.sensor_model import upper_lower
+    from firmware_io.localization import SensorModel
 
     arrays, meta = read(mapfile)
     keep = slice(0, 5)
@@ -314,9 +314,12 @@ def test_the_format_holds_any_number_of_sensors(mapfile, tmp_path):
     np.testing.assert_array_equal(m.sensor_coil_field(), full.sensor_coil_field()[keep])
     np.testing.assert_array_equal(m.sensor_rotations[2], rot[2])
     assert m.sensor_induced_field(np.mean(m.bounds, axis=0)).shape == (5, 3)
-    # the localizer's estimators still need an upper and a lower array of equal size
-    with pytest.raises(ValueError, match="even number of sensors"):
-        upper_lower(m.sensor_positions_m)
+    # the pose estimators take the flat list as it is: its 5 sensors and their rotations
+    model = SensorModel.from_map(path)
+    assert model.n_sensors == 5 and model.n_coils == 9
+    np.testing.assert_array_equal(model.sensor_positions_m, full.sensor_positions_m[keep])
+    np.testing.assert_array_equal(model.sensor_orientations[2], rot[2])
+    assert model.induced_field(np.mean(m.bounds, axis=0)).shape == (5, 3)
 
 
 def test_outside_points(fm):
@@ -573,11 +576,14 @@ def test_coupled_map_against_direct_coupled_model(coupled):
                                rtol=1e-9, atol=1e-15)
     np.testing.assert_allclose(fm.bias_force(p[7]), g.bias_force(p[7]), rtol=1e-9, atol=1e-15)
     m = fm.moment_a_m2
-    f = arr.bias_force(p[:20], m)
+    # the map's F0 is the finite cylinder's (the magnet the design names), not the dipole's
+    f = arr.bias_force(p[:20], m, magnet_size_m=(TWO.magnet.radius_m, TWO.magnet.length_m))
     # per-core tables (0.5 mm, 2 %) + a 10 mm grid of the cores' interaction: ~0.5 % of the
     # largest F0 (the former 2 mm, 15 % tables and 25 mm grid: ~8-12 %)
     err = np.abs(fm.bias_force(p[:20]) - f).max() / np.abs(f).max()
     assert err < 0.01, err
+    dipole = arr.bias_force(p[:20], m)   # 2-4 % off the cylinder at 20-30 mm: the map is not it
+    assert np.abs(fm.bias_force(p[:20]) - dipole).max() / np.abs(f).max() > 0.01
     s = fm.sensor_positions_m
     np.testing.assert_allclose(s, arr.sensor_positions_m().reshape(-1, 3))
     direct = arr.actuation_matrix(s)[:, :3, :]

@@ -5,17 +5,27 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 
 import numpy as np
 import pytest
 
 from firmware_io.errors import BadInputError
-from firmware_io.localization import (ConstantVelocityKalman, LearnedInverse, Localizer,
-                                      SensorModel, calibrate, multipole_field)
+from firmware_io.localization import (ConstantVelocityKalman, EstimatorSettings,
+                                      LearnedInverse, SensorModel, calibrate,
+                                      estimator_from_map, make_estimator, multipole_field)
 
 import magpylib as magpy  # noqa: E402  (a test dependency: no skip)
 
 MOMENT = np.array([0.0, 0.0, 0.909])
+
+
+def _loc(model, method="model", *, calibration=None, learned=None, **settings):
+    """The estimator of ``method`` with these settings (EstimatorSettings' keywords; no alert
+    limits unless given: these tests check the fit and its residual test)."""
+    settings = {"alert_limit_m": math.inf, "orientation_alert_limit_rad": math.inf, **settings}
+    return make_estimator(method, model, EstimatorSettings(**settings), calibration=calibration,
+                          learned=learned)
 
 
 def _positions():
@@ -32,14 +42,15 @@ def _model(rng, *, induced=None):
     # a coil field per ampere with the array's mirror symmetry (Br odd about the mid-plane)
     up = rng.normal(scale=5e-3, size=(9, 3, 9))
     lo = up * np.array([-1.0, -1.0, 1.0])[None, :, None]
-    return SensorModel(sp, np.stack([up, lo]), MOMENT, "a" * 64, 0.0, induced)
+    return SensorModel(sp.reshape(-1, 3), np.concatenate([up, lo]), MOMENT, "a" * 64, 0.0,
+                       induced)
 
 
 def _dipole_readings(model, p, currents):
     """Readings from magpylib's dipole (independent of the code under test) plus coils."""
     dip = magpy.misc.Dipole(moment=MOMENT, position=p)
-    b = dip.getB(model.sensor_positions_m.reshape(-1, 3)).reshape(2, 9, 3)
-    return b + np.einsum("asdc,c->asd", model.coil_field_t_per_a, currents)
+    b = dip.getB(model.sensor_positions_m) + model.coil_field_t_per_a @ currents
+    return b.reshape(2, 9, 3)
 
 
 def test_multipole_dipole_matches_magpylib_and_jacobian_matches_differences():
@@ -60,11 +71,11 @@ def test_multipole_dipole_matches_magpylib_and_jacobian_matches_differences():
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_fused_multipole_rows_match_magpylib_and_differences(seed):
-    """The fit's fused field + Jacobian (one (n, 3, 4) block, in units of mu0): the dipole part
-    against magpylib, the octupole's field and Jacobian against central differences of the
-    field, random moments and points 5-80 mm away."""
-    from firmware_io.localization.magnet import MU0, _multipole_rows, _multipole_work
+def test_pose_rows_match_magpylib_and_differences(seed):
+    """The fit's kernel (field, position and moment-direction Jacobians in one pass): the
+    dipole part against magpylib, the octupole's field and Jacobian against central
+    differences of the field, random moments and points 5-80 mm away."""
+    from firmware_io.localization.magnet import multipole_pose_rows
 
     rng = np.random.default_rng(seed)
     d = rng.normal(size=(18, 3))
@@ -73,20 +84,18 @@ def test_fused_multipole_rows_match_magpylib_and_differences(seed):
     m = rng.normal(size=3)
     mag = np.linalg.norm(m)
     u, cc = m / mag, mag / (4 * math.pi)
-    work = _multipole_work(18, u, cc)
-    out = np.empty((18, 3, 4))
-    _multipole_rows(pts - c, u, cc, 0.0, out, work)
+    b, _, _ = multipole_pose_rows(pts - c, u, cc, 0.0)
     ref = magpy.misc.Dipole(moment=m, position=c).getB(pts)
-    assert np.allclose(MU0 * out[..., 3], ref, rtol=1e-9, atol=1e-9 * np.abs(ref).max())
+    assert np.allclose(b, ref, rtol=1e-9, atol=1e-9 * np.abs(ref).max())
     q = rng.uniform(-3e-5, 3e-5)
-    _multipole_rows(pts - c, u, cc, 0.5 * cc * q, out, work)   # the buffers reused
-    b = multipole_field(pts, c, m, q)
-    assert np.allclose(MU0 * out[..., 3], b, rtol=1e-12, atol=1e-12 * np.abs(b).max())
+    b, jp, _ = multipole_pose_rows(pts - c, u, cc, 0.5 * cc * q)
+    want = multipole_field(pts, c, m, q)
+    assert np.allclose(b, want, rtol=1e-12, atol=1e-12 * np.abs(want).max())
     h = 1e-8
     fd = np.stack([(multipole_field(pts, c + h * e, m, q) - multipole_field(pts, c - h * e, m, q))
                    / (2 * h) for e in np.eye(3)], -1)
     scale = np.abs(fd).max(axis=(1, 2))[:, None, None]
-    assert np.all(np.abs(MU0 * out[..., :3] - fd) < 1e-5 * scale)
+    assert np.all(np.abs(jp - fd) < 1e-5 * scale)
 
 
 def test_octupole_term_approaches_the_exact_cylinder():
@@ -109,79 +118,94 @@ def test_octupole_term_approaches_the_exact_cylinder():
 def test_fit_recovers_a_noiseless_dipole(method):
     rng = np.random.default_rng(2)
     model = _model(rng)
-    loc = Localizer(model, method, cores=False)
+    loc = _loc(model, method, cores=False)
     for _ in range(8):
         p = np.r_[rng.uniform(-0.025, 0.025, 2), rng.uniform(0.02, 0.07)]
         i = rng.uniform(-1, 1, 9)
         top, bot = _dipole_readings(model, p, i)
         loc.reset()
-        est = loc.locate(top, bot, i)
+        est = loc.estimate(np.r_[top, bot], i)
         assert est.ok, est.reason
         assert np.linalg.norm(est.position_m - p) < 1e-6
         # warm start from the last estimate, a nearby frame
         p2 = p + rng.normal(scale=1e-3, size=3)
         top, bot = _dipole_readings(model, p2, i)
-        est = loc.locate(top, bot, i)
-        assert est.ok and np.linalg.norm(est.position_m - p2) < 1e-6
+        est = loc.estimate(np.r_[top, bot], i)
+        # the solver stops once the step after the last would be below ~1/60 of the noise
+        sd = math.sqrt(np.linalg.eigvalsh(est.position_covariance_m2)[-1])
+        assert est.ok and np.linalg.norm(est.position_m - p2) < max(1e-6, 0.02 * sd)
 
 
 @pytest.mark.parametrize("method", ["dipole", "model"])
 def test_warm_fit_of_noisy_frames_matches_scipy_least_squares(method):
-    """The fused fit path (one linear map of the field + Jacobian, weights, subtraction, a NaN
-    sensor) against scipy's least_squares on the same weighted cost written out independently
-    (magpylib's dipole; sigma^2 = noise^2 per reading + (rel |B|)^2, the subtraction's mirror
-    diag(-1, -1, 1) from the array's symmetry): warm-started estimates agree to < 1/20 of the
-    estimate's own standard deviation (the fit's stopping rule), with 0.1 mT noise."""
+    """The fit (5 unknowns: position and moment direction; weights, subtraction, a NaN sensor)
+    against scipy's least_squares on the same weighted cost written out independently
+    (magpylib's dipole; the direction as polar angles; sigma^2 = noise^2 + lsb^2 / 12 per
+    reading + (rel |B|)^2, the subtraction's mirror diag(-1, -1, 1) from the array's symmetry)
+    along a moving, tilting magnet: warm-started estimates agree to < 1/20 of the estimate's
+    own standard deviation (the fit's stopping rule), with 0.1 mT noise."""
     from scipy.optimize import least_squares
 
     rng = np.random.default_rng(11)
     model = _model(rng)
-    noise, rel = 1e-4, 0.02
-    loc = Localizer(model, method, cores=False, noise_t=noise, relative_error=rel)
+    noise, rel, lsb = 1e-4, 0.02, 0.098e-3
+    loc = _loc(model, method, cores=False, noise_t=noise, relative_error=rel, lsb_t=lsb,
+               background="off")
     sp = model.sensor_positions_m
     mirror = np.array([-1.0, -1.0, 1.0])
-    p = np.array([0.0, 0.0, 0.04])
+    p, ang = np.array([0.0, 0.0, 0.035]), np.array([0.2, 0.5])
+    var = noise ** 2 + lsb ** 2 / 12
+
+    def direction(a):
+        return np.array([math.sin(a[0]) * math.cos(a[1]), math.sin(a[0]) * math.sin(a[1]),
+                         math.cos(a[0])])
+
     for k in range(12):
-        p = p + rng.normal(scale=0.5e-3, size=3)     # a moving magnet, frame to frame
+        p = p + rng.normal(scale=0.5e-3, size=3)     # a moving, tilting magnet
+        ang = ang + rng.normal(scale=0.02, size=2)
         i = rng.uniform(-1, 1, 9)
-        top, bot = _dipole_readings(model, p, i)
+        b = magpy.misc.Dipole(moment=0.909 * direction(ang), position=p).getB(sp)
+        top, bot = (b + model.coil_field_t_per_a @ i).reshape(2, 9, 3)
         top = top + rng.normal(scale=noise, size=top.shape)
         bot = bot + rng.normal(scale=noise, size=bot.shape)
         if k % 3 == 2:
             top[rng.integers(9)] = np.nan
-        est = loc.locate(top, bot, i)
+        est = loc.estimate(np.r_[top, bot], i)
         assert est.ok, est.reason
-        coil = np.einsum("asdc,c->asd", model.coil_field_t_per_a, i)
+        coil = (model.coil_field_t_per_a @ i).reshape(2, 9, 3)
         if method == "dipole":
             d = top - mirror * bot
-            sig = np.sqrt(2 * noise**2 + rel**2 * (np.sum(top**2, 1) + np.sum(bot**2, 1)))
+            sig = np.sqrt(2 * var + rel**2 * (np.sum(top**2, 1) + np.sum(bot**2, 1)))
         else:
             d = np.r_[top - coil[0], bot - coil[1]]
-            sig = np.sqrt(noise**2 + rel**2 * np.sum(np.r_[top, bot] ** 2, 1))
+            sig = np.sqrt(var + rel**2 * np.sum(np.r_[top, bot] ** 2, 1))
         use = np.all(np.isfinite(d), axis=1)
 
-        def res(q):
-            b = magpy.misc.Dipole(moment=MOMENT, position=q).getB(sp.reshape(-1, 3))
-            b = (b[:9] - mirror * b[9:]) if method == "dipole" else b
-            return ((d - b)[use] / sig[use, None]).ravel()
+        def res(x):
+            f = magpy.misc.Dipole(moment=0.909 * direction(x[3:]), position=x[:3]).getB(sp)
+            f = (f[:9] - mirror * f[9:]) if method == "dipole" else f
+            return ((d - f)[use] / sig[use, None]).ravel()
 
-        ref = least_squares(res, p, x_scale=1e-3, xtol=1e-12, ftol=1e-12, gtol=1e-12)
-        sd = np.sqrt(np.trace(np.linalg.inv(ref.jac.T @ ref.jac)))
-        assert np.linalg.norm(est.position_m - ref.x) < 0.05 * sd, (k, est.position_m - ref.x, sd)
+        ref = least_squares(res, np.r_[p, ang], x_scale=np.r_[1e-3, 1e-3, 1e-3, 0.01, 0.01],
+                            xtol=1e-12, ftol=1e-12, gtol=1e-12)
+        cov = np.linalg.inv(ref.jac.T @ ref.jac)
+        assert np.linalg.norm(est.position_m - ref.x[:3]) < 0.05 * np.sqrt(np.trace(cov[:3, :3]))
+        turn = math.acos(min(1.0, est.moment_a_m2 @ direction(ref.x[3:]) / 0.909))
+        assert turn < 0.05 * math.sqrt(cov[3, 3] + (math.sin(ref.x[3]) ** 2) * cov[4, 4])
 
 
 @pytest.mark.parametrize("method", ["dipole", "model"])
 def test_nan_sensor_is_excluded(method):
     rng = np.random.default_rng(3)
     model = _model(rng)
-    loc = Localizer(model, method, cores=False)
+    loc = _loc(model, method, cores=False)
     p = np.array([0.004, -0.006, 0.03])
     i = rng.uniform(-1, 1, 9)
     top, bot = _dipole_readings(model, p, i)
     top[4] = [np.nan, 0.0, 0.0]      # the strongest sensor saturated
     bot[0] = np.nan                  # a dead one in the lower array
     top[7] = 1e3 * 0 + 0.5 * np.nan  # NaN everywhere in one more
-    est = loc.locate(top, bot, i)
+    est = loc.estimate(np.r_[top, bot], i)
     assert est.ok, est.reason
     assert np.linalg.norm(est.position_m - p) < 1e-6
     assert est.n_used == (6 if method == "dipole" else 15)
@@ -190,15 +214,15 @@ def test_nan_sensor_is_excluded(method):
 def test_too_few_sensors_and_garbage_give_ok_false():
     rng = np.random.default_rng(4)
     model = _model(rng)
-    loc = Localizer(model, "model", cores=False)
+    loc = _loc(model, "model", cores=False)
     top = np.full((9, 3), np.nan)
     bot = np.full((9, 3), np.nan)
     top[:2] = 1e-3
-    est = loc.locate(top, bot, np.zeros(9))
+    est = loc.estimate(np.r_[top, bot], np.zeros(9))
     assert not est.ok and "usable" in est.reason
     assert np.all(np.isfinite(est.position_m))
     # a field no dipole in the box can make: +50 mT along x at every sensor
-    est = loc.locate(np.tile([0.05, 0, 0], (9, 1)), np.tile([0.05, 0, 0], (9, 1)), np.zeros(9))
+    est = loc.estimate(np.tile([0.05, 0, 0], (18, 1)), np.zeros(9))
     assert not est.ok
     assert np.all(np.isfinite(est.position_m)) and math.isfinite(est.residual)
 
@@ -207,31 +231,37 @@ def test_model_based_cancellation_uses_the_commanded_currents():
     """Large coil fields, a wrong current in the model -> detected (residual), right -> exact."""
     rng = np.random.default_rng(5)
     model = _model(rng)
-    loc = Localizer(model, "model", cores=False, relative_error=0.0)
+    loc = _loc(model, "model", cores=False, relative_error=0.0)
     p = np.array([-0.01, 0.012, 0.05])
     i = rng.uniform(-5, 5, 9)
     top, bot = _dipole_readings(model, p, i)
-    assert np.linalg.norm(loc.locate(top, bot, i).position_m - p) < 1e-6
+    assert np.linalg.norm(loc.estimate(np.r_[top, bot], i).position_m - p) < 1e-6
     loc.reset()
     wrong = i.copy()
     wrong[3] += 1.0
-    assert not loc.locate(top, bot, wrong).ok
+    assert not loc.estimate(np.r_[top, bot], wrong).ok
 
 
 def test_induced_term_is_fitted():
-    """A position-dependent extra field known to the model (the cores' stand-in) is fitted."""
+    """A field known to the model, linear in the moment and falling with the height (the
+    magnet-magnetized cores' stand-in), of a tilted magnet: fitted to 10 um and 0.05 degree;
+    left out, the fit is off."""
     rng = np.random.default_rng(6)
+    mix = rng.normal(scale=2e-3 / 0.909, size=(18, 3, 3))   # T per A m^2, 30 mm away
 
-    def induced(p):
-        # a smooth field falling with height, as the magnet-magnetized cores make
-        return np.broadcast_to(np.array([0.0, 0.0, 4e-3]) * (0.03 / p[2]) ** 3, (2, 9, 3)).copy()
+    def induced(positions, directions):
+        d = np.linalg.norm(model.sensor_positions_m[None] - positions[:, None], axis=-1)
+        return (0.03 / d)[..., None, None] ** 3 * mix @ directions
 
     model = _model(rng, induced=induced)
-    p = np.array([0.005, 0.002, 0.035])
-    top, bot = _dipole_readings(model, p, np.zeros(9)) + induced(p)
-    est = Localizer(model, "model").locate(top, bot, np.zeros(9))
+    p, u = np.array([0.005, 0.002, 0.035]), np.array([0.3, -0.2, 0.93])
+    u /= np.linalg.norm(u)
+    b = magpy.misc.Dipole(moment=0.909 * u, position=p).getB(model.sensor_positions_m)
+    readings = b + induced(p[None], np.eye(3))[0] @ (0.909 * u)
+    est = _loc(model, "model").estimate(readings, np.zeros(9))
     assert est.ok and np.linalg.norm(est.position_m - p) < 1e-5
-    naive = Localizer(model, "model", cores=False, residual_limit=1e9).locate(top, bot, np.zeros(9))
+    assert math.degrees(math.acos(min(1.0, est.moment_a_m2 @ u / 0.909))) < 0.05
+    naive = _loc(model, "model", cores=False, residual_limit=1e9).estimate(readings, np.zeros(9))
     assert np.linalg.norm(naive.position_m - p) > 1e-4
 
 
@@ -246,7 +276,7 @@ def test_learned_inverse_never_leaves_its_box_unflagged():
     rng = np.random.default_rng(7)
     inv = _inverse(rng)
     model = _model(rng)
-    loc = Localizer(model, "learned", learned=inv)
+    loc = _loc(model, "learned", learned=inv)
     n_flagged = 0
     for _ in range(300):
         b = rng.normal(size=3) * 10 ** rng.uniform(-5, -0.5)
@@ -259,11 +289,11 @@ def test_learned_inverse_never_leaves_its_box_unflagged():
             n_flagged += 1
         top = np.zeros((9, 3))
         top[int(rng.integers(9))] = b
-        est = loc.locate(top, np.zeros((9, 3)))
+        est = loc.estimate(np.r_[top, np.zeros((9, 3))])
         k = int(np.argmax(np.linalg.norm(top, axis=1)))
         if out_of_box or not inside:
             assert not est.ok
-        assert np.all(est.position_m - model.sensor_positions_m[0, k] >= inv.box_lower_m - 1e-12)
+        assert np.all(est.position_m - model.sensor_positions_m[k] >= inv.box_lower_m - 1e-12)
     assert n_flagged > 10  # the random network does leave its box: the check is exercised
 
 
@@ -277,38 +307,42 @@ def test_learned_weights_round_trip_and_design_check(tmp_path):
     other = _model(rng)
     other.design_sha256 = "b" * 64
     with pytest.raises(BadInputError, match="weights"):
-        Localizer(other, "learned", learned=back)
+        _loc(other, "learned", learned=back)
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
     with pytest.raises(BadInputError, match="weights"):
         LearnedInverse.load(tmp_path / "junk.npz")
 
 
 def test_bad_inputs_name_the_parameter(tmp_path):
+    """A bad frame is a not-ok estimate naming the input (never an exception); a bad
+    estimator or map is a BadInputError naming the parameter."""
     rng = np.random.default_rng(9)
     model = _model(rng)
-    loc = Localizer(model, "model", cores=False)
+    loc = _loc(model, "model", cores=False)
     ok = np.zeros((9, 3))
-    with pytest.raises(BadInputError, match="top.*shape"):
-        loc.locate(np.zeros((8, 3)), ok, np.zeros(9))
-    with pytest.raises(BadInputError, match="bottom.*Inf"):
-        bad = ok.copy()
-        bad[2, 1] = np.inf
-        loc.locate(ok, bad, np.zeros(9))
-    with pytest.raises(BadInputError, match="millitesla"):
-        loc.locate(ok + 50.0, ok, np.zeros(9))
-    with pytest.raises(BadInputError, match="currents"):
-        loc.locate(ok, ok, np.zeros(8))
-    with pytest.raises(BadInputError, match="currents"):
-        loc.locate(ok, ok, np.r_[np.zeros(8), np.nan])
-    with pytest.raises(BadInputError, match="currents"):
-        loc.locate(ok, ok)
+    bad = ok.copy()
+    bad[2, 1] = np.inf
+    frames = {"readings_t.*shape": (np.r_[np.zeros((8, 3)), ok], np.zeros(9)),
+              "readings_t.*Inf": (np.r_[ok, bad], np.zeros(9)),
+              "millitesla": (np.r_[ok + 50.0, ok], np.zeros(9)),
+              "currents_a.*shape": (np.r_[ok, ok], np.zeros(8)),
+              "currents_a.*nan": (np.r_[ok, ok], np.r_[np.zeros(8), np.nan]),
+              "currents_a.*None": (np.r_[ok, ok], None)}
+    for pattern, (readings, currents) in frames.items():
+        est = loc.estimate(readings, currents)
+        assert not est.ok and re.search(pattern, est.reason), (pattern, est.reason)
+        assert np.all(np.isfinite(est.position_m))
+    est = loc.estimate(np.r_[ok, ok], np.zeros(9), usable=np.ones(17, bool))
+    assert not est.ok and "usable" in est.reason
     with pytest.raises(BadInputError, match="method"):
-        Localizer(model, "neural")
+        _loc(model, "neural")
+    with pytest.raises(BadInputError, match="noise_t"):
+        _loc(model, "model", noise_t=-1.0)
     with pytest.raises(BadInputError, match="sensor_positions_m"):
-        SensorModel(np.zeros((9, 3)), model.coil_field_t_per_a, MOMENT, "x")
+        SensorModel(np.zeros((18, 2)), model.coil_field_t_per_a, MOMENT, "x")
     with pytest.raises(BadInputError, match="map file"):
         (tmp_path / "m.npz").write_bytes(b"junk")
-        Localizer.from_map(tmp_path / "m.npz")
+        estimator_from_map(tmp_path / "m.npz")
 
 
 def test_kalman_tracks_constant_velocity_exactly():
@@ -328,17 +362,17 @@ def test_kalman_tracks_constant_velocity_exactly():
 def test_legacy_calibration_pair_still_accepted():
     rng = np.random.default_rng(10)
     model = _model(rng)
-    gi = np.tile(np.eye(3), (2, 9, 1, 1)) * 1.01
-    off = rng.normal(scale=1e-5, size=(2, 9, 3))
-    loc = Localizer(model, "model", cores=False, calibration=(gi, off))
+    gi = np.tile(np.eye(3), (18, 1, 1)) * 1.01
+    off = rng.normal(scale=1e-5, size=(18, 3))
+    loc = _loc(model, "model", cores=False, calibration=(gi, off))
     p = np.array([0.003, 0.004, 0.035])
     i = rng.uniform(-1, 1, 9)
     top, bot = _dipole_readings(model, p, i)
-    raw = np.einsum("ij,asj->asi", np.linalg.inv(gi[0, 0]), np.stack([top, bot])) + off
-    est = loc.locate(raw[0], raw[1], i)
+    raw = np.r_[top, bot] @ np.linalg.inv(gi[0]).T + off
+    est = loc.estimate(raw, i)
     assert est.ok and np.linalg.norm(est.position_m - p) < 1e-6
     with pytest.raises(BadInputError, match="calibration"):
-        Localizer(model, "model", cores=False, calibration=(gi[:, :4], off))
+        _loc(model, "model", cores=False, calibration=(gi[:4], off))
 
 
 # ---------------------------------------------------------------- calibration (coil-driven)
@@ -396,12 +430,12 @@ def test_calibration_recovers_injected_offset_gain_rotation_and_shift(seed):
     rows = _coil_rows_factory(sources)
     sp = _positions()
     nominal = rows(sp.reshape(-1, 3))
-    coil = nominal[:, :3].reshape(2, 9, 3, 9)
-    grad = np.stack([_field_gradient_ref(r) for r in nominal]).reshape(2, 9, 3, 3, 9)
-    known = np.zeros((2, 9), bool)
-    known[0] = True
-    model = SensorModel(sp, coil, MOMENT, "a" * 64, 0.0, None, None, None, None, grad, known,
-                        rows)
+    coil = nominal[:, :3]
+    grad = np.stack([_field_gradient_ref(r) for r in nominal])
+    known = np.zeros(18, bool)
+    known[:9] = True
+    model = SensorModel(sp.reshape(-1, 3), coil, MOMENT, "a" * 64, 0.0, None, None, None, None,
+                        grad, known, rows)
     rng = np.random.default_rng(seed)
     gains = 1 + rng.normal(scale=0.01, size=(2, 9, 3))
     axes = rng.normal(size=(2, 9, 3))
@@ -421,15 +455,15 @@ def test_calibration_recovers_injected_offset_gain_rotation_and_shift(seed):
     b = np.einsum("asdc,kc->kasd", true_coil, cur)
     meas = np.einsum("asij,kasj->kasi", g_true, b) + offsets
     meas = meas + noise.normal(scale=1e-4, size=meas.shape)
-    cal = calibrate(meas[:, 0], meas[:, 1], cur, model)
-    assert np.abs(cal.offsets_t - offsets).max() < 0.015e-3
-    left = np.einsum("asij,asjk->asik", cal.gain_inverse, g_true) - np.eye(3)
-    assert np.abs(left[0]).max() < 0.004
-    assert np.abs(left[1]).max() < 0.03
-    assert np.linalg.norm(cal.shift_m[0] - shift[0], axis=-1).max() < 0.1e-3
-    assert np.all(cal.shift_m[1] == 0)
+    cal = calibrate(meas.reshape(k, 18, 3), cur, model)
+    assert np.abs(cal.offsets_t - offsets.reshape(18, 3)).max() < 0.015e-3
+    left = np.einsum("sij,sjk->sik", cal.gain_inverse, g_true.reshape(18, 3, 3)) - np.eye(3)
+    assert np.abs(left[:9]).max() < 0.004
+    assert np.abs(left[9:]).max() < 0.03
+    assert np.linalg.norm(cal.shift_m[:9] - shift[0], axis=-1).max() < 0.1e-3
+    assert np.all(cal.shift_m[9:] == 0)
     # the coils' field at the upper sensors, back in the array frame (0.4 % of ~25 mT)
-    assert np.allclose(cal.coil_field_t_per_a[0], true_coil[0], atol=0.1e-3)
+    assert np.allclose(cal.coil_field_t_per_a[:9], true_coil[0], atol=0.1e-3)
 
 
 def _field_gradient_ref(r):
@@ -441,22 +475,25 @@ def _field_gradient_ref(r):
 
 
 def test_calibration_round_trip_and_bad_input(tmp_path):
-    from firmware_io.localization import SensorCalibration, calibrate
+    from firmware_io.localization import CalibrationSettings, SensorCalibration, calibrate
 
     rng = np.random.default_rng(24)
     model = _model(rng)
     cur = rng.uniform(-2, 2, (40, 9))
-    b = np.einsum("asdc,kc->kasd", model.coil_field_t_per_a, cur)
-    cal = calibrate(b[:, 0], b[:, 1], cur, model)
+    b = np.einsum("sdc,kc->ksd", model.coil_field_t_per_a, cur)
+    cal = calibrate(b, cur, model)
     assert isinstance(cal, SensorCalibration)
     cal.save(tmp_path / "cal.npz")
     back = SensorCalibration.load(tmp_path / "cal.npz")
     assert np.array_equal(back.gain_inverse, cal.gain_inverse)
     assert np.array_equal(back.coil_field_t_per_a, cal.coil_field_t_per_a)
     with pytest.raises(BadInputError, match="currents"):
-        calibrate(b[:, 0], b[:, 1], cur[:, :8], model)
+        calibrate(b, cur[:, :8], model)
     with pytest.raises(BadInputError, match="currents"):
-        calibrate(b[:5, 0], b[:5, 1], cur[:5], model)   # too few frames for 9 coils
+        calibrate(b[:5], cur[:5], model)   # too few frames for 9 coils
+    for bad in (dict(noise_t=-1e-4), dict(prior_gain=math.nan), dict(iterations=0)):
+        with pytest.raises(BadInputError, match=next(iter(bad))):
+            CalibrationSettings(**bad)
     (tmp_path / "junk.npz").write_bytes(b"junk")
     with pytest.raises(BadInputError, match="calibration"):
         SensorCalibration.load(tmp_path / "junk.npz")
@@ -502,27 +539,27 @@ def test_fit_with_the_exact_magnet_recovers_a_cylinder(method):
     model = _model(rng)
     exact = dataclasses.replace(model, magnet_size_m=(0.005, 0.010), octupole_m2=0.25 * 0.005**2)
     j = 0.909 / (math.pi * 0.005**2 * 0.010) * magpy.mu_0
-    loc = Localizer(exact, method)
-    multipole = Localizer(dataclasses.replace(exact, magnet_size_m=None), method)
+    loc = _loc(exact, method)
+    multipole = _loc(dataclasses.replace(exact, magnet_size_m=None), method)
     worst_multipole = 0.0
     p = np.array([0.004, -0.006, 0.024])
     for k in range(12):
         p = p + rng.normal(scale=0.4e-3, size=3) if k else p
         i = rng.uniform(-1, 1, 9)
         cyl = magpy.magnet.Cylinder(polarization=(0, 0, j), dimension=(0.010, 0.010), position=p)
-        b = cyl.getB(model.sensor_positions_m.reshape(-1, 3)).reshape(2, 9, 3)
-        b = b + np.einsum("asdc,c->asd", model.coil_field_t_per_a, i)
+        b = cyl.getB(model.sensor_positions_m) + model.coil_field_t_per_a @ i
+        b = b.reshape(2, 9, 3)
         b[np.any(np.abs(b) > 0.13, axis=-1)] = np.nan
         if k == 0:
             loc.reset()
-        est = loc.locate(b[0], b[1], i)
+        est = loc.estimate(np.r_[b[0], b[1]], i)
         assert est.ok, est.reason
         # cold: re-linearized to the end; warm: the reused linearization's error is kept near
         # noise / 20 (0.005 mT), a few um here against ~300 um of noise-limited error
         assert np.linalg.norm(est.position_m - p) < (2e-6 if k == 0 else 20e-6)
         multipole.reset()
         worst_multipole = max(worst_multipole,
-                              np.linalg.norm(multipole.locate(b[0], b[1], i).position_m - p))
+                              np.linalg.norm(multipole.estimate(np.r_[b[0], b[1]], i).position_m - p))
     assert worst_multipole > 5e-6
 
 

@@ -10,12 +10,20 @@ import numpy as np
 import pytest
 
 import magpylib as magpy  # noqa: E402  (a test dependency: no skip)
-from firmware_io.localization import Localizer, SensorModel
+from firmware_io.localization import EstimatorSettings, SensorModel, make_estimator
 from firmware_io.localization.integrity import chi2_quantile, chi2_sf, covariance_and_pl
 from firmware_io.localization.integrity import fused_protection_level, ratio_quantiles
 
 MOMENT = np.array([0.0, 0.0, 0.909])
 NOISE = 1e-4
+
+
+def _loc(model, method="model", *, calibration=None, learned=None, **settings):
+    """The estimator of ``method`` with these settings (EstimatorSettings' keywords; no alert
+    limits unless given: these tests check the fit and its residual test)."""
+    settings = {"alert_limit_m": math.inf, "orientation_alert_limit_rad": math.inf, **settings}
+    return make_estimator(method, model, EstimatorSettings(**settings), calibration=calibration,
+                          learned=learned)
 
 
 def _model(seed=0):
@@ -25,15 +33,16 @@ def _model(seed=0):
     xy = np.array([[x, y] for y in (0.05, 0.0, -0.05) for x in (-0.05, 0.0, 0.05)])
     sp = np.stack([np.c_[xy, np.full(9, 0.014)], np.c_[xy, np.full(9, -0.114)]])
     up = rng.normal(scale=5e-3, size=(9, 3, 9))
-    return SensorModel(sp, np.stack([up, up * np.array([-1.0, -1.0, 1.0])[None, :, None]]),
+    return SensorModel(sp.reshape(-1, 3),
+                       np.concatenate([up, up * np.array([-1.0, -1.0, 1.0])[None, :, None]]),
                        MOMENT, "a" * 64, 0.0, None)
 
 
 def _frame(model, p, currents, rng):
     """magpylib's dipole (independent of the code under test) + coils + Gaussian noise."""
     b = magpy.misc.Dipole(moment=MOMENT, position=p).getB(
-        model.sensor_positions_m.reshape(-1, 3)).reshape(2, 9, 3)
-    b = b + np.einsum("asdc,c->asd", model.coil_field_t_per_a, currents)
+        model.sensor_positions_m) + model.coil_field_t_per_a @ currents
+    b = b.reshape(2, 9, 3)
     return b + rng.normal(scale=NOISE, size=b.shape)
 
 
@@ -53,7 +62,7 @@ def test_covariance_matches_the_scatter_and_the_protection_level_bounds_the_erro
     (false alarm 1e-3) and the normalized chi2 averages 1."""
     rng = np.random.default_rng(1)
     model = _model()
-    loc = Localizer(model, "model", cores=False, noise_t=NOISE, relative_error=0.0,
+    loc = _loc(model, "model", cores=False, noise_t=NOISE, relative_error=0.0,
                     model_bias_m=0.0, integrity_risk=1e-4, false_alarm=1e-3)
     m2, over, oks, chi = [], 0, 0, []
     for _ in range(300):
@@ -61,9 +70,9 @@ def test_covariance_matches_the_scatter_and_the_protection_level_bounds_the_erro
         i = rng.uniform(-1, 1, 9)
         f = _frame(model, p, i, rng)
         loc.reset()
-        est = loc.fix(f[0], f[1], i)
+        est = loc.estimate(np.r_[f[0], f[1]], i)
         e = est.position_m - p
-        m2.append(float(e @ np.linalg.solve(est.covariance_m2, e)))
+        m2.append(float(e @ np.linalg.solve(est.position_covariance_m2, e)))
         chi.append(est.chi2 / est.dof)
         oks += est.ok
         over += est.ok and np.linalg.norm(e) > est.protection_level_m
@@ -78,10 +87,10 @@ def test_noise_larger_than_modelled_fails_the_residual_test():
     threshold at 51 dof (~1.7): not ok, the reason names the test."""
     rng = np.random.default_rng(2)
     model = _model()
-    loc = Localizer(model, "model", cores=False, noise_t=NOISE / 3, relative_error=0.0)
+    loc = _loc(model, "model", cores=False, noise_t=NOISE / 3, relative_error=0.0)
     p = np.array([0.0, 0.01, 0.04])
     f = _frame(model, p, np.zeros(9), rng)
-    est = loc.fix(f[0], f[1], np.zeros(9))
+    est = loc.estimate(np.r_[f[0], f[1]], np.zeros(9))
     assert not est.ok and "chi2" in est.reason
 
 
@@ -92,7 +101,7 @@ def test_jumps_between_frames_are_reacquired():
     alert limit) and every fix flagged ok is within 5 mm."""
     rng = np.random.default_rng(3)
     model = _model()
-    loc = Localizer(model, "model", cores=False, noise_t=NOISE, relative_error=0.0,
+    loc = _loc(model, "model", cores=False, noise_t=NOISE, relative_error=0.0,
                     alert_limit_m=5e-3)
     p = np.array([0.0, 0.0, 0.04])
     bad, found, reasons = 0, 0, set()
@@ -105,7 +114,7 @@ def test_jumps_between_frames_are_reacquired():
         p = q
         i = rng.uniform(-2, 2, 9)
         f = _frame(model, p, i, rng)
-        est = loc.fix(f[0], f[1], i)
+        est = loc.estimate(np.r_[f[0], f[1]], i)
         err = np.linalg.norm(est.position_m - p)
         found += err < max(5e-3, est.protection_level_m)
         bad += est.ok and err > 5e-3
@@ -121,31 +130,33 @@ def test_alert_limit_and_bad_frames_give_not_ok_with_a_reason_never_an_exception
     model = _model()
     p = np.array([0.01, 0.0, 0.05])
     f = _frame(model, p, np.zeros(9), rng)
-    est = Localizer(model, "model", cores=False, alert_limit_m=1e-5).fix(f[0], f[1], np.zeros(9))
+    est = _loc(model, "model", cores=False, alert_limit_m=1e-5).estimate(np.r_[f[0], f[1]], np.zeros(9))
     assert not est.ok and "alert limit" in est.reason
     assert est.protection_level_m > 1e-5 and math.isfinite(est.protection_level_m)
-    loc = Localizer(model, "model", cores=False)
+    loc = _loc(model, "model", cores=False)
     nan = np.full((9, 3), np.nan)
-    frames = {"shape": (f[0][:8], f[1], np.zeros(9)),
-              "Inf": (f[0], np.where(np.arange(9)[:, None] == 2, np.inf, f[1]), np.zeros(9)),
-              "currents": (f[0], f[1], np.r_[np.zeros(8), np.nan]),
-              "currents ": (f[0], f[1], None),
-              "usable": (nan, nan, np.zeros(9)),
-              "usable ": (np.where(np.arange(9)[:, None] < 2, f[0], np.nan), nan, np.zeros(9)),
-              "top": ("not a frame", f[1], np.zeros(9)),
-              "bottom": (f[0], [[0.0, 0.0], [0.0]], np.zeros(9)),
-              "bottom ": (f[0], f[1][:, :2], np.zeros(9)),
-              "tesla": (f[0] * 1e3, f[1], np.zeros(9)),
-              "currents  ": (f[0], f[1], ["a"] * 9),
-              "currents   ": (f[0], f[1], np.zeros(8)),
-              "currents    ": (f[0], f[1], np.r_[np.zeros(8), np.inf])}
-    for word, (top, bot, i) in frames.items():
-        est = loc.fix(top, bot, i)
+    good = np.r_[f[0], f[1]]
+    frames = {"shape": (good[:17], np.zeros(9)),
+              "Inf": (np.where(np.arange(18)[:, None] == 11, np.inf, good), np.zeros(9)),
+              "currents": (good, np.r_[np.zeros(8), np.nan]),
+              "currents ": (good, None),
+              "usable": (np.r_[nan, nan], np.zeros(9)),
+              "usable ": (np.r_[np.where(np.arange(9)[:, None] < 2, f[0], np.nan), nan],
+                          np.zeros(9)),
+              "readings": ("not a frame", np.zeros(9)),
+              "readings ": ([[0.0, 0.0], [0.0]], np.zeros(9)),
+              "readings  ": (good[:, :2], np.zeros(9)),
+              "tesla": (good * 1e3, np.zeros(9)),
+              "currents  ": (good, ["a"] * 9),
+              "currents   ": (good, np.zeros(8)),
+              "currents    ": (good, np.r_[np.zeros(8), np.inf])}
+    for word, (readings, i) in frames.items():
+        est = loc.estimate(readings, i)
         assert not est.ok and word.strip() in est.reason, (word, est.reason)
         assert np.all(np.isfinite(est.position_m))
     # a good frame after the bad ones: found again
-    est = loc.fix(f[0], f[1], np.zeros(9))
-    assert est.ok and np.linalg.norm(est.position_m - p) < 1e-3
+    est = loc.estimate(np.r_[f[0], f[1]], np.zeros(9))
+    assert est.ok and np.linalg.norm(est.position_m - p) < est.protection_level_m
 
 
 def test_ratio_quantiles_match_the_closed_forms_and_a_monte_carlo():

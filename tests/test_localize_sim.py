@@ -63,7 +63,7 @@ def test_localization_study_smoke(tmp_path):
 
 @pytest.mark.slow
 def test_from_map_end_to_end_and_design_check(tmp_path):
-    """A v2 map of the default design: the Localizer built from it finds the magnet in
+    """A v2 map of the default design: the estimator built from it finds the magnet in
     noise-free simulated readings (coupled coils, magnet-induced cores, exact cylinder magnet):
     the fit explains them to 1/10 of the 0.1 mT sensor noise, and the position error (the map's
     interpolation, the multipole magnet) stays below the noise-limited error at 30-60 mm (~1-2
@@ -71,15 +71,17 @@ def test_from_map_end_to_end_and_design_check(tmp_path):
     from designkit import default_design, fieldmap
     from designkit.sim.readings import SensorSimulator
     from firmware_io.errors import BadInputError
-    from firmware_io.localization import Localizer
+    import dataclasses
+
+    from firmware_io.localization import POSITION_ONLY, SensorModel, estimator_from_map
 
     d = default_design()
     path = fieldmap.write(tmp_path / "map.npz", fieldmap.build(d, progress=False))
     mg = d.magnet
     q = (mg.length_m / 2) ** 2 - 0.75 * mg.radius_m**2
-    loc = Localizer.from_map(path, "model", octupole_m2=q, relative_error=0.0,
-                             expected_design_sha256=d.spec_hash())
-    assert loc.sensor_positions_m.shape == (2, 9, 3)
+    loc = estimator_from_map(path, "model", dataclasses.replace(POSITION_ONLY, relative_error=0.0),
+                             octupole_m2=q, expected_design_sha256=d.spec_hash())
+    assert loc.n_sensors == 18
     sim = SensorSimulator(d, errors="ideal", noise_t=0.0, seed=1)
     rng = np.random.default_rng(0)
     p = np.c_[rng.uniform(-0.02, 0.02, (3, 2)), rng.uniform(0.03, 0.06, 3)]
@@ -87,12 +89,12 @@ def test_from_map_end_to_end_and_design_check(tmp_path):
     b = sim.magnet_part(p) + sim.induced_part(p) + sim.coil_part(i)
     for k in range(3):
         loc.reset()
-        est = loc.locate(b[k, 0], b[k, 1], i[k])
+        est = loc.estimate(b[k].reshape(-1, 3), i[k])
         assert est.ok, est.reason
         assert est.residual < 0.1
         assert np.linalg.norm(est.position_m - p[k]) < 0.8e-3
     with pytest.raises(BadInputError, match="design"):
-        Localizer.from_map(path, "model", expected_design_sha256="0" * 64)
+        SensorModel.from_map(path, expected_design_sha256="0" * 64)
 
 
 @pytest.mark.slow
@@ -105,7 +107,7 @@ def test_calibration_removes_the_mounting_bias(tmp_path):
     the sensors left the box of A; uncalibrated 0.6-0.9 mm)."""
     from designkit import default_design, fieldmap
     from designkit.sim.readings import SensorSimulator, random_positions
-    from firmware_io.localization import Localizer, calibrate
+    from firmware_io.localization import POSITION_ONLY, ModelEstimator, calibrate
 
     d = default_design()
     path = fieldmap.write(tmp_path / "map.npz", fieldmap.build(d, progress=False))
@@ -118,9 +120,9 @@ def test_calibration_removes_the_mounting_bias(tmp_path):
     cur[np.arange(500), np.arange(500) % 9] = np.where(np.arange(500) % 18 < 9, 3.0, -3.0)
     zero = np.zeros((1000, 2, 9, 3))
     frames = noisy.read(np.zeros((1000, 3)), cur, parts=(zero, zero), rng=rng)
-    plain = Localizer.from_map(path, "model", magnet_size_m=size)
-    cal = calibrate(frames.top_t, frames.bottom_t, cur, plain.model)
-    fitted = Localizer.from_map(path, "model", magnet_size_m=size, calibration=cal)
+    plain = ModelEstimator.from_map(path, POSITION_ONLY, magnet_size_m=size)
+    cal = calibrate(np.concatenate([frames.top_t, frames.bottom_t], 1), cur, plain.model)
+    fitted = ModelEstimator.from_map(path, POSITION_ONLY, magnet_size_m=size, calibration=cal)
     p = random_positions(25, np.random.default_rng(8), z_range_m=(0.020, 0.045))
     i = np.random.default_rng(9).uniform(-1, 1, (25, 9))
     rd = sim.read(p, i)
@@ -128,7 +130,7 @@ def test_calibration_removes_the_mounting_bias(tmp_path):
     for k in range(25):
         for name, loc in (("plain", plain), ("cal", fitted)):
             loc.reset()
-            err[name].append(np.linalg.norm(loc.locate(rd.top_t[k], rd.bottom_t[k],
-                                                       i[k]).position_m - p[k]))
+            err[name].append(np.linalg.norm(loc.estimate(np.r_[rd.top_t[k], rd.bottom_t[k]],
+                                                         i[k]).position_m - p[k]))
     assert np.mean(err["plain"]) > 0.25e-3
     assert np.mean(err["cal"]) < 0.17e-3

@@ -11,7 +11,8 @@ mutants = importlib.util.module_from_spec(_spec)
 sys.modules["tools_mutants"] = mutants  # dataclasses look their module up
 _spec.loader.exec_module(mutants)
 
-AREAS = {"field", "cores", "coupling", "map", "allocation", "localization", "runner", "optimizer"}
+AREAS = {"field", "cores", "coupling", "map", "allocation", "localization", "runner", "optimizer",
+         "simulator"}
 
 
 def test_the_list_covers_every_area_with_existing_killers():

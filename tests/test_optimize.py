@@ -36,7 +36,7 @@ def test_textbook_loop_radius_for_maximum_axial_gradient():
         h = 1e-8
         return g(x[0]), [(g(x[0] + h) - g(x[0] - h)) / (2 * h)]
 
-    run = opt.maximize(f, None, 0, [0.001], [0.1], [0.08], xtol_rel=1e-12)
+    run = opt.maximize(f, None, 0, [0.001], [0.1], [0.08], opt.SolverOptions(xtol_rel=1e-12))
     assert run.x[0] == pytest.approx(d * math.sqrt(2 / 3), rel=1e-6)
 
 
@@ -352,8 +352,8 @@ def test_device_optimum_beats_a_dense_two_variable_grid():
 
     pc = dataclasses.replace(p, corrections=res.corrections)
     y = opt.DeviceProblem.search(res.x_continuous)
-    m = fast_model._FastModel(pc, {6: res.wire_diameter_m})
-    ref = fast_model._local(m, [y[k] for k in m.free]).value
+    m = fast_model.FastModel(pc, {6: res.wire_diameter_m})
+    ref = fast_model.local_solve(m, [y[k] for k in m.free]).value
     best = 0.0
     for ri in np.linspace(p.lower[0], 0.015, 20):
         for ln in np.linspace(p.lower[2], p.upper[2], 20):
@@ -402,7 +402,8 @@ def test_infeasible_device_bounds_name_the_constraint_and_the_amount():
                                             r"0\.0048 m"):
         opt.solve_device(opt.device_problem_for(d))
     # an impossible heating requirement: no winding in the bounds lasts 1e6 s
-    p = opt.device_problem_for(default_design(), min_time_to_hot_s=1e6)
+    p = opt.device_problem_for(default_design(),
+                              conditions=opt.OperatingConditions(min_time_to_hot_s=1e6))
     with pytest.raises(BadInputError, match="time_to_max_temperature_s: misses its limit"):
         opt.solve_device(p, starts=1)
 
@@ -514,9 +515,8 @@ def test_render_points_folded_by_the_array_symmetry_keep_every_distinct_force():
 def test_pitch_variable_needs_the_rendering_objective_and_bounds_the_overlap():
     d = default_design()
     with pytest.raises(BadInputError, match="rendering"):
-        opt.device_problem_for(d, vary_pitch=True)
-    p = opt.device_problem_for(d, objective="rendering", vary_pitch=True,
-                               pitch_range_m=(0.04, 0.06))
+        opt.device_problem_for(d, vary={"pitch_m": None})
+    p = opt.device_problem_for(d, objective="rendering", vary={"pitch_m": (0.04, 0.06)})
     assert p.n_search == 8 and p.pitch_bounds_m == (0.04, 0.06)
     assert "coil_overlap_m" in p.constraint_names
     # Ro's bound follows the largest pitch; the overlap is a constraint on each design. The
@@ -524,13 +524,12 @@ def test_pitch_variable_needs_the_rendering_objective_and_bounds_the_overlap():
     # 0.8 mm wall + 2 x (1.5 mm flange lip + 0.3 mm pocket clearance) = 4.4 mm
     assert p.coil_clearance_m == pytest.approx(4.4e-3)
     assert p.upper[1] == pytest.approx(min(0.5 * (0.06 - 4.4e-3), d.optimize.max_outer_radius_m))
-    m = fast_model._FastModel(p)
+    m = fast_model.FastModel(p)
     y = np.array(p.lower) + 0.5 * (np.array(p.upper) - np.array(p.lower))
     y[1], y[7] = 0.02, 0.04  # 2 x 20 mm + 4.4 mm > 40 mm: short by 4.4 mm
     assert m.values(y)[1 + len(opt.DEVICE_CONSTRAINTS)] == pytest.approx(4.4)
-    with pytest.raises(BadInputError, match="pitch_range_m"):
-        opt.device_problem_for(d, objective="rendering", vary_pitch=True,
-                               pitch_range_m=(0.005, 0.06))
+    with pytest.raises(BadInputError, match="pitch_m range"):
+        opt.device_problem_for(d, objective="rendering", vary={"pitch_m": (0.005, 0.06)})
     # a given design (7 variables, no pitch among them) is judged at its own pitch
     rep = opt.evaluate_device(d, p)
     od = rep["constraints"]["outer_diameter_m"]
@@ -543,7 +542,7 @@ def test_pitch_optimum_meets_the_constraints_and_no_other_pitch_renders_more():
     """--vary-pitch: the reported device is feasible under the panel model, its coils do not
     overlap, and with its coil fixed a scan of the pitch finds no stronger rendering."""
     d = default_design()
-    p = opt.device_problem_for(d, objective="rendering", vary_pitch=True)
+    p = opt.device_problem_for(d, objective="rendering", vary={"pitch_m": None})
     res = opt.solve_device(p, starts=1)
     assert res.feasible and res.fast_model_check["within_bound"]
     x = list(res.x)

@@ -33,7 +33,7 @@ def _catch_constraints(monkeypatch, module) -> dict:
     """Replace ``module.maximize`` by a stand-in that records its arguments and stops."""
     seen = {}
 
-    def stand_in(objective, constraints, n_constraints, lower, upper, start, **kw):
+    def stand_in(objective, constraints, n_constraints, lower, upper, start, *options, **kw):
         seen.update(constraints=constraints, n=n_constraints, lower=np.asarray(lower),
                     upper=np.asarray(upper))
         raise _Caught

@@ -182,3 +182,17 @@ def test_report_is_idempotent(tmp_path):
     for p, content in first.items():
         if p.name != "optimized_coil.json":  # holds the optimizer's wall-clock seconds
             assert p.read_bytes() == content, p
+
+
+def test_report_prints_the_sensor_layouts_bound_maps(quick_report):
+    rep = json.loads((quick_report / "report.json").read_text())
+    sb = rep["sensor_bounds"]
+    assert (quick_report / "figures" / sb["figure"]).stat().st_size > 10000
+    # the thesis array serves two magnets: both kinds, the design's layout in each
+    assert set(sb["summaries"]) == {"one magnet", "two magnets"}
+    one = sb["summaries"]["one magnet"]["design"]["rows"]
+    assert [r["group"] for r in one] == ["z 20 mm", "z 50 mm", "z 80 mm", "all"]
+    # a magnet higher up is located worse
+    assert one[0]["median_rms_m"] < one[1]["median_rms_m"] < one[2]["median_rms_m"]
+    md = (quick_report / "report.md").read_text()
+    assert "## Sensor layout: Cramer-Rao bound" in md and "figures/sensor_bounds.png" in md

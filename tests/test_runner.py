@@ -4,6 +4,7 @@ PCA9685 register file, the bounds)."""
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 import sys
 
@@ -91,8 +92,16 @@ def device_and_a(thesis_array):
     return design, array, a
 
 
+class RefusingEstimator(TruthEstimator):
+    """Never trusts a fix: the runner never locates the finger."""
+
+    def estimate(self, readings_t, currents_a=None, *, usable=None, seed=None, time_s=None):
+        est = super().estimate(readings_t, currents_a)
+        return dataclasses.replace(est, ok=False, reason="refused")
+
+
 def _run(device_and_a, faults: str, duration_s: float, *, limit=4.8, total=20.0,
-         resume_after_s=0.1):
+         resume_after_s=0.1, estimator=TruthEstimator):
     design, array, a = device_and_a
     drive = md10c_drive(design, limit, total)
     dev = SimulatedDevice(design, array, seed=4, drive=drive)
@@ -104,7 +113,7 @@ def _run(device_and_a, faults: str, duration_s: float, *, limit=4.8, total=20.0,
     def factory(source, clock, hook):
         cfg = RunnerConfig(drive, resume_after_s=resume_after_s)
         r = Runner(fmap, PlaneScene(0.05, 6.0),
-                   TruthEstimator(lambda: source.frame_truth_m, dev.moment),
+                   estimator(lambda: source.frame_truth_m, dev.moment),
                    RunnerIO(dev.coils, source, lambda line: None, clock), cfg,
                    tracker=HoldTracker(), allocate=hook(clipped_lstsq))
         r.start()
@@ -194,6 +203,14 @@ def test_commands_never_exceed_the_limits_even_when_a_defect_asks_for_more(devic
     assert np.abs(cmd).max() <= 2.0 + 1e-9
     assert np.abs(cmd).sum(axis=1).max() <= 6.0 + 1e-9
     assert (c["state"] == "over_limit").sum() > 0
+
+
+def test_thermal_fault_is_detected_while_the_finger_is_not_located(device_and_a):
+    _, runner, res = _run(device_and_a, "thermal@0.2", 0.3, estimator=RefusingEstimator)
+    st, t = res.columns["state"], res.columns["t_s"]
+    assert np.all(st[(t > 0.05) & (t < 0.2)] == "lost")
+    assert np.all(st[t >= 0.2] == "thermal")
+    assert [name for _, name, _ in runner.fault_log][-1] == "thermal"
 
 
 def test_thermal_fault_stays_off_until_cooled(device_and_a):
@@ -340,7 +357,7 @@ def test_start_up_calibration_through_the_firmware_recovers_the_sensor_errors(de
     # what the controller knows: the nominal sensor poses' coil field per ampere (exact here, so
     # that only the sensor errors remain to be learned)
     g = np.stack([sim.coil_part(np.eye(9)[k][None])[0] for k in range(9)], -1)
-    model = SensorModel(sim.nominal_m, g.reshape(2, 9, 3, 9), dev.moment, "x" * 64)
+    model = SensorModel(sim.nominal_m.reshape(-1, 3), g.reshape(18, 3, 9), dev.moment, "x" * 64)
     cal = dev.calibrate_sensors(model)
     gi, off = cal if isinstance(cal, tuple) else (cal.gain_inverse, cal.offsets_t)
     assert np.all(dev.current_a == 0) and all(b.duty(ch) == 0 for b in dev.sim_boards
@@ -351,7 +368,7 @@ def test_start_up_calibration_through_the_firmware_recovers_the_sensor_errors(de
         field = sim.coil_part(i[None])                     # (1, 2, 9, 3) T, exact
         truth = field[0]
         raw = analog_reading(field, sim.errors, 0.0, rng)[0]
-        fixed = np.einsum("asij,asj->asi", gi, raw - off)
+        fixed = np.einsum("asij,asj->asi", gi.reshape(2, 9, 3, 3), raw - off.reshape(2, 9, 3))
         before = np.abs(raw - truth).max()
         after = np.abs(fixed - truth).max()
         # 1 % gains, 1 degree mountings of fields up to ~50 mT: ~1 mT before; the 0.1 mT noise

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from firmware_io.errors import BadInputError
+from firmware_io.localization import Estimate
 from firmware_io.mapfile.drive import DriveRecord
-from firmware_io.runner import (CoilSkipBound, CurrentHistory, Fix, PoseEstimate, PoseTracker,
-                                RunnerConfig, SensorFrame, SensorLayout, SensorPipeline,
-                                force_law_rows)
+from firmware_io.runner import (CoilSkipBound, CurrentHistory, Fix, PoseTracker, RunnerConfig,
+                                SensorFrame, SensorLayout, SensorPipeline, force_law_rows)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -185,9 +185,9 @@ class _RecordingEstimator:
     def reset(self):
         pass
 
-    def fix(self, readings_t, currents_a):
+    def estimate(self, readings_t, currents_a=None, *, usable=None, seed=None, time_s=None):
         self.calls.append((readings_t.copy(), np.array(currents_a)))
-        return PoseEstimate(np.array([0.0, 0.0, 0.03]), np.array([0.0, 0.0, 0.6]), True)
+        return Estimate(np.array([0.0, 0.0, 0.03]), np.array([0.0, 0.0, 0.6]), True)
 
 
 def _layout(n=18, n_coils=9):

@@ -77,7 +77,7 @@ def test_the_force_is_rendered_on_the_estimated_moment(device, thesis_array, til
 def test_the_plant_pushes_on_the_true_tilted_moment(device, thesis_array):
     """The simulated device's force and torque at a step come from the moment the trajectory
     gives that step: against central differences of m . B plus the cores' pull on that same
-    moment (CoilArray.bias_force), and m x B."""
+    moment (CoilArray.bias_force of the magnet's cylinder, its axis along m), and m x B."""
     steps = 40
     p = np.linspace([0.0, 0.0, 0.03], [0.004, 0.002, 0.032], steps)
     u = tilted_direction([0.0, 0.0, 1.0], np.radians(np.linspace(0.0, 40.0, steps)),
@@ -87,8 +87,9 @@ def test_the_plant_pushes_on_the_true_tilted_moment(device, thesis_array):
     for k in (0, 17, 39):
         i = rng.uniform(-3.0, 3.0, 9)
         m = M * u[k]
+        mg = default_design().magnet
         want = _force_by_differences(thesis_array, p[k], m, i) + thesis_array.bias_force(
-            p[k][None], m)[0]
+            p[k][None], m, magnet_size_m=(mg.radius_m, mg.length_m))[0]
         # samples every 0.5 degrees or 0.25 mm: the interpolation leaves ~1e-4 of the force
         np.testing.assert_allclose(device.true_force_n(k, i), want, rtol=0,
                                    atol=2e-3 * np.linalg.norm(want))

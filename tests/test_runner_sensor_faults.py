@@ -13,9 +13,10 @@ import pytest
 
 from designkit.design import default_design
 from designkit.sim import SimulatedDevice
+from firmware_io.localization import Estimate
 from firmware_io.runner import (EXPECTED_SATURATION, FDE_LATCH_PASSES, CurrentHistory,
-                                ExclusionLatch, PoseEstimate, Runner, RunnerConfig, RunnerIO,
-                                SensorFrame, SensorLayout, SensorPipeline)
+                                ExclusionLatch, Runner, RunnerConfig, RunnerIO, SensorFrame,
+                                SensorLayout, SensorPipeline)
 
 from _runner_fakes import PlaneScene, clipped_lstsq, device_map, md10c_drive
 
@@ -37,20 +38,22 @@ class ExcludingEstimator:
     def reset(self):
         pass
 
-    def fix(self, readings_t, currents_a):
+    def estimate(self, readings_t, currents_a=None, *, usable=None, seed=None, time_s=None):
         self.seen.append(np.array(readings_t))
         excl = (self.bad,) if np.isfinite(readings_t[self.bad]).all() else ()
-        return PoseEstimate(P.copy(), M.copy(), True, "", (0.3e-3) ** 2 * np.eye(3), 1e-3,
-                            0.0, excl)
+        return Estimate(P.copy(), M.copy(), True, "", (0.3e-3) ** 2 * np.eye(3), 1e-3, 0.0,
+                        excl)
 
 
-def test_exclusion_latch_counts_trusted_frames_in_a_row():
+def test_exclusion_latch_counts_consistent_frames_until_a_trusted_fix_vouches():
     latch = ExclusionLatch(5, passes=3)
     assert latch.update((2,), True) == [] and latch.update((2,), True) == []
     assert latch.update((2,), False) == []          # a refused frame: no evidence either way
-    assert latch.update((2, 4), True) == [2]        # third trusted frame in a row
-    assert latch.update((4,), True) == [] and latch.update((), True) == []
+    assert latch.update((2, 4), True) == [2]        # third frame the others agreed with
+    assert latch.update((4,), True) == []
+    assert latch.update((), True, vouched=(0, 1, 3, 4)) == []   # a trusted fix used sensor 4
     assert latch.count[4] == 0 and latch.latched.tolist() == [False, False, True, False, False]
+    assert latch.update((4,), True) == [] and latch.count[4] == 1
 
 
 @pytest.fixture(scope="module")
@@ -100,9 +103,9 @@ class RecordingEstimator:
     def reset(self):
         pass
 
-    def fix(self, readings_t, currents_a):
+    def estimate(self, readings_t, currents_a=None, *, usable=None, seed=None, time_s=None):
         self.seen.append(np.array(readings_t))
-        return PoseEstimate(P.copy(), M.copy(), True, "", None, 1e-3)
+        return Estimate(P.copy(), M.copy(), True, "", None, 1e-3)
 
 
 @pytest.mark.parametrize("current_a, dropped", [(3.3, False), (3.6, True)])

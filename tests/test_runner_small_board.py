@@ -14,7 +14,8 @@ import pytest
 from designkit import fieldmap
 from designkit.design import default_design
 from designkit.sim.run import RunSettings, run_simulation
-from firmware_io.runner import PoseEstimate, SensorFrame, SensorLayout, SensorPipeline
+from firmware_io.localization import Estimate
+from firmware_io.runner import SensorFrame, SensorLayout, SensorPipeline
 
 BOX = (np.array([-0.07, -0.03, 0.015]), np.array([0.07, 0.03, 0.06]))
 
@@ -53,9 +54,9 @@ class _Estimator:
     def reset(self):
         pass
 
-    def fix(self, readings_t, currents_a):
+    def estimate(self, readings_t, currents_a=None, *, usable=None, seed=None, time_s=None):
         self.shapes.append((np.shape(readings_t), np.shape(currents_a)))
-        return PoseEstimate(np.zeros(3), np.array([0.0, 0.0, 1.0]), True)
+        return Estimate(np.zeros(3), np.array([0.0, 0.0, 1.0]), True)
 
 
 class _Map:

@@ -209,7 +209,7 @@ def test_rendering_lp_is_bracketed_by_two_independent_allocations():
 
     from designkit.model.metrics import max_vertical_force
     from designkit.design import load_design
-    from designkit.optimize import array_force_per_amp, rendering_force
+    from designkit.optimize import RodCoil, array_force_per_amp, rendering_force
 
     d = load_design("optimized")
     pts = np.array([[0.0, 0.0, 0.03], [0.02, -0.01, 0.025]])
@@ -217,8 +217,7 @@ def test_rendering_lp_is_bracketed_by_two_independent_allocations():
     c, k = d.coil, d.core
     x = [c.inner_radius_m, c.outer_radius_m, c.length_m, k.radius_m, k.length_m,
          k.offset_m + k.length_m / 2 - c.length_m / 2, d.wire.diameter_m]
-    cen = np.array([[a, b] for a, b, _ in d.coil_centres_m()])
-    f = array_force_per_amp(x, c.turns, d.drive.max_current_a, cen, pts,
+    f = array_force_per_amp(RodCoil(tuple(x), c.turns, d.drive.max_current_a), d.array, pts,
                             d.magnet.moment_a_m2)
     centre_alone = abs(f[0, 2, 4]) * d.drive.max_current_a
     assert abs(f[0, 0, 4]) < 1e-12 and abs(f[0, 1, 4]) < 1e-12
@@ -234,7 +233,7 @@ def test_rendering_winding_part_matches_the_coil_array_field_engine():
     import numpy as np
 
     from designkit.model.array import CoilArray, force_matrix
-    from designkit.optimize import array_force_per_amp
+    from designkit.optimize import RodCoil, array_force_per_amp
 
     d = default_design().replace(core=None)
     arr = CoilArray.from_design(d)
@@ -243,10 +242,9 @@ def test_rendering_winding_part_matches_the_coil_array_field_engine():
     a = arr.actuation_matrix(pts)
     m = np.array([0.0, 0.0, d.magnet.moment_a_m2])
     ref = np.einsum("jk,nkc->njc", force_matrix(m), a[:, 3:, :])
-    cen = np.array([[x, y] for x, y, _ in d.coil_centres_m()])
-    x = [0.012, 0.019, 0.1, 0.006, 0.05, 0.0, 0.7e-3]
-    got = array_force_per_amp(x, 1429, 6.0, cen, pts, d.magnet.moment_a_m2,
-                              core_force_ratio=0.0)
+    x = (0.012, 0.019, 0.1, 0.006, 0.05, 0.0, 0.7e-3)
+    got = array_force_per_amp(RodCoil(x, 1429, 6.0, core_force_ratio=0.0), d.array, pts,
+                              d.magnet.moment_a_m2)
     np.testing.assert_allclose(got, ref, rtol=1e-7, atol=1e-9)
 
 

@@ -9,10 +9,10 @@ The as-built description itself: :mod:`designkit.design.asbuilt`. Reference: doc
 """
 
 from .fit import FitNotConverged, FitResult, actuation_error, fit, fitted_mask
-from .measurements import (Measurements, onboard_plan, probe_plan, read_csv, simulate,
-                           workspace_points, write_csv)
+from .measurements import (Measurements, onboard_plan, probe_plan, read_csv, sensor_groups,
+                           simulate, workspace_points, write_csv)
 from .model import ForwardModel, coupling_term
 
 __all__ = ["FitNotConverged", "actuation_error", "FitResult", "ForwardModel", "Measurements", "coupling_term",
-           "fit", "fitted_mask", "onboard_plan", "probe_plan", "read_csv", "simulate",
+           "fit", "fitted_mask", "onboard_plan", "probe_plan", "read_csv", "sensor_groups", "simulate",
            "workspace_points", "write_csv"]

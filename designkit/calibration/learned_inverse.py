@@ -43,7 +43,7 @@ def train_learned_inverse(model, *, n_samples: int = 20000, hidden: int = 24, se
     n_samples = v.positive_int("n_samples", n_samples)
     rng = np.random.default_rng(seed)
     pos = random_positions(n_samples, rng, z_range_m=z_range_m, half_width_m=half_width_m)
-    up = model.sensor_positions_m[0]
+    up = model.sensor_positions_m[model.pairs[:, 0]]   # the subtraction's upper sensors
     b = np.stack([multipole_field(up, p, model.moment_a_m2, model.octupole_m2) for p in pos])
     k = np.argmax(np.linalg.norm(b, axis=-1), axis=1)
     x_b = b[np.arange(n_samples), k]

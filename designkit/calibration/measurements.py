@@ -1,14 +1,16 @@
 """Field measurements for the calibration: the CSV file, its checks, simulated plans.
 
 CSV columns (any order, all required but ``sigma_t``): ``x_m, y_m, z_m`` (the reading's point,
-m, array frame), ``i1_a ... iN_a`` (the coils' currents in the design's row-major order, A),
-``bx_t, by_t, bz_t`` (the 3-axis reading, T), ``sigma_t`` (its noise per axis, T; default
+m, array frame), ``i1_a ... iN_a`` (the coils' currents in the design's coil order, A),
+``bx_t, by_t, bz_t`` (the 3-axis reading in the array frame, T: an onboard chip's reading
+turned by its frame, :meth:`Design.sensor_poses`), ``sigma_t`` (its noise per axis, T; default
 :data:`DEFAULT_SIGMA_T`). Each row is one reading at a point with those currents; a row may
 come from the onboard Hall arrays (the start-up calibration drives each coil and reads them)
 or from a probe. Readings must be below the sensors' range (``design.sensors.range_t``).
 
 Plans (:func:`onboard_plan`, :func:`probe_plan`) give points, currents and noise; :func:`simulate`
-fills the readings from a device's exact model with Gaussian noise.
+fills the readings from a device's exact model with Gaussian noise (``designkit calibrate
+--simulate``).
 """
 
 from __future__ import annotations
@@ -53,36 +55,43 @@ class Measurements:
         uniq, inverse = np.unique(key, axis=0, return_inverse=True)
         return uniq, inverse.ravel()
 
-    def groups(self, sensor_positions_m) -> np.ndarray:
-        """Each row's group: 'onboard-upper', 'onboard-lower' or 'probe' (n,) str."""
+    def groups(self, sensor_positions_m, sensor_groups) -> np.ndarray:
+        """Each row's group (n,) str: the group of the onboard sensor it was read at
+        (``sensor_groups`` (n_sensors,), e.g. :func:`sensor_groups`), else 'probe'.
+        ``sensor_positions_m``: (n_sensors, 3) m."""
         out = np.full(len(self), "probe", dtype=object)
-        for name, pos in zip(("onboard-upper", "onboard-lower"), sensor_positions_m):
-            d = np.linalg.norm(self.points_m[:, None, :] - pos[None], axis=-1).min(axis=1)
-            out[d < ONBOARD_TOLERANCE_M] = name
+        pos = np.asarray(sensor_positions_m, dtype=float).reshape(-1, 3)
+        d = np.linalg.norm(self.points_m[:, None, :] - pos[None], axis=-1)
+        near = d.min(axis=1) < ONBOARD_TOLERANCE_M
+        out[near] = np.asarray(sensor_groups, dtype=object)[d.argmin(axis=1)[near]]
         return out
 
 
-def read_csv(path, n_coils: int, range_t: float) -> Measurements:
-    """Read and check a measurement file; every error names the column or the row."""
+def read_csv(path, n_coils: int, range_t: float, *, readings: bool = True,
+             option: str = "--measurements") -> Measurements:
+    """Read and check a measurement file; every error names the column or the row.
+    ``readings=False``: a plan (points, currents, sigma_t): bx/by/bz may be absent and are
+    read as 0. ``option``: the command-line option the file came from (for the errors)."""
     path = Path(path)
     if not path.is_file():
-        raise BadInputError("--measurements", "an existing CSV file", str(path))
+        raise BadInputError(option, "an existing CSV file", str(path))
     with path.open(newline="") as fh:
         rows = list(csv.reader(fh))
     if not rows:
-        raise BadInputError("--measurements", "a CSV file with a header row", str(path))
+        raise BadInputError(option, "a CSV file with a header row", str(path))
     header = [h.strip() for h in rows[0]]
     currents = [h for h in header if h.startswith("i") and h.endswith("_a")]
     if len(currents) != n_coils:
         raise BadInputError(f"{path.name}: current columns",
                             f"{n_coils} (i1_a ... i{n_coils}_a, one per coil of the design)",
                             len(currents))
-    required = ["x_m", "y_m", "z_m"] + [f"i{k + 1}_a" for k in range(n_coils)] + [
-        "bx_t", "by_t", "bz_t"]
+    b_cols = ["bx_t", "by_t", "bz_t"]
+    required = ["x_m", "y_m", "z_m"] + [f"i{k + 1}_a" for k in range(n_coils)] + (
+        b_cols if readings else [])
     for name in required:
         if name not in header:
             raise BadInputError(f"{path.name}: column {name}", "present", "missing")
-    extra = [h for h in header if h not in required and h != "sigma_t"]
+    extra = [h for h in header if h not in required + b_cols + ["sigma_t"]]
     if extra or len(set(header)) != len(header):
         bad = extra[0] if extra else next(h for h in header if header.count(h) > 1)
         raise BadInputError(f"{path.name}: column {bad}",
@@ -101,15 +110,16 @@ def read_csv(path, n_coils: int, range_t: float) -> Measurements:
             if not math.isfinite(data[r - 2, c]):
                 raise BadInputError(f"{path.name}: row {r}, column {name}", "finite", text)
     if len(data) == 0:
-        raise BadInputError("--measurements", "at least one data row", str(path))
+        raise BadInputError(option, "at least one data row", str(path))
     col = {h: data[:, k] for k, h in enumerate(header)}
     sigma = col.get("sigma_t", np.full(len(data), DEFAULT_SIGMA_T))
     for r, s in enumerate(sigma, start=2):
         if not s > 0:
             raise BadInputError(f"{path.name}: row {r}, column sigma_t", "> 0 T", s)
-    b = np.c_[col["bx_t"], col["by_t"], col["bz_t"]]
+    zero = np.zeros(len(data))
+    b = np.c_[tuple(col.get(c, zero) if not readings else col[c] for c in b_cols)]
     clipped = np.flatnonzero((np.abs(b) >= range_t * (1 - 1e-9)).any(axis=1))
-    if len(clipped):
+    if readings and len(clipped):
         raise BadInputError(f"{path.name}: row {clipped[0] + 2}, columns bx_t/by_t/bz_t",
                             f"below the sensor range {range_t:g} T (a reading at the range "
                             "is clipped)", b[clipped[0]].tolist())
@@ -145,8 +155,19 @@ def _each_coil(points, n_coils, currents, sigma):
     return Measurements(pts, cur, np.zeros_like(pts), np.full(len(pts), float(sigma)))
 
 
+def sensor_groups(design) -> list[str]:
+    """The group of each of the design's sensors (:meth:`Design.sensor_poses` order):
+    'onboard-upper' then 'onboard-lower' for the default layout (one above, one below each
+    coil), 'onboard' for a free sensor layout."""
+    n = len(design.sensor_poses()[0])
+    if design.sensors.layout == "free":
+        return ["onboard"] * n
+    return ["onboard-upper"] * (n // 2) + ["onboard-lower"] * (n - n // 2)
+
+
 def onboard_plan(sensor_positions_m, n_coils, current_a=2.0, sigma_t=5e-5) -> Measurements:
-    """The onboard arrays (2, n_coils, 3) m, each coil alone at +-``current_a``."""
+    """The onboard sensors (n_sensors, 3) m (any shape ending in 3), each coil alone at
+    +-``current_a``."""
     return _each_coil(np.asarray(sensor_positions_m).reshape(-1, 3), n_coils,
                       (current_a, -current_a), sigma_t)
 
@@ -157,11 +178,17 @@ def probe_plan(points_m, n_coils, current_a=1.0, sigma_t=2e-5) -> Measurements:
 
 
 def workspace_points(design, n: int, rng) -> np.ndarray:
-    """``n`` uniform random points in the design's workspace box (n, 3) m."""
-    ws = design.workspace
-    lo = [-ws.half_width_m, -ws.half_width_m, ws.z_min_m]
-    hi = [ws.half_width_m, ws.half_width_m, ws.z_max_m]
-    return rng.uniform(lo, hi, size=(n, 3))
+    """``n`` uniform random points in the design's workspace region
+    (:meth:`Design.workspace_region`: its bounding box, the points outside the outline drawn
+    again), (n, 3) m."""
+    region = design.workspace_region()
+    lo, hi = region.bounds_m()
+    out = rng.uniform(lo, hi, size=(n, 3))
+    inside = region.contains(out)
+    while not inside.all():
+        out[~inside] = rng.uniform(lo, hi, size=(int((~inside).sum()), 3))
+        inside = region.contains(out)
+    return out
 
 
 def simulate(array, meas: Measurements, rng) -> Measurements:

@@ -1,9 +1,9 @@
 """A measurement plan from the Fisher information of the calibration fit.
 
 The fit's whitened Jacobian J (readings / sigma by parameters / tolerance) at the nominal device
-gives the information ``I + J^T J`` (the identity: the priors). The onboard arrays' readings
+gives the information ``I + J^T J`` (the identity: the priors). The onboard sensors' readings
 (each coil alone at +-2 A) come first; probe points are then added greedily from a grid over
-the workspace box, each read with every coil alone at ``current_a``, choosing the point that
+the workspace region, each read with every coil alone at ``current_a``, choosing the point that
 raises log det of the information most (D-optimal; the matrix determinant lemma keeps each
 choice a small determinant). Outputs: the probe rows (m, A, T) and each parameter's posterior
 standard deviation with the onboard arrays alone and with the plan.
@@ -20,12 +20,17 @@ from .model import coupled_forward_model
 
 
 def candidate_points(design, per_axis: int = 7, heights: int = 3) -> np.ndarray:
-    """A grid over the workspace box (per_axis^2 x heights points), m."""
-    ws = design.workspace
-    xs = np.linspace(-ws.half_width_m, ws.half_width_m, per_axis)
-    zs = np.linspace(ws.z_min_m, ws.z_max_m, heights)
-    X, Y, Z = np.meshgrid(xs, xs, zs, indexing="ij")
-    return np.c_[X.ravel(), Y.ravel(), Z.ravel()]
+    """A grid over the workspace region (:meth:`Design.workspace_region`): per_axis x per_axis
+    over its bounding box, the points inside its outline, at ``heights`` levels from z_min to
+    z_max, m."""
+    region = design.workspace_region()
+    lo, hi = region.bounds_m()
+    xs = np.linspace(lo[0], hi[0], per_axis)
+    ys = np.linspace(lo[1], hi[1], per_axis)
+    zs = np.linspace(lo[2], hi[2], heights)
+    X, Y, Z = np.meshgrid(xs, ys, zs, indexing="ij")
+    pts = np.c_[X.ravel(), Y.ravel(), Z.ravel()]
+    return pts[region.contains(pts)]
 
 
 def _jacobian(array, meas: Measurements, tol: BuildTolerances, mask) -> np.ndarray:
@@ -53,7 +58,7 @@ def make_plan(design, array, n_points: int, tol: BuildTolerances, *, current_a: 
     """
     mask = fitted_mask(array.coils, tol)
     n_coils = array.n_coils
-    onboard = onboard_plan(array.sensor_positions_m(), n_coils, onboard_current_a,
+    onboard = onboard_plan(array.sensor_poses()[0], n_coils, onboard_current_a,
                            onboard_sigma_t)
     j_on = _jacobian(array, onboard, tol, mask)
     info = np.eye(int(mask.sum())) + j_on.T @ j_on

@@ -6,7 +6,9 @@ the design's ``[asbuilt.tolerances]``, default :class:`designkit.design.asbuilt.
 writes DIR/asbuilt.toml (a design file) and DIR/calibration.json (parameters with standard
 errors, residuals before/after per group, condition, parameters the data cannot see).
 ``--plan [--points N] --out plan.csv``: probe points and currents from the fit's Fisher
-information, and what the onboard arrays alone identify (also in plan.json next to it).
+information over the workspace region, and what the onboard sensors alone identify (also in
+plan.json next to it). ``--simulate plan.csv --as-built TRUE.toml --out M.csv [--onboard]
+[--noise-t SIGMA] [--seed N]``: the measurement file an as-built device would give.
 A fit that does not converge writes nothing. Reference: docs/calibration.md.
 """
 
@@ -25,8 +27,8 @@ from ..calibration.plan import make_plan
 from ..design import design_to_toml, load_design
 from ..design.asbuilt import PARAMETERS, AsBuilt, BuildTolerances
 from ..errors import BadInputError
-from ..model.array import array_for_design
-from ..support.atomic import write_json_atomic, write_text_atomic
+from ..model.array import CoilArray, array_for_design
+from ..support.atomic import atomic_path, write_json_atomic, write_text_atomic
 from .common import add_progress_argument, check_output, show_progress, staged_folder
 
 
@@ -45,6 +47,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--magnet-moment", default=None, metavar="MX,MY,MZ",
                         help="measured magnet moment, A m^2 (e.g. from the localizer's fits), "
                              "recorded in asbuilt.toml's [magnet]")
+    parser.add_argument("--simulate", type=Path, default=None, metavar="PLAN.csv",
+                        help="write the readings a device would give at the rows of PLAN.csv "
+                             "(a --plan file, or any measurement file: its readings are "
+                             "replaced) to --out, instead of fitting; the device: --as-built")
+    parser.add_argument("--as-built", type=Path, default=None, metavar="TRUE.toml",
+                        help="with --simulate: the device as built, a design file whose "
+                             "[asbuilt] tables give each coil's offsets, tilt, turns and core "
+                             "(without them: the nominal device)")
+    parser.add_argument("--onboard", action="store_true",
+                        help="with --simulate: also the onboard sensors' readings, each coil "
+                             "alone at +-2 A (what the start-up calibration reads)")
+    parser.add_argument("--noise-t", type=float, default=None, metavar="SIGMA",
+                        help="with --simulate: Gaussian reading noise per axis, T (default: "
+                             "each row's sigma_t), written as sigma_t; 0: noiseless readings, "
+                             "the plan's sigma_t kept as the fit's weights")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="with --simulate: seed of the noise (default 0)")
     parser.add_argument("--coupling-rounds", type=int, default=2,
                         help="at most this many refits after an exact coupled solve of the "
                              "fitted device (fewer once the coupling converges; default 2, "
@@ -54,7 +73,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     if args.out is None:
-        raise BadInputError("--out", "a folder (fit) or a CSV file (--plan)", None)
+        raise BadInputError("--out", "a folder (fit) or a CSV file (--plan, --simulate)", None)
+    if args.simulate is not None:
+        return _simulate(args)
+    for option, given in (("--as-built", args.as_built is not None), ("--onboard", args.onboard),
+                          ("--noise-t", args.noise_t is not None)):
+        if given:
+            raise BadInputError(option, "given together with --simulate", "without it")
     design = load_design(args.design)
     nominal = dataclasses.replace(design, asbuilt=None)
     tol = design.asbuilt.tolerances if design.asbuilt is not None else BuildTolerances()
@@ -77,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
     built = dataclasses.replace(nominal, name=f"{nominal.name}-asbuilt", asbuilt=asbuilt)
     if moment is not None:
         built = _with_moment(built, moment)
-    report = _report(res, meas, array, nominal)
+    report = _report(res, meas, nominal)
     with staged_folder(args.out) as stage:
         write_text_atomic(stage / "asbuilt.toml", design_to_toml(built))
         write_json_atomic(stage / "calibration.json", report)
@@ -111,8 +136,8 @@ def _with_moment(design, moment):
     return dataclasses.replace(design, magnet=magnet)
 
 
-def _report(res, meas, array, nominal) -> dict:
-    groups = meas.groups(array.sensor_positions_m())
+def _report(res, meas, nominal) -> dict:
+    groups = meas.groups(nominal.sensor_poses()[0], cal.sensor_groups(nominal))
     by_group = {}
     for g in sorted(set(groups)):
         sel = groups == g
@@ -123,7 +148,7 @@ def _report(res, meas, array, nominal) -> dict:
                        "chi2_per_reading_after": _chi(res.residual_after_t[sel], meas, sel)}
     params, unident = [], []
     paired = {kj for c in res.combined if c["identifiable"] for kj in c["parameters"]}
-    for k in range(array.n_coils):
+    for k in range(nominal.n_coils):
         for j, name in enumerate(PARAMETERS):
             if not res.fitted[k, j]:
                 continue
@@ -183,3 +208,48 @@ def _seen(ratio, mask) -> dict:
             "posterior_over_prior": {f"coil {k + 1} {PARAMETERS[j]}": float(ratio[k, j])
                                      for k, j in zip(*np.nonzero(mask))
                                      if math.isfinite(ratio[k, j])}}
+
+
+def _simulate(args) -> int:
+    """``--simulate PLAN.csv --as-built TRUE.toml --out M.csv``: the readings of the as-built
+    device (its exact coupled model, sensors where the nominal design puts them) at the plan's
+    rows, plus Gaussian noise; refused when a reading would clip at the sensor range."""
+    if args.plan or args.measurements is not None:
+        raise BadInputError("--simulate", "alone (not with --plan or --measurements)",
+                            str(args.simulate))
+    if args.as_built is None:
+        raise BadInputError("--as-built", "a design file of the device to simulate (with "
+                            "--simulate)", None)
+    if args.noise_t is not None and not (math.isfinite(args.noise_t) and args.noise_t >= 0):
+        raise BadInputError("--noise-t", "a noise >= 0 T (0: noiseless)", args.noise_t)
+    out = check_output(args.out, folder=False)
+    true = load_design(args.as_built)
+    plan = cal.read_csv(args.simulate, true.n_coils, true.sensors.range_t, readings=False,
+                        option="--simulate")
+    n_onboard = 0
+    if args.onboard:
+        onboard = cal.onboard_plan(true.sensor_poses()[0], true.n_coils)
+        n_onboard, plan = len(onboard), onboard.concat(plan)
+    noise = plan
+    if args.noise_t is not None:
+        noise = cal.Measurements(plan.points_m, plan.currents_a, plan.b_t,
+                                 np.full(len(plan), float(args.noise_t)))
+    meas = cal.simulate(CoilArray.from_design(true), noise, np.random.default_rng(args.seed))
+    if args.noise_t is not None and args.noise_t > 0:
+        plan = noise  # the file's sigma_t is the noise it was drawn with
+    meas = cal.Measurements(meas.points_m, meas.currents_a, meas.b_t, plan.sigma_t)
+    over = np.flatnonzero((np.abs(meas.b_t) >= true.sensors.range_t * (1 - 1e-9)).any(axis=1))
+    if len(over):
+        k = int(over[0])
+        where = (f"onboard reading {k + 1}" if k < n_onboard
+                 else f"{args.simulate.name}: row {k - n_onboard + 2}")
+        raise BadInputError(f"--simulate: {where}", f"readings below the sensor range "
+                            f"{true.sensors.range_t:g} T (lower that row's currents)",
+                            [round(float(q), 6) for q in meas.b_t[k]])
+    with atomic_path(out) as tmp:
+        cal.write_csv(tmp, meas)
+    print(f"wrote {out}: {len(meas)} readings of '{true.name}' "
+          f"({'as built' if true.asbuilt is not None else 'nominal'}), noise "
+          + (f"{args.noise_t:g} T" if args.noise_t is not None else "sigma_t of each row")
+          + f", seed {args.seed}")
+    return 0

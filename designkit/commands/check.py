@@ -5,10 +5,12 @@ Prints every rule of the rule book (:mod:`designkit.rules`) and every device con
 air-core design's R, I R, 5 L/R and heating with the closed-form air-core inductance): value,
 limit, margin (>= 0 is met), the design keys that fix it. The same table decides
 ``optimize`` (its bounds), ``report`` (its "violates" line) and ``cad`` (its refusal: the
-rules of group 'cad'). Then, per Hall sensor, the coil currents that take it out of its linear
-range (:func:`designkit.rules.sensor_saturation`: reported, not a rule -- the runner leaves
-out a sensor it predicts beyond 80 % of its range). Exit 0 when every row is met, 1 when one
-is violated.
+rules of group 'cad'). Any layout: coils in their poses (docs/rules.md). Then, per Hall sensor,
+the coil currents that take it out of its linear range (:func:`designkit.rules.sensor_saturation`:
+reported, not a rule -- the runner leaves out a sensor it predicts beyond 80 % of its range).
+Exit codes: :data:`EXIT_MET` when every row is met, :data:`EXIT_VIOLATED` when one is violated
+(the row names the design keys that fix it), 1 on bad input (a design file that cannot be read
+or is refused: one line naming the key, its value and the valid range).
 """
 
 from __future__ import annotations
@@ -16,9 +18,15 @@ from __future__ import annotations
 import argparse
 
 from ..design import load_design
+from ..errors import BadInputError
 from ..optimize import rule_table
 from ..rules import sensor_saturation
 from .common import add_design_argument, add_progress_argument, shown_margin
+
+EXIT_MET = 0
+"""Every rule of the design holds."""
+EXIT_VIOLATED = 3
+"""At least one rule is violated (bad input is 1, as for every command)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -71,9 +79,20 @@ def saturation_text(design, rows: list) -> str:
     return "\n".join(lines)
 
 
+def saturation_of(design) -> str:
+    """:func:`saturation_text` of the design's sensors, or the one line saying why there is
+    none: a sensor inside a coil's iron has no field model (the model refuses it), and the
+    rule table above already names the rule it breaks and the keys that fix it."""
+    try:
+        rows = sensor_saturation(design)
+    except BadInputError as exc:
+        return f"sensor saturation: not evaluated ({exc})"
+    return saturation_text(design, rows)
+
+
 def run(args: argparse.Namespace) -> int:
     design = load_design(args.design)
     table = rule_table(design)
     print(table_text(design.name, table))
-    print(saturation_text(design, sensor_saturation(design)))
-    return 0 if all(r["met"] for r in table.values()) else 1
+    print(saturation_of(design))
+    return EXIT_MET if all(r["met"] for r in table.values()) else EXIT_VIOLATED

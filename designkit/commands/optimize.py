@@ -42,13 +42,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="device: the upward force at the design point (default) or the "
                              "smallest upward force the array renders over the workspace "
                              "region (bounded LP allocation)")
+    parser.add_argument("--vary", action="append", default=[], metavar="KEY[=LO:HI]",
+                        help="device: a layout key of the design file ([array]) becomes a "
+                             "variable too, within LO:HI (a length in m as its name says, or "
+                             "with its unit, 40mm:6cm; tilt_deg in degrees; default ranges in "
+                             "docs/optimize.md): pitch_m (grid, hex), radius_m and tilt_deg "
+                             "(ring); repeat or join with commas (--vary radius_m,tilt_deg). "
+                             "Coils may not overlap; implies --objective rendering")
     parser.add_argument("--vary-pitch", action="store_true",
-                        help="device: the array pitch is a variable too (coils may not overlap; "
-                             "implies --objective rendering; slow: one LP per point)")
+                        help="device: the same as --vary pitch_m")
     parser.add_argument("--pitch-range", default=None, metavar="LO:HI",
                         help="with --vary-pitch: pitch bounds, e.g. 30:60 or 30mm:6cm (a "
                              "number is mm; default 0.6 x the design's pitch to 2 x max outer "
-                             "radius + 1 mm)")
+                             "radius + 1 mm); the same as --vary pitch_m=LO:HI, where a "
+                             "number is m as the key's name says")
     parser.add_argument("--verify", action="store_true",
                         help="device: also run the global checks (multistart, ISRES, grid)")
     parser.add_argument("--fem", action="store_true",
@@ -72,20 +79,19 @@ def run(args: argparse.Namespace) -> int:
     if starts < 1:
         raise BadInputError("--starts", "a whole number >= 1", starts)
     if args.problem == "coil":
+        if args.vary or args.vary_pitch:
+            raise BadInputError("--vary", "only with --problem device (the coil problem has no "
+                                "layout)", ",".join(args.vary) or "pitch_m")
         return _run_coil(args, design, starts)
     return _run_device(args, design, starts)
 
 
 def _run_device(args, design, starts: int) -> int:
     t0 = time.perf_counter()
-    if args.pitch_range is not None and not args.vary_pitch:
-        raise BadInputError("--pitch-range", "given together with --vary-pitch",
-                            args.pitch_range)
-    objective = args.objective or ("rendering" if args.vary_pitch else "design-point")
-    problem = device_problem_for(design, objective=objective, vary_pitch=args.vary_pitch,
-                                 pitch_range_m=_pitch_range(args.pitch_range))
-    say_unfixable("optimize", design, DEVICE_KEYS + (("array.pitch_m",) if args.vary_pitch
-                                                     else ()))
+    vary = layout_variables(args.vary, args.vary_pitch, args.pitch_range)
+    objective = args.objective or ("rendering" if vary else "design-point")
+    problem = device_problem_for(design, objective=objective, vary=vary)
+    say_unfixable("optimize", design, DEVICE_KEYS + tuple(f"array.{key}" for key in vary))
     if problem.supply_voltage_v < design.drive.supply_voltage_v:
         print(f"note: drive.supply_voltage_v = {design.drive.supply_voltage_v:g} V is above "
               f"drive.driver_max_voltage_v = {problem.supply_voltage_v:g} V (the driver "
@@ -115,11 +121,50 @@ def _run_device(args, design, starts: int) -> int:
 
 
 def _pitch_range(text: str | None):
-    """'LO:HI' (the command line's lengths, :func:`parse_lengths`) -> (lo, hi) m; None
-    passes through."""
+    """``--pitch-range`` 'LO:HI' (the command line's lengths, :func:`parse_lengths`: a number
+    is mm) -> (lo, hi) m; None passes through."""
     if text is None:
         return None
     return parse_lengths(text, "--pitch-range", 2, sep=":", valid_m=(1e-3, 1.0))
+
+
+def _layout_range(name: str, text: str) -> tuple[float, float]:
+    """``--vary NAME=LO:HI`` -> (lo, hi) in the key's unit: a length key (``*_m``) takes
+    lengths with a unit or numbers in metres, as the design file's key (:func:`parse_lengths`
+    with ``bare='m'``); an angle (``*_deg``) numbers in degrees."""
+    option = f"--vary {name}"
+    if name.endswith("_m"):
+        return parse_lengths(text, option, 2, sep=":", valid_m=(1e-3, 1.0), bare="m")
+    try:
+        lo, hi = (float(q) for q in text.split(":"))
+    except ValueError:
+        raise BadInputError(option, "LO:HI, e.g. 0:40 (deg)", text) from None
+    return lo, hi
+
+
+def layout_variables(vary: list[str], vary_pitch: bool = False,
+                     pitch_range: str | None = None) -> dict:
+    """``--vary`` (and its pitch aliases) -> {layout key: (lo, hi) or None}; a key's layout is
+    checked by the device problem (:func:`designkit.optimize.search_space.device_space`)."""
+    if pitch_range is not None and not vary_pitch:
+        raise BadInputError("--pitch-range", "given together with --vary-pitch", pitch_range)
+    out: dict = {"pitch_m": _pitch_range(pitch_range)} if vary_pitch else {}
+    for item in vary:
+        for part in (q.strip() for q in item.split(",")):
+            if not part:
+                raise BadInputError("--vary", "KEY[=LO:HI][,KEY...]", item)
+            name, _, rng = part.partition("=")
+            name = name.strip()
+            if name in out:
+                raise BadInputError("--vary", "each layout key once", name)
+            out[name] = _layout_range(name, rng) if rng else None
+    return out
+
+
+LAYOUT_ROWS = {"pitch_m": ("array pitch (mm)", 1e3, ".2f"),
+               "radius_m": ("ring radius (mm)", 1e3, ".2f"),
+               "tilt_deg": ("ring tilt (deg)", 1.0, ".2f")}
+"""Summary rows of the layout keys: label, scale, format."""
 
 
 def device_summary(data: dict) -> str:
@@ -143,8 +188,13 @@ def device_summary(data: dict) -> str:
     ]
     rend = data.get("rendering")
     if rend:
-        rows.append((f"array pitch (mm){' (optimized)' if data.get('pitch_varied') else ''}",
-                     f"{data['pitch_m'] * 1e3:.2f}"))
+        varied = data.get("layout_varied", [])
+        layout = data.get("layout", {})
+        for key in [k for k in LAYOUT_ROWS if k in layout] or ["pitch_m"]:
+            label, scale, fmt = LAYOUT_ROWS[key]
+            value = layout.get(key, data["pitch_m"])
+            rows.append((f"{label}{' (optimized)' if key in varied else ''}",
+                         f"{value * scale:{fmt}}"))
         rows.append((f"rendering: smallest upward Fz over {len(rend['points_m'])} points (mN)",
                      f"{rend['min_upward_force_n'] * 1e3:.1f}"))
     w = max(len(r[0]) for r in rows)

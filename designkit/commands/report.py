@@ -35,6 +35,7 @@ from ..model.array import array_for_design, force_matrix, g5_from_gradient
 from ..geometry.pose import Pose
 from ..model.coil import Coil
 from ..model.sensor_headroom import sensor_headroom
+from ..sensing.layout_report import layout_report, layout_report_markdown, planned_layout
 from ..optimize import device_problem_for, evaluate_device, rendering_force
 from ..support.atomic import write_json_atomic, write_text_atomic
 from ..support.progress import tqdm
@@ -72,6 +73,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="coarse grids, small images, fewer optimizer starts (seconds)")
     parser.add_argument("--no-figures", action="store_false", dest="figures",
                         help="leave out the figures and their VTK files")
+    parser.add_argument("--sensors", type=Path, default=None, metavar="FILE.toml",
+                        help="a planned [sensors] table (designkit sensors plan's sensors.toml) "
+                             "whose bound maps the report shows beside the design's")
     add_progress_argument(parser)
 
 
@@ -358,6 +362,9 @@ def report_markdown(report: dict) -> str:
     designs = report.get("designs")
     if designs:
         lines += designs_markdown(designs)
+    if report.get("sensor_bounds"):
+        lines += [""] + layout_report_markdown(report["sensor_bounds"],
+                                               f"figures/{report['sensor_bounds']['figure']}")
     figs = report.get("figures", {})
     if figs:
         lines += ["", "## Figures", ""]
@@ -464,6 +471,8 @@ def run(args: argparse.Namespace) -> int:
     currents_arg = parse_currents(getattr(args, "currents", None))
     if currents_arg is not None:
         check_current_limit(design, viz.resolve_currents(design, currents_arg), allow=allow)
+    if getattr(args, "sensors", None) is not None:
+        args.planned_sensors = planned_layout(design, args.sensors)
     with staged_folder(out) as stage:
         summary, report = _run(args, design, current, currents_arg, stage)
     _print_summary(design, summary, current, report, out)
@@ -474,7 +483,7 @@ def _run(args, design, current, currents_arg, out):
     quality = getattr(args, "quality", "full")
     show = show_progress(args)
     steps = ["design summary", "design point", "design vs optimized", "figures", "VTK files",
-             "map file", "report"]
+             "map file", "sensor bounds", "report"]
     bar = tqdm(total=len(steps), desc="designkit report", unit="step", disable=not show)
 
     def step(name: str):
@@ -555,8 +564,13 @@ def _run(args, design, current, currents_arg, out):
         skipped["map file"] = f"designkit.fieldmap is not available ({exc})"
     done()
 
-    # 7. report
+    # 7. the sensor layout's Cramer-Rao bound maps (and a planned layout's)
     step(steps[6])
+    _sensor_bounds(args, design, quality, out, report, skipped)
+    done()
+
+    # 8. report
+    step(steps[7])
     report["skipped"] = skipped
     report["sensors"] = sensor_headroom(design)
     write_json_atomic(out / "report.json", report)
@@ -564,6 +578,17 @@ def _run(args, design, current, currents_arg, out):
     done()
     bar.close()
     return summary, report
+
+
+def _sensor_bounds(args, design, quality, out, report, skipped) -> None:
+    """figures/sensor_bounds.png and report["sensor_bounds"]: the design's sensor layout's
+    Cramer-Rao bound maps (and a planned layout's, ``--sensors``)."""
+    if not getattr(args, "figures", True):
+        skipped["sensor bounds"] = "--no-figures"
+        return
+    (out / "figures").mkdir(exist_ok=True)
+    report["sensor_bounds"] = layout_report(design, out / "figures" / "sensor_bounds.png",
+                                            quality, getattr(args, "planned_sensors", None))
 
 
 def _figures_and_vtk(design, currents, quality, out, report) -> None:

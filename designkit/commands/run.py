@@ -69,6 +69,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="sensors the scene keeps in their linear range while rendering "
                              "(indices in the map's order, e.g. 0-8 or 3,4,5; default none: "
                              "`designkit check` lists the currents that blind each sensor)")
+    parser.add_argument("--background-mt", dest="background_mt", default="0,0,0",
+                        help="a uniform ambient field X,Y,Z in mT (array frame) that appears "
+                             "after the start-up calibration, e.g. 0,0,1 (default none)")
     parser.add_argument("--out", type=Path, default=Path("run-out"),
                         help="output folder (default ./run-out)")
     add_progress_argument(parser)
@@ -93,6 +96,11 @@ def run(args: argparse.Namespace) -> int:
     print("  " + lambda_line(summary))
     print(f"  faults injected {len(summary['faults'])}, faults the runner detected "
           f"{len(summary['fault_log'])}")
+    if summary["fixes"]:
+        print(f"  sensor side: {summary['fixes']} fixes, {summary['fixes_trusted_fraction']:.1%} "
+              f"trusted, {summary['trusted_fixes_beyond_5mm']} trusted more than 5 mm off; "
+              "fault detection excluded sensors "
+              f"{summary['fault_excluded_sensors'] or 'none'}")
     if summary["trajectory_played"] != "whole":
         print(f"  simulated {summary['duration_s']:g} s of the "
               f"{summary['trajectory_duration_s']:g} s trajectory at its own speed "
@@ -112,7 +120,19 @@ def _settings(args: argparse.Namespace) -> RunSettings:
                        faults=args.faults, method=args.method, period_s=args.period_ms * 1e-3,
                        unipolar=args.unipolar, rows=args.rows, lam_n_per_m=args.lam,
                        seed=args.seed, keep_sensors=_sensor_list(args.keep_sensors),
-                       scene_path=args.scene)
+                       background_t=_field_t(args.background_mt), scene_path=args.scene)
+
+
+def _field_t(text: str) -> tuple:
+    """'0,0,1' (mT) -> (0.0, 0.0, 0.001) T."""
+    try:
+        values = tuple(float(v) * 1e-3 for v in text.split(","))
+    except ValueError:
+        raise BadInputError("--background-mt", "three numbers X,Y,Z in mT, e.g. 0,0,1",
+                            text) from None
+    if len(values) != 3:
+        raise BadInputError("--background-mt", "three numbers X,Y,Z in mT, e.g. 0,0,1", text)
+    return values
 
 
 def _sensor_list(text: str) -> tuple:

@@ -11,6 +11,8 @@ from typing import Any
 
 import numpy as np
 
+from firmware_io.hw.sensors import MAX_SENSORS
+
 from ..constants import MU0
 from ..errors import BadInputError, DesignRuleError
 from ..support import validate as v
@@ -202,11 +204,22 @@ def _check_sensors(d: DesignLike) -> None:
             if getattr(s, key):
                 raise BadInputError(f"sensors.{key}", "given only with sensors.layout = 'free'",
                                     f"layout {s.layout!r}")
+        if 2 * d.n_coils > MAX_SENSORS:
+            raise BadInputError(
+                "sensors.layout", f"'free' with at most {MAX_SENSORS} sensors, or 'coils' with "
+                f"at most {MAX_SENSORS // 2} coils (one sensor above and one below each)",
+                f"'coils' on {d.n_coils} coils ({2 * d.n_coils} sensors)",
+                f"The sensor bus addresses {MAX_SENSORS}: TCA9548A muxes 0x71..0x77, 8 "
+                "channels each.")
         return
     pos = np.asarray(s.positions_m, dtype=float) if s.positions_m else np.zeros((0, 3))
     if pos.ndim != 2 or pos.shape[1] != 3 or len(pos) == 0 or not np.all(np.isfinite(pos)):
         raise BadInputError("sensors.positions_m", "a non-empty list of [x, y, z] in m",
                             s.positions_m)
+    if len(pos) > MAX_SENSORS:
+        raise BadInputError("sensors.positions_m", f"at most {MAX_SENSORS} sensors (the sensor "
+                            "bus: TCA9548A muxes 0x71..0x77, 8 channels each)",
+                            f"{len(pos)} sensors")
     if s.rotations:
         rot = np.asarray(s.rotations, dtype=float)
         if rot.shape != (len(pos), 3, 3) or not np.all(np.isfinite(rot)):

@@ -107,7 +107,7 @@ def cel(kc, p, c, s, *, tol: float = 3e-9):
 
 
 # --------------------------------------------------------------------------- current loop
-def _loop_scaled(rho, z, gradient, omr=None):
+def loop_scaled(rho, z, gradient, omr=None):
     """Loop of unit radius. Returns the dimensionless integrals scaled so that
     B/(mu0 I) = out / (4 pi a) and gradients = out / (4 pi a^2).
 
@@ -211,7 +211,7 @@ def loop_rz(a, rho, z, *, gradient: bool = False):
     omr = (a - rho) / a  # exact near the wire (Sterbenz), unlike 1 - rho/a
     zz = np.asarray(z, dtype=float) / a
     r, zz, omr = np.broadcast_arrays(r, zz, omr)
-    res = _loop_scaled(np.ascontiguousarray(r, dtype=float), np.ascontiguousarray(zz, dtype=float),
+    res = loop_scaled(np.ascontiguousarray(r, dtype=float), np.ascontiguousarray(zz, dtype=float),
                        gradient, np.ascontiguousarray(omr, dtype=float))
     f1 = 1.0 / (4.0 * math.pi * a)
     if not gradient:
@@ -271,7 +271,7 @@ def sheet_rz(a, h, rho, z, *, gradient: bool = False):
     hh = np.asarray(h, dtype=float) / a
     r, zz, hh, omr = (np.ascontiguousarray(x, dtype=float)
                       for x in np.broadcast_arrays(r, zz, hh, omr))
-    res = _sheet_scaled(r, omr, zz, hh, gradient)
+    res = sheet_scaled(r, omr, zz, hh, gradient)
     if not gradient:
         return res
     br, bz, br_r, dbr_dz, dbz_dz = res
@@ -308,7 +308,7 @@ def _sheet_far(r, omr, zz, hh, gradient, mag=False):
         xk, wk = _SHEET_GL[int(nn)]
         m = sel.size
         zp = (hh[sel][:, None] * xk[None, :]).ravel()
-        res = _loop_scaled(np.repeat(r[sel], nn), np.repeat(zz[sel], nn) - zp, gradient,
+        res = loop_scaled(np.repeat(r[sel], nn), np.repeat(zz[sel], nn) - zp, gradient,
                            np.repeat(omr[sel], nn))
         ww = (hh[sel][:, None] * wk[None, :]).ravel() / (4.0 * math.pi)
         comps = (res[0], res[1], res[4], res[2], res[3]) if gradient else res
@@ -319,7 +319,7 @@ def _sheet_far(r, omr, zz, hh, gradient, mag=False):
     return tuple(out)
 
 
-def _sheet_scaled(r, omr, zz, hh, gradient, tol=1e-15, mag=False, ends=None):
+def sheet_scaled(r, omr, zz, hh, gradient, tol=1e-15, mag=False, ends=None):
     """Unit-radius sheet. Returns (br, bz) per mu0 K, or with gradient
     (br, bz, br_over_r, dbr_dz, dbz_dz) in units of the radius.
 
@@ -393,8 +393,8 @@ def _sheet_scaled_closed(r, omr, zz, hh, gradient, mag=False, ends_in=None):
     if not gradient:
         return (br, bz, m_brr * r, m_bz) if mag else (br, bz)
     # d/dz of a sheet = K [B_loop(z + h) - B_loop(z - h)] (difference of its end loops)
-    lp = _loop_scaled(r, ends[0], False, omr)
-    lm = _loop_scaled(r, ends[1], False, omr)
+    lp = loop_scaled(r, ends[0], False, omr)
+    lm = loop_scaled(r, ends[1], False, omr)
     inv4pi = 1.0 / (4.0 * math.pi)
     out = (br, bz, br_r, (lp[0] - lm[0]) * inv4pi, (lp[1] - lm[1]) * inv4pi)
     if mag:

@@ -27,7 +27,7 @@ import math
 import numpy as np
 
 from .harmonic import harmonic_rz
-from .kernels import _loop_scaled, _sheet_scaled
+from .kernels import loop_scaled, sheet_scaled
 
 RTOL_MIN = 1e-12
 """Tightest rtol guaranteed (rounding: the kernels' few-ulp errors amplified by at most
@@ -209,7 +209,7 @@ def _sheet_loops(a, pr, pz, h, gradient, nzs):
         A = np.repeat(a[sel], nn)
         R = np.repeat(pr[sel], nn)
         U = np.repeat(pz[sel], nn) - np.tile(h * x, k)
-        res = _loop_scaled(R / A, U / A, gradient, (A - R) / A)
+        res = loop_scaled(R / A, U / A, gradient, (A - R) / A)
         f = np.tile(h * w, k) / (4.0 * math.pi * A)
         terms = [res[0] * f, res[1] * f]
         if gradient:
@@ -248,7 +248,7 @@ def _near(ri, ro, h, rho, z, gradient, rtol, zsum=False):
         a = anc + t
         delta = np.where(anc == 0.0, a - pr, t)
         # z +- h formed before scaling: exact for points within an ulp of an end plane
-        res = _sheet_scaled(pr / a, delta / a, pz / a, hz / a, gradient, rtol, mag=True,
+        res = sheet_scaled(pr / a, delta / a, pz / a, hz / a, gradient, rtol, mag=True,
                             ends=((pz + hz) / a, (pz - hz) / a))
         ww = (half[:, None] * w[None, :]).ravel()
         # scale back: B_sheet is per mu0 K already (dimensionless); Br/rho and d/dz carry 1/a
@@ -322,7 +322,7 @@ def _far(ri, ro, h, rho, z, gradient, na, nz):
         pr = np.repeat(rho[sel], m)
         pz = np.repeat(z[sel], m)
         aa = np.tile(A, sel.size)
-        res = _loop_scaled(pr / aa, (pz - np.tile(ZP, sel.size)) / aa, gradient, (aa - pr) / aa)
+        res = loop_scaled(pr / aa, (pz - np.tile(ZP, sel.size)) / aa, gradient, (aa - pr) / aa)
         f1 = 1.0 / (4.0 * math.pi * aa)
         ww = np.tile(WW, sel.size)
         vals = [res[0] * f1, res[1] * f1]

@@ -33,7 +33,8 @@ from .physics import MapPhysics, map_physics
 from .plan import box_axes, cell_layers, default_box, layer_nodes, lattice_nodes, table_specs
 from .settings import BuildSettings
 from .symmetry import Orbits, random_orbits, sampling_group
-from .tables import compute_magnet_table, coupled_modes, mode_table_entry
+from .tables import (compute_magnet_table, coupled_modes, finite_size_correction,
+                     mode_table_entry)
 
 FORMAT, FORMAT_VERSION, UNITS = mf.FORMAT, mf.FORMAT_VERSION, mf.UNITS
 CHUNK = 64
@@ -44,6 +45,9 @@ WORKERS = min(2, os.cpu_count() or 1)
 """Processes of the sampling phase after the coupled solve (docs/fieldmap.md, "Costs")."""
 CHECK_SEED = 20261123
 """Seed of the random check points (the same points for every build of a box)."""
+N_F0_CHECK = 16
+"""Check points where the map's F0 is compared with the finite cylinder's (meta 'errors';
+~15-30 ms each, the dipole's ~1 ms: the first of the magnet check points)."""
 
 
 def build(design, settings: BuildSettings | None = None, *, box=None, progress: bool = True,
@@ -164,6 +168,7 @@ class _Samples:
     a_check: np.ndarray               # (n_check, 8, nc) A at the check points
     f0: np.ndarray                    # (M, 3) N, F0 at the residual grid's nodes
     tables: dict = field(default_factory=dict)   # MRZ<k>, SM<k>
+    mrz_dipole: dict = field(default_factory=dict)   # MRZ<k> of the point dipole (residual)
     mrz_meta: list = field(default_factory=list)
     sm_meta: list = field(default_factory=list)
     sensor_coef: np.ndarray | None = None  # coupled_modes' sensor_coef (None: no cores)
@@ -274,11 +279,14 @@ def _step(kind: str, k: int, ctx: dict):
         proto, idx = plan.types[k]
         spec = plan.m_specs[k]
         # each core alone in its own frame, the moment along its axis: the part of its pull
-        # the (rho, z) table can hold (tilted_pull: the residual grid carries the rest)
+        # the (rho, z) table can hold (tilted_pull: the residual grid carries the rest). The
+        # point dipole's table carries the grid's residual; the stored one adds what the
+        # magnet's finite size changes in each core's own pull (docs/fieldmap.md)
         axial = dataclasses.replace(phys, moment_a_m2=np.array(
             [0.0, 0.0, float(np.linalg.norm(phys.moment_a_m2))]))
-        return (compute_magnet_table(axial, proto, spec).astype(np.float32),
-                {"name": f"MRZ{k}", "coils": [int(c) for c in idx], **spec})
+        dipole = compute_magnet_table(axial, proto, spec).astype(np.float32)
+        stored = (dipole + finite_size_correction(axial, proto, spec)).astype(np.float32)
+        return dipole, stored, {"name": f"MRZ{k}", "coils": [int(c) for c in idx], **spec}
     if kind == "mode tables":  # the sensor field's adjoint modes and their tables
         modes = coupled_modes(arr, s.sensor_mode_tolerance)
         out = []
@@ -294,7 +302,8 @@ def _step(kind: str, k: int, ctx: dict):
     if kind == "check":
         return phys.actuation(arr, plan.check[plan.check_orbits.reps[k:k + CHUNK]])
     if kind == "magnet check":
-        return (phys.bias_force(arr, plan.check[:plan.n_mcheck]),
+        # the truth: the finite cylinder (~20 x a dipole's cost: the first few points)
+        return (phys.bias_force_finite(arr, plan.check[:min(plan.n_mcheck, N_F0_CHECK)]),
                 phys.sensor_induced(arr, plan.check[:plan.n_mcheck]))
     return phys.saturation(arr)
 
@@ -308,7 +317,7 @@ def _store(smp: _Samples, kind: str, k: int, value) -> None:
     elif kind == "cell nodes":
         smp.a_fit[k:k + FIT_CHUNK] = value
     elif kind == "magnet tables":
-        smp.tables[f"MRZ{k}"], smp.mrz_meta[k] = value
+        smp.mrz_dipole[f"MRZ{k}"], smp.tables[f"MRZ{k}"], smp.mrz_meta[k] = value
     elif kind == "mode tables":
         smp.sensor_coef, tables = value
         for j, (tab, entry) in enumerate(tables):
@@ -332,7 +341,7 @@ def _arrays(phys: MapPhysics, arr: CoilArray, plan: _Plan, smp: _Samples,
     arrays = dict(smp.tables)
     cells, row_max = fit_layers(plan.layers, plan.lattices, smp.a_fit, fit_nodes)
     arrays.update(cells)
-    mprep = mf.prepare_magnet([arrays[t["name"]] for t in smp.mrz_meta], smp.mrz_meta,
+    mprep = mf.prepare_magnet([smp.mrz_dipole[t["name"]] for t in smp.mrz_meta], smp.mrz_meta,
                               plan.positions, plan.rotations)
     f_pair = mf.magnet_terms(mprep, plan.m_nodes)
     m_shape = tuple(len(a) for a in plan.m_axes)
@@ -395,7 +404,9 @@ def _errors(reader: mf.MapFile, plan: _Plan, smp: _Samples, row_max: np.ndarray)
         "n_fit_points": len(plan.fit_pts),
         "actuation_fit_nodes_max_rel": float(fit_err.max()),
         "n_magnet_points": plan.n_mcheck,
-        "bias_force_max_rel": _rel(reader.bias_force(check), smp.f0_check),
+        "n_bias_force_points": len(smp.f0_check),
+        "bias_force_max_rel": _rel(reader.bias_force(check[:len(smp.f0_check)]),
+                                   smp.f0_check),
         "sensor_induced_max_rel": _rel(reader.sensor_induced_field(check).reshape(
             smp.sind_check.shape), smp.sind_check)}
 

@@ -20,6 +20,8 @@ class MapPhysics:
 
     moment_a_m2: np.ndarray
     max_current_a: float
+    magnet_size_m: tuple | None = None
+    """(radius, length) m of the finger magnet's cylinder (:meth:`bias_force_finite`)."""
     source: str = "designkit.cores.coupled (all cores solved together, linear cores)"
 
     def sensor_positions(self, array: CoilArray) -> np.ndarray:
@@ -37,8 +39,16 @@ class MapPhysics:
         return array.actuation_matrix(np.asarray(points, float))
 
     def bias_force(self, array: CoilArray, points) -> np.ndarray:
-        """F0 (n, 3) N on the magnet at ``points`` at zero current."""
+        """F0 (n, 3) N on the magnet, as a point dipole, at ``points`` at zero current."""
         return array.bias_force(np.asarray(points, float), self.moment_a_m2)
+
+    def bias_force_finite(self, array: CoilArray, points) -> np.ndarray:
+        """F0 (n, 3) N on the magnet as the uniformly magnetized cylinder it is
+        (:attr:`magnet_size_m`; ~20 x the dipole's cost), at ``points`` at zero current: the
+        map's per-core tables carry its difference from the dipole (docs/fieldmap.md, "The
+        magnet's finite size")."""
+        return array.bias_force(np.asarray(points, float), self.moment_a_m2,
+                                magnet_size_m=self.magnet_size_m)
 
     def sensor_induced(self, array: CoilArray, magnet_positions, chunk: int = 64) -> np.ndarray:
         """(n, n_sensors, 3) T: the field of the magnet-magnetized cores at the sensors (array
@@ -66,8 +76,8 @@ class MapPhysics:
 
     def saturation(self, array: CoilArray) -> tuple[np.ndarray, np.ndarray]:
         """Currents (n_s,) A and per-coil factors (n_s, n_coils) on the columns of A
-        (:meth:`CoilArray.saturation_correction`; 1 for air coils)."""
-        if array.coupled() is None:  # no iron: nothing saturates (and no solve to pay for)
+        (:meth:`CoilArray.saturation_correction`; 1 for air coils and linear cores)."""
+        if not array.saturating_coils():  # air or linear cores: nothing to solve for
             cur = np.array([0.0, 1.0])
             return cur, np.ones((2, array.n_coils))
         # 7 currents: linear interpolation between them follows a 13-point curve closely (the
@@ -79,4 +89,5 @@ class MapPhysics:
 def map_physics(design) -> MapPhysics:
     """The one place the map's physics comes from (see :class:`MapPhysics`)."""
     return MapPhysics(np.asarray(design.magnet.moment_vector_a_m2, float),
-                      design.drive.max_current_a)
+                      design.drive.max_current_a,
+                      (design.magnet.radius_m, design.magnet.length_m))

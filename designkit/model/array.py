@@ -369,27 +369,32 @@ class CoilArray:
                                 "sensor_positions_m(); use sensor_poses()", len(pos))
         return pos.reshape(2, self.n_coils, 3)
 
+    def saturating_coils(self) -> list[int]:
+        """Indices of the coils whose core saturates (``Core.bh == 'steel1010'``; linear cores
+        and air coils do not)."""
+        return [k for k, c in enumerate(self.coils)
+                if c.core is not None and c.core.bh == "steel1010"]
+
     def saturation_correction(self, height_m: float = 0.03, currents_a=None) -> dict:
         """Saturation correction of the 1010-steel cores (form: :func:`designkit.cores.
         saturation_table`).
 
         Returns dict: ``saturation_current_a`` (k,) A; ``saturation_factor`` (k, n_coils)
-        (1 for air coils); ``core_flux_t_per_a`` (n_coils, n_coils) T/A, the coupled linear
+        (1 for air coils and for cores the design calls linear, ``bh='linear'``: their model
+        does not saturate); ``core_flux_t_per_a`` (n_coils, n_coils) T/A, the coupled linear
         axial flux density at core k's mid-plane per ampere in coil j (zero rows for air
         coils), for the per-state use.
         """
         tables = {}
-        for c in self.coils:
-            if c.core is not None:
-                key = dataclasses.replace(c, pose=Pose())
-                if key not in tables:
-                    tables[key] = saturation_table(c, height_m, currents_a)
+        for k in self.saturating_coils():
+            key = dataclasses.replace(self.coils[k], pose=Pose())
+            if key not in tables:
+                tables[key] = saturation_table(self.coils[k], height_m, currents_a)
         cur = (np.arange(0.0, 6.01, 1.0) if currents_a is None
                else np.asarray(currents_a, dtype=float))
         fac = np.ones((len(cur), self.n_coils))
-        for k, c in enumerate(self.coils):
-            if c.core is not None:
-                fac[:, k] = tables[dataclasses.replace(c, pose=Pose())]["factor"]
+        for k in self.saturating_coils():
+            fac[:, k] = tables[dataclasses.replace(self.coils[k], pose=Pose())]["factor"]
         cmat = np.zeros((self.n_coils, self.n_coils))
         system = self.coupled()
         if system is not None:

@@ -25,11 +25,13 @@ from .coil_problem import (CORE_MODEL_NAMES, EXTRA_VARIABLES, MAGNET_CLEARANCE_M
                            DesignResult, Evaluation, evaluate_design, force_field_engine)
 from .device_check import evaluate_device, rule_table
 from .device_problem import (DEVICE_CONSTRAINTS, DEVICE_OBJECTIVES, DEVICE_VARIABLES,
-                             PITCH_VARIABLE, SEARCH_VARIABLES, DeviceProblem, device_problem_for)
+                             PITCH_VARIABLE, DeviceProblem, OperatingConditions,
+                             device_problem_for)
 from .device_solve import DeviceResult, device_design, round_design, solve_device
 from .fast_model import FAST_MODEL_ENVELOPE, RESIDUAL_BOUND
-from .nlopt_driver import LocalRun, maximize
-from .rendering import array_force_per_amp, array_render_forces, rendering_force
+from .nlopt_driver import LocalRun, SolverOptions, maximize
+from .rendering import RodCoil, array_force_per_amp, array_render_forces, rendering_force
+from .search_space import LAYOUT_VARIABLES, SEARCH_VARIABLES, SearchSpace, Variable
 from .solve import (GLOBAL_METHODS, THESIS_FORCE_N, THESIS_POINT, THESIS_TURNS, GlobalMethod,
                     OptimizeResult, ParetoPoint, optimize_wire, pareto_front, solve,
                     thesis_point_summary)

@@ -29,18 +29,21 @@ def device_candidate(base: Design, x: Sequence[float], turns: int, insulated_m: 
     insulated_m : float
         Insulated wire diameter, m.
     pitch_m : float, optional
-        Array pitch, m (default: the base design's).
+        Array pitch, m (default: the layout's).
     **sections
-        Further top-level replacements (``name``, typed ``drive`` or ``workspace`` specs).
+        Further top-level replacements (``name``, typed ``drive`` or ``workspace`` specs, the
+        ``array`` layout).
 
     Raises BadInputError or DesignRuleError from the design's checks.
     """
     ri, ro, ln, a, lc, prot, d = x[:7]
     core = base.core if base.core is not None else CoreSpec()
+    layout = sections.pop("array", base.array)
+    if pitch_m is not None:
+        layout = dataclasses.replace(layout, pitch_m=pitch_m)
     return dataclasses.replace(
         base,
-        array=dataclasses.replace(
-            base.array, pitch_m=base.array.pitch_m if pitch_m is None else pitch_m),
+        array=layout,
         coil=dataclasses.replace(base.coil, inner_radius_m=ri, outer_radius_m=ro, length_m=ln,
                                  turns=turns),
         wire=dataclasses.replace(base.wire, diameter_m=d, insulated_diameter_m=insulated_m),

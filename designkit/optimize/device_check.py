@@ -14,6 +14,7 @@ from ..errors import BadInputError
 from ..model import electrical as el
 from ..support.blas import one_blas_thread
 from .device_problem import DeviceProblem, device_problem_for
+from .search_space import SEARCH_VARIABLES, SearchSpace, Variable
 
 
 def evaluate_device(design: Design, problem: DeviceProblem | None = None) -> dict:
@@ -66,7 +67,8 @@ def air_core_constraints(design: Design) -> dict:
     formulas (:meth:`DeviceProblem.table_with_inductance`) with the winding's closed-form
     air-core inductance (:func:`designkit.model.electrical.air_inductance_from_geometry`)."""
     c, w = design.coil, design.wire
-    problem = DeviceProblem(design=design, lower=(0.0,) * 7, upper=(1.0,) * 7,
+    space = SearchSpace(tuple(Variable(name, 0.0, 1.0) for name in SEARCH_VARIABLES))
+    problem = DeviceProblem(design=design, space=space,
                             insulation_ratio=w.insulated_diameter_m / w.diameter_m)
     x = [c.inner_radius_m, c.outer_radius_m, c.length_m, 0.0, 0.0, 0.0, w.diameter_m]
     inductance = el.air_inductance_from_geometry(c.inner_radius_m, c.outer_radius_m,
@@ -78,8 +80,9 @@ def air_core_constraints(design: Design) -> dict:
 def rule_table(design: Design) -> dict:
     """Every rule and constraint of a design, by name -> :meth:`designkit.rules.Rule.as_dict`
     rows: the device constraints (a cored design's under the panel model,
-    :func:`evaluate_device`; an air-core design's electrical ones, :func:`air_core_constraints`)
-    and the rule book (:func:`designkit.rules.rules`, any design)."""
+    :func:`evaluate_device`; an air-core design's electrical ones, :func:`air_core_constraints`;
+    each coil type of its ``[[groups]]`` too, :func:`group_constraints`) and the rule book
+    (:func:`designkit.rules.rules`, any design)."""
     if design.core is None:
         table = air_core_constraints(design)
         table.update({r.name: r.as_dict() for r in rules.rules(design)})
@@ -88,4 +91,26 @@ def rule_table(design: Design) -> dict:
     for row in table.values():
         row.setdefault("group", "device")
         row.setdefault("keys", [])
-    return table
+    return {**table, **group_constraints(design)}
+
+
+def group_constraints(design: Design) -> dict:
+    """The device constraints of each coil type of the design's ``[[groups]]`` (a cored
+    type's winding and core under the panel model, as :func:`evaluate_device` judges the
+    design's own; an air-core type's electrical ones, :func:`air_core_constraints`), named
+    ``NAME@groups[g]``, their keys the group's."""
+    out = {}
+    for t in rules.coil_types(design)[0]:
+        if not t.where:
+            continue
+        alone = dataclasses.replace(design, coil=t.coil, core=t.core, groups=())
+        where = t.where.rstrip(".")
+        table = (air_core_constraints(alone) if t.core is None
+                 else evaluate_device(alone)["constraints"])
+        for name, row in table.items():
+            if "group" in row:  # a rule of the rule book: the whole design's table has it
+                continue
+            keys = [t.where + k if k.startswith(("coil.", "core.")) else k
+                    for k in row.get("keys", [])]
+            out[f"{name}@{where}"] = {**row, "group": "device", "keys": keys}
+    return out

@@ -5,7 +5,7 @@ fill (core radius / inner radius), core depth fraction (core length / (winding l
 protrusion)), core protrusion above the winding top, bare wire diameter (continuous; the
 solver then picks a neighbouring IEC 60317 size), optionally the array pitch. Constraints
 (:data:`DEVICE_CONSTRAINTS`, each with its margin): R at the hot limit < Rmax, I R(hot) <=
-the driver's rating, 5 L_secant / R(cold) < T, adiabatic time from cold to hot at the
+the supply (the design's, at most the driver's rating), 5 L_secant / R(cold) < T, adiabatic time from cold to hot at the
 rendering duty >= its minimum, a winding at least one wire deep; with a varying pitch also
 2 Ro + clearance <= pitch. Objective: the upward force on the axis at the design height, or
 the smallest upward force the array renders over the workspace region (:mod:`.rendering`).
@@ -16,8 +16,10 @@ surface-current panel model of :mod:`designkit.cores`). Details: docs/optimize.m
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Mapping
 
 import numpy as np
 
@@ -31,9 +33,10 @@ from ..model.coil import Coil
 from ..support import validate as v
 from .axial_kernel import axial_gradient_per_current_density
 from .design_view import DesignView
-from .rendering import array_render_forces
+from .rendering import RodCoil, array_render_forces, render_forces_many
+from .search_space import SEARCH_VARIABLES, SearchSpace, device_space, nearest_spacing_m
 from .wire_table import GRADE1_INSULATION_RATIO, METRIC_DIAMETERS_M
-from .workspace import _fold_points, workspace_region
+from .workspace import fold_points, workspace_region
 
 DEVICE_VARIABLES = ("inner_radius_m", "outer_radius_m", "length_m", "core_radius_m",
                     "core_length_m", "core_protrusion_m", "wire_diameter_m")
@@ -42,13 +45,8 @@ DEVICE_CONSTRAINTS = ("resistance_ohm", "supply_voltage_v", "settling_time_s",
 DEVICE_OBJECTIVES = ("design-point", "rendering")
 PITCH_VARIABLE = "pitch_m"
 """The optional 8th search (and physical) variable, :attr:`DeviceProblem.pitch_bounds_m`."""
-SEARCH_VARIABLES = ("inner_radius_m", "outer_radius_m", "length_m", "core_fill",
-                    "core_depth_fraction", "core_protrusion_m", "wire_diameter_m")
-"""What the optimizer moves: core radius = core_fill x inner radius (the bore bounds it) and
-core length = core_depth_fraction x (winding length + protrusion) (the core's bottom never
-below the winding's), so those two limits are bounds, not constraints."""
 
-# stated operating conditions (defaults of DeviceProblem.from_design)
+# stated operating conditions (defaults of OperatingConditions)
 HOT_TEMPERATURE_C = 100.0
 """Winding temperature of the resistance and supply constraints, deg C (the thermal limit)."""
 RENDER_DUTY = 0.5
@@ -58,69 +56,20 @@ MIN_TIME_TO_HOT_S = 60.0
 BOARD_CLEARANCE_M = 1e-3
 """Gap between the core top and the upper sensor board's underside, m (assumed, assembly)."""
 
-# the search box (choices of this optimizer, not facts of the device)
-MIN_WINDING_LENGTH_M = 0.010
-"""Shortest winding searched, m."""
-MIN_WINDING_DEPTH_M = 0.2e-3
-"""Outer radius at least this above the smallest inner radius, m."""
-INNER_RADIUS_MARGIN_M = 0.3e-3
-"""Largest inner radius this below the largest outer radius, m."""
-CORE_FILL_BOUNDS = (0.25, 1.0)
-"""Core radius / inner radius."""
-CORE_DEPTH_BOUNDS = (0.1, 1.0)
-"""Core length / (winding length + protrusion)."""
-MIN_PROTRUSION_BOUND_M = 1e-4
-"""Smallest upper bound of the core protrusion, m (keeps the box non-empty)."""
-WIRE_BOUNDS_M = (0.20e-3, 1.60e-3)
-"""Bare wire diameter, m: the ends of the IEC 60317 metric table."""
-PITCH_RANGE_FACTOR = 0.6
-"""Default smallest pitch searched, as a fraction of the design's pitch."""
-MIN_PITCH_WINDING_DEPTH_M = 0.5e-3
-"""Default smallest pitch: coils of the smallest inner radius this deep, m."""
 
+@dataclass(frozen=True)
+class OperatingConditions:
+    """The stated operating conditions of the device constraints.
 
-def _array_pitch(design: Design) -> float:
-    """The design's pitch, m (1 m for a single coil: no neighbour to overlap)."""
-    return design.array.pitch_m if design.n_coils > 1 else 1.0
+    hot_temperature_c : winding temperature of the resistance and supply constraints (the
+        thermal limit: the coil must still take the operating current from the supply hot).
+    render_duty : mean duty of the rendering drive for the heating constraint.
+    min_time_to_hot_s : shortest adiabatic time from cold to ``hot_temperature_c`` at that duty.
+    """
 
-
-def _pitch_bounds(design: Design, coil_clearance_m: float,
-                  pitch_range_m: tuple[float, float] | None) -> tuple[float, float]:
-    """Checked (lo, hi) of a varying pitch, m (default: :meth:`DeviceProblem.from_design`)."""
-    o, pitch = design.optimize, _array_pitch(design)
-    if design.n_coils < 2:
-        raise BadInputError("array", "at least 2 coils when the pitch varies",
-                            design.n_coils)
-    if pitch_range_m is None:
-        pitch_range_m = (max(PITCH_RANGE_FACTOR * pitch, 2 * o.min_inner_radius_m
-                             + 2 * MIN_PITCH_WINDING_DEPTH_M + coil_clearance_m),
-                         max(pitch, 2 * o.max_outer_radius_m + coil_clearance_m))
-    lo_p, hi_p = (float(q) for q in pitch_range_m)
-    smallest = 2 * o.min_inner_radius_m + 2 * MIN_WINDING_DEPTH_M + coil_clearance_m
-    if not (math.isfinite(lo_p) and math.isfinite(hi_p) and smallest < lo_p < hi_p):
-        raise BadInputError(
-            "pitch_range_m", f"finite lo < hi with lo > 2 x min inner radius + "
-            f"{2 * MIN_WINDING_DEPTH_M * 1e3:g} mm + clearance ({smallest:.4g} m)", pitch_range_m)
-    return lo_p, hi_p
-
-
-def _search_bounds(design: Design, pitch_bounds, coil_clearance_m: float,
-                   board_clearance_m: float) -> tuple[tuple, tuple]:
-    """(lower, upper) of :data:`SEARCH_VARIABLES` [+ pitch], SI (see
-    :meth:`DeviceProblem.from_design`)."""
-    o = design.optimize
-    widest = pitch_bounds[1] if pitch_bounds else _array_pitch(design)
-    r_out = min(0.5 * (widest - coil_clearance_m), o.max_outer_radius_m)
-    # buildability (designkit.rules): the core top stays below the upper sensor mount
-    max_prot = max(min(design.sensors.offset_m - board_clearance_m,
-                       rules.max_core_protrusion_m(design)), MIN_PROTRUSION_BOUND_M)
-    lower = (o.min_inner_radius_m, o.min_inner_radius_m + MIN_WINDING_DEPTH_M,
-             MIN_WINDING_LENGTH_M, CORE_FILL_BOUNDS[0], CORE_DEPTH_BOUNDS[0], 0.0,
-             WIRE_BOUNDS_M[0]) + ((pitch_bounds[0],) if pitch_bounds else ())
-    upper = (r_out - INNER_RADIUS_MARGIN_M, r_out, o.max_length_m, CORE_FILL_BOUNDS[1],
-             CORE_DEPTH_BOUNDS[1], max_prot, WIRE_BOUNDS_M[1]) + (
-                 (pitch_bounds[1],) if pitch_bounds else ())
-    return lower, upper
+    hot_temperature_c: float = HOT_TEMPERATURE_C
+    render_duty: float = RENDER_DUTY
+    min_time_to_hot_s: float = MIN_TIME_TO_HOT_S
 
 
 @dataclass(frozen=True)
@@ -129,24 +78,17 @@ class DeviceProblem(DesignView):
 
     The design gives the magnet, design height, drive (current, driver rating, total current),
     wire material, limits (``optimize``), sensor board and array; the problem adds the search
-    space (bounds of :data:`SEARCH_VARIABLES` [+ pitch]), the objective and the stated
-    operating conditions:
-
-    hot_temperature_c : winding temperature of the resistance and supply constraints (the
-        thermal limit: the coil must still take ``current_a`` from ``supply_voltage_v`` when hot).
-    cold_temperature_c : temperature of the settling-time constraint (the wire's reference
-        temperature: cold copper has the lowest R, so the longest L/R).
-    Inductance: *secant* L(I) = L_air + lambda_core(I) / I at the operating current (the
-    incremental value is reported too).
+    space (:class:`designkit.optimize.search_space.SearchSpace`: the coil's variables and any
+    layout variable, with bounds), the objective and the stated operating conditions
+    (:class:`OperatingConditions`). The settling-time constraint is taken cold (the wire's
+    reference temperature: cold copper has the lowest R, so the longest L/R). Inductance:
+    *secant* L(I) = L_air + lambda_core(I) / I at the operating current (the incremental value
+    is reported too).
     """
 
     design: Design
-    lower: tuple
-    upper: tuple
-    """Bounds (floats) of the search variables (:data:`SEARCH_VARIABLES` [+ pitch]), SI."""
-    hot_temperature_c: float = HOT_TEMPERATURE_C
-    render_duty: float = RENDER_DUTY
-    min_time_to_hot_s: float = MIN_TIME_TO_HOT_S
+    space: SearchSpace
+    conditions: OperatingConditions = OperatingConditions()
     insulation_ratio: float = GRADE1_INSULATION_RATIO
     """Insulated / bare diameter of the wire family (grade-1 enamel, ~1.04-1.1)."""
     wire_table_m: tuple[float, ...] = METRIC_DIAMETERS_M
@@ -157,93 +99,99 @@ class DeviceProblem(DesignView):
     """'design-point': upward force on the axis at the design height; 'rendering': the
     smallest upward force the array renders over ``render_points_m`` (LP allocation,
     :func:`designkit.optimize.array_render_forces`)."""
-    pitch_bounds_m: tuple[float, float] | None = None
-    """Pitch as the 8th search variable (:data:`PITCH_VARIABLE`) within these bounds, m; None:
-    the pitch is fixed at ``pitch_m``. Then the no-overlap condition 2 Ro + coil_clearance_m
-    <= pitch is a constraint (not a bound)."""
     coil_clearance_m: float = 0.0
     """Pitch - 2 x outer radius that the rule book needs (flange lips, pocket clearances and
-    the frame web: :func:`designkit.rules.pitch_clearance_m`; set by :meth:`from_design`), m."""
-    centres_per_pitch: tuple = ((0.0, 0.0),)
-    """Coil centres (x, y) in units of the pitch (the array's row-major layout)."""
+    the frame web: :func:`designkit.rules.pitch_clearance_m`; set by :meth:`from_design`), m.
+    With a layout variable the no-overlap condition 2 Ro + coil_clearance_m <= pitch is a
+    constraint (not a bound)."""
     render_points_m: tuple = ()
-    """Points (x, y, z) of the rendering objective, m (fixed: they do not move with the pitch)."""
+    """Points (x, y, z) of the rendering objective, m (fixed: they do not move with the
+    layout)."""
+
+    @property
+    def lower(self) -> tuple:
+        """Lower bounds of the search variables, SI."""
+        return self.space.lower
+
+    @property
+    def upper(self) -> tuple:
+        """Upper bounds of the search variables, SI."""
+        return self.space.upper
+
+    @property
+    def pitch_bounds_m(self) -> tuple[float, float] | None:
+        """Bounds of the pitch when it is a search variable (:data:`PITCH_VARIABLE`), m."""
+        return self.space.bounds(PITCH_VARIABLE)
+
+    @property
+    def hot_temperature_c(self) -> float:
+        return self.conditions.hot_temperature_c
+
+    @property
+    def render_duty(self) -> float:
+        return self.conditions.render_duty
+
+    @property
+    def min_time_to_hot_s(self) -> float:
+        return self.conditions.min_time_to_hot_s
 
     @property
     def n_search(self) -> int:
-        """7 search variables, or 8 with the pitch."""
-        return 7 if self.pitch_bounds_m is None else 8
+        """The coil's 7 search variables and the layout's."""
+        return len(self.space.variables)
 
     @property
     def constraint_names(self) -> tuple[str, ...]:
-        return DEVICE_CONSTRAINTS + (("coil_overlap_m",) if self.pitch_bounds_m else ())
+        return DEVICE_CONSTRAINTS + (("coil_overlap_m",) if self.space.layout_names else ())
 
     @classmethod
-    def from_design(cls, design: Design, *, hot_temperature_c: float = HOT_TEMPERATURE_C,
-                    render_duty: float = RENDER_DUTY,
-                    min_time_to_hot_s: float = MIN_TIME_TO_HOT_S,
+    def from_design(cls, design: Design, *, objective: str = "design-point",
+                    vary: Mapping[str, tuple[float, float] | None] | None = None,
+                    conditions: OperatingConditions | None = None,
                     coil_clearance_m: float | None = None,
                     board_clearance_m: float = BOARD_CLEARANCE_M,
-                    objective: str = "design-point", vary_pitch: bool = False,
-                    pitch_range_m: tuple[float, float] | None = None,
                     **changes) -> "DeviceProblem":
-        """The device problem of ``design``: its magnet, height, drive, sensors and pitch.
+        """The device problem of ``design``: its magnet, height, drive, sensors and layout.
 
         ``objective``: 'design-point' or 'rendering' (the smallest upward force over
         :func:`designkit.optimize.workspace_region` of ``design``, folded by the array's
-        symmetry). ``vary_pitch``: the pitch becomes a search variable in ``pitch_range_m``
-        (default: from 0.6 x the design's pitch to 2 x optimize.max_outer_radius_m +
-        coil_clearance_m, or the design's pitch if larger); needs the rendering objective (at
-        one point the pitch does not matter).
-
-        Supply: the design's (:attr:`supply_voltage_v`, at most the driver's rating). Bounds:
-        inner radius
-        [optimize.min_inner_radius_m, Ro bound - 0.3 mm]; outer radius up to
-        (pitch - coil_clearance_m)/2 (no overlap at the pitch); winding length
-        [10 mm, optimize.max_length_m]; core fill [0.25, 1]; core depth fraction [0.1, 1];
-        protrusion above the winding [0, the upper sensor board's underside -
-        board_clearance_m]; bare wire [0.2, 1.6] mm (the ``*_BOUNDS`` module constants).
+        symmetry). ``vary``: layout keys that become search variables ({'pitch_m': (lo, hi)
+        or None for the default range}, :func:`designkit.optimize.search_space.device_space`,
+        which states the bounds); they need the rendering objective (at one point the layout
+        does not matter). ``conditions``: :class:`OperatingConditions` (default: the module
+        constants). Supply: the design's (:attr:`supply_voltage_v`, at most the driver's
+        rating).
         """
+        vary = dict(vary or {})
         if objective not in DEVICE_OBJECTIVES:
             raise BadInputError("objective", f"one of {DEVICE_OBJECTIVES}", objective)
         if coil_clearance_m is None:
             coil_clearance_m = rules.pitch_clearance_m(design)
-        if vary_pitch and objective != "rendering":
-            raise BadInputError("objective", "'rendering' when the pitch varies (the force at "
-                                "one point does not depend on the pitch)", objective)
-        pitch_bounds = (_pitch_bounds(design, coil_clearance_m, pitch_range_m) if vary_pitch
-                        else None)
-        lower, upper = _search_bounds(design, pitch_bounds, coil_clearance_m, board_clearance_m)
-        n_coils = design.n_coils
-        cen = np.array([[x, y] for x, y, _ in design.coil_centres_m()]) / (
-            _array_pitch(design) if n_coils > 1 else 1.0)
+        if vary and objective != "rendering":
+            raise BadInputError("objective", f"'rendering' when the layout varies ({', '.join(vary)}:"
+                                " the force at one point does not depend on it)", objective)
+        space = device_space(design, vary, coil_clearance_m, board_clearance_m)
         pts = ()
         if objective == "rendering":
-            pts = tuple(tuple(float(c) for c in q)
-                        for q in _fold_points(workspace_region(design), cen))
-        kw = dict(
-            design=design, lower=lower, upper=upper, hot_temperature_c=hot_temperature_c,
-            render_duty=render_duty, min_time_to_hot_s=min_time_to_hot_s,
-            objective=objective, pitch_bounds_m=pitch_bounds, coil_clearance_m=coil_clearance_m,
-            centres_per_pitch=tuple(map(tuple, cen)), render_points_m=pts)
+            folded = fold_points(workspace_region(design), design.array.top_centres_m(),
+                                 design.array.axes())
+            pts = tuple(tuple(float(c) for c in q) for q in folded)
+        kw = dict(design=design, space=space, conditions=conditions or OperatingConditions(),
+                  objective=objective, coil_clearance_m=coil_clearance_m, render_points_m=pts)
         kw.update(changes)
         return cls(**kw)
 
     def __post_init__(self):
         v.in_range("render_duty", self.render_duty, 1e-3, 1.0)
-        names = SEARCH_VARIABLES + (PITCH_VARIABLE,) * (self.n_search - 7)
-        if len(self.lower) != self.n_search or len(self.upper) != self.n_search:
-            raise BadInputError("bounds", f"{self.n_search} values for {names}",
-                                (self.lower, self.upper))
+        if self.space.names[:len(SEARCH_VARIABLES)] != SEARCH_VARIABLES:
+            raise BadInputError("space", f"the coil's variables {SEARCH_VARIABLES} first",
+                                self.space.names)
         if self.objective not in DEVICE_OBJECTIVES:
             raise BadInputError("objective", f"one of {DEVICE_OBJECTIVES}", self.objective)
         if self.objective == "rendering" and not len(self.render_points_m):
             raise BadInputError("render_points_m", "at least one point for the rendering "
                                 "objective", self.render_points_m)
-        for name, lo, hi in zip(names, self.lower, self.upper):
-            if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo < hi):
-                raise BadInputError(f"bounds of {name}", "0 <= lower < upper (finite, m)",
-                                    (lo, hi))
+        self.space.checked()
 
     # ------------------------------------------------------------------ the design's numbers
     @property
@@ -277,17 +225,20 @@ class DeviceProblem(DesignView):
 
     @property
     def pitch_m(self) -> float:
-        """The design's pitch, m (1 m for a single coil)."""
-        return _array_pitch(self.design)
+        """The distance of the design's nearest two coils, m: a lattice's pitch (1 m for a
+        single coil)."""
+        return nearest_spacing_m(self.design)
 
     @property
     def board_top_m(self) -> float:
-        """Top of the upper sensor board above the coil tops, m."""
-        return rules.board_top_m(self.design)
+        """Top of the highest sensor board or printed part under the magnet at the design
+        point, m (:func:`designkit.rules.design_point_floor_m` less the magnet's half
+        length)."""
+        return rules.design_point_floor_m(self.design) - self.design.magnet.length_m / 2
 
     @property
     def magnet_bottom_clearance_m(self) -> float:
-        """Design height - magnet half length - upper-board top, m (>= 0 for the magnet to
+        """Design height - magnet half length - :attr:`board_top_m`, m (>= 0 for the magnet to
         reach the design point)."""
         return self.design.optimize.height_m - self.design.magnet.length_m / 2 - self.board_top_m
 
@@ -337,8 +288,7 @@ class DeviceProblem(DesignView):
             raise BadInputError("model", "'fast' or 'panel'", model)
         ri, ro, ln, a, lc, prot, d = x[:7]
         n = self.turns(x) if turns is None else float(turns)
-        g_c, lam, peak = _panel_core(ri, ro, ln, n, min(a, ri), lc, self.core_offset(x),
-                                     self.current_a, ln / 2 + self.height_m)
+        g_c, lam, peak = panel_core(x, n, self.current_a, ln / 2 + self.height_m)
         l_air = el.air_inductance_from_geometry(ri, ro, ln, n, t_max=60.0)
         out = self._assemble(np.array([x]), np.array([n]), np.array([g_c]), np.array([lam]),
                              np.zeros(1), np.array([peak]), np.array([l_air]))
@@ -377,16 +327,50 @@ class DeviceProblem(DesignView):
         given design's 7 variables sit at ``pitch_m``), else ``pitch_m``."""
         return float(x[7]) if self.pitch_bounds_m is not None and len(x) > 7 else self.pitch_m
 
+    def spacing_of(self, x) -> float:
+        """Distance of the nearest two top-face centres of the layout of ``x``, m (a
+        lattice's pitch)."""
+        if self.design.array.kind in ("grid", "hex"):
+            return self.pitch_of(x)
+        return nearest_spacing_m(dataclasses.replace(self.design, array=self.layout_of(x)))
+
+    def overlap_m(self, x) -> float:
+        """How much closer than a frame web the flange pockets of the coils of ``x`` come, m
+        (<= 0: they fit). A grid or hex lattice: 2 Ro + coil_clearance_m - pitch; any other
+        layout: the minimum wall less the smallest signed distance of the pockets in their
+        poses (:func:`designkit.rules.lattice_gap_m`)."""
+        ro = float(x[1])
+        if self.design.array.kind in ("grid", "hex"):
+            return 2 * ro + self.coil_clearance_m - self.pitch_of(x)
+        c = self.design.cad
+        gap = rules.lattice_gap_m(self.layout_of(x), ro + c.flange_lip_m + c.pocket_clearance_m,
+                                  float(x[2]), c.flange_thickness_m)
+        return c.min_wall_m - gap
+
+    def layout_of(self, x):
+        """The layout of search or physical vector ``x``: the design's, with the layout
+        variables of ``x`` when it has them (:meth:`SearchSpace.layout_of`)."""
+        return self.space.layout_of(self.design.array, x)
+
     def render_forces(self, x, turns: float | None = None) -> np.ndarray:
         """Largest upward force the array renders at each of ``render_points_m`` (N, (P,)),
         bounded allocation with Fx = Fy = 0; core force ratio ``corrections[0]``."""
         x = [float(q) for q in x]
         n = self.turns(x) if turns is None else float(turns)
-        cen = np.asarray(self.centres_per_pitch, dtype=float) * self.pitch_of(x)
-        return array_render_forces(x[:7], n, self.current_a, self.total_current_a, cen,
+        coil = RodCoil(tuple(x[:7]), n, self.current_a, self.corrections[0], self.n_slices)
+        return array_render_forces(coil, self.layout_of(x),
                                    np.asarray(self.render_points_m, dtype=float),
-                                   self.moment_a_m2, core_force_ratio=self.corrections[0],
-                                   n_slices=self.n_slices)
+                                   self.moment_a_m2, self.total_current_a)
+
+    def render_forces_many(self, xs) -> np.ndarray:
+        """:meth:`render_forces` of the rows of ``xs`` (B, n) physical vectors, their own turns,
+        (B, P) N, in one batch (:func:`designkit.optimize.rendering.render_forces_many`)."""
+        xs = [[float(q) for q in x] for x in xs]
+        coils = [RodCoil(tuple(x[:7]), self.turns(x), self.current_a, self.corrections[0],
+                         self.n_slices) for x in xs]
+        return render_forces_many(coils, [self.layout_of(x) for x in xs],
+                                  np.asarray(self.render_points_m, dtype=float),
+                                  self.moment_a_m2, self.total_current_a)
 
     def _assemble(self, xs, n, g_c, lam, l_inc_core, peak, l_air) -> dict:
         """The numbers of :meth:`evaluate` from the core's share (arrays over designs, SI)."""
@@ -449,8 +433,12 @@ class DeviceProblem(DesignView):
                                           f"{self.current_a:g} A, {self.cold_temperature_c:g} "
                                           f"-> {self.hot_temperature_c:g} C"),
             "core_radius_m": (a, ri, 1, "core fits the bore"),
-            "outer_diameter_m": (2 * ro, self.pitch_of(x) - self.coil_clearance_m, 1,
-                                 "coils, flanges and frame pockets fit at the pitch"),
+            "outer_diameter_m": (2 * ro, (self.pitch_of(x) - self.coil_clearance_m
+                                          if self.design.array.kind in ("grid", "hex")
+                                          else 2 * ro - self.overlap_m(x)), 1,
+                                 "coils, flanges and frame pockets fit at the "
+                                 + ("pitch" if self.design.array.kind in ("grid", "hex")
+                                    else "spacing")),
             "core_protrusion_m": (prot, self.upper[5], 1,
                                   "core top below the upper sensor board"),
             "magnet_bottom_m": (self.magnet_bottom_clearance_m + self.board_top_m,
@@ -465,7 +453,9 @@ class DeviceProblem(DesignView):
             out[name] = {"value": float(val), "limit": float(lim), "unit": _unit_of(name),
                          "kind": "upper" if sense > 0 else "lower", "margin": float(margin),
                          "met": bool(margin >= -1e-9 * max(abs(lim), 1e-12)), "note": note,
-                         "keys": list(_FIXED_BY.get(name, ()))}
+                         "keys": list(_FIXED_BY.get(name, ()) if name != "outer_diameter_m"
+                                      else ("coil.outer_radius_m",)
+                                      + rules.layout_keys(self.design))}
         return out
 
 
@@ -494,10 +484,15 @@ def _unit_of(name: str) -> str:
     return "turns" if name == "turns" else ""
 
 
-def _panel_core(ri, ro, ln, n, a, lc, offset, current, z_mag):
-    """Core share of dBz/dz at the magnet (T/m), flux linkage (Wb), peak B (T): panel model."""
+def panel_core(x, turns: float, current_a: float, z_mag_m: float):
+    """Core share of dBz/dz at the magnet (T/m), flux linkage (Wb), peak B (T) of the coil of
+    physical variables ``x`` (:data:`DEVICE_VARIABLES`) with ``turns`` at ``current_a``: the
+    panel model (steel1010), the magnet ``z_mag_m`` above the winding centre on the axis."""
+    ri, ro, ln, a, lc = x[:5]
+    n, current, z_mag = turns, current_a, z_mag_m
     ref = 1000
-    core = Core(radius=a, length=lc, offset=offset, bh="steel1010")
+    core = Core(radius=min(a, ri), length=lc, offset=DeviceProblem.core_offset(x),
+                bh="steel1010")
     coil = Coil(ri, ro, ln, ref, core)
     i_ref = current * n / ref
     sol = core.solution(coil, i_ref)

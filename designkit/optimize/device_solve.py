@@ -2,11 +2,12 @@
 
 Stages of :func:`solve_device`: SLSQP multistart on the corrected fast model (coarse
 tolerances: the starts only find the basin) -> the two IEC 60317 sizes around the continuous
-wire, each re-solved -> the a-posteriori correction loop (:func:`_correct_for_wire`): the panel
+wire, each re-solved -> the a-posteriori correction loop (:func:`correct_for_wire`): the panel
 model (:mod:`designkit.cores`, steel1010) at the rounded design, the panel/fast ratios of the
 core's shares as corrections, re-solve until the corrected fast model reproduces the panel
 model within :data:`RESIDUAL_BOUND` -> whole layers and turns, every reported number the panel
-model's. With a varying pitch the rounded coil's pitch is re-chosen (bounded Brent).
+model's. With a varying layout the rounded coil's layout is re-chosen (the pitch by bounded
+Brent, a ring's radius and tilt by COBYLA).
 Infeasible bounds: :func:`_diagnose_infeasible` names each constraint that cannot be met and
 by how much. Method and proof: docs/optimize.md.
 """
@@ -23,6 +24,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from ..design import Design
+from ..design.layouts import layout_to_table
 from ..errors import BadInputError
 from ..model import electrical as el
 from ..rules import reachable_height_m
@@ -30,15 +32,15 @@ from ..support import validate as v
 from ..support.blas import one_blas_thread
 from ..support.progress import tqdm
 from .candidate import device_candidate
-from .device_problem import (DEVICE_CONSTRAINTS, DEVICE_VARIABLES, PITCH_VARIABLE,
-                             SEARCH_VARIABLES, DeviceProblem)
-from .fast_model import FAST_MODEL_ENVELOPE, RESIDUAL_BOUND, _FastModel, _local
-from .nlopt_driver import LocalRun, _sobol
+from .device_problem import DEVICE_CONSTRAINTS, DEVICE_VARIABLES, PITCH_VARIABLE, DeviceProblem
+from .fast_model import FAST_MODEL_ENVELOPE, RESIDUAL_BOUND, FastModel, local_solve
+from .nlopt_driver import LocalRun, SolverOptions, halton_box, maximize
+from .search_space import SEARCH_VARIABLES
 
 
 def _device_starts(problem: DeviceProblem, n: int, seed: int) -> np.ndarray:
     """Shifted-Halton starts made geometrically sensible (core in the bore, Ro above Ri)."""
-    x = _sobol(problem.lower, problem.upper, n, seed)
+    x = halton_box(problem.lower, problem.upper, n, seed)
     x[:, 1] = np.maximum(x[:, 1], np.minimum(x[:, 0] + 2e-3, problem.upper[1]))
     return x
 
@@ -94,7 +96,7 @@ class DeviceResult:
     def as_dict(self, problem: DeviceProblem) -> dict:
         ev = self.evaluation
         ri, ro, ln, a, lc, prot, d = self.x[:7]
-        names = DEVICE_VARIABLES + (PITCH_VARIABLE,) * (len(self.x_continuous) - 7)
+        names = DEVICE_VARIABLES + problem.space.layout_names
         out = {
             "inner_radius_m": ri, "outer_radius_m": ro, "length_m": ln, "turns": self.turns,
             "wire_diameter_m": d, "insulated_wire_diameter_m": self.insulated_diameter_m,
@@ -125,9 +127,11 @@ class DeviceResult:
             "fast_model_check": self.fast_model_check,
             "rendering": self.rendering or None,
             "continuous_optimum": dict(zip(names, map(float, self.x_continuous))),
-            "search_variables": list(SEARCH_VARIABLES) + [PITCH_VARIABLE] * (len(names) - 7),
-            "objective": problem.objective, "pitch_m": problem.pitch_of(self.x),
+            "search_variables": list(problem.space.names),
+            "objective": problem.objective, "pitch_m": problem.spacing_of(self.x),
             "pitch_varied": problem.pitch_bounds_m is not None,
+            "layout": layout_to_table(problem.layout_of(self.x)),
+            "layout_varied": list(problem.space.layout_names),
             "starts": len(self.starts),
             "local_optima": [dataclasses.asdict(r) for r in self.starts],
             "constraints": self.constraints,
@@ -140,7 +144,7 @@ class DeviceResult:
 def _diagnose_infeasible(problem: DeviceProblem) -> BadInputError:
     """Which constraint makes the bounds infeasible, and by how much (fast model)."""
     # the constraints do not depend on the objective: diagnose on the cheap one
-    model = _FastModel(dataclasses.replace(problem, objective="design-point"))
+    model = FastModel(dataclasses.replace(problem, objective="design-point"))
     names = DEVICE_CONSTRAINTS
     worst = []
     y0 = _device_starts(problem, 1, 1)[0]
@@ -196,7 +200,7 @@ def solve_device(problem: DeviceProblem, *, starts: int = 4, seed: int = 0,
     """Optimize the device (see :func:`_solve_device`), BLAS on one thread.
 
     ``max_corrections``: at most this many panel-model evaluations in the correction loop
-    (:func:`_correct_for_wire`); ``correction_tol``: the residual bound it enforces
+    (:func:`correct_for_wire`); ``correction_tol``: the residual bound it enforces
     (:data:`RESIDUAL_BOUND`).
     """
     with one_blas_thread():
@@ -219,7 +223,7 @@ def _solve_device(problem: DeviceProblem, *, starts: int = 4, seed: int = 0,
     t0 = time.perf_counter()
     if problem.magnet_bottom_clearance_m < 0:
         raise _diagnose_infeasible(problem)
-    model = _FastModel(problem)
+    model = FastModel(problem)
     runs = []
     it = list(_device_starts(problem, starts, seed))
     bar = None
@@ -227,7 +231,7 @@ def _solve_device(problem: DeviceProblem, *, starts: int = 4, seed: int = 0,
         bar = tqdm(total=starts + 2, desc="optimize", unit="stage")
     for y0 in it:
         # coarse tolerances: the starts only have to find the basin; the wire stage polishes
-        runs.append(_local(model, y0, xtol_rel=1e-3, ftol_rel=1e-6))
+        runs.append(local_solve(model, y0, xtol_rel=1e-3, ftol_rel=1e-6))
         if bar is not None:
             bar.update(1)
     fast_calls = model.calls
@@ -246,8 +250,8 @@ def _solve_device(problem: DeviceProblem, *, starts: int = 4, seed: int = 0,
     prob = problem
     wire_runs = []
     for d in cands:
-        m = _FastModel(prob, {6: d})
-        r = _local(m, [best.x[k] for k in m.free])
+        m = FastModel(prob, {6: d})
+        r = local_solve(m, [best.x[k] for k in m.free])
         fast_calls += m.calls
         if r.feasible:
             wire_runs.append((r.value, d, m.full_y(r.x)))
@@ -260,7 +264,7 @@ def _solve_device(problem: DeviceProblem, *, starts: int = 4, seed: int = 0,
     _, wire, y = max(wire_runs)
     if bar is not None:
         bar.update(1)
-    c = _correct_for_wire(prob, wire, y, max_corrections=max_corrections,
+    c = correct_for_wire(prob, wire, y, max_corrections=max_corrections,
                           correction_tol=correction_tol)
     if bar is not None:
         bar.update(1)
@@ -310,7 +314,32 @@ def _best_pitch(prob: DeviceProblem, x, turns: int) -> list[float]:
     return x
 
 
-def _correct_for_wire(prob: DeviceProblem, wire: float, y, *, max_corrections: int = 4,
+def _best_layout(prob: DeviceProblem, x, turns: int) -> list[float]:
+    """The rounded coil's best layout variables: the pitch by :func:`_best_pitch`, others
+    (a ring's radius and tilt) by COBYLA from the continuous optimum's under the no-overlap
+    constraint (:meth:`DeviceProblem.overlap_m`)."""
+    names = prob.space.layout_names
+    if names == (PITCH_VARIABLE,):
+        return _best_pitch(prob, x, turns)
+    x = list(x)
+    k = len(SEARCH_VARIABLES)
+
+    def value(v):
+        return float(prob.render_forces(x[:k] + list(v), turns).min()), None
+
+    def overlap(v):
+        return np.array([prob.overlap_m(x[:k] + list(v)) / 1e-3]), None
+
+    start = x[k:]
+    run = maximize(value, overlap, 1, prob.lower[k:], prob.upper[k:], start,
+                   SolverOptions(xtol_rel=1e-6, ftol_rel=1e-9, max_evaluations=60,
+                                 algorithm="LN_COBYLA", initial_step=0.05))
+    if run.feasible and run.value > value(start)[0]:
+        x[k:] = list(run.x)
+    return x
+
+
+def correct_for_wire(prob: DeviceProblem, wire: float, y, *, max_corrections: int = 4,
                       correction_tol: float = RESIDUAL_BOUND) -> dict:
     """A-posteriori correction loop for one wire (the proof of the fast model's numbers).
 
@@ -346,8 +375,8 @@ def _correct_for_wire(prob: DeviceProblem, wire: float, y, *, max_corrections: i
         prob = dataclasses.replace(prob, corrections=corr)
         if (within and all(gv <= 1e-9 for gv in ev_panel["g"])) or k + 1 >= max_corrections:
             break
-        m = _FastModel(prob, {6: wire})
-        r = _local(m, [y[q] for q in m.free])
+        m = FastModel(prob, {6: wire})
+        r = local_solve(m, [y[q] for q in m.free])
         fast_calls += m.calls
         if not r.feasible:
             break
@@ -357,15 +386,17 @@ def _correct_for_wire(prob: DeviceProblem, wire: float, y, *, max_corrections: i
                                  prob.packing)
     table_c = prob.constraint_table(x_round, ev_panel, fit)
     rendering = {}
-    if prob.pitch_bounds_m is not None:
-        x_round = _best_pitch(prob, x_round, n)
+    if prob.space.layout_names:
+        x_round = _best_layout(prob, x_round, n)
     if prob.objective == "rendering":
         # the array objective of the reported design, its cores scaled by the panel/fast force
         # ratio measured at this design
         f = prob.render_forces(x_round, n)
         rendering = {"min_upward_force_n": float(f.min()), "upward_force_n": f.tolist(),
                      "points_m": [list(q) for q in prob.render_points_m],
-                     "pitch_m": prob.pitch_of(x_round), "core_force_ratio": float(corr[0]),
+                     "pitch_m": prob.spacing_of(x_round),
+                     "layout": layout_to_table(prob.layout_of(x_round)),
+                     "core_force_ratio": float(corr[0]),
                      "allocation": "LP per point: |I_k| <= current_a, sum |I_k| <= "
                                    "total_current_a, Fx = Fy = 0",
                      "points_note": "the workspace region folded by the array's mirror "
@@ -392,14 +423,14 @@ def device_design(base: Design, result: DeviceResult, problem: DeviceProblem, *,
 
     Coil, wire (bare and insulated diameter), core (radius, length, offset, 1010 steel B-H),
     drive (supply = the problem's: the design's, at most the driver's rating; current = the
-    operating current) and, when it was a
-    variable, the array's pitch come from the result.
+    operating current) and, when they were variables, the layout's keys (pitch, ring radius,
+    tilt) come from the result.
     """
-    pitch = problem.pitch_of(result.x) if problem.pitch_bounds_m is not None else None
     drive = dataclasses.replace(base.drive, supply_voltage_v=problem.supply_voltage_v,
                                 max_current_a=problem.current_a)
     # the workspace starts where the magnet can be: above the upper sensor board
     workspace = dataclasses.replace(
         base.workspace, z_min_m=max(base.workspace.z_min_m, reachable_height_m(base)))
     return device_candidate(base, result.x, int(result.turns), result.insulated_diameter_m,
-                            pitch_m=pitch, name=name, drive=drive, workspace=workspace)
+                            name=name, drive=drive, workspace=workspace,
+                            array=problem.layout_of(result.x))

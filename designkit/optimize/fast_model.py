@@ -1,8 +1,8 @@
 """The corrected fast model as the device optimizer sees it, and its local solve.
 
-:class:`_FastModel` evaluates search-variable vectors by the batched fast slice model of
+:class:`FastModel` evaluates search-variable vectors by the batched fast slice model of
 :meth:`DeviceProblem.evaluate_many` (a whole finite-difference stencil in one batch), caches
-the values and gives forward-difference gradients; :func:`_local` is the local solve on it
+the values and gives forward-difference gradients; :func:`local_solve` is the local solve on it
 (SLSQP; for the rendering objective in epigraph form, polished by COBYLA). The fast model's
 core shares are multiplied by the panel/fast ``corrections`` of the problem; how well the
 corrected model reproduces the panel model is bounded a posteriori (:data:`RESIDUAL_BOUND`,
@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from .device_problem import DEVICE_CONSTRAINTS, DeviceProblem
-from .nlopt_driver import LocalRun, maximize
+from .nlopt_driver import LocalRun, SolverOptions, maximize
 
 FAST_MODEL_ENVELOPE = {"force_rel_err": (-0.2, 0.6), "inductance_rel_err": (-0.25, 0.1)}
 """Uncorrected fast model / panel model - 1 over the optimizer's bounds (upward force, secant
@@ -28,7 +28,7 @@ secant inductance within 1 % of the panel model's (the correction loop of
 :func:`designkit.optimize.solve_device` re-solves until the residual meets it)."""
 
 
-class _FastModel:
+class FastModel:
     """Cached fast evaluations and forward-difference gradients of the search variables.
 
     A row of :meth:`values_many`: [objective, g (``n_g`` scaled constraints <= 0), then for
@@ -83,14 +83,12 @@ class _FastModel:
                 ev = self.p.evaluate_many(xs[~empty], air_cache=self.air_cache)
                 out[~empty, 0] = ev["force_n"]
                 out[~empty, 1:1 + len(DEVICE_CONSTRAINTS)] = ev["g"]
-                if self.rendering:
-                    for i in np.nonzero(~empty)[0]:
-                        f = self.p.render_forces(xs[i])
-                        out[i, 1 + self.n_g:] = f
-                        out[i, 0] = f.min()
-            if self.n_g > len(DEVICE_CONSTRAINTS):  # the coils must not overlap at the pitch
-                out[:, 1 + len(DEVICE_CONSTRAINTS)] = (
-                    2 * xs[:, 1] + self.p.coil_clearance_m - xs[:, 7]) / 1e-3
+                if self.rendering:  # the whole stencil in one batch
+                    f = self.p.render_forces_many(xs[~empty])
+                    out[~empty, 1 + self.n_g:] = f
+                    out[~empty, 0] = f.min(axis=1)
+            if self.n_g > len(DEVICE_CONSTRAINTS):  # the coils' pockets keep a frame web
+                out[:, 1 + len(DEVICE_CONSTRAINTS)] = [self.p.overlap_m(x) / 1e-3 for x in xs]
             self.calls += len(miss)
             for i, row in zip(miss, out):
                 self.cache[keys[i]] = row
@@ -110,13 +108,48 @@ class _FastModel:
         return base, jac
 
 
-def _local(model: _FastModel, y0, max_evaluations: int = 80, *, xtol_rel: float = 1e-5,
-           ftol_rel: float = 1e-9) -> LocalRun:
+FEASIBLE_MARGIN = 0.01
+"""How far inside every scaled constraint the feasibility stage of :func:`local_solve` goes."""
+
+
+def feasible_start(model: FastModel, y0, max_evaluations: int = 80) -> np.ndarray:
+    """A point of the box where every constraint holds, found from ``y0`` by maximizing the
+    smallest scaled margin s (g_i(y) + s <= 0, s <= :data:`FEASIBLE_MARGIN`) with SLSQP;
+    ``y0`` itself when it is feasible or none is found."""
+    y0 = np.asarray(y0, dtype=float)
+    ng, nv = model.n_g, len(y0)
+    g0 = model.values(y0)[1:1 + ng]
+    if np.all(g0 <= 0):
+        return y0
+
+    def margin(u):
+        grad = np.zeros(nv + 1)
+        grad[-1] = 1.0
+        return float(u[-1]), grad
+
+    def cons(u):
+        val, jac = model.with_gradient(u[:-1])
+        j = np.zeros((ng, nv + 1))
+        j[:, :nv] = jac[1:1 + ng]
+        j[:, -1] = 1.0
+        return val[1:1 + ng] + u[-1], j
+
+    worst = float(np.max(g0))
+    run = maximize(margin, cons, ng, np.r_[model.lo, -worst - 1.0], np.r_[model.hi, FEASIBLE_MARGIN],
+                   np.r_[y0, -worst], SolverOptions(xtol_rel=1e-6, ftol_rel=1e-9,
+                                                    max_evaluations=max_evaluations))
+    y = np.asarray(run.x[:-1])
+    return y if np.all(model.values(y)[1:1 + ng] <= 1e-8) else y0
+
+
+def local_solve(model: FastModel, y0, max_evaluations: int = 80, *, xtol_rel: float = 1e-5,
+                ftol_rel: float = 1e-9) -> LocalRun:
     """A local solve from y0 on the corrected fast model: SLSQP with the batched
     finite-difference gradient. The rendering objective (a minimum over points of LP values)
     is solved in epigraph form (maximize t subject to t <= F_p(y) at every point), then
     polished by nlopt's derivative-free COBYLA from there: the LP values are kinked where an
     active set changes, and a one-sided difference there can stall SLSQP."""
+    options = SolverOptions(xtol_rel=xtol_rel, ftol_rel=ftol_rel, max_evaluations=max_evaluations)
     ng = model.n_g
 
     def obj(y):
@@ -128,9 +161,8 @@ def _local(model: _FastModel, y0, max_evaluations: int = 80, *, xtol_rel: float 
         return val[1:1 + ng], jac[1:1 + ng]
 
     if not model.rendering:
-        return maximize(obj, cons, ng, model.lo, model.hi, y0, xtol_rel=xtol_rel,
-                        ftol_rel=ftol_rel, max_evaluations=max_evaluations)
-    y0 = np.asarray(y0, dtype=float)
+        return maximize(obj, cons, ng, model.lo, model.hi, y0, options)
+    y0 = feasible_start(model, y0)  # the epigraph stage and the polish need a feasible start
     n_pts = len(model.p.render_points_m)
     t_hi = 10.0 * float(np.max(model.values(y0)[1 + ng:])) + 1.0
     nv = len(y0)
@@ -150,8 +182,7 @@ def _local(model: _FastModel, y0, max_evaluations: int = 80, *, xtol_rel: float 
         return c, j
 
     run = maximize(obj_t, cons_t, ng + n_pts, np.r_[model.lo, 0.0], np.r_[model.hi, t_hi],
-                   np.r_[y0, 0.0], xtol_rel=xtol_rel, ftol_rel=ftol_rel,
-                   max_evaluations=max_evaluations)
+                   np.r_[y0, 0.0], options)
     y1 = np.asarray(run.x[:-1])
     v1 = model.values(y1)
     feas1 = bool(np.all(v1[1:1 + ng] <= 1e-8))
@@ -159,9 +190,10 @@ def _local(model: _FastModel, y0, max_evaluations: int = 80, *, xtol_rel: float 
     if not feas1 or run.return_code not in (1, 3, 4):  # stalled: polish without gradients
         pol = maximize(lambda y_: (model.values(y_)[0], None),
                        lambda y_: (model.values(y_)[1:1 + ng], None), ng, model.lo, model.hi,
-                       y1 if feas1 else y0, xtol_rel=1e-6, ftol_rel=1e-9,
-                       max_evaluations=max_evaluations, algorithm="LN_COBYLA",
-                       initial_step=0.02 if feas1 else None)
+                       y1 if feas1 else y0,
+                       SolverOptions(xtol_rel=1e-6, ftol_rel=1e-9,
+                                     max_evaluations=max_evaluations, algorithm="LN_COBYLA",
+                                     initial_step=0.02 if feas1 else None))
         calls += pol.evaluations
         if pol.feasible and (not feas1 or pol.value > val):
             y, val, feas, code = np.asarray(pol.x), pol.value, True, pol.return_code

@@ -2,7 +2,7 @@
 
 :func:`maximize` scales the variables to [0, 1] (finite bounds), runs one nlopt algorithm
 (LD_SLSQP by default) from a start and, when SLSQP stops on round-off after real progress,
-keeps the best feasible iterate and restarts once from it. :func:`_halton` gives randomly
+keeps the best feasible iterate and restarts once from it. :func:`halton` gives randomly
 shifted Halton points for multistarts. The textbook tests (tests/test_optimize.py) use the
 driver directly.
 """
@@ -28,16 +28,33 @@ class LocalRun:
     evaluations: int
 
 
+@dataclass(frozen=True)
+class SolverOptions:
+    """How one local solve runs and when it stops (nlopt's own names)."""
+
+    xtol_rel: float = 1e-10
+    """Relative tolerance on the (scaled) variables."""
+    ftol_rel: float = 1e-14
+    """Relative tolerance on the objective."""
+    max_evaluations: int = 500
+    algorithm: str = "LD_SLSQP"
+    """An nlopt algorithm name (``LD_*`` use the gradients, ``LN_*`` do not)."""
+    initial_step: float | None = None
+    """First step of a derivative-free algorithm in the scaled variables (None: nlopt's)."""
+
+
 def maximize(objective: Callable, constraints: Callable | None, n_constraints: int,
-             lower: Sequence[float], upper: Sequence[float], start: Sequence[float], *,
-             xtol_rel: float = 1e-10, ftol_rel: float = 1e-14, max_evaluations: int = 500,
-             algorithm: str = "LD_SLSQP", initial_step: float | None = None) -> LocalRun:
+             lower: Sequence[float], upper: Sequence[float], start: Sequence[float],
+             options: SolverOptions | None = None) -> LocalRun:
     """Maximize ``objective(x) -> (f, grad)`` s.t. ``constraints(x) -> (c, jac)`` <= 0 with nlopt.
 
     Variables are scaled to [0, 1] internally (bounds must be finite). ``constraints`` may be
-    None (then ``n_constraints`` must be 0). ``initial_step``: first step of a derivative-free
-    algorithm in the scaled variables.
+    None (then ``n_constraints`` must be 0). ``options``: :class:`SolverOptions` (default:
+    SLSQP to 1e-10 in x, at most 500 evaluations).
     """
+    o = options or SolverOptions()
+    xtol_rel, ftol_rel, max_evaluations = o.xtol_rel, o.ftol_rel, o.max_evaluations
+    algorithm, initial_step = o.algorithm, o.initial_step
     lo = np.asarray(lower, dtype=float)
     hi = np.asarray(upper, dtype=float)
     span = hi - lo
@@ -104,7 +121,7 @@ def maximize(objective: Callable, constraints: Callable | None, n_constraints: i
                     count[0])
 
 
-def _halton(n: int, dim: int, seed: int) -> np.ndarray:
+def halton(n: int, dim: int, seed: int) -> np.ndarray:
     """Randomly shifted Halton points in [0, 1)^dim, shape (n, dim) (dim <= 10)."""
     primes = (2, 3, 5, 7, 11, 13, 17, 19, 23, 29)[:dim]
     out = np.empty((n, dim))
@@ -120,8 +137,8 @@ def _halton(n: int, dim: int, seed: int) -> np.ndarray:
     return (out + shift) % 1.0
 
 
-def _sobol(lo, hi, n, seed):
+def halton_box(lo, hi, n: int, seed: int) -> np.ndarray:
     """``n`` shifted-Halton points in the box [lo, hi], shape (n, len(lo))."""
-    u = _halton(n, len(lo), seed)
+    u = halton(n, len(lo), seed)
     return np.asarray(lo) + u * (np.asarray(hi) - np.asarray(lo))
 

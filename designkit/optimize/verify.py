@@ -22,9 +22,9 @@ from ..model.coil import Coil
 from ..support.blas import one_blas_thread
 from ..support.progress import tqdm
 from .device_problem import DEVICE_VARIABLES, DeviceProblem
-from .device_solve import DeviceResult, _correct_for_wire
-from .fast_model import _FastModel, _local
-from .nlopt_driver import LocalRun, _halton
+from .device_solve import DeviceResult, correct_for_wire
+from .fast_model import FastModel, local_solve
+from .nlopt_driver import LocalRun, halton
 
 AGREE_TOL = 1e-3
 """Relative tolerance of agreement between the checks and the optimum."""
@@ -47,14 +47,14 @@ def best_fast_ref(ref: LocalRun, feas: list) -> float:
     return max([ref.value] + list(feas))
 
 
-def _multistart_stage(model: _FastModel, starts: int, seed: int) -> tuple[dict, list[float]]:
+def _multistart_stage(model: FastModel, starts: int, seed: int) -> tuple[dict, list[float]]:
     """Stage 1: ``starts`` SLSQP runs from shifted-Halton points -> (record, feasible values N)."""
     lo, hi = model.lo, model.hi
     t1 = time.perf_counter()
     c0 = model.calls
-    ys = lo + _halton(starts, len(lo), seed + 17) * (hi - lo)
+    ys = lo + halton(starts, len(lo), seed + 17) * (hi - lo)
     ys[:, 1] = np.maximum(ys[:, 1], np.minimum(ys[:, 0] + 2e-3, hi[1]))
-    runs = [_local(model, y0) for y0 in ys]
+    runs = [local_solve(model, y0) for y0 in ys]
     feas = [r.value for r in runs if r.feasible]
     return {"starts": starts, "feasible": len(feas),
             "values_n": [float(v_) for v_ in feas],
@@ -63,7 +63,7 @@ def _multistart_stage(model: _FastModel, starts: int, seed: int) -> tuple[dict, 
             "seconds": time.perf_counter() - t1}, feas
 
 
-def _isres_stage(model: _FastModel, isres_evaluations: int, seed: int) -> tuple[dict, LocalRun]:
+def _isres_stage(model: FastModel, isres_evaluations: int, seed: int) -> tuple[dict, LocalRun]:
     """Stage 2: nlopt GN_ISRES over the box, polished by SLSQP -> (record, polished run)."""
     lo, hi = model.lo, model.hi
     t2 = time.perf_counter()
@@ -84,14 +84,14 @@ def _isres_stage(model: _FastModel, isres_evaluations: int, seed: int) -> tuple[
     opt.set_maxeval(int(isres_evaluations))
     u = opt.optimize(np.full(n, 0.5))
     raw = model.values(lo + u * (hi - lo))
-    pol = _local(model, lo + u * (hi - lo))
+    pol = local_solve(model, lo + u * (hi - lo))
     return {"evaluations_requested": int(isres_evaluations),
             "raw_value_n": float(raw[0]), "raw_feasible": bool(np.all(raw[1:1 + ng] <= 1e-8)),
             "polished_value_n": float(pol.value), "polished_feasible": pol.feasible,
             "evaluations": model.calls - c0, "seconds": time.perf_counter() - t2}, pol
 
 
-def _grid_stage(model: _FastModel, grid_levels: int, progress: bool) -> dict:
+def _grid_stage(model: FastModel, grid_levels: int, progress: bool) -> dict:
     """Stage 3: ``grid_levels`` values per variable, bounds included -> record (best_n: the
     best feasible value, N, or None)."""
     ng = model.n_g
@@ -129,8 +129,8 @@ def _wire_stage(problem: DeviceProblem, result: DeviceResult, ref: LocalRun,
     per_wire, wire_calls = {}, 0
     y_opt = DeviceProblem.search(result.x_continuous)
     for d in prob.wire_table_m:
-        mw = _FastModel(prob, {6: d})
-        rw = _local(mw, [y_opt[k] for k in mw.free])
+        mw = FastModel(prob, {6: d})
+        rw = local_solve(mw, [y_opt[k] for k in mw.free])
         wire_calls += mw.calls
         per_wire[f"{d * 1e3:.2f}_mm"] = float(rw.value) if rw.feasible else None
     # the corrections were measured on the chosen wire's design: a wire that looks better
@@ -140,7 +140,7 @@ def _wire_stage(problem: DeviceProblem, result: DeviceResult, ref: LocalRun,
         d = float(key[:-3]) * 1e-3
         if (val is not None and abs(d - wire) > 1e-9
                 and val > best_fast_ref(ref, feas) * (1 + AGREE_TOL)):
-            c = _correct_for_wire(dataclasses.replace(problem, corrections=(1.0, 1.0)), d,
+            c = correct_for_wire(dataclasses.replace(problem, corrections=(1.0, 1.0)), d,
                                   y_opt)
             rival[key] = {"force_n": c["evaluation"]["force_n"], "feasible": c["feasible"],
                           "panel_evaluations": c["panel_calls"]}
@@ -163,7 +163,7 @@ def _verify_device(problem: DeviceProblem, result: DeviceResult, *, starts: int 
        included);
     4. every wire of the table: a local solve from the optimum with that wire; a wire that
        beats the chosen one there is re-solved with its own panel corrections
-       (:func:`designkit.optimize.device_solve._correct_for_wire`) and compared on
+       (:func:`designkit.optimize.device_solve.correct_for_wire`) and compared on
        panel-model numbers of the rounded designs.
     ``agree`` when every feasible multistart optimum and the polished ISRES optimum reach the
     best value to 1e-3 relative, no feasible grid point beats it and no other wire beats the
@@ -172,11 +172,11 @@ def _verify_device(problem: DeviceProblem, result: DeviceResult, *, starts: int 
     """
     prob = dataclasses.replace(problem, corrections=result.corrections)
     wire = result.wire_diameter_m
-    model = _FastModel(prob, {6: wire})
+    model = FastModel(prob, {6: wire})
     out: dict = {"wire_diameter_m": wire, "corrections": list(result.corrections)}
     # reference: the corrected local optimum from the result's continuous design
     t0 = time.perf_counter()
-    ref = _local(model, [DeviceProblem.search(result.x_continuous)[k] for k in model.free])
+    ref = local_solve(model, [DeviceProblem.search(result.x_continuous)[k] for k in model.free])
     out["multistart"], feas = _multistart_stage(model, starts, seed)
     out["isres"], pol = _isres_stage(model, isres_evaluations, seed)
     out["grid"] = _grid_stage(model, grid_levels, progress)

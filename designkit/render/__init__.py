@@ -14,7 +14,8 @@ current is counter-clockwise seen from above, so positive current pushes the fin
 
 from __future__ import annotations
 
-from .constant import ArrayActuation, ForceConstant, actuation_source, force_constant
+from .constant import (ArrayActuation, ConstantSettings, ForceConstant, actuation_source,
+                       force_constant)
 from .laws import ConstraintLaw, PenetrationLaw
 from .objects import (OBJECTS, HalfCylinder, Hemisphere, MeshSurface, Plane, VirtualObject,
                       Wedge)
@@ -22,4 +23,5 @@ from .scenefile import compile_scene, make_object
 
 __all__ = ["Plane", "Hemisphere", "HalfCylinder", "Wedge", "MeshSurface", "VirtualObject",
            "OBJECTS", "ConstraintLaw", "PenetrationLaw", "force_constant", "ForceConstant",
+           "ConstantSettings",
            "ArrayActuation", "actuation_source", "compile_scene", "make_object"]

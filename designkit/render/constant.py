@@ -20,6 +20,7 @@ eq. 4.2's magnitude); 'fz' -- the thesis' eq. 4.2 literally: only F_z = lambda h
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -316,18 +317,12 @@ def _secant_lambdas(fms, d_all, bias, u, tl, unipolar, rtol, progress):
     return lam
 
 
-def force_constant(obj, fieldmap, *, current_limit_a: float, total_current_a: float,
-                   unipolar: bool = False, rows: str = "force", n_side: int = 61,
-                   rtol: float = 1e-6, progress: bool = True,
-                   method: str = "faces") -> ForceConstant:
-    """Largest lambda (N/m) with every surface point's required force renderable (eq. 4.3).
+@dataclass(frozen=True)
+class ConstantSettings:
+    """How :func:`force_constant` computes lambda.
 
-    Parameters
+    Attributes
     ----------
-    obj : designkit.render.VirtualObject
-    fieldmap : ActuationSource
-        A FieldMap, a MapFile or an :class:`ArrayActuation` (designkit's CoilArray directly).
-    current_limit_a, total_current_a : the bounds u_i and I_t, A
     unipolar : 0 <= I_i <= u_i (the thesis) instead of |I_i| <= u_i
     rows : 'force' (3-D lambda h n) or 'fz' (eq. 4.2: F_z = lambda h only)
     n_side : surface discretization (61 x 61 grid over the footprint, the thesis' 3721)
@@ -336,10 +331,39 @@ def force_constant(obj, fieldmap, *, current_limit_a: float, total_current_a: fl
     method : 'faces' (default: the reachable set's facets, each point's lambda confirmed by
         the allocator or by the facets' completeness) or 'secant' (the secant search on the
         allocator's residual per point, the reference; both to ``rtol``)
+    """
+
+    unipolar: bool = False
+    rows: str = "force"
+    n_side: int = 61
+    rtol: float = 1e-6
+    method: str = "faces"
+
+
+def force_constant(obj, fieldmap, *, current_limit_a: float, total_current_a: float,
+                   settings: ConstantSettings | None = None, progress: bool = True,
+                   **changes) -> ForceConstant:
+    """Largest lambda (N/m) with every surface point's required force renderable (eq. 4.3).
+
+    Parameters
+    ----------
+    obj : designkit.render.VirtualObject
+    fieldmap : ActuationSource
+        A FieldMap, a MapFile or an :class:`ArrayActuation` (designkit's CoilArray directly).
+    current_limit_a, total_current_a : the bounds u_i and I_t, A
+    settings : ConstantSettings or None (its defaults); ``changes``: fields of it to replace
+        (``force_constant(..., rows="fz")``), a name that is no field refused
+    progress : one progress bar over the surface points
 
     The magnet's pull on the cores at zero current, F0 (the source's ``bias_force``), is
     included: lambda d - F0 must be renderable.
     """
+    names = {f.name for f in dataclasses.fields(ConstantSettings)}
+    for key in changes:
+        if key not in names:
+            raise BadInputError("force_constant setting", f"one of {sorted(names)}", key)
+    st = dataclasses.replace(settings or ConstantSettings(), **changes)
+    unipolar, rows, n_side, rtol, method = st.unipolar, st.rows, st.n_side, st.rtol, st.method
     if rows not in ("force", "fz"):
         raise BadInputError("rows", "'force' or 'fz'", rows)
     if method not in ("faces", "secant"):

@@ -3,11 +3,13 @@ driven by exact array physics and R-L coil currents.
 
 The coil currents (A) follow the voltage each coil driver applies from the drive record's
 supply (the design's: what the coils see), read back from the simulated PCA9685 registers (PWM
-duty, DIR level), so the bytes the runner wrote are what moves the current. The true force on the magnet (N) comes from designkit's array model at the true
-pose -- its position and the moment the finger's tilt gives it (``CoilArray`` A(p) with
-F = F(m) G5, + the magnet's pull on the cores) -- never the map, so that the map's, the
-estimator's and the allocator's errors show up in a run. The sensors see the tilted magnet's
-exact field through their errors and noise (designkit.sim.readings.SensorSimulator).
+duty, DIR level), so the bytes the runner wrote are what moves the current. The true force on
+the magnet (N) comes from designkit's array model at the true pose -- its position and the
+moment the finger's tilt gives it (``CoilArray`` A(p) with F = F(m) G5, + the pull of the cores
+on the magnet as the finite cylinder it is; 1010-steel cores saturate at the true currents,
+:mod:`designkit.sim.saturation`) -- never the map, so that the map's, the estimator's and the
+allocator's errors show up in a run. The sensors see the tilted magnet's exact field through
+their errors and noise (designkit.sim.readings.SensorSimulator).
 """
 
 from __future__ import annotations
@@ -26,8 +28,13 @@ from ..model.array import CoilArray, force_matrix
 from ..model.coil import Coil
 from ..model.electrical import drive_data
 from .readings import SensorSimulator, analog_reading, magnet_field
-from .samples import Sampled, bias_force_any, induced_field_any, sample_steps
+from .samples import Sampled, bias_force_any, finite_size_bias, induced_field_any, sample_steps
+from .saturation import PATH_STEP_M, PlantSaturation
 from .sensors import MODELLED_FIT_S, SimSensorSource
+
+
+FINITE_SIZE_STEP_M = 1e-3
+"""Path step of the finite-size part of F0 (:func:`designkit.sim.samples.finite_size_bias`), m."""
 
 
 class SimulatedDevice:
@@ -46,8 +53,8 @@ class SimulatedDevice:
     seed : int
     drive : firmware_io.mapfile.drive.DriveRecord, optional
         The coils' drive (default: :func:`designkit.model.electrical.drive_data` of the design's
-        coil): its supply, driver, and the first coil's R (at the operating temperature) and L
-        are the simulated coils'.
+        coils): its supply, driver, and each coil's R (at the operating temperature) and L are
+        the simulated coils' (a design with coils of several sizes drives each by its own).
 
     The coil bus runs at 1 MHz (the PCA9685s on their own adapter: Fm+, per the PCA9685
     datasheet), the sensor bus at 400 kHz (the TCA9548A's limit); each has its own simulated
@@ -61,9 +68,12 @@ class SimulatedDevice:
         n = self.array.n_coils
         self.drive = (drive if drive is not None
                       else drive_data(design, [Coil.of_design(design, k) for k in range(n)]))
-        self.resistance_ohm = self.drive.resistance_ohm[0]
-        self.inductance_h = self.drive.inductance_h[0]
+        self.resistance_ohm = np.asarray(self.drive.resistance_ohm, float)   # (n,) ohm
+        self.inductance_h = np.asarray(self.drive.inductance_h, float)       # (n,) H
         self.supply_v = self.drive.supply_voltage_v
+        # the cores' saturation up to the largest current the supply can drive
+        top_a = max(self.drive.current_limit_a, self.supply_v / float(self.resistance_ohm.min()))
+        self.saturation = PlantSaturation.of(self.array, top_a)
         self.noise_t = float(noise_t)
         self.rng = np.random.default_rng(seed)
         self.moment = np.asarray(design.magnet.moment_vector_a_m2, float)
@@ -81,7 +91,7 @@ class SimulatedDevice:
         boards = [PCA9685(self.coil_bus, 0x40 + b, sleep=self.coil_clock.sleep)
                   for b in range(n_boards)]
         # the runner commands voltages: the drive may apply any voltage within the supply
-        self.coils = CoilDriver(boards, [self.drive.drives[0]] * n, sleep=self.coil_clock.sleep)
+        self.coils = CoilDriver(boards, list(self.drive.drives), sleep=self.coil_clock.sleep)
 
         self.sensor_clock = SimClock()
         self.sensor_bus = SimBus(scl_hz=400e3, clock=self.sensor_clock)
@@ -94,6 +104,7 @@ class SimulatedDevice:
 
         self.current_a = np.zeros(n)
         self.field_offset_t = np.zeros((n_sensors, 3))   # fault injection (saturation)
+        self.ambient_t = np.zeros(3)     # a uniform field in the room (array frame), T
         self._in_flight: tuple[float, float, object] | None = None
         self._last_set_s = 0.0
 
@@ -145,37 +156,70 @@ class SimulatedDevice:
         a = self.array.actuation_matrix(p[idx])
         self.g5 = Sampled(idx, a[:, 3:, :])          # gradient rows per ampere, T/(m A)
         self.b_per_amp = Sampled(idx, a[:, :3, :])   # field per ampere at the magnet, T/A
-        self.bias = Sampled(idx, bias_force_any(self.array, p[idx], self.moment_steps[idx]))
+        # F0 of the point dipole along the path, plus what the cylinder changes in it (sampled
+        # every mm: ~4 % of F0 at 20 mm, its interpolation within ~0.1 % of F0)
+        at = sample_steps(p, u, step_m=FINITE_SIZE_STEP_M, turn_rad=np.radians(2.0))
+        mg = self.design.magnet
+        size = Sampled(at, finite_size_bias(self.array, p[at], self.moment_steps[at],
+                                            (mg.radius_m, mg.length_m)))
+        self.bias = Sampled(idx, bias_force_any(self.array, p[idx], self.moment_steps[idx])
+                            + size.all(idx))
+        self.sat_deltas = None
+        if self.saturation is not None:    # the cores' field only: the moment does not enter
+            at = sample_steps(p, np.tile([0.0, 0.0, 1.0], (len(p), 1)), step_m=PATH_STEP_M,
+                              turn_rad=np.pi)
+            self.sat_deltas = Sampled(at, self.saturation.deltas(p[at]))
         coarse = sample_steps(p, u, step_m=induced_step_m, turn_rad=np.radians(2.0))
         pts = self.sensor_sim.true_m.reshape(-1, 3)
         self.induced = Sampled(coarse, induced_field_any(self.array, pts, p[coarse],
                                                          self.moment_steps[coarse]))
 
+    def actuation(self, step: int, current_a) -> np.ndarray:
+        """The plant's A at the true position of step ``step`` for the currents ``current_a``
+        (n,) A: (8, n), each column at its coil's |I| when the cores saturate."""
+        a = np.concatenate([self.b_per_amp.at(step), self.g5.at(step)])
+        if self.sat_deltas is None:
+            return a
+        return self.saturation.columns(a, self.sat_deltas.at(step), current_a)
+
     def true_force_n(self, step: int, current_a) -> np.ndarray:
         """Force on the true magnet (its moment at step ``step``) at its true position, N, (3,):
-        F(m) G5(p) I + F0(p, m)."""
-        f = force_matrix(self.moment_steps[step]) @ self.g5.at(step)
-        return f @ current_a + self.bias.at(step)
+        F(m) G5(p, I) I + F0(p, m)."""
+        return self.force_per_amp(step, current_a) @ current_a + self.bias.at(step)
 
     def true_torque_n_m(self, step: int, current_a) -> np.ndarray:
         """Torque m x B of the coils' field on the true magnet at step ``step``, N m, (3,)."""
-        return np.cross(self.moment_steps[step], self.b_per_amp.at(step) @ current_a)
+        b = self.actuation(step, current_a)[:3]
+        return np.cross(self.moment_steps[step], b @ current_a)
 
-    def force_per_amp(self, step: int) -> np.ndarray:
-        """The true magnet's force per ampere at step ``step``, (3, n) N/A."""
-        return force_matrix(self.moment_steps[step]) @ self.g5.at(step)
+    def force_per_amp(self, step: int, current_a) -> np.ndarray:
+        """The true magnet's force per ampere at step ``step`` with the currents ``current_a``
+        (the saturating cores' columns at them), (3, n) N/A."""
+        return force_matrix(self.moment_steps[step]) @ self.actuation(step, current_a)[3:]
+
+    def saturated(self, points_m, a_linear, current_a) -> np.ndarray:
+        """The plant's exact A at any points (k, 3) m for the currents (k, n) A there: (k, 8, n)
+        from the coupled (linear) ``a_linear`` (k, 8, n) there, each column at its coil's |I|
+        (``a_linear`` itself when no core saturates)."""
+        if self.saturation is None:
+            return a_linear
+        p = np.asarray(points_m, float).reshape(-1, 3)
+        d = self.saturation.deltas(p)
+        i = np.asarray(current_a, float).reshape(len(p), -1)
+        return np.stack([self.saturation.columns(a_linear[k], d[k], i[k])
+                         for k in range(len(p))])
 
     def sensor_readings_t(self, step: int, position_m, current_a) -> np.ndarray:
         """(n_sensors, 3) T, what each sensor's ADC converts at step ``step`` (the magnet at
         ``position_m`` with its moment at that step): the field (magnet, coils, induced cores)
-        through the sensor errors, plus noise and injected offsets; the TLV493D models quantize
-        and clip it."""
+        through the sensor errors, plus noise and injected offsets, with the room's uniform field
+        ``ambient_t``; the TLV493D models quantize and clip it."""
         sim = self.sensor_sim
         mg = self.design.magnet
         pts = sim.true_m.reshape(-1, 3)
         magnet = magnet_field(pts, np.asarray(position_m, float), self.moment_steps[step],
                               mg.radius_m, mg.length_m)
-        b = (magnet + self.induced.at(step)).reshape(sim.true_m.shape) \
+        b = (magnet + self.induced.at(step) + self.ambient_t).reshape(sim.true_m.shape) \
             + sim.coil_part(np.asarray(current_a, float)[None])[0]
         a = analog_reading(b[None], sim.errors, self.noise_t, self.rng)[0].reshape(-1, 3)
         return a + self.field_offset_t
@@ -193,7 +237,7 @@ class SimulatedDevice:
         frames : int; current_a : float, A (default :data:`firmware_io.runner.
             CALIBRATION_CURRENT_A`, at most the drive's limit)
 
-        Returns the Localizer's ``calibration`` (gain_inverse (2, n, 3, 3), offsets (2, n, 3)).
+        Returns the estimator's ``calibration`` (gain_inverse (2, n, 3, 3), offsets (2, n, 3)).
         """
         sim = self.sensor_sim
 
@@ -206,9 +250,9 @@ class SimulatedDevice:
                 sensor.field_t = tuple(bi)
 
         amp = min(CALIBRATION_CURRENT_A if current_a is None else current_a,
-                  self.supply_v / self.resistance_ohm)
+                  self.supply_v / float(self.resistance_ohm.max()))
         currents = calibration_currents(self.array.n_coils, amp, frames)
-        tau = self.inductance_h / self.resistance_ohm
+        tau = float(np.max(self.inductance_h / self.resistance_ohm))   # the slowest coil
         readings, applied = record_calibration(self.coils, self.sensors, currents,
                                                settle_s=7 * tau, sleep=settle)
         settle(7 * tau)          # coils off: decayed before the run starts

@@ -89,13 +89,15 @@ class SimulationResult:
     """Per-step columns (SI; the run.csv columns, plus ``new_frame`` (bool: the step took in a
     new sensor result) and, when the runner profiles, ``stage_<name>_s``), the faults as
     injected (time s, type; those in :data:`RUNNING_FAULTS` wait for a running step), the
-    runner's fault log and the sensor side's fit times (s, one per frame)."""
+    runner's fault log, the sensor side's fit times (s, one per frame) and its fixes (field
+    time s, trusted, distance from the truth m)."""
 
     columns: dict
     faults: list
     fault_log: list
     period_s: float
     fit_s: list = field(default_factory=list)
+    fixes: list = field(default_factory=list)
 
 
 class _Injector:
@@ -276,7 +278,7 @@ def simulate(device: SimulatedDevice, runner_factory, trajectory: Trajectory, *,
     bar.close()
     runner.stop()
     return SimulationResult(rec_all.columns(), injector.injected, list(runner.fault_log),
-                            period_s, list(source.fit_s))
+                            period_s, list(source.fit_s), list(source.fixes))
 
 
 def _step(runner, ts: float, overrun: bool):

@@ -428,17 +428,19 @@ def random_positions(n: int, rng: np.random.Generator, *, z_range_m=(0.020, 0.07
 def forward_model(sim: SensorSimulator) -> dict:
     """The numbers the runner-side estimator needs (what the v2 map carries), from the design.
 
-    Returns a dict for :class:`firmware_io.localization.SensorModel`: nominal
-    ``sensor_positions_m`` (2, n, 3), ``coil_field_t_per_a`` (2, n, 3, n_coils) at the nominal
-    positions, ``moment_a_m2`` (3,), ``octupole_m2`` (the magnet's l = 3 multipole
+    Returns a dict for :class:`firmware_io.localization.SensorModel` (its flat sensor list:
+    the upper array, then the lower): nominal ``sensor_positions_m`` (2 n, 3),
+    ``coil_field_t_per_a`` (2 n, 3, n_coils) at the nominal positions, the (upper, lower)
+    ``pairs``, ``moment_a_m2`` (3,), ``octupole_m2`` (the magnet's l = 3 multipole
     coefficient / dipole coefficient, h^2 - 3 a^2 / 4), the induced-core linear operator (see
     :class:`InducedCoreModel`) and ``design_sha256``.
     """
     d = sim.design
     pts = sim.nominal_m.reshape(-1, 3)
-    coil = sim.array.actuation_matrix(pts)[:, :3, :].reshape(2, sim.n, 3, sim.array.n_coils)
+    coil = sim.array.actuation_matrix(pts)[:, :3, :]
     mg = d.magnet
-    out = {"sensor_positions_m": sim.nominal_m.copy(), "coil_field_t_per_a": coil,
+    out = {"sensor_positions_m": pts.copy(), "coil_field_t_per_a": coil,
+           "pairs": np.c_[np.arange(sim.n), sim.n + np.arange(sim.n)],
            "moment_a_m2": sim.moment_a_m2.copy(),
            "octupole_m2": (mg.length_m / 2) ** 2 - 0.75 * mg.radius_m**2,
            "design_sha256": d.spec_hash()}

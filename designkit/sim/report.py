@@ -3,7 +3,8 @@ localization error, loop timing, and the run.csv table.
 
 Inputs are a :class:`designkit.sim.loop.SimulationResult` (per-step SI columns); outputs are
 plain dicts for summary.json (N, m, s). The force error is split into localization,
-allocation, map interpolation and current lag (:func:`force_error_causes`).
+allocation, map interpolation, the saturation model and current lag
+(:func:`force_error_causes`); the saturation model at the limit (:func:`saturation_summary`).
 """
 
 from __future__ import annotations
@@ -170,6 +171,7 @@ def summarize(result: SimulationResult, causes: dict | None = None) -> dict:
         "fault_log": [{"t_s": float(t), "state": s, "detail": d} for t, s, d in result.fault_log],
     }
     out.update(pose_summary(c))
+    out.update(fix_summary(result.fixes))
     if causes is not None:
         out["force_error_causes"] = causes
     return out
@@ -177,6 +179,18 @@ def summarize(result: SimulationResult, causes: dict | None = None) -> dict:
 
 STALE_LIMIT_M = 5e-3
 """A rendered position farther than this from where the finger was is counted, m."""
+
+
+def fix_summary(fixes) -> dict:
+    """summary.json's sensor-side rows: the fixes published, the share trusted, and the
+    trusted ones more than :data:`STALE_LIMIT_M` from the truth at their frame's field time
+    (``fixes``: (field time s, trusted, distance m) per fix)."""
+    if not fixes:
+        return {"fixes": 0, "fixes_trusted_fraction": None, "trusted_fixes_beyond_5mm": 0}
+    ok = np.array([f[1] for f in fixes], bool)
+    far = np.array([f[2] for f in fixes], float) > STALE_LIMIT_M
+    return {"fixes": int(len(ok)), "fixes_trusted_fraction": float(ok.mean()),
+            "trusted_fixes_beyond_5mm": int(np.sum(ok & far))}
 
 
 def pose_summary(columns: dict) -> dict:
@@ -253,17 +267,21 @@ def force_error_causes(device: SimulatedDevice, fieldmap, result: SimulationResu
     costly part; RMS and p95 of an evenly spaced subsample of a 4000-step run).
 
     With (p, m) the true and (q, n) the estimated pose (position, moment), I* the command and I
-    the true currents, F(., m) / F0(., m) the exact force per ampere and bias force on a
-    moment m and Fm / F0m the map's (the map's F0 is for its own moment)::
+    the true currents, F(., m, I) / F0(., m) the exact force per ampere (the saturating cores'
+    columns at the currents I) and bias force on a moment m, Fm / F0m the map's (Fm(q, n, I*):
+    its linear A with the map's saturation factor at I*; the map's F0 is for its own moment) and
+    Fl(q, n) S(I*) the exact linear force per ampere scaled by that factor::
 
-        F(p,m) I + F0(p,m) - f(p) = [f(q) - f(p)]
-                                    + [F(p,m) I* + F0(p,m) - F(q,n) I* - F0(q,n)]  localization
-                                    + [Fm(q,n) I* + F0m(q) - f(q)]                 allocation
-                                    + [F(q,n) I* + F0(q,n) - Fm(q,n) I* - F0m(q)]  map
-                                    + F(p,m) (I - I*)                              current lag
+        F(p,m,I) I + F0(p,m) - f(p) = [f(q) - f(p)]
+                      + [F(p,m,I*) I* + F0(p,m) - F(q,n,I*) I* - F0(q,n)]   localization
+                      + [Fm(q,n,I*) I* + F0m(q) - f(q)]                     allocation
+                      + [Fl(q,n) S(I*) I* + F0(q,n) - Fm(q,n,I*) I* - F0m(q)] map
+                      + [F(q,n,I*) I* - Fl(q,n) S(I*) I*]                    saturation
+                      + [F(p,m,I) I - F(p,m,I*) I*]                         current lag
 
-    ('localization' holds the pose's error, position and orientation.) Returns RMS and p95 (N)
-    of each term's Fz and of its magnitude, and of the total.
+    ('localization' holds the pose's error, position and orientation; 'saturation' the error of
+    the map's per-coil factor against the plant's saturating cores, zero for linear cores.)
+    Returns RMS and p95 (N) of each term's Fz and of its magnitude, and of the total.
     """
     c = result.columns
     run = np.flatnonzero(c["state"] == "running")
@@ -284,29 +302,39 @@ def force_error_causes(device: SimulatedDevice, fieldmap, result: SimulationResu
     f_ref = col3("fx_ref_n fy_ref_n fz_ref_n")
     f_obj = col3("fx_obj_n fy_obj_n fz_obj_n")
     fm = np.stack([force_matrix(m) for m in m_est])
-    f_exact_q = np.einsum("kij,kjl->kil", fm, device.array.actuation_matrix(q)[:, 3:, :])
-    f0_exact_q = bias_force_any(device.array, q, m_est)
+    a_lin = device.array.actuation_matrix(q)
+    f_lin_q = np.einsum("kij,kjl->kil", fm, a_lin[:, 3:, :])
+    f_exact_q = np.einsum("kij,kjl->kil", fm, device.saturated(q, a_lin, i_cmd)[:, 3:, :])
+    # F0 at the estimate: the point dipole's there, plus the magnet's finite-size part at the
+    # true position (a few % of F0, smooth: its change over the localization error is small)
+    f0_exact_q = (bias_force_any(device.array, q, m_est)
+                  + np.stack([device.bias.at(k) for k in run])
+                  - bias_force_any(device.array, device.path_m[run], device.moment_steps[run]))
+    s_map = fieldmap.saturation_table().factor_at(i_cmd)          # (k, n)
     inside = _inside(fieldmap, q)
     f_map_q = np.zeros_like(f_exact_q)
     f_map_q[inside] = np.einsum("kij,kjl->kil", fm[inside],
-                                fieldmap.actuation(q[inside])[:, 3:, :])
+                                fieldmap.actuation(q[inside])[:, 3:, :]) * s_map[inside, None]
     f0_map_q = np.zeros_like(q)
     if inside.any():
         f0_map_q[inside] = np.asarray(fieldmap.bias_force(q[inside]), float).reshape(-1, 3)
-    f_p = np.stack([device.force_per_amp(k) for k in run])
+    f_cmd = np.stack([device.force_per_amp(k, i) for k, i in zip(run, i_cmd)])
+    f_true = np.stack([device.force_per_amp(k, i) for k, i in zip(run, i_true)])
     f0_p = np.stack([device.bias.at(k) for k in run])
 
     def mv(a, i):
         return np.einsum("kil,kl->ki", a, i)
 
     terms = {
-        "localization": (f_ref - f_obj) + (mv(f_p, i_cmd) + f0_p - mv(f_exact_q, i_cmd)
+        "localization": (f_ref - f_obj) + (mv(f_cmd, i_cmd) + f0_p - mv(f_exact_q, i_cmd)
                                            - f0_exact_q),
         "allocation": mv(f_map_q, i_cmd) + f0_map_q - f_ref,
-        "map_interpolation": mv(f_exact_q, i_cmd) + f0_exact_q - mv(f_map_q, i_cmd) - f0_map_q,
-        "current_lag": mv(f_p, i_true - i_cmd),
+        "map_interpolation": mv(f_lin_q * s_map[:, None], i_cmd) + f0_exact_q
+        - mv(f_map_q, i_cmd) - f0_map_q,
+        "saturation": mv(f_exact_q - f_lin_q * s_map[:, None], i_cmd),
+        "current_lag": mv(f_true, i_true) - mv(f_cmd, i_cmd),
     }
-    terms["total"] = mv(f_p, i_true) + f0_p - f_obj
+    terms["total"] = mv(f_true, i_true) + f0_p - f_obj
     out = {}
     for name, v in terms.items():
         v = v[inside] if name != "total" else v
@@ -324,3 +352,65 @@ def _inside(fieldmap, q) -> np.ndarray:
     lo, hi = (np.asarray(b, float) for b in fieldmap.bounds)
     return np.all((q >= lo) & (q <= hi), axis=1)
 
+
+
+SATURATION_NEAR = 0.9
+"""A running step counts as near the current limit when its largest commanded |I| is at least
+this fraction of the limit (:func:`saturation_summary`)."""
+
+
+def saturation_summary(device: SimulatedDevice, fieldmap, result: SimulationResult,
+                       limit_a: float) -> dict:
+    """The runner's saturation model against the plant's saturating cores, at the commanded
+    currents I* and the finger's true pose (p, m): the coils' force as the runner's model has
+    it, F(m) Am(p) S(I*) I* (the map's A and its saturation factor S), against the plant's
+    exact F(m) A(p, I*) I*. Over the running steps inside the map's box whose largest |I*| is
+    at least :data:`SATURATION_NEAR` x ``limit_a`` (A): the relative error's RMS and maximum
+    (|difference| / |exact|), and the same without the factor (S = 1: the linear cores' map).
+    At those of the steps where no coil is at its bound (``below_bound_steps``: the allocation
+    is exact there), ``commands_vs_rendered_mean_rel``: the commands through that model at the
+    runner's estimate, F(n) Am(q) S(I*) I* + F0m(q), against the force the runner rendered there
+    (f_ref), the mean difference along f_ref over its mean magnitude: ~0 when the runner applies
+    the factor, ~ -6 % when it ignores it, ~ +6 % when it applies it twice. Empty when no core
+    saturates."""
+    if device.saturation is None:
+        return {}
+    c = result.columns
+    n = device.array.n_coils
+    i_cmd = np.stack([c[f"cmd{k + 1}_a"] for k in range(n)], 1)
+    p = np.stack([c["x_m"], c["y_m"], c["z_m"]], 1)
+    near = ((c["state"] == "running") & _inside(fieldmap, p)
+            & (np.abs(i_cmd).max(axis=1) >= SATURATION_NEAR * limit_a))
+    steps = np.flatnonzero(near)
+    out = {"near_limit_a": SATURATION_NEAR * limit_a, "steps": int(len(steps))}
+    if not len(steps):
+        return out
+    fm = np.stack([force_matrix(device.moment_steps[k]) for k in steps])
+    a_map = np.einsum("kij,kjl->kil", fm, fieldmap.actuation(p[steps])[:, 3:, :])
+    s_map = fieldmap.saturation_table().factor_at(i_cmd[steps])
+    exact = np.stack([device.force_per_amp(k, i_cmd[k]) @ i_cmd[k] for k in steps])
+    norm = np.maximum(np.linalg.norm(exact, axis=1), 1e-300)
+    for name, s in (("with_factor", s_map), ("without_factor", np.ones_like(s_map))):
+        rel = np.linalg.norm(np.einsum("kil,kl->ki", a_map * s[:, None], i_cmd[steps]) - exact,
+                             axis=1) / norm
+        out[name] = {"rel_rms": float(np.sqrt(np.mean(rel ** 2))), "rel_max": float(rel.max())}
+    # the runner's commands through the map's model with the factor, at its own estimate, against
+    # the force it rendered there (its target f_ref - F0m), where no coil is at its bound (the
+    # allocation is then exact): ~0 when the runner applies the factor, ~ -6 % when it ignores it
+    free = steps[np.abs(i_cmd[steps]).max(axis=1) < limit_a - 1e-3]
+    out["below_bound_steps"] = int(len(free))
+    if len(free):
+        q = np.stack([c["xe_m"], c["ye_m"], c["ze_m"]], 1)[free]
+        n_est = np.stack([c["mxe_a_m2"], c["mye_a_m2"], c["mze_a_m2"]], 1)[free]
+        am = np.einsum("kij,kjl->kil", np.stack([force_matrix(m) for m in n_est]),
+                       fieldmap.actuation(q)[:, 3:, :])
+        i = i_cmd[free]
+        model = np.einsum("kil,kl->ki", am * fieldmap.saturation_table().factor_at(i)[:, None],
+                          i) + np.asarray(fieldmap.bias_force(q), float).reshape(-1, 3)
+        f_ref = np.stack([c["fx_ref_n"], c["fy_ref_n"], c["fz_ref_n"]], 1)[free]
+        along = np.sum((model - f_ref) * f_ref, axis=1) / np.linalg.norm(f_ref, axis=1)
+        out["commands_vs_rendered_mean_rel"] = float(np.mean(along)
+                                                     / np.mean(np.linalg.norm(f_ref, axis=1)))
+    out["max_command_a"] = float(np.abs(i_cmd[steps]).max())
+    out["factor_at_max"] = float(s_map.min())
+    return out

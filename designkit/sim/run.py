@@ -19,11 +19,10 @@ from pathlib import Path
 import numpy as np
 
 from firmware_io.allocation import Allocator
-from firmware_io.localization import Localizer
+from firmware_io.localization import SensorModel, estimator_from_map
 from firmware_io.mapfile import MapFile
 from firmware_io.mapfile.drive import DriveRecord
-from firmware_io.runner import (CALIBRATED_RELATIVE_ERROR, LocalizerShim, Runner, RunnerIO,
-                                SceneForce, SensorHeadroom, config_from_map)
+from firmware_io.runner import Runner, RunnerIO, SceneForce, SensorHeadroom, config_from_map
 from firmware_io.scene import Scene
 
 from .. import fieldmap, render
@@ -39,7 +38,7 @@ from .device import SimulatedDevice
 from .faults import FaultSchedule
 from .loop import LoopTiming, simulate
 from .plot import plot_run
-from .report import force_error_causes, summarize, write_run_csv
+from .report import force_error_causes, saturation_summary, summarize, write_run_csv
 from .trajectory import Trajectory, poke_trajectory, slide_trajectory, tilt_trajectory
 
 MAX_DURATION_S = 600.0
@@ -79,13 +78,16 @@ class RunSettings:
         thesis' eq. 4.6)
     seed : int -- the sensor noise's
     calibrate : bool -- the start-up sensor calibration (:meth:`SimulatedDevice.
-        calibrate_sensors`); the localizer then weighs the sensors with
-        :data:`firmware_io.runner.CALIBRATED_RELATIVE_ERROR`
+        calibrate_sensors`); the estimator then weighs the sensors as calibrated
+        (:meth:`firmware_io.localization.EstimatorSettings.relative_error_for`)
     profile : bool -- the runner times each stage of its step (summary
         ``loop_by_kind['stages']``; compute time measured, not modelled)
     skip_force_n : float -- the runner's coil-skip force, N
     keep_sensors : tuple of int -- sensors the scene keeps in their linear range
         (:class:`firmware_io.runner.SensorHeadroom`; default none)
+    background_t : (3,) T -- a uniform ambient field (array frame) that appears after the
+        start-up calibration (which would take a constant one as the sensors' offsets): the
+        estimator must find it
     scene_path : str or None -- a compiled scene (``designkit scene compile``) to run instead
         of ``obj``: its objects and its lambda
     """
@@ -104,7 +106,12 @@ class RunSettings:
     profile: bool = False
     skip_force_n: float = 0.0
     keep_sensors: tuple = ()
+    background_t: tuple = (0.0, 0.0, 0.0)
     scene_path: str | None = None
+
+
+MAX_BACKGROUND_T = 10e-3
+"""Largest ambient field a simulated run takes, T per axis (beyond, sensors saturate)."""
 
 
 def run_simulation(settings: RunSettings = RunSettings(), *, design=None, map_path=None,
@@ -128,7 +135,7 @@ def run_simulation(settings: RunSettings = RunSettings(), *, design=None, map_pa
                 raise BadInputError(name, "left out with --scene (the compiled scene has its "
                                     "objects and lambda)", value)
     obj = "hemisphere" if st.obj is None and st.scene_path is None else st.obj
-    virtual, path, duration, schedule = _checked_inputs(st, obj)
+    virtual, path, duration, schedule = _checked_inputs(st, obj, design)
     # the scene is read and matched to the design before the map is built
     scene = (None if st.scene_path is None else
              Scene.load(st.scene_path, expected_design_sha256=design.spec_hash()))
@@ -165,12 +172,13 @@ def run_simulation(settings: RunSettings = RunSettings(), *, design=None, map_pa
         plant_array = CoilArray.from_design(plant_design)
     device = SimulatedDevice(plant_design, plant_array, seed=st.seed, drive=drive)
     loc_kw = _localizer_options(device, map_path, st.method, st.calibrate)
+    device.ambient_t = np.asarray(st.background_t, float)     # after the calibration
 
     def factory(source, clock, hook):
-        localizer = LocalizerShim(Localizer.from_map(map_path, method=st.method, **loc_kw))
+        estimator = estimator_from_map(map_path, st.method, **loc_kw)
         io = RunnerIO(device.coils, source, lambda line: print(line) if progress else None,
                       clock)
-        runner = Runner(fmap, SceneForce(scene), localizer, io, cfg,
+        runner = Runner(fmap, SceneForce(scene), estimator, io, cfg,
                         allocate=hook(Allocator()),
                         headroom=SensorHeadroom.from_meta(scene.meta))
         runner.profile = st.profile
@@ -181,9 +189,13 @@ def run_simulation(settings: RunSettings = RunSettings(), *, design=None, map_pa
     res = simulate(device, factory, path, duration_s=duration, timing=timing,
                    faults=schedule, scene_force=SceneForce(scene).force, progress=progress)
     summary = summarize(res, force_error_causes(device, fmap, res))
+    sat = saturation_summary(device, fmap, res, drive.current_limit_a)
+    if sat:
+        summary["saturation"] = sat
     summary.update({"object": obj, "trajectory": str(st.trajectory), "design": design.name,
                     "rows": st.rows, **choice, "method": st.method,
                     "unipolar": st.unipolar, "keep_sensors": list(st.keep_sensors),
+                    "background_t": [float(x) for x in st.background_t],
                     "drive": drive.to_dict(), "drive_violations": drive.violations(),
                     **_duration_note(path.duration_s, duration),
                     "faults_not_injected": _not_injected(schedule, res.faults)})
@@ -234,9 +246,10 @@ def choose_lambda(design: Design, virtual, fmap, drive: DriveRecord, st: RunSett
             "lambda_surface_points": int(len(fc.points_m))}
 
 
-def _checked_inputs(st: RunSettings, obj: str | None):
+def _checked_inputs(st: RunSettings, obj: str | None, design: Design):
     """The run's inputs, checked: (virtual object (None with a scene file), trajectory from a
-    file or None for a scripted one, duration s, fault schedule)."""
+    file -- inside the design's workspace -- or None for a scripted one, duration s, fault
+    schedule)."""
     if st.rows not in ("force", "fz"):
         raise BadInputError("--rows", "'force' (3-D) or 'fz' (the thesis' vertical force)",
                             st.rows)
@@ -244,12 +257,16 @@ def _checked_inputs(st: RunSettings, obj: str | None):
         raise BadInputError("--period-ms", "in [0.1, 50] ms", st.period_s * 1e3)
     if st.lam_n_per_m is not None and not 0 <= float(st.lam_n_per_m) < np.inf:
         raise BadInputError("--lambda", ">= 0 and finite, N/m", st.lam_n_per_m)
+    bg = np.asarray(st.background_t, dtype=float)
+    if bg.shape != (3,) or not np.all(np.abs(bg) <= MAX_BACKGROUND_T):
+        raise BadInputError("--background-mt", f"three values within +-{MAX_BACKGROUND_T * 1e3:g} "
+                            "mT (x, y, z, the array frame)", np.round(bg * 1e3, 3).tolist())
     if any(not (isinstance(k, (int, np.integer)) and k >= 0) for k in st.keep_sensors):
         raise BadInputError("--keep-sensors", "sensor indices >= 0 (the map's order)",
                             list(st.keep_sensors))
     virtual = None if obj is None else scenefile.make_object(obj)
     scripted = st.trajectory in SCRIPTED_DURATION_S
-    path = None if scripted else Trajectory.from_csv(st.trajectory)
+    path = None if scripted else Trajectory.from_csv(st.trajectory, design.workspace_region())
     duration = float(st.duration_s or (path.duration_s if path is not None
                                         else SCRIPTED_DURATION_S[st.trajectory]))
     if not 0 < duration <= MAX_DURATION_S:
@@ -310,10 +327,8 @@ def _map(design, array, map_path, out: Path, progress: bool):
 
 def _localizer_options(device: SimulatedDevice, map_path, method: str, calibrate: bool) -> dict:
     """The localizer's keywords: the start-up calibration (coils only; the map carries the
-    magnet's cylinder) and the calibrated sensors' weight, unless not calibrating."""
+    magnet's cylinder), unless not calibrating."""
     loc_kw: dict = {}
     if calibrate and method != "learned":
-        base = Localizer.from_map(map_path, method=method, **loc_kw)
-        loc_kw.update(calibration=device.calibrate_sensors(base.model),
-                      relative_error=CALIBRATED_RELATIVE_ERROR)
+        loc_kw.update(calibration=device.calibrate_sensors(SensorModel.from_map(map_path)))
     return loc_kw

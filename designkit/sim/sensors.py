@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import time
 
+import numpy as np
+
 from firmware_io.runner import SensorFrame
 
 MODELLED_FIT_S = 1e-3
@@ -52,6 +54,9 @@ class SimSensorSource:
         ``fit_time_s`` unless it is None).
     frame_truth_m : ndarray (3,) or None
         The true position at the field time of the last frame read (diagnostics).
+    fixes : list of (field time s, trusted, distance m)
+        Each published fix: whether the sensor side trusted it and how far its position was
+        from the true one at its frame's field time (diagnostics).
     """
 
     def __init__(self, device, position_at, period_s: float,
@@ -65,6 +70,7 @@ class SimSensorSource:
         self.frame_truth_m = None
         self.pipeline = None
         self.fit_s: list = []
+        self.fixes: list = []
 
     def attach(self, pipeline) -> None:
         self.pipeline = pipeline
@@ -83,6 +89,8 @@ class SimSensorSource:
                 c0 = time.thread_time()
                 frame = self.pipeline.process(frame)
                 measured = time.thread_time() - c0
+                self.fixes.append((field_s, bool(frame.ok), float(np.linalg.norm(
+                    np.asarray(frame.position_m, float) - self.frame_truth_m))))
                 self.fit_s.append(measured)
                 fit_s = measured if self.fit_time_s is None else self.fit_time_s
             self.fitted = (ready_s + fit_s, frame, field_s)

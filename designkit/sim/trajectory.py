@@ -115,9 +115,13 @@ class Trajectory:
         return tilted_direction(reference, tilt, az)
 
     @classmethod
-    def from_csv(cls, path) -> "Trajectory":
+    def from_csv(cls, path, workspace=None) -> "Trajectory":
         """Read ``t_s, x_m, y_m, z_m`` columns (SI, a header line naming them) and, if present,
-        ``tilt_deg`` (in [0, 180]) and ``azimuth_deg``."""
+        ``tilt_deg`` (in [0, 180]) and ``azimuth_deg``. With ``workspace``
+        (:class:`designkit.design.workspace.Workspace`, the design's region) every position must
+        lie in it: a path in millimetres or below the floor is refused in one line naming the
+        column, the file line, the value and the valid range (the map covers only the
+        workspace; outside it nothing is rendered)."""
         p = Path(path)
         if not p.is_file():
             raise BadInputError("trajectory", "a CSV file with columns t_s,x_m,y_m,z_m", str(p))
@@ -134,10 +138,11 @@ class Trajectory:
                                     header, hint=f"missing {missing} in {p}")
             cols = TRAJECTORY_COLUMNS + tuple(c for c in TILT_COLUMNS if c in header)
             idx = [header.index(c) for c in cols]
-            rows = []
+            rows, line_numbers = [], []
             for line_no, row in enumerate(reader, start=2):
                 if not row:
                     continue
+                line_numbers.append(line_no)
                 try:
                     rows.append([float(row[i]) for i in idx])
                 except (ValueError, IndexError):
@@ -148,6 +153,8 @@ class Trajectory:
         for name, valid in (("tilt_deg", TILT_RANGE_DEG), ("azimuth_deg", AZIMUTH_RANGE_DEG)):
             if name in extra:
                 _check_range(name, extra[name], valid, lines=True)
+        if workspace is not None and len(a):
+            _check_workspace(a[:, 1:4], workspace, line_numbers)
         return cls(a[:, 0], a[:, 1:4], **extra)
 
 
@@ -160,6 +167,34 @@ def _check_range(name: str, values: np.ndarray, valid: tuple, lines: bool = Fals
         raise BadInputError(f"trajectory column {name}",
                             f"in [{valid[0]:g}, {valid[1]:g}] degrees",
                             f"{values[k]!r}{where}")
+
+
+def _check_workspace(positions_m, workspace, line_numbers) -> None:
+    """BadInputError for the first position (k, 3) m outside ``workspace``: the column, its
+    file line and value, the column's valid range (m) and, when the value is in range read as
+    millimetres, the hint; a position in the range of every column but outside the outline
+    names the outline."""
+    lo, hi = workspace.bounds_m()
+    tol = 1e-9
+    bad = (positions_m < lo - tol) | (positions_m > hi + tol)
+    rows = np.flatnonzero(bad.any(axis=1))
+    if len(rows):
+        k = int(rows[0])
+        j = int(np.argmax(bad[k]))
+        v = float(positions_m[k, j])
+        # a length of a metre or more that lies in the range as millimetres: the unit
+        mm = abs(v) >= 1.0 and lo[j] - tol <= v * 1e-3 <= hi[j] + tol
+        raise BadInputError(f"trajectory column {('x_m', 'y_m', 'z_m')[j]}",
+                            f"in [{lo[j]:.4g}, {hi[j]:.4g}] m (the design's workspace)",
+                            f"{v:g} (line {line_numbers[k]})",
+                            hint=(f"Millimetres where metres are expected? Write {v * 1e-3:g}."
+                                  if mm else ""))
+    out = np.flatnonzero(~workspace.contains(positions_m))
+    if len(out):
+        k = int(out[0])
+        raise BadInputError("trajectory x_m, y_m", "inside the design's workspace outline "
+                            f"{np.round(workspace.outline * 1e3, 1).tolist()} mm",
+                            f"{positions_m[k, :2].tolist()} m (line {line_numbers[k]})")
 
 
 def slide_trajectory(surface_height, *, duration_s: float = 4.0, half_span_m: float = 0.04,

@@ -124,7 +124,12 @@ def slice_data(design: "Design", currents: Sequence[float] | None = None, *,
         dist = solid_distance_m(design, mesh.points)
         mesh.point_data[SOLID_DISTANCE_M] = dist
         mesh.point_data[IN_SOLID] = (dist <= 0.0).astype(np.uint8)
+        mesh.field_data[MOMENT_A_M2] = m  # what F was computed for (the figure's title)
     return vert, horiz
+
+
+MOMENT_A_M2 = "moment (A m^2)"
+"""The field-data entry of :func:`slice_data`'s sections: the magnet moment of their force."""
 
 
 def _z_low(design: "Design") -> float:
@@ -168,22 +173,24 @@ def _section_lines(pv, design, blocks, sec: Section, view: Literal["xz", "xy"], 
 
 
 def plot_slices(design: "Design", currents: Sequence[float] | None = None, *,
-                quantity: Literal["B", "F"] = "B", moment=None, height_m: float | None = None,
-                quality: Quality = "full", window_size=(1500, 640), data=None,
-                blocks=None) -> "pyvista.Plotter":
+                quantity: Literal["B", "F"] = "B", quality: Quality = "full",
+                window_size=(1500, 640), data=None, blocks=None) -> "pyvista.Plotter":
     """Magnitude of B (mT) or of the force on the magnet (mN) on the vertical section through
     the design point (left) and on a horizontal section at its height (right); one log colour
     scale, the design's fixed one (:func:`designkit.viz.ranges.colour_ranges`), shared by both;
     the coils cut by the sections and, for the force, the contour of the human threshold; the
-    force only where the magnet's centre can be (z >= workspace z_min)."""
+    force only where the magnet's centre can be (z >= workspace z_min). ``data``: the two
+    sections of :func:`slice_data` (None: made here, at the design point's height, for the
+    design's magnet; another height or moment: make them with :func:`slice_data`)."""
     pv = import_pyvista()
     if quantity not in ("B", "F"):
         raise BadInputError("quantity", "'B' or 'F'", quantity)
     cur = resolve_currents(design, currents)
     sec = section_plane(design)
-    h = float(sec.point_m[2]) if height_m is None else height_m
-    vert, horiz = (slice_data(design, cur, moment=moment, height_m=h, quality=quality)
+    vert, horiz = (slice_data(design, cur, height_m=float(sec.point_m[2]), quality=quality)
                    if data is None else data)
+    h = float(horiz.points[0, 2])
+    moment = np.asarray(horiz.field_data[MOMENT_A_M2], dtype=float)
     blocks = scene_meshes(design, cur) if blocks is None else blocks
     ranges = colour_ranges(design)
     name = B_MT if quantity == "B" else F_MN

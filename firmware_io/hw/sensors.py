@@ -39,8 +39,17 @@ class SensorSlot:
     sensor_address: int = 0x5E
 
 
+MAX_SENSORS = (0x77 - 0x71 + 1) * 8
+"""Sensors the default layout addresses: one TLV493D per channel of the TCA9548A muxes at
+0x71..0x77 (0x70 left free), 8 channels each."""
+
+
 def default_sensor_layout(n_sensors: int = 18, first_mux: int = 0x71) -> tuple[SensorSlot, ...]:
     """One sensor per channel: sensor i on mux ``first_mux + i // 8``, channel ``i % 8``."""
+    most = (0x77 - first_mux + 1) * 8
+    if not 0 < n_sensors <= most:
+        raise BadInputError("n_sensors", f"1..{most} (TCA9548A muxes 0x{first_mux:02x}..0x77, "
+                            "8 channels each)", n_sensors)
     return tuple(SensorSlot(first_mux + i // 8, i % 8) for i in range(n_sensors))
 
 

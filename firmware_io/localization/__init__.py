@@ -1,32 +1,42 @@
-"""Where is the finger magnet? Estimators over the two Hall arrays -- numpy only (runs on the
+"""Where is the finger magnet? Pose estimators over the Hall sensors -- numpy only (runs on the
 controller).
 
-    loc = Localizer.from_map("fieldmap.npz", method="model")
-    est = loc.locate(top_t, bottom_t, currents_a)     # (9, 3) T each; NaN = missing/saturated
-    est.position_m, est.residual, est.ok
+    est = estimator_from_map("fieldmap.npz", "model")           # or ModelEstimator(model, settings)
+    fix = est.estimate(readings_t, currents_a)   # (n_sensors, 3) T, NaN = missing; (n_coils,) A
+    if fix.ok: fix.position_m, fix.moment_a_m2   # ok: trusted (protection levels within limits)
 
-One concept a module: :mod:`.magnet` (the magnet's multipole and exact cylinder field),
-:mod:`.sensor_model` (what the estimators know about the sensors and coils),
-:mod:`.estimator` (:class:`Localizer`, methods 'learned', 'dipole', 'model', 'kalman'),
-:mod:`.lm` (its Levenberg-Marquardt), :mod:`.integrity` (residual test, covariance and
-protection level of a fix),
-:mod:`.calibration` (per-sensor gains, rotation, offset and position error from frames with
-the coils driven), :mod:`.learned` (the thesis' learned inverse, section 3.2.2) and
-:mod:`.filter` (the constant-velocity Kalman filter). The methods, the magnet model's
-derivation and the measured accuracy: docs/localization.md.
+One interface (:class:`Estimator`, :mod:`.estimator`), one method a module: 'model'
+(:mod:`.model_estimator`), 'dipole' (:mod:`.subtraction_estimator`), 'learned'
+(:mod:`.learned_estimator`), 'kalman' (:mod:`.kalman_estimator`), chosen by name in
+:mod:`.factory`; their settings (:mod:`.settings`) and result (:mod:`.estimate`). The fit
+(:mod:`.position_fit`, :mod:`.lm`), the magnet's field (:mod:`.magnet`), the sensors
+(:mod:`.sensor_model`, :mod:`.calibration`, :mod:`.frame`), integrity (:mod:`.integrity`), the
+learned inverse (:mod:`.learned`) and the Kalman filter (:mod:`.filter`). Derivations and
+measured accuracy: docs/localization.md.
 """
 
 from .calibration import (CALIBRATED_RELATIVE_ERROR, UNCALIBRATED_RELATIVE_ERROR,
-                          SensorCalibration, calibrate)
-from .estimator import METHODS, Estimate, Localizer
+                          CalibrationSettings, SensorCalibration, calibrate)
+from .estimate import Estimate, Pose
+from .estimator import Estimator
+from .factory import METHODS, estimator_from_map, make_estimator
 from .filter import ConstantVelocityKalman
+from .kalman_estimator import KalmanEstimator
 from .learned import LearnedInverse
+from .learned_estimator import LearnedEstimator
 from .magnet import MU0, cylinder_field, multipole_field
+from .model_estimator import ModelEstimator
 from .sensor_model import DEFAULT_NOISE_T, SensorModel
+from .settings import (MIN_SENSORS_FOR_POSE, POSITION_ONLY, EstimatorSettings,
+                       settings_for_layout)
+from .subtraction_estimator import SubtractionEstimator
 
 __all__ = [
-    "CALIBRATED_RELATIVE_ERROR", "UNCALIBRATED_RELATIVE_ERROR",
-    "SensorCalibration", "calibrate", "METHODS", "Estimate", "Localizer",
-    "ConstantVelocityKalman", "LearnedInverse", "MU0", "cylinder_field", "multipole_field",
-    "DEFAULT_NOISE_T", "SensorModel",
+    "CALIBRATED_RELATIVE_ERROR", "UNCALIBRATED_RELATIVE_ERROR", "CalibrationSettings",
+    "SensorCalibration", "calibrate", "Estimate", "Pose", "Estimator", "METHODS", "estimator_from_map",
+    "make_estimator", "ConstantVelocityKalman", "KalmanEstimator", "LearnedInverse",
+    "LearnedEstimator", "MU0", "cylinder_field", "multipole_field", "ModelEstimator",
+    "DEFAULT_NOISE_T", "SensorModel", "EstimatorSettings", "POSITION_ONLY",
+    "MIN_SENSORS_FOR_POSE", "settings_for_layout",
+    "SubtractionEstimator",
 ]

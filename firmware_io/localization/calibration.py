@@ -4,9 +4,9 @@ Per sensor, least squares over the frames gives the measured response ``reading 
 (K (3, n_coils) T/A, o the offset T); the sensor's gains, mounting rotation (small angles, rad)
 and position error (m) then follow from ``K = diag(g) (I - [w]x) C(p_nominal + d)`` by
 regularized Gauss-Newton against the coils' field C of the map. The result,
-:class:`SensorCalibration`, is what :class:`firmware_io.localization.Localizer` applies:
-corrected reading = gain_inverse @ (reading - offset), sensors moved by the shift, the measured
-coil field in place of the map's. Method and accuracy: docs/localization.md.
+:class:`SensorCalibration`, is what the estimators (:mod:`.estimator`) apply: corrected reading
+= gain_inverse @ (reading - offset) in the sensor's nominal frame, sensors moved by the shift,
+the measured coil field in place of the map's. Sensors are a flat list (:class:`SensorModel`). Method and accuracy: docs/localization.md.
 """
 
 from __future__ import annotations
@@ -34,16 +34,16 @@ the coils' field gradient at the sensors) leaves of the gain, mounting and posit
 
 @dataclass(frozen=True)
 class SensorCalibration:
-    """What :func:`calibrate` recovers for each sensor (upper array, then lower).
+    """What :func:`calibrate` recovers for each of the n sensors (the model's flat list).
 
-    gain_inverse : (2, n, 3, 3) -- corrected reading = gain_inverse @ (reading - offset), in the
-        array frame (undoes gain and mounting rotation)
-    offsets_t : (2, n, 3) T -- zero-field reading (chip offset + any static background)
-    shift_m : (2, n, 3) m -- the sensor's position minus its nominal one (0 where the map gives
+    gain_inverse : (n, 3, 3) -- corrected reading = gain_inverse @ (reading - offset), in the
+        sensor's nominal frame (undoes gain and mounting rotation)
+    offsets_t : (n, 3) T -- zero-field reading (chip offset + any static background)
+    shift_m : (n, 3) m -- the sensor's position minus its nominal one (0 where the map gives
         no field gradient at the sensor)
-    coil_field_t_per_a : (2, n, 3, n_coils) T/A -- the coils' field at the sensors as measured
-        (after the gain correction); the estimators use it instead of the map's
-    response_design_inverse : (2, n, n_coils + 1, n_coils + 1), or None -- (X^T X)^-1 of the
+    coil_field_t_per_a : (n, 3, n_coils) T/A -- the coils' field at the sensors as measured
+        (after the gain correction), array frame; the estimators use it instead of the map's
+    response_design_inverse : (n, n_coils + 1, n_coils + 1), or None -- (X^T X)^-1 of the
         frames' currents and the offset column (1/A^2, 1/A, 1): the measured coils' field plus
         offset at currents I has the variance sigma^2 x^T D x, x = (I, 1), sigma the reading's
         noise per axis (the estimators add it to each reading's variance: the response is
@@ -67,12 +67,12 @@ class SensorCalibration:
             except (TypeError, ValueError):
                 raise BadInputError("calibration", "a SensorCalibration or (gain_inverse, "
                                     "offsets_t)", type(value).__name__) from None
-            cal = cls(np.asarray(gi, float), np.asarray(off, float), np.zeros((2, n, 3)))
-        shapes = {"gain_inverse": (2, n, 3, 3), "offsets_t": (2, n, 3), "shift_m": (2, n, 3)}
+            cal = cls(np.asarray(gi, float), np.asarray(off, float), np.zeros((n, 3)))
+        shapes = {"gain_inverse": (n, 3, 3), "offsets_t": (n, 3), "shift_m": (n, 3)}
         if cal.coil_field_t_per_a is not None:
-            shapes["coil_field_t_per_a"] = (2, n, 3, n_coils)
+            shapes["coil_field_t_per_a"] = (n, 3, n_coils)
         if cal.response_design_inverse is not None:
-            shapes["response_design_inverse"] = (2, n, n_coils + 1, n_coils + 1)
+            shapes["response_design_inverse"] = (n, n_coils + 1, n_coils + 1)
         for name, shape in shapes.items():
             a = np.asarray(getattr(cal, name), float)
             if a.shape != shape or not np.all(np.isfinite(a)):
@@ -118,71 +118,100 @@ def _field_gradient(rows: np.ndarray):
     return rows[:, :3], np.moveaxis(g, 1, -1)
 
 
-def calibrate(frames_top, frames_bottom, currents, model: SensorModel, *,
-              noise_t: float = DEFAULT_NOISE_T, prior_gain: float = 0.02,
-              prior_angle_deg: float = 2.0, prior_shift_m: float = 0.5e-3,
-              fit_shift: bool = True, iterations: int = 10) -> SensorCalibration:
+@dataclass(frozen=True)
+class CalibrationSettings:
+    """The options of :func:`calibrate`, checked when made.
+
+    noise_t : T rms per axis of one reading
+    prior_gain : the gains' prior standard deviation (relative, about 1)
+    prior_angle_deg : the mounting angles' prior standard deviation, degrees
+    prior_shift_m : the position errors' prior standard deviation per axis, m
+    fit_shift : fit the sensors' position errors where the map gives the coils' field gradient
+    iterations : Gauss-Newton iterations at most, per sensor
+    """
+
+    noise_t: float = DEFAULT_NOISE_T
+    prior_gain: float = 0.02
+    prior_angle_deg: float = 2.0
+    prior_shift_m: float = 0.5e-3
+    fit_shift: bool = True
+    iterations: int = 10
+
+    def __post_init__(self):
+        for name in ("noise_t", "prior_gain", "prior_angle_deg", "prior_shift_m"):
+            val = getattr(self, name)
+            if not (isinstance(val, (int, float, np.integer, np.floating))
+                    and math.isfinite(val) and val > 0):
+                raise BadInputError(name, "a finite number > 0", val)
+        if not (isinstance(self.iterations, (int, np.integer)) and self.iterations >= 1):
+            raise BadInputError("iterations", "an integer >= 1", self.iterations)
+
+    @property
+    def prior(self) -> np.ndarray:
+        """(9,) the priors' standard deviations: gains - 1 (3), angles (3) rad, shift (3) m."""
+        return np.r_[np.full(3, self.prior_gain), np.full(3, math.radians(self.prior_angle_deg)),
+                     np.full(3, self.prior_shift_m)]
+
+
+def calibrate(frames_t, currents, model: SensorModel,
+              settings: CalibrationSettings = CalibrationSettings()) -> SensorCalibration:
     """Per-sensor calibration from frames with the coils driven and the magnet away.
 
     The device runs it at start-up with the finger magnet away from the arrays: drive the
     coils with known currents (each coil alone at +-3 A, then random patterns, every sensor
-    below 130 mT), read both arrays, ~1000 frames. Per sensor, least squares over the frames
+    below 130 mT), read the sensors, ~1000 frames. Per sensor, least squares over the frames
     gives the measured response ``reading = K I + o`` (K (3, n_coils) T/A; o = the offset: the
     magnet-free offset capture, Earth's field included). The map predicts K from the sensor's
-    nominal pose; the sensor's gains g (3), mounting rotation w (3, small angles) and position
-    error d (3) follow from ``K = diag(g) (I - [w]x) C(p_nominal + d)`` by regularized
-    Gauss-Newton: the residuals weighted by the noise of K, plus the priors g = 1 +- prior_gain,
-    |w| ~ prior_angle_deg, d ~ prior_shift_m per axis (the tolerances, not the realization:
-    directions the coils' fields do not excite -- the lateral gains, mostly -- stay near the
-    prior instead of fitting the noise). C and its gradient come from ``model.coil_rows`` at the
-    shifted position where given, else from the linearization about the nominal position with
-    ``model.coil_gradient_t_per_a_m`` (from_map: the map's SENSOR_COIL_GRAD), wherever
-    ``model.gradient_known``; elsewhere d = 0. The estimators then use gain_inverse = G^-1, the
-    offsets, the sensors at nominal + d for the magnet's field and G^-1 K as the coils' field.
+    nominal pose (C in its nominal frame: R^T C); the sensor's gains g (3), mounting rotation w
+    (3, small angles) and position error d (3) follow from ``K = diag(g) (I - [w]x) R^T
+    C(p_nominal + d)`` by regularized Gauss-Newton: the residuals weighted by the noise of K,
+    plus the priors g = 1 +- prior_gain, |w| ~ prior_angle_deg, d ~ prior_shift_m per axis (the
+    tolerances, not the realization: directions the coils' fields do not excite -- the lateral
+    gains, mostly -- stay near the prior instead of fitting the noise). C and its gradient come
+    from ``model.coil_rows`` at the shifted position where given, else from the linearization
+    about the nominal position with ``model.coil_gradient_t_per_a_m`` (from_map: the map's
+    SENSOR_COIL_GRAD), wherever ``model.gradient_known``; elsewhere d = 0. The estimators then
+    use gain_inverse = G^-1, the offsets, the sensors at nominal + d for the magnet's field and
+    R G^-1 K as the coils' field.
 
     Parameters
     ----------
-    frames_top, frames_bottom : (k, n, 3) T -- readings; rows with NaN (saturated) are skipped
+    frames_t : (k, n, 3) T -- readings, each in its sensor's frame; rows with NaN are skipped
     currents : (k, n_coils) A -- each frame's currents; together they must excite every coil
         independently (rank n_coils + 1 with the offset)
     model : SensorModel
-    noise_t : float, T rms per axis of one reading
-    prior_gain, prior_angle_deg, prior_shift_m : prior standard deviations (see above)
+    settings : CalibrationSettings -- the reading's noise, the priors' standard deviations (see
+        above), whether to fit the position errors, the iterations
 
     Returns
     -------
     SensorCalibration
     """
-    meas = np.stack([np.asarray(frames_top, float), np.asarray(frames_bottom, float)], 1)
+    meas = np.asarray(frames_t, float)
     i = np.asarray(currents, float)
-    k, _, n, _ = meas.shape
-    nc = model.n_coils
+    n, nc = model.n_sensors, model.n_coils
+    if meas.ndim != 3 or meas.shape[1:] != (n, 3):
+        raise BadInputError("frames_t", f"shape (k, {n}, 3), T", f"shape {meas.shape}")
+    k = len(meas)
     if i.shape != (k, nc) or not np.all(np.isfinite(i)):
         raise BadInputError("currents", f"finite, shape ({k}, {nc}), A", f"shape {i.shape}")
-    for name, val in (("noise_t", noise_t), ("prior_gain", prior_gain),
-                      ("prior_angle_deg", prior_angle_deg), ("prior_shift_m", prior_shift_m)):
-        if not (math.isfinite(val) and val > 0):
-            raise BadInputError(name, "a finite number > 0", val)
-    prior_all = np.r_[np.full(3, prior_gain), np.full(3, math.radians(prior_angle_deg)),
-                      np.full(3, prior_shift_m)]
-    gi = np.empty((2, n, 3, 3))
-    off = np.empty((2, n, 3))
-    shift = np.zeros((2, n, 3))
-    coil = np.empty((2, n, 3, nc))
-    cov = np.empty((2, n, nc + 1, nc + 1))
-    for a in range(2):
-        for s in range(n):
-            kk, off[a, s], w, cov[a, s] = _measured_response(meas[:, a, s], i, noise_t,
-                                                             f"{a}:{s}")
-            shifts = (fit_shift and model.gradient_known is not None
-                      and bool(model.gradient_known[a, s]))
-            theta = _fit_sensor_pose(model, a, s, kk, w, prior_all[:9 if shifts else 6],
-                                     iterations)
-            g_mat = (1.0 + theta[:3])[:, None] * (np.eye(3) - _skew(theta[3:6]))
-            gi[a, s] = np.linalg.inv(g_mat)
-            if shifts:
-                shift[a, s] = theta[6:]
-            coil[a, s] = gi[a, s] @ kk
+    st = settings
+    prior_all = st.prior
+    gi = np.empty((n, 3, 3))
+    off = np.empty((n, 3))
+    shift = np.zeros((n, 3))
+    coil = np.empty((n, 3, nc))
+    cov = np.empty((n, nc + 1, nc + 1))
+    for s in range(n):
+        kk, off[s], w, cov[s] = _measured_response(meas[:, s], i, st.noise_t, str(s))
+        shifts = (st.fit_shift and model.gradient_known is not None
+                  and bool(model.gradient_known[s]))
+        theta = _fit_sensor_pose(model, s, kk, w, prior_all[:9 if shifts else 6], st.iterations)
+        g_mat = (1.0 + theta[:3])[:, None] * (np.eye(3) - _skew(theta[3:6]))
+        gi[s] = np.linalg.inv(g_mat)
+        if shifts:
+            shift[s] = theta[6:]
+        coil[s] = model.sensor_orientations[s] @ gi[s] @ kk
     return SensorCalibration(gi, off, shift, coil, cov)
 
 
@@ -194,7 +223,7 @@ def _measured_response(readings, currents, noise_t: float, label: str):
     readings : (k, 3) T; rows with NaN are skipped
     currents : (k, n_coils) A
     noise_t : float, T rms per axis
-    label : str, 'array:index' for the error message
+    label : str, the sensor's index for the error message
 
     Returns
     -------
@@ -217,27 +246,28 @@ def _measured_response(readings, currents, noise_t: float, label: str):
     return coef[:nc].T, coef[nc], w, d_inv
 
 
-def _fit_sensor_pose(model: SensorModel, a: int, s: int, kk, w, prior, iterations: int):
-    """Regularized Gauss-Newton for sensor ``a, s``: theta = (gains - 1 (3), mounting angles (3)
-    rad[, position error (3) m when ``prior`` has 9 entries]) so that diag(g) (I - [w]x)
+def _fit_sensor_pose(model: SensorModel, s: int, kk, w, prior, iterations: int):
+    """Regularized Gauss-Newton for sensor ``s``: theta = (gains - 1 (3), mounting angles (3)
+    rad[, position error (3) m when ``prior`` has 9 entries]) so that diag(g) (I - [w]x) R^T
     C(p + d) matches the measured response ``kk`` (3, n_coils) T/A, residuals weighted by ``w``
     (n_coils,) A/T, plus the priors theta ~ 0 +- ``prior``."""
     shifts = prior.size == 9
-    c_nom = model.coil_field_t_per_a[a, s]
+    rt = model.sensor_orientations[s].T
+    c_nom = rt @ model.coil_field_t_per_a[s]
+    pos = model.sensor_positions_m[s]
     exact = shifts and model.coil_rows is not None
     if exact:
-        c0 = _field_gradient(model.coil_rows(model.sensor_positions_m[a, s][None]))[0][0]
+        c0 = _field_gradient(model.coil_rows(pos[None]))[0][0]
     theta = np.zeros(prior.size)      # gains - 1, angles, shift
     for _ in range(iterations):
         g = 1.0 + theta[:3]
         rot = np.eye(3) - _skew(theta[3:6])
         if exact:
-            cc, gg = _field_gradient(model.coil_rows(
-                (model.sensor_positions_m[a, s] + theta[6:])[None]))
+            cc, gg = _field_gradient(model.coil_rows((pos + theta[6:])[None]))
             # SENSOR_COIL at d = 0 plus the change: no interpolation offset
-            c, dc = c_nom + cc[0] - c0, gg[0]
+            c, dc = c_nom + rt @ (cc[0] - c0), np.einsum("ij,jkl->ikl", rt, gg[0])
         elif shifts:  # linearized: C(p + d) = C(p) + grad C d
-            dc = model.coil_gradient_t_per_a_m[a, s]
+            dc = np.einsum("ij,jkl->ikl", rt, model.coil_gradient_t_per_a_m[s])
             c = c_nom + np.einsum("ijk,j->ik", dc, theta[6:])
         else:
             c = c_nom

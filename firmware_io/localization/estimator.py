@@ -1,691 +1,130 @@
-"""The magnet's position from one frame of the two Hall arrays: :class:`Localizer`.
+"""The one interface of the magnet's pose estimators: :class:`Estimator`.
 
-Methods ``'learned'`` (the thesis' nearest-sensor inverse), ``'dipole'`` (subtract the lower
-array from the upper one, fit the magnet), ``'model'`` (subtract the coils' field predicted from
-the commanded currents, fit the magnet and the magnet-induced core field to every sensor) and
-``'kalman'`` (``'model'`` or ``'dipole'`` followed by :class:`ConstantVelocityKalman`). The fits
-are Levenberg-Marquardt on the position (3 unknowns) over the multipole magnet model with its
-analytic Jacobian; the exact cylinder's and the cores' fields enter as corrections linearized
-about a recent position. Sensors are weighted by sigma^2 = noise^2 + (relative_error |B|)^2.
+Each method is one subclass in its own module ('model': :mod:`.model_estimator`, 'dipole':
+:mod:`.subtraction_estimator`, 'learned': :mod:`.learned_estimator`, 'kalman':
+:mod:`.kalman_estimator`); :mod:`.factory` picks one by name. An estimator holds a
+:class:`SensorModel` (the sensors' poses, the coils' field there, the magnet), an
+:class:`EstimatorSettings` and an optional :class:`SensorCalibration`. One call per frame::
 
-Inputs: readings (n, 3) T per array (NaN = missing or saturated), currents (n_coils,) A.
-Output: :class:`Estimate` (position m, covariance m^2, protection level m, residual, ok).
-``ok`` is False when the fit did not converge, the residual fails the chi-square test
-(:mod:`.integrity`), the protection level exceeds ``alert_limit_m``, fewer than 3 sensors are
-usable or the position leaves the plausible box -- the runner then fails safe. A warm fit that
-fails the test or moved farther than ``reacquire_m`` is re-solved from the global search (a
-precomputed grid of the magnet's field). Models, derivations: docs/localization.md.
+    est = estimator.estimate(readings_t, currents_a)   # (n_sensors, 3) T, (n_coils,) A
+    if est.ok: ...                                     # trusted: use est.position_m, ...
+
+:meth:`Estimator.estimate` never raises on a frame: a wrong shape, non-finite values or too few
+usable sensors give a not-ok :class:`Estimate` whose ``reason`` says why.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import math
-from dataclasses import dataclass
+import abc
+from typing import ClassVar
 
 import numpy as np
 
 from ..errors import BadInputError
-from ..hw.tlv493d import TLV493D_LSB_T
-from ..mapfile import MapFile
-from .calibration import (CALIBRATED_RELATIVE_ERROR, UNCALIBRATED_RELATIVE_ERROR,
-                          SensorCalibration)
-from .filter import ConstantVelocityKalman
-from .frame import as_float_array, check_frame
-from .integrity import covariance_and_pl, ratio_quantiles, thresholds
-from .learned import LearnedInverse
-from .lm import levenberg_marquardt
-from .magnet import _EYE, MU0, _multipole_rows, _multipole_work, cylinder_field, multipole_field
-from .sensor_model import DEFAULT_NOISE_T, SensorModel, upper_lower
-
-METHODS = ("learned", "dipole", "model", "kalman")
+from .calibration import SensorCalibration
+from .estimate import Estimate, Pose
+from .frame import check_currents, check_readings
+from .sensor_model import SensorModel
+from .settings import EstimatorSettings
 
 
-@dataclass(frozen=True)
-class Estimate:
-    """position_m (3,) m; residual: normalized rms fit residual (1 ~ noise level; 0.0 when no
-    fit was possible, then ok is False and ``reason`` says why); ok; n_used
-    sensors (pairs for subtraction); iterations; method; velocity_m_s (3,) (Kalman only);
-    reason: why ok is False ('' when ok); covariance_m2 (3, 3) m^2 (the inverse Fisher
-    information, inflated by chi2 / dof when above 1; None without a fit);
-    protection_level_m: bound on |error| at the localizer's integrity risk (inf without a
-    fit); chi2, dof: the residual test's statistic and degrees of freedom."""
-
-    position_m: np.ndarray
-    residual: float
-    ok: bool
-    n_used: int
-    iterations: int
-    method: str
-    velocity_m_s: np.ndarray | None = None
-    reason: str = ""
-    covariance_m2: np.ndarray | None = None
-    protection_level_m: float = math.inf
-    chi2: float = 0.0
-    dof: int = 0
-
-
-def _dist(a: np.ndarray, b: np.ndarray) -> float:
-    """|a - b| of two (3,) vectors (cheaper than np.linalg.norm on the fit's hot path)."""
-    d = a - b
-    return math.sqrt(float(d @ d))
-
-
-class Localizer:
-    """Magnet position from the two arrays' readings (methods: the module docstring and
-    docs/localization.md).
+class Estimator(abc.ABC):
+    """The magnet's pose from one frame of the sensors (see the module docstring).
 
     Parameters
     ----------
     model : SensorModel
-    method : {'learned', 'dipole', 'model', 'kalman'}
-    learned : LearnedInverse, needed for 'learned'
-    noise_t : float, T rms per axis (the analog noise)
-    lsb_t : float, T -- the readout's quantization step; the fit's per-axis variance is
-        noise_t^2 + lsb_t^2 / 12 (uniform rounding error), plus the model-error terms
-    relative_error : float, relative model error of a sensor's reading (default
-        UNCALIBRATED_RELATIVE_ERROR, with a calibration CALIBRATED_RELATIVE_ERROR)
-    residual_limit : float, largest normalized rms residual for ok (a cap beside the test)
-    integrity_risk : float, probability per fix that the error exceeds the protection level
-    false_alarm : float, probability per fix that a correct fit fails the residual test (a
-        wrong basin leaves chi2 / dof >> 3, a correct fit ~1: a small false-alarm rate costs
-        no integrity and keeps the availability where the model errors exceed their terms)
-    alert_limit_m : float, m -- largest protection level of an ok fix (default inf: none; the
-        runner passes its scene's)
-    reacquire_m : float, m -- a warm fit that moved farther is checked by the global search
-    model_bias_m : float, m -- bound on the fit's bias from what the noise model leaves out
-        (sensor poses, the map's core term), added to the protection level; default 1 mm, or
-        0.5 mm with a calibration (its measured noise-free bias:
-        docs/localization.md "Integrity")
-    cores : bool or None, model the magnet-induced core field ('dipole'; default: if known)
-    mount_position_m : float, m -- sensor position uncertainty, weighs near-field sensors
-    calibration : SensorCalibration (see :func:`calibrate`), or (gain_inverse (2, n, 3, 3),
-        offsets_t (2, n, 3)), or None: corrected reading = gain_inverse @ (reading - offset); a
-        SensorCalibration also moves the sensors by its ``shift_m``, replaces the map's coil
-        field at the sensors by the measured one and adds that one's variance at the frame's
-        currents (``response_design_inverse``) to each reading's.
-    refresh_m : float, m -- the exact-magnet and core corrections are re-evaluated when the
-        position moved farther than this from where they were last evaluated (linear in between);
-        their Jacobian (central differences, 6 more evaluations) when it moved 10x farther. A
-        warm-started fit re-linearizes when its solution lands beyond 1.5 times the reuse
-        radius (adapted from the linearization's observed error, kept near noise / 20, between
-        0.25 and 5 mm), a cold one until within refresh_m / 4.
+    settings : EstimatorSettings (default: its defaults)
+    calibration : SensorCalibration, a path to a saved one, or None (uncalibrated)
     """
 
-    def __init__(self, model: SensorModel, method: str = "model", *,
-                 learned: LearnedInverse | None = None, noise_t: float = DEFAULT_NOISE_T,
-                 relative_error: float | None = None, residual_limit: float = 5.0,
-                 cores: bool | None = None, max_iterations: int = 30, calibration=None,
-                 kalman: ConstantVelocityKalman | None = None, frame_period_s: float = 0.01,
-                 mount_position_m: float = 0.0, refresh_m: float = 1e-3,
-                 integrity_risk: float = 1e-4, false_alarm: float = 1e-6,
-                 alert_limit_m: float = math.inf, reacquire_m: float = 5e-3,
-                 model_bias_m: float | None = None, lsb_t: float = TLV493D_LSB_T):
-        if method not in METHODS:
-            raise BadInputError("method", f"one of {METHODS}", method)
-        if method == "learned":
-            if learned is None:
-                raise BadInputError("weights", "a learned-inverse file for method 'learned'", None)
-            if learned.design_sha256 != model.design_sha256:
-                raise BadInputError("weights", f"trained for design {model.design_sha256[:12]}...",
-                                    f"design {learned.design_sha256[:12]}...",
-                                    "Retrain: designkit.calibration.learned_inverse.train_learned_inverse.")
-        if relative_error is None:
-            relative_error = (UNCALIBRATED_RELATIVE_ERROR if calibration is None
-                              else CALIBRATED_RELATIVE_ERROR)
-        if model_bias_m is None:
-            model_bias_m = 1e-3 if calibration is None else 0.5e-3
-        for name, val in (("noise_t", noise_t), ("relative_error", relative_error + 1e-300),
-                          ("residual_limit", residual_limit), ("frame_period_s", frame_period_s),
-                          ("refresh_m", refresh_m), ("reacquire_m", reacquire_m)):
-            if not (math.isfinite(val) and val > 0):
-                raise BadInputError(name, "a finite number > 0", val)
+    method: ClassVar[str] = ""
+    """The method's name ('model', 'dipole', 'learned', 'kalman')."""
+    needs_currents: ClassVar[bool] = True
+    """Whether :meth:`estimate` needs the frame's coil currents."""
+
+    def __init__(self, model: SensorModel, settings: EstimatorSettings | None = None, *,
+                 calibration=None):
+        if not isinstance(model, SensorModel):
+            raise BadInputError("model", "a SensorModel", type(model).__name__)
         self.model = model
-        self.method = method
-        self.learned = learned
-        self.noise_t = float(noise_t)
-        self.rel = float(relative_error)
-        if not (math.isfinite(mount_position_m) and mount_position_m >= 0):
-            raise BadInputError("mount_position_m", "a finite number >= 0, m", mount_position_m)
-        self.mount_position_m = float(mount_position_m)
-        self._moment = float(np.linalg.norm(model.moment_a_m2))
-        self.residual_limit = float(residual_limit)
-        for name, val in (("integrity_risk", integrity_risk), ("false_alarm", false_alarm)):
-            if not (math.isfinite(val) and 0 < val < 0.5):
-                raise BadInputError(name, "a probability in (0, 0.5)", val)
-        for name, val in (("model_bias_m", model_bias_m), ("lsb_t", lsb_t)):
-            if not (math.isfinite(val) and val >= 0):
-                raise BadInputError(name, "a finite number >= 0 (m, T)", val)
-        self.model_bias_m, self._sig2n = float(model_bias_m), self.noise_t**2 + lsb_t**2 / 12.0
-        if not (alert_limit_m > 0):   # inf: no alert limit (the scene sets one)
-            raise BadInputError("alert_limit_m", "a number > 0 (or inf), m", alert_limit_m)
-        self.integrity_risk, self.false_alarm, self.alert_limit_m, self.reacquire_m = map(
-            float, (integrity_risk, false_alarm, alert_limit_m, reacquire_m))
-        self._k2 = ratio_quantiles(self.integrity_risk)
-        self._chi2_max = thresholds(self.false_alarm, 6 * model.n_sensors)
-        self.cores = (model.induced is not None) if cores is None else bool(cores)
-        if self.cores and model.induced is None:
-            raise BadInputError("cores", "False (the model carries no induced core field)", cores)
-        self.max_iterations = int(max_iterations)
-        self.frame_period_s = float(frame_period_s)
-        self.kalman = kalman or (ConstantVelocityKalman() if method == "kalman" else None)
-        n = model.n_sensors
-        self.refresh_m = float(refresh_m)
-        cf = self._use_calibration(calibration)
-        # subtraction: the lower sensor's coil field mapped onto the upper one's (for the
-        # symmetric array diag(-1, -1, 1): Br is odd about the coil's mid-plane)
-        self._mirror = np.stack([cf[0, i] @ np.linalg.pinv(cf[1, i]) for i in range(n)])
-        # the residual's linear maps of the 2n sensors' fields (rows: per used sensor, 3 each):
-        # subtraction top - P bottom, or the identity for the model-based fit
-        sub = np.zeros((n, 3, 2, n, 3))
-        for s_ in range(n):
-            sub[s_, :, 0, s_] = _EYE
-            sub[s_, :, 1, s_] = -self._mirror[s_]
-        self._sub_op = sub.reshape(n, 3, 6 * n)
-        self._id_op = np.eye(6 * n).reshape(2 * n, 3, 6 * n)
-        self._sub_op_all = self._sub_op.reshape(3 * n, 6 * n)
-        self._id_op_all = self._id_op.reshape(6 * n, 6 * n)
-        # every sensor usable (the usual frame): (op, mu0 op) by subtract
-        self._ops = {True: (self._sub_op_all, MU0 * self._sub_op_all),
-                     False: (self._id_op_all, MU0 * self._id_op_all)}
-        mom = model.moment_a_m2
-        mag = math.sqrt(float(mom @ mom))
-        c_ = mag / (4 * math.pi)
-        # the multipole's constants for _multipole_rows (u, c, k) and its (2n, 3, 4) buffer
-        self._mp = (mom / mag, c_, 0.5 * c_ * model.octupole_m2)
-        self._mp_stack = np.zeros((6 * n + 4, 4))
-        self._mp_stack[-4:] = np.eye(4)
-        self._mp_work = _multipole_work(2 * n, self._mp[0], c_)
-        self._exact = model.magnet_size_m is not None
-        self._candidates = self._grid_points(model.box_lower_m, model.box_upper_m)
-        self._grid = self._grid_fields(self._candidates)
-        self._last: np.ndarray | None = None
-        self._box_lo = [float(x) for x in model.box_lower_m]
-        self._box_hi = [float(x) for x in model.box_upper_m]
-        # per correction: (p_c, value (2n, 3), jacobian (2n, 3, 3), radius, const (6n,),
-        # jacobian (6n, 3)) -- the last two the same linearization as const + jacobian @ q
-        self._lin = {}
-        self._pj = None  # where the core term's Jacobian was last differenced
-        self._radius = self.refresh_m  # reuse radius of the linearization, adapted
-
-    def _use_calibration(self, calibration):
-        """Set the sensors' positions, the calibration and the coils' field at the sensors
-        (the measured one when the calibration has it) and the calibration's own variance
-        sigma^2 x^T D x per sensor at x = (I, 1); returns that coils' field."""
-        model, n = self.model, self.model.n_sensors
-        self._pts = model.sensor_positions_m.reshape(-1, 3)
-        cf, self.calibration, self._resp = model.coil_field_t_per_a, None, None
-        if calibration is not None:
-            self.calibration = SensorCalibration.coerce(calibration, n, model.n_coils)
-            self._pts = (model.sensor_positions_m + self.calibration.shift_m).reshape(-1, 3)
-            if self.calibration.coil_field_t_per_a is not None:
-                cf = self.calibration.coil_field_t_per_a
-            d_inv = self.calibration.response_design_inverse
-            if d_inv is not None:
-                self._resp = self._sig2n * d_inv.reshape(2 * n, model.n_coils + 1, -1)
-        self._coil = cf
-        return cf
-
-    # -- construction from files -----------------------------------------------------------
-    @classmethod
-    def from_map(cls, path, method: str = "model", *, weights=None,
-                 expected_design_sha256: str | None = None, octupole_m2: float | None = None,
-                 magnet_size_m=None, calibration=None, **kw) -> "Localizer":
-        """From a v2 map file (its sensor section) and, for 'learned', a weights file.
-
-        ``magnet_size_m``: (radius, length) m of the cylinder magnet -> its exact field; default
-        the map's ``meta['magnet_radius_m']``, ``meta['magnet_length_m']`` if it has them.
-        ``octupole_m2``: the magnet's l = 3 coefficient ratio h^2 - 3 a^2 / 4 (m^2); default from
-        the magnet's size, else the map's ``meta['magnet_octupole_m2']``, else 0 (pure dipole).
-        ``calibration``: a :class:`SensorCalibration`, or a path to one saved with
-        :meth:`SensorCalibration.save` (default None: uncalibrated). Other keywords go to
-        :class:`Localizer`.
-        """
-        m = MapFile.load(path, expected_design_sha256=expected_design_sha256)
-        need = ("sensor_positions_m", "sensor_coil_field", "sensor_coil_gradient",
-                "sensor_induced_field", "moment_a_m2",
-                "design_sha256")
-        missing = [a for a in need if not hasattr(m, a)]
-        if missing:
-            raise BadInputError("map file", "a v2 map with the sensor section (missing "
-                                f"{', '.join(missing)})", str(path))
-        sp = upper_lower(m.sensor_positions_m() if callable(m.sensor_positions_m)
-                         else m.sensor_positions_m)
-        scf = upper_lower(m.sensor_coil_field() if callable(m.sensor_coil_field)
-                          else m.sensor_coil_field)
-        mom = m.moment_a_m2() if callable(m.moment_a_m2) else m.moment_a_m2
-        sha = m.design_sha256() if callable(m.design_sha256) else m.design_sha256
-        lo, hi = (np.asarray(b, float) for b in m.bounds)
-        # plausible positions: the map's box widened (the magnet model is analytic; outside the
-        # box the runner fails safe on its own 'out_of_box' test), never below the upper board
-        box_lo = lo - [0.015, 0.015, 0.0]
-        box_hi = hi + [0.015, 0.015, 0.02]
-        box_lo[2] = max(lo[2], float(sp[0, :, 2].max()) + 0.002)
-        if magnet_size_m is None and "magnet_radius_m" in m.meta and "magnet_length_m" in m.meta:
-            magnet_size_m = (m.meta["magnet_radius_m"], m.meta["magnet_length_m"])
-        if octupole_m2 is None:
-            if magnet_size_m is not None:
-                a, length = (float(x) for x in magnet_size_m)
-                octupole_m2 = (length / 2) ** 2 - 0.75 * a * a
-            else:
-                octupole_m2 = float(m.meta.get("magnet_octupole_m2", 0.0))
-        # the coils' field gradient at every sensor (the map's SENSOR_COIL_GRAD: the sensors sit
-        # below the box of A) for calibrate() to recover their position errors
-        grad = upper_lower(m.sensor_coil_gradient())
-        known = np.ones(sp.shape[:2], bool)
-        model = SensorModel(sp, np.asarray(scf, float), np.asarray(mom, float), str(sha),
-                            float(octupole_m2),
-                            # the induced term is a small correction: outside the map's box the
-                            # nearest box point is safer than extrapolating its polynomials
-                            lambda p: upper_lower(m.sensor_induced_field(np.clip(p, lo, hi)),
-                                                  -2),
-                            box_lo, box_hi, magnet_size_m, grad, known)
-        learned = (LearnedInverse.load(weights) if weights is not None
-                   else kw.pop("learned", None))
+        self.settings = settings if settings is not None else EstimatorSettings()
         if calibration is not None and not isinstance(calibration, (SensorCalibration, tuple)):
             calibration = SensorCalibration.load(calibration)
-        return cls(model, method, learned=learned, calibration=calibration, **kw)
+        self.calibration = calibration
+
+    @classmethod
+    def from_map(cls, path, settings: EstimatorSettings | None = None, *, calibration=None,
+                 expected_design_sha256: str | None = None, magnet_size_m=None,
+                 octupole_m2: float | None = None, **extra) -> "Estimator":
+        """This method's estimator from a v2 map file (:meth:`SensorModel.from_map`);
+        ``extra`` keywords go to the class (e.g. ``learned`` for 'learned')."""
+        model = SensorModel.from_map(path, expected_design_sha256=expected_design_sha256,
+                                     magnet_size_m=magnet_size_m, octupole_m2=octupole_m2)
+        return cls(model, settings, calibration=calibration, **extra)
 
     @property
-    def sensor_positions_m(self) -> np.ndarray:
-        """(2, n, 3) m: upper array, lower array, in the order :meth:`locate` expects."""
-        return self.model.sensor_positions_m.copy()
+    def n_sensors(self) -> int:
+        """Sensors in a frame (the rows of ``readings_t``)."""
+        return self.model.n_sensors
 
-    def reset(self) -> None:
-        """Forget the warm start and the filter state."""
-        self._last = None
-        if self.kalman is not None:
-            self.kalman.reset()
+    @property
+    def integrity_risk(self) -> float:
+        """Probability per fix that the error exceeds the protection level."""
+        return self.settings.integrity_risk
 
-    def predict(self, time_s: float) -> np.ndarray:
-        """Kalman-extrapolated position (3,) m at ``time_s`` (method 'kalman')."""
-        if self.kalman is None:
-            raise BadInputError("method", "'kalman' for predict()", self.method)
-        return self.kalman.predict(time_s)
+    @property
+    def model_bias_m(self) -> float:
+        """The model-bias bound (m) inside every protection level."""
+        return self.settings.model_bias_for(self.calibration is not None)
 
-    # -- the estimate ------------------------------------------------------------------------
-    def locate(self, top, bottom, currents=None, *, time_s: float | None = None) -> Estimate:
-        """Estimate the magnet's position from one frame.
+    def estimate(self, readings_t, currents_a=None, *, usable=None, seed: Pose | None = None,
+                 time_s: float | None = None) -> Estimate:
+        """The pose from one frame; never raises on the frame's contents.
 
         Parameters
         ----------
-        top, bottom : array-like, shape (n, 3), T; NaN marks a missing or saturated sensor
-        currents : array-like, shape (n_coils,), A -- commanded currents ('model'; optional else)
-        time_s : float, frame time for 'kalman' (default: one ``frame_period_s`` per call)
+        readings_t : (n_sensors, 3) T, each sensor in its own frame; NaN = missing/unusable
+        currents_a : (n_coils,) A, the coils' currents when the frame was sampled
+        usable : (n_sensors,) bool, optional -- False excludes a sensor (as NaN would)
+        seed : Pose, optional -- a prior pose (a tracker's prediction) to start from
+        time_s : float, optional -- the frame's time (filtering estimators)
         """
-        n = self.model.n_sensors
-        top = check_frame("top", top, n)
-        bottom = check_frame("bottom", bottom, n)
-        i = None
-        if currents is not None:
-            i = as_float_array("currents", currents, f"{self.model.n_coils} finite values, A")
-            if i.shape != (self.model.n_coils,) or not np.all(np.isfinite(i)):
-                raise BadInputError("currents", f"{self.model.n_coils} finite values, A",
-                                    f"shape {i.shape}" if i.shape != (self.model.n_coils,)
-                                    else i.tolist())
-        meas = np.stack([top, bottom])
-        if self.calibration is not None:
-            cal = self.calibration
-            meas = np.matmul(cal.gain_inverse, (meas - cal.offsets_t)[..., None])[..., 0]
-        method = self.method
-        if method == "model" and i is None:
-            raise BadInputError("currents", f"{self.model.n_coils} commanded currents, A, for "
-                                "method 'model'", None)
-        if method == "kalman":
-            method = "model" if i is not None else "dipole"
-        if method == "learned":
-            est = self._learned(meas)
-        else:
-            est = self._fit(meas, i if method == "model" else None, method)
-        if self.kalman is not None:
-            t = time_s if time_s is not None else (
-                (self.kalman.t + self.frame_period_s) if self.kalman.t is not None else 0.0)
-            pos, vel = self.kalman.update(est.position_m, t, est.ok)
-            est = dataclasses.replace(est, position_m=pos, method="kalman", velocity_m_s=vel)
-        return est
-
-    def fix(self, top, bottom, currents=None, *, time_s: float | None = None) -> Estimate:
-        """:meth:`locate` for the control step: never raises on a bad frame (wrong shape,
-        non-finite or out-of-range values, missing or non-finite currents) -- that frame's
-        estimate is not ok, its ``reason`` the check's message, its position the last ok one
-        (or the box's centre) -- and the next frame starts cold."""
         try:
-            return self.locate(top, bottom, currents, time_s=time_s)
+            readings = check_readings(readings_t, self.n_sensors, usable)
+            currents = (check_currents(currents_a, self.model.n_coils)
+                        if currents_a is not None or self.needs_currents else None)
         except BadInputError as exc:
-            p = self._last if self._last is not None else self._box_centre()
-            self._last = None
-            return Estimate(np.array(p, float), 0.0, False, 0, 0, self.method,
-                            reason=f"bad frame: {exc}")
+            self.reset()
+            return Estimate.refused(self.fallback_position_m(), self.model.moment_a_m2,
+                                    f"bad frame: {exc}", self.method)
+        try:
+            return self.fit(readings, currents, seed, time_s)
+        except (ArithmeticError, np.linalg.LinAlgError) as exc:
+            # a numerical failure inside the fit: refuse the frame, never stop the control step
+            self.reset()
+            return Estimate.refused(self.fallback_position_m(), self.model.moment_a_m2,
+                                    f"numerical failure: {exc}", self.method)
 
-    def _box_centre(self) -> np.ndarray:
-        return 0.5 * (self.model.box_lower_m + self.model.box_upper_m)
+    def magnet_free(self, readings_t, currents_a=None) -> bool:
+        """Does the frame show no magnet and sensors that agree: the coils' field at
+        ``currents_a`` and (when the settings fit one) a uniform background explain every usable
+        sensor within the residual test at the false-alarm probability? Then no sensor carries
+        an offset much beyond the noise -- a check of the sensors while the finger is away (a
+        runner's acquisition uses it). Never raises; False when the method cannot tell."""
+        return False
 
-    # subtraction: d = top - P bottom; model-based: both arrays minus the coils' field
-    def _mount_var(self, d):
-        """Variance from the sensors' position uncertainty: |dB| ~ 3 |B| dr / r for the magnet's
-        field, with r from |B| (on-axis dipole: |B| = mu0 |m| / (2 pi r^3))."""
-        if self.mount_position_m == 0.0:
-            return 0.0
-        b = np.linalg.norm(np.nan_to_num(d), axis=-1)
-        r = np.cbrt(MU0 * self._moment / (2 * math.pi * np.maximum(b, 1e-9)))
-        return (3 * self.mount_position_m * b / r) ** 2
+    @abc.abstractmethod
+    def fit(self, readings: np.ndarray, currents: np.ndarray | None, seed: Pose | None,
+            time_s: float | None) -> Estimate:
+        """The estimate of a checked frame: readings (n_sensors, 3) T (NaN = unusable),
+        currents (n_coils,) A or None."""
 
-    def _data(self, meas, currents):
-        sig2n = self._sig2n
-        mag2 = np.einsum("asi,asi->as", meas, meas)
-        if currents is None:
-            d = meas[0] - np.matmul(self._mirror, meas[1][..., None])[..., 0]
-            # a row sum is NaN when any component is (|B| <= 1 T: no overflow)
-            use = np.isfinite(d.sum(1))
-            s2 = 2 * sig2n + self.rel**2 * (mag2[0] + mag2[1])
-        else:
-            d = (meas - self._coil @ currents).reshape(-1, 3)
-            use = np.isfinite(d.sum(1))
-            s2 = sig2n + self.rel**2 * mag2.reshape(-1)
-            if self._resp is not None:
-                x = np.append(currents, 1.0)
-                s2 = s2 + (self._resp @ x) @ x
-        if self.mount_position_m:
-            s2 = s2 + self._mount_var(d)
-        return d, use, np.sqrt(s2)
+    @abc.abstractmethod
+    def reset(self) -> None:
+        """Forget the warm start (and any filter state): the next fit starts cold."""
 
-    def _exact_part(self, p):
-        """The exact cylinder's field minus the multipole at the sensors near p, and its
-        Jacobian (central differences, h = 0.1 mm, all in one vectorized call): (2n, 3) T,
-        (2n, 3, 3) T/m. The l >= 5 terms the multipole misses fall as (size / r)^4 of the
-        dipole's field: beyond 5 magnet lengths they are < 0.002 mT, 50x below the noise."""
-        m = self.model
-        a, length = m.magnet_size_m
-        val = np.zeros((len(self._pts), 3))
-        jac = np.zeros((len(self._pts), 3, 3))
-        rel = self._pts - p
-        near = np.einsum("ij,ij->i", rel, rel) < (5 * max(a, length)) ** 2
-        if near.any():
-            h = 1e-4
-            # the magnet moved by +-h e_k is the sensors moved by -+h e_k
-            shifts = np.r_[np.zeros((1, 3)), -h * _EYE, h * _EYE]
-            pts = (self._pts[near][None] + shifts[:, None]).reshape(-1, 3)
-            d = (cylinder_field(pts, p, m.moment_a_m2, a, length)
-                 - multipole_field(pts, p, m.moment_a_m2, m.octupole_m2)).reshape(7, -1, 3)
-            val[near] = d[0]
-            jac[near] = np.stack([(d[1 + k] - d[4 + k]) / (2 * h) for k in range(3)], -1)
-        return val, jac
-
-    def _induced_part(self, p):
-        return self.model.induced(p).reshape(-1, 3)
-
-    def _extra(self, p) -> np.ndarray:
-        """(2n, 3) T: what the multipole misses at the sensors -- the exact cylinder's field minus
-        the multipole, plus the field of the cores the magnet magnetizes."""
-        out = np.zeros((len(self._pts), 3))
-        if self._exact:
-            out += self._exact_part(p)[0]
-        if self.cores:
-            out += self._induced_part(p)
-        return out
-
-    def _refresh(self, key, p, tol, evaluate, first_radius):
-        """One correction's linearization near p: (p_c, value, jacobian), reused while p stays
-        within the adapted radius (and ``tol``); ``evaluate(p, old)`` -> (value, jacobian)."""
-        c = self._lin.get(key)
-        if c is not None and _dist(p, c[0]) <= min(tol, c[3]):
-            return c
-        val, jac = evaluate(p, c)
-        radius = first_radius
-        if c is not None:
-            # the linearization's error grows as |dp|^2: keep it near noise / 20
-            dp = p - c[0]
-            err = float(np.abs(val - c[1] - c[2] @ dp).max())
-            step = math.sqrt(float(dp @ dp))
-            radius = (min(max(step * math.sqrt(0.05 * self.noise_t / err), 0.1e-3), 5e-3)
-                      if err > 0 else 5e-3)
-        # also as the affine map the fit uses: value + J (q - p) = const + J q, flattened
-        jf = jac.reshape(-1, 3)
-        self._lin[key] = (p, val, jac, radius, val.reshape(-1) - jf @ p, jf)
-        return self._lin[key]
-
-    def _evaluate_induced(self, p, old):
-        val = self._induced_part(p)
-        if old is not None and _dist(p, old[4]) <= 10 * self.refresh_m:
-            # Broyden: the reused Jacobian made exact along the move (free); the cores' field
-            # is smooth on the 10 mm scale
-            dp = p - old[0]
-            jac = old[2] + np.einsum("ki,j->kij", val - old[1] - old[2] @ dp,
-                                     dp / float(dp @ dp))
-            self._pj = old[4]
-            return val, jac
-        h = 0.25e-3
-        jac = np.stack([(self._induced_part(p + h * e) - self._induced_part(p - h * e))
-                        / (2 * h) for e in _EYE], -1)
-        self._pj = p
-        return val, jac
-
-    def _within(self, p, tol) -> bool:
-        """Is p close enough to every correction's linearization point (``tol``, or 1.5 times
-        each one's reuse radius)?"""
-        return all(_dist(p, c[0]) <= (tol if tol is not None else 1.5 * c[3])
-                   for c in self._lin.values())
-
-    def _linearized(self, p, tol=None):
-        """(const (6n,) T, jacobian (6n, 3) T/m): the corrections to the multipole at the 2n
-        sensors, affine in the position q near p: const + jacobian @ q. Each part keeps its own
-        linearization point and reuse radius (adapted from the linearization's observed error):
-        the exact magnet's part (cheap, curved near the sensors: value and Jacobian fresh at each
-        refresh) and the map's core term (the expensive one; Jacobian by central differences
-        within 10 ``refresh_m``, Broyden-updated)."""
-        p = np.array(p, dtype=float)
-        tol = math.inf if tol is None else tol
-        parts = []
-        self._radius = math.inf
-        if self._exact:
-            # near the sensors the exact part curves on the 1 mm scale: start small
-            parts.append(self._refresh("exact", p, tol, lambda q, old: self._exact_part(q),
-                                       0.25e-3))
-        if self.cores:
-            def ev(q, old):
-                return self._evaluate_induced(q, None if old is None else old[:4] + (self._pj,))
-            parts.append(self._refresh("cores", p, tol, ev, self.refresh_m))
-        self._radius = min(c[3] for c in parts)
-        if len(parts) == 1:
-            return parts[0][4], parts[0][5]
-        return parts[0][4] + parts[1][4], parts[0][5] + parts[1][5]
-
-    def _subtracted_model(self, p, extra=None):
-        """The model of the subtracted data at position p: (n, 3) T, the multipole plus the
-        corrections ``extra`` (2n, 3) T at the 2n sensors, mapped by the fit's own subtraction
-        operator."""
-        m = self.model
-        b = multipole_field(self._pts, p, m.moment_a_m2, m.octupole_m2)
-        if extra is not None:
-            b = b + extra
-        return (self._sub_op_all @ b.reshape(-1)).reshape(-1, 3)
-
-    def _fit(self, meas, currents, method) -> Estimate:
-        subtract = currents is None
-        d, use, sig = self._data(meas, np.asarray(currents) if currents is not None else None)
-        n_used = int(use.sum())
-        if n_used < 3:
-            p = self._last if self._last is not None else self._box_centre()
-            return Estimate(p.copy(), 0.0, False, n_used, 0, method,
-                            reason=f"only {n_used} usable sensors (need 3)")
-        # the whole weighted (and, for subtraction, mirrored) residual is one linear map of the
-        # 2n sensors' field and Jacobian: op (3 m, 6 n), built once per frame
-        if n_used == len(use):
-            op, opm = self._ops[subtract]
-            w3 = (1.0 / sig).repeat(3)[:, None]
-            du = d.reshape(-1)
-        else:
-            op = (self._sub_op if subtract else self._id_op)[use].reshape(
-                -1, 6 * self.model.n_sensors)
-            opm = MU0 * op
-            w3 = (1.0 / sig[use]).repeat(3)[:, None]
-            du = d[use].reshape(-1)
-        has_extra = self._exact or self.cores
-
-        def residuals(lin):
-            """p -> the 4 x 4 Gram matrix of [J, b - d] (weighted): J^T J, -J^T r and the cost
-            r^T r in one product. The linearized corrections b_c(p) = const + L p enter as the
-            constant columns A = op L and op const - d, weighted with the rows."""
-            if lin is None:
-                a_lin, c = np.zeros((len(op), 3)), du
-            else:
-                const, lf = lin
-                a_lin, c = op @ lf, du - op @ const
-            big = np.concatenate([opm, a_lin, -c[:, None]], 1)
-            big *= w3
-            return self._make_eval(big)
-
-        def solve(p0, tol):
-            """LM with the corrections linearized near the position, re-linearized (at most 4
-            times) until the solution stays within tol of the linearization point."""
-            it = 0
-            for _ in range(5):
-                lin = self._linearized(p0, tol) if has_extra else None
-                out = self._lm(residuals(lin), p0)
-                it += out[2]
-                if lin is None or not out[3] or self._within(out[0], tol):
-                    break
-                p0 = out[0]
-            return out[0], out[1], it, out[3], out[4]
-
-        def cold():
-            """The global search: the grid's best candidate polished on the multipole, then the
-            full model; the next candidates only while the result fails the integrity test
-            (a better cost wins). Returns (fit, its integrity check)."""
-            found = None
-            for q0 in self._global_starts(d, use, sig, subtract):
-                out = self._lm(residuals(None), q0)
-                if has_extra:
-                    out = solve(out[0], 0.25 * self.refresh_m)
-                if found is None or out[1] < found[0][1]:
-                    found = (out, self._integrity(out, n_used))
-                if found[1][0]:
-                    break
-            return found
-
-        if self._last is not None:
-            start = self._last
-            best = solve(start, None)
-            check = self._integrity(best, n_used)
-            if not check[0] or _dist(best[0], start) > self.reacquire_m:
-                # suspicious (failed, or moved far from the warm start): the global search
-                other = cold()
-                if other[0][1] < best[1]:
-                    best, check = other
-        else:
-            best, check = cold()
-        p, cost, iters = best[:3]
-        ok, reason, cov, pl, dof = check
-        self._last = p.copy() if ok else None
-        return Estimate(p, math.sqrt(cost / max(dof, 1)), ok, n_used, iters, method,
-                        reason=reason, covariance_m2=cov, protection_level_m=pl,
-                        chi2=float(cost), dof=dof)
-
-    def _integrity(self, out, n_used):
-        """(ok, reason, covariance, protection level, dof) of a fit ``out`` (see
-        :mod:`.integrity`): converged, inside the box, chi2 within the test's threshold, the
-        protection level within the alert limit."""
-        p, cost, _, converged, gm = out
-        dof = 3 * n_used - 3
-        cov, pl = covariance_and_pl(gm, cost, dof, self._k2)
-        pl += self.model_bias_m
-        rms = math.sqrt(cost / max(dof, 1))
-        lo, hi = self._box_lo, self._box_hi
-        if not converged:
-            reason = "fit did not converge"
-        elif not all(lo[k] + 1e-6 < p[k] < hi[k] - 1e-6 for k in range(3)):
-            reason = "position at or outside the plausible box's edge"
-        elif not cost <= self._chi2_max[dof]:
-            reason = (f"residual chi2 {cost:.3g} > {self._chi2_max[dof]:.3g} ({dof} dof, "
-                      f"false-alarm {self.false_alarm:g}): lost or model error")
-        elif rms > self.residual_limit:
-            reason = f"residual {rms:.3g} > {self.residual_limit:g} (lost or implausible)"
-        elif not math.isfinite(pl):
-            reason = "singular Fisher information: the position is not determined"
-        elif not pl <= self.alert_limit_m:
-            reason = (f"protection level {pl * 1e3:.3g} mm > alert limit "
-                      f"{self.alert_limit_m * 1e3:.3g} mm")
-        else:
-            return True, "", cov, pl, dof
-        return False, reason, cov, pl, dof
-
-    @staticmethod
-    def _grid_points(lo, hi) -> np.ndarray:
-        """The global search's candidates (C, 3) m in the plausible box [lo, hi]: ~1.2 cm apart
-        in x, y (the dipole's field varies over the sensor spacing, a coarser grid can put every
-        start in a wrong basin near the board), 7 heights denser near the board."""
-        nx = max(int(round((hi[0] - lo[0]) / 0.012)), 5)
-        ny = max(int(round((hi[1] - lo[1]) / 0.012)), 5)
-        zs = lo[2] + np.array([0.004, 0.010, 0.018, 0.028, 0.042, 0.060, 0.085])
-        g = np.stack(np.meshgrid(np.linspace(lo[0] + 0.005, hi[0] - 0.005, nx),
-                                 np.linspace(lo[1] + 0.005, hi[1] - 0.005, ny),
-                                 zs[zs < hi[2] - 0.002], indexing="ij"), -1)
-        return g.reshape(-1, 3)
-
-    def _grid_fields(self, c):
-        """The magnet's field at the 2n sensors for every grid candidate c (C, 3) m: the exact
-        cylinder when its size is known, else the multipole; as (C, 6n) T for the model-based
-        fit and subtracted (C, 3n) T, each with its square (the search's weighted costs)."""
-        m = self.model
-        rel = (self._pts[None] - c[:, None]).reshape(-1, 3)
-        if self._exact:
-            b = cylinder_field(rel, np.zeros(3), m.moment_a_m2, *m.magnet_size_m)
-        else:
-            b = multipole_field(rel, np.zeros(3), m.moment_a_m2, m.octupole_m2)
-        b = np.ascontiguousarray(b.reshape(len(c), -1))
-        sub = b @ self._sub_op_all.T
-        return {False: (b, b * b), True: (sub, sub * sub)}
-
-    def _global_starts(self, d, use, sig, subtract, keep: int = 3):
-        """The best ``keep`` grid candidates for the frame: weighted cost sum_s |d_s - B_cs|^2
-        / sigma_s^2 over the usable sensors, up to its candidate-independent part, from the
-        precomputed fields (two matrix-vector products)."""
-        b, b2 = self._grid[subtract]
-        w = np.where(use, 1.0 / np.where(use, sig, 1.0) ** 2, 0.0)
-        wd = (np.where(use[:, None], d, 0.0) * w[:, None]).reshape(-1)
-        costs = b2 @ w.repeat(3) - 2.0 * (b @ wd)
-        costs[~np.isfinite(costs)] = np.inf
-        k = min(keep, len(costs))
-        best = np.argpartition(costs, k - 1)[:k]
-        return [self._candidates[j] for j in best[np.argsort(costs[best])]]
-
-    def _lm(self, evaluate, p0):
-        return levenberg_marquardt(evaluate, p0, self._box_lo, self._box_hi,
-                                   self.max_iterations)
-
-    def _make_eval(self, big):
-        """p -> the Gram matrix of [J, -r] (4 x 4 nested lists) for :meth:`_lm`; big (3 m, 6 n + 4)
-        = the weighted [mu0 op | A | -c] (see :meth:`_fit`)."""
-        u, cc, k = self._mp
-        pts = self._pts
-        work = self._mp_work
-        # one product: [mu0 op | A | -c] @ [[multipole rows (6n, 4)], [I, p], [0, 0, 0, 1]] =
-        # op b(p) + A p - c next to op J(p) + A (A = 0 without corrections)
-        stack = self._mp_stack
-        buf = stack[:-4].reshape(-1, 3, 4)
-
-        def evaluate(p):
-            _multipole_rows(pts - p, u, cc, k, buf, work)
-            stack[-4:-1, 3] = p
-            y = big @ stack
-            return (y.T @ y).tolist()
-        return evaluate
-
-    def _learned(self, meas) -> Estimate:
-        n = self.model.n_sensors
-        d, use, sig = self._data(meas, None)
-        if not use.any():
-            return Estimate(np.zeros(3), 0.0, False, 0, 0, "learned",
-                            reason="no usable sensor pair")
-        mag = np.where(use, np.linalg.norm(np.nan_to_num(d), axis=1), -1.0)
-        k = int(np.argmax(mag))
-        rel, inside = self.learned(d[k])
-        p = self.model.sensor_positions_m[0, k] + rel
-        b = self._subtracted_model(p, self._extra(p) if (self._exact or self.cores) else None)
-        r = ((d[use] - b[use]) / sig[use, None]).reshape(-1)
-        rms = math.sqrt(float(r @ r) / max(r.size - 3, 1))
-        ok, reason = inside, "" if inside else "outside the learned inverse's training box"
-        if ok and rms > self.residual_limit:
-            ok, reason = False, f"residual {rms:.3g} > {self.residual_limit:g}"
-        return Estimate(p, rms, ok, int(use.sum()), 0, "learned", reason=reason)
-
+    @abc.abstractmethod
+    def fallback_position_m(self) -> np.ndarray:
+        """(3,) m reported by a not-ok estimate without a fit: the last ok position or the
+        plausible box's centre."""

@@ -2,8 +2,8 @@
 residual test and a protection level.
 
 The fit minimizes chi2 = sum r_i^2 / sigma_i^2 over the usable sensor axes (sigma: noise plus
-the model-error terms, :class:`firmware_io.localization.Localizer`). Under that noise model
-chi2 at the solution follows a chi-square law with dof = 3 m - 3 (m sensors, 3 unknowns); the
+the model-error terms, :class:`firmware_io.localization.EstimatorSettings`). Under that noise
+model chi2 at the solution follows a chi-square law with dof = 3 m - 3 (m sensors, 3 unknowns); the
 fix passes the residual test when chi2 <= the (1 - p_fa) quantile. Its covariance is the
 inverse Fisher information (J^T W J)^-1, m^2, inflated by chi2 / dof when the residual says the
 noise is larger than modelled. The protection level bounds the position error |e| with
@@ -171,3 +171,82 @@ def _eigenvalues(m) -> tuple:
     big = q + 2.0 * p * math.cos(phi)
     small = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)
     return big, 3.0 * q - big - small, small
+
+
+def noncentral_chi2_cdf(x: float, dof: int, lam: float) -> float:
+    """P(X <= x) for X ~ noncentral chi-square(dof, lam): the Poisson(lam / 2) mixture of
+    chi-square(dof + 2 j) (:func:`_central_cdfs`)."""
+    return float(_mixture_cdf(_central_cdfs(x, dof, _poisson_terms(lam)), lam))
+
+
+def _poisson_terms(lam: float) -> int:
+    """Poisson(lam / 2) terms that carry all but ~1e-16 of the weight."""
+    h = 0.5 * lam
+    return int(h + 12.0 * math.sqrt(h + 1.0) + 40.0)
+
+
+def _central_cdfs(x: float, dof: int, terms: int) -> np.ndarray:
+    """P(chi-square(dof + 2 j) <= x), j = 0 .. terms - 1, from the recurrence
+    sf(x, nu + 2) = sf(x, nu) + (x / 2)^(nu / 2) exp(-x / 2) / Gamma(nu / 2 + 1)."""
+    nu = dof + 2.0 * np.arange(terms - 1)
+    log_step = 0.5 * nu * math.log(0.5 * x) - 0.5 * x - np.array(
+        [math.lgamma(v / 2.0 + 1.0) for v in nu]) if x > 0 else np.full(terms - 1, -np.inf)
+    sf = chi2_sf(x, dof) + np.r_[0.0, np.cumsum(np.exp(log_step))]
+    return np.clip(1.0 - sf, 0.0, 1.0)
+
+
+def _mixture_cdf(cdfs: np.ndarray, lam: float) -> float:
+    j = np.arange(len(cdfs))
+    if lam <= 0:
+        return float(cdfs[0])
+    h = 0.5 * lam
+    log_w = -h + j * math.log(h) - np.cumsum(np.log(np.maximum(j, 1)))
+    return float(np.exp(log_w) @ cdfs)
+
+
+@functools.lru_cache(maxsize=None)
+def missed_detection_noncentrality(p_fa: float, p_md: float, dof: int) -> float:
+    """The noncentrality lam at which the residual test (chi-square(dof) beyond its (1 - p_fa)
+    quantile) misses a fault with probability p_md: P(X <= T) = p_md for X ~ noncentral
+    chi-square(dof, lam) (RAIM's pbias^2; Brown, Navigation 39 (1992)). Bisection."""
+    t = chi2_quantile(p_fa, dof)
+    hi = 4.0 * t + 100.0
+    cdfs = _central_cdfs(t, dof, _poisson_terms(hi))
+    while _mixture_cdf(cdfs[:_poisson_terms(hi)], hi) > p_md or _poisson_terms(hi) > len(cdfs):
+        hi *= 2.0
+        cdfs = _central_cdfs(t, dof, _poisson_terms(hi))
+    lo = 0.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if _mixture_cdf(cdfs, mid) > p_md:
+            lo = mid
+        else:
+            hi = mid
+    return hi
+
+
+def largest_eigenvalues(m: np.ndarray) -> tuple:
+    """(l1, l2) of a symmetric 3 x 3 or 2 x 2 matrix (closed forms)."""
+    if m.shape == (2, 2):
+        a, b, c = float(m[0, 0]), float(m[0, 1]), float(m[1, 1])
+        mid, rad = 0.5 * (a + c), math.hypot(0.5 * (a - c), b)
+        return mid + rad, mid - rad
+    return _eigenvalues(m.tolist())[:2]
+
+
+def position_protection_level(cov: np.ndarray, k2) -> float:
+    """sqrt(l1 k(r)) for the position covariance ``cov`` (3, 3) m^2 and the ratio table ``k2``
+    (:func:`ratio_quantiles`): the fault-free bound of the module docstring (inf when singular)."""
+    lam, lam2 = largest_eigenvalues(cov)
+    if not (math.isfinite(lam) and lam > 0):
+        return math.inf
+    return math.sqrt(lam * k2[_ratio_step(max(lam2, 0.0) / lam)])
+
+
+def orientation_protection_level(cov: np.ndarray, risk: float) -> float:
+    """sqrt(l1 q) for the moment direction's 2 x 2 covariance (rad^2), q the chi-square(2)
+    quantile at ``risk`` (|e|^2 <= l1 (z1^2 + z2^2)): the fault-free bound, rad."""
+    lam = largest_eigenvalues(cov)[0]
+    if not (math.isfinite(lam) and lam > 0):
+        return math.inf
+    return math.sqrt(lam * chi2_quantile(risk, 2))

@@ -1,8 +1,8 @@
 """The finger magnet's field at the sensors: the axisymmetric multipole and the exact cylinder.
 
 :func:`multipole_field` is the dipole plus the l = 3 term of an axially magnetized magnet, with
-its analytic Jacobian; :func:`_multipole_rows` is the same algebra arranged for the fit's inner
-loop. :func:`cylinder_field` is the exact field of a uniformly magnetized cylinder (Derby &
+its analytic Jacobian; :func:`multipole_pose_rows` adds the derivative in the moment's
+direction (the pose fit's inner loop). :func:`cylinder_field` is the exact field of a uniformly magnetized cylinder (Derby &
 Olbert, Am. J. Phys. 78, 229 (2010), with Bulirsch's cel from :mod:`firmware_io.special`).
 Points, positions in m, moments in A m^2, fields in T. Derivations: docs/localization.md.
 numpy only (runs on the controller).
@@ -17,8 +17,34 @@ import numpy as np
 from .. import special
 from ..constants import MU0
 
-_EYE = np.eye(3)
+EYE3 = np.eye(3)
 _DIAG = np.arange(3)
+
+
+def _radial(r: np.ndarray, u: np.ndarray, c: float, k: float, derivatives: bool):
+    """The potential's radial functions at r (n, 3) for the unit moment u, c = |m| / (4 pi),
+    k = c q / 2: f_s, f_rho and, with ``derivatives``, f_srho, f_rhorho, f_ss (see
+    :func:`multipole_field`); each is a = rho^-5/2 times a polynomial in t = s^2 / rho and
+    w = k / rho."""
+    rho = np.einsum("ij,ij->i", r, r)
+    s = r @ u
+    ir = 1.0 / rho
+    a = ir * ir * np.sqrt(ir)
+    sa = s * a
+    if k:
+        t = s * s * ir
+        w = k * ir
+        fs = a * (c * rho + k * (15.0 * t - 3.0))
+        fr = sa * (w * (7.5 - 17.5 * t) - 1.5 * c)
+        if not derivatives:
+            return fs, fr
+        return (fs, fr, a * (w * (7.5 - 52.5 * t) - 1.5 * c),
+                sa * ir * (w * (78.75 * t - 26.25) + 3.75 * c), 30.0 * w * sa)
+    fs = c * rho * a
+    fr = -1.5 * c * sa
+    if not derivatives:
+        return fs, fr
+    return fs, fr, -1.5 * c * a, 3.75 * c * sa * ir, np.zeros_like(s)
 
 
 def multipole_field(points_m: np.ndarray, position_m: np.ndarray, moment_a_m2: np.ndarray,
@@ -37,102 +63,13 @@ def multipole_field(points_m: np.ndarray, position_m: np.ndarray, moment_a_m2: n
     """
     mag = math.sqrt(float(moment_a_m2 @ moment_a_m2))
     u = moment_a_m2 / mag
-    r = points_m - position_m
-    rho = np.einsum("ij,ij->i", r, r)
-    s = r @ u
     c = mag / (4 * math.pi)
-    ir = 1.0 / rho
-    a = ir * ir * np.sqrt(ir)        # rho^-5/2: every derivative below is a = times a polynomial
-    sa = s * a
-    if octupole_m2:
-        # with t = s^2 / rho (cos^2 of the polar angle) and w = k / rho, k = c q / 2:
-        # f_s = a (c rho + k (15 t - 3)), f_rho = s a (-3c/2 + w (15/2 - 35 t / 2)), ...
-        k = 0.5 * c * octupole_m2
-        t = s * s * ir
-        w = k * ir
-        fs = a * (c * rho + k * (15.0 * t - 3.0))
-        fr = sa * (w * (7.5 - 17.5 * t) - 1.5 * c)
-    else:
-        fs = c * rho * a
-        fr = -1.5 * c * sa
-    b = -MU0 * (fs[:, None] * u[None] + 2 * fr[:, None] * r)
-    if not jacobian:
-        return b
-    if octupole_m2:
-        fsr = a * (w * (7.5 - 52.5 * t) - 1.5 * c)
-        frr = sa * ir * (w * (78.75 * t - 26.25) + 3.75 * c)
-        fss = 30.0 * w * sa
-    else:
-        fsr = -1.5 * c * a
-        frr = 3.75 * c * sa * ir
-    # 2 fsr (u r^T + r u^T) + 4 frr r r^T + fss u u^T + 2 fr I, as r v1^T + u v2^T + 2 fr I
-    # (fewer small-array operations: this runs in every fit iteration)
-    v1 = (4 * frr)[:, None] * r + (2 * fsr)[:, None] * u
-    v2 = (2 * fsr)[:, None] * r
-    if octupole_m2:
-        v2 += fss[:, None] * u
-    d = r[:, :, None] * v1[:, None, :] + u[None, :, None] * v2[:, None, :]
-    d[:, _DIAG, _DIAG] += (2 * fr)[:, None]
-    return b, MU0 * d  # d/d(position) = -d/dr
-
-
-def _multipole_rows(r: np.ndarray, u: np.ndarray, c: float, k: float, out: np.ndarray,
-                    work: tuple | None = None):
-    """The fit's hot path: :func:`multipole_field`'s Jacobian and field at r = points - position
-    (n, 3) m, written as out[:, :, :3] = dB/d(position) / mu0 (T/m per mu0) and out[:, :, 3] =
-    B / mu0 (T per mu0), out (n, 3, 4); c = |m| / (4 pi), k = c q / 2, u the unit moment;
-    ``work``: :func:`_multipole_work` (n, u, c), reused between calls. The same algebra as
-    :func:`multipole_field` (tested equal), arranged as a few matrix products (the overhead of a
-    small numpy call outweighs its arithmetic here)."""
-    b3, r5, pq, cm, tv, v, k6 = work if work is not None else _multipole_work(len(r), u, c)
-    rho = np.einsum("ij,ij->i", r, r)
-    s = r @ u
-    ir = 1.0 / rho
-    a = ir * ir * np.sqrt(ir)
-    # the radial functions, each a = rho^-5/2 times (a power of s, 1/rho, rho) times a polynomial
-    # c0 c + c1 w + c2 w t in w = k / rho and t = s^2 / rho (see multipole_field), in the order
-    # of cm: [4 f_rho rho, 2 f_s rho, -2 f_rho; 2 f_s rho, f_ss, -f_s]
-    np.multiply(ir, k, out=tv[:, 1])
-    np.multiply(tv[:, 1], s * s * ir, out=tv[:, 2])
-    np.multiply(s, ir, out=v[:, 0])
-    v[:, 2] = v[:, 4] = s
-    v[:, 5] = rho
-    x = tv @ k6
-    x *= v
-    np.multiply(x, a[:, None], out=cm.reshape(-1, 6))
-    # row i of out[k] is r_i P_k + u_i Q_k + 2 f_rho [e_i, 0] with P = [4 frr r + 2 fsr u, -2 fr]
-    # and Q = [2 fsr r + fss u, -fs]: [P; Q] = cm @ [[r, 0], [u, 0], [0, 0, 0, 1]], then
-    # out = [r, u, I] @ [P; Q; 2 f_rho [I, 0]]
-    b3[:, 0, :3] = r
-    r5[:, :, 0] = r
-    np.matmul(cm, b3, out=pq[:, :2])
-    np.negative(cm[:, 0, 2], out=pq[:, 2, 0])
-    pq[:, 3, 1] = pq[:, 4, 2] = pq[:, 2, 0]
-    np.matmul(r5, pq, out=out)
-    return out
-
-
-def _multipole_work(n: int, u: np.ndarray, c: float) -> tuple:
-    """Buffers and constants of :func:`_multipole_rows` for n points, unit moment u and c =
-    |m| / (4 pi): b3 (n, 3, 4) = [[r, 0], [u, 0], [0, 0, 0, 1]], r5 (n, 3, 5) = [r, u, I],
-    pq (n, 5, 4) (rows 2-4: 2 f_rho [I, 0]), cm (n, 2, 3), tv (n, 3) = [1, w, w t],
-    v (n, 6) = [s / rho, 1, s, 1, s, rho], k6 (3, 6) the polynomials' coefficients; r, s, rho,
-    w, t are filled in per call."""
-    b3 = np.zeros((n, 3, 4))
-    b3[:, 1, :3] = u
-    b3[:, 2, 3] = 1.0
-    r5 = np.zeros((n, 3, 5))
-    r5[:, :, 1] = u
-    r5[:, :, 2:] = _EYE
-    tv = np.zeros((n, 3))
-    tv[:, 0] = 1.0
-    v = np.ones((n, 6))
-    # columns: 4 f_rho rho / (a s / rho), 2 f_s rho / a, -2 f_rho / (a s), 2 f_s rho / a,
-    # f_ss / (a s), -f_s / (a rho) as c0 c + c1 w + c2 w t
-    k6 = np.array([[15.0 * c, -3.0 * c, 3.0 * c, -3.0 * c, 0.0, -c],
-                   [-105.0, 15.0, -15.0, 15.0, 30.0, 3.0],
-                   [315.0, -105.0, 35.0, -105.0, 0.0, -15.0]])
-    return b3, r5, np.zeros((n, 5, 4)), np.zeros((n, 2, 3)), tv, v, k6
+    r = np.asarray(points_m, float) - position_m
+    if jacobian:
+        b, jp, _ = multipole_pose_rows(r, u, c, 0.5 * c * octupole_m2)
+        return b, jp
+    fs, fr = _radial(r, u, c, 0.5 * c * octupole_m2, False)
+    return -MU0 * (fs[:, None] * u[None] + 2 * fr[:, None] * r)
 
 
 def cylinder_field(points_m: np.ndarray, position_m: np.ndarray, moment_a_m2: np.ndarray,
@@ -175,3 +112,74 @@ def cylinder_field(points_m: np.ndarray, position_m: np.ndarray, moment_a_m2: np
     rhat = perp / np.maximum(r, 1e-300)[:, None]
     return br[:, None] * rhat + bz[:, None] * u
 
+
+
+def multipole_pose_rows(r: np.ndarray, u: np.ndarray, c: float, k: float):
+    """The multipole's field and its derivatives in the magnet's pose, for the pose fit.
+
+    r = points - position (n, 3) m; u the unit moment; c = |m| / (4 pi) (A m^2); k = c q / 2
+    (q = ``octupole_m2``). Returns B (n, 3) T, dB/d(position) (n, 3, 3) T/m and dB/du
+    (n, 3, 3) T (u as a free 3-vector at fixed c: the derivative along a rotation of the moment
+    is dB/du @ (w x u)). From B = -mu0 (f_s u + 2 f_rho r) (:func:`multipole_field`):
+    dB/du = -mu0 (f_s I + (f_ss u + 2 f_srho r) r^T), since only s = u . r depends on u.
+    """
+    fs, fr, fsr, frr, fss = _radial(r, u, c, k, True)
+    b = -MU0 * (fs[:, None] * u + 2.0 * fr[:, None] * r)
+    # d/d(position) = mu0 (r v1^T + u v2^T + 2 f_rho I), v1 = 4 f_rr r + 2 f_sr u,
+    # v2 = 2 f_sr r + f_ss u (multipole_field)
+    fsr2 = 2.0 * fsr[:, None]
+    v1 = (4.0 * frr)[:, None] * r + fsr2 * u
+    v2 = fsr2 * r + fss[:, None] * u
+    jp = r[:, :, None] * v1[:, None, :] + u[None, :, None] * v2[:, None, :]
+    jp[:, _DIAG, _DIAG] += (2.0 * fr)[:, None]
+    jp *= MU0
+    # d/du = -mu0 (f_s I + v3 r^T), v3 = f_ss u + 2 f_sr r  (= v2)
+    ju = v2[:, :, None] * r[:, None, :]
+    ju[:, _DIAG, _DIAG] += fs[:, None]
+    ju *= -MU0
+    return b, jp, ju
+
+
+_POLY_ALPHA = np.array([-3.0, 7.5, 7.5, -26.25, 30.0])
+_POLY_BETA = np.array([15.0, -17.5, -52.5, 78.75, 0.0])
+_SCALES = MU0 * np.array([-1.0, -2.0, 2.0, 4.0, 1.0])
+
+
+def multipole_pose_columns(r: np.ndarray, u: np.ndarray, axes: np.ndarray, c: float, k: float,
+                           out: np.ndarray) -> np.ndarray:
+    """The multipole's field and its pose Jacobian written into ``out`` (n, 3, >= 5): columns
+    0-2 dB/d(position) (T/m), 3-4 dB along the rotations about ``axes`` (e1, e2) (T/rad), for
+    the pose fit's inner loop (the derivative along a rotation w of the moment is dB/du (w x
+    u); about e1 it moves u along e2 and about e2 along -e1: the directions the fit steps in,
+    :func:`.pose.rotated`). r, u, c, k as in :func:`multipole_pose_rows`. Returns B (n, 3) T.
+
+    The five radial functions of :func:`_radial` are each a prefactor (a rho, s a, a, s a /
+    rho, s a) times c_i + w (alpha_i + beta_i t), w = k / rho, evaluated together; then, with
+    the mu0 factors folded in, B = g0 u + g1 r, dB/dp = r (g3 r + g2 u)^T + u v^T - g1 I with
+    v = g2 r + g4 u, and the rotation along e: g0 e - v (r . e).
+    """
+    rho = np.einsum("ij,ij->i", r, r)
+    s = r @ u
+    ir = 1.0 / rho
+    sq = np.sqrt(ir)
+    a = ir * sq * ir
+    sa = s * a
+    t = s * s * ir
+    poly = (k * ir)[:, None] * (_POLY_ALPHA + t[:, None] * _POLY_BETA)
+    poly[:, 0] += c
+    poly[:, 1:4] -= (1.5 * c, 1.5 * c, -3.75 * c)
+    pre = np.stack([ir * sq, sa, a, sa * ir, sa], 1)
+    g = pre * poly * _SCALES                  # (n, 5): g0 .. g4
+    g0, g1, g2, g3, g4 = (g[:, j:j + 1] for j in range(5))
+    b = g0 * u + g1 * r
+    v = g2 * r + g4 * u
+    w1 = g3 * r + g2 * u
+    jp = out[:, :, :3]
+    np.multiply(r[:, :, None], w1[:, None, :], out=jp)
+    jp += u[None, :, None] * v[:, None, :]
+    jp[:, _DIAG, _DIAG] -= g1
+    re = r @ axes.T                                         # (n, 2)
+    rot = out[:, :, 3:5]
+    np.multiply(v[:, :, None], re[:, None, :], out=rot)
+    np.subtract(g0[:, :, None] * axes.T[None], rot, out=rot)
+    return b

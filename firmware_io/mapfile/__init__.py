@@ -10,6 +10,7 @@ interpolation -- is defined here and nowhere else:
 * :mod:`.cells`: A(p), the cell of a point and the per-cell products;
 * :mod:`.modes`: the per-core (rho, z) tables (magnet pull, sensor-field modes) and kernels;
 * :mod:`.grid`: trilinear interpolation on the bias force's residual grid;
+* :mod:`.saturation`: :class:`SaturationTable`, the cores' saturation factors as applied;
 * :mod:`.reader`: :class:`MapFile`, the loaded map;
 * :mod:`.source`: :class:`ActuationSource`, the one interface of a map or a direct model.
 
@@ -30,6 +31,7 @@ from .modes import (BATCH_CHUNK, gradient_tensor, kernel_rows_many, magnet_terms
                     magnet_terms_one, mode_rows, modes_one, prepare_magnet, prepare_magnet_one,
                     prepare_modes, prepare_one)
 from .reader import MapFile, check_currents
+from .saturation import SaturationTable
 from .source import ActuationSource, selection
 
 __all__ = [
@@ -41,5 +43,5 @@ __all__ = [
     "solid_harmonics", "BATCH_CHUNK", "gradient_tensor", "kernel_rows_many", "magnet_terms",
     "magnet_terms_one", "mode_rows", "modes_one", "prepare_magnet", "prepare_magnet_one",
     "prepare_modes", "prepare_one", "MapFile", "check_currents", "ActuationSource", "selection",
-    "DriveRecord",
+    "DriveRecord", "SaturationTable",
 ]

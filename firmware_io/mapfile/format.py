@@ -200,6 +200,9 @@ def validate(arrays: dict, meta: dict, p="<map data>") -> None:
     for name in ("M_X", "M_Y", "M_Z", "SAT_I"):
         if len(arrays[name]) < 2 or not np.all(np.diff(arrays[name]) > 0):
             raise map_error(p, f"{name} strictly increasing with at least 2 nodes")
+    if arrays["SAT_I"][0] != 0 or not np.all(arrays["SAT_FACTOR"] > 0):
+        raise map_error(p, "SAT_I starting at 0 A and SAT_FACTOR > 0 (a saturation factor scales "
+                        "a column of A)")
     rot = arrays["SENSOR_ROT"]
     if (np.abs(rot @ np.swapaxes(rot, 1, 2) - np.eye(3)).max() > 1e-9
             or np.any(np.linalg.det(rot) < 0)):

@@ -27,6 +27,7 @@ from ..errors import BadInputError
 from .cells import CELL_CHUNK, cells_many, cells_one, prepare_cells
 from .format import REBUILD, map_error, read
 from .grid import trilinear, trilinear_one
+from .saturation import SaturationTable
 from .modes import (BATCH_CHUNK, gradient_tensor, kernel_rows_many, magnet_terms,
                     magnet_terms_one, mode_rows, modes_one, prepare_magnet, prepare_magnet_one,
                     prepare_modes, prepare_one)
@@ -39,12 +40,6 @@ def check_currents(currents, n_coils: int, error=BadInputError) -> np.ndarray:
     if i.shape != (n_coils,) or not np.all(np.isfinite(i)):
         raise error("currents", f"{n_coils} finite values, A", f"shape {i.shape}")
     return i
-
-
-def _interp_factor(currents, sat_i, sat_f) -> np.ndarray:
-    """Saturation factors (n_coils,) at the magnitudes of ``currents`` (clamped to the table)."""
-    a = np.abs(np.asarray(currents, float))
-    return np.array([np.interp(a[k], sat_i, sat_f[:, k]) for k in range(sat_f.shape[1])])
 
 
 @dataclass(frozen=True, eq=False)
@@ -65,8 +60,8 @@ class MapFile:
     n_coils: int
     kernels: dict = field(repr=False)
     """The prepared lookups: 'cells' (A, :func:`prepare_cells`), 'scoef', 'magnet',
-    'magnet_f0' and the one-point kernels 'sensor_one', 'magnet_one' (None where the general
-    path runs)."""
+    'magnet_f0', the one-point kernels 'sensor_one', 'magnet_one' (None where the general
+    path runs) and 'saturation' (:class:`SaturationTable`)."""
 
     @classmethod
     def load(cls, path, expected_design_sha256: str | None = None) -> "MapFile":
@@ -104,7 +99,8 @@ class MapFile:
             "magnet_f0": (maxes, np.ascontiguousarray(f0.reshape(-1, 3)), f0.shape[:3]),
             "sensor_one": (prepare_one(smodes, tuple(c for _, c in scoefs), arrays["MOMENT"])
                            if smodes else None),
-            "magnet_one": prepare_magnet_one(magnet)}
+            "magnet_one": prepare_magnet_one(magnet),
+            "saturation": SaturationTable(arrays["SAT_I"], arrays["SAT_FACTOR"])}
         return cls(arrays, meta, (np.asarray(g[0], float), np.asarray(g[1], float)), nc,
                    kernels)
 
@@ -300,9 +296,13 @@ class MapFile:
 
     def saturation_factor(self, currents) -> np.ndarray:
         """Per-coil factors (n_coils,) on the columns of A at these currents (A): the
-        saturation correction (1 for linear cores)."""
-        return _interp_factor(self._currents(currents), self.arrays["SAT_I"],
-                              self.arrays["SAT_FACTOR"])
+        saturation correction (1 for air coils and linear cores; docs/coupling.md)."""
+        return self.kernels["saturation"].factor_at(self._currents(currents))
+
+    def saturation_table(self) -> SaturationTable:
+        """The stored saturation correction (``SAT_I``, ``SAT_FACTOR``) as the runner applies
+        it (:class:`SaturationTable`: factors, linear-equivalent currents, linearization)."""
+        return self.kernels["saturation"]
 
     def _currents(self, currents) -> np.ndarray:
         return check_currents(currents, self.n_coils)

@@ -23,7 +23,6 @@ from .calibration import (CALIBRATED_RELATIVE_ERROR, CALIBRATION_CURRENT_A, cali
                           calibration_currents, record_calibration)
 from .config import RunnerConfig, config_from_map
 from .drive import CurrentPath, feedforward_voltage, rl_step
-from .estimator_shim import LocalizerShim, PoseEstimate
 from .forcelaw import force_law_matrix, force_law_rows, torque_matrix
 from .frames import Fix, SensorFrame
 from .gate import InnovationGate, rendered_protection_level
@@ -39,8 +38,8 @@ from .tracker import PoseTracker
 __all__ = [
     "CALIBRATED_RELATIVE_ERROR", "CALIBRATION_CURRENT_A", "calibrate_sensors",
     "calibration_currents", "record_calibration", "RunnerConfig", "config_from_map",
-    "CurrentPath", "feedforward_voltage", "rl_step", "LocalizerShim", "PoseEstimate",
-    "force_law_matrix", "force_law_rows", "torque_matrix", "Fix", "SensorFrame",
+    "CurrentPath", "feedforward_voltage", "rl_step", "force_law_matrix", "force_law_rows",
+    "torque_matrix", "Fix", "SensorFrame",
     "InnovationGate", "rendered_protection_level", "EXPECTED_SATURATION", "SensorHeadroom",
     "SensorLayout", "expected_saturation", "CurrentHistory", "FAULTS", "LOCALIZATION_FAULTS",
     "Runner", "RunnerIO", "SceneForce", "StepRecord", "SensorPipeline", "FDE_LATCH_PASSES",

@@ -3,7 +3,7 @@
 With the finger magnet away from the board, the coils are driven with known current patterns
 (A) and every sensor read (T, one flat list in the map's order);
 :func:`firmware_io.localization.calibrate` then fits each sensor's gain, mounting rotation and
-offset. Output: the Localizer's ``calibration``.
+offset. Output: the pose estimator's ``calibration``.
 """
 
 from __future__ import annotations
@@ -71,13 +71,12 @@ def record_calibration(coils, arrays, currents_a: np.ndarray, *, settle_s: float
 
 def calibrate_sensors(model, readings_t, applied_a):
     """Per-sensor calibration (gain, mounting rotation, offset) from coil-only frames
-    ``readings_t`` (k, n_sensors, 3) T: :func:`firmware_io.localization.calibrate` (its sensors
-    0..n-1 the upper array, n..2n-1 the lower one), checked to be finite. Returns what it
-    returns, for the Localizer's ``calibration``."""
+    ``readings_t`` (k, n_sensors, 3) T, each in its sensor's frame:
+    :func:`firmware_io.localization.calibrate`, checked to be finite. Returns what it returns,
+    for the estimator's ``calibration``."""
     r = np.asarray(readings_t, float)
-    half = r.shape[1] // 2
     try:
-        cal = calibrate(r[:, :half], r[:, half:], applied_a, model)
+        cal = calibrate(r, applied_a, model)
     except (np.linalg.LinAlgError, ValueError):
         cal = (np.full(1, np.nan),)
     # (gain_inverse, offsets) or the localizer's calibration object with those attributes

@@ -4,8 +4,10 @@ The coils' R, L, supply, driver and current bounds are the map's drive record
 (:class:`firmware_io.mapfile.drive.DriveRecord`, ``meta['drive']``, written by
 designkit.model.electrical.drive_data), held whole in :attr:`RunnerConfig.drive`; its ``drives`` (one
 :class:`firmware_io.hw.driver.CoilDrive` per coil) is what the runner's current path and the
-PWM driver both read. :func:`config_from_map` builds the configuration from a map. SI units
-throughout; the fault and resume policy the fields tune is described in docs/runner.md.
+PWM driver both read; :attr:`RunnerConfig.saturation` is the map's saturation table (the cores'
+factor on A's columns, applied by the allocation). :func:`config_from_map` builds the
+configuration from a map. SI units throughout; the fault and resume policy the fields tune is
+described in docs/runner.md.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from dataclasses import dataclass
 
 from ..errors import BadInputError
 from ..mapfile.drive import DriveRecord
+from ..mapfile.saturation import SaturationTable
 
 
 @dataclass(frozen=True)
@@ -60,6 +63,9 @@ class RunnerConfig:
     max_fix_age_s : float
         The tracker's newest accepted fix may be at most this old (frame time), s; older: the
         prediction is not supported by the sensors ('lost', coils off).
+    saturation : SaturationTable or None
+        The map's saturation correction (column k of A scaled by s_k(|I_k|)); None: linear
+        cores (nothing to apply). How the allocation applies it: docs/runner.md, "Saturation".
     """
 
     drive: DriveRecord
@@ -75,6 +81,7 @@ class RunnerConfig:
     gate_risk: float = 1e-4
     alert_limit_m: float = 10e-3
     max_fix_age_s: float = 0.05
+    saturation: SaturationTable | None = None
 
     def __post_init__(self):
         if not isinstance(self.drive, DriveRecord):
@@ -94,6 +101,11 @@ class RunnerConfig:
             raise BadInputError("max_fix_age_s", "a time > 0 s", self.max_fix_age_s)
         if not (self.alert_limit_m > 0):
             raise BadInputError("alert_limit_m", "a length > 0 m (inf: none)", self.alert_limit_m)
+        if self.saturation is not None and not (
+                isinstance(self.saturation, SaturationTable)
+                and self.saturation.n_coils == self.drive.n_coils):
+            raise BadInputError("saturation", f"None or a SaturationTable of {self.drive.n_coils} "
+                                "coils (the map's)", type(self.saturation).__name__)
 
     @property
     def n_coils(self) -> int:
@@ -102,6 +114,9 @@ class RunnerConfig:
 
 def config_from_map(fieldmap, **overrides) -> RunnerConfig:
     """RunnerConfig from the drive record a map file carries (``meta['drive']``, checked by
-    :meth:`DriveRecord.from_dict`); ``overrides``: the other fields."""
+    :meth:`DriveRecord.from_dict`) and its saturation table (None when every factor is 1);
+    ``overrides``: the other fields."""
     drive = DriveRecord.from_dict(fieldmap.meta.get("drive"), fieldmap.n_coils)
+    table = fieldmap.saturation_table()
+    overrides.setdefault("saturation", None if table.linear else table)
     return RunnerConfig(drive, **overrides)

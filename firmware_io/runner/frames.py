@@ -50,6 +50,16 @@ class Fix:
     saturating : tuple of int -- sensors dropped because the model predicts them beyond
         :data:`firmware_io.runner.headroom.EXPECTED_SATURATION` of their linear range
     reason : str -- why not ok ('' when ok)
+    background_t : ndarray (3,), T -- the estimated uniform ambient field
+    pose_covariance : ndarray (k, k) or None -- the estimate's covariance: the position (m^2),
+        then (k = 5) two rotations of the moment's direction about its tangent axes
+        (:func:`firmware_io.localization.pose.tangent_axes`, rad^2)
+    acquired : bool -- trusted by the acquisition rule (:class:`firmware_io.runner.pipeline.
+        Acquisition`) on its fault-free protection level, not by the estimator's own verdict
+    prior_used : bool -- fitted with the track's prediction as the prior
+    candidate : bool -- not trusted, but a consistent fix the acquisition rule would trust
+        but for its protection levels: an acquiring tracker takes it as the next frame's
+        prior (nothing renders on it)
     """
 
     position_m: np.ndarray
@@ -66,3 +76,7 @@ class Fix:
     saturating: tuple = ()
     reason: str = ""
     background_t: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    pose_covariance: np.ndarray | None = None
+    acquired: bool = False
+    prior_used: bool = False
+    candidate: bool = False

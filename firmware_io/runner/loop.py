@@ -4,7 +4,8 @@ voltages -> PWM, one step per control period.
 Each :meth:`Runner.step` takes the sensor side's newest :class:`~firmware_io.runner.frames.Fix`
 (or None), updates the tracker at the frame's time and predicts to now, evaluates the scene's
 force f (N) there, allocates currents (A) with min ||F(p, m) I - (f - F0(p))|| within the bounds
-for the moment m the estimator found, turns them into the voltages of the R-L feed-forward
+for the moment m the estimator found (column k of F scaled by the map's saturation factor at
+|I_k| when the cores saturate), turns them into the voltages of the R-L feed-forward
 (:mod:`firmware_io.runner.drive`) and writes the coil drivers' duties, one block write per PCA9685. The
 torque m x B the currents cause is reported with each step. Every fault switches every coil off
 in the same step; no force is rendered with a position older than one sensor pass. For the
@@ -55,6 +56,18 @@ of hand-over jitter): a newer frame is missing, so the position is older than on
 
 PASSES_KEPT = 8
 """Frame intervals the pass interval is the median of."""
+
+SATURATION_SOLVES = 2
+"""Allocations per step with saturating cores: about the previous command, then (when that
+linearization is off at the result) once about the result (docs/runner.md, "Saturation")."""
+
+SATURATION_RTOL = 1e-3
+"""The linearization of g(I) = s(|I|) I is accepted at the allocation's result when it is off
+by at most SATURATION_RTOL |I_k| + :data:`SATURATION_ATOL_A` in every coil (0.1 % of that
+coil's force, plus 1 mA)."""
+
+SATURATION_ATOL_A = 1e-3
+"""See :data:`SATURATION_RTOL`, A."""
 
 _ALL_ROWS = np.arange(8)
 
@@ -123,9 +136,10 @@ class Runner:
         dBy/dz, per ampere), ``bias_force(point)`` N, ``bounds`` m, ``moment_a_m2`` A m^2,
         ``sensor_positions_m`` and ``sensor_coil_field()`` (:class:`SensorLayout`).
     scene : object -- ``force(position_m, velocity_m_s) -> (3,)`` N
-    estimator : pose estimator
-        ``fix(readings_t, currents_a)``, ``reset()``, ``integrity_risk``, ``model_bias_m``
-        (:mod:`firmware_io.runner.estimator_shim` lists the estimate's fields).
+    estimator : firmware_io.localization.Estimator
+        ``estimate(readings_t, currents_a, ...)``, ``reset()``, ``integrity_risk``,
+        ``model_bias_m`` (:class:`firmware_io.localization.Estimate` lists the estimate's
+        fields).
     io : RunnerIO -- coils, sensor source, log, clock
     config : RunnerConfig
     tracker : PoseTracker, optional (default: a new one)
@@ -331,6 +345,12 @@ class Runner:
                 self.have_fix = False     # renders again from the next accepted fix
             if gated:
                 self.pipeline.reacquire = True
+        if not ok and fix.candidate and not self.have_fix and math.isfinite(
+                float(np.sum(fix.position_m) + np.sum(fix.moment_a_m2))):
+            # acquiring: a consistent fix beyond the limits is the next frame's prior (frames'
+            # noise averages out in the chain), nothing renders on it
+            self.tracker.update(fix.position_m, fix.frame_t_s, True, fix.moment_a_m2,
+                                fix.pose_covariance)
         pl = (rendered_protection_level(fix, self.tracker, self.estimator)
               if ok and not gated else math.inf)
         if gated:
@@ -341,14 +361,17 @@ class Runner:
             if not self.have_fix:
                 # acquisition: the tracker takes the fix (it passed the estimator's tests and
                 # the gate), nothing renders until a filtered PL is within the limit
-                self.tracker.update(fix.position_m, fix.frame_t_s, True, fix.moment_a_m2)
+                self.tracker.update(fix.position_m, fix.frame_t_s, True, fix.moment_a_m2,
+                                    fix.pose_covariance)
         elif ok:
-            self.tracker.update(fix.position_m, fix.frame_t_s, True, fix.moment_a_m2)
+            self.tracker.update(fix.position_m, fix.frame_t_s, True, fix.moment_a_m2,
+                                fix.pose_covariance)
             self.have_fix = accepted = True
             self.accepted_at_s = t_s
             self.background_t = fix.background_t
         self.last_estimate_ok = accepted      # taken into the tracker
         self.accepted_in_row = self.accepted_in_row + 1 if accepted else 0
+        self.pipeline.track = self.tracker.snapshot()   # the next frame's prior
         return True, problems
 
     def _freshness(self, t_s: float, problems: list) -> None:
@@ -363,6 +386,7 @@ class Runner:
             # also an acquisition's track (fixes beyond the alert limit): a state that old
             # would bend the next fixes with its velocity
             self.tracker.reset()
+            self.pipeline.track = None
             self.pipeline.reacquire = True
             if self.have_fix:
                 self.have_fix = False
@@ -398,6 +422,9 @@ class Runner:
         if self.tracker.x is not None:
             self._freshness(t_s, problems)
         if not self.have_fix:
+            # a coil over its budget is a fault whether or not the finger is located; it
+            # outlasts any localization problem (it waits for the coil to cool), so it is shown
+            problems[:0] = self._thermal_problem([])
             if problems and (self.fault is None or problems[0][0] != self.fault):
                 self._enter_fault(t_s, *problems[0])
             return self._record(t_s, t0, np.full(3, np.nan), np.zeros(3), new_frame,
@@ -410,9 +437,7 @@ class Runner:
         if not inside:
             problems.append(("out_of_box", f"estimate {np.round(p * 1e3, 1).tolist()} mm outside "
                              f"the map box"))
-        if self.thermal.exceeded():
-            problems.append(("thermal", f"I^2 t {self.thermal.energy_a2s.max():.0f} A^2 s above "
-                             f"the budget {self.thermal.budget_a2s:.0f} A^2 s"))
+        self._thermal_problem(problems)
         if self._still_off(t_s, problems):
             return self._record(t_s, t0, p, np.zeros(3), new_frame, off=True)
         if prof:
@@ -432,6 +457,14 @@ class Runner:
                               f"(limits {cfg.drive.current_limit_a:.3f} A, {budget:.3f} A)")
             return self._record(t_s, t0, p, f_ref, new_frame, off=True)
         return self._drive(t_s, t0, p, f_ref, command, new_frame)
+
+    def _thermal_problem(self, problems: list) -> list:
+        """``problems`` with the 'thermal' problem appended when a coil's I^2 t is over its
+        budget."""
+        if self.thermal.exceeded():
+            problems.append(("thermal", f"I^2 t {self.thermal.energy_a2s.max():.0f} A^2 s above "
+                             f"the budget {self.thermal.budget_a2s:.0f} A^2 s"))
+        return problems
 
     def force_matrix(self, p: np.ndarray, moment_a_m2, coils=None) -> np.ndarray:
         """Force per ampere at p on the moment ``moment_a_m2`` (A m^2): (3, c) N/A, or (1, c)
@@ -466,17 +499,42 @@ class Runner:
             if len(h):
                 kw["inequalities"] = (g, h)
         command = np.zeros(cfg.n_coils)
+        equivalent = np.zeros(0 if keep is None else len(keep))
         if keep is None or len(keep):
-            i, _ = self.allocate(fm, target, limit, cfg.drive.total_current_a, **kw)
+            i, equivalent = self._currents_for(fm, target, limit, kw, keep)
             if keep is None:
-                command = np.asarray(i, float)
+                command = i
             else:
                 command[keep] = i
-        b = a[:3] @ (command if keep is None else command[keep])
+        b = a[:3] @ equivalent       # the saturating cores' field of those currents
         self.torque_n_m = torque_matrix(m) @ b
         if prof:
             self._mark("allocation", tm)
         return command
+
+    def _currents_for(self, fm, target, limit, kw, keep) -> tuple[np.ndarray, np.ndarray]:
+        """The allocation's currents I (A) for the force per ampere ``fm`` (linear cores) and
+        ``target`` (N), and their linear-equivalent currents g(I) (A: what the linear columns
+        of A multiply). Saturating cores (``cfg.saturation``): column k scaled by s_k(|I_k|) at
+        the currents solved for, g(I) = s(|I|) I -- the allocation runs on g linearized about
+        the previous command and, when the result lies where that is off by more than
+        :data:`SATURATION_RTOL`, once more about the result (docs/runner.md, "Saturation")."""
+        total = self.cfg.drive.total_current_a
+        sat = self.cfg.saturation
+        if sat is None:
+            i = np.asarray(self.allocate(fm, target, limit, total, **kw)[0], float)
+            return i, i
+        about = self.command_a if keep is None else self.command_a[keep]
+        for _ in range(SATURATION_SOLVES):
+            gain, offset = sat.linearize(about, keep)
+            i = np.asarray(self.allocate(fm * gain, target - fm @ offset, limit, total,
+                                         **kw)[0], float)
+            g = sat.equivalent(i, keep)
+            if np.all(np.abs(g - gain * i - offset) <= SATURATION_RTOL * np.abs(i)
+                      + SATURATION_ATOL_A):
+                break
+            about = i
+        return i, g
 
     def _drive(self, t_s, t0, p, f_ref, command, new_frame) -> StepRecord:
         cfg = self.cfg

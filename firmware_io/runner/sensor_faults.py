@@ -4,8 +4,9 @@ excluding.
 A driver status other than 'ok' excludes a sensor from the fit and raises the fault of
 :data:`SENSOR_FAULTS`. A sensor whose value contradicts the others while its status is ok is
 excluded by the estimator's fault detection (RAIM FDE); when that happens in
-:data:`FDE_LATCH_PASSES` passes in a row, :class:`ExclusionLatch` latches it out ('sensor_value'
-fault): it is left out before the fit from then on, and the estimator can exclude another.
+:data:`FDE_LATCH_PASSES` passes whose fit the others agree with, with no trusted fix using it
+in between, :class:`ExclusionLatch` latches it out ('sensor_value' fault): it is left out
+before the fit from then on, and the estimator can exclude another.
 """
 
 from __future__ import annotations
@@ -20,13 +21,13 @@ SENSOR_FAULTS = {"stale": "sensor_stuck", "recovered": "sensor_stuck", "hung": "
 name; any status but 'ok' excludes the sensor from the fit."""
 
 FDE_LATCH_PASSES = 10
-"""Passes in a row (frames with a trusted estimate) a sensor must be excluded by the
-estimator's fault detection before it is latched out: a lying sensor, not one noisy frame."""
+"""Passes (frames whose fit passed its residual test) a sensor must be excluded by the
+estimator's fault detection, with no trusted fix using it in between, before it is latched
+out: a lying sensor, not one noisy frame."""
 
 
 class ExclusionLatch:
-    """Per sensor, the trusted frames in a row the estimator excluded it; latched out at
-    ``passes``.
+    """Per sensor, the passes in a row the estimator excluded it; latched out at ``passes``.
 
     Parameters
     ----------
@@ -39,16 +40,19 @@ class ExclusionLatch:
         self.latched = np.zeros(n_sensors, dtype=bool)
         self.passes = int(passes)
 
-    def update(self, excluded, trusted: bool) -> list:
-        """Count one frame's exclusions (indices); only a trusted frame counts (a frame the
-        estimator refuses says nothing about one sensor). Returns the newly latched."""
-        if not trusted:
-            return []
-        hit = np.zeros(len(self.count), dtype=bool)
-        for k in excluded:
-            if 0 <= int(k) < len(hit):
-                hit[int(k)] = True
-        self.count = np.where(hit, self.count + 1, 0)
+    def update(self, excluded, consistent: bool, vouched=()) -> list:
+        """Count one frame: the sensors the estimator excluded (indices) from a fix that passed
+        its residual test (``consistent``: the others agree) count one more; the sensors a
+        trusted fix used (``vouched``) restart at zero; the rest keep their count (a refused
+        frame, or a sensor left out, says nothing about one sensor). Returns the newly
+        latched."""
+        for k in vouched:
+            if 0 <= int(k) < len(self.count):
+                self.count[int(k)] = 0
+        if consistent:
+            for k in excluded:
+                if 0 <= int(k) < len(self.count):
+                    self.count[int(k)] += 1
         new = np.flatnonzero((self.count >= self.passes) & ~self.latched)
         self.latched[new] = True
         return [int(k) for k in new]
