@@ -182,13 +182,15 @@ class _Samples:
 
 
 def _steps(plan: _Plan, n_check: int) -> list:
-    """The sampling phase's steps (kind, index), in order: one progress-bar tick each."""
+    """The sampling phase's steps (kind, index), in order: one progress-bar tick each. After the
+    coupled solve the single long steps go first and the chunks last, so that the workers
+    finish together (longest first: no long step is left to run alone at the end)."""
     return ([("coupled solve", 0)]
+            + [("magnet tables", k) for k in range(len(plan.types))]
+            + [("magnet check", 0), ("mode tables", 0), ("saturation", 0), ("sensor rows", 0)]
             + [("cell nodes", s) for s in range(0, len(plan.fit_orbits.reps), FIT_CHUNK)]
-            + [("magnet tables", k) for k in range(len(plan.types))] + [("mode tables", 0)]
             + [("magnet", s) for s in range(0, len(plan.m_orbits.reps), CHUNK)]
-            + [("check", s) for s in range(0, len(plan.check_orbits.reps), CHUNK)]
-            + [("magnet check", 0), ("saturation", 0), ("sensor rows", 0)])
+            + [("check", s) for s in range(0, len(plan.check_orbits.reps), CHUNK)])
 
 
 def _sample(phys: MapPhysics, arr: CoilArray, plan: _Plan, s: BuildSettings,
@@ -237,21 +239,37 @@ def _forks() -> bool:
             and not multiprocessing.current_process().daemon)
 
 
+BEFORE_SOLVE = ("magnet tables",)
+"""Steps that do not read the array's coupled solve (each core type alone in its own frame):
+they run on a worker forked before the solve, beside it."""
+
+
 def _run_steps(steps: list):
-    """(kind, k, value, wall s, CPU s) of every step: the coupled solve here, the others on
-    the forked workers (in completion order) or here, one after the other."""
-    yield _timed_step(steps[0])  # the coupled solve: every other step needs it
+    """(kind, k, value, wall s, CPU s) of every step: the coupled solve here, the steps of
+    :data:`BEFORE_SOLVE` on a worker forked before it, the others on workers forked after it
+    (in completion order); without forking, here, one after the other."""
     if not _forks():
-        for st in steps[1:]:
+        for st in steps:
             yield _timed_step(st)
         return
-    # forked after the solve: the workers inherit it; they ignore Ctrl-C, which the parent
-    # answers by terminating them
-    with multiprocessing.get_context("fork").Pool(WORKERS, initializer=_ignore_sigint) as pool:
+    early = [st for st in steps[1:] if st[0] in BEFORE_SOLVE]
+    late = [st for st in steps[1:] if st[0] not in BEFORE_SOLVE]
+    fork = multiprocessing.get_context("fork")
+    # the workers ignore Ctrl-C, which the parent answers by terminating them
+    with fork.Pool(1, initializer=_ignore_sigint) as first:
         try:
-            yield from pool.imap_unordered(_timed_step, steps[1:])
+            beside = first.map_async(_timed_step, early)
+            yield _timed_step(steps[0])  # the coupled solve: the late steps need it
+            # forked after the solve: these workers inherit it
+            with fork.Pool(WORKERS, initializer=_ignore_sigint) as pool:
+                try:
+                    yield from pool.imap_unordered(_timed_step, late)
+                except BaseException:
+                    pool.terminate()
+                    raise
+            yield from beside.get()
         except BaseException:
-            pool.terminate()
+            first.terminate()
             raise
 
 
