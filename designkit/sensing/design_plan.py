@@ -21,6 +21,10 @@ from .region import RegionSettings, magnet_pairs, one_magnet, one_magnet_of
 from .response import Response
 from .sites import Headroom, candidate_sites, design_boards, headroom, user_board
 
+MAX_SITES = 4000
+"""Candidate sites a plan may search (a finer --spacing is refused before any work: the
+response is computed at every site for every magnet pose, minutes beyond this)."""
+
 
 @dataclass(frozen=True)
 class PlanRequest:
@@ -114,7 +118,14 @@ def prepare(design, request: PlanRequest) -> Prepared:
                else request.max_current_a)
     level = request.bound.usable_fraction * request.bound.range_t
     sites = candidate_sites(design, array, boards, request.spacing_m, current, level)
-    if len(sites.positions_m) < request.count:
+    n_sites = len(sites.positions_m)
+    if n_sites > MAX_SITES:
+        coarser = request.spacing_m * (n_sites / MAX_SITES) ** 0.5
+        raise BadInputError("--spacing", f"a spacing that leaves at most {MAX_SITES} candidate "
+                            f"sites (here >= {coarser * 1e3:.2g} mm)",
+                            f"{request.spacing_m * 1e3:g} mm ({n_sites} sites)",
+                            "The search's cost grows with the sites times the magnet poses.")
+    if n_sites < request.count:
         raise BadInputError("--count", f"at most {len(sites.positions_m)} sensors (the sites "
                             f"left on the boards at a {request.spacing_m * 1e3:g} mm spacing "
                             f"within the headroom at {current:g} A; "
