@@ -140,6 +140,8 @@ if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", nargs="?", default=DEFAULT_OUT)
     ap.add_argument("--map", default=None, help="an existing map file (default: build one)")
-    ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--seeds", type=int, default=3, help="runs, seeds 0 .. SEEDS-1 (>= 1)")
     a = ap.parse_args()
+    if a.seeds < 1:
+        ap.error(f"--seeds must be >= 1 (runs with seeds 0 .. SEEDS-1); got {a.seeds}")
     run(a.out, map_path=a.map, seeds=a.seeds)
