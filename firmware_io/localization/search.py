@@ -132,16 +132,9 @@ class GridSearch:
             e = (e_blk.sum(axis=2, keepdims=True) - e_blk).transpose(1, 0, 2)
             wt = np.maximum(float(weights.sum()) - weights, 1e-300)
             rb = wd.sum(axis=0)[:, None] - wd.T                          # (3, b)
-            e00, e01, e02, e11, e12, e22 = e
-            a = a - np.stack([e00 * e00 + e01 * e01 + e02 * e02,
-                              e00 * e01 + e01 * e11 + e02 * e12,
-                              e00 * e02 + e01 * e12 + e02 * e22,
-                              e01 * e01 + e11 * e11 + e12 * e12,
-                              e01 * e02 + e11 * e12 + e12 * e22,
-                              e02 * e02 + e12 * e12 + e22 * e22]) / wt
-            rhs = rhs - np.stack([e00 * rb[0] + e01 * rb[1] + e02 * rb[2],
-                                  e01 * rb[0] + e11 * rb[1] + e12 * rb[2],
-                                  e02 * rb[0] + e12 * rb[1] + e22 * rb[2]], 1) / wt
+            ee, er = _background_terms(e, rb)
+            a = a - ee / wt
+            rhs = rhs - er / wt
             base = base - np.einsum("ib,ib->b", rb, rb) / wt
         m = _solve_sym3(a.reshape(6, -1), rhs.transpose(0, 2, 1).reshape(-1, 3))
         m = m.reshape(c, n, 3)
@@ -162,16 +155,9 @@ class GridSearch:
             e = (self.qe @ weights).reshape(-1, 6).T
             wt = float(weights.sum())
             rb = wd.sum(axis=0)
-            e00, e01, e02, e11, e12, e22 = e
-            a = a - np.stack([e00 * e00 + e01 * e01 + e02 * e02,
-                              e00 * e01 + e01 * e11 + e02 * e12,
-                              e00 * e02 + e01 * e12 + e02 * e22,
-                              e01 * e01 + e11 * e11 + e12 * e12,
-                              e01 * e02 + e11 * e12 + e12 * e22,
-                              e02 * e02 + e12 * e12 + e22 * e22]) / wt
-            rhs -= np.stack([e00 * rb[0] + e01 * rb[1] + e02 * rb[2],
-                             e01 * rb[0] + e11 * rb[1] + e12 * rb[2],
-                             e02 * rb[0] + e12 * rb[1] + e22 * rb[2]], 1) / wt
+            ee, er = _background_terms(e, rb)
+            a = a - ee / wt
+            rhs -= er / wt
             base -= float(rb @ rb) / wt
         return _solve_sym3(a, rhs), base
 
@@ -208,3 +194,20 @@ def _solve_sym3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     b0, b1, b2 = b[:, 0], b[:, 1], b[:, 2]
     return np.stack([c00 * b0 + c01 * b1 + c02 * b2, c01 * b0 + c11 * b1 + c12 * b2,
                      c02 * b0 + c12 * b1 + c22 * b2], 1) * inv[:, None]
+
+
+def _background_terms(e, rb):
+    """E E and E rb for the symmetric E given by its six distinct entries ``e`` (00, 01, 02, 11,
+    12, 22; each of any shape) and ``rb`` (3, ...): E E in the same six-entry order, E rb stacked
+    on axis 1 -- what eliminating a uniform background takes from the moment's normal equations."""
+    e00, e01, e02, e11, e12, e22 = e
+    ee = np.stack([e00 * e00 + e01 * e01 + e02 * e02,
+                   e00 * e01 + e01 * e11 + e02 * e12,
+                   e00 * e02 + e01 * e12 + e02 * e22,
+                   e01 * e01 + e11 * e11 + e12 * e12,
+                   e01 * e02 + e11 * e12 + e12 * e22,
+                   e02 * e02 + e12 * e12 + e22 * e22])
+    er = np.stack([e00 * rb[0] + e01 * rb[1] + e02 * rb[2],
+                   e01 * rb[0] + e11 * rb[1] + e12 * rb[2],
+                   e02 * rb[0] + e12 * rb[1] + e22 * rb[2]], 1)
+    return ee, er
