@@ -51,10 +51,14 @@ class Corrections:
         self.first = {"exact": 0.25e-3, "cores": first_radius_m}
         self.lin: dict = {}
         n = len(self.points)
-        # the sum of the parts as const + J_p p + J_u u: (n, 3), (n, 3, 3), (n, 3, 3)
+        # the sum of the parts as const + J_p p + J_u u: (n, 3), (n, 3, 3), (n, 3, 3); jac_pu
+        # is [J_p | J_u] (n, 3, 6), jac_p and jac_u views of it
         self.const = np.zeros((n, 3))
-        self.jac_p = np.zeros((n, 3, 3))
-        self.jac_u = np.zeros((n, 3, 3))
+        self.jac_pu = np.zeros((n, 3, 6))
+        self.jac_p = self.jac_pu[:, :, :3]
+        self.jac_u = self.jac_pu[:, :, 3:]
+        self._to_pose = np.zeros((6, 5))
+        self._to_pose[:3, :3] = EYE3
 
     @property
     def active(self) -> bool:
@@ -65,15 +69,20 @@ class Corrections:
         self.lin = {}
 
     def distance(self, part: str, p: np.ndarray, u: np.ndarray) -> float:
+        """d = |p - p0| + rho |u - u0| from the part's linearization pose (inf: none)."""
         c = self.lin.get(part)
         if c is None:
             return math.inf
-        dp, du = p - c[0], u - c[1]
-        return math.sqrt(dp @ dp) + RHO_M * math.sqrt(du @ du)
+        return math.dist(p.tolist(), c[6]) + RHO_M * math.dist(u.tolist(), c[7])
 
     def within(self, p: np.ndarray, u: np.ndarray, slack: float = 1.0) -> bool:
         """Is (p, u) within ``slack`` times every part's reuse radius?"""
-        return all(self.distance(k, p, u) <= slack * self.lin[k][5] for k in self.parts)
+        pl, ul = p.tolist(), u.tolist()
+        for part in self.parts:
+            c = self.lin.get(part)
+            if c is None or math.dist(pl, c[6]) + RHO_M * math.dist(ul, c[7]) > slack * c[5]:
+                return False
+        return True
 
     def update(self, p: np.ndarray, u: np.ndarray) -> None:
         """Re-linearize the parts (p, u) left (beyond their radius), then sum."""
@@ -90,21 +99,37 @@ class Corrections:
                 err = float(np.abs(val - (c[2] + c[3] @ (p - c[0]) + c[4] @ (u - c[1]))).max())
                 radius = (min(max(d * math.sqrt(0.05 * self.noise_t / err), 0.1e-3), 5e-3)
                           if err > 0 else 5e-3)
-            self.lin[part] = (p.copy(), u.copy(), val, jp, ju, radius)
+            self.lin[part] = (p.copy(), u.copy(), val, jp, ju, radius, p.tolist(), u.tolist())
             changed = True
         if changed:
             self.const[:] = 0.0
-            self.jac_p[:] = 0.0
-            self.jac_u[:] = 0.0
+            self.jac_pu[:] = 0.0
             for part in self.parts:
-                p0, u0, val, jp, ju, _ = self.lin[part]
+                p0, u0, val, jp, ju = self.lin[part][:5]
                 self.const += val - jp @ p0 - ju @ u0
                 self.jac_p += jp
                 self.jac_u += ju
 
     def value(self, p: np.ndarray, u: np.ndarray) -> np.ndarray:
         """(n, 3) T: the summed linearization at (p, u)."""
-        return self.const + self.jac_p @ p + self.jac_u @ u
+        return self.const + self.jac_pu @ np.concatenate((p, u))
+
+    def add_pose_columns(self, cols: np.ndarray, axes: np.ndarray | None,
+                         scale: float = 1.0) -> None:
+        """Add ``scale`` times the linearization's pose Jacobian to ``cols`` (n, 3, >= 5):
+        columns 0-2 J_p, 3-4 J_u along the rotations about ``axes`` (e1, e2) (the fit's
+        orientation steps, :func:`.pose.rotated`); ``axes`` None: J_p alone (a fixed
+        direction)."""
+        if axes is None:
+            cols[:, :, :3] += self.jac_p if scale == 1.0 else scale * self.jac_p
+            return
+        to_pose = self._to_pose
+        to_pose[3:, 3:] = axes.T if scale == 1.0 else scale * axes.T
+        if scale != 1.0:
+            to_pose[:3, :3] = scale * EYE3
+        cols[:, :, :5] += self.jac_pu @ to_pose
+        if scale != 1.0:
+            to_pose[:3, :3] = EYE3
 
     def _exact(self, p, u):
         """The exact cylinder minus the multipole: value, J_p (forward differences, h = 0.1

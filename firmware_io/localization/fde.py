@@ -82,18 +82,20 @@ def bounded_fault_bias(jac: np.ndarray, kt: np.ndarray, axis_amp: np.ndarray,
     S_jj)) |C0 J_i^T e_j| (monotone in the amplitude: the larger of offset and gain)."""
     b = len(kt)
     jb = jac.reshape(b, 3, -1)
-    s_diag = 1.0 - np.einsum("bjp,bjp->bj", kt, jb)
+    q = 3 + n_rot
+    groups = _GROUPS[:q, :1 + (n_rot > 0)]
+    s_diag = 1.0 - (kt * jb).sum(axis=2)
     amp = np.minimum(axis_amp, np.sqrt(lam_md / np.maximum(s_diag, 1e-300)))
-    kp = np.sqrt(np.einsum("bjp,bjp->bj", kt[:, :, :3], kt[:, :, :3]))
-    dp = (amp * kp).max(axis=1)
-    move = np.einsum("bj,bjp->bp", vector, kt)
-    nc = np.einsum("bj,bj->b", vector, vector) - np.einsum("bp,bp->b", move,
-                                                          np.einsum("bj,bjp->bp", vector, jb))
+    # |K_p e_j|, |K_u e_j| per block and axis (b, 3, 2): the gains' norms by group
+    norms = np.sqrt(np.square(kt[:, :, :q]) @ groups)
+    worst = (amp[:, :, None] * norms).max(axis=1)                      # (b, 2)
+    move = (vector[:, None, :] @ kt)[:, 0]
+    nc = np.einsum("bj,bj->b", vector, vector) - np.einsum(
+        "bp,bp->b", move, (vector[:, None, :] @ jb)[:, 0])
     scale = np.minimum(1.0, np.sqrt(lam_md / np.maximum(nc, 1e-300)))
-    dp = np.maximum(dp, scale * np.sqrt(np.einsum("bp,bp->b", move[:, :3], move[:, :3])))
-    du = np.zeros(b)
-    if n_rot:
-        ku = np.sqrt(np.einsum("bjp,bjp->bj", kt[:, :, 3:3 + n_rot], kt[:, :, 3:3 + n_rot]))
-        rot = move[:, 3:3 + n_rot]
-        du = np.maximum((amp * ku).max(axis=1), scale * np.sqrt(np.einsum("bp,bp->b", rot, rot)))
-    return dp, du
+    np.maximum(worst, scale[:, None] * np.sqrt(np.square(move[:, :q]) @ groups), out=worst)
+    return worst[:, 0], (worst[:, 1] if n_rot else np.zeros(b))
+
+
+_GROUPS = np.array([[1.0, 0.0]] * 3 + [[0.0, 1.0]] * 3)
+"""Sums of squares over the position (0-2) and the orientation (3-4) parameters."""

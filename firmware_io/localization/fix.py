@@ -176,7 +176,7 @@ def _inconsistent(fit: PoseFit, sol: Solution, dof: int, pl_m: float, pl_rad: fl
         return "fit did not converge" + ("" if sol.chi2 <= fit.chi2_max[dof] else
                                          f" (residual chi2 {sol.chi2:.3g} > "
                                          f"{fit.chi2_max[dof]:.3g}, {dof} dof)")
-    if not (np.all(p > fit.lo + 1e-6) and np.all(p < fit.hi - 1e-6)):
+    if not _inside(p, fit.lo, fit.hi):
         return "position at or outside the plausible box's edge"
     if not sol.chi2 <= fit.chi2_max[dof]:
         return (f"residual chi2 {sol.chi2:.3g} > {fit.chi2_max[dof]:.3g} ({dof} dof, "
@@ -186,6 +186,11 @@ def _inconsistent(fit: PoseFit, sol: Solution, dof: int, pl_m: float, pl_rad: fl
     if not (math.isfinite(pl_m) and (math.isfinite(pl_rad) or not fit.n_rot)):
         return "singular Fisher information: the pose is not determined"
     return ""
+
+
+def _inside(p: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
+    """Is p strictly inside the box [lo, hi], 1 um from its faces (Python floats: every fix)?"""
+    return all(a + 1e-6 < x < b - 1e-6 for x, a, b in zip(p.tolist(), lo.tolist(), hi.tolist()))
 
 
 def _beyond_limits(fit: PoseFit, pl_m: float, pl_rad: float) -> str:
@@ -211,7 +216,7 @@ def locate(fit: PoseFit, d: np.ndarray, use: np.ndarray, sigma: np.ndarray, read
         return Estimate.refused(_fallback(fit), _moment(fit, fit.last), f"only {len(blocks)} "
                                 f"usable sensors (need {need})", method)
     w_all = np.where(use, 1.0 / sigma, 0.0)
-    frame = Blocks(d, w_all, np.nan_to_num(reading))
+    frame = Blocks(d, w_all, np.where(use[:, None], reading, 0.0))   # finite where used
     best = None
     if seed is not None and seed.covariance is not None:
         best = _with_prior(fit, frame, blocks, seed)

@@ -10,6 +10,7 @@ numpy only (runs on the controller).
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -140,9 +141,38 @@ def multipole_pose_rows(r: np.ndarray, u: np.ndarray, c: float, k: float):
     return b, jp, ju
 
 
-_POLY_ALPHA = np.array([-3.0, 7.5, 7.5, -26.25, 30.0])
-_POLY_BETA = np.array([15.0, -17.5, -52.5, 78.75, 0.0])
-_SCALES = MU0 * np.array([-1.0, -2.0, 2.0, 4.0, 1.0])
+def _pose_coefficients() -> tuple:
+    """(M_c, M_k), each (8, 6): the multipole's radial functions as g = Q @ (c M_c + k M_k),
+    Q = [x^1.5, x^2.5, x^3.5, x^4.5, x^5.5, s^2 x^3.5, s^2 x^4.5, s^2 x^5.5] (x = 1 / rho), in
+    the order (g1 / s, g2, g3 / s, g0, g4 / s, g2) (:func:`multipole_pose_columns`). Each g_j is
+    (prefactor) (c_j + w (alpha_j + beta_j t)) of :func:`_radial` times its mu0 factor, w = k x,
+    t = s^2 x, prefactors (x^1.5, s x^2.5, x^2.5, s x^3.5, s x^2.5)."""
+    alpha = (-3.0, 7.5, 7.5, -26.25, 30.0)
+    beta = (15.0, -17.5, -52.5, 78.75, 0.0)
+    c_term = (1.0, -1.5, -1.5, 3.75, 0.0)
+    mu = MU0 * np.array([-1.0, -2.0, 2.0, 4.0, 1.0])
+    # the x power index (0: x^1.5) of each prefactor without its s (odd functions: g / s)
+    base = (0, 1, 1, 2, 1)
+    m_c, m_k = np.zeros((8, 5)), np.zeros((8, 5))
+    for j in range(5):
+        e = base[j]
+        m_c[e, j] += c_term[j] * mu[j]
+        m_k[e + 1, j] += alpha[j] * mu[j]
+        m_k[5 + e, j] += beta[j] * mu[j]            # s^2 x^(e + 2), at row 5 + e
+    order = [1, 2, 3, 0, 4, 2]
+    return m_c[:, order].copy(), m_k[:, order].copy()
+
+
+_M_C, _M_K = _pose_coefficients()
+
+
+@functools.lru_cache(maxsize=16)
+def _pose_table(c: float, k: float) -> np.ndarray:
+    """c M_c + k M_k (:func:`_pose_coefficients`), one per magnet (read-only)."""
+    m = c * _M_C + k * _M_K
+    m.flags.writeable = False
+    return m
+_X_POWERS = np.arange(5.0) + 1.5
 
 
 def multipole_pose_columns(r: np.ndarray, u: np.ndarray, axes: np.ndarray, c: float, k: float,
@@ -153,33 +183,28 @@ def multipole_pose_columns(r: np.ndarray, u: np.ndarray, axes: np.ndarray, c: fl
     u); about e1 it moves u along e2 and about e2 along -e1: the directions the fit steps in,
     :func:`.pose.rotated`). r, u, c, k as in :func:`multipole_pose_rows`. Returns B (n, 3) T.
 
-    The five radial functions of :func:`_radial` are each a prefactor (a rho, s a, a, s a /
-    rho, s a) times c_i + w (alpha_i + beta_i t), w = k / rho, evaluated together; then, with
-    the mu0 factors folded in, B = g0 u + g1 r, dB/dp = r (g3 r + g2 u)^T + u v^T - g1 I with
-    v = g2 r + g4 u, and the rotation along e: g0 e - v (r . e).
+    The five radial functions of :func:`_radial`, with the mu0 factors folded in (g0 .. g4),
+    are one product of the powers of x = 1 / rho and s = u . r with a constant table
+    (:func:`_pose_coefficients`); then B = g0 u + g1 r, dB/dp = r (g3 r + g2 u)^T + u v^T
+    - g1 I with v = g2 r + g4 u, and the rotation along e: g0 e - v (r . e).
     """
-    rho = np.einsum("ij,ij->i", r, r)
+    n = len(r)
     s = r @ u
-    ir = 1.0 / rho
-    sq = np.sqrt(ir)
-    a = ir * sq * ir
-    sa = s * a
-    t = s * s * ir
-    poly = (k * ir)[:, None] * (_POLY_ALPHA + t[:, None] * _POLY_BETA)
-    poly[:, 0] += c
-    poly[:, 1:4] -= (1.5 * c, 1.5 * c, -3.75 * c)
-    pre = np.stack([ir * sq, sa, a, sa * ir, sa], 1)
-    g = pre * poly * _SCALES                  # (n, 5): g0 .. g4
-    g0, g1, g2, g3, g4 = (g[:, j:j + 1] for j in range(5))
-    b = g0 * u + g1 * r
-    v = g2 * r + g4 * u
-    w1 = g3 * r + g2 * u
+    x = 1.0 / (r * r).sum(1)
+    q = np.empty((n, 8))
+    np.power(x[:, None], _X_POWERS, out=q[:, :5])
+    np.multiply(q[:, 2:5], (s * s)[:, None], out=q[:, 5:])
+    g = q @ _pose_table(c, k)                    # g1 / s, g2, g3 / s, g0, g4 / s, g2
+    g[:, ::2] *= s[:, None]
+    # rows b, v, w1: (g1, g2, g3) r + (g0, g4, g2) u
+    bvw = g[:, :3, None] * r[:, None, :]
+    bvw += g[:, 3:, None] * u
+    b, v = bvw[:, 0], bvw[:, 1]
     jp = out[:, :, :3]
-    np.multiply(r[:, :, None], w1[:, None, :], out=jp)
-    jp += u[None, :, None] * v[:, None, :]
-    jp[:, _DIAG, _DIAG] -= g1
-    re = r @ axes.T                                         # (n, 2)
+    np.multiply(r[:, :, None], bvw[:, None, 2], out=jp)
+    jp += u[:, None] * v[:, None, :]
+    jp -= g[:, 0, None, None] * EYE3
     rot = out[:, :, 3:5]
-    np.multiply(v[:, :, None], re[:, None, :], out=rot)
-    np.subtract(g0[:, :, None] * axes.T[None], rot, out=rot)
+    np.multiply(v[:, :, None], (r @ axes.T)[:, None, :], out=rot)
+    np.subtract(g[:, 3, None, None] * axes.T, rot, out=rot)
     return b

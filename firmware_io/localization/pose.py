@@ -35,7 +35,7 @@ def tangent_axes(u: np.ndarray) -> np.ndarray:
 
 def rotated(u: np.ndarray, axes: np.ndarray, delta) -> np.ndarray:
     """u moved by delta = (a, b) rad along ``axes`` (e1, e2) and renormalized."""
-    v = u + delta[0] * axes[0] + delta[1] * axes[1]
+    v = u + np.asarray(delta[:2], float) @ axes
     return v / math.sqrt(float(v @ v))
 
 

@@ -44,6 +44,8 @@ COLD_ITERATIONS = 20
 CONVERGED_GAIN = 2.5e-3
 """The Gauss-Newton step's predicted chi-square drop below which a solve has converged."""
 
+_ONE = np.ones(1)
+
 
 @dataclass(frozen=True)
 class State:
@@ -159,7 +161,11 @@ class PoseFit:
         info = np.linalg.cholesky(np.linalg.inv(cov)).T          # info^T info = cov^-1
         u0 = np.asarray(seed.moment_a_m2, float)
         u0 = u0 / math.sqrt(float(u0 @ u0))
-        self.prior = (np.asarray(seed.position_m, float), tangent_axes(u0), info)
+        p0, axes0 = np.asarray(seed.position_m, float), tangent_axes(u0)
+        info_p = info[:, :3].copy()
+        # info (p - p0, axes0 . u) = info_p (p - p0) + info_u u (:meth:`rows`)
+        info_u = info[:, 3:] @ axes0 if self.n_rot else None
+        self.prior = (p0, axes0, info, info_p, info_u)
 
     def _observation(self, subtract: bool) -> None:
         """The observation blocks: each sensor, or each (upper, lower) pair with the lower
@@ -211,7 +217,7 @@ class PoseFit:
             d = field - self.coil @ currents
             s2 = sig2n + self.rel ** 2 * mag2
             if self.resp is not None:
-                x = np.append(currents, 1.0)
+                x = np.concatenate((currents, _ONE))
                 s2 = s2 + (self.resp @ x) @ x
         else:
             up, lo = self.pairs[:, 0], self.pairs[:, 1]
@@ -259,7 +265,7 @@ class PoseFit:
         (weights w = 1 / sigma of those blocks, data d of those blocks); with a prior
         (:meth:`set_prior`) its rows follow."""
         p, u = st.p, st.u
-        scale = math.exp(st.log_scale)
+        scale = math.exp(st.log_scale) if st.log_scale else 1.0
         axes = tangent_axes(u)
         n, nb = len(self.pts), len(blocks)
         n_par = self.n_unknowns(st.g is not None)
@@ -273,10 +279,8 @@ class PoseFit:
             cols[:, :, :3] = pose[:, :, :3]
         if corrected and self.corr.active:
             corr = self.corr
-            b += scale * corr.value(p, u)
-            cols[:, :, :3] += scale * corr.jac_p
-            if self.n_rot:
-                cols[:, :, 3:5] += scale * (corr.jac_u @ axes.T)
+            b += corr.value(p, u) if scale == 1.0 else scale * corr.value(p, u)
+            corr.add_pose_columns(cols, axes if self.n_rot else None, scale)
         j = 3 + self.n_rot
         if self.fit_scale:
             cols[:, :, j] = b
@@ -301,15 +305,15 @@ class PoseFit:
             jac[:3 * nb] = (cols[blocks] * w[:, None, None]).reshape(3 * nb, n_par)
             res[:3 * nb] = ((d - f[blocks]) * w[:, None]).reshape(-1)
         if kp:
-            p0, axes0, info = self.prior
+            # the prior's rows info (p - p0, axes0 . u) = info_p (p - p0) + info_u u
+            p0, _, _, info_p, info_u = self.prior
             top = jac[3 * nb:]
-            top[:] = 0.0
-            top[:, :3] = info[:, :3]
-            dev = p - p0
+            top[:, :3] = info_p
+            res[3 * nb:] = info_p @ (p0 - p)
             if self.n_rot:
-                top[:, 3:5] = info[:, 3:] @ (axes0 @ axes.T)
-                dev = np.concatenate([dev, axes0 @ u])
-            res[3 * nb:] = -(info @ dev)
+                top[:, 3:5] = info_u @ axes.T
+                res[3 * nb:] -= info_u @ u
+            top[:, kp:] = 0.0
         return jac, res
 
     def step(self, st: State, delta: np.ndarray) -> State:
@@ -344,12 +348,13 @@ class PoseFit:
         cost = float(res @ res)
         lam, converged, it = 1e-4, False, 0
         prev_gain = 0.0         # the last accepted undamped step's predicted drop (0: none)
-        idx = np.arange(jac.shape[1])
+        stride = jac.shape[1] + 1
         for it in range(1, (max_iterations or self.settings.max_iterations) + 1):
             a = jac.T @ jac
             g = jac.T @ res
-            a[idx, idx] *= 1.0 + lam
-            a[idx, idx] += 1e-300
+            diag = a.reshape(-1)[::stride]         # a view: a is a new contiguous array
+            diag *= 1.0 + lam
+            diag += 1e-300
             try:
                 delta = np.linalg.solve(a, g)
             except np.linalg.LinAlgError:
