@@ -30,6 +30,9 @@ from .pose import rotation_derivatives, tangent_axes
 RHO_M = 0.02
 """Length that converts a change of the moment direction into the reuse distance, m/rad."""
 
+_SHIFTS = np.r_[np.zeros((1, 3)), -1e-4 * EYE3]
+"""The sensors' shifts of :meth:`Corrections._exact` (the magnet moved by +h e_k, h = 0.1 mm)."""
+
 
 class Corrections:
     """The linearized corrections at the points ``points_m`` (n, 3) of a sensor model
@@ -144,11 +147,10 @@ class Corrections:
             return val, jp, ju
         k = int(near.sum())
         # the magnet moved by +h e_k is the sensors moved by -h e_k
-        shifts = np.r_[np.zeros((1, 3)), -h * EYE3]
-        pts = (self.points[near][None] + shifts[:, None]).reshape(-1, 3)
+        pts = (self.points[near][None] + _SHIFTS[:, None]).reshape(-1, 3)
         d = self.moment * self.excess.field(pts, p, u).reshape(4, k, 3)
         val[near] = d[0]
-        jp[near] = np.stack([(d[1 + j] - d[0]) / h for j in range(3)], -1)
+        jp[near] = ((d[1:] - d[0]) / h).transpose(1, 2, 0)
         axes = tangent_axes(u)
         rot = rotation_derivatives(val[near], jp[near], rel[near], axes)
         # as a derivative in u (a free 3-vector): the two rotations plus |m|'s scaling along u

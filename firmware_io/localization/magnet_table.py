@@ -26,6 +26,12 @@ T_STEPS = 360
 """Polar-angle steps of the table over [0, pi]."""
 
 
+_SLOPE_A, _BASE_A = np.array([-1.0, -1.0, 1.0, 1.0]), np.array([1.0, 1.0, 0.0, 0.0])
+_SLOPE_B, _BASE_B = np.array([-1.0, 1.0, -1.0, 1.0]), np.array([1.0, 0.0, 1.0, 0.0])
+"""The bilinear weights of a cell's four corners (i, j), (i, j + 1), (i + 1, j), (i + 1,
+j + 1): (1 - a)(1 - b), (1 - a) b, a (1 - b), a b as (a s_a + o_a)(b s_b + o_b)."""
+
+
 @functools.lru_cache(maxsize=8)
 def cylinder_excess(radius_m: float, length_m: float, octupole_m2: float) -> "CylinderExcess":
     """The table of one magnet, built once per process (it takes a fraction of a second)."""
@@ -58,6 +64,10 @@ class CylinderExcess:
         # components along rho_hat (+x here) and u (+z), scaled
         self.table = np.stack([d[:, 0] * scale, d[:, 2] * scale], -1).reshape(
             self.n_r, T_STEPS + 1, 2)
+        # the four corners of a cell as offsets into the flat table (i, j), (i, j + 1),
+        # (i + 1, j), (i + 1, j + 1)
+        self.flat = self.table.reshape(-1, 2)
+        self.corners = np.array([0, 1, T_STEPS + 1, T_STEPS + 2], np.intp)
 
     def exact(self, points: np.ndarray, position: np.ndarray, u: np.ndarray) -> np.ndarray:
         """(k, 3) T per A m^2: the exact difference by direct evaluation (slow)."""
@@ -82,11 +92,13 @@ class CylinderExcess:
             ft = np.arccos(np.clip(z[mid] / rm, -1.0, 1.0)) * (T_STEPS / math.pi)
             i = np.minimum(fs.astype(int), self.n_r - 2)
             j = np.minimum(ft.astype(int), T_STEPS - 1)
-            a, b = (fs - i)[:, None], (ft - j)[:, None]
-            tab = self.table
-            g = ((1 - a) * ((1 - b) * tab[i, j] + b * tab[i, j + 1])
-                 + a * ((1 - b) * tab[i + 1, j] + b * tab[i + 1, j + 1]))
-            g = g * (self.r_min / rm)[:, None] ** 7
+            a, b = fs - i, ft - j
+            # bilinear: the corners (k, 4, 2) weighted (1-a)(1-b), (1-a) b, a (1-b), a b, one
+            # gather and one product
+            corners = self.flat[(i * (T_STEPS + 1) + j)[:, None] + self.corners]
+            w = (a[:, None] * _SLOPE_A + _BASE_A) * (b[:, None] * _SLOPE_B + _BASE_B)
+            w *= ((self.r_min / rm) ** 7)[:, None]
+            g = np.matmul(w[:, None, :], corners)[:, 0]
             rho = np.sqrt(np.einsum("ij,ij->i", rho_v[mid], rho_v[mid]))
             rhat = rho_v[mid] / np.maximum(rho, 1e-300)[:, None]
             out[mid] = g[:, :1] * rhat + g[:, 1:] * u

@@ -44,18 +44,16 @@ def angle_between(u: np.ndarray, v: np.ndarray) -> float:
     return 2.0 * math.atan2(float(np.linalg.norm(u - v)), float(np.linalg.norm(u + v)))
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a x b for a (3,) and b (n, 3) (numpy's cross costs more than it computes here)."""
-    return np.stack([a[1] * b[:, 2] - a[2] * b[:, 1], a[2] * b[:, 0] - a[0] * b[:, 2],
-                     a[0] * b[:, 1] - a[1] * b[:, 0]], 1)
-
-
 def rotation_derivatives(value: np.ndarray, jac_p: np.ndarray, r: np.ndarray,
                          axes: np.ndarray) -> np.ndarray:
     """(n, 3, 2): d value / d(a, b) of a field that rotates rigidly with the moment (module
     docstring); value (n, 3), jac_p = d value / d position (n, 3, 3), r = points - position
-    (n, 3), axes (e1, e2)."""
-    e1, e2 = axes
-    da = _cross(e2, value) + np.einsum("nij,nj->ni", jac_p, _cross(e2, r))
-    db = -(_cross(e1, value) + np.einsum("nij,nj->ni", jac_p, _cross(e1, r)))
-    return np.stack([da, db], -1)
+    (n, 3), axes (e1, e2). Along a: e2 x (value + J_p r'); along b: -e1 x ..., written as the
+    cross-product matrices [w]x of w = (e2, -e1) applied to value and r."""
+    e1, e2 = axes.tolist()
+    skew = np.array([[[0.0, -e2[2], e2[1]], [e2[2], 0.0, -e2[0]], [-e2[1], e2[0], 0.0]],
+                     [[0.0, e1[2], -e1[1]], [-e1[2], 0.0, e1[0]], [e1[1], -e1[0], 0.0]]])
+    # (n, 3, 2): column k is [w_k]x v for v = value, and J_p [w_k]x r
+    turned = np.einsum("kij,nj->nik", skew, value)
+    turned += jac_p @ np.einsum("kij,nj->nik", skew, r)
+    return turned

@@ -61,22 +61,23 @@ class GridSearch:
         if op is None:
             # one block a sensor, T = I: D is symmetric, so D^T D = D D and D^T T = D, six
             # distinct entries each
+            # (the tables entry-major, row k C + c: the per-candidate sums come out as (6, C)
+            # and (3, C), contiguous rows for the batched 3 x 3 solve)
             c = len(d)
             self.qa = np.ascontiguousarray(np.einsum("cnij,cnjl->cnil", d, d).reshape(
-                c, n, 9)[..., _SYM].transpose(0, 2, 1).reshape(c * 6, n))
+                c, n, 9)[..., _SYM].transpose(2, 0, 1).reshape(6 * c, n))
             self.qe = np.ascontiguousarray(d.reshape(c, n, 9)[..., _SYM].transpose(
-                0, 2, 1).reshape(c * 6, n))
-            self.dt = np.ascontiguousarray(d.reshape(c, n * 3 * 3).reshape(c, n, 3, 3)
-                                           .transpose(0, 3, 1, 2).reshape(c * 3, n * 3))
+                2, 0, 1).reshape(6 * c, n))
+            self.dt = np.ascontiguousarray(d.transpose(3, 0, 1, 2).reshape(3 * c, n * 3))
             # the leave-one-out pass's coarse candidates (every other one in x and y) and the
             # rows of its tables
             g = self.candidates
             xs, ys = np.unique(g[:, 0]), np.unique(g[:, 1])
             keep = np.isin(g[:, 0], xs[::2]) & np.isin(g[:, 1], ys[::2])
             self.coarse = np.flatnonzero(keep)
-            self.coarse3 = (3 * self.coarse[:, None] + np.arange(3)).reshape(-1)
-            self.coarse6 = (6 * self.coarse[:, None] + np.arange(6)).reshape(-1)
-            self.dt3 = self.dt.reshape(c * 3, n, 3)
+            self.coarse3 = (np.arange(3)[:, None] * c + self.coarse).reshape(-1)
+            self.coarse6 = (np.arange(6)[:, None] * c + self.coarse).reshape(-1)
+            self.dt3 = self.dt.reshape(3 * c, n, 3)
             return
         d = np.einsum("kisj,csjl->ckil", op, d)
         t = op.sum(axis=2) @ basis                                        # (k, 3, j)
@@ -92,14 +93,19 @@ class GridSearch:
         """The best ``keep`` (position (3,), moment (3,)) for the frame: ``data`` (k, 3) T with
         0 where unusable, ``weights`` (k,) 1/sigma^2 (0 where unusable)."""
         wd = data * weights[:, None]
-        rhs = (self.dt @ wd.reshape(-1)).reshape(-1, 3)
         base = float(np.einsum("ki,ki->", wd, data))
         if self.isotropic:
+            # component-major: rhs and m (3, C)
+            rhs = (self.dt @ wd.reshape(-1)).reshape(3, -1)
             m, base = self._isotropic(weights, wd, rhs, base, background)
+            cost = base - np.einsum("ic,ic->c", rhs, m)
+            size = np.sqrt(np.einsum("ic,ic->c", m, m)) / self.moment
+            m = m.T
         else:
+            rhs = (self.dt @ wd.reshape(-1)).reshape(-1, 3)
             m, base = self._general(weights, wd, rhs, base, background)
-        cost = base - np.einsum("ci,ci->c", rhs, m)
-        size = np.sqrt(np.einsum("ci,ci->c", m, m)) / self.moment
+            cost = base - np.einsum("ci,ci->c", rhs, m)
+            size = np.sqrt(np.einsum("ci,ci->c", m, m)) / self.moment
         cost = np.where(np.isfinite(cost), cost, np.inf)
         # a moment far from the magnet's: a wrong basin (ranked after every plausible one)
         cost = cost + np.where((size > 0.25) & (size < 4.0), 0.0, 1e300)
@@ -122,24 +128,24 @@ class GridSearch:
         c, n = len(sub), len(weights)
         wd = data * weights[:, None]
         # per block: the candidates' right-hand sides D^T w d (C, 3, b) and A's entries (6, C, b)
-        per = np.einsum("xka,ka->xk", self.dt3[self.coarse3], wd).reshape(c, 3, n)
+        # per block: the candidates' right-hand sides D^T w d (3, C, b) and A's entries (6, C, b)
+        per = np.einsum("xka,ka->xk", self.dt3[self.coarse3], wd).reshape(3, c, n)
         rhs = per.sum(axis=2, keepdims=True) - per
-        a_blk = (self.qa[self.coarse6] * weights).reshape(c, 6, n)
-        a = (a_blk.sum(axis=2, keepdims=True) - a_blk).transpose(1, 0, 2)
+        a_blk = (self.qa[self.coarse6] * weights).reshape(6, c, n)
+        a = a_blk.sum(axis=2, keepdims=True) - a_blk
         base = float(np.einsum("ki,ki->", wd, data)) - np.einsum("ki,ki->k", wd, data)
         if background:
-            e_blk = (self.qe[self.coarse6] * weights).reshape(c, 6, n)
-            e = (e_blk.sum(axis=2, keepdims=True) - e_blk).transpose(1, 0, 2)
+            e_blk = (self.qe[self.coarse6] * weights).reshape(6, c, n)
+            e = e_blk.sum(axis=2, keepdims=True) - e_blk
             wt = np.maximum(float(weights.sum()) - weights, 1e-300)
             rb = wd.sum(axis=0)[:, None] - wd.T                          # (3, b)
             ee, er = _background_terms(e, rb)
             a = a - ee / wt
             rhs = rhs - er / wt
             base = base - np.einsum("ib,ib->b", rb, rb) / wt
-        m = _solve_sym3(a.reshape(6, -1), rhs.transpose(0, 2, 1).reshape(-1, 3))
-        m = m.reshape(c, n, 3)
-        cost = base - np.einsum("cib,cbi->cb", rhs, m)
-        size = np.sqrt(np.einsum("cbi,cbi->cb", m, m)) / self.moment
+        m = _solve_sym3(a, rhs)                                          # (3, C, b)
+        cost = base - np.einsum("icb,icb->cb", rhs, m)
+        size = np.sqrt(np.einsum("icb,icb->cb", m, m)) / self.moment
         cost = np.where(np.isfinite(cost) & (size > 0.25) & (size < 4.0) & (weights > 0),
                         cost, np.inf)
         best = cost.min(axis=0)
@@ -147,12 +153,13 @@ class GridSearch:
         return j if np.isfinite(best[j]) else None
 
     def _isotropic(self, weights, wd, rhs, base, background):
-        """The moments (C, 3) and the candidate-independent cost part, T = I: with the
-        background eliminated, M = A - E E / W and rhs -= E rb / W (W = sum w, rb = sum w d),
-        in the six distinct entries of the symmetric matrices (rhs is updated in place)."""
-        a = (self.qa @ weights).reshape(-1, 6).T
+        """The moments (3, C) and the candidate-independent cost part, T = I, from rhs (3, C):
+        with the background eliminated, M = A - E E / W and rhs -= E rb / W (W = sum w, rb =
+        sum w d), in the six distinct entries of the symmetric matrices (rhs is updated in
+        place)."""
+        a = (self.qa @ weights).reshape(6, -1)
         if background:
-            e = (self.qe @ weights).reshape(-1, 6).T
+            e = (self.qe @ weights).reshape(6, -1)
             wt = float(weights.sum())
             rb = wd.sum(axis=0)
             ee, er = _background_terms(e, rb)
@@ -175,12 +182,13 @@ class GridSearch:
             rhs -= ef @ rb
             base -= float(rb @ finv @ rb)
         a = 0.5 * (a + np.swapaxes(a, 1, 2)).reshape(c, 9)[:, _SYM].T
-        return _solve_sym3(a, rhs), base
+        return _solve_sym3(a, rhs.T).T, base
 
 
 def _solve_sym3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Solve A x = b for symmetric A given by its six distinct entries a (6, C) (00, 01, 02,
-    11, 12, 22) and b (C, 3), by the adjugate (zero where singular)."""
+    """Solve A x = b for symmetric A given by its six distinct entries a (6, ...) (00, 01, 02,
+    11, 12, 22) and b (3, ...), component first; x (3, ...), by the adjugate (zero where
+    singular)."""
     a00, a01, a02, a11, a12, a22 = a
     c00 = a11 * a22 - a12 * a12
     c01 = a02 * a12 - a01 * a22
@@ -191,15 +199,20 @@ def _solve_sym3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     det = a00 * c00 + a01 * c01 + a02 * c02
     ok = np.abs(det) > 0
     inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-    b0, b1, b2 = b[:, 0], b[:, 1], b[:, 2]
-    return np.stack([c00 * b0 + c01 * b1 + c02 * b2, c01 * b0 + c11 * b1 + c12 * b2,
-                     c02 * b0 + c12 * b1 + c22 * b2], 1) * inv[:, None]
+    b0, b1, b2 = b
+    x = np.empty(b.shape)
+    x[0] = c00 * b0 + c01 * b1 + c02 * b2
+    x[1] = c01 * b0 + c11 * b1 + c12 * b2
+    x[2] = c02 * b0 + c12 * b1 + c22 * b2
+    x *= inv
+    return x
 
 
 def _background_terms(e, rb):
     """E E and E rb for the symmetric E given by its six distinct entries ``e`` (00, 01, 02, 11,
-    12, 22; each of any shape) and ``rb`` (3, ...): E E in the same six-entry order, E rb stacked
-    on axis 1 -- what eliminating a uniform background takes from the moment's normal equations."""
+    12, 22; each of any shape) and ``rb`` (3, ...): E E in the same six-entry order, E rb (3,
+    ...) component first -- what eliminating a uniform background takes from the moment's
+    normal equations."""
     e00, e01, e02, e11, e12, e22 = e
     ee = np.stack([e00 * e00 + e01 * e01 + e02 * e02,
                    e00 * e01 + e01 * e11 + e02 * e12,
@@ -209,5 +222,5 @@ def _background_terms(e, rb):
                    e02 * e02 + e12 * e12 + e22 * e22])
     er = np.stack([e00 * rb[0] + e01 * rb[1] + e02 * rb[2],
                    e01 * rb[0] + e11 * rb[1] + e12 * rb[2],
-                   e02 * rb[0] + e12 * rb[1] + e22 * rb[2]], 1)
+                   e02 * rb[0] + e12 * rb[1] + e22 * rb[2]])
     return ee, er

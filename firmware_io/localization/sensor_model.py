@@ -197,12 +197,16 @@ class SensorModel:
 
         def induced(positions, directions):
             r = samples[None] - np.asarray(positions, float)[:, None]    # (k, S, 3)
-            rho2 = np.einsum("ksi,ksi->ks", r, r)
-            inv3 = rho2 ** -1.5 / (4 * math.pi)
+            inv2 = 1.0 / np.einsum("ksi,ksi->ks", r, r)
+            inv3 = inv2 * np.sqrt(inv2) * (1.0 / (4 * math.pi))
             # H_z of a unit dipole along axis j: (3 r_z r_j / r^5 - delta_zj / r^3) / (4 pi)
-            hz = (3.0 * r[..., 2] * inv3 / rho2)[..., None] * r
+            hz = (3.0 * r[..., 2] * inv3 * inv2)[..., None] * r
             hz[..., 2] -= inv3
-            return (op @ (hz @ directions)).reshape(len(r), n, 3, -1)
+            k, d = len(r), directions.shape[1]
+            h = hz @ directions                                          # (k, S, d)
+            # one product for every position and direction: op (3 n, S) @ (S, k d)
+            out = op @ h.transpose(1, 0, 2).reshape(len(samples), k * d)
+            return out.reshape(n, 3, k, d).transpose(2, 0, 1, 3)
 
         model.induced = induced
         return model
