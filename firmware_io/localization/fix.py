@@ -26,7 +26,7 @@ object near the sensors) stays refused.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -245,7 +245,8 @@ def _with_prior(fit: PoseFit, frame: Blocks, blocks: np.ndarray, seed: Pose) -> 
     ambient field's gradient."""
     start = fit.initial_state(seed.position_m, seed.moment_a_m2)
     if fit.last is not None:
-        start = replace(start, b=fit.last.b.copy())     # the room changes slowly
+        # the room changes slowly: the last trusted fix's background
+        start = State(start.p, start.u, start.log_scale, fit.last.b.copy(), start.g)
     w, db = frame.w[blocks], frame.d[blocks]
     fit.set_prior(seed)
     try:

@@ -18,7 +18,7 @@ it. Derivations and measured accuracy: docs/localization.md.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -408,7 +408,8 @@ class PoseFit:
             # grows as the distance squared); the next fix re-linearizes from here
             if not sol.converged or self.corr.within(st.p, st.u, slack=2.0):
                 break
-        return replace(sol, iterations=iterations)
+        return Solution(sol.state, sol.jac, sol.res, sol.blocks, sol.chi2, sol.converged,
+                        iterations)
 
     def initial_state(self, position, moment, gradient: bool = False) -> State:
         m = np.asarray(moment, float)

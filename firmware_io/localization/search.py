@@ -75,9 +75,12 @@ class GridSearch:
             xs, ys = np.unique(g[:, 0]), np.unique(g[:, 1])
             keep = np.isin(g[:, 0], xs[::2]) & np.isin(g[:, 1], ys[::2])
             self.coarse = np.flatnonzero(keep)
-            self.coarse3 = (np.arange(3)[:, None] * c + self.coarse).reshape(-1)
-            self.coarse6 = (np.arange(6)[:, None] * c + self.coarse).reshape(-1)
-            self.dt3 = self.dt.reshape(3 * c, n, 3)
+            coarse3 = (np.arange(3)[:, None] * c + self.coarse).reshape(-1)
+            coarse6 = (np.arange(6)[:, None] * c + self.coarse).reshape(-1)
+            # their rows of the tables, gathered once
+            self.dt_coarse = np.ascontiguousarray(self.dt.reshape(3 * c, n, 3)[coarse3])
+            self.qa_coarse = np.ascontiguousarray(self.qa[coarse6])
+            self.qe_coarse = np.ascontiguousarray(self.qe[coarse6])
             return
         d = np.einsum("kisj,csjl->ckil", op, d)
         t = op.sum(axis=2) @ basis                                        # (k, 3, j)
@@ -129,13 +132,13 @@ class GridSearch:
         wd = data * weights[:, None]
         # per block: the candidates' right-hand sides D^T w d (C, 3, b) and A's entries (6, C, b)
         # per block: the candidates' right-hand sides D^T w d (3, C, b) and A's entries (6, C, b)
-        per = np.einsum("xka,ka->xk", self.dt3[self.coarse3], wd).reshape(3, c, n)
+        per = np.einsum("xka,ka->xk", self.dt_coarse, wd).reshape(3, c, n)
         rhs = per.sum(axis=2, keepdims=True) - per
-        a_blk = (self.qa[self.coarse6] * weights).reshape(6, c, n)
+        a_blk = (self.qa_coarse * weights).reshape(6, c, n)
         a = a_blk.sum(axis=2, keepdims=True) - a_blk
         base = float(np.einsum("ki,ki->", wd, data)) - np.einsum("ki,ki->k", wd, data)
         if background:
-            e_blk = (self.qe[self.coarse6] * weights).reshape(6, c, n)
+            e_blk = (self.qe_coarse * weights).reshape(6, c, n)
             e = e_blk.sum(axis=2, keepdims=True) - e_blk
             wt = np.maximum(float(weights.sum()) - weights, 1e-300)
             rb = wd.sum(axis=0)[:, None] - wd.T                          # (3, b)
