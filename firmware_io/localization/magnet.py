@@ -200,11 +200,14 @@ def multipole_pose_columns(r: np.ndarray, u: np.ndarray, axes: np.ndarray, c: fl
     bvw = g[:, :3, None] * r[:, None, :]
     bvw += g[:, 3:, None] * u
     b, v = bvw[:, 0], bvw[:, 1]
-    jp = out[:, :, :3]
-    np.multiply(r[:, :, None], bvw[:, None, 2], out=jp)
-    jp += u[:, None] * v[:, None, :]
-    jp -= g[:, 0, None, None] * EYE3
-    rot = out[:, :, 3:5]
-    np.multiply(v[:, :, None], (r @ axes.T)[:, None, :], out=rot)
-    np.subtract(g[:, 3, None, None] * axes.T, rot, out=rot)
+    # dB/dp = [r u] [w1; v] - g1 I: one batched (3 x 2)(2 x 3) product, the diagonal in place
+    ru = np.empty((n, 3, 2))
+    ru[:, :, 0] = r
+    ru[:, :, 1] = u
+    jp = ru @ bvw[:, 2:0:-1]
+    jp.reshape(n, 9)[:, ::4] -= g[:, :1]
+    out[:, :, :3] = jp
+    rot = g[:, 3, None, None] * axes.T
+    rot -= v[:, :, None] * (r @ axes.T)[:, None, :]
+    out[:, :, 3:5] = rot
     return b
