@@ -54,14 +54,17 @@ class Corrections:
         self.first = {"exact": 0.25e-3, "cores": first_radius_m}
         self.lin: dict = {}
         n = len(self.points)
-        # the sum of the parts as const + J_p p + J_u u: (n, 3), (n, 3, 3), (n, 3, 3); jac_pu
-        # is [J_p | J_u] (n, 3, 6), jac_p and jac_u views of it
-        self.const = np.zeros((n, 3))
-        self.jac_pu = np.zeros((n, 3, 6))
-        self.jac_p = self.jac_pu[:, :, :3]
-        self.jac_u = self.jac_pu[:, :, 3:]
-        self._to_pose = np.zeros((6, 5))
-        self._to_pose[:3, :3] = EYE3
+        # the sum of the parts as const + J_p p + J_u u: (n, 3), (n, 3, 3), (n, 3, 3), views of
+        # one array [J_p | J_u | const] (n, 3, 7)
+        self.table = np.zeros((n, 3, 7))
+        self.jac_pu = self.table[:, :, :6]
+        self.jac_p = self.table[:, :, :3]
+        self.jac_u = self.table[:, :, 3:6]
+        self.const = self.table[:, :, 6]
+        # (7, 6): the table to (pose columns J_p, J_u e1, J_u e2 | value at (p, u))
+        self._apply = np.zeros((7, 6))
+        self._apply[:3, :3] = EYE3
+        self._apply[6, 5] = 1.0
 
     @property
     def active(self) -> bool:
@@ -105,8 +108,7 @@ class Corrections:
             self.lin[part] = (p.copy(), u.copy(), val, jp, ju, radius, p.tolist(), u.tolist())
             changed = True
         if changed:
-            self.const[:] = 0.0
-            self.jac_pu[:] = 0.0
+            self.table[:] = 0.0
             for part in self.parts:
                 p0, u0, val, jp, ju = self.lin[part][:5]
                 self.const += val - jp @ p0 - ju @ u0
@@ -117,22 +119,25 @@ class Corrections:
         """(n, 3) T: the summed linearization at (p, u)."""
         return self.const + self.jac_pu @ np.concatenate((p, u))
 
-    def add_pose_columns(self, cols: np.ndarray, axes: np.ndarray | None,
-                         scale: float = 1.0) -> None:
-        """Add ``scale`` times the linearization's pose Jacobian to ``cols`` (n, 3, >= 5):
-        columns 0-2 J_p, 3-4 J_u along the rotations about ``axes`` (e1, e2) (the fit's
-        orientation steps, :func:`.pose.rotated`); ``axes`` None: J_p alone (a fixed
-        direction)."""
+    def add_to(self, field: np.ndarray, cols: np.ndarray, p: np.ndarray, u: np.ndarray,
+               axes: np.ndarray | None, scale: float = 1.0) -> None:
+        """Add ``scale`` times the linearization at (p, u) to ``field`` (n, 3) and its pose
+        Jacobian to ``cols`` (n, 3, >= 5): columns 0-2 J_p, 3-4 J_u along the rotations about
+        ``axes`` (e1, e2) (the fit's orientation steps, :func:`.pose.rotated`); ``axes`` None:
+        J_p alone (a fixed direction). One product of the table [J_p | J_u | const]."""
+        apply = self._apply
+        apply[:3, 5] = p
+        apply[3:6, 5] = u
+        if axes is not None:
+            apply[3:6, 3:5] = axes.T
+        x = self.table @ apply
+        if scale != 1.0:
+            x *= scale
+        field += x[:, :, 5]
         if axes is None:
-            cols[:, :, :3] += self.jac_p if scale == 1.0 else scale * self.jac_p
-            return
-        to_pose = self._to_pose
-        to_pose[3:, 3:] = axes.T if scale == 1.0 else scale * axes.T
-        if scale != 1.0:
-            to_pose[:3, :3] = scale * EYE3
-        cols[:, :, :5] += self.jac_pu @ to_pose
-        if scale != 1.0:
-            to_pose[:3, :3] = EYE3
+            cols[:, :, :3] += x[:, :, :3]
+        else:
+            cols[:, :, :5] += x[:, :, :5]
 
     def _exact(self, p, u):
         """The exact cylinder minus the multipole: value, J_p (forward differences, h = 0.1

@@ -278,9 +278,7 @@ class PoseFit:
         if not self.n_rot:
             cols[:, :, :3] = pose[:, :, :3]
         if corrected and self.corr.active:
-            corr = self.corr
-            b += corr.value(p, u) if scale == 1.0 else scale * corr.value(p, u)
-            corr.add_pose_columns(cols, axes if self.n_rot else None, scale)
+            self.corr.add_to(b, cols, p, u, axes if self.n_rot else None, scale)
         j = 3 + self.n_rot
         if self.fit_scale:
             cols[:, :, j] = b
