@@ -44,6 +44,9 @@ def dipole_basis(points: np.ndarray, positions: np.ndarray) -> np.ndarray:
 
 _SYM = (0, 1, 2, 4, 5, 8)
 """Flat indices of a symmetric 3 x 3 matrix's six distinct entries (00, 01, 02, 11, 12, 22)."""
+_SYM_ROWS = np.array([[0, 1, 2], [1, 3, 4], [2, 4, 5]])
+_SYM_COLS = np.array([[0, 1, 2], [0, 1, 2], [0, 1, 2]])
+"""Entry (i, j) of the symmetric matrix as its six-entry index, and j: (D v)_i = sum_j."""
 
 
 class GridSearch:
@@ -68,17 +71,16 @@ class GridSearch:
                 c, n, 9)[..., _SYM].transpose(2, 0, 1).reshape(6 * c, n))
             self.qe = np.ascontiguousarray(d.reshape(c, n, 9)[..., _SYM].transpose(
                 2, 0, 1).reshape(6 * c, n))
-            self.dt = np.ascontiguousarray(d.transpose(3, 0, 1, 2).reshape(3 * c, n * 3))
             # the leave-one-out pass's coarse candidates (every other one in x and y) and the
             # rows of its tables
             g = self.candidates
             xs, ys = np.unique(g[:, 0]), np.unique(g[:, 1])
             keep = np.isin(g[:, 0], xs[::2]) & np.isin(g[:, 1], ys[::2])
             self.coarse = np.flatnonzero(keep)
-            coarse3 = (np.arange(3)[:, None] * c + self.coarse).reshape(-1)
             coarse6 = (np.arange(6)[:, None] * c + self.coarse).reshape(-1)
-            # their rows of the tables, gathered once
-            self.dt_coarse = np.ascontiguousarray(self.dt.reshape(3 * c, n, 3)[coarse3])
+            # their rows of the tables, gathered once (D^T, row i C + c: (3 C', n, 3))
+            self.dt_coarse = np.ascontiguousarray(d[self.coarse].transpose(3, 0, 1, 2).reshape(
+                3 * len(self.coarse), n, 3))
             self.qa_coarse = np.ascontiguousarray(self.qa[coarse6])
             self.qe_coarse = np.ascontiguousarray(self.qe[coarse6])
             return
@@ -98,9 +100,12 @@ class GridSearch:
         wd = data * weights[:, None]
         base = float(np.einsum("ki,ki->", wd, data))
         if self.isotropic:
-            # component-major: rhs and m (3, C)
-            rhs = (self.dt @ wd.reshape(-1)).reshape(3, -1)
-            m, base = self._isotropic(weights, wd, rhs, base, background)
+            # D's six entries times (w d_x, w d_y, w d_z, w): one pass over the table, (6, C, 4);
+            # rhs = D w d (3, C) component-major, E = sum w D (6, C)
+            x = (self.qe @ np.concatenate((wd, weights[:, None]), axis=1)).reshape(6, -1, 4)
+            rhs = x[_SYM_ROWS, :, _SYM_COLS].sum(axis=1)
+            e = np.ascontiguousarray(x[:, :, 3]) if background else None
+            m, base = self._isotropic(weights, wd, rhs, base, e)
             cost = base - np.einsum("ic,ic->c", rhs, m)
             size = np.sqrt(np.einsum("ic,ic->c", m, m)) / self.moment
             m = m.T
@@ -155,14 +160,13 @@ class GridSearch:
         j = int(np.argmin(best))
         return j if np.isfinite(best[j]) else None
 
-    def _isotropic(self, weights, wd, rhs, base, background):
+    def _isotropic(self, weights, wd, rhs, base, e):
         """The moments (3, C) and the candidate-independent cost part, T = I, from rhs (3, C):
-        with the background eliminated, M = A - E E / W and rhs -= E rb / W (W = sum w, rb =
-        sum w d), in the six distinct entries of the symmetric matrices (rhs is updated in
-        place)."""
+        with the background eliminated (``e``: E's six entries (6, C), None: no background),
+        M = A - E E / W and rhs -= E rb / W (W = sum w, rb = sum w d), in the six distinct
+        entries of the symmetric matrices (rhs is updated in place)."""
         a = (self.qa @ weights).reshape(6, -1)
-        if background:
-            e = (self.qe @ weights).reshape(6, -1)
+        if e is not None:
             wt = float(weights.sum())
             rb = wd.sum(axis=0)
             ee, er = _background_terms(e, rb)
