@@ -30,8 +30,11 @@ from .pose import rotation_derivatives, tangent_axes
 RHO_M = 0.02
 """Length that converts a change of the moment direction into the reuse distance, m/rad."""
 
-_SHIFTS = np.r_[np.zeros((1, 3)), -1e-4 * EYE3]
-"""The sensors' shifts of :meth:`Corrections._exact` (the magnet moved by +h e_k, h = 0.1 mm)."""
+EXACT_STEP_M = 1e-4
+"""The forward-difference step of the exact part's position Jacobian, m (its difference from the
+multipole varies on the scale of its distance, >= 10 mm)."""
+_SHIFTS = np.r_[np.zeros((1, 3)), -EXACT_STEP_M * EYE3]
+"""The sensors' shifts of :meth:`Corrections._exact`: the magnet moved by +h e_k."""
 
 
 class Corrections:
@@ -143,7 +146,7 @@ class Corrections:
         """The exact cylinder minus the multipole: value, J_p (forward differences, h = 0.1
         mm: the difference varies on the scale of its distance, >= 10 mm), J_u (module
         docstring)."""
-        h = 1e-4
+        h = EXACT_STEP_M
         n = len(self.points)
         val, jp, ju = np.zeros((n, 3)), np.zeros((n, 3, 3)), np.zeros((n, 3, 3))
         rel = self.points - p

@@ -48,8 +48,8 @@ def rotation_derivatives(value: np.ndarray, jac_p: np.ndarray, r: np.ndarray,
                          axes: np.ndarray) -> np.ndarray:
     """(n, 3, 2): d value / d(a, b) of a field that rotates rigidly with the moment (module
     docstring); value (n, 3), jac_p = d value / d position (n, 3, 3), r = points - position
-    (n, 3), axes (e1, e2). Along a: e2 x (value + J_p r'); along b: -e1 x ..., written as the
-    cross-product matrices [w]x of w = (e2, -e1) applied to value and r."""
+    (n, 3), axes (e1, e2). Along rotation k, w_k = (e2, -e1)[k]: w_k x value + J_p (w_k x r),
+    with the cross products as the matrices [w_k]x."""
     e1, e2 = axes.tolist()
     skew = np.array([[[0.0, -e2[2], e2[1]], [e2[2], 0.0, -e2[0]], [-e2[1], e2[0], 0.0]],
                      [[0.0, e1[2], -e1[1]], [-e1[2], 0.0, e1[0]], [e1[1], -e1[0], 0.0]]])
