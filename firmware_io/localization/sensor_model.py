@@ -190,22 +190,23 @@ class SensorModel:
         """Induced field as a linear operator on the magnet's applied H_z at sample points
         (designkit.sim.readings.InducedCoreModel), the applied field the magnet's dipole (per
         unit moment; the l = 3 term changes H_z at the cores, >= 20 mm away, by < 2 %)."""
-        samples = np.asarray(induced_samples_m, float)
+        # the sample points component-major (3, S): the long axis innermost in every product
+        samples = np.ascontiguousarray(np.asarray(induced_samples_m, float).T)
         op = np.asarray(induced_operator, float)
         model = cls(**kw)
         n = model.n_sensors
 
         def induced(positions, directions):
-            r = samples[None] - np.asarray(positions, float)[:, None]    # (k, S, 3)
-            inv2 = 1.0 / np.einsum("ksi,ksi->ks", r, r)
+            r = samples[None] - np.asarray(positions, float)[:, :, None]    # (k, 3, S)
+            inv2 = 1.0 / np.einsum("kis,kis->ks", r, r)
             inv3 = inv2 * np.sqrt(inv2) * (1.0 / (4 * math.pi))
             # H_z of a unit dipole along axis j: (3 r_z r_j / r^5 - delta_zj / r^3) / (4 pi)
-            hz = (3.0 * r[..., 2] * inv3 * inv2)[..., None] * r
-            hz[..., 2] -= inv3
+            hz = (3.0 * inv3 * inv2 * r[:, 2])[:, None, :] * r
+            hz[:, 2] -= inv3
             k, d = len(r), directions.shape[1]
-            h = hz @ directions                                          # (k, S, d)
+            h = np.swapaxes(directions, 0, 1) @ hz                          # (k, d, S)
             # one product for every position and direction: op (3 n, S) @ (S, k d)
-            out = op @ h.transpose(1, 0, 2).reshape(len(samples), k * d)
+            out = op @ h.reshape(k * d, -1).T
             return out.reshape(n, 3, k, d).transpose(2, 0, 1, 3)
 
         model.induced = induced
