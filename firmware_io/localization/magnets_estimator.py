@@ -310,7 +310,8 @@ class MagnetsEstimator:
         if not reason and unknown:
             reason = (f"identity unknown: another magnet makes the same field and no seed or "
                       f"trusted history tells which is {self.specs[k].name}")
-        elif m.reason and v.consistent and m.alone_m <= self.settings.alert_limit_m:
+        elif (m.reason and v.consistent and m.pl_m > self.settings.alert_limit_m
+              and m.alone_m <= self.settings.alert_limit_m):
             near = self._nearest(st, j)
             reason += (f" -- too close to {near} for the sensors to separate them "
                        f"(alone its level would be {m.alone_m * 1e3:.3g} mm)")
