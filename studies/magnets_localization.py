@@ -75,7 +75,8 @@ NOISE_T = 0.1e-3
 @dataclass
 class Device:
     """The sensors as built (positions (n, 3) m, chip frames (n, 3, 3)), the coils' field
-    there per ampere (n, 3, n_coils) T/A, the cores' rod model, and the estimator's model."""
+    there per ampere (n, 3, n_coils) T/A, the cores' rod model, the estimator's model and the
+    design's coil array."""
 
     design: object
     positions: np.ndarray
@@ -83,6 +84,7 @@ class Device:
     coil: np.ndarray
     cores: InducedCoreModel
     model: SensorModel
+    array: CoilArray
 
 
 def device(design) -> Device:
@@ -98,7 +100,7 @@ def device(design) -> Device:
         moment_a_m2=np.asarray(mg.moment_vector_a_m2), design_sha256=design.spec_hash(),
         octupole_m2=(mg.length_m / 2) ** 2 - 0.75 * mg.radius_m ** 2,
         magnet_size_m=(mg.radius_m, mg.length_m), sensor_orientations=frames)
-    return Device(design, pos, frames, coil, cores, model)
+    return Device(design, pos, frames, coil, cores, model, array)
 
 
 def rotations(dirs: np.ndarray) -> Rotation:
@@ -177,11 +179,11 @@ def pair_readings(dev: Device, truth: dict, j: int, rng) -> np.ndarray:
     return readout(dev, field, rng)
 
 
-def crb_mae(dev: Device, array, positions: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+def crb_mae(dev: Device, positions: np.ndarray, dirs: np.ndarray) -> np.ndarray:
     """(2,) m: each magnet's one-frame Cramer-Rao bound (mean absolute error of the position;
     5 unknowns a magnet and the background, cores coupled; designkit.sensing)."""
     resp = magnet_response(dev.positions, positions, dirs, MagnetShape.of(dev.design.magnet),
-                           array=array)
+                           array=dev.array)
     b = pose_bound(resp, [[0, 1]], np.arange(len(dev.positions)), dev.frames, BoundSettings())
     return b.position_mae_m[0]
 
@@ -311,9 +313,8 @@ def run(out_dir=DEFAULT_OUT, n_pairs: int = 20, n_frames: int = 50, seed: int = 
     rows = []
     for name in layouts:
         dev = device(designs[name])
-        array = CoilArray.from_design(dev.design)
         truth = pair_tracks(dev, n_pairs, n_frames, np.random.default_rng(seed + 1))
-        crb = np.array([crb_mae(dev, array, truth["pos"][j, 0], truth["dirs"][j])
+        crb = np.array([crb_mae(dev, truth["pos"][j, 0], truth["dirs"][j])
                         for j in range(n_pairs)])
         for mode in modes:
             rows.append(summary(name, mode, run_layout(dev, truth, mode, seed + 7), crb))
