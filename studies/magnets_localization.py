@@ -2,30 +2,25 @@
 trusted fix more than 5 mm off, 30-60 mm apart and 30-60 mm above the array, on the thesis'
 sensor layout and on the layout ``designkit sensors plan`` places for two magnets?
 
-Data (not the estimator's model): each magnet is magpylib's finite cylinder (the design's
-magnet, tilted 0-30 degrees from its axis, any azimuth) at the sensors; the cores it magnetizes
-are designkit's rod model (:class:`designkit.sim.readings.InducedCoreModel`) driven by
-magpylib's H at the cores; the coils' field is designkit's at the frame's currents (each coil
-uniform in +-2 A, the current the planned layout stays linear at); the TLV493D chain (0.1 mT
-noise per axis, 0.098 mT counts, NaN beyond 130 mT) on each chip's axes. The estimator
-(:class:`firmware_io.localization.MagnetsEstimator`, default settings, uncalibrated: no
-sensor errors are simulated) knows the nominal layout, the coils' field and the rod model.
-
-Pairs: centres 30-60 mm apart along a random horizontal direction, each 30-60 mm up (the
-pair's middle within 10 mm of the array's centre), moving at up to 50 mm/s for ``--frames``
-frames of 2 ms. Modes: 'frame' -- each frame alone, the seeds the true positions displaced by
-2 mm (identities only, no covariance: a runner's acquisition); 'track' -- the runner's case:
-its tracker (:class:`firmware_io.runner.tracker.PoseTracker`, one a magnet, fed each magnet's
-consistent fixes) predicts each magnet's pose and covariance at the next frame, that frame's
-seed (identity hints until a magnet's first consistent fix); 'prior' -- a calibrated tracker, as
-studies/pose_integrity.py's: each frame alone with the true poses displaced by N(0, 0.5 mm)
-per axis and N(0, 2 degrees) per tangent axis as seeds, with that covariance.
-Printed per layout, mode and magnet: availability (ok), MAE of the trusted fixes, the
-one-frame Cramer-Rao bound's MAE (designkit.sensing, cores coupled, the pair's first frame),
-trusted fixes > 5 mm off and beyond their protection level, identity swaps among the trusted.
+Data (not the estimator's model): magpylib's finite cylinders (the design's magnet, tilted 0-30
+degrees, any azimuth); the cores they magnetize, designkit's rod model (InducedCoreModel) driven
+by magpylib's H at the cores; the coils' field at the frame's currents (each coil uniform in
++-2 A: the planned layout stays linear there); the TLV493D chain (0.1 mT noise, 0.098 mT
+counts, NaN beyond 130 mT) on each chip's axes. The estimator (MagnetsEstimator, default
+settings, uncalibrated: no sensor errors simulated) knows the nominal layout, the coils' field
+and the rod model. Pairs: 30-60 mm apart, each 30-60 mm up, their middle within 10 mm of the
+centre, moving at up to 50 mm/s for ``--frames`` frames (500 a second). Modes: 'frame' -- each frame
+alone, seeded with the true positions displaced by 2 mm (identities only, no covariance: an
+acquisition); 'prior' -- each frame alone with a calibrated tracker's prediction, the true
+poses displaced by N(0, 0.5 mm) per axis and N(0, 2 degrees) per tangent axis with that
+covariance (as studies/pose_integrity.py); 'track' -- the runner's tracker
+(firmware_io.runner.tracker.PoseTracker, one a magnet, fed each consistent fix) predicts the
+next frame's seed with its covariance. Printed per layout, mode and magnet: availability,
+trusted MAE, the one-frame Cramer-Rao bound's MAE (designkit.sensing, coupled cores, the
+pair's first frame), trusted fixes > 5 mm off and beyond their protection level, swaps.
 
     nice -n 10 python studies/magnets_localization.py OUT [--n 20] [--frames 50] [--full]
-        [--planned design.toml] [--layouts thesis,planned] [--modes frame,track]
+        [--planned design.toml] [--layouts thesis,planned] [--modes frame,prior,track]
 """
 
 from __future__ import annotations
