@@ -13,14 +13,15 @@ centre, moving at up to 50 mm/s for ``--frames`` frames (500 a second). Modes: '
 alone, seeded with the true positions displaced by 2 mm (identities only, no covariance: an
 acquisition); 'prior' -- each frame alone with a calibrated tracker's prediction, the true
 poses displaced by N(0, 0.5 mm) per axis and N(0, 2 degrees) per tangent axis with that
-covariance (as studies/pose_integrity.py); 'track' -- the runner's tracker
-(firmware_io.runner.tracker.PoseTracker, one a magnet, fed each consistent fix) predicts the
-next frame's seed with its covariance. Printed per layout, mode and magnet: availability,
-trusted MAE, the one-frame Cramer-Rao bound's MAE (designkit.sensing, coupled cores, the
-pair's first frame), trusted fixes > 5 mm off and beyond their protection level, swaps.
+covariance (as studies/pose_integrity.py); 'track' -- a constant-velocity filter a magnet
+(FrameTracker) fed the frame-only measurement of each consistent fix predicts the next seed;
+'runner' -- the same with the runner's tracker (PoseTracker) fed the fixes themselves.
+Printed per layout, mode and magnet: availability, trusted MAE, the one-frame Cramer-Rao
+bound's MAE (designkit.sensing, coupled cores, the pair's first frame), trusted fixes > 5 mm
+off and beyond their protection level, swaps.
 
-    nice -n 10 python studies/magnets_localization.py OUT [--n 20] [--frames 50] [--full]
-        [--planned design.toml] [--layouts thesis,planned] [--modes frame,prior,track]
+    nice -n 10 python studies/magnets_localization.py OUT [--n 10] [--frames 200] [--full]
+        [--planned design.toml] [--layouts thesis,planned] [--modes frame,prior,track,runner]
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ from firmware_io.runner.tracker import PoseTracker
 from studies._common import ROOT, finish, load_average
 
 DEFAULT_OUT = ROOT / "out" / "magnets_localization"
-MODES = ("frame", "prior", "track")
+MODES = ("frame", "prior", "track", "runner")
 LAYOUTS = ("thesis", "planned")
 FRAME_S = 2e-3
 """Time between frames, s (500 frames/s)."""
@@ -204,6 +205,72 @@ def true_priors(truth: dict, j: int, k: int, size: float, rng) -> list:
     return out
 
 
+ACCEL_RMS_M_S2 = 5.0
+"""The 'track' filter's white acceleration, rms m/s^2 (a finger's quick moves)."""
+TURN_RMS_RAD_S = math.radians(60.0)
+"""The direction's random walk, rms rad/s (the runner's tracker's turning rate)."""
+
+
+class FrameTracker:
+    """One magnet's tracker in mode 'track': a constant-velocity Kalman filter of the position
+    whose measurement is the frame's own (``MagnetsEstimate.frame_positions_m`` and its
+    covariance: the fix without the prior it was seeded with), and the direction's random walk
+    from the newest consistent fix (its covariance block, which the recursion may reuse: the
+    fix is the posterior and the prediction only adds the turn). :meth:`prior` is the next
+    frame's seed."""
+
+    def __init__(self):
+        self.x, self.p, self.t = None, None, 0.0
+        self.moment, self.rot = None, None
+
+    def _predicted(self, t: float):
+        dt = t - self.t
+        f = np.eye(6)
+        f[:3, 3:] = dt * np.eye(3)
+        q = ACCEL_RMS_M_S2 ** 2 * np.kron(np.array([[dt ** 4 / 4, dt ** 3 / 2],
+                                                    [dt ** 3 / 2, dt * dt]]), np.eye(3))
+        return f @ self.x, f @ self.p @ f.T + q
+
+    def update(self, fix, position, cov, t: float) -> None:
+        """Fold in a magnet's fix (an Estimate) and its frame-only position and covariance."""
+        if not fix.consistent or position is None or fix.covariance is None:
+            return
+        if self.x is None:
+            self.x = np.r_[position, np.zeros(3)]
+            self.p = np.diag(np.r_[np.diag(cov), [0.3 ** 2] * 3])
+            self.p[:3, :3] = cov
+        else:
+            x, p = self._predicted(t)
+            s = p[:3, :3] + cov
+            k = p[:, :3] @ np.linalg.inv(s)
+            self.x, self.p = x + k @ (position - x[:3]), p - k @ p[:3]
+        self.t, self.moment = t, fix.moment_a_m2.copy()
+        self.rot = (fix.covariance[3:5, 3:5].copy(), t)
+
+    def prior(self, t: float) -> Pose | None:
+        """The seed at ``t`` s: the filter's predicted position and covariance, the newest
+        fix's direction with its variance grown by the turn (None before the first fix)."""
+        if self.x is None:
+            return None
+        x, p = self._predicted(t)
+        cov = np.zeros((5, 5))
+        cov[:3, :3] = p[:3, :3]
+        rot, t_rot = self.rot
+        cov[3:, 3:] = rot + np.eye(2) * TURN_RMS_RAD_S ** 2 * (t - t_rot) ** 2
+        return Pose(x[:3].copy(), self.moment.copy(), cov)
+
+
+def filtered_seeds(trackers: list, seeds: list, fit, time_s: float) -> list:
+    """Mode 'track': each magnet's :class:`FrameTracker` takes its frame-only measurement and
+    predicts the next frame's seed (the identity hint until its first)."""
+    out = []
+    for k, (tr, m, s) in enumerate(zip(trackers, fit.magnets, seeds)):
+        tr.update(m, fit.frame_positions_m[k], fit.frame_covariances_m2[k], time_s)
+        nxt = tr.prior(time_s + FRAME_S)
+        out.append(s if nxt is None else nxt)
+    return out
+
+
 def tracked_seeds(trackers: list, seeds: list, fit, time_s: float) -> list:
     """The runner's tracker (:class:`firmware_io.runner.tracker.PoseTracker`, one a magnet):
     each magnet's consistent fix (its pose covariance) is folded in, and its prediction at the
@@ -232,6 +299,7 @@ def run_layout(dev: Device, truth: dict, mode: str, seed: int) -> dict:
         est.reset()
         seeds = hints(truth, j, size, rng)
         trackers = [PoseTracker(), PoseTracker()]
+        filters = [FrameTracker(), FrameTracker()]
         for k in range(n_frames):
             if mode != "track":
                 est.reset()
@@ -249,6 +317,8 @@ def run_layout(dev: Device, truth: dict, mode: str, seed: int) -> dict:
                 swapped[j, k, i] = (np.linalg.norm(m.position_m - true[1 - i])
                                     < err[j, k, i])
             if mode == "track":
+                seeds = filtered_seeds(filters, seeds, fit, k * FRAME_S)
+            elif mode == "runner":
                 seeds = tracked_seeds(trackers, seeds, fit, k * FRAME_S)
     return {"ok": ok, "err": err, "pl": pl, "swapped": swapped, "ts": ts}
 
@@ -297,7 +367,7 @@ def _table(res: dict) -> str:
     return "\n".join(lines)
 
 
-def run(out_dir=DEFAULT_OUT, n_pairs: int = 20, n_frames: int = 50, seed: int = 0,
+def run(out_dir=DEFAULT_OUT, n_pairs: int = 10, n_frames: int = 200, seed: int = 0,
         layouts=LAYOUTS, modes=MODES, planned=None) -> dict:
     """The study (module docstring); returns its numbers (also written as JSON)."""
     out = Path(out_dir)
@@ -323,10 +393,10 @@ def run(out_dir=DEFAULT_OUT, n_pairs: int = 20, n_frames: int = 50, seed: int = 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", nargs="?", default=str(DEFAULT_OUT), help="output folder")
-    ap.add_argument("--n", type=int, default=20, help="pairs per layout (each --frames frames)")
-    ap.add_argument("--frames", type=int, default=50, help="frames per pair (2 ms apart)")
+    ap.add_argument("--n", type=int, default=10, help="pairs per layout (each --frames frames)")
+    ap.add_argument("--frames", type=int, default=200, help="frames per pair (2 ms apart)")
     ap.add_argument("--full", action="store_true", help="10 000 fixes per layout and mode "
-                    "(200 pairs x 50 frames; the acceptance run)")
+                    "(50 pairs x 200 frames; the acceptance run)")
     ap.add_argument("--planned", default=None, help="design file of the planned layout "
                     "(designkit sensors plan --magnets 2 writes OUT/design.toml)")
     ap.add_argument("--layouts", default=None, help="subset of: " + ", ".join(LAYOUTS)
@@ -337,7 +407,7 @@ def main(argv=None) -> int:
     layouts = tuple(x.strip() for x in (a.layouts or ("thesis,planned" if a.planned else
                                                       "thesis")).split(",") if x.strip())
     modes = tuple(x.strip() for x in a.modes.split(",") if x.strip())
-    n_pairs = 200 if a.full else a.n
+    n_pairs = 50 if a.full else a.n
     bad = [x for x in layouts if x not in LAYOUTS] + [m for m in modes if m not in MODES]
     if bad or n_pairs < 1 or a.frames < 1 or a.seed < 0 or (
             "planned" in layouts and not (a.planned and Path(a.planned).is_file())):
@@ -347,7 +417,7 @@ def main(argv=None) -> int:
               f"seed >= 0", file=sys.stderr)
         return 2
     try:
-        run(a.out, n_pairs, 50 if a.full else a.frames, a.seed, layouts, modes, a.planned)
+        run(a.out, n_pairs, 200 if a.full else a.frames, a.seed, layouts, modes, a.planned)
     except KeyboardInterrupt:
         print("interrupted: nothing written", file=sys.stderr)
         return 130

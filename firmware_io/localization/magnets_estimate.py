@@ -28,6 +28,12 @@ class MagnetsEstimate:
     chi2, dof : the joint residual test's statistic and degrees of freedom
     reason : why not every magnet is ok ('' when all are): the frame's, or the first
         not-ok magnet's, named
+    frame_positions_m, frame_covariances_m2 : per magnet, its position (3,) m and covariance
+        (3, 3) m^2 from this frame's sensors alone (a seed's prior taken out, linearized at
+        the fix), or None (not found, not determined by the sensors alone; N = 1: the
+        single-magnet fix does not report it): the measurement a
+        tracker's filter takes in -- a fix with a prior already holds the prediction, and
+        filtering the fix again counts the prediction twice (docs/localization.md)
     """
 
     magnets: tuple
@@ -37,6 +43,8 @@ class MagnetsEstimate:
     chi2: float = 0.0
     dof: int = 0
     reason: str = ""
+    frame_positions_m: tuple = ()
+    frame_covariances_m2: tuple = ()
 
     @property
     def ok(self) -> bool:
@@ -51,4 +59,6 @@ class MagnetsEstimate:
     @classmethod
     def refused(cls, estimates, reason: str) -> "MagnetsEstimate":
         """A not-ok frame: each magnet's given (not-ok) estimate, one reason."""
-        return cls(tuple(estimates), reason=reason)
+        est = tuple(estimates)
+        return cls(est, reason=reason, frame_positions_m=(None,) * len(est),
+                   frame_covariances_m2=(None,) * len(est))

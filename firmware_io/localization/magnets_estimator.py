@@ -215,7 +215,8 @@ class MagnetsEstimator:
             self.history[0] = fix.position_m.copy()
         return MagnetsEstimate((fix,), fix.excluded_sensors, fix.consistent,
                                fix.background_t.copy(), fix.chi2, fix.dof,
-                               "" if fix.ok else f"{self.specs[0].name}: {fix.reason}")
+                               "" if fix.ok else f"{self.specs[0].name}: {fix.reason}",
+                               (None,), (None,))
 
     def _fit(self, readings, currents, seeds) -> MagnetsEstimate:
         fit = self.fit
@@ -296,9 +297,13 @@ class MagnetsEstimator:
                 reasons.append(f"{self.specs[k].name}: {est.reason}")
         if v.consistent:
             self.last_b = st.b.copy()
+        alone = [v.magnets[found[k]].frame if k in found else None
+                 for k in range(self.n_magnets)]
         return MagnetsEstimate(tuple(out), excluded, v.consistent, st.b.copy(),
                                float(v.solution.chi2), v.dof,
-                               "" if not reasons else v.reason or reasons[0])
+                               "" if not reasons else v.reason or reasons[0],
+                               tuple(None if a is None else a[0] for a in alone),
+                               tuple(None if a is None else a[1] for a in alone))
 
     def _magnet_estimate(self, v: JointVerdict, j: int, k: int, unknown: bool,
                          prior_used: bool, n_used: int) -> Estimate:

@@ -85,7 +85,9 @@ class MagnetVerdict:
     """One magnet's integrity in a joint solution: ok, reason, its covariance (5, 5), the
     position and orientation protection levels (m, rad) with and without the undetected fault
     (``free``), and the position level it would have if the other magnets' poses were known
-    (``alone_m``: tells magnets too close to separate from a weak signal)."""
+    (``alone_m``: tells magnets too close to separate from a weak signal); ``frame``: its
+    position (3,) m and covariance (3, 3) m^2 from the sensors alone (:func:`frame_only`), or
+    None."""
 
     ok: bool
     reason: str
@@ -94,6 +96,7 @@ class MagnetVerdict:
     pl_rad: float
     free: tuple
     alone_m: float
+    frame: tuple | None = None
 
 
 @dataclass(frozen=True)
@@ -309,13 +312,41 @@ def _verdict(fit: MagnetsFit, sol: JointSolution, frame: tuple, excluded: tuple)
         cov0 = None
     reason = _inconsistent(fit, sol, dof)
     mags = []
+    alone = frame_only(sol, fit.n_unknowns(k))
     for j in range(k):
-        mags.append(_magnet_verdict(fit, sol, frame, cov0, j, dof))
+        v = _magnet_verdict(fit, sol, frame, cov0, j, dof)
+        if alone is not None:
+            cols = slice(MAGNET_UNKNOWNS * j, MAGNET_UNKNOWNS * j + 3)
+            v = dataclasses.replace(v, frame=(sol.state.poses[j].p + alone[0][cols],
+                                              alone[1][cols, cols]))
+        mags.append(v)
     if not reason and any(not math.isfinite(m.pl_m) for m in mags):
         reason = "singular Fisher information: the poses are not determined"
     if reason:
         mags = [dataclasses.replace(m, ok=False, reason=reason) for m in mags]
     return JointVerdict(sol, not reason, reason, tuple(mags), dof, excluded)
+
+
+def frame_only(sol: JointSolution, n_par: int):
+    """(step (P,), covariance (P, P)) of the sensors alone at the solution: the Gauss-Newton
+    step F^-1 J_s^T r_s from it and F^-1, F = J_s^T J_s over the sensors' rows only (a seed's
+    prior rows left out), inflated by chi2 / dof above 1 as the fix's; None when the sensors
+    alone do not determine the unknowns. The fix with a prior is the posterior; this is the
+    frame's own measurement of it (linearized there), what a tracker's filter may take in
+    without counting its own prediction twice."""
+    nb = len(sol.blocks)
+    js, rs = sol.jac[:3 * nb], sol.res[:3 * nb]
+    dof = 3 * nb - n_par
+    if dof < 1:
+        return None
+    try:
+        cov = np.linalg.inv(js.T @ js)
+    except np.linalg.LinAlgError:
+        return None
+    if not np.all(np.isfinite(cov)):
+        return None
+    chi2 = float(rs @ rs)
+    return cov @ (js.T @ rs), cov * max(1.0, chi2 / dof)
 
 
 def _magnet_verdict(fit: MagnetsFit, sol: JointSolution, frame: tuple, cov0, j: int,
