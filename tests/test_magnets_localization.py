@@ -300,3 +300,26 @@ def test_bad_construction_is_refused_in_one_line(grid):
     with pytest.raises(BadInputError, match="model"):
         MagnetsEstimator("map.npz", [grid.design.magnet])
     assert isinstance(grid.model, SensorModel)
+
+
+def test_the_frame_only_measurement_takes_the_prior_out(grid, scene):
+    """Seeds 1 mm off with a tight (0.2 mm) covariance pull the fixes towards them; the
+    frame-only positions are the sensors' own measurement: within 3 sd of their covariance of
+    the truth, where the fixes are not (a frame-only step over the prior's rows too would
+    return the fix)."""
+    dirs, field = scene
+    size = float(np.linalg.norm(grid.model.moment_a_m2))
+    cov = np.diag([0.2e-3 ** 2] * 3 + [math.radians(1.0) ** 2] * 2)
+    off = np.array([1e-3, -1e-3, 0.5e-3])
+    seeds = [Pose(p + off, size * u, cov) for p, u in zip(P0, dirs)]
+    est = MagnetsEstimator(grid.model, [grid.design.magnet] * 2)
+    r, cur = _frame(grid, field, np.random.default_rng(11))
+    fit = est.estimate(r, cur, seeds=seeds)
+    assert fit.consistent and all(m.prior_used for m in fit.magnets)
+    for k in range(2):
+        fix_err = fit.magnets[k].position_m - P0[k]
+        frame_err = fit.frame_positions_m[k] - P0[k]
+        c = fit.frame_covariances_m2[k]
+        assert float(frame_err @ np.linalg.solve(c, frame_err)) < 3.0 ** 2 * 3
+        assert np.linalg.norm(frame_err) < 0.5 * np.linalg.norm(fix_err)
+        assert np.trace(c) > np.trace(fit.magnets[k].covariance[:3, :3])   # no prior in it

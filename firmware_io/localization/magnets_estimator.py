@@ -154,6 +154,11 @@ class MagnetsEstimator:
             currents = check_currents(currents_a, self.model.n_coils)
             seeds = self._check_seeds(seeds)
         except BadInputError as exc:
+            # the warm starts are forgotten (as the single-magnet estimator's); the identities'
+            # history is kept: one bad frame does not make the magnets anonymous
+            self.last = [None] * self.n_magnets
+            if self.single is not None:
+                self.single.reset()
             return self._refused(f"bad frame: {exc}")
         try:
             if self.single is not None:
