@@ -17,6 +17,7 @@ from designkit.design import default_design
 from firmware_io.localization import (MagnetsEstimate, MagnetsEstimator, ModelEstimator, Pose,
                                       SensorModel)
 from studies.magnets_localization import crb_mae, device, magnet_fields, readout, tilted
+from studies.magnets_localization import main as study_main
 
 P0 = np.array([[-0.020, 0.000, 0.035], [0.020, 0.005, 0.040]])
 """Two magnets 40 mm apart, 35 and 40 mm up."""
@@ -323,3 +324,23 @@ def test_the_frame_only_measurement_takes_the_prior_out(grid, scene):
         assert float(frame_err @ np.linalg.solve(c, frame_err)) < 3.0 ** 2 * 3
         assert np.linalg.norm(frame_err) < 0.5 * np.linalg.norm(fix_err)
         assert np.trace(c) > np.trace(fit.magnets[k].covariance[:3, :3])   # no prior in it
+
+
+def test_from_map_and_a_frame_without_magnets(small_map):
+    """From a v2 map file (the small coupled-core map): a frame with no magnet in it (zero
+    field, zero currents) finds none to trust and says why; nothing non-finite out."""
+    mg = default_design().magnet
+    est = MagnetsEstimator.from_map(small_map, [mg, mg], names=["index", "thumb"])
+    n, nc = est.model.n_sensors, est.model.n_coils
+    fit = est.estimate(np.zeros((n, 3)), np.zeros(nc))
+    assert not any(m.ok for m in fit.magnets) and fit.reason and _all_finite(fit)
+    assert est.names == ("index", "thumb")
+
+
+@pytest.mark.parametrize("argv", [["--n", "0"], ["--frames", "0"], ["--modes", "cold"],
+                                  ["--layouts", "planned"], ["--seed", "-1"]])
+def test_the_study_refuses_bad_options_in_one_line(tmp_path, capsys, argv):
+    assert study_main([str(tmp_path / "out")] + argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "error:" in err
+    assert not (tmp_path / "out").exists()
