@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from designkit.design import default_design
-from firmware_io.localization import (MagnetsEstimate, MagnetsEstimator, ModelEstimator, Pose,
-                                      SensorModel)
+from firmware_io.localization import (POSITION_ONLY, MagnetsEstimate, MagnetsEstimator,
+                                      ModelEstimator, Pose, SensorModel)
 from studies.magnets_localization import crb_mae, device, magnet_fields, readout, tilted
 from studies.magnets_localization import main as study_main
 
@@ -298,6 +298,8 @@ def test_bad_construction_is_refused_in_one_line(grid):
         MagnetsEstimator(grid.model, [grid.design.magnet, object()])
     with pytest.raises(BadInputError, match="names"):
         MagnetsEstimator(grid.model, [grid.design.magnet] * 2, names=["a", "a"])
+    with pytest.raises(BadInputError, match="settings"):
+        MagnetsEstimator(grid.model, [grid.design.magnet] * 2, POSITION_ONLY)
     with pytest.raises(BadInputError, match="model"):
         MagnetsEstimator("map.npz", [grid.design.magnet])
     assert isinstance(grid.model, SensorModel)
