@@ -19,6 +19,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 from dataclasses import dataclass
@@ -168,8 +169,7 @@ def _relabeled(fit: MagnetsFit, frame: FrameData, verdict: JointVerdict, ids) ->
     if same:
         sol = verdict.solution
         new = JointState(tuple(ids), st.poses, st.b)
-        return JointVerdict(type(sol)(new, sol.jac, sol.res, sol.blocks, sol.chi2,
-                                      sol.converged, sol.iterations),
+        return JointVerdict(dataclasses.replace(sol, state=new),
                             verdict.consistent, verdict.reason, verdict.magnets, verdict.dof,
                             verdict.excluded)
     start = JointState(tuple(ids), tuple(fit.engines[i].initial_state(p.p, p.u)
