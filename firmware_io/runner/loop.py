@@ -322,6 +322,17 @@ class Runner:
         problems: list[tuple[str, str]] = []
         if fix is None:
             return False, problems
+        self._note_frame(fix, t_s)
+        problems.extend(fix.problems)
+        accepted = self._accept(fix, t_s, problems, self)
+        self.last_estimate_ok = accepted      # taken into the tracker
+        self.accepted_in_row = self.accepted_in_row + 1 if accepted else 0
+        self.pipeline.track = self.tracker.snapshot()   # the next frame's prior
+        return True, problems
+
+    def _note_frame(self, fix, t_s: float) -> None:
+        """A new result from the sensor side (a :class:`Fix`, or anything with its
+        ``frame_t_s`` and ``fault_excluded``): the pass interval and the exclusion log."""
         self.last_fix = fix
         if math.isfinite(fix.frame_t_s):
             self.frame_times.append(fix.frame_t_s)
@@ -329,17 +340,11 @@ class Runner:
                 t = list(self.frame_times)
                 d = sorted(b - a for a, b in zip(t, t[1:]))
                 self.pass_interval_s = d[(len(d) - 1) // 2]
-        problems.extend(fix.problems)
         if fix.fault_excluded != self.fault_excluded:
             self.fault_excluded = fix.fault_excluded
             self.exclusion_log.append((t_s, fix.fault_excluded))
             self.log(f"[{t_s:9.4f} s] fault detection excludes sensors "
                      f"{list(fix.fault_excluded) or 'none'}")
-        accepted = self._accept(fix, t_s, problems, self)
-        self.last_estimate_ok = accepted      # taken into the tracker
-        self.accepted_in_row = self.accepted_in_row + 1 if accepted else 0
-        self.pipeline.track = self.tracker.snapshot()   # the next frame's prior
-        return True, problems
 
     def _accept(self, fix: Fix, t_s: float, problems: list, lane) -> bool:
         """Take one magnet's fix into its track (``lane``: ``tracker``, ``gate``, ``have_fix``,

@@ -122,31 +122,7 @@ class SensorPipeline:
         bad = self._bad_frame(frame)
         if bad:
             return self._refused(frame, bad, t0)
-        values = np.asarray(frame.readings_t, float)
-        status = list(frame.status)
-        # beyond the linear range (or Inf): saturated, whatever the driver said
-        with np.errstate(invalid="ignore"):
-            beyond = np.any(np.abs(values) > TLV493D_LINEAR_RANGE_T, axis=1)
-        for i in np.flatnonzero(beyond):
-            if status[i] == "ok":
-                status[i] = "saturated"
-        # the currents the coils really carried when the frame's field was sampled (R-L
-        # model), not the command they lag nor today's
-        currents = self.currents_at(frame.t_s)
-        predicted = self.expected_saturation(currents)
-        healthy = np.array([s == "ok" for s in status])
-        # the one headroom rule: predicted beyond EXPECTED_SATURATION -> left out, no fault
-        # (whatever the sensor reads, also a saturated reading the model expected)
-        quiet = predicted & (healthy | np.array([s == "saturated" for s in status]))
-        out = ~healthy & ~quiet
-        newly = [i for i in np.flatnonzero(out) if not self.excluded[i]]
-        problems = []
-        if newly:
-            i = newly[0]
-            problems.append((SENSOR_FAULTS.get(status[i], "sensor_dead"),
-                             f"sensor {i} reports {status[i]!r}; excluded"))
-        self.excluded = out | quiet | self.latch.latched
-        readings = np.where(self.excluded[:, None], np.nan, values)
+        readings, currents, problems, quiet = self._screen(frame)
         cold = self.reacquire
         if cold:
             self.reacquire = False
@@ -180,6 +156,37 @@ class SensorPipeline:
                    "" if ok else est.reason, np.asarray(est.background_t, float),
                    None if cov is None else np.asarray(cov, float).copy(),
                    acquired, bool(est.prior_used), candidate and not acquired)
+
+    def _screen(self, frame: SensorFrame):
+        """The frame's health and headroom checks: (readings (n_sensors, 3) T with NaN where a
+        sensor is left out, the modelled currents (n_coils,) A at the frame's time, the sensor
+        problems it raises, the sensors left out for predicted saturation (bool))."""
+        values = np.asarray(frame.readings_t, float)
+        status = list(frame.status)
+        # beyond the linear range (or Inf): saturated, whatever the driver said
+        with np.errstate(invalid="ignore"):
+            beyond = np.any(np.abs(values) > TLV493D_LINEAR_RANGE_T, axis=1)
+        for i in np.flatnonzero(beyond):
+            if status[i] == "ok":
+                status[i] = "saturated"
+        # the currents the coils really carried when the frame's field was sampled (R-L
+        # model), not the command they lag nor today's
+        currents = self.currents_at(frame.t_s)
+        predicted = self.expected_saturation(currents)
+        healthy = np.array([s == "ok" for s in status])
+        # the one headroom rule: predicted beyond EXPECTED_SATURATION -> left out, no fault
+        # (whatever the sensor reads, also a saturated reading the model expected)
+        quiet = predicted & (healthy | np.array([s == "saturated" for s in status]))
+        out = ~healthy & ~quiet
+        newly = [i for i in np.flatnonzero(out) if not self.excluded[i]]
+        problems = []
+        if newly:
+            i = newly[0]
+            problems.append((SENSOR_FAULTS.get(status[i], "sensor_dead"),
+                             f"sensor {i} reports {status[i]!r}; excluded"))
+        self.excluded = out | quiet | self.latch.latched
+        readings = np.where(self.excluded[:, None], np.nan, values)
+        return readings, currents, problems, quiet
 
     def _fit(self, readings: np.ndarray, currents, seed, t_s: float):
         """The estimate of one frame with the sensor side's trust: (estimate, the sensors fault
