@@ -127,7 +127,8 @@ class MagnetsRunner(Runner):
                       for k, name in enumerate(magnets.names)]
         self.tracker, self.gate = self.lanes[0].tracker, self.lanes[0].gate
         self.pairs = MagnetPairs(magnets.radii_m, magnets.lengths_m, names=magnets.names)
-        self.pipeline = MagnetsPipeline(estimator, self.layout, self.history.at, self.nominal)
+        self.pipeline = MagnetsPipeline(estimator, self.layout, self.history.at, self.nominal,
+                                        magnets.names)
         self.positions_m = np.full((n, 3), np.nan)
         self.torques_n_m = np.zeros((n, 3))
         self.pair_n = np.zeros((n, 3))

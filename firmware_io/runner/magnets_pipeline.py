@@ -57,6 +57,7 @@ class MagnetsPipeline(SensorPipeline):
     layout : SensorLayout -- the sensors in the estimator's order
     currents_at : callable -- ``currents_at(t_s) -> (n_coils,)`` A at a frame's time
     moments_a_m2 : (N, 3) A m^2 -- each magnet's moment until the estimator finds one
+    names : sequence of N str -- what the problems call each magnet (default its index)
     clock : callable, s
 
     ``tracks``: each magnet's newest :class:`~firmware_io.runner.tracker.TrackedPose` (or None),
@@ -64,9 +65,10 @@ class MagnetsPipeline(SensorPipeline):
     """
 
     def __init__(self, estimator, layout: SensorLayout, currents_at: Callable,
-                 moments_a_m2, clock: Callable[[], float] = time.perf_counter):
+                 moments_a_m2, names=None, clock: Callable[[], float] = time.perf_counter):
         moments = np.asarray(moments_a_m2, float).reshape(-1, 3)
         super().__init__(estimator, layout, currents_at, moments[0], clock)
+        self.names = [str(k) for k in range(len(moments))] if names is None else list(names)
         self.moments = moments.copy()
         self.tracks: list = [None] * len(moments)
         self.positions: list = [None] * len(moments)
@@ -106,7 +108,7 @@ class MagnetsPipeline(SensorPipeline):
         for i, est in enumerate(fit.magnets):
             fixes.append(self._magnet_fix(i, est, t, cold, fde))
             if not est.ok:
-                problems.append(("lost", f"magnet {i}: {est.reason or 'not trusted'}"))
+                problems.append(("lost", f"{self.names[i]}: {est.reason or 'not trusted'}"))
         if any(f.ok for f in fixes):
             self.background_t = bg
         saturating = tuple(int(k) for k in np.flatnonzero(quiet))
