@@ -61,10 +61,10 @@ def run_pinch(settings: RunSettings, *, design=None, map_path=None, out=Path("ru
     st = settings
     design = design if isinstance(design, Design) else load_design(design)
     _check(st, design, estimator)
+    pinch_trajectory(pinch, design.magnets, _box(design))   # refused before anything is built
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     array = CoilArray.from_design(design)
-    pinch_trajectory(pinch, design.magnets, _box(design))   # refused before a map is built
     map_path, fmap = map_of_design(design, array, map_path, out, progress)
     path = pinch_trajectory(pinch, design.magnets, fmap.bounds)
     cfg = config_from_map(fmap, control_period_s=st.period_s, unipolar=st.unipolar,
