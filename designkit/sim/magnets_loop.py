@@ -58,6 +58,8 @@ class MagnetsResult:
     pair_compensated_n: np.ndarray
     condition: np.ndarray
     state: np.ndarray
+    loop_s: np.ndarray
+    new_frame: np.ndarray
     current_a: np.ndarray
     command_a: np.ndarray
     fixes: list = field(default_factory=list)
@@ -87,14 +89,18 @@ def simulate_magnets(device, runner_factory, trajectory, *, duration_s: float,
     n, nc = device.n_magnets, device.array.n_coils
     cols = {key: np.zeros((n_steps, n, 3)) for key in
             ("estimate_m", "force_ref_n", "force_n", "object_n", "pair_compensated_n")}
-    cond = np.zeros(n_steps)
+    cond, loop_s = np.zeros(n_steps), np.zeros(n_steps)
+    new_frame = np.zeros(n_steps, dtype=bool)
+    cpu = device.coil_bus.cpu_outside_s
     cur, cmd = np.zeros((n_steps, nc)), np.zeros((n_steps, nc))
     states = []
     bar = tqdm(total=n_steps, desc="simulate", unit="step", disable=not progress,
                mininterval=0.5)
     for s in range(n_steps):
         source.tick(t[s])
+        c0 = cpu()
         rec = runner.step(t[s])
+        loop_s[s], new_frame[s] = cpu() - c0, rec.new_frame
         i_true = device.current_a.copy()
         cols["estimate_m"][s] = rec.positions_m
         cols["force_ref_n"][s] = rec.forces_ref_n
@@ -111,7 +117,8 @@ def simulate_magnets(device, runner_factory, trajectory, *, duration_s: float,
     bar.close()
     runner.stop()
     return MagnetsResult(list(device.names), period, t, true_p, pair_n=device.pair_n[:n_steps],
-                         condition=cond, state=np.array(states), current_a=cur,
+                         condition=cond, state=np.array(states), loop_s=loop_s,
+                         new_frame=new_frame, current_a=cur,
                          command_a=cmd, fixes=list(source.fixes),
                          fault_log=list(runner.fault_log), **cols)
 
@@ -122,8 +129,9 @@ def magnets_summary(result: MagnetsResult) -> dict:
     RMS ``force_error_rms_n`` (|true force - object force at the true position|, running
     steps), ``localization_mae_m`` (the rendered-on position's error, steps with a track),
     ``trusted_wrong_fixes`` (trusted fixes more than 5 mm off at their frame time), the pair
-    force RMS and the RMS of its compensation error; and the run's running fraction and the
-    stacked rows' condition numbers."""
+    force RMS and the RMS of its compensation error; and the run's running fraction, the
+    running steps' measured compute time (p50, p99) and the stacked rows' condition
+    numbers."""
     running = result.state == "running"
     out = []
     for k, name in enumerate(result.names):
@@ -143,8 +151,11 @@ def magnets_summary(result: MagnetsResult) -> dict:
             "pair_force_rms_n": _rms(np.linalg.norm(result.pair_n[:, k], axis=1)[running]),
             "pair_compensation_error_rms_n": _rms(pair_err)})
     c = result.condition[running]
+    loop = result.loop_s[running]
     return {"magnets": out, "steps": int(len(result.t_s)), "period_s": result.period_s,
             "running_fraction": float(np.mean(running)),
+            "loop_p50_s": float(np.percentile(loop, 50)) if len(loop) else None,
+            "loop_p99_s": float(np.percentile(loop, 99)) if len(loop) else None,
             "condition_median": float(np.median(c)) if len(c) else None,
             "condition_max": float(np.max(c)) if len(c) else None,
             "max_command_a": float(np.abs(result.command_a).max()),

@@ -145,7 +145,7 @@ class MagnetsRunner(Runner):
         span = 0.5 * (self.hi[0] - self.lo[0])
         ps = [centre + np.array([span * (k / max(n - 1, 1) - 0.5), 0.0, 0.0])
               for k in range(n)]
-        self._allocate_magnets(ps, [np.zeros(3)] * n, list(self.nominal))
+        self.allocate_forces(ps, [np.zeros(3)] * n, list(self.nominal))
         super().start()
 
     # -- the sensor side's results ------------------------------------------------------------
@@ -204,7 +204,7 @@ class MagnetsRunner(Runner):
         if self._still_off(t_s, problems):
             return self._off(t_s, t0, self.positions_m, np.zeros((n, 3)), new_frame)
         f_refs = np.array([np.asarray(self.scene.force(p, v), float) for p, v in zip(ps, vs)])
-        command = self._allocate_magnets(ps, f_refs, ms)
+        command = self.allocate_forces(ps, f_refs, ms)
         if command is None:
             self._enter_fault(t_s, "lost", "the estimates of two magnets overlap")
             return self._off(t_s, t0, self.positions_m, f_refs, new_frame)
@@ -218,7 +218,7 @@ class MagnetsRunner(Runner):
         return [self.nominal[k] if lane.tracker.moment_a_m2 is None
                 else lane.tracker.moment_a_m2.copy() for k, lane in enumerate(self.lanes)]
 
-    def _allocate_magnets(self, ps, f_refs, ms) -> np.ndarray | None:
+    def allocate_forces(self, ps, f_refs, ms) -> np.ndarray | None:
         """Currents (n,) A rendering ``f_refs`` (N, 3) N on the magnets at ``ps`` (N, 3) m with
         moments ``ms`` (N, 3) A m^2 (:mod:`firmware_io.runner.magnets_force`); sets the torques,
         the pair forces and the condition number. None when two estimates overlap."""
