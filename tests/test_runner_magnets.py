@@ -34,6 +34,9 @@ class TwoForces:
     def force(self, p, v):
         return F_WANTED[0 if p[0] < 0 else 1].copy()
 
+    def forces(self, p, v):
+        return np.array([self.force(q, w) for q, w in zip(p, v)])
+
 
 class Frames:
     """A sensor source handing over a raw frame (zeros, every sensor ok) every ``pass_s``."""

@@ -116,14 +116,18 @@ class RunnerIO:
 
 
 class SceneForce:
-    """A compiled scene (:class:`firmware_io.scene.Scene`) as the runner's one-point interface:
-    ``force(position_m (3,), velocity_m_s (3,)) -> (3,)`` N."""
+    """A compiled scene (:class:`firmware_io.scene.Scene`) as the runner's interface:
+    ``force(position_m (3,), velocity_m_s (3,)) -> (3,)`` N at one point, ``forces(positions_m
+    (N, 3), velocities_m_s (N, 3)) -> (N, 3)`` N at each magnet's (one evaluation)."""
 
     def __init__(self, scene):
         self.scene = scene
 
     def force(self, p, v):
         return self.scene.force(np.asarray(p, float)[None], np.asarray(v, float)[None])[0]
+
+    def forces(self, p, v):
+        return self.scene.force(np.asarray(p, float), np.asarray(v, float))
 
 
 class Runner:

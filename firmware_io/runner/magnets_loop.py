@@ -109,7 +109,9 @@ class MagnetsRunner(Runner):
 
     Parameters
     ----------
-    fieldmap, scene, io, config : as :class:`~firmware_io.runner.loop.Runner`
+    fieldmap, io, config : as :class:`~firmware_io.runner.loop.Runner`
+    scene : object -- ``forces(positions_m (N, 3), velocities_m_s (N, 3)) -> (N, 3)`` N, each
+        magnet's own contact (:class:`~firmware_io.runner.loop.SceneForce`)
     estimator : the N-magnet estimator (``estimate(readings_t, currents_a, usable=, seeds=,
         time_s=) -> .magnets``, ``reset()``, ``integrity_risk``, ``model_bias_m``)
     magnets : MagnetsSettings
@@ -203,7 +205,7 @@ class MagnetsRunner(Runner):
         self._thermal_problem(problems)
         if self._still_off(t_s, problems):
             return self._off(t_s, t0, self.positions_m, np.zeros((n, 3)), new_frame)
-        f_refs = np.array([np.asarray(self.scene.force(p, v), float) for p, v in zip(ps, vs)])
+        f_refs = np.asarray(self.scene.forces(self.positions_m, np.array(vs)), float)
         command = self.allocate_forces(ps, f_refs, ms)
         if command is None:
             self._enter_fault(t_s, "lost", "the estimates of two magnets overlap")
