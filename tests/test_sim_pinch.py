@@ -91,6 +91,12 @@ def test_the_simulated_pinch_renders_each_finger_its_force(pinch_map, tmp_path):
     s = run_pinch(RunSettings(trajectory="pinch"), design=design, map_path=path, out=out,
                   progress=False, estimator=_estimator)
     assert [m["name"] for m in s["magnets"]] == ["thumb", "index"]
+    for m in s["magnets"]:      # the numbers docs/runner.md quotes (pytest -s shows them)
+        print(f"{m['name']}: error RMS {m['force_error_rms_n'] * 1e3:.1f} mN of "
+              f"{m['force_rms_n'] * 1e3:.1f} mN commanded, without the pair force compensated "
+              f"{m['force_error_rms_without_pair_compensation_n'] * 1e3:.1f} mN; pair force "
+              f"RMS {m['pair_force_rms_n'] * 1e3:.1f} mN; condition median "
+              f"{s['condition_median']:.3g}")
     for m in s["magnets"]:
         # the acceptance: error RMS <= 15 % of the commanded force RMS, the pair force
         # compensated; without it the error is the pair force's size
