@@ -6,14 +6,14 @@ Allocation: at every control step of the simulated pinch (designkit.sim.pinch: t
 F0, the pair force of the finite cylinders, the conditioning, the weighted stack, the
 warm-started bounded solve of eq. 4.9) with two magnets, the same code with one magnet, and the
 fixed reference workload of studies/bench_runner.py (a 9 x 9 solve and small products),
-interleaved in one process on this thread's CPU clock; median and p99, and the ratios.
-Target: two magnets <= 200 us median.
+interleaved in one process on this thread's CPU clock; median and p99, and the ratios, next
+to the issue's target (printed).
 
 Step: the simulated pinch (designkit run --simulate --trajectory pinch's code,
 designkit.sim.magnets_run.run_pinch) with each control step's measured CPU time (the simulated
 PWM boards' own time subtracted): p50 and p99 of the running steps; in the same process, the
 single-magnet runner's step (the first magnet sliding over the hemisphere on the same map) as
-the reference. Target p99 <= 1 ms. The step never fits (the fit runs on the sensor side), so
+the reference, next to the issue's target (printed). The step never fits (the fit runs on the sensor side), so
 until the N-magnet estimator is wired the sensor side hands over the simulation's true
 positions (:class:`StepTimingFixes`, a timing harness, not a localizer); the step's cost does
 not depend on which estimator made the fix.
