@@ -20,11 +20,10 @@ inside the map's kernel, or sliced after it as the runner does), then also only 
 bound of force per ampere near p (firmware_io.runner.CoilSkipBound) times the current limit
 exceeds a stated force; with the allocation on the kept coils and the force it then misses.
 ``--design``: another design (1010-steel cores: the allocation applies the map's saturation
-factor); ``--no-saturation``: the map's factor table set to 1 (the linear columns' step).
+factor); ``--no-saturation``: the map's factor table set to 1 (the linear columns' step);
 ``--magnets F.toml``: also the two-magnet case of studies/bench_magnets.py on that design.
 
-    python studies/bench_runner.py [OUT] [--map F] [--design F.toml] [--no-saturation] [--quick]
-        [--magnets F.toml [--magnets-map F]]
+    python studies/bench_runner.py [OUT] [--map F] [--design F] [--no-saturation] [--magnets F]
 """
 
 from __future__ import annotations
