@@ -19,9 +19,9 @@ at a time along the path: all 8 rows of A(p) for all coils, then only the rows t
 inside the map's kernel, or sliced after it as the runner does), then also only the coils whose
 bound of force per ampere near p (firmware_io.runner.CoilSkipBound) times the current limit
 exceeds a stated force; with the allocation on the kept coils and the force it then misses.
-``--design``: another design (1010-steel cores: the allocation applies the map's saturation
-factor); ``--no-saturation``: the map's factor table set to 1 (the linear columns' step);
-``--magnets F.toml``: also the two-magnet case of studies/bench_magnets.py on that design.
+``--design``: another design (1010-steel cores: the map's saturation factor applied);
+``--no-saturation``: the map's factor table set to 1 (the linear columns' step); ``--magnets
+F.toml``: also the two-magnet case of studies/bench_magnets.py on that design.
 
     python studies/bench_runner.py [OUT] [--map F] [--design F] [--no-saturation] [--magnets F]
 """
