@@ -20,8 +20,7 @@ inside the map's kernel, or sliced after it as the runner does), then also only 
 bound of force per ampere near p (firmware_io.runner.CoilSkipBound) times the current limit
 exceeds a stated force; with the allocation on the kept coils and the force it then misses.
 ``--design``: another design (1010-steel cores: the map's saturation factor applied);
-``--no-saturation``: the map's factor table set to 1 (the linear columns' step); ``--magnets
-F.toml``: also the two-magnet case of studies/bench_magnets.py on that design.
+``--no-saturation``: its factor set to 1; ``--magnets F``: the two-magnet case (bench_magnets).
 
     python studies/bench_runner.py [OUT] [--map F] [--design F] [--no-saturation] [--magnets F]
 """
