@@ -38,7 +38,7 @@ from designkit.sim.magnets_run import run_pinch
 from designkit.sim.pinch import Pinch, pinch_trajectory
 from designkit.sim.run import RunSettings, run_simulation
 from firmware_io.allocation import Allocator
-from firmware_io.localization import Estimate
+from firmware_io.localization import Estimate, EstimatorSettings
 from firmware_io.mapfile import MapFile
 from firmware_io.runner import MagnetsRunner, MagnetsSettings, RunnerIO, config_from_map
 from firmware_io.scene import penetration_force
@@ -60,8 +60,8 @@ class StepTimingFixes:
     simulation's true positions (``truth(t_s) -> (N, 3)`` m) as trusted fixes, so the step
     can be timed before the N-magnet estimator is wired (the step never fits)."""
 
-    integrity_risk = 1e-4
-    model_bias_m = 0.0
+    settings = EstimatorSettings(model_bias_m=0.0)
+    calibration = None
 
     def __init__(self, truth, moments, sd_m: float = 2e-4):
         self.truth, self.moments, self.sd = truth, np.asarray(moments, float), sd_m
@@ -81,6 +81,7 @@ class _Fit:
     def __init__(self, magnets):
         self.magnets, self.excluded_sensors = magnets, ()
         self.background_t = np.zeros(3)
+        self.frame_positions_m = self.frame_covariances_m2 = ()
 
 
 def _us(t) -> dict:

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from firmware_io.localization import Estimate
+from firmware_io.localization import Estimate, EstimatorSettings
 
 
 @dataclass(frozen=True)
@@ -25,6 +25,8 @@ class TruthFit:
     chi2: float = 0.0
     dof: int = 0
     reason: str = ""
+    frame_positions_m: tuple = ()
+    frame_covariances_m2: tuple = ()
 
 
 class TruthPlusNoiseMagnets:
@@ -32,8 +34,8 @@ class TruthPlusNoiseMagnets:
     ``noise_m`` rms per axis; ``untrusted(t_s) -> set of magnet indices`` not trusted then
     (default none)."""
 
-    integrity_risk = 1e-4
-    model_bias_m = 0.0
+    settings = EstimatorSettings(model_bias_m=0.0)
+    calibration = None
 
     def __init__(self, truth, moments, noise_m: float = 2e-4, seed: int = 0, untrusted=None):
         self.truth = truth

@@ -130,10 +130,11 @@ def test_magnets_that_overlap_along_the_pinch_are_refused(tmp_path):
 
 
 def test_the_command_refuses_in_one_line(tmp_path):
-    """Without the N-magnet estimator (not in this build), and with one magnet: one line, no
-    traceback, nothing written."""
-    for design, match in ((str(PINCH_DESIGN), "MagnetsEstimator"),
-                          ("thesis", "two [[magnets]]")):
+    """One magnet, or magnets that overlap along the pinch: one line, no traceback, nothing
+    written."""
+    big = tmp_path / "big.toml"
+    big.write_text(PINCH_DESIGN.read_text().replace("radius_m = 0.005", "radius_m = 0.016"))
+    for design, match in ((str(big), "overlap"), ("thesis", "two [[magnets]]")):
         out = tmp_path / "out"
         res = subprocess.run([sys.executable, "-m", "designkit.cli", "run", "--simulate",
                               "--trajectory", "pinch", "--design", design, "--out", str(out),

@@ -11,7 +11,8 @@ uncompensated run's into ``no-pair-compensation/``.
 
 The N-magnet estimator is the one extension point (``estimator``): a callable
 ``estimator(map_path, design, calibration) -> estimator`` with the interface of
-``firmware_io.localization.MagnetsEstimator`` (docs/runner.md, "Several magnets").
+``firmware_io.localization.MagnetsEstimator`` (docs/runner.md, "Several magnets"); by default
+that estimator itself (:func:`magnets_estimator`).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from firmware_io.allocation import Allocator
-from firmware_io.localization import SensorModel
+from firmware_io.localization import MagnetsEstimator, SensorModel
 from firmware_io.runner import MagnetsRunner, MagnetsSettings, RunnerIO, SceneForce, \
     config_from_map
 from firmware_io.scene import Scene
@@ -45,14 +46,18 @@ PINCH_STIFFNESS_N_PER_M = 60.0
 passivity bound at a 1 ms period is 2000 N/m, its position-noise bound is left out -- the
 tracked estimate's noise, not one frame's, is what the finger feels)."""
 
-NO_ESTIMATOR = ("--trajectory pinch", "a build with the N-magnet estimator "
-                "(firmware_io.localization.MagnetsEstimator, docs/runner.md \"Several "
-                "magnets\")", "none in this build")
-"""The refusal when no N-magnet estimator is given (key, valid, value)."""
+
+
+def magnets_estimator(map_path, design, calibration) -> MagnetsEstimator:
+    """The design's magnets' estimator from the map's sensor section, with the start-up
+    calibration (the pinch's default)."""
+    return MagnetsEstimator.from_map(map_path, design.magnets, calibration=calibration,
+                                     names=[m.name for m in design.magnets],
+                                     expected_design_sha256=design.spec_hash())
 
 
 def run_pinch(settings: RunSettings, *, design=None, map_path=None, out=Path("run-out"),
-              progress: bool = True, estimator: Callable | None = None,
+              progress: bool = True, estimator: Callable = magnets_estimator,
               pinch: Pinch = Pinch()) -> dict:
     """The pinch (module docstring); returns the summary. Every input is checked before
     anything is computed: a design without exactly two magnets, a path leaving the map's box
@@ -60,7 +65,7 @@ def run_pinch(settings: RunSettings, *, design=None, map_path=None, out=Path("ru
     line."""
     st = settings
     design = design if isinstance(design, Design) else load_design(design)
-    _check(st, design, estimator)
+    _check(st, design)
     pinch_trajectory(pinch, design.magnets, _box(design))   # refused before anything is built
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -81,7 +86,9 @@ def run_pinch(settings: RunSettings, *, design=None, map_path=None, out=Path("ru
     duration = pinch.duration_s if st.duration_s is None else st.duration_s
     runs = {}
     for compensate in (True, False):
-        magnets = MagnetsSettings.of_specs(design.magnets, compensate_pair=compensate)
+        # the fingers' places at the start (the pinch's first point): which magnet is which
+        magnets = MagnetsSettings.of_specs(design.magnets, compensate_pair=compensate,
+                                           start_positions_m=path.positions_m[:, 0])
 
         def factory(source, clock, magnets=magnets):
             io = RunnerIO(device.coils, source, lambda line: print(line) if progress else None,
@@ -120,7 +127,7 @@ def file_names(names) -> list:
     return [f"run_{re.sub(r'[^A-Za-z0-9_-]', '_', n)}.png" for n in names]
 
 
-def _check(st: RunSettings, design, estimator) -> None:
+def _check(st: RunSettings, design) -> None:
     """The pinch's refusals that need no map (one line each)."""
     if len(design.magnets) != 2:
         raise BadInputError("--trajectory pinch", "a design with two [[magnets]] (one per "
@@ -132,8 +139,6 @@ def _check(st: RunSettings, design, estimator) -> None:
             raise BadInputError(key, f"left at its default ({default!r}) with --trajectory "
                                 "pinch (its object is the block, its rows the 3-D force)",
                                 value)
-    if estimator is None:
-        raise BadInputError(*NO_ESTIMATOR)
 
 
 def _box(design) -> tuple:

@@ -165,6 +165,8 @@ class Runner:
         if allocate is None:
             allocate = Allocator()
         self.map, self.scene, self.estimator, self.cfg = fieldmap, scene, estimator, config
+        # ``integrity_risk`` and ``model_bias_m`` of the multi-frame protection level
+        self.integrity = estimator
         self.tracker = tracker if tracker is not None else PoseTracker()
         self.allocate, self.headroom = allocate, headroom
         self.coils, self.sensors, self.log, self.clock = io.coils, io.sensors, io.log, io.clock
@@ -371,7 +373,7 @@ class Runner:
             # noise averages out in the chain), nothing renders on it
             lane.tracker.update(fix.position_m, fix.frame_t_s, True, fix.moment_a_m2,
                                 fix.pose_covariance)
-        pl = (rendered_protection_level(fix, lane.tracker, self.estimator)
+        pl = (rendered_protection_level(fix, lane.tracker, self.integrity)
               if ok and not gated else math.inf)
         if gated:
             problems.append(("gated", gated))

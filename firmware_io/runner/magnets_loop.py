@@ -45,6 +45,11 @@ class MagnetsSettings:
     weights : tuple of float or None -- the priority of each magnet's force rows (weighted
         least squares; None: 1 each, :mod:`firmware_io.runner.magnets_force`)
     compensate_pair : bool -- subtract the magnets' direct pull on each other from the targets
+    start_positions_m : tuple of (3,) m or None -- where each magnet is expected before its
+        first trusted fix (the fingers' places at the start): the estimator's reference for
+        which magnet is which (identical magnets are told apart only by where they are); the
+        sensor side seeds a magnet without a track from its last trusted position, else from
+        this (None: no reference)
     """
 
     names: tuple
@@ -53,6 +58,7 @@ class MagnetsSettings:
     moments_a_m2: tuple
     weights: tuple | None = None
     compensate_pair: bool = True
+    start_positions_m: tuple | None = None
 
     def __post_init__(self):
         n = len(self.names)
@@ -63,16 +69,41 @@ class MagnetsSettings:
                 raise BadInputError(f"magnets.{key}", f"{n} entries, one per magnet",
                                     len(getattr(self, key)))
         magnet_weights(self.weights, n)
+        if self.start_positions_m is not None:
+            p = np.asarray(self.start_positions_m, float)
+            if p.shape != (n, 3) or not np.all(np.isfinite(p)):
+                raise BadInputError("magnets.start_positions_m", f"({n}, 3) finite positions, m",
+                                    self.start_positions_m)
 
     @classmethod
-    def of_specs(cls, specs, weights=None, compensate_pair: bool = True) -> "MagnetsSettings":
+    def of_specs(cls, specs, weights=None, compensate_pair: bool = True,
+                 start_positions_m=None) -> "MagnetsSettings":
         """From magnet specs with ``name``, ``radius_m``, ``length_m`` and
         ``moment_vector_a_m2`` (a design's ``magnets``)."""
         specs = list(specs)
+        starts = (None if start_positions_m is None else
+                  tuple(tuple(float(c) for c in p) for p in start_positions_m))
         return cls(tuple(s.name for s in specs), tuple(float(s.radius_m) for s in specs),
                    tuple(float(s.length_m) for s in specs),
                    tuple(tuple(float(c) for c in s.moment_vector_a_m2) for s in specs),
-                   None if weights is None else tuple(weights), compensate_pair)
+                   None if weights is None else tuple(weights), compensate_pair, starts)
+
+
+@dataclass(frozen=True)
+class IntegrityTerms:
+    """What the multi-frame protection level takes from the estimator: its integrity risk per
+    fix and its model-bias bound, m (:func:`firmware_io.runner.gate.
+    rendered_protection_level`)."""
+
+    integrity_risk: float
+    model_bias_m: float
+
+    @classmethod
+    def of(cls, estimator) -> "IntegrityTerms":
+        """From an estimator's ``settings`` (``EstimatorSettings``) and ``calibration``."""
+        s = estimator.settings
+        return cls(float(s.integrity_risk),
+                   float(s.model_bias_for(estimator.calibration is not None)))
 
 
 @dataclass
@@ -113,7 +144,8 @@ class MagnetsRunner(Runner):
     scene : object -- ``forces(positions_m (N, 3), velocities_m_s (N, 3)) -> (N, 3)`` N, each
         magnet's own contact (:class:`~firmware_io.runner.loop.SceneForce`)
     estimator : the N-magnet estimator (``estimate(readings_t, currents_a, usable=, seeds=,
-        time_s=) -> .magnets``, ``reset()``, ``integrity_risk``, ``model_bias_m``)
+        time_s=) -> .magnets``, ``reset()``, ``settings``, ``calibration``:
+        :class:`IntegrityTerms`)
     magnets : MagnetsSettings
     allocate : callable, optional -- as :class:`Runner`'s
     """
@@ -122,6 +154,7 @@ class MagnetsRunner(Runner):
                  MagnetsSettings, *, allocate=None):
         super().__init__(fieldmap, scene, estimator, io, config, allocate=allocate)
         self.magnets = magnets
+        self.integrity = IntegrityTerms.of(estimator)
         n = len(magnets.names)
         self.weights = magnet_weights(magnets.weights, n)
         self.nominal = np.asarray(magnets.moments_a_m2, float).reshape(n, 3)
@@ -130,7 +163,7 @@ class MagnetsRunner(Runner):
         self.tracker, self.gate = self.lanes[0].tracker, self.lanes[0].gate
         self.pairs = MagnetPairs(magnets.radii_m, magnets.lengths_m, names=magnets.names)
         self.pipeline = MagnetsPipeline(estimator, self.layout, self.history.at, self.nominal,
-                                        magnets.names)
+                                        magnets.names, magnets.start_positions_m)
         self.positions_m = np.full((n, 3), np.nan)
         self.torques_n_m = np.zeros((n, 3))
         self.pair_n = np.zeros((n, 3))
