@@ -153,4 +153,4 @@ class MagnetsPipeline(SensorPipeline):
         return Fix(p, moment.copy(), ok, t_s, (), self.excluded.copy(), 0.0,
                    None if cov is None else cov[:3, :3], float(est.protection_level_m), cold,
                    fde, (), "" if ok else est.reason, np.asarray(est.background_t, float), cov,
-                   False, bool(est.prior_used), False)
+                   False, bool(est.prior_used), not ok and bool(est.consistent))
