@@ -13,10 +13,9 @@ Step: the simulated pinch (designkit run --simulate --trajectory pinch's code,
 designkit.sim.magnets_run.run_pinch) with each control step's measured CPU time (the simulated
 PWM boards' own time subtracted): p50 and p99 of the running steps; in the same process, the
 single-magnet runner's step (the first magnet sliding over the hemisphere on the same map) as
-the reference, next to the issue's target (printed). The step never fits (the fit runs on the sensor side), so
-until the N-magnet estimator is wired the sensor side hands over the simulation's true
-positions (:class:`StepTimingFixes`, a timing harness, not a localizer); the step's cost does
-not depend on which estimator made the fix.
+the reference, next to the issue's target (printed). The sensor side runs the N-magnet
+estimator (its fit is not part of the step); the default design is the thesis device with the
+36 sensors planned for two magnets (on the thesis' 18 no fix is trusted: nothing runs).
 
     python studies/bench_magnets.py [OUT] [--map F] [--design F.toml] [--quick]
 """
@@ -38,7 +37,7 @@ from designkit.sim.magnets_run import run_pinch
 from designkit.sim.pinch import Pinch, pinch_trajectory
 from designkit.sim.run import RunSettings, run_simulation
 from firmware_io.allocation import Allocator
-from firmware_io.localization import Estimate, EstimatorSettings
+from firmware_io.localization import MagnetsEstimator
 from firmware_io.mapfile import MapFile
 from firmware_io.runner import MagnetsRunner, MagnetsSettings, RunnerIO, config_from_map
 from firmware_io.scene import penetration_force
@@ -48,40 +47,11 @@ ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = ROOT / "out" / "bench_magnets"
 """Default output folder (git-ignored), whatever the working directory."""
 
-DEFAULT_DESIGN = ROOT / "docs" / "gallery" / "thesis-pinch.toml"
-"""The thesis device with two magnets."""
+DEFAULT_DESIGN = ROOT / "docs" / "gallery" / "thesis-pinch-planned.toml"
+"""The thesis device with two magnets and the 36 sensors planned for them."""
 
 STIFFNESS_N_PER_M = 60.0
 """The block's stiffness in the allocation benchmark, N/m (the pinch run's)."""
-
-
-class StepTimingFixes:
-    """A timing harness for the control step, NOT a localizer: the sensor side hands over the
-    simulation's true positions (``truth(t_s) -> (N, 3)`` m) as trusted fixes, so the step
-    can be timed before the N-magnet estimator is wired (the step never fits)."""
-
-    settings = EstimatorSettings(model_bias_m=0.0)
-    calibration = None
-
-    def __init__(self, truth, moments, sd_m: float = 2e-4):
-        self.truth, self.moments, self.sd = truth, np.asarray(moments, float), sd_m
-        self.rng = np.random.default_rng(0)
-
-    def reset(self):
-        pass
-
-    def estimate(self, readings_t, currents_a=None, *, usable=None, seeds=None, time_s=None):
-        est = tuple(Estimate(p + self.rng.normal(scale=self.sd, size=3), m.copy(), True, "",
-                             np.eye(3) * self.sd ** 2, 6 * self.sd, consistent=True)
-                    for p, m in zip(self.truth(time_s), self.moments))
-        return _Fit(est)
-
-
-class _Fit:
-    def __init__(self, magnets):
-        self.magnets, self.excluded_sensors = magnets, ()
-        self.background_t = np.zeros(3)
-        self.frame_positions_m = self.frame_covariances_m2 = ()
 
 
 def _us(t) -> dict:
@@ -101,7 +71,7 @@ def allocation_times(design, map_path, *, steps: int | None = None) -> dict:
     ms = [np.asarray(m.moment_vector_a_m2, float) for m in design.magnets]
 
     def runner(specs):
-        return MagnetsRunner(fmap, None, StepTimingFixes(path.at, ms), RunnerIO(
+        return MagnetsRunner(fmap, None, MagnetsEstimator.from_map(map_path, specs), RunnerIO(
             device.coils, lambda t: None, lambda line: None, time.thread_time), cfg,
             MagnetsSettings.of_specs(specs), allocate=Allocator())
 
@@ -138,12 +108,8 @@ def allocation_times(design, map_path, *, steps: int | None = None) -> dict:
 def step_times(design, map_path, out_dir, *, duration_s: float | None = None) -> dict:
     """The pinch's control step with two magnets (module docstring), from the run's summary
     and run.csv-level arrays: p50 / p99 of the running steps, us."""
-    fmap = MapFile.load(map_path)
-    path = pinch_trajectory(Pinch(), design.magnets, fmap.bounds)
-    ms = [m.moment_vector_a_m2 for m in design.magnets]
     s = run_pinch(RunSettings(trajectory="pinch", duration_s=duration_s), design=design,
-                  map_path=map_path, out=out_dir / "pinch", progress=False,
-                  estimator=lambda *_: StepTimingFixes(path.at, ms))
+                  map_path=map_path, out=out_dir / "pinch", progress=False)
     # the same process's one-magnet step: the first magnet sliding over the hemisphere on
     # the same map (the single-magnet runner, its pose estimator on the sensor side)
     one = run_simulation(RunSettings(duration_s=duration_s or Pinch().duration_s),

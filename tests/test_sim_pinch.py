@@ -143,3 +143,21 @@ def test_the_command_refuses_in_one_line(tmp_path):
         assert res.returncode != 0 and "Traceback" not in res.stderr
         assert match in res.stderr and len(res.stderr.strip().splitlines()) == 1, res.stderr
         assert not out.exists()
+
+
+@pytest.mark.slow
+def test_the_pinch_with_the_n_magnet_estimator_on_the_planned_layout(tmp_path):
+    """The real chain: MagnetsEstimator on the 36 sensors planned for two magnets
+    (docs/gallery/thesis-pinch-planned.toml), the start-up calibration, the sensors' mounting
+    errors and noise. docs/runner.md gives the numbers; here what must hold whatever the noise
+    seed: both fingers rendered most of the time, no trusted fix more than 5 mm off, the pair
+    force's compensation removing most of the error."""
+    design = load_design(ROOT / "docs" / "gallery" / "thesis-pinch-planned.toml")
+    s = run_pinch(RunSettings(trajectory="pinch"), design=design, out=tmp_path / "pinch",
+                  progress=False)
+    assert s["running_fraction"] > 0.9
+    for m in s["magnets"]:
+        print(m["name"], {k: v for k, v in m.items() if k != "name"})
+        assert m["trusted_wrong_fixes"] == 0 and m["localization_mae_m"] < 1.5e-3
+        assert m["force_error_rms_n"] < 0.25 * m["force_rms_n"]
+        assert m["force_error_rms_n"] < 0.15 * m["force_error_rms_without_pair_compensation_n"]
