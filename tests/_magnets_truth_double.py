@@ -1,32 +1,16 @@
 """TEST DOUBLE, not a localizer: an N-magnet "estimator" that returns the TRUE positions (read
 from the trajectory at the frame's time) plus Gaussian noise, with the interface the N-magnet
-estimator of firmware_io.localization provides (docs/runner.md, "Several magnets"). It lets the
-runner's and the simulator's N-magnet paths be tested before that estimator lands; it is never
-shipped (it lives in tests/ and reads the simulation's truth)."""
+estimator of firmware_io.localization provides (its MagnetsEstimate; docs/runner.md, "Several
+magnets"). It tests the runner's and the simulator's N-magnet paths with a known localization
+error; it is never shipped (it lives in tests/ and reads the simulation's truth)."""
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 
 import numpy as np
 
-from firmware_io.localization import Estimate, EstimatorSettings
-
-
-@dataclass(frozen=True)
-class TruthFit:
-    """What ``estimate`` returns (the N-magnet estimate's fields)."""
-
-    magnets: tuple
-    excluded_sensors: tuple = ()
-    consistent: bool = True
-    background_t: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    chi2: float = 0.0
-    dof: int = 0
-    reason: str = ""
-    frame_positions_m: tuple = ()
-    frame_covariances_m2: tuple = ()
+from firmware_io.localization import Estimate, EstimatorSettings, MagnetsEstimate
 
 
 class TruthPlusNoiseMagnets:
@@ -62,4 +46,4 @@ class TruthPlusNoiseMagnets:
                                 np.eye(3) * sd * sd, 6 * sd if ok else math.inf,
                                 consistent=ok, fault_free_protection_level_m=6 * sd,
                                 prior_used=seeds is not None and seeds[k] is not None))
-        return TruthFit(tuple(out))
+        return MagnetsEstimate(tuple(out), consistent=True)
