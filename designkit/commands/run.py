@@ -129,13 +129,19 @@ def _pinch(args: argparse.Namespace) -> int:
     print(f"wrote {args.out}/run.csv, summary.json, "
           + ", ".join(f"run_{m['name']}.png" for m in summary["magnets"])
           + f" (and no-pair-compensation/): running fraction {summary['running_fraction']:.1%}, "
-          f"condition number median {summary['condition_median']:.3g}")
+          "condition number median "
+          + ("n/a" if summary["condition_median"] is None
+             else f"{summary['condition_median']:.3g}"))
     for m in summary["magnets"]:
         print(f"  {m['name']}: force error RMS {_mn(m['force_error_rms_n'])} on a commanded "
               f"force RMS {_mn(m['force_rms_n'])} (without the pair force compensated "
               f"{_mn(m['force_error_rms_without_pair_compensation_n'])}), localization MAE "
               f"{_mm(m['localization_mae_m'])}, {m['trusted_wrong_fixes']} trusted fixes more "
               "than 5 mm off")
+    if summary["running_fraction"] == 0 and summary["fault_log"]:
+        first = summary["fault_log"][0]
+        print(f"  the coils stayed off (the safe state while a magnet is untrusted): "
+              f"{first['state']}: {first['detail']}")
     return 0
 
 
