@@ -11,13 +11,17 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from designkit.model.array import force_matrix
+from designkit.render import scenefile
+from designkit.render.laws import ConstraintLaw
+from designkit.render.objects import Hemisphere
 from designkit.sim.magnets import MagnetsDevice
 from firmware_io.allocation import Allocator
 from firmware_io.errors import BadInputError
 from firmware_io.mapfile import MapFile
-from firmware_io.runner import (MagnetsRunner, MagnetsSettings, Runner, RunnerIO, SensorFrame,
-                                condition_number, config_from_map, force_law_matrix,
-                                magnet_weights, stacked_rows)
+from firmware_io.runner import (MagnetsRunner, MagnetsSettings, Runner, RunnerIO, SceneForce,
+                                SensorFrame, condition_number, config_from_map,
+                                force_law_matrix, magnet_weights, stacked_rows)
+from firmware_io.scene import Scene
 
 from _magnets_truth_double import TruthPlusNoiseMagnets
 from _runner_fakes import TruthEstimator
@@ -205,3 +209,31 @@ def test_one_magnet_renders_as_the_single_magnet_runner(rig):
     assert a[-1].state == "running"
     np.testing.assert_allclose(np.array([x.command_a for x in b]),
                                np.array([x.command_a for x in a]), atol=1e-12)
+
+
+def test_two_fingers_on_a_sphere_each_get_their_own_contact(rig, thesis_array, tmp_path):
+    """A compiled scene (the thesis' hemisphere, eq. 4.1-4.2): each magnet gets the object's
+    force at its own position, through the scene's one evaluation of both."""
+    design, fmap, cfg, device = rig
+    lam = 4.0
+    path = scenefile.compile_scene(Hemisphere(), tmp_path / "scene.npz", lam_n_per_m=lam,
+                                   law=ConstraintLaw(lam), map_design_sha256=fmap.design_sha256)
+    scene = SceneForce(Scene.load(path))
+    truth = np.array([P0, P1])
+    est = TruthPlusNoiseMagnets(lambda t: truth, [m.moment_vector_a_m2 for m in design.magnets],
+                                0.0)
+    r = MagnetsRunner(fmap, scene, est, RunnerIO(device.coils, Frames(fmap.n_sensors),
+                                                 lambda line: None, lambda: 0.0), cfg,
+                      MagnetsSettings.of_specs(design.magnets), allocate=Allocator())
+    r.start()
+    rec = _run(r, 40)[-1]
+    assert rec.state == "running"
+    f, cross, _ = _true_forces(design, thesis_array, truth, rec.command_a)
+    for k in range(2):
+        # the hemisphere's force there: lambda h(x, y) along the top's outward normal
+        want = scene.force(truth[k], np.zeros(3))
+        h = np.sqrt(0.05 ** 2 - truth[k, 0] ** 2 - truth[k, 1] ** 2)
+        np.testing.assert_allclose(np.linalg.norm(want), lam * h, rtol=1e-6)
+        assert np.sign(want[0]) == np.sign(truth[k, 0])       # each pushed out on its side
+        np.testing.assert_allclose(rec.forces_ref_n[k], want, atol=1e-12)
+        assert np.linalg.norm(f[k] - cross[k] - want) < 2e-3, k
