@@ -1,9 +1,12 @@
 """firmware_io.runner with N magnets: the stacked allocation's rendered force against designkit's
 coupled model and magpylib's pair force, the priority rule, the conditioning, the safe state for
-N and the identity of each magnet's track. The estimator is a TEST DOUBLE (truth + noise,
-tests/_magnets_truth_double.py) until the N-magnet estimator lands."""
+N, each magnet's own contact and track. The estimator is a TEST DOUBLE (truth + noise,
+tests/_magnets_truth_double.py): the runner's logic with a known localization error; the real
+N-magnet estimator runs in tests/test_sim_pinch.py."""
 
 from __future__ import annotations
+
+import dataclasses
 
 import magpylib as magpy
 import numpy as np
@@ -237,3 +240,28 @@ def test_two_fingers_on_a_sphere_each_get_their_own_contact(rig, thesis_array, t
         assert np.sign(want[0]) == np.sign(truth[k, 0])       # each pushed out on its side
         np.testing.assert_allclose(rec.forces_ref_n[k], want, atol=1e-12)
         assert np.linalg.norm(f[k] - cross[k] - want) < 2e-3, k
+
+
+class FrameOnly(TruthPlusNoiseMagnets):
+    """The double with a frame-only measurement 1 mm beside each (prior-fused) fix."""
+
+    def estimate(self, readings_t, currents_a=None, **kw):
+        fit = super().estimate(readings_t, currents_a, **kw)
+        return dataclasses.replace(
+            fit, frame_positions_m=tuple(m.position_m + [0.0, 1e-3, 0.0] for m in fit.magnets),
+            frame_covariances_m2=tuple(np.eye(3) * 1e-8 for _ in fit.magnets))
+
+
+def test_each_track_filters_the_frame_only_measurement(rig):
+    """A fix made with the track's prior already holds the prediction: the lane's tracker takes
+    the estimator's frame-only position instead (docs/localization.md, "Several magnets")."""
+    design, fmap, cfg, device = rig
+    truth = np.array([P0, P1])
+    est = FrameOnly(lambda t: truth, [m.moment_vector_a_m2 for m in design.magnets], 0.0)
+    r = MagnetsRunner(fmap, TwoForces(), est, RunnerIO(device.coils, Frames(fmap.n_sensors),
+                                                       lambda line: None, lambda: 0.0), cfg,
+                      MagnetsSettings.of_specs(design.magnets), allocate=Allocator())
+    r.start()
+    rec = _run(r, 60)[-1]
+    assert rec.state == "running"
+    np.testing.assert_allclose(rec.positions_m, truth + [0.0, 1e-3, 0.0], atol=1e-6)

@@ -1,6 +1,7 @@
 """designkit.sim with two magnets: the plant's force against designkit's coupled model and
 magpylib's pair force, the sensors against magpylib's field of both cylinders, the simulated
-pinch end to end (the N-magnet estimator is a TEST DOUBLE: truth + noise) and its refusals."""
+pinch end to end (with a TEST DOUBLE for the estimator: truth + noise; and with the N-magnet
+estimator on the planned sensor layout) and its refusals."""
 
 from __future__ import annotations
 
