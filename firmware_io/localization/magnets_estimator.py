@@ -75,7 +75,8 @@ class MagnetsEstimator:
     model : SensorModel (the sensors, the coils' field there, the cores' relay)
     magnets : sequence of N >= 1 magnet specs in the design's magnet order
         (:func:`magnet_specs`)
-    settings : EstimatorSettings (default: its defaults; the gradient is not fitted for N > 1)
+    settings : EstimatorSettings (default: its defaults; for N > 1 the direction is fitted,
+        |m| is the spec's -- other choices are refused -- and the gradient is not fitted)
     calibration : SensorCalibration, a path to a saved one, or None
     names : the magnets' names (default 'magnet 0', ...)
     """

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import BadInputError
 from .fde import bounded_fault_bias, exclusion_drops, projections
 from .integrity import orientation_protection_level, position_protection_level
 from .pose_fit import COLD_ITERATIONS, CONVERGED_GAIN, PoseFit, State
@@ -142,8 +143,11 @@ class MagnetsFit:
                  calibration=None):
         self.specs = tuple(specs)
         self.settings = settings
-        single = dataclasses.replace(settings, background="off", gradient="off",
-                                     orientation="fit", fit_moment_magnitude=False)
+        if settings.orientation != "fit" or settings.fit_moment_magnitude:
+            raise BadInputError("settings", "orientation 'fit' and fit_moment_magnitude False "
+                                "(several magnets: each pose's 5 unknowns, |m| from its spec)",
+                                (settings.orientation, settings.fit_moment_magnitude))
+        single = dataclasses.replace(settings, background="off", gradient="off")
         self.engines = [PoseFit(spec_model(model, s), single, calibration) for s in self.specs]
         first = self.engines[0]
         self.calibration = first.calibration

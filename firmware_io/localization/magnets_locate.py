@@ -19,6 +19,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 from dataclasses import dataclass
@@ -58,14 +59,41 @@ class FrameData:
 
 def warm(fit: MagnetsFit, frame: FrameData, start: JointState, priors) -> JointVerdict:
     """The verdict of the joint fit from ``start``; ``priors``: one per spec (a
-    :class:`.estimate.Pose` with a covariance, or None), observations of those poses."""
+    :class:`.estimate.Pose` with a covariance, or None), observations of those poses. When it
+    fails the residual test and the exclusion cannot name a liar (a gross fault drags the
+    solve), the sensor the start explains worst (:func:`worst_block`) is left out and the fit
+    solved again from the start: the better verdict wins (that exclusion is judged as any)."""
     b = frame.blocks
     fit.set_priors(priors)
     try:
         sol = fit.solve(start, b, frame.w[b], frame.d[b])
-        return judge(fit, sol, frame.judged)
+        verdict = judge(fit, sol, frame.judged)
+        if verdict.consistent or fit.settings.max_exclusions < 1 or verdict.dof <= 3:
+            return verdict
+        suspect = worst_block(fit, frame, start)
+        if suspect is None:
+            return verdict
+        rest = b[b != suspect]
+        again = judge(fit, fit.solve(start, rest, frame.w[rest], frame.d[rest]), frame.judged,
+                      (suspect,))
+        return again if again.rank() < verdict.rank() else verdict
     finally:
         fit.set_priors([None] * len(fit.engines))
+
+
+def worst_block(fit: MagnetsFit, frame: FrameData, start: JointState) -> int | None:
+    """The sensor whose reading the start explains worst, when the start cannot explain it
+    (its whitened innovation, the robust (median) uniform background of all sensors taken
+    out, beyond the residual test's chi-square(3) threshold), else None."""
+    b = frame.blocks
+    w = frame.w[b]
+    _, res = fit.rows(start, b, w, frame.d[b])
+    rb = res[:3 * len(b)].reshape(len(b), 3)
+    if fit.background:
+        rb = rb - w[:, None] * np.median(rb / w[:, None], axis=0)
+    r2 = np.einsum("bi,bi->b", rb, rb)
+    j = int(np.argmax(r2))
+    return int(b[j]) if r2[j] > fit.chi2_max[3] else None
 
 
 def acquire(fit: MagnetsFit, frame: FrameData, n_max: int) -> JointVerdict | None:
@@ -141,8 +169,7 @@ def _relabeled(fit: MagnetsFit, frame: FrameData, verdict: JointVerdict, ids) ->
     if same:
         sol = verdict.solution
         new = JointState(tuple(ids), st.poses, st.b)
-        return JointVerdict(type(sol)(new, sol.jac, sol.res, sol.blocks, sol.chi2,
-                                      sol.converged, sol.iterations),
+        return JointVerdict(dataclasses.replace(sol, state=new),
                             verdict.consistent, verdict.reason, verdict.magnets, verdict.dof,
                             verdict.excluded)
     start = JointState(tuple(ids), tuple(fit.engines[i].initial_state(p.p, p.u)
