@@ -315,3 +315,25 @@ def test_acquisition_refuses_clear_passes_out_of_range():
     for bad in (0, -1, 2.5, 10_000):
         with pytest.raises(BadInputError, match="clear_passes"):
             Acquisition(clear_passes=bad)
+
+
+def test_a_gated_jump_is_confirmed_by_the_next_fix_solved_cold():
+    """A fix 40 mm from the track fails the gate; the next one, solved cold (its frame rejected
+    the track's prior) and consistent with it, restarts the tracker there. A warm fix (the
+    prior used) does not confirm: it could repeat a wrong basin."""
+    from firmware_io.runner import InnovationGate
+
+    def fix(x, t, prior_used):
+        return Fix(np.array([x, 0.0, 0.03]), np.array([0.0, 0.0, 0.6]), True, t, (),
+                   np.zeros(18, bool), 0.0, covariance_m2=np.eye(3) * 1e-8,
+                   prior_used=prior_used)
+
+    for second_prior_used, restarts in ((False, True), (True, False)):
+        kf = PoseTracker()
+        for k in range(10):
+            kf.update(np.array([-0.02, 0.0, 0.03]), 0.005 * k, True, np.array([0.0, 0.0, 0.6]))
+        gate = InnovationGate(1e-4)
+        why, restart = gate.check(fix(0.02, 0.05, False), kf)
+        assert why and not restart
+        why, restart = gate.check(fix(0.0201, 0.055, second_prior_used), kf)
+        assert restart is restarts and (why == "") is restarts
