@@ -128,3 +128,8 @@ def test_refusals_found_with_the_sites_come_before_the_progress_bar(tmp_path, ca
     err = [ln for ln in (cap.out + cap.err).splitlines() if ln.strip()]
     assert len(err) == 1 and args[0] in err[0], err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_usage_line_puts_the_action_first_as_it_is_typed(capsys):
+    assert main(["sensors", "--help"]) in (0, None)
+    assert capsys.readouterr().out.startswith("usage: designkit sensors {plan} [options]")
