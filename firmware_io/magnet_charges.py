@@ -162,21 +162,31 @@ def charge_forces(positions_m: np.ndarray, moments_a_m2: np.ndarray, models: lis
     pos = np.asarray(positions_m, float)
     mom = np.asarray(moments_a_m2, float)
     n = len(pos)
-    k = len(models[0].charges)
     mag = np.sqrt(np.einsum("ij,ij->i", mom, mom))
     u = mom / np.where(mag > 0, mag, 1.0)[:, None]
-    off = np.concatenate([m.offsets_m for m in models])
-    q = (np.concatenate([m.charges for m in models]).reshape(n, k) * mag[:, None]).ravel()
-    x = (pos[:, None, :] + off.reshape(n, k)[:, :, None] * u[:, None, :]).reshape(-1, 3)
-    d = x[:, None, :] - x[None, :, :]
-    r2 = np.einsum("ijk,ijk->ij", d, d)
+    off = np.array([m.offsets_m for m in models])                  # (n, k)
+    q = np.array([m.charges for m in models]) * mag[:, None]      # (n, k)
+    x = pos[:, None, :] + off[:, :, None] * u[:, None, :]          # (n, k, 3)
     keep = ~np.eye(n, dtype=bool) if mask is None else mask & ~np.eye(n, dtype=bool)
-    keep = np.repeat(np.repeat(keep, k, axis=0), k, axis=1)
-    r2[~keep] = 1.0
-    w = np.outer(q, q) / (r2 * np.sqrt(r2))
-    w[~keep] = 0.0
-    fc = (x * w.sum(axis=1)[:, None] - w @ x) * (MU0 / (4.0 * math.pi))  # on each charge
-    force = fc.reshape(n, k, 3).sum(axis=1)
-    # sum_k (off_k u) x f_k = u x sum_k off_k f_k
-    lever = (off[:, None] * fc).reshape(n, k, 3).sum(axis=1)
-    return force, np.cross(u, lever)
+    force, lever = np.zeros((n, 3)), np.zeros((n, 3))
+    scale = MU0 / (4.0 * math.pi)
+    pairs = [(i, j) for i in range(n) for j in range(i + 1, n) if keep[i, j] or keep[j, i]]
+    for i, j in pairs:                                              # each pair once
+        d = x[i][:, None, :] - x[j][None, :, :]                   # (k, k, 3)
+        r2 = np.einsum("abk,abk->ab", d, d)
+        w = np.outer(q[i], q[j]) / (r2 * np.sqrt(r2)) * scale
+        fi = np.einsum("ab,abk->ak", w, d)          # on each charge of i (Newton: j's opposite)
+        fj = np.einsum("ab,abk->bk", w, d)
+        force[i] += fi.sum(axis=0)
+        force[j] -= fj.sum(axis=0)
+        # sum_k (off_k u) x f_k = u x sum_k off_k f_k
+        lever[i] += off[i] @ fi
+        lever[j] -= off[j] @ fj
+    return force, cross_rows(u, lever)
+
+
+def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of (n, 3) arrays (np.cross's axis handling costs more than the
+    product for a few rows)."""
+    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)

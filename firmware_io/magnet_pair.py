@@ -151,6 +151,7 @@ class MagnetPairs:
                                 f"shapes {pos.shape}, {mom.shape}")
         dist = np.sqrt(((pos[:, None, :] - pos[None, :, :]) ** 2).sum(axis=-1))
         close = dist < self.switch_distance_m
+        np.fill_diagonal(close, False)       # a magnet and itself: no pair
         force, torque = (charge_forces(pos, mom, self.models, ~close) if n > 1
                          else (np.zeros((1, 3)), np.zeros((1, 3))))
         if close.any():

@@ -19,10 +19,10 @@ at a time along the path: all 8 rows of A(p) for all coils, then only the rows t
 inside the map's kernel, or sliced after it as the runner does), then also only the coils whose
 bound of force per ampere near p (firmware_io.runner.CoilSkipBound) times the current limit
 exceeds a stated force; with the allocation on the kept coils and the force it then misses.
-``--design``: another design (1010-steel cores: the allocation applies the map's saturation
-factor); ``--no-saturation``: the map's factor table set to 1 (the linear columns' step).
+``--design``: another design (1010-steel cores: the map's saturation factor applied);
+``--no-saturation``: its factor set to 1; ``--magnets F``: the two-magnet case (bench_magnets).
 
-    python studies/bench_runner.py [OUT] [--map F] [--design F.toml] [--no-saturation] [--quick]
+    python studies/bench_runner.py [OUT] [--map F] [--design F] [--no-saturation] [--magnets F]
 """
 
 from __future__ import annotations
@@ -44,6 +44,7 @@ from firmware_io.allocation import allocate
 from firmware_io.mapfile import MapFile
 from firmware_io.runner import CoilSkipBound, force_law_rows
 from firmware_io.scene import Scene
+from studies import bench_magnets
 from studies._common import design_and_map, finish, load_average, without_saturation
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "bench_runner"
@@ -111,7 +112,9 @@ def _loop(summary: dict) -> dict:
 
 
 def run(out_dir=DEFAULT_OUT, *, map_path=None, duration_s: float = 2.0,
-        quick: bool = False, design=None, saturation: bool = True) -> dict:
+        quick: bool = False, design=None, saturation: bool = True, magnets=None) -> dict:
+    """The study (module docstring); ``magnets``: None, or (a design with two magnets, its
+    map path or None) for the two-magnet case."""
     out_dir, design, array, map_path = design_and_map(out_dir, map_path, progress=not quick,
                                                       design=design)
     if not saturation:
@@ -195,6 +198,9 @@ def run(out_dir=DEFAULT_OUT, *, map_path=None, duration_s: float = 2.0,
             "force_change_p95_n": float(np.percentile(miss, 95)),
             "force_change_max_n": float(np.max(miss))}
     res["skip"] = skip
+    if magnets is not None:
+        res["two_magnets"] = bench_magnets.run(out_dir / "two-magnets", design=magnets[0],
+                                               map_path=magnets[1], quick=quick)
     return finish(out_dir / "bench_runner.json", res, _print)
 
 
@@ -259,7 +265,11 @@ if __name__ == "__main__":
                     help="design TOML file or a shipped design (default: the thesis device)")
     ap.add_argument("--no-saturation", action="store_true",
                     help="run with the map's saturation factor table set to 1")
+    ap.add_argument("--magnets", default=None,
+                    help="a design with two [[magnets]]: also the two-magnet case")
+    ap.add_argument("--magnets-map", default=None, help="that design's map (default: build)")
     a = ap.parse_args()
     run(a.out, map_path=a.map, duration_s=a.duration, quick=a.quick,
         design=None if a.design is None else load_design(a.design),
-        saturation=not a.no_saturation)
+        saturation=not a.no_saturation,
+        magnets=None if a.magnets is None else (load_design(a.magnets), a.magnets_map))

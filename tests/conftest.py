@@ -160,3 +160,21 @@ def pytest_runtest_makereport(item, call):
     if _ci() and report.skipped and not hasattr(report, "wasxfail"):
         report.outcome = "failed"
         report.longrepr = f"skipped under DESIGNKIT_CI (every check must run): {report.longrepr}"
+
+
+PINCH_DESIGN = ROOT / "tests" / "data" / "pinch_small.toml"
+"""The thesis device with two magnets (thumb, index) and the small map box."""
+
+
+@pytest.fixture(scope="session")
+def pinch_map(tmp_path_factory, thesis_array):
+    """(design, map path) of tests/data/pinch_small.toml, built once per run (the thesis
+    array's coupled solve shared: the design's coils are the thesis')."""
+    from designkit import fieldmap
+    from designkit.design import load_design
+
+    design = load_design(PINCH_DESIGN)
+    path = tmp_path_factory.mktemp("pinch_map") / "map.npz"
+    fieldmap.write(path, fieldmap.build(design, array=thesis_array, n_check=10,
+                                        progress=False))
+    return design, path

@@ -3,6 +3,8 @@
 Reference for the numbers: :meth:`designkit.Coil.field` evaluated directly, F = (grad B)^T m.
 """
 
+import contextlib
+import io
 import json
 
 import numpy as np
@@ -16,8 +18,9 @@ from designkit.cores import ArraySystem
 
 @pytest.fixture(scope="module")
 def quick_run(tmp_path_factory):
-    """A quick report, and the coil count of every coupled core solve it built."""
+    """A quick report, the coil count of every coupled core solve it built, what it printed."""
     out = tmp_path_factory.mktemp("report")
+    printed = io.StringIO()
     built, build = [], ArraySystem.__init__
 
     def counting(self, array, *args, **kwargs):
@@ -27,8 +30,9 @@ def quick_run(tmp_path_factory):
     array_for_design.cache_clear()     # the report's own solves, not an earlier test's
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(ArraySystem, "__init__", counting)
-        assert main(["report", "--quick", "--no-progress", "--out", str(out)]) == 0
-    return out, built
+        with contextlib.redirect_stdout(printed):
+            assert main(["report", "--quick", "--no-progress", "--out", str(out)]) == 0
+    return out, built, printed.getvalue()
 
 
 @pytest.fixture(scope="module")
@@ -41,6 +45,16 @@ def test_report_solves_the_design_s_coupled_cores_once(quick_run):
     built = quick_run[1]
     n = default_design().n_coils
     assert built.count(n) == 1 and set(built) <= {1, n}, built
+
+
+def test_the_summary_says_which_force_is_one_coil_and_which_the_whole_array(quick_run):
+    out, _, printed = quick_run
+    rep = json.loads((out / "report.json").read_text())
+    e = rep["designs"]["design"]
+    [line] = [ln for ln in printed.splitlines() if ln.startswith("design '")]
+    assert (f"upward Fz {round(e['upward_force_design_point_n'] * 1e3, 1):.1f} mN at the design "
+            f"point from its coil alone at {e['current_a']:g} A; with every coil") in line
+    assert f"Fz >= {round(e['min_upward_force_workspace_n'] * 1e3, 1):.1f} mN" in line
 
 
 def test_report_folder_is_complete(quick_report):

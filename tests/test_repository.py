@@ -90,6 +90,8 @@ def test_readme_default_test_command_excludes_slow_tests():
 
     cfg = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["pytest"]["ini_options"]
     assert "-m 'not slow'" in cfg["addopts"]
+    # one worker per core, each test file on one worker (its module fixtures built once)
+    assert "-n auto --dist loadfile" in cfg["addopts"]
     assert "python -m pytest -m slow" in (ROOT / "README.md").read_text()
 
 

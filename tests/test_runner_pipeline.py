@@ -13,6 +13,7 @@ import pytest
 from firmware_io.errors import BadInputError
 from firmware_io.localization import Estimate
 from firmware_io.mapfile.drive import DriveRecord
+from firmware_io.runner.pipeline import Acquisition
 from firmware_io.runner import (CoilSkipBound, CurrentHistory, Fix, PoseTracker, RunnerConfig,
                                 SensorFrame, SensorLayout, SensorPipeline, force_law_rows)
 
@@ -255,3 +256,84 @@ def test_threaded_source_runs_the_pipeline_and_stamps_the_previous_pass():
     assert got.frame_t_s < ticks["t"] and float(got.frame_t_s).is_integer()
     again = src(0.0)                       # handed over once: None or a newer result
     assert again is None or (isinstance(again, Fix) and again.frame_t_s > got.frame_t_s)
+
+
+class _ScriptedEstimator:
+    """Names sensor 3 in the first frame (a pass whose reads straddle a move), then finds the
+    magnet consistent with every sensor (fault-free PL 3.5 mm) but never trusts it alone (no
+    prior); solved without sensor 3 its fault-free PL is 15 mm: what the runner_stale study
+    showed after the finger's return."""
+
+    class settings:
+        alert_limit_m = 0.010
+        orientation_alert_limit_rad = 0.2
+
+    def __init__(self):
+        self.calls = 0
+
+    def reset(self):
+        pass
+
+    def magnet_free(self, readings, currents):
+        return False
+
+    def estimate(self, readings, currents, usable=None, seed=None, time_s=None):
+        self.calls += 1
+        p = np.array([-0.020, 0.0, 0.030])
+        without_3 = usable is not None and not usable[3]
+        named = (3,) if self.calls == 1 else ()
+        return Estimate(p, np.array([0.0, 0.0, 0.6]), False, "protection level above the limit",
+                        protection_level_m=0.04, excluded_sensors=named, consistent=True,
+                        fault_free_protection_level_m=0.015 if without_3 or named else 0.0035)
+
+
+def test_a_transient_naming_clears_after_agreeing_frames_and_the_finger_is_acquired():
+    est = _ScriptedEstimator()
+    pipe = SensorPipeline(est, _layout(), lambda t: np.zeros(9), np.array([0.0, 0.0, 0.6]),
+                          acquisition=Acquisition(clear_passes=5))
+    fixes = [pipe.process(SensorFrame(np.full((18, 3), 1e-3), ("ok",) * 18, 0.01 + 0.003 * k))
+             for k in range(8)]
+    assert not fixes[0].ok and fixes[0].fault_excluded == (3,)
+    # frames 1-4 agree with sensor 3 but it stays suspect: each is solved without it and not
+    # acquired (fault-free PL 15 mm > 10 mm); the 5th agreeing frame ends the suspicion
+    assert [f.ok for f in fixes[1:5]] == [False] * 4
+    assert all(f.ok and f.acquired for f in fixes[5:])
+    assert not pipe.suspect.any()
+    # a sensor named again restarts its count: never cleared while it keeps being named
+    est2 = _ScriptedEstimator()
+    est2.estimate = lambda r, c, usable=None, seed=None, time_s=None: Estimate(
+        np.array([-0.02, 0.0, 0.03]), np.array([0.0, 0.0, 0.6]), False, "",
+        protection_level_m=0.04, excluded_sensors=(3,) if (usable is None) else (),
+        consistent=True, fault_free_protection_level_m=0.0035)
+    pipe2 = SensorPipeline(est2, _layout(), lambda t: np.zeros(9), np.array([0.0, 0.0, 0.6]))
+    for k in range(12):
+        pipe2.process(SensorFrame(np.full((18, 3), 1e-3), ("ok",) * 18, 0.01 + 0.003 * k))
+    assert pipe2.suspect[3]
+
+
+def test_acquisition_refuses_clear_passes_out_of_range():
+    for bad in (0, -1, 2.5, 10_000):
+        with pytest.raises(BadInputError, match="clear_passes"):
+            Acquisition(clear_passes=bad)
+
+
+def test_a_gated_jump_is_confirmed_by_the_next_fix_solved_cold():
+    """A fix 40 mm from the track fails the gate; the next one, solved cold (its frame rejected
+    the track's prior) and consistent with it, restarts the tracker there. A warm fix (the
+    prior used) does not confirm: it could repeat a wrong basin."""
+    from firmware_io.runner import InnovationGate
+
+    def fix(x, t, prior_used):
+        return Fix(np.array([x, 0.0, 0.03]), np.array([0.0, 0.0, 0.6]), True, t, (),
+                   np.zeros(18, bool), 0.0, covariance_m2=np.eye(3) * 1e-8,
+                   prior_used=prior_used)
+
+    for second_prior_used, restarts in ((False, True), (True, False)):
+        kf = PoseTracker()
+        for k in range(10):
+            kf.update(np.array([-0.02, 0.0, 0.03]), 0.005 * k, True, np.array([0.0, 0.0, 0.6]))
+        gate = InnovationGate(1e-4)
+        why, restart = gate.check(fix(0.02, 0.05, False), kf)
+        assert why and not restart
+        why, restart = gate.check(fix(0.0201, 0.055, second_prior_used), kf)
+        assert restart is restarts and (why == "") is restarts

@@ -63,7 +63,7 @@ def test_the_plan_is_a_sensors_table_a_design_file_takes(planned):
     (["--max-current", "-1"], ["--max-current", "> 0", "-1"]),
     (["--noise-mt", "0"], ["--noise-mt", "> 0"]),
     (["--count", "500", "--spacing", "50"], ["--count", "at most", "sites"]),
-    (["--spacing", "1"], ["--spacing", "at most 4000 candidate sites", "1 mm (", "sites)"]),
+    (["--spacing", "1"], ["--spacing", "at most 24000 grid points", "1 mm (", "points)"]),
     (["--separation", "1:2", "--magnets", "2"], ["--separation", "lattice step 30 mm", "1:2 mm"]),
     (["--seed", "-1"], ["--seed", "[0, 2^63)", "-1"]),
     (["--design", "no-such-design.toml"], ["design", "existing TOML file",
@@ -128,3 +128,8 @@ def test_refusals_found_with_the_sites_come_before_the_progress_bar(tmp_path, ca
     err = [ln for ln in (cap.out + cap.err).splitlines() if ln.strip()]
     assert len(err) == 1 and args[0] in err[0], err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_usage_line_puts_the_action_first_as_it_is_typed(capsys):
+    assert main(["sensors", "--help"]) in (0, None)
+    assert capsys.readouterr().out.startswith("usage: designkit sensors {plan} [options]")

@@ -626,7 +626,8 @@ def _print_summary(design, summary, current, report, out) -> None:
             continue
         bad = ", ".join(e["violated"]) or "none"
         print(f"{role} '{e['name']}': upward Fz {_mn1(e['upward_force_design_point_n'])} mN "
-              f"at the design point; over the workspace region "
+              f"at the design point from its coil alone at {e['current_a']:g} A; with every "
+              f"coil (bounded allocation) over the workspace region "
               f"{_at_least(e['min_upward_force_workspace_n'])}; violates: {bad}")
     if report.get("quick"):
         print("QUICK RUN (--quick): coarse grids and small images")

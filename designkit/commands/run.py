@@ -19,6 +19,7 @@ from pathlib import Path
 from ..design import load_design
 from ..errors import BadInputError
 from ..sim import RunSettings, run_simulation
+from ..sim.magnets_run import run_pinch
 from ..support.atomic import write_json_atomic
 from .common import add_design_argument, add_progress_argument, show_progress, staged_folder
 
@@ -37,6 +38,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "run: its objects and lambda, compiled for the map's design")
     parser.add_argument("--trajectory", default="slide",
                         help="slide | poke | tilt (a slide tilting the magnet up to 45 deg) | "
+                             "pinch (two fingers squeeze a block: a design with two [[magnets]]) | "
                              "FILE.csv with columns t_s,x_m,y_m,z_m and optionally tilt_deg "
                              "(0..180), azimuth_deg (default slide)")
     parser.add_argument("--duration", type=float, default=None,
@@ -82,6 +84,8 @@ def run(args: argparse.Namespace) -> int:
         raise BadInputError("--simulate", "given (this machine has no coil hardware; on the "
                             "controller run `python -m firmware_io.run --bus N --map F --scene F`)",
                             False)
+    if args.trajectory == "pinch":
+        return _pinch(args)
     # staged: a run that fails (bad trajectory file, a fault, Ctrl-C) leaves no half-written
     # folder (map and scene without a summary) behind
     with staged_folder(args.out) as stage:
@@ -111,6 +115,33 @@ def run(args: argparse.Namespace) -> int:
         print("  fault " + _fault_line(f))
     for f in summary.get("faults_not_injected", []):
         print(f"  fault {f['fault']} @ {f['scheduled_s']:.3f} s: not injected ({f['why']})")
+    return 0
+
+
+def _pinch(args: argparse.Namespace) -> int:
+    """``--trajectory pinch``: two magnets squeeze a block (:func:`designkit.sim.magnets_run.
+    run_pinch`); one line per magnet."""
+    if args.as_built is not None:
+        raise BadInputError("--as-built", "left out with --trajectory pinch", args.as_built)
+    with staged_folder(args.out) as stage:
+        summary = run_pinch(_settings(args), design=args.design, map_path=args.map, out=stage,
+                            progress=show_progress(args))
+    print(f"wrote {args.out}/run.csv, summary.json, "
+          + ", ".join(f"run_{m['name']}.png" for m in summary["magnets"])
+          + f" (and no-pair-compensation/): running fraction {summary['running_fraction']:.1%}, "
+          "condition number median "
+          + ("n/a" if summary["condition_median"] is None
+             else f"{summary['condition_median']:.3g}"))
+    for m in summary["magnets"]:
+        print(f"  {m['name']}: force error RMS {_mn(m['force_error_rms_n'])} on a commanded "
+              f"force RMS {_mn(m['force_rms_n'])} (without the pair force compensated "
+              f"{_mn(m['force_error_rms_without_pair_compensation_n'])}), localization MAE "
+              f"{_mm(m['localization_mae_m'])}, {m['trusted_wrong_fixes']} trusted fixes more "
+              "than 5 mm off")
+    if summary["running_fraction"] == 0 and summary["fault_log"]:
+        first = summary["fault_log"][0]
+        print(f"  the coils stayed off (the safe state while a magnet is untrusted): "
+              f"{first['state']}: {first['detail']}")
     return 0
 
 

@@ -43,6 +43,8 @@ ACTIONS = ("plan",)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    # the action first, as it is typed (argparse would list the positional after the options)
+    parser.usage = "%(prog)s {" + ",".join(ACTIONS) + "} [options]"
     parser.add_argument("action", choices=ACTIONS, help="plan: place the sensors")
     add_design_argument(parser)
     parser.add_argument("--count", type=int, default=None,

@@ -19,11 +19,15 @@ from .maps import Layout, scenario_response, summary
 from .planner import Plan, PlanSettings, minimum_count, plan_sensors
 from .region import RegionSettings, magnet_pairs, one_magnet, one_magnet_of
 from .response import Response
-from .sites import Headroom, candidate_sites, design_boards, headroom, user_board
+from .sites import (Headroom, board_outline_m, candidate_sites, design_boards, grid_xy, headroom,
+                    user_board)
 
 MAX_SITES = 4000
 """Candidate sites a plan may search (a finer --spacing is refused before any work: the
 response is computed at every site for every magnet pose, minutes beyond this)."""
+MAX_GRID_POINTS = 6 * MAX_SITES
+"""Grid points on the boards before the headroom keeps the sites (the headroom's coupled field
+at each point takes about a second per thousand): a finer --spacing is refused before it."""
 
 
 @dataclass(frozen=True)
@@ -116,6 +120,13 @@ def prepare(design, request: PlanRequest) -> Prepared:
               (user_board(design, array.coils, request.plane_m),))
     current = (design.drive.max_current_a if request.max_current_a is None
                else request.max_current_a)
+    n_grid = len(grid_xy(*board_outline_m(design), request.spacing_m)) * len(boards)
+    if n_grid > MAX_GRID_POINTS:
+        coarser = request.spacing_m * (n_grid / MAX_GRID_POINTS) ** 0.5
+        raise BadInputError("--spacing", f"a spacing that leaves at most {MAX_GRID_POINTS} grid "
+                            f"points on the boards (here >= {coarser * 1e3:.2g} mm)",
+                            f"{request.spacing_m * 1e3:g} mm ({n_grid} points)",
+                            "Each point's headroom is checked before the sites are kept.")
     level = request.bound.usable_fraction * request.bound.range_t
     sites = candidate_sites(design, array, boards, request.spacing_m, current, level)
     n_sites = len(sites.positions_m)

@@ -51,13 +51,19 @@ THESIS_MAE_MM = {"off": 0.80, "static": 1.26, "sinusoidal": 0.91, "time-varying"
 
 # ---------------------------------------------------------------------------- geometry
 def sensor_positions_m(design: Design | None = None, array=None) -> np.ndarray:
-    """Nominal sensor positions, shape (2, n_coils, 3), m: upper array, then lower array.
+    """Nominal sensor positions, shape (2, n, 3), m: the map's flat sensor list in two halves
+    (the default layout: the upper array, then the lower array, n = n_coils; a layout of its
+    own, e.g. a planned one, in its order: an even count).
 
-    Uses ``CoilArray.sensor_positions_m()`` when the array provides it (one definition), else
-    the design rule: on each coil axis, ``sensors.offset_m`` above z = 0 and below the coil bottom.
+    Uses ``CoilArray.sensor_poses()`` when the array provides it (one definition), else the
+    design rule: on each coil axis, ``sensors.offset_m`` above z = 0 and below the coil bottom.
     """
-    if array is not None and hasattr(array, "sensor_positions_m"):
-        return np.asarray(array.sensor_positions_m(), dtype=float)
+    if array is not None and hasattr(array, "sensor_poses"):
+        pos = np.asarray(array.sensor_poses()[0], dtype=float)
+        if len(pos) % 2:
+            raise BadInputError("sensor layout", "an even number of sensors for the simulated "
+                                "device (its sensors in two halves)", len(pos))
+        return pos.reshape(2, -1, 3)
     d = design or default_design()
     c = np.array(d.coil_centres_m(), dtype=float)
     up, lo = c.copy(), c.copy()

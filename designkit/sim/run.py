@@ -142,7 +142,7 @@ def run_simulation(settings: RunSettings = RunSettings(), *, design=None, map_pa
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     array = array if array is not None else CoilArray.from_design(design)
-    map_path, fmap = _map(design, array, map_path, out, progress)
+    map_path, fmap = map_of_design(design, array, map_path, out, progress)
     # the runner's configuration from the map's drive record, as on the controller
     cfg = config_from_map(fmap, control_period_s=st.period_s, unipolar=st.unipolar,
                           force_axes="z" if st.rows == "fz" else "xyz",
@@ -315,7 +315,7 @@ def _scripted_path(design, array, virtual, trajectory: str, bounds) -> Trajector
                 z_limits_m=(floor, hi[2] - BOX_MARGIN_M))
 
 
-def _map(design, array, map_path, out: Path, progress: bool):
+def map_of_design(design, array, map_path, out: Path, progress: bool):
     """The map file (built into ``out`` when none is given) and its loaded MapFile, checked to
     be the design's."""
     if map_path is None:

@@ -89,8 +89,7 @@ class SimSensorSource:
                 c0 = time.thread_time()
                 frame = self.pipeline.process(frame)
                 measured = time.thread_time() - c0
-                self.fixes.append((field_s, bool(frame.ok), float(np.linalg.norm(
-                    np.asarray(frame.position_m, float) - self.frame_truth_m))))
+                self.fixes.append((field_s,) + self.diagnose(frame, self.frame_truth_m))
                 self.fit_s.append(measured)
                 fit_s = measured if self.fit_time_s is None else self.fit_time_s
             self.fitted = (ready_s + fit_s, frame, field_s)
@@ -110,6 +109,11 @@ class SimSensorSource:
         dev.sensor_bus.clear_log()
         self.in_flight = (dev.sensor_clock.t, self.last_set_s, reading)
         self.last_set_s = t_s
+
+    @staticmethod
+    def diagnose(fix, truth_m) -> tuple:
+        """(trusted, distance m from ``truth_m``) of a published fix (diagnostics)."""
+        return bool(fix.ok), float(np.linalg.norm(np.asarray(fix.position_m, float) - truth_m))
 
     def __call__(self, t_s: float):
         frame, self.ready = self.ready, None

@@ -13,6 +13,10 @@ checks each sensor's health and headroom and runs the pose estimator, publishing
       -> voltages: R-L feed-forward within the supply; I^2 t guard [drive, thermal]
       -> driver duty/direction, one block write per PCA9685       [firmware_io.hw.coils]
 
+N magnets (:mod:`.magnets_loop`, :mod:`.magnets_pipeline`, :mod:`.magnets_force`): one track
+per magnet, each its own contact, one allocation of the stacked rows with the magnets' pull on
+each other compensated; any magnet untrusted switches every coil off.
+
 Configuration: :mod:`.config`; start-up sensor calibration: :mod:`.calibration`; sensor fault
 names and the exclusion latch: :mod:`.sensor_faults`. For the fault table, the resume policy
 and the timing rationale see docs/runner.md. Imports numpy only (plus the firmware_io
@@ -29,6 +33,9 @@ from .gate import InnovationGate, rendered_protection_level
 from .headroom import EXPECTED_SATURATION, SensorHeadroom, SensorLayout, expected_saturation
 from .history import CurrentHistory
 from .loop import FAULTS, LOCALIZATION_FAULTS, Runner, RunnerIO, SceneForce, StepRecord
+from .magnets_force import condition_number, magnet_weights, stacked_rows
+from .magnets_loop import MagnetLane, MagnetsRunner, MagnetsSettings, MagnetsStepRecord
+from .magnets_pipeline import MagnetsFix, MagnetsPipeline
 from .pipeline import SensorPipeline
 from .sensor_faults import FDE_LATCH_PASSES, SENSOR_FAULTS, ExclusionLatch
 from .skip import CoilSkipBound, gradient_norm
@@ -44,5 +51,6 @@ __all__ = [
     "SensorLayout", "expected_saturation", "CurrentHistory", "FAULTS", "LOCALIZATION_FAULTS",
     "Runner", "RunnerIO", "SceneForce", "StepRecord", "SensorPipeline", "FDE_LATCH_PASSES",
     "SENSOR_FAULTS", "ExclusionLatch", "CoilSkipBound", "gradient_norm", "ThermalGuard",
-    "PoseTracker",
+    "PoseTracker", "condition_number", "magnet_weights", "stacked_rows", "MagnetLane",
+    "MagnetsRunner", "MagnetsSettings", "MagnetsStepRecord", "MagnetsFix", "MagnetsPipeline",
 ]

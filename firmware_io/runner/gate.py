@@ -4,8 +4,9 @@ A trusted fix is taken into the tracker only when it agrees with the tracker's p
 its frame time: squared Mahalanobis distance with both covariances (the fix's and the
 prediction's plus the tracker's measurement noise) <= the chi-square(3) quantile at the gate
 risk. A fix that fails asks the sensor side to re-acquire (the next fit starts from the global
-search); a following re-acquired fix consistent with it confirms that the finger really moved
-(a warm fit could repeat a wrong basin; a cold one would not). The protection level of the
+search); a following fix solved cold (re-acquired, or its frame rejected the track's prior)
+consistent with it confirms that the finger really moved (a warm fit could repeat a wrong
+basin; a cold one would not). The protection level of the
 position the runner renders is that of the tracker's filtered position once the fix is in
 (:func:`firmware_io.localization.integrity.fused_protection_level`). docs/runner.md,
 "Integrity".
@@ -36,8 +37,9 @@ class InnovationGate:
         self.candidate: Fix | None = None     # a gated-out fix awaiting confirmation
 
     def check(self, fix: Fix, tracker) -> tuple[str, bool]:
-        """('' or why the fix fails, whether the tracker must restart at this fix: two
-        consecutive re-acquired fixes agree, so the tracker was wrong, not the fix)."""
+        """('' or why the fix fails, whether the tracker must restart at this fix: a fix
+        solved cold agrees with the gated fix before it, so the tracker was wrong, not the
+        fix)."""
         if tracker.x is None:
             return "", False
         cov = fix.covariance_m2 if fix.covariance_m2 is not None else _ZERO3
@@ -47,7 +49,7 @@ class InnovationGate:
             self.candidate = None
             return "", False
         c = self.candidate
-        if c is not None and fix.reacquired:
+        if c is not None and (fix.reacquired or not fix.prior_used):
             cc = c.covariance_m2 if c.covariance_m2 is not None else _ZERO3
             dv = fix.position_m - c.position_m
             s = cov + cc + 2 * tracker.r * np.eye(3)

@@ -116,14 +116,18 @@ class RunnerIO:
 
 
 class SceneForce:
-    """A compiled scene (:class:`firmware_io.scene.Scene`) as the runner's one-point interface:
-    ``force(position_m (3,), velocity_m_s (3,)) -> (3,)`` N."""
+    """A compiled scene (:class:`firmware_io.scene.Scene`) as the runner's interface:
+    ``force(position_m (3,), velocity_m_s (3,)) -> (3,)`` N at one point, ``forces(positions_m
+    (N, 3), velocities_m_s (N, 3)) -> (N, 3)`` N at each magnet's (one evaluation)."""
 
     def __init__(self, scene):
         self.scene = scene
 
     def force(self, p, v):
         return self.scene.force(np.asarray(p, float)[None], np.asarray(v, float)[None])[0]
+
+    def forces(self, p, v):
+        return self.scene.force(np.asarray(p, float), np.asarray(v, float))
 
 
 class Runner:
@@ -161,6 +165,8 @@ class Runner:
         if allocate is None:
             allocate = Allocator()
         self.map, self.scene, self.estimator, self.cfg = fieldmap, scene, estimator, config
+        # ``integrity_risk`` and ``model_bias_m`` of the multi-frame protection level
+        self.integrity = estimator
         self.tracker = tracker if tracker is not None else PoseTracker()
         self.allocate, self.headroom = allocate, headroom
         self.coils, self.sensors, self.log, self.clock = io.coils, io.sensors, io.log, io.clock
@@ -322,6 +328,17 @@ class Runner:
         problems: list[tuple[str, str]] = []
         if fix is None:
             return False, problems
+        self._note_frame(fix, t_s)
+        problems.extend(fix.problems)
+        accepted = self._accept(fix, t_s, problems, self)
+        self.last_estimate_ok = accepted      # taken into the tracker
+        self.accepted_in_row = self.accepted_in_row + 1 if accepted else 0
+        self.pipeline.track = self.tracker.snapshot()   # the next frame's prior
+        return True, problems
+
+    def _note_frame(self, fix, t_s: float) -> None:
+        """A new result from the sensor side (a :class:`Fix`, or anything with its
+        ``frame_t_s`` and ``fault_excluded``): the pass interval and the exclusion log."""
         self.last_fix = fix
         if math.isfinite(fix.frame_t_s):
             self.frame_times.append(fix.frame_t_s)
@@ -329,80 +346,88 @@ class Runner:
                 t = list(self.frame_times)
                 d = sorted(b - a for a, b in zip(t, t[1:]))
                 self.pass_interval_s = d[(len(d) - 1) // 2]
-        problems.extend(fix.problems)
         if fix.fault_excluded != self.fault_excluded:
             self.fault_excluded = fix.fault_excluded
             self.exclusion_log.append((t_s, fix.fault_excluded))
             self.log(f"[{t_s:9.4f} s] fault detection excludes sensors "
                      f"{list(fix.fault_excluded) or 'none'}")
+
+    def _accept(self, fix: Fix, t_s: float, problems: list, lane) -> bool:
+        """Take one magnet's fix into its track (``lane``: ``tracker``, ``gate``, ``have_fix``,
+        ``accepted_at_s``; the runner itself for one magnet): the gate, the acquisition's
+        prior, the multi-frame protection level against the alert limit; appends the
+        problems it finds and returns whether the fix was accepted."""
         ok = fix.ok and math.isfinite(float(np.sum(fix.position_m) + np.sum(fix.moment_a_m2)))
         accepted = False
         gated = ""
         if ok:
-            gated, restart = self.gate.check(fix, self.tracker)
+            gated, restart = lane.gate.check(fix, lane.tracker)
             if restart:       # the tracker was wrong, not the fix: restart there
-                self.tracker.reset()
-                self.have_fix = False     # renders again from the next accepted fix
+                lane.tracker.reset()
+                lane.have_fix = False     # renders again from the next accepted fix
             if gated:
                 self.pipeline.reacquire = True
-        if not ok and fix.candidate and not self.have_fix and math.isfinite(
+        if not ok and fix.candidate and not lane.have_fix and math.isfinite(
                 float(np.sum(fix.position_m) + np.sum(fix.moment_a_m2))):
             # acquiring: a consistent fix beyond the limits is the next frame's prior (frames'
             # noise averages out in the chain), nothing renders on it
-            self.tracker.update(fix.position_m, fix.frame_t_s, True, fix.moment_a_m2,
+            lane.tracker.update(fix.position_m, fix.frame_t_s, True, fix.moment_a_m2,
                                 fix.pose_covariance)
-        pl = (rendered_protection_level(fix, self.tracker, self.estimator)
+        pl = (rendered_protection_level(fix, lane.tracker, self.integrity)
               if ok and not gated else math.inf)
         if gated:
             problems.append(("gated", gated))
         elif ok and pl > self.cfg.alert_limit_m:
             problems.append(("lost", f"protection level {pl * 1e3:.3g} mm > alert limit "
                              f"{self.cfg.alert_limit_m * 1e3:.3g} mm"))
-            if not self.have_fix:
+            if not lane.have_fix:
                 # acquisition: the tracker takes the fix (it passed the estimator's tests and
                 # the gate), nothing renders until a filtered PL is within the limit
-                self.tracker.update(fix.position_m, fix.frame_t_s, True, fix.moment_a_m2,
+                lane.tracker.update(fix.position_m, fix.frame_t_s, True, fix.moment_a_m2,
                                     fix.pose_covariance)
         elif ok:
-            self.tracker.update(fix.position_m, fix.frame_t_s, True, fix.moment_a_m2,
+            lane.tracker.update(fix.position_m, fix.frame_t_s, True, fix.moment_a_m2,
                                 fix.pose_covariance)
-            self.have_fix = accepted = True
-            self.accepted_at_s = t_s
+            lane.have_fix = accepted = True
+            lane.accepted_at_s = t_s
             self.background_t = fix.background_t
-        self.last_estimate_ok = accepted      # taken into the tracker
-        self.accepted_in_row = self.accepted_in_row + 1 if accepted else 0
-        self.pipeline.track = self.tracker.snapshot()   # the next frame's prior
-        return True, problems
+        return accepted
 
-    def _freshness(self, t_s: float, problems: list) -> None:
+    def _freshness(self, t_s: float, problems: list, lane=None) -> None:
         """No force with a position older than one sensor pass: 'lost' once the newest accepted
         fix was handed over more than :data:`STALE_PASSES` pass intervals ago (a newer frame
         is missing); beyond ``max_fix_age_s`` the track is dropped (the next fix starts from
         the global search and restarts the tracker: a returning finger is not gated against
-        where it left)."""
+        where it left). ``lane``: one magnet's track (:meth:`_accept`; default the runner's
+        own)."""
+        lane = self if lane is None else lane
         cfg = self.cfg
-        age = t_s - self.tracker.t
+        age = t_s - lane.tracker.t
         if age > cfg.max_fix_age_s:
             # also an acquisition's track (fixes beyond the alert limit): a state that old
             # would bend the next fixes with its velocity
-            self.tracker.reset()
-            self.pipeline.track = None
+            lane.tracker.reset()
+            self._forget_track(lane)
             self.pipeline.reacquire = True
-            if self.have_fix:
-                self.have_fix = False
+            if lane.have_fix:
+                lane.have_fix = False
                 problems.append(("lost", f"newest accepted fix {age * 1e3:.0f} ms old > "
                                  f"{cfg.max_fix_age_s * 1e3:.0f} ms: track dropped"))
             return
-        if not self.have_fix:
+        if not lane.have_fix:
             return
         dt = self.pass_interval_s
         if dt is None:
             return
-        since = t_s - self.accepted_at_s
+        since = t_s - lane.accepted_at_s
         limit = STALE_PASSES * dt + 2 * cfg.control_period_s
         if since > limit:
             problems.append(("lost", f"no trusted fix for {since * 1e3:.1f} ms > "
                              f"{limit * 1e3:.1f} ms ({STALE_PASSES:g} sensor passes)"))
+
+    def _forget_track(self, lane) -> None:
+        """The sensor side fits the next frame without ``lane``'s prior."""
+        self.pipeline.track = None
 
     # -- the step ------------------------------------------------------------------------------
     def step(self, t_s: float) -> StepRecord:
@@ -447,6 +472,14 @@ class Runner:
         if prof:
             tm = self._mark("object_force", tm)
         command = self._allocate(p, f_ref, m)
+        if self._over_limit(t_s, command):
+            return self._record(t_s, t0, p, f_ref, new_frame, off=True)
+        return self._drive(t_s, t0, p, f_ref, command, new_frame)
+
+    def _over_limit(self, t_s: float, command: np.ndarray) -> bool:
+        """Enter 'over_limit' (True) when ``command`` (A) breaks a per-coil limit, the total
+        budget or the drive mode, or is not finite: a defect upstream never reaches a coil."""
+        cfg = self.cfg
         total = float(np.sum(np.abs(command)))
         budget = cfg.drive.total_current_a
         if np.any(np.abs(command) > self.limit + 1e-9) or total > budget + 1e-9 \
@@ -455,8 +488,8 @@ class Runner:
             self._enter_fault(t_s, "over_limit",
                               f"command max |I| {np.abs(command).max():.3f} A, sum {total:.3f} A "
                               f"(limits {cfg.drive.current_limit_a:.3f} A, {budget:.3f} A)")
-            return self._record(t_s, t0, p, f_ref, new_frame, off=True)
-        return self._drive(t_s, t0, p, f_ref, command, new_frame)
+            return True
+        return False
 
     def _thermal_problem(self, problems: list) -> list:
         """``problems`` with the 'thermal' problem appended when a coil's I^2 t is over its

@@ -51,20 +51,30 @@ class Acquisition:
     rare, so the exposure (its rate times the window) stays small with a window of a minute.
     While a track exists, a fix solved cold (the frame rejected the track's prior) counts only
     when it lies farther from the prior than its own protection level (which bounds any
-    bounded fault's effect) plus ``jump_sigmas`` of the prior's sd: the finger moved.
+    bounded fault's effect) plus ``jump_sigmas`` of the prior's sd: the finger moved. A prior
+    whose sd is at least the fix's protection level (an acquiring track's first far guess)
+    says less than the fix and counts as none.
+
+    A suspect also clears after ``clear_passes`` frames in a row whose fit used it, passed the
+    residual test and named no one: the naming was transient (a pass whose reads straddle a
+    move of the finger), and a fault that escapes the test that often is one the test bounds.
 
     hold_s : s; jump_risk : the probability that a correct prior lies beyond ``jump_sigmas``
-        (chi-square(3))
+        (chi-square(3)); clear_passes : frames
     """
 
     hold_s: float = 60.0
     jump_risk: float = 1e-4
+    clear_passes: int = 5
 
     def __post_init__(self):
         if not (isinstance(self.hold_s, (int, float)) and 0 <= self.hold_s < math.inf):
             raise BadInputError("hold_s", "a time >= 0 s", self.hold_s)
         if not (isinstance(self.jump_risk, (int, float)) and 0 < self.jump_risk < 0.5):
             raise BadInputError("jump_risk", "a probability in (0, 0.5)", self.jump_risk)
+        if not (isinstance(self.clear_passes, int) and 1 <= self.clear_passes <= 1000):
+            raise BadInputError("clear_passes", "an integer in [1, 1000] frames",
+                                self.clear_passes)
 
     @property
     def jump_sigmas(self) -> float:
@@ -99,6 +109,7 @@ class SensorPipeline:
         self.checked_s: float | None = None   # the sensors' last check (None: the start's)
         self.n = layout.n_sensors
         self.suspect = np.zeros(self.n, dtype=bool)   # excluded by fault detection, not cleared
+        self.clean = np.zeros(self.n, dtype=int)      # a suspect's frames in a row found agreeing
         self.currents_at, self.clock = currents_at, clock
         self.moment = np.asarray(moment_a_m2, float)
         self.excluded = np.zeros(self.n, dtype=bool)
@@ -122,31 +133,7 @@ class SensorPipeline:
         bad = self._bad_frame(frame)
         if bad:
             return self._refused(frame, bad, t0)
-        values = np.asarray(frame.readings_t, float)
-        status = list(frame.status)
-        # beyond the linear range (or Inf): saturated, whatever the driver said
-        with np.errstate(invalid="ignore"):
-            beyond = np.any(np.abs(values) > TLV493D_LINEAR_RANGE_T, axis=1)
-        for i in np.flatnonzero(beyond):
-            if status[i] == "ok":
-                status[i] = "saturated"
-        # the currents the coils really carried when the frame's field was sampled (R-L
-        # model), not the command they lag nor today's
-        currents = self.currents_at(frame.t_s)
-        predicted = self.expected_saturation(currents)
-        healthy = np.array([s == "ok" for s in status])
-        # the one headroom rule: predicted beyond EXPECTED_SATURATION -> left out, no fault
-        # (whatever the sensor reads, also a saturated reading the model expected)
-        quiet = predicted & (healthy | np.array([s == "saturated" for s in status]))
-        out = ~healthy & ~quiet
-        newly = [i for i in np.flatnonzero(out) if not self.excluded[i]]
-        problems = []
-        if newly:
-            i = newly[0]
-            problems.append((SENSOR_FAULTS.get(status[i], "sensor_dead"),
-                             f"sensor {i} reports {status[i]!r}; excluded"))
-        self.excluded = out | quiet | self.latch.latched
-        readings = np.where(self.excluded[:, None], np.nan, values)
+        readings, currents, problems, quiet = self._screen(frame)
         cold = self.reacquire
         if cold:
             self.reacquire = False
@@ -181,6 +168,37 @@ class SensorPipeline:
                    None if cov is None else np.asarray(cov, float).copy(),
                    acquired, bool(est.prior_used), candidate and not acquired)
 
+    def _screen(self, frame: SensorFrame):
+        """The frame's health and headroom checks: (readings (n_sensors, 3) T with NaN where a
+        sensor is left out, the modelled currents (n_coils,) A at the frame's time, the sensor
+        problems it raises, the sensors left out for predicted saturation (bool))."""
+        values = np.asarray(frame.readings_t, float)
+        status = list(frame.status)
+        # beyond the linear range (or Inf): saturated, whatever the driver said
+        with np.errstate(invalid="ignore"):
+            beyond = np.any(np.abs(values) > TLV493D_LINEAR_RANGE_T, axis=1)
+        for i in np.flatnonzero(beyond):
+            if status[i] == "ok":
+                status[i] = "saturated"
+        # the currents the coils really carried when the frame's field was sampled (R-L
+        # model), not the command they lag nor today's
+        currents = self.currents_at(frame.t_s)
+        predicted = self.expected_saturation(currents)
+        healthy = np.array([s == "ok" for s in status])
+        # the one headroom rule: predicted beyond EXPECTED_SATURATION -> left out, no fault
+        # (whatever the sensor reads, also a saturated reading the model expected)
+        quiet = predicted & (healthy | np.array([s == "saturated" for s in status]))
+        out = ~healthy & ~quiet
+        newly = [i for i in np.flatnonzero(out) if not self.excluded[i]]
+        problems = []
+        if newly:
+            i = newly[0]
+            problems.append((SENSOR_FAULTS.get(status[i], "sensor_dead"),
+                             f"sensor {i} reports {status[i]!r}; excluded"))
+        self.excluded = out | quiet | self.latch.latched
+        readings = np.where(self.excluded[:, None], np.nan, values)
+        return readings, currents, problems, quiet
+
     def _fit(self, readings: np.ndarray, currents, seed, t_s: float):
         """The estimate of one frame with the sensor side's trust: (estimate, the sensors fault
         detection excluded or left out as suspects, those the estimator named in this frame,
@@ -193,6 +211,7 @@ class SensorPipeline:
         fde = set(named)
         used = np.isfinite(readings).all(axis=1)
         used[list(fde)] = False
+        self._count_agreement(est, used, named)
         left = self.suspect & used
         if not est.ok and est.consistent and left.any():
             again = self.estimator.estimate(readings, currents, usable=~left, seed=seed,
@@ -216,6 +235,20 @@ class SensorPipeline:
             self.suspect &= ~used
         return est, tuple(sorted(fde)), named, (candidate, acquired)
 
+    def _count_agreement(self, est, used: np.ndarray, named: tuple) -> None:
+        """A transient naming ends: a suspect that an all-sensor fit used while it passed its
+        residual test and named no one, in :attr:`Acquisition.clear_passes` frames in a row,
+        is no longer suspect (a sensor named once while the finger moved between its reads
+        would otherwise block acquisition for good). A naming or a failed test restarts the
+        count of the sensors it concerns."""
+        if est.consistent and not named:
+            self.clean[self.suspect & used] += 1
+        else:
+            self.clean[list(named) if est.consistent else slice(None)] = 0
+        cleared = self.suspect & (self.clean >= self.acquisition.clear_passes)
+        self.suspect &= ~cleared
+        self.clean[~self.suspect] = 0
+
     def _candidate(self, est, seed, t_s: float) -> bool:
         """May a fix the estimator does not trust be trusted on its fault-free protection
         levels (:class:`Acquisition`, its limits aside)?"""
@@ -225,8 +258,11 @@ class SensorPipeline:
             return False
         if seed is None or est.prior_used:
             return True
-        # the frame rejected the track's prior: a jump, unless a bounded fault could explain it
+        # the frame rejected the track's prior: a jump, unless a bounded fault could explain it;
+        # a prior vaguer than the fix's own bound (an acquiring track's first guess) is no prior
         sd = math.sqrt(float(np.max(np.diag(seed.covariance)[:3])))
+        if sd >= est.protection_level_m:
+            return True
         far = float(np.linalg.norm(np.asarray(est.position_m, float) - seed.position_m))
         return far > est.protection_level_m + self.acquisition.jump_sigmas * sd
 
