@@ -110,3 +110,36 @@ def test_ctrl_c_is_one_line_exit_130_and_leaves_nothing(tmp_path, command):
     assert proc.returncode == 130, err[-3000:]
     assert lines == [f"designkit {command}: interrupted; nothing written"], err[-3000:]
     assert sorted(p.name for p in work.rglob("*")) == []
+
+
+
+FORK_DRIVER = """
+import multiprocessing, os, signal, sys, time
+from designkit.support.parallel import quiet_pool
+armed = []
+os.register_at_fork(after_in_parent=lambda: armed and os.kill(os.getpid(), signal.SIGINT))
+armed.append(True)
+try:
+    pool = quiet_pool(2, "fork")
+except KeyboardInterrupt:
+    armed.clear()
+    deadline = time.monotonic() + 10
+    while multiprocessing.active_children() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    print("interrupted", len(multiprocessing.active_children()))
+    sys.exit(0)
+armed.clear()
+pool.terminate()
+print("lost")
+"""
+
+
+def test_a_ctrl_c_that_lands_while_a_pool_forks_is_not_lost():
+    """A SIGINT delivered inside the fork's at-fork hooks (where logging's lock hook swallows
+    the KeyboardInterrupt: a map build under load worked on after Ctrl-C) is held until the
+    pool exists, then raised, and the pool's workers are gone (a fresh interpreter's main
+    thread, as the command runs)."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    out = subprocess.run([sys.executable, "-c", FORK_DRIVER], env=env, capture_output=True,
+                         text=True, timeout=120)
+    assert out.stdout.split() == ["interrupted", "0"], out.stdout + out.stderr[-2000:]

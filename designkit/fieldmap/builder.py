@@ -13,7 +13,6 @@ from __future__ import annotations
 import dataclasses
 import multiprocessing
 import os
-import signal
 import time
 from dataclasses import dataclass, field
 
@@ -26,6 +25,7 @@ from ..errors import BadInputError
 from ..model.array import ROWS, CoilArray
 from ..model.electrical import drive_data
 from ..support.blas import one_blas_thread
+from ..support.parallel import quiet_pool
 from ..support.progress import tqdm
 from .cells import fit_layers
 from .clearance import Clearance
@@ -254,14 +254,13 @@ def _run_steps(steps: list):
         return
     early = [st for st in steps[1:] if st[0] in BEFORE_SOLVE]
     late = [st for st in steps[1:] if st[0] not in BEFORE_SOLVE]
-    fork = multiprocessing.get_context("fork")
     # the workers ignore Ctrl-C, which the parent answers by terminating them
-    with fork.Pool(1, initializer=_ignore_sigint) as first:
+    with quiet_pool(1, "fork") as first:
         try:
             beside = first.map_async(_timed_step, early)
             yield _timed_step(steps[0])  # the coupled solve: the late steps need it
             # forked after the solve: these workers inherit it
-            with fork.Pool(WORKERS, initializer=_ignore_sigint) as pool:
+            with quiet_pool(WORKERS, "fork") as pool:
                 try:
                     yield from pool.imap_unordered(_timed_step, late)
                 except BaseException:
@@ -271,10 +270,6 @@ def _run_steps(steps: list):
         except BaseException:
             first.terminate()
             raise
-
-
-def _ignore_sigint() -> None:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _timed_step(step):

@@ -88,6 +88,30 @@ def _ignore_ctrl_c() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
+def quiet_pool(n_workers: int, start_method: str | None = None):
+    """A ``multiprocessing`` pool of ``n_workers`` processes that ignore Ctrl-C (the parent
+    answers it by terminating them), started with Ctrl-C held: one that lands inside a fork's
+    at-fork hooks is swallowed there ("Exception ignored") and the parent would work on; held,
+    it is raised as the signal mask is restored, after the pool is terminated.
+    ``start_method``: None (the platform's default) or e.g. 'fork'."""
+    ctx = multiprocessing.get_context(start_method)
+    held = hasattr(signal, "pthread_sigmask")
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if held else None
+    try:
+        pool = ctx.Pool(n_workers, initializer=_ignore_ctrl_c)
+    except BaseException:
+        if held:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        raise
+    try:
+        if held:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)   # a held Ctrl-C is raised here
+    except BaseException:
+        pool.terminate()
+        raise
+    return pool
+
+
 def run_chunks(fn: Callable, head: tuple, source: RowSource, *, workers: int | None = None,
                scheduler: str | None = None, progress: tuple[str, str] | None = ("rows", "row"),
                max_chunk: int = 500) -> ChunkRun:
@@ -141,7 +165,7 @@ def _collect(done: dict, start: int, out, seconds: float, n: int, sizer: ChunkSi
 def _run_pool(n_workers: int, fn, head, source, sizer: ChunkSizer, done: dict, bar) -> None:
     """The chunks on ``n_workers`` local processes, :data:`IN_FLIGHT_PER_WORKER` each ahead."""
     finished: queue.SimpleQueue = queue.SimpleQueue()
-    pool = multiprocessing.Pool(n_workers, initializer=_ignore_ctrl_c)
+    pool = quiet_pool(n_workers)
     ok = False
     try:
         start, in_flight = 0, 0
