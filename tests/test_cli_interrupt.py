@@ -141,5 +141,5 @@ def test_a_ctrl_c_that_lands_while_a_pool_forks_is_not_lost():
     thread, as the command runs)."""
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     out = subprocess.run([sys.executable, "-c", FORK_DRIVER], env=env, capture_output=True,
-                         text=True, timeout=120)
+                         text=True, timeout=120, preexec_fn=_as_from_a_terminal)
     assert out.stdout.split() == ["interrupted", "0"], out.stdout + out.stderr[-2000:]
