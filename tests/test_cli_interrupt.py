@@ -118,11 +118,16 @@ import multiprocessing, os, signal, sys, time
 from designkit.support.parallel import quiet_pool
 armed = []
 os.register_at_fork(after_in_parent=lambda: armed and os.kill(os.getpid(), signal.SIGINT))
+import threading
+first = quiet_pool(1, "fork")
+# a thread that can take the signal (BLAS's and the progress bar's threads do in a map build)
+threading.Thread(target=time.sleep, args=(60,), daemon=True).start()
 armed.append(True)
 try:
     pool = quiet_pool(2, "fork")
 except KeyboardInterrupt:
     armed.clear()
+    first.terminate()
     deadline = time.monotonic() + 10
     while multiprocessing.active_children() and time.monotonic() < deadline:
         time.sleep(0.05)
@@ -130,6 +135,7 @@ except KeyboardInterrupt:
     sys.exit(0)
 armed.clear()
 pool.terminate()
+first.terminate()
 print("lost")
 """
 

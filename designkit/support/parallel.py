@@ -18,6 +18,7 @@ import multiprocessing
 import os
 import queue
 import signal
+import threading
 import time
 from dataclasses import dataclass
 from typing import Any, Callable, Protocol
@@ -90,25 +91,27 @@ def _ignore_ctrl_c() -> None:
 
 def quiet_pool(n_workers: int, start_method: str | None = None):
     """A ``multiprocessing`` pool of ``n_workers`` processes that ignore Ctrl-C (the parent
-    answers it by terminating them), started with Ctrl-C held: one that lands inside a fork's
-    at-fork hooks is swallowed there ("Exception ignored") and the parent would work on; held,
-    it is raised as the signal mask is restored, after the pool is terminated.
+    answers it by terminating them). While the pool forks, this process's Ctrl-C handler only
+    notes the signal: raised inside a fork's at-fork hooks the KeyboardInterrupt would be
+    swallowed there ("Exception ignored") and the parent would work on (a signal mask would
+    not do: another thread takes the signal and the handler still runs in those hooks); a noted
+    Ctrl-C terminates the new pool and is then passed to the handler.
     ``start_method``: None (the platform's default) or e.g. 'fork'."""
     ctx = multiprocessing.get_context(start_method)
-    held = hasattr(signal, "pthread_sigmask")
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if held else None
+    handler = (signal.getsignal(signal.SIGINT)
+               if threading.current_thread() is threading.main_thread() else None)
+    noted: list = []
+    if callable(handler):
+        signal.signal(signal.SIGINT, lambda signum, frame: noted.append(signum))
     try:
         pool = ctx.Pool(n_workers, initializer=_ignore_ctrl_c)
-    except BaseException:
-        if held:
-            signal.pthread_sigmask(signal.SIG_SETMASK, old)
-        raise
-    try:
-        if held:
-            signal.pthread_sigmask(signal.SIG_SETMASK, old)   # a held Ctrl-C is raised here
-    except BaseException:
+    finally:
+        if callable(handler):
+            signal.signal(signal.SIGINT, handler)
+    if noted:
         pool.terminate()
-        raise
+        handler(signal.SIGINT, None)      # Python's handler raises KeyboardInterrupt
+        raise KeyboardInterrupt
     return pool
 
 
