@@ -33,6 +33,18 @@ def _hypothesis_profiles() -> None:
 _hypothesis_profiles()
 
 
+@pytest.fixture(autouse=True)
+def collector_given_back():
+    """A runner a test starts and never stops (the runner takes the garbage collector while
+    it runs: firmware_io.runner.collector) must not leave it off for the tests after it."""
+    import gc
+
+    enabled = gc.isenabled()
+    yield
+    if enabled and not gc.isenabled():
+        gc.enable()
+
+
 @pytest.fixture(scope="session")
 def thesis_array():
     """The default design's coupled 3 x 3 array (its one LU solve shared by every test)."""

@@ -258,25 +258,28 @@ def simulate(device: SimulatedDevice, runner_factory, trajectory: Trajectory, *,
     rec_all = _Recorder(n_steps, device.array.n_coils)
     bar = tqdm(total=n_steps, desc="simulate", unit="step", disable=not progress,
                mininterval=0.5)
-    for s in range(n_steps):
-        ts = t[s]
-        overrun = injector.before_step(runner, ts)
-        source.tick(ts)
-        c0 = cpu()
-        rec = _step(runner, ts, overrun)
-        if not measured:      # the step's measured CPU time, for the record only
-            rec.loop_s = cpu() - c0
-        i_true = device.current_a.copy()
-        truth = {"position": true_p[s], "moment": device.moment_steps[s],
-                 "force": device.true_force_n(s, i_true),
-                 "torque": device.true_torque_n_m(s, i_true),
-                 "object": scene_force(true_p[s], vel[s]) if scene_force is not None else None}
-        rec_all.add(s, rec, truth, i_true, runner)
-        device.advance_currents(period_s)
-        device.coil_bus.clear_log()
-        bar.update()
-    bar.close()
-    runner.stop()
+    try:     # the runner gives the garbage collector back on any exit
+        for s in range(n_steps):
+            ts = t[s]
+            overrun = injector.before_step(runner, ts)
+            source.tick(ts)
+            c0 = cpu()
+            rec = _step(runner, ts, overrun)
+            if not measured:      # the step's measured CPU time, for the record only
+                rec.loop_s = cpu() - c0
+            i_true = device.current_a.copy()
+            truth = {"position": true_p[s], "moment": device.moment_steps[s],
+                     "force": device.true_force_n(s, i_true),
+                     "torque": device.true_torque_n_m(s, i_true),
+                     "object": (scene_force(true_p[s], vel[s]) if scene_force is not None
+                                else None)}
+            rec_all.add(s, rec, truth, i_true, runner)
+            device.advance_currents(period_s)
+            device.coil_bus.clear_log()
+            bar.update()
+        bar.close()
+    finally:
+        runner.stop()
     return SimulationResult(rec_all.columns(), injector.injected, list(runner.fault_log),
                             period_s, list(source.fit_s), list(source.fixes))
 

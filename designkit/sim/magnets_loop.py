@@ -96,26 +96,28 @@ def simulate_magnets(device, runner_factory, trajectory, *, duration_s: float,
     states = []
     bar = tqdm(total=n_steps, desc="simulate", unit="step", disable=not progress,
                mininterval=0.5)
-    for s in range(n_steps):
-        source.tick(t[s])
-        c0 = cpu()
-        rec = runner.step(t[s])
-        loop_s[s], new_frame[s] = cpu() - c0, rec.new_frame
-        i_true = device.current_a.copy()
-        cols["estimate_m"][s] = rec.positions_m
-        cols["force_ref_n"][s] = rec.forces_ref_n
-        cols["force_n"][s] = device.true_forces_n(s, i_true)
-        if scene_force is not None:
-            cols["object_n"][s] = [scene_force(true_p[s, k], vel[s, k]) for k in range(n)]
-        cols["pair_compensated_n"][s] = rec.pair_forces_n
-        cond[s] = rec.condition
-        cur[s], cmd[s] = i_true, rec.command_a
-        states.append(rec.state)
-        device.advance_currents(period)
-        device.coil_bus.clear_log()
-        bar.update()
-    bar.close()
-    runner.stop()
+    try:     # the runner gives the garbage collector back on any exit
+        for s in range(n_steps):
+            source.tick(t[s])
+            c0 = cpu()
+            rec = runner.step(t[s])
+            loop_s[s], new_frame[s] = cpu() - c0, rec.new_frame
+            i_true = device.current_a.copy()
+            cols["estimate_m"][s] = rec.positions_m
+            cols["force_ref_n"][s] = rec.forces_ref_n
+            cols["force_n"][s] = device.true_forces_n(s, i_true)
+            if scene_force is not None:
+                cols["object_n"][s] = [scene_force(true_p[s, k], vel[s, k]) for k in range(n)]
+            cols["pair_compensated_n"][s] = rec.pair_forces_n
+            cond[s] = rec.condition
+            cur[s], cmd[s] = i_true, rec.command_a
+            states.append(rec.state)
+            device.advance_currents(period)
+            device.coil_bus.clear_log()
+            bar.update()
+        bar.close()
+    finally:
+        runner.stop()
     return MagnetsResult(list(device.names), period, t, true_p, pair_n=device.pair_n[:n_steps],
                          condition=cond, state=np.array(states), loop_s=loop_s,
                          new_frame=new_frame, current_a=cur,

@@ -22,6 +22,14 @@ from ..errors import BadInputError, I2CError
 #: i2c_msg flag for a read message (uapi/linux/i2c.h I2C_M_RD).
 I2C_M_RD = 0x0001
 
+MESSAGE_BUFFER_TYPES = tuple(ctypes.c_char * n for n in range(1, 66))
+"""The ctypes array types of every message buffer up to 65 bytes (a PCA9685 register byte and
+all 16 channels' 64), held for the life of the process. ``i2c_msg.read``/``write`` build
+their buffer with ``ctypes.create_string_buffer``, and ctypes caches an array type only while
+something else holds it: without this, every raw transfer made a new type (slow to make, and
+a reference cycle, so garbage only the cyclic collector frees -- work that lands in a control
+step)."""
+
 
 class I2CBus(Protocol):
     """The subset of :class:`smbus2.SMBus` that firmware_io uses."""

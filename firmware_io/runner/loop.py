@@ -10,11 +10,18 @@ for the moment m the estimator found (column k of F scaled by the map's saturati
 torque m x B the currents cause is reported with each step. Every fault switches every coil off
 in the same step; no force is rendered with a position older than one sensor pass. For the
 fault table, the resume policy and the timing rationale see docs/runner.md.
+
+The garbage collector is the runner's while it runs (:mod:`firmware_io.runner.collector`):
+:meth:`Runner.start` collects once, freezes what start-up made and switches automatic
+collection off; each step ends, after the coils were written, with a young pass when one is due
+(its time counts in the step's ``loop_s``); middle and full passes -- which walk every
+survivor and would land in whichever step crosses a threshold -- never run in the loop;
+:meth:`Runner.stop` gives the collector back as it found it. Callers stop the runner in a
+``finally``, so that an exception or Ctrl-C gives it back too.
 """
 
 from __future__ import annotations
 
-import gc
 import math
 import time
 from collections import deque
@@ -25,6 +32,7 @@ import numpy as np
 
 from ..allocation import Allocator
 from ..errors import BadInputError, CoilWriteError
+from .collector import LoopCollector
 from .config import RunnerConfig
 from .drive import CurrentPath
 from .forcelaw import force_law_matrix, torque_matrix
@@ -209,6 +217,7 @@ class Runner:
         # per-stage compute times of the last step (s), when ``profile`` is set
         self.profile = False
         self.stages: dict[str, float] = {}
+        self.collector = LoopCollector()
         attach = getattr(io.sensors, "attach", None)
         if attach is not None:
             attach(self.pipeline)       # the source runs the fit on its side
@@ -232,15 +241,18 @@ class Runner:
                        self.moment)
         self.coils.plan_voltage(self.path.voltage(self.path.current_a))
         # a full collection walks every object the map, scene and estimator made at start-up
-        # (long enough to be an overrun, docs/runner.md): collect once now and move the
-        # survivors out of the collector's reach; later collections see only the loop's objects
-        gc.collect()
-        gc.freeze()
+        # (long enough to be an overrun, docs/runner.md): collect once now, move the survivors
+        # out of the collector's reach and take the collector for the loop (module docstring)
+        self.collector.take()
 
     def stop(self) -> None:
-        self.coils.all_off()
-        self.state = "safe"
-        gc.unfreeze()  # what start() froze is collectable again once the loop is over
+        """All coils off, the safe state, and the garbage collector given back as
+        :meth:`start` found it (also when the coils fail to answer)."""
+        try:
+            self.coils.all_off()
+            self.state = "safe"
+        finally:
+            self.collector.release()
 
     # -- faults --------------------------------------------------------------------------------
     def _enter_fault(self, t_s: float, name: str, detail: str) -> None:
@@ -436,9 +448,21 @@ class Runner:
 
         ``self.sensors(t_s)`` hands over the newest :class:`Fix` of the sensor side, or None;
         a source that hands over raw :class:`SensorFrame` s instead has them processed here
-        (the single-threaded fallback: the fit then counts in this step).
+        (the single-threaded fallback: the fit then counts in this step). After the coils
+        were written, the young garbage collection when one is due (module docstring); the
+        record's ``loop_s`` includes it.
         """
         t0 = self.clock()
+        rec = self._step(t_s, t0)
+        tc = self.clock() if self.profile else 0.0
+        if self.collector.young():
+            rec.loop_s = self.clock() - t0
+        if self.profile:
+            self.stages["collect"] = self.clock() - tc
+        return rec
+
+    def _step(self, t_s: float, t0: float) -> StepRecord:
+        """The step up to the coils' write (:meth:`step`)."""
         cfg = self.cfg
         prof = self.profile
         self.history.push(t_s, self.path.current_a)

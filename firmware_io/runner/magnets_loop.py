@@ -207,10 +207,9 @@ class MagnetsRunner(Runner):
         self.pipeline.tracks[lane.index] = None
 
     # -- the step ------------------------------------------------------------------------------
-    def step(self, t_s: float) -> MagnetsStepRecord:
-        """One control step at ``t_s`` (s) for every magnet; never raises for a device fault
-        or a bad frame."""
-        t0 = self.clock()
+    def _step(self, t_s: float, t0: float) -> MagnetsStepRecord:
+        """One control step at ``t_s`` (s) for every magnet up to the coils' write
+        (:meth:`Runner.step` runs it); never raises for a device fault or a bad frame."""
         self.history.push(t_s, self.path.current_a)
         new_frame, problems = self._take_fix(t_s)
         for lane in self.lanes:

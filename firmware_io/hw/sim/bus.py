@@ -118,13 +118,11 @@ class SimBus:
     def reachable(self) -> list[SimDevice]:
         """Devices connected to the upstream segment through the current mux settings."""
         out: list[SimDevice] = []
-
-        def walk(d: SimDevice) -> None:
+        stack = list(reversed(self.devices))
+        while stack:   # depth first, in order (no recursive closure: that is a reference
+            d = stack.pop()    # cycle, garbage for the cyclic collector on every transfer)
             out.append(d)
-            for sub in d.downstream():
-                walk(sub)
-        for d in self.devices:
-            walk(d)
+            stack.extend(reversed(list(d.downstream())))
         return out
 
     def violations(self) -> list[str]:
