@@ -158,35 +158,40 @@ def charge_forces(positions_m: np.ndarray, moments_a_m2: np.ndarray, models: lis
     """Forces (N, 3) N and torques (N, 3) N m (about each centre) of N magnets on each other
     from their axial charges (``models``: one :class:`AxialCharges` per magnet, all with the
     same number of charges); ``mask`` (N, N) bool: the pairs to include (default all; the
-    diagonal never)."""
+    diagonal never). At k = 8 charges each the cost is the number of numpy calls, not the
+    arithmetic: per pair one (k, k, 3) difference, its weights and two batched products."""
     pos = np.asarray(positions_m, float)
     mom = np.asarray(moments_a_m2, float)
     n = len(pos)
-    mag = np.sqrt(np.einsum("ij,ij->i", mom, mom))
-    u = mom / np.where(mag > 0, mag, 1.0)[:, None]
-    off = np.array([m.offsets_m for m in models])                  # (n, k)
-    q = np.array([m.charges for m in models]) * mag[:, None]      # (n, k)
-    x = pos[:, None, :] + off[:, :, None] * u[:, None, :]          # (n, k, 3)
-    keep = ~np.eye(n, dtype=bool) if mask is None else mask & ~np.eye(n, dtype=bool)
+    pairs = [(i, j) for i in range(n) for j in range(i + 1, n)
+             if mask is None or mask[i, j] or mask[j, i]]
+    if not pairs:
+        return np.zeros((n, 3)), np.zeros((n, 3))
     force, lever = np.zeros((n, 3)), np.zeros((n, 3))
+    mag = np.sqrt((mom * mom).sum(axis=1))
+    u = mom / np.where(mag > 0, mag, 1.0)[:, None]
     scale = MU0 / (4.0 * math.pi)
-    pairs = [(i, j) for i in range(n) for j in range(i + 1, n) if keep[i, j] or keep[j, i]]
+    x = [pos[i] + models[i].offsets_m[:, None] * u[i] for i in range(n)]   # (k, 3) each
     for i, j in pairs:                                              # each pair once
         d = x[i][:, None, :] - x[j][None, :, :]                   # (k, k, 3)
         r2 = np.einsum("abk,abk->ab", d, d)
-        w = np.outer(q[i], q[j]) / (r2 * np.sqrt(r2)) * scale
-        fi = np.einsum("ab,abk->ak", w, d)          # on each charge of i (Newton: j's opposite)
-        fj = np.einsum("ab,abk->bk", w, d)
+        w = np.multiply.outer(models[i].charges, models[j].charges)
+        w *= scale * mag[i] * mag[j]
+        w /= r2 * np.sqrt(r2)
+        # on each charge of i (Newton: j's opposite), w[a, b] d[a, b] summed over b, resp. a
+        fi = np.matmul(w[:, None, :], d)[:, 0]
+        fj = np.matmul(w.T[:, None, :], d.transpose(1, 0, 2))[:, 0]
         force[i] += fi.sum(axis=0)
         force[j] -= fj.sum(axis=0)
         # sum_k (off_k u) x f_k = u x sum_k off_k f_k
-        lever[i] += off[i] @ fi
-        lever[j] -= off[j] @ fj
+        lever[i] += models[i].offsets_m @ fi
+        lever[j] -= models[j].offsets_m @ fj
     return force, cross_rows(u, lever)
 
 
 def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise cross product of (n, 3) arrays (np.cross's axis handling costs more than the
-    product for a few rows)."""
-    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
+    """Row-wise cross product of (n, 3) arrays (np.cross's axis handling, and numpy calls on
+    single columns, cost more than the product for a few rows: Python floats)."""
+    return np.array([[a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0]
+                     for (a0, a1, a2), (b0, b1, b2) in zip(a.tolist(), b.tolist())],
+                    float).reshape(-1, 3)

@@ -137,6 +137,9 @@ class MagnetPairs:
             for j in range(i + 1, n):
                 d = PairBound(self.models[i], self.models[j]).switch_distance_m(self.tol)
                 self.switch_distance_m[i, j] = self.switch_distance_m[j, i] = d
+        # compared with squared distances; a magnet and itself: no pair (-1 < any square)
+        self.switch_squared_m2 = self.switch_distance_m ** 2
+        np.fill_diagonal(self.switch_squared_m2, -1.0)
 
     def forces(self, positions_m, moments_a_m2) -> tuple[np.ndarray, np.ndarray]:
         """Force (N, 3) N and torque (N, 3) N m (about its centre) on each magnet from all the
@@ -145,13 +148,14 @@ class MagnetPairs:
         pos = np.asarray(positions_m, float)
         mom = np.asarray(moments_a_m2, float)
         n = len(self.models)
-        if (pos.shape != (n, 3) or mom.shape != (n, 3) or not np.all(np.isfinite(pos))
-                or not np.all(np.isfinite(mom))):
+        # one reduction for the finiteness of both (a NaN or an Inf makes the sum non-finite)
+        if (pos.shape != (n, 3) or mom.shape != (n, 3)
+                or not math.isfinite(float(np.abs(pos).sum() + np.abs(mom).sum()))
+                and not (np.all(np.isfinite(pos)) and np.all(np.isfinite(mom)))):
             raise BadInputError("positions_m, moments_a_m2", f"finite arrays of shape ({n}, 3)",
                                 f"shapes {pos.shape}, {mom.shape}")
-        dist = np.sqrt(((pos[:, None, :] - pos[None, :, :]) ** 2).sum(axis=-1))
-        close = dist < self.switch_distance_m
-        np.fill_diagonal(close, False)       # a magnet and itself: no pair
+        diff = pos[:, None, :] - pos[None, :, :]
+        close = np.einsum("ijk,ijk->ij", diff, diff) < self.switch_squared_m2
         force, torque = (charge_forces(pos, mom, self.models, ~close) if n > 1
                          else (np.zeros((1, 3)), np.zeros((1, 3))))
         if close.any():

@@ -50,10 +50,9 @@ def magnet_weights(weights, n_magnets: int) -> np.ndarray:
 def stacked_rows(force_rows, targets, weights) -> tuple[np.ndarray, np.ndarray]:
     """The weighted stack: (sum_i r_i, n) rows and (sum_i r_i,) targets from each magnet's rows
     (r_i, n) N/A and target (r_i,) N, each scaled by sqrt(w_i)."""
-    s = np.sqrt(np.asarray(weights, float))
-    rows = np.concatenate([si * np.asarray(f, float) for si, f in zip(s, force_rows)])
-    target = np.concatenate([si * np.asarray(t, float) for si, t in zip(s, targets)])
-    return rows, target
+    rows = np.concatenate(force_rows)
+    scale = np.repeat(np.sqrt(np.asarray(weights, float)), [len(f) for f in force_rows])
+    return rows * scale[:, None], np.concatenate(targets) * scale
 
 
 def condition_number(rows) -> float:

@@ -157,6 +157,7 @@ class MagnetsRunner(Runner):
         self.integrity = IntegrityTerms.of(estimator)
         n = len(magnets.names)
         self.weights = magnet_weights(magnets.weights, n)
+        self.equal_weights = bool(np.all(self.weights == 1.0))
         self.nominal = np.asarray(magnets.moments_a_m2, float).reshape(n, 3)
         self.lanes = [MagnetLane(name, k, PoseTracker(), InnovationGate(config.gate_risk))
                       for k, name in enumerate(magnets.names)]
@@ -261,8 +262,7 @@ class MagnetsRunner(Runner):
         for p, f, m in zip(ps, f_refs, ms):
             a = self.map.actuation(p)
             rows.append(force_law_matrix(m) @ a[3:])
-            targets.append(np.asarray(f, float) - bias_scale(m, self.moment)
-                           * np.asarray(self.map.bias_force(p), float))
+            targets.append(np.subtract(f, bias_scale(m, self.moment) * self.map.bias_force(p)))
             fields.append(a[:3])
         pair = np.zeros((len(ps), 3))
         if self.magnets.compensate_pair and len(ps) > 1:
@@ -273,8 +273,9 @@ class MagnetsRunner(Runner):
         targets = [t - q for t, q in zip(targets, pair)]
         if self.z_only:
             rows, targets = [r[2:3] for r in rows], [t[2:3] for t in targets]
-        self.condition = condition_number(np.concatenate(rows))
         fm, target = stacked_rows(rows, targets, self.weights)
+        # unweighted: the weights scale whole rows; with equal weights the stack is the same
+        self.condition = condition_number(fm if self.equal_weights else np.concatenate(rows))
         i, g = self._currents_for(fm, target, self.limit, {"unipolar": cfg.unipolar}, None)
         self.pair_n = pair
         self.torques_n_m = np.array([torque_matrix(m) @ (b @ g) for m, b in zip(ms, fields)])
