@@ -148,10 +148,11 @@ class MagnetPairs:
         pos = np.asarray(positions_m, float)
         mom = np.asarray(moments_a_m2, float)
         n = len(self.models)
-        # one reduction for the finiteness of both (a NaN or an Inf makes the sum non-finite)
-        if (pos.shape != (n, 3) or mom.shape != (n, 3)
-                or not math.isfinite(float(np.abs(pos).sum() + np.abs(mom).sum()))
-                and not (np.all(np.isfinite(pos)) and np.all(np.isfinite(mom)))):
+        # one reduction for both (a NaN or an Inf makes the sum non-finite; the element-wise
+        # test only when it is, so that a sum that overflows does not refuse finite input)
+        finite = (math.isfinite(float(np.abs(pos).sum() + np.abs(mom).sum()))
+                  or bool(np.all(np.isfinite(pos)) and np.all(np.isfinite(mom))))
+        if pos.shape != (n, 3) or mom.shape != (n, 3) or not finite:
             raise BadInputError("positions_m, moments_a_m2", f"finite arrays of shape ({n}, 3)",
                                 f"shapes {pos.shape}, {mom.shape}")
         diff = pos[:, None, :] - pos[None, :, :]
