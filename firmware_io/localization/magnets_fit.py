@@ -29,7 +29,8 @@ import numpy as np
 from ..errors import BadInputError
 from .fde import bounded_fault_bias, exclusion_drops, projections
 from .integrity import orientation_protection_level, position_protection_level
-from .pose_fit import COLD_ITERATIONS, CONVERGED_GAIN, PoseFit, State
+from .levenberg import levenberg_marquardt
+from .pose_fit import COLD_ITERATIONS, PoseFit, State
 from .sensor_model import SensorModel
 from .settings import EstimatorSettings
 
@@ -231,40 +232,15 @@ class MagnetsFit:
     # -- solving ---------------------------------------------------------------------------
     def solve_once(self, st: JointState, blocks, w, d, corrected: bool,
                    max_iterations: int) -> JointSolution:
-        """Levenberg-Marquardt from ``st``; converged when the Gauss-Newton step would lower
-        chi2 by less than :data:`.pose_fit.CONVERGED_GAIN` (as the single-magnet fit)."""
-        jac, res = self.rows(st, blocks, w, d, corrected)
-        cost, lam, converged, it = float(res @ res), 1e-4, False, 0
-        idx = np.arange(jac.shape[1])
-        for it in range(1, max_iterations + 1):
-            a = jac.T @ jac
-            g = jac.T @ res
-            a[idx, idx] = a[idx, idx] * (1.0 + lam) + 1e-300
-            try:
-                delta = np.linalg.solve(a, g)
-            except np.linalg.LinAlgError:
-                break
-            gain = float(delta @ g)
-            if not math.isfinite(gain):
-                break
-            if lam < 1e-2 and gain < CONVERGED_GAIN:
-                st, converged = self.step(st, delta), True
-                break
-            new = self.step(st, delta)
-            jac2, res2 = self.rows(new, blocks, w, d, corrected)
-            cost2 = float(res2 @ res2)
-            if math.isfinite(cost2) and cost2 <= cost:
-                small = cost - cost2 <= 1e-9 * cost
-                st, jac, res, cost = new, jac2, res2, cost2
-                lam = max(lam * 0.2, 1e-9)
-                if small:
-                    converged = True
-                    break
-            else:
-                lam *= 10.0
-                if lam > 1e8:
-                    break
-        return JointSolution(st, jac, res, np.asarray(blocks), cost, converged, it)
+        """Levenberg-Marquardt from ``st`` (:func:`.levenberg.levenberg_marquardt`): converged
+        when the Gauss-Newton step would lower chi2 by less than
+        :data:`.levenberg.CONVERGED_GAIN`."""
+        def rows(state):
+            return self.rows(state, blocks, w, d, corrected)
+
+        out = levenberg_marquardt(st, rows, self.step, rows(st), max_iterations)
+        return JointSolution(out.state, out.jac, out.res, np.asarray(blocks), out.chi2,
+                             out.converged, out.iterations)
 
     def solve(self, st: JointState, blocks, w, d, max_iterations: int | None = None,
               cold: bool = False) -> JointSolution:

@@ -27,6 +27,7 @@ from .calibration import SensorCalibration
 from .corrections import Corrections
 from .integrity import (chi2_quantile, missed_detection_noncentrality, ratio_quantiles,
                         thresholds)
+from .levenberg import levenberg_marquardt
 from .magnet import MU0, multipole_pose_columns
 from .pose import rotated, tangent_axes
 from .search import GridSearch
@@ -40,9 +41,6 @@ does not is dragged by a liar, or the prior is wrong)."""
 
 COLD_ITERATIONS = 20
 """Iterations of a cold start's multipole solve (a good start converges in 3-15)."""
-
-CONVERGED_GAIN = 2.5e-3
-"""The Gauss-Newton step's predicted chi-square drop below which a solve has converged."""
 
 _ONE = np.ones(1)
 
@@ -334,55 +332,20 @@ class PoseFit:
     # -- solving ---------------------------------------------------------------------------
     def solve(self, st: State, blocks, w, d, corrected: bool = True,
               first: tuple | None = None, max_iterations: int | None = None) -> Solution:
-        """Levenberg-Marquardt from ``st`` on the used blocks. Converged when the Gauss-Newton
-        step would lower chi2 by < :data:`CONVERGED_GAIN` (a step below 1/20 of the estimate's
-        own noise, Mahalanobis), or when, converging quadratically (the last step was accepted
-        undamped), the step after it would by a tenth of that: g_next ~ g^3 / g_prev^2 for the
-        predicted drops g of successive steps (errors e_{k+1} ~ C e_k^2, g ~ e^2). That step is
-        taken and the fit
-        stops (the Jacobian and chi2 reported are those before it). ``first``: the rows at
-        ``st`` when the caller has them; ``max_iterations`` (default the settings')."""
-        jac, res = first if first is not None else self.rows(st, blocks, w, d, corrected)
-        cost = float(res @ res)
-        lam, converged, it = 1e-4, False, 0
-        prev_gain = 0.0         # the last accepted undamped step's predicted drop (0: none)
-        stride = jac.shape[1] + 1
-        for it in range(1, (max_iterations or self.settings.max_iterations) + 1):
-            a = jac.T @ jac
-            g = jac.T @ res
-            diag = a.reshape(-1)[::stride]         # a view: a is a new contiguous array
-            diag *= 1.0 + lam
-            diag += 1e-300
-            try:
-                delta = np.linalg.solve(a, g)
-            except np.linalg.LinAlgError:
-                break
-            gain = float(delta @ g)
-            if not math.isfinite(gain):
-                break
-            if lam < 1e-2 and (gain < CONVERGED_GAIN
-                               or gain ** 3 < 0.1 * CONVERGED_GAIN * prev_gain * prev_gain):
-                st = self.step(st, delta)
-                converged = True
-                break
-            new = self.step(st, delta)
-            jac2, res2 = self.rows(new, blocks, w, d, corrected)
-            cost2 = float(res2 @ res2)
-            if math.isfinite(cost2) and cost2 <= cost:
-                st, jac, res = new, jac2, res2
-                small = cost - cost2 <= 1e-9 * cost
-                cost = cost2
-                prev_gain = gain if lam < 1e-3 else 0.0
-                lam = max(lam * 0.2, 1e-9)
-                if small:
-                    converged = True
-                    break
-            else:
-                prev_gain = 0.0
-                lam *= 10.0
-                if lam > 1e8:
-                    break
-        return Solution(st, jac, res, blocks, cost, converged, it)
+        """Levenberg-Marquardt from ``st`` on the used blocks (:func:`.levenberg.
+        levenberg_marquardt`, with its quadratic-convergence stop): converged when the
+        Gauss-Newton step would lower chi2 by < :data:`.levenberg.CONVERGED_GAIN` (a step below
+        1/20 of the estimate's own noise, Mahalanobis) or the step after it would by a tenth
+        of that. ``first``: the rows at ``st`` when the caller has them; ``max_iterations``
+        (default the settings')."""
+        def rows(state):
+            return self.rows(state, blocks, w, d, corrected)
+
+        out = levenberg_marquardt(st, rows, self.step, first if first is not None else rows(st),
+                                  max_iterations or self.settings.max_iterations,
+                                  quadratic=True)
+        return Solution(out.state, out.jac, out.res, blocks, out.chi2, out.converged,
+                        out.iterations)
 
     def solve_corrected(self, st: State, blocks, w, d, first: tuple | None = None,
                         max_iterations: int | None = None) -> Solution:
