@@ -174,3 +174,42 @@ def test_with_default_arguments_ok_means_trusted():
             far.append(cold)
     assert prior_ok >= 30 and cold_ok <= prior_ok
     assert far and all(not f.ok and "protection level" in f.reason for f in far)
+
+
+def test_the_linearized_chi2_of_a_hypothesis_is_the_least_squares_minimum():
+    """The prescreen of a hypothesis (:func:`fix._linearized_chi2`) is min |r - J x|^2, checked
+    against numpy's least squares on a random whitened system."""
+    from firmware_io.localization.fix import _linearized_chi2
+
+    rng = np.random.default_rng(3)
+    jac, res = rng.normal(size=(54, 13)), rng.normal(size=54)
+    x, *_ = np.linalg.lstsq(jac, res, rcond=None)
+    assert _linearized_chi2(jac, res) == pytest.approx(float(np.sum((res - jac @ x) ** 2)),
+                                                       rel=1e-10)
+    assert _linearized_chi2(np.zeros((6, 2)), np.ones(6)) == math.inf
+
+
+@pytest.mark.parametrize("kind", ["zeros", "frozen"])
+def test_the_abandoning_exclusion_still_names_a_lying_sensor_near_the_magnet(kind):
+    """The second-nearest sensor to the magnet reads zeros, or the value for the magnet 20 mm
+    away, with an ok status (it drags the fit by millimetres): the exclusion's solve (abandoned when
+    its linearized chi2 stays beyond ``HOPELESS`` times the threshold) still converges, names
+    that sensor alone and is trusted within its protection level of the truth, cold and from a
+    tracker's prior."""
+    from firmware_io.localization import Pose
+
+    model = _model(4)
+    est = ModelEstimator(model, _loose())
+    rng = np.random.default_rng(11)
+    p, u = np.array([0.002, -0.001, 0.03]), _direction(20, 30)
+    i = rng.uniform(-1, 1, 9)
+    s = int(np.argsort(np.linalg.norm(model.sensor_positions_m - p, axis=1))[1])
+    bad = _frame(model, p, u, i, rng, 1e-4)
+    bad[s] = 0.0 if kind == "zeros" else _frame(model, p + [0.02, 0.0, 0.0], u, i)[s]
+    prior = Pose(p + 3e-4, M * u, np.diag([1e-6] * 3 + [math.radians(2.0) ** 2] * 2))
+    for seed in (None, prior):
+        est.reset()
+        fix = est.estimate(bad, i, seed=seed)
+        assert fix.ok, fix.reason
+        assert fix.excluded_sensors == (s,)
+        assert np.linalg.norm(fix.position_m - p) < fix.protection_level_m

@@ -135,13 +135,29 @@ def _fault_bias(fit: PoseFit, sol: Solution, frame: Blocks, kt: np.ndarray, lam_
     return float(dp.max()), float(du.max())
 
 
+HOPELESS = 4.0
+"""A hypothesis tested on a fit that failed its residual test (one sensor excluded, or the
+ambient field's gradient added) is kept only when its fit passes the test; one whose
+linearized best chi2 (where one Gauss-Newton step says its minimum is) exceeds this many times
+the test's threshold is not solved, or its solve is abandoned (not converged: never trusted).
+The margin covers the model's curvature over the step."""
+
+
 def _with_gradient(fit: PoseFit, sol: Solution, frame: Blocks) -> Verdict | None:
     """The verdict with the ambient field's gradient fitted too, when it is significant and
-    passes the test (module docstring); else None."""
+    passes the test (module docstring); else None. Not solved, or abandoned, while even its
+    linearized best (:func:`_linearized_chi2`) stays beyond :data:`HOPELESS` times the
+    threshold."""
     st = sol.state
     start = State(st.p, st.u, st.log_scale, st.b, np.zeros(5))
     blocks = sol.blocks
-    again = fit.solve_corrected(start, blocks, frame.w[blocks], frame.d[blocks])
+    w, d = frame.w[blocks], frame.d[blocks]
+    first = fit.rows(start, blocks, w, d)
+    dof = first[0].shape[0] - first[0].shape[1]
+    bound = HOPELESS * fit.chi2_max[dof] if dof >= 1 else -math.inf
+    if _linearized_chi2(*first) > bound:
+        return None
+    again = fit.solve_corrected(start, blocks, w, d, first, give_up=bound)
     dof = again.jac.shape[0] - again.jac.shape[1]
     if not (again.converged and sol.chi2 - again.chi2 > fit.gradient_drop
             and again.chi2 <= fit.chi2_max[dof]):
@@ -153,7 +169,7 @@ def _exclude(fit: PoseFit, sol: Solution, frame: Blocks, drops: np.ndarray, dof:
              excluded: tuple) -> Verdict | None:
     """The verdict without the one sensor that explains the failed residual test (``drops``:
     the chi-square drop of removing each block), or None when none does or two would (not
-    identifiable)."""
+    identifiable); its solve is abandoned beyond :data:`HOPELESS` times the threshold."""
     limit = fit.chi2_max[dof - 3]
     order = np.argsort(-drops)
     rest = sol.chi2 - drops[order]
@@ -161,8 +177,20 @@ def _exclude(fit: PoseFit, sol: Solution, frame: Blocks, drops: np.ndarray, dof:
         return None
     drop = int(sol.blocks[order[0]])
     blocks = sol.blocks[sol.blocks != drop]
-    again = fit.solve_corrected(sol.state, blocks, frame.w[blocks], frame.d[blocks])
+    again = fit.solve_corrected(sol.state, blocks, frame.w[blocks], frame.d[blocks],
+                                give_up=HOPELESS * limit)
     return assess(fit, again, frame, excluded + (drop,))
+
+
+def _linearized_chi2(jac: np.ndarray, res: np.ndarray) -> float:
+    """min |res - jac x|^2: the chi2 one undamped Gauss-Newton step would reach (inf when the
+    normal matrix is singular)."""
+    g = jac.T @ res
+    try:
+        x = np.linalg.solve(jac.T @ jac, g)
+    except np.linalg.LinAlgError:
+        return math.inf
+    return float(res @ res - x @ g)
 
 
 def _inconsistent(fit: PoseFit, sol: Solution, dof: int, pl_m: float, pl_rad: float) -> str:

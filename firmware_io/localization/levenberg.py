@@ -57,15 +57,25 @@ class Outcome:
     iterations: int
 
 
+GIVE_UP_AFTER = 3
+"""Iterations before a solve with a ``give_up`` bound may abandon (the first steps from a
+dragged start are damped and far from linear)."""
+
+
 def levenberg_marquardt(state, rows: Callable, step: Callable, first: tuple,
-                        max_iterations: int, quadratic: bool = False) -> Outcome:
+                        max_iterations: int, quadratic: bool = False,
+                        give_up: float = math.inf) -> Outcome:
     """Levenberg-Marquardt from ``state``: ``rows(state)`` -> (jac, res) whitened, ``step(state,
     delta)`` -> the moved state, ``first`` the rows at ``state``. Converged as the module
     docstring says, or when chi2 stops falling (relative 1e-9), or -- ``quadratic`` -- when,
     converging quadratically (the last step was accepted nearly undamped), the step after this
     one would predict a tenth of :data:`CONVERGED_GAIN`: g_next ~ g^3 / g_prev^2 for the
     predicted drops g of successive steps (errors e_{k+1} ~ C e_k^2, g ~ e^2). A converged
-    fit takes its last step unverified (the Jacobian and chi2 reported are those before it)."""
+    fit takes its last step unverified (the Jacobian and chi2 reported are those before it).
+    ``give_up``: after :data:`GIVE_UP_AFTER` iterations, a nearly undamped step whose linearized
+    chi2 (chi2 - g: where the linear model says the minimum is) is still above this bound ends
+    the solve, not converged -- for a hypothesis that can only be kept below a test's
+    threshold, a bound a few times that threshold."""
     jac, res = first
     cost = float(res @ res)
     lam, converged, it = 1e-4, False, 0
@@ -75,6 +85,8 @@ def levenberg_marquardt(state, rows: Callable, step: Callable, first: tuple,
         if found is None:
             break
         delta, gain = found
+        if it > GIVE_UP_AFTER and lam < 1e-2 and cost - gain > give_up:
+            break
         if lam < 1e-2 and (gain < CONVERGED_GAIN or (
                 quadratic and gain ** 3 < 0.1 * CONVERGED_GAIN * prev_gain * prev_gain)):
             state = step(state, delta)

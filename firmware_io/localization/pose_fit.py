@@ -331,37 +331,41 @@ class PoseFit:
 
     # -- solving ---------------------------------------------------------------------------
     def solve(self, st: State, blocks, w, d, corrected: bool = True,
-              first: tuple | None = None, max_iterations: int | None = None) -> Solution:
+              first: tuple | None = None, max_iterations: int | None = None,
+              give_up: float = math.inf) -> Solution:
         """Levenberg-Marquardt from ``st`` on the used blocks (:func:`.levenberg.
         levenberg_marquardt`, with its quadratic-convergence stop): converged when the
         Gauss-Newton step would lower chi2 by < :data:`.levenberg.CONVERGED_GAIN` (a step below
         1/20 of the estimate's own noise, Mahalanobis) or the step after it would by a tenth
         of that. ``first``: the rows at ``st`` when the caller has them; ``max_iterations``
-        (default the settings')."""
+        (default the settings'); ``give_up``: the linearized chi2 above which a solve is
+        abandoned (:func:`.levenberg.levenberg_marquardt`)."""
         def rows(state):
             return self.rows(state, blocks, w, d, corrected)
 
         out = levenberg_marquardt(st, rows, self.step, first if first is not None else rows(st),
                                   max_iterations or self.settings.max_iterations,
-                                  quadratic=True)
+                                  quadratic=True, give_up=give_up)
         return Solution(out.state, out.jac, out.res, blocks, out.chi2, out.converged,
                         out.iterations)
 
     def solve_corrected(self, st: State, blocks, w, d, first: tuple | None = None,
-                        max_iterations: int | None = None) -> Solution:
+                        max_iterations: int | None = None, give_up: float = math.inf
+                        ) -> Solution:
         """:meth:`solve` with the corrections linearized near the pose, re-linearized (at most
         4 times) until the solution stays within twice their reuse radius. ``first``: the rows
         at ``st`` with the corrections as they are linearized now; ``max_iterations`` per
-        solve (default the settings')."""
+        solve (default the settings'), ``give_up`` as :meth:`solve`'s."""
         if not self.corr.active:
             return self.solve(st, blocks, w, d, corrected=False, first=first,
-                              max_iterations=max_iterations)
+                              max_iterations=max_iterations, give_up=give_up)
         iterations = 0
         for _ in range(5):
             if first is None or not self.corr.within(st.p, st.u):
                 self.corr.update(st.p, st.u)
                 first = None
-            sol = self.solve(st, blocks, w, d, first=first, max_iterations=max_iterations)
+            sol = self.solve(st, blocks, w, d, first=first, max_iterations=max_iterations,
+                             give_up=give_up)
             first = None
             iterations += sol.iterations
             st = sol.state
