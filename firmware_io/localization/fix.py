@@ -382,8 +382,9 @@ def _cold(fit: PoseFit, frame: Blocks, blocks: np.ndarray, need: int,
 
 def _leave_one_out(fit: PoseFit, frame: Blocks, blocks: np.ndarray) -> Verdict | None:
     """The block whose removal fits best (:meth:`.search.GridSearch.leave_one_out`), the
-    search and the fit without it, judged with every block at that pose (:func:`_cold`).
-    None when the search cannot tell."""
+    search and the fit without it (abandoned while its linearized chi2 stays beyond
+    :data:`HOPELESS` times the rest's threshold), judged with every block at that pose
+    (:func:`_cold`). None when the search cannot tell."""
     d, w_all = frame.d, frame.w
     suspect = fit.search.leave_one_out(d, w_all ** 2, fit.background)
     if suspect is None:
@@ -392,7 +393,9 @@ def _leave_one_out(fit: PoseFit, frame: Blocks, blocks: np.ndarray) -> Verdict |
     w_rest[suspect] = 0.0
     rest = blocks[blocks != suspect]
     st = fit.cold_starts(d, w_rest ** 2)[0]
-    sub = fit.solve_cold(st, rest, w_all[rest], d[rest])
+    # the rest must pass the test on its own: abandoned beyond HOPELESS times its threshold
+    limit = fit.chi2_max[max(3 * len(rest) - fit.n_unknowns(False), 1)]
+    sub = fit.solve_cold(st, rest, w_all[rest], d[rest], HOPELESS * limit)
     jac, res = fit.rows(sub.state, blocks, w_all[blocks], d[blocks])
     return assess(fit, Solution(sub.state, jac, res, blocks, float(res @ res), sub.converged,
                                 sub.iterations), frame, gradient=False)

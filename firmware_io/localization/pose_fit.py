@@ -389,12 +389,14 @@ class PoseFit:
         return [self.initial_state(p0, m0)
                 for p0, m0 in self.search.starts(d_all, weights_all, self.background)]
 
-    def solve_cold(self, st: State, blocks, w, d) -> Solution:
+    def solve_cold(self, st: State, blocks, w, d, give_up: float = math.inf) -> Solution:
         """From a search start: the multipole alone first (at most :data:`COLD_ITERATIONS`
         iterations: a start that does not converge by then is in a wrong basin or dragged by a
-        liar, and is returned as not converged), then corrected."""
+        liar, and is returned as not converged), then corrected; ``give_up`` as
+        :meth:`solve`'s."""
         sol = self.solve(st, blocks, w, d, corrected=False,
-                         max_iterations=min(COLD_ITERATIONS, self.settings.max_iterations))
+                         max_iterations=min(COLD_ITERATIONS, self.settings.max_iterations),
+                         give_up=give_up)
         if not sol.converged:
             return sol
-        return self.solve_corrected(sol.state, blocks, w, d)
+        return self.solve_corrected(sol.state, blocks, w, d, give_up=give_up)
