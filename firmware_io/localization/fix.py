@@ -33,6 +33,7 @@ import numpy as np
 from .estimate import Estimate, Pose
 from .fde import bounded_fault_bias, exclusion_drops, fault_slopes, projections
 from .integrity import orientation_protection_level, position_protection_level
+from .levenberg import beyond
 from .pose import tangent_axes
 from .pose_fit import PRIOR_ITERATIONS, PoseFit, Solution, State
 
@@ -157,7 +158,7 @@ def _with_gradient(fit: PoseFit, sol: Solution, frame: Blocks) -> Verdict | None
     bound = HOPELESS * fit.chi2_max[dof] if dof >= 1 else -math.inf
     if _linearized_chi2(*first) > bound:
         return None
-    again = fit.solve_corrected(start, blocks, w, d, first, give_up=bound)
+    again = fit.solve_corrected(start, blocks, w, d, first, give_up=beyond(bound))
     dof = again.jac.shape[0] - again.jac.shape[1]
     if not (again.converged and sol.chi2 - again.chi2 > fit.gradient_drop
             and again.chi2 <= fit.chi2_max[dof]):
@@ -178,7 +179,7 @@ def _exclude(fit: PoseFit, sol: Solution, frame: Blocks, drops: np.ndarray, dof:
     drop = int(sol.blocks[order[0]])
     blocks = sol.blocks[sol.blocks != drop]
     again = fit.solve_corrected(sol.state, blocks, frame.w[blocks], frame.d[blocks],
-                                give_up=HOPELESS * limit)
+                                give_up=beyond(HOPELESS * limit))
     return assess(fit, again, frame, excluded + (drop,))
 
 
@@ -395,7 +396,7 @@ def _leave_one_out(fit: PoseFit, frame: Blocks, blocks: np.ndarray) -> Verdict |
     st = fit.cold_starts(d, w_rest ** 2)[0]
     # the rest must pass the test on its own: abandoned beyond HOPELESS times its threshold
     limit = fit.chi2_max[max(3 * len(rest) - fit.n_unknowns(False), 1)]
-    sub = fit.solve_cold(st, rest, w_all[rest], d[rest], HOPELESS * limit)
+    sub = fit.solve_cold(st, rest, w_all[rest], d[rest], beyond(HOPELESS * limit))
     jac, res = fit.rows(sub.state, blocks, w_all[blocks], d[blocks])
     return assess(fit, Solution(sub.state, jac, res, blocks, float(res @ res), sub.converged,
                                 sub.iterations), frame, gradient=False)

@@ -58,13 +58,19 @@ class Outcome:
 
 
 GIVE_UP_AFTER = 3
-"""Iterations before a solve with a ``give_up`` bound may abandon (the first steps from a
+"""Iterations before a solve with a ``give_up`` test may abandon (the first steps from a
 dragged start are damped and far from linear)."""
+
+
+def beyond(bound: float) -> Callable:
+    """The ``give_up`` test of :func:`levenberg_marquardt` that abandons while the linearized
+    chi2 exceeds ``bound``."""
+    return lambda jac, res, linearized, iteration: linearized > bound
 
 
 def levenberg_marquardt(state, rows: Callable, step: Callable, first: tuple,
                         max_iterations: int, quadratic: bool = False,
-                        give_up: float = math.inf) -> Outcome:
+                        give_up: Callable | None = None) -> Outcome:
     """Levenberg-Marquardt from ``state``: ``rows(state)`` -> (jac, res) whitened, ``step(state,
     delta)`` -> the moved state, ``first`` the rows at ``state``. Converged as the module
     docstring says, or when chi2 stops falling (relative 1e-9), or -- ``quadratic`` -- when,
@@ -72,10 +78,10 @@ def levenberg_marquardt(state, rows: Callable, step: Callable, first: tuple,
     one would predict a tenth of :data:`CONVERGED_GAIN`: g_next ~ g^3 / g_prev^2 for the
     predicted drops g of successive steps (errors e_{k+1} ~ C e_k^2, g ~ e^2). A converged
     fit takes its last step unverified (the Jacobian and chi2 reported are those before it).
-    ``give_up``: after :data:`GIVE_UP_AFTER` iterations, a nearly undamped step whose linearized
-    chi2 (chi2 - g: where the linear model says the minimum is) is still above this bound ends
-    the solve, not converged -- for a hypothesis that can only be kept below a test's
-    threshold, a bound a few times that threshold."""
+    ``give_up(jac, res, linearized, iteration) -> bool``: asked after :data:`GIVE_UP_AFTER`
+    iterations at each nearly undamped step, with the linearized chi2 (chi2 - g: where the
+    linear model says the minimum is); True ends the solve, not converged -- for a hypothesis
+    that can only be kept below a test's threshold, e.g. :func:`beyond` a few times it."""
     jac, res = first
     cost = float(res @ res)
     lam, converged, it = 1e-4, False, 0
@@ -85,7 +91,8 @@ def levenberg_marquardt(state, rows: Callable, step: Callable, first: tuple,
         if found is None:
             break
         delta, gain = found
-        if it > GIVE_UP_AFTER and lam < 1e-2 and cost - gain > give_up:
+        if (give_up is not None and it > GIVE_UP_AFTER and lam < 1e-2
+                and give_up(jac, res, cost - gain, it)):
             break
         if lam < 1e-2 and (gain < CONVERGED_GAIN or (
                 quadratic and gain ** 3 < 0.1 * CONVERGED_GAIN * prev_gain * prev_gain)):

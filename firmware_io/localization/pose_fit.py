@@ -332,14 +332,14 @@ class PoseFit:
     # -- solving ---------------------------------------------------------------------------
     def solve(self, st: State, blocks, w, d, corrected: bool = True,
               first: tuple | None = None, max_iterations: int | None = None,
-              give_up: float = math.inf) -> Solution:
+              give_up=None) -> Solution:
         """Levenberg-Marquardt from ``st`` on the used blocks (:func:`.levenberg.
         levenberg_marquardt`, with its quadratic-convergence stop): converged when the
         Gauss-Newton step would lower chi2 by < :data:`.levenberg.CONVERGED_GAIN` (a step below
         1/20 of the estimate's own noise, Mahalanobis) or the step after it would by a tenth
         of that. ``first``: the rows at ``st`` when the caller has them; ``max_iterations``
-        (default the settings'); ``give_up``: the linearized chi2 above which a solve is
-        abandoned (:func:`.levenberg.levenberg_marquardt`)."""
+        (default the settings'); ``give_up``: the test that abandons a hopeless solve (None:
+        never; :func:`.levenberg.levenberg_marquardt`)."""
         def rows(state):
             return self.rows(state, blocks, w, d, corrected)
 
@@ -350,7 +350,7 @@ class PoseFit:
                         out.iterations)
 
     def solve_corrected(self, st: State, blocks, w, d, first: tuple | None = None,
-                        max_iterations: int | None = None, give_up: float = math.inf
+                        max_iterations: int | None = None, give_up=None
                         ) -> Solution:
         """:meth:`solve` with the corrections linearized near the pose, re-linearized (at most
         4 times) until the solution stays within twice their reuse radius. ``first``: the rows
@@ -389,7 +389,7 @@ class PoseFit:
         return [self.initial_state(p0, m0)
                 for p0, m0 in self.search.starts(d_all, weights_all, self.background)]
 
-    def solve_cold(self, st: State, blocks, w, d, give_up: float = math.inf) -> Solution:
+    def solve_cold(self, st: State, blocks, w, d, give_up=None) -> Solution:
         """From a search start: the multipole alone first (at most :data:`COLD_ITERATIONS`
         iterations: a start that does not converge by then is in a wrong basin or dragged by a
         liar, and is returned as not converged), then corrected; ``give_up`` as
