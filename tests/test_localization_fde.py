@@ -213,3 +213,39 @@ def test_the_abandoning_exclusion_still_names_a_lying_sensor_near_the_magnet(kin
         assert fix.ok, fix.reason
         assert fix.excluded_sensors == (s,)
         assert np.linalg.norm(fix.position_m - p) < fix.protection_level_m
+
+
+def test_a_cold_start_is_abandoned_only_when_no_exclusion_or_gradient_could_pass():
+    """The cold start's give-up test (:func:`fix._hopeless_start`) on a linear whitened system
+    of the fit's size: noise alone, or noise plus a gross fault in one block (its exclusion
+    passes), or an ambient gradient (the gradient fit passes) -- kept; gross faults in two
+    blocks -- abandoned. Checked against brute force: the best least-squares chi2 of every
+    single-block removal."""
+    from firmware_io.localization.fix import HOPELESS, _hopeless_start
+
+    model = _model(4)
+    fit = ModelEstimator(model, _loose()).engine
+    nb = model.n_sensors
+    blocks, w = np.arange(nb), np.full(nb, 1e4)
+    test = _hopeless_start(fit, blocks, w)
+    rng = np.random.default_rng(5)
+    jac = rng.normal(size=(3 * nb, fit.n_unknowns(False)))
+    noise = rng.normal(size=3 * nb)
+    one, two = noise.copy(), noise.copy()
+    one[6:9] += 200.0
+    two[6:9] += 200.0
+    two[30:33] -= 150.0
+    graded = noise + (fit.gcols.reshape(-1, 5) * 1e4) @ np.array([9e-3, -4e-3, 6e-3, 2e-3,
+                                                                 -5e-3])
+
+    def lsq(j, r):
+        x, *_ = np.linalg.lstsq(j, r, rcond=None)
+        return float(np.sum((r - j @ x) ** 2))
+
+    dof = 3 * nb - jac.shape[1]
+    for res, hopeless in ((noise, False), (one, False), (graded, False), (two, True)):
+        lin = lsq(jac, res)
+        best_out = min(lsq(np.delete(jac, slice(3 * i, 3 * i + 3), 0),
+                           np.delete(res, slice(3 * i, 3 * i + 3))) for i in range(nb))
+        assert (best_out > HOPELESS * fit.chi2_max[dof - 3]) == (hopeless or res is graded)
+        assert test(jac, res, lin, 5) is hopeless

@@ -357,8 +357,9 @@ def _cold(fit: PoseFit, frame: Blocks, blocks: np.ndarray, need: int,
     d, w_all = frame.d, frame.w
     w, db = w_all[blocks], d[blocks]
     starts = fit.cold_starts(d, w_all ** 2)
+    hopeless = _hopeless_start(fit, blocks, w)
     for k, st in enumerate(starts):
-        sol = fit.solve_cold(st, blocks, w, db)
+        sol = fit.solve_cold(st, blocks, w, db, hopeless)
         v = assess(fit, sol, frame, gradient=k > 0)
         if best is None or v.rank() < best.rank():
             best = v
@@ -379,6 +380,38 @@ def _cold(fit: PoseFit, frame: Blocks, blocks: np.ndarray, need: int,
                 if best.consistent:
                     return best
     return best
+
+
+def _hopeless_start(fit: PoseFit, blocks: np.ndarray, w: np.ndarray):
+    """The ``give_up`` test of a cold start's fit of ``blocks`` (weights w): abandoned (after
+    :data:`.levenberg.GIVE_UP_AFTER` iterations) while, linearized, neither the fit nor the fit
+    without its best single block to exclude (the exclusion drops at the linearized minimum)
+    nor, with ``gradient='auto'``, the fit with the ambient gradient comes within
+    :data:`HOPELESS` times its threshold: no verdict of this start could then pass."""
+    nb, s = len(blocks), fit.settings
+    dof = 3 * nb - fit.n_unknowns(False)
+    if dof <= 3 or s.max_exclusions < 1:
+        return beyond(HOPELESS * fit.chi2_max[max(dof, 1)])
+    one_out = HOPELESS * fit.chi2_max[dof - 3]
+    graded = HOPELESS * fit.chi2_max[dof - 5] if s.gradient == "auto" and dof > 5 else -1.0
+    gcols = None
+    if graded > 0:
+        gcols = fit.gcols if fit.op is None else np.einsum("kisj,sjq->kiq", fit.op, fit.gcols)
+        gcols = (gcols[blocks] * w[:, None, None]).reshape(3 * nb, 5)
+
+    def test(jac, res, linearized, iteration):
+        if linearized <= one_out:
+            return False
+        try:
+            cov0 = np.linalg.inv(jac.T @ jac)
+        except np.linalg.LinAlgError:
+            return False
+        r = res - jac @ (cov0 @ (jac.T @ res))          # the residual at the linearized minimum
+        drops = exclusion_drops(jac, r, projections(jac, cov0))
+        if float(r @ r) - float(drops.max()) <= one_out:
+            return False
+        return gcols is None or _linearized_chi2(np.hstack((jac, gcols)), res) > graded
+    return test
 
 
 def _leave_one_out(fit: PoseFit, frame: Blocks, blocks: np.ndarray) -> Verdict | None:
