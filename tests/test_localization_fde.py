@@ -248,4 +248,4 @@ def test_a_cold_start_is_abandoned_only_when_no_exclusion_or_gradient_could_pass
         best_out = min(lsq(np.delete(jac, slice(3 * i, 3 * i + 3), 0),
                            np.delete(res, slice(3 * i, 3 * i + 3))) for i in range(nb))
         assert (best_out > HOPELESS * fit.chi2_max[dof - 3]) == (hopeless or res is graded)
-        assert test(jac, res, lin, 5) is hopeless
+        assert test(jac, res, lin) is hopeless

@@ -399,7 +399,7 @@ def _hopeless_start(fit: PoseFit, blocks: np.ndarray, w: np.ndarray):
         gcols = fit.gcols if fit.op is None else np.einsum("kisj,sjq->kiq", fit.op, fit.gcols)
         gcols = (gcols[blocks] * w[:, None, None]).reshape(3 * nb, 5)
 
-    def test(jac, res, linearized, iteration):
+    def test(jac, res, linearized):
         if linearized <= one_out:
             return False
         try:

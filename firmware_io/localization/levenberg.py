@@ -65,7 +65,7 @@ dragged start are damped and far from linear)."""
 def beyond(bound: float) -> Callable:
     """The ``give_up`` test of :func:`levenberg_marquardt` that abandons while the linearized
     chi2 exceeds ``bound``."""
-    return lambda jac, res, linearized, iteration: linearized > bound
+    return lambda jac, res, linearized: linearized > bound
 
 
 def levenberg_marquardt(state, rows: Callable, step: Callable, first: tuple,
@@ -78,7 +78,7 @@ def levenberg_marquardt(state, rows: Callable, step: Callable, first: tuple,
     one would predict a tenth of :data:`CONVERGED_GAIN`: g_next ~ g^3 / g_prev^2 for the
     predicted drops g of successive steps (errors e_{k+1} ~ C e_k^2, g ~ e^2). A converged
     fit takes its last step unverified (the Jacobian and chi2 reported are those before it).
-    ``give_up(jac, res, linearized, iteration) -> bool``: asked after :data:`GIVE_UP_AFTER`
+    ``give_up(jac, res, linearized) -> bool``: asked after :data:`GIVE_UP_AFTER`
     iterations at each nearly undamped step, with the linearized chi2 (chi2 - g: where the
     linear model says the minimum is); True ends the solve, not converged -- for a hypothesis
     that can only be kept below a test's threshold, e.g. :func:`beyond` a few times it."""
@@ -92,7 +92,7 @@ def levenberg_marquardt(state, rows: Callable, step: Callable, first: tuple,
             break
         delta, gain = found
         if (give_up is not None and it > GIVE_UP_AFTER and lam < 1e-2
-                and give_up(jac, res, cost - gain, it)):
+                and give_up(jac, res, cost - gain)):
             break
         if lam < 1e-2 and (gain < CONVERGED_GAIN or (
                 quadratic and gain ** 3 < 0.1 * CONVERGED_GAIN * prev_gain * prev_gain)):
