@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -59,10 +60,11 @@ class State:
 
 @dataclass(frozen=True)
 class Solution:
-    """A converged (or abandoned) solve: its state, whitened Jacobian (3 b, P) and residual
-    (3 b,) at it, the used blocks, chi2, converged, iterations."""
+    """A converged (or abandoned) solve: its state (a :class:`State`, or the several-magnet
+    fit's joint state), whitened Jacobian (3 b + prior rows, P) and residual at it, the used
+    blocks (sensors), chi2, converged, iterations."""
 
-    state: State
+    state: Any
     jac: np.ndarray
     res: np.ndarray
     blocks: np.ndarray
