@@ -57,6 +57,19 @@ def finish(path, result: dict, printer) -> dict:
     return result
 
 
+def run_interruptible(run, *args) -> int:
+    """``run(*args)``; exit code 0, or 130 after one line when Ctrl-C stops it (the studies
+    write their outputs atomically at the end: nothing is half written)."""
+    import sys
+
+    try:
+        run(*args)
+    except KeyboardInterrupt:
+        print("interrupted: nothing written", file=sys.stderr)
+        return 130
+    return 0
+
+
 def study_parser(doc: str, default_out, *, quick: str | None = None) -> argparse.ArgumentParser:
     """The command line the studies share: an optional output folder OUT (``default_out``,
     under out/), ``--quick`` when the study has a short version (``quick``: what it drops),
