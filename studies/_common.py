@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 import os
 from pathlib import Path
 
@@ -60,8 +61,6 @@ def finish(path, result: dict, printer) -> dict:
 def run_interruptible(run, *args) -> int:
     """``run(*args)``; exit code 0, or 130 after one line when Ctrl-C stops it (the studies
     write their outputs atomically at the end: nothing is half written)."""
-    import sys
-
     try:
         run(*args)
     except KeyboardInterrupt:
