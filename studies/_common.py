@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 import os
 from pathlib import Path
 
@@ -55,6 +56,17 @@ def finish(path, result: dict, printer) -> dict:
     write_json_atomic(path, result)
     printer(result)
     return result
+
+
+def run_interruptible(run, *args) -> int:
+    """``run(*args)``; exit code 0, or 130 after one line when Ctrl-C stops it (the studies
+    write their outputs atomically at the end: nothing is half written)."""
+    try:
+        run(*args)
+    except KeyboardInterrupt:
+        print("interrupted: nothing written", file=sys.stderr)
+        return 130
+    return 0
 
 
 def study_parser(doc: str, default_out, *, quick: str | None = None) -> argparse.ArgumentParser:

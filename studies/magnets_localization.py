@@ -51,7 +51,7 @@ from firmware_io.hw.tlv493d import TLV493D_LINEAR_RANGE_T, TLV493D_LSB_T
 from firmware_io.localization import MagnetsEstimator, Pose, SensorModel
 from firmware_io.localization.pose import tangent_axes
 from firmware_io.runner.tracker import PoseTracker
-from studies._common import ROOT, finish, load_average
+from studies._common import ROOT, finish, load_average, run_interruptible
 
 DEFAULT_OUT = ROOT / "out" / "magnets_localization"
 MODES = ("frame", "prior", "track", "runner")
@@ -421,12 +421,8 @@ def main(argv=None) -> int:
               f"--planned FILE, an existing design file), modes from {MODES}, n, frames >= 1, "
               f"seed >= 0", file=sys.stderr)
         return 2
-    try:
-        run(a.out, n_pairs, 200 if a.full else a.frames, a.seed, layouts, modes, a.planned)
-    except KeyboardInterrupt:
-        print("interrupted: nothing written", file=sys.stderr)
-        return 130
-    return 0
+    return run_interruptible(run, a.out, n_pairs, 200 if a.full else a.frames, a.seed, layouts,
+                             modes, a.planned)
 
 
 if __name__ == "__main__":

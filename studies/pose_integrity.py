@@ -46,7 +46,7 @@ from firmware_io.localization import EstimatorSettings, ModelEstimator, Pose, Se
 from firmware_io.localization.pose import tangent_axes
 from firmware_io.localization.pose_fit import State
 from firmware_io.mapfile import gradient_tensor
-from studies._common import finish, load_average
+from studies._common import finish, load_average, run_interruptible
 from studies.localization import _calibrate, with_coil_gradient
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "out" / "pose_integrity"
@@ -385,12 +385,7 @@ def main(argv=None) -> int:
               f"from {CONDITIONS}, modes from {MODES}, n >= 1, noise in (0, 10) mT",
               file=sys.stderr)
         return 2
-    try:
-        run(a.out, n, a.seed, conds, modes, a.noise_mt * 1e-3)
-    except KeyboardInterrupt:
-        print("interrupted: nothing written", file=sys.stderr)
-        return 130
-    return 0
+    return run_interruptible(run, a.out, n, a.seed, conds, modes, a.noise_mt * 1e-3)
 
 
 if __name__ == "__main__":

@@ -105,14 +105,13 @@ def small_steel_design():
 
 @pytest.fixture(scope="session")
 def steel_small_map(tmp_path_factory):
-    """(map path, CoilArray) of :func:`small_steel_design`, built once per run."""
+    """(map path, CoilArray) of :func:`small_steel_design`, its map built once per run."""
     from designkit import fieldmap
     from designkit.model.array import CoilArray
 
     arr = CoilArray.from_design(small_steel_design())
-    path = tmp_path_factory.mktemp("steel_map") / "map.npz"
-    fieldmap.write(path, fieldmap.build(small_steel_design(), array=arr, n_check=10,
-                                        progress=False))
+    path = run_shared(tmp_path_factory, "steel_small_map.npz", lambda out: fieldmap.write(
+        out, fieldmap.build(small_steel_design(), array=arr, n_check=10, progress=False)))
     return path, arr
 
 
@@ -121,10 +120,9 @@ def small_map(tmp_path_factory, thesis_array):
     """The coupled iron-core map (v2 file) of :func:`small_box_design`, built once per run."""
     from designkit import fieldmap
 
-    path = tmp_path_factory.mktemp("small_map") / "map.npz"
-    fieldmap.write(path, fieldmap.build(small_box_design(), array=thesis_array, n_check=10,
-                                        progress=False))
-    return path
+    return run_shared(tmp_path_factory, "small_map.npz", lambda out: fieldmap.write(
+        out, fieldmap.build(small_box_design(), array=thesis_array, n_check=10,
+                            progress=False)))
 
 
 def load_study(name: str):
@@ -153,6 +151,39 @@ def top_level_imports(path) -> set:
 
 def _ci() -> bool:
     return bool(os.environ.get("DESIGNKIT_CI"))
+
+
+def pytest_configure(config):
+    # a worker of a parallel run: BLAS on one thread in it and in the programs it starts (the
+    # workers are the parallelism; two workers each waking two BLAS threads on two cores wait
+    # for one another far longer than they compute)
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        from threadpoolctl import threadpool_limits
+
+        for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+            os.environ[name] = "1"
+        threadpool_limits(limits=1, user_api="blas")
+
+
+def run_shared(tmp_path_factory, name: str, build) -> Path:
+    """The file ``name`` that ``build(path)`` writes, made once per test run: the workers of a
+    parallel run share the run's base folder, the first to ask builds the file under a lock
+    and the others read it (one process alone builds it in its own folder)."""
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent
+    path = root / name
+    try:
+        import fcntl
+    except ImportError:            # no POSIX locks: each worker builds its own
+        path = tmp_path_factory.mktemp(Path(name).stem) / Path(name).name
+        build(path)
+        return path
+    with open(root / f"{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not path.exists():
+            build(path)
+    return path
 
 
 def pytest_sessionstart(session):
@@ -186,7 +217,5 @@ def pinch_map(tmp_path_factory, thesis_array):
     from designkit.design import load_design
 
     design = load_design(PINCH_DESIGN)
-    path = tmp_path_factory.mktemp("pinch_map") / "map.npz"
-    fieldmap.write(path, fieldmap.build(design, array=thesis_array, n_check=10,
-                                        progress=False))
-    return design, path
+    return design, run_shared(tmp_path_factory, "pinch_map.npz", lambda out: fieldmap.write(
+        out, fieldmap.build(design, array=thesis_array, n_check=10, progress=False)))

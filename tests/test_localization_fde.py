@@ -174,3 +174,78 @@ def test_with_default_arguments_ok_means_trusted():
             far.append(cold)
     assert prior_ok >= 30 and cold_ok <= prior_ok
     assert far and all(not f.ok and "protection level" in f.reason for f in far)
+
+
+def test_the_linearized_chi2_of_a_hypothesis_is_the_least_squares_minimum():
+    """The prescreen of a hypothesis (:func:`fix._linearized_chi2`) is min |r - J x|^2, checked
+    against numpy's least squares on a random whitened system."""
+    from firmware_io.localization.fix import _linearized_chi2
+
+    rng = np.random.default_rng(3)
+    jac, res = rng.normal(size=(54, 13)), rng.normal(size=54)
+    x, *_ = np.linalg.lstsq(jac, res, rcond=None)
+    assert _linearized_chi2(jac, res) == pytest.approx(float(np.sum((res - jac @ x) ** 2)),
+                                                       rel=1e-10)
+    assert _linearized_chi2(np.zeros((6, 2)), np.ones(6)) == math.inf
+
+
+@pytest.mark.parametrize("kind", ["zeros", "frozen"])
+def test_the_abandoning_exclusion_still_names_a_lying_sensor_near_the_magnet(kind):
+    """The second-nearest sensor to the magnet reads zeros, or the value for the magnet 20 mm
+    away, with an ok status (it drags the fit by millimetres): the exclusion's solve (abandoned when
+    its linearized chi2 stays beyond ``HOPELESS`` times the threshold) still converges, names
+    that sensor alone and is trusted within its protection level of the truth, cold and from a
+    tracker's prior."""
+    from firmware_io.localization import Pose
+
+    model = _model(4)
+    est = ModelEstimator(model, _loose())
+    rng = np.random.default_rng(11)
+    p, u = np.array([0.002, -0.001, 0.03]), _direction(20, 30)
+    i = rng.uniform(-1, 1, 9)
+    s = int(np.argsort(np.linalg.norm(model.sensor_positions_m - p, axis=1))[1])
+    bad = _frame(model, p, u, i, rng, 1e-4)
+    bad[s] = 0.0 if kind == "zeros" else _frame(model, p + [0.02, 0.0, 0.0], u, i)[s]
+    prior = Pose(p + 3e-4, M * u, np.diag([1e-6] * 3 + [math.radians(2.0) ** 2] * 2))
+    for seed in (None, prior):
+        est.reset()
+        fix = est.estimate(bad, i, seed=seed)
+        assert fix.ok, fix.reason
+        assert fix.excluded_sensors == (s,)
+        assert np.linalg.norm(fix.position_m - p) < fix.protection_level_m
+
+
+def test_a_cold_start_is_abandoned_only_when_no_exclusion_or_gradient_could_pass():
+    """The cold start's give-up test (:func:`fix._hopeless_start`) on a linear whitened system
+    of the fit's size: noise alone, or noise plus a gross fault in one block (its exclusion
+    passes), or an ambient gradient (the gradient fit passes) -- kept; gross faults in two
+    blocks -- abandoned. Checked against brute force: the best least-squares chi2 of every
+    single-block removal."""
+    from firmware_io.localization.fix import HOPELESS, _hopeless_start
+
+    model = _model(4)
+    fit = ModelEstimator(model, _loose()).engine
+    nb = model.n_sensors
+    blocks, w = np.arange(nb), np.full(nb, 1e4)
+    test = _hopeless_start(fit, blocks, w)
+    rng = np.random.default_rng(5)
+    jac = rng.normal(size=(3 * nb, fit.n_unknowns(False)))
+    noise = rng.normal(size=3 * nb)
+    one, two = noise.copy(), noise.copy()
+    one[6:9] += 200.0
+    two[6:9] += 200.0
+    two[30:33] -= 150.0
+    graded = noise + (fit.gcols.reshape(-1, 5) * 1e4) @ np.array([9e-3, -4e-3, 6e-3, 2e-3,
+                                                                 -5e-3])
+
+    def lsq(j, r):
+        x, *_ = np.linalg.lstsq(j, r, rcond=None)
+        return float(np.sum((r - j @ x) ** 2))
+
+    dof = 3 * nb - jac.shape[1]
+    for res, hopeless in ((noise, False), (one, False), (graded, False), (two, True)):
+        lin = lsq(jac, res)
+        best_out = min(lsq(np.delete(jac, slice(3 * i, 3 * i + 3), 0),
+                           np.delete(res, slice(3 * i, 3 * i + 3))) for i in range(nb))
+        assert (best_out > HOPELESS * fit.chi2_max[dof - 3]) == (hopeless or res is graded)
+        assert test(jac, res, lin) is hopeless

@@ -109,6 +109,17 @@ class Prepared:
     scenarios: dict
 
 
+def _limit_spacing(spacing_m: float, count: int, limit: int, what: str, unit: str,
+                   why: str) -> None:
+    """Refuse a ``--spacing`` (m) that leaves ``count`` > ``limit`` of ``what`` (a board's
+    points scale as 1 / spacing^2: the coarser spacing that fits is named)."""
+    if count > limit:
+        coarser = spacing_m * (count / limit) ** 0.5
+        raise BadInputError("--spacing", f"a spacing that leaves at most {limit} {what} "
+                            f"(here >= {coarser * 1e3:.2g} mm)",
+                            f"{spacing_m * 1e3:g} mm ({count} {unit})", why)
+
+
 def prepare(design, request: PlanRequest) -> Prepared:
     """The boards and their sites for ``request``, every refusal of it raised here (before any
     long work starts): the magnets, the count, the plane, a count above the sites left, a
@@ -121,21 +132,13 @@ def prepare(design, request: PlanRequest) -> Prepared:
     current = (design.drive.max_current_a if request.max_current_a is None
                else request.max_current_a)
     n_grid = len(grid_xy(*board_outline_m(design), request.spacing_m)) * len(boards)
-    if n_grid > MAX_GRID_POINTS:
-        coarser = request.spacing_m * (n_grid / MAX_GRID_POINTS) ** 0.5
-        raise BadInputError("--spacing", f"a spacing that leaves at most {MAX_GRID_POINTS} grid "
-                            f"points on the boards (here >= {coarser * 1e3:.2g} mm)",
-                            f"{request.spacing_m * 1e3:g} mm ({n_grid} points)",
-                            "Each point's headroom is checked before the sites are kept.")
+    _limit_spacing(request.spacing_m, n_grid, MAX_GRID_POINTS, "grid points on the boards",
+                   "points", "Each point's headroom is checked before the sites are kept.")
     level = request.bound.usable_fraction * request.bound.range_t
     sites = candidate_sites(design, array, boards, request.spacing_m, current, level)
     n_sites = len(sites.positions_m)
-    if n_sites > MAX_SITES:
-        coarser = request.spacing_m * (n_sites / MAX_SITES) ** 0.5
-        raise BadInputError("--spacing", f"a spacing that leaves at most {MAX_SITES} candidate "
-                            f"sites (here >= {coarser * 1e3:.2g} mm)",
-                            f"{request.spacing_m * 1e3:g} mm ({n_sites} sites)",
-                            "The search's cost grows with the sites times the magnet poses.")
+    _limit_spacing(request.spacing_m, n_sites, MAX_SITES, "candidate sites", "sites",
+                   "The search's cost grows with the sites times the magnet poses.")
     if n_sites < request.count:
         raise BadInputError("--count", f"at most {len(sites.positions_m)} sensors (the sites "
                             f"left on the boards at a {request.spacing_m * 1e3:g} mm spacing "

@@ -33,6 +33,7 @@ import numpy as np
 from .estimate import Estimate, Pose
 from .fde import bounded_fault_bias, exclusion_drops, fault_slopes, projections
 from .integrity import orientation_protection_level, position_protection_level
+from .levenberg import beyond
 from .pose import tangent_axes
 from .pose_fit import PRIOR_ITERATIONS, PoseFit, Solution, State
 
@@ -135,13 +136,29 @@ def _fault_bias(fit: PoseFit, sol: Solution, frame: Blocks, kt: np.ndarray, lam_
     return float(dp.max()), float(du.max())
 
 
+HOPELESS = 4.0
+"""A hypothesis tested on a fit that failed its residual test (one sensor excluded, or the
+ambient field's gradient added) is kept only when its fit passes the test; one whose
+linearized best chi2 (where one Gauss-Newton step says its minimum is) exceeds this many times
+the test's threshold is not solved, or its solve is abandoned (not converged: never trusted).
+The margin covers the model's curvature over the step."""
+
+
 def _with_gradient(fit: PoseFit, sol: Solution, frame: Blocks) -> Verdict | None:
     """The verdict with the ambient field's gradient fitted too, when it is significant and
-    passes the test (module docstring); else None."""
+    passes the test (module docstring); else None. Not solved, or abandoned, while even its
+    linearized best (:func:`_linearized_chi2`) stays beyond :data:`HOPELESS` times the
+    threshold."""
     st = sol.state
     start = State(st.p, st.u, st.log_scale, st.b, np.zeros(5))
     blocks = sol.blocks
-    again = fit.solve_corrected(start, blocks, frame.w[blocks], frame.d[blocks])
+    w, d = frame.w[blocks], frame.d[blocks]
+    first = fit.rows(start, blocks, w, d)
+    dof = first[0].shape[0] - first[0].shape[1]
+    bound = HOPELESS * fit.chi2_max[dof] if dof >= 1 else -math.inf
+    if _linearized_chi2(*first) > bound:
+        return None
+    again = fit.solve_corrected(start, blocks, w, d, first, give_up=beyond(bound))
     dof = again.jac.shape[0] - again.jac.shape[1]
     if not (again.converged and sol.chi2 - again.chi2 > fit.gradient_drop
             and again.chi2 <= fit.chi2_max[dof]):
@@ -153,7 +170,7 @@ def _exclude(fit: PoseFit, sol: Solution, frame: Blocks, drops: np.ndarray, dof:
              excluded: tuple) -> Verdict | None:
     """The verdict without the one sensor that explains the failed residual test (``drops``:
     the chi-square drop of removing each block), or None when none does or two would (not
-    identifiable)."""
+    identifiable); its solve is abandoned beyond :data:`HOPELESS` times the threshold."""
     limit = fit.chi2_max[dof - 3]
     order = np.argsort(-drops)
     rest = sol.chi2 - drops[order]
@@ -161,8 +178,20 @@ def _exclude(fit: PoseFit, sol: Solution, frame: Blocks, drops: np.ndarray, dof:
         return None
     drop = int(sol.blocks[order[0]])
     blocks = sol.blocks[sol.blocks != drop]
-    again = fit.solve_corrected(sol.state, blocks, frame.w[blocks], frame.d[blocks])
+    again = fit.solve_corrected(sol.state, blocks, frame.w[blocks], frame.d[blocks],
+                                give_up=beyond(HOPELESS * limit))
     return assess(fit, again, frame, excluded + (drop,))
+
+
+def _linearized_chi2(jac: np.ndarray, res: np.ndarray) -> float:
+    """min |res - jac x|^2: the chi2 one undamped Gauss-Newton step would reach (inf when the
+    normal matrix is singular)."""
+    g = jac.T @ res
+    try:
+        x = np.linalg.solve(jac.T @ jac, g)
+    except np.linalg.LinAlgError:
+        return math.inf
+    return float(res @ res - x @ g)
 
 
 def _inconsistent(fit: PoseFit, sol: Solution, dof: int, pl_m: float, pl_rad: float) -> str:
@@ -328,8 +357,9 @@ def _cold(fit: PoseFit, frame: Blocks, blocks: np.ndarray, need: int,
     d, w_all = frame.d, frame.w
     w, db = w_all[blocks], d[blocks]
     starts = fit.cold_starts(d, w_all ** 2)
+    hopeless = _hopeless_start(fit, blocks, w)
     for k, st in enumerate(starts):
-        sol = fit.solve_cold(st, blocks, w, db)
+        sol = fit.solve_cold(st, blocks, w, db, hopeless)
         v = assess(fit, sol, frame, gradient=k > 0)
         if best is None or v.rank() < best.rank():
             best = v
@@ -352,10 +382,43 @@ def _cold(fit: PoseFit, frame: Blocks, blocks: np.ndarray, need: int,
     return best
 
 
+def _hopeless_start(fit: PoseFit, blocks: np.ndarray, w: np.ndarray):
+    """The ``give_up`` test of a cold start's fit of ``blocks`` (weights w): abandoned (after
+    :data:`.levenberg.GIVE_UP_AFTER` iterations) while, linearized, neither the fit nor the fit
+    without its best single block to exclude (the exclusion drops at the linearized minimum)
+    nor, with ``gradient='auto'``, the fit with the ambient gradient comes within
+    :data:`HOPELESS` times its threshold: no verdict of this start could then pass."""
+    nb, s = len(blocks), fit.settings
+    dof = 3 * nb - fit.n_unknowns(False)
+    if dof <= 3 or s.max_exclusions < 1:
+        return beyond(HOPELESS * fit.chi2_max[max(dof, 1)])
+    one_out = HOPELESS * fit.chi2_max[dof - 3]
+    graded = HOPELESS * fit.chi2_max[dof - 5] if s.gradient == "auto" and dof > 5 else -1.0
+    gcols = None
+    if graded > 0:
+        gcols = fit.gcols if fit.op is None else np.einsum("kisj,sjq->kiq", fit.op, fit.gcols)
+        gcols = (gcols[blocks] * w[:, None, None]).reshape(3 * nb, 5)
+
+    def test(jac, res, linearized):
+        if linearized <= one_out:
+            return False
+        try:
+            cov0 = np.linalg.inv(jac.T @ jac)
+        except np.linalg.LinAlgError:
+            return False
+        r = res - jac @ (cov0 @ (jac.T @ res))          # the residual at the linearized minimum
+        drops = exclusion_drops(jac, r, projections(jac, cov0))
+        if float(r @ r) - float(drops.max()) <= one_out:
+            return False
+        return gcols is None or _linearized_chi2(np.hstack((jac, gcols)), res) > graded
+    return test
+
+
 def _leave_one_out(fit: PoseFit, frame: Blocks, blocks: np.ndarray) -> Verdict | None:
     """The block whose removal fits best (:meth:`.search.GridSearch.leave_one_out`), the
-    search and the fit without it, judged with every block at that pose (:func:`_cold`).
-    None when the search cannot tell."""
+    search and the fit without it (abandoned while its linearized chi2 stays beyond
+    :data:`HOPELESS` times the rest's threshold), judged with every block at that pose
+    (:func:`_cold`). None when the search cannot tell."""
     d, w_all = frame.d, frame.w
     suspect = fit.search.leave_one_out(d, w_all ** 2, fit.background)
     if suspect is None:
@@ -364,7 +427,9 @@ def _leave_one_out(fit: PoseFit, frame: Blocks, blocks: np.ndarray) -> Verdict |
     w_rest[suspect] = 0.0
     rest = blocks[blocks != suspect]
     st = fit.cold_starts(d, w_rest ** 2)[0]
-    sub = fit.solve_cold(st, rest, w_all[rest], d[rest])
+    # the rest must pass the test on its own: abandoned beyond HOPELESS times its threshold
+    limit = fit.chi2_max[max(3 * len(rest) - fit.n_unknowns(False), 1)]
+    sub = fit.solve_cold(st, rest, w_all[rest], d[rest], beyond(HOPELESS * limit))
     jac, res = fit.rows(sub.state, blocks, w_all[blocks], d[blocks])
     return assess(fit, Solution(sub.state, jac, res, blocks, float(res @ res), sub.converged,
                                 sub.iterations), frame, gradient=False)

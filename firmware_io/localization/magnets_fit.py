@@ -29,7 +29,8 @@ import numpy as np
 from ..errors import BadInputError
 from .fde import bounded_fault_bias, exclusion_drops, projections
 from .integrity import orientation_protection_level, position_protection_level
-from .pose_fit import COLD_ITERATIONS, CONVERGED_GAIN, PoseFit, State
+from .levenberg import levenberg_marquardt
+from .pose_fit import COLD_ITERATIONS, PoseFit, Solution, State
 from .sensor_model import SensorModel
 from .settings import EstimatorSettings
 
@@ -68,20 +69,6 @@ class JointState:
 
 
 @dataclass(frozen=True)
-class JointSolution:
-    """A solve's state, whitened Jacobian (3 b + prior rows, 5 k + 3) and residual at it, the
-    used blocks (sensors), chi2, converged, iterations."""
-
-    state: JointState
-    jac: np.ndarray
-    res: np.ndarray
-    blocks: np.ndarray
-    chi2: float
-    converged: bool
-    iterations: int
-
-
-@dataclass(frozen=True)
 class MagnetVerdict:
     """One magnet's integrity in a joint solution: ok, reason, its covariance (5, 5), the
     position and orientation protection levels (m, rad) with and without the undetected fault
@@ -106,7 +93,7 @@ class JointVerdict:
     test after any exclusion, finite levels), ``reason`` ('' when consistent), the magnets'
     verdicts (in ``solution.state.ids`` order), dof and the excluded sensors."""
 
-    solution: JointSolution
+    solution: Solution
     consistent: bool
     reason: str
     magnets: tuple
@@ -230,44 +217,19 @@ class MagnetsFit:
 
     # -- solving ---------------------------------------------------------------------------
     def solve_once(self, st: JointState, blocks, w, d, corrected: bool,
-                   max_iterations: int) -> JointSolution:
-        """Levenberg-Marquardt from ``st``; converged when the Gauss-Newton step would lower
-        chi2 by less than :data:`.pose_fit.CONVERGED_GAIN` (as the single-magnet fit)."""
-        jac, res = self.rows(st, blocks, w, d, corrected)
-        cost, lam, converged, it = float(res @ res), 1e-4, False, 0
-        idx = np.arange(jac.shape[1])
-        for it in range(1, max_iterations + 1):
-            a = jac.T @ jac
-            g = jac.T @ res
-            a[idx, idx] = a[idx, idx] * (1.0 + lam) + 1e-300
-            try:
-                delta = np.linalg.solve(a, g)
-            except np.linalg.LinAlgError:
-                break
-            gain = float(delta @ g)
-            if not math.isfinite(gain):
-                break
-            if lam < 1e-2 and gain < CONVERGED_GAIN:
-                st, converged = self.step(st, delta), True
-                break
-            new = self.step(st, delta)
-            jac2, res2 = self.rows(new, blocks, w, d, corrected)
-            cost2 = float(res2 @ res2)
-            if math.isfinite(cost2) and cost2 <= cost:
-                small = cost - cost2 <= 1e-9 * cost
-                st, jac, res, cost = new, jac2, res2, cost2
-                lam = max(lam * 0.2, 1e-9)
-                if small:
-                    converged = True
-                    break
-            else:
-                lam *= 10.0
-                if lam > 1e8:
-                    break
-        return JointSolution(st, jac, res, np.asarray(blocks), cost, converged, it)
+                   max_iterations: int) -> Solution:
+        """Levenberg-Marquardt from ``st`` (:func:`.levenberg.levenberg_marquardt`): converged
+        when the Gauss-Newton step would lower chi2 by less than
+        :data:`.levenberg.CONVERGED_GAIN`."""
+        def rows(state):
+            return self.rows(state, blocks, w, d, corrected)
+
+        out = levenberg_marquardt(st, rows, self.step, rows(st), max_iterations)
+        return Solution(out.state, out.jac, out.res, np.asarray(blocks), out.chi2,
+                             out.converged, out.iterations)
 
     def solve(self, st: JointState, blocks, w, d, max_iterations: int | None = None,
-              cold: bool = False) -> JointSolution:
+              cold: bool = False) -> Solution:
         """The solve with the corrections linearized near every pose, re-linearized (at most 4
         times) until the solution stays within twice their reuse radius; ``cold``: the
         multipoles alone first (at most :data:`.pose_fit.COLD_ITERATIONS` iterations)."""
@@ -288,10 +250,10 @@ class MagnetsFit:
         # the rows reported at the final state with the corrections linearized there
         self.relinearize(st)
         jac, res = self.rows(st, blocks, w, d, True)
-        return JointSolution(st, jac, res, sol.blocks, float(res @ res), sol.converged, total)
+        return Solution(st, jac, res, sol.blocks, float(res @ res), sol.converged, total)
 
 
-def judge(fit: MagnetsFit, sol: JointSolution, frame: tuple, excluded: tuple = ()) -> JointVerdict:
+def judge(fit: MagnetsFit, sol: Solution, frame: tuple, excluded: tuple = ()) -> JointVerdict:
     """The verdict of a joint solution (module docstring); ``frame`` = (d, w_all, reading)
     of every sensor (w 0 where unusable). Fault exclusion when chi2 fails."""
     verdict = _verdict(fit, sol, frame, excluded)
@@ -303,7 +265,7 @@ def judge(fit: MagnetsFit, sol: JointSolution, frame: tuple, excluded: tuple = (
     return better if better is not None and better.rank() < verdict.rank() else verdict
 
 
-def _verdict(fit: MagnetsFit, sol: JointSolution, frame: tuple, excluded: tuple) -> JointVerdict:
+def _verdict(fit: MagnetsFit, sol: Solution, frame: tuple, excluded: tuple) -> JointVerdict:
     rows, n_par = sol.jac.shape
     dof = rows - n_par
     nb = len(sol.blocks)
@@ -331,7 +293,7 @@ def _verdict(fit: MagnetsFit, sol: JointSolution, frame: tuple, excluded: tuple)
     return JointVerdict(sol, not reason, reason, tuple(mags), dof, excluded)
 
 
-def frame_only(sol: JointSolution, n_par: int):
+def frame_only(sol: Solution, n_par: int):
     """(step (P,), covariance (P, P)) of the sensors alone at the solution: the Gauss-Newton
     step F^-1 J_s^T r_s from it and F^-1, F = J_s^T J_s over the sensors' rows only (a seed's
     prior rows left out), inflated by chi2 / dof above 1 as the fix's; None when the sensors
@@ -353,7 +315,7 @@ def frame_only(sol: JointSolution, n_par: int):
     return cov @ (js.T @ rs), cov * max(1.0, chi2 / dof)
 
 
-def _magnet_verdict(fit: MagnetsFit, sol: JointSolution, frame: tuple, cov0, j: int,
+def _magnet_verdict(fit: MagnetsFit, sol: Solution, frame: tuple, cov0, j: int,
                     dof: int) -> MagnetVerdict:
     """Magnet j's levels and verdict from the joint covariance ``cov0`` (None: singular)."""
     if cov0 is None:
@@ -403,7 +365,7 @@ def _beyond_limits(s: EstimatorSettings, pl_m: float, pl_rad: float) -> str:
     return ""
 
 
-def _inconsistent(fit: MagnetsFit, sol: JointSolution, dof: int) -> str:
+def _inconsistent(fit: MagnetsFit, sol: Solution, dof: int) -> str:
     """Why the joint solution fails a test other than the alert limits ('' when it passes)."""
     s = fit.settings
     if dof < 1:
@@ -422,7 +384,7 @@ def _inconsistent(fit: MagnetsFit, sol: JointSolution, dof: int) -> str:
     return ""
 
 
-def _exclude(fit: MagnetsFit, sol: JointSolution, frame: tuple,
+def _exclude(fit: MagnetsFit, sol: Solution, frame: tuple,
              excluded: tuple) -> JointVerdict | None:
     """The verdict without the one sensor that explains the failed residual test (RAIM FDE,
     :func:`.fde.exclusion_drops`), or None when none does or two would."""

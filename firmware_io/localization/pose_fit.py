@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -27,6 +28,7 @@ from .calibration import SensorCalibration
 from .corrections import Corrections
 from .integrity import (chi2_quantile, missed_detection_noncentrality, ratio_quantiles,
                         thresholds)
+from .levenberg import levenberg_marquardt
 from .magnet import MU0, multipole_pose_columns
 from .pose import rotated, tangent_axes
 from .search import GridSearch
@@ -40,9 +42,6 @@ does not is dragged by a liar, or the prior is wrong)."""
 
 COLD_ITERATIONS = 20
 """Iterations of a cold start's multipole solve (a good start converges in 3-15)."""
-
-CONVERGED_GAIN = 2.5e-3
-"""The Gauss-Newton step's predicted chi-square drop below which a solve has converged."""
 
 _ONE = np.ones(1)
 
@@ -61,10 +60,11 @@ class State:
 
 @dataclass(frozen=True)
 class Solution:
-    """A converged (or abandoned) solve: its state, whitened Jacobian (3 b, P) and residual
-    (3 b,) at it, the used blocks, chi2, converged, iterations."""
+    """A converged (or abandoned) solve: its state (a :class:`State`, or the several-magnet
+    fit's joint state), whitened Jacobian (3 b + prior rows, P) and residual at it, the used
+    blocks (sensors), chi2, converged, iterations."""
 
-    state: State
+    state: Any
     jac: np.ndarray
     res: np.ndarray
     blocks: np.ndarray
@@ -333,72 +333,41 @@ class PoseFit:
 
     # -- solving ---------------------------------------------------------------------------
     def solve(self, st: State, blocks, w, d, corrected: bool = True,
-              first: tuple | None = None, max_iterations: int | None = None) -> Solution:
-        """Levenberg-Marquardt from ``st`` on the used blocks. Converged when the Gauss-Newton
-        step would lower chi2 by < :data:`CONVERGED_GAIN` (a step below 1/20 of the estimate's
-        own noise, Mahalanobis), or when, converging quadratically (the last step was accepted
-        undamped), the step after it would by a tenth of that: g_next ~ g^3 / g_prev^2 for the
-        predicted drops g of successive steps (errors e_{k+1} ~ C e_k^2, g ~ e^2). That step is
-        taken and the fit
-        stops (the Jacobian and chi2 reported are those before it). ``first``: the rows at
-        ``st`` when the caller has them; ``max_iterations`` (default the settings')."""
-        jac, res = first if first is not None else self.rows(st, blocks, w, d, corrected)
-        cost = float(res @ res)
-        lam, converged, it = 1e-4, False, 0
-        prev_gain = 0.0         # the last accepted undamped step's predicted drop (0: none)
-        stride = jac.shape[1] + 1
-        for it in range(1, (max_iterations or self.settings.max_iterations) + 1):
-            a = jac.T @ jac
-            g = jac.T @ res
-            diag = a.reshape(-1)[::stride]         # a view: a is a new contiguous array
-            diag *= 1.0 + lam
-            diag += 1e-300
-            try:
-                delta = np.linalg.solve(a, g)
-            except np.linalg.LinAlgError:
-                break
-            gain = float(delta @ g)
-            if not math.isfinite(gain):
-                break
-            if lam < 1e-2 and (gain < CONVERGED_GAIN
-                               or gain ** 3 < 0.1 * CONVERGED_GAIN * prev_gain * prev_gain):
-                st = self.step(st, delta)
-                converged = True
-                break
-            new = self.step(st, delta)
-            jac2, res2 = self.rows(new, blocks, w, d, corrected)
-            cost2 = float(res2 @ res2)
-            if math.isfinite(cost2) and cost2 <= cost:
-                st, jac, res = new, jac2, res2
-                small = cost - cost2 <= 1e-9 * cost
-                cost = cost2
-                prev_gain = gain if lam < 1e-3 else 0.0
-                lam = max(lam * 0.2, 1e-9)
-                if small:
-                    converged = True
-                    break
-            else:
-                prev_gain = 0.0
-                lam *= 10.0
-                if lam > 1e8:
-                    break
-        return Solution(st, jac, res, blocks, cost, converged, it)
+              first: tuple | None = None, max_iterations: int | None = None,
+              give_up=None) -> Solution:
+        """Levenberg-Marquardt from ``st`` on the used blocks (:func:`.levenberg.
+        levenberg_marquardt`, with its quadratic-convergence stop): converged when the
+        Gauss-Newton step would lower chi2 by < :data:`.levenberg.CONVERGED_GAIN` (a step below
+        1/20 of the estimate's own noise, Mahalanobis) or the step after it would by a tenth
+        of that. ``first``: the rows at ``st`` when the caller has them; ``max_iterations``
+        (default the settings'); ``give_up``: the test that abandons a hopeless solve (None:
+        never; :func:`.levenberg.levenberg_marquardt`)."""
+        def rows(state):
+            return self.rows(state, blocks, w, d, corrected)
+
+        out = levenberg_marquardt(st, rows, self.step, first if first is not None else rows(st),
+                                  max_iterations or self.settings.max_iterations,
+                                  quadratic=True, give_up=give_up)
+        return Solution(out.state, out.jac, out.res, blocks, out.chi2, out.converged,
+                        out.iterations)
 
     def solve_corrected(self, st: State, blocks, w, d, first: tuple | None = None,
-                        max_iterations: int | None = None) -> Solution:
+                        max_iterations: int | None = None, give_up=None
+                        ) -> Solution:
         """:meth:`solve` with the corrections linearized near the pose, re-linearized (at most
         4 times) until the solution stays within twice their reuse radius. ``first``: the rows
         at ``st`` with the corrections as they are linearized now; ``max_iterations`` per
-        solve (default the settings')."""
+        solve (default the settings'), ``give_up`` as :meth:`solve`'s."""
         if not self.corr.active:
             return self.solve(st, blocks, w, d, corrected=False, first=first,
-                              max_iterations=max_iterations)
+                              max_iterations=max_iterations, give_up=give_up)
         iterations = 0
         for _ in range(5):
             if first is None or not self.corr.within(st.p, st.u):
                 self.corr.update(st.p, st.u)
                 first = None
-            sol = self.solve(st, blocks, w, d, first=first, max_iterations=max_iterations)
+            sol = self.solve(st, blocks, w, d, first=first, max_iterations=max_iterations,
+                             give_up=give_up)
             first = None
             iterations += sol.iterations
             st = sol.state
@@ -422,12 +391,14 @@ class PoseFit:
         return [self.initial_state(p0, m0)
                 for p0, m0 in self.search.starts(d_all, weights_all, self.background)]
 
-    def solve_cold(self, st: State, blocks, w, d) -> Solution:
+    def solve_cold(self, st: State, blocks, w, d, give_up=None) -> Solution:
         """From a search start: the multipole alone first (at most :data:`COLD_ITERATIONS`
         iterations: a start that does not converge by then is in a wrong basin or dragged by a
-        liar, and is returned as not converged), then corrected."""
+        liar, and is returned as not converged), then corrected; ``give_up`` as
+        :meth:`solve`'s."""
         sol = self.solve(st, blocks, w, d, corrected=False,
-                         max_iterations=min(COLD_ITERATIONS, self.settings.max_iterations))
+                         max_iterations=min(COLD_ITERATIONS, self.settings.max_iterations),
+                         give_up=give_up)
         if not sol.converged:
             return sol
-        return self.solve_corrected(sol.state, blocks, w, d)
+        return self.solve_corrected(sol.state, blocks, w, d, give_up=give_up)
