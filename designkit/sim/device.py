@@ -28,7 +28,8 @@ from ..model.array import CoilArray, force_matrix
 from ..model.coil import Coil
 from ..model.electrical import drive_data
 from .readings import SensorSimulator, analog_reading, magnet_field
-from .samples import Sampled, bias_force_any, finite_size_bias, induced_field_any, sample_steps
+from .samples import (Sampled, bias_force_any, finite_size_bias, induced_field_any, memoized,
+                      sample_steps)
 from .saturation import PATH_STEP_M, PlantSaturation
 from .sensors import MODELLED_FIT_S, SimSensorSource
 
@@ -160,10 +161,10 @@ class SimulatedDevice:
         # every mm: ~4 % of F0 at 20 mm, its interpolation within ~0.1 % of F0)
         at = sample_steps(p, u, step_m=FINITE_SIZE_STEP_M, turn_rad=np.radians(2.0))
         mg = self.design.magnet
-        size = Sampled(at, finite_size_bias(self.array, p[at], self.moment_steps[at],
-                                            (mg.radius_m, mg.length_m)))
-        self.bias = Sampled(idx, bias_force_any(self.array, p[idx], self.moment_steps[idx])
-                            + size.all(idx))
+        size = Sampled(at, memoized(finite_size_bias, self.array, p[at], self.moment_steps[at],
+                                    (mg.radius_m, mg.length_m)))
+        self.bias = Sampled(idx, memoized(bias_force_any, self.array, p[idx],
+                                          self.moment_steps[idx]) + size.all(idx))
         self.sat_deltas = None
         if self.saturation is not None:    # the cores' field only: the moment does not enter
             at = sample_steps(p, np.tile([0.0, 0.0, 1.0], (len(p), 1)), step_m=PATH_STEP_M,
@@ -171,8 +172,8 @@ class SimulatedDevice:
             self.sat_deltas = Sampled(at, self.saturation.deltas(p[at]))
         coarse = sample_steps(p, u, step_m=induced_step_m, turn_rad=np.radians(2.0))
         pts = self.sensor_sim.true_m.reshape(-1, 3)
-        self.induced = Sampled(coarse, induced_field_any(self.array, pts, p[coarse],
-                                                         self.moment_steps[coarse]))
+        self.induced = Sampled(coarse, memoized(induced_field_any, self.array, pts, p[coarse],
+                                                self.moment_steps[coarse]))
 
     def actuation(self, step: int, current_a) -> np.ndarray:
         """The plant's A at the true position of step ``step`` for the currents ``current_a``

@@ -9,11 +9,23 @@ few fixed moments evaluated in batches (:func:`bias_force_any`, :func:`induced_f
 The finger magnet is a finite cylinder, not a point: :func:`finite_size_bias` is what that
 changes in F0 (up to 4-5 % 15-20 mm above a core), sampled more coarsely (it is small and
 smooth). Positions m, moments A m^2, fields T, forces N.
+
+The array is immutable and these loads are pure functions of it and of their arguments, so each
+array keeps the loads of the last few paths it was asked for (:func:`memoized`): a path run
+again -- another seed, another runner on the same trajectory -- is not evaluated again.
 """
 
 from __future__ import annotations
 
+import weakref
+from collections import OrderedDict
+
 import numpy as np
+
+MEMO_PATHS = 16
+"""Paths whose loads each array keeps (the oldest is dropped first)."""
+
+_MEMO: "weakref.WeakKeyDictionary[object, OrderedDict]" = weakref.WeakKeyDictionary()
 
 _BASIS = np.array([[1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0], [1.0, 1.0, 0], [1.0, 0, 1.0],
                    [0, 1.0, 1.0]])
@@ -71,6 +83,25 @@ def _one_moment(moments) -> np.ndarray | None:
     """The moment (3,) when all rows of ``moments`` (k, 3) are equal, else None."""
     m = np.asarray(moments, float)
     return m[0] if np.all(m == m[0]) else None
+
+
+def memoized(function, array, *args):
+    """``function(array, *args)`` (numpy arrays or floats), kept for the array's core system
+    (its coupled solve: what the loads depend on besides the arguments) while it lives; a copy
+    is returned, so callers may change it. Arrays without coupled cores are not kept (their
+    loads are zeros)."""
+    system = array.coupled()
+    if system is None:
+        return function(array, *args)
+    key = (function.__name__,) + tuple(
+        (a.shape, a.tobytes()) for a in (np.ascontiguousarray(x, float) for x in args))
+    memo = _MEMO.setdefault(system, OrderedDict())
+    if key not in memo:
+        memo[key] = function(array, *args)
+        if len(memo) > MEMO_PATHS:
+            memo.popitem(last=False)
+    memo.move_to_end(key)
+    return memo[key].copy()
 
 
 def bias_force_any(array, points_m, moments_a_m2) -> np.ndarray:

@@ -18,8 +18,8 @@ allocates the object that crosses a threshold, and a control step cannot afford 
   itself makes no reference cycles (tests/test_runner_collector.py), so what is held is what
   the loop keeps anyway, plus any cycle a caller makes and still references at a young pass;
 - at stop (also after an exception or Ctrl-C: ``Runner.stop`` in a ``finally``), the
-  collector's state as it was before start-up: unfrozen, enabled if it was, and one full
-  collection for what was held.
+  collector's state as it was before start-up: unfrozen and enabled if it was (what the loop
+  held is left to the collector's own passes: a full pass at stop would only delay the caller).
 
 Numpy arrays are not tracked by the collector: they cost nothing here.
 """
@@ -61,11 +61,10 @@ class LoopCollector:
 
     def release(self) -> None:
         """The collector as it was before :meth:`take`: unfrozen, automatic collection on if
-        it was, one full collection for what the loop held. Safe to call more than once."""
+        it was. Safe to call more than once."""
         if not self.held:
             return
         self.held = False
         gc.unfreeze()
         if self.was_enabled:
             gc.enable()
-        gc.collect()
