@@ -98,3 +98,12 @@ def test_cli_bad_input_no_traceback(tmp_path, capsys):
     assert main(["scene", "compile", "plane", "--lambda", "-1",
                  "--out", str(tmp_path / "x.npz")]) == 1
     assert not (tmp_path / "x.npz").exists()
+
+
+def test_compile_shows_no_empty_progress_bar(tmp_path, capsys):
+    """A bar is shown only for work there is: the hemisphere's lambda leaves no point to the
+    allocator, so no bar of zero items ("0it", printed twice before) is shown."""
+    out = tmp_path / "s.npz"
+    assert main(["scene", "compile", "hemisphere", "--n-side", "5", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert not [ln for ln in err.splitlines() if " 0it" in ln or "| 0/0" in ln], err

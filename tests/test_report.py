@@ -214,3 +214,22 @@ def test_report_prints_the_sensor_layouts_bound_maps(quick_report):
     assert one[0]["median_rms_m"] < one[1]["median_rms_m"] < one[2]["median_rms_m"]
     md = (quick_report / "report.md").read_text()
     assert "## Sensor layout: Cramer-Rao bound" in md and "figures/sensor_bounds.png" in md
+
+
+@pytest.mark.parametrize("force_n, says", [
+    (-2e-5, "Fz = 0 mN: somewhere in the region the array cannot push the magnet up"),
+    (-0.004, "Fz = 0 mN: somewhere in the region the array cannot push the magnet up"),
+    (0.01234, "Fz >= 12.3 mN")])
+def test_a_smallest_upward_force_of_zero_or_below_says_what_it_means(quick_report, force_n,
+                                                                       says):
+    """The report never prints '>= -0.0 mN' (a force rounding to minus zero, or one below
+    zero, means the array cannot push the magnet up somewhere in the region)."""
+    import re
+
+    from designkit.commands.report import report_markdown
+
+    report = json.loads((quick_report / "report.json").read_text())
+    for e in report["designs"].values():
+        e["min_upward_force_workspace_n"] = force_n
+    text = report_markdown(report)
+    assert says in text and not re.search(r"-0\.0(?![0-9])", text)
